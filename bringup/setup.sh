@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Reflex set-up: installs every Debian 12 package the project and its tests use (only the missing
+# ones), then configures and builds the project in Release with both cores.
+# Idempotent: running it twice installs nothing the second time and rebuilds only what changed.
+#
+# Usage: bringup/setup.sh [--no-build] [--build-dir DIR] [--help]
+#   REFLEX_BUILD_DIR   build folder (default: <repo>/build)
+#   REFLEX_CMAKE_ARGS  extra arguments for the CMake configure step
+set -euo pipefail
+
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+build_dir=${REFLEX_BUILD_DIR:-$here/build}
+do_build=1
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --no-build) do_build=0 ;;
+    --build-dir) build_dir=$2; shift ;;
+    -h|--help) sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+
+# One list, grouped by who needs it. Keep it in step with find_package() calls in CMakeLists.txt.
+packages=(
+  # toolchain
+  build-essential cmake pkg-config git
+  # bus: Fast DDS 2.9 + code generator (needs a JRE) + discovery server CLI
+  libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools default-jre-headless
+  # control: math, robot description, configuration
+  libeigen3-dev liburdfdom-dev liburdfdom-headers-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
+  # vision
+  libapriltag-dev libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  libopencv-videoio-dev libopencv-calib3d-dev libopencv-contrib-dev ffmpeg
+  # tests and benchmarks: independent answers and a second DDS vendor
+  googletest libgtest-dev libgmock-dev libbenchmark-dev libfcl-dev liborocos-kdl-dev
+  libkdl-parser-dev cyclonedds-dev cyclonedds-tools
+  # multi-host tests and reports
+  iproute2 python3 python3-matplotlib python3-numpy
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup.sh: installing ${#missing[@]} missing package(s): ${missing[*]}"
+  sudo_cmd=""
+  [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo_cmd apt-get update -qq
+  $sudo_cmd apt-get install -y -qq --no-install-recommends "${missing[@]}"
+else
+  echo "setup.sh: all ${#packages[@]} packages already installed"
+fi
+
+[ "$do_build" -eq 1 ] || exit 0
+
+echo "setup.sh: configuring and building in $build_dir (Release, $(nproc) jobs)"
+# shellcheck disable=SC2086
+cmake -S "$here" -B "$build_dir" -DCMAKE_BUILD_TYPE=Release ${REFLEX_CMAKE_ARGS:-}
+cmake --build "$build_dir" -j"$(nproc)"
