@@ -1,0 +1,82 @@
+// Self-distances between collision segments (paper Sec. 4, 7.3), every cycle, for every checked pair.
+//
+// Sign convention (the one every controller sign follows from):
+//   d      surface-to-surface distance between segments a and b (radii subtracted; < 0 if penetrating)
+//   p_W_a  witness point on a's surface, p_W_b on b's surface, both in the root frame W
+//   nhat_W = (p_W_a - p_W_b) / d, unit, pointing from b towards a
+//   row    = nhat_W^T (J_W_pa - J_W_pb)  (1 x nq): the rate of d, so a positive row velocity
+//          row * qdot > 0 separates the pair.
+// Coincident core points: the normal falls back to the direction between the two links' origins
+// (else +z), `well_defined` is false, and everything stays finite.
+//
+// Body schema (Sec. 8.5): every model has kBodySchemaSlots run-time slots, one capsule each, that take
+// part in the pair checks once enabled (grasped objects, virtual occlusion segments).
+#pragma once
+
+#include "reflex/control/kinematics.hpp"
+#include "reflex/control/model.hpp"
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+namespace reflex::control {
+
+/// Distance result of one checked segment pair. Invariants (checked by tests): when `active`,
+/// |nhat_W| = 1, p_W_a - p_W_b = distance * nhat_W, distance is finite.
+struct PairDistance {
+  int seg_a = -1, seg_b = -1;   ///< segment indices (a < b)
+  double distance = std::numeric_limits<double>::infinity();
+  Eigen::Vector3d p_W_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p_W_b = Eigen::Vector3d::Zero();
+  Eigen::Vector3d nhat_W = Eigen::Vector3d::UnitZ();
+  bool well_defined = true;     ///< false when the core points coincided (fallback normal)
+  bool active = false;          ///< false for pairs of disabled body-schema slots (distance = inf)
+  bool has_row = false;         ///< rows.row(i) is valid for this cycle
+};
+
+/// A run-time body-schema segment: a capsule (or sphere if a_L == b_L) attached to a link.
+struct BodySchemaSlot {
+  bool enabled = false;
+  int link = 0;                              ///< link the endpoints are expressed in
+  Eigen::Vector3d a_L = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_L = Eigen::Vector3d::Zero();
+  double radius = 0.0;
+  std::uint64_t ignore_mask = 0;             ///< bit i set: never checked against segment i
+};
+
+struct DistanceOptions {
+  /// Avoidance rows are computed for pairs with distance below this (m). +inf: every pair.
+  double row_threshold = std::numeric_limits<double>::infinity();
+};
+
+/// Per-cycle distance results and scratch, sized from the model.
+struct DistanceData {
+  explicit DistanceData(const Model& model);
+
+  std::vector<PairDistance> pairs;  ///< same order as Model::pairs
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows;  ///< npairs x nq
+  std::array<BodySchemaSlot, kBodySchemaSlots> slots;
+  int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
+  std::vector<Eigen::Vector3d> prim_a_W, prim_b_W;  ///< primitive cores in W (scratch)
+};
+
+/// Computes every checked pair's distance, witness points, normal and (below the threshold) row.
+/// Call after computeForwardKinematics. Allocates nothing, never throws.
+void computeSegmentDistances(const Model& model, const KinematicsData& kin, DistanceData& data,
+                             const DistanceOptions& options = {});
+
+/// Enables body-schema slot `slot` with a capsule [a_L, b_L] of `radius` on `link`, never checked
+/// against the segments in `ignore_mask` (the owner link's segment is always ignored).
+/// Returns false (and changes nothing) for a bad slot, link, radius or non-finite point.
+bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link,
+                             const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
+                             std::uint64_t ignore_mask = 0);
+
+/// Disables a slot. Returns false for a bad slot index.
+bool detachBodySchemaSegment(DistanceData& data, int slot);
+
+}  // namespace reflex::control

@@ -1,0 +1,46 @@
+// Forward kinematics and Jacobians (positions only) for a Model.
+//
+// Frames: W = root link frame. Jacobians are 3 x nq, in W, of a point fixed to a link, given by its
+// current position p_W. Columns of joints that do not move the link are zero.
+// Per-cycle functions allocate nothing and never throw; sizes are asserted.
+#pragma once
+
+#include "reflex/control/model.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <vector>
+
+namespace reflex::control {
+
+/// Per-cycle kinematic results, sized from the model. One per thread of use.
+struct KinematicsData {
+  explicit KinematicsData(const Model& model);
+
+  std::vector<Eigen::Isometry3d> X_W_L;  ///< pose of every link in W
+  std::vector<Eigen::Vector3d> axis_W;   ///< joint axis of every link's parent joint, in W
+  Eigen::VectorXd q;                     ///< the configuration the poses belong to
+};
+
+/// Forward kinematics. Returns false (and leaves `data` unchanged) if q has the wrong size or a
+/// non-finite value; the caller then keeps its last valid state.
+bool computeForwardKinematics(const Model& model, KinematicsData& data,
+                              const Eigen::Ref<const Eigen::VectorXd>& q);
+
+/// J_W (3 x nq) of the point p_W rigidly attached to `link` (after computeForwardKinematics).
+void computePointJacobian(const Model& model, const KinematicsData& data, int link,
+                          const Eigen::Vector3d& p_W, Eigen::Ref<Eigen::MatrixXd> J_W);
+
+/// Relative Jacobian J_W_p1 - J_W_p2 (3 x nq) of two points on two links: the rate of p1 - p2.
+void computeRelativeJacobian(const Model& model, const KinematicsData& data, int link1,
+                             const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
+                             Eigen::Ref<Eigen::MatrixXd> J_W);
+
+/// The directional row n^T (J_W_p1 - J_W_p2) (1 x nq): the rate of the distance along n_W.
+/// With n_W = (p1 - p2)/d this is the paper's J_ca|row,y (Eq. 8): positive row velocity separates.
+void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1,
+                           const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
+                           const Eigen::Vector3d& n_W, Eigen::Ref<Eigen::RowVectorXd> row);
+
+}  // namespace reflex::control

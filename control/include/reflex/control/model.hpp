@@ -1,0 +1,84 @@
+// Robot model: the immutable description of a humanoid's kinematic tree and collision segments
+// (paper Sec. 4, Fig. 1). Loaded once from URDF (see loadModel in urdf_loader.hpp); never mutated
+// afterwards. Everything that changes per cycle lives in the Data structs of kinematics.hpp and
+// distance.hpp, sized from this model.
+//
+// Frames: W is the URDF root link frame ("base frame"; for the shipped robot: on the floor, x forward,
+// y left, z up). L is a link frame (URDF convention: it coincides with the frame of its parent joint).
+// Units: metres, radians.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <string>
+#include <vector>
+
+namespace reflex::control {
+
+enum class JointType { kFixed, kRevolute, kPrismatic };
+
+/// One link and the joint that connects it to its parent (every non-root link has exactly one).
+struct Link {
+  std::string name;
+  int parent = -1;                                        ///< parent link index, -1 for the root
+  Eigen::Isometry3d X_P_J = Eigen::Isometry3d::Identity(); ///< joint origin in the parent link frame
+  JointType type = JointType::kFixed;
+  Eigen::Vector3d axis_J = Eigen::Vector3d::UnitZ();      ///< unit joint axis in the joint frame
+  int q_index = -1;                                       ///< index into q, -1 if fixed
+  std::string joint_name;                                 ///< empty for the root
+};
+
+/// A sphere-swept line (capsule) in a link frame; a sphere when a_L == b_L (`sphere` is then true).
+/// Invariants: radius > 0; a capsule has |b_L - a_L| > 0.
+struct Primitive {
+  Eigen::Vector3d a_L = Eigen::Vector3d::Zero();
+  Eigen::Vector3d b_L = Eigen::Vector3d::Zero();
+  double radius = 0.0;
+  bool sphere = true;
+};
+
+/// A collision segment (paper Fig. 1): one or several primitives rigidly attached to one link.
+/// Primitives are stored flat in Model::primitives[first_primitive, first_primitive + num_primitives).
+struct Segment {
+  std::string name;   ///< the link name for robot segments; the slot name for body-schema slots
+  int link = -1;      ///< link the primitives are expressed in (body-schema slots: set at run time)
+  int first_primitive = 0;
+  int num_primitives = 0;
+  bool body_schema_slot = false;  ///< a run-time slot (grasped object / virtual segment), Sec. 8.5
+};
+
+/// A pair of segments whose distance is computed every cycle. Invariant: a < b.
+struct SegmentPair {
+  int a = -1;
+  int b = -1;
+};
+
+/// The immutable robot model. Build it with loadModel(); do not edit it after loading.
+struct Model {
+  std::string name;
+  std::vector<Link> links;       ///< topological order: a parent always comes before its children
+  int nq = 0;                    ///< number of movable (revolute / prismatic) joints
+  std::vector<std::string> q_names;     ///< joint name per q index
+  Eigen::VectorXd q_lower, q_upper;     ///< position limits per q index (rad or m)
+  Eigen::VectorXd v_max;                ///< velocity limits per q index (rad/s or m/s), > 0
+  std::vector<int> q_link;              ///< link moved by each q index
+  /// For each link, the q indices of the movable joints on the path from the root to it,
+  /// root first (its own joint last if movable). Used by every Jacobian.
+  std::vector<std::vector<int>> link_support;
+
+  std::vector<Primitive> primitives;
+  std::vector<Segment> segments;        ///< robot segments first, then the body-schema slots
+  int num_robot_segments = 0;
+  std::vector<SegmentPair> pairs;       ///< checked pairs (configuration), including slot pairs
+
+  /// Index lookups; return -1 when the name is unknown.
+  int linkIndex(const std::string& link_name) const;
+  int qIndex(const std::string& joint_name) const;
+  int segmentIndex(const std::string& segment_name) const;
+};
+
+/// Capacity of a body-schema slot (one capsule each) and the number of slots every model has.
+inline constexpr int kBodySchemaSlots = 4;
+
+}  // namespace reflex::control

@@ -1,0 +1,56 @@
+// Loading a humanoid from URDF (urdfdom) plus its collision configuration into an immutable Model.
+//
+// Collision elements become primitives (README, "Collision model"):
+//   sphere              -> sphere
+//   cylinder (r, L)     -> capsule of radius r whose core segment is the cylinder's axis, length L,
+//                          centred on the collision origin (the capsule is L + 2r long overall)
+//   box (x, y, z)       -> the enclosing capsule along the box's longest axis, with a warning
+//   mesh                -> refused: a std::runtime_error says which link and how to fix it
+// A link with collision elements is one segment named like the link.
+//
+// Which pairs are checked is configuration (a YAML file next to the robot, <robot>.collision.yaml):
+//   exclude_adjacent: true     # default; pairs of segments on links joined by one joint (or by a chain
+//                              # of fixed joints and collision-free links) are never checked
+//   exclude:                   # further pairs that cannot collide or must not be checked
+//     - [l_thigh, r_thigh]
+// Every error names the file, the element and the bad value.
+#pragma once
+
+#include "reflex/control/model.hpp"
+
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace reflex::control {
+
+/// Thrown for every set-up error of the model (URDF, collision configuration).
+class ModelError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct CollisionConfig {
+  bool exclude_adjacent = true;
+  std::vector<std::pair<std::string, std::string>> exclude;
+  std::string source = "<defaults>";  ///< where it was read from, for error messages
+};
+
+/// Reads a collision configuration YAML. Throws ModelError naming the file and the bad entry.
+CollisionConfig loadCollisionConfig(const std::string& yaml_path);
+
+/// "dir/robot.urdf" -> "dir/robot.collision.yaml".
+std::string defaultCollisionConfigPath(const std::string& urdf_path);
+
+/// Loads a URDF file. Warnings (e.g. boxes replaced by capsules) are appended to `warnings` if given.
+/// Throws ModelError for a missing or malformed file, mesh-only collision, non-positive radius,
+/// zero-length cylinder, bad limits, and unknown link names in the configuration.
+Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
+                std::vector<std::string>* warnings = nullptr);
+
+/// Same, from URDF XML text; `origin` names the source in error messages.
+Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config,
+                          const std::string& origin, std::vector<std::string>* warnings = nullptr);
+
+}  // namespace reflex::control

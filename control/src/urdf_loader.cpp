@@ -1,0 +1,305 @@
+#include "reflex/control/urdf_loader.hpp"
+
+#include <urdf_model/model.h>
+#include <urdf_parser/urdf_parser.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace reflex::control {
+namespace {
+
+[[noreturn]] void fail(const std::string& origin, const std::string& what) {
+  throw ModelError(origin + ": " + what);
+}
+
+Eigen::Isometry3d toIsometry(const urdf::Pose& pose) {
+  Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+  const Eigen::Quaterniond quat(pose.rotation.w, pose.rotation.x, pose.rotation.y, pose.rotation.z);
+  X.linear() = quat.normalized().toRotationMatrix();
+  X.translation() = Eigen::Vector3d(pose.position.x, pose.position.y, pose.position.z);
+  return X;
+}
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+
+/// Appends the primitives of one URDF collision element (in the link frame).
+void addCollision(const std::string& origin, const std::string& link_name,
+                  const urdf::Collision& collision, std::vector<Primitive>& out,
+                  std::vector<std::string>* warnings) {
+  if (!collision.geometry) fail(origin, "link '" + link_name + "' has a collision element without geometry");
+  const Eigen::Isometry3d X_L_C = toIsometry(collision.origin);
+  const std::string where = "link '" + link_name + "' collision '" + collision.name + "'";
+  Primitive prim;
+  switch (collision.geometry->type) {
+    case urdf::Geometry::SPHERE: {
+      const auto& sphere = static_cast<const urdf::Sphere&>(*collision.geometry);
+      if (!(sphere.radius > 0.0) || !std::isfinite(sphere.radius))
+        fail(origin, where + ": sphere radius " + fmt(sphere.radius) + " must be positive");
+      prim.a_L = prim.b_L = X_L_C.translation();
+      prim.radius = sphere.radius;
+      prim.sphere = true;
+      break;
+    }
+    case urdf::Geometry::CYLINDER: {
+      const auto& cyl = static_cast<const urdf::Cylinder&>(*collision.geometry);
+      if (!(cyl.radius > 0.0) || !std::isfinite(cyl.radius))
+        fail(origin, where + ": cylinder radius " + fmt(cyl.radius) + " must be positive");
+      if (!(cyl.length > 0.0) || !std::isfinite(cyl.length))
+        fail(origin, where + ": cylinder (capsule) length " + fmt(cyl.length) +
+                         " must be positive; use a sphere for a zero-length capsule");
+      const Eigen::Vector3d half = X_L_C.linear() * Eigen::Vector3d(0, 0, 0.5 * cyl.length);
+      prim.a_L = X_L_C.translation() - half;
+      prim.b_L = X_L_C.translation() + half;
+      prim.radius = cyl.radius;
+      prim.sphere = false;
+      break;
+    }
+    case urdf::Geometry::BOX: {
+      const auto& box = static_cast<const urdf::Box&>(*collision.geometry);
+      const Eigen::Vector3d dim(box.dim.x, box.dim.y, box.dim.z);
+      if (!(dim.minCoeff() > 0.0) || !dim.allFinite())
+        fail(origin, where + ": box size " + fmt(dim.x()) + " " + fmt(dim.y()) + " " + fmt(dim.z()) +
+                         " must be positive");
+      int axis = 0;
+      dim.maxCoeff(&axis);
+      // Enclosing capsule: core along the longest axis, radius = half diagonal of the cross-section.
+      const double r = 0.5 * std::sqrt(dim.squaredNorm() - dim[axis] * dim[axis]);
+      Eigen::Vector3d half = Eigen::Vector3d::Zero();
+      half[axis] = 0.5 * dim[axis];
+      prim.a_L = X_L_C.translation() - X_L_C.linear() * half;
+      prim.b_L = X_L_C.translation() + X_L_C.linear() * half;
+      prim.radius = r;
+      prim.sphere = false;
+      if (warnings)
+        warnings->push_back(origin + ": " + where + ": box replaced by its enclosing capsule (radius " +
+                            fmt(r) + " m, core length " + fmt(dim[axis]) + " m)");
+      break;
+    }
+    case urdf::Geometry::MESH:
+    default:
+      fail(origin, where + ": mesh collision geometry is not supported; replace it with spheres and "
+                           "cylinders (read as capsules) that enclose the mesh");
+  }
+  out.push_back(prim);
+}
+
+}  // namespace
+
+std::string defaultCollisionConfigPath(const std::string& urdf_path) {
+  const auto dot = urdf_path.rfind('.');
+  const auto slash = urdf_path.rfind('/');
+  const std::string stem =
+      (dot != std::string::npos && (slash == std::string::npos || dot > slash)) ? urdf_path.substr(0, dot)
+                                                                                 : urdf_path;
+  return stem + ".collision.yaml";
+}
+
+CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
+  CollisionConfig config;
+  config.source = yaml_path;
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(yaml_path);
+  } catch (const YAML::BadFile&) {
+    throw ModelError(yaml_path + ": cannot open collision configuration");
+  } catch (const YAML::Exception& e) {
+    throw ModelError(yaml_path + ": malformed YAML: " + e.what());
+  }
+  if (!root.IsMap() && !root.IsNull()) throw ModelError(yaml_path + ": top level must be a map");
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (key == "exclude_adjacent") {
+      try {
+        config.exclude_adjacent = kv.second.as<bool>();
+      } catch (const YAML::Exception&) {
+        throw ModelError(yaml_path + ": exclude_adjacent must be true or false, got '" +
+                         YAML::Dump(kv.second) + "'");
+      }
+    } else if (key == "exclude") {
+      if (!kv.second.IsSequence()) throw ModelError(yaml_path + ": 'exclude' must be a list of pairs");
+      for (const auto& item : kv.second) {
+        if (!item.IsSequence() || item.size() != 2)
+          throw ModelError(yaml_path + ": exclude entry '" + YAML::Dump(item) +
+                           "' must be a pair [segment_a, segment_b]");
+        config.exclude.emplace_back(item[0].as<std::string>(), item[1].as<std::string>());
+      }
+    } else {
+      throw ModelError(yaml_path + ": unknown key '" + key + "' (expected exclude_adjacent, exclude)");
+    }
+  }
+  return config;
+}
+
+Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
+                std::vector<std::string>* warnings) {
+  std::ifstream in(urdf_path);
+  if (!in) throw ModelError(urdf_path + ": cannot open URDF file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return loadModelFromString(ss.str(), config, urdf_path, warnings);
+}
+
+Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config,
+                          const std::string& origin, std::vector<std::string>* warnings) {
+  urdf::ModelInterfaceSharedPtr urdf_model;
+  try {
+    urdf_model = urdf::parseURDF(urdf_xml);
+  } catch (const std::exception& e) {
+    fail(origin, std::string("malformed URDF: ") + e.what());
+  }
+  if (!urdf_model) fail(origin, "malformed URDF (urdfdom could not parse it; see the message above)");
+  if (!urdf_model->getRoot()) fail(origin, "URDF has no root link");
+
+  Model model;
+  model.name = urdf_model->getName();
+
+  // Breadth-first over the tree: parents before children.
+  std::vector<urdf::LinkConstSharedPtr> order{urdf_model->getRoot()};
+  for (std::size_t i = 0; i < order.size(); ++i)
+    for (const auto& child : order[i]->child_links) order.push_back(child);
+
+  std::map<std::string, int> index_of;
+  for (const auto& ulink : order) {
+    Link link;
+    link.name = ulink->name;
+    const auto& joint = ulink->parent_joint;
+    if (joint) {
+      link.parent = index_of.at(ulink->getParent()->name);
+      link.joint_name = joint->name;
+      link.X_P_J = toIsometry(joint->parent_to_joint_origin_transform);
+      const Eigen::Vector3d axis(joint->axis.x, joint->axis.y, joint->axis.z);
+      const std::string jwhere = "joint '" + joint->name + "'";
+      switch (joint->type) {
+        case urdf::Joint::FIXED: link.type = JointType::kFixed; break;
+        case urdf::Joint::REVOLUTE:
+        case urdf::Joint::CONTINUOUS: link.type = JointType::kRevolute; break;
+        case urdf::Joint::PRISMATIC: link.type = JointType::kPrismatic; break;
+        default:
+          fail(origin, jwhere + ": floating and planar joints are not supported; model them as a chain "
+                                "of prismatic and revolute joints");
+      }
+      if (link.type != JointType::kFixed) {
+        if (!(axis.norm() > 1e-9) || !axis.allFinite()) fail(origin, jwhere + ": zero or invalid axis");
+        link.axis_J = axis.normalized();
+        link.q_index = model.nq++;
+        model.q_names.push_back(joint->name);
+        model.q_link.push_back(static_cast<int>(model.links.size()));
+      }
+    }
+    index_of[link.name] = static_cast<int>(model.links.size());
+    model.links.push_back(link);
+  }
+
+  // Limits per q index.
+  model.q_lower.resize(model.nq);
+  model.q_upper.resize(model.nq);
+  model.v_max.resize(model.nq);
+  for (int qi = 0; qi < model.nq; ++qi) {
+    const auto joint = urdf_model->getJoint(model.q_names[qi]);
+    const std::string jwhere = "joint '" + joint->name + "'";
+    double lo = -std::numeric_limits<double>::infinity();
+    double hi = std::numeric_limits<double>::infinity();
+    double v = 0.0;
+    if (joint->limits) {
+      if (joint->type != urdf::Joint::CONTINUOUS) {
+        lo = joint->limits->lower;
+        hi = joint->limits->upper;
+      }
+      v = joint->limits->velocity;
+    }
+    if (!(lo <= hi)) fail(origin, jwhere + ": lower limit " + fmt(lo) + " exceeds upper limit " + fmt(hi));
+    if (!(v > 0.0) || !std::isfinite(v)) {
+      if (warnings)
+        warnings->push_back(origin + ": " + jwhere + ": no positive velocity limit (" + fmt(v) +
+                            "); using 1.0");
+      v = 1.0;
+    }
+    model.q_lower[qi] = lo;
+    model.q_upper[qi] = hi;
+    model.v_max[qi] = v;
+  }
+
+  // Support (movable ancestors, root first) of every link.
+  model.link_support.resize(model.links.size());
+  for (std::size_t i = 0; i < model.links.size(); ++i) {
+    const Link& link = model.links[i];
+    if (link.parent >= 0) model.link_support[i] = model.link_support[link.parent];
+    if (link.q_index >= 0) model.link_support[i].push_back(link.q_index);
+  }
+
+  // Segments: one per link with collision elements.
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    const auto& ulink = order[i];
+    std::vector<urdf::CollisionSharedPtr> collisions = ulink->collision_array;
+    if (collisions.empty() && ulink->collision) collisions.push_back(ulink->collision);
+    if (collisions.empty()) continue;
+    Segment seg;
+    seg.name = ulink->name;
+    seg.link = static_cast<int>(i);
+    seg.first_primitive = static_cast<int>(model.primitives.size());
+    for (const auto& c : collisions) addCollision(origin, ulink->name, *c, model.primitives, warnings);
+    seg.num_primitives = static_cast<int>(model.primitives.size()) - seg.first_primitive;
+    model.segments.push_back(seg);
+  }
+  model.num_robot_segments = static_cast<int>(model.segments.size());
+  if (model.num_robot_segments == 0)
+    fail(origin, "no link has collision geometry; add spheres or cylinders (read as capsules)");
+  if (model.num_robot_segments + kBodySchemaSlots > 64)
+    fail(origin, "too many collision segments (" + std::to_string(model.num_robot_segments) +
+                     "); at most " + std::to_string(64 - kBodySchemaSlots) + " are supported");
+  for (int s = 0; s < kBodySchemaSlots; ++s) {
+    Segment seg;
+    seg.name = "body_schema_" + std::to_string(s);
+    seg.link = 0;
+    seg.first_primitive = static_cast<int>(model.primitives.size());
+    seg.num_primitives = 1;
+    seg.body_schema_slot = true;
+    model.primitives.push_back(Primitive{});
+    model.segments.push_back(seg);
+  }
+
+  // Segment parent: the nearest ancestor link that carries a segment.
+  std::vector<int> segment_of_link(model.links.size(), -1);
+  for (int s = 0; s < model.num_robot_segments; ++s) segment_of_link[model.segments[s].link] = s;
+  auto segmentParent = [&](int s) {
+    int l = model.links[model.segments[s].link].parent;
+    while (l >= 0 && segment_of_link[l] < 0) l = model.links[l].parent;
+    return l >= 0 ? segment_of_link[l] : -1;
+  };
+
+  std::set<std::pair<int, int>> excluded;
+  for (const auto& [na, nb] : config.exclude) {
+    const int a = model.segmentIndex(na);
+    const int b = model.segmentIndex(nb);
+    if (a < 0 || a >= model.num_robot_segments)
+      fail(config.source, "exclude pair [" + na + ", " + nb + "]: unknown segment '" + na + "' in " + origin);
+    if (b < 0 || b >= model.num_robot_segments)
+      fail(config.source, "exclude pair [" + na + ", " + nb + "]: unknown segment '" + nb + "' in " + origin);
+    if (a == b) fail(config.source, "exclude pair [" + na + ", " + nb + "]: a segment is never paired with itself");
+    excluded.insert({std::min(a, b), std::max(a, b)});
+  }
+  const int nseg = static_cast<int>(model.segments.size());
+  for (int a = 0; a < nseg; ++a) {
+    for (int b = a + 1; b < nseg; ++b) {
+      if (model.segments[a].body_schema_slot) continue;  // slot-slot pairs are never checked
+      if (!model.segments[b].body_schema_slot) {
+        if (excluded.count({a, b})) continue;
+        if (config.exclude_adjacent && (segmentParent(a) == b || segmentParent(b) == a)) continue;
+      }
+      model.pairs.push_back({a, b});
+    }
+  }
+  return model;
+}
+
+}  // namespace reflex::control

@@ -1,0 +1,203 @@
+// reflex_inspect: checks a robot's collision model. Loads a URDF (and its collision configuration),
+// takes joint values, and prints the segments, the checked pairs with their distances and witness
+// points, and the closest pair, as CSV or JSON.
+#include "reflex/control/distance.hpp"
+#include "reflex/control/kinematics.hpp"
+#include "reflex/control/urdf_loader.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using reflex::control::Model;
+
+std::vector<std::string> splitCsv(const std::string& line) {
+  std::vector<std::string> out;
+  std::stringstream ss(line);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    const auto b = item.find_first_not_of(" \t\r");
+    const auto e = item.find_last_not_of(" \t\r");
+    out.push_back(b == std::string::npos ? "" : item.substr(b, e - b + 1));
+  }
+  return out;
+}
+
+double parseNumber(const std::string& text, const std::string& what) {
+  try {
+    std::size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used != text.size()) throw std::invalid_argument("trailing characters");
+    if (!std::isfinite(v)) throw std::invalid_argument("not finite");
+    return v;
+  } catch (const std::exception&) {
+    throw std::runtime_error(what + ": '" + text + "' is not a finite number");
+  }
+}
+
+void setJoint(const Model& model, Eigen::VectorXd& q, const std::string& name, const std::string& value,
+              const std::string& where) {
+  const int qi = model.qIndex(name);
+  if (qi < 0) throw std::runtime_error(where + ": unknown joint '" + name + "' in " + model.name);
+  const double v = parseNumber(value, where + " joint '" + name + "'");
+  if (v < model.q_lower[qi] - 1e-12 || v > model.q_upper[qi] + 1e-12) {
+    std::ostringstream os;
+    os << where << ": joint '" << name << "' value " << v << " is outside its limits [" << model.q_lower[qi]
+       << ", " << model.q_upper[qi] << "]";
+    throw std::runtime_error(os.str());
+  }
+  q[qi] = v;
+}
+
+/// CSV with a header row of joint names and value rows; `row` selects the row (0 = first after header).
+void readCsvRow(const Model& model, Eigen::VectorXd& q, const std::string& path, int row) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open joint CSV");
+  std::string header;
+  if (!std::getline(in, header)) throw std::runtime_error(path + ": empty joint CSV (expected a header row)");
+  const auto names = splitCsv(header);
+  std::string line;
+  for (int i = 0; i <= row; ++i)
+    if (!std::getline(in, line))
+      throw std::runtime_error(path + ": has no row " + std::to_string(row) + " after the header");
+  const auto values = splitCsv(line);
+  if (values.size() != names.size())
+    throw std::runtime_error(path + ": row " + std::to_string(row) + " has " + std::to_string(values.size()) +
+                             " values for " + std::to_string(names.size()) + " columns");
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (names[i] == "time" || names[i] == "t") continue;
+    setJoint(model, q, names[i], values[i], path + " column " + std::to_string(i + 1));
+  }
+}
+
+std::string jsonString(const std::string& s) {
+  std::string out = "\"";
+  for (const char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"reflex_inspect: check a robot's collision model (segments, checked pairs, distances)"};
+  std::string urdf_path;
+  std::string config_path;
+  std::vector<std::string> q_args;
+  std::string csv_path;
+  int csv_row = 0;
+  std::string format = "csv";
+  bool list_only = false;
+  app.add_option("urdf", urdf_path, "URDF file (collision elements: spheres, cylinders read as capsules)")
+      ->required();
+  app.add_option("--config", config_path,
+                 "collision configuration YAML (default: <urdf stem>.collision.yaml if it exists)");
+  app.add_option("--q", q_args, "joint values, name=value (radians / metres); others stay 0");
+  app.add_option("--csv", csv_path, "joint values from a CSV file: header row of joint names, value rows");
+  app.add_option("--row", csv_row, "row of --csv to use (0 = first after the header)")->check(CLI::NonNegativeNumber);
+  app.add_option("--format", format, "output format")->check(CLI::IsMember({"csv", "json"}));
+  app.add_flag("--segments", list_only, "print only the segments and their primitives");
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    reflex::control::CollisionConfig config;
+    if (config_path.empty()) {
+      const std::string guess = reflex::control::defaultCollisionConfigPath(urdf_path);
+      if (std::ifstream(guess).good()) config = reflex::control::loadCollisionConfig(guess);
+    } else {
+      config = reflex::control::loadCollisionConfig(config_path);
+    }
+    std::vector<std::string> warnings;
+    const Model model = reflex::control::loadModel(urdf_path, config, &warnings);
+    for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";
+
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
+    for (int qi = 0; qi < model.nq; ++qi)  // zero if allowed, else the nearest limit
+      q[qi] = std::min(std::max(0.0, model.q_lower[qi]), model.q_upper[qi]);
+    if (!csv_path.empty()) readCsvRow(model, q, csv_path, csv_row);
+    for (const auto& arg : q_args) {
+      const auto eq = arg.find('=');
+      if (eq == std::string::npos)
+        throw std::runtime_error("--q '" + arg + "': expected name=value");
+      setJoint(model, q, arg.substr(0, eq), arg.substr(eq + 1), "--q");
+    }
+
+    reflex::control::KinematicsData kin(model);
+    reflex::control::computeForwardKinematics(model, kin, q);
+    reflex::control::DistanceData dist(model);
+    reflex::control::computeSegmentDistances(model, kin, dist);
+
+    const bool json = format == "json";
+    if (json) std::printf("{\n  \"robot\": %s,\n  \"segments\": [\n", jsonString(model.name).c_str());
+    else std::printf("# robot %s: %d segments, %zu checked pairs, %d joints\n# segment,link,primitives\n",
+                     model.name.c_str(), model.num_robot_segments, model.pairs.size(), model.nq);
+    for (int s = 0; s < model.num_robot_segments; ++s) {
+      const auto& seg = model.segments[s];
+      if (json) {
+        std::printf("    {\"name\": %s, \"link\": %s, \"primitives\": [", jsonString(seg.name).c_str(),
+                    jsonString(model.links[seg.link].name).c_str());
+        for (int p = 0; p < seg.num_primitives; ++p) {
+          const auto& prim = model.primitives[seg.first_primitive + p];
+          std::printf("%s{\"type\": \"%s\", \"a\": [%.6f, %.6f, %.6f], \"b\": [%.6f, %.6f, %.6f], \"radius\": %.6f}",
+                      p ? ", " : "", prim.sphere ? "sphere" : "capsule", prim.a_L.x(), prim.a_L.y(), prim.a_L.z(),
+                      prim.b_L.x(), prim.b_L.y(), prim.b_L.z(), prim.radius);
+        }
+        std::printf("]}%s\n", s + 1 < model.num_robot_segments ? "," : "");
+      } else {
+        std::printf("# %s,%s,", seg.name.c_str(), model.links[seg.link].name.c_str());
+        for (int p = 0; p < seg.num_primitives; ++p) {
+          const auto& prim = model.primitives[seg.first_primitive + p];
+          std::printf("%s%s(r=%.4f)", p ? " " : "", prim.sphere ? "sphere" : "capsule", prim.radius);
+        }
+        std::printf("\n");
+      }
+    }
+    if (list_only) {
+      if (json) std::printf("  ]\n}\n");
+      return 0;
+    }
+    if (json) std::printf("  ],\n  \"pairs\": [\n");
+    else std::printf("segment_a,segment_b,distance_m,pa_x,pa_y,pa_z,pb_x,pb_y,pb_z\n");
+    bool first = true;
+    for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+      const auto& pd = dist.pairs[i];
+      if (!pd.active) continue;
+      const char* a = model.segments[pd.seg_a].name.c_str();
+      const char* b = model.segments[pd.seg_b].name.c_str();
+      if (json) {
+        std::printf("%s    {\"a\": \"%s\", \"b\": \"%s\", \"distance\": %.6f, \"pa\": [%.6f, %.6f, %.6f], "
+                    "\"pb\": [%.6f, %.6f, %.6f]}", first ? "" : ",\n", a, b, pd.distance, pd.p_W_a.x(),
+                    pd.p_W_a.y(), pd.p_W_a.z(), pd.p_W_b.x(), pd.p_W_b.y(), pd.p_W_b.z());
+      } else {
+        std::printf("%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", a, b, pd.distance, pd.p_W_a.x(), pd.p_W_a.y(),
+                    pd.p_W_a.z(), pd.p_W_b.x(), pd.p_W_b.y(), pd.p_W_b.z());
+      }
+      first = false;
+    }
+    if (dist.closest >= 0) {
+      const auto& c = dist.pairs[dist.closest];
+      if (json)
+        std::printf("\n  ],\n  \"closest\": {\"a\": \"%s\", \"b\": \"%s\", \"distance\": %.6f}\n}\n",
+                    model.segments[c.seg_a].name.c_str(), model.segments[c.seg_b].name.c_str(), c.distance);
+      else
+        std::printf("# closest: %s,%s,%.6f\n", model.segments[c.seg_a].name.c_str(),
+                    model.segments[c.seg_b].name.c_str(), c.distance);
+    } else if (json) {
+      std::printf("\n  ],\n  \"closest\": null\n}\n");
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "reflex_inspect: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
