@@ -1,0 +1,180 @@
+// The reactive controller of the paper: whole-body motion (Eq. 2-5) and collision avoidance
+// (Eq. 6-12) blended by the risk level f(d) (Eq. 1, 13), with merged virtual forces per arm
+// (Eq. 14-18), the red-zone emergency stop (Sec. 7.1), motion priority between the arms (Sec. 7.2),
+// linear trajectories to new targets (Sec. 8) and body-schema / virtual segments (Sec. 8.5).
+//
+// Scope of the controlled joints: like the paper's Sec. 8.1, avoidance and reaching act on the arm
+// joints (five per arm on the shipped robot); legs, heel and the virtual heel->body link belong to
+// walking and balance, the head to gaze. Those joints move the segments the arms avoid, but the
+// controller never commands them (their output velocity is 0).
+//
+// Sign convention (see distance.hpp): row = nhat^T (J_pa - J_pb) is the rate of the distance, so the
+// collision-avoidance task asks for row * qdot = +k (d_a - d) > 0, i.e. separation. The paper's
+// Eq. 5 gradient -alpha J_row^T (d_safe - d) is written in its own y-axis convention; here it is
+// +alpha_ca * row^T (d_safe - d), which increases d.
+//
+// Usage (Model/Data split as in pinocchio):
+//   ControllerModel cm = makeControllerModel(model, loadControllerConfig(path));   // set-up, throws
+//   ControllerData data(model, cm);
+//   every 5 ms: computeControl(model, cm, data, q, input);  // allocation-free, never throws, no NaN
+//               -> data.qdot (nq), data.arms[i] status, data.estop
+// Extending: a new criterion in the nullspace goes into the xi terms of computeArm() in controller.cpp.
+#pragma once
+
+#include "reflex/control/distance.hpp"
+#include "reflex/control/kinematics.hpp"
+#include "reflex/control/model.hpp"
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace reflex::control {
+
+inline constexpr int kMaxArmDof = 8;
+inline constexpr int kLeft = 0;
+inline constexpr int kRight = 1;
+
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+enum class AvoidanceMode { kOneDof, kThreeDof, kOff };
+enum class Zone : std::uint8_t { kFree = 0, kYellow = 1, kOrange = 2, kRed = 3 };
+enum class HandStatus : std::uint8_t { kNoTarget = 0, kGiven = 1 };
+enum class MotionPriority : std::uint8_t { kEqual = 0, kLeftHigher = 1, kRightHigher = 2 };
+enum class EstopState : std::uint8_t { kClear = 0, kLatched = 1, kRecovering = 2 };
+
+/// Controller parameters; defaults are the paper's (Sec. 8) where it gives them.
+struct ControllerParams {
+  double d_a = 0.040;        ///< yellow zone boundary (m): virtual force and blending start, Eq. 6, 13
+  double d_b = 0.010;        ///< orange zone boundary (m): f(d) = 1 below, Eq. 13
+  double d_r = 0.005;        ///< red zone (m): emergency stop, Sec. 7.1
+  double period = 0.005;     ///< control period (s)
+  double k_virtual = 10.0;   ///< virtual force gain k (1/s): separation speed k (d_a - d), Eq. 6
+  double alpha_ca = 1.0;     ///< step width of the avoidance gradient in the WBM nullspace (1/(m s)), Eq. 5
+  double d_safe = 0.10;      ///< d_safe of Eq. 5 (m); pairs closer than this feed the gradient
+  double alpha_t = 60.0;     ///< step width of target reaching in the CA nullspace (1/s), Eq. 12
+  double alpha_jla = 0.2;    ///< joint-limit-avoidance gradient step (1/s), Eq. 4
+  double alpha_rest = 1.5;   ///< attraction to the rest posture when a hand has no target (1/s)
+  double damping = 0.02;     ///< singularity-robust inverse damping lambda (m)
+  double reach_gain = 5.0;   ///< trajectory tracking gain (1/s)
+  double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s)
+  double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8
+  double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m)
+  AvoidanceMode mode = AvoidanceMode::kOneDof;
+};
+
+/// One arm as the configuration names it.
+struct ArmConfig {
+  std::string name;
+  std::vector<std::string> joints;  ///< controlled joints, shoulder to wrist
+  std::string hand_link;
+  Eigen::Vector3d hand_point_L = Eigen::Vector3d::Zero();  ///< reaching point in the hand link frame
+  std::vector<double> rest;         ///< rest posture (rad), one per joint
+};
+
+struct ControllerConfig {
+  ControllerParams params;
+  std::array<ArmConfig, 2> arms;    ///< [kLeft], [kRight]
+  std::string source = "<defaults>";
+};
+
+/// Defaults for the shipped asimo_like robot.
+ControllerConfig defaultControllerConfig();
+
+/// Reads a YAML file on top of the defaults. Throws ConfigError naming the file, key and bad value.
+ControllerConfig loadControllerConfig(const std::string& yaml_path);
+
+/// Checks a configuration (thresholds ordered, gains positive, ...). Throws ConfigError.
+void validateControllerParams(const ControllerParams& params, const std::string& source);
+
+/// The configuration resolved against a robot model (immutable).
+struct ControllerModel {
+  struct Arm {
+    std::string name;
+    int n = 0;                               ///< number of controlled joints
+    std::array<int, kMaxArmDof> q{};         ///< their q indices
+    int hand_link = -1;
+    Eigen::Vector3d hand_point_L = Eigen::Vector3d::Zero();
+    Eigen::Matrix<double, kMaxArmDof, 1> rest = Eigen::Matrix<double, kMaxArmDof, 1>::Zero();
+    std::vector<bool> link_in_arm;           ///< per link: moved by this arm's joints
+    std::uint64_t segment_mask = 0;          ///< robot segments moved by this arm
+    std::vector<int> candidate_pairs;        ///< pairs that involve this arm (or a body-schema slot)
+  };
+  ControllerParams params;
+  std::array<Arm, 2> arms;
+};
+
+/// Resolves names against the model. Throws ConfigError for unknown joints/links, wrong rest size,
+/// an arm with more than kMaxArmDof joints, or joints shared between arms.
+ControllerModel makeControllerModel(const Model& model, const ControllerConfig& config);
+
+struct HandCommand {
+  HandStatus status = HandStatus::kNoTarget;
+  Eigen::Vector3d target_W = Eigen::Vector3d::Zero();  ///< hand target in the root frame (m)
+};
+
+struct ControlInput {
+  std::array<HandCommand, 2> hands;
+  MotionPriority priority = MotionPriority::kEqual;
+  bool reset_estop = false;   ///< request to leave a latched e-stop (only separating motion allowed)
+};
+
+struct ArmStatus {
+  double f = 0.0;                    ///< blending coefficient f(d), Eq. 13
+  double distance = std::numeric_limits<double>::infinity();  ///< closest distance of this arm (m)
+  int closest_pair = -1;             ///< index into Model::pairs
+  Zone zone = Zone::kFree;
+  double force = 0.0;                ///< |F_virtual^all| (m/s), Eq. 17
+  Eigen::Vector3d force_dir_W = Eigen::Vector3d::Zero();  ///< unit direction of F^all
+  Eigen::Vector3d force_point_W = Eigen::Vector3d::Zero(); ///< P_cp1^all, Eq. 18
+  Eigen::Vector3d hand_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d reference_W = Eigen::Vector3d::Zero();  ///< point on the linear trajectory
+};
+
+/// Per-arm linear trajectory state (Sec. 8).
+struct Trajectory {
+  bool active = false;
+  Eigen::Vector3d goal_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ref_W = Eigen::Vector3d::Zero();
+};
+
+enum class ControlResult { kOk, kFrozen, kRecovering, kBadInput };
+
+/// Per-cycle state and scratch, sized from the model.
+struct ControllerData {
+  ControllerData(const Model& model, const ControllerModel& cm);
+
+  KinematicsData kin;
+  DistanceData dist;
+  Eigen::VectorXd qdot;                 ///< output joint velocities (nq); non-arm joints are 0
+  std::array<ArmStatus, 2> arms;
+  std::array<Trajectory, 2> trajectories;
+  EstopState estop = EstopState::kClear;
+  int estop_pair = -1;                  ///< pair that triggered the last e-stop
+  std::uint64_t estop_count = 0;
+  std::array<bool, kBodySchemaSlots> slot_virtual{};  ///< virtual slots never trigger the e-stop
+  std::uint64_t bad_input_count = 0;
+  // scratch
+  Eigen::MatrixXd J_full;               ///< 3 x nq
+  Eigen::MatrixXd J_rel_full;           ///< 3 x nq
+};
+
+/// The blending coefficient of Eq. 13.
+double blendingCoefficient(double d, double d_a, double d_b);
+
+/// The zone of a distance.
+Zone zoneOf(double d, const ControllerParams& params);
+
+/// One control cycle: kinematics, every pair, both controllers, blend, e-stop. Writes data.qdot.
+/// Allocation-free; never throws; data.qdot is always finite (zero on bad input or e-stop).
+ControlResult computeControl(const Model& model, const ControllerModel& cm, ControllerData& data,
+                             const Eigen::Ref<const Eigen::VectorXd>& q, const ControlInput& input);
+
+}  // namespace reflex::control

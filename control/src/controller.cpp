@@ -1,0 +1,343 @@
+#include "reflex/control/controller.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace reflex::control {
+namespace {
+
+using VecA = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxArmDof, 1>;
+using MatA = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxArmDof, kMaxArmDof>;
+using Mat3A = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxArmDof>;
+using MatA3 = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, kMaxArmDof, 3>;
+using RowA = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxArmDof>;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// The arm (kLeft / kRight) that moves segment s this cycle, or -1.
+int ownerArm(const Model& model, const ControllerModel& cm, const DistanceData& dist, int s) {
+  if (!model.segments[s].body_schema_slot) {
+    for (int a = 0; a < 2; ++a)
+      if ((cm.arms[a].segment_mask >> s) & 1U) return a;
+    return -1;
+  }
+  const int link = dist.slots[s - model.num_robot_segments].link;
+  for (int a = 0; a < 2; ++a)
+    if (cm.arms[a].link_in_arm[link]) return a;
+  return -1;
+}
+
+int segmentLink(const Model& model, const DistanceData& dist, int s) {
+  return model.segments[s].body_schema_slot ? dist.slots[s - model.num_robot_segments].link
+                                            : model.segments[s].link;
+}
+
+bool higherPriority(MotionPriority p, int arm) {
+  return (p == MotionPriority::kLeftHigher && arm == kLeft) || (p == MotionPriority::kRightHigher && arm == kRight);
+}
+
+/// Gathers the arm's columns of a 3 x nq matrix.
+void gather(const ControllerModel::Arm& arm, const Eigen::MatrixXd& full, Mat3A& out) {
+  out.resize(3, arm.n);
+  for (int i = 0; i < arm.n; ++i) out.col(i) = full.col(arm.q[i]);
+}
+
+/// Singularity-robust (damped least squares) inverse of a 3 x n Jacobian: J^T (J J^T + l^2 I)^-1.
+void dampedPinv(const Mat3A& J, double lambda, MatA3& J_pinv) {
+  Eigen::Matrix3d M = J * J.transpose();
+  M.diagonal().array() += lambda * lambda;
+  J_pinv = J.transpose() * M.inverse();
+}
+
+/// What one arm's pair contributes to the merged force (Eq. 14-18).
+struct PairTerm {
+  int pair;
+  int sign;          ///< +1: the arm's point is p_W_a, -1: p_W_b
+  double weight;     ///< |F_ij|
+};
+
+}  // namespace
+
+double blendingCoefficient(double d, double d_a, double d_b) {
+  if (!(d > d_b)) return 1.0;  // also NaN -> maximal caution
+  if (d > d_a) return 0.0;
+  return (d - d_a) / (d_b - d_a);
+}
+
+Zone zoneOf(double d, const ControllerParams& p) {
+  if (!(d >= p.d_r)) return Zone::kRed;
+  if (d < p.d_b) return Zone::kOrange;
+  if (d < p.d_a) return Zone::kYellow;
+  return Zone::kFree;
+}
+
+ControllerData::ControllerData(const Model& model, const ControllerModel& /*cm*/)
+    : kin(model),
+      dist(model),
+      qdot(Eigen::VectorXd::Zero(model.nq)),
+      J_full(Eigen::MatrixXd::Zero(3, model.nq)),
+      J_rel_full(Eigen::MatrixXd::Zero(3, model.nq)) {}
+
+namespace {
+
+/// Controller for one arm: Eq. 1-18 on its own joints. Writes the arm's joint velocities into qdot.
+void computeArm(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
+                const ControlInput& input, bool recovery_only) {
+  const ControllerParams& P = cm.params;
+  const ControllerModel::Arm& arm = cm.arms[a];
+  ArmStatus& status = data.arms[a];
+  Trajectory& traj = data.trajectories[a];
+  const int n = arm.n;
+  const double dt = P.period;
+
+  VecA q(n);
+  for (int i = 0; i < n; ++i) q[i] = data.kin.q[arm.q[i]];
+
+  // Hand, its Jacobian, the linear trajectory (Sec. 8) and the task velocity.
+  const Eigen::Vector3d r = data.kin.X_W_L[arm.hand_link] * arm.hand_point_L;
+  status.hand_W = r;
+  computePointJacobian(model, data.kin, arm.hand_link, r, data.J_full);
+  Mat3A J;
+  gather(arm, data.J_full, J);
+
+  const HandCommand& cmd = input.hands[a];
+  const bool given = cmd.status == HandStatus::kGiven && !recovery_only;
+  Eigen::Vector3d rdot = Eigen::Vector3d::Zero();
+  if (given) {
+    if (!traj.active) {
+      traj.active = true;
+      traj.ref_W = r;
+    }
+    traj.goal_W = cmd.target_W;
+    const Eigen::Vector3d delta = traj.goal_W - traj.ref_W;
+    const double step = P.trajectory_speed * dt;
+    const double len = delta.norm();
+    Eigen::Vector3d v_ref = Eigen::Vector3d::Zero();
+    if (len <= step) {
+      traj.ref_W = traj.goal_W;
+    } else {
+      v_ref = delta * (P.trajectory_speed / len);
+      traj.ref_W += v_ref * dt;
+    }
+    rdot = v_ref + P.reach_gain * (traj.ref_W - r);
+    const double speed = rdot.norm();
+    if (speed > P.max_task_speed) rdot *= P.max_task_speed / speed;
+  } else {
+    traj.active = false;
+    traj.ref_W = r;
+  }
+  status.reference_W = traj.ref_W;
+
+  // Pairs of this arm, their merged virtual force (Eq. 14-18) and the closest distance.
+  std::array<PairTerm, 64> terms;  // pairs inside the yellow zone
+  int nterms = 0;
+  double weight_sum = 0.0;
+  Eigen::Vector3d F_all = Eigen::Vector3d::Zero();
+  Eigen::Vector3d P_all = Eigen::Vector3d::Zero();
+  RowA xi_row_sum = RowA::Zero(n);  // sum of row^T (d_safe - d) for Eq. 5
+  double d_min = kInf;
+  int closest = -1;
+  for (const int p : arm.candidate_pairs) {
+    const PairDistance& pd = data.dist.pairs[p];
+    if (!pd.active) continue;
+    const int oa = ownerArm(model, cm, data.dist, pd.seg_a);
+    const int ob = ownerArm(model, cm, data.dist, pd.seg_b);
+    if (oa != a && ob != a) continue;
+    const int sign = oa == a ? 1 : -1;
+    const int other = oa == a ? ob : oa;
+    // Motion priority (Sec. 7.2): the higher-priority arm ignores the other arm (it is the obstacle).
+    if (other >= 0 && other != a && higherPriority(input.priority, a) && !recovery_only) continue;
+    if (pd.distance < d_min) {
+      d_min = pd.distance;
+      closest = p;
+    }
+    if (pd.has_row && pd.distance < P.d_safe && !recovery_only) {
+      for (int i = 0; i < n; ++i) xi_row_sum[i] += data.dist.rows(p, arm.q[i]) * (P.d_safe - pd.distance);
+    }
+    if (pd.distance < P.d_a && nterms < static_cast<int>(terms.size())) {
+      const double w = P.k_virtual * (P.d_a - pd.distance);  // |F_ij|, Eq. 14
+      const Eigen::Vector3d e = sign * pd.nhat_W;             // e_f,ij: from the other segment to the arm
+      terms[nterms++] = {p, sign, w};
+      weight_sum += w;
+      F_all += w * (w * e);                                   // Eq. 17 numerator
+      P_all += w * (sign > 0 ? pd.p_W_a : pd.p_W_b);           // Eq. 18 numerator
+    }
+  }
+  status.distance = d_min;
+  status.closest_pair = closest;
+  status.zone = zoneOf(d_min, P);
+  const double f = P.mode == AvoidanceMode::kOff ? 0.0 : blendingCoefficient(d_min, P.d_a, P.d_b);
+  status.f = f;
+
+  // Merged force, point and avoidance Jacobian (weighted relative Jacobians of the pairs).
+  Mat3A J_ca = Mat3A::Zero(3, n);
+  double F_mag = 0.0;
+  Eigen::Vector3d e_all = Eigen::Vector3d::Zero();
+  if (weight_sum > 0.0) {
+    F_all /= weight_sum;
+    P_all /= weight_sum;
+    F_mag = F_all.norm();
+    if (F_mag > 1e-12) e_all = F_all / F_mag;
+    Mat3A J_rel(3, n);
+    for (int t = 0; t < nterms; ++t) {
+      const PairDistance& pd = data.dist.pairs[terms[t].pair];
+      const int la = segmentLink(model, data.dist, pd.seg_a);
+      const int lb = segmentLink(model, data.dist, pd.seg_b);
+      computeRelativeJacobian(model, data.kin, la, pd.p_W_a, lb, pd.p_W_b, data.J_rel_full);
+      gather(arm, data.J_rel_full, J_rel);
+      J_ca += (terms[t].weight / weight_sum) * terms[t].sign * J_rel;  // rate of p1 - p2 (arm side first)
+    }
+  }
+  status.force = F_mag;
+  status.force_dir_W = e_all;
+  status.force_point_W = P_all;
+
+  // Nullspace criteria: joint-limit avoidance (Eq. 4), rest posture without a target.
+  VecA xi_jla(n);
+  for (int i = 0; i < n; ++i) {
+    const int qi = arm.q[i];
+    const double lo = model.q_lower[qi], hi = model.q_upper[qi];
+    const double half = 0.5 * (hi - lo);
+    xi_jla[i] = std::isfinite(half) && half > 0.0 ? -P.alpha_jla * (q[i] - 0.5 * (hi + lo)) / (half * half) : 0.0;
+  }
+  VecA xi_rest = VecA::Zero(n);
+  if (!given) xi_rest = -P.alpha_rest * (q - arm.rest.head(n));
+
+  VecA qdot(n);
+  if (recovery_only) {
+    // Only the separating motion of Eq. 8: nothing in the nullspace.
+    qdot.setZero();
+    if (F_mag > 0.0) {
+      const RowA row = e_all.transpose() * J_ca;
+      const double rr = row.squaredNorm() + P.damping * P.damping;
+      qdot = row.transpose() * (F_mag / rr);
+    }
+  } else {
+    // Whole-body motion, Eq. 2-5.
+    MatA3 J_pinv;
+    dampedPinv(J, P.damping, J_pinv);
+    const MatA N_wbm = MatA::Identity(n, n) - J_pinv * J;
+    VecA xi_ca = VecA::Zero(n);
+    if (P.mode != AvoidanceMode::kOff) xi_ca = P.alpha_ca * xi_row_sum.transpose();
+    VecA qdot_wbm(n);
+    if (given) qdot_wbm = J_pinv * rdot + N_wbm * (xi_ca + xi_jla);
+    else qdot_wbm = xi_ca + xi_jla + xi_rest;
+
+    if (P.mode == AvoidanceMode::kOff || f <= 0.0) {
+      qdot = qdot_wbm;
+    } else {
+      // Collision avoidance, Eq. 8-12: the virtual force along one direction, reaching in its nullspace.
+      VecA xi_t(n);
+      if (given) xi_t = -P.alpha_t * (J.transpose() * (r - traj.ref_W));  // Eq. 12, W_t = I
+      else xi_t = xi_rest;
+      VecA qdot_ca(n);
+      if (P.mode == AvoidanceMode::kOneDof) {
+        const RowA row = e_all.transpose() * J_ca;  // J_ca|row,y in the merged avoidance frame
+        const double rr = row.squaredNorm() + P.damping * P.damping;
+        const VecA row_pinv = row.transpose() / rr;
+        const MatA N_ca = MatA::Identity(n, n) - row_pinv * row;
+        qdot_ca = row_pinv * F_mag + N_ca * xi_t;
+      } else {
+        MatA3 Jca_pinv;
+        dampedPinv(J_ca, P.damping, Jca_pinv);
+        const MatA N_ca = MatA::Identity(n, n) - Jca_pinv * J_ca;
+        qdot_ca = Jca_pinv * (F_mag * e_all) + N_ca * xi_t;
+      }
+      qdot = (1.0 - f) * qdot_wbm + f * qdot_ca;  // Eq. 1
+    }
+  }
+
+  // Joint position and velocity limits: no motion further into a limit; uniform scaling to v_max.
+  double scale = 1.0;
+  for (int i = 0; i < n; ++i) {
+    const int qi = arm.q[i];
+    if ((q[i] <= model.q_lower[qi] && qdot[i] < 0.0) || (q[i] >= model.q_upper[qi] && qdot[i] > 0.0)) qdot[i] = 0.0;
+    const double v = std::abs(qdot[i]);
+    if (v > model.v_max[qi]) scale = std::min(scale, model.v_max[qi] / v);
+  }
+  qdot *= scale;
+  for (int i = 0; i < n; ++i) data.qdot[arm.q[i]] = qdot[i];
+}
+
+}  // namespace
+
+ControlResult computeControl(const Model& model, const ControllerModel& cm, ControllerData& data,
+                             const Eigen::Ref<const Eigen::VectorXd>& q, const ControlInput& input) {
+  data.qdot.setZero();
+  if (!computeForwardKinematics(model, data.kin, q)) {
+    ++data.bad_input_count;
+    return ControlResult::kBadInput;
+  }
+  ControlInput in = input;
+  for (auto& hand : in.hands) {
+    if (hand.status == HandStatus::kGiven && !hand.target_W.allFinite()) {
+      hand.status = HandStatus::kNoTarget;  // a NaN target is never followed
+      ++data.bad_input_count;
+    }
+  }
+  DistanceOptions options;
+  options.row_threshold = std::max(cm.params.d_safe, cm.params.d_a);
+  computeSegmentDistances(model, data.kin, data.dist, options);
+
+  // Red zone (Sec. 7.1): the closest physical pair.
+  double d_phys = kInf;
+  int pair_phys = -1;
+  for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
+    const PairDistance& pd = data.dist.pairs[i];
+    if (!pd.active) continue;
+    const int sb = pd.seg_b;
+    if (model.segments[sb].body_schema_slot && data.slot_virtual[sb - model.num_robot_segments]) continue;
+    if (pd.distance < d_phys) {
+      d_phys = pd.distance;
+      pair_phys = static_cast<int>(i);
+    }
+  }
+  if (cm.params.mode != AvoidanceMode::kOff && data.estop == EstopState::kClear && d_phys < cm.params.d_r) {
+    data.estop = EstopState::kLatched;
+    data.estop_pair = pair_phys;
+    ++data.estop_count;
+  }
+  if (data.estop == EstopState::kLatched) {
+    if (!in.reset_estop) {
+      for (int a = 0; a < 2; ++a) {
+        data.trajectories[a].active = false;
+        data.arms[a].f = 1.0;
+        data.arms[a].zone = Zone::kRed;
+      }
+      return ControlResult::kFrozen;
+    }
+    data.estop = EstopState::kRecovering;
+  }
+  if (data.estop == EstopState::kRecovering) {
+    if (d_phys >= cm.params.d_r + cm.params.estop_release_margin) {
+      data.estop = EstopState::kClear;
+    } else {
+      for (int a = 0; a < 2; ++a) computeArm(model, cm, data, a, in, true);
+      // Allowed only if every red pair separates (row * qdot >= 0); otherwise stay frozen.
+      for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
+        const PairDistance& pd = data.dist.pairs[i];
+        if (!pd.active || pd.distance >= cm.params.d_r || !pd.has_row) continue;
+        if (data.dist.rows.row(static_cast<Eigen::Index>(i)).dot(data.qdot) < 0.0) {
+          data.qdot.setZero();
+          break;
+        }
+      }
+      if (!data.qdot.allFinite()) data.qdot.setZero();
+      return ControlResult::kRecovering;
+    }
+  }
+
+  for (int a = 0; a < 2; ++a) computeArm(model, cm, data, a, in, false);
+  if (!data.qdot.allFinite()) {
+    data.qdot.setZero();
+    ++data.bad_input_count;
+    return ControlResult::kBadInput;
+  }
+  return ControlResult::kOk;
+}
+
+}  // namespace reflex::control

@@ -1,0 +1,179 @@
+#include "reflex/control/scenarios.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+
+namespace reflex::control {
+
+bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vector3d& a_L,
+                             const Eigen::Vector3d& b_L, double radius, bool is_virtual,
+                             const std::vector<std::string>& ignore) {
+  const int l = model.linkIndex(link);
+  if (l < 0) return false;
+  std::uint64_t mask = 0;
+  for (const auto& name : ignore) {
+    const int s = model.segmentIndex(name);
+    if (s < 0) return false;
+    mask |= std::uint64_t{1} << s;
+  }
+  if (!attachBodySchemaSegment(model, data.dist, slot, l, a_L, b_L, radius, mask)) return false;
+  data.slot_virtual[slot] = is_virtual;
+  return true;
+}
+
+void ScenarioContext::detach(int slot) {
+  if (detachBodySchemaSegment(data.dist, slot)) data.slot_virtual[slot] = false;
+}
+
+Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm) {
+  Eigen::VectorXd q(model.nq);
+  for (int i = 0; i < model.nq; ++i) q[i] = std::min(std::max(0.0, model.q_lower[i]), model.q_upper[i]);
+  for (const auto& arm : cm.arms)
+    for (int i = 0; i < arm.n; ++i) q[arm.q[i]] = arm.rest[i];
+  return q;
+}
+
+SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Scenario& scenario,
+                      const SimOptions& options) {
+  ControllerModel cm = cm_in;
+  cm.params.mode = options.mode;
+  ControllerData data(model, cm);
+  KinematicRobot robot(model, restConfiguration(model, cm));
+  WalkingPattern walking(model);
+  Eigen::VectorXd q_walk = robot.jointPositions();
+  ScenarioContext ctx{model, data};
+  ControlInput input;
+  SimResult result;
+  result.min_distance = std::numeric_limits<double>::infinity();
+  result.min_virtual_distance = std::numeric_limits<double>::infinity();
+  const double dt = cm.params.period;
+  const auto steps = static_cast<std::uint64_t>(std::llround(scenario.duration / dt));
+  if (options.record) result.samples.reserve(steps + 1);
+  bool walk_started = false;
+  for (std::uint64_t k = 0; k <= steps; ++k) {
+    const double t = static_cast<double>(k) * dt;
+    if (scenario.script) scenario.script(t, input, ctx);
+    const ControlResult cr = computeControl(model, cm, data, robot.jointPositions(), input);
+    input.reset_estop = false;
+    if (!data.qdot.allFinite()) result.non_finite = true;
+    // Distances of this cycle (computed inside the controller for the current q).
+    double dmin = std::numeric_limits<double>::infinity(), dvirt = dmin;
+    int pmin = -1;
+    for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
+      const PairDistance& pd = data.dist.pairs[i];
+      if (!pd.active) continue;
+      const bool virt = model.segments[pd.seg_b].body_schema_slot && data.slot_virtual[pd.seg_b - model.num_robot_segments];
+      if (virt) {
+        dvirt = std::min(dvirt, pd.distance);
+      } else if (pd.distance < dmin) {
+        dmin = pd.distance;
+        pmin = static_cast<int>(i);
+      }
+    }
+    if (dmin < result.min_distance) {
+      result.min_distance = dmin;
+      result.min_time = t;
+      result.min_pair = pmin;
+    }
+    result.min_virtual_distance = std::min(result.min_virtual_distance, dvirt);
+    if (data.estop != EstopState::kClear) result.estop_fired = true;
+    for (int i = 0; i < model.nq; ++i)
+      result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
+    for (int a = 0; a < 2; ++a) {
+      if (input.hands[a].status != HandStatus::kGiven) continue;
+      const double err = (data.arms[a].hand_W - input.hands[a].target_W).norm();
+      result.final_error[a] = err;
+      if (err < 0.01 && result.reach_time[a] < 0.0) result.reach_time[a] = t;
+      if (err >= 0.01) result.reach_time[a] = -1.0;  // must stay reached
+    }
+    if (options.record) {
+      SimSample s;
+      s.t = t;
+      s.arms = data.arms;
+      s.commands = input.hands;
+      s.estop = data.estop;
+      s.min_distance = dmin;
+      s.min_pair = pmin;
+      s.virtual_distance = dvirt;
+      s.q = robot.jointPositions();
+      s.qdot = data.qdot;
+      result.samples.push_back(std::move(s));
+    }
+    ++result.cycles;
+    if (k == steps) break;
+    // Apply: arms from the controller; legs/heel/body from walking (frozen with the robot on e-stop).
+    const bool frozen = cr == ControlResult::kFrozen;
+    if (!frozen) {
+      robot.command(data.qdot, dt);
+      if (scenario.walk_distance > 0.0 && t >= scenario.walk_start) {
+        if (!walk_started) {
+          walking.start(scenario.walk_distance, scenario.walk_speed);
+          walk_started = true;
+        }
+        q_walk = robot.jointPositions();
+        walking.step(dt, q_walk);
+        robot.setWalkingJoints(q_walk, walking.joints());
+      }
+    }
+  }
+  return result;
+}
+
+namespace {
+
+const char* zoneName(Zone z) {
+  switch (z) {
+    case Zone::kFree: return "free";
+    case Zone::kYellow: return "yellow";
+    case Zone::kOrange: return "orange";
+    case Zone::kRed: return "red";
+  }
+  return "?";
+}
+
+std::string pairName(const Model& model, int pair) {
+  if (pair < 0) return "";
+  return model.segments[model.pairs[pair].a].name + "|" + model.segments[model.pairs[pair].b].name;
+}
+
+}  // namespace
+
+void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
+                        const std::string& path) {
+  std::ofstream out(path);
+  if (!out) throw ConfigError(path + ": cannot write time series");
+  out << std::setprecision(9);
+  out << "time";
+  const char* side[2] = {"left", "right"};
+  for (const char* s : side)
+    out << ',' << s << "_f," << s << "_distance," << s << "_pair," << s << "_zone," << s << "_force";
+  out << ",estop,min_distance,min_pair,virtual_distance";
+  for (const char* s : side)
+    out << ',' << s << "_status," << s << "_hand_x," << s << "_hand_y," << s << "_hand_z," << s << "_target_x,"
+        << s << "_target_y," << s << "_target_z," << s << "_ref_x," << s << "_ref_y," << s << "_ref_z";
+  for (int i = 0; i < model.nq; ++i) out << ",q_" << model.q_names[i];
+  out << '\n';
+  auto num = [](double v) { return std::isfinite(v) ? v : 1e9; };  // inf (no pair) as a large number
+  for (const auto& s : result.samples) {
+    out << s.t;
+    for (int a = 0; a < 2; ++a)
+      out << ',' << s.arms[a].f << ',' << num(s.arms[a].distance) << ',' << pairName(model, s.arms[a].closest_pair)
+          << ',' << zoneName(s.arms[a].zone) << ',' << s.arms[a].force;
+    out << ',' << static_cast<int>(s.estop) << ',' << num(s.min_distance) << ',' << pairName(model, s.min_pair) << ','
+        << num(s.virtual_distance);
+    for (int a = 0; a < 2; ++a) {
+      const bool given = s.commands[a].status == HandStatus::kGiven;
+      out << ',' << (given ? "given" : "no_target");
+      for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].hand_W[i];
+      for (int i = 0; i < 3; ++i) out << ',' << (given ? s.commands[a].target_W[i] : std::nan(""));
+      for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].reference_W[i];
+    }
+    for (int i = 0; i < model.nq; ++i) out << ',' << s.q[i];
+    out << '\n';
+  }
+  (void)cm;
+}
+
+}  // namespace reflex::control

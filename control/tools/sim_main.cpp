@@ -1,0 +1,160 @@
+// reflex_sim: runs the paper's experiments on the kinematic robot, without DDS.
+//   reflex_sim --list
+//   reflex_sim SCENARIO --out DIR [--no-avoidance] [--mode one_dof|three_dof]
+// Writes DIR/timeseries.csv (one row per 5 ms cycle), DIR/postures.csv (capsules at a few instants),
+// DIR/summary.txt, and PNG plots like the paper's figures (through python3-matplotlib).
+#include "reflex/control/controller.hpp"
+#include "reflex/control/scenarios.hpp"
+#include "reflex/control/urdf_loader.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using namespace reflex::control;
+
+namespace {
+
+std::string exeDir() {
+  char buf[4096];
+  const ssize_t n = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
+  if (n <= 0) return ".";
+  buf[n] = 0;
+  return fs::path(buf).parent_path().string();
+}
+
+void writePostures(const Model& model, const SimResult& result, const std::string& path, int frames) {
+  std::ofstream out(path);
+  if (!out) throw ConfigError(path + ": cannot write postures");
+  out << "frame,time,segment,ax,ay,az,bx,by,bz,radius\n";
+  KinematicsData kin(model);
+  const std::size_t n = result.samples.size();
+  for (int f = 0; f < frames && n > 0; ++f) {
+    const std::size_t k = (n - 1) * static_cast<std::size_t>(f) / static_cast<std::size_t>(std::max(1, frames - 1));
+    const SimSample& s = result.samples[k];
+    computeForwardKinematics(model, kin, s.q);
+    for (int seg = 0; seg < model.num_robot_segments; ++seg) {
+      const Segment& sg = model.segments[seg];
+      for (int p = sg.first_primitive; p < sg.first_primitive + sg.num_primitives; ++p) {
+        const Eigen::Vector3d a = kin.X_W_L[sg.link] * model.primitives[p].a_L;
+        const Eigen::Vector3d b = kin.X_W_L[sg.link] * model.primitives[p].b_L;
+        out << f << ',' << s.t << ',' << sg.name << ',' << a.x() << ',' << a.y() << ',' << a.z() << ',' << b.x()
+            << ',' << b.y() << ',' << b.z() << ',' << model.primitives[p].radius << '\n';
+      }
+    }
+  }
+}
+
+std::string pairName(const Model& model, int pair) {
+  if (pair < 0) return "none";
+  return model.segments[model.pairs[pair].a].name + "-" + model.segments[model.pairs[pair].b].name;
+}
+
+void summarize(std::ostream& os, const Model& model, const Scenario& sc, const SimResult& r, const char* label,
+               double wall) {
+  os << "scenario " << sc.name << " (" << sc.paper << "), " << label << "\n";
+  os << "  min distance          " << r.min_distance * 1000.0 << " mm at t = " << r.min_time << " s ("
+     << pairName(model, r.min_pair) << ")\n";
+  if (std::isfinite(r.min_virtual_distance))
+    os << "  min virtual distance  " << r.min_virtual_distance * 1000.0 << " mm\n";
+  os << "  e-stop fired          " << (r.estop_fired ? "yes" : "no") << "\n";
+  const char* side[2] = {"left", "right"};
+  for (int a = 0; a < 2; ++a) {
+    if (r.final_error[a] == 0.0 && r.reach_time[a] < 0.0) continue;
+    os << "  " << side[a] << " hand: final error " << r.final_error[a] * 1000.0 << " mm, within 1 cm "
+       << (r.reach_time[a] >= 0.0 ? "from t = " + std::to_string(r.reach_time[a]) + " s" : std::string("never"))
+       << "\n";
+  }
+  os << "  max |qdot|/v_max      " << r.max_joint_speed_ratio << "\n";
+  os << "  non-finite output     " << (r.non_finite ? "YES" : "no") << "\n";
+  os << "  cycles " << r.cycles << ", simulated " << r.cycles * 0.005 << " s in " << wall * 1000.0
+     << " ms wall (" << (wall > 0 ? r.cycles * 0.005 / wall : 0.0) << "x real time)\n";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"reflex_sim: the paper's experiments on the kinematic robot (no DDS)"};
+  std::string scenario_name, out_dir = "out/sim", urdf, collision, controller_cfg, mode = "one_dof";
+  bool list = false, no_avoidance = false, no_plots = false;
+  app.add_option("scenario", scenario_name, "scenario name (see --list) or 'all'");
+  app.add_flag("--list", list, "list the scenarios");
+  app.add_option("--out", out_dir, "output folder (created)");
+  app.add_flag("--no-avoidance", no_avoidance, "run with collision avoidance off (for comparison)");
+  app.add_option("--mode", mode, "avoidance variant")->check(CLI::IsMember({"one_dof", "three_dof"}));
+  app.add_option("--urdf", urdf, "robot URDF")->default_str(REFLEX_DEFAULT_URDF);
+  app.add_option("--collision", collision, "collision configuration YAML (default: next to the URDF)");
+  app.add_option("--controller", controller_cfg, "controller configuration YAML (default: built-in)");
+  app.add_flag("--no-plots", no_plots, "do not render PNG plots");
+  CLI11_PARSE(app, argc, argv);
+
+  if (list) {
+    for (const auto& s : builtinScenarios()) std::printf("%-22s %-22s %s\n", s.name.c_str(), s.paper.c_str(), s.description.c_str());
+    return 0;
+  }
+  if (scenario_name.empty()) {
+    std::fprintf(stderr, "reflex_sim: error: name a scenario (reflex_sim --list) or 'all'\n");
+    return 2;
+  }
+  std::vector<const Scenario*> todo;
+  if (scenario_name == "all") {
+    for (const auto& s : builtinScenarios()) todo.push_back(&s);
+  } else if (const Scenario* s = findScenario(scenario_name)) {
+    todo.push_back(s);
+  } else {
+    std::fprintf(stderr, "reflex_sim: error: unknown scenario '%s' (reflex_sim --list names them)\n", scenario_name.c_str());
+    return 2;
+  }
+  try {
+    if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
+    const std::string coll = collision.empty() ? defaultCollisionConfigPath(urdf) : collision;
+    CollisionConfig cc;
+    if (!collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
+    const Model model = loadModel(urdf, cc);
+    const ControllerConfig config = controller_cfg.empty() ? defaultControllerConfig() : loadControllerConfig(controller_cfg);
+    const ControllerModel cm = makeControllerModel(model, config);
+    int failures = 0;
+    for (const Scenario* sc : todo) {
+      const fs::path dir = todo.size() > 1 ? fs::path(out_dir) / sc->name : fs::path(out_dir);
+      fs::create_directories(dir);
+      std::ofstream summary(dir / "summary.txt");
+      auto run = [&](AvoidanceMode m, const std::string& csv, const char* label) {
+        SimOptions opt;
+        opt.mode = m;
+        const auto t0 = std::chrono::steady_clock::now();
+        SimResult r = runScenario(model, cm, *sc, opt);
+        const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        writeTimeseriesCsv(model, cm, r, (dir / csv).string());
+        summarize(std::cout, model, *sc, r, label, wall);
+        summarize(summary, model, *sc, r, label, wall);
+        return r;
+      };
+      const AvoidanceMode m = no_avoidance ? AvoidanceMode::kOff
+                                           : (mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
+      const SimResult main = run(m, "timeseries.csv", no_avoidance ? "avoidance off" : mode.c_str());
+      writePostures(model, main, (dir / "postures.csv").string(), 6);
+      if (sc->name == "one_vs_three_dof" && !no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
+      if (!no_plots) {
+        const std::string script = exeDir() + "/reflex_plot_sim.py";
+        const std::string cmd = std::string(REFLEX_PYTHON) + " '" + script + "' '" + dir.string() + "' '" + sc->name + "'";
+        if (std::system(cmd.c_str()) != 0) {
+          std::fprintf(stderr, "reflex_sim: warning: plotting failed (%s)\n", cmd.c_str());
+          ++failures;
+        }
+      }
+      std::cout << "  wrote " << dir.string() << "/\n";
+    }
+    return failures ? 1 : 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
+    return 1;
+  }
+}
