@@ -1,0 +1,16 @@
+// reflex::bus errors. Every setup failure of the bus layer (configuration, profiles file, profile
+// name, topic, entity creation) throws BusError with a message that names what failed and where
+// the bad value came from. The data path (publish / take) never throws: it returns a status.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+
+namespace reflex::bus {
+
+class BusError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace reflex::bus

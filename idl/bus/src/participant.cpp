@@ -1,0 +1,325 @@
+#include "reflex/bus/participant.hpp"
+
+#include <fastdds/dds/core/condition/StatusCondition.hpp>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
+#include <fastdds/dds/publisher/Publisher.hpp>
+#include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <fastdds/dds/topic/Topic.hpp>
+
+#include <algorithm>
+#include <cstdlib>
+#include <fstream>
+#include <thread>
+
+namespace reflex::bus {
+
+namespace {
+
+using eprosima::fastrtps::types::ReturnCode_t;
+using Clock = std::chrono::steady_clock;
+
+eprosima::fastrtps::Duration_t toDuration(std::chrono::nanoseconds ns) {
+  if (ns.count() <= 0) return eprosima::fastrtps::Duration_t(0, 0);
+  const auto s = std::chrono::duration_cast<std::chrono::seconds>(ns);
+  return eprosima::fastrtps::Duration_t(static_cast<std::int32_t>(s.count()),
+                                        static_cast<std::uint32_t>((ns - s).count()));
+}
+
+// Where the profiles file path came from, for error messages (mirrors resolveProfilesFile).
+std::string profilesFileOrigin(const std::string& configured) {
+  if (!configured.empty()) return "the bus configuration";
+  if (const char* env = std::getenv("FASTRTPS_DEFAULT_PROFILES_FILE"); env && *env) {
+    return "environment variable FASTRTPS_DEFAULT_PROFILES_FILE";
+  }
+  return "the compiled-in default";
+}
+
+// Polls `ok` every few milliseconds until it holds or `timeout` passes (setup-time waits only).
+template <class Pred>
+bool pollUntil(Pred ok, std::chrono::nanoseconds timeout) {
+  const auto end = Clock::now() + timeout;
+  while (!ok()) {
+    if (Clock::now() >= end) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
+}
+
+}  // namespace
+
+std::int64_t nowNs() noexcept {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// ---- status counters -------------------------------------------------------------------------
+
+namespace detail {
+
+void ReaderCounters::on_requested_deadline_missed(dds::DataReader*,
+                                                  const dds::RequestedDeadlineMissedStatus& s) {
+  deadline_missed_.store(static_cast<std::uint64_t>(s.total_count));
+}
+void ReaderCounters::on_sample_lost(dds::DataReader*, const dds::SampleLostStatus& s) {
+  samples_lost_.store(static_cast<std::uint64_t>(s.total_count));
+}
+void ReaderCounters::on_sample_rejected(dds::DataReader*, const dds::SampleRejectedStatus& s) {
+  samples_rejected_.store(static_cast<std::uint64_t>(s.total_count));
+}
+void ReaderCounters::on_requested_incompatible_qos(dds::DataReader*,
+                                                   const dds::RequestedIncompatibleQosStatus& s) {
+  incompatible_qos_.store(static_cast<std::uint64_t>(s.total_count));
+}
+void ReaderCounters::on_liveliness_changed(dds::DataReader*, const dds::LivelinessChangedStatus& s) {
+  alive_writers_.store(s.alive_count);
+  if (s.not_alive_count_change > 0) {
+    liveliness_lost_.fetch_add(static_cast<std::uint64_t>(s.not_alive_count_change));
+  }
+}
+void ReaderCounters::on_subscription_matched(dds::DataReader*, const dds::SubscriptionMatchedStatus& s) {
+  matched_writers_.store(s.current_count);
+}
+ReaderStats ReaderCounters::snapshot() const {
+  ReaderStats r;
+  r.deadline_missed = deadline_missed_.load();
+  r.samples_lost = samples_lost_.load();
+  r.samples_rejected = samples_rejected_.load();
+  r.incompatible_qos = incompatible_qos_.load();
+  r.liveliness_lost = liveliness_lost_.load();
+  r.alive_writers = alive_writers_.load();
+  r.matched_writers = matched_writers_.load();
+  return r;
+}
+
+void WriterCounters::on_offered_deadline_missed(dds::DataWriter*,
+                                                const dds::OfferedDeadlineMissedStatus& s) {
+  deadline_missed_.store(static_cast<std::uint64_t>(s.total_count));
+}
+void WriterCounters::on_liveliness_lost(dds::DataWriter*, const dds::LivelinessLostStatus& s) {
+  liveliness_lost_.store(static_cast<std::uint64_t>(s.total_count));
+}
+void WriterCounters::on_offered_incompatible_qos(dds::DataWriter*,
+                                                 const dds::OfferedIncompatibleQosStatus& s) {
+  incompatible_qos_.store(static_cast<std::uint64_t>(s.total_count));
+}
+void WriterCounters::on_publication_matched(dds::DataWriter*, const dds::PublicationMatchedStatus& s) {
+  matched_readers_.store(s.current_count);
+}
+WriterStats WriterCounters::snapshot() const {
+  WriterStats w;
+  w.deadline_missed = deadline_missed_.load();
+  w.liveliness_lost = liveliness_lost_.load();
+  w.incompatible_qos = incompatible_qos_.load();
+  w.matched_readers = matched_readers_.load();
+  return w;
+}
+
+// ---- writer / reader bases -------------------------------------------------------------------
+
+bool WriterBase::writeRaw(void* sample) noexcept { return writer_->write(sample); }
+
+bool WriterBase::waitForReaders(int count, std::chrono::nanoseconds timeout) const {
+  return pollUntil([&] { return counters_.snapshot().matched_readers >= count; }, timeout);
+}
+
+bool ReaderBase::waitForWriters(int count, std::chrono::nanoseconds timeout) const {
+  return pollUntil([&] { return counters_.snapshot().matched_writers >= count; }, timeout);
+}
+
+bool ReaderBase::waitForData(std::chrono::nanoseconds timeout) {
+  return reader_->wait_for_unread_message(toDuration(timeout));
+}
+
+}  // namespace detail
+
+// ---- participant -----------------------------------------------------------------------------
+
+Participant::Participant(const BusConfig& config)
+    : module_name_(config.module_name),
+      domain_id_(resolveDomainId(config.domain_id)),
+      profiles_file_(resolveProfilesFile(config.profiles_file)) {
+  if (module_name_.empty()) throw BusError("empty module name in the bus configuration");
+
+  const std::string origin = profilesFileOrigin(config.profiles_file);
+  if (!std::ifstream(profiles_file_).good()) {
+    throw BusError("cannot open the DDS QoS profiles file '" + profiles_file_ + "' (from " + origin + ")");
+  }
+  auto* factory = dds::DomainParticipantFactory::get_instance();
+  if (factory->load_XML_profiles_file(profiles_file_) != ReturnCode_t::RETCODE_OK) {
+    throw BusError("malformed DDS QoS profiles file '" + profiles_file_ + "' (from " + origin +
+                   "): Fast DDS could not parse it (its log above says where)");
+  }
+
+  dds::DomainParticipantQos qos;
+  if (factory->get_participant_qos_from_profile(config.participant_profile, qos) !=
+      ReturnCode_t::RETCODE_OK) {
+    throw BusError("unknown participant QoS profile '" + config.participant_profile + "'" + where());
+  }
+  qos.name(module_name_);
+  participant_ = factory->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, nullptr,
+                                             dds::StatusMask::none());
+  if (participant_ == nullptr) {
+    throw BusError("could not create the DDS participant '" + module_name_ + "' on domain " +
+                   std::to_string(domain_id_) + " with profile '" + config.participant_profile + "'" +
+                   where());
+  }
+  // From here on the participant exists: release it if anything else fails.
+  try {
+    publisher_ = participant_->create_publisher(dds::PUBLISHER_QOS_DEFAULT, nullptr, dds::StatusMask::none());
+    if (publisher_ == nullptr) {
+      throw BusError("could not create the DDS publisher of participant '" + module_name_ + "'");
+    }
+    subscriber_ =
+        participant_->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT, nullptr, dds::StatusMask::none());
+    if (subscriber_ == nullptr) {
+      throw BusError("could not create the DDS subscriber of participant '" + module_name_ + "'");
+    }
+  } catch (...) {
+    participant_->delete_contained_entities();
+    factory->delete_participant(participant_);
+    participant_ = nullptr;
+    throw;
+  }
+}
+
+Participant::~Participant() {
+  // Entities first (readers, writers, publisher, subscriber, topics), then the participant; the
+  // Writer/Reader objects (and their listeners) are destroyed after this body, once nothing can
+  // call them any more.
+  participant_->delete_contained_entities();
+  dds::DomainParticipantFactory::get_instance()->delete_participant(participant_);
+  participant_ = nullptr;
+}
+
+std::string Participant::where() const { return " (profiles file '" + profiles_file_ + "')"; }
+
+dds::Topic& Participant::topicFor(const std::string& topic_name, dds::TypeSupport type) {
+  const std::string type_name = type.get_type_name();
+  if (auto it = topics_.find(topic_name); it != topics_.end()) {
+    const std::string existing = it->second->get_type_name();
+    if (existing != type_name) {
+      throw BusError("topic '" + topic_name + "' already exists with type '" + existing +
+                     "'; cannot use it with type '" + type_name + "'");
+    }
+    return *it->second;
+  }
+  if (participant_->find_type(type_name).empty() &&
+      type.register_type(participant_) != ReturnCode_t::RETCODE_OK) {
+    throw BusError("could not register type '" + type_name + "' for topic '" + topic_name + "'");
+  }
+  dds::Topic* topic = participant_->create_topic(topic_name, type_name, dds::TOPIC_QOS_DEFAULT);
+  if (topic == nullptr) {
+    throw BusError("could not create topic '" + topic_name + "' of type '" + type_name + "'");
+  }
+  topics_.emplace(topic_name, topic);
+  return *topic;
+}
+
+void Participant::createWriter(detail::WriterBase& w, dds::TypeSupport type) {
+  dds::DataWriterQos qos;
+  if (publisher_->get_datawriter_qos_from_profile(w.profile_name_, qos) != ReturnCode_t::RETCODE_OK) {
+    throw BusError("unknown data_writer QoS profile '" + w.profile_name_ + "' for topic '" +
+                   w.topic_name_ + "'" + where());
+  }
+  dds::Topic& topic = topicFor(w.topic_name_, std::move(type));
+  dds::StatusMask mask = dds::StatusMask::none();
+  mask << dds::StatusMask::offered_deadline_missed() << dds::StatusMask::liveliness_lost()
+       << dds::StatusMask::offered_incompatible_qos() << dds::StatusMask::publication_matched();
+  w.writer_ = publisher_->create_datawriter(&topic, qos, &w.counters_, mask);
+  if (w.writer_ == nullptr) {
+    throw BusError("could not create the DataWriter of topic '" + w.topic_name_ + "' with profile '" +
+                   w.profile_name_ + "' (inconsistent QoS in the profile?)" + where());
+  }
+}
+
+void Participant::createReader(detail::ReaderBase& r, dds::TypeSupport type) {
+  dds::DataReaderQos qos;
+  if (subscriber_->get_datareader_qos_from_profile(r.profile_name_, qos) != ReturnCode_t::RETCODE_OK) {
+    throw BusError("unknown data_reader QoS profile '" + r.profile_name_ + "' for topic '" +
+                   r.topic_name_ + "'" + where());
+  }
+  dds::Topic& topic = topicFor(r.topic_name_, std::move(type));
+  // Data availability is NOT in the listener mask: it goes to the reader's StatusCondition (WaitSet).
+  dds::StatusMask mask = dds::StatusMask::none();
+  mask << dds::StatusMask::requested_deadline_missed() << dds::StatusMask::sample_lost()
+       << dds::StatusMask::sample_rejected() << dds::StatusMask::requested_incompatible_qos()
+       << dds::StatusMask::liveliness_changed() << dds::StatusMask::subscription_matched();
+  r.reader_ = subscriber_->create_datareader(&topic, qos, &r.counters_, mask);
+  if (r.reader_ == nullptr) {
+    throw BusError("could not create the DataReader of topic '" + r.topic_name_ + "' with profile '" +
+                   r.profile_name_ + "' (inconsistent QoS in the profile?)" + where());
+  }
+  r.reader_->get_statuscondition().set_enabled_statuses(dds::StatusMask::data_available());
+}
+
+void Participant::every(std::chrono::nanoseconds period, std::function<void()> fn) {
+  if (period.count() <= 0) {
+    throw BusError("timer period must be > 0 ns, got " + std::to_string(period.count()) + " ns");
+  }
+  timers_.push_back(Timer{period, std::move(fn), Clock::now() + period});
+}
+
+void Participant::run() { loop(nullptr); }
+
+bool Participant::runFor(std::chrono::nanoseconds duration) {
+  const auto end = Clock::now() + duration;
+  return loop(&end);
+}
+
+void Participant::stop() noexcept {
+  stop_.store(true);
+  stop_guard_.set_trigger_value(true);
+}
+
+bool Participant::loop(const Clock::time_point* end) {
+  // The WaitSet lives for this call: readers that got an onData callback since the last call are
+  // included, and nothing stays attached once run() returns.
+  dds::WaitSet wait_set;
+  wait_set.attach_condition(stop_guard_);
+  std::vector<std::pair<dds::Condition*, detail::ReaderBase*>> dispatch;
+  for (auto& r : readers_) {
+    if (!r->hasCallback()) continue;
+    dds::StatusCondition& c = r->reader_->get_statuscondition();
+    wait_set.attach_condition(c);
+    dispatch.emplace_back(&c, r.get());
+  }
+  const auto start = Clock::now();
+  for (auto& t : timers_) t.next = start + t.period;
+
+  while (!stop_.load()) {
+    auto now = Clock::now();
+    for (auto& t : timers_) {
+      if (now < t.next) continue;
+      t.fn();
+      t.next += t.period;
+      if (t.next <= now) t.next = now + t.period;  // skip the calls we were too late for
+    }
+    if (stop_.load()) break;
+    now = Clock::now();
+    if (end != nullptr && now >= *end) return true;
+
+    auto wake = end != nullptr ? *end : Clock::time_point::max();
+    for (const auto& t : timers_) wake = std::min(wake, t.next);
+    const auto timeout = wake == Clock::time_point::max() ? eprosima::fastrtps::c_TimeInfinite
+                                                          : toDuration(wake - now);
+    dds::ConditionSeq active;
+    const ReturnCode_t rc = wait_set.wait(active, timeout);
+    if (rc == ReturnCode_t::RETCODE_TIMEOUT) continue;
+    if (rc != ReturnCode_t::RETCODE_OK) {
+      throw BusError("WaitSet wait failed in participant '" + module_name_ + "' (return code " +
+                     std::to_string(rc()) + ")");
+    }
+    for (dds::Condition* c : active) {
+      for (auto& [condition, reader] : dispatch) {
+        if (condition == c) reader->dispatch();
+      }
+    }
+  }
+  return false;
+}
+
+}  // namespace reflex::bus
