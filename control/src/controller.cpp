@@ -10,11 +10,11 @@
 namespace reflex::control {
 namespace {
 
-using VecA = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxArmDof, 1>;
-using MatA = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxArmDof, kMaxArmDof>;
-using Mat3A = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxArmDof>;
-using MatA3 = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, kMaxArmDof, 3>;
-using RowA = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxArmDof>;
+using VecA = ArmVector;
+using MatA = ArmMatrix;
+using Mat3A = TaskJacobian;
+using MatA3 = TaskJacobianInverse;
+using RowA = ArmRow;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
@@ -46,13 +46,6 @@ void gather(const ControllerModel::Arm& arm, const Eigen::MatrixXd& full, Mat3A&
   for (int i = 0; i < arm.n; ++i) out.col(i) = full.col(arm.q[i]);
 }
 
-/// Singularity-robust (damped least squares) inverse of a 3 x n Jacobian: J^T (J J^T + l^2 I)^-1.
-void dampedPinv(const Mat3A& J, double lambda, MatA3& J_pinv) {
-  Eigen::Matrix3d M = J * J.transpose();
-  M.diagonal().array() += lambda * lambda;
-  J_pinv = J.transpose() * M.inverse();
-}
-
 /// What one arm's pair contributes to the merged force (Eq. 14-18).
 struct PairTerm {
   int pair;
@@ -61,6 +54,22 @@ struct PairTerm {
 };
 
 }  // namespace
+
+void VirtualForceSum::add(double k, double d_a, double d, const Eigen::Vector3d& e, const Eigen::Vector3d& p_cp1) {
+  if (!(d < d_a)) return;
+  const double magnitude = k * (d_a - d);  // |F_ij|, Eq. 14
+  weighted_force += magnitude * (magnitude * e);
+  weighted_point += magnitude * p_cp1;
+  weight += magnitude;
+}
+
+Eigen::Vector3d VirtualForceSum::force() const {
+  return weight > 0.0 ? Eigen::Vector3d(weighted_force / weight) : Eigen::Vector3d::Zero();
+}
+
+Eigen::Vector3d VirtualForceSum::point() const {
+  return weight > 0.0 ? Eigen::Vector3d(weighted_point / weight) : Eigen::Vector3d::Zero();
+}
 
 double blendingCoefficient(double d, double d_a, double d_b) {
   if (!(d > d_b)) return 1.0;  // also NaN -> maximal caution
@@ -135,9 +144,9 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   // Pairs of this arm, their merged virtual force (Eq. 14-18) and the closest distance.
   std::array<PairTerm, 64> terms;  // pairs inside the yellow zone
   int nterms = 0;
-  double weight_sum = 0.0;
-  Eigen::Vector3d F_all = Eigen::Vector3d::Zero();
-  Eigen::Vector3d P_all = Eigen::Vector3d::Zero();
+  std::array<int, 64> guarded;     // pairs inside the orange zone, for the safety filter
+  int nguarded = 0;
+  VirtualForceSum forces;
   RowA xi_row_sum = RowA::Zero(n);  // sum of row^T (d_safe - d) for Eq. 5
   double d_min = kInf;
   int closest = -1;
@@ -158,13 +167,11 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
     if (pd.has_row && pd.distance < P.d_safe && !recovery_only) {
       for (int i = 0; i < n; ++i) xi_row_sum[i] += data.dist.rows(p, arm.q[i]) * (P.d_safe - pd.distance);
     }
+    if (pd.distance < P.d_b && pd.has_row && nguarded < static_cast<int>(guarded.size())) guarded[nguarded++] = p;
     if (pd.distance < P.d_a && nterms < static_cast<int>(terms.size())) {
-      const double w = P.k_virtual * (P.d_a - pd.distance);  // |F_ij|, Eq. 14
-      const Eigen::Vector3d e = sign * pd.nhat_W;             // e_f,ij: from the other segment to the arm
-      terms[nterms++] = {p, sign, w};
-      weight_sum += w;
-      F_all += w * (w * e);                                   // Eq. 17 numerator
-      P_all += w * (sign > 0 ? pd.p_W_a : pd.p_W_b);           // Eq. 18 numerator
+      // e_f,ij points from the other segment towards the arm's closest point (Eq. 16).
+      forces.add(P.k_virtual, P.d_a, pd.distance, sign * pd.nhat_W, sign > 0 ? pd.p_W_a : pd.p_W_b);
+      terms[nterms++] = {p, sign, P.k_virtual * (P.d_a - pd.distance)};
     }
   }
   status.distance = d_min;
@@ -177,9 +184,10 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   Mat3A J_ca = Mat3A::Zero(3, n);
   double F_mag = 0.0;
   Eigen::Vector3d e_all = Eigen::Vector3d::Zero();
+  const double weight_sum = forces.weight;
+  const Eigen::Vector3d F_all = forces.force();
+  const Eigen::Vector3d P_all = forces.point();
   if (weight_sum > 0.0) {
-    F_all /= weight_sum;
-    P_all /= weight_sum;
     F_mag = F_all.norm();
     if (F_mag > 1e-12) e_all = F_all / F_mag;
     Mat3A J_rel(3, n);
@@ -213,14 +221,16 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
     qdot.setZero();
     if (F_mag > 0.0) {
       const RowA row = e_all.transpose() * J_ca;
-      const double rr = row.squaredNorm() + P.damping * P.damping;
-      qdot = row.transpose() * (F_mag / rr);
+      VecA row_pinv;
+      dampedPseudoInverse(row, P.damping, row_pinv);
+      qdot = row_pinv * F_mag;
     }
   } else {
     // Whole-body motion, Eq. 2-5.
     MatA3 J_pinv;
-    dampedPinv(J, P.damping, J_pinv);
-    const MatA N_wbm = MatA::Identity(n, n) - J_pinv * J;
+    dampedPseudoInverse(J, P.damping, J_pinv);
+    MatA N_wbm;
+    nullspaceProjector(J, N_wbm);
     VecA xi_ca = VecA::Zero(n);
     if (P.mode != AvoidanceMode::kOff) xi_ca = P.alpha_ca * xi_row_sum.transpose();
     VecA qdot_wbm(n);
@@ -237,25 +247,64 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
       VecA qdot_ca(n);
       if (P.mode == AvoidanceMode::kOneDof) {
         const RowA row = e_all.transpose() * J_ca;  // J_ca|row,y in the merged avoidance frame
-        const double rr = row.squaredNorm() + P.damping * P.damping;
-        const VecA row_pinv = row.transpose() / rr;
-        const MatA N_ca = MatA::Identity(n, n) - row_pinv * row;
+        VecA row_pinv;
+        dampedPseudoInverse(row, P.damping, row_pinv);
+        MatA N_ca;
+        nullspaceProjector(row, N_ca);
         qdot_ca = row_pinv * F_mag + N_ca * xi_t;
       } else {
         MatA3 Jca_pinv;
-        dampedPinv(J_ca, P.damping, Jca_pinv);
-        const MatA N_ca = MatA::Identity(n, n) - Jca_pinv * J_ca;
+        dampedPseudoInverse(J_ca, P.damping, Jca_pinv);
+        MatA N_ca;
+        nullspaceProjector(J_ca, N_ca);
         qdot_ca = Jca_pinv * (F_mag * e_all) + N_ca * xi_t;
       }
       qdot = (1.0 - f) * qdot_wbm + f * qdot_ca;  // Eq. 1
     }
   }
 
-  // Joint position and velocity limits: no motion further into a limit; uniform scaling to v_max.
-  double scale = 1.0;
+  // Joint position limits: no motion further into a limit.
   for (int i = 0; i < n; ++i) {
     const int qi = arm.q[i];
     if ((q[i] <= model.q_lower[qi] && qdot[i] < 0.0) || (q[i] >= model.q_upper[qi] && qdot[i] > 0.0)) qdot[i] = 0.0;
+  }
+
+  // Safety filter (not in the paper): inside the orange zone, this arm may approach a pair no faster
+  // than guard_rate (d - d_r - guard_margin), so the distance decays at most exponentially towards a
+  // floor above d_r. Merging several pairs into one direction (Eq. 17) and the reaching gradient in
+  // the collision controller's nullspace can otherwise leak motion into a pair that is not the merged
+  // direction; this removes exactly that component and nothing else (inactive above d_b).
+  if (P.mode != AvoidanceMode::kOff && !recovery_only) {
+    for (int iter = 0; iter < 3; ++iter) {
+      bool changed = false;
+      for (int g = 0; g < nguarded; ++g) {
+        const int p = guarded[g];
+        const double d = data.dist.pairs[p].distance;
+        RowA row(n), free_row(n);
+        for (int i = 0; i < n; ++i) {
+          row[i] = data.dist.rows(p, arm.q[i]);
+          // A joint at a position limit cannot take a correction (the robot would clamp it away).
+          const int qi = arm.q[i];
+          const bool locked = q[i] <= model.q_lower[qi] || q[i] >= model.q_upper[qi];
+          free_row[i] = locked ? 0.0 : row[i];
+        }
+        const double rr = free_row.squaredNorm();
+        if (rr < 1e-12) continue;
+        const double allowed = -P.guard_rate * std::max(0.0, d - P.d_r - P.guard_margin);
+        const double rate = row.dot(qdot.transpose());
+        if (rate < allowed) {
+          qdot += free_row.transpose() * ((allowed - rate) / rr);
+          changed = true;
+        }
+      }
+      if (!changed) break;
+    }
+  }
+
+  // Joint velocity limits: uniform scaling keeps the direction (and every filtered pair's bound).
+  double scale = 1.0;
+  for (int i = 0; i < n; ++i) {
+    const int qi = arm.q[i];
     const double v = std::abs(qdot[i]);
     if (v > model.v_max[qi]) scale = std::min(scale, model.v_max[qi] / v);
   }

@@ -75,6 +75,13 @@ void validateControllerParams(const ControllerParams& p, const std::string& src)
   positive(p.max_task_speed, "max_task_speed");
   positive(p.trajectory_speed, "trajectory_speed");
   nonneg(p.estop_release_margin, "estop_release_margin");
+  positive(p.guard_rate, "guard_rate");
+  if (p.guard_rate * p.period > 0.5)
+    throw ConfigError(src + ": guard_rate * period = " + str(p.guard_rate * p.period) +
+                      " must be <= 0.5 so two arms approaching each other cannot overshoot the floor");
+  nonneg(p.guard_margin, "guard_margin");
+  if (!(p.d_r + p.guard_margin < p.d_b))
+    throw ConfigError(src + ": d_r + guard_margin = " + str(p.d_r + p.guard_margin) + " must be below d_b = " + str(p.d_b));
 }
 
 ControllerConfig loadControllerConfig(const std::string& yaml_path) {
@@ -96,7 +103,8 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
       {"k_virtual", &p.k_virtual}, {"alpha_ca", &p.alpha_ca}, {"d_safe", &p.d_safe},
       {"alpha_t", &p.alpha_t}, {"alpha_jla", &p.alpha_jla}, {"alpha_rest", &p.alpha_rest},
       {"damping", &p.damping}, {"reach_gain", &p.reach_gain}, {"max_task_speed", &p.max_task_speed},
-      {"trajectory_speed", &p.trajectory_speed}, {"estop_release_margin", &p.estop_release_margin}};
+      {"trajectory_speed", &p.trajectory_speed}, {"estop_release_margin", &p.estop_release_margin},
+      {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin}};
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
     const std::string where = yaml_path + ": " + key;

@@ -24,6 +24,7 @@
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/model.hpp"
+#include "reflex/control/redundancy.hpp"
 
 #include <Eigen/Core>
 
@@ -35,7 +36,6 @@
 
 namespace reflex::control {
 
-inline constexpr int kMaxArmDof = 8;
 inline constexpr int kLeft = 0;
 inline constexpr int kRight = 1;
 
@@ -66,6 +66,8 @@ struct ControllerParams {
   double reach_gain = 5.0;   ///< trajectory tracking gain (1/s)
   double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s)
   double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8
+  double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s)
+  double guard_margin = 0.001;        ///< safety filter floor above d_r (m)
   double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m)
   AvoidanceMode mode = AvoidanceMode::kOneDof;
 };
@@ -164,6 +166,21 @@ struct ControllerData {
   // scratch
   Eigen::MatrixXd J_full;               ///< 3 x nq
   Eigen::MatrixXd J_rel_full;           ///< 3 x nq
+};
+
+/// Sum of the virtual forces acting on one arm (Eq. 14-18), accumulated pair by pair.
+struct VirtualForceSum {
+  Eigen::Vector3d weighted_force = Eigen::Vector3d::Zero();  ///< sum |F_ij| F_ij
+  Eigen::Vector3d weighted_point = Eigen::Vector3d::Zero();  ///< sum |F_ij| P_cp1,ij
+  double weight = 0.0;                                        ///< sum |F_ij|
+
+  /// Adds the pair force F_ij = k (d_a - d_ij) e_ij (Eq. 14) applied at p_cp1 (nothing if d >= d_a).
+  /// e_ij is the unit direction from the other segment towards the arm (Eq. 16).
+  void add(double k, double d_a, double d, const Eigen::Vector3d& e, const Eigen::Vector3d& p_cp1);
+  /// F_virtual^all (Eq. 17); zero if no pair contributed.
+  Eigen::Vector3d force() const;
+  /// P_cp1^all (Eq. 18); zero if no pair contributed.
+  Eigen::Vector3d point() const;
 };
 
 /// The blending coefficient of Eq. 13.
