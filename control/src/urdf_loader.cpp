@@ -117,6 +117,8 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
   }
   if (!root.IsMap() && !root.IsNull()) throw ModelError(yaml_path + ": top level must be a map");
   for (const auto& kv : root) {
+    if (!kv.first.IsScalar())
+      throw ModelError(yaml_path + ": key '" + YAML::Dump(kv.first) + "' must be a name (exclude_adjacent, exclude)");
     const std::string key = kv.first.as<std::string>();
     if (key == "exclude_adjacent") {
       try {
@@ -128,7 +130,7 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
     } else if (key == "exclude") {
       if (!kv.second.IsSequence()) throw ModelError(yaml_path + ": 'exclude' must be a list of pairs");
       for (const auto& item : kv.second) {
-        if (!item.IsSequence() || item.size() != 2)
+        if (!item.IsSequence() || item.size() != 2 || !item[0].IsScalar() || !item[1].IsScalar())
           throw ModelError(yaml_path + ": exclude entry '" + YAML::Dump(item) +
                            "' must be a pair [segment_a, segment_b]");
         config.exclude.emplace_back(item[0].as<std::string>(), item[1].as<std::string>());
