@@ -1,0 +1,76 @@
+#pragma once
+// Camera calibration in the ROS camera_info YAML format (one file per camera, as written by
+// ROS camera_calibration / camera_calibration_parsers), the stereo pair built from two such files,
+// and the camera mount (left optical frame in the robot base frame).
+//
+// Conventions (those of ROS sensor_msgs/CameraInfo and OpenCV):
+//  - K (camera_matrix) and D (distortion_coefficients) describe the raw image;
+//  - R (rectification_matrix) rotates raw camera rays into the rectified frame: x_rect = R x_cam;
+//  - P (projection_matrix) projects rectified-frame points to rectified pixels. For the right
+//    camera of a horizontal pair, P(0,3) = -fx' * B with B > 0 the baseline in metres; the left
+//    camera has P(0,3) = 0. Both P share fx', fy', cy' (cx' may differ).
+// Frames: optical frames are z forward, x right, y down (metres). The mount gives the LEFT optical
+// frame C in the robot base frame B (x forward, y left, z up, origin on the floor between the feet):
+// p_B = R_B_C p_C + p_B_C.
+#include <opencv2/core.hpp>
+
+#include <string>
+#include <vector>
+
+namespace reflex::vision {
+
+/// One camera's calibration (a ROS camera_info YAML file).
+/// Invariants after load: image_size > 0; K(0,0), K(1,1) > 0; D.size() matches distortion_model
+/// (plumb_bob 5, rational_polynomial 8, equidistant 4); R orthonormal; P(0,0), P(1,1) > 0.
+struct CameraInfo {
+  std::string camera_name;
+  cv::Size image_size;
+  cv::Matx33d K = cv::Matx33d::eye();
+  std::string distortion_model = "plumb_bob";
+  std::vector<double> D = std::vector<double>(5, 0.0);
+  cv::Matx33d R = cv::Matx33d::eye();
+  cv::Matx34d P = cv::Matx34d::zeros();
+};
+
+/// Parses camera_info YAML text. `source` names the file in error messages.
+/// Throws VisionError naming the file and field for a missing/mistyped/inconsistent field
+/// (rows*cols != data length, non-positive focal length, unknown distortion model, ...).
+CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& source);
+/// Loads a camera_info YAML file; throws VisionError if it cannot be read or is invalid.
+CameraInfo loadCameraInfo(const std::string& path);
+/// Writes `info` as camera_info YAML (the layout ROS tools write). Throws on I/O failure.
+void saveCameraInfo(const std::string& path, const CameraInfo& info);
+
+/// A calibrated horizontal stereo pair.
+struct StereoCalibration {
+  CameraInfo left;
+  CameraInfo right;
+  /// Baseline B in metres, from the right projection matrix: B = -P_R(0,3) / P_R(0,0).
+  double baseline() const { return -right.P(0, 3) / right.P(0, 0); }
+};
+
+/// Checks the pair is consistent: equal image sizes, left P(0,3) = 0, right P(0,3) < 0 (the right
+/// camera lies to the right of the left one), P(1,3) = 0 (horizontal pair), and the rectified
+/// intrinsics fx', fy', cy' equal in both P. Throws VisionError naming the file and field.
+void validateStereoCalibration(const StereoCalibration& calib, const std::string& left_source,
+                               const std::string& right_source);
+/// Loads and validates a stereo pair from two camera_info files.
+StereoCalibration loadStereoCalibration(const std::string& left_path, const std::string& right_path);
+
+/// Left optical frame C in robot base frame B. Invariant: R_B_C is a rotation (orthonormal, det +1).
+struct CameraMount {
+  cv::Matx33d R_B_C;
+  cv::Vec3d p_B_C;
+  cv::Vec3d toBase(const cv::Vec3d& p_C) const { return R_B_C * p_C + p_B_C; }
+};
+
+/// The shipped robot's left camera with head joints at zero: p_B_C = (0.08, 0.03, 1.15),
+/// x_C = -y_B, y_C = -z_B, z_C = +x_B.
+CameraMount defaultCameraMount();
+/// Parses a mount YAML node text:  translation: [x, y, z]  (metres) and
+/// rotation_matrix: [9 numbers, row-major R_B_C]. Throws VisionError naming source and field.
+CameraMount parseCameraMount(const std::string& yaml_text, const std::string& source);
+CameraMount loadCameraMount(const std::string& path);
+void saveCameraMount(const std::string& path, const CameraMount& mount, const std::string& comment);
+
+}  // namespace reflex::vision

@@ -1,0 +1,144 @@
+#pragma once
+// A recorded stereo session is a folder (see vision/README.md, "Session folder format"):
+//
+//   session.yaml       manifest: format, version, name, fps, frames, file names (optional; defaults below)
+//   left.mp4 right.mp4 left/right videos, any codec OpenCV's FFmpeg backend reads
+//   timestamps.csv     frame,stamp  (capture time of each stereo pair, seconds, strictly increasing)
+//   left.yaml right.yaml   ROS camera_info calibration of each camera
+//   objects.yaml       tag id -> object name, tag size
+//   camera_mount.yaml  optional: left optical frame in the robot base frame during the recording
+//   ground_truth.csv   optional: stamp,frame,object,tag_id,x,y,z,x_cam,y_cam,z_cam,visible,present
+//
+// SessionReader validates the folder when opened (VisionError naming the missing or bad file);
+// reading frames never throws: a truncated or corrupt video ends the stream with a message.
+#include "reflex/vision/calibration.hpp"
+#include "reflex/vision/object_map.hpp"
+
+#include <opencv2/core.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace reflex::vision {
+
+/// One stereo pair. stamp: capture time in seconds (session clock: 0-based for synthetic sessions,
+/// UNIX time for live recordings).
+struct StereoFrame {
+  int index = -1;
+  double stamp = 0.0;
+  cv::Mat left, right;
+};
+
+struct SessionFiles {
+  std::string left_video = "left.mp4";
+  std::string right_video = "right.mp4";
+  std::string timestamps = "timestamps.csv";
+  std::string left_calibration = "left.yaml";
+  std::string right_calibration = "right.yaml";
+  std::string objects = "objects.yaml";
+  std::string camera_mount;   ///< empty if none
+  std::string ground_truth;   ///< empty if none
+};
+
+struct SessionInfo {
+  std::string dir;
+  std::string name;
+  double fps = 0.0;  ///< nominal frame rate
+  SessionFiles files;
+  std::vector<double> stamps;  ///< one per frame, strictly increasing
+  StereoCalibration calibration;
+  ObjectMap objects;
+  std::optional<CameraMount> mount;
+  std::string path(const std::string& file) const { return dir + "/" + file; }
+  int frameCount() const { return static_cast<int>(stamps.size()); }
+};
+
+/// Reads and validates everything but the video contents. Throws VisionError naming the file.
+SessionInfo loadSessionInfo(const std::string& dir);
+
+/// Parses timestamps.csv (header "frame,stamp"); frames must be 0..N-1, stamps strictly increasing.
+std::vector<double> loadTimestamps(const std::string& path);
+
+/// One row of ground_truth.csv. visible: tag fully visible in both images (inside the image, facing
+/// the camera, not occluded, not hidden, not a drop-out frame). present: not hidden and not a
+/// drop-out frame (a detection of a present object is legitimate even if partially occluded).
+struct GroundTruthRow {
+  double stamp = 0.0;
+  int frame = 0;
+  std::string object;
+  int tag_id = -1;
+  cv::Vec3d p_B;  ///< robot base frame, metres
+  cv::Vec3d p_C;  ///< left optical frame, metres
+  bool visible = false;
+  bool present = false;
+};
+std::vector<GroundTruthRow> loadGroundTruth(const std::string& path);
+void saveGroundTruth(const std::string& path, const std::vector<GroundTruthRow>& rows);
+
+enum class ReadStatus {
+  kOk,       ///< frame filled
+  kSkipped,  ///< this frame is unusable (message says why); reading may continue
+  kEnd,      ///< no more frames; message is empty at a normal end, else why the stream stopped early
+};
+
+class SessionReader {
+ public:
+  /// Opens and validates the session (VisionError naming the file for a missing file, a video that
+  /// cannot be opened, left/right frame counts or sizes that differ from each other, from the
+  /// timestamps or from the calibration).
+  explicit SessionReader(const std::string& dir);
+
+  const SessionInfo& info() const { return info_; }
+  /// Next frame. Never throws.
+  ReadStatus read(StereoFrame& frame, std::string& message);
+  /// Restarts at frame `first` (0-based, clamped to the session), decoding and dropping earlier frames.
+  void restart(int first);
+  /// Index of the next frame read() returns.
+  int position() const { return next_; }
+
+ private:
+  void open();
+  SessionInfo info_;
+  cv::VideoCapture cap_[2];
+  int next_ = 0;
+};
+
+struct SessionWriterOptions {
+  std::string name = "session";
+  double fps = 10.0;
+  /// FourCC and container tried in order until one opens (H.264 in MP4, then MPEG-4 part 2, MJPEG in AVI).
+  std::vector<std::pair<std::string, std::string>> codecs = {{"avc1", "mp4"}, {"mp4v", "mp4"}, {"MJPG", "avi"}};
+};
+
+/// Writes a session folder. The constructor creates the folder and writes the calibration, object
+/// map and mount; write() appends one pair; finish() writes timestamps.csv and session.yaml.
+class SessionWriter {
+ public:
+  SessionWriter(const std::string& dir, const StereoCalibration& calibration, const ObjectMap& objects,
+                const std::optional<CameraMount>& mount, const SessionWriterOptions& options);
+  ~SessionWriter();
+  SessionWriter(const SessionWriter&) = delete;
+  SessionWriter& operator=(const SessionWriter&) = delete;
+
+  /// Appends a pair (8-bit BGR or gray, the calibration's size). Throws VisionError on a wrong size
+  /// or a stamp not after the previous one.
+  void write(double stamp, const cv::Mat& left, const cv::Mat& right);
+  /// Finishes the folder; ground_truth_file (already written into the folder) is listed if non-empty.
+  void finish(const std::string& ground_truth_file = "");
+  int frames() const { return static_cast<int>(stamps_.size()); }
+  const std::string& codec() const { return codec_; }
+
+ private:
+  std::string dir_;
+  SessionWriterOptions options_;
+  cv::Size size_;
+  SessionFiles files_;
+  cv::VideoWriter writer_[2];
+  std::string codec_;
+  std::vector<double> stamps_;
+  bool finished_ = false;
+};
+
+}  // namespace reflex::vision

@@ -1,0 +1,83 @@
+#pragma once
+// Stereo frame sources: a recorded session, or live cameras (two devices, or one side-by-side
+// device) through OpenCV's VideoCapture. A capture spec is a device index ("0") or anything
+// VideoCapture opens (a video file, a URL) -- which is also how tests feed a fake camera.
+#include "reflex/vision/calibration.hpp"
+#include "reflex/vision/session.hpp"
+
+#include <opencv2/videoio.hpp>
+
+#include <chrono>
+#include <memory>
+#include <string>
+
+namespace reflex::vision {
+
+class StereoSource {
+ public:
+  virtual ~StereoSource() = default;
+  /// Next pair; never throws (see ReadStatus).
+  virtual ReadStatus next(StereoFrame& frame, std::string& message) = 0;
+  /// Goes back to the first frame (after the start offset); false if the source cannot (live).
+  virtual bool restart() = 0;
+  virtual bool live() const = 0;
+  /// Frames in one pass, or -1 if unknown (live).
+  virtual int frameCount() const = 0;
+  /// Stamp of the first frame of a pass and the nominal frame period, seconds (session clock).
+  virtual double firstStamp() const = 0;
+  virtual double framePeriod() const = 0;
+  virtual const StereoCalibration& calibration() const = 0;
+};
+
+/// A recorded session, from `start` seconds after its first frame.
+class SessionSource : public StereoSource {
+ public:
+  /// Throws VisionError for a bad session or a start offset outside [0, session length).
+  SessionSource(const std::string& dir, double start);
+  ReadStatus next(StereoFrame& frame, std::string& message) override;
+  bool restart() override;
+  bool live() const override { return false; }
+  int frameCount() const override { return reader_.info().frameCount() - first_; }
+  double firstStamp() const override { return reader_.info().stamps[static_cast<std::size_t>(first_)]; }
+  double framePeriod() const override { return 1.0 / reader_.info().fps; }
+  const StereoCalibration& calibration() const override { return reader_.info().calibration; }
+  const SessionInfo& info() const { return reader_.info(); }
+
+ private:
+  SessionReader reader_;
+  int first_ = 0;
+};
+
+/// Opens a capture spec: an integer is a device index (V4L2), anything else a file or URL.
+/// Throws VisionError naming the spec if it cannot be opened.
+std::unique_ptr<cv::VideoCapture> openCapture(const std::string& spec);
+
+/// Live stereo cameras. Stamps are UNIX time (system clock) taken right after both grab() calls.
+class CameraSource : public StereoSource {
+ public:
+  /// Two captures (left, right), or right == nullptr with side_by_side: the left half of each
+  /// frame is the left image. pace_fps > 0 throttles reading to that rate (used when a file stands
+  /// in for a camera, which would otherwise be read as fast as it decodes).
+  CameraSource(std::unique_ptr<cv::VideoCapture> left, std::unique_ptr<cv::VideoCapture> right,
+               const StereoCalibration& calibration, double pace_fps);
+  ReadStatus next(StereoFrame& frame, std::string& message) override;
+  bool restart() override { return false; }
+  bool live() const override { return true; }
+  int frameCount() const override { return -1; }
+  double firstStamp() const override { return first_stamp_; }
+  double framePeriod() const override { return period_; }
+  const StereoCalibration& calibration() const override { return calibration_; }
+
+ private:
+  std::unique_ptr<cv::VideoCapture> cap_[2];
+  StereoCalibration calibration_;
+  double period_ = 0.1;
+  double pace_ = 0.0;
+  double first_stamp_ = 0.0;
+  int index_ = 0;
+  int failures_ = 0;
+  cv::Mat sbs_;
+  std::chrono::steady_clock::time_point next_due_{};
+};
+
+}  // namespace reflex::vision

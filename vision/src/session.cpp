@@ -1,0 +1,350 @@
+#include "reflex/vision/session.hpp"
+
+#include "yaml_util.hpp"
+
+#include <opencv2/imgproc.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+
+namespace fs = std::filesystem;
+
+namespace reflex::vision {
+namespace {
+using namespace detail;
+
+std::vector<std::string> splitCsv(const std::string& line) {
+  std::vector<std::string> out;
+  std::string cur;
+  for (char c : line) {
+    if (c == ',') {
+      out.push_back(cur);
+      cur.clear();
+    } else if (c != '\r') {
+      cur += c;
+    }
+  }
+  out.push_back(cur);
+  return out;
+}
+
+double parseDouble(const std::string& s, const std::string& where) {
+  try {
+    std::size_t used = 0;
+    const double v = std::stod(s, &used);
+    if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
+    return v;
+  } catch (const std::exception&) {
+    throw VisionError(where + ": '" + s + "' is not a number");
+  }
+}
+
+int parseInt(const std::string& s, const std::string& where) {
+  try {
+    std::size_t used = 0;
+    const int v = std::stoi(s, &used);
+    if (used != s.size()) throw std::invalid_argument(s);
+    return v;
+  } catch (const std::exception&) {
+    throw VisionError(where + ": '" + s + "' is not an integer");
+  }
+}
+
+void requireFile(const std::string& dir, const std::string& file, const std::string& what) {
+  const std::string p = dir + "/" + file;
+  if (!fs::is_regular_file(p))
+    throw VisionError("session '" + dir + "' is missing its " + what + " file '" + file + "'");
+}
+
+}  // namespace
+
+std::vector<double> loadTimestamps(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw VisionError("cannot open timestamps file '" + path + "'");
+  std::string line;
+  if (!std::getline(in, line)) throw VisionError(path + ": empty file (expected header 'frame,stamp')");
+  if (splitCsv(line).size() < 2 || splitCsv(line)[0] != "frame" || splitCsv(line)[1] != "stamp")
+    throw VisionError(path + ": line 1: expected header 'frame,stamp', got '" + line + "'");
+  std::vector<double> stamps;
+  int lineno = 1;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line == "\r") continue;
+    const std::string where = path + ": line " + std::to_string(lineno);
+    const std::vector<std::string> f = splitCsv(line);
+    if (f.size() < 2) throw VisionError(where + ": expected 'frame,stamp', got '" + line + "'");
+    const int frame = parseInt(f[0], where + " frame");
+    const double stamp = parseDouble(f[1], where + " stamp");
+    if (frame != static_cast<int>(stamps.size()))
+      throw VisionError(where + ": frame " + std::to_string(frame) + " out of order (expected " +
+                        std::to_string(stamps.size()) + ")");
+    if (!stamps.empty() && !(stamp > stamps.back()))
+      throw VisionError(where + ": stamp " + fmt(stamp) + " is not after the previous " + fmt(stamps.back()));
+    stamps.push_back(stamp);
+  }
+  if (stamps.empty()) throw VisionError(path + ": no frames");
+  return stamps;
+}
+
+std::vector<GroundTruthRow> loadGroundTruth(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw VisionError("cannot open ground truth file '" + path + "'");
+  std::string line;
+  std::getline(in, line);
+  const std::string header = "stamp,frame,object,tag_id,x,y,z,x_cam,y_cam,z_cam,visible,present";
+  if (line.rfind(header, 0) != 0) throw VisionError(path + ": line 1: expected header '" + header + "'");
+  std::vector<GroundTruthRow> rows;
+  int lineno = 1;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty()) continue;
+    const std::string where = path + ": line " + std::to_string(lineno);
+    const std::vector<std::string> f = splitCsv(line);
+    if (f.size() < 12) throw VisionError(where + ": expected 12 fields, got " + std::to_string(f.size()));
+    GroundTruthRow r;
+    r.stamp = parseDouble(f[0], where);
+    r.frame = parseInt(f[1], where);
+    r.object = f[2];
+    r.tag_id = parseInt(f[3], where);
+    for (int k = 0; k < 3; ++k) {
+      r.p_B[k] = parseDouble(f[static_cast<std::size_t>(4 + k)], where);
+      r.p_C[k] = parseDouble(f[static_cast<std::size_t>(7 + k)], where);
+    }
+    r.visible = parseInt(f[10], where) != 0;
+    r.present = parseInt(f[11], where) != 0;
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+void saveGroundTruth(const std::string& path, const std::vector<GroundTruthRow>& rows) {
+  std::ofstream os(path);
+  if (!os) throw VisionError("cannot write ground truth file '" + path + "'");
+  os << "stamp,frame,object,tag_id,x,y,z,x_cam,y_cam,z_cam,visible,present\n" << std::fixed;
+  for (const GroundTruthRow& r : rows) {
+    os << std::setprecision(6) << r.stamp << ',' << r.frame << ',' << r.object << ',' << r.tag_id
+       << std::setprecision(6);
+    for (int k = 0; k < 3; ++k) os << ',' << r.p_B[k];
+    for (int k = 0; k < 3; ++k) os << ',' << r.p_C[k];
+    os << ',' << (r.visible ? 1 : 0) << ',' << (r.present ? 1 : 0) << '\n';
+  }
+  if (!os) throw VisionError("failed writing ground truth file '" + path + "'");
+}
+
+SessionInfo loadSessionInfo(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw VisionError("session folder '" + dir + "' does not exist");
+  SessionInfo info;
+  info.dir = dir;
+  info.name = fs::path(dir).filename().string();
+  const std::string manifest = dir + "/session.yaml";
+  if (fs::exists(manifest)) {
+    const YAML::Node root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
+    if (root["format"] && asString(root["format"], manifest + ": format") != "reflex_stereo_session")
+      throw VisionError(manifest + ": format '" + root["format"].as<std::string>() +
+                        "' is not 'reflex_stereo_session'");
+    if (root["version"] && asInt(root["version"], manifest + ": version") != 1)
+      throw VisionError(manifest + ": version " + root["version"].as<std::string>() + " is not supported (1)");
+    if (root["name"]) info.name = asString(root["name"], manifest + ": name");
+    if (root["fps"]) info.fps = asDouble(root["fps"], manifest + ": fps");
+    auto file = [&](const char* key, std::string& field) {
+      if (root[key]) field = asString(root[key], manifest + ": " + key);
+    };
+    file("left_video", info.files.left_video);
+    file("right_video", info.files.right_video);
+    file("timestamps", info.files.timestamps);
+    file("left_calibration", info.files.left_calibration);
+    file("right_calibration", info.files.right_calibration);
+    file("objects", info.files.objects);
+    file("camera_mount", info.files.camera_mount);
+    file("ground_truth", info.files.ground_truth);
+  } else if (fs::exists(dir + "/camera_mount.yaml")) {
+    info.files.camera_mount = "camera_mount.yaml";
+  }
+  const SessionFiles& f = info.files;
+  requireFile(dir, f.left_video, "left video");
+  requireFile(dir, f.right_video, "right video");
+  requireFile(dir, f.timestamps, "timestamps");
+  requireFile(dir, f.left_calibration, "left calibration");
+  requireFile(dir, f.right_calibration, "right calibration");
+  requireFile(dir, f.objects, "object map");
+  if (!f.camera_mount.empty()) requireFile(dir, f.camera_mount, "camera mount");
+  if (!f.ground_truth.empty()) requireFile(dir, f.ground_truth, "ground truth");
+
+  info.stamps = loadTimestamps(info.path(f.timestamps));
+  info.calibration = loadStereoCalibration(info.path(f.left_calibration), info.path(f.right_calibration));
+  info.objects = loadObjectMap(info.path(f.objects));
+  if (!f.camera_mount.empty()) info.mount = loadCameraMount(info.path(f.camera_mount));
+  if (info.fps <= 0.0) {
+    const double span = info.stamps.back() - info.stamps.front();
+    info.fps = info.stamps.size() > 1 && span > 0.0 ? (info.stamps.size() - 1) / span : 10.0;
+  }
+  return info;
+}
+
+SessionReader::SessionReader(const std::string& dir) : info_(loadSessionInfo(dir)) { open(); }
+
+void SessionReader::open() {
+  const std::string paths[2] = {info_.path(info_.files.left_video), info_.path(info_.files.right_video)};
+  double counts[2] = {0.0, 0.0};
+  cv::Size sizes[2];
+  for (int i = 0; i < 2; ++i) {
+    cap_[i].release();
+    if (!cap_[i].open(paths[i], cv::CAP_FFMPEG) || !cap_[i].isOpened())
+      throw VisionError("cannot open video '" + paths[i] + "' (missing, corrupt or unsupported codec)");
+    counts[i] = cap_[i].get(cv::CAP_PROP_FRAME_COUNT);
+    sizes[i] = cv::Size(static_cast<int>(cap_[i].get(cv::CAP_PROP_FRAME_WIDTH)),
+                        static_cast<int>(cap_[i].get(cv::CAP_PROP_FRAME_HEIGHT)));
+  }
+  if (sizes[0] != sizes[1])
+    throw VisionError("video sizes differ: '" + paths[0] + "' is " + std::to_string(sizes[0].width) + "x" +
+                      std::to_string(sizes[0].height) + " but '" + paths[1] + "' is " +
+                      std::to_string(sizes[1].width) + "x" + std::to_string(sizes[1].height));
+  const cv::Size calib = info_.calibration.left.image_size;
+  if (sizes[0] != calib)
+    throw VisionError("video '" + paths[0] + "' is " + std::to_string(sizes[0].width) + "x" +
+                      std::to_string(sizes[0].height) + " but the calibration '" +
+                      info_.path(info_.files.left_calibration) + "' says " + std::to_string(calib.width) + "x" +
+                      std::to_string(calib.height));
+  // Containers with an index report exact counts; 0 or negative means unknown (checked while reading).
+  if (counts[0] > 0 && counts[1] > 0 && std::lround(counts[0]) != std::lround(counts[1]))
+    throw VisionError("left and right videos differ in length: '" + paths[0] + "' has " +
+                      std::to_string(std::lround(counts[0])) + " frames but '" + paths[1] + "' has " +
+                      std::to_string(std::lround(counts[1])));
+  if (counts[0] > 0 && std::lround(counts[0]) != info_.frameCount())
+    throw VisionError("'" + paths[0] + "' has " + std::to_string(std::lround(counts[0])) + " frames but '" +
+                      info_.path(info_.files.timestamps) + "' lists " + std::to_string(info_.frameCount()));
+  next_ = 0;
+}
+
+void SessionReader::restart(int first) {
+  open();
+  first = std::clamp(first, 0, info_.frameCount());
+  for (; next_ < first; ++next_) {
+    if (!cap_[0].grab() || !cap_[1].grab()) break;
+  }
+}
+
+ReadStatus SessionReader::read(StereoFrame& frame, std::string& message) {
+  message.clear();
+  if (next_ >= info_.frameCount()) return ReadStatus::kEnd;
+  const bool ok_left = cap_[0].read(frame.left);
+  const bool ok_right = cap_[1].read(frame.right);
+  const int index = next_++;
+  if (!ok_left || !ok_right || frame.left.empty() || frame.right.empty()) {
+    const char* which = (!ok_left || frame.left.empty()) ? (!ok_right || frame.right.empty() ? "both videos"
+                                                                                                : "the left video")
+                                                         : "the right video";
+    message = std::string(which) + " ended at frame " + std::to_string(index) + " of " +
+              std::to_string(info_.frameCount()) + " listed in " + info_.files.timestamps +
+              " (truncated or corrupt video)";
+    next_ = info_.frameCount();
+    return ReadStatus::kEnd;
+  }
+  frame.index = index;
+  frame.stamp = info_.stamps[static_cast<std::size_t>(index)];
+  if (frame.left.size() != frame.right.size() || frame.left.size() != info_.calibration.left.image_size) {
+    message = "frame " + std::to_string(index) + " has sizes " + std::to_string(frame.left.cols) + "x" +
+              std::to_string(frame.left.rows) + " / " + std::to_string(frame.right.cols) + "x" +
+              std::to_string(frame.right.rows) + " differing from the calibration";
+    return ReadStatus::kSkipped;
+  }
+  return ReadStatus::kOk;
+}
+
+SessionWriter::SessionWriter(const std::string& dir, const StereoCalibration& calibration, const ObjectMap& objects,
+                             const std::optional<CameraMount>& mount, const SessionWriterOptions& options)
+    : dir_(dir), options_(options), size_(calibration.left.image_size) {
+  if (!(options_.fps > 0.0)) throw VisionError("session writer: fps = " + fmt(options_.fps) + " must be positive");
+  std::error_code ec;
+  fs::create_directories(dir_, ec);
+  if (ec || !fs::is_directory(dir_)) throw VisionError("cannot create session folder '" + dir_ + "'");
+  validateStereoCalibration(calibration, "left calibration", "right calibration");
+  saveCameraInfo(dir_ + "/" + files_.left_calibration, calibration.left);
+  saveCameraInfo(dir_ + "/" + files_.right_calibration, calibration.right);
+  saveObjectMap(dir_ + "/" + files_.objects, objects);
+  if (mount) {
+    files_.camera_mount = "camera_mount.yaml";
+    saveCameraMount(dir_ + "/" + files_.camera_mount, *mount, "camera mount during the recording");
+  }
+  std::string tried;
+  for (const auto& [fourcc, ext] : options_.codecs) {
+    if (fourcc.size() != 4) throw VisionError("session writer: codec '" + fourcc + "' is not a FourCC");
+    const int cc = cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]);
+    files_.left_video = "left." + ext;
+    files_.right_video = "right." + ext;
+    const bool ok = writer_[0].open(dir_ + "/" + files_.left_video, cv::CAP_FFMPEG, cc, options_.fps, size_, true) &&
+                    writer_[1].open(dir_ + "/" + files_.right_video, cv::CAP_FFMPEG, cc, options_.fps, size_, true);
+    if (ok) {
+      codec_ = fourcc;
+      break;
+    }
+    writer_[0].release();
+    writer_[1].release();
+    fs::remove(dir_ + "/" + files_.left_video, ec);
+    fs::remove(dir_ + "/" + files_.right_video, ec);
+    tried += (tried.empty() ? "" : ", ") + fourcc + "/" + ext;
+  }
+  if (codec_.empty()) throw VisionError("session writer: no video codec could be opened (tried " + tried + ")");
+}
+
+SessionWriter::~SessionWriter() {
+  if (!finished_) {
+    try {
+      finish();
+    } catch (const std::exception&) {
+      // A destructor must not throw; an unfinished folder lacks session.yaml and is refused by the reader.
+    }
+  }
+}
+
+void SessionWriter::write(double stamp, const cv::Mat& left, const cv::Mat& right) {
+  if (finished_) throw VisionError("session writer: write after finish");
+  const cv::Mat* in[2] = {&left, &right};
+  for (int i = 0; i < 2; ++i) {
+    if (in[i]->size() != size_ || in[i]->depth() != CV_8U)
+      throw VisionError(std::string("session writer: ") + (i ? "right" : "left") + " frame is " +
+                        std::to_string(in[i]->cols) + "x" + std::to_string(in[i]->rows) +
+                        " (8-bit expected), calibration says " + std::to_string(size_.width) + "x" +
+                        std::to_string(size_.height));
+  }
+  if (!stamps_.empty() && !(stamp > stamps_.back()))
+    throw VisionError("session writer: stamp " + fmt(stamp) + " is not after the previous " + fmt(stamps_.back()));
+  for (int i = 0; i < 2; ++i) {
+    if (in[i]->channels() == 3) {
+      writer_[i].write(*in[i]);
+    } else {
+      cv::Mat bgr;
+      cv::cvtColor(*in[i], bgr, in[i]->channels() == 1 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGRA2BGR);
+      writer_[i].write(bgr);
+    }
+  }
+  stamps_.push_back(stamp);
+}
+
+void SessionWriter::finish(const std::string& ground_truth_file) {
+  if (finished_) return;
+  finished_ = true;
+  writer_[0].release();
+  writer_[1].release();
+  files_.ground_truth = ground_truth_file;
+  {
+    std::ofstream ts(dir_ + "/" + files_.timestamps);
+    if (!ts) throw VisionError("cannot write '" + dir_ + "/" + files_.timestamps + "'");
+    ts << "frame,stamp\n" << std::fixed << std::setprecision(6);
+    for (std::size_t i = 0; i < stamps_.size(); ++i) ts << i << ',' << stamps_[i] << '\n';
+  }
+  std::ofstream os(dir_ + "/session.yaml");
+  if (!os) throw VisionError("cannot write '" + dir_ + "/session.yaml'");
+  os << "# Reflex stereo session (see vision/README.md, \"Session folder format\").\n"
+     << "format: reflex_stereo_session\nversion: 1\nname: " << options_.name << "\nfps: " << fmt(options_.fps)
+     << "\nframes: " << stamps_.size() << "\ncodec: " << codec_ << "\nleft_video: " << files_.left_video
+     << "\nright_video: " << files_.right_video << "\ntimestamps: " << files_.timestamps
+     << "\nleft_calibration: " << files_.left_calibration << "\nright_calibration: " << files_.right_calibration
+     << "\nobjects: " << files_.objects << "\n";
+  if (!files_.camera_mount.empty()) os << "camera_mount: " << files_.camera_mount << "\n";
+  if (!files_.ground_truth.empty()) os << "ground_truth: " << files_.ground_truth << "\n";
+}
+
+}  // namespace reflex::vision

@@ -1,0 +1,102 @@
+#include "reflex/vision/source.hpp"
+
+#include "reflex/vision/error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <thread>
+
+namespace reflex::vision {
+
+SessionSource::SessionSource(const std::string& dir, double start) : reader_(dir) {
+  const std::vector<double>& s = reader_.info().stamps;
+  const double span = s.back() - s.front();
+  if (!(start >= 0.0) || start > span)
+    throw VisionError("start offset " + std::to_string(start) + " s is outside the session '" + dir + "' (0.." +
+                      std::to_string(span) + " s)");
+  first_ = static_cast<int>(std::lower_bound(s.begin(), s.end(), s.front() + start - 1e-9) - s.begin());
+  reader_.restart(first_);
+}
+
+ReadStatus SessionSource::next(StereoFrame& frame, std::string& message) { return reader_.read(frame, message); }
+
+bool SessionSource::restart() {
+  try {
+    reader_.restart(first_);
+  } catch (const VisionError&) {
+    return false;
+  }
+  return true;
+}
+
+std::unique_ptr<cv::VideoCapture> openCapture(const std::string& spec) {
+  auto cap = std::make_unique<cv::VideoCapture>();
+  const bool is_index = !spec.empty() && std::all_of(spec.begin(), spec.end(), ::isdigit);
+  bool ok = false;
+  if (is_index)
+    ok = cap->open(std::stoi(spec), cv::CAP_V4L2) || cap->open(std::stoi(spec), cv::CAP_ANY);
+  else
+    ok = cap->open(spec, cv::CAP_FFMPEG) || cap->open(spec, cv::CAP_ANY);
+  if (!ok || !cap->isOpened())
+    throw VisionError("cannot open camera '" + spec + "'" + (is_index ? " (no such video device?)" : ""));
+  return cap;
+}
+
+CameraSource::CameraSource(std::unique_ptr<cv::VideoCapture> left, std::unique_ptr<cv::VideoCapture> right,
+                           const StereoCalibration& calibration, double pace_fps)
+    : calibration_(calibration), pace_(pace_fps) {
+  if (!left) throw VisionError("camera source: no left (or side-by-side) capture");
+  cap_[0] = std::move(left);
+  cap_[1] = std::move(right);
+  const double fps = cap_[0]->get(cv::CAP_PROP_FPS);
+  period_ = pace_ > 0.0 ? 1.0 / pace_ : (fps > 0.0 && fps < 500.0 ? 1.0 / fps : 1.0 / 30.0);
+}
+
+ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
+  message.clear();
+  if (pace_ > 0.0) {
+    const auto now = std::chrono::steady_clock::now();
+    if (next_due_.time_since_epoch().count() == 0) next_due_ = now;
+    std::this_thread::sleep_until(next_due_);
+    next_due_ += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / pace_));
+  }
+  const bool stereo = static_cast<bool>(cap_[1]);
+  const bool grabbed = cap_[0]->grab() && (!stereo || cap_[1]->grab());
+  const double stamp =
+      std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  bool ok = grabbed;
+  if (ok && stereo) {
+    ok = cap_[0]->retrieve(frame.left) && cap_[1]->retrieve(frame.right);
+  } else if (ok) {
+    ok = cap_[0]->retrieve(sbs_) && !sbs_.empty() && sbs_.cols % 2 == 0;
+    if (ok) {
+      frame.left = sbs_.colRange(0, sbs_.cols / 2).clone();
+      frame.right = sbs_.colRange(sbs_.cols / 2, sbs_.cols).clone();
+    }
+  }
+  if (!ok || frame.left.empty() || frame.right.empty()) {
+    // A camera that stops delivering (unplugged, end of a stand-in file) ends the stream after a
+    // few consecutive failures; a single failure is a skipped frame.
+    if (++failures_ >= 5 || !grabbed) {
+      message = "camera stopped delivering frames after " + std::to_string(index_) + " frames";
+      return ReadStatus::kEnd;
+    }
+    message = "camera frame " + std::to_string(index_) + " could not be retrieved";
+    return ReadStatus::kSkipped;
+  }
+  failures_ = 0;
+  if (index_ == 0) first_stamp_ = stamp;
+  frame.index = index_++;
+  frame.stamp = stamp;
+  if (frame.left.size() != frame.right.size() || frame.left.size() != calibration_.left.image_size) {
+    message = "camera frame " + std::to_string(frame.index) + " is " + std::to_string(frame.left.cols) + "x" +
+              std::to_string(frame.left.rows) + " / " + std::to_string(frame.right.cols) + "x" +
+              std::to_string(frame.right.rows) + " but the calibration says " +
+              std::to_string(calibration_.left.image_size.width) + "x" +
+              std::to_string(calibration_.left.image_size.height);
+    return ReadStatus::kSkipped;
+  }
+  return ReadStatus::kOk;
+}
+
+}  // namespace reflex::vision
