@@ -1,5 +1,6 @@
 #include "reflex/control/redundancy.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
@@ -18,8 +19,17 @@ void dampedPseudoInverse(const ArmRow& row, double lambda, ArmVector& row_pinv) 
 void nullspaceProjector(const TaskJacobian& J, ArmMatrix& N, double sigma_min) {
   const Eigen::Index n = J.cols();
   N.setIdentity(n, n);
-  // J J^T = U S^2 U^T; the row space of J is spanned by J^T u_i / s_i for s_i > sigma_min.
   const Eigen::Matrix3d JJt = J * J.transpose();
+  // Well conditioned (the common case): N = I - J^T (J J^T)^-1 J through a Cholesky factorization.
+  const Eigen::LLT<Eigen::Matrix3d> llt(JJt);
+  if (llt.info() == Eigen::Success) {
+    const Eigen::Vector3d diag = llt.matrixL().toDenseMatrix().diagonal();
+    if (diag.minCoeff() > 1e-3 * diag.maxCoeff() && diag.minCoeff() > sigma_min) {
+      N.noalias() -= J.transpose() * llt.solve(Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxArmDof>(J));
+      return;
+    }
+  }
+  // Near a singularity: J J^T = U S^2 U^T; the row space of J is spanned by J^T u_i / s_i, s_i > sigma_min.
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(JJt);
   for (int i = 0; i < 3; ++i) {
     const double s2 = eig.eigenvalues()[i];

@@ -21,7 +21,7 @@ std::vector<Scenario> makeScenarios() {
     s.name = "target_inside_body";
     s.paper = "Sec. 8.2.1, Fig. 5";
     s.description = "the right hand's target is inside the body: the arm stops at the side of the body";
-    s.duration = 4.0;
+    s.duration = 6.0;
     s.script = [](double, ControlInput& in, ScenarioContext&) {
       none(in, kLeft);
       give(in, kRight, 0.02, -0.06, 0.66);
@@ -48,11 +48,11 @@ std::vector<Scenario> makeScenarios() {
     s.paper = "Sec. 8.2.2, Figs. 8-9";
     s.description = "the same reach with 1-DOF and 3-DOF avoidance (reflex_sim runs both): the 1-DOF "
                     "controller keeps more joints for reaching and arrives sooner";
-    s.duration = 7.0;
+    s.duration = 8.0;
     s.script = [](double t, ControlInput& in, ScenarioContext&) {
       none(in, kLeft);
-      if (t < 2.0) give(in, kRight, 0.05, -0.40, 1.00);
-      else give(in, kRight, 0.28, 0.0, 0.80);
+      if (t < 2.0) give(in, kRight, -0.10, -0.33, 0.80);
+      else give(in, kRight, 0.27, 0.03, 0.82);
     };
     list.push_back(s);
   }

@@ -138,9 +138,13 @@ int main(int argc, char** argv) {
     reflex::control::computeSegmentDistances(model, kin, dist);
 
     const bool json = format == "json";
+    int robot_pairs = 0;  // pairs of two robot segments (the slot pairs are inactive here)
+    for (const auto& p : model.pairs) robot_pairs += model.segments[p.b].body_schema_slot ? 0 : 1;
     if (json) std::printf("{\n  \"robot\": %s,\n  \"segments\": [\n", jsonString(model.name).c_str());
-    else std::printf("# robot %s: %d segments, %zu checked pairs, %d joints\n# segment,link,primitives\n",
-                     model.name.c_str(), model.num_robot_segments, model.pairs.size(), model.nq);
+    else std::printf("# robot %s: %d segments, %d checked pairs (+%d with body-schema slots), %d joints\n"
+                     "# segment,link,primitives\n",
+                     model.name.c_str(), model.num_robot_segments, robot_pairs,
+                     static_cast<int>(model.pairs.size()) - robot_pairs, model.nq);
     for (int s = 0; s < model.num_robot_segments; ++s) {
       const auto& seg = model.segments[s];
       if (json) {
@@ -175,8 +179,10 @@ int main(int argc, char** argv) {
       const char* a = model.segments[pd.seg_a].name.c_str();
       const char* b = model.segments[pd.seg_b].name.c_str();
       if (json) {
-        std::printf("%s    {\"a\": \"%s\", \"b\": \"%s\", \"distance\": %.6f, \"pa\": [%.6f, %.6f, %.6f], "
-                    "\"pb\": [%.6f, %.6f, %.6f]}", first ? "" : ",\n", a, b, pd.distance, pd.p_W_a.x(),
+        std::printf("%s    {\"a\": %s, \"b\": %s, \"distance\": %.6f, \"pa\": [%.6f, %.6f, %.6f], "
+                    "\"pb\": [%.6f, %.6f, %.6f]}", first ? "" : ",\n",
+                    jsonString(model.segments[pd.seg_a].name).c_str(),
+                    jsonString(model.segments[pd.seg_b].name).c_str(), pd.distance, pd.p_W_a.x(),
                     pd.p_W_a.y(), pd.p_W_a.z(), pd.p_W_b.x(), pd.p_W_b.y(), pd.p_W_b.z());
       } else {
         std::printf("%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", a, b, pd.distance, pd.p_W_a.x(), pd.p_W_a.y(),
@@ -187,8 +193,9 @@ int main(int argc, char** argv) {
     if (dist.closest >= 0) {
       const auto& c = dist.pairs[dist.closest];
       if (json)
-        std::printf("\n  ],\n  \"closest\": {\"a\": \"%s\", \"b\": \"%s\", \"distance\": %.6f}\n}\n",
-                    model.segments[c.seg_a].name.c_str(), model.segments[c.seg_b].name.c_str(), c.distance);
+        std::printf("\n  ],\n  \"closest\": {\"a\": %s, \"b\": %s, \"distance\": %.6f}\n}\n",
+                    jsonString(model.segments[c.seg_a].name).c_str(),
+                    jsonString(model.segments[c.seg_b].name).c_str(), c.distance);
       else
         std::printf("# closest: %s,%s,%.6f\n", model.segments[c.seg_a].name.c_str(),
                     model.segments[c.seg_b].name.c_str(), c.distance);

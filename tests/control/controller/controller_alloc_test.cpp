@@ -1,0 +1,74 @@
+// The 5 ms control path allocates nothing: global operator new/delete are replaced by counting
+// versions, and a full controller cycle (kinematics, every pair, both controllers, blend, safety
+// filter, e-stop logic, body-schema slots) must leave the count unchanged.
+#include "fixture.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+
+namespace {
+std::atomic<long> g_allocations{0};
+}
+
+void* operator new(std::size_t n) {
+  ++g_allocations;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) {
+  ++g_allocations;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, std::align_val_t a) {
+  ++g_allocations;
+  if (void* p = std::aligned_alloc(static_cast<std::size_t>(a), ((n + static_cast<std::size_t>(a) - 1) / static_cast<std::size_t>(a)) * static_cast<std::size_t>(a))) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+
+namespace reflex::control {
+namespace {
+
+TEST(ControllerAllocation, ACycleAllocatesNothing) {
+  const Model& model = testing::shippedModel();
+  const ControllerModel& cm = testing::defaultControllerModel();
+  for (const AvoidanceMode mode : {AvoidanceMode::kOneDof, AvoidanceMode::kThreeDof}) {
+    ControllerModel cmm = cm;
+    cmm.params.mode = mode;
+    ControllerData data(model, cmm);
+    attachBodySchemaSegment(model, data.dist, 0, model.linkIndex("l_hand"), Eigen::Vector3d(-0.16, 0, -0.06),
+                            Eigen::Vector3d(0.16, 0, -0.06), 0.015);
+    Eigen::VectorXd q = restConfiguration(model, cmm);
+    ControlInput in;
+    in.hands[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};  // crossing: avoidance active
+    in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
+    computeControl(model, cmm, data, q, in);  // warm-up
+    long max_f = 0;
+    const long before = g_allocations.load();
+    for (int k = 0; k < 1500; ++k) {
+      computeControl(model, cmm, data, q, in);
+      q += data.qdot * cmm.params.period;
+      if (data.arms[kLeft].f > 0.5) ++max_f;
+    }
+    const long after = g_allocations.load();
+    EXPECT_EQ(after - before, 0) << "allocations in 1500 cycles";
+    EXPECT_GT(max_f, 0) << "the cycles exercised the collision controller";
+    // The e-stop path too.
+    in.reset_estop = true;
+    const long before2 = g_allocations.load();
+    computeControl(model, cmm, data, q, in);
+    EXPECT_EQ(g_allocations.load() - before2, 0);
+  }
+}
+
+}  // namespace
+}  // namespace reflex::control

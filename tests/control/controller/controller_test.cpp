@@ -1,0 +1,320 @@
+// Unit tests of controller.hpp and redundancy.hpp against independent answers: Eq. 13 by hand,
+// Eq. 17-18 on hand-made forces, the sign convention by finite differences of the distance,
+// nullspace projection by J N = 0, the e-stop latch and its release, motion priority.
+#include "fixture.hpp"
+
+#include "reflex/control/redundancy.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace reflex::control {
+namespace {
+
+using testing::defaultControllerModel;
+using testing::shippedModel;
+
+TEST(BlendingCoefficient, MatchesEquation13) {
+  const double da = 0.040, db = 0.010;
+  EXPECT_DOUBLE_EQ(blendingCoefficient(0.0, da, db), 1.0);
+  EXPECT_DOUBLE_EQ(blendingCoefficient(-0.01, da, db), 1.0);
+  EXPECT_DOUBLE_EQ(blendingCoefficient(db, da, db), 1.0);
+  EXPECT_DOUBLE_EQ(blendingCoefficient(0.025, da, db), 0.5);   // midway
+  EXPECT_DOUBLE_EQ(blendingCoefficient(0.034, da, db), 0.2);   // (0.034 - 0.04) / (0.01 - 0.04)
+  EXPECT_DOUBLE_EQ(blendingCoefficient(da, da, db), 0.0);
+  EXPECT_DOUBLE_EQ(blendingCoefficient(0.5, da, db), 0.0);
+  EXPECT_DOUBLE_EQ(blendingCoefficient(std::nan(""), da, db), 1.0);  // unknown distance: most cautious
+}
+
+TEST(Zones, Boundaries) {
+  ControllerParams p;
+  EXPECT_EQ(zoneOf(0.050, p), Zone::kFree);
+  EXPECT_EQ(zoneOf(0.040, p), Zone::kFree);
+  EXPECT_EQ(zoneOf(0.039, p), Zone::kYellow);
+  EXPECT_EQ(zoneOf(0.009, p), Zone::kOrange);
+  EXPECT_EQ(zoneOf(0.004, p), Zone::kRed);
+  EXPECT_EQ(zoneOf(std::nan(""), p), Zone::kRed);
+}
+
+TEST(VirtualForces, Equations17And18OnHandMadePairs) {
+  // Two pairs: d1 = 0.02 along +x at p1, d2 = 0.03 along +y at p2; k = 10, d_a = 0.04.
+  VirtualForceSum sum;
+  const Eigen::Vector3d p1(0.1, 0.0, 0.0), p2(0.0, 0.2, 0.0);
+  sum.add(10.0, 0.04, 0.02, Eigen::Vector3d::UnitX(), p1);  // |F1| = 0.2
+  sum.add(10.0, 0.04, 0.03, Eigen::Vector3d::UnitY(), p2);  // |F2| = 0.1
+  sum.add(10.0, 0.04, 0.05, Eigen::Vector3d::UnitZ(), p2);  // outside the yellow zone: no force
+  // Eq. 17: (0.2 * (0.2, 0, 0) + 0.1 * (0, 0.1, 0)) / 0.3
+  EXPECT_NEAR(sum.force().x(), 0.04 / 0.3, 1e-15);
+  EXPECT_NEAR(sum.force().y(), 0.01 / 0.3, 1e-15);
+  EXPECT_NEAR(sum.force().z(), 0.0, 1e-15);
+  // Eq. 18: (0.2 * p1 + 0.1 * p2) / 0.3
+  EXPECT_TRUE(sum.point().isApprox((0.2 * p1 + 0.1 * p2) / 0.3, 1e-14));
+  // One pair alone gives back Eq. 6 and its own point.
+  VirtualForceSum one;
+  one.add(10.0, 0.04, 0.01, -Eigen::Vector3d::UnitZ(), p1);
+  EXPECT_TRUE(one.force().isApprox(Eigen::Vector3d(0, 0, -0.3), 1e-14));
+  EXPECT_TRUE(one.point().isApprox(p1, 1e-14));
+  EXPECT_TRUE(VirtualForceSum{}.force().isZero());
+}
+
+TEST(Redundancy, NullspaceProjectorsAnnihilateTheTask) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> g(0.0, 0.3);
+  for (int trial = 0; trial < 200; ++trial) {
+    const int n = 3 + trial % 6;
+    TaskJacobian J(3, n);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < n; ++j) J(i, j) = g(rng);
+    if (trial % 5 == 0) J.row(2) = 0.5 * J.row(0) - 2.0 * J.row(1);  // rank deficient (singular)
+    ArmMatrix N;
+    nullspaceProjector(J, N);
+    ArmVector xi(n);
+    for (int j = 0; j < n; ++j) xi[j] = g(rng);
+    EXPECT_LT((J * (N * xi)).norm(), 1e-12) << "trial " << trial;
+    EXPECT_LT((N * N - N).norm(), 1e-10);       // a projector
+    EXPECT_LT((N - N.transpose()).norm(), 1e-12);  // orthogonal
+    EXPECT_NEAR(N.trace(), n - (trial % 5 == 0 ? 2 : 3), 1e-9);  // rank of the nullspace
+    ArmRow row(n);
+    for (int j = 0; j < n; ++j) row[j] = g(rng);
+    ArmMatrix Nr;
+    nullspaceProjector(row, Nr);
+    EXPECT_LT(std::abs(row.dot((Nr * xi).transpose())), 1e-12);
+    // The damped inverse tends to the exact one as lambda -> 0 on a well-conditioned J.
+    TaskJacobianInverse Jp;
+    dampedPseudoInverse(J, 1e-9, Jp);
+    if (trial % 5 != 0) {
+      EXPECT_LT((J * Jp - Eigen::Matrix3d::Identity()).norm(), 1e-6);
+    }
+  }
+}
+
+/// A configuration with the right forearm close to the chest.
+Eigen::VectorXd closeToChest(const Model& model, const ControllerModel& cm) {
+  Eigen::VectorXd q = restConfiguration(model, cm);
+  q[model.qIndex("r_shoulder_pitch")] = -0.9;
+  q[model.qIndex("r_shoulder_roll")] = 0.15;
+  q[model.qIndex("r_shoulder_yaw")] = 0.6;
+  q[model.qIndex("r_elbow")] = -1.6;
+  return q;
+}
+
+TEST(SignConvention, PositiveRowVelocitySeparatesThePair) {
+  const Model& model = shippedModel();
+  KinematicsData kin(model);
+  DistanceData dist(model);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int checked = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    Eigen::VectorXd q(model.nq);
+    for (int i = 0; i < model.nq; ++i) {
+      const double lo = std::max(model.q_lower[i], -1.5), hi = std::min(model.q_upper[i], 1.5);
+      q[i] = lo + (hi - lo) * u(rng);
+    }
+    computeForwardKinematics(model, kin, q);
+    computeSegmentDistances(model, kin, dist);
+    for (std::size_t p = 0; p < dist.pairs.size(); ++p) {
+      if (!dist.pairs[p].active || dist.pairs[p].distance < 0.01) continue;
+      const Eigen::VectorXd row = dist.rows.row(static_cast<Eigen::Index>(p)).transpose();
+      if (row.norm() < 1e-3) continue;
+      const double eps = 1e-4;
+      computeForwardKinematics(model, kin, q + eps * row / row.norm());
+      computeSegmentDistances(model, kin, dist);
+      const double d_plus = dist.pairs[p].distance;
+      computeForwardKinematics(model, kin, q);
+      computeSegmentDistances(model, kin, dist);
+      EXPECT_GT(d_plus, dist.pairs[p].distance) << "pair " << p;  // moving along +row separates
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 1000);
+}
+
+TEST(Controller, CollisionAvoidanceAloneSeparatesInTheOrangeZone) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  ControllerData data(model, cm);
+  Eigen::VectorXd q = closeToChest(model, cm);
+  // Find an elbow angle that puts the forearm in the orange zone.
+  double d = 1.0;
+  for (double e = -1.6; e > -2.5; e -= 0.01) {
+    q[model.qIndex("r_elbow")] = e;
+    ControlInput probe;
+    computeControl(model, cm, data, q, probe);
+    d = data.arms[kRight].distance;
+    if (d < 0.009 && d > 0.006) break;
+  }
+  ASSERT_LT(d, 0.010);
+  ASSERT_GT(d, cm.params.d_r);
+  ControlInput in;
+  in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.0, 0.0, 0.9)};  // inside the chest
+  ASSERT_EQ(computeControl(model, cm, data, q, in), ControlResult::kOk);
+  EXPECT_DOUBLE_EQ(data.arms[kRight].f, 1.0);
+  const int p = data.arms[kRight].closest_pair;
+  const double rate = data.dist.rows.row(p).dot(data.qdot);
+  EXPECT_GT(rate, 0.0) << "the collision controller must separate the closest pair";
+  // Integrating one step increases the distance.
+  const double d0 = data.dist.pairs[p].distance;
+  const Eigen::VectorXd q1 = q + data.qdot * cm.params.period;
+  computeControl(model, cm, data, q1, in);
+  EXPECT_GT(data.dist.pairs[p].distance, d0);
+}
+
+TEST(Controller, NullspaceTermsLeaveTheReachingTaskUnchanged) {
+  const Model& model = shippedModel();
+  ControllerConfig config = defaultControllerConfig();
+  config.params.alpha_jla = 0.0;
+  config.params.alpha_ca = 0.0;
+  const ControllerModel plain = makeControllerModel(model, config);
+  config.params.alpha_jla = 3.0;
+  config.params.alpha_ca = 40.0;
+  const ControllerModel with_null = makeControllerModel(model, config);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int compared = 0;
+  for (int trial = 0; trial < 100; ++trial) {
+    Eigen::VectorXd q = restConfiguration(model, plain);
+    for (const auto& arm : plain.arms)
+      for (int i = 0; i < arm.n; ++i) q[arm.q[i]] += 0.3 * u(rng);
+    ControllerData a(model, plain), b(model, with_null);
+    computeControl(model, plain, a, q, ControlInput{});  // where the hands are
+    ControlInput in;
+    for (int s = 0; s < 2; ++s)
+      in.hands[s] = {HandStatus::kGiven, a.arms[s].hand_W + 0.03 * Eigen::Vector3d(u(rng), u(rng), u(rng))};
+    computeControl(model, plain, a, q, in);
+    computeControl(model, with_null, b, q, in);
+    for (int s = 0; s < 2; ++s) {
+      if (a.arms[s].f != 0.0) continue;  // the comparison is about the whole-body controller alone
+      const auto& arm = plain.arms[s];
+      Eigen::MatrixXd J(3, model.nq);
+      computePointJacobian(model, a.kin, arm.hand_link, a.arms[s].hand_W, J);
+      const Eigen::Vector3d va = J * a.qdot, vb = J * b.qdot;
+      double speed_ratio = 0.0;
+      for (int i = 0; i < model.nq; ++i)
+        speed_ratio = std::max({speed_ratio, std::abs(a.qdot[i]) / model.v_max[i], std::abs(b.qdot[i]) / model.v_max[i]});
+      if (speed_ratio >= 1.0 - 1e-9) continue;  // velocity scaling would change both
+      bool at_limit = false;
+      for (int i = 0; i < arm.n; ++i)
+        at_limit |= q[arm.q[i]] <= model.q_lower[arm.q[i]] || q[arm.q[i]] >= model.q_upper[arm.q[i]];
+      if (at_limit) continue;  // a joint held at its limit is not the nullspace's business
+      EXPECT_LT((va - vb).norm(), 1e-9) << "trial " << trial << " arm " << s;
+      EXPECT_GT((a.qdot - b.qdot).norm(), 1e-6);  // the nullspace terms did move the joints
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 40);
+}
+
+TEST(Controller, RedZoneLatchesAndReleasesOnlyWithSeparatingMotion) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  ControllerData data(model, cm);
+  Eigen::VectorXd q = closeToChest(model, cm);
+  double e = -1.6;
+  for (; e > -2.5; e -= 0.002) {  // push the forearm into the red zone (the robot would never do this)
+    q[model.qIndex("r_elbow")] = e;
+    ControllerData probe(model, cm);
+    computeControl(model, cm, probe, q, ControlInput{});
+    if (probe.arms[kRight].distance < 0.004) break;
+  }
+  ControlInput in;
+  in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.3, -0.2, 0.9)};
+  EXPECT_EQ(computeControl(model, cm, data, q, in), ControlResult::kFrozen);
+  EXPECT_EQ(data.estop, EstopState::kLatched);
+  EXPECT_TRUE(data.qdot.isZero());
+  EXPECT_EQ(data.estop_count, 1U);
+  // Latched: it stays frozen cycle after cycle without a reset, even if targets change.
+  in.hands[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.3, 0.2, 0.9)};
+  for (int k = 0; k < 10; ++k) {
+    EXPECT_EQ(computeControl(model, cm, data, q, in), ControlResult::kFrozen);
+    EXPECT_TRUE(data.qdot.isZero());
+  }
+  // Reset: only motion that separates every red pair, until the pair is out of the red zone.
+  in.reset_estop = true;
+  int recovering = 0;
+  for (int k = 0; k < 400 && data.estop != EstopState::kClear; ++k) {
+    const ControlResult r = computeControl(model, cm, data, q, in);
+    in.reset_estop = false;
+    if (r == ControlResult::kRecovering) {
+      ++recovering;
+      for (std::size_t p = 0; p < data.dist.pairs.size(); ++p) {
+        const auto& pd = data.dist.pairs[p];
+        if (pd.active && pd.distance < cm.params.d_r) {
+          EXPECT_GE(data.dist.rows.row(static_cast<Eigen::Index>(p)).dot(data.qdot), 0.0);
+        }
+      }
+      // Only the arm joints move during recovery.
+      for (int i = 0; i < model.nq; ++i) {
+        bool arm_joint = false;
+        for (const auto& arm : cm.arms)
+          for (int j = 0; j < arm.n; ++j) arm_joint |= arm.q[j] == i;
+        if (!arm_joint) {
+          EXPECT_EQ(data.qdot[i], 0.0);
+        }
+      }
+    }
+    q += data.qdot * cm.params.period;
+  }
+  EXPECT_GT(recovering, 0);
+  EXPECT_EQ(data.estop, EstopState::kClear);
+  EXPECT_EQ(computeControl(model, cm, data, q, in), ControlResult::kOk);
+  EXPECT_GE(data.arms[kRight].distance, cm.params.d_r);
+}
+
+TEST(Controller, HigherPriorityArmIsUntouchedByTheOtherArm) {
+  // With LEFT_HIGHER the left arm ignores the right arm completely: its joint trajectory is the same
+  // whether the right arm crosses into it or stays at rest.
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  auto run = [&](bool right_crosses) {
+    Scenario s;
+    s.duration = 4.0;
+    s.script = [right_crosses](double, ControlInput& in, ScenarioContext&) {
+      in.priority = MotionPriority::kLeftHigher;
+      in.hands[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};
+      if (right_crosses) in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
+      else in.hands[kRight].status = HandStatus::kNoTarget;
+    };
+    return runScenario(model, cm, s);
+  };
+  const SimResult crossing = run(true), alone = run(false);
+  ASSERT_EQ(crossing.samples.size(), alone.samples.size());
+  double max_diff = 0.0, max_right_diff = 0.0;
+  for (std::size_t k = 0; k < crossing.samples.size(); ++k) {
+    for (int i = 0; i < cm.arms[kLeft].n; ++i) {
+      const int qi = cm.arms[kLeft].q[i];
+      max_diff = std::max(max_diff, std::abs(crossing.samples[k].q[qi] - alone.samples[k].q[qi]));
+    }
+    for (int i = 0; i < cm.arms[kRight].n; ++i) {
+      const int qi = cm.arms[kRight].q[i];
+      max_right_diff = std::max(max_right_diff, std::abs(crossing.samples[k].q[qi] - alone.samples[k].q[qi]));
+    }
+  }
+  EXPECT_EQ(max_diff, 0.0);
+  EXPECT_GT(max_right_diff, 0.1);            // the right arm did move in the crossing run
+  EXPECT_GE(crossing.min_distance, cm.params.d_r);  // and it avoided the left arm
+  EXPECT_FALSE(crossing.estop_fired);
+}
+
+TEST(Controller, BadInputGivesADefinedSafeOutput) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  ControllerData data(model, cm);
+  Eigen::VectorXd q = restConfiguration(model, cm);
+  ControlInput in;
+  in.hands[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(std::nan(""), 0.0, 1.0)};
+  in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.3, -0.2, std::numeric_limits<double>::infinity())};
+  EXPECT_EQ(computeControl(model, cm, data, q, in), ControlResult::kOk);  // NaN targets are dropped
+  EXPECT_TRUE(data.qdot.allFinite());
+  EXPECT_EQ(data.bad_input_count, 2U);
+  Eigen::VectorXd bad = q;
+  bad[3] = std::nan("");
+  EXPECT_EQ(computeControl(model, cm, data, bad, in), ControlResult::kBadInput);
+  EXPECT_TRUE(data.qdot.isZero());
+  EXPECT_EQ(computeControl(model, cm, data, Eigen::VectorXd::Zero(3), in), ControlResult::kBadInput);
+  EXPECT_TRUE(data.qdot.isZero());
+}
+
+}  // namespace
+}  // namespace reflex::control

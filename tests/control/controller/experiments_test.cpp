@@ -1,0 +1,171 @@
+// The paper's experiments (Sec. 8) on the kinematic robot, asserted (issue 4, item 12): with
+// avoidance on no pair ever comes below d_r and the e-stop never fires; with it off the segments
+// penetrate; f(d) and the joints are continuous and do not oscillate; the 1-DOF controller reaches
+// the target before the 3-DOF one; crossing arms end between d_r and d_a.
+#include "fixture.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace reflex::control {
+namespace {
+
+using testing::defaultControllerModel;
+using testing::shippedModel;
+
+SimResult run(const std::string& name, AvoidanceMode mode) {
+  const Scenario* s = findScenario(name);
+  EXPECT_NE(s, nullptr) << name;
+  SimOptions options;
+  options.mode = mode;
+  return runScenario(shippedModel(), defaultControllerModel(), *s, options);
+}
+
+/// High-frequency content of a signal sampled every cycle: the total variation of its first
+/// difference (sum |x[k+1] - 2 x[k] + x[k-1]|). A smooth motion with a few velocity changes keeps it
+/// near a few times its peak step; chattering (sign flips every cycle) grows it with every cycle.
+double roughness(const std::vector<double>& x) {
+  double tv = 0.0;
+  for (std::size_t k = 1; k + 1 < x.size(); ++k) tv += std::abs(x[k + 1] - 2.0 * x[k] + x[k - 1]);
+  return tv;
+}
+
+/// Number of direction reversals of a signal larger than `step` per cycle (oscillation count).
+int reversals(const std::vector<double>& x, double step) {
+  int count = 0, last = 0;
+  for (std::size_t k = 1; k < x.size(); ++k) {
+    const double dx = x[k] - x[k - 1];
+    const int dir = dx > step ? 1 : (dx < -step ? -1 : 0);
+    if (dir != 0 && last != 0 && dir != last) ++count;
+    if (dir != 0) last = dir;
+  }
+  return count;
+}
+
+void expectSafeAndSmooth(const std::string& name) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const SimResult r = run(name, AvoidanceMode::kOneDof);
+  EXPECT_GE(r.min_distance, cm.params.d_r) << name;
+  EXPECT_FALSE(r.estop_fired) << name;
+  EXPECT_FALSE(r.non_finite) << name;
+  EXPECT_LE(r.max_joint_speed_ratio, 1.0 + 1e-9) << name;
+  for (int a = 0; a < 2; ++a) {
+    std::vector<double> f;
+    for (const auto& s : r.samples) f.push_back(s.arms[a].f);
+    EXPECT_LT(roughness(f), 1.0) << name << " arm " << a << ": f(d) jitters";
+    EXPECT_LT(reversals(f, 0.002), 12) << name << " arm " << a << ": f(d) oscillates";
+    for (int i = 0; i < cm.arms[a].n; ++i) {
+      std::vector<double> q;
+      for (const auto& s : r.samples) q.push_back(s.q[cm.arms[a].q[i]]);
+      EXPECT_LT(roughness(q), 0.25) << name << " joint " << model.q_names[cm.arms[a].q[i]] << " jitters";
+      // Walking swings the legs the arms avoid: allow two reversals per step on top of the baseline.
+      const Scenario* sc = findScenario(name);
+      const int allowed = 12 + (sc->walk_speed > 0.0 ? static_cast<int>(2.0 * sc->walk_distance / sc->walk_speed / 0.8) : 0);
+      EXPECT_LT(reversals(q, 1e-4), allowed) << name << " joint " << model.q_names[cm.arms[a].q[i]] << " oscillates";
+    }
+  }
+}
+
+TEST(Experiments, EveryScenarioIsSafeAndSmoothWithAvoidance) {
+  for (const auto& s : builtinScenarios()) expectSafeAndSmooth(s.name);
+}
+
+TEST(Experiments, WithoutAvoidanceTheSegmentsPenetrate) {
+  for (const auto& s : builtinScenarios()) {
+    const SimResult off = run(s.name, AvoidanceMode::kOff);
+    if (s.name == "occlusion") {
+      EXPECT_LT(off.min_virtual_distance, 0.0) << "the hand should cross the gaze line without avoidance";
+      const SimResult on = run(s.name, AvoidanceMode::kOneDof);
+      EXPECT_GT(on.min_virtual_distance, 0.0) << "with avoidance the hand stays off the gaze line";
+    } else {
+      EXPECT_LT(off.min_distance, 0.0) << s.name << ": expected a collision without avoidance";
+    }
+  }
+}
+
+TEST(Experiments, TargetInsideTheBodyStopsAtTheSide) {
+  const SimResult on = run("target_inside_body", AvoidanceMode::kOneDof);
+  const SimResult off = run("target_inside_body", AvoidanceMode::kOff);
+  EXPECT_LT(off.final_error[kRight], 0.01);   // without avoidance the hand goes into the body
+  EXPECT_GT(on.final_error[kRight], 0.05);    // with it the arm stops outside
+  const auto& last = on.samples.back();
+  EXPECT_GE(last.arms[kRight].distance, defaultControllerModel().params.d_b * 0.5);
+  EXPECT_LE(last.arms[kRight].distance, defaultControllerModel().params.d_a);  // at the side, held there
+  // It settles: the hand slides along the surface ever more slowly (towards the point closest to the
+  // target) and moves less than 5 mm in the last 0.5 s.
+  const auto& half = on.samples[on.samples.size() - 101];
+  const auto& one = on.samples[on.samples.size() - 201];
+  const double last_move = (last.arms[kRight].hand_W - half.arms[kRight].hand_W).norm();
+  const double previous_move = (half.arms[kRight].hand_W - one.arms[kRight].hand_W).norm();
+  EXPECT_LT(last_move, 0.005);
+  EXPECT_LT(last_move, previous_move);
+}
+
+TEST(Experiments, ThroughTheBodyTheWristGoesAround) {
+  const SimResult on = run("through_body", AvoidanceMode::kOneDof);
+  EXPECT_GE(on.reach_time[kRight], 0.0) << "the target outside the body is reached";
+  EXPECT_LT(on.final_error[kRight], 0.01);
+}
+
+TEST(Experiments, OneDofAvoidanceReachesBeforeThreeDof) {
+  const SimResult one = run("one_vs_three_dof", AvoidanceMode::kOneDof);
+  const SimResult three = run("one_vs_three_dof", AvoidanceMode::kThreeDof);
+  ASSERT_GE(one.reach_time[kRight], 0.0) << "1-DOF never reached within 1 cm";
+  EXPECT_TRUE(three.reach_time[kRight] < 0.0 || one.reach_time[kRight] < three.reach_time[kRight])
+      << "1-DOF " << one.reach_time[kRight] << " s, 3-DOF " << three.reach_time[kRight] << " s";
+  EXPECT_GE(three.min_distance, defaultControllerModel().params.d_r);
+}
+
+TEST(Experiments, CrossingArmsEndBetweenRedAndYellow) {
+  const ControllerParams& p = defaultControllerModel().params;
+  const SimResult r = run("crossing_arms", AvoidanceMode::kOneDof);
+  const auto& last = r.samples.back();
+  const double d = std::min(last.arms[kLeft].distance, last.arms[kRight].distance);
+  EXPECT_GE(d, p.d_r);
+  EXPECT_LE(d, p.d_a);
+  const Model& model = shippedModel();
+  const std::string pair = model.segments[model.pairs[last.min_pair].a].name + "|" +
+                           model.segments[model.pairs[last.min_pair].b].name;
+  EXPECT_TRUE(pair.find("l_") != std::string::npos && pair.find("r_") != std::string::npos)
+      << "the closest pair at the end is arm against arm, got " << pair;
+}
+
+TEST(Experiments, WalkingPastTheTargetKeepsTheArmOutOfTheBody) {
+  const SimResult r = run("walking_target_behind", AvoidanceMode::kOneDof);
+  const Model& model = shippedModel();
+  const int heel = model.qIndex("heel_x");
+  EXPECT_NEAR(r.samples.back().q[heel], 1.5, 1e-6) << "the robot walked 1.5 m";
+  // At the end the target (0.8 m) is behind the robot, and the hand is not inside the body.
+  EXPECT_LT(r.samples.back().commands[kRight].target_W.x(), r.samples.back().q[heel]);
+  EXPECT_GE(r.min_distance, defaultControllerModel().params.d_r);
+}
+
+TEST(Experiments, GraspedBarIsAvoidedByTheLowerPriorityArm) {
+  const SimResult on = run("grasped_bar", AvoidanceMode::kOneDof);
+  const SimResult off = run("grasped_bar", AvoidanceMode::kOff);
+  const Model& model = shippedModel();
+  // The pairs with the bar (body-schema slot 0) stay apart with avoidance and penetrate without.
+  auto barDistance = [&](const SimResult& r) {
+    KinematicsData kin(model);
+    DistanceData dist(model);
+    attachBodySchemaSegment(model, dist, 0, model.linkIndex("l_hand"), Eigen::Vector3d(-0.16, 0, -0.06),
+                            Eigen::Vector3d(0.16, 0, -0.06), 0.015,
+                            (std::uint64_t{1} << model.segmentIndex("l_hand")) |
+                                (std::uint64_t{1} << model.segmentIndex("l_forearm")));
+    double dmin = 1.0;
+    for (const auto& s : r.samples) {
+      computeForwardKinematics(model, kin, s.q);
+      computeSegmentDistances(model, kin, dist);
+      for (const auto& pd : dist.pairs)
+        if (pd.active && model.segments[pd.seg_b].body_schema_slot) dmin = std::min(dmin, pd.distance);
+    }
+    return dmin;
+  };
+  EXPECT_GE(barDistance(on), defaultControllerModel().params.d_r);
+  EXPECT_LT(barDistance(off), 0.0);
+}
+
+}  // namespace
+}  // namespace reflex::control
