@@ -1,0 +1,281 @@
+// bench_distance: the self-distance sweep of the shipped robot, side by side with FCL and KDL
+// (issue 3, item 8). Not a CTest test; run by hand:
+//   build-*/bin/bench_distance --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+//
+// Every benchmark cycles through the same 256 random configurations (within the joint limits),
+// precomputed outside the timed loop; one iteration = one configuration.
+//   Reflex/*        reflex::control (FK = computeForwardKinematics of every link; sweep = FK +
+//                   computeSegmentDistances over every checked pair)
+//   FCL/*           the same checked pairs through FCL 0.7: fcl::distance on fcl::Sphered /
+//                   fcl::Capsuled in W (dispatches to FCL's analytic sphere/capsule functions),
+//                   minimum over each pair's primitive pairs, nearest points on
+//   KDL/*           kdl_parser tree, one KDL::Chain per tip: ChainFkSolverPos_recursive +
+//                   ChainJntToJacSolver
+#include "reflex/control/distance.hpp"
+#include "reflex/control/kinematics.hpp"
+#include "reflex/control/urdf_loader.hpp"
+
+#include <benchmark/benchmark.h>
+#include <fcl/narrowphase/distance.h>
+#include <kdl/chainfksolverpos_recursive.hpp>
+#include <kdl/chainjnttojacsolver.hpp>
+#include <kdl/tree.hpp>
+#include <kdl_parser/kdl_parser.hpp>
+
+#include <Eigen/Geometry>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace reflex::control;
+
+constexpr int kConfigurations = 256;
+
+std::string robotPath(const std::string& file) { return std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/" + file; }
+
+struct FclPrimitive {
+  std::shared_ptr<fcl::CollisionGeometryd> geometry;
+  Eigen::Isometry3d X_L_P;  // primitive frame in its link frame (capsule along local z)
+  int link;
+};
+
+struct KdlTip {
+  KDL::Chain chain;
+  std::unique_ptr<KDL::ChainFkSolverPos_recursive> fk;
+  std::unique_ptr<KDL::ChainJntToJacSolver> jac;
+  std::vector<KDL::JntArray> q;  // per configuration
+  KDL::Frame frame;
+  KDL::Jacobian J;
+  int link;
+};
+
+/// Everything shared by the benchmarks, built once.
+struct Setup {
+  Model model;
+  std::vector<Eigen::VectorXd> qs;
+  std::vector<KinematicsData> kin;  // FK of each configuration (for the distance-only benchmarks)
+  std::vector<FclPrimitive> fcl_prims;
+  std::vector<std::vector<fcl::Transform3d>> fcl_X;  // per configuration, per primitive, in W
+  std::vector<std::pair<int, int>> robot_pairs;      // checked robot segment pairs
+  KDL::Tree tree;
+
+  Setup() : model(loadModel(robotPath("asimo_like.urdf"), loadCollisionConfig(robotPath("asimo_like.collision.yaml")))) {
+    std::mt19937_64 rng(42);
+    for (int c = 0; c < kConfigurations; ++c) {
+      Eigen::VectorXd q(model.nq);
+      for (int i = 0; i < model.nq; ++i) q[i] = std::uniform_real_distribution<double>(model.q_lower[i], model.q_upper[i])(rng);
+      qs.push_back(q);
+      kin.emplace_back(model);
+      computeForwardKinematics(model, kin.back(), q);
+    }
+    for (int s = 0; s < model.num_robot_segments; ++s) {
+      const Segment& seg = model.segments[s];
+      for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+        const Primitive& prim = model.primitives[p];
+        FclPrimitive f;
+        f.link = seg.link;
+        f.X_L_P.setIdentity();
+        f.X_L_P.translation() = 0.5 * (prim.a_L + prim.b_L);
+        if (prim.sphere) {
+          f.geometry = std::make_shared<fcl::Sphered>(prim.radius);
+        } else {
+          f.X_L_P.linear() =
+              Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), prim.b_L - prim.a_L).toRotationMatrix();
+          f.geometry = std::make_shared<fcl::Capsuled>(prim.radius, (prim.b_L - prim.a_L).norm());
+        }
+        fcl_prims.push_back(f);
+      }
+    }
+    for (int c = 0; c < kConfigurations; ++c) {
+      std::vector<fcl::Transform3d> X;
+      for (const FclPrimitive& f : fcl_prims) X.push_back(kin[c].X_W_L[f.link] * f.X_L_P);
+      fcl_X.push_back(X);
+    }
+    for (const SegmentPair& p : model.pairs)
+      if (!model.segments[p.b].body_schema_slot) robot_pairs.emplace_back(p.a, p.b);
+    if (!kdl_parser::treeFromFile(robotPath("asimo_like.urdf"), tree)) throw std::runtime_error("kdl_parser failed");
+  }
+
+  std::unique_ptr<KdlTip> kdlTip(const std::string& tip) const {
+    auto t = std::make_unique<KdlTip>();
+    if (!tree.getChain(model.links[0].name, tip, t->chain)) throw std::runtime_error("no KDL chain to " + tip);
+    t->fk = std::make_unique<KDL::ChainFkSolverPos_recursive>(t->chain);
+    t->jac = std::make_unique<KDL::ChainJntToJacSolver>(t->chain);
+    t->J.resize(t->chain.getNrOfJoints());
+    t->link = model.linkIndex(tip);
+    for (const Eigen::VectorXd& q : qs) {
+      KDL::JntArray kq(t->chain.getNrOfJoints());
+      unsigned k = 0;
+      for (const KDL::Segment& s : t->chain.segments)
+        if (s.getJoint().getType() != KDL::Joint::None) kq(k++) = q[model.qIndex(s.getJoint().getName())];
+      t->q.push_back(kq);
+    }
+    return t;
+  }
+};
+
+const Setup& setup() {
+  static const Setup s;
+  return s;
+}
+
+// ---------------------------------------------------------------- Reflex
+void Reflex_FK(benchmark::State& state) {
+  const Setup& s = setup();
+  KinematicsData kin(s.model);
+  int c = 0;
+  for (auto _ : state) {
+    computeForwardKinematics(s.model, kin, s.qs[c]);
+    benchmark::DoNotOptimize(kin.X_W_L.data());
+    c = (c + 1) % kConfigurations;
+  }
+}
+
+void sweep(benchmark::State& state, double row_threshold, bool with_fk) {
+  const Setup& s = setup();
+  KinematicsData kin(s.model);
+  DistanceData dist(s.model);
+  const DistanceOptions options{row_threshold};
+  int c = 0;
+  for (auto _ : state) {
+    if (with_fk) {
+      computeForwardKinematics(s.model, kin, s.qs[c]);
+      computeSegmentDistances(s.model, kin, dist, options);
+    } else {
+      computeSegmentDistances(s.model, s.kin[c], dist, options);
+    }
+    benchmark::DoNotOptimize(dist.pairs.data());
+    benchmark::ClobberMemory();
+    c = (c + 1) % kConfigurations;
+  }
+  state.counters["pairs"] = static_cast<double>(s.robot_pairs.size());
+}
+
+void Reflex_Sweep_RowsOff(benchmark::State& state) { sweep(state, -std::numeric_limits<double>::infinity(), true); }
+void Reflex_Sweep_RowsBelow40mm(benchmark::State& state) { sweep(state, 0.04, true); }
+void Reflex_Sweep_RowsAll(benchmark::State& state) { sweep(state, std::numeric_limits<double>::infinity(), true); }
+void Reflex_DistancesOnly_RowsOff(benchmark::State& state) {
+  sweep(state, -std::numeric_limits<double>::infinity(), false);
+}
+
+// ---------------------------------------------------------------- FCL
+double fclPairs(const Setup& s, const std::vector<fcl::Transform3d>& X, const fcl::DistanceRequestd& request) {
+  double sum = 0.0;
+  for (const auto& [a, b] : s.robot_pairs) {
+    const Segment& A = s.model.segments[a];
+    const Segment& B = s.model.segments[b];
+    double best = std::numeric_limits<double>::infinity();
+    for (int pa = A.first_primitive; pa < A.first_primitive + A.num_primitives; ++pa) {
+      for (int pb = B.first_primitive; pb < B.first_primitive + B.num_primitives; ++pb) {
+        fcl::DistanceResultd result;
+        fcl::distance(s.fcl_prims[pa].geometry.get(), X[pa], s.fcl_prims[pb].geometry.get(), X[pb], request, result);
+        if (result.min_distance < best) best = result.min_distance;
+      }
+    }
+    sum += best;
+  }
+  return sum;
+}
+
+void FCL_DistancesOnly(benchmark::State& state) {
+  const Setup& s = setup();
+  fcl::DistanceRequestd request;
+  request.enable_nearest_points = true;
+  int c = 0;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(fclPairs(s, s.fcl_X[c], request));
+    c = (c + 1) % kConfigurations;
+  }
+  state.counters["pairs"] = static_cast<double>(s.robot_pairs.size());
+}
+
+void FCL_Sweep_ReflexFK(benchmark::State& state) {
+  // The FCL counterpart of Reflex_Sweep_RowsOff: Reflex FK, primitive poses into W, FCL pairs.
+  const Setup& s = setup();
+  KinematicsData kin(s.model);
+  std::vector<fcl::Transform3d> X(s.fcl_prims.size());
+  fcl::DistanceRequestd request;
+  request.enable_nearest_points = true;
+  int c = 0;
+  for (auto _ : state) {
+    computeForwardKinematics(s.model, kin, s.qs[c]);
+    for (std::size_t p = 0; p < X.size(); ++p) X[p] = kin.X_W_L[s.fcl_prims[p].link] * s.fcl_prims[p].X_L_P;
+    benchmark::DoNotOptimize(fclPairs(s, X, request));
+    c = (c + 1) % kConfigurations;
+  }
+  state.counters["pairs"] = static_cast<double>(s.robot_pairs.size());
+}
+
+// ---------------------------------------------------------------- FK + Jacobians: KDL vs Reflex
+const std::vector<std::string>& handTips() {
+  static const std::vector<std::string> t = {"l_hand", "r_hand"};
+  return t;
+}
+
+std::vector<std::string> segmentLinks(const Model& m) {
+  std::vector<std::string> t;
+  for (int s = 0; s < m.num_robot_segments; ++s) t.push_back(m.links[m.segments[s].link].name);
+  return t;
+}
+
+void kdlFkJac(benchmark::State& state, const std::vector<std::string>& tips) {
+  const Setup& s = setup();
+  std::vector<std::unique_ptr<KdlTip>> kt;
+  for (const auto& t : tips) kt.push_back(s.kdlTip(t));
+  int c = 0;
+  for (auto _ : state) {
+    for (auto& t : kt) {
+      t->fk->JntToCart(t->q[c], t->frame);
+      t->jac->JntToJac(t->q[c], t->J);
+      benchmark::DoNotOptimize(t->J.data.data());
+    }
+    c = (c + 1) % kConfigurations;
+  }
+  state.counters["tips"] = static_cast<double>(tips.size());
+}
+
+void reflexFkJac(benchmark::State& state, const std::vector<std::string>& tips) {
+  const Setup& s = setup();
+  KinematicsData kin(s.model);
+  std::vector<int> links;
+  for (const auto& t : tips) links.push_back(s.model.linkIndex(t));
+  std::vector<Eigen::MatrixXd> J(links.size(), Eigen::MatrixXd(3, s.model.nq));
+  int c = 0;
+  for (auto _ : state) {
+    computeForwardKinematics(s.model, kin, s.qs[c]);
+    for (std::size_t i = 0; i < links.size(); ++i) {
+      computePointJacobian(s.model, kin, links[i], kin.X_W_L[links[i]].translation(), J[i]);
+      benchmark::DoNotOptimize(J[i].data());
+    }
+    c = (c + 1) % kConfigurations;
+  }
+  state.counters["tips"] = static_cast<double>(tips.size());
+}
+
+void KDL_FK_Jac_Hands(benchmark::State& state) { kdlFkJac(state, handTips()); }
+void Reflex_FK_Jac_Hands(benchmark::State& state) { reflexFkJac(state, handTips()); }
+void KDL_FK_Jac_SegmentLinks(benchmark::State& state) { kdlFkJac(state, segmentLinks(setup().model)); }
+void Reflex_FK_Jac_SegmentLinks(benchmark::State& state) { reflexFkJac(state, segmentLinks(setup().model)); }
+
+BENCHMARK(Reflex_FK);
+BENCHMARK(Reflex_Sweep_RowsOff);
+BENCHMARK(Reflex_Sweep_RowsBelow40mm);
+BENCHMARK(Reflex_Sweep_RowsAll);
+BENCHMARK(Reflex_DistancesOnly_RowsOff);
+BENCHMARK(FCL_DistancesOnly);
+BENCHMARK(FCL_Sweep_ReflexFK);
+BENCHMARK(Reflex_FK_Jac_Hands);
+BENCHMARK(KDL_FK_Jac_Hands);
+BENCHMARK(Reflex_FK_Jac_SegmentLinks);
+BENCHMARK(KDL_FK_Jac_SegmentLinks);
+
+}  // namespace
+
+BENCHMARK_MAIN();

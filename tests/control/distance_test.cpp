@@ -1,0 +1,423 @@
+// Tests of control/include/reflex/control/distance.hpp on whole robots: the checked pair list, the
+// PairDistance invariants, distances and witness points against FCL at random configurations, the
+// avoidance rows against the Jacobians and against finite differences of the pair distance,
+// body-schema slots, the coincident-core fallback, and NaN joint values.
+#include "reflex/control/distance.hpp"
+
+#include "reflex/control/kinematics.hpp"
+#include "test_support.hpp"
+
+#include <fcl/narrowphase/distance.h>
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <random>
+#include <set>
+#include <string>
+
+namespace reflex::control {
+namespace {
+
+using Eigen::Vector3d;
+
+std::pair<std::string, std::string> pairNames(const Model& m, const SegmentPair& p) {
+  return {m.segments[p.a].name, m.segments[p.b].name};
+}
+
+bool hasPair(const Model& m, const std::string& a, const std::string& b) {
+  for (const SegmentPair& p : m.pairs) {
+    const auto [na, nb] = pairNames(m, p);
+    if ((na == a && nb == b) || (na == b && nb == a)) return true;
+  }
+  return false;
+}
+
+int robotPairCount(const Model& m) {
+  return static_cast<int>(std::count_if(m.pairs.begin(), m.pairs.end(), [&](const SegmentPair& p) {
+    return !m.segments[p.b].body_schema_slot;
+  }));
+}
+
+int yamlExcludeEntries(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  int n = 0;
+  while (std::getline(in, line))
+    if (line.rfind("  - [", 0) == 0) ++n;
+  return n;
+}
+
+// ---------------------------------------------------------------- pair list
+TEST(DistancePairs, ShippedRobotChecksEveryPairButNeighboursAndExclusions) {
+  const Model m = test::loadRobot(test::kAsimo);
+  ASSERT_EQ(m.num_robot_segments, 17);
+  // 17 segments: 136 pairs. Neighbours in the segment tree (hand-listed from Fig. 1): body-chest,
+  // chest-head, chest-shoulders (2), shoulder-upper arm, upper arm-forearm, forearm-hand (2 x 3),
+  // body-thighs (2), thigh-shank, shank-foot (2 x 2) = 16.
+  const int excluded = yamlExcludeEntries(test::robotPath("asimo_like.collision.yaml"));
+  EXPECT_EQ(excluded, 45);
+  EXPECT_EQ(robotPairCount(m), 136 - 16 - excluded);
+  for (const auto& [a, b] : {std::pair{"body", "chest"}, {"chest", "head"}, {"chest", "l_shoulder"},
+                            {"l_shoulder", "l_upper_arm"}, {"l_upper_arm", "l_forearm"},
+                            {"r_forearm", "r_hand"}, {"body", "l_thigh"}, {"l_shank", "l_foot"},
+                            {"l_thigh", "r_thigh"}, {"head", "body"}})
+    EXPECT_FALSE(hasPair(m, a, b)) << a << "-" << b;
+  for (const auto& [a, b] : {std::pair{"l_hand", "r_hand"}, {"l_hand", "head"}, {"l_forearm", "body"},
+                            {"r_upper_arm", "chest"}, {"l_hand", "l_thigh"}, {"l_shoulder", "l_hand"},
+                            {"l_upper_arm", "l_hand"}})
+    EXPECT_TRUE(hasPair(m, a, b)) << a << "-" << b;
+  // Every robot segment against each body-schema slot; never slot against slot; a < b always.
+  EXPECT_EQ(static_cast<int>(m.pairs.size()) - robotPairCount(m), 17 * kBodySchemaSlots);
+  std::set<std::pair<int, int>> seen;
+  for (const SegmentPair& p : m.pairs) {
+    EXPECT_LT(p.a, p.b);
+    EXPECT_FALSE(m.segments[p.a].body_schema_slot);
+    EXPECT_TRUE(seen.insert({p.a, p.b}).second) << "duplicate pair";
+  }
+}
+
+TEST(DistancePairs, AdjacencyExclusionCanBeTurnedOff) {
+  CollisionConfig config = loadCollisionConfig(test::robotPath("asimo_like.collision.yaml"));
+  config.exclude_adjacent = false;
+  const Model m = loadModel(test::robotPath("asimo_like.urdf"), config);
+  EXPECT_EQ(robotPairCount(m), 136 - 45);
+  EXPECT_TRUE(hasPair(m, "l_forearm", "l_hand"));
+  CollisionConfig none;
+  const Model all = loadModel(test::robotPath("asimo_like.urdf"), none);
+  EXPECT_EQ(robotPairCount(all), 136 - 16);
+}
+
+// ---------------------------------------------------------------- against FCL on the robot
+std::shared_ptr<fcl::CollisionGeometryd> fclShape(const Vector3d& a, const Vector3d& b, double r,
+                                                  fcl::Transform3d& X_W_S) {
+  X_W_S.setIdentity();
+  X_W_S.translation() = 0.5 * (a + b);
+  const double length = (b - a).norm();
+  if (length == 0.0) return std::make_shared<fcl::Sphered>(r);
+  X_W_S.linear() = Eigen::Quaterniond::FromTwoVectors(Vector3d::UnitZ(), b - a).toRotationMatrix();
+  return std::make_shared<fcl::Capsuled>(r, length);
+}
+
+struct FclPair {
+  double d = std::numeric_limits<double>::infinity();
+  double second = std::numeric_limits<double>::infinity();  // next best primitive pair
+  Vector3d p_a, p_b;
+  bool parallel = false;
+};
+
+// The segment distance from FCL: the minimum over the segments' primitive pairs, each primitive
+// placed in W with the link pose from FK and the local endpoints from the model.
+FclPair fclSegmentDistance(const Model& m, const KinematicsData& kin, int sa, int sb) {
+  FclPair out;
+  const Segment& A = m.segments[sa];
+  const Segment& B = m.segments[sb];
+  for (int pa = A.first_primitive; pa < A.first_primitive + A.num_primitives; ++pa) {
+    for (int pb = B.first_primitive; pb < B.first_primitive + B.num_primitives; ++pb) {
+      const Primitive& P = m.primitives[pa];
+      const Primitive& Q = m.primitives[pb];
+      const Eigen::Isometry3d& XA = kin.X_W_L[A.link];
+      const Eigen::Isometry3d& XB = kin.X_W_L[B.link];
+      fcl::Transform3d Xa, Xb;
+      const auto ga = fclShape(XA * P.a_L, P.sphere ? Vector3d(XA * P.a_L) : Vector3d(XA * P.b_L), P.radius, Xa);
+      const auto gb = fclShape(XB * Q.a_L, Q.sphere ? Vector3d(XB * Q.a_L) : Vector3d(XB * Q.b_L), Q.radius, Xb);
+      fcl::DistanceRequestd request;
+      request.enable_nearest_points = true;
+      fcl::DistanceResultd result;
+      fcl::distance(ga.get(), Xa, gb.get(), Xb, request, result);
+      const double d = result.min_distance;
+      if (d < out.d) {
+        out.second = out.d;
+        out.d = d;
+        out.p_a = result.nearest_points[0];
+        out.p_b = result.nearest_points[1];
+        out.parallel = !P.sphere && !Q.sphere &&
+                       (XA.linear() * (P.b_L - P.a_L)).normalized().cross(
+                           (XB.linear() * (Q.b_L - Q.a_L)).normalized()).norm() < 1e-3;
+      } else {
+        out.second = std::min(out.second, d);
+      }
+    }
+  }
+  return out;
+}
+
+void checkRobotAgainstFcl(const Model& m, int configurations, std::uint64_t seed) {
+  KinematicsData kin(m);
+  DistanceData dist(m);
+  std::mt19937_64 rng(seed);
+  double max_d = 0.0, max_p = 0.0;
+  int compared = 0, points = 0;
+  for (int c = 0; c < configurations; ++c) {
+    ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+    computeSegmentDistances(m, kin, dist);
+    int closest = -1;
+    for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+      const PairDistance& pd = dist.pairs[i];
+      if (m.segments[pd.seg_b].body_schema_slot) {
+        EXPECT_FALSE(pd.active);  // no slot enabled
+        EXPECT_EQ(pd.distance, std::numeric_limits<double>::infinity());
+        continue;
+      }
+      ASSERT_TRUE(pd.active);
+      // Invariants.
+      ASSERT_TRUE(std::isfinite(pd.distance));
+      EXPECT_NEAR(pd.nhat_W.norm(), 1.0, 1e-12);
+      EXPECT_LT((pd.p_W_a - pd.p_W_b - pd.distance * pd.nhat_W).norm(), 1e-12);
+      if (closest < 0 || pd.distance < dist.pairs[closest].distance) closest = static_cast<int>(i);
+      const FclPair f = fclSegmentDistance(m, kin, pd.seg_a, pd.seg_b);
+      if (!(f.d > 1e-9)) continue;  // FCL reports no points for touching/penetrating spheres
+      const double e = std::abs(f.d - pd.distance);
+      max_d = std::max(max_d, e);
+      ASSERT_LT(e, 1e-9) << m.segments[pd.seg_a].name << "-" << m.segments[pd.seg_b].name;
+      ++compared;
+      // Witness points are unique unless the best primitive pair is (nearly) parallel or two
+      // primitive pairs tie.
+      if (!f.parallel && f.second - f.d > 1e-9) {
+        const double ep = std::max((f.p_a - pd.p_W_a).norm(), (f.p_b - pd.p_W_b).norm());
+        max_p = std::max(max_p, ep);
+        ASSERT_LT(ep, 1e-9) << m.segments[pd.seg_a].name << "-" << m.segments[pd.seg_b].name;
+        ++points;
+      }
+    }
+    EXPECT_EQ(dist.closest, closest);
+  }
+  EXPECT_GT(compared, configurations * robotPairCount(m) * 9 / 10);
+  EXPECT_GT(points, compared / 2);
+  std::printf("%s vs FCL: %d pair distances (max error %.3g m), %d witness pairs (max error %.3g m)\n",
+              m.name.c_str(), compared, max_d, points, max_p);
+}
+
+TEST(DistanceFcl, ShippedRobotAgreesWithFcl) { checkRobotAgainstFcl(test::loadRobot(test::kAsimo), 60, 7); }
+
+TEST(DistanceFcl, SecondHumanoidAgreesWithFcl) { checkRobotAgainstFcl(test::loadRobot(test::kSmall), 60, 8); }
+
+// ---------------------------------------------------------------- avoidance rows
+double pairDistanceAt(const Model& m, KinematicsData& kin, DistanceData& dist, const Eigen::VectorXd& q, int i) {
+  EXPECT_TRUE(computeForwardKinematics(m, kin, q));
+  computeSegmentDistances(m, kin, dist, DistanceOptions{-std::numeric_limits<double>::infinity()});
+  return dist.pairs[i].distance;
+}
+
+void checkRowsAgainstFiniteDifferences(const Model& m, int configurations, std::uint64_t seed) {
+  KinematicsData kin(m), kin_fd(m);
+  DistanceData dist(m), dist_fd(m);
+  std::mt19937_64 rng(seed);
+  const double h = 1e-6;
+  double max_err = 0.0;
+  int rows_checked = 0;
+  for (int c = 0; c < configurations; ++c) {
+    const Eigen::VectorXd q = test::randomConfiguration(m, rng);
+    ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+    computeSegmentDistances(m, kin, dist);  // default threshold +inf: every active pair has a row
+    for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+      const PairDistance& pd = dist.pairs[i];
+      if (!pd.active) {
+        EXPECT_FALSE(pd.has_row);
+        continue;
+      }
+      ASSERT_TRUE(pd.has_row);
+      // The row is n^T (J_pa - J_pb) with the Jacobians of the witness points on their links.
+      const int la = m.segments[pd.seg_a].link, lb = m.segments[pd.seg_b].link;
+      Eigen::MatrixXd Ja(3, m.nq), Jb(3, m.nq);
+      computePointJacobian(m, kin, la, pd.p_W_a, Ja);
+      computePointJacobian(m, kin, lb, pd.p_W_b, Jb);
+      const Eigen::RowVectorXd expected = pd.nhat_W.transpose() * (Ja - Jb);
+      EXPECT_LT((dist.rows.row(static_cast<Eigen::Index>(i)) - expected).cwiseAbs().maxCoeff(), 1e-12);
+      // ... and it is the gradient of the pair distance (closest points unique at random configs).
+      if (!pd.well_defined) continue;
+      for (int j = 0; j < m.nq; ++j) {
+        Eigen::VectorXd qp = q, qm = q;
+        qp[j] += h;
+        qm[j] -= h;
+        const double fd = (pairDistanceAt(m, kin_fd, dist_fd, qp, static_cast<int>(i)) -
+                           pairDistanceAt(m, kin_fd, dist_fd, qm, static_cast<int>(i))) / (2 * h);
+        const double e = std::abs(fd - dist.rows(static_cast<Eigen::Index>(i), j));
+        max_err = std::max(max_err, e);
+        ASSERT_LT(e, 1e-6) << m.segments[pd.seg_a].name << "-" << m.segments[pd.seg_b].name << " joint "
+                           << m.q_names[j];
+      }
+      ++rows_checked;
+    }
+  }
+  std::printf("%s: %d avoidance rows vs central differences (h = 1e-6): max error %.3g\n", m.name.c_str(),
+              rows_checked, max_err);
+}
+
+TEST(DistanceRows, ShippedRobotRowsAreDistanceGradients) {
+  checkRowsAgainstFiniteDifferences(test::loadRobot(test::kAsimo), 4, 11);
+}
+
+TEST(DistanceRows, SecondHumanoidRowsAreDistanceGradients) {
+  checkRowsAgainstFiniteDifferences(test::loadRobot(test::kSmall), 3, 12);
+}
+
+TEST(DistanceRows, ThresholdSelectsRows) {
+  const Model m = test::loadRobot(test::kAsimo);
+  KinematicsData kin(m);
+  DistanceData dist(m);
+  std::mt19937_64 rng(3);
+  ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+  computeSegmentDistances(m, kin, dist, DistanceOptions{0.15});
+  int with = 0;
+  for (const PairDistance& pd : dist.pairs) {
+    EXPECT_EQ(pd.has_row, pd.active && pd.distance < 0.15);
+    with += pd.has_row;
+  }
+  EXPECT_GT(with, 0);
+  computeSegmentDistances(m, kin, dist, DistanceOptions{-std::numeric_limits<double>::infinity()});
+  for (const PairDistance& pd : dist.pairs) EXPECT_FALSE(pd.has_row);
+}
+
+// ---------------------------------------------------------------- body schema
+TEST(DistanceBodySchema, SlotCapsuleOnTheHandIsChecked) {
+  const Model m = test::loadRobot(test::kAsimo);
+  KinematicsData kin(m);
+  DistanceData dist(m);
+  std::mt19937_64 rng(5);
+  ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+  const int hand = m.linkIndex("l_hand");
+  const int hand_seg = m.segmentIndex("l_hand");
+  const int forearm_seg = m.segmentIndex("l_forearm");
+  // A 20 cm stick held in the left hand, never checked against the left forearm.
+  const Vector3d a_L(0, 0, -0.08), b_L(0.2, 0, -0.08);
+  ASSERT_TRUE(attachBodySchemaSegment(m, dist, 1, hand, a_L, b_L, 0.02, std::uint64_t{1} << forearm_seg));
+  computeSegmentDistances(m, kin, dist);
+  const int slot_seg = m.num_robot_segments + 1;
+  int active = 0, compared = 0;
+  for (const PairDistance& pd : dist.pairs) {
+    if (pd.seg_b != slot_seg) {
+      if (m.segments[pd.seg_b].body_schema_slot) {
+        EXPECT_FALSE(pd.active);
+      }
+      continue;
+    }
+    const bool expect_active = pd.seg_a != hand_seg && pd.seg_a != forearm_seg;
+    EXPECT_EQ(pd.active, expect_active) << m.segments[pd.seg_a].name;
+    if (!pd.active) continue;
+    ++active;
+    // Against FCL with the stick placed by hand.
+    const Eigen::Isometry3d& X = kin.X_W_L[hand];
+    const Segment& S = m.segments[pd.seg_a];
+    double best = std::numeric_limits<double>::infinity();
+    for (int p = S.first_primitive; p < S.first_primitive + S.num_primitives; ++p) {
+      const Primitive& P = m.primitives[p];
+      const Eigen::Isometry3d& XA = kin.X_W_L[S.link];
+      fcl::Transform3d Xa, Xb;
+      const auto ga = fclShape(XA * P.a_L, P.sphere ? Vector3d(XA * P.a_L) : Vector3d(XA * P.b_L), P.radius, Xa);
+      const auto gb = fclShape(X * a_L, X * b_L, 0.02, Xb);
+      fcl::DistanceRequestd request;
+      fcl::DistanceResultd result;
+      fcl::distance(ga.get(), Xa, gb.get(), Xb, request, result);
+      best = std::min(best, result.min_distance);
+    }
+    if (best > 1e-9) {  // FCL gives no distance for touching / penetrating spheres
+      EXPECT_NEAR(pd.distance, best, 1e-9) << S.name;
+      ++compared;
+    }
+    EXPECT_LT((pd.p_W_a - pd.p_W_b - pd.distance * pd.nhat_W).norm(), 1e-12);
+    // The row of a slot pair uses the slot's link (the hand) for p_b.
+    Eigen::MatrixXd Ja(3, m.nq), Jb(3, m.nq);
+    computePointJacobian(m, kin, S.link, pd.p_W_a, Ja);
+    computePointJacobian(m, kin, hand, pd.p_W_b, Jb);
+    const Eigen::Index i = &pd - dist.pairs.data();
+    EXPECT_LT((dist.rows.row(i) - pd.nhat_W.transpose() * (Ja - Jb)).cwiseAbs().maxCoeff(), 1e-12);
+  }
+  EXPECT_EQ(active, m.num_robot_segments - 2);
+  EXPECT_GE(compared, active - 3);
+  // Detach: inactive again, distance +inf, and the closest pair is a robot pair.
+  ASSERT_TRUE(detachBodySchemaSegment(dist, 1));
+  computeSegmentDistances(m, kin, dist);
+  for (const PairDistance& pd : dist.pairs)
+    if (pd.seg_b == slot_seg) {
+      EXPECT_FALSE(pd.active);
+      EXPECT_EQ(pd.distance, std::numeric_limits<double>::infinity());
+    }
+  EXPECT_FALSE(m.segments[dist.pairs[dist.closest].seg_b].body_schema_slot);
+}
+
+TEST(DistanceBodySchema, BadArgumentsAreRejectedAndChangeNothing) {
+  const Model m = test::loadRobot(test::kAsimo);
+  DistanceData dist(m);
+  const Vector3d a(0, 0, 0), b(0.1, 0, 0);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const int nlinks = static_cast<int>(m.links.size());
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, -1, 0, a, b, 0.1));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, kBodySchemaSlots, 0, a, b, 0.1));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, -1, a, b, 0.1));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, nlinks, a, b, 0.1));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, 0, a, b, 0.0));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, 0, a, b, -0.1));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, 0, a, b, nan));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, 0, a, b, inf));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, 0, Vector3d(nan, 0, 0), b, 0.1));
+  EXPECT_FALSE(attachBodySchemaSegment(m, dist, 0, 0, a, Vector3d(0, inf, 0), 0.1));
+  for (const BodySchemaSlot& s : dist.slots) {
+    EXPECT_FALSE(s.enabled);
+    EXPECT_EQ(s.radius, 0.0);
+  }
+  EXPECT_FALSE(detachBodySchemaSegment(dist, -1));
+  EXPECT_FALSE(detachBodySchemaSegment(dist, kBodySchemaSlots));
+}
+
+TEST(DistanceBodySchema, CoincidentCoresGetTheLinkFallbackNormal) {
+  // A sphere on the world link centred exactly on the head sphere's centre at q = 0.
+  const Model m = test::loadRobot(test::kAsimo);
+  KinematicsData kin(m);
+  DistanceData dist(m);
+  const int head = m.linkIndex("head");
+  const Segment& hs = m.segments[m.segmentIndex("head")];
+  const Vector3d centre_W = kin.X_W_L[head] * m.primitives[hs.first_primitive].a_L;
+  ASSERT_TRUE(attachBodySchemaSegment(m, dist, 0, 0, centre_W, centre_W, 0.05));
+  computeSegmentDistances(m, kin, dist);
+  bool found = false;
+  for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+    const PairDistance& pd = dist.pairs[i];
+    if (pd.seg_a != m.segmentIndex("head") || pd.seg_b != m.num_robot_segments) continue;
+    found = true;
+    ASSERT_TRUE(pd.active);
+    EXPECT_FALSE(pd.well_defined);
+    EXPECT_NEAR(pd.distance, -(0.14 + 0.05), 1e-12);
+    // Fallback: from the slot's link origin (world) towards the head link origin.
+    const Vector3d expected = kin.X_W_L[head].translation().normalized();
+    EXPECT_LT((pd.nhat_W - expected).norm(), 1e-12);
+    EXPECT_LT((pd.p_W_a - pd.p_W_b - pd.distance * pd.nhat_W).norm(), 1e-12);
+    EXPECT_TRUE(dist.rows.row(static_cast<Eigen::Index>(i)).allFinite());
+  }
+  EXPECT_TRUE(found);
+}
+
+// ---------------------------------------------------------------- bad joint values at run time
+TEST(DistanceRuntime, NonFiniteJointValuesKeepTheLastValidResult) {
+  const Model m = test::loadRobot(test::kAsimo);
+  KinematicsData kin(m);
+  DistanceData dist(m);
+  std::mt19937_64 rng(9);
+  const Eigen::VectorXd q = test::randomConfiguration(m, rng);
+  ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+  computeSegmentDistances(m, kin, dist);
+  const std::vector<PairDistance> before = dist.pairs;
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+                           -std::numeric_limits<double>::infinity()}) {
+    Eigen::VectorXd qb = test::randomConfiguration(m, rng);
+    qb[m.qIndex("l_elbow")] = bad;
+    EXPECT_FALSE(computeForwardKinematics(m, kin, qb));
+    computeSegmentDistances(m, kin, dist);
+    EXPECT_TRUE(dist.rows.allFinite());
+    for (std::size_t i = 0; i < before.size(); ++i) {
+      if (!before[i].active) continue;
+      EXPECT_EQ(dist.pairs[i].distance, before[i].distance);
+      EXPECT_EQ(dist.pairs[i].p_W_a, before[i].p_W_a);
+      EXPECT_TRUE(dist.pairs[i].nhat_W.allFinite());
+    }
+  }
+}
+
+}  // namespace
+}  // namespace reflex::control
