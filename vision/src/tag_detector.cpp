@@ -132,8 +132,11 @@ std::vector<TagDetection> TagDetector::detect(const cv::Mat& gray) {
     t.id = d->id;
     t.hamming = d->hamming;
     t.decision_margin = d->decision_margin;
-    t.center = cv::Point2d(d->c[0], d->c[1]);
-    for (int k = 0; k < 4; ++k) t.corners[static_cast<std::size_t>(k)] = cv::Point2d(d->p[k][0], d->p[k][1]);
+    // libapriltag puts pixel centres at +0.5 (its issue #121); OpenCV and the calibration put them
+    // at integers, so shift into the calibration's convention.
+    t.center = cv::Point2d(d->c[0] - 0.5, d->c[1] - 0.5);
+    for (int k = 0; k < 4; ++k)
+      t.corners[static_cast<std::size_t>(k)] = cv::Point2d(d->p[k][0] - 0.5, d->p[k][1] - 0.5);
     out.push_back(t);
   }
   apriltag_detections_destroy(dets);

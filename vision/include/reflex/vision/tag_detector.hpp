@@ -53,7 +53,8 @@ struct DetectorOptions {
 /// Throws VisionError naming the option and value if out of range (family checked by TagFamily).
 void validateDetectorOptions(const DetectorOptions& options);
 
-/// One tag in one image, pixel coordinates of that image (x right, y down; integer = pixel centre).
+/// One tag in one image, pixel coordinates of that image (x right, y down; integer = pixel centre,
+/// OpenCV's convention: libapriltag's own coordinates are shifted by -0.5 to get there).
 /// corners follow libapriltag's order (counter-clockwise around the tag in the tag's own frame,
 /// starting at its (-1, +1) corner); center is the homography image of the tag centre.
 struct TagDetection {

@@ -1,0 +1,182 @@
+// Tests of vision/include/reflex/vision/calibration.hpp and object_map.hpp: the ROS camera_info
+// format (round trip, every error path), stereo consistency, the camera mount.
+#include "reflex/vision/calibration.hpp"
+#include "reflex/vision/error.hpp"
+#include "reflex/vision/object_map.hpp"
+#include "reflex/vision/session_maker.hpp"
+#include "vision_test_util.hpp"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <regex>
+
+using namespace reflex::vision;
+using ::testing::HasSubstr;
+
+namespace {
+
+// A camera_info file as ROS camera_calibration writes it (values from a real-looking 640x480 rig).
+const char* kLeft = R"(image_width: 640
+image_height: 480
+camera_name: narrow_stereo/left
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [501.2, 0, 318.7, 0, 500.9, 241.3, 0, 0, 1]
+distortion_model: plumb_bob
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [-0.041, 0.013, 0.0004, -0.0002, 0]
+rectification_matrix:
+  rows: 3
+  cols: 3
+  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]
+projection_matrix:
+  rows: 3
+  cols: 4
+  data: [495.0, 0, 320.0, 0, 0, 495.0, 240.0, 0, 0, 0, 1, 0]
+)";
+
+std::string rightFrom(const std::string& left) {
+  std::string r = std::regex_replace(left, std::regex("narrow_stereo/left"), "narrow_stereo/right");
+  return std::regex_replace(r, std::regex(R"(\[495.0, 0, 320.0, 0,)"), "[495.0, 0, 320.0, -29.7,");
+}
+
+template <typename F>
+std::string errorOf(F f) {
+  try {
+    f();
+  } catch (const VisionError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+}  // namespace
+
+TEST(Calibration, ParsesRosCameraInfo) {
+  const CameraInfo c = parseCameraInfo(kLeft, "left.yaml");
+  EXPECT_EQ(c.image_size, cv::Size(640, 480));
+  EXPECT_EQ(c.camera_name, "narrow_stereo/left");
+  EXPECT_DOUBLE_EQ(c.K(0, 0), 501.2);
+  EXPECT_DOUBLE_EQ(c.K(1, 2), 241.3);
+  ASSERT_EQ(c.D.size(), 5u);
+  EXPECT_DOUBLE_EQ(c.D[0], -0.041);
+  EXPECT_DOUBLE_EQ(c.P(0, 0), 495.0);
+}
+
+TEST(Calibration, SaveLoadRoundTrip) {
+  test::TempDir dir("calib");
+  CameraInfo c = parseCameraInfo(kLeft, "left.yaml");
+  saveCameraInfo(dir / "c.yaml", c);
+  const CameraInfo d = loadCameraInfo(dir / "c.yaml");
+  for (int i = 0; i < 9; ++i) EXPECT_DOUBLE_EQ(c.K.val[i], d.K.val[i]);
+  for (int i = 0; i < 12; ++i) EXPECT_DOUBLE_EQ(c.P.val[i], d.P.val[i]);
+  EXPECT_EQ(c.D, d.D);
+  EXPECT_EQ(c.distortion_model, d.distortion_model);
+}
+
+TEST(Calibration, StereoBaselineFromProjection) {
+  StereoCalibration s{parseCameraInfo(kLeft, "l"), parseCameraInfo(rightFrom(kLeft), "r")};
+  EXPECT_NO_THROW(validateStereoCalibration(s, "l", "r"));
+  EXPECT_NEAR(s.baseline(), 29.7 / 495.0, 1e-12);  // P[0][3] = -fx' * B
+}
+
+TEST(Calibration, ErrorsNameFileAndField) {
+  auto bad = [](const std::string& from, const std::string& to) {
+    return errorOf([&] { parseCameraInfo(std::regex_replace(kLeft, std::regex(from), to), "cam.yaml"); });
+  };
+  // wrong rows*cols vs data length
+  EXPECT_THAT(bad(R"(data: \[501.2, 0, 318.7, 0, 500.9, 241.3, 0, 0, 1\])", "data: [501.2, 0, 318.7, 0, 500.9, 241.3]"),
+              AllOf(HasSubstr("cam.yaml"), HasSubstr("camera_matrix"), HasSubstr("data length 6")));
+  // non-positive focal length
+  EXPECT_THAT(bad("501.2", "-501.2"), AllOf(HasSubstr("cam.yaml"), HasSubstr("fx = -501.2")));
+  EXPECT_THAT(bad(R"(\[495.0, 0, 320.0, 0, 0, 495.0)", "[0, 0, 320.0, 0, 0, 495.0"),
+              AllOf(HasSubstr("projection_matrix"), HasSubstr("fx'")));
+  // missing field
+  EXPECT_THAT(bad("image_height: 480\n", ""), AllOf(HasSubstr("cam.yaml"), HasSubstr("image_height")));
+  EXPECT_THAT(bad("rectification_matrix:", "rectification_matrixx:"), HasSubstr("'rectification_matrix'"));
+  // unknown distortion model, wrong coefficient count
+  EXPECT_THAT(bad("plumb_bob", "fisheye62"), HasSubstr("unknown distortion_model 'fisheye62'"));
+  EXPECT_THAT(bad("plumb_bob", "rational_polynomial"), HasSubstr("needs 8 coefficients, got 5"));
+  // wrong shape
+  EXPECT_THAT(bad("  rows: 3\n  cols: 4", "  rows: 4\n  cols: 3"), HasSubstr("expected a 3x4 matrix"));
+  // not a number, not a rotation, negative size, syntax
+  EXPECT_THAT(bad("318.7", "abc"), AllOf(HasSubstr("camera_matrix.data[2]"), HasSubstr("'abc'")));
+  EXPECT_THAT(bad(R"(data: \[1, 0, 0, 0, 1, 0, 0, 0, 1\])", "data: [2, 0, 0, 0, 1, 0, 0, 0, 1]"),
+              HasSubstr("rectification_matrix is not a rotation"));
+  EXPECT_THAT(bad("image_width: 640", "image_width: -640"), HasSubstr("image_width = -640"));
+  EXPECT_THAT(bad("camera_matrix:", "camera_matrix: [oops"), HasSubstr("YAML syntax error"));
+  EXPECT_THAT(errorOf([] { loadCameraInfo("/nonexistent/left.yaml"); }), HasSubstr("/nonexistent/left.yaml"));
+}
+
+TEST(Calibration, StereoInconsistenciesAreErrors) {
+  const CameraInfo l = parseCameraInfo(kLeft, "l");
+  const CameraInfo r = parseCameraInfo(rightFrom(kLeft), "r");
+  StereoCalibration swapped{r, l};
+  EXPECT_THAT(errorOf([&] { validateStereoCalibration(swapped, "L.yaml", "R.yaml"); }),
+              AllOf(HasSubstr("L.yaml"), HasSubstr("left/right swapped")));
+  StereoCalibration sizes{l, r};
+  sizes.right.image_size = cv::Size(320, 240);
+  EXPECT_THAT(errorOf([&] { validateStereoCalibration(sizes, "L.yaml", "R.yaml"); }),
+              AllOf(HasSubstr("image sizes differ"), HasSubstr("640x480"), HasSubstr("320x240")));
+  StereoCalibration focal{l, r};
+  focal.right.P(0, 0) = 600.0;
+  EXPECT_THAT(errorOf([&] { validateStereoCalibration(focal, "L.yaml", "R.yaml"); }),
+              HasSubstr("rectified intrinsics differ"));
+  StereoCalibration vertical{l, r};
+  vertical.right.P(1, 3) = -10.0;
+  EXPECT_THAT(errorOf([&] { validateStereoCalibration(vertical, "L.yaml", "R.yaml"); }), HasSubstr("horizontal"));
+}
+
+TEST(Calibration, RigCalibrationMatchesStereoRectifyConventions) {
+  RigSpec rig;
+  rig.right_rpy_deg = cv::Vec3d(0.3, -0.5, 0.2);
+  const StereoCalibration c = rigCalibration(rig);
+  EXPECT_NO_THROW(validateStereoCalibration(c, "l", "r"));
+  EXPECT_NEAR(c.baseline(), 0.06, 1e-9);  // |T| = baseline
+  EXPECT_DOUBLE_EQ(c.left.P(0, 3), 0.0);
+}
+
+TEST(CameraMount, DefaultIsTheShippedHead) {
+  const CameraMount m = defaultCameraMount();
+  // The optical axis z_C looks along +x_B, image right x_C along -y_B, image down y_C along -z_B.
+  EXPECT_EQ(m.toBase(cv::Vec3d(0, 0, 1)) - m.p_B_C, cv::Vec3d(1, 0, 0));
+  EXPECT_EQ(m.toBase(cv::Vec3d(1, 0, 0)) - m.p_B_C, cv::Vec3d(0, -1, 0));
+  EXPECT_EQ(m.toBase(cv::Vec3d(0, 1, 0)) - m.p_B_C, cv::Vec3d(0, 0, -1));
+  EXPECT_EQ(m.p_B_C, cv::Vec3d(0.08, 0.03, 1.15));
+}
+
+TEST(CameraMount, ParseAndErrors) {
+  const CameraMount m =
+      parseCameraMount("translation: [0.1, 0.0, 1.0]\nrotation_matrix: [0,0,1, -1,0,0, 0,-1,0]\n", "mount.yaml");
+  EXPECT_EQ(m.p_B_C, cv::Vec3d(0.1, 0.0, 1.0));
+  EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0.1, 0.0]\nrotation_matrix: [1,0,0,0,1,0,0,0,1]", "m.yaml"); }),
+              AllOf(HasSubstr("m.yaml"), HasSubstr("translation"), HasSubstr("expected 3 numbers")));
+  EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0, 0, 1]\nrotation_matrix: [1,0,0,0,1,0,0,0,-1]", "m.yaml"); }),
+              HasSubstr("not a rotation"));
+  EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0, 0, 1]\n", "m.yaml"); }), HasSubstr("rotation_matrix"));
+  // The shipped default file matches the built-in default.
+  const CameraMount shipped = loadCameraMount(std::string(REFLEX_SOURCE_DIR) + "/bringup/vision/camera_mount.yaml");
+  EXPECT_LT(cv::norm(shipped.p_B_C - defaultCameraMount().p_B_C), 1e-12);
+  EXPECT_LT(cv::norm(cv::Mat(shipped.R_B_C), cv::Mat(defaultCameraMount().R_B_C)), 1e-12);
+}
+
+TEST(ObjectMap, ParseAndErrors) {
+  const ObjectMap m = parseObjectMap("family: tag36h11\nobjects:\n  - {id: 0, name: cup, size: 0.06}\n"
+                                     "  - {id: 3, name: can, size: 0.05}\n",
+                                     "objects.yaml");
+  ASSERT_NE(m.find(3), nullptr);
+  EXPECT_EQ(m.find(3)->name, "can");
+  EXPECT_EQ(m.find(1), nullptr);
+  EXPECT_EQ(m.findByName("cup")->tag_id, 0);
+  EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, name: a, size: 0.06}\n  - {id: 0, name: b, size: 0.06}\n", "o.yaml"); }),
+              AllOf(HasSubstr("o.yaml"), HasSubstr("duplicate tag id")));
+  EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, name: a, size: -1}\n", "o.yaml"); }),
+              HasSubstr("size = -1 must be positive"));
+  EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, size: 0.06}\n", "o.yaml"); }),
+              HasSubstr("objects[0]: missing field 'name'"));
+  EXPECT_THAT(errorOf([] { parseObjectMap("family: tag36h11\n", "o.yaml"); }), HasSubstr("'objects'"));
+}

@@ -1,0 +1,193 @@
+// Tests of vision/include/reflex/vision/stereo_pipeline.hpp and tag_detector.hpp against analytic
+// answers: exact projections triangulate back, the stereo tag pose fit recovers a known pose, a
+// rendered tag is found where it was drawn, bad options and families are errors.
+#include "reflex/vision/error.hpp"
+#include "reflex/vision/session_maker.hpp"
+#include "reflex/vision/stereo_pipeline.hpp"
+#include "reflex/vision/tag_detector.hpp"
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+using namespace reflex::vision;
+using ::testing::HasSubstr;
+
+namespace {
+
+StereoCalibration testRig() {
+  RigSpec rig;
+  rig.K_right = cv::Matx33d(503, 0, 322, 0, 502, 241, 0, 0, 1);
+  rig.D_left = {-0.04, 0.012, 0.0005, -0.0003, 0};
+  rig.D_right = {-0.038, 0.010, -0.0004, 0.0002, 0};
+  rig.right_rpy_deg = cv::Vec3d(0.3, -0.5, 0.2);
+  return rigCalibration(rig);
+}
+
+// Raw (distorted) pixel of a left-optical-frame point in the left or right camera of testRig().
+cv::Point2d projectRaw(const StereoCalibration& c, const cv::Vec3d& p_C, bool right) {
+  RigSpec rig;
+  const double d2r = M_PI / 180.0;
+  cv::Matx33d R_L_R = cv::Matx33d::eye();
+  if (right) {
+    const cv::Vec3d a = cv::Vec3d(0.3, -0.5, 0.2) * d2r;  // same rpy convention as the maker (Rz Ry Rx)
+    const cv::Matx33d Rx(1, 0, 0, 0, std::cos(a[0]), -std::sin(a[0]), 0, std::sin(a[0]), std::cos(a[0]));
+    const cv::Matx33d Ry(std::cos(a[1]), 0, std::sin(a[1]), 0, 1, 0, -std::sin(a[1]), 0, std::cos(a[1]));
+    const cv::Matx33d Rz(std::cos(a[2]), -std::sin(a[2]), 0, std::sin(a[2]), std::cos(a[2]), 0, 0, 0, 1);
+    R_L_R = Rz * Ry * Rx;
+  }
+  const cv::Vec3d p = right ? R_L_R.t() * (p_C - cv::Vec3d(0.06, 0, 0)) : p_C;
+  const CameraInfo& cam = right ? c.right : c.left;
+  std::vector<cv::Point2d> uv;
+  cv::projectPoints(std::vector<cv::Point3d>{cv::Point3d(p[0], p[1], p[2])}, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0),
+                    cam.K, cam.D, uv);
+  return uv[0];
+}
+
+}  // namespace
+
+TEST(StereoRectifier, TriangulatesExactProjectionsBack) {
+  const StereoCalibration c = testRig();
+  const StereoRectifier rect(c);
+  for (const cv::Vec3d& p_C : {cv::Vec3d(0.0, 0.0, 0.5), cv::Vec3d(-0.12, 0.08, 0.7), cv::Vec3d(0.3, -0.2, 1.5),
+                              cv::Vec3d(0.05, 0.1, 1.0)}) {
+    std::vector<cv::Point2d> l, r;
+    rect.rectifyPoints({projectRaw(c, p_C, false)}, l, false);
+    rect.rectifyPoints({projectRaw(c, p_C, true)}, r, true);
+    EXPECT_NEAR(l[0].y, r[0].y, 1e-3) << "rectified rows must agree";
+    cv::Vec3d p_rect;
+    ASSERT_TRUE(rect.triangulate(l[0], r[0], p_rect));
+    const cv::Vec3d back = rect.rectToCamera(p_rect);
+    EXPECT_LT(cv::norm(back - p_C), 1e-5 * cv::norm(p_C)) << p_C << " -> " << back;
+  }
+}
+
+TEST(StereoRectifier, RejectsNonPositiveDisparity) {
+  const StereoRectifier rect(testRig());
+  cv::Vec3d p;
+  EXPECT_FALSE(rect.triangulate(cv::Point2d(300, 200), cv::Point2d(320, 200), p));
+}
+
+TEST(StereoRectifier, HandComputedPinholeCase) {
+  // No distortion, no rotation: Z = f B / d, X = (u - cx) Z / f.
+  StereoCalibration c;
+  c.left.image_size = c.right.image_size = cv::Size(640, 480);
+  c.left.K = c.right.K = cv::Matx33d(500, 0, 320, 0, 500, 240, 0, 0, 1);
+  c.left.P = cv::Matx34d(500, 0, 320, 0, 0, 500, 240, 0, 0, 0, 1, 0);
+  c.right.P = cv::Matx34d(500, 0, 320, -30, 0, 500, 240, 0, 0, 0, 1, 0);  // B = 0.06
+  const StereoRectifier rect(c);
+  cv::Vec3d p;
+  ASSERT_TRUE(rect.triangulate(cv::Point2d(370, 290), cv::Point2d(310, 290), p));  // d = 60 px
+  EXPECT_NEAR(p[2], 0.5, 1e-12);
+  EXPECT_NEAR(p[0], 0.05, 1e-12);
+  EXPECT_NEAR(p[1], 0.05, 1e-12);
+}
+
+TEST(StereoTagPoseFit, RecoversAKnownPoseFromExactCorners) {
+  const StereoCalibration c = testRig();
+  const StereoRectifier rect(c);
+  const double s = 0.06;
+  const cv::Vec3d centre(0.05, -0.03, 0.8);
+  cv::Matx33d R;
+  cv::Rodrigues(cv::Vec3d(0.3, -0.4, 0.2), R);
+  const cv::Vec3d model[4] = {{-s / 2, s / 2, 0}, {s / 2, s / 2, 0}, {s / 2, -s / 2, 0}, {-s / 2, -s / 2, 0}};
+  std::array<cv::Point2d, 4> l, r;
+  std::array<cv::Vec3d, 4> seed;
+  for (std::size_t k = 0; k < 4; ++k) {
+    const cv::Vec3d p = R * model[k] + centre;
+    l[k] = rect.projectRect(p, false);
+    r[k] = rect.projectRect(p, true);
+    seed[k] = p + cv::Vec3d(0.002, -0.001, 0.004 * (k % 2 ? 1 : -1));  // a noisy stereo seed
+  }
+  cv::Vec3d c_fit, z_fit;
+  double rms = -1;
+  ASSERT_TRUE(fitTagPoseStereo(rect, l, r, seed, s, c_fit, z_fit, rms));
+  EXPECT_LT(cv::norm(c_fit - centre), 1e-7);
+  EXPECT_LT(cv::norm(z_fit - R * cv::Vec3d(0, 0, 1)), 1e-6);
+  EXPECT_LT(rms, 1e-5);
+}
+
+TEST(Confidence, RangeAndMonotonicity) {
+  EXPECT_NEAR(computeConfidence(150, 0, 1.0), 1.0, 1e-12);
+  EXPECT_GE(computeConfidence(0, 10, 3.0), 0.0);
+  EXPECT_LT(computeConfidence(50, 0, 1.0), computeConfidence(90, 0, 1.0));
+  EXPECT_LT(computeConfidence(90, 1.5, 1.0), computeConfidence(90, 0.2, 1.0));
+  EXPECT_LT(computeConfidence(90, 0, 1.1), computeConfidence(90, 0, 1.01));
+}
+
+TEST(TagDetector, FindsARenderedTagWhereItWasDrawn) {
+  const TagFamily family("tag36h11");
+  const cv::Mat bits = family.bitmap(42);
+  ASSERT_EQ(bits.rows, family.totalWidth());
+  const int cell = 12;
+  cv::Mat img(480, 640, CV_8U, cv::Scalar(200));
+  cv::Mat big;
+  cv::resize(bits, big, cv::Size(), cell, cell, cv::INTER_NEAREST);
+  const cv::Point origin(200, 150);
+  big.copyTo(img(cv::Rect(origin, big.size())));
+  TagDetector det(DetectorOptions{});
+  const std::vector<TagDetection> found = det.detect(img);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(found[0].id, 42);
+  // The black square spans cells 1..9 of the 10-cell bitmap; pixel centres are integers, so its
+  // outer edges lie at origin + cell - 0.5 and origin + 9 cell - 0.5.
+  const double lo = cell - 0.5, hi = (family.totalWidth() - 1) * cell - 0.5;
+  const double cx = origin.x + 0.5 * (lo + hi), cy = origin.y + 0.5 * (lo + hi);
+  EXPECT_NEAR(found[0].center.x, cx, 0.3);
+  EXPECT_NEAR(found[0].center.y, cy, 0.3);
+  for (const cv::Point2d& p : found[0].corners) {
+    EXPECT_NEAR(std::abs(p.x - cx), 0.5 * (hi - lo), 0.5);
+    EXPECT_NEAR(std::abs(p.y - cy), 0.5 * (hi - lo), 0.5);
+  }
+  // libapriltag's order: counter-clockwise on screen, starting bottom-left (y down).
+  EXPECT_GT(found[0].corners[0].y, cy);
+  EXPECT_LT(found[0].corners[0].x, cx);
+  EXPECT_GT(found[0].corners[1].x, cx);
+}
+
+TEST(TagDetector, BadFamilyOptionsAndImagesAreErrors) {
+  DetectorOptions o;
+  o.family = "tag99h1";
+  try {
+    TagDetector d(o);
+    FAIL() << "unknown family accepted";
+  } catch (const VisionError& e) {
+    EXPECT_THAT(e.what(), AllOf(HasSubstr("'tag99h1'"), HasSubstr("tag36h11")));
+  }
+  o = DetectorOptions{};
+  o.decimate = 0.5;
+  EXPECT_THROW(TagDetector{o}, VisionError);
+  o = DetectorOptions{};
+  o.threads = 0;
+  EXPECT_THROW(TagDetector{o}, VisionError);
+  TagDetector d(DetectorOptions{});
+  EXPECT_TRUE(d.detect(cv::Mat()).empty());
+  EXPECT_THROW(d.detect(cv::Mat(10, 10, CV_32F)), VisionError);
+  EXPECT_THROW(TagFamily("tag36h11").bitmap(100000), VisionError);
+}
+
+TEST(StereoTagPipeline, BadFramesAreSkippedNotThrown) {
+  const StereoCalibration c = testRig();
+  ObjectMap objects("tag36h11", {{0, "cup", 0.06}}, "test");
+  StereoTagPipeline p(c, defaultCameraMount(), objects, PipelineOptions{});
+  StereoResult r;
+  p.process(cv::Mat(), cv::Mat(480, 640, CV_8U), r);
+  EXPECT_EQ(r.status, FrameStatus::kSkipped);
+  EXPECT_THAT(r.message, HasSubstr("left image is empty"));
+  p.process(cv::Mat(480, 640, CV_8U), cv::Mat(240, 320, CV_8U), r);
+  EXPECT_EQ(r.status, FrameStatus::kSkipped);
+  EXPECT_THAT(r.message, HasSubstr("320x240"));
+  p.process(cv::Mat(480, 640, CV_16U), cv::Mat(480, 640, CV_16U), r);
+  EXPECT_EQ(r.status, FrameStatus::kSkipped);
+  p.process(cv::Mat(480, 640, CV_8UC3, cv::Scalar::all(0)), cv::Mat(480, 640, CV_8UC3, cv::Scalar::all(0)), r);
+  EXPECT_EQ(r.status, FrameStatus::kOk);
+  EXPECT_TRUE(r.objects.empty());
+  // Family mismatch and out-of-range ids are setup errors.
+  PipelineOptions other;
+  other.detector.family = "tag25h9";
+  EXPECT_THROW(StereoTagPipeline(c, defaultCameraMount(), objects, other), VisionError);
+  ObjectMap huge("tag36h11", {{5000, "x", 0.06}}, "test");
+  EXPECT_THROW(StereoTagPipeline(c, defaultCameraMount(), huge, PipelineOptions{}), VisionError);
+}
