@@ -3,7 +3,12 @@
 // resolution (domain id and profiles file from the environment).
 #include <gtest/gtest.h>
 
+#include <reflex/bus/heartbeat.hpp>
 #include <reflex/bus/participant.hpp>
+
+#include <unistd.h>
+
+#include <climits>
 
 #include <chrono>
 #include <cstdlib>
@@ -80,6 +85,72 @@ TEST(Participant, ReportsItsConfiguration) {
   EXPECT_EQ(bus.profilesFile(), kProfilesFile);
   EXPECT_EQ(bus.native().get_domain_id(), kDomain);
   EXPECT_EQ(bus.native().get_qos().name().to_string(), "configured");
+}
+
+TEST(Participant, EveryCannotBeCalledFromInsideTheLoop) {
+  Participant bus(testConfig("every_inside", kDomain));
+  std::string error;
+  bus.every(5ms, [&] {
+    try {
+      bus.every(5ms, [] {});
+    } catch (const BusError& e) {
+      error = e.what();
+    }
+    bus.stop();
+  });
+  bus.runFor(2s);
+  EXPECT_NE(error.find("every_inside"), std::string::npos) << error;
+}
+
+TEST(Heartbeat, PublishesModuleHostPidStateAndPeriod) {
+  Participant module(testConfig("hb_module", kDomain));
+  HeartbeatPublisher heartbeat(module, 50ms);  // publishes STATE_CONFIGURING (seq 1) at once
+
+  Participant monitor(testConfig("hb_monitor", kDomain));
+  auto& state_reader = monitor.makeReader<msg::Heartbeat>();  // reflex_heartbeat: late joiner gets seq 1
+  auto& record_reader =
+      monitor.makeReader<msg::Heartbeat>(TopicTraits<msg::Heartbeat>::kTopicName, kProfileRecord);
+  ASSERT_TRUE(state_reader.waitForData(2s));
+  msg::Heartbeat first;
+  ASSERT_TRUE(state_reader.takeNext(first));
+  EXPECT_EQ(first.state(), msg::STATE_CONFIGURING);
+  EXPECT_EQ(first.header().seq(), 1u);
+  ASSERT_TRUE(record_reader.waitForWriters(1, 2s));
+
+  heartbeat.setState(msg::STATE_RUNNING, "all good");  // seq 2, at once
+  ASSERT_TRUE(module.runFor(300ms));                   // about 6 periodic heartbeats
+  std::this_thread::sleep_for(50ms);
+  std::vector<msg::Heartbeat> got;
+  record_reader.takeAll(got);
+  ASSERT_GE(got.size(), 4u) << "1 immediate + about 6 periodic";
+  char host[HOST_NAME_MAX + 1] = {};
+  ::gethostname(host, sizeof host - 1);
+  EXPECT_EQ(got.front().header().seq(), 2u);
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    EXPECT_EQ(got[i].module_name(), "hb_module");
+    EXPECT_EQ(got[i].header().source(), "hb_module");
+    EXPECT_EQ(got[i].host(), host);
+    EXPECT_EQ(got[i].pid(), static_cast<std::int32_t>(::getpid()));
+    EXPECT_EQ(got[i].period_ms(), 50u);
+    EXPECT_EQ(got[i].state(), msg::STATE_RUNNING);
+    EXPECT_EQ(got[i].detail(), "all good");
+    if (i > 0) {
+      EXPECT_EQ(got[i].header().seq(), got[i - 1].header().seq() + 1);
+    }
+  }
+  EXPECT_EQ(state_reader.stats().alive_writers, 1) << "the heartbeat writer asserts its liveliness";
+}
+
+TEST(Heartbeat, PeriodMustBeShorterThanTheLivelinessLease) {
+  Participant module(testConfig("hb_slow", kDomain));
+  try {
+    HeartbeatPublisher heartbeat(module, 1500ms);
+    FAIL() << "a 1.5 s period cannot keep a 1.5 s lease alive";
+  } catch (const BusError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("1500 ms"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("reflex_heartbeat"), std::string::npos) << msg;
+  }
 }
 
 TEST(Config, DomainIdFromConfigurationEnvironmentOrZero) {

@@ -260,6 +260,7 @@ void Participant::every(std::chrono::nanoseconds period, std::function<void()> f
   if (period.count() <= 0) {
     throw BusError("timer period must be > 0 ns, got " + std::to_string(period.count()) + " ns");
   }
+  if (running_) throw BusError("every() called while participant '" + module_name_ + "' is running its loop");
   timers_.push_back(Timer{period, std::move(fn), Clock::now() + period});
 }
 
@@ -289,6 +290,11 @@ bool Participant::loop(const Clock::time_point* end) {
   }
   const auto start = Clock::now();
   for (auto& t : timers_) t.next = start + t.period;
+  running_ = true;
+  struct Running {
+    bool& flag;
+    ~Running() { flag = false; }
+  } running_guard{running_};
 
   while (!stop_.load()) {
     auto now = Clock::now();

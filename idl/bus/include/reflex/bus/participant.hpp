@@ -60,6 +60,7 @@ struct ReaderStats {
   std::uint64_t samples_lost = 0;       ///< samples the reader knows it will never receive
   std::uint64_t samples_rejected = 0;   ///< samples dropped for lack of resources
   std::uint64_t incompatible_qos = 0;   ///< writers seen whose offered QoS does not match
+  // Liveliness is tracked only by readers whose profile requests a finite lease (reflex_heartbeat).
   std::uint64_t liveliness_lost = 0;    ///< times a matched writer was declared not alive
   std::int32_t alive_writers = 0;       ///< matched writers currently alive
   std::int32_t matched_writers = 0;     ///< matched writers now
@@ -296,7 +297,8 @@ class Participant {
   }
 
   /// Calls `fn` every `period` from inside run() / runFor() (first call one period after the loop
-  /// starts; missed calls are skipped, not queued). Throws BusError if period <= 0.
+  /// starts; missed calls are skipped, not queued). Throws BusError if period <= 0 or if called
+  /// while run() / runFor() is running (e.g. from a callback).
   void every(std::chrono::nanoseconds period, std::function<void()> fn);
 
   /// Waits on a WaitSet (readers with an onData callback + the stop guard condition) and dispatches
@@ -345,6 +347,7 @@ class Participant {
   std::vector<Timer> timers_;
   dds::GuardCondition stop_guard_;
   std::atomic<bool> stop_{false};
+  bool running_ = false;
 };
 
 }  // namespace reflex::bus
