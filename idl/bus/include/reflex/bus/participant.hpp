@@ -269,6 +269,7 @@ class Participant {
   /// the profile is unknown, the topic name is already used here with another type, or creation fails.
   template <class T>
   Writer<T>& makeWriter(const std::string& topic_name, const std::string& profile) {
+    // Owned at once; not make_unique because the constructor is private to Participant.
     std::unique_ptr<Writer<T>> w(new Writer<T>(topic_name, profile, module_name_));
     auto& ref = *w;
     createWriter(*w, makeTypeSupport<T>());
