@@ -1,0 +1,124 @@
+// reflex_controller as a real process over real DDS (issue 7, item 1): it runs at 200 Hz, follows
+// hand targets from another participant while keeping every pair above d_r, rejects NaN targets,
+// and retracts both hands on its own when the target source goes silent.
+#include "process.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+
+namespace reflex {
+namespace {
+
+constexpr int kDomain = 71;
+
+msg::HandTargets crossing(bool nan_left = false) {
+  msg::HandTargets t;
+  t.left().status(msg::TARGET_GIVEN);
+  t.left().position_base().x(0.30);
+  t.left().position_base().y(nan_left ? std::nan("") : -0.08);
+  t.left().position_base().z(0.90);
+  t.right().status(msg::TARGET_GIVEN);
+  t.right().position_base().x(0.30);
+  t.right().position_base().y(0.08);
+  t.right().position_base().z(0.90);
+  return t;
+}
+
+TEST(ControllerNode, FollowsTargetsSafelyAndRetractsWhenTheSourceGoesSilent) {
+  const std::string log = ::testing::TempDir() + "controller_node_test.log";
+  testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain",
+                                    std::to_string(kDomain), "--duration", "9", "--input-timeout", "1.0"},
+                                   log);
+  ASSERT_TRUE(controller.started());
+
+  bus::BusConfig config;
+  config.module_name = "test_behavior";
+  config.domain_id = kDomain;
+  auto source = std::make_unique<bus::Participant>(config);
+  auto* targets = &source->makeWriter<msg::HandTargets>();
+  auto* heartbeat = &source->makeWriter<msg::Heartbeat>();
+  bus::BusConfig watch_config = config;
+  watch_config.module_name = "test_watch";
+  bus::Participant watch(watch_config);
+  // The recorder profile keeps a burst (keep last 256), so every 200 Hz sample can be counted.
+  auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
+  auto& joints = watch.makeReader<msg::JointState>();
+  ASSERT_TRUE(status.waitForWriters(1, std::chrono::seconds(10))) << "the controller publishes status";
+  ASSERT_TRUE(targets->waitForReaders(1, std::chrono::seconds(10))) << "the controller subscribes hand targets";
+
+  // Phase 1 (3 s): crossing targets, a heartbeat every 0.5 s.
+  std::vector<msg::ControlStatus> statuses;
+  auto pump = [&](double seconds, bool send) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    int k = 0;
+    while (std::chrono::steady_clock::now() < end) {
+      if (send && k % 10 == 0) {
+        msg::HandTargets t = crossing();
+        targets->publish(t);
+        msg::Heartbeat hb;
+        hb.module_name("test_behavior");
+        hb.state(msg::STATE_RUNNING);
+        heartbeat->publish(hb);
+      }
+      ++k;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      status.takeAll(statuses);
+    }
+  };
+  pump(4.0, true);
+  const std::size_t phase1 = statuses.size();
+  ASSERT_GT(phase1, 300U) << "status stream at 200 Hz";
+  double dmin = 1.0;
+  bool yellow = false;
+  for (const auto& s : statuses) {
+    dmin = std::min({dmin, s.left().distance(), s.right().distance()});
+    yellow |= s.left().zone() != msg::ZONE_FREE || s.right().zone() != msg::ZONE_FREE;
+    EXPECT_FALSE(s.left().estop_latched());
+  }
+  EXPECT_TRUE(yellow) << "the crossing targets bring the arms together";
+  EXPECT_GE(dmin, 0.005) << "never below d_r";
+  msg::JointState js;
+  ASSERT_TRUE(joints.takeLatest(js));
+  ASSERT_EQ(js.names().size(), js.positions().size());
+  std::size_t r_elbow = 0;
+  for (; r_elbow < js.names().size() && js.names()[r_elbow] != "r_elbow"; ++r_elbow) {}
+  ASSERT_LT(r_elbow, js.names().size());
+  const double elbow_reaching = js.positions()[r_elbow];
+  EXPECT_LT(elbow_reaching, -0.6) << "the right elbow bent to reach the target";
+
+  // A NaN target is rejected (counted), never followed: send one, then go silent.
+  msg::HandTargets bad = crossing(true);
+  targets->publish(bad);
+  source.reset();  // the behavior process "dies": no more samples, no heartbeat
+  pump(3.0, false);
+  ASSERT_TRUE(joints.takeLatest(js));
+  const double elbow_after = js.positions()[r_elbow];
+  EXPECT_GT(elbow_after, elbow_reaching + 0.15) << "the right arm retracts";
+  EXPECT_NEAR(elbow_after, -0.5, 0.1) << "towards its rest posture (elbow -0.5)";
+  for (std::size_t k = phase1; k < statuses.size(); ++k) EXPECT_GE(std::min(statuses[k].left().distance(), statuses[k].right().distance()), 0.005);
+
+  EXPECT_EQ(controller.wait(std::chrono::seconds(10)), 0);
+  std::ifstream in(log);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("rejected 1"), std::string::npos) << text;
+  EXPECT_NE(text.find("stale events 1"), std::string::npos) << text;
+  EXPECT_NE(text.find("e-stops 0"), std::string::npos) << text;
+}
+
+TEST(ControllerNode, BadSetupIsAClearErrorAndNonZeroExit) {
+  const std::string log = ::testing::TempDir() + "controller_node_bad.log";
+  testing::ChildProcess bad({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--urdf", "/nonexistent/robot.urdf",
+                             "--domain", std::to_string(kDomain + 1)},
+                            log);
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 1);
+  std::ifstream in(log);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("/nonexistent/robot.urdf"), std::string::npos) << text;
+}
+
+}  // namespace
+}  // namespace reflex
