@@ -36,7 +36,7 @@ packages=(
   googletest libgtest-dev libgmock-dev libbenchmark-dev libfcl-dev liborocos-kdl-dev
   libkdl-parser-dev cyclonedds-dev cyclonedds-tools
   # multi-host tests and reports
-  iproute2 python3 python3-matplotlib python3-numpy
+  iproute2 python3 python3-matplotlib python3-numpy python3-yaml
 )
 
 missing=()
