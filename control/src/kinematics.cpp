@@ -1,8 +1,37 @@
 #include "reflex/control/kinematics.hpp"
 
 #include <cassert>
+#include <cmath>
 
 namespace reflex::control {
+namespace {
+
+/// R_out = R * Rot(axis, angle) for a unit axis. Coordinate axes (the usual URDF case) take the
+/// short path: two columns of R mixed by cos / sin instead of building and multiplying a matrix.
+template <typename Out>
+void rotateAbout(const Eigen::Matrix3d& R, const Eigen::Vector3d& axis, double angle, Out&& R_out) {
+  const double c = std::cos(angle);
+  const double s = std::sin(angle);
+  // Column indices (i, j) mixed by a positive rotation about axis k, and the sign of the axis.
+  int k = -1;
+  for (int a = 0; a < 3; ++a)
+    if ((axis[a] == 1.0 || axis[a] == -1.0) && axis[(a + 1) % 3] == 0.0 && axis[(a + 2) % 3] == 0.0) k = a;
+  if (k < 0) {
+    R_out = R * Eigen::AngleAxisd(angle, axis).toRotationMatrix();
+    return;
+  }
+  const int i = (k + 1) % 3;
+  const int j = (k + 2) % 3;
+  const double ss = axis[k] > 0.0 ? s : -s;
+  // Rot about e_k: e_i -> c e_i + s e_j, e_j -> -s e_i + c e_j.
+  const Eigen::Vector3d col_i = c * R.col(i) + ss * R.col(j);
+  const Eigen::Vector3d col_j = c * R.col(j) - ss * R.col(i);
+  R_out.col(k) = R.col(k);
+  R_out.col(i) = col_i;
+  R_out.col(j) = col_j;
+}
+
+}  // namespace
 
 KinematicsData::KinematicsData(const Model& model)
     : X_W_L(model.links.size(), Eigen::Isometry3d::Identity()),
@@ -30,12 +59,10 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data,
       case JointType::kFixed:
         data.X_W_L[i] = X_W_J;
         break;
-      case JointType::kRevolute: {
-        const Eigen::Matrix3d R = Eigen::AngleAxisd(q[link.q_index], link.axis_J).toRotationMatrix();
-        data.X_W_L[i].linear() = X_W_J.linear() * R;
+      case JointType::kRevolute:
+        rotateAbout(X_W_J.linear(), link.axis_J, q[link.q_index], data.X_W_L[i].linear());
         data.X_W_L[i].translation() = X_W_J.translation();
         break;
-      }
       case JointType::kPrismatic:
         data.X_W_L[i].linear() = X_W_J.linear();
         data.X_W_L[i].translation() = X_W_J.translation() + data.axis_W[i] * q[link.q_index];

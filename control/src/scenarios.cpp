@@ -27,6 +27,19 @@ void ScenarioContext::detach(int slot) {
   if (detachBodySchemaSegment(data.dist, slot)) data.slot_virtual[slot] = false;
 }
 
+double armToArmDistance(const Model& model, const ControllerModel& cm, const ControllerData& data) {
+  double d = std::numeric_limits<double>::infinity();
+  const std::uint64_t left = cm.arms[kLeft].segment_mask, right = cm.arms[kRight].segment_mask;
+  for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
+    const PairDistance& pd = data.dist.pairs[i];
+    if (!pd.active || pd.seg_b >= model.num_robot_segments) continue;
+    const bool la = (left >> pd.seg_a) & 1U, lb = (left >> pd.seg_b) & 1U;
+    const bool ra = (right >> pd.seg_a) & 1U, rb = (right >> pd.seg_b) & 1U;
+    if ((la && rb) || (ra && lb)) d = std::min(d, pd.distance);
+  }
+  return d;
+}
+
 Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm) {
   Eigen::VectorXd q(model.nq);
   for (int i = 0; i < model.nq; ++i) q[i] = std::min(std::max(0.0, model.q_lower[i]), model.q_upper[i]);
@@ -97,6 +110,7 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
       s.min_distance = dmin;
       s.min_pair = pmin;
       s.virtual_distance = dvirt;
+      s.arm_distance = armToArmDistance(model, cm, data);
       s.q = robot.jointPositions();
       s.qdot = data.qdot;
       result.samples.push_back(std::move(s));
@@ -149,7 +163,7 @@ void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const Sim
   const char* side[2] = {"left", "right"};
   for (const char* s : side)
     out << ',' << s << "_f," << s << "_distance," << s << "_pair," << s << "_zone," << s << "_force";
-  out << ",estop,min_distance,min_pair,virtual_distance";
+  out << ",estop,min_distance,min_pair,virtual_distance,arm_distance,wall_time";
   for (const char* s : side)
     out << ',' << s << "_status," << s << "_hand_x," << s << "_hand_y," << s << "_hand_z," << s << "_target_x,"
         << s << "_target_y," << s << "_target_z," << s << "_ref_x," << s << "_ref_y," << s << "_ref_z";
@@ -162,7 +176,8 @@ void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const Sim
       out << ',' << s.arms[a].f << ',' << num(s.arms[a].distance) << ',' << pairName(model, s.arms[a].closest_pair)
           << ',' << zoneName(s.arms[a].zone) << ',' << s.arms[a].force;
     out << ',' << static_cast<int>(s.estop) << ',' << num(s.min_distance) << ',' << pairName(model, s.min_pair) << ','
-        << num(s.virtual_distance);
+        << num(s.virtual_distance) << ',' << num(s.arm_distance) << ',' << std::setprecision(16) << s.wall_time
+        << std::setprecision(9);
     for (int a = 0; a < 2; ++a) {
       const bool given = s.commands[a].status == HandStatus::kGiven;
       out << ',' << (given ? "given" : "no_target");

@@ -58,6 +58,9 @@ def main():
         d = [x * 1000 for x in clip(ts[side + "_distance"])]
         axes[1][col].plot(t, d, label="closest distance")
         axes[1][col].plot(t, [x * 1000 for x in clip(ts["min_distance"])], color="gray", lw=0.8, label="all pairs")
+        if "arm_distance" in ts:
+            axes[1][col].plot(t, [x * 1000 for x in clip(ts["arm_distance"])], color="tab:purple", lw=0.8, ls="-.",
+                              label="arm to arm")
         for v, c, name in ((D_A, "gold", "d_a yellow"), (D_B, "orange", "d_b orange"), (D_R, "red", "d_r red")):
             axes[1][col].axhline(v * 1000, color=c, ls="--", lw=1, label=name)
         axes[1][col].axhline(0, color="black", lw=0.8)

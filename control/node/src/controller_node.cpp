@@ -328,6 +328,8 @@ void ControllerNode::run() {
       s.commands = in.hands;
       s.estop = m.data->estop;
       s.min_distance = dmin;
+      s.arm_distance = armToArmDistance(m.model, m.cm, *m.data);
+      s.wall_time = nowSeconds(CLOCK_REALTIME);
       s.q = q;
       s.qdot = m.data->qdot;
       m.log.push_back(std::move(s));

@@ -13,6 +13,7 @@
 // part in the pair checks once enabled (grasped objects, virtual occlusion segments).
 #pragma once
 
+#include "reflex/control/geometry.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/model.hpp"
 
@@ -61,7 +62,9 @@ struct DistanceData {
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows;  ///< npairs x nq
   std::array<BodySchemaSlot, kBodySchemaSlots> slots;
   int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
-  std::vector<Eigen::Vector3d> prim_a_W, prim_b_W;  ///< primitive cores in W (scratch)
+  // Scratch of computeSegmentDistances, per primitive (valid only during the call):
+  std::vector<SegmentW> prim_W;  ///< core segment in W (start, direction, squared length)
+  std::vector<double> prim_r;    ///< radius (body-schema slots: the slot's)
 };
 
 /// Computes every checked pair's distance, witness points, normal and (below the threshold) row.

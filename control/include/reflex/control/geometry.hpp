@@ -12,6 +12,48 @@ namespace reflex::control {
 /// Core points below this separation count as coincident (the normal is then not defined by them).
 inline constexpr double kCoincidentEps = 1e-12;
 
+/// Below this squared length a segment counts as a point.
+inline constexpr double kPointSegmentSq = 1e-300;
+
+/// The per-segment quantities closestPointsSegmentSegment needs: direction d = end - start, its
+/// squared length dd and 1/dd (0 for a point). Computed once per primitive per cycle when one
+/// primitive takes part in several pairs.
+struct SegmentW {
+  Eigen::Vector3d start = Eigen::Vector3d::Zero();
+  Eigen::Vector3d d = Eigen::Vector3d::Zero();
+  double dd = 0.0;
+  double inv_dd = 0.0;
+
+  SegmentW() = default;
+  SegmentW(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) { set(p0, p1); }
+  void set(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) {
+    start = p0;
+    d = p1 - p0;
+    dd = d.squaredNorm();
+    inv_dd = dd > kPointSegmentSq ? 1.0 / dd : 0.0;
+  }
+};
+
+/// Segment parameters s, t in [0, 1] of the closest points A.start + s A.d and B.start + t B.d
+/// (either segment may have zero length). When the segments are parallel the closest pair is not
+/// unique; one valid pair is returned. At most one division and no data-dependent branch but the
+/// parallel test: s on the line-line optimum (clamped), then t = the clamped foot of A(s) on B, then
+/// s = the clamped foot of B(t) on A (Ericson, Real-Time Collision Detection, 5.1.9; the last step
+/// is the identity when t was not clamped, so it is done unconditionally).
+inline void closestParametersSegmentSegment(const SegmentW& A, const SegmentW& B, double& s, double& t) {
+  // Written on scalars: Eigen's 2-wide SSE packets only add shuffles for 3-vectors here.
+  const double rx = A.start.x() - B.start.x(), ry = A.start.y() - B.start.y(), rz = A.start.z() - B.start.z();
+  const double f = B.d.x() * rx + B.d.y() * ry + B.d.z() * rz;
+  const double c = A.d.x() * rx + A.d.y() * ry + A.d.z() * rz;
+  const double b = A.d.x() * B.d.x() + A.d.y() * B.d.y() + A.d.z() * B.d.z();
+  const double ae = A.dd * B.dd;
+  const double denom = ae - b * b;  // >= 0; ~0 when parallel (or when either is a point)
+  const double s_line = denom > 1e-14 * ae && denom > 0.0 ? (b * f - c * B.dd) / denom : 0.0;
+  s = std::min(std::max(s_line, 0.0), 1.0);
+  t = std::min(std::max((b * s + f) * B.inv_dd, 0.0), 1.0);
+  s = std::min(std::max((b * t - c) * A.inv_dd, 0.0), 1.0);
+}
+
 /// Closest points c1 on [a0, a1] and c2 on [b0, b1] (either segment may have zero length).
 /// When the segments are parallel the closest pair is not unique; one valid pair is returned
 /// (the one nearest the start of the first segment). s, t are the segment parameters in [0, 1].
@@ -19,40 +61,10 @@ inline void closestPointsSegmentSegment(const Eigen::Vector3d& a0, const Eigen::
                                         const Eigen::Vector3d& b0, const Eigen::Vector3d& b1,
                                         Eigen::Vector3d& c1, Eigen::Vector3d& c2, double& s,
                                         double& t) {
-  const Eigen::Vector3d d1 = a1 - a0;
-  const Eigen::Vector3d d2 = b1 - b0;
-  const Eigen::Vector3d r = a0 - b0;
-  const double a = d1.squaredNorm();
-  const double e = d2.squaredNorm();
-  const double f = d2.dot(r);
-  constexpr double kTiny = 1e-300;
-  if (a <= kTiny && e <= kTiny) {
-    s = 0.0;
-    t = 0.0;
-  } else if (a <= kTiny) {
-    s = 0.0;
-    t = std::clamp(f / e, 0.0, 1.0);
-  } else {
-    const double c = d1.dot(r);
-    if (e <= kTiny) {
-      t = 0.0;
-      s = std::clamp(-c / a, 0.0, 1.0);
-    } else {
-      const double b = d1.dot(d2);
-      const double denom = a * e - b * b;  // >= 0; ~0 when parallel
-      s = denom > 1e-14 * a * e ? std::clamp((b * f - c * e) / denom, 0.0, 1.0) : 0.0;
-      t = (b * s + f) / e;
-      if (t < 0.0) {
-        t = 0.0;
-        s = std::clamp(-c / a, 0.0, 1.0);
-      } else if (t > 1.0) {
-        t = 1.0;
-        s = std::clamp((b - c) / a, 0.0, 1.0);
-      }
-    }
-  }
-  c1 = a0 + s * d1;
-  c2 = b0 + t * d2;
+  const SegmentW A(a0, a1), B(b0, b1);
+  closestParametersSegmentSegment(A, B, s, t);
+  c1 = A.start + s * A.d;
+  c2 = B.start + t * B.d;
 }
 
 /// Surface-to-surface signed distance between capsule A (core [a0,a1], radius ra) and capsule B.

@@ -49,6 +49,8 @@ struct SimSample {
   double min_distance = 0.0;         ///< closest physical pair (m)
   int min_pair = -1;
   double virtual_distance = 0.0;     ///< closest pair with a virtual segment (m), +inf if none
+  double arm_distance = 0.0;         ///< closest pair between the two arms (m), the paper's Fig. 13
+  double wall_time = 0.0;            ///< system clock (s since the epoch) when logged by a process; 0 in simulation
   Eigen::VectorXd q;
   Eigen::VectorXd qdot;
 };
@@ -78,6 +80,9 @@ Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm)
 /// The built-in scenarios (the paper's experiments), for reflex_sim --list.
 const std::vector<Scenario>& builtinScenarios();
 const Scenario* findScenario(const std::string& name);
+
+/// The closest distance between a segment of the left arm and one of the right arm (m), +inf if none.
+double armToArmDistance(const Model& model, const ControllerModel& cm, const ControllerData& data);
 
 /// Writes the time series as CSV: header row, one row per cycle.
 void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
