@@ -164,14 +164,22 @@ void drawQuad(cv::Mat& canvas, const RenderCamera& cam, const Quad& quad, int S)
 }
 
 cv::Mat noiseTexture(cv::RNG& rng, cv::Size size, cv::Scalar base, double amp, int cells) {
-  cv::Mat low(std::max(2, size.height / cells), std::max(2, size.width / cells), CV_32FC3);
+  // Low-frequency luminance variation with a little colour, plus fine grain.
+  cv::Mat low(std::max(2, size.height / cells), std::max(2, size.width / cells), CV_32F);
   rng.fill(low, cv::RNG::NORMAL, 0.0, amp);
+  cv::Mat tint(low.size(), CV_32FC3);
+  rng.fill(tint, cv::RNG::NORMAL, 0.0, amp * 0.25);
+  cv::Mat low3;
+  cv::merge(std::vector<cv::Mat>{low, low, low}, low3);
+  low3 += tint;
   cv::Mat up;
-  cv::resize(low, up, size, 0, 0, cv::INTER_CUBIC);
-  cv::Mat fine(size, CV_32FC3);
+  cv::resize(low3, up, size, 0, 0, cv::INTER_CUBIC);
+  cv::Mat fine(size, CV_32F);
   rng.fill(fine, cv::RNG::NORMAL, 0.0, amp * 0.3);
+  cv::Mat fine3;
+  cv::merge(std::vector<cv::Mat>{fine, fine, fine}, fine3);
   cv::Mat out;
-  cv::Mat sum = up + fine + cv::Scalar(base[0], base[1], base[2]);
+  cv::Mat sum = up + fine3 + cv::Scalar(base[0], base[1], base[2]);
   sum.convertTo(out, CV_8UC3);
   return out;
 }
@@ -430,6 +438,7 @@ MakeSummary makeSession(const SceneScript& script, const std::string& out_dir,
   const cv::Mat floor = floorTexture(tex_rng);
   const cv::Mat shirt = noiseTexture(tex_rng, cv::Size(180, 240), cv::Scalar(140, 80, 60), 14, 12);
   const cv::Mat face = noiseTexture(tex_rng, cv::Size(90, 110), cv::Scalar(120, 150, 205), 8, 10);
+  const cv::Mat trousers = noiseTexture(tex_rng, cv::Size(120, 260), cv::Scalar(70, 55, 45), 10, 12);
   const cv::Mat skin = noiseTexture(tex_rng, cv::Size(70, 100), cv::Scalar(115, 145, 200), 8, 10);
   std::vector<Quad> statics;
   {
@@ -443,6 +452,8 @@ MakeSummary makeSession(const SceneScript& script, const std::string& out_dir,
     if (script.render.person) {
       QuadPose torso{cv::Vec3d(1.05, 0.0, 1.10), kFacing};
       QuadPose head{cv::Vec3d(1.08, 0.0, 1.55), kFacing};
+      QuadPose legs{cv::Vec3d(1.07, 0.0, 0.40), kFacing};
+      statics.push_back(makeQuad(legs, 0.36, 0.80, &trousers, -1));
       statics.push_back(makeQuad(torso, 0.46, 0.62, &shirt, -1));
       statics.push_back(makeQuad(head, 0.19, 0.24, &face, -1));
     }
