@@ -110,8 +110,10 @@ int main(int argc, char** argv) {
       const StereoCalibration calib = loadStereoCalibration(calib_left, calib_right);
       if (!sbs.empty())
         source = std::make_unique<CameraSource>(openCapture(sbs), nullptr, calib, 0.0);
-      else
-        source = std::make_unique<CameraSource>(openCapture(cam_left), openCapture(cam_right), calib, 0.0);
+      else {
+        auto left = openCapture(cam_left);  // left first, so an error names the first bad device
+        source = std::make_unique<CameraSource>(std::move(left), openCapture(cam_right), calib, 0.0);
+      }
       if (replay.rate != 1.0 && rate_given) throw VisionError("--rate applies to sessions only");
       replay.rate = 1.0;
     }
