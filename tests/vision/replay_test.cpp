@@ -1,0 +1,131 @@
+// Replay and publication rate (issue 5, items 5 and 8/9): the publications that reflex_vision hands
+// to its DDS writer come from runVision's on_publish; here the same path hands them to a recorder of
+// call times. 10 Hz +- 2 % on the replay clock at real rate, 2x and 0.5x; loop, start offset.
+#include "vision_test_util.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+
+using namespace reflex::vision;
+using namespace reflex::vision::test;
+
+namespace {
+
+class Replay : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = std::make_unique<TempDir>("replay");
+    makeSession(parseSceneScript(nearScript(5.0), "near"), *dir_ / "s");
+    makeSession(parseSceneScript(nearScript(1.0), "near"), *dir_ / "one");
+  }
+  static void TearDownTestSuite() { dir_.reset(); }
+
+  struct Run {
+    std::vector<double> wall;  // steady clock, s
+    std::vector<Publication> pubs;
+    std::vector<double> frame_stamps;
+    std::vector<int> frame_index;
+    int progress_calls = 0;
+    RunStats stats;
+  };
+  static Run run(const std::string& session, double rate, double duration, bool loop = false, double start = 0.0) {
+    SessionSource source(session, start);
+    StereoTagPipeline pipeline(source.calibration(), source.info().mount.value_or(defaultCameraMount()),
+                               source.info().objects, PipelineOptions{});
+    Run r;
+    RunCallbacks cb;
+    cb.on_publish = [&](const Publication& p) {
+      r.wall.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count());
+      r.pubs.push_back(p);
+    };
+    cb.on_frame = [&](const StereoFrame& f, double s, const StereoResult&) {
+      r.frame_stamps.push_back(s);
+      r.frame_index.push_back(f.index);
+    };
+    cb.on_progress = [&](const RunProgress&) { ++r.progress_calls; };
+    ReplayOptions o;
+    o.rate = rate;
+    o.duration = duration;
+    o.loop = loop;
+    o.publish_hz = 10.0;
+    std::atomic<bool> stop{false};
+    r.stats = runVision(source, pipeline, o, cb, stop);
+    return r;
+  }
+  static void expectWallRate(const Run& r, double hz) {
+    ASSERT_GE(r.wall.size(), 10u);
+    const double mean = (r.wall.size() - 1) / (r.wall.back() - r.wall.front());
+    double worst = 0.0;
+    for (std::size_t i = 1; i < r.wall.size(); ++i) worst = std::max(worst, std::abs(r.wall[i] - r.wall[i - 1] - 1.0 / hz));
+    std::cout << "publications " << r.wall.size() << ", mean rate " << mean << " Hz (target " << hz
+              << "), worst period error " << 1000.0 * worst << " ms\n";
+    EXPECT_NEAR(mean, hz, 0.02 * hz);
+  }
+  static std::unique_ptr<TempDir> dir_;
+};
+std::unique_ptr<TempDir> Replay::dir_;
+
+}  // namespace
+
+TEST_F(Replay, RealTimePublishesAt10HzOnTheReplayClock) {
+  const Run r = run(*dir_ / "s", 1.0, 3.0);
+  expectWallRate(r, 10.0);
+  ASSERT_FALSE(r.pubs.empty());
+  for (std::size_t k = 0; k < r.pubs.size(); ++k) {
+    EXPECT_NEAR(r.pubs[k].publish_time - r.pubs[0].publish_time, 0.1 * k, 1e-9);
+    EXPECT_EQ(r.pubs[k].sequence, k);
+    // A publication carries a frame captured at or before it was due (+ the stamp jitter).
+    if (r.pubs[k].frame >= 0) {
+      EXPECT_LE(r.pubs[k].capture_stamp, r.pubs[k].publish_time + 0.005);
+    }
+    if (k > 0) {
+      EXPECT_GE(r.pubs[k].capture_stamp, r.pubs[k - 1].capture_stamp);
+    }
+  }
+  EXPECT_GE(r.progress_calls, r.stats.frames) << "progress is reported for every processed frame";
+}
+
+TEST_F(Replay, TwiceAsFastAndHalfSpeed) {
+  const Run fast = run(*dir_ / "s", 2.0, 3.0);
+  expectWallRate(fast, 20.0);  // 10 Hz on the replay clock = 20 Hz of wall time at 2x
+  for (std::size_t k = 1; k < fast.pubs.size(); ++k)
+    EXPECT_NEAR(fast.pubs[k].publish_time - fast.pubs[k - 1].publish_time, 0.1, 1e-9);
+  const Run slow = run(*dir_ / "s", 0.5, 1.0);
+  expectWallRate(slow, 5.0);
+}
+
+TEST_F(Replay, AsFastAsPossibleStillPublishesOnTheSessionClock) {
+  const Run r = run(*dir_ / "s", 0.0, 0.0);
+  EXPECT_EQ(r.stats.frames + r.stats.skipped, 50);
+  const double span = r.frame_stamps.back() - r.frame_stamps.front();
+  EXPECT_EQ(static_cast<int>(r.pubs.size()), static_cast<int>(std::floor(span * 10.0 + 1e-9)) + 1);
+}
+
+TEST_F(Replay, LoopKeepsStampsIncreasing) {
+  const Run r = run(*dir_ / "one", 0.0, 2.5, true);
+  EXPECT_GE(r.stats.passes, 2);
+  EXPECT_GE(r.frame_stamps.size(), 24u);
+  for (std::size_t i = 1; i < r.frame_stamps.size(); ++i) EXPECT_GT(r.frame_stamps[i], r.frame_stamps[i - 1]);
+  EXPECT_EQ(r.frame_index[10], 0) << "second pass restarts at the first frame";
+}
+
+TEST_F(Replay, StartOffset) {
+  // The first frame is the first one stamped at least `start` after the session's first frame.
+  const std::vector<double> stamps = loadSessionInfo(*dir_ / "s").stamps;
+  auto firstAfter = [&](double start) {
+    int i = 0;
+    while (stamps[static_cast<std::size_t>(i)] < stamps[0] + start - 1e-9) ++i;
+    return i;
+  };
+  const Run r = run(*dir_ / "s", 0.0, 0.0, false, 2.0);
+  ASSERT_FALSE(r.frame_index.empty());
+  EXPECT_EQ(r.frame_index.front(), firstAfter(2.0));
+  EXPECT_EQ(static_cast<int>(r.frame_index.size()) + r.stats.skipped, 50 - firstAfter(2.0));
+  // Loop from an offset restarts at the offset.
+  const Run l = run(*dir_ / "s", 0.0, 5.0, true, 4.0);
+  const int first = firstAfter(4.0);
+  ASSERT_GT(l.frame_index.size(), static_cast<std::size_t>(2 * (50 - first)));
+  EXPECT_EQ(l.frame_index.front(), first);
+  EXPECT_EQ(l.frame_index[static_cast<std::size_t>(50 - first)], first);
+}
