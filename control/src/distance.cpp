@@ -20,16 +20,34 @@ DistanceData::DistanceData(const Model& model)
 
 namespace {
 
-/// Whether segment s takes part this cycle, and the link it moves with.
-inline bool segmentState(const Model& model, const DistanceData& data, int s, int& link) {
-  const Segment& seg = model.segments[s];
-  if (!seg.body_schema_slot) {
-    link = seg.link;
-    return true;
+/// Core closest points of two primitives: parameters s, t and the core distance (sqrt of the squared
+/// distance between A(s) and B(t)).
+inline double coreDistance(const SegmentW& A, const SegmentW& B, double& s, double& t) {
+  closestParametersSegmentSegment(A, B, s, t);
+  const double dx = (A.start.x() + s * A.d.x()) - (B.start.x() + t * B.d.x());
+  const double dy = (A.start.y() + s * A.d.y()) - (B.start.y() + t * B.d.y());
+  const double dz = (A.start.z() + s * A.d.z()) - (B.start.z() + t * B.d.z());
+  return std::sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+/// Whether a pair that involves a body-schema slot is checked this cycle; sets the links.
+bool slotPairActive(const Model& model, const DistanceData& data, const SegmentPair& pair, int& link_a,
+                    int& link_b) {
+  const Segment& sa = model.segments[pair.a];
+  const Segment& sb = model.segments[pair.b];
+  if (sa.body_schema_slot) {
+    const BodySchemaSlot& slot = data.slots[pair.a - model.num_robot_segments];
+    if (!slot.enabled) return false;
+    link_a = slot.link;
   }
-  const BodySchemaSlot& slot = data.slots[s - model.num_robot_segments];
-  link = slot.link;
-  return slot.enabled;
+  if (sb.body_schema_slot) {
+    const BodySchemaSlot& slot = data.slots[pair.b - model.num_robot_segments];
+    if (!slot.enabled) return false;
+    link_b = slot.link;
+    if ((slot.ignore_mask >> pair.a) & 1U) return false;
+    if (sa.link == slot.link) return false;  // never against the segment of the link it hangs on
+  }
+  return true;
 }
 
 }  // namespace
@@ -57,7 +75,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
       const Primitive& prim = model.primitives[p];
       SegmentW& w = data.prim_W[p];
       w.start = X * prim.a_L;
-      if (prim.sphere) {
+      if (prim.sphere) {  // no second end point to transform
         w.d.setZero();
         w.dd = 0.0;
         w.inv_dd = 0.0;
@@ -70,75 +88,69 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
     }
   }
 
-  // 2. Every checked pair: the minimum over its primitive pairs (closest points of the cores first;
-  //    normal and witness points only for the best primitive pair).
+  // 2. Every checked pair: the minimum over its primitive pairs (closest core points first; normal
+  //    and witness points only for the best primitive pair).
   data.closest = -1;
   double closest_d = kInf;
   const int npairs = static_cast<int>(model.pairs.size());
+  const SegmentW* prim = data.prim_W.data();
+  const double* radius = data.prim_r.data();
   for (int i = 0; i < npairs; ++i) {
     const SegmentPair& pair = model.pairs[i];
     PairDistance& out = data.pairs[i];
-    out.has_row = false;
-    int link_a = 0, link_b = 0;
-    bool active = segmentState(model, data, pair.a, link_a) && segmentState(model, data, pair.b, link_b);
-    if (active && model.segments[pair.b].body_schema_slot) {
-      const BodySchemaSlot& slot = data.slots[pair.b - model.num_robot_segments];
-      active = !((slot.ignore_mask >> pair.a) & 1U) && model.segments[pair.a].link != slot.link;
-    }
-    out.active = active;
-    if (!active) {
+    const Segment& sa = model.segments[pair.a];
+    const Segment& sb = model.segments[pair.b];
+    int link_a = sa.link, link_b = sb.link;
+    if ((sa.body_schema_slot || sb.body_schema_slot) && !slotPairActive(model, data, pair, link_a, link_b)) {
+      out.active = false;
+      out.has_row = false;
       out.distance = kInf;
       continue;
     }
-    const Segment& sa = model.segments[pair.a];
-    const Segment& sb = model.segments[pair.b];
-    double best = kInf, best_core = 0.0, best_s = 0.0, best_t = 0.0;
+    double best_s = 0.0, best_t = 0.0;
     int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
-    for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
-      const SegmentW& A = data.prim_W[pa];
-      const double ra = data.prim_r[pa];
-      for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
-        const SegmentW& B = data.prim_W[pb];
-        const double rb = data.prim_r[pb];
-        double s, t;
-        closestParametersSegmentSegment(A, B, s, t);
-        const double dx = (A.start.x() + s * A.d.x()) - (B.start.x() + t * B.d.x());
-        const double dy = (A.start.y() + s * A.d.y()) - (B.start.y() + t * B.d.y());
-        const double dz = (A.start.z() + s * A.d.z()) - (B.start.z() + t * B.d.z());
-        const double core = std::sqrt(dx * dx + dy * dy + dz * dz);
-        const double d = core - ra - rb;
-        if (d < best) {
-          best = d;
-          best_core = core;
-          best_s = s;
-          best_t = t;
-          best_pa = pa;
-          best_pb = pb;
+    double best_core = coreDistance(prim[best_pa], prim[best_pb], best_s, best_t);
+    double best = best_core - radius[best_pa] - radius[best_pb];
+    if (sa.num_primitives > 1 || sb.num_primitives > 1) {
+      for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
+        for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
+          if (pa == sa.first_primitive && pb == sb.first_primitive) continue;  // done above
+          double s, t;
+          const double core = coreDistance(prim[pa], prim[pb], s, t);
+          const double d = core - radius[pa] - radius[pb];
+          if (d < best) {
+            best = d;
+            best_core = core;
+            best_s = s;
+            best_t = t;
+            best_pa = pa;
+            best_pb = pb;
+          }
         }
       }
     }
-    const SegmentW& A = data.prim_W[best_pa];
-    const SegmentW& B = data.prim_W[best_pb];
-    const Eigen::Vector3d best_ca = A.start + best_s * A.d;
-    const Eigen::Vector3d best_cb = B.start + best_t * B.d;
+    const SegmentW& A = prim[best_pa];
+    const SegmentW& B = prim[best_pb];
+    const Eigen::Vector3d c_a = A.start + best_s * A.d;
+    const Eigen::Vector3d c_b = B.start + best_t * B.d;
     // Unit normal from b towards a; coincident cores: the direction between the link origins.
     Eigen::Vector3d n;
     out.well_defined = best_core > kCoincidentEps;
     if (out.well_defined) {
-      n = (best_ca - best_cb) / best_core;
+      n = (c_a - c_b) * (1.0 / best_core);
     } else {
       n = kin.X_W_L[link_a].translation() - kin.X_W_L[link_b].translation();
       const double norm = n.norm();
       n = norm > kCoincidentEps ? Eigen::Vector3d(n / norm) : Eigen::Vector3d::UnitZ();
     }
+    out.active = true;
     out.distance = best;
     out.nhat_W = n;
-    out.p_W_a = best_ca - data.prim_r[best_pa] * n;
-    out.p_W_b = best_cb + data.prim_r[best_pb] * n;
-    if (best < options.row_threshold) {
+    out.p_W_a = c_a - radius[best_pa] * n;
+    out.p_W_b = c_b + radius[best_pb] * n;
+    out.has_row = best < options.row_threshold;
+    if (out.has_row)
       computeDirectionalRow(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n, data.rows.row(i));
-      out.has_row = true;
-    }
     if (best < closest_d) {
       closest_d = best;
       data.closest = i;

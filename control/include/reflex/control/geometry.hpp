@@ -7,6 +7,10 @@
 
 #include <algorithm>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace reflex::control {
 
 /// Core points below this separation count as coincident (the normal is then not defined by them).
@@ -34,6 +38,19 @@ struct SegmentW {
   }
 };
 
+/// x clamped to [0, 1], written so that it compiles to maxsd / minsd instead of branches (the
+/// clamping outcome is data-dependent and mispredicts); NaN gives 0.
+inline double clamp01(double x) {
+#if defined(__SSE2__)
+  // maxsd returns its second operand when either is NaN: max(x, 0) with x NaN gives 0.
+  const __m128d v = _mm_min_sd(_mm_max_sd(_mm_set_sd(x), _mm_set_sd(0.0)), _mm_set_sd(1.0));
+  return _mm_cvtsd_f64(v);
+#else
+  x = x > 0.0 ? x : 0.0;
+  return x < 1.0 ? x : 1.0;
+#endif
+}
+
 /// Segment parameters s, t in [0, 1] of the closest points A.start + s A.d and B.start + t B.d
 /// (either segment may have zero length). When the segments are parallel the closest pair is not
 /// unique; one valid pair is returned. At most one division and no data-dependent branch but the
@@ -49,9 +66,9 @@ inline void closestParametersSegmentSegment(const SegmentW& A, const SegmentW& B
   const double ae = A.dd * B.dd;
   const double denom = ae - b * b;  // >= 0; ~0 when parallel (or when either is a point)
   const double s_line = denom > 1e-14 * ae && denom > 0.0 ? (b * f - c * B.dd) / denom : 0.0;
-  s = std::min(std::max(s_line, 0.0), 1.0);
-  t = std::min(std::max((b * s + f) * B.inv_dd, 0.0), 1.0);
-  s = std::min(std::max((b * t - c) * A.inv_dd, 0.0), 1.0);
+  s = clamp01(s_line);
+  t = clamp01((b * s + f) * B.inv_dd);
+  s = clamp01((b * t - c) * A.inv_dd);
 }
 
 /// Closest points c1 on [a0, a1] and c2 on [b0, b1] (either segment may have zero length).
