@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <sstream>
 #include <string>
 #include <unistd.h>
 
@@ -31,15 +32,15 @@ std::string exeDir() {
   return fs::path(buf).parent_path().string();
 }
 
-void writePostures(const Model& model, const SimResult& result, const std::string& path, int frames) {
+/// Writes the capsules of the robot at the given samples (frame = position in `picks`).
+void writePostures(const Model& model, const SimResult& result, const std::string& path,
+                   const std::vector<std::size_t>& picks) {
   std::ofstream out(path);
   if (!out) throw ConfigError(path + ": cannot write postures");
   out << "frame,time,segment,ax,ay,az,bx,by,bz,radius\n";
   KinematicsData kin(model);
-  const std::size_t n = result.samples.size();
-  for (int f = 0; f < frames && n > 0; ++f) {
-    const std::size_t k = (n - 1) * static_cast<std::size_t>(f) / static_cast<std::size_t>(std::max(1, frames - 1));
-    const SimSample& s = result.samples[k];
+  for (std::size_t f = 0; f < picks.size(); ++f) {
+    const SimSample& s = result.samples[picks[f]];
     computeForwardKinematics(model, kin, s.q);
     for (int seg = 0; seg < model.num_robot_segments; ++seg) {
       const Segment& sg = model.segments[seg];
@@ -51,6 +52,56 @@ void writePostures(const Model& model, const SimResult& result, const std::strin
       }
     }
   }
+}
+
+std::vector<std::size_t> evenPicks(std::size_t n, int frames) {
+  std::vector<std::size_t> picks;
+  for (int f = 0; f < frames && n > 0; ++f)
+    picks.push_back((n - 1) * static_cast<std::size_t>(f) / static_cast<std::size_t>(std::max(1, frames - 1)));
+  return picks;
+}
+
+/// Reads the joint columns (q_<name>) and the time column of a time-series CSV (reflex_sim or
+/// reflex_controller --log) into samples.
+SimResult readTimeseries(const Model& model, const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError(path + ": cannot open time series");
+  std::string line;
+  if (!std::getline(in, line)) throw ConfigError(path + ": empty time series");
+  std::vector<std::string> cols;
+  {
+    std::stringstream ss(line);
+    std::string c;
+    while (std::getline(ss, c, ',')) cols.push_back(c);
+  }
+  std::vector<int> qcol(model.nq, -1);
+  int tcol = -1;
+  for (std::size_t i = 0; i < cols.size(); ++i) {
+    if (cols[i] == "time") tcol = static_cast<int>(i);
+    if (cols[i].rfind("q_", 0) == 0) {
+      const int qi = model.qIndex(cols[i].substr(2));
+      if (qi >= 0) qcol[qi] = static_cast<int>(i);
+    }
+  }
+  if (tcol < 0) throw ConfigError(path + ": no 'time' column");
+  for (int qi = 0; qi < model.nq; ++qi)
+    if (qcol[qi] < 0) throw ConfigError(path + ": no column q_" + model.q_names[qi]);
+  SimResult r;
+  int row = 1;
+  while (std::getline(in, line)) {
+    ++row;
+    std::vector<std::string> v;
+    std::stringstream ss(line);
+    std::string c;
+    while (std::getline(ss, c, ',')) v.push_back(c);
+    if (v.size() < cols.size()) throw ConfigError(path + ": row " + std::to_string(row) + " has too few values");
+    SimSample s;
+    s.t = std::stod(v[tcol]);
+    s.q.resize(model.nq);
+    for (int qi = 0; qi < model.nq; ++qi) s.q[qi] = std::stod(v[qcol[qi]]);
+    r.samples.push_back(std::move(s));
+  }
+  return r;
 }
 
 std::string pairName(const Model& model, int pair) {
@@ -94,7 +145,40 @@ int main(int argc, char** argv) {
   app.add_option("--collision", collision, "collision configuration YAML (default: next to the URDF)");
   app.add_option("--controller", controller_cfg, "controller configuration YAML (default: built-in)");
   app.add_flag("--no-plots", no_plots, "do not render PNG plots");
+  std::string postures_from;
+  std::vector<double> at;
+  app.add_option("--postures-from", postures_from,
+                 "instead of simulating: write OUT/postures.csv (the robot's capsules) for rows of this time-series "
+                 "CSV (reflex_sim or reflex_controller --log)");
+  app.add_option("--at", at, "times (s) of the rows for --postures-from (nearest row each)")->delimiter(',');
   CLI11_PARSE(app, argc, argv);
+
+  if (!postures_from.empty()) {
+    try {
+      if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
+      const std::string coll = collision.empty() ? defaultCollisionConfigPath(urdf) : collision;
+      CollisionConfig cc;
+      if (!collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
+      const Model model = loadModel(urdf, cc);
+      const SimResult r = readTimeseries(model, postures_from);
+      if (r.samples.empty()) throw ConfigError(postures_from + ": no rows");
+      std::vector<std::size_t> picks;
+      if (at.empty()) picks = evenPicks(r.samples.size(), 6);
+      for (const double t : at) {
+        std::size_t best = 0;
+        for (std::size_t k = 0; k < r.samples.size(); ++k)
+          if (std::abs(r.samples[k].t - t) < std::abs(r.samples[best].t - t)) best = k;
+        picks.push_back(best);
+      }
+      fs::create_directories(out_dir);
+      writePostures(model, r, (fs::path(out_dir) / "postures.csv").string(), picks);
+      std::cout << "wrote " << (fs::path(out_dir) / "postures.csv").string() << "\n";
+      return 0;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
+      return 1;
+    }
+  }
 
   if (list) {
     for (const auto& s : builtinScenarios()) std::printf("%-22s %-22s %s\n", s.name.c_str(), s.paper.c_str(), s.description.c_str());
@@ -140,7 +224,7 @@ int main(int argc, char** argv) {
       const AvoidanceMode m = no_avoidance ? AvoidanceMode::kOff
                                            : (mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
       const SimResult main = run(m, "timeseries.csv", no_avoidance ? "avoidance off" : mode.c_str());
-      writePostures(model, main, (dir / "postures.csv").string(), 6);
+      writePostures(model, main, (dir / "postures.csv").string(), evenPicks(main.samples.size(), 6));
       if (sc->name == "one_vs_three_dof" && !no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
       if (!no_plots) {
         const std::string script = exeDir() + "/reflex_plot_sim.py";
