@@ -1,0 +1,265 @@
+#!/usr/bin/python3
+"""Report of a flagship run (run_flagship.py): plots like the paper's Figs. 12-13 and the outcome.
+
+Usage: report.py OUT_DIR [--session DIR] [--build DIR]
+Reads OUT_DIR/avoidance/controller.csv and OUT_DIR/no_avoidance/controller.csv (either may be
+missing) and writes into OUT_DIR:
+  fig13_status_distance.png  hand status and arm-to-arm distance with the zone boundaries (Fig. 13)
+  blending.png               f(d) of both arms
+  tracking.png               hand targets against hand positions
+  strip.png                  left camera frames beside the robot's capsules at key instants (Fig. 12)
+  summary.json, report.md    the outcome figures
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.image as mpimg  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+
+D_A, D_B, D_R = 0.040, 0.010, 0.005
+ORANGE_BOUND = 0.015  # the issue's "within the orange zone" bound for the crossing
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+SHOULDER = {"left": (0.0, 0.23, 1.04), "right": (0.0, -0.23, 1.04)}
+REACH = 0.48
+
+
+def read(path):
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        raise SystemExit("report.py: %s has no rows" % path)
+    cols = {}
+    for key in rows[0]:
+        vals = []
+        for r in rows:
+            try:
+                vals.append(float(r[key]))
+            except (TypeError, ValueError):
+                vals.append(r[key])
+        cols[key] = vals
+    return cols
+
+
+def pct(values, p):
+    if not values:
+        return float("nan")
+    v = sorted(values)
+    return v[min(len(v) - 1, int(p * len(v)))]
+
+
+def summarize(ts):
+    n = len(ts["time"])
+    arm = ts["arm_distance"]
+    out = {
+        "duration_s": ts["time"][-1] - ts["time"][0],
+        "cycles": n,
+        "min_arm_distance_m": min(arm),
+        "min_arm_distance_time_s": ts["time"][arm.index(min(arm))],
+        "min_distance_all_pairs_m": min(ts["min_distance"]),
+        "estop_cycles": sum(1 for e in ts["estop"] if e != 0),
+        "time_arm_in_yellow_s": sum(1 for d in arm if d < D_A) * 0.005,
+        "time_arm_in_orange_s": sum(1 for d in arm if d < D_B) * 0.005,
+        "max_f": max(max(ts["left_f"]), max(ts["right_f"])),
+    }
+    for side in ("left", "right"):
+        given = [s == "given" for s in ts[side + "_status"]]
+        out[side + "_given_fraction"] = sum(given) / n
+        out[side + "_lost_events"] = sum(1 for k in range(1, n) if given[k - 1] and not given[k])
+        # Tracking: samples with a reachable target held for >= 1 s and the arm out of the yellow zone.
+        errs, held = [], 0
+        for k in range(n):
+            held = held + 1 if given[k] else 0
+            if held < 200 or ts[side + "_f"][k] > 0.0:
+                continue
+            tgt = (ts[side + "_target_x"][k], ts[side + "_target_y"][k], ts[side + "_target_z"][k])
+            if math.dist(tgt, SHOULDER[side]) > REACH:
+                continue
+            hand = (ts[side + "_hand_x"][k], ts[side + "_hand_y"][k], ts[side + "_hand_z"][k])
+            errs.append(math.dist(hand, tgt))
+        out[side + "_tracking_samples"] = len(errs)
+        out[side + "_tracking_error_median_m"] = pct(errs, 0.5)
+        out[side + "_tracking_error_p90_m"] = pct(errs, 0.9)
+    return out
+
+
+def session_frames(session):
+    with open(os.path.join(session, "timestamps.csv")) as fh:
+        return [(int(r["frame"]), float(r["stamp"])) for r in csv.DictReader(fh)]
+
+
+def first_given_time(ts):
+    for k, (l, r) in enumerate(zip(ts["left_status"], ts["right_status"])):
+        if l == "given" or r == "given":
+            return ts["time"][k]
+    return ts["time"][0]
+
+
+def extract_frame(session, stamp, dest):
+    """The left image at session time `stamp` (ffmpeg, from the session's left video)."""
+    with open(os.path.join(session, "session.yaml")) as fh:
+        video = next((line.split(":", 1)[1].strip() for line in fh if line.startswith("left_video:")), "left.mp4")
+    cmd = ["ffmpeg", "-loglevel", "error", "-y", "-ss", "%.3f" % max(0.0, stamp), "-i",
+           os.path.join(session, video), "-frames:v", "1", dest]
+    return subprocess.call(cmd) == 0 and os.path.exists(dest)
+
+
+def draw_capsules(ax, rows):
+    for r in rows:
+        a = (float(r["ay"]), float(r["az"]))
+        b = (float(r["by"]), float(r["bz"]))
+        seg = r["segment"]
+        arm = seg[:2] in ("l_", "r_") and any(s in seg for s in ("arm", "hand", "shoulder"))
+        color = "tab:blue" if arm and seg.startswith("r_") else ("tab:green" if arm else "silver")
+        ax.plot([-a[0], -b[0]], [a[1], b[1]], color=color, lw=float(r["radius"]) * 120, solid_capstyle="round",
+                alpha=0.75)
+    ax.set_aspect("equal")
+    ax.set_xlim(-0.55, 0.55)
+    ax.set_ylim(0.3, 1.35)
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out")
+    ap.add_argument("--session", default=os.path.join(ROOT, "bringup", "sessions", "flagship"))
+    ap.add_argument("--build", default=os.environ.get("REFLEX_BUILD_DIR", os.path.join(ROOT, "build")))
+    args = ap.parse_args()
+    runs = {}
+    for label in ("avoidance", "no_avoidance"):
+        path = os.path.join(args.out, label, "controller.csv")
+        if os.path.exists(path):
+            runs[label] = read(path)
+    if not runs:
+        raise SystemExit("report.py: no run in %s (expected avoidance/controller.csv)" % args.out)
+    summary = {label: summarize(ts) for label, ts in runs.items()}
+
+    # Fig. 13: hand status and arm-to-arm distance.
+    fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1, 1, 3]})
+    main_ts = runs.get("avoidance", next(iter(runs.values())))
+    t = main_ts["time"]
+    for ax, side in zip(axes[:2], ("left", "right")):
+        ax.step(t, [1 if s == "given" else 0 for s in main_ts[side + "_status"]], where="post")
+        ax.set_yticks([0, 1])
+        ax.set_yticklabels(["no target", "given"])
+        ax.set_ylabel(side + " hand")
+    style = {"avoidance": ("tab:blue", "-", "with avoidance"), "no_avoidance": ("tab:red", "--", "without avoidance")}
+    for label, ts in runs.items():
+        color, ls, name = style[label]
+        axes[2].plot(ts["time"], [min(d, 0.3) * 1000 for d in ts["arm_distance"]], color=color, ls=ls, label=name)
+    for v, c, name in ((D_A, "gold", "yellow zone d_a"), (D_B, "orange", "orange zone d_b"), (D_R, "red", "red zone d_r")):
+        axes[2].axhline(v * 1000, color=c, ls="--", lw=1, label=name)
+    axes[2].axhline(0, color="black", lw=0.8)
+    axes[2].set_ylabel("arm-to-arm distance (mm)")
+    axes[2].set_xlabel("time (s)")
+    axes[2].set_ylim(-100, 300)
+    axes[2].legend(fontsize=8, loc="upper right")
+    fig.suptitle("Flagship: hand status and the distance between the arms (paper Fig. 13)")
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, "fig13_status_distance.png"), dpi=90)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(11, 3.5))
+    for side, c in (("left", "tab:green"), ("right", "tab:blue")):
+        ax.plot(t, main_ts[side + "_f"], color=c, label=side + " arm f(d)")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_xlabel("time (s)")
+    ax.legend(fontsize=8)
+    ax.set_title("blending coefficient f(d) (Eq. 13), with avoidance")
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, "blending.png"), dpi=90)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(3, 2, figsize=(11, 7), sharex=True)
+    for col, side in enumerate(("left", "right")):
+        for row, a in enumerate("xyz"):
+            ax = axes[row][col]
+            ax.plot(t, main_ts["%s_target_%s" % (side, a)], ls="--", color="gray", label="target (pointing)")
+            ax.plot(t, main_ts["%s_hand_%s" % (side, a)], label="hand")
+            ax.set_ylabel("%s %s (m)" % (side, a))
+        axes[0][col].set_title(side + " hand")
+    axes[0][1].legend(fontsize=8)
+    fig.suptitle("hand targets from the pointing module against the hands (with avoidance)")
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, "tracking.png"), dpi=90)
+    plt.close(fig)
+
+    # Strip: camera frame beside the robot at key instants.
+    strip_ok = False
+    try:
+        offset = first_given_time(main_ts)  # controller time of the session's first frame (approx.)
+        frames = session_frames(args.session)
+        arm = main_ts["arm_distance"]
+        k_min = arm.index(min(arm))
+        lost = next((k for k in range(1, len(t)) if main_ts["left_status"][k] != "given" and main_ts["left_status"][k - 1] == "given"), None)
+        picks = [min(len(t) - 1, int((offset + 3.0 - t[0]) / 0.005))]
+        if lost is not None:
+            picks.append(min(len(t) - 1, lost + 200))
+        picks += [max(0, k_min - 800), k_min, len(t) - 1]
+        picks = sorted(set(picks))
+        times = [t[k] for k in picks]
+        tmp = os.path.join(args.out, "strip")
+        os.makedirs(tmp, exist_ok=True)
+        sim = os.path.join(args.build, "bin", "reflex_sim")
+        subprocess.check_call([sim, "--postures-from", os.path.join(args.out, "avoidance", "controller.csv"), "--at",
+                               ",".join("%.3f" % x for x in times), "--out", tmp], stdout=subprocess.DEVNULL)
+        with open(os.path.join(tmp, "postures.csv")) as fh:
+            prow = list(csv.DictReader(fh))
+        fig, axes = plt.subplots(2, len(times), figsize=(3.0 * len(times), 6.2))
+        for i, tt in enumerate(times):
+            st = tt - offset + frames[0][1]
+            img = os.path.join(tmp, "frame_%d.png" % i)
+            if extract_frame(args.session, st, img):
+                axes[0][i].imshow(mpimg.imread(img))
+            axes[0][i].set_title("t = %.1f s, d_arms = %.0f mm" % (tt, main_ts["arm_distance"][picks[i]] * 1000), fontsize=8)
+            axes[0][i].axis("off")
+            draw_capsules(axes[1][i], [r for r in prow if int(r["frame"]) == i])
+        axes[1][0].set_ylabel("robot (seen from the camera)")
+        fig.suptitle("camera (left image) and the robot's collision capsules (right arm blue, left arm green)")
+        fig.tight_layout()
+        fig.savefig(os.path.join(args.out, "strip.png"), dpi=80)
+        plt.close(fig)
+        strip_ok = True
+    except (subprocess.CalledProcessError, OSError, ValueError, KeyError, IndexError) as e:
+        print("report.py: warning: no frame strip: %s" % e, file=sys.stderr)
+
+    with open(os.path.join(args.out, "summary.json"), "w") as fh:
+        json.dump(summary, fh, indent=2)
+    lines = ["# Flagship experiment report", "",
+             "Session `%s` replayed through reflex_vision -> reflex_behavior -> reflex_controller over DDS." % args.session,
+             "", "| | with avoidance | without avoidance |", "| --- | --- | --- |"]
+    on, off = summary.get("avoidance", {}), summary.get("no_avoidance", {})
+    def cell(d, key, scale=1.0, fmt="%.1f"):
+        return (fmt % (d[key] * scale)) if key in d else "-"
+    for key, name, scale, fmt in (("min_arm_distance_m", "closest arm-to-arm distance (mm)", 1000, "%.1f"),
+                                  ("min_arm_distance_time_s", "... at (s)", 1, "%.1f"),
+                                  ("min_distance_all_pairs_m", "closest pair of all (mm)", 1000, "%.1f"),
+                                  ("time_arm_in_yellow_s", "arms in the yellow zone (s)", 1, "%.1f"),
+                                  ("time_arm_in_orange_s", "arms in the orange zone (s)", 1, "%.2f"),
+                                  ("estop_cycles", "cycles with the e-stop latched", 1, "%d"),
+                                  ("max_f", "max f(d)", 1, "%.2f"),
+                                  ("left_lost_events", "left target lost (events)", 1, "%d"),
+                                  ("right_lost_events", "right target lost (events)", 1, "%d"),
+                                  ("left_tracking_error_median_m", "left hand tracking error, median (mm)", 1000, "%.1f"),
+                                  ("right_tracking_error_median_m", "right hand tracking error, median (mm)", 1000, "%.1f")):
+        lines.append("| %s | %s | %s |" % (name, cell(on, key, scale, fmt), cell(off, key, scale, fmt)))
+    lines += ["", "![Fig. 13](fig13_status_distance.png)", "", "![f(d)](blending.png)", "", "![tracking](tracking.png)"]
+    if strip_ok:
+        lines += ["", "![strip](strip.png)"]
+    with open(os.path.join(args.out, "report.md"), "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines[4:4 + 13]))
+    print("report.py: wrote %s/report.md and plots" % args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
