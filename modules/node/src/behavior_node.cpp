@@ -1,0 +1,206 @@
+#include "reflex/modules/behavior_node.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <sstream>
+
+namespace reflex::modules {
+
+namespace {
+
+msg::Vector3 toMsg(const Eigen::Vector3d& v) {
+  msg::Vector3 m;
+  m.x(v.x());
+  m.y(v.y());
+  m.z(v.z());
+  return m;
+}
+
+void fillHand(msg::HandTarget& out, const HandTarget& in) {
+  out.status(in.given ? msg::TARGET_GIVEN : msg::TARGET_NONE);
+  out.position_base(toMsg(in.given ? in.p_B : Eigen::Vector3d::Zero()));
+  out.object_name(in.given ? in.object : std::string());
+}
+
+// The host's outputs, published on the bus. Writers exist only for what the modules claim.
+class DdsSink final : public OutputSink {
+ public:
+  void bind(bus::Participant& bus, const Claims& claims) {
+    if (claims.hands[0] || claims.hands[1]) hands_ = &bus.makeWriter<msg::HandTargets>();
+    if (claims.priority) priority_ = &bus.makeWriter<msg::MotionPriority>();
+    if (!claims.segments.empty()) schema_ = &bus.makeWriter<msg::BodySchemaChange>();
+    if (claims.walk) walk_ = &bus.makeWriter<msg::WalkCommand>();
+  }
+  void handTargets(const HandTarget& left, const HandTarget& right) override {
+    fillHand(hands_msg_.left(), left);
+    fillHand(hands_msg_.right(), right);
+    hands_->publish(hands_msg_);
+  }
+  void motionPriority(ArmPriority p) override {
+    msg::MotionPriority m;
+    m.priority(p == ArmPriority::kLeftHigher    ? msg::PRIORITY_LEFT_HIGHER
+               : p == ArmPriority::kRightHigher ? msg::PRIORITY_RIGHT_HIGHER
+                                                : msg::PRIORITY_EQUAL);
+    priority_->publish(m);
+  }
+  void segmentAttached(const SegmentSpec& s) override {
+    msg::BodySchemaChange m;
+    m.segment_name(s.name);
+    m.operation(msg::SCHEMA_ATTACH);
+    m.parent_link(s.parent_link);
+    m.shape(s.capsule ? msg::SHAPE_CAPSULE : msg::SHAPE_SPHERE);
+    m.point_a(toMsg(s.a_L));
+    m.point_b(toMsg(s.capsule ? s.b_L : s.a_L));
+    m.radius(s.radius);
+    m.motion_priority(s.motion_priority);
+    m.enabled(s.enabled);
+    m.virtual_segment(s.virtual_segment);
+    schema_->publish(m);
+  }
+  void segmentDetached(const std::string& name) override {
+    msg::BodySchemaChange m;
+    m.segment_name(name);
+    m.operation(msg::SCHEMA_DETACH);
+    m.enabled(false);
+    schema_->publish(m);
+  }
+  void walk(const WalkGoal& g) override {
+    msg::WalkCommand m;
+    m.goal_x(g.x);
+    m.goal_y(g.y);
+    m.goal_yaw(g.yaw);
+    m.speed(g.speed);
+    m.stop(g.stop);
+    walk_->publish(m);
+  }
+  /// Waits until every matched reader acknowledged what was published (reliable writers).
+  void waitForAcknowledgments(std::chrono::milliseconds timeout) {
+    const eprosima::fastrtps::Duration_t d(static_cast<std::int32_t>(timeout.count() / 1000),
+                                          static_cast<std::uint32_t>((timeout.count() % 1000) * 1000000));
+    if (hands_) hands_->native().wait_for_acknowledgments(d);
+    if (priority_) priority_->native().wait_for_acknowledgments(d);
+    if (schema_) schema_->native().wait_for_acknowledgments(d);
+    if (walk_) walk_->native().wait_for_acknowledgments(d);
+  }
+
+ private:
+  bus::Writer<msg::HandTargets>* hands_ = nullptr;
+  bus::Writer<msg::MotionPriority>* priority_ = nullptr;
+  bus::Writer<msg::BodySchemaChange>* schema_ = nullptr;
+  bus::Writer<msg::WalkCommand>* walk_ = nullptr;
+  msg::HandTargets hands_msg_;
+};
+
+}  // namespace
+
+struct BehaviorNode::Impl {
+  NodeOptions options;
+  HostConfig config;
+  DdsSink sink;
+  std::unique_ptr<BehaviorHost> host;
+  std::unique_ptr<bus::Participant> bus;
+  std::unique_ptr<bus::HeartbeatPublisher> heartbeat;
+  std::chrono::steady_clock::time_point t_start = std::chrono::steady_clock::now();
+  ObjectsFrame frame;
+  JointStateSample joints;
+
+  Now now() const {
+    return Now{std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count(), bus::nowNs()};
+  }
+};
+
+BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& registry) : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.options = options;
+  m.config = loadHostConfig(options.config, registry);
+  BehaviorHost::LogFn log;
+  if (options.quiet) log = [](const std::string&) {};
+  m.host = std::make_unique<BehaviorHost>(m.config, registry, m.sink, log, options.module);
+
+  bus::BusConfig bc;
+  bc.module_name = m.host->processName();
+  bc.domain_id = options.domain_id;
+  bc.profiles_file = options.profiles_file;
+  bc.participant_profile = options.participant_profile;
+  m.bus = std::make_unique<bus::Participant>(bc);
+  m.sink.bind(*m.bus, m.host->claims());
+  m.heartbeat = std::make_unique<bus::HeartbeatPublisher>(*m.bus);  // 500 ms: 2 Hz
+
+  if (m.host->claims().objects) {
+    auto& objects = m.bus->makeReader<msg::ObjectTargets>();
+    objects.onData([&m](const msg::ObjectTargets& o) {
+      m.frame.stamp_ns = o.header().stamp_ns();
+      m.frame.capture_stamp_ns = o.capture_stamp_ns();
+      m.frame.image_index = o.image_index();
+      m.frame.objects.resize(o.objects().size());
+      for (std::size_t i = 0; i < o.objects().size(); ++i) {
+        const msg::ObjectTarget& in = o.objects()[i];
+        ObjectObservation& out = m.frame.objects[i];
+        out.name = in.name();
+        out.tag_id = in.tag_id();
+        out.p_B = Eigen::Vector3d(in.position_base().x(), in.position_base().y(), in.position_base().z());
+        out.confidence = in.confidence();
+      }
+      m.host->onObjects(m.frame, m.now());
+    });
+  }
+  auto& joints = m.bus->makeReader<msg::JointState>();
+  joints.onData([&m](const msg::JointState& js) {
+    m.joints.stamp_ns = js.header().stamp_ns();
+    m.joints.names = js.names();
+    m.joints.positions = js.positions();
+    m.host->onJointState(m.joints, m.now());
+  });
+  m.bus->every(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(m.config.tick_period)),
+               [&m] { m.host->tick(m.now()); });
+  if (options.progress_period > 0.0 && !options.quiet) {
+    m.bus->every(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(options.progress_period)),
+                 [&m] { std::fprintf(stderr, "%s: %s\n", m.host->processName().c_str(), m.host->status().c_str()); });
+  }
+}
+
+BehaviorNode::~BehaviorNode() = default;
+
+const BehaviorHost& BehaviorNode::host() const { return *impl_->host; }
+
+void BehaviorNode::stop() noexcept { impl_->bus->stop(); }
+
+void BehaviorNode::run() {
+  Impl& m = *impl_;
+  bus::StopOnSignal stop_on_signal(*m.bus);
+  std::string names;
+  for (const auto& n : m.host->moduleNames()) names += (names.empty() ? "" : ",") + n;
+  try {
+    m.host->start(m.now());
+    m.heartbeat->setState(msg::STATE_RUNNING, "modules: " + names);
+    if (m.options.duration > 0.0) {
+      m.bus->runFor(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(m.options.duration)));
+    } else {
+      m.bus->run();
+    }
+    m.heartbeat->setState(msg::STATE_STOPPING, "modules: " + names);
+    m.host->stop(m.now());
+    m.sink.waitForAcknowledgments(std::chrono::milliseconds(2000));
+  } catch (const std::exception& e) {
+    m.heartbeat->setState(msg::STATE_ERROR, e.what());
+    throw;
+  }
+}
+
+std::string BehaviorNode::report() const {
+  const HostStats& s = impl_->host->stats();
+  std::ostringstream m;
+  m << "frames=" << s.frames_received << " objects_accepted=" << s.objects_accepted
+    << " rejected_future=" << s.frames_rejected_future << " rejected_invalid=" << s.objects_rejected_invalid
+    << " rejected_unknown=" << s.objects_rejected_unknown << " rejected_range=" << s.objects_rejected_range
+    << " rejected_duplicate=" << s.objects_rejected_duplicate << " joint_states=" << s.joint_states
+    << " joint_states_rejected=" << s.joint_states_rejected << " hand_targets=" << s.hand_targets_published
+    << " priority=" << s.priority_published << " segment_changes=" << s.segment_changes_published
+    << " walk=" << s.walk_published << " outputs_rejected=" << s.outputs_rejected
+    << " forced_cleanups=" << s.forced_cleanups;
+  return m.str();
+}
+
+}  // namespace reflex::modules

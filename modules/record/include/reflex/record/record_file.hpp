@@ -1,0 +1,159 @@
+// The Reflex recording file: an append-only log of length-prefixed, CRC-checked records, each one
+// DDS sample as it was received (topic name, type name, receive time, source time, CDR payload).
+//
+// Layout (all integers little-endian):
+//   file header (16 bytes): "RFXREC\r\n" | u32 format version (1) | u32 reserved (0)
+//   record:                  u32 sync "RREC" | u32 body length L | u32 CRC-32 (IEEE) of the body | body
+//   body:                    i64 receive time [ns, system clock, Unix epoch]
+//                            i64 source time [ns, the writer's DDS source timestamp]
+//                            u16 topic length | topic bytes | u16 type length | type bytes
+//                            u32 payload length | payload (XCDR1 with its 4-byte encapsulation)
+//
+// Why this survives a kill -9: the file is only ever appended to, each record is complete in itself
+// and carries its own length and CRC, so whatever a crash leaves behind is a valid prefix plus at
+// most one torn record at the end, which RecordReader detects and reports (TailState::kTorn) instead
+// of returning it. A record that is corrupt in the middle (bad CRC, bad sync) is reported, and the
+// reader can resynchronise on the next sync word whose CRC checks.
+//
+// Durability policy (RecordWriter): records are collected in a user-space buffer and handed to the
+// kernel (write(2)) when the buffer holds flush_bytes or the oldest buffered record is older than
+// flush_interval; fsync(2) runs every sync_interval and at close. A kill -9 loses at most the records
+// of the last flush_interval (they were still in the process); data already written survives the
+// process (page cache) and, after the next fsync, also a power loss or kernel crash.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace reflex::record {
+
+/// Set-up and I/O errors of recording files (message names the file and the bad value).
+class RecordError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr char kFileMagic[8] = {'R', 'F', 'X', 'R', 'E', 'C', '\r', '\n'};
+inline constexpr std::uint32_t kFormatVersion = 1;
+inline constexpr std::uint32_t kRecordSync = 0x43455252u;  // "RREC" read as little-endian u32
+inline constexpr std::size_t kFileHeaderSize = 16;
+inline constexpr std::size_t kRecordHeaderSize = 12;       // sync + length + CRC
+/// Upper bound on one record's body; a length above it is treated as corruption, not allocated.
+inline constexpr std::uint32_t kMaxBodySize = 64u << 20;
+
+/// One recorded sample.
+struct RecordEntry {
+  std::int64_t receive_ns = 0;   ///< when the recorder received it (system clock, ns since epoch)
+  std::int64_t source_ns = 0;    ///< DDS source timestamp of the writer (ns since epoch), 0 if unknown
+  std::string topic;             ///< DDS topic name, e.g. "reflex/control_status"
+  std::string type;              ///< DDS type name, e.g. "reflex::msg::ControlStatus"
+  std::vector<std::uint8_t> payload;  ///< serialized sample: encapsulation header + XCDR1 body
+};
+
+/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320) of `size` bytes, continuing from `crc`
+/// (pass 0 to start). crc32("123456789") == 0xCBF43926.
+std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc = 0) noexcept;
+
+/// Encodes a record (header + body) as it is stored in the file. Throws RecordError if the topic or
+/// type name is longer than 65535 bytes or the body exceeds kMaxBodySize.
+std::vector<std::uint8_t> encodeRecord(const RecordEntry& entry);
+
+struct WriterOptions {
+  std::chrono::milliseconds flush_interval{100};  ///< max age of a buffered record before write(2)
+  std::size_t flush_bytes = 256 * 1024;           ///< buffer size that triggers write(2)
+  std::chrono::milliseconds sync_interval{1000};  ///< fsync(2) period (0: after every flush)
+  bool append = false;  ///< false: create/truncate; true: append to an existing valid recording
+};
+
+/// Appends records to a recording file. Not thread-safe (one writer thread). The destructor flushes
+/// and fsyncs (errors there are swallowed; call close() to see them).
+class RecordWriter {
+ public:
+  /// Creates (or, with options.append, opens and checks the header of) `path`. Throws RecordError
+  /// naming the path and the failing system call.
+  RecordWriter(const std::string& path, const WriterOptions& options = {});
+  ~RecordWriter();
+  RecordWriter(const RecordWriter&) = delete;
+  RecordWriter& operator=(const RecordWriter&) = delete;
+
+  /// Buffers one record, then flushes / syncs as the policy says. Throws RecordError on I/O failure.
+  void append(const RecordEntry& entry);
+  /// Applies the time-based part of the policy (call it periodically when no records arrive).
+  void poll();
+  /// Hands the buffer to the kernel (write(2)).
+  void flush();
+  /// flush() + fsync(2).
+  void sync();
+  /// sync() and close the file; later calls do nothing.
+  void close();
+
+  const std::string& path() const { return path_; }
+  std::uint64_t recordsWritten() const { return records_; }
+  std::uint64_t bytesWritten() const { return bytes_; }
+
+ private:
+  std::string path_;
+  WriterOptions options_;
+  int fd_ = -1;
+  std::vector<std::uint8_t> buffer_;
+  std::chrono::steady_clock::time_point oldest_buffered_{};
+  std::chrono::steady_clock::time_point last_sync_{};
+  std::uint64_t records_ = 0, bytes_ = 0;
+};
+
+/// How the reader's scan of a file ended.
+enum class TailState {
+  kClean,    ///< the last record ended exactly at the end of the file
+  kTorn,     ///< the file ends inside a record (e.g. killed while writing); that record was dropped
+  kCorrupt,  ///< a record with a bad sync word, length or CRC that is NOT at the end (see skipped)
+};
+
+/// Reads a recording sequentially. Never returns a record whose CRC does not check.
+class RecordReader {
+ public:
+  /// Opens `path` and checks the file header. Throws RecordError naming the path and what is wrong
+  /// (missing, not a recording, unsupported version).
+  explicit RecordReader(const std::string& path);
+  ~RecordReader();
+  RecordReader(const RecordReader&) = delete;
+  RecordReader& operator=(const RecordReader&) = delete;
+
+  /// Reads the next valid record into `out`; false at the end. With resync (the default) a corrupt
+  /// record in the middle is skipped by scanning for the next sync word whose record checks
+  /// (counted in skippedBytes(), state kCorrupt); without it reading stops there.
+  bool next(RecordEntry& out);
+  /// Goes back to the first record (counters reset).
+  void rewind();
+  void setResync(bool on) { resync_ = on; }
+
+  TailState tailState() const { return state_; }
+  /// Byte offset just after the last valid record read.
+  std::uint64_t validEnd() const { return valid_end_; }
+  std::uint64_t fileSize() const { return size_; }
+  std::uint64_t skippedBytes() const { return skipped_; }
+  /// Offset of the first corrupt record seen (meaningful if tailState() == kCorrupt).
+  std::uint64_t firstCorruptOffset() const { return first_corrupt_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  enum class Parse { kOk, kShort, kBad };
+  Parse parseAt(std::uint64_t offset, RecordEntry& out, std::uint64_t& record_size);
+  bool readAt(std::uint64_t offset, void* dst, std::size_t n);
+
+  std::string path_;
+  std::FILE* file_ = nullptr;
+  std::uint64_t size_ = 0, pos_ = kFileHeaderSize, valid_end_ = kFileHeaderSize;
+  std::uint64_t skipped_ = 0, first_corrupt_ = 0;
+  TailState state_ = TailState::kClean;
+  bool resync_ = true;
+  std::vector<std::uint8_t> body_;
+};
+
+/// Human-readable name of a tail state ("clean", "torn last record", "corrupt records skipped").
+const char* toString(TailState s);
+
+}  // namespace reflex::record

@@ -1,0 +1,145 @@
+// reflex::record — the bus recorder, player and exporter (issue 7, item 2).
+//
+//   Recorder  subscribes chosen (or all) Reflex topics and appends every received sample to a
+//             recording file (record_file.hpp: survives kill -9, torn tail detected);
+//   Player    publishes a recording again with its original timing, scaled by a rate, from a
+//             start offset, optionally looped (like `ros2 bag play`);
+//   exportCsv writes the samples of one topic as a CSV table (for reports and plots).
+//
+// Each is a library class with a thin main (reflex_record / reflex_play). The Recorder and Player own
+// their bus::Participant; stop() is thread-safe and is what SIGINT / SIGTERM call.
+#pragma once
+
+#include "reflex/record/codecs.hpp"
+#include "reflex/record/record_file.hpp"
+
+#include <reflex/bus/config.hpp>
+
+#include <atomic>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace reflex::bus {
+class Participant;
+}
+
+namespace reflex::record {
+
+struct RecorderOptions {
+  std::string output;                 ///< recording file to create (or append to, see writer.append)
+  std::vector<std::string> topics;    ///< topic specs (parseTopicSpec); empty = every known topic
+  std::vector<std::string> exclude;   ///< topic names not to record (with the default "all")
+  /// true: state topics (behavior decisions, heartbeats: reliable + transient local) are read with
+  /// their own reader profile, so the recording starts with the current state even if it was
+  /// published before the recorder started; false: every topic with the reflex_record profile.
+  bool late_joiner_state = true;
+  double duration = 0.0;              ///< seconds to record (0: until stop())
+  bool progress = false;              ///< print a status line to stderr about once a second
+  WriterOptions writer;
+  bus::BusConfig bus;
+};
+
+/// Per-topic counts of a recorder.
+struct TopicCount {
+  std::string type;
+  std::uint64_t samples = 0;
+};
+
+class Recorder {
+ public:
+  /// Parses the topics, opens the file and creates the readers. Throws RecordError / bus::BusError
+  /// naming the bad topic, file or entity.
+  explicit Recorder(const RecorderOptions& options);
+  ~Recorder();
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  /// Records until stop() or the duration; closes (fsyncs) the file at the end. Throws RecordError
+  /// on a write error.
+  void run();
+  void stop() noexcept;
+
+  bus::Participant& bus();
+  const std::map<std::string, TopicCount>& counts() const { return counts_; }
+  std::uint64_t totalSamples() const;
+
+ private:
+  RecorderOptions options_;
+  std::unique_ptr<bus::Participant> bus_;
+  std::unique_ptr<RecordWriter> writer_;
+  std::map<std::string, TopicCount> counts_;
+};
+
+struct PlayerOptions {
+  std::string input;                  ///< recording to play
+  double rate = 1.0;                  ///< speed factor (> 0); 0 = as fast as possible
+  bool loop = false;                  ///< start again at the start offset when the end is reached
+  double start = 0.0;                 ///< seconds after the first record to start from
+  double duration = 0.0;              ///< seconds of recording time to play from the start (0: to the end)
+  double delay = 0.5;                 ///< seconds between creating the writers and the first sample (discovery)
+  std::vector<std::string> topics;    ///< topic names to play; empty = every topic in the file
+  std::vector<std::string> exclude;   ///< topic names not to play
+  bool restamp = false;               ///< move sample time stamps to the playing time (see SamplePublisher)
+  bool progress = false;              ///< status line on stderr
+  bus::BusConfig bus;
+};
+
+struct PlayerStats {
+  std::uint64_t published = 0;        ///< samples written
+  std::uint64_t failed = 0;           ///< payloads that did not deserialize or writes refused
+  std::uint64_t loops = 0;            ///< completed passes
+  TailState tail = TailState::kClean; ///< how the file ended
+};
+
+class Player {
+ public:
+  /// Scans the file (time range, topics), checks the options and creates one writer per played
+  /// topic with its type's profile. Throws RecordError naming the bad option value or the file.
+  explicit Player(const PlayerOptions& options);
+  ~Player();
+  Player(const Player&) = delete;
+  Player& operator=(const Player&) = delete;
+
+  /// Plays until the end (or forever with loop) or stop().
+  void run();
+  void stop() noexcept { stop_ = true; }
+
+  bus::Participant& bus();
+  const PlayerStats& stats() const { return stats_; }
+  /// Length of the played window, seconds of recording time.
+  double windowSeconds() const { return 1e-9 * static_cast<double>(end_ns_ - begin_ns_); }
+
+ private:
+  PlayerOptions options_;
+  std::unique_ptr<bus::Participant> bus_;
+  std::map<std::string, std::unique_ptr<SamplePublisher>> publishers_;
+  std::int64_t first_ns_ = 0, begin_ns_ = 0, end_ns_ = 0;
+  std::uint64_t window_records_ = 0;
+  std::atomic<bool> stop_{false};
+  PlayerStats stats_;
+};
+
+/// Summary of a recording (reflex_record info).
+struct RecordingInfo {
+  std::int64_t first_ns = 0, last_ns = 0;
+  std::uint64_t records = 0;
+  std::map<std::string, TopicCount> topics;  ///< topic -> type + count
+  TailState tail = TailState::kClean;
+  std::uint64_t valid_end = 0, file_size = 0, skipped_bytes = 0;
+};
+/// Scans a recording. Throws RecordError if it cannot be opened or is not a recording.
+RecordingInfo scanRecording(const std::string& path);
+
+/// Writes the samples of `topic` in `input` as CSV to `csv_path` (header from the first sample,
+/// t = seconds since the first record of the file). Returns the number of samples written. Throws
+/// RecordError if the topic is not in the recording (naming the topics that are), its type is
+/// unknown, or the output cannot be written.
+std::uint64_t exportCsv(const std::string& input, const std::string& topic, const std::string& csv_path);
+
+/// A file name for a topic's CSV: "reflex/control_status" -> "reflex_control_status.csv".
+std::string csvFileNameForTopic(const std::string& topic);
+
+}  // namespace reflex::record

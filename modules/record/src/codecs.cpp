@@ -1,0 +1,299 @@
+#include "reflex/record/codecs.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include <cinttypes>
+#include <cstdio>
+#include <sstream>
+
+namespace reflex::record {
+
+namespace msg = reflex::msg;
+
+namespace {
+
+// ---- serialization through the Fast DDS type support ----------------------------------------
+
+template <class T>
+std::vector<std::uint8_t> serializeSample(const T& sample) {
+  typename bus::TopicTraits<T>::PubSubType type;
+  void* data = const_cast<T*>(&sample);  // the type support only reads it
+  const std::uint32_t size = type.getSerializedSizeProvider(data)();
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(size);
+  if (!type.serialize(data, &payload))
+    throw RecordError(std::string("cannot serialize a ") + type.getName() + " sample (" + std::to_string(size) + " bytes)");
+  return std::vector<std::uint8_t>(payload.data, payload.data + payload.length);
+}
+
+template <class T>
+bool deserializeSample(const std::vector<std::uint8_t>& bytes, T& out) {
+  typename bus::TopicTraits<T>::PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<std::uint32_t>(bytes.size()));
+  std::copy(bytes.begin(), bytes.end(), payload.data);
+  payload.length = static_cast<std::uint32_t>(bytes.size());
+  try {
+    return type.deserialize(&payload, &out);
+  } catch (const std::exception&) {  // fastcdr throws BadParamException on inconsistent lengths
+    return false;
+  }
+}
+
+// ---- CSV columns per type ----------------------------------------------------------------------
+
+std::string num(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof(buf), "%.9g", v);
+  return buf;
+}
+
+void hand(std::ostream& o, const msg::HandTarget& h) {
+  o << ',' << static_cast<int>(h.status()) << ',' << num(h.position_base().x()) << ',' << num(h.position_base().y())
+    << ',' << num(h.position_base().z()) << ',' << csvField(h.object_name());
+}
+void arm(std::ostream& o, const msg::ArmStatus& a) {
+  o << ',' << num(a.blend_f()) << ',' << num(a.distance()) << ',' << static_cast<int>(a.zone()) << ','
+    << (a.estop_latched() ? 1 : 0) << ',' << csvField(a.closest_segment_a()) << ',' << csvField(a.closest_segment_b());
+}
+
+void csvColumns(std::ostream& o, const msg::ObjectTargets&) {
+  o << ",capture_stamp_ns,image_index,frame_id,n_objects,object,tag_id,x,y,z,x_cam,y_cam,z_cam,confidence";
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::ObjectTargets& s) {
+  const std::string head = prefix + "," + std::to_string(s.capture_stamp_ns()) + "," + std::to_string(s.image_index()) +
+                           "," + csvField(s.frame_id()) + "," + std::to_string(s.objects().size());
+  if (s.objects().empty()) o << head << ",,,,,,,,,\n";
+  for (const auto& obj : s.objects()) {
+    o << head << ',' << csvField(obj.name()) << ',' << obj.tag_id() << ',' << num(obj.position_base().x()) << ','
+      << num(obj.position_base().y()) << ',' << num(obj.position_base().z()) << ',' << num(obj.position_camera().x())
+      << ',' << num(obj.position_camera().y()) << ',' << num(obj.position_camera().z()) << ',' << num(obj.confidence())
+      << '\n';
+  }
+}
+
+void csvColumns(std::ostream& o, const msg::HandTargets&) {
+  o << ",left_status,left_x,left_y,left_z,left_object,right_status,right_x,right_y,right_z,right_object";
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::HandTargets& s) {
+  o << prefix;
+  hand(o, s.left());
+  hand(o, s.right());
+  o << '\n';
+}
+
+void csvColumns(std::ostream& o, const msg::MotionPriority&) { o << ",priority"; }
+void csvRows(std::ostream& o, const std::string& prefix, const msg::MotionPriority& s) {
+  o << prefix << ',' << static_cast<int>(s.priority()) << '\n';
+}
+
+void csvColumns(std::ostream& o, const msg::BodySchemaChange&) {
+  o << ",segment_name,operation,parent_link,shape,a_x,a_y,a_z,b_x,b_y,b_z,radius,motion_priority,enabled,virtual_segment";
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::BodySchemaChange& s) {
+  o << prefix << ',' << csvField(s.segment_name()) << ',' << static_cast<int>(s.operation()) << ','
+    << csvField(s.parent_link()) << ',' << static_cast<int>(s.shape()) << ',' << num(s.point_a().x()) << ','
+    << num(s.point_a().y()) << ',' << num(s.point_a().z()) << ',' << num(s.point_b().x()) << ',' << num(s.point_b().y())
+    << ',' << num(s.point_b().z()) << ',' << num(s.radius()) << ',' << s.motion_priority() << ','
+    << (s.enabled() ? 1 : 0) << ',' << (s.virtual_segment() ? 1 : 0) << '\n';
+}
+
+void csvColumns(std::ostream& o, const msg::WalkCommand&) { o << ",goal_x,goal_y,goal_yaw,speed,stop"; }
+void csvRows(std::ostream& o, const std::string& prefix, const msg::WalkCommand& s) {
+  o << prefix << ',' << num(s.goal_x()) << ',' << num(s.goal_y()) << ',' << num(s.goal_yaw()) << ',' << num(s.speed())
+    << ',' << (s.stop() ? 1 : 0) << '\n';
+}
+
+void csvColumns(std::ostream& o, const msg::JointState& first) {
+  for (const auto& n : first.names()) o << ",q_" << n;
+  for (const auto& n : first.names()) o << ",qd_" << n;
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::JointState& s) {
+  o << prefix;
+  for (double v : s.positions()) o << ',' << num(v);
+  for (double v : s.velocities()) o << ',' << num(v);
+  o << '\n';
+}
+
+void csvColumns(std::ostream& o, const msg::ControlStatus&) {
+  for (const char* a : {"left", "right"})
+    o << ',' << a << "_f," << a << "_distance," << a << "_zone," << a << "_estop," << a << "_closest_a," << a
+      << "_closest_b";
+  o << ",cycle_period_us,compute_time_us,lateness_us,overrun_count";
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::ControlStatus& s) {
+  o << prefix;
+  arm(o, s.left());
+  arm(o, s.right());
+  o << ',' << num(s.cycle_period_us()) << ',' << num(s.compute_time_us()) << ',' << num(s.lateness_us()) << ','
+    << s.overrun_count() << '\n';
+}
+
+void csvColumns(std::ostream& o, const msg::Heartbeat&) { o << ",module_name,host,pid,state,period_ms,detail"; }
+void csvRows(std::ostream& o, const std::string& prefix, const msg::Heartbeat& s) {
+  o << prefix << ',' << csvField(s.module_name()) << ',' << csvField(s.host()) << ',' << s.pid() << ','
+    << static_cast<int>(s.state()) << ',' << s.period_ms() << ',' << csvField(s.detail()) << '\n';
+}
+
+// ---- restamping for replay ---------------------------------------------------------------------
+
+template <class T>
+void shiftStamps(T& s, std::int64_t shift) {
+  s.header().stamp_ns(s.header().stamp_ns() + shift);
+}
+template <>
+void shiftStamps(msg::ObjectTargets& s, std::int64_t shift) {
+  s.header().stamp_ns(s.header().stamp_ns() + shift);
+  s.capture_stamp_ns(s.capture_stamp_ns() + shift);
+}
+
+// ---- the codec ------------------------------------------------------------------------------------
+
+template <class T>
+class Publisher final : public SamplePublisher {
+ public:
+  explicit Publisher(bus::Writer<T>& w) : writer_(w) {}
+  bool publish(const std::vector<std::uint8_t>& payload, std::int64_t shift_ns) override {
+    if (!deserializeSample(payload, sample_)) return false;
+    if (shift_ns != 0) shiftStamps(sample_, shift_ns);
+    return writer_.write(sample_);
+  }
+  int matchedReaders() const override { return writer_.stats().matched_readers; }
+
+ private:
+  bus::Writer<T>& writer_;
+  T sample_;
+};
+
+template <class T>
+class Codec final : public TopicCodec {
+ public:
+  Codec() : name_(typename bus::TopicTraits<T>::PubSubType().getName()) {}
+  const std::string& typeName() const override { return name_; }
+  std::string shortName() const override { return name_.substr(name_.rfind(':') + 1); }
+  const char* defaultTopic() const override { return bus::TopicTraits<T>::kTopicName; }
+  const char* defaultProfile() const override { return bus::TopicTraits<T>::kProfile; }
+  bool isState() const override {
+    const std::string p = defaultProfile();
+    return p == bus::kProfileBehavior || p == bus::kProfileHeartbeat;
+  }
+
+  void subscribe(bus::Participant& bus, const std::string& topic, const std::string& profile,
+                 std::function<void(RecordEntry&&)> sink) const override {
+    auto& reader = bus.makeReader<T>(topic, profile);
+    reader.onDataWithInfo([sink = std::move(sink), topic, type = name_](const T& s, const bus::dds::SampleInfo& info) {
+      RecordEntry e;
+      e.receive_ns = bus::nowNs();
+      e.source_ns = info.source_timestamp.to_ns();
+      e.topic = topic;
+      e.type = type;
+      e.payload = serializeSample(s);
+      sink(std::move(e));
+    });
+  }
+  std::unique_ptr<SamplePublisher> makePublisher(bus::Participant& bus, const std::string& topic,
+                                                 const std::string& profile) const override {
+    return std::make_unique<Publisher<T>>(bus.makeWriter<T>(topic, profile));
+  }
+
+  void writeCsvHeader(std::ostream& out, const RecordEntry& first) const override {
+    out << "t,receive_ns,source_ns,stamp_ns,seq,source";
+    csvColumns(out, decode(first));
+    out << '\n';
+  }
+  void writeCsvRows(std::ostream& out, const RecordEntry& e, const CsvContext& ctx) const override {
+    const T s = decode(e);
+    char t[40];
+    std::snprintf(t, sizeof(t), "%.6f", 1e-9 * static_cast<double>(e.receive_ns - ctx.t0_ns));
+    const std::string prefix = std::string(t) + "," + std::to_string(e.receive_ns) + "," + std::to_string(e.source_ns) +
+                               "," + std::to_string(s.header().stamp_ns()) + "," + std::to_string(s.header().seq()) +
+                               "," + csvField(s.header().source());
+    csvRows(out, prefix, s);
+  }
+  std::string summary(const RecordEntry& e) const override {
+    const T s = decode(e);
+    std::ostringstream o;
+    o << e.topic << " seq " << s.header().seq() << " from '" << s.header().source() << "' stamp "
+      << s.header().stamp_ns() << ":";
+    std::ostringstream row;
+    csvRows(row, "", s);
+    std::string r = row.str();
+    if (!r.empty() && r.back() == '\n') r.pop_back();
+    if (r.size() > 160) r = r.substr(0, 160) + "...";
+    o << r;
+    return o.str();
+  }
+
+ private:
+  T decode(const RecordEntry& e) const {
+    T s;
+    if (!deserializeSample(e.payload, s))
+      throw RecordError("record of topic '" + e.topic + "' does not deserialize as " + name_ + " (" +
+                        std::to_string(e.payload.size()) + " bytes)");
+    return s;
+  }
+  std::string name_;
+};
+
+}  // namespace
+
+const std::vector<const TopicCodec*>& allCodecs() {
+  static const Codec<msg::ObjectTargets> object_targets;
+  static const Codec<msg::HandTargets> hand_targets;
+  static const Codec<msg::MotionPriority> motion_priority;
+  static const Codec<msg::BodySchemaChange> body_schema;
+  static const Codec<msg::WalkCommand> walk_command;
+  static const Codec<msg::JointState> joint_state;
+  static const Codec<msg::ControlStatus> control_status;
+  static const Codec<msg::Heartbeat> heartbeat;
+  static const std::vector<const TopicCodec*> all = {&object_targets, &hand_targets, &motion_priority, &body_schema,
+                                                     &walk_command,   &joint_state,  &control_status,  &heartbeat};
+  return all;
+}
+
+const TopicCodec* findCodecByType(const std::string& type_name) {
+  for (const TopicCodec* c : allCodecs())
+    if (c->typeName() == type_name || c->shortName() == type_name) return c;
+  return nullptr;
+}
+
+const TopicCodec* findCodecByTopic(const std::string& topic) {
+  for (const TopicCodec* c : allCodecs())
+    if (topic == c->defaultTopic()) return c;
+  return nullptr;
+}
+
+TopicSpec parseTopicSpec(const std::string& text) {
+  TopicSpec spec;
+  const auto colon = text.find(':');
+  // "reflex::msg::X" contains "::"; a spec separates topic and type with the FIRST single ':'.
+  if (colon != std::string::npos && colon > 0) {
+    spec.topic = text.substr(0, colon);
+    const std::string type = text.substr(colon + 1);
+    spec.codec = findCodecByType(type);
+    if (!spec.codec) {
+      std::string known;
+      for (const TopicCodec* c : allCodecs()) known += " " + c->shortName();
+      throw RecordError("unknown type '" + type + "' in topic '" + text + "' (known:" + known + ")");
+    }
+    return spec;
+  }
+  spec.topic = text;
+  spec.codec = findCodecByTopic(text);
+  if (!spec.codec) {
+    std::string known;
+    for (const TopicCodec* c : allCodecs()) known += std::string(" ") + c->defaultTopic();
+    throw RecordError("unknown topic '" + text + "' (known:" + known + "; or give NAME:TYPE)");
+  }
+  return spec;
+}
+
+std::string csvField(const std::string& s) {
+  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"') out += '"';
+    out += c;
+  }
+  return out + "\"";
+}
+
+}  // namespace reflex::record

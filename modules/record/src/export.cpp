@@ -1,0 +1,42 @@
+#include "reflex/record/recorder.hpp"
+
+#include <fstream>
+
+namespace reflex::record {
+
+std::string csvFileNameForTopic(const std::string& topic) {
+  std::string name;
+  for (char c : topic) name += (c == '/' || c == ':' || c == ' ') ? '_' : c;
+  return name + ".csv";
+}
+
+std::uint64_t exportCsv(const std::string& input, const std::string& topic, const std::string& csv_path) {
+  const RecordingInfo info = scanRecording(input);
+  const auto it = info.topics.find(topic);
+  if (it == info.topics.end()) {
+    std::string have;
+    for (const auto& kv : info.topics) have += " " + kv.first;
+    throw RecordError("topic '" + topic + "' is not in recording '" + input + "' (it has:" +
+                      (have.empty() ? std::string(" nothing") : have) + ")");
+  }
+  const TopicCodec* codec = findCodecByType(it->second.type);
+  if (!codec) throw RecordError("topic '" + topic + "' has unknown type '" + it->second.type + "'");
+  std::ofstream out(csv_path);
+  if (!out) throw RecordError("cannot write CSV file '" + csv_path + "'");
+  RecordReader reader(input);
+  RecordEntry e;
+  CsvContext ctx;
+  ctx.t0_ns = info.first_ns;
+  std::uint64_t n = 0;
+  while (reader.next(e)) {
+    if (e.topic != topic) continue;
+    if (n == 0) codec->writeCsvHeader(out, e);
+    codec->writeCsvRows(out, e, ctx);
+    ++n;
+  }
+  out.flush();
+  if (!out) throw RecordError("error while writing CSV file '" + csv_path + "'");
+  return n;
+}
+
+}  // namespace reflex::record

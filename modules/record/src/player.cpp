@@ -1,0 +1,141 @@
+#include "reflex/record/recorder.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <thread>
+
+namespace reflex::record {
+
+RecordingInfo scanRecording(const std::string& path) {
+  RecordReader reader(path);
+  RecordingInfo info;
+  RecordEntry e;
+  while (reader.next(e)) {
+    if (info.records == 0) info.first_ns = info.last_ns = e.receive_ns;
+    info.first_ns = std::min(info.first_ns, e.receive_ns);
+    info.last_ns = std::max(info.last_ns, e.receive_ns);
+    ++info.records;
+    TopicCount& c = info.topics[e.topic];
+    c.type = e.type;
+    ++c.samples;
+  }
+  info.tail = reader.tailState();
+  info.valid_end = reader.validEnd();
+  info.file_size = reader.fileSize();
+  info.skipped_bytes = reader.skippedBytes();
+  return info;
+}
+
+Player::Player(const PlayerOptions& options) : options_(options) {
+  if (!std::isfinite(options.rate) || options.rate < 0.0)
+    throw RecordError("--rate " + std::to_string(options.rate) + " must be > 0 (or 0: as fast as possible)");
+  if (!std::isfinite(options.start) || options.start < 0.0)
+    throw RecordError("--start " + std::to_string(options.start) + " s must not be negative");
+  if (!std::isfinite(options.duration) || options.duration < 0.0)
+    throw RecordError("--duration " + std::to_string(options.duration) + " s must not be negative");
+  if (!std::isfinite(options.delay) || options.delay < 0.0)
+    throw RecordError("--delay " + std::to_string(options.delay) + " s must not be negative");
+  const RecordingInfo info = scanRecording(options.input);
+  if (info.records == 0) throw RecordError("recording '" + options.input + "' holds no sample");
+  stats_.tail = info.tail;
+  first_ns_ = info.first_ns;
+  begin_ns_ = info.first_ns + static_cast<std::int64_t>(std::llround(options.start * 1e9));
+  end_ns_ = options.duration > 0.0 ? begin_ns_ + static_cast<std::int64_t>(std::llround(options.duration * 1e9))
+                                   : info.last_ns;
+  end_ns_ = std::min(end_ns_, info.last_ns);
+  if (begin_ns_ > info.last_ns) {
+    char buf[160];
+    std::snprintf(buf, sizeof(buf), "--start %.3f s is beyond the end of the recording (%.3f s long)", options.start,
+                  1e-9 * static_cast<double>(info.last_ns - info.first_ns));
+    throw RecordError(std::string(buf) + " '" + options.input + "'");
+  }
+  std::vector<std::string> topics = options.topics;
+  if (topics.empty())
+    for (const auto& kv : info.topics) topics.push_back(kv.first);
+  for (const std::string& t : options.topics) {
+    if (!info.topics.count(t)) {
+      std::string have;
+      for (const auto& kv : info.topics) have += " " + kv.first;
+      throw RecordError("topic '" + t + "' is not in recording '" + options.input + "' (it has:" + have + ")");
+    }
+  }
+  for (const std::string& ex : options.exclude) {
+    const auto it = std::find(topics.begin(), topics.end(), ex);
+    if (it == topics.end()) throw RecordError("--exclude '" + ex + "' is not among the played topics");
+    topics.erase(it);
+  }
+  if (topics.empty()) throw RecordError("no topic left to play from '" + options.input + "'");
+
+  bus_ = std::make_unique<bus::Participant>(options.bus);
+  for (const std::string& t : topics) {
+    const std::string& type = info.topics.at(t).type;
+    const TopicCodec* codec = findCodecByType(type);
+    if (!codec) throw RecordError("topic '" + t + "' in '" + options.input + "' has unknown type '" + type + "'");
+    publishers_[t] = codec->makePublisher(*bus_, t, codec->defaultProfile());
+  }
+  RecordReader reader(options.input);
+  RecordEntry e;
+  while (reader.next(e))
+    if (e.receive_ns >= begin_ns_ && e.receive_ns <= end_ns_ && publishers_.count(e.topic)) ++window_records_;
+}
+
+Player::~Player() = default;
+
+bus::Participant& Player::bus() { return *bus_; }
+
+void Player::run() {
+  using Clock = std::chrono::steady_clock;
+  const bool fast = options_.rate == 0.0;
+  const auto sleepFor = [&](double seconds) {  // interruptible by stop()
+    const auto until = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+    while (!stop_ && !bus_->stopRequested() && Clock::now() < until)
+      std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(50)));
+  };
+  sleepFor(options_.delay);
+  const double window = windowSeconds();
+  auto last_print = Clock::now() - std::chrono::seconds(1);
+  RecordReader reader(options_.input);
+  RecordEntry e;
+  do {
+    reader.rewind();
+    std::uint64_t in_pass = 0;
+    const auto pass_start = Clock::now();
+    while (!stop_ && !bus_->stopRequested() && reader.next(e)) {
+      if (e.receive_ns < begin_ns_) continue;
+      if (e.receive_ns > end_ns_) break;
+      auto it = publishers_.find(e.topic);
+      if (it == publishers_.end()) continue;
+      const double t_rec = 1e-9 * static_cast<double>(e.receive_ns - begin_ns_);
+      if (!fast) {
+        const auto due = pass_start + std::chrono::duration_cast<Clock::duration>(
+                                          std::chrono::duration<double>(t_rec / options_.rate));
+        while (!stop_ && !bus_->stopRequested() && Clock::now() < due)
+          std::this_thread::sleep_for(std::min<Clock::duration>(due - Clock::now(), std::chrono::milliseconds(50)));
+        if (stop_ || bus_->stopRequested()) break;
+      }
+      const std::int64_t shift = options_.restamp ? bus::nowNs() - e.receive_ns : 0;
+      if (it->second->publish(e.payload, shift))
+        ++stats_.published;
+      else
+        ++stats_.failed;
+      ++in_pass;
+      const auto now = Clock::now();
+      if (options_.progress && now - last_print >= std::chrono::milliseconds(250)) {
+        last_print = now;
+        std::fprintf(stderr, "\rreflex_play: %7.2f / %.2f s (%3.0f%%)  %llu / %llu samples  rate %gx  loop %llu   ",
+                     t_rec + options_.start, window + options_.start, window > 0 ? 100.0 * t_rec / window : 100.0,
+                     static_cast<unsigned long long>(in_pass), static_cast<unsigned long long>(window_records_),
+                     options_.rate, static_cast<unsigned long long>(stats_.loops + 1));
+      }
+    }
+    if (stop_ || bus_->stopRequested()) break;
+    ++stats_.loops;
+  } while (options_.loop);
+  if (options_.progress) std::fprintf(stderr, "\n");
+}
+
+}  // namespace reflex::record

@@ -1,0 +1,316 @@
+#include "reflex/record/record_file.hpp"
+
+#include <array>
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace reflex::record {
+
+namespace {
+
+std::array<std::uint32_t, 256> makeCrcTable() {
+  std::array<std::uint32_t, 256> table{};
+  for (std::uint32_t i = 0; i < 256; ++i) {
+    std::uint32_t c = i;
+    for (int k = 0; k < 8; ++k) c = (c & 1u) ? (0xEDB88320u ^ (c >> 1)) : (c >> 1);
+    table[i] = c;
+  }
+  return table;
+}
+
+void putU16(std::vector<std::uint8_t>& b, std::uint16_t v) {
+  for (int i = 0; i < 2; ++i) b.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+}
+void putU32(std::vector<std::uint8_t>& b, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) b.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+}
+void putI64(std::vector<std::uint8_t>& b, std::int64_t v) {
+  const auto u = static_cast<std::uint64_t>(v);
+  for (int i = 0; i < 8; ++i) b.push_back(static_cast<std::uint8_t>(u >> (8 * i)));
+}
+std::uint32_t getU32(const std::uint8_t* p) {
+  return static_cast<std::uint32_t>(p[0]) | (static_cast<std::uint32_t>(p[1]) << 8) |
+         (static_cast<std::uint32_t>(p[2]) << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
+}
+std::uint16_t getU16(const std::uint8_t* p) {
+  return static_cast<std::uint16_t>(p[0] | (p[1] << 8));
+}
+std::int64_t getI64(const std::uint8_t* p) {
+  std::uint64_t u = 0;
+  for (int i = 7; i >= 0; --i) u = (u << 8) | p[i];
+  return static_cast<std::int64_t>(u);
+}
+
+std::string sysError(const std::string& what, const std::string& path) {
+  return what + " '" + path + "': " + std::strerror(errno);
+}
+
+}  // namespace
+
+std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc) noexcept {
+  static const std::array<std::uint32_t, 256> table = makeCrcTable();
+  const auto* p = static_cast<const std::uint8_t*>(data);
+  crc = ~crc;
+  for (std::size_t i = 0; i < size; ++i) crc = table[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
+  return ~crc;
+}
+
+std::vector<std::uint8_t> encodeRecord(const RecordEntry& e) {
+  if (e.topic.size() > 0xFFFF) throw RecordError("topic name longer than 65535 bytes: '" + e.topic.substr(0, 64) + "...'");
+  if (e.type.size() > 0xFFFF) throw RecordError("type name longer than 65535 bytes: '" + e.type.substr(0, 64) + "...'");
+  const std::size_t body_size = 8 + 8 + 2 + e.topic.size() + 2 + e.type.size() + 4 + e.payload.size();
+  if (body_size > kMaxBodySize)
+    throw RecordError("sample of topic '" + e.topic + "' is " + std::to_string(body_size) + " bytes, above the " +
+                      std::to_string(kMaxBodySize) + "-byte record limit");
+  std::vector<std::uint8_t> out;
+  out.reserve(kRecordHeaderSize + body_size);
+  putU32(out, kRecordSync);
+  putU32(out, static_cast<std::uint32_t>(body_size));
+  putU32(out, 0);  // CRC, filled below
+  putI64(out, e.receive_ns);
+  putI64(out, e.source_ns);
+  putU16(out, static_cast<std::uint16_t>(e.topic.size()));
+  out.insert(out.end(), e.topic.begin(), e.topic.end());
+  putU16(out, static_cast<std::uint16_t>(e.type.size()));
+  out.insert(out.end(), e.type.begin(), e.type.end());
+  putU32(out, static_cast<std::uint32_t>(e.payload.size()));
+  out.insert(out.end(), e.payload.begin(), e.payload.end());
+  const std::uint32_t crc = crc32(out.data() + kRecordHeaderSize, body_size);
+  for (int i = 0; i < 4; ++i) out[8 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// RecordWriter
+
+RecordWriter::RecordWriter(const std::string& path, const WriterOptions& options) : path_(path), options_(options) {
+  if (options.flush_interval.count() < 0 || options.sync_interval.count() < 0)
+    throw RecordError("flush/sync intervals must not be negative (recording '" + path + "')");
+  std::uint64_t keep = 0;
+  bool existing = false;
+  if (options.append) {
+    struct stat st{};
+    if (::stat(path.c_str(), &st) == 0 && st.st_size > 0) {
+      RecordReader check(path);  // throws if it is not a recording
+      check.setResync(false);
+      RecordEntry scratch;
+      while (check.next(scratch)) {}
+      if (check.tailState() == TailState::kCorrupt)
+        throw RecordError("cannot append to '" + path + "': corrupt record at byte " +
+                          std::to_string(check.firstCorruptOffset()));
+      keep = check.validEnd();  // a torn last record is cut off before appending
+      existing = true;
+    }
+  }
+  const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | (existing ? 0 : O_TRUNC);
+  fd_ = ::open(path.c_str(), flags, 0644);
+  if (fd_ < 0) throw RecordError(sysError("cannot open recording", path));
+  if (existing) {
+    if (::ftruncate(fd_, static_cast<off_t>(keep)) != 0 || ::lseek(fd_, static_cast<off_t>(keep), SEEK_SET) < 0) {
+      const std::string msg = sysError("cannot position at the end of recording", path);
+      ::close(fd_);
+      fd_ = -1;
+      throw RecordError(msg);
+    }
+  } else {
+    std::vector<std::uint8_t> header(kFileMagic, kFileMagic + 8);
+    putU32(header, kFormatVersion);
+    putU32(header, 0);
+    buffer_ = std::move(header);
+    flush();
+  }
+  buffer_.reserve(options_.flush_bytes + 4096);
+  last_sync_ = std::chrono::steady_clock::now();
+}
+
+RecordWriter::~RecordWriter() {
+  try {
+    close();
+  } catch (const RecordError&) {
+    // Destructors must not throw; close() reports errors to callers who want them.
+  }
+}
+
+void RecordWriter::append(const RecordEntry& entry) {
+  if (fd_ < 0) throw RecordError("recording '" + path_ + "' is closed");
+  const std::vector<std::uint8_t> rec = encodeRecord(entry);
+  if (buffer_.empty()) oldest_buffered_ = std::chrono::steady_clock::now();
+  buffer_.insert(buffer_.end(), rec.begin(), rec.end());
+  ++records_;
+  if (buffer_.size() >= options_.flush_bytes) flush();
+  poll();
+}
+
+void RecordWriter::poll() {
+  if (fd_ < 0) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (!buffer_.empty() && now - oldest_buffered_ >= options_.flush_interval) flush();
+  if (now - last_sync_ >= options_.sync_interval) sync();
+}
+
+void RecordWriter::flush() {
+  std::size_t done = 0;
+  while (done < buffer_.size()) {
+    const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw RecordError(sysError("cannot write recording", path_));
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  bytes_ += done;
+  buffer_.clear();
+}
+
+void RecordWriter::sync() {
+  if (fd_ < 0) return;
+  flush();
+  if (::fsync(fd_) != 0) throw RecordError(sysError("cannot fsync recording", path_));
+  last_sync_ = std::chrono::steady_clock::now();
+}
+
+void RecordWriter::close() {
+  if (fd_ < 0) return;
+  const int fd = fd_;
+  try {
+    sync();
+  } catch (...) {
+    ::close(fd);
+    fd_ = -1;
+    throw;
+  }
+  fd_ = -1;
+  if (::close(fd) != 0) throw RecordError(sysError("cannot close recording", path_));
+}
+
+// ---------------------------------------------------------------------------------------------
+// RecordReader
+
+RecordReader::RecordReader(const std::string& path) : path_(path) {
+  file_ = std::fopen(path.c_str(), "rb");
+  if (!file_) throw RecordError(sysError("cannot open recording", path));
+  struct stat st{};
+  if (::fstat(fileno(file_), &st) != 0) {
+    std::fclose(file_);
+    throw RecordError(sysError("cannot stat recording", path));
+  }
+  size_ = static_cast<std::uint64_t>(st.st_size);
+  std::uint8_t header[kFileHeaderSize];
+  if (size_ < kFileHeaderSize || !readAt(0, header, kFileHeaderSize) || std::memcmp(header, kFileMagic, 8) != 0) {
+    std::fclose(file_);
+    throw RecordError("'" + path + "' is not a Reflex recording (no RFXREC header)");
+  }
+  const std::uint32_t version = getU32(header + 8);
+  if (version != kFormatVersion) {
+    std::fclose(file_);
+    throw RecordError("recording '" + path + "' has format version " + std::to_string(version) +
+                      "; this tool reads version " + std::to_string(kFormatVersion));
+  }
+}
+
+RecordReader::~RecordReader() {
+  if (file_) std::fclose(file_);
+}
+
+bool RecordReader::readAt(std::uint64_t offset, void* dst, std::size_t n) {
+  if (offset + n > size_) return false;
+  if (fseeko(file_, static_cast<off_t>(offset), SEEK_SET) != 0) return false;
+  return std::fread(dst, 1, n, file_) == n;
+}
+
+RecordReader::Parse RecordReader::parseAt(std::uint64_t offset, RecordEntry& out, std::uint64_t& record_size) {
+  std::uint8_t head[kRecordHeaderSize];
+  if (offset + kRecordHeaderSize > size_) return Parse::kShort;
+  if (!readAt(offset, head, kRecordHeaderSize)) return Parse::kShort;
+  if (getU32(head) != kRecordSync) return Parse::kBad;
+  const std::uint32_t len = getU32(head + 4);
+  const std::uint32_t crc = getU32(head + 8);
+  if (len < 8 + 8 + 2 + 2 + 4 || len > kMaxBodySize) return Parse::kBad;
+  if (offset + kRecordHeaderSize + len > size_) return Parse::kShort;
+  body_.resize(len);
+  if (!readAt(offset + kRecordHeaderSize, body_.data(), len)) return Parse::kShort;
+  if (crc32(body_.data(), len) != crc) return Parse::kBad;
+  // The CRC checks, so the inner lengths were written by encodeRecord; still verify them.
+  const std::uint8_t* p = body_.data();
+  const std::uint8_t* end = p + len;
+  out.receive_ns = getI64(p);
+  out.source_ns = getI64(p + 8);
+  p += 16;
+  const std::uint16_t topic_len = getU16(p);
+  p += 2;
+  if (end - p < topic_len + 2) return Parse::kBad;
+  out.topic.assign(reinterpret_cast<const char*>(p), topic_len);
+  p += topic_len;
+  const std::uint16_t type_len = getU16(p);
+  p += 2;
+  if (end - p < type_len + 4) return Parse::kBad;
+  out.type.assign(reinterpret_cast<const char*>(p), type_len);
+  p += type_len;
+  const std::uint32_t payload_len = getU32(p);
+  p += 4;
+  if (static_cast<std::uint64_t>(end - p) != payload_len) return Parse::kBad;
+  out.payload.assign(p, end);
+  record_size = kRecordHeaderSize + len;
+  return Parse::kOk;
+}
+
+bool RecordReader::next(RecordEntry& out) {
+  while (pos_ < size_) {
+    std::uint64_t record_size = 0;
+    const Parse r = parseAt(pos_, out, record_size);
+    if (r == Parse::kOk) {
+      pos_ += record_size;
+      valid_end_ = pos_;
+      return true;
+    }
+    if (r == Parse::kShort && state_ != TailState::kCorrupt) {
+      // The file ends inside this record: a torn last write (kill -9, power loss). Not an error.
+      state_ = TailState::kTorn;
+      return false;
+    }
+    if (state_ != TailState::kCorrupt) first_corrupt_ = pos_;
+    state_ = TailState::kCorrupt;
+    if (!resync_) return false;
+    // Scan forward for the next sync word whose record checks.
+    const std::uint64_t from = pos_;
+    std::uint64_t scan = pos_ + 1;
+    bool found = false;
+    std::uint8_t b4[4];
+    for (; scan + kRecordHeaderSize <= size_; ++scan) {
+      if (!readAt(scan, b4, 4) || getU32(b4) != kRecordSync) continue;
+      std::uint64_t sz = 0;
+      if (parseAt(scan, out, sz) == Parse::kOk) {
+        found = true;
+        break;
+      }
+    }
+    if (!found) {
+      skipped_ += size_ - from;
+      pos_ = size_;
+      return false;
+    }
+    skipped_ += scan - from;
+    pos_ = scan;
+  }
+  return false;
+}
+
+void RecordReader::rewind() {
+  pos_ = valid_end_ = kFileHeaderSize;
+  skipped_ = first_corrupt_ = 0;
+  state_ = TailState::kClean;
+}
+
+const char* toString(TailState s) {
+  switch (s) {
+    case TailState::kClean: return "clean";
+    case TailState::kTorn: return "torn last record (dropped)";
+    case TailState::kCorrupt: return "corrupt records skipped";
+  }
+  return "?";
+}
+
+}  // namespace reflex::record

@@ -1,0 +1,77 @@
+#include "reflex/record/recorder.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+
+namespace reflex::record {
+
+Recorder::Recorder(const RecorderOptions& options) : options_(options) {
+  if (options.output.empty()) throw RecordError("no output file given for the recording");
+  if (!(options.duration >= 0.0))
+    throw RecordError("recording duration " + std::to_string(options.duration) + " s must not be negative");
+  std::vector<TopicSpec> specs;
+  if (options.topics.empty()) {
+    for (const TopicCodec* c : allCodecs()) specs.push_back({c->defaultTopic(), c});
+  } else {
+    for (const std::string& t : options.topics) specs.push_back(parseTopicSpec(t));
+  }
+  for (const std::string& ex : options.exclude) {
+    const auto it = std::find_if(specs.begin(), specs.end(), [&](const TopicSpec& s) { return s.topic == ex; });
+    if (it == specs.end()) throw RecordError("--exclude '" + ex + "' is not among the recorded topics");
+    specs.erase(it);
+  }
+  if (specs.empty()) throw RecordError("no topic left to record");
+
+  bus_ = std::make_unique<bus::Participant>(options.bus);
+  writer_ = std::make_unique<RecordWriter>(options.output, options.writer);
+  for (const TopicSpec& s : specs) {
+    if (counts_.count(s.topic)) throw RecordError("topic '" + s.topic + "' given twice");
+    counts_[s.topic].type = s.codec->typeName();
+    const std::string profile =
+        options.late_joiner_state && s.codec->isState() ? s.codec->defaultProfile() : bus::kProfileRecord;
+    TopicCount* count = &counts_[s.topic];
+    s.codec->subscribe(*bus_, s.topic, profile, [this, count](RecordEntry&& e) {
+      writer_->append(e);
+      ++count->samples;
+    });
+  }
+}
+
+Recorder::~Recorder() = default;
+
+bus::Participant& Recorder::bus() { return *bus_; }
+
+void Recorder::stop() noexcept { bus_->stop(); }
+
+std::uint64_t Recorder::totalSamples() const {
+  std::uint64_t n = 0;
+  for (const auto& kv : counts_) n += kv.second.samples;
+  return n;
+}
+
+void Recorder::run() {
+  const auto start = std::chrono::steady_clock::now();
+  auto last_print = start;
+  // The flush/sync policy is time based; poll it also when nothing arrives.
+  bus_->every(std::chrono::milliseconds(20), [&] {
+    writer_->poll();
+    const auto now = std::chrono::steady_clock::now();
+    if (options_.progress && now - last_print >= std::chrono::seconds(1)) {
+      last_print = now;
+      std::fprintf(stderr, "reflex_record: %.0f s, %llu samples, %.1f MB -> %s\n",
+                   std::chrono::duration<double>(now - start).count(),
+                   static_cast<unsigned long long>(totalSamples()),
+                   1e-6 * static_cast<double>(writer_->bytesWritten()), options_.output.c_str());
+    }
+  });
+  if (options_.duration > 0.0)
+    bus_->runFor(std::chrono::nanoseconds(static_cast<std::int64_t>(options_.duration * 1e9)));
+  else
+    bus_->run();
+  writer_->close();
+}
+
+}  // namespace reflex::record
