@@ -29,9 +29,13 @@ bool SessionSource::restart() {
   return true;
 }
 
+bool isDeviceSpec(const std::string& spec) {
+  return !spec.empty() && spec.size() < 4 && std::all_of(spec.begin(), spec.end(), ::isdigit);
+}
+
 std::unique_ptr<cv::VideoCapture> openCapture(const std::string& spec) {
   auto cap = std::make_unique<cv::VideoCapture>();
-  const bool is_index = !spec.empty() && std::all_of(spec.begin(), spec.end(), ::isdigit);
+  const bool is_index = isDeviceSpec(spec);
   bool ok = false;
   if (is_index)
     ok = cap->open(std::stoi(spec), cv::CAP_V4L2) || cap->open(std::stoi(spec), cv::CAP_ANY);
@@ -97,6 +101,40 @@ ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
     return ReadStatus::kSkipped;
   }
   return ReadStatus::kOk;
+}
+
+RecordStats recordSession(StereoSource& source, SessionWriter& writer, const RecordOptions& options,
+                          const std::atomic<bool>& stop, const std::function<void(int, const std::string&)>& on_skip,
+                          const std::function<void(int, double)>& on_progress) {
+  RecordStats stats;
+  StereoFrame frame;
+  std::string message;
+  double first = 0.0;
+  while (!stop.load()) {
+    if (options.max_frames > 0 && stats.recorded >= options.max_frames) break;
+    const ReadStatus st = source.next(frame, message);
+    if (st == ReadStatus::kEnd) {
+      stats.end_message = message;
+      break;
+    }
+    if (st == ReadStatus::kSkipped) {
+      ++stats.skipped;
+      if (on_skip) on_skip(frame.index, message);
+      continue;
+    }
+    if (stats.recorded == 0) first = frame.stamp;
+    if (options.duration > 0.0 && frame.stamp - first > options.duration) break;
+    try {
+      writer.write(frame.stamp, frame.left, frame.right);
+    } catch (const VisionError& e) {
+      ++stats.skipped;
+      if (on_skip) on_skip(frame.index, e.what());
+      continue;
+    }
+    ++stats.recorded;
+    if (on_progress) on_progress(stats.recorded, frame.stamp - first);
+  }
+  return stats;
 }
 
 }  // namespace reflex::vision

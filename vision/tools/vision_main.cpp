@@ -108,12 +108,14 @@ int main(int argc, char** argv) {
       if (objects_path.empty()) throw VisionError("live cameras need --objects");
       if (start != 0.0 || replay.loop) throw VisionError("--start and --loop apply to sessions only");
       const StereoCalibration calib = loadStereoCalibration(calib_left, calib_right);
+      // A video file standing in for a camera is paced at its own frame rate.
+      const std::string& first_spec = sbs.empty() ? cam_left : sbs;
+      auto left = openCapture(first_spec);  // left first, so an error names the first bad device
+      const double pace = isDeviceSpec(first_spec) ? 0.0 : left->get(cv::CAP_PROP_FPS);
       if (!sbs.empty())
-        source = std::make_unique<CameraSource>(openCapture(sbs), nullptr, calib, 0.0);
-      else {
-        auto left = openCapture(cam_left);  // left first, so an error names the first bad device
-        source = std::make_unique<CameraSource>(std::move(left), openCapture(cam_right), calib, 0.0);
-      }
+        source = std::make_unique<CameraSource>(std::move(left), nullptr, calib, pace);
+      else
+        source = std::make_unique<CameraSource>(std::move(left), openCapture(cam_right), calib, pace);
       if (replay.rate != 1.0 && rate_given) throw VisionError("--rate applies to sessions only");
       replay.rate = 1.0;
     }

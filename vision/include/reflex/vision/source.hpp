@@ -7,7 +7,9 @@
 
 #include <opencv2/videoio.hpp>
 
+#include <atomic>
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -48,6 +50,8 @@ class SessionSource : public StereoSource {
   int first_ = 0;
 };
 
+/// True if a capture spec names a device index ("0", "1", ...) rather than a file or URL.
+bool isDeviceSpec(const std::string& spec);
 /// Opens a capture spec: an integer is a device index (V4L2), anything else a file or URL.
 /// Throws VisionError naming the spec if it cannot be opened.
 std::unique_ptr<cv::VideoCapture> openCapture(const std::string& spec);
@@ -79,5 +83,23 @@ class CameraSource : public StereoSource {
   cv::Mat sbs_;
   std::chrono::steady_clock::time_point next_due_{};
 };
+
+struct RecordOptions {
+  int max_frames = 0;     ///< stop after this many recorded pairs (0 = no limit)
+  double duration = 0.0;  ///< stop after this many seconds since the first pair (0 = no limit)
+};
+
+struct RecordStats {
+  int recorded = 0;
+  int skipped = 0;
+  std::string end_message;  ///< why the source stopped, if it did
+};
+
+/// Copies pairs from a (live) source into a session writer until a limit, the end of the source, or
+/// `stop`. Skipped frames are reported through on_skip and not written. Never throws for bad frames.
+RecordStats recordSession(StereoSource& source, SessionWriter& writer, const RecordOptions& options,
+                          const std::atomic<bool>& stop,
+                          const std::function<void(int frame, const std::string& why)>& on_skip = {},
+                          const std::function<void(int recorded, double seconds)>& on_progress = {});
 
 }  // namespace reflex::vision
