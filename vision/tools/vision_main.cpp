@@ -23,6 +23,7 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <thread>
 
 namespace {
 
@@ -45,7 +46,7 @@ int main(int argc, char** argv) {
   bool rate_given = false, quiet = false, progress_flag = false, no_refine = false;
   PipelineOptions popt;
   std::string family;
-  int domain = -1;
+  std::string domain_text, frame_id = "base_link";
   std::string profiles;
 
   app.add_option("--session", session, "recorded session folder");
@@ -74,8 +75,10 @@ int main(int argc, char** argv) {
   app.add_flag("--no-refine", no_refine, "stereo-only triangulation (do not use the tag size)");
   app.add_flag("--progress", progress_flag, "show progress even if stderr is not a terminal");
   app.add_flag("--quiet", quiet, "no progress display");
-  app.add_option("--domain", domain, "DDS domain id (default: the bus default)");
+  app.add_option("--domain", domain_text, "DDS domain id (default: $REFLEX_DOMAIN_ID, else 0)");
   app.add_option("--profiles", profiles, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
+  app.add_option("--frame-id", frame_id, "name of the robot base frame written into ObjectTargets")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   rate_given = rate_opt->count() > 0;
 
@@ -133,15 +136,18 @@ int main(int argc, char** argv) {
     }
 #ifdef REFLEX_VISION_WITH_BUS
     std::unique_ptr<VisionPublisher> publisher;
-    if (dump_path.empty()) publisher = std::make_unique<VisionPublisher>(domain, profiles);
+    if (dump_path.empty()) {
+      reflex::bus::BusConfig config;
+      config.module_name = "vision";
+      if (!domain_text.empty()) config.domain_id = reflex::bus::parseDomainId(domain_text, "--domain");
+      config.profiles_file = profiles;
+      publisher = std::make_unique<VisionPublisher>(config, frame_id);
+    }
 #else
     if (dump_path.empty())
       throw VisionError("this reflex_vision was built without the DDS bus (reflex::bus); use --dump FILE.csv");
-    (void)domain;
+    (void)frame_id;
 #endif
-
-    std::signal(SIGINT, onSignal);
-    std::signal(SIGTERM, onSignal);
     const bool show = !quiet && (progress_flag || isatty(STDERR_FILENO));
     auto last_shown = std::chrono::steady_clock::now() - std::chrono::seconds(1);
     RunCallbacks cb;
@@ -170,7 +176,37 @@ int main(int argc, char** argv) {
       else
         std::fprintf(stderr, "\rframe %d  t=%.1f s  objects=%d   ", p.frame + 1, p.session_time, p.objects);
     };
-    const RunStats stats = runVision(*source, pipeline, replay, cb, g_stop);
+    RunStats stats;
+#ifdef REFLEX_VISION_WITH_BUS
+    if (publisher) {
+      // The bus loop (heartbeat timer, signal-driven stop) runs on this thread; vision on another.
+      reflex::bus::StopOnSignal stop_on_signal(publisher->bus());
+      std::string worker_error;
+      std::thread worker([&] {
+        try {
+          stats = runVision(*source, pipeline, replay, cb, g_stop);
+        } catch (const std::exception& e) {
+          worker_error = e.what();
+        }
+        publisher->bus().stop();
+      });
+      publisher->heartbeat().setState(reflex::msg::STATE_RUNNING);
+      publisher->bus().run();
+      g_stop.store(true);
+      worker.join();
+      if (!worker_error.empty() || !stats.end_message.empty())
+        publisher->heartbeat().setState(reflex::msg::STATE_ERROR,
+                                        worker_error.empty() ? stats.end_message : worker_error);
+      else
+        publisher->heartbeat().setState(reflex::msg::STATE_STOPPING);
+      if (!worker_error.empty()) throw VisionError(worker_error);
+    } else
+#endif
+    {
+      std::signal(SIGINT, onSignal);
+      std::signal(SIGTERM, onSignal);
+      stats = runVision(*source, pipeline, replay, cb, g_stop);
+    }
     if (show) std::fprintf(stderr, "\n");
     std::cerr << "reflex_vision: " << stats.frames << " frames processed, " << stats.skipped << " skipped, "
               << stats.publications << " publications" << (dump_path.empty() ? "" : " (dump: " + dump_path + ")")

@@ -1,0 +1,43 @@
+#include "vision_publisher.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace reflex::vision {
+
+void toObjectTargets(const Publication& p, const std::string& frame_id, reflex::msg::ObjectTargets& out) {
+  out.capture_stamp_ns(static_cast<std::int64_t>(std::llround(p.capture_wall * 1e9)));
+  out.image_index(p.frame < 0 ? 0 : static_cast<std::uint64_t>(p.frame));
+  out.frame_id(frame_id);
+  std::vector<reflex::msg::ObjectTarget>& objects = out.objects();
+  objects.clear();
+  // The type bounds the sequence at 32 (another vendor's reader drops longer samples).
+  const std::size_t n = std::min<std::size_t>(p.objects.size(), 32);
+  for (std::size_t i = 0; i < n; ++i) {
+    const ObjectObservation& o = p.objects[i];
+    reflex::msg::ObjectTarget t;
+    t.name(o.name);
+    t.tag_id(o.tag_id);
+    t.position_base().x(o.p_B[0]);
+    t.position_base().y(o.p_B[1]);
+    t.position_base().z(o.p_B[2]);
+    t.position_camera().x(o.p_C[0]);
+    t.position_camera().y(o.p_C[1]);
+    t.position_camera().z(o.p_C[2]);
+    t.confidence(o.confidence);
+    objects.push_back(t);
+  }
+}
+
+VisionPublisher::VisionPublisher(const reflex::bus::BusConfig& config, std::string frame_id)
+    : bus_(config),
+      writer_(bus_.makeWriter<reflex::msg::ObjectTargets>()),
+      heartbeat_(bus_),
+      frame_id_(std::move(frame_id)) {}
+
+void VisionPublisher::publish(const Publication& p) {
+  toObjectTargets(p, frame_id_, sample_);
+  writer_.publish(sample_);
+}
+
+}  // namespace reflex::vision

@@ -1,0 +1,38 @@
+#pragma once
+// The DDS side of reflex_vision (linked only into the executable, never into reflex::vision):
+// owns the bus participant, the ObjectTargets writer (topic reflex/object_targets, profile
+// reflex_object_targets from bringup/dds/reflex_profiles.xml) and the heartbeat, and turns a
+// runner Publication into an ObjectTargets sample.
+#include "reflex/vision/runner.hpp"
+
+#include <reflex/bus/bus.hpp>
+#include <reflex/msg/vision.h>
+
+#include <string>
+
+namespace reflex::vision {
+
+/// Fills an ObjectTargets sample from a publication (header left to Writer::publish).
+/// capture_stamp_ns: the frame's capture time on the system clock (replayed sessions: the capture
+/// mapped onto the replay clock, so consumers see fresh data; see runner.hpp).
+void toObjectTargets(const Publication& p, const std::string& frame_id, reflex::msg::ObjectTargets& out);
+
+class VisionPublisher {
+ public:
+  /// Throws reflex::bus::BusError naming what failed (profiles file, domain id, writer).
+  VisionPublisher(const reflex::bus::BusConfig& config, std::string frame_id);
+  /// Called from one thread (the runner's publication thread). Never throws.
+  void publish(const Publication& p);
+  reflex::bus::Participant& bus() { return bus_; }
+  reflex::bus::HeartbeatPublisher& heartbeat() { return heartbeat_; }
+  std::uint64_t published() const { return writer_.lastSeq(); }
+
+ private:
+  reflex::bus::Participant bus_;
+  reflex::bus::Writer<reflex::msg::ObjectTargets>& writer_;
+  reflex::bus::HeartbeatPublisher heartbeat_;
+  std::string frame_id_;
+  reflex::msg::ObjectTargets sample_;
+};
+
+}  // namespace reflex::vision
