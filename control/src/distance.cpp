@@ -13,9 +13,28 @@ DistanceData::DistanceData(const Model& model)
       prim_W(model.primitives.size()),
       prim_r(model.primitives.size(), 0.0) {
   for (std::size_t i = 0; i < model.pairs.size(); ++i) {
-    pairs[i].seg_a = model.pairs[i].a;
-    pairs[i].seg_b = model.pairs[i].b;
+    const SegmentPair& p = model.pairs[i];
+    pairs[i].seg_a = p.a;
+    pairs[i].seg_b = p.b;
+    pp_begin.push_back(static_cast<int>(pp_a.size()));
+    const Segment& sa = model.segments[p.a];
+    const Segment& sb = model.segments[p.b];
+    if (sa.body_schema_slot || sb.body_schema_slot) {
+      slot_pairs.push_back(static_cast<int>(i));
+      continue;
+    }
+    robot_pairs.push_back(static_cast<int>(i));
+    for (int a = sa.first_primitive; a < sa.first_primitive + sa.num_primitives; ++a) {
+      for (int b = sb.first_primitive; b < sb.first_primitive + sb.num_primitives; ++b) {
+        pp_a.push_back(a);
+        pp_b.push_back(b);
+      }
+    }
   }
+  pp_begin.push_back(static_cast<int>(pp_a.size()));
+  pp_s.assign(pp_a.size(), 0.0);
+  pp_t.assign(pp_a.size(), 0.0);
+  pp_core.assign(pp_a.size(), 0.0);
 }
 
 namespace {
@@ -88,56 +107,29 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
     }
   }
 
-  // 2. Every checked pair: the minimum over its primitive pairs (closest core points first; normal
-  //    and witness points only for the best primitive pair).
-  data.closest = -1;
-  double closest_d = kInf;
-  const int npairs = static_cast<int>(model.pairs.size());
+  // 2. The core closest points of every robot primitive pair, in one tight loop (independent
+  //    iterations: the long sqrt / division latency chains of neighbouring pairs overlap).
   const SegmentW* prim = data.prim_W.data();
   const double* radius = data.prim_r.data();
-  for (int i = 0; i < npairs; ++i) {
-    const SegmentPair& pair = model.pairs[i];
+  const int npp = static_cast<int>(data.pp_a.size());
+  for (int k = 0; k < npp; ++k)
+    data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], data.pp_s[k], data.pp_t[k]);
+
+  // 3. Every checked pair: the best of its primitive pairs, then normal, witness points and row.
+  data.closest = -1;
+  double closest_d = kInf;
+  auto finish = [&](int i, int link_a, int link_b, double best, double core, int pa, int pb, double s,
+                    double t) {
     PairDistance& out = data.pairs[i];
-    const Segment& sa = model.segments[pair.a];
-    const Segment& sb = model.segments[pair.b];
-    int link_a = sa.link, link_b = sb.link;
-    if ((sa.body_schema_slot || sb.body_schema_slot) && !slotPairActive(model, data, pair, link_a, link_b)) {
-      out.active = false;
-      out.has_row = false;
-      out.distance = kInf;
-      continue;
-    }
-    double best_s = 0.0, best_t = 0.0;
-    int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
-    double best_core = coreDistance(prim[best_pa], prim[best_pb], best_s, best_t);
-    double best = best_core - radius[best_pa] - radius[best_pb];
-    if (sa.num_primitives > 1 || sb.num_primitives > 1) {
-      for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
-        for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
-          if (pa == sa.first_primitive && pb == sb.first_primitive) continue;  // done above
-          double s, t;
-          const double core = coreDistance(prim[pa], prim[pb], s, t);
-          const double d = core - radius[pa] - radius[pb];
-          if (d < best) {
-            best = d;
-            best_core = core;
-            best_s = s;
-            best_t = t;
-            best_pa = pa;
-            best_pb = pb;
-          }
-        }
-      }
-    }
-    const SegmentW& A = prim[best_pa];
-    const SegmentW& B = prim[best_pb];
-    const Eigen::Vector3d c_a = A.start + best_s * A.d;
-    const Eigen::Vector3d c_b = B.start + best_t * B.d;
+    const SegmentW& A = prim[pa];
+    const SegmentW& B = prim[pb];
+    const Eigen::Vector3d c_a = A.start + s * A.d;
+    const Eigen::Vector3d c_b = B.start + t * B.d;
     // Unit normal from b towards a; coincident cores: the direction between the link origins.
     Eigen::Vector3d n;
-    out.well_defined = best_core > kCoincidentEps;
+    out.well_defined = core > kCoincidentEps;
     if (out.well_defined) {
-      n = (c_a - c_b) * (1.0 / best_core);
+      n = (c_a - c_b) * (1.0 / core);
     } else {
       n = kin.X_W_L[link_a].translation() - kin.X_W_L[link_b].translation();
       const double norm = n.norm();
@@ -146,8 +138,8 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
     out.active = true;
     out.distance = best;
     out.nhat_W = n;
-    out.p_W_a = c_a - radius[best_pa] * n;
-    out.p_W_b = c_b + radius[best_pb] * n;
+    out.p_W_a = c_a - radius[pa] * n;
+    out.p_W_b = c_b + radius[pb] * n;
     out.has_row = best < options.row_threshold;
     if (out.has_row)
       computeDirectionalRow(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n, data.rows.row(i));
@@ -155,6 +147,54 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
       closest_d = best;
       data.closest = i;
     }
+  };
+
+  for (const int i : data.robot_pairs) {
+    const SegmentPair& pair = model.pairs[i];
+    int k_best = data.pp_begin[i];
+    double best = data.pp_core[k_best] - radius[data.pp_a[k_best]] - radius[data.pp_b[k_best]];
+    for (int k = k_best + 1; k < data.pp_begin[i + 1]; ++k) {
+      const double d = data.pp_core[k] - radius[data.pp_a[k]] - radius[data.pp_b[k]];
+      if (d < best) {
+        best = d;
+        k_best = k;
+      }
+    }
+    finish(i, model.segments[pair.a].link, model.segments[pair.b].link, best, data.pp_core[k_best],
+           data.pp_a[k_best], data.pp_b[k_best], data.pp_s[k_best], data.pp_t[k_best]);
+  }
+
+  // Pairs with a body-schema slot: usually all disabled; each computed directly when active.
+  for (const int i : data.slot_pairs) {
+    const SegmentPair& pair = model.pairs[i];
+    const Segment& sa = model.segments[pair.a];
+    const Segment& sb = model.segments[pair.b];
+    int link_a = sa.link, link_b = sb.link;
+    if (!slotPairActive(model, data, pair, link_a, link_b)) {
+      PairDistance& out = data.pairs[i];
+      out.active = false;
+      out.has_row = false;
+      out.distance = kInf;
+      continue;
+    }
+    double best = kInf, best_core = 0.0, best_s = 0.0, best_t = 0.0;
+    int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
+    for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
+      for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
+        double s, t;
+        const double core = coreDistance(prim[pa], prim[pb], s, t);
+        const double d = core - radius[pa] - radius[pb];
+        if (d < best) {
+          best = d;
+          best_core = core;
+          best_s = s;
+          best_t = t;
+          best_pa = pa;
+          best_pb = pb;
+        }
+      }
+    }
+    finish(i, link_a, link_b, best, best_core, best_pa, best_pb, best_s, best_t);
   }
 }
 

@@ -62,9 +62,15 @@ struct DistanceData {
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows;  ///< npairs x nq
   std::array<BodySchemaSlot, kBodySchemaSlots> slots;
   int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
-  // Scratch of computeSegmentDistances, per primitive (valid only during the call):
+  // Scratch of computeSegmentDistances (built from the model here; values valid only during the call).
+  // Per primitive:
   std::vector<SegmentW> prim_W;  ///< core segment in W (start, direction, squared length)
   std::vector<double> prim_r;    ///< radius (body-schema slots: the slot's)
+  // The primitive pairs of all robot-robot pairs, flat, so that they are computed in one tight loop:
+  // pair i owns entries [pp_begin[i], pp_begin[i + 1]) (none for pairs with a body-schema slot).
+  std::vector<int> pp_a, pp_b, pp_begin;
+  std::vector<double> pp_s, pp_t, pp_core;  ///< segment parameters and core distance per entry
+  std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
 };
 
 /// Computes every checked pair's distance, witness points, normal and (below the threshold) row.
