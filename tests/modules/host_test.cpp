@@ -1,0 +1,260 @@
+// BehaviorHost with fake inputs: input validation (NaN, future stamps, unknown objects, range,
+// duplicates: rejected, counted, never forwarded), joint states, output ownership, merging of
+// several modules, --module selection, and the clean-up guarantee at stop.
+#include "modules_test_support.hpp"
+
+#include <reflex/modules/pointing.hpp>
+
+#include <cmath>
+#include <limits>
+
+namespace reflex::modules {
+namespace {
+
+using testing::at;
+using testing::frameAt;
+using testing::object;
+using testing::TestHost;
+
+// Records the frames it is given. Optional misbehaviour for the host's guarantees.
+class ProbeModule final : public Module {
+ public:
+  static std::vector<ObjectsFrame>* frames;
+  static int joint_callbacks;
+  explicit ProbeModule(std::string name) : Module(std::move(name)) {}
+  void configure(const ConfigNode& c, const RobotState&) override {
+    c.rejectUnknown({"misbehave"});
+    misbehave_ = c.choice("misbehave", "no", {"no", "unclaimed_hand", "leave_segment", "nan_target"});
+  }
+  Claims claims() const override {
+    Claims c;
+    c.objects = true;
+    c.hands[1] = misbehave_ == "nan_target";
+    if (misbehave_ == "leave_segment") c.segments = {"probe_ball"};
+    return c;
+  }
+  void start(ModuleContext& ctx) override {
+    if (misbehave_ == "leave_segment") {
+      SegmentSpec s;
+      s.name = "probe_ball";
+      s.parent_link = "r_hand";
+      s.capsule = false;
+      s.radius = 0.05;
+      ctx.attachSegment(s);
+    }
+  }
+  void onObjects(const ObjectsFrame& f, ModuleContext& ctx) override {
+    frames->push_back(f);
+    if (misbehave_ == "unclaimed_hand") ctx.setHand(Hand::kLeft, HandTarget::at({0.3, 0.0, 1.0}));
+    if (misbehave_ == "nan_target")
+      ctx.setHand(Hand::kRight, HandTarget::at({std::numeric_limits<double>::quiet_NaN(), 0.0, 1.0}));
+  }
+  void onJointState(ModuleContext&) override { ++joint_callbacks; }
+  void stop(ModuleContext&) override {}  // removes nothing on purpose when misbehaving
+
+ private:
+  std::string misbehave_;
+};
+std::vector<ObjectsFrame>* ProbeModule::frames = nullptr;
+int ProbeModule::joint_callbacks = 0;
+
+ModuleRegistry probeRegistry() {
+  ModuleRegistry r = builtinRegistry();
+  r.add("probe", "test probe", [](const std::string& n) { return std::make_unique<ProbeModule>(n); });
+  return r;
+}
+
+class HostTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ProbeModule::frames = &frames_;
+    ProbeModule::joint_callbacks = 0;
+  }
+  std::vector<ObjectsFrame> frames_;
+};
+
+const char* kProbe =
+    "inputs: {known_objects: [cup, can], future_tolerance: 0.5, max_range: 3.0}\n"
+    "modules:\n"
+    "  - {name: probe, type: probe}\n";
+
+TEST_F(HostTest, NonFiniteObjectsAreRejectedCountedAndNotForwarded) {
+  TestHost h(kProbe, probeRegistry());
+  h->start(at(0.0));
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  h->onObjects(frameAt(0.0, {object("cup", {nan, 0.0, 1.0}), object("can", {0.4, inf, 1.0}),
+                             object("cup", {0.4, 0.1, 1.0}, nan), object("can", {0.4, 0.1, 1.0}, 1.5),
+                             object("can", {0.4, 0.1, 1.0}, -0.1), object("cup", {0.45, -0.1, 0.95})}),
+               at(0.0));
+  ASSERT_EQ(frames_.size(), 1u);
+  ASSERT_EQ(frames_[0].objects.size(), 1u);
+  EXPECT_EQ(frames_[0].objects[0].name, "cup");
+  EXPECT_EQ(frames_[0].objects[0].p_B, Eigen::Vector3d(0.45, -0.1, 0.95));
+  EXPECT_EQ(h->stats().objects_rejected_invalid, 5u);
+  EXPECT_EQ(h->stats().objects_accepted, 1u);
+}
+
+TEST_F(HostTest, FramesFromTheFutureAreRejectedWhole) {
+  TestHost h(kProbe, probeRegistry());
+  h->start(at(0.0));
+  ObjectsFrame ahead = frameAt(1.0, {object("cup", {0.45, -0.1, 0.95})});  // stamped 1 s ahead of now
+  h->onObjects(ahead, at(0.0));
+  ObjectsFrame capture_ahead = frameAt(0.0, {object("cup", {0.45, -0.1, 0.95})});
+  capture_ahead.capture_stamp_ns = at(0.8).wall_ns;
+  h->onObjects(capture_ahead, at(0.0));
+  EXPECT_TRUE(frames_.empty());
+  EXPECT_EQ(h->stats().frames_rejected_future, 2u);
+  h->onObjects(frameAt(0.4, {object("cup", {0.45, -0.1, 0.95})}), at(0.0));  // within the tolerance
+  EXPECT_EQ(frames_.size(), 1u);
+  EXPECT_EQ(h->stats().frames_received, 3u);
+}
+
+TEST_F(HostTest, UnknownOutOfRangeAndDuplicateObjectsAreRejected) {
+  TestHost h(kProbe, probeRegistry());
+  h->start(at(0.0));
+  h->onObjects(frameAt(0.0, {object("", {0.4, 0.0, 1.0}), object("ghost", {0.4, 0.0, 1.0}),
+                             object("cup", {3.5, 0.0, 0.0}), object("can", {0.4, 0.1, 1.0}),
+                             object("can", {0.4, 0.2, 1.0})}),
+               at(0.0));
+  ASSERT_EQ(frames_.size(), 1u);
+  ASSERT_EQ(frames_[0].objects.size(), 1u);
+  EXPECT_EQ(frames_[0].objects[0].p_B, Eigen::Vector3d(0.4, 0.1, 1.0));
+  EXPECT_EQ(h->stats().objects_rejected_unknown, 2u);
+  EXPECT_EQ(h->stats().objects_rejected_range, 1u);
+  EXPECT_EQ(h->stats().objects_rejected_duplicate, 1u);
+  EXPECT_EQ(h->stats().rejectedObjects(), 4u);
+}
+
+TEST_F(HostTest, WithoutAKnownListAnyNamedObjectIsKnown) {
+  TestHost h("modules:\n  - {name: probe, type: probe}\n", probeRegistry());
+  h->start(at(0.0));
+  h->onObjects(frameAt(0.0, {object("ghost", {0.4, 0.0, 1.0}), object("", {0.4, 0.0, 1.0})}), at(0.0));
+  ASSERT_EQ(frames_[0].objects.size(), 1u);
+  EXPECT_EQ(frames_[0].objects[0].name, "ghost");
+  EXPECT_EQ(h->stats().objects_rejected_unknown, 1u);
+}
+
+TEST_F(HostTest, BadSamplesNeverReachTheHandTargets) {
+  TestHost h("inputs: {known_objects: [cup, can]}\nmodules:\n  - {name: pointing, type: pointing}\n");
+  h->start(at(0.0));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (int k = 0; k < 30; ++k) {
+    const double t = 0.1 * k;
+    h->onObjects(frameAt(t, {object("cup", {nan, nan, nan}), object("ghost", {0.4, 0.0, 1.0}),
+                             object("can", {0.46, 0.13, 0.96})}),
+                 at(t));
+    h->onObjects(frameAt(t + 5.0, {object("cup", {0.3, 0.3, 0.5})}), at(t));  // future
+  }
+  for (const auto& hs : h.sink.hands) {
+    for (const HandTarget* t : {&hs.left, &hs.right}) {
+      EXPECT_TRUE(t->p_B.allFinite());
+      EXPECT_NE(t->object, "ghost");
+      EXPECT_NE(t->object, "cup");  // only ever seen as NaN or from the future
+    }
+  }
+  EXPECT_EQ(h->hand(Hand::kLeft).object, "can");
+  EXPECT_EQ(h->stats().objects_rejected_invalid, 30u);
+  EXPECT_EQ(h->stats().objects_rejected_unknown, 30u);
+  EXPECT_EQ(h->stats().frames_rejected_future, 30u);
+}
+
+TEST_F(HostTest, JointStatesMoveTheRobotAndBadOnesAreRejected) {
+  TestHost h(kProbe, probeRegistry());
+  h->start(at(0.0));
+  const Eigen::Vector3d s0 = h->robot().shoulder_B(Hand::kRight);
+  JointStateSample js;
+  js.names = {"heel_x", "no_such_joint"};
+  js.positions = {0.5, 3.0};
+  h->onJointState(js, at(0.0));
+  EXPECT_NEAR((h->robot().shoulder_B(Hand::kRight) - (s0 + Eigen::Vector3d(0.5, 0.0, 0.0))).norm(), 0.0, 1e-12);
+  EXPECT_TRUE(h->robot().fromJointState());
+  JointStateSample bad = js;
+  bad.positions = {std::numeric_limits<double>::quiet_NaN(), 0.0};
+  h->onJointState(bad, at(0.01));
+  JointStateSample mismatch = js;
+  mismatch.positions = {0.1};
+  h->onJointState(mismatch, at(0.02));
+  EXPECT_EQ(h->stats().joint_states_rejected, 2u);
+  EXPECT_NEAR(h->robot().shoulder_B(Hand::kRight).x(), s0.x() + 0.5, 1e-12);  // kept
+  // Modules hear of joint states at most every joint_state_period (0.1 s).
+  for (int k = 0; k < 100; ++k) h->onJointState(js, at(0.2 + 0.005 * k));  // 0.5 s at 200 Hz
+  EXPECT_GE(ProbeModule::joint_callbacks, 5);
+  EXPECT_LE(ProbeModule::joint_callbacks, 7);
+}
+
+TEST_F(HostTest, TwoModulesClaimingOneOutputAreRefused) {
+  try {
+    TestHost h("modules:\n  - {name: a, type: pointing}\n  - {name: b, type: scripted, config: {timeline: [{t: 0, right: none}]}}\n");
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("'a' and 'b' both write the right hand target"), std::string::npos) << m;
+  }
+}
+
+TEST_F(HostTest, ModulesOfOneProcessMergeIntoOneHandTargets) {
+  TestHost h(
+      "inputs: {known_objects: [cup]}\n"
+      "modules:\n"
+      "  - {name: point_right, type: pointing, config: {hands: [right], priority_rule: none}}\n"
+      "  - {name: left_script, type: scripted, config: {timeline: [{t: 0, left: [0.3, 0.2, 1.0]}]}}\n");
+  h->start(at(0.0));
+  h->onObjects(frameAt(0.0, {object("cup", {0.46, -0.13, 0.95})}), at(0.0));
+  const auto& last = h.sink.hands.back();
+  EXPECT_TRUE(last.left.given);
+  EXPECT_EQ(last.left.p_B, Eigen::Vector3d(0.3, 0.2, 1.0));
+  EXPECT_EQ(last.right.object, "cup");
+}
+
+TEST_F(HostTest, WritingAnUnclaimedOutputIsAProgrammingError) {
+  TestHost h("modules:\n  - {name: probe, type: probe, config: {misbehave: unclaimed_hand}}\n", probeRegistry());
+  h->start(at(0.0));
+  EXPECT_THROW(h->onObjects(frameAt(0.0, {object("cup", {0.4, 0.0, 1.0})}), at(0.0)), std::logic_error);
+}
+
+TEST_F(HostTest, NonFiniteHandTargetFromAModuleBecomesNoTarget) {
+  TestHost h("modules:\n  - {name: probe, type: probe, config: {misbehave: nan_target}}\n", probeRegistry());
+  h->start(at(0.0));
+  h->onObjects(frameAt(0.0, {object("cup", {0.4, 0.0, 1.0})}), at(0.0));
+  EXPECT_FALSE(h->hand(Hand::kRight).given);
+  EXPECT_EQ(h->stats().outputs_rejected, 1u);
+}
+
+TEST_F(HostTest, WhatAModuleLeavesBehindIsRemovedAtStopAndReported) {
+  TestHost h("modules:\n  - {name: probe, type: probe, config: {misbehave: leave_segment}}\n", probeRegistry());
+  h->start(at(0.0));
+  ASSERT_EQ(h->segments().count("probe_ball"), 1u);
+  h->stop(at(1.0));
+  EXPECT_EQ(h->segments().count("probe_ball"), 0u);
+  ASSERT_FALSE(h.sink.detached.empty());
+  EXPECT_EQ(h.sink.detached.back(), "probe_ball");
+  EXPECT_EQ(h->stats().forced_cleanups, 1u);
+}
+
+TEST_F(HostTest, OnlyModuleRunsOneModuleUnderItsOwnName) {
+  const std::string yaml =
+      "modules:\n"
+      "  - {name: pointing, type: pointing}\n"
+      "  - {name: eyes, type: occlusion, config: {point: [0.5, 0.0, 0.9]}}\n";
+  TestHost h(yaml, builtinRegistry(), "eyes");
+  EXPECT_EQ(h->moduleNames(), std::vector<std::string>{"eyes"});
+  EXPECT_EQ(h->processName(), "eyes");
+  EXPECT_FALSE(h->claims().hands[0] || h->claims().hands[1]);
+  try {
+    TestHost bad(yaml, builtinRegistry(), "nosuch");
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("no module named 'nosuch'"), std::string::npos) << m;
+    EXPECT_NE(m.find("pointing, eyes"), std::string::npos) << m;
+  }
+}
+
+TEST_F(HostTest, StartTwiceIsRefused) {
+  TestHost h(kProbe, probeRegistry());
+  h->start(at(0.0));
+  EXPECT_THROW(h->start(at(0.1)), std::logic_error);
+}
+
+}  // namespace
+}  // namespace reflex::modules
