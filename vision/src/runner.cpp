@@ -68,6 +68,7 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
       std::lock_guard<std::mutex> lock(mutex);
       p = latest;
     }
+    if (p.frame < 0) return;  // nothing processed yet: no publication (not even an empty one)
     p.sequence = sequence++;
     p.publish_time = due;
     ++stats.publications;
@@ -137,6 +138,11 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
     }
     if (options.duration > 0.0 && s - s0 > options.duration + 1e-9) break;
     if (clock->paced()) {
+      // Keep up with the clock like a live camera: a frame already a period late is dropped.
+      if (clock->lagAt(s) > source.framePeriod()) {
+        ++stats.dropped;
+        continue;
+      }
       std::this_thread::sleep_until(clock->wallAt(s));
     } else {
       while (next_due < s - 1e-9) {  // publications due before this frame carry the previous one

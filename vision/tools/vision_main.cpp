@@ -209,6 +209,7 @@ int main(int argc, char** argv) {
     }
     if (show) std::fprintf(stderr, "\n");
     std::cerr << "reflex_vision: " << stats.frames << " frames processed, " << stats.skipped << " skipped, "
+              << stats.dropped << " dropped to keep up, "
               << stats.publications << " publications" << (dump_path.empty() ? "" : " (dump: " + dump_path + ")")
               << "\n";
     if (!stats.end_message.empty()) {

@@ -10,8 +10,11 @@
 // --dump). With loop, the session restarts at the start offset and session time keeps increasing
 // (each pass adds its length plus one frame period), so stamps stay monotonic.
 // Publication k is due at session time s0 + k / publish_hz and carries the newest frame processed
-// by then (its capture stamp, not the publication time). In paced mode a separate thread keeps the
-// publication deadlines, so a slow frame never delays a publication.
+// by then (its capture stamp, not the publication time); there is no publication before the first
+// frame is processed. In paced mode a separate thread keeps the publication deadlines, so a slow
+// frame never delays a publication, and a frame that is already one frame period late when it is
+// read is dropped (counted in RunStats::dropped), as a live camera would: targets stay fresh.
+// Unpaced runs (rate 0, --dump) process every frame.
 #include "reflex/vision/source.hpp"
 #include "reflex/vision/stereo_pipeline.hpp"
 
@@ -61,6 +64,7 @@ struct RunCallbacks {
 struct RunStats {
   int frames = 0;        ///< processed
   int skipped = 0;       ///< reported skipped frames
+  int dropped = 0;       ///< paced runs: frames dropped because processing fell a period behind
   int publications = 0;
   int passes = 0;
   std::string end_message;  ///< non-empty if the source stopped early (truncated video, camera lost)
