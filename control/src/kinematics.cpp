@@ -111,18 +111,30 @@ void computeDirectionalRow(const Model& model, const KinematicsData& data, int l
                            const Eigen::Vector3d& n_W, Eigen::Ref<Eigen::RowVectorXd> row) {
   assert(row.cols() == model.nq);
   row.setZero();
-  // n . (axis x (p - o)) = axis . ((p - o) x n)
-  for (const int qi : model.link_support[link1]) {
-    const int l = model.q_link[qi];
-    row[qi] += model.links[l].type == JointType::kRevolute
-                   ? data.axis_W[l].dot((p1_W - data.X_W_L[l].translation()).cross(n_W))
-                   : data.axis_W[l].dot(n_W);
+  const std::vector<int>& s1 = model.link_support[link1];
+  const std::vector<int>& s2 = model.link_support[link2];
+  // Joints on the common path from the root move p1 and p2 as one rigid body: their entry is
+  // n . (axis x (p1 - p2)) = axis . ((p1 - p2) x n) for a revolute joint (0 when n is along p1 - p2,
+  // as for a PairDistance), 0 for a prismatic one. The rest: n . (axis x (p - o)) = axis . ((p - o) x n).
+  std::size_t common = 0;
+  while (common < s1.size() && common < s2.size() && s1[common] == s2[common]) ++common;
+  const Eigen::Vector3d w = (p1_W - p2_W).cross(n_W);
+  for (std::size_t k = 0; k < common; ++k) {
+    const int l = model.q_link[s1[k]];
+    if (model.links[l].type == JointType::kRevolute) row[s1[k]] = data.axis_W[l].dot(w);
   }
-  for (const int qi : model.link_support[link2]) {
-    const int l = model.q_link[qi];
-    row[qi] -= model.links[l].type == JointType::kRevolute
-                   ? data.axis_W[l].dot((p2_W - data.X_W_L[l].translation()).cross(n_W))
-                   : data.axis_W[l].dot(n_W);
+  const Eigen::Vector3d p1xn = p1_W.cross(n_W), p2xn = p2_W.cross(n_W);
+  for (std::size_t k = common; k < s1.size(); ++k) {
+    const int l = model.q_link[s1[k]];
+    row[s1[k]] = model.links[l].type == JointType::kRevolute
+                     ? data.axis_W[l].dot(p1xn - data.X_W_L[l].translation().cross(n_W))
+                     : data.axis_W[l].dot(n_W);
+  }
+  for (std::size_t k = common; k < s2.size(); ++k) {
+    const int l = model.q_link[s2[k]];
+    row[s2[k]] -= model.links[l].type == JointType::kRevolute
+                      ? data.axis_W[l].dot(p2xn - data.X_W_L[l].translation().cross(n_W))
+                      : data.axis_W[l].dot(n_W);
   }
 }
 
