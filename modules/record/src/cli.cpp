@@ -1,0 +1,200 @@
+#include "cli.hpp"
+
+#include "reflex/record/recorder.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+
+namespace reflex::record::cli {
+
+namespace {
+
+struct BusOptions {
+  int domain = -1;
+  std::string profiles;
+  std::string participant_profile = "reflex_participant";
+  void add(CLI::App& app) {
+    app.add_option("--domain", domain, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
+        ->check(CLI::Range(0, bus::kMaxDomainId));
+    app.add_option("--profiles", profiles,
+                   "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else bringup/dds/reflex_profiles.xml)");
+    app.add_option("--participant-profile", participant_profile, "participant profile in the XML")
+        ->capture_default_str();
+  }
+  bus::BusConfig config(const std::string& module) const {
+    bus::BusConfig c;
+    c.module_name = module;
+    if (domain >= 0) c.domain_id = domain;
+    c.profiles_file = profiles;
+    c.participant_profile = participant_profile;
+    return c;
+  }
+};
+
+template <class F>
+int guarded(const char* tool, F&& f) {
+  try {
+    return f();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
+    return 1;
+  }
+}
+
+}  // namespace
+
+std::function<int()> addPlay(CLI::App& app) {
+  auto o = std::make_shared<PlayerOptions>();
+  auto b = std::make_shared<BusOptions>();
+  auto quiet = std::make_shared<bool>(false);
+  app.add_option("file", o->input, "recording to play")->required();
+  app.add_option("-r,--rate", o->rate, "speed factor: 1 real time, 2 twice as fast; 0 as fast as possible")
+      ->capture_default_str();
+  app.add_flag("-l,--loop", o->loop, "play again from the start offset when the end is reached");
+  app.add_option("-s,--start", o->start, "start offset, seconds after the first sample")->capture_default_str();
+  app.add_option("--duration", o->duration, "play only this many seconds of recording time (0: to the end)");
+  app.add_option("--delay", o->delay, "seconds to wait after creating the writers (discovery)")->capture_default_str();
+  app.add_option("-t,--topic", o->topics, "topic to play (repeatable; default: every topic in the file)");
+  app.add_option("-x,--exclude", o->exclude, "topic not to play (repeatable)");
+  app.add_flag("--restamp", o->restamp,
+               "move sample time stamps (header.stamp_ns, capture_stamp_ns) to the playing time");
+  app.add_flag("--progress", o->progress, "show progress even if stderr is not a terminal");
+  app.add_flag("-q,--quiet", *quiet, "no progress display");
+  b->add(app);
+  return [o, b, quiet] {
+    return guarded("reflex_play", [&] {
+      o->bus = b->config("player");
+      o->progress = !*quiet && (o->progress || isatty(STDERR_FILENO));
+      Player player(*o);
+      bus::StopOnSignal stop_on_signal(player.bus());
+      std::fprintf(stderr, "reflex_play: %s, %.2f s window, rate %g%s, domain %d\n", o->input.c_str(),
+                   player.windowSeconds(), o->rate, o->loop ? ", loop" : "", player.bus().domainId());
+      player.run();
+      const auto& s = player.stats();
+      std::fprintf(stderr, "reflex_play: published %llu samples (%llu failed), %llu complete passes; file: %s\n",
+                   static_cast<unsigned long long>(s.published), static_cast<unsigned long long>(s.failed),
+                   static_cast<unsigned long long>(s.loops), toString(s.tail));
+      return s.failed == 0 ? 0 : 2;
+    });
+  };
+}
+
+std::function<int()> addRecord(CLI::App& app) {
+  auto o = std::make_shared<RecorderOptions>();
+  auto b = std::make_shared<BusOptions>();
+  auto flush_ms = std::make_shared<int>(100);
+  auto sync_ms = std::make_shared<int>(1000);
+  auto all_best_effort = std::make_shared<bool>(false);
+  auto name = std::make_shared<std::string>("recorder");
+  app.add_option("-o,--output", o->output, "recording file to write")->required();
+  app.add_option("-t,--topic", o->topics,
+                 "topic to record (repeatable): a Reflex topic name, or NAME:TYPE for another topic name "
+                 "(default: every Reflex topic)");
+  app.add_option("-x,--exclude", o->exclude, "topic not to record (repeatable)");
+  app.add_option("--duration", o->duration, "seconds to record (0: until Ctrl-C / SIGTERM)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--flush-ms", *flush_ms, "hand buffered records to the kernel at least this often (ms)")
+      ->capture_default_str()->check(CLI::Range(0, 60000));
+  app.add_option("--sync-ms", *sync_ms, "fsync the file this often (ms; 0: after every flush)")
+      ->capture_default_str()->check(CLI::Range(0, 600000));
+  app.add_flag("--append", o->writer.append, "append to an existing recording (a torn last record is cut off)");
+  app.add_flag("--best-effort-only", *all_best_effort,
+               "read every topic with the reflex_record profile (default: state topics with their own "
+               "transient-local profile, so the current state is recorded at start)");
+  app.add_flag("--progress", o->progress, "print a status line every second");
+  app.add_option("--name", *name, "module name on the bus")->capture_default_str();
+  b->add(app);
+  return [o, b, flush_ms, sync_ms, all_best_effort, name] {
+    return guarded("reflex_record", [&] {
+      o->bus = b->config(*name);
+      o->writer.flush_interval = std::chrono::milliseconds(*flush_ms);
+      o->writer.sync_interval = std::chrono::milliseconds(*sync_ms);
+      o->late_joiner_state = !*all_best_effort;
+      Recorder recorder(*o);
+      bus::StopOnSignal stop_on_signal(recorder.bus());
+      std::fprintf(stderr, "reflex_record: recording %zu topics to %s on domain %d\n", recorder.counts().size(),
+                   o->output.c_str(), recorder.bus().domainId());
+      recorder.run();
+      std::fprintf(stderr, "reflex_record: %llu samples written to %s\n",
+                   static_cast<unsigned long long>(recorder.totalSamples()), o->output.c_str());
+      for (const auto& kv : recorder.counts())
+        std::fprintf(stderr, "  %-28s %-30s %llu\n", kv.first.c_str(), kv.second.type.c_str(),
+                     static_cast<unsigned long long>(kv.second.samples));
+      return 0;
+    });
+  };
+}
+
+std::function<int()> addExport(CLI::App& app) {
+  auto input = std::make_shared<std::string>();
+  auto topics = std::make_shared<std::vector<std::string>>();
+  auto csv = std::make_shared<std::string>();
+  auto dir = std::make_shared<std::string>();
+  app.add_option("file", *input, "recording")->required();
+  app.add_option("-t,--topic", *topics, "topic to export (repeatable with --dir; default with --dir: all)");
+  app.add_option("--csv", *csv, "CSV file to write (one --topic)");
+  app.add_option("--dir", *dir, "folder to write one CSV per topic into (<topic with / as _>.csv)");
+  return [input, topics, csv, dir] {
+    return guarded("reflex_record export", [&] {
+      if (csv->empty() == dir->empty()) throw RecordError("give exactly one of --csv FILE (with one --topic) or --dir DIR");
+      if (!csv->empty()) {
+        if (topics->size() != 1)
+          throw RecordError("--csv needs exactly one --topic (got " + std::to_string(topics->size()) + ")");
+        const auto n = exportCsv(*input, topics->front(), *csv);
+        std::fprintf(stderr, "reflex_record: %llu samples of %s -> %s\n", static_cast<unsigned long long>(n),
+                     topics->front().c_str(), csv->c_str());
+        return 0;
+      }
+      std::error_code ec;
+      std::filesystem::create_directories(*dir, ec);
+      if (ec) throw RecordError("cannot create folder '" + *dir + "': " + ec.message());
+      std::vector<std::string> list = *topics;
+      if (list.empty())
+        for (const auto& kv : scanRecording(*input).topics) list.push_back(kv.first);
+      for (const std::string& t : list) {
+        const std::string path = (std::filesystem::path(*dir) / csvFileNameForTopic(t)).string();
+        const auto n = exportCsv(*input, t, path);
+        std::fprintf(stderr, "reflex_record: %llu samples of %s -> %s\n", static_cast<unsigned long long>(n), t.c_str(),
+                     path.c_str());
+      }
+      return 0;
+    });
+  };
+}
+
+std::function<int()> addInfo(CLI::App& app) {
+  auto input = std::make_shared<std::string>();
+  auto print = std::make_shared<int>(0);
+  app.add_option("file", *input, "recording")->required();
+  app.add_option("--print", *print, "also print the first N samples")->check(CLI::NonNegativeNumber);
+  return [input, print] {
+    return guarded("reflex_record info", [&] {
+      const RecordingInfo info = scanRecording(*input);
+      std::printf("file:      %s (%llu bytes, valid up to byte %llu)\n", input->c_str(),
+                  static_cast<unsigned long long>(info.file_size), static_cast<unsigned long long>(info.valid_end));
+      std::printf("end:       %s%s\n", toString(info.tail),
+                  info.skipped_bytes ? (" (" + std::to_string(info.skipped_bytes) + " bytes skipped)").c_str() : "");
+      std::printf("samples:   %llu\n", static_cast<unsigned long long>(info.records));
+      std::printf("duration:  %.3f s\n", 1e-9 * static_cast<double>(info.last_ns - info.first_ns));
+      for (const auto& kv : info.topics)
+        std::printf("  %-28s %-30s %8llu\n", kv.first.c_str(), kv.second.type.c_str(),
+                    static_cast<unsigned long long>(kv.second.samples));
+      if (*print > 0) {
+        RecordReader reader(*input);
+        RecordEntry e;
+        for (int i = 0; i < *print && reader.next(e); ++i) {
+          const TopicCodec* c = findCodecByType(e.type);
+          std::printf("%.6f %s\n", 1e-9 * static_cast<double>(e.receive_ns - info.first_ns),
+                      c ? c->summary(e).c_str() : (e.topic + " (unknown type " + e.type + ")").c_str());
+        }
+      }
+      return 0;
+    });
+  };
+}
+
+}  // namespace reflex::record::cli
