@@ -1,0 +1,114 @@
+// The real reflex_controller process in secure mode (issue 8, item 1): started with the controller's
+// generated profiles file (--profiles <dir>/profiles/controller.xml), it authenticates a secure
+// behavior identity, follows its hand targets at 200 Hz with every pair above d_r, and publishes
+// encrypted joint state / status that the recorder identity reads and an unauthenticated
+// participant never sees. Domain 100.
+#include "../system/process.hpp"
+#include "security_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <numeric>
+#include <vector>
+
+namespace reflex::security_test {
+namespace {
+
+using namespace std::chrono_literals;
+constexpr int kDomain = 100;
+
+msg::HandTargets crossing() {
+  msg::HandTargets t;
+  t.left().status(msg::TARGET_GIVEN);
+  t.left().position_base().x(0.30);
+  t.left().position_base().y(-0.08);
+  t.left().position_base().z(0.90);
+  t.right().status(msg::TARGET_GIVEN);
+  t.right().position_base().x(0.30);
+  t.right().position_base().y(0.08);
+  t.right().position_base().z(0.90);
+  return t;
+}
+
+TEST(SecureController, FollowsASecureSourceAt200HzAndHidesItsStateFromOutsiders) {
+  const std::string dir = makeSecurityMaterial("proc");
+  loadProfiles(dir);
+  const std::string log = dir + "/controller.log";
+  testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain",
+                                    std::to_string(kDomain), "--duration", "12", "--input-timeout", "1.0",
+                                    "--profiles", dir + "/profiles/controller.xml"},
+                                   log);
+  ASSERT_TRUE(controller.started());
+
+  auto behavior = secureParticipant(dir, "behavior", kDomain);
+  auto& targets = behavior->makeWriter<msg::HandTargets>();
+  auto& heartbeat = behavior->makeWriter<msg::Heartbeat>();
+  auto watch = secureParticipant(dir, "recorder", kDomain);
+  auto& status = watch->makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
+  auto& joints = watch->makeReader<msg::JointState>("reflex/joint_state", bus::kProfileRecord);
+  auto outsider = plainParticipant("outsider", kDomain);
+  auto& outsider_status = outsider->makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
+  auto& outsider_targets = outsider->makeWriter<msg::HandTargets>();
+
+  ASSERT_TRUE(status.waitForWriters(1, 20s)) << "the secure controller is authenticated by the recorder identity";
+  ASSERT_TRUE(targets.waitForReaders(1, 20s)) << "the secure controller subscribes hand targets";
+
+  std::vector<msg::ControlStatus> statuses, outsider_got;
+  int k = 0;
+  status.takeAll(statuses);
+  statuses.clear();
+  const auto t0 = std::chrono::steady_clock::now();
+  repeatFor(4000ms, 50ms, [&] {
+    if (k++ % 2 == 0) {
+      msg::HandTargets t = crossing();
+      targets.publish(t);
+      msg::Heartbeat hb;
+      hb.module_name("behavior");
+      hb.state(msg::STATE_RUNNING);
+      heartbeat.publish(hb);
+      msg::HandTargets forged = crossing();
+      forged.left().position_base().y(0.4);  // would pull the left hand far to its right
+      outsider_targets.publish(forged);
+    }
+    status.takeAll(statuses);
+    outsider_status.takeAll(outsider_got);
+  });
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // 200 Hz over DDS-Security: allow for best-effort losses on a loaded 2-core machine.
+  EXPECT_GT(static_cast<double>(statuses.size()), 0.75 * 200.0 * seconds) << statuses.size() << " in " << seconds << " s";
+  ASSERT_FALSE(statuses.empty());
+  std::vector<double> periods;
+  for (const auto& s : statuses) periods.push_back(s.cycle_period_us());
+  std::sort(periods.begin(), periods.end());
+  EXPECT_NEAR(periods[periods.size() / 2], 5000.0, 250.0) << "median cycle period";
+  double dmin = 1.0;
+  bool near = false;
+  for (const auto& s : statuses) {
+    dmin = std::min({dmin, s.left().distance(), s.right().distance()});
+    near |= s.left().zone() != msg::ZONE_FREE || s.right().zone() != msg::ZONE_FREE;
+  }
+  std::printf("secure controller: %zu statuses in %.2f s (%.0f Hz), median cycle period %.0f us, closest %.1f mm\n",
+              statuses.size(), seconds, static_cast<double>(statuses.size()) / seconds, periods[periods.size() / 2],
+              dmin * 1000.0);
+  EXPECT_TRUE(near) << "the crossing targets bring the arms together";
+  EXPECT_GE(dmin, 0.005) << "never below d_r";
+  msg::JointState js;
+  ASSERT_TRUE(joints.takeLatest(js));
+  const auto it = std::find(js.names().begin(), js.names().end(), "r_elbow");
+  ASSERT_NE(it, js.names().end());
+  EXPECT_LT(js.positions()[static_cast<std::size_t>(it - js.names().begin())], -0.6) << "the right arm reached";
+
+  EXPECT_TRUE(outsider_got.empty()) << "an unauthenticated participant read " << outsider_got.size() << " statuses";
+  EXPECT_EQ(outsider_status.stats().matched_writers, 0);
+  EXPECT_EQ(outsider_targets.stats().matched_readers, 0) << "the controller never matched the forged source";
+
+  EXPECT_EQ(controller.wait(15s), 0);
+  const std::string text = readFile(log);
+  EXPECT_NE(text.find("(rejected 0)"), std::string::npos) << text;
+  EXPECT_NE(text.find("e-stops 0"), std::string::npos) << text;
+}
+
+}  // namespace
+}  // namespace reflex::security_test
