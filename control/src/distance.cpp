@@ -112,8 +112,12 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
   const SegmentW* prim = data.prim_W.data();
   const double* radius = data.prim_r.data();
   const int npp = static_cast<int>(data.pp_a.size());
-  for (int k = 0; k < npp; ++k)
-    data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], data.pp_s[k], data.pp_t[k]);
+  for (int k = 0; k < npp; ++k) {
+    double s, t;  // locals: writing through pp_s / pp_t directly would force reloads (aliasing)
+    data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], s, t);
+    data.pp_s[k] = s;
+    data.pp_t[k] = t;
+  }
 
   // 3. Every checked pair: the best of its primitive pairs, then normal, witness points and row.
   data.closest = -1;
@@ -165,6 +169,17 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
   }
 
   // Pairs with a body-schema slot: usually all disabled; each computed directly when active.
+  bool any_slot = false;
+  for (const BodySchemaSlot& slot : data.slots) any_slot = any_slot || slot.enabled;
+  if (!any_slot) {
+    for (const int i : data.slot_pairs) {
+      PairDistance& out = data.pairs[i];
+      out.active = false;
+      out.has_row = false;
+      out.distance = kInf;
+    }
+    return;
+  }
   for (const int i : data.slot_pairs) {
     const SegmentPair& pair = model.pairs[i];
     const Segment& sa = model.segments[pair.a];

@@ -66,9 +66,10 @@ inline void closestParametersSegmentSegment(const SegmentW& A, const SegmentW& B
   const double ae = A.dd * B.dd;
   const double denom = ae - b * b;  // >= 0; ~0 when parallel (or when either is a point)
   const double s_line = denom > 1e-14 * ae && denom > 0.0 ? (b * f - c * B.dd) / denom : 0.0;
-  s = clamp01(s_line);
-  t = clamp01((b * s + f) * B.inv_dd);
-  s = clamp01((b * t - c) * A.inv_dd);
+  const double s0 = clamp01(s_line);
+  const double t1 = clamp01((b * s0 + f) * B.inv_dd);
+  t = t1;
+  s = clamp01((b * t1 - c) * A.inv_dd);
 }
 
 /// Closest points c1 on [a0, a1] and c2 on [b0, b1] (either segment may have zero length).
