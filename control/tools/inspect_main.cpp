@@ -102,7 +102,7 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("--config", config_path,
                  "collision configuration YAML (default: <urdf stem>.collision.yaml if it exists)");
-  app.add_option("--q", q_args, "joint values, name=value (radians / metres); others stay 0");
+  app.add_option("--q", q_args, "joint values, name=value (radians / metres); others stay 0 (or the nearest limit if 0 is outside)");
   app.add_option("--csv", csv_path, "joint values from a CSV file: header row of joint names, value rows");
   app.add_option("--row", csv_row, "row of --csv to use (0 = first after the header)")->check(CLI::NonNegativeNumber);
   app.add_option("--format", format, "output format")->check(CLI::IsMember({"csv", "json"}));
