@@ -1,0 +1,210 @@
+// issue 6 "Done when": reflex_behavior runs the pointing module (bringup/behavior/pointing.yaml)
+// against reflex_vision replaying the flagship session (bringup/sessions/flagship) over real DDS
+// (domain 62), and publishes sensible hand targets. Two stretches of the session are replayed at
+// real time into one behavior process: 8-21 s (the can is lost 13-19 s) and 40-54 s (the person
+// crosses the arms; the can is hidden behind the cup for a while).
+//
+// Checked against the session's ground truth (ground_truth.csv, by the image index of the object
+// targets each hand target follows): every given target is 0.40 m from its shoulder, pointing at
+// the true object within 3 degrees; the right hand points only at the cup and the left only at the
+// can (no swap while the objects cross); a lost object's hand gets "no target" lost_timeout (1 s)
+// after its last detection and points again at the first new detection; at the end the hands
+// point across each other, as the objects have crossed.
+#include "child_process.hpp"
+
+#include <reflex/bus/bus.hpp>
+#include <reflex/control/kinematics.hpp>
+#include <reflex/control/urdf_loader.hpp>
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+namespace reflex::modules {
+namespace {
+
+using namespace std::chrono_literals;
+using testing::Child;
+using Clock = std::chrono::steady_clock;
+
+constexpr int kDomain = 62;
+const std::string kBin = REFLEX_BIN_DIR;
+const std::string kSession = std::string(REFLEX_SOURCE_DIR) + "/bringup/sessions/flagship";
+
+double seconds(Clock::time_point t, Clock::time_point t0) { return std::chrono::duration<double>(t - t0).count(); }
+Eigen::Vector3d vec(const msg::Vector3& v) { return {v.x(), v.y(), v.z()}; }
+
+// ground_truth.csv: (frame, object) -> position in the base frame.
+std::map<std::pair<std::uint64_t, std::string>, Eigen::Vector3d> loadGroundTruth() {
+  std::ifstream in(kSession + "/ground_truth.csv");
+  std::map<std::pair<std::uint64_t, std::string>, Eigen::Vector3d> gt;
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line.rfind("stamp,frame,object,tag_id,x,y,z", 0), 0u) << line;
+  while (std::getline(in, line)) {
+    std::stringstream ss(line);
+    std::vector<std::string> c;
+    std::string f;
+    while (std::getline(ss, f, ',')) c.push_back(f);
+    if (c.size() < 7) continue;
+    gt[{std::stoull(c[1]), c[2]}] = Eigen::Vector3d(std::stod(c[4]), std::stod(c[5]), std::stod(c[6]));
+  }
+  return gt;
+}
+
+Eigen::Vector3d restShoulder(const std::string& link) {
+  const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
+  const control::Model model =
+      control::loadModel(urdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(urdf)));
+  control::KinematicsData data(model);
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
+  for (int i = 0; i < model.nq; ++i) q[i] = std::clamp(0.0, model.q_lower[i], model.q_upper[i]);
+  control::computeForwardKinematics(model, data, q);
+  return data.X_W_L[static_cast<std::size_t>(model.linkIndex(link))].translation();
+}
+
+struct Seen {
+  double t;
+  msg::ObjectTargets objects;
+};
+struct Hands {
+  double t;
+  msg::HandTargets hands;
+};
+
+TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) {
+  const auto gt = loadGroundTruth();
+  ASSERT_GT(gt.size(), 1000u);
+  const Eigen::Vector3d shoulder[2] = {restShoulder("l_shoulder"), restShoulder("r_shoulder")};
+
+  bus::BusConfig bc;
+  bc.module_name = "modules_flagship_test";
+  bc.domain_id = kDomain;
+  bus::Participant bus(bc);
+  auto& objects_reader = bus.makeReader<msg::ObjectTargets>("reflex/object_targets", bus::kProfileRecord);
+  auto& hands_reader = bus.makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord);
+  std::vector<Seen> seen;
+  std::vector<Hands> hands;
+  const Clock::time_point t0 = Clock::now();
+  auto collectWhile = [&](const std::function<bool()>& running) {
+    while (running()) {
+      msg::ObjectTargets o;
+      while (objects_reader.takeNext(o)) seen.push_back({seconds(Clock::now(), t0), o});
+      msg::HandTargets h;
+      while (hands_reader.takeNext(h)) hands.push_back({seconds(Clock::now(), t0), h});
+      std::this_thread::sleep_for(2ms);
+    }
+  };
+
+  Child behavior({kBin + "/reflex_behavior", "--config", std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/pointing.yaml",
+                  "--domain", std::to_string(kDomain), "--progress", "0"},
+                 ::testing::TempDir() + "modules_flagship_behavior.log");
+  ASSERT_TRUE(behavior.started());
+  ASSERT_TRUE(hands_reader.waitForWriters(1, 10s)) << behavior.log();
+
+  struct Stretch {
+    const char* start;
+    const char* duration;
+  };
+  std::vector<std::size_t> stretch_begin;  // index into `hands` where each stretch starts
+  for (const Stretch s : {Stretch{"8", "13"}, Stretch{"40", "14"}}) {
+    stretch_begin.push_back(hands.size());
+    Child vision({kBin + "/reflex_vision", "--session", kSession, "--start", s.start, "--duration", s.duration, "--quiet",
+                  "--domain", std::to_string(kDomain)},
+                 ::testing::TempDir() + "modules_flagship_vision_" + s.start + ".log");
+    ASSERT_TRUE(vision.started());
+    collectWhile([&] { return vision.wait(0ms) == -1 && seconds(Clock::now(), t0) < 100.0; });
+    EXPECT_EQ(vision.wait(0ms), 0) << vision.log();
+    collectWhile([&, end = seconds(Clock::now(), t0) + 1.5] { return seconds(Clock::now(), t0) < end; });
+  }
+  EXPECT_EQ(behavior.terminate(), 0) << behavior.log();
+  std::printf("flagship: %zu object frames, %zu hand-target samples received\n", seen.size(), hands.size());
+  ASSERT_GT(seen.size(), 200u);
+  ASSERT_GT(hands.size(), 100u);
+
+  // 1. Every given target: 0.40 m from its shoulder, towards the true object of the frame it follows.
+  int checked = 0;
+  double worst_deg = 0.0;
+  std::size_t k = 0;
+  for (const Hands& h : hands) {
+    while (k + 1 < seen.size() && seen[k + 1].t <= h.t) ++k;
+    const msg::HandTarget* t[2] = {&h.hands.left(), &h.hands.right()};
+    for (int i = 0; i < 2; ++i) {
+      if (t[i]->status() != msg::TARGET_GIVEN) continue;
+      const std::string& name = t[i]->object_name();
+      EXPECT_EQ(name, i == 0 ? "can" : "cup") << "at " << h.t << " s";  // never swapped
+      const Eigen::Vector3d p = vec(t[i]->position_base());
+      EXPECT_NEAR((p - shoulder[i]).norm(), 0.40, 1e-6);
+      // The latest frame received before this target that holds the object.
+      for (std::size_t j = k + 1; j-- > 0;) {
+        if (seen[j].t > h.t) continue;
+        bool has = false;
+        for (const auto& o : seen[j].objects.objects()) has |= o.name() == name;
+        if (!has) continue;
+        auto it = gt.find({seen[j].objects.image_index(), name});
+        if (it == gt.end()) break;
+        const double c = (p - shoulder[i]).normalized().dot((it->second - shoulder[i]).normalized());
+        const double deg = std::acos(std::min(1.0, c)) * 180.0 / M_PI;
+        worst_deg = std::max(worst_deg, deg);
+        EXPECT_LT(deg, 3.0) << name << " at " << h.t << " s, frame " << seen[j].objects.image_index();
+        ++checked;
+        break;
+      }
+    }
+  }
+  std::printf("flagship: %d given targets checked against ground truth, worst direction error %.2f deg\n", checked,
+              worst_deg);
+  EXPECT_GT(checked, 150);
+
+  // 2. Lost can (session 13-19 s, first stretch): the left hand turns to "no target" lost_timeout after
+  //    the last can detection and points again at the first new one; the right hand keeps the cup.
+  auto hasCan = [](const msg::ObjectTargets& o) {
+    for (const auto& x : o.objects())
+      if (x.name() == "can") return true;
+    return false;
+  };
+  double last_can = -1.0, back_can = -1.0;
+  for (const Seen& s : seen) {
+    if (s.objects.image_index() >= 130 && s.objects.image_index() < 190 && hasCan(s.objects) && last_can < 0.0)
+      ADD_FAILURE() << "vision saw the can while hidden, frame " << s.objects.image_index();
+    if (s.objects.image_index() < 130 && hasCan(s.objects)) last_can = s.t;
+    if (s.objects.image_index() >= 190 && s.objects.image_index() < 220 && hasCan(s.objects) && back_can < 0.0)
+      back_can = s.t;
+  }
+  ASSERT_GT(last_can, 0.0);
+  ASSERT_GT(back_can, 0.0);
+  double left_none = -1.0, left_back = -1.0;
+  for (std::size_t i = stretch_begin[0]; i < stretch_begin[1]; ++i) {
+    const Hands& h = hands[i];
+    if (h.t > last_can && h.hands.left().status() == msg::TARGET_NONE && left_none < 0.0) left_none = h.t;
+    if (left_none > 0.0 && h.hands.left().status() == msg::TARGET_GIVEN && left_back < 0.0) left_back = h.t;
+    if (h.t < back_can + 0.5) {
+      EXPECT_EQ(h.hands.right().status(), msg::TARGET_GIVEN) << "the cup is never lost, at " << h.t << " s";
+    }
+  }
+  std::printf("flagship: can last seen %.3f s, left hand off %.3f s later, back %.3f s after the can reappeared\n",
+              last_can, left_none - last_can, left_back - back_can);
+  EXPECT_GE(left_none - last_can, 1.0 - 0.02);
+  EXPECT_LE(left_none - last_can, 1.0 + 0.3);  // + one step period (0.05 s) + one tick + scheduling under load
+  EXPECT_GE(left_back - back_can, -0.02);
+  EXPECT_LE(left_back - back_can, 0.3);
+
+  // 3. Crossing (second stretch): at the end the hands point across each other, the right hand at the
+  //    cup on the robot's left, the left hand at the can on its right.
+  const msg::HandTargets& end = hands.back().hands.left().status() == msg::TARGET_NONE && hands.size() > 1
+                                    ? hands[hands.size() - 2].hands
+                                    : hands.back().hands;
+  ASSERT_EQ(end.right().status(), msg::TARGET_GIVEN);
+  ASSERT_EQ(end.left().status(), msg::TARGET_GIVEN);
+  EXPECT_GT(end.right().position_base().y(), end.left().position_base().y());
+  EXPECT_GT(end.right().position_base().y(), 0.0);
+  EXPECT_LT(end.left().position_base().y(), 0.0);
+}
+
+}  // namespace
+}  // namespace reflex::modules
