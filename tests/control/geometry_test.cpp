@@ -301,7 +301,8 @@ TEST(GeometryCapsuleCapsule, NearlyParallelStaysFinite) {
 // sphere-sphere, sphere-capsule and capsule-capsule to the analytic functions in
 // primitive_shape_algorithm/ (sphereSphereDistance, sphereCapsuleDistance, capsuleCapsuleDistance),
 // not to GJK; the sphere functions report -1 (no points) for touching or penetrating shapes, so
-// penetration of those is checked through fcl::collide's analytic contact depth instead.
+// penetration of those is checked through fcl::collide's analytic contact depth instead. The
+// GST_INDEP solver has the same analytic specializations (gjk_solver_indep-inl.h); both are used.
 // A Capsule is centred on its frame origin, along its local z, with lz = core length.
 
 std::shared_ptr<fcl::CollisionGeometryd> fclShape(const Vector3d& a, const Vector3d& b, double r,
@@ -321,13 +322,16 @@ TEST(GeometryFcl, NearestPointsAreInTheWorldFrame) {
   const auto s = fclShape({5, 5, 5}, {5, 5, 5}, 0.5, X1);
   const auto c = fclShape({5, 7, 4}, {5, 7, 6}, 0.5, X2);  // vertical capsule, 2 m away in y
   X1.linear() = Eigen::AngleAxisd(1.0, Vector3d(1, 2, 3).normalized()).toRotationMatrix();
-  fcl::DistanceRequestd request;
-  request.enable_nearest_points = true;
-  fcl::DistanceResultd result;
-  fcl::distance(s.get(), X1, c.get(), X2, request, result);
-  EXPECT_NEAR(result.min_distance, 1.0, 1e-12);
-  expectVec(result.nearest_points[0], {5, 5.5, 5});
-  expectVec(result.nearest_points[1], {5, 6.5, 5});
+  for (const fcl::GJKSolverType solver : {fcl::GST_LIBCCD, fcl::GST_INDEP}) {
+    fcl::DistanceRequestd request;
+    request.enable_nearest_points = true;
+    request.gjk_solver_type = solver;
+    fcl::DistanceResultd result;
+    fcl::distance(s.get(), X1, c.get(), X2, request, result);
+    EXPECT_NEAR(result.min_distance, 1.0, 1e-12);
+    expectVec(result.nearest_points[0], {5, 5.5, 5});
+    expectVec(result.nearest_points[1], {5, 6.5, 5});
+  }
 }
 
 struct Counts {
@@ -383,6 +387,8 @@ TEST(GeometryFcl, RandomPairsAgreeWithFcl) {
     if (r.d > 1e-12) {
       fcl::DistanceRequestd request;
       request.enable_nearest_points = true;
+      // Both narrow-phase solvers dispatch these shapes to the same analytic functions; use both.
+      request.gjk_solver_type = (i % 2) ? fcl::GST_INDEP : fcl::GST_LIBCCD;
       fcl::DistanceResultd result;
       fcl::distance(ga.get(), Xa, gb.get(), Xb, request, result);
       const double e = std::abs(result.min_distance - r.d);
