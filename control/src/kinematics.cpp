@@ -31,6 +31,14 @@ void rotateAbout(const Eigen::Matrix3d& R, const Eigen::Vector3d& axis, double a
   R_out.col(j) = col_j;
 }
 
+/// Sets a small matrix to zero column by column: Eigen's setZero() on a whole dynamic matrix becomes
+/// a memset call, whose start-up cost dominated these few-hundred-byte Jacobians in bench_distance.
+template <typename Matrix>
+void zeroColumns(Matrix&& M) {
+  for (Eigen::Index c = 0; c < M.cols(); ++c)
+    for (Eigen::Index r = 0; r < M.rows(); ++r) M(r, c) = 0.0;
+}
+
 }  // namespace
 
 KinematicsData::KinematicsData(const Model& model)
@@ -75,7 +83,7 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data,
 void computePointJacobian(const Model& model, const KinematicsData& data, int link,
                           const Eigen::Vector3d& p_W, Eigen::Ref<Eigen::MatrixXd> J_W) {
   assert(J_W.rows() == 3 && J_W.cols() == model.nq);
-  J_W.setZero();
+  zeroColumns(J_W);
   for (const int qi : model.link_support[link]) {
     const int l = model.q_link[qi];
     if (model.links[l].type == JointType::kRevolute)
@@ -89,7 +97,7 @@ void computeRelativeJacobian(const Model& model, const KinematicsData& data, int
                              const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
                              Eigen::Ref<Eigen::MatrixXd> J_W) {
   assert(J_W.rows() == 3 && J_W.cols() == model.nq);
-  J_W.setZero();
+  zeroColumns(J_W);
   for (const int qi : model.link_support[link1]) {
     const int l = model.q_link[qi];
     if (model.links[l].type == JointType::kRevolute)
@@ -110,7 +118,7 @@ void computeDirectionalRow(const Model& model, const KinematicsData& data, int l
                            const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
                            const Eigen::Vector3d& n_W, Eigen::Ref<Eigen::RowVectorXd> row) {
   assert(row.cols() == model.nq);
-  row.setZero();
+  zeroColumns(row);
   const std::vector<int>& s1 = model.link_support[link1];
   const std::vector<int>& s2 = model.link_support[link2];
   // Joints on the common path from the root move p1 and p2 as one rigid body: their entry is

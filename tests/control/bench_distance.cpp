@@ -12,7 +12,8 @@
 //   FCL_Analytic/*  the same, calling FCL's analytic functions (fcl::detail::sphereSphereDistance,
 //                   sphereCapsuleDistance, capsuleCapsuleDistance) directly: FCL without its dispatch
 //   KDL/*           kdl_parser tree, one KDL::Chain per tip: ChainFkSolverPos_recursive +
-//                   ChainJntToJacSolver
+//                   ChainJntToJacSolver; tips: both hands, the 17 segment links, every link
+//                   (Reflex: one computeForwardKinematics + computePointJacobian per tip)
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/urdf_loader.hpp"
@@ -309,10 +310,18 @@ void reflexFkJac(benchmark::State& state, const std::vector<std::string>& tips) 
   state.counters["tips"] = static_cast<double>(tips.size());
 }
 
+std::vector<std::string> allLinks(const Model& m) {
+  std::vector<std::string> t;
+  for (std::size_t l = 1; l < m.links.size(); ++l) t.push_back(m.links[l].name);  // every link but the root
+  return t;
+}
+
 void KDL_FK_Jac_Hands(benchmark::State& state) { kdlFkJac(state, handTips()); }
 void Reflex_FK_Jac_Hands(benchmark::State& state) { reflexFkJac(state, handTips()); }
 void KDL_FK_Jac_SegmentLinks(benchmark::State& state) { kdlFkJac(state, segmentLinks(setup().model)); }
 void Reflex_FK_Jac_SegmentLinks(benchmark::State& state) { reflexFkJac(state, segmentLinks(setup().model)); }
+void KDL_FK_Jac_AllLinks(benchmark::State& state) { kdlFkJac(state, allLinks(setup().model)); }
+void Reflex_FK_Jac_AllLinks(benchmark::State& state) { reflexFkJac(state, allLinks(setup().model)); }
 
 // The machine is shared: besides mean / median / stddev, report the minimum over repetitions (the
 // run least disturbed by other processes).
@@ -331,6 +340,8 @@ REFLEX_BENCH(Reflex_FK_Jac_Hands);
 REFLEX_BENCH(KDL_FK_Jac_Hands);
 REFLEX_BENCH(Reflex_FK_Jac_SegmentLinks);
 REFLEX_BENCH(KDL_FK_Jac_SegmentLinks);
+REFLEX_BENCH(Reflex_FK_Jac_AllLinks);
+REFLEX_BENCH(KDL_FK_Jac_AllLinks);
 
 }  // namespace
 
