@@ -9,8 +9,8 @@
 Every process gets the configuration's DDS domain (REFLEX_DOMAIN_ID) and profiles file
 (FASTRTPS_DEFAULT_PROFILES_FILE), both read by reflex::bus in every Reflex process; its output is
 prefixed with its name on this terminal and written whole to <log_dir>/<name>.log. Ctrl-C / SIGTERM
-stops all processes (SIGTERM to each process group in reverse start order, SIGKILL after
-stop_timeout). A process that exits is reported; by default (on_exit: shutdown) its exit stops the
+stops all processes (SIGTERM to each process group in reverse start order, one after the other,
+SIGKILL after stop_timeout). A process that exits is reported; by default (on_exit: shutdown) its exit stops the
 others. Exit code: 0 if every process ended normally (finished with 0 or stopped by the launcher),
 1 if one failed, 2 for a bad configuration or command line.
 
@@ -320,10 +320,10 @@ class Launch:
         # process's children (e.g. fastdds -> fast-discovery-server) are stopped with it.
         p.popen = subprocess.Popen(p.argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                    stdin=subprocess.DEVNULL, start_new_session=True)
+        self.say(f"started {p.name} (pid {p.popen.pid}){' on host ' + p.host if p.host else ''}")
         t = threading.Thread(target=self._pump, args=(p, p.popen.stdout), daemon=True)
         t.start()
         p.threads.append(t)
-        self.say(f"started {p.name} (pid {p.popen.pid}){' on host ' + p.host if p.host else ''}")
 
     def _signal(self, p, sig):
         if p.popen and p.popen.poll() is None:
@@ -333,20 +333,20 @@ class Launch:
                 pass
 
     def stop_all(self, started):
-        for p in reversed(started):
-            if p.popen and p.popen.poll() is None:
-                p.stopped_by_launcher = True
-                self._signal(p, p.stop_signal)
-        end = time.monotonic() + self.stop_timeout
+        """Stops in reverse start order, one after the other, so that e.g. the recorder (started first)
+        still records what the others publish while they stop (a behavior's final "no target")."""
         for p in reversed(started):
             if not p.popen:
                 continue
-            try:
-                p.popen.wait(timeout=max(0.0, end - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                self.say(f"{p.name} did not stop within {self.stop_timeout:g} s: SIGKILL")
-                self._signal(p, signal.SIGKILL)
-                p.popen.wait()
+            if p.popen.poll() is None:
+                p.stopped_by_launcher = True
+                self._signal(p, p.stop_signal)
+                try:
+                    p.popen.wait(timeout=self.stop_timeout)
+                except subprocess.TimeoutExpired:
+                    self.say(f"{p.name} did not stop within {self.stop_timeout:g} s: SIGKILL")
+                    self._signal(p, signal.SIGKILL)
+                    p.popen.wait()
             # The group may still hold children (e.g. the discovery server under the fastdds wrapper).
             try:
                 os.killpg(p.popen.pid, signal.SIGKILL)

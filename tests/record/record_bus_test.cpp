@@ -244,6 +244,32 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   }
 }
 
+TEST(RecordBus, LateJoinerStateRecordsTheStatePublishedBeforeTheRecorderStarted) {
+  bus::Participant src(busConfig("source"));
+  auto& w = src.makeWriter<msg::HandTargets>();
+  msg::HandTargets before = bus::test::handTargets(7);
+  w.write(before);  // nobody listens yet; the writer keeps it (transient local)
+  for (bool late : {false, true}) {
+    RecorderOptions ro;
+    ro.output = tempPath(late ? "late.rfx" : "not_late.rfx");
+    ro.topics = {"reflex/hand_targets"};
+    ro.late_joiner_state = late;
+    ro.duration = 1.5;
+    ro.bus = busConfig("recorder");
+    Recorder recorder(ro);
+    recorder.run();
+    const RecordingInfo info = scanRecording(ro.output);
+    EXPECT_EQ(info.records, late ? 1u : 0u) << (late ? "with" : "without") << " --late-joiner-state";
+    if (late) {
+      RecordReader r(ro.output);
+      RecordEntry e;
+      ASSERT_TRUE(r.next(e));
+      const auto d = bus::test::diffSample(before, decode<msg::HandTargets>(e));
+      EXPECT_TRUE(d.empty()) << bus::test::join(d);
+    }
+  }
+}
+
 // A recording made here: ControlStatus k = 0..20 received every 100 ms (2 s long).
 std::string syntheticRecording() {
   const std::string file = tempPath("synthetic.rfx");

@@ -88,7 +88,7 @@ std::function<int()> addRecord(CLI::App& app) {
   auto b = std::make_shared<BusOptions>();
   auto flush_ms = std::make_shared<int>(100);
   auto sync_ms = std::make_shared<int>(1000);
-  auto all_best_effort = std::make_shared<bool>(false);
+  auto late_joiner = std::make_shared<bool>(false);
   auto name = std::make_shared<std::string>("recorder");
   app.add_option("-o,--output", o->output, "recording file to write")->required();
   app.add_option("-t,--topic", o->topics,
@@ -102,18 +102,19 @@ std::function<int()> addRecord(CLI::App& app) {
   app.add_option("--sync-ms", *sync_ms, "fsync the file this often (ms; 0: after every flush)")
       ->capture_default_str()->check(CLI::Range(0, 600000));
   app.add_flag("--append", o->writer.append, "append to an existing recording (a torn last record is cut off)");
-  app.add_flag("--best-effort-only", *all_best_effort,
-               "read every topic with the reflex_record profile (default: state topics with their own "
-               "transient-local profile, so the current state is recorded at start)");
+  app.add_flag("--late-joiner-state", *late_joiner,
+               "read state topics (hand targets, priority, body schema, walk, heartbeat) with their own "
+               "reliable transient-local profile: the recording starts with the state published before it "
+               "started, but keeps only the newest of a burst (default: every topic with reflex_record)");
   app.add_flag("--progress", o->progress, "print a status line every second");
   app.add_option("--name", *name, "module name on the bus")->capture_default_str();
   b->add(app);
-  return [o, b, flush_ms, sync_ms, all_best_effort, name] {
+  return [o, b, flush_ms, sync_ms, late_joiner, name] {
     return guarded("reflex_record", [&] {
       o->bus = b->config(*name);
       o->writer.flush_interval = std::chrono::milliseconds(*flush_ms);
       o->writer.sync_interval = std::chrono::milliseconds(*sync_ms);
-      o->late_joiner_state = !*all_best_effort;
+      o->late_joiner_state = *late_joiner;
       Recorder recorder(*o);
       bus::StopOnSignal stop_on_signal(recorder.bus());
       std::fprintf(stderr, "reflex_record: recording %zu topics to %s on domain %d\n", recorder.counts().size(),

@@ -180,7 +180,7 @@ class LaunchTest(unittest.TestCase):
             """, "c2.yaml")
         rc, out = self.run_launch(cfg2, "--host", "a")
         self.assertEqual(rc, 0, out)
-        self.assertIn("[on_a] 2\n[on_a] 2", out)  # both participant profiles point at the server
+        self.assertEqual(out.count("[on_a] 2\n"), 2, out)  # both participant profiles point at the server
         copy = (self.dir / "logs_a" / "profiles_reflex_profiles_discovery.xml").read_text()
         self.assertNotIn("<address>127.0.0.1</address>", copy)
 

@@ -260,8 +260,15 @@ def main():
         obs_hands = export(args.bin_dir, obs_rfx, "reflex/hand_targets", out / "obs_hands.csv")
         obs_status = export(args.bin_dir, obs_rfx, "reflex/control_status", out / "obs_status.csv")
         strip = lambda rows: {tuple(v for k, v in r.items() if k not in ("t", "receive_ns", "source_ns")) for r in rows}
-        check(strip(hands) == strip(obs_hands) and len(hands) > 0,
-              f"hand targets recorded on the robot host == on the vision host ({len(hands)} vs {len(obs_hands)})")
+        # Exactly the same samples while both recorders were up and discovered: from the first frame
+        # of vision (which starts seconds after the others) until the robot side stopped (its launcher
+        # may stop before the behavior's last "no target" on shutdown, which the observer then gets).
+        t_from = min(int(r["stamp_ns"]) for r in objects)
+        t_to = max(int(r["receive_ns"]) for r in status) - 10_000_000
+        window = lambda rows: strip([r for r in rows if t_from <= int(r["stamp_ns"]) <= t_to])
+        check(len(window(hands)) > 0 and window(hands) == window(obs_hands),
+              f"hand targets recorded on the robot host == on the vision host ({len(window(hands))} vs "
+              f"{len(window(obs_hands))} while both ran; {len(hands)} / {len(obs_hands)} in all)")
         by_seq = {r["seq"]: r for r in status}
         common_seq = [r for r in obs_status if r["seq"] in by_seq]
         same = all(strip([r]) == strip([by_seq[r["seq"]]]) for r in common_seq)

@@ -32,10 +32,12 @@ struct RecorderOptions {
   std::string output;                 ///< recording file to create (or append to, see writer.append)
   std::vector<std::string> topics;    ///< topic specs (parseTopicSpec); empty = every known topic
   std::vector<std::string> exclude;   ///< topic names not to record (with the default "all")
-  /// true: state topics (behavior decisions, heartbeats: reliable + transient local) are read with
-  /// their own reader profile, so the recording starts with the current state even if it was
-  /// published before the recorder started; false: every topic with the reflex_record profile.
-  bool late_joiner_state = true;
+  /// false (default): every topic is read with the reflex_record profile (best effort, keep last 256):
+  /// every sample is kept, also bursts of state changes. true: state topics (behavior decisions,
+  /// heartbeats: reliable + transient local) are read with their own reader profile instead, so the
+  /// recording starts with the state published BEFORE the recorder started, but that profile keeps
+  /// only the newest sample per instance (a burst of changes between two takes keeps its last one).
+  bool late_joiner_state = false;
   double duration = 0.0;              ///< seconds to record (0: until stop())
   bool progress = false;              ///< print a status line to stderr about once a second
   WriterOptions writer;
