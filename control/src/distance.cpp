@@ -5,6 +5,12 @@
 #include <cassert>
 #include <cmath>
 
+#if defined(__GNUC__)
+#define REFLEX_ALWAYS_INLINE __attribute__((always_inline))
+#else
+#define REFLEX_ALWAYS_INLINE
+#endif
+
 namespace reflex::control {
 
 DistanceData::DistanceData(const Model& model)
@@ -122,8 +128,9 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
   // 3. Every checked pair: the best of its primitive pairs, then normal, witness points and row.
   data.closest = -1;
   double closest_d = kInf;
+  // Inlined into both loops (GCC otherwise keeps one out-of-line copy: a call per pair).
   auto finish = [&](int i, int link_a, int link_b, double best, double core, int pa, int pb, double s,
-                    double t) {
+                    double t) REFLEX_ALWAYS_INLINE {
     PairDistance& out = data.pairs[i];
     const SegmentW& A = prim[pa];
     const SegmentW& B = prim[pb];
