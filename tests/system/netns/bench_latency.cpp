@@ -19,6 +19,7 @@
 #include "../process.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/record/record_file.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -43,7 +44,7 @@ struct Options {
   std::string bin_dir = REFLEX_BIN_DIR;
   int domain = 90;
   int samples = 300;
-  double period = 0.2;
+  double period = 0.25;
   double minutes = 10.0;
   bool netns = false;
   bool skip_lateness = false;
@@ -105,6 +106,14 @@ int measureTargets(const Options& o) {
   if (o.robot_ns.empty() == false) ctl = cat(nsPrefix(o.robot_ns), ctl);
   const std::string ctl_log = o.work + "/bench_controller.log";
   reflex::testing::ChildProcess controller(ctl, ctl_log);
+  // A recorder beside the controller (same host / namespace): its receive times are when the targets
+  // reach a process on the robot host (the transport part, without the wait for the next cycle).
+  const std::string rfx = o.work + "/bench_targets.rfx";
+  std::vector<std::string> rec = {o.bin_dir + "/reflex_record", "record", "-o", rfx, "--domain", dom, "--flush-ms",
+                                  "50", "-t", "reflex/hand_targets", "-t", "reflex/object_targets"};
+  if (!profiles.empty()) rec = cat(rec, {"--profiles", profiles});
+  if (!o.robot_ns.empty()) rec = cat(nsPrefix(o.robot_ns), rec);
+  reflex::testing::ChildProcess recorder(rec, o.work + "/bench_recorder.log");
   std::unique_ptr<reflex::testing::ChildProcess> behavior;
   if (o.path == "objects") {
     std::vector<std::string> b = {o.bin_dir + "/reflex_behavior", "--config",
@@ -121,25 +130,24 @@ int measureTargets(const Options& o) {
   auto& hands_w = bus.makeWriter<msg::HandTargets>();
   auto& objects_w = bus.makeWriter<msg::ObjectTargets>();
   auto& heartbeat_w = bus.makeWriter<msg::Heartbeat>();
-  auto& hands_r = bus.makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileBehavior);
   auto& js_r = bus.makeReader<msg::JointState>("reflex/joint_state", bus::kProfileRecord);
   if (!js_r.waitForWriters(1, 20s)) {
     std::fprintf(stderr, "reflex_latency_bench: no joint state from reflex_controller:\n%s\n", slurp(ctl_log).c_str());
     return 1;
   }
-  if (!hands_w.waitForReaders(1, 20s)) return 1;
+  if (!hands_w.waitForReaders(2, 20s)) {  // the controller and the recorder
+    std::fprintf(stderr, "reflex_latency_bench: the controller and the recorder did not both subscribe\n");
+    return 1;
+  }
 
   // Left-arm joints (names starting with "l_" on the ASIMO-like robot).
   std::vector<int> left;
   std::mutex mu;
   std::vector<JsSample> js;
   js.reserve(static_cast<std::size_t>((o.samples * o.period + 20) * 200));
-  std::map<std::uint64_t, std::int64_t> hand_rx;  // hand target seq -> receive time
-  std::vector<std::pair<std::int64_t, std::int64_t>> hand_rx_by_stamp;  // (capture stamp, receive)
   std::atomic<bool> done{false};
   std::thread reader([&] {
     msg::JointState s;
-    msg::HandTargets h;
     while (!done) {
       js_r.waitForData(10ms);
       while (js_r.takeNext(s)) {
@@ -150,10 +158,6 @@ int measureTargets(const Options& o) {
         for (int i : left) x.qd.push_back(s.velocities()[static_cast<std::size_t>(i)]);
         std::lock_guard<std::mutex> lock(mu);
         js.push_back(std::move(x));
-      }
-      while (hands_r.takeNext(h)) {
-        std::lock_guard<std::mutex> lock(mu);
-        hand_rx_by_stamp.emplace_back(h.header().stamp_ns(), bus::nowNs());
       }
     }
   });
@@ -201,6 +205,7 @@ int measureTargets(const Options& o) {
   reader.join();
   controller.terminate();
   if (behavior) behavior->terminate();
+  recorder.terminate();
 
   // For each capture: the first joint state after it whose left-arm velocity turned > 60 degrees.
   std::vector<double> to_applied, to_received;
@@ -221,7 +226,8 @@ int measureTargets(const Options& o) {
       }
       na = std::sqrt(na);
       nb = std::sqrt(nb);
-      const bool turned = (na > 1e-3 && nb > 1e-3 && dot < 0.5 * na * nb) || (na <= 1e-3 && nb > 1e-2);
+      // turned by more than 25 degrees (cos 25 = 0.906) in one 5 ms cycle, or started from rest
+      const bool turned = (na > 1e-3 && nb > 1e-3 && dot < 0.906 * na * nb) || (na <= 1e-3 && nb > 1e-2);
       if (turned) {
         to_applied.push_back(1e-6 * static_cast<double>(js[j].stamp - c));
         found = true;
@@ -230,14 +236,37 @@ int measureTargets(const Options& o) {
     }
     if (!found) ++missed;
   }
-  // Hand targets received here: with --path hands the bench's own samples (loopback through DDS);
-  // with --path objects the behavior's answers, matched to the last capture before them.
-  for (const auto& [stamp, rx] : hand_rx_by_stamp) {
-    if (o.path == "hands") {
-      to_received.push_back(1e-6 * static_cast<double>(rx - stamp));
-    } else {
-      const auto it = std::upper_bound(capture.begin(), capture.end(), stamp);
-      if (it != capture.begin()) to_received.push_back(1e-6 * static_cast<double>(rx - *(it - 1)));
+  // Hand targets as the recorder beside the controller received them (receive time - capture time;
+  // with --path objects the behavior's hand targets, matched to the last capture before them).
+  std::vector<std::pair<std::int64_t, std::int64_t>> hand_rx_by_stamp;  // (hand target stamp, receive)
+  try {
+    record::RecordReader r(rfx);
+    record::RecordEntry e;
+    while (r.next(e)) {
+      if (e.topic != "reflex/hand_targets") continue;
+      msg::HandTargets h;
+      msg::HandTargetsPubSubType type;
+      eprosima::fastrtps::rtps::SerializedPayload_t p(static_cast<std::uint32_t>(e.payload.size()));
+      std::copy(e.payload.begin(), e.payload.end(), p.data);
+      p.length = static_cast<std::uint32_t>(e.payload.size());
+      if (type.deserialize(&p, &h)) hand_rx_by_stamp.emplace_back(h.header().stamp_ns(), e.receive_ns);
+    }
+  } catch (const std::exception& ex) {
+    std::fprintf(stderr, "reflex_latency_bench: recording: %s\n", ex.what());
+    return 1;
+  }
+  if (o.path == "hands") {
+    for (const auto& [stamp, rx] : hand_rx_by_stamp) to_received.push_back(1e-6 * static_cast<double>(rx - stamp));
+  } else {
+    // The behavior's reaction to capture i: its first hand target stamped after c_i (and before c_i+1);
+    // hand targets it publishes for other reasons (re-aiming on joint state) are not reactions.
+    std::sort(hand_rx_by_stamp.begin(), hand_rx_by_stamp.end());
+    for (std::size_t i = 0; i < capture.size(); ++i) {
+      const std::int64_t next = i + 1 < capture.size() ? capture[i + 1] : capture[i] + 1'000'000'000LL;
+      const auto it = std::lower_bound(hand_rx_by_stamp.begin(), hand_rx_by_stamp.end(),
+                                       std::make_pair(capture[i], std::int64_t{0}));
+      if (it != hand_rx_by_stamp.end() && it->first < next)
+        to_received.push_back(1e-6 * static_cast<double>(it->second - capture[i]));
     }
   }
   const bool objects = o.path == "objects";
@@ -246,10 +275,8 @@ int measureTargets(const Options& o) {
               objects ? "ObjectTargets -> reflex_behavior pointing -> HandTargets -> reflex_controller"
                       : "HandTargets -> reflex_controller",
               o.samples, o.period * 1e3, missed);
-  if (!objects)
-    print("capture -> hand target received (DDS loopback here)", stats(to_received));
-  else
-    print("capture -> behavior's hand target received", stats(to_received));
+  print(objects ? "capture -> behavior's hand target at the robot host" : "capture -> hand target at the robot host",
+        stats(to_received));
   print("capture -> applied by the controller (joint state)", stats(to_applied));
   std::string tail = slurp(ctl_log);
   const auto pos = tail.rfind("reflex_controller:");
