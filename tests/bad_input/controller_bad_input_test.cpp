@@ -1,0 +1,308 @@
+// Bad input at run time against the real reflex_controller process (issue 8, item 3): NaN / Inf /
+// huge values in every numeric field of every message it reads, unknown links and enumerators,
+// old / future / duplicate stamps and sequence numbers, and floods. Asserted: the sample is rejected
+// and counted in the exit summary ("targets N (rejected M)") where the controller rejects it, the
+// loop keeps 200 Hz, every pair stays above d_r, and no non-finite value is ever published.
+// Domains 101..105.
+#include "controller_run.hpp"
+
+#include <cstdio>
+#include <limits>
+#include <random>
+
+namespace reflex::bad_input {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Each of the six target coordinates gets each bad value once, the other hand staying valid:
+// 6 fields x 6 values = 36 rejected hand targets.
+TEST(ControllerBadInput, NonFiniteHugeAndFarHandTargetsAreRejectedAndCounted) {
+  ControllerRun run(101, 9.0, "hand_targets");
+  ASSERT_TRUE(run.started());
+  auto& targets = run.source->makeWriter<msg::HandTargets>();
+  auto& hb = run.source->makeWriter<msg::Heartbeat>();
+  ASSERT_TRUE(run.waitMatched(targets));
+
+  const double bad_values[] = {kNaN, kInf, -kInf, 1e300, -1e300, 2.5 /* beyond max_target_distance 2 m */};
+  std::vector<msg::HandTargets> samples;
+  for (int field = 0; field < 6; ++field) {
+    for (double v : bad_values) {
+      msg::HandTargets t = reachable();
+      t.left().status(msg::TARGET_GIVEN);  // left: a valid target
+      t.left().position_base().x(0.35);
+      t.left().position_base().y(0.20);
+      t.left().position_base().z(0.95);
+      msg::Vector3& p = field < 3 ? t.left().position_base() : t.right().position_base();
+      if (field % 3 == 0) p.x(v);
+      if (field % 3 == 1) p.y(v);
+      if (field % 3 == 2) p.z(v);
+      samples.push_back(t);
+    }
+  }
+  // 1 s of valid targets, then one bad sample every 70 ms (the controller takes the newest each
+  // 5 ms cycle; 70 ms apart none is overwritten unread), then valid ones again.
+  int sent = 0;
+  run.pump(1000ms, 70ms, [&](int) {
+    msg::HandTargets t = reachable();
+    targets.publish(t);
+    msg::Heartbeat h = heartbeat("bad_source");
+    hb.publish(h);
+    ++sent;
+  });
+  run.pumpCount(static_cast<int>(samples.size()), 70ms, [&](int k) {
+    targets.publish(samples[static_cast<std::size_t>(k)]);
+    ++sent;
+    if (k % 5 == 0) {
+      msg::Heartbeat h = heartbeat("bad_source");
+      hb.publish(h);
+    }
+  });
+  run.pump(1500ms, 70ms, [&](int) {
+    msg::HandTargets t = reachable();
+    targets.publish(t);
+    msg::Heartbeat h = heartbeat("bad_source");
+    hb.publish(h);
+    ++sent;
+  });
+  run.expectSafeAndFinite();
+
+  ExitSummary s;
+  ASSERT_EQ(run.finish(s), 0) << run.output;
+  ASSERT_TRUE(s.found) << run.output;
+  EXPECT_EQ(s.targets, sent) << "every sample was taken";
+  EXPECT_EQ(s.rejected, 36) << run.output;
+  EXPECT_EQ(s.estops, 0);
+}
+
+// Body schema: non-finite / non-positive radius, non-finite endpoints, unknown and empty parent
+// links are rejected and counted (one stderr line each); walk commands with a non-finite goal or
+// speed, or a speed <= 0, likewise. An unknown enumerator (priority 42, target status 7, segment
+// shape 9) is treated as the safe default (equal priority, no target, capsule).
+TEST(ControllerBadInput, BadBodySchemaWalkAndEnumeratorsAreRejectedOrDefaulted) {
+  ControllerRun run(102, 7.0, "schema_walk");
+  ASSERT_TRUE(run.started());
+  auto& schema = run.source->makeWriter<msg::BodySchemaChange>();
+  auto& walk = run.source->makeWriter<msg::WalkCommand>();
+  auto& prio = run.source->makeWriter<msg::MotionPriority>();
+  auto& targets = run.source->makeWriter<msg::HandTargets>();
+  ASSERT_TRUE(run.waitMatched(schema));
+  ASSERT_TRUE(walk.waitForReaders(1, 10s) && prio.waitForReaders(1, 10s) && targets.waitForReaders(1, 10s));
+
+  auto segment = [](const std::string& name) {
+    msg::BodySchemaChange c;
+    c.segment_name(name);
+    c.operation(msg::SCHEMA_ATTACH);
+    c.parent_link("l_hand");
+    c.shape(msg::SHAPE_CAPSULE);
+    c.point_a().x(0.0);
+    c.point_b().z(-0.1);
+    c.radius(0.02);
+    c.enabled(true);
+    return c;
+  };
+  std::vector<msg::BodySchemaChange> bad;
+  for (double r : {kNaN, kInf, -0.01, 0.0}) {
+    bad.push_back(segment("bad_radius_" + std::to_string(bad.size())));
+    bad.back().radius(r);
+  }
+  bad.push_back(segment("nan_a"));
+  bad.back().point_a().y(kNaN);
+  bad.push_back(segment("inf_b"));
+  bad.back().point_b().x(-kInf);
+  bad.push_back(segment("unknown_link"));
+  bad.back().parent_link("no_such_link");
+  bad.push_back(segment("empty_link"));
+  bad.back().parent_link("");
+  for (auto& c : bad) schema.publish(c);
+  // A valid "stop" first: the walk reader is matched on both sides before the bad commands come
+  // (a reliable keep-last-1 writer replaces a sample the reader never acknowledged).
+  msg::WalkCommand stop;
+  stop.stop(true);
+  walk.publish(stop);
+  run.pump(500ms, 50ms, [](int) {});
+
+  std::vector<msg::WalkCommand> bad_walk;
+  for (double g : {kNaN, kInf}) {
+    msg::WalkCommand w;
+    w.goal_x(g);
+    w.speed(0.2);
+    bad_walk.push_back(w);
+  }
+  for (double v : {kNaN, kInf, -0.2, 0.0}) {
+    msg::WalkCommand w;
+    w.goal_x(0.0);
+    w.speed(v);
+    bad_walk.push_back(w);
+  }
+  run.pumpCount(static_cast<int>(bad_walk.size()) + 2, 80ms, [&](int k) {
+    if (k < static_cast<int>(bad_walk.size())) walk.publish(bad_walk[static_cast<std::size_t>(k)]);
+    if (k == 0) {
+      msg::MotionPriority p;
+      p.priority(static_cast<msg::ArmPriority>(42));
+      prio.publish(p);
+    }
+    if (k == 1) {
+      msg::HandTargets t = reachable();
+      t.left().status(static_cast<msg::TargetStatus>(7));
+      t.left().position_base().x(kNaN);  // ignored: status 7 is not TARGET_GIVEN
+      targets.publish(t);
+    }
+  });
+  run.pump(1000ms, 50ms, [](int) {});
+  run.expectSafeAndFinite();
+
+  ExitSummary s;
+  ASSERT_EQ(run.finish(s), 0) << run.output;
+  ASSERT_TRUE(s.found) << run.output;
+  EXPECT_EQ(s.rejected, static_cast<long>(bad.size() + bad_walk.size())) << run.output;
+  for (const char* name : {"bad_radius_0", "nan_a", "inf_b", "unknown_link", "empty_link"}) {
+    EXPECT_NE(run.output.find(std::string("body-schema segment '") + name + "' rejected"), std::string::npos) << name;
+  }
+  EXPECT_EQ(s.estops, 0);
+  EXPECT_EQ(s.targets, 1);
+}
+
+// Header fields are the sender's business: the controller judges freshness by ARRIVAL time (its
+// own monotonic clock), so a stamp from 1970, from the far future, INT64 extremes, seq 0, repeated
+// or decreasing sequence numbers are all taken (never rejected, never a crash) — and, the safety
+// point, a future stamp cannot keep a silent source alive: after the source stops the hands
+// retract within --input-timeout.
+TEST(ControllerBadInput, OldFutureAndDuplicateStampsAreHarmlessAndCannotKeepASilentSourceAlive) {
+  ControllerRun run(103, 7.0, "stamps");
+  ASSERT_TRUE(run.started());
+  auto& targets = run.source->makeWriter<msg::HandTargets>();
+  ASSERT_TRUE(run.waitMatched(targets));
+  const std::int64_t now = bus::nowNs();
+  const std::int64_t stamps[] = {0, -1, std::numeric_limits<std::int64_t>::min(), std::numeric_limits<std::int64_t>::max(),
+                                 now + 3600LL * 1000000000LL, now - 3600LL * 1000000000LL, now, now};
+  const std::uint64_t seqs[] = {0, 0, 5, 5, 4, 3, std::numeric_limits<std::uint64_t>::max(), 1};
+  int sent = 0;
+  run.pumpCount(16, 70ms, [&](int k) {
+    msg::HandTargets t = reachable();
+    t.header().stamp_ns(stamps[k % 8]);
+    t.header().seq(seqs[k % 8]);
+    t.header().source(k % 2 ? "bad_source" : "");
+    targets.write(t);  // header as given
+    ++sent;
+  });
+  const double reaching = run.latestJoint("r_elbow");
+  // Silence: last sample carried a stamp from the future; the controller must still retract.
+  run.pump(2500ms, 50ms, [](int) {});
+  run.expectSafeAndFinite();
+  const double after = run.latestJoint("r_elbow");
+  EXPECT_GT(std::abs(after - reaching), 0.05) << "the right arm moved back towards rest";
+
+  ExitSummary s;
+  ASSERT_EQ(run.finish(s), 0) << run.output;
+  ASSERT_TRUE(s.found) << run.output;
+  EXPECT_EQ(s.targets, sent);
+  EXPECT_EQ(s.rejected, 0);
+  EXPECT_GE(s.stale, 1) << "the silent source was declared stale";
+}
+
+// A module that publishes hand targets (random, valid) and heartbeats at 1 kHz for 3 s: the
+// controller keeps its 5 ms period (median of ControlStatus.cycle_period_us), publishes its status
+// at ~200 Hz, and stays safe.
+TEST(ControllerBadInput, OneKilohertzPublisherDoesNotSlowThe200HzLoop) {
+  ControllerRun run(104, 7.0, "flood");
+  ASSERT_TRUE(run.started());
+  auto& targets = run.source->makeWriter<msg::HandTargets>();
+  auto& hb = run.source->makeWriter<msg::Heartbeat>();
+  ASSERT_TRUE(run.waitMatched(targets));
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<double> dx(0.25, 0.45), dy(0.05, 0.35), dz(0.8, 1.1);
+  run.drain();
+  run.statuses.clear();
+  const auto t0 = std::chrono::steady_clock::now();
+  long published = 0;
+  const auto end = t0 + 3s;
+  auto next = t0;
+  while (std::chrono::steady_clock::now() < end) {
+    msg::HandTargets t;
+    t.left().status(msg::TARGET_GIVEN);
+    t.left().position_base().x(dx(rng));
+    t.left().position_base().y(dy(rng));
+    t.left().position_base().z(dz(rng));
+    t.right().status(msg::TARGET_GIVEN);
+    t.right().position_base().x(dx(rng));
+    t.right().position_base().y(-dy(rng));
+    t.right().position_base().z(dz(rng));
+    targets.publish(t);
+    msg::Heartbeat h = heartbeat("bad_source");
+    hb.publish(h);
+    ++published;
+    if (published % 20 == 0) run.drain();
+    next += 1ms;
+    std::this_thread::sleep_until(next);
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  run.drain();
+  const double rate = static_cast<double>(published) / seconds;
+  ASSERT_FALSE(run.statuses.empty());
+  std::vector<double> periods;
+  for (const auto& s : run.statuses) periods.push_back(s.cycle_period_us());
+  std::sort(periods.begin(), periods.end());
+  const double median = periods[periods.size() / 2];
+  const double p99 = periods[periods.size() * 99 / 100];
+  std::printf("flood: %.0f samples/s published for %.2f s; controller status %.0f Hz, cycle period median %.0f us, "
+              "p99 %.0f us\n",
+              rate, seconds, static_cast<double>(run.statuses.size()) / seconds, median, p99);
+  EXPECT_GT(rate, 700.0) << "the flood really ran near 1 kHz";
+  EXPECT_NEAR(median, 5000.0, 250.0);
+  EXPECT_GT(static_cast<double>(run.statuses.size()), 0.75 * 200.0 * seconds);
+  run.expectSafeAndFinite();
+
+  ExitSummary s;
+  ASSERT_EQ(run.finish(s), 0) << run.output;
+  ASSERT_TRUE(s.found) << run.output;
+  EXPECT_EQ(s.rejected, 0);
+  EXPECT_LE(s.targets, s.cycles) << "at most one target set per cycle is taken (the newest)";
+  EXPECT_LE(s.overruns, s.cycles / 100) << "overruns stay below 1% of the cycles";
+}
+
+// A flood of 200 distinct body-schema segments in one burst: the reader keeps at most 64 instances
+// (QoS resource limits), the controller fills its 4 slots and rejects (counts) the rest; the loop
+// keeps 200 Hz. Then every segment is detached again and the arms move freely.
+TEST(ControllerBadInput, BodySchemaFloodIsBoundedBySlotsAndResourceLimits) {
+  ControllerRun run(105, 6.0, "schema_flood");
+  ASSERT_TRUE(run.started());
+  auto& schema = run.source->makeWriter<msg::BodySchemaChange>();
+  ASSERT_TRUE(run.waitMatched(schema));
+  run.drain();
+  run.statuses.clear();
+  int published = 0;
+  run.pump(1500ms, 5ms, [&](int k) {
+    if (k >= 200) return;
+    msg::BodySchemaChange c;
+    c.segment_name("flood_" + std::to_string(k));
+    c.operation(msg::SCHEMA_ATTACH);
+    c.parent_link(k % 2 ? "l_hand" : "r_hand");
+    c.shape(msg::SHAPE_SPHERE);
+    c.radius(0.01);
+    c.enabled(true);
+    c.virtual_segment(true);
+    schema.publish(c);
+    ++published;
+  });
+  std::vector<double> periods;
+  for (const auto& s : run.statuses) periods.push_back(s.cycle_period_us());
+  ASSERT_FALSE(periods.empty());
+  std::sort(periods.begin(), periods.end());
+  EXPECT_NEAR(periods[periods.size() / 2], 5000.0, 250.0);
+  run.expectSafeAndFinite(/*status_distances=*/false);  // virtual spheres overlap the hands
+
+  ExitSummary s;
+  ASSERT_EQ(run.finish(s), 0) << run.output;
+  ASSERT_TRUE(s.found) << run.output;
+  // Writer keep-last 1 per instance, reader max 64 instances: the reader gets at most 64 instances
+  // (others are refused by DDS). 4 fill the slots; every further one is rejected and counted.
+  EXPECT_GE(s.rejected, 60) << run.output;
+  EXPECT_LE(s.rejected, published - 4) << run.output;
+  EXPECT_GE(s.min_distance_mm, 5.0) << "physical pairs never below d_r";
+  EXPECT_EQ(s.estops, 0);
+}
+
+}  // namespace
+}  // namespace reflex::bad_input

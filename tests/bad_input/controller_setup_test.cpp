@@ -1,0 +1,125 @@
+// Bad files and values given to the real reflex_controller at start (issue 8, item 3): every one is
+// a clear error before the loop starts — exit code != 0 and a message quoting the bad file or value
+// — never a crash (a signal) and never a running controller. Domain 106 (only reached by the
+// profile cases).
+#include "controller_run.hpp"
+
+#include <cstdio>
+#include <cstdlib>
+#include <stdexcept>
+
+namespace reflex::bad_input {
+namespace {
+
+struct Case {
+  std::string name;                 // test case name (also the catalogue row)
+  std::vector<std::string> args;    // after the executable
+  std::string expect;               // text the error output must contain
+};
+
+// A fresh folder per run: nothing left over from an earlier run (e.g. a collision YAML that sits
+// next to a URDF) can change what the controller reads.
+std::string tmp(const std::string& file) {
+  static const std::string dir = [] {
+    std::string templ = ::testing::TempDir() + "reflex_bad_setup_XXXXXX";
+    if (mkdtemp(templ.data()) == nullptr) throw std::runtime_error("mkdtemp failed for '" + templ + "'");
+    return templ + "/";
+  }();
+  return dir + file;
+}
+
+std::vector<Case> cases() {
+  const std::string robots = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/";
+  const std::string urdf = robots + "asimo_like.urdf";
+  const std::string profiles = std::string(REFLEX_SOURCE_DIR) + "/bringup/dds/reflex_profiles.xml";
+  const std::string base_profiles = readFile(profiles);
+  // Bad files, written once.
+  writeFile(tmp("malformed.urdf"), "<robot name='x'><link name='a'>");
+  writeFile(tmp("empty.urdf"), "");
+  writeFile(tmp("binary.urdf"), std::string("\x7f" "ELF\x02\x01\x01\0\0\0", 10));
+  writeFile(tmp("mesh.urdf"),
+            "<robot name='m'><link name='base'><collision><geometry><mesh filename='x.stl'/></geometry></collision>"
+            "</link></robot>");
+  writeFile(tmp("collision_malformed.yaml"), "exclude: [[a, b\n");
+  writeFile(tmp("collision_unknown.yaml"), "exclude:\n  - [l_hand, no_such_segment]\n");
+  writeFile(tmp("malformed.controller.yaml"), "d_a: [1, 2\n");
+  writeFile(tmp("negative.controller.yaml"), "d_r: -0.005\n");
+  writeFile(tmp("unordered.controller.yaml"), "d_a: 0.005\nd_b: 0.010\n");
+  writeFile(tmp("nan.controller.yaml"), "k_virtual: .nan\n");
+  writeFile(tmp("unknown_key.controller.yaml"), "d_z: 0.01\n");
+  writeFile(tmp("unknown_joint.controller.yaml"), "arms:\n  left:\n    joints: [l_no_such_joint]\n");
+  writeFile(tmp("truncated.xml"), base_profiles.substr(0, base_profiles.size() / 2));
+  writeFile(tmp("not_xml.xml"), "this is not XML at all {\n");
+  writeFile(tmp("bad_qos.xml"),
+            "<?xml version='1.0'?><dds xmlns='http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'><profiles>"
+            "<participant profile_name='reflex_participant'><rtps><name>x</name></rtps></participant>"
+            "<data_writer profile_name='reflex_state'><topic><historyQos><kind>KEEP_LAST</kind><depth>abc</depth>"
+            "</historyQos></topic></data_writer></profiles></dds>");
+  writeFile(tmp("no_profiles.xml"),
+            "<?xml version='1.0'?><dds xmlns='http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'><profiles>"
+            "</profiles></dds>");
+  const std::string d = "106";
+  return {
+      {"missing URDF", {"--urdf", "/nonexistent/robot.urdf"}, "/nonexistent/robot.urdf"},
+      {"malformed URDF", {"--urdf", tmp("malformed.urdf")}, tmp("malformed.urdf")},
+      {"empty URDF", {"--urdf", tmp("empty.urdf")}, tmp("empty.urdf")},
+      {"binary URDF", {"--urdf", tmp("binary.urdf")}, tmp("binary.urdf")},
+      {"URDF is a folder", {"--urdf", ::testing::TempDir()}, ::testing::TempDir()},
+      {"mesh-only collision URDF", {"--urdf", tmp("mesh.urdf")}, "mesh"},
+      {"missing collision YAML", {"--urdf", urdf, "--collision", "/nonexistent/c.yaml"}, "/nonexistent/c.yaml"},
+      {"malformed collision YAML", {"--urdf", urdf, "--collision", tmp("collision_malformed.yaml")},
+       tmp("collision_malformed.yaml")},
+      {"unknown segment in collision YAML", {"--urdf", urdf, "--collision", tmp("collision_unknown.yaml")},
+       "no_such_segment"},
+      {"missing controller YAML", {"--controller", "/nonexistent/ctl.yaml"}, "/nonexistent/ctl.yaml"},
+      {"malformed controller YAML", {"--controller", tmp("malformed.controller.yaml")}, "malformed YAML"},
+      {"negative d_r", {"--controller", tmp("negative.controller.yaml")}, "d_r"},
+      {"d_a < d_b", {"--controller", tmp("unordered.controller.yaml")}, "d_r < d_b < d_a"},
+      {"NaN gain", {"--controller", tmp("nan.controller.yaml")}, "k_virtual"},
+      {"unknown controller key", {"--controller", tmp("unknown_key.controller.yaml")}, "d_z"},
+      {"unknown joint in controller YAML", {"--controller", tmp("unknown_joint.controller.yaml")}, "l_no_such_joint"},
+      {"missing profiles XML", {"--domain", d, "--profiles", "/nonexistent/p.xml"}, "/nonexistent/p.xml"},
+      {"truncated profiles XML", {"--domain", d, "--profiles", tmp("truncated.xml")}, tmp("truncated.xml")},
+      {"profiles file not XML", {"--domain", d, "--profiles", tmp("not_xml.xml")}, tmp("not_xml.xml")},
+      {"bad QoS value in profiles XML", {"--domain", d, "--profiles", tmp("bad_qos.xml")}, tmp("bad_qos.xml")},
+      {"profiles XML without any profile", {"--domain", d, "--profiles", tmp("no_profiles.xml")},
+       tmp("no_profiles.xml")},
+      {"unknown participant profile", {"--domain", d, "--participant-profile", "no_such_profile"}, "no_such_profile"},
+      {"domain id out of range", {"--domain", "999"}, "999"},
+      {"domain id not a number", {"--domain", "abc"}, "abc"},
+      {"negative duration", {"--duration", "-1"}, "-1"},
+      {"zero input timeout", {"--input-timeout", "0"}, "0"},
+      {"NaN input timeout", {"--input-timeout", "nan"}, "nan"},
+      {"unknown option", {"--no-such-option"}, "--no-such-option"},
+  };
+}
+
+TEST(ControllerBadSetup, EveryBadFileOrValueIsAClearErrorAtStart) {
+  int n = 0;
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.name);
+    const std::string log = tmp("case_" + std::to_string(n++) + ".log");
+    std::vector<std::string> argv = {controllerExe()};
+    argv.insert(argv.end(), c.args.begin(), c.args.end());
+    argv.insert(argv.end(), {"--duration", "1"});  // a controller that starts anyway stops by itself
+    if (c.args.size() >= 2 && c.args[0] == "--duration") argv.resize(argv.size() - 2);
+    testing::ChildProcess p(argv, log);
+    ASSERT_TRUE(p.started());
+    const int rc = p.wait(std::chrono::seconds(20));
+    const std::string out = readFile(log);
+    EXPECT_GT(rc, 0) << "exit code " << rc << ", output:\n" << out;
+    EXPECT_LT(rc, 128) << "killed by a signal (a crash), output:\n" << out;
+    EXPECT_NE(out.find(c.expect), std::string::npos) << "the message does not quote '" << c.expect << "':\n" << out;
+    EXPECT_EQ(out.find("running at"), std::string::npos) << "the loop started:\n" << out;
+  }
+}
+
+TEST(ControllerBadSetup, HelpExitsZero) {
+  const std::string log = tmp("help.log");
+  testing::ChildProcess p({controllerExe(), "--help"}, log);
+  EXPECT_EQ(p.wait(std::chrono::seconds(10)), 0);
+  EXPECT_NE(readFile(log).find("--input-timeout"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace reflex::bad_input
