@@ -74,7 +74,7 @@ inline void closestParametersSegmentSegment(const SegmentW& A, const SegmentW& B
 
 /// Closest points c1 on [a0, a1] and c2 on [b0, b1] (either segment may have zero length).
 /// When the segments are parallel the closest pair is not unique; one valid pair is returned
-/// (the one nearest the start of the first segment). s, t are the segment parameters in [0, 1].
+/// (see closestParametersSegmentSegment). s, t are the segment parameters in [0, 1].
 inline void closestPointsSegmentSegment(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1,
                                         const Eigen::Vector3d& b0, const Eigen::Vector3d& b1,
                                         Eigen::Vector3d& c1, Eigen::Vector3d& c2, double& s,
