@@ -72,8 +72,8 @@ def run_once(args, label, avoidance):
                                        "--domain", domain], os.path.join(out, "behavior.log")))
         recorder = os.path.join(bindir, "reflex_record")
         if os.path.exists(recorder):
-            procs.append(Proc("recorder", [recorder, "record", "--domain", domain, "--out",
-                                           os.path.join(out, "bus.rec")], os.path.join(out, "recorder.log")))
+            procs.append(Proc("recorder", [recorder, "record", "--domain", domain, "--output",
+                                           os.path.join(out, "bus.rfx")], os.path.join(out, "recorder.log")))
         time.sleep(2.0)  # discovery
         for p in procs:
             if not p.alive():
@@ -83,15 +83,22 @@ def run_once(args, label, avoidance):
                                  "--rate", str(args.rate), "--quiet"], os.path.join(out, "vision.log"))
         procs.append(vision)
         t0 = time.time()
+        tty = sys.stdout.isatty()
+        last_tenth = -1
         while vision.alive():
             time.sleep(1.0)
             done = min(1.0, (time.time() - t0) / max(length, 1e-3))
-            print("\rflagship: %s run %3.0f%% (%.0f of %.0f s)" % (label, 100 * done, time.time() - t0, length),
-                  end="", flush=True)
+            if tty:
+                print("\rflagship: %s run %3.0f%% (%.0f of %.0f s)" % (label, 100 * done, time.time() - t0, length),
+                      end="", flush=True)
+            elif int(done * 10) != last_tenth:
+                last_tenth = int(done * 10)
+                print("flagship: %s run %3.0f%%" % (label, 100 * done), flush=True)
             for p in procs:
                 if p is not vision and not p.alive() and p.name != "recorder":
                     raise RuntimeError("%s died during the run (see %s)" % (p.name, p.log.name))
-        print("", flush=True)
+        if tty:
+            print("", flush=True)
         if vision.p.returncode != 0:
             raise RuntimeError("vision failed with exit code %d (see %s)" % (vision.p.returncode, vision.log.name))
         time.sleep(1.0)
@@ -142,7 +149,8 @@ def main():
         return 1
     if not args.no_report:
         python = "/usr/bin/python3" if os.path.exists("/usr/bin/python3") else sys.executable  # needs matplotlib
-        return subprocess.call([python, os.path.join(HERE, "report.py"), args.out, "--session", args.session])
+        return subprocess.call([python, os.path.join(HERE, "report.py"), args.out, "--session", args.session,
+                                "--build", args.build])
     return 0
 
 

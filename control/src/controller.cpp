@@ -291,7 +291,15 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
         const double rr = free_row.squaredNorm();
         if (rr < 1e-12) continue;
         const double allowed = -P.guard_rate * std::max(0.0, d - P.d_r - P.guard_margin);
-        const double rate = row.dot(qdot.transpose());
+        // The higher-priority arm was computed first (computeControl orders them): its motion of this
+        // cycle is known, so the pair's approach includes it (the obstacle arm does not avoid).
+        double other_rate = 0.0;
+        const int b = 1 - a;
+        if (higherPriority(input.priority, b)) {
+          for (int i = 0; i < cm.arms[b].n; ++i)
+            other_rate += data.dist.rows(p, cm.arms[b].q[i]) * data.qdot[cm.arms[b].q[i]];
+        }
+        const double rate = row.dot(qdot.transpose()) + other_rate;
         if (rate < allowed) {
           qdot += free_row.transpose() * ((allowed - rate) / rr);
           changed = true;
@@ -380,7 +388,10 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
     }
   }
 
-  for (int a = 0; a < 2; ++a) computeArm(model, cm, data, a, in, false);
+  // The higher-priority arm first, so the other arm's safety filter knows its motion (Sec. 7.2).
+  const int first = in.priority == MotionPriority::kRightHigher ? kRight : kLeft;
+  computeArm(model, cm, data, first, in, false);
+  computeArm(model, cm, data, 1 - first, in, false);
   if (!data.qdot.allFinite()) {
     data.qdot.setZero();
     ++data.bad_input_count;

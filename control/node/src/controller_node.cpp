@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <ctime>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <unistd.h>
 
@@ -280,12 +281,15 @@ void ControllerNode::run() {
         m.robot->setWalkingJoints(m.q_walk, m.walking->joints());
       }
     }
-    double dmin = 1e9;
+    double dmin = 1e9, dvirt = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < m.data->dist.pairs.size(); ++i) {
       const auto& pd = m.data->dist.pairs[i];
       if (!pd.active) continue;
       const int sb = pd.seg_b;
-      if (m.model.segments[sb].body_schema_slot && m.data->slot_virtual[sb - m.model.num_robot_segments]) continue;
+      if (m.model.segments[sb].body_schema_slot && m.data->slot_virtual[sb - m.model.num_robot_segments]) {
+        dvirt = std::min(dvirt, pd.distance);
+        continue;
+      }
       dmin = std::min(dmin, pd.distance);
     }
     stats_.min_distance = std::min(stats_.min_distance, dmin);
@@ -328,6 +332,7 @@ void ControllerNode::run() {
       s.commands = in.hands;
       s.estop = m.data->estop;
       s.min_distance = dmin;
+      s.virtual_distance = dvirt;
       s.arm_distance = armToArmDistance(m.model, m.cm, *m.data);
       s.wall_time = nowSeconds(CLOCK_REALTIME);
       s.q = q;

@@ -51,7 +51,13 @@ struct Options {
   std::string path = "hands";
   std::string robot_ns;  // inner run: controller's namespace
   std::string work = "/tmp";
+  int rt = 0;  // > 0: SCHED_FIFO priority for the controller, recorder and behavior (chrt -f)
 };
+
+std::vector<std::string> rtPrefix(const Options& o) {
+  if (o.rt <= 0) return {};
+  return {"/usr/bin/chrt", "-f", std::to_string(o.rt)};
+}
 
 struct Stats {
   double p50 = 0, p99 = 0, max = 0;
@@ -103,6 +109,7 @@ int measureTargets(const Options& o) {
   std::vector<std::string> ctl = {o.bin_dir + "/reflex_controller", "--domain", dom, "--duration",
                                   std::to_string(o.samples * o.period + 15.0)};
   if (!profiles.empty()) ctl = cat(ctl, {"--profiles", profiles});
+  ctl = cat(rtPrefix(o), ctl);
   if (o.robot_ns.empty() == false) ctl = cat(nsPrefix(o.robot_ns), ctl);
   const std::string ctl_log = o.work + "/bench_controller.log";
   reflex::testing::ChildProcess controller(ctl, ctl_log);
@@ -112,6 +119,7 @@ int measureTargets(const Options& o) {
   std::vector<std::string> rec = {o.bin_dir + "/reflex_record", "record", "-o", rfx, "--domain", dom, "--flush-ms",
                                   "50", "-t", "reflex/hand_targets", "-t", "reflex/object_targets"};
   if (!profiles.empty()) rec = cat(rec, {"--profiles", profiles});
+  rec = cat(rtPrefix(o), rec);
   if (!o.robot_ns.empty()) rec = cat(nsPrefix(o.robot_ns), rec);
   reflex::testing::ChildProcess recorder(rec, o.work + "/bench_recorder.log");
   std::unique_ptr<reflex::testing::ChildProcess> behavior;
@@ -120,6 +128,7 @@ int measureTargets(const Options& o) {
                                   std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/pointing.yaml", "--domain", dom,
                                   "--progress", "0"};
     if (!profiles.empty()) b = cat(b, {"--profiles", profiles});
+    b = cat(rtPrefix(o), b);
     behavior = std::make_unique<reflex::testing::ChildProcess>(b, o.work + "/bench_behavior.log");
   }
   bus::BusConfig cfg;
@@ -270,8 +279,8 @@ int measureTargets(const Options& o) {
     }
   }
   const bool objects = o.path == "objects";
-  std::printf("latency (%s, %s): %d targets every %.0f ms, %zu not seen applied\n",
-              o.netns ? "across network namespaces: bench in one, controller in another (UDP)" : "one host",
+  std::printf("latency (%s%s, %s): %d targets every %.0f ms, %zu not seen applied\n",
+              o.rt > 0 ? "SCHED_FIFO, " : "", o.netns ? "across network namespaces: bench in one, controller in another (UDP)" : "one host",
               objects ? "ObjectTargets -> reflex_behavior pointing -> HandTargets -> reflex_controller"
                       : "HandTargets -> reflex_controller",
               o.samples, o.period * 1e3, missed);
@@ -290,7 +299,8 @@ int measureLateness(const Options& o) {
   std::printf("lateness: reflex_controller --duration %.0f (%.1f min) ...\n", seconds, o.minutes);
   std::fflush(stdout);
   reflex::testing::ChildProcess controller(
-      {o.bin_dir + "/reflex_controller", "--domain", std::to_string(o.domain + 1), "--duration", std::to_string(seconds)},
+      cat(rtPrefix(o), {o.bin_dir + "/reflex_controller", "--domain", std::to_string(o.domain + 1), "--duration",
+                        std::to_string(seconds)}),
       log);
   const int rc = controller.wait(std::chrono::milliseconds(static_cast<long>((seconds + 60.0) * 1000)));
   const std::string text = slurp(log);
@@ -318,6 +328,8 @@ int main(int argc, char** argv) {
                  "reflex_behavior (pointing)")->capture_default_str()->check(CLI::IsMember({"hands", "objects"}));
   app.add_flag("--netns", o.netns, "run the controller (and behavior) in another network namespace (root)");
   app.add_option("--work", o.work, "folder for the child processes' logs")->capture_default_str();
+  app.add_option("--rt", o.rt, "run the controller, recorder and behavior with SCHED_FIFO at this priority "
+                 "(chrt -f; 0: normal scheduling)")->capture_default_str()->check(CLI::Range(0, 99));
   app.add_option("--robot-ns", o.robot_ns, "(internal) the controller's namespace");
   CLI11_PARSE(app, argc, argv);
   if (!o.netns || !o.robot_ns.empty()) {
@@ -347,7 +359,7 @@ int main(int argc, char** argv) {
     std::ostringstream cmd;
     cmd << "ip netns exec " << src << " " << argv[0] << " --netns --robot-ns " << robot << " --bin-dir " << o.bin_dir
         << " --domain " << o.domain << " --samples " << o.samples << " --period " << o.period << " --path " << o.path
-        << " --work " << o.work << " --minutes 0";
+        << " --work " << o.work << " --rt " << o.rt << " --minutes 0";
     rc = std::system(cmd.str().c_str());
   }
   sh("ip netns del " + src);

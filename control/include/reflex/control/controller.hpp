@@ -56,14 +56,14 @@ struct ControllerParams {
   double d_b = 0.010;        ///< orange zone boundary (m): f(d) = 1 below, Eq. 13
   double d_r = 0.005;        ///< red zone (m): emergency stop, Sec. 7.1
   double period = 0.005;     ///< control period (s)
-  double k_virtual = 10.0;   ///< virtual force gain k (1/s): separation speed k (d_a - d), Eq. 6
+  double k_virtual = 5.0;    ///< virtual force gain k (1/s): separation speed k (d_a - d), Eq. 6
   double alpha_ca = 1.0;     ///< step width of the avoidance gradient in the WBM nullspace (1/(m s)), Eq. 5
   double d_safe = 0.10;      ///< d_safe of Eq. 5 (m); pairs closer than this feed the gradient
   double alpha_t = 60.0;     ///< step width of target reaching in the CA nullspace (1/s), Eq. 12
   double alpha_jla = 0.2;    ///< joint-limit-avoidance gradient step (1/s), Eq. 4
   double alpha_rest = 1.5;   ///< attraction to the rest posture when a hand has no target (1/s)
   double damping = 0.02;     ///< singularity-robust inverse damping lambda (m)
-  double reach_gain = 5.0;   ///< trajectory tracking gain (1/s)
+  double reach_gain = 10.0;  ///< trajectory tracking gain (1/s)
   double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s)
   double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8
   double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s)
