@@ -1,20 +1,30 @@
 #!/usr/bin/env bash
-# Set up, build, and run the main job.
-# Until the flagship experiment (recorded session -> vision -> behavior -> controller over DDS) lands,
-# the main job is the most complete piece that exists: the paper's experiments (Sec. 8) on the
-# kinematic robot with reflex_sim, each with and without collision avoidance, plots in out/sim/.
-# Usage: bringup/demo.sh [--help]
+# Set up, build, and run the main job: the flagship experiment (paper Sec. 8.4, Figs. 12-13).
+# The shipped two-object stereo session is replayed through reflex_vision -> reflex_behavior
+# (pointing) -> reflex_controller as separate processes over DDS, once with collision avoidance and
+# once without; the report (plots + outcome) lands in out/flagship/report.md. Then the paper's
+# other experiments run on the kinematic robot (reflex_sim all), plots in out/sim/.
+# Usage: bringup/demo.sh [--help] [--sim-only]
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 build_dir=${REFLEX_BUILD_DIR:-$here/build}
-case "${1:-}" in -h|--help) sed -n '2,6p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;; esac
+sim_only=0
+case "${1:-}" in
+  -h|--help) sed -n '2,8p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+  --sim-only) sim_only=1 ;;
+  "") ;;
+  *) echo "demo.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
+esac
 "$here/bringup/setup.sh"
+export REFLEX_BUILD_DIR=$build_dir
+if [ "$sim_only" -eq 0 ]; then
+  echo "demo.sh: flagship experiment (about 2.5 minutes: two real-time replays of a 60 s session)"
+  /usr/bin/python3 "$here/bringup/flagship/run_flagship.py" --out "$here/out/flagship"
+fi
 out=$here/out/sim
-echo "demo.sh: the flagship experiment is not built yet; running the paper's experiments in simulation"
-echo "demo.sh: the robot's collision model (reflex_inspect, closest pairs at rest):"
-"$build_dir/bin/reflex_inspect" "$here/bringup/robots/asimo_like.urdf" | grep -v '^#' | sort -t, -k3 -g | head -6
-"$build_dir/bin/reflex_sim" all --out "$out"
+echo "demo.sh: the paper's experiments on the kinematic robot (reflex_sim all)"
+"$build_dir/bin/reflex_sim" all --out "$out" | grep -E "^scenario|min distance|within|e-stop"
 "$build_dir/bin/reflex_sim" all --no-avoidance --out "$out/no_avoidance" > "$out/no_avoidance.txt"
-echo "demo.sh: without avoidance (closest distance < 0 means the segments penetrate):"
+echo "demo.sh: the same without avoidance (a closest distance < 0 means the segments penetrate):"
 grep -E "^scenario|min distance|min virtual" "$out/no_avoidance.txt"
-echo "demo.sh: done. Plots and time series: $out/<scenario>/ (distance_f.png, hands.png, joints.png, postures.png)"
+echo "demo.sh: done. Flagship report: out/flagship/report.md; simulation plots: out/sim/<scenario>/"
