@@ -3,7 +3,7 @@
 // old / future / duplicate stamps and sequence numbers, and floods. Asserted: the sample is rejected
 // and counted in the exit summary ("targets N (rejected M)") where the controller rejects it, the
 // loop keeps 200 Hz, every pair stays above d_r, and no non-finite value is ever published.
-// Domains 101..105.
+// Domains 101..105, 107.
 #include "controller_run.hpp"
 
 #include <cstdio>
@@ -302,6 +302,37 @@ TEST(ControllerBadInput, BodySchemaFloodIsBoundedBySlotsAndResourceLimits) {
   EXPECT_LE(s.rejected, published - 4) << run.output;
   EXPECT_GE(s.min_distance_mm, 5.0) << "physical pairs never below d_r";
   EXPECT_EQ(s.estops, 0);
+}
+
+// A body-schema segment that is finite but absurd (a 1 km sphere on the left hand) is accepted:
+// every pair with it is in the red zone, so the controller latches its e-stop and freezes the robot
+// (zero velocities) — safe, never a NaN. (A bound on segment size would reject it instead; see
+// README.md, "Not rejected today".)
+TEST(ControllerBadInput, AbsurdlyLargeBodySchemaSegmentFreezesTheRobot) {
+  ControllerRun run(107, 5.0, "huge_segment");
+  ASSERT_TRUE(run.started());
+  auto& schema = run.source->makeWriter<msg::BodySchemaChange>();
+  ASSERT_TRUE(run.waitMatched(schema));
+  msg::BodySchemaChange c;
+  c.segment_name("boulder");
+  c.operation(msg::SCHEMA_ATTACH);
+  c.parent_link("l_hand");
+  c.shape(msg::SHAPE_SPHERE);
+  c.radius(1000.0);
+  c.enabled(true);
+  schema.publish(c);
+  run.pump(1500ms, 50ms, [](int) {});
+  run.drain();
+  run.expectSafeAndFinite(/*status_distances=*/false);
+  ASSERT_FALSE(run.statuses.empty());
+  EXPECT_TRUE(run.statuses.back().left().estop_latched()) << "red zone -> e-stop latched";
+  for (double v : run.joint_states.back().velocities()) EXPECT_EQ(v, 0.0) << "frozen";
+
+  ExitSummary s;
+  ASSERT_EQ(run.finish(s), 0) << run.output;
+  ASSERT_TRUE(s.found) << run.output;
+  EXPECT_EQ(s.rejected, 0) << "accepted today";
+  EXPECT_GE(s.estops, 1);
 }
 
 }  // namespace

@@ -135,7 +135,9 @@ class ControllerRun {
     }
     for (const auto& s : statuses) {
       ASSERT_TRUE(std::isfinite(s.left().distance()) && std::isfinite(s.right().distance()));
-      if (status_distances) EXPECT_GE(std::min(s.left().distance(), s.right().distance()), 0.005) << "below d_r";
+      if (status_distances) {
+        EXPECT_GE(std::min(s.left().distance(), s.right().distance()), 0.005) << "below d_r";
+      }
     }
   }
   /// Position of joint `name` in the newest joint state (NaN if absent).

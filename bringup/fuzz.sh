@@ -1,0 +1,127 @@
+#!/usr/bin/env bash
+# fuzz.sh — builds the libFuzzer targets of tests/fuzz with clang in a separate build dir and runs
+# each one for a bounded time on its seed corpus (shipped files) and its committed reproducers
+# (tests/fuzz/regressions/<target>/). Exits non-zero if any target crashes, reports a sanitizer
+# error, or finds an undocumented exception; the input is saved under <build>/artifacts/<target>/
+# and replayed once with its message. See tests/fuzz/README.md.
+set -euo pipefail
+
+usage() {
+  cat <<'USAGE'
+usage: fuzz.sh [--time SECONDS] [--build-dir DIR] [--jobs N] [--no-build] [TARGET...]
+
+Builds (clang, -fsanitize=fuzzer,address,undefined) and runs the Reflex fuzz targets.
+
+  --time SECONDS   fuzzing time per target (default 20; -max_total_time)
+  --build-dir DIR  build folder (default: <repo>/build-fuzz)
+  --jobs N         build jobs (default 2)
+  --no-build       use an existing build
+  TARGET...        only these targets (default: all, e.g. fuzz_urdf fuzz_idl)
+Exit status: 0 no finding; 1 a target found a crash; 2 bad arguments, missing clang, build failure.
+USAGE
+}
+
+die() { echo "fuzz.sh: error: $*" >&2; exit 2; }
+
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="$repo/build-fuzz"
+seconds=20
+jobs=2
+do_build=1
+only=()
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    -h|--help) usage; exit 0 ;;
+    --time)
+      [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--time '${2:-}' is not a positive number of seconds"
+      seconds="$2"; shift 2 ;;
+    --build-dir) [[ $# -ge 2 ]] || die "--build-dir needs a folder"; build="$2"; shift 2 ;;
+    --jobs)
+      [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--jobs '${2:-}' is not a positive integer"
+      jobs="$2"; shift 2 ;;
+    --no-build) do_build=0; shift ;;
+    -*) die "unknown option '$1' (see --help)" ;;
+    *) only+=("$1"); shift ;;
+  esac
+done
+
+cc=$(command -v clang || command -v clang-14 || true)
+cxx=$(command -v clang++ || command -v clang++-14 || true)
+[[ -n "$cc" && -n "$cxx" ]] || die "clang not found (Debian packages clang-14 libclang-rt-14-dev)"
+
+start=$(date +%s)
+if [[ $do_build -eq 1 ]]; then
+  mkdir -p "$build" || die "cannot create the build folder '$build'"
+  flags="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -gline-tables-only"
+  CC="$cc" CXX="$cxx" cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DREFLEX_FUZZ=ON \
+    -DREFLEX_BUILD_BENCHMARKS=OFF "-DCMAKE_C_FLAGS=$flags" "-DCMAKE_CXX_FLAGS=$flags" \
+    > "$build/fuzz.configure.log" 2>&1 ||
+    { tail -30 "$build/fuzz.configure.log" >&2; die "configure of '$build' failed"; }
+fi
+cache="$build/CMakeCache.txt"
+[[ -f "$cache" ]] || die "'$build' is not a configured build folder"
+entries=$(sed -n 's/^REFLEX_FUZZ_TARGETS:INTERNAL=//p' "$cache")
+[[ -n "$entries" ]] || die "no fuzz targets in '$build' (is tests/fuzz added by tests/CMakeLists.txt?)"
+
+declare -A seeds
+names=()
+IFS=';' read -r -a list <<< "$entries"
+for e in "${list[@]}"; do
+  name="${e%%|*}"
+  seeds[$name]="${e#*|}"
+  if [[ ${#only[@]} -eq 0 ]] || printf '%s\n' "${only[@]}" | grep -qx "$name"; then names+=("$name"); fi
+done
+for o in "${only[@]}"; do
+  [[ -n "${seeds[$o]+x}" ]] || die "unknown fuzz target '$o' (known: ${!seeds[*]})"
+done
+
+if [[ $do_build -eq 1 ]]; then
+  targets=("${names[@]}")
+  if printf '%s\n' "${names[@]}" | grep -qx fuzz_idl; then targets+=(fuzz_idl_seeds); fi
+  nice cmake --build "$build" -j"$jobs" --target "${targets[@]}" > "$build/fuzz.build.log" 2>&1 ||
+    { tail -40 "$build/fuzz.build.log" >&2; die "build failed (full log: $build/fuzz.build.log)"; }
+fi
+built=$(date +%s)
+
+export ASAN_OPTIONS="halt_on_error=1:detect_leaks=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
+export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
+failed=()
+summary=()
+for t in "${names[@]}"; do
+  corpus="$build/corpus/$t"
+  artifacts="$build/artifacts/$t"
+  mkdir -p "$corpus" "$artifacts"
+  IFS=',' read -r -a files <<< "${seeds[$t]}"
+  for f in "${files[@]}"; do [[ -n "$f" ]] && cp -n "$f" "$corpus/" ; done
+  if [[ "$t" == fuzz_idl ]]; then "$build/bin/fuzz_idl_seeds" "$corpus"; fi
+  dirs=("$corpus")
+  if [[ -d "$repo/tests/fuzz/regressions/$t" ]]; then dirs+=("$repo/tests/fuzz/regressions/$t"); fi
+  log="$build/fuzz_$t.log"
+  echo "fuzz.sh: $t for ${seconds} s (corpus $corpus)"
+  set +e
+  "$build/bin/$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -close_fd_mask=3 \
+    -print_final_stats=1 -artifact_prefix="$artifacts/" "${dirs[@]}" > "$log" 2>&1
+  rc=$?
+  set -e
+  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+  cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
+  summary+=("$t: ${execs:-?} runs, coverage ${cov:-?} edges, exit $rc")
+  if [[ $rc -ne 0 ]]; then
+    failed+=("$t")
+    crash=$(ls -t "$artifacts"/* 2>/dev/null | head -1 || true)
+    echo "fuzz.sh: $t FOUND A PROBLEM (exit $rc); log $log; input ${crash:-none}" >&2
+    grep -E "ERROR:|runtime error|FUZZ FINDING|SUMMARY" "$log" | head -5 >&2 || true
+    if [[ -n "$crash" ]]; then
+      echo "fuzz.sh: replay of $crash:" >&2
+      "$build/bin/$t" "$crash" 2>&1 | grep -E "FUZZ FINDING|ERROR:|runtime error|SUMMARY|#[0-3] " | head -12 >&2 || true
+    fi
+  fi
+done
+end=$(date +%s)
+printf 'fuzz.sh: %s\n' "${summary[@]}"
+echo "fuzz.sh: build $((built - start)) s, fuzzing $((end - built)) s"
+if [[ ${#failed[@]} -gt 0 ]]; then
+  echo "fuzz.sh: FINDINGS in: ${failed[*]} (reproducers in $build/artifacts/; commit them to tests/fuzz/regressions/<target>/ with the fix)" >&2
+  exit 1
+fi
+echo "fuzz.sh: no finding"

@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# sanitize.sh — the Reflex test suite under AddressSanitizer + UndefinedBehaviorSanitizer.
+#
+# Configures a separate build dir with -DREFLEX_SANITIZE=ON (top CMakeLists: -fsanitize=address,
+# undefined), builds only the test programs (and the executables they start) selected by the
+# labels, runs them with ctest, and exits non-zero if a test fails or if any sanitizer report
+# appears in the output (also one from a child process whose exit code a test ignored).
+#
+# Default selection (CI): labels unit|control|vision|modules|bad_input, excluding the long DDS
+# system tests and experiments (labels system|integration|flagship|netns|launch|experiment|security).
+# Pass --labels '.' --exclude '^$' for everything.
+set -euo pipefail
+
+usage() {
+  cat <<'EOF'
+usage: sanitize.sh [--build-dir DIR] [--labels REGEX] [--exclude REGEX] [--jobs N] [--no-build]
+
+Runs the Reflex tests under AddressSanitizer + UndefinedBehaviorSanitizer.
+
+  --build-dir DIR   build folder (default: <repo>/build-sanitize)
+  --labels REGEX    ctest -L: labels to run (default: 'unit|control|vision|modules|bad_input')
+  --exclude REGEX   ctest -LE: labels to skip
+                    (default: 'system|integration|flagship|netns|launch|experiment|security')
+  --jobs N          build jobs (default 2)
+  --no-build        run the tests of an existing build only
+  -h, --help        this help
+Exit status: 0 clean; 1 a test failed or a sanitizer reported; 2 bad arguments or build failure.
+EOF
+}
+
+die() { echo "sanitize.sh: error: $*" >&2; exit 2; }
+
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="$repo/build-sanitize"
+labels='unit|control|vision|modules|bad_input'
+exclude='system|integration|flagship|netns|launch|experiment|security'
+jobs=2
+do_build=1
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    -h|--help) usage; exit 0 ;;
+    --build-dir) [[ $# -ge 2 ]] || die "--build-dir needs a folder"; build="$2"; shift 2 ;;
+    --labels) [[ $# -ge 2 ]] || die "--labels needs a regex"; labels="$2"; shift 2 ;;
+    --exclude) [[ $# -ge 2 ]] || die "--exclude needs a regex"; exclude="$2"; shift 2 ;;
+    --jobs)
+      [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--jobs '${2:-}' is not a positive integer"
+      jobs="$2"; shift 2 ;;
+    --no-build) do_build=0; shift ;;
+    *) die "unknown argument '$1' (see --help)" ;;
+  esac
+done
+
+start=$(date +%s)
+if [[ $do_build -eq 1 ]]; then
+  mkdir -p "$build" || die "cannot create the build folder '$build'"
+  cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DREFLEX_SANITIZE=ON \
+    -DREFLEX_BUILD_BENCHMARKS=OFF > "$build/sanitize.configure.log" 2>&1 ||
+    { cat "$build/sanitize.configure.log" >&2; die "configure of '$build' failed"; }
+fi
+[[ -f "$build/CTestTestfile.cmake" ]] || die "'$build' is not a configured build folder"
+
+# The selected tests; each test's name is its executable's target (reflex_add_test).
+mapfile -t tests < <(cd "$build" && ctest -N -L "$labels" -LE "$exclude" | sed -n 's/^ *Test *#[0-9]*: *//p')
+[[ ${#tests[@]} -gt 0 ]] || die "no test matches labels '$labels' minus '$exclude'"
+echo "sanitize.sh: ${#tests[@]} tests: ${tests[*]}"
+
+if [[ $do_build -eq 1 ]]; then
+  # The executables of the selected tests (one program may serve several tests), plus the
+  # executables that tests start as child processes when they exist as targets.
+  # (read from the generated CTestTestfile.cmake files: ctest hides commands not built yet).
+  mapfile -t targets < <(python3 - "$build" "${tests[@]}" <<'PY'
+import os, re, sys
+build, wanted = sys.argv[1], set(sys.argv[2:])
+exes = set()
+for root, _, files in os.walk(os.path.join(build, "tests")):
+    if "CTestTestfile.cmake" in files:
+        text = open(os.path.join(root, "CTestTestfile.cmake")).read()
+        for name, exe in re.findall(r'add_test\(\[=\[(.*?)\]=\] "([^"]+)"', text):
+            if name in wanted:
+                exes.add(os.path.basename(exe))
+print("\n".join(sorted(exes)))
+PY
+)
+  for exe in reflex_controller reflex_inspect reflex_sim reflex_vision_exe reflex_behavior reflex_make_session; do
+    if cmake --build "$build" --target help 2>/dev/null | grep -q "^\.\.\. $exe\$"; then targets+=("$exe"); fi
+  done
+  nice cmake --build "$build" -j"$jobs" --target "${targets[@]}" > "$build/sanitize.build.log" 2>&1 ||
+    { tail -50 "$build/sanitize.build.log" >&2; die "build failed (full log: $build/sanitize.build.log)"; }
+fi
+built=$(date +%s)
+
+# halt_on_error: the first report ends the process with a failure (UBSan only warns by default);
+# print_stacktrace: where the undefined behaviour happened. Leak detection stays on (ASan default).
+export ASAN_OPTIONS="halt_on_error=1:abort_on_error=0:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1:check_initialization_order=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
+export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
+supp="$repo/bringup/sanitize.lsan.supp"
+if [[ -f "$supp" ]]; then export LSAN_OPTIONS="suppressions=$supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"; fi
+
+log="$build/sanitize.log"
+set +e
+(cd "$build" && ctest -L "$labels" -LE "$exclude" --output-on-failure --timeout 900 -j1) 2>&1 | tee "$log"
+rc=${PIPESTATUS[0]}
+set -e
+end=$(date +%s)
+
+# Reports of child processes can hide behind a passing test: scan every test's output too.
+reports=$(grep -c -E "ERROR: (AddressSanitizer|LeakSanitizer)|runtime error:|SUMMARY: (AddressSanitizer|UndefinedBehaviorSanitizer)" \
+  "$log" "$build"/Testing/Temporary/LastTest.log 2>/dev/null | awk -F: '{s += $NF} END {print s + 0}')
+echo "sanitize.sh: build $((built - start)) s, tests $((end - built)) s, ctest exit $rc, sanitizer report lines $reports"
+if [[ $rc -ne 0 || $reports -ne 0 ]]; then
+  echo "sanitize.sh: FAILED (see $log and $build/Testing/Temporary/LastTest.log)" >&2
+  exit 1
+fi
+echo "sanitize.sh: clean"

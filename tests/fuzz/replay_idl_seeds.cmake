@@ -1,0 +1,11 @@
+# ctest fuzz_replay_fuzz_idl_seeds: generate the fuzz_idl seed corpus, then replay it.
+file(REMOVE_RECURSE ${DIR})
+file(MAKE_DIRECTORY ${DIR})
+execute_process(COMMAND ${SEEDS} ${DIR} RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "fuzz_idl_seeds failed (${rc})")
+endif()
+execute_process(COMMAND ${REPLAY} ${DIR} RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "fuzz_idl_replay failed on the seeds (${rc})")
+endif()
