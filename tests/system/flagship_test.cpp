@@ -4,6 +4,7 @@
 // below d_r, the e-stop never fires and the hands track reachable targets; without it they penetrate.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <regex>
