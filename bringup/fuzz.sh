@@ -8,7 +8,7 @@ set -euo pipefail
 
 usage() {
   cat <<'USAGE'
-usage: fuzz.sh [--time SECONDS] [--build-dir DIR] [--jobs N] [--no-build] [TARGET...]
+usage: fuzz.sh [--time SECONDS] [--build-dir DIR] [--jobs N] [--no-build] [--keep-going] [TARGET...]
 
 Builds (clang, -fsanitize=fuzzer,address,undefined) and runs the Reflex fuzz targets.
 
@@ -16,6 +16,8 @@ Builds (clang, -fsanitize=fuzzer,address,undefined) and runs the Reflex fuzz tar
   --build-dir DIR  build folder (default: <repo>/build-fuzz)
   --jobs N         build jobs (default 2)
   --no-build       use an existing build
+  --keep-going     survey mode: do not stop at the first finding (libFuzzer -fork=1
+                   -ignore_crashes=1); every distinct crash input is kept in the artifacts folder
   TARGET...        only these targets (default: all, e.g. fuzz_urdf fuzz_idl)
 Exit status: 0 no finding; 1 a target found a crash; 2 bad arguments, missing clang, build failure.
 USAGE
@@ -28,6 +30,7 @@ build="$repo/build-fuzz"
 seconds=20
 jobs=2
 do_build=1
+keep_going=0
 only=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -40,6 +43,7 @@ while [[ $# -gt 0 ]]; do
       [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--jobs '${2:-}' is not a positive integer"
       jobs="$2"; shift 2 ;;
     --no-build) do_build=0; shift ;;
+    --keep-going) keep_going=1; shift ;;
     -*) die "unknown option '$1' (see --help)" ;;
     *) only+=("$1"); shift ;;
   esac
@@ -98,11 +102,15 @@ for t in "${names[@]}"; do
   if [[ -d "$repo/tests/fuzz/regressions/$t" ]]; then dirs+=("$repo/tests/fuzz/regressions/$t"); fi
   log="$build/fuzz_$t.log"
   echo "fuzz.sh: $t for ${seconds} s (corpus $corpus)"
+  extra=()
+  if [[ $keep_going -eq 1 ]]; then extra=(-fork=1 -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1); fi
   set +e
   "$build/bin/$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -close_fd_mask=3 \
-    -print_final_stats=1 -artifact_prefix="$artifacts/" "${dirs[@]}" > "$log" 2>&1
+    -print_final_stats=1 -artifact_prefix="$artifacts/" "${extra[@]}" "${dirs[@]}" > "$log" 2>&1
   rc=$?
   set -e
+  # In survey mode libFuzzer exits 0 even after crashes: the saved inputs are the findings.
+  if [[ $keep_going -eq 1 && $rc -eq 0 ]] && compgen -G "$artifacts/crash-*" > /dev/null; then rc=1; fi
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
   summary+=("$t: ${execs:-?} runs, coverage ${cov:-?} edges, exit $rc")
