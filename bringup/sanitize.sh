@@ -7,7 +7,8 @@
 # appears in the output (also one from a child process whose exit code a test ignored).
 #
 # Default selection (CI): labels unit|control|vision|modules|bad_input, excluding the long DDS
-# system tests and experiments (labels system|integration|flagship|netns|launch|experiment|security).
+# system tests, experiments and the soak (labels system|integration|flagship|netns|launch|experiment|
+# security|soak).
 # Pass --labels '.' --exclude '^$' for everything.
 set -euo pipefail
 
@@ -20,7 +21,7 @@ Runs the Reflex tests under AddressSanitizer + UndefinedBehaviorSanitizer.
   --build-dir DIR   build folder (default: <repo>/build-sanitize)
   --labels REGEX    ctest -L: labels to run (default: 'unit|control|vision|modules|bad_input')
   --exclude REGEX   ctest -LE: labels to skip
-                    (default: 'system|integration|flagship|netns|launch|experiment|security')
+                    (default: 'system|integration|flagship|netns|launch|experiment|security|soak')
   --jobs N          build jobs (default 2)
   --no-build        run the tests of an existing build only
   -h, --help        this help
@@ -33,7 +34,7 @@ die() { echo "sanitize.sh: error: $*" >&2; exit 2; }
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="$repo/build-sanitize"
 labels='unit|control|vision|modules|bad_input'
-exclude='system|integration|flagship|netns|launch|experiment|security'
+exclude='system|integration|flagship|netns|launch|experiment|security|soak'
 jobs=2
 do_build=1
 while [[ $# -gt 0 ]]; do
@@ -64,11 +65,11 @@ mapfile -t tests < <(cd "$build" && ctest -N -L "$labels" -LE "$exclude" | sed -
 [[ ${#tests[@]} -gt 0 ]] || die "no test matches labels '$labels' minus '$exclude'"
 echo "sanitize.sh: ${#tests[@]} tests: ${tests[*]}"
 
-if [[ $do_build -eq 1 ]]; then
-  # The executables of the selected tests (one program may serve several tests), plus the
-  # executables that tests start as child processes when they exist as targets.
-  # (read from the generated CTestTestfile.cmake files: ctest hides commands not built yet).
-  mapfile -t targets < <(python3 - "$build" "${tests[@]}" <<'PY'
+# The executables of the selected tests (one program may serve several tests), read from the
+# generated CTestTestfile.cmake files (ctest hides commands not built yet), plus every reflex_*
+# executable (tests start them as child processes).
+list_targets() {
+  python3 - "$build" "${tests[@]}" <<'PY'
 import os, re, sys
 build, wanted = sys.argv[1], set(sys.argv[2:])
 exes = set()
@@ -80,12 +81,22 @@ for root, _, files in os.walk(os.path.join(build, "tests")):
                 exes.add(os.path.basename(exe))
 print("\n".join(sorted(exes)))
 PY
-)
-  for exe in reflex_controller reflex_inspect reflex_sim reflex_vision_exe reflex_behavior reflex_make_session; do
-    if cmake --build "$build" --target help 2>/dev/null | grep -q "^\.\.\. $exe\$"; then targets+=("$exe"); fi
+  # (captured first: grep -q on a pipe would SIGPIPE cmake and fail under pipefail)
+  local help
+  help=$(cmake --build "$build" --target help 2>/dev/null || true)
+  sed -n 's/^\.\.\. \(reflex_[A-Za-z0-9_]*\).*/\1/p' <<< "$help"
+}
+
+if [[ $do_build -eq 1 ]]; then
+  # Two passes: a CMakeLists.txt changed during the build re-runs CMake and may add tests.
+  for pass in 1 2; do
+    mapfile -t targets < <(list_targets)
+    nice cmake --build "$build" -j"$jobs" --target "${targets[@]}" > "$build/sanitize.build.log" 2>&1 ||
+      { tail -50 "$build/sanitize.build.log" >&2; die "build failed (full log: $build/sanitize.build.log)"; }
+    mapfile -t again < <(cd "$build" && ctest -N -L "$labels" -LE "$exclude" | sed -n 's/^ *Test *#[0-9]*: *//p')
+    [[ "${again[*]}" == "${tests[*]}" ]] && break
+    tests=("${again[@]}")
   done
-  nice cmake --build "$build" -j"$jobs" --target "${targets[@]}" > "$build/sanitize.build.log" 2>&1 ||
-    { tail -50 "$build/sanitize.build.log" >&2; die "build failed (full log: $build/sanitize.build.log)"; }
 fi
 built=$(date +%s)
 

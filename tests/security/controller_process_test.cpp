@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <numeric>
+#include <regex>
 #include <vector>
 
 namespace reflex::security_test {
@@ -109,6 +110,57 @@ TEST(SecureController, FollowsASecureSourceAt200HzAndHidesItsStateFromOutsiders)
   EXPECT_NE(text.find("(rejected 0)"), std::string::npos) << text;
   EXPECT_NE(text.find("e-stops 0"), std::string::npos) << text;
 }
+
+#ifdef REFLEX_SECURITY_CHAIN
+// The whole chain in secure mode, every process with its own identity: reflex_vision (recorded
+// flagship session) -> reflex_behavior (pointing) -> reflex_controller, all authenticated and
+// encrypted; behavior also reads the controller's joint state. Same domain as above (the tests of
+// this program run one after the other).
+TEST(SecureController, VisionBehaviorControllerChainRunsSecurely) {
+  const std::string dir = makeSecurityMaterial("chain");
+  const std::string bin = REFLEX_BIN_DIR;
+  const std::string d = std::to_string(kDomain);
+  const std::string src = REFLEX_SOURCE_DIR;
+  testing::ChildProcess controller({bin + "/reflex_controller", "--domain", d, "--duration", "26", "--profiles",
+                                    dir + "/profiles/controller.xml"},
+                                   dir + "/controller.log");
+  testing::ChildProcess behavior({bin + "/reflex_behavior", "--config", src + "/bringup/behavior/pointing.yaml",
+                                  "--domain", d, "--duration", "23", "--profiles", dir + "/profiles/behavior.xml"},
+                                 dir + "/behavior.log");
+  std::this_thread::sleep_for(3s);  // authentication of controller and behavior
+  testing::ChildProcess vision({bin + "/reflex_vision", "--session", src + "/bringup/sessions/flagship", "--domain", d,
+                                "--duration", "18", "--quiet", "--profiles", dir + "/profiles/vision.xml"},
+                               dir + "/vision.log");
+  ASSERT_TRUE(controller.started() && behavior.started() && vision.started());
+  auto outsider = plainParticipant("outsider", kDomain);
+  auto& outsider_targets = outsider->makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord);
+  auto& outsider_objects = outsider->makeReader<msg::ObjectTargets>("reflex/object_targets", bus::kProfileRecord);
+  std::vector<msg::HandTargets> t;
+  std::vector<msg::ObjectTargets> o;
+  repeatFor(15000ms, 100ms, [&] {
+    outsider_targets.takeAll(t);
+    outsider_objects.takeAll(o);
+  });
+  EXPECT_TRUE(t.empty() && o.empty()) << "an unauthenticated participant read the chain's samples";
+
+  EXPECT_EQ(vision.wait(30s), 0);
+  EXPECT_EQ(behavior.wait(30s), 0);
+  EXPECT_EQ(controller.wait(30s), 0);
+  const std::string vis = readFile(dir + "/vision.log"), beh = readFile(dir + "/behavior.log"),
+                    ctl = readFile(dir + "/controller.log");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(vis, m, std::regex(R"((\d+) publications)"))) << vis;
+  EXPECT_GT(std::stol(m[1]), 100) << vis;
+  ASSERT_TRUE(std::regex_search(beh, m, std::regex(R"(objects_accepted=(\d+).*joint_states=(\d+))"))) << beh;
+  EXPECT_GT(std::stol(m[1]), 100) << "behavior received vision's objects: " << beh;
+  EXPECT_GT(std::stol(m[2]), 1000) << "behavior received the controller's joint states: " << beh;
+  ASSERT_TRUE(std::regex_search(ctl, m, std::regex(R"(e-stops (\d+), targets (\d+) \(rejected (\d+)\))"))) << ctl;
+  EXPECT_EQ(std::stol(m[1]), 0);
+  EXPECT_GT(std::stol(m[2]), 50) << "the controller received behavior's hand targets: " << ctl;
+  EXPECT_EQ(std::stol(m[3]), 0);
+  std::printf("secure chain: %s\n", ctl.substr(ctl.rfind("reflex_controller:")).c_str());
+}
+#endif
 
 }  // namespace
 }  // namespace reflex::security_test
