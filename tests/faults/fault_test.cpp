@@ -17,6 +17,7 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <iterator>
 
 namespace reflex {
@@ -185,6 +186,115 @@ TEST(Faults, KillNineOfTheRecorderLeavesTheControllerAndAReadableRecording) {
               record::toString(reader.tailState()));
   EXPECT_GT(n_status, 200U) << "at least ~1 s of the 200 Hz status reached the file before the kill";
   EXPECT_NE(reader.tailState(), record::TailState::kCorrupt);
+}
+#endif
+
+#ifdef REFLEX_FAULTS_WITH_CHAIN
+// The real chain reflex_vision (flagship session, looped) -> reflex_behavior (pointing) ->
+// reflex_controller. kill -9 of vision: the pointing module loses its objects and sends "no target"
+// within lost_timeout (1 s) + margin, the controller keeps 200 Hz; vision restarted: targets again
+// within 3 s. kill -9 of behavior: the controller declares its source stale (retract) and keeps
+// 200 Hz; behavior restarted: targets again within 3 s. Domain 108 (after the test above).
+TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
+  constexpr int kDomain = 108;
+  const std::string d = std::to_string(kDomain);
+  const std::string src = REFLEX_SOURCE_DIR;
+  const std::string tmp = ::testing::TempDir();
+  auto visionArgs = [&] {
+    return std::vector<std::string>{bin("reflex_vision"), "--session", src + "/bringup/sessions/flagship", "--loop",
+                                    "--quiet", "--domain", d};
+  };
+  auto behaviorArgs = [&] {
+    return std::vector<std::string>{bin("reflex_behavior"), "--config", src + "/bringup/behavior/pointing.yaml",
+                                    "--domain", d};
+  };
+  testing::ChildProcess controller({bin("reflex_controller"), "--domain", d, "--duration", "45", "--input-timeout", "0.5"},
+                                   tmp + "chain_controller.log");
+  auto behavior = std::make_unique<testing::ChildProcess>(behaviorArgs(), tmp + "chain_behavior1.log");
+  auto vision = std::make_unique<testing::ChildProcess>(visionArgs(), tmp + "chain_vision1.log");
+  ASSERT_TRUE(controller.started() && behavior->started() && vision->started());
+
+  bus::BusConfig config;
+  config.module_name = "fault_watch";
+  config.domain_id = kDomain;
+  bus::Participant watch(config);
+  auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
+  auto& targets = watch.makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord);
+  ASSERT_TRUE(status.waitForWriters(1, 15s));
+  const auto t0 = Clock::now();
+  auto now = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
+  std::vector<msg::ControlStatus> statuses;
+  std::vector<std::pair<double, bool>> given;  // (time, some hand has a target)
+  std::vector<msg::HandTargets> batch;
+  auto pumpUntil = [&](double t_end, const std::function<bool()>& done = {}) {
+    while (now() < t_end) {
+      std::this_thread::sleep_for(20ms);
+      status.takeAll(statuses);
+      batch.clear();
+      targets.takeAll(batch);
+      for (const auto& t : batch) {
+        given.emplace_back(now(), t.left().status() == msg::TARGET_GIVEN || t.right().status() == msg::TARGET_GIVEN);
+      }
+      if (done && done()) return;
+    }
+  };
+  auto lastGiven = [&] { return !given.empty() && given.back().second; };
+  auto lastNone = [&] { return !given.empty() && !given.back().second; };
+
+  pumpUntil(20.0, lastGiven);
+  ASSERT_TRUE(lastGiven()) << "the chain points at an object";
+  pumpUntil(now() + 2.0);
+
+  // kill -9 of vision.
+  const double t_kill_vision = now();
+  vision->signal(SIGKILL);
+  vision->wait(2000ms);
+  pumpUntil(t_kill_vision + 4.0, lastNone);
+  ASSERT_TRUE(lastNone()) << "pointing gave up the objects";
+  const double lost = given.back().first - t_kill_vision;
+  EXPECT_LT(lost, 1.0 + 0.6) << "within lost_timeout + margin";
+  const double t_restart_vision = now();
+  vision = std::make_unique<testing::ChildProcess>(visionArgs(), tmp + "chain_vision2.log");
+  pumpUntil(t_restart_vision + 6.0, lastGiven);
+  ASSERT_TRUE(lastGiven());
+  const double vision_recovery = given.back().first - t_restart_vision;
+  EXPECT_LT(vision_recovery, 3.0) << "targets again within 3 s of restarting vision";
+  pumpUntil(now() + 1.0);
+
+  // kill -9 of behavior.
+  const double t_kill_behavior = now();
+  const std::size_t statuses_before = statuses.size();
+  behavior->signal(SIGKILL);
+  behavior->wait(2000ms);
+  pumpUntil(t_kill_behavior + 3.0);
+  const double window = now() - t_kill_behavior;
+  const std::size_t during = statuses.size() - statuses_before;
+  EXPECT_GT(static_cast<double>(during), 0.75 * 200.0 * window) << "200 Hz while behavior is dead";
+  const std::size_t n_given = given.size();
+  const double t_restart_behavior = now();
+  behavior = std::make_unique<testing::ChildProcess>(behaviorArgs(), tmp + "chain_behavior2.log");
+  pumpUntil(t_restart_behavior + 6.0, [&] { return given.size() > n_given && lastGiven(); });
+  ASSERT_GT(given.size(), n_given);
+  ASSERT_TRUE(lastGiven());
+  const double behavior_recovery = given.back().first - t_restart_behavior;
+  EXPECT_LT(behavior_recovery, 3.0) << "targets again within 3 s of restarting behavior";
+
+  std::vector<double> periods;
+  for (const auto& s : statuses) periods.push_back(s.cycle_period_us());
+  std::sort(periods.begin(), periods.end());
+  for (const auto& s : statuses) EXPECT_GE(std::min(s.left().distance(), s.right().distance()), 0.005);
+  std::printf("fault chain: kill -9 vision -> no target after %.2f s, vision restart -> target after %.2f s; "
+              "kill -9 behavior -> %.0f status/s, behavior restart -> target after %.2f s; median cycle %.0f us\n",
+              lost, vision_recovery, static_cast<double>(during) / window, behavior_recovery,
+              periods[periods.size() / 2]);
+  EXPECT_NEAR(periods[periods.size() / 2], 5000.0, 250.0);
+  vision.reset();
+  behavior.reset();
+  controller.signal(SIGTERM);
+  EXPECT_EQ(controller.wait(10s), 0);
+  const std::string out = readFile(tmp + "chain_controller.log");
+  EXPECT_NE(out.find("e-stops 0"), std::string::npos) << out;
+  EXPECT_EQ(out.find("stale events 0"), std::string::npos) << "behavior's death was noticed: " << out;
 }
 #endif
 
