@@ -106,8 +106,16 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
       {"trajectory_speed", &p.trajectory_speed}, {"estop_release_margin", &p.estop_release_margin},
       {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin}};
   for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
+    std::string key;
+    try {
+      key = kv.first.as<std::string>();
+    } catch (const YAML::Exception&) {
+      throw ConfigError(yaml_path + ": a key must be a name, got '" + YAML::Dump(kv.first) + "'");
+    }
     const std::string where = yaml_path + ": " + key;
+    // A value of the wrong kind (a map where a name or list is expected) surfaces from yaml-cpp as a
+    // raw conversion error without the file name (fuzz finding): name the file and key instead.
+    try {
     bool done = false;
     for (const auto& [name, target] : numbers) {
       if (key == name) {
@@ -150,6 +158,9 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
       }
     } else {
       throw ConfigError(where + ": unknown key");
+    }
+    } catch (const YAML::Exception& e) {
+      throw ConfigError(where + ": value of the wrong kind (" + e.what() + "): '" + YAML::Dump(kv.second) + "'");
     }
   }
   validateControllerParams(p, yaml_path);

@@ -31,6 +31,8 @@ inline YAML::Node parseYaml(const std::string& text, const std::string& source) 
 }
 
 inline YAML::Node require(const YAML::Node& parent, const std::string& key, const std::string& where) {
+  if (!parent.IsMap())  // indexing a scalar or a list throws a raw YAML::BadSubscript (fuzz finding)
+    throw VisionError(where + ": expected a mapping with the field '" + key + "', got '" + YAML::Dump(parent) + "'");
   const YAML::Node n = parent[key];
   if (!n || n.IsNull()) throw VisionError(where + ": missing field '" + key + "'");
   return n;

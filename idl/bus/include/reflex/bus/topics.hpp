@@ -13,7 +13,26 @@
 #include <reflex/msg/systemPubSubTypes.h>
 #include <reflex/msg/visionPubSubTypes.h>
 
+#include <fastcdr/exceptions/Exception.h>
+
 namespace reflex::bus {
+
+/// The generated type support with a deserializer that never throws: fastddsgen 2.3 code catches only
+/// NotEnoughMemoryException, so a malformed payload (bad encapsulation, a boolean byte of 2, ...)
+/// let a fastcdr BadParamException escape through DataReader::take into the process (a fuzz finding:
+/// one rogue sample ended reflex_controller). Here every fastcdr exception makes deserialize return
+/// false, and Fast DDS drops the sample.
+template <class Generated>
+class SafePubSubType final : public Generated {
+ public:
+  bool deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) override {
+    try {
+      return Generated::deserialize(payload, data);
+    } catch (const eprosima::fastcdr::exception::Exception&) {
+      return false;
+    }
+  }
+};
 
 /// Specialized for every topic type; using a type without a specialization does not compile.
 template <class T>
@@ -28,56 +47,56 @@ inline constexpr const char* kProfileRecord = "reflex_record";               // 
 
 template <>
 struct TopicTraits<reflex::msg::ObjectTargets> {
-  using PubSubType = reflex::msg::ObjectTargetsPubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::ObjectTargetsPubSubType>;
   static constexpr const char* kTopicName = "reflex/object_targets";
   static constexpr const char* kProfile = kProfileObjectTargets;
 };
 
 template <>
 struct TopicTraits<reflex::msg::HandTargets> {
-  using PubSubType = reflex::msg::HandTargetsPubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::HandTargetsPubSubType>;
   static constexpr const char* kTopicName = "reflex/hand_targets";
   static constexpr const char* kProfile = kProfileBehavior;
 };
 
 template <>
 struct TopicTraits<reflex::msg::MotionPriority> {
-  using PubSubType = reflex::msg::MotionPriorityPubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::MotionPriorityPubSubType>;
   static constexpr const char* kTopicName = "reflex/motion_priority";
   static constexpr const char* kProfile = kProfileBehavior;
 };
 
 template <>
 struct TopicTraits<reflex::msg::BodySchemaChange> {
-  using PubSubType = reflex::msg::BodySchemaChangePubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::BodySchemaChangePubSubType>;
   static constexpr const char* kTopicName = "reflex/body_schema";
   static constexpr const char* kProfile = kProfileBehavior;
 };
 
 template <>
 struct TopicTraits<reflex::msg::WalkCommand> {
-  using PubSubType = reflex::msg::WalkCommandPubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::WalkCommandPubSubType>;
   static constexpr const char* kTopicName = "reflex/walk_command";
   static constexpr const char* kProfile = kProfileBehavior;
 };
 
 template <>
 struct TopicTraits<reflex::msg::JointState> {
-  using PubSubType = reflex::msg::JointStatePubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::JointStatePubSubType>;
   static constexpr const char* kTopicName = "reflex/joint_state";
   static constexpr const char* kProfile = kProfileState;
 };
 
 template <>
 struct TopicTraits<reflex::msg::ControlStatus> {
-  using PubSubType = reflex::msg::ControlStatusPubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::ControlStatusPubSubType>;
   static constexpr const char* kTopicName = "reflex/control_status";
   static constexpr const char* kProfile = kProfileState;
 };
 
 template <>
 struct TopicTraits<reflex::msg::Heartbeat> {
-  using PubSubType = reflex::msg::HeartbeatPubSubType;
+  using PubSubType = SafePubSubType<reflex::msg::HeartbeatPubSubType>;
   static constexpr const char* kTopicName = "reflex/heartbeat";
   static constexpr const char* kProfile = kProfileHeartbeat;
 };
