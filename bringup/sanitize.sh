@@ -84,13 +84,16 @@ PY
   # (captured first: grep -q on a pipe would SIGPIPE cmake and fail under pipefail)
   local help
   help=$(cmake --build "$build" --target help 2>/dev/null || true)
-  sed -n 's/^\.\.\. \(reflex_[A-Za-z0-9_]*\).*/\1/p' <<< "$help"
+  # reflex_* executables, and the fuzz replays / seed writer that script-driven tests run.
+  sed -n 's/^\.\.\. \(reflex_[A-Za-z0-9_]*\|fuzz_[A-Za-z0-9_]*\).*/\1/p' <<< "$help"
 }
 
 if [[ $do_build -eq 1 ]]; then
   # Two passes: a CMakeLists.txt changed during the build re-runs CMake and may add tests.
   for pass in 1 2; do
-    mapfile -t targets < <(list_targets)
+    # Only names that are build targets (a test may run e.g. `cmake -P`).
+    known=$(cmake --build "$build" --target help 2>/dev/null | sed -n 's/^\.\.\. \([A-Za-z0-9_.+-]*\).*/\1/p' || true)
+    mapfile -t targets < <(list_targets | sort -u | grep -Fx -f <(printf '%s\n' "$known"))
     nice cmake --build "$build" -j"$jobs" --target "${targets[@]}" > "$build/sanitize.build.log" 2>&1 ||
       { tail -50 "$build/sanitize.build.log" >&2; die "build failed (full log: $build/sanitize.build.log)"; }
     mapfile -t again < <(cd "$build" && ctest -N -L "$labels" -LE "$exclude" | sed -n 's/^ *Test *#[0-9]*: *//p')
@@ -104,6 +107,12 @@ built=$(date +%s)
 # print_stacktrace: where the undefined behaviour happened. Leak detection stays on (ASan default).
 export ASAN_OPTIONS="halt_on_error=1:abort_on_error=0:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1:check_initialization_order=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
 export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
+# Third party: OpenCV's gPhoto2 camera autodetection (cv::VideoCapture::open(index) ->
+# gp_camera_autodetect -> libusb_get_device_list) leaks ~22 KB per attempt, seen when a test opens a
+# camera index that does not exist; the fast unwinder cannot see past libusb, so a suppression
+# cannot match it. CI has no gPhoto2 camera: the backend is switched off for the sanitized run.
+export OPENCV_VIDEOIO_PRIORITY_GPHOTO2=0
+# Further suppressions, if ever needed, go into this file (LeakSanitizer format).
 supp="$repo/bringup/sanitize.lsan.supp"
 if [[ -f "$supp" ]]; then export LSAN_OPTIONS="suppressions=$supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"; fi
 
@@ -116,7 +125,7 @@ end=$(date +%s)
 
 # Reports of child processes can hide behind a passing test: scan every test's output too.
 reports=$(grep -c -E "ERROR: (AddressSanitizer|LeakSanitizer)|runtime error:|SUMMARY: (AddressSanitizer|UndefinedBehaviorSanitizer)" \
-  "$log" "$build"/Testing/Temporary/LastTest.log 2>/dev/null | awk -F: '{s += $NF} END {print s + 0}')
+  "$log" "$build"/Testing/Temporary/LastTest.log 2>/dev/null | awk -F: '{s += $NF} END {print s + 0}' || true)
 echo "sanitize.sh: build $((built - start)) s, tests $((end - built)) s, ctest exit $rc, sanitizer report lines $reports"
 if [[ $rc -ne 0 || $reports -ne 0 ]]; then
   echo "sanitize.sh: FAILED (see $log and $build/Testing/Temporary/LastTest.log)" >&2
