@@ -149,6 +149,7 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   VirtualForceSum forces;
   RowA xi_row_sum = RowA::Zero(n);  // sum of row^T (d_safe - d) for Eq. 5
   double d_min = kInf;
+  double d_arm_contact = kInf, d_static_contact = kInf;
   int closest = -1;
   for (const int p : arm.candidate_pairs) {
     const PairDistance& pd = data.dist.pairs[p];
@@ -158,8 +159,14 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
     if (oa != a && ob != a) continue;
     const int sign = oa == a ? 1 : -1;
     const int other = oa == a ? ob : oa;
+    const bool arm_pair = other >= 0 && other != a;
+    if (arm_pair || other < 0) {
+      // For the step cap below: contacts with the other arm, and with everything that is not it.
+      if (arm_pair) d_arm_contact = std::min(d_arm_contact, pd.distance);
+      else d_static_contact = std::min(d_static_contact, pd.distance);
+    }
     // Motion priority (Sec. 7.2): the higher-priority arm ignores the other arm (it is the obstacle).
-    if (other >= 0 && other != a && higherPriority(input.priority, a) && !recovery_only) continue;
+    if (arm_pair && higherPriority(input.priority, a) && !recovery_only) continue;
     if (pd.distance < d_min) {
       d_min = pd.distance;
       closest = p;
@@ -263,10 +270,14 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
     }
   }
 
-  // Joint position limits: no motion further into a limit.
+  // Joint position limits: a step never crosses a limit (the robot would clamp the motion away, so
+  // what it does would differ from what the filter below checked). The box contains 0.
+  VecA v_lo(n), v_hi(n);
   for (int i = 0; i < n; ++i) {
     const int qi = arm.q[i];
-    if ((q[i] <= model.q_lower[qi] && qdot[i] < 0.0) || (q[i] >= model.q_upper[qi] && qdot[i] > 0.0)) qdot[i] = 0.0;
+    v_lo[i] = std::min(0.0, (model.q_lower[qi] - q[i]) / dt);
+    v_hi[i] = std::max(0.0, (model.q_upper[qi] - q[i]) / dt);
+    qdot[i] = std::clamp(qdot[i], v_lo[i], v_hi[i]);
   }
 
   // Safety filter (not in the paper): inside the orange zone, this arm may approach a pair no faster
@@ -275,7 +286,7 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   // the collision controller's nullspace can otherwise leak motion into a pair that is not the merged
   // direction; this removes exactly that component and nothing else (inactive above d_b).
   if (P.mode != AvoidanceMode::kOff && !recovery_only) {
-    for (int iter = 0; iter < 3; ++iter) {
+    for (int iter = 0; iter < 6; ++iter) {
       bool changed = false;
       for (int g = 0; g < nguarded; ++g) {
         const int p = guarded[g];
@@ -283,10 +294,9 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
         RowA row(n), free_row(n);
         for (int i = 0; i < n; ++i) {
           row[i] = data.dist.rows(p, arm.q[i]);
-          // A joint at a position limit cannot take a correction (the robot would clamp it away).
-          const int qi = arm.q[i];
-          const bool locked = q[i] <= model.q_lower[qi] || q[i] >= model.q_upper[qi];
-          free_row[i] = locked ? 0.0 : row[i];
+          // A joint whose correction would leave its limit box cannot take it.
+          const bool blocked = (row[i] > 0.0 && qdot[i] >= v_hi[i]) || (row[i] < 0.0 && qdot[i] <= v_lo[i]);
+          free_row[i] = blocked ? 0.0 : row[i];
         }
         const double rr = free_row.squaredNorm();
         if (rr < 1e-12) continue;
@@ -300,8 +310,9 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
             other_rate += data.dist.rows(p, cm.arms[b].q[i]) * data.qdot[cm.arms[b].q[i]];
         }
         const double rate = row.dot(qdot.transpose()) + other_rate;
-        if (rate < allowed) {
+        if (rate < allowed - 1e-12) {
           qdot += free_row.transpose() * ((allowed - rate) / rr);
+          for (int i = 0; i < n; ++i) qdot[i] = std::clamp(qdot[i], v_lo[i], v_hi[i]);
           changed = true;
         }
       }
@@ -317,6 +328,24 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
     if (v > model.v_max[qi]) scale = std::min(scale, model.v_max[qi] / v);
   }
   qdot *= scale;
+
+  // Step cap inside the orange zone (part of the safety filter): the filter bounds the approach to
+  // first order along each pair's current normal, but a large step can make another primitive of the
+  // same segment the closest one (the chest has three). So no point of the arm may move more than half the remaining gap above d_r in one cycle: sum |qdot_i| * lever_i * dt <= (d - d_r) / 2, with
+  // lever_i the distance from joint i to the hand plus 0.1 m. Scaling keeps every bound above.
+  // Against the other arm only with equal priority: a yielding arm must be free to get out of the way,
+  // and a higher-priority arm is untouched by the other arm (Sec. 7.2; the e-stop is the last resort).
+  const bool equal = input.priority == MotionPriority::kEqual;
+  const double d_cap = equal ? std::min(d_static_contact, d_arm_contact) : d_static_contact;
+  if (P.mode != AvoidanceMode::kOff && !recovery_only && d_cap < P.d_b) {
+    double sweep = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const double lever = (r - data.kin.X_W_L[model.q_link[arm.q[i]]].translation()).norm() + 0.1;
+      sweep += std::abs(qdot[i]) * lever * dt;
+    }
+    const double budget = 0.5 * std::max(0.0, d_cap - P.d_r);
+    if (sweep > budget) qdot *= budget / sweep;
+  }
   for (int i = 0; i < n; ++i) data.qdot[arm.q[i]] = qdot[i];
 }
 
