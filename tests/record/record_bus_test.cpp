@@ -254,7 +254,7 @@ TEST(RecordBus, LateJoinerStateRecordsTheStatePublishedBeforeTheRecorderStarted)
     ro.output = tempPath(late ? "late.rfx" : "not_late.rfx");
     ro.topics = {"reflex/hand_targets"};
     ro.late_joiner_state = late;
-    ro.duration = 1.5;
+    ro.duration = 4.0;  // discovery + the transient-local resend take seconds on a loaded 2-core CI machine
     ro.bus = busConfig("recorder");
     Recorder recorder(ro);
     recorder.run();

@@ -31,7 +31,7 @@ msg::HandTargets crossing(bool nan_left = false) {
 TEST(ControllerNode, FollowsTargetsSafelyAndRetractsWhenTheSourceGoesSilent) {
   const std::string log = ::testing::TempDir() + "controller_node_test.log";
   testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain",
-                                    std::to_string(kDomain), "--duration", "9", "--input-timeout", "1.0"},
+                                    std::to_string(kDomain), "--duration", "11", "--input-timeout", "1.0"},
                                    log);
   ASSERT_TRUE(controller.started());
 
@@ -93,8 +93,9 @@ TEST(ControllerNode, FollowsTargetsSafelyAndRetractsWhenTheSourceGoesSilent) {
   // A NaN target is rejected (counted), never followed: send one, then go silent.
   msg::HandTargets bad = crossing(true);
   targets->publish(bad);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // delivered (reliable) before the writer goes
   source.reset();  // the behavior process "dies": no more samples, no heartbeat
-  pump(3.0, false);
+  pump(3.5, false);
   ASSERT_TRUE(joints.takeLatest(js));
   const double elbow_after = js.positions()[r_elbow];
   EXPECT_GT(elbow_after, elbow_reaching + 0.15) << "the right arm retracts";
