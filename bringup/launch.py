@@ -366,23 +366,23 @@ class Launch:
         signal.signal(signal.SIGINT, on_signal)
         signal.signal(signal.SIGTERM, on_signal)
         started = []
-        todo = list(self.selected())
+        chosen = list(self.selected())
         if self.runs_discovery_server():
             ds = Process({"name": "discovery_server", "cmd": "fastdds"}, -1, self)
             ds.argv = self.discovery_argv()
             ds.argv[0] = ds.exe = shutil.which("fastdds") or "/usr/bin/fastdds"
             ds.env, ds.delay, ds.on_exit, ds.stop_signal = {}, 0.0, "shutdown", signal.SIGTERM
-            todo.insert(0, ds)
-        if not todo:
+            chosen.insert(0, ds)
+        if not chosen:
             self.say(f"nothing to start for host '{self.args.host}'")
             return 0
-        self.all_started = todo
+        self.all_started = chosen
         self.say(f"{self.doc.get('name', self.path.stem)}: domain {self.domain}, profiles "
                  f"{self.effective_profiles() or '(default)'}, logs in {self.log_dir}")
         failed = False
         t_end = time.monotonic() + self.args.duration if self.args.duration else None
         try:
-            for p in todo:
+            for p in chosen:
                 if stop.wait(p.delay if p.delay > 0 else 0):
                     break
                 self._start(p)

@@ -188,11 +188,11 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "reflex_sim: error: name a scenario (reflex_sim --list) or 'all'\n");
     return 2;
   }
-  std::vector<const Scenario*> todo;
+  std::vector<const Scenario*> chosen;
   if (scenario_name == "all") {
-    for (const auto& s : builtinScenarios()) todo.push_back(&s);
+    for (const auto& s : builtinScenarios()) chosen.push_back(&s);
   } else if (const Scenario* s = findScenario(scenario_name)) {
-    todo.push_back(s);
+    chosen.push_back(s);
   } else {
     std::fprintf(stderr, "reflex_sim: error: unknown scenario '%s' (reflex_sim --list names them)\n", scenario_name.c_str());
     return 2;
@@ -206,8 +206,8 @@ int main(int argc, char** argv) {
     const ControllerConfig config = controller_cfg.empty() ? defaultControllerConfig() : loadControllerConfig(controller_cfg);
     const ControllerModel cm = makeControllerModel(model, config);
     int failures = 0;
-    for (const Scenario* sc : todo) {
-      const fs::path dir = todo.size() > 1 ? fs::path(out_dir) / sc->name : fs::path(out_dir);
+    for (const Scenario* sc : chosen) {
+      const fs::path dir = chosen.size() > 1 ? fs::path(out_dir) / sc->name : fs::path(out_dir);
       fs::create_directories(dir);
       std::ofstream summary(dir / "summary.txt");
       auto run = [&](AvoidanceMode m, const std::string& csv, const char* label) {
