@@ -29,7 +29,7 @@ class RawBytesType final : public dds::TopicDataType {
   bool serialize(void* data, eprosima::fastrtps::rtps::SerializedPayload_t* payload) override {
     const auto& bytes = *static_cast<std::vector<std::uint8_t>*>(data);
     if (bytes.size() > payload->max_size) return false;
-    std::memcpy(payload->data, bytes.data(), bytes.size());
+    if (!bytes.empty()) std::memcpy(payload->data, bytes.data(), bytes.size());  // data() may be null
     payload->length = static_cast<std::uint32_t>(bytes.size());
     return true;
   }
