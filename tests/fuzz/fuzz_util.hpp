@@ -45,8 +45,10 @@ template <class Documented, class Fn>
 void expectOnly(const char* parser, Fn fn) {
   try {
     fn();
-  } catch (const Documented&) {
-    // the documented reaction to bad input
+  } catch (const Documented& e) {
+    // The documented reaction to bad input; REFLEX_FUZZ_VERBOSE=1 prints its message (replays).
+    static const bool verbose = std::getenv("REFLEX_FUZZ_VERBOSE") != nullptr;
+    if (verbose) std::fprintf(stderr, "%s: %s\n", parser, e.what());
   } catch (const std::exception& e) {
     undocumentedException(parser, e);
   }
