@@ -6,9 +6,14 @@
 // Every record carries a CRC-32, so random bytes almost never reach the record body. Each input is
 // therefore read twice: as it is, and with the CRC of every framed record ("RREC" | length | CRC |
 // body that fits) recomputed, so that the fuzzer also explores the body fields (inner lengths, the
-// CDR payload of each type). Invariant checked beyond "no crash": every record the reader returns,
-// re-encoded by encodeRecord, is byte for byte the bytes it was read from (the reader never returns
-// a record that is not in the file).
+// CDR payload of each type).
+//
+// Invariants checked beyond "no crash": every record the reader returns, re-encoded by
+// encodeRecord, is byte for byte the bytes it was read from (the reader never returns a record that
+// is not in the file); and a file the reader calls "torn" (cut inside its last record) holds no
+// complete valid record after the point where reading stopped, i.e. a damaged length field in the
+// middle of a file is not mistaken for the torn tail of a kill -9 (which would silently drop every
+// later record).
 #include "fuzz_util.hpp"
 
 #include "reflex/record/codecs.hpp"
@@ -46,8 +51,28 @@ std::vector<std::uint8_t> withFixedCrcs(const std::uint8_t* data, std::size_t si
   return out;
 }
 
+std::uint16_t readU16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] | (p[1] << 8)); }
+
+/// Independent of RecordReader: is there a complete record with a good CRC and consistent inner
+/// lengths at byte `pos` (record_file.hpp layout)?
+bool validRecordAt(const std::vector<std::uint8_t>& b, std::size_t pos) {
+  if (pos + kRecordHeaderSize > b.size() || readU32(b.data() + pos) != kRecordSync) return false;
+  const std::uint64_t len = readU32(b.data() + pos + 4);
+  if (len < 24 || len > kMaxBodySize || pos + kRecordHeaderSize + len > b.size()) return false;
+  const std::uint8_t* body = b.data() + pos + kRecordHeaderSize;
+  if (crc32(body, len) != readU32(b.data() + pos + 8)) return false;
+  std::uint64_t at = 16;
+  const std::uint64_t topic = readU16(body + at);
+  at += 2 + topic;
+  if (at + 2 > len) return false;
+  const std::uint64_t type = readU16(body + at);
+  at += 2 + type;
+  if (at + 4 > len) return false;
+  return readU32(body + at) == len - at - 4;
+}
+
 [[noreturn]] void invariantBroken(const char* what, std::uint64_t offset) {
-  std::fprintf(stderr, "FUZZ FINDING: RecordReader %s (record ending at byte %llu)\n", what,
+  std::fprintf(stderr, "FUZZ FINDING: RecordReader %s (byte %llu)\n", what,
                static_cast<unsigned long long>(offset));
   std::abort();
 }
@@ -80,6 +105,11 @@ void readRecording(const std::vector<std::uint8_t>& bytes) {
       }
     }
     if (n != info.records) invariantBroken("counted different records in two reads of the same file", reader.validEnd());
+    if (reader.tailState() == TailState::kTorn) {
+      for (std::size_t pos = reader.validEnd() + 1; pos < bytes.size(); ++pos) {
+        if (validRecordAt(bytes, pos)) invariantBroken("called the tail torn but a valid record follows", pos);
+      }
+    }
     // Without resync reading stops at the first corrupt record.
     reader.rewind();
     reader.setResync(false);

@@ -257,6 +257,19 @@ RecordReader::Parse RecordReader::parseAt(std::uint64_t offset, RecordEntry& out
   return Parse::kOk;
 }
 
+bool RecordReader::findValid(std::uint64_t from, std::uint64_t& at, RecordEntry& scratch) {
+  std::uint8_t b4[4];
+  for (std::uint64_t scan = from; scan + kRecordHeaderSize <= size_; ++scan) {
+    if (!readAt(scan, b4, 4) || getU32(b4) != kRecordSync) continue;
+    std::uint64_t sz = 0;
+    if (parseAt(scan, scratch, sz) == Parse::kOk) {
+      at = scan;
+      return true;
+    }
+  }
+  return false;
+}
+
 bool RecordReader::next(RecordEntry& out) {
   while (pos_ < size_) {
     std::uint64_t record_size = 0;
@@ -266,34 +279,23 @@ bool RecordReader::next(RecordEntry& out) {
       valid_end_ = pos_;
       return true;
     }
-    if (r == Parse::kShort && state_ != TailState::kCorrupt) {
-      // The file ends inside this record: a torn last write (kill -9, power loss). Not an error.
+    // A record that runs past the end of the file is a torn last write (kill -9, power loss) only
+    // if no valid record follows it. If one does, its length field is damaged: corruption in the
+    // middle, not the end (calling it torn would drop every later record, and --append would cut
+    // them off).
+    const bool maybe_torn = r == Parse::kShort && state_ != TailState::kCorrupt;
+    std::uint64_t next_valid = size_;
+    const bool later = (maybe_torn || resync_) && findValid(pos_ + 1, next_valid, out);
+    if (maybe_torn && !later) {
       state_ = TailState::kTorn;
       return false;
     }
     if (state_ != TailState::kCorrupt) first_corrupt_ = pos_;
     state_ = TailState::kCorrupt;
     if (!resync_) return false;
-    // Scan forward for the next sync word whose record checks.
-    const std::uint64_t from = pos_;
-    std::uint64_t scan = pos_ + 1;
-    bool found = false;
-    std::uint8_t b4[4];
-    for (; scan + kRecordHeaderSize <= size_; ++scan) {
-      if (!readAt(scan, b4, 4) || getU32(b4) != kRecordSync) continue;
-      std::uint64_t sz = 0;
-      if (parseAt(scan, out, sz) == Parse::kOk) {
-        found = true;
-        break;
-      }
-    }
-    if (!found) {
-      skipped_ += size_ - from;
-      pos_ = size_;
-      return false;
-    }
-    skipped_ += scan - from;
-    pos_ = scan;
+    // Skip to the next sync word whose record checks (or to the end).
+    skipped_ += next_valid - pos_;
+    pos_ = next_valid;
   }
   return false;
 }

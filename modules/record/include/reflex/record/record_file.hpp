@@ -108,8 +108,10 @@ class RecordWriter {
 /// How the reader's scan of a file ended.
 enum class TailState {
   kClean,    ///< the last record ended exactly at the end of the file
-  kTorn,     ///< the file ends inside a record (e.g. killed while writing); that record was dropped
-  kCorrupt,  ///< a record with a bad sync word, length or CRC that is NOT at the end (see skipped)
+  kTorn,     ///< the file ends inside a record (e.g. killed while writing) and no valid record
+             ///< follows its start; that record was dropped
+  kCorrupt,  ///< a record with a bad sync word, length or CRC that is NOT at the end (see skipped);
+             ///< also one whose length runs past the end of the file while a valid record follows
 };
 
 /// Reads a recording sequentially. Never returns a record whose CRC does not check.
@@ -143,6 +145,8 @@ class RecordReader {
   enum class Parse { kOk, kShort, kBad };
   Parse parseAt(std::uint64_t offset, RecordEntry& out, std::uint64_t& record_size);
   bool readAt(std::uint64_t offset, void* dst, std::size_t n);
+  /// The first offset >= `from` holding a valid record (into `at`; `scratch` is overwritten).
+  bool findValid(std::uint64_t from, std::uint64_t& at, RecordEntry& scratch);
 
   std::string path_;
   std::FILE* file_ = nullptr;
