@@ -28,10 +28,12 @@ HostConfig parseHostConfig(const ConfigNode& root, const ModuleRegistry& registr
   c.process = root.string("process", c.process);
   c.robot = readRobotConfig(root.child("robot"));
   const ConfigNode in = root.child("inputs");
-  in.rejectUnknown({"known_objects", "future_tolerance", "max_range"});
+  in.rejectUnknown({"known_objects", "future_tolerance", "max_range", "frames"});
   c.inputs.known_objects = in.strings("known_objects", {});
   c.inputs.future_tolerance = in.number("future_tolerance", c.inputs.future_tolerance, 0.0, 60.0);
   c.inputs.max_range = in.number("max_range", c.inputs.max_range, 0.1, 100.0);
+  c.inputs.frames = in.strings("frames", c.inputs.frames);
+  if (c.inputs.frames.empty()) in.fail("frames", "must name at least one base frame, got");
   c.tick_period = root.number("tick_period", c.tick_period, 0.001, 1.0);
   c.joint_state_period = root.number("joint_state_period", c.joint_state_period, 0.0, 10.0);
   if (!root.has("modules")) throw ConfigError(root.where("modules") + ": required key missing (a list of modules)");
@@ -251,6 +253,16 @@ void BehaviorHost::onObjects(const ObjectsFrame& frame, const Now& now) {
     logRejected(stats_.frames_rejected_future, m.str());
     return;
   }
+  const auto& frames = inputs_.frames;
+  if (std::find(frames.begin(), frames.end(), frame.frame_id) == frames.end()) {
+    ++stats_.frames_rejected_frame;
+    std::string accepted;
+    for (const auto& f : frames) accepted += (accepted.empty() ? "'" : ", '") + f + "'";
+    logRejected(stats_.frames_rejected_frame, "object targets frame " + std::to_string(frame.image_index) +
+                                                  " rejected: unknown frame_id '" + frame.frame_id +
+                                                  "' (accepted: " + accepted + ")");
+    return;
+  }
   scratch_.stamp_ns = frame.stamp_ns;
   scratch_.capture_stamp_ns = frame.capture_stamp_ns;
   scratch_.image_index = frame.image_index;
@@ -361,7 +373,7 @@ std::string BehaviorHost::status() const {
     m << s->module->name() << (st.empty() ? "" : "[" + st + "]") << " ";
   }
   m << "frames=" << stats_.frames_received << " objects=" << stats_.objects_accepted
-    << " rejected=" << stats_.rejectedObjects() + stats_.frames_rejected_future;
+    << " rejected=" << stats_.rejectedObjects() + stats_.frames_rejected_future + stats_.frames_rejected_frame;
   return m.str();
 }
 

@@ -170,13 +170,15 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
       EXPECT_NEAR((target - shoulder).norm(), 0.40, 1e-9);
       EXPECT_NEAR((target - shoulder).normalized().dot((obj - shoulder).normalized()), 1.0, 1e-9);
     }
-    // Bad samples (NaN cup, "ghost", cup from the future at (0.3, 0.3, 0.5)) never got through.
+    // Bad samples (NaN cup, "ghost", cup from the future at (0.3, 0.3, 0.5), cup in frame "odom" at
+    // (0.35, -0.3, 0.6)) never got through.
     ASSERT_FALSE(bus.hand_log.empty());
     for (const auto& s : bus.hand_log) {
       for (const msg::HandTarget* t : {&s.left(), &s.right()}) {
         EXPECT_TRUE(vec(t->position_base()).allFinite());
         EXPECT_NE(t->object_name(), "ghost");
-        // The cup stands still: every target for it is the same point (a future sample would move it).
+        // The cup stands still: every target for it is the same point (a future or "odom" sample
+        // would move it).
         if (t->status() == msg::TARGET_GIVEN && t->object_name() == "cup") {
           EXPECT_NEAR((vec(t->position_base()) - vec(h.right().position_base())).norm(), 0.0, 1e-9);
         }
@@ -200,6 +202,7 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
     const std::string log = proc.log();
     std::printf("%s", log.substr(log.rfind("reflex_behavior: stats")).c_str());
     EXPECT_GT(statValue(log, "rejected_future"), 0) << log;
+    EXPECT_GT(statValue(log, "rejected_frame"), 0) << log;
     EXPECT_GT(statValue(log, "rejected_invalid"), 0) << log;
     EXPECT_GT(statValue(log, "rejected_unknown"), 0) << log;
     EXPECT_GT(statValue(log, "objects_accepted"), 0) << log;

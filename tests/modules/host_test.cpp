@@ -1,5 +1,5 @@
-// BehaviorHost with fake inputs: input validation (NaN, future stamps, unknown objects, range,
-// duplicates: rejected, counted, never forwarded), joint states, output ownership, merging of
+// BehaviorHost with fake inputs: input validation (NaN, future stamps, unknown frame_id, unknown
+// objects, range, duplicates: rejected, counted, never forwarded), joint states, output ownership, merging of
 // several modules, --module selection, and the clean-up guarantee at stop.
 #include "modules_test_support.hpp"
 
@@ -107,6 +107,50 @@ TEST_F(HostTest, FramesFromTheFutureAreRejectedWhole) {
   h->onObjects(frameAt(0.4, {object("cup", {0.45, -0.1, 0.95})}), at(0.0));  // within the tolerance
   EXPECT_EQ(frames_.size(), 1u);
   EXPECT_EQ(h->stats().frames_received, 3u);
+}
+
+// ObjectTargets.frame_id: positions are only used when the sender says they are in the base frame
+// (default name "base_link", what reflex_vision writes). Any other name, "" and a different case
+// are rejected whole, counted and logged with the bad name; the accepted list is configurable.
+TEST_F(HostTest, FramesInAnUnknownFrameAreRejectedWhole) {
+  TestHost h(kProbe, probeRegistry());
+  h->start(at(0.0));
+  for (const char* bad : {"odom", "", "head_camera", "BASE_LINK", "base_link "}) {
+    ObjectsFrame f = frameAt(0.0, {object("cup", {0.45, -0.1, 0.95})});
+    f.frame_id = bad;
+    h->onObjects(f, at(0.0));
+  }
+  EXPECT_TRUE(frames_.empty()) << "no frame in an unknown frame reached the module";
+  EXPECT_EQ(h->stats().frames_rejected_frame, 5u);
+  EXPECT_EQ(h->stats().objects_accepted, 0u);
+  EXPECT_EQ(h->stats().frames_received, 5u);
+  ASSERT_FALSE(h.log.empty());
+  bool named = false;
+  for (const auto& line : h.log) named |= line.find("unknown frame_id 'odom'") != std::string::npos;
+  EXPECT_TRUE(named) << "the log names the bad frame";
+  ObjectsFrame good = frameAt(0.0, {object("cup", {0.45, -0.1, 0.95})});
+  good.frame_id = "base_link";
+  h->onObjects(good, at(0.0));
+  ASSERT_EQ(frames_.size(), 1u);
+  EXPECT_EQ(frames_[0].objects.size(), 1u);
+  EXPECT_EQ(h->stats().frames_rejected_frame, 5u);
+
+  // Configured: only "torso_frame" is B; "base_link" is then unknown.
+  frames_.clear();
+  TestHost t("inputs: {frames: [torso_frame]}\nmodules:\n  - {name: probe, type: probe}\n", probeRegistry());
+  t->start(at(0.0));
+  ObjectsFrame torso = frameAt(0.0, {object("cup", {0.45, -0.1, 0.95})});
+  torso.frame_id = "torso_frame";
+  t->onObjects(torso, at(0.0));
+  t->onObjects(good, at(0.0));
+  EXPECT_EQ(frames_.size(), 1u);
+  EXPECT_EQ(t->stats().frames_rejected_frame, 1u);
+  try {
+    TestHost empty("inputs: {frames: []}\nmodules:\n  - {name: probe, type: probe}\n", probeRegistry());
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("frames"), std::string::npos) << e.what();
+  }
 }
 
 TEST_F(HostTest, UnknownOutOfRangeAndDuplicateObjectsAreRejected) {

@@ -1,8 +1,9 @@
 // reflex_modules_object_publisher: synthetic ObjectTargets for the behavior integration tests, over
 // real DDS (a separate process, in place of reflex_vision). Objects stand still at the given
 // positions; --inject-bad adds samples the behavior process must reject: a NaN copy of the first
-// object and an unknown "ghost" in every frame, and every third frame an extra frame stamped 10 s in
-// the future that puts the first object somewhere else.
+// object and an unknown "ghost" in every frame, every third frame an extra frame stamped 10 s in
+// the future that puts the first object somewhere else, and every third frame (another one) an
+// extra frame in frame_id "odom" that puts the first object somewhere else.
 #include <reflex/bus/bus.hpp>
 
 #include <CLI/CLI.hpp>
@@ -58,7 +59,7 @@ int main(int argc, char** argv) {
   app.add_option("--object", object_texts, "NAME=X,Y,Z in the base frame [m] (repeatable)")->required();
   app.add_option("--duration", duration, "seconds to publish")->check(CLI::PositiveNumber)->capture_default_str();
   app.add_option("--rate", rate, "frames per second")->check(CLI::Range(0.5, 100.0))->capture_default_str();
-  app.add_flag("--inject-bad", inject, "add NaN, unknown and future samples");
+  app.add_flag("--inject-bad", inject, "add NaN, unknown, future and wrong-frame samples");
   CLI11_PARSE(app, argc, argv);
   try {
     std::vector<Obj> objects;
@@ -95,6 +96,14 @@ int main(int argc, char** argv) {
         future.frame_id("base_link");
         future.objects().push_back(target(objects[0].name, 0, 0.30, 0.30, 0.50));
         writer.write(future);
+      }
+      if (inject && index % 3 == 1) {
+        msg::ObjectTargets odom;
+        odom.capture_stamp_ns(bus::nowNs());
+        odom.image_index(index);
+        odom.frame_id("odom");
+        odom.objects().push_back(target(objects[0].name, 0, 0.35, -0.30, 0.60));
+        writer.publish(odom);
       }
       next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
       std::this_thread::sleep_until(next);

@@ -134,6 +134,7 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
       m.frame.stamp_ns = o.header().stamp_ns();
       m.frame.capture_stamp_ns = o.capture_stamp_ns();
       m.frame.image_index = o.image_index();
+      m.frame.frame_id = o.frame_id();
       m.frame.objects.resize(o.objects().size());
       for (std::size_t i = 0; i < o.objects().size(); ++i) {
         const msg::ObjectTarget& in = o.objects()[i];
@@ -193,7 +194,8 @@ std::string BehaviorNode::report() const {
   const HostStats& s = impl_->host->stats();
   std::ostringstream m;
   m << "frames=" << s.frames_received << " objects_accepted=" << s.objects_accepted
-    << " rejected_future=" << s.frames_rejected_future << " rejected_invalid=" << s.objects_rejected_invalid
+    << " rejected_future=" << s.frames_rejected_future << " rejected_frame=" << s.frames_rejected_frame
+    << " rejected_invalid=" << s.objects_rejected_invalid
     << " rejected_unknown=" << s.objects_rejected_unknown << " rejected_range=" << s.objects_rejected_range
     << " rejected_duplicate=" << s.objects_rejected_duplicate << " joint_states=" << s.joint_states
     << " joint_states_rejected=" << s.joint_states_rejected << " hand_targets=" << s.hand_targets_published

@@ -8,6 +8,9 @@
 // Input validation (InputPolicy), counted in HostStats and never forwarded to a module:
 //   - an ObjectTargets frame stamped in the future (stamp_ns or capture_stamp_ns later than the
 //     host's wall clock + future_tolerance): the whole frame is dropped;
+//   - an ObjectTargets frame whose frame_id is not one of `frames` (default: "base_link", the name
+//     reflex_vision writes): the whole frame is dropped, since its positions are not in B (a
+//     frame named "odom", "head_camera" or "" is never used as if it were the base frame);
 //   - an object with a non-finite position or confidence, or a confidence outside [0, 1];
 //   - an object with an unknown name ("" or not in known_objects when that list is given);
 //   - an object farther than max_range from the base origin; a second object of the same name;
@@ -16,7 +19,7 @@
 // Configuration file (a YAML map; see bringup/behavior/*.yaml and modules/README.md):
 //   process: behavior          # module name on the bus (Header.source, heartbeat)
 //   robot: {urdf: ..., ...}    # readRobotConfig
-//   inputs: {known_objects: [cup, can], future_tolerance: 0.5, max_range: 3.0}
+//   inputs: {known_objects: [cup, can], future_tolerance: 0.5, max_range: 3.0, frames: [base_link]}
 //   tick_period: 0.02          # s, how often modules' step() timers are checked
 //   joint_state_period: 0.1    # s, modules hear of joint states at most this often
 //   modules:
@@ -54,6 +57,8 @@ struct InputPolicy {
   std::vector<std::string> known_objects;  ///< empty: any non-empty name is known
   double future_tolerance = 0.5;           ///< [s] a stamp later than now + this is rejected
   double max_range = 3.0;                  ///< [m] objects farther from the base origin are rejected
+  /// Names of the base frame B accepted in ObjectTargets.frame_id (exact, case-sensitive; not empty).
+  std::vector<std::string> frames = {kBaseFrameId};
 };
 
 struct ModuleEntry {
@@ -81,6 +86,7 @@ HostConfig parseHostConfig(const ConfigNode& root, const ModuleRegistry& registr
 struct HostStats {
   std::uint64_t frames_received = 0;
   std::uint64_t frames_rejected_future = 0;
+  std::uint64_t frames_rejected_frame = 0;       ///< frame_id not one of InputPolicy::frames
   std::uint64_t objects_accepted = 0;
   std::uint64_t objects_rejected_invalid = 0;    ///< NaN / inf position or confidence, confidence out of [0, 1]
   std::uint64_t objects_rejected_unknown = 0;    ///< "" or not in known_objects

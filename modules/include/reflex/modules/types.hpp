@@ -30,11 +30,16 @@ struct ObjectObservation {
   double confidence = 1.0;                        ///< 0..1
 };
 
+/// Name of the robot base frame B on the bus: what reflex_vision writes into ObjectTargets.frame_id
+/// (its --frame-id default) and what the behavior host accepts unless configured otherwise.
+inline constexpr const char* kBaseFrameId = "base_link";
+
 /// One image pair's objects (reflex::msg::ObjectTargets). An empty list = nothing seen.
 struct ObjectsFrame {
   std::int64_t stamp_ns = 0;          ///< publication time, system clock [ns since epoch]
   std::int64_t capture_stamp_ns = 0;  ///< capture time of the image pair, system clock (0 = unknown)
   std::uint64_t image_index = 0;
+  std::string frame_id = kBaseFrameId;  ///< frame the sender says p_B is in (ObjectTargets.frame_id)
   std::vector<ObjectObservation> objects;
 };
 
