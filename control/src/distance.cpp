@@ -2,6 +2,7 @@
 
 #include "reflex/control/geometry.hpp"
 
+#include <algorithm>
 #include <cassert>
 #include <cmath>
 
@@ -234,6 +235,53 @@ bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, i
   s.radius = radius;
   s.ignore_mask = ignore_mask;
   return true;
+}
+
+BodySchemaCheck checkBodySchemaSegment(const Model& model, int link, const Eigen::Vector3d& a_L,
+                                       const Eigen::Vector3d& b_L, double radius, bool virtual_segment,
+                                       const BodySchemaLimits& limits) {
+  BodySchemaCheck c;
+  auto fail = [&c](BodySchemaFault f, double value, double limit, const char* key) {
+    c.fault = f;
+    c.value = value;
+    c.limit = limit;
+    c.key = key;
+    return c;
+  };
+  if (link < 0 || link >= static_cast<int>(model.links.size()))
+    return fail(BodySchemaFault::kUnknownLink, static_cast<double>(link), 0.0, "");
+  if (!std::isfinite(radius)) return fail(BodySchemaFault::kNonFinite, radius, 0.0, "");
+  for (int i = 0; i < 3; ++i) {
+    if (!std::isfinite(a_L[i])) return fail(BodySchemaFault::kNonFinite, a_L[i], 0.0, "");
+    if (!std::isfinite(b_L[i])) return fail(BodySchemaFault::kNonFinite, b_L[i], 0.0, "");
+  }
+  if (!(radius > 0.0)) return fail(BodySchemaFault::kRadiusNotPositive, radius, 0.0, "");
+  if (radius > limits.max_radius)
+    return fail(BodySchemaFault::kRadiusTooLarge, radius, limits.max_radius, "max_radius");
+  const double length = (b_L - a_L).norm();
+  const double max_length = virtual_segment ? limits.max_virtual_length : limits.max_length;
+  if (length > max_length)
+    return fail(BodySchemaFault::kTooLong, length, max_length,
+                virtual_segment ? "max_virtual_length" : "max_length");
+  const double reach = std::max(a_L.norm(), b_L.norm());
+  const double max_reach = virtual_segment ? limits.max_virtual_reach : limits.max_reach;
+  if (reach > max_reach)
+    return fail(BodySchemaFault::kTooFar, reach, max_reach,
+                virtual_segment ? "max_virtual_reach" : "max_reach");
+  return c;
+}
+
+const char* describe(BodySchemaFault fault) {
+  switch (fault) {
+    case BodySchemaFault::kNone: return "accepted";
+    case BodySchemaFault::kUnknownLink: return "unknown parent link";
+    case BodySchemaFault::kNonFinite: return "non-finite radius or endpoint";
+    case BodySchemaFault::kRadiusNotPositive: return "radius not positive";
+    case BodySchemaFault::kRadiusTooLarge: return "radius above the limit";
+    case BodySchemaFault::kTooLong: return "length |point_b - point_a| above the limit";
+    case BodySchemaFault::kTooFar: return "endpoint farther from the parent link origin than the limit";
+  }
+  return "unknown fault";
 }
 
 bool detachBodySchemaSegment(DistanceData& data, int slot) {

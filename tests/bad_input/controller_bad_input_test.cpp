@@ -6,6 +6,7 @@
 // Domains 101..105, 107.
 #include "controller_run.hpp"
 
+#include <csignal>
 #include <cstdio>
 #include <limits>
 #include <random>
@@ -304,35 +305,133 @@ TEST(ControllerBadInput, BodySchemaFloodIsBoundedBySlotsAndResourceLimits) {
   EXPECT_EQ(s.estops, 0);
 }
 
-// A body-schema segment that is finite but absurd (a 1 km sphere on the left hand) is accepted:
-// every pair with it is in the red zone, so the controller latches its e-stop and freezes the robot
-// (zero velocities) — safe, never a NaN. (A bound on segment size would reject it instead; see
-// README.md, "Not rejected today".)
-TEST(ControllerBadInput, AbsurdlyLargeBodySchemaSegmentFreezesTheRobot) {
-  ControllerRun run(107, 5.0, "huge_segment");
+// Body-schema segments that are finite but absurd (a 1 km sphere on the left hand, a 3 m pole, a
+// sphere 1.5 m away from the hand, a virtual segment of radius 0.6 m or reaching 10 m) are rejected
+// at the boundary (BodySchemaLimits: radius <= 0.5 m; physical length and reach <= 1 m; virtual
+// <= 4 m), counted, and named in a stderr line with the bad value; the robot keeps following its
+// targets (no e-stop). A grasped bar of ordinary size is accepted (not counted). Then, by choice
+// (tests/bad_input/README.md, row 44a), a physical segment within the bounds that overlaps the body on
+// attach (a 0.3 m sphere on the left hand) is ACCEPTED: the e-stop latches and the robot freezes
+// (zero velocities), never a NaN. Recovery: the segment is detached and SIGUSR1 releases the e-stop;
+// the robot follows a new target again.
+TEST(ControllerBadInput, AbsurdBodySchemaSegmentsAreRejectedAndAnOverlappingOneStopsTheRobot) {
+  ControllerRun run(107, 13.0, "huge_segment");
   ASSERT_TRUE(run.started());
   auto& schema = run.source->makeWriter<msg::BodySchemaChange>();
+  auto& targets = run.source->makeWriter<msg::HandTargets>();
+  auto& hb = run.source->makeWriter<msg::Heartbeat>();
   ASSERT_TRUE(run.waitMatched(schema));
-  msg::BodySchemaChange c;
-  c.segment_name("boulder");
-  c.operation(msg::SCHEMA_ATTACH);
-  c.parent_link("l_hand");
-  c.shape(msg::SHAPE_SPHERE);
-  c.radius(1000.0);
-  c.enabled(true);
-  schema.publish(c);
-  run.pump(1500ms, 50ms, [](int) {});
+  ASSERT_TRUE(targets.waitForReaders(1, 10s));
+
+  auto segment = [](const std::string& name, const std::string& link, double radius, bool is_virtual) {
+    msg::BodySchemaChange c;
+    c.segment_name(name);
+    c.operation(msg::SCHEMA_ATTACH);
+    c.parent_link(link);
+    c.shape(msg::SHAPE_CAPSULE);
+    c.radius(radius);
+    c.enabled(true);
+    c.virtual_segment(is_virtual);
+    return c;
+  };
+  std::vector<msg::BodySchemaChange> bad;
+  bad.push_back(segment("boulder", "l_hand", 1000.0, false));
+  bad.back().shape(msg::SHAPE_SPHERE);
+  bad.push_back(segment("pole", "l_hand", 0.02, false));  // 3 m long
+  bad.back().point_a().y(-1.5);
+  bad.back().point_b().y(1.5);
+  bad.push_back(segment("far_ball", "r_hand", 0.05, false));  // 1.5 m from the hand
+  bad.back().shape(msg::SHAPE_SPHERE);
+  bad.back().point_a().x(1.5);
+  bad.push_back(segment("fat_gaze", "head", 0.6, true));
+  bad.back().point_b().x(1.0);
+  bad.push_back(segment("gaze_to_the_moon", "head", 0.03, true));  // 10 m
+  bad.back().point_b().x(10.0);
+  msg::BodySchemaChange bar = segment("bar", "r_hand", 0.01, false);  // ordinary: accepted
+  bar.point_a().y(-0.05);
+  bar.point_a().z(-0.06);
+  bar.point_b().y(0.05);
+  bar.point_b().z(-0.06);
+
+  // Phase 1: targets + heartbeats throughout; the bad segments go out one by one, the bar once the
+  // right hand is forward (1.5 s).
   run.drain();
-  run.expectSafeAndFinite(/*status_distances=*/false);
+  const double elbow_before = run.latestJoint("r_elbow");
+  ASSERT_TRUE(std::isfinite(elbow_before));
+  run.pump(2500ms, 50ms, [&](int k) {
+    msg::HandTargets t = reachable();
+    targets.publish(t);
+    msg::Heartbeat h = heartbeat("bad_source");
+    hb.publish(h);
+    if (k < static_cast<int>(bad.size())) schema.publish(bad[static_cast<std::size_t>(k)]);
+    if (k == 30) schema.publish(bar);
+  });
+  run.expectSafeAndFinite();
   ASSERT_FALSE(run.statuses.empty());
+  for (const auto& st : run.statuses) {
+    ASSERT_FALSE(st.left().estop_latched() || st.right().estop_latched()) << "an absurd segment froze the robot";
+  }
+  const double elbow_after = run.latestJoint("r_elbow");
+  EXPECT_GT(std::abs(elbow_after - elbow_before), 0.05) << "the right arm follows its target";
+  const std::size_t phase1_joint_states = run.joint_states.size();
+
+  // Phase 2: a plausible-size physical segment that overlaps the body at once: accepted, e-stop.
+  msg::BodySchemaChange overlapping = segment("overlapping_ball", "l_hand", 0.3, false);
+  overlapping.shape(msg::SHAPE_SPHERE);
+  schema.publish(overlapping);
+  run.pump(1500ms, 50ms, [&](int) {
+    msg::HandTargets t = reachable();
+    targets.publish(t);
+    msg::Heartbeat h = heartbeat("bad_source");
+    hb.publish(h);
+  });
+  run.drain();
+  run.expectSafeAndFinite(/*status_distances=*/false);  // red by design after the overlap
+  ASSERT_GT(run.joint_states.size(), phase1_joint_states);
   EXPECT_TRUE(run.statuses.back().left().estop_latched()) << "red zone -> e-stop latched";
   for (double v : run.joint_states.back().velocities()) EXPECT_EQ(v, 0.0) << "frozen";
+
+  // Phase 3: the module detaches the segment, the operator sends SIGUSR1; a new target is followed.
+  msg::BodySchemaChange detach = overlapping;
+  detach.operation(msg::SCHEMA_DETACH);
+  schema.publish(detach);
+  run.pump(300ms, 50ms, [](int) {});
+  run.signal(SIGUSR1);
+  const std::vector<double> q_frozen = run.joint_states.back().positions();
+  msg::HandTargets other = reachable();
+  other.right().position_base().y(-0.30);
+  other.right().position_base().z(0.80);
+  run.statuses.clear();
+  run.pump(1500ms, 50ms, [&](int) {
+    targets.publish(other);
+    msg::Heartbeat h = heartbeat("bad_source");
+    hb.publish(h);
+  });
+  run.drain();
+  ASSERT_FALSE(run.statuses.empty());
+  EXPECT_FALSE(run.statuses.back().left().estop_latched()) << "released after detach + SIGUSR1";
+  double moved = 0.0;
+  const std::vector<double>& q_now = run.joint_states.back().positions();
+  for (std::size_t i = 0; i < q_now.size() && i < q_frozen.size(); ++i) moved += std::abs(q_now[i] - q_frozen[i]);
+  EXPECT_GT(moved, 0.05) << "the robot moves again";
 
   ExitSummary s;
   ASSERT_EQ(run.finish(s), 0) << run.output;
   ASSERT_TRUE(s.found) << run.output;
-  EXPECT_EQ(s.rejected, 0) << "accepted today";
-  EXPECT_GE(s.estops, 1);
+  EXPECT_EQ(s.rejected, static_cast<long>(bad.size())) << "the five absurd segments, not the bar, not the overlap\n"
+                                                       << run.output;
+  EXPECT_EQ(s.estops, 1) << "only the overlapping segment stopped the robot";
+  const char* lines[] = {
+      "body-schema segment 'boulder' rejected: radius above the limit: 1000 m > max_radius 0.5 m",
+      "body-schema segment 'pole' rejected: length |point_b - point_a| above the limit: 3 m > max_length 1 m",
+      "body-schema segment 'far_ball' rejected: endpoint farther from the parent link origin than the limit: 1.5 m > "
+      "max_reach 1 m",
+      "body-schema segment 'fat_gaze' rejected: radius above the limit: 0.6 m > max_radius 0.5 m",
+      "body-schema segment 'gaze_to_the_moon' rejected: length |point_b - point_a| above the limit: 10 m > "
+      "max_virtual_length 4 m"};
+  for (const char* line : lines) EXPECT_NE(run.output.find(line), std::string::npos) << line << "\n" << run.output;
+  EXPECT_EQ(run.output.find("'bar' rejected"), std::string::npos);
+  EXPECT_EQ(run.output.find("'overlapping_ball' rejected"), std::string::npos);
 }
 
 }  // namespace

@@ -81,6 +81,8 @@ class ControllerRun {
   }
 
   bool started() const { return process_->started(); }
+  /// Sends a signal to the controller process (SIGUSR1: leave a latched e-stop).
+  void signal(int sig) { process_->signal(sig); }
   /// Waits until the controller's status stream and the given writer are matched, then 0.5 s more:
   /// the writer sees the match before the controller's reader has matched back, and a reliable
   /// keep-last-1 writer replaces a first sample that was never acknowledged.

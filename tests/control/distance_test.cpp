@@ -366,6 +366,87 @@ TEST(DistanceBodySchema, BadArgumentsAreRejectedAndChangeNothing) {
   EXPECT_FALSE(detachBodySchemaSegment(dist, kBodySchemaSlots));
 }
 
+// The boundary check of body-schema samples (reflex_controller): hand-computed sizes against the
+// documented default limits, each fault with its value, limit and field name; the segments the
+// shipped behaviors and scenarios attach pass.
+TEST(DistanceBodySchema, CheckRejectsAbsurdSegmentsAndNamesTheBadValue) {
+  const Model m = test::loadRobot(test::kAsimo);
+  const BodySchemaLimits lim;  // defaults: radius 0.5, physical length / reach 1.0, virtual 4.0
+  const int hand = m.linkIndex("l_hand");
+  const int head = m.linkIndex("head");
+  ASSERT_GE(hand, 0);
+  ASSERT_GE(head, 0);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const Vector3d o = Vector3d::Zero();
+
+  // Accepted: the grasped bar of bringup/behavior/bar_occlusion.yaml (0.30 m, r 0.02), the bar of the
+  // grasped_bar scenario, a sphere exactly at the radius limit, a capsule exactly at the length limit.
+  EXPECT_TRUE(checkBodySchemaSegment(m, hand, Vector3d(0, -0.15, -0.06), Vector3d(0, 0.15, -0.06), 0.02, false, lim).ok());
+  EXPECT_TRUE(checkBodySchemaSegment(m, hand, Vector3d(-0.16, 0, -0.06), Vector3d(0.16, 0, -0.06), 0.02, false, lim).ok());
+  EXPECT_TRUE(checkBodySchemaSegment(m, hand, o, o, 0.5, false, lim).ok());
+  EXPECT_TRUE(checkBodySchemaSegment(m, hand, Vector3d(-0.5, 0, 0), Vector3d(0.5, 0, 0), 0.01, false, lim).ok());
+  // A gaze line from the head camera to an object on the floor 3 m ahead (the behavior host's
+  // default max_range), expressed in the head link frame at q = 0: a virtual segment, accepted.
+  KinematicsData kin(m);
+  const Eigen::Isometry3d X_head_W = kin.X_W_L[head].inverse();
+  const Vector3d cam_W = kin.X_W_L[m.linkIndex("head_camera")].translation();
+  const Vector3d a_gaze = X_head_W * cam_W, b_gaze = X_head_W * Vector3d(3.0, 0.0, 0.0);
+  ASSERT_GT((b_gaze - a_gaze).norm(), 3.0);
+  EXPECT_TRUE(checkBodySchemaSegment(m, head, a_gaze, b_gaze, 0.03, true, lim).ok());
+  // ... but the same line as a physical segment is too long for anything a link holds.
+  const BodySchemaCheck phys = checkBodySchemaSegment(m, head, a_gaze, b_gaze, 0.03, false, lim);
+  EXPECT_EQ(phys.fault, BodySchemaFault::kTooLong);
+  EXPECT_NEAR(phys.value, (b_gaze - a_gaze).norm(), 1e-12);
+  EXPECT_STREQ(phys.key, "max_length");
+
+  // The 1 km sphere of the earlier review.
+  BodySchemaCheck c = checkBodySchemaSegment(m, hand, o, o, 1000.0, false, lim);
+  EXPECT_EQ(c.fault, BodySchemaFault::kRadiusTooLarge);
+  EXPECT_EQ(c.value, 1000.0);
+  EXPECT_EQ(c.limit, 0.5);
+  EXPECT_STREQ(c.key, "max_radius");
+  EXPECT_EQ(checkBodySchemaSegment(m, head, o, o, 0.51, true, lim).fault, BodySchemaFault::kRadiusTooLarge)
+      << "the radius bound holds for virtual segments too";
+  // Length: (0.3, 0.4, 1.2) is 1.3 m long: too long for a physical segment, fine for a virtual one.
+  const Vector3d a(0.0, 0.0, 0.0), b(0.3, 0.4, 1.2);
+  c = checkBodySchemaSegment(m, hand, a, b, 0.02, false, lim);
+  EXPECT_EQ(c.fault, BodySchemaFault::kTooLong);
+  EXPECT_NEAR(c.value, 1.3, 1e-12);
+  EXPECT_EQ(c.limit, 1.0);
+  EXPECT_TRUE(checkBodySchemaSegment(m, hand, a, b, 0.02, true, lim).ok());
+  // Reach: a short segment far from the link (a sphere 1.2 m from the hand origin; 5 m virtual).
+  c = checkBodySchemaSegment(m, hand, Vector3d(0, 1.2, 0), Vector3d(0, 1.2, 0), 0.02, false, lim);
+  EXPECT_EQ(c.fault, BodySchemaFault::kTooFar);
+  EXPECT_NEAR(c.value, 1.2, 1e-12);
+  EXPECT_STREQ(c.key, "max_reach");
+  c = checkBodySchemaSegment(m, head, Vector3d(0, 0, 5.0), Vector3d(0, 0, 4.5), 0.02, true, lim);
+  EXPECT_EQ(c.fault, BodySchemaFault::kTooFar);
+  EXPECT_NEAR(c.value, 5.0, 1e-12);
+  EXPECT_STREQ(c.key, "max_virtual_reach");
+  c = checkBodySchemaSegment(m, head, Vector3d(0, 0, -2.1), Vector3d(0, 0, 2.1), 0.02, true, lim);
+  EXPECT_EQ(c.fault, BodySchemaFault::kTooLong);
+  EXPECT_STREQ(c.key, "max_virtual_length");
+  // Non-finite, non-positive and unknown link: no size limit, the bad value is reported.
+  c = checkBodySchemaSegment(m, hand, Vector3d(0, nan, 0), b, 0.02, false, lim);
+  EXPECT_EQ(c.fault, BodySchemaFault::kNonFinite);
+  EXPECT_TRUE(std::isnan(c.value));
+  EXPECT_STREQ(c.key, "");
+  EXPECT_EQ(checkBodySchemaSegment(m, hand, a, Vector3d(-inf, 0, 0), 0.02, false, lim).fault, BodySchemaFault::kNonFinite);
+  EXPECT_EQ(checkBodySchemaSegment(m, hand, a, a, inf, false, lim).fault, BodySchemaFault::kNonFinite);
+  EXPECT_EQ(checkBodySchemaSegment(m, hand, a, a, 0.0, false, lim).fault, BodySchemaFault::kRadiusNotPositive);
+  EXPECT_EQ(checkBodySchemaSegment(m, hand, a, a, -0.01, false, lim).fault, BodySchemaFault::kRadiusNotPositive);
+  EXPECT_EQ(checkBodySchemaSegment(m, -1, a, a, 0.02, false, lim).fault, BodySchemaFault::kUnknownLink);
+  EXPECT_EQ(checkBodySchemaSegment(m, static_cast<int>(m.links.size()), a, a, 0.02, false, lim).fault,
+            BodySchemaFault::kUnknownLink);
+  // Limits are parameters: a tighter radius bound rejects what the default accepts.
+  BodySchemaLimits tight;
+  tight.max_radius = 0.01;
+  EXPECT_EQ(checkBodySchemaSegment(m, hand, a, a, 0.02, false, tight).fault, BodySchemaFault::kRadiusTooLarge);
+  for (BodySchemaFault f : {BodySchemaFault::kRadiusTooLarge, BodySchemaFault::kTooLong, BodySchemaFault::kTooFar})
+    EXPECT_NE(std::string(describe(f)).find("limit"), std::string::npos);
+}
+
 TEST(DistanceBodySchema, CoincidentCoresGetTheLinkFallbackNormal) {
   // A sphere on the world link centred exactly on the head sphere's centre at q = 0.
   const Model m = test::loadRobot(test::kAsimo);

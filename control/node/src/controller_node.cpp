@@ -227,10 +227,22 @@ void ControllerNode::run() {
         const int parent_seg = m.model.segmentIndex(m.model.links[m.model.links[link].parent].name);
         if (parent_seg >= 0) ignore |= std::uint64_t{1} << parent_seg;
       }
-      if (slot < 0 || link < 0 || !attachBodySchemaSegment(m.model, m.data->dist, slot, link, a, b, change.radius(), ignore)) {
+      // The boundary check (bounds: BodySchemaLimits): a bad sample is rejected, counted and named.
+      const BodySchemaCheck check =
+          checkBodySchemaSegment(m.model, link, a, b, change.radius(), change.virtual_segment(), BodySchemaLimits{});
+      if (!check.ok() || slot < 0 || !attachBodySchemaSegment(m.model, m.data->dist, slot, link, a, b, change.radius(), ignore)) {
         ++stats_.targets_rejected;
-        std::fprintf(stderr, "controller: body-schema segment '%s' rejected (link '%s', radius %g, free slot %d)\n",
-                     name.c_str(), change.parent_link().c_str(), change.radius(), slot);
+        if (check.ok()) {
+          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: no free slot (link '%s')\n", name.c_str(),
+                       change.parent_link().c_str());
+        } else if (*check.key != '\0') {
+          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)\n",
+                       name.c_str(), describe(check.fault), check.value, check.key, check.limit,
+                       change.parent_link().c_str(), change.virtual_segment() ? "virtual" : "physical");
+        } else {
+          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %s (value %g, link '%s')\n", name.c_str(),
+                       describe(check.fault), check.value, change.parent_link().c_str());
+        }
         continue;
       }
       m.data->slot_virtual[slot] = change.virtual_segment();

@@ -88,4 +88,50 @@ bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, i
 /// Disables a slot. Returns false for a bad slot index.
 bool detachBodySchemaSegment(DistanceData& data, int slot);
 
+/// Bounds a body-schema segment from the bus must satisfy before it is attached (the boundary check
+/// of reflex_controller; attachBodySchemaSegment itself checks only slot, link and finiteness).
+/// A segment beyond them is a bad sample, not a real object: a 1 km sphere on a hand would put every
+/// pair in the red zone and freeze the robot in e-stop. Lengths in metres, in the parent link frame.
+/// Physical segments (grasped objects) are objects the hand holds: within reach of the link.
+/// Virtual segments (Sec. 8.5.2, a gaze line from the head camera to a seen object) may be as long as
+/// the view: 4 m covers an object at the behavior host's default max_range (3 m from the base
+/// origin) seen from the head. reflex_controller uses these documented defaults.
+struct BodySchemaLimits {
+  double max_radius = 0.5;          ///< radius, both kinds (the behavior modules' configuration bound)
+  double max_length = 1.0;          ///< core length |b_L - a_L| of a physical segment
+  double max_reach = 1.0;           ///< |a_L|, |b_L| of a physical segment (distance from the link origin)
+  double max_virtual_length = 4.0;  ///< core length of a virtual segment
+  double max_virtual_reach = 4.0;   ///< |a_L|, |b_L| of a virtual segment
+};
+
+/// Why checkBodySchemaSegment refused a segment.
+enum class BodySchemaFault : std::uint8_t {
+  kNone = 0,
+  kUnknownLink,        ///< link index outside the model
+  kNonFinite,          ///< radius or an endpoint coordinate NaN / Inf
+  kRadiusNotPositive,  ///< radius <= 0
+  kRadiusTooLarge,     ///< radius > max_radius
+  kTooLong,            ///< |b_L - a_L| > max_length (max_virtual_length)
+  kTooFar,             ///< |a_L| or |b_L| > max_reach (max_virtual_reach)
+};
+
+/// Outcome of checkBodySchemaSegment: the fault, the offending value and the limit it broke (with
+/// the name of that BodySchemaLimits field; "" where no size limit applies).
+struct BodySchemaCheck {
+  BodySchemaFault fault = BodySchemaFault::kNone;
+  double value = 0.0;       ///< the bad value (m): radius, length or endpoint distance
+  double limit = 0.0;       ///< the limit it broke (m)
+  const char* key = "";     ///< the BodySchemaLimits field broken, e.g. "max_radius"
+  bool ok() const { return fault == BodySchemaFault::kNone; }
+};
+
+/// Checks a body-schema segment (capsule [a_L, b_L] of `radius` on `link`) against `limits`.
+/// Allocation-free, never throws (called in the 5 ms loop for every sample).
+BodySchemaCheck checkBodySchemaSegment(const Model& model, int link, const Eigen::Vector3d& a_L,
+                                       const Eigen::Vector3d& b_L, double radius, bool virtual_segment,
+                                       const BodySchemaLimits& limits);
+
+/// A short English description of a fault, e.g. "radius above the limit".
+const char* describe(BodySchemaFault fault);
+
 }  // namespace reflex::control
