@@ -6,7 +6,8 @@
 #                                            it is both the identity CA and the permissions CA
 #   intruder_ca/ca.cert.pem, .key.pem        a DIFFERENT CA, only for tests (the "intruder" identity)
 #   <module>/cert.pem, <module>/key.pem      identity of each module: vision, behavior, controller,
-#                                            recorder (CA-signed) and intruder (intruder-CA-signed)
+#                                            recorder, player (CA-signed) and intruder
+#                                            (intruder-CA-signed)
 #   governance.xml, governance.p7s           domain rules (authentication required, discovery +
 #                                            liveliness encrypted, RTPS messages signed, every
 #                                            topic access-controlled and encrypted), S/MIME-signed
@@ -80,7 +81,7 @@ mkdir -p "$out" || die "cannot create the output folder '$out'"
 out="$(cd "$out" && pwd)"
 umask 077   # private keys are readable by the owner only
 
-modules=(vision behavior controller recorder)
+modules=(vision behavior controller recorder player)
 identities=("${modules[@]}" intruder)
 
 # ---- certificate authorities -----------------------------------------------------------------
@@ -194,6 +195,13 @@ subscribe[controller]="reflex/hand_targets reflex/motion_priority reflex/body_sc
 # The recorder only listens (every topic); it may announce itself with a heartbeat.
 publish[recorder]="reflex/heartbeat"
 subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat"
+# The player (reflex_play) republishes recorded OBSERVATIONS only: what vision saw and what the
+# robot did, so a recording can re-run behavior modules and feed monitoring. Not the four command
+# topics the controller obeys (a recording replayed in a secure system never commands the robot),
+# not reflex/heartbeat (replayed heartbeats carry other modules' names and would keep a silent
+# source alive for the controller's staleness check). It reads nothing.
+publish[player]="reflex/object_targets reflex/joint_state reflex/control_status"
+subscribe[player]=""
 # The intruder asks for everything, but its identity and permissions come from another CA.
 all_topics="${subscribe[recorder]}"
 publish[intruder]="$all_topics"
@@ -202,6 +210,17 @@ subscribe[intruder]="$all_topics"
 topics_xml() {
   local t
   for t in $1; do printf '            <topic>%s</topic>\n' "$t"; done
+}
+
+# criteria_xml publish|subscribe "TOPICS": the <publish> / <subscribe> element of an allow rule;
+# nothing for an empty list (Fast DDS refuses a <topics> element without a <topic>, and an absent
+# element grants nothing under <default>DENY</default>).
+criteria_xml() {
+  local kind="$1" topics="$2"
+  [[ -n "$topics" ]] || return 0
+  printf '        <%s>\n          <topics>\n' "$kind"
+  topics_xml "$topics"
+  printf '          </topics>\n        </%s>\n' "$kind"
 }
 
 not_before="$(date -u -d '1 day ago' +%Y-%m-%dT00:00:00)"
@@ -232,16 +251,7 @@ permissions_text() {
         <domains>
           <id_range><min>0</min><max>232</max></id_range>
         </domains>
-        <publish>
-          <topics>
-$(topics_xml "${publish[$name]}")
-          </topics>
-        </publish>
-        <subscribe>
-          <topics>
-$(topics_xml "${subscribe[$name]}")
-          </topics>
-        </subscribe>
+$(criteria_xml publish "${publish[$name]}"; criteria_xml subscribe "${subscribe[$name]}")
       </allow_rule>
       <default>DENY</default>
     </grant>

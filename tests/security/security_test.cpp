@@ -32,7 +32,7 @@ class Security : public ::testing::Test {
 std::string Security::dir_;
 
 TEST_F(Security, ScriptMakesEveryFileAndTheSignaturesVerify) {
-  for (const char* id : {"vision", "behavior", "controller", "recorder", "intruder"}) {
+  for (const char* id : {"vision", "behavior", "controller", "recorder", "player", "intruder"}) {
     for (const char* f : {"cert.pem", "key.pem", "permissions.xml", "permissions.p7s"}) {
       EXPECT_FALSE(readFile(dir_ + "/" + id + "/" + f).empty()) << id << "/" << f;
     }
@@ -226,6 +226,29 @@ TEST_F(Security, ModuleCannotCreateEndpointsItsPermissionsDoNotGrant) {
   EXPECT_NO_THROW(recorder->makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord));
   EXPECT_THROW(recorder->makeWriter<msg::HandTargets>(), bus::BusError) << "the recorder only listens";
   EXPECT_THROW(recorder->makeWriter<msg::JointState>(), bus::BusError);
+
+  // The player (reflex_play) republishes observations only: never a command to the controller,
+  // never a heartbeat in another module's name, and it reads nothing.
+  auto player = secureParticipant(dir_, "player", kDomain);
+  EXPECT_NO_THROW(player->makeWriter<msg::ObjectTargets>());
+  EXPECT_NO_THROW(player->makeWriter<msg::JointState>());
+  EXPECT_NO_THROW(player->makeWriter<msg::ControlStatus>());
+  for (const char* topic : {"reflex/hand_targets", "reflex/motion_priority", "reflex/body_schema", "reflex/walk_command",
+                            "reflex/heartbeat"}) {
+    try {
+      if (std::string(topic) == "reflex/hand_targets") player->makeWriter<msg::HandTargets>();
+      if (std::string(topic) == "reflex/motion_priority") player->makeWriter<msg::MotionPriority>();
+      if (std::string(topic) == "reflex/body_schema") player->makeWriter<msg::BodySchemaChange>();
+      if (std::string(topic) == "reflex/walk_command") player->makeWriter<msg::WalkCommand>();
+      if (std::string(topic) == "reflex/heartbeat") player->makeWriter<msg::Heartbeat>();
+      ADD_FAILURE() << "the player created a writer of " << topic;
+    } catch (const bus::BusError& e) {
+      EXPECT_NE(std::string(e.what()).find(topic), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(player->makeReader<msg::ObjectTargets>("reflex/object_targets", bus::kProfileRecord), bus::BusError)
+      << "the player reads nothing";
+  EXPECT_THROW(player->makeReader<msg::Heartbeat>(), bus::BusError);
 }
 
 // Editing a signed permissions document (here: granting vision the hand targets) breaks its
