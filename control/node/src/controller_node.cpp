@@ -1,6 +1,7 @@
 #include "reflex/control_node/controller_node.hpp"
 
 #include "reflex/control/urdf_loader.hpp"
+#include "reflex/control_node/robot_state_file.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -50,6 +51,8 @@ struct ControllerNode::Impl {
   ControllerModel cm;
   std::unique_ptr<ControllerData> data;
   std::unique_ptr<KinematicRobot> robot;
+  std::unique_ptr<RobotStateFile> state_file;  ///< null without --robot-state
+  std::string state_note;
   std::unique_ptr<WalkingPattern> walking;
   std::unique_ptr<bus::Participant> participant;
   bus::Writer<msg::JointState>* joint_writer = nullptr;
@@ -93,7 +96,21 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   if (!config.avoidance) ctl.params.mode = AvoidanceMode::kOff;
   m.cm = makeControllerModel(m.model, ctl);
   m.data = std::make_unique<ControllerData>(m.model, m.cm);
-  m.robot = std::make_unique<KinematicRobot>(m.model, restConfiguration(m.model, m.cm));
+  Eigen::VectorXd q0 = restConfiguration(m.model, m.cm);
+  if (!config.robot_state.empty()) {
+    m.state_file = std::make_unique<RobotStateFile>(config.robot_state, m.model.q_names, m.model.q_lower, m.model.q_upper);
+    char note[512];
+    if (m.state_file->loaded()) {
+      q0 = m.state_file->loadedPositions();
+      const double age = nowSeconds(CLOCK_REALTIME) - 1e-9 * static_cast<double>(m.state_file->loadedWallNs());
+      std::snprintf(note, sizeof(note), "robot state from '%s' (record %llu, written %.3f s ago)",
+                    config.robot_state.c_str(), static_cast<unsigned long long>(m.state_file->loadedSequence()), age);
+    } else {
+      std::snprintf(note, sizeof(note), "no robot state in '%s' yet: starting from rest", config.robot_state.c_str());
+    }
+    m.state_note = note;
+  }
+  m.robot = std::make_unique<KinematicRobot>(m.model, q0);
   m.walking = std::make_unique<WalkingPattern>(m.model);
   m.q_walk = m.robot->jointPositions();
 
@@ -124,6 +141,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
 ControllerNode::~ControllerNode() = default;
 
 bus::Participant& ControllerNode::bus() { return *impl_->participant; }
+const std::string& ControllerNode::robotStateNote() const { return impl_->state_note; }
 
 void ControllerNode::stop() noexcept { impl_->stop = true; }
 void ControllerNode::requestEstopReset() noexcept { impl_->reset = true; }
@@ -293,6 +311,8 @@ void ControllerNode::run() {
         m.robot->setWalkingJoints(m.q_walk, m.walking->joints());
       }
     }
+    // The robot state is persisted before it is published: what any reader saw survives a crash.
+    if (m.state_file && !m.state_file->save(m.robot->jointPositions())) ++stats_.state_write_errors;
     double dmin = 1e9, dvirt = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < m.data->dist.pairs.size(); ++i) {
       const auto& pd = m.data->dist.pairs[i];

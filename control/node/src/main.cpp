@@ -35,6 +35,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::PositiveNumber);
   app.add_flag("--no-avoidance", no_avoidance, "collision avoidance off (comparison runs only; never on a robot)");
   app.add_option("--log", config.log_csv, "write the per-cycle time series CSV here at exit");
+  app.add_option("--robot-state", config.robot_state,
+                 "keep the simulated robot's joint positions in this file across restarts (loaded at start, "
+                 "written every cycle; refused if it holds another robot or is damaged)");
   app.add_option("--name", config.module_name, "module name on the bus")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   config.avoidance = !no_avoidance;
@@ -43,6 +46,7 @@ int main(int argc, char** argv) {
     g_node = &node;
     std::signal(SIGUSR1, onUsr1);
     reflex::bus::StopOnSignal stop_on_signal(node.bus());
+    if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
     std::fprintf(stderr, "reflex_controller: running at %.0f Hz on domain %d%s\n", 200.0, node.bus().domainId(),
                  config.avoidance ? "" : " (AVOIDANCE OFF)");
     node.run();
@@ -53,11 +57,12 @@ int main(int argc, char** argv) {
     auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))]; };
     std::fprintf(stderr,
                  "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "
-                 "min distance %.1f mm, e-stops %llu, targets %llu (rejected %llu), stale events %llu\n",
+                 "min distance %.1f mm, e-stops %llu, targets %llu (rejected %llu), stale events %llu%s\n",
                  static_cast<unsigned long long>(s.cycles), pct(0.5), pct(0.99), s.max_lateness_us,
                  static_cast<unsigned long long>(s.overruns), s.min_distance * 1000.0,
                  static_cast<unsigned long long>(s.estop_count), static_cast<unsigned long long>(s.targets_received),
-                 static_cast<unsigned long long>(s.targets_rejected), static_cast<unsigned long long>(s.stale_events));
+                 static_cast<unsigned long long>(s.targets_rejected), static_cast<unsigned long long>(s.stale_events),
+                 s.state_write_errors > 0 ? (", robot-state writes FAILED " + std::to_string(s.state_write_errors)).c_str() : "");
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "reflex_controller: error: %s\n", e.what());

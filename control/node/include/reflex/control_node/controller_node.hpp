@@ -6,6 +6,10 @@
 // get "no target" and retract to rest on their own; a NaN or out-of-frame target is dropped and
 // counted. The loop runs on its own clock (absolute deadlines), polling the readers each cycle.
 //
+// With a robot state file (NodeConfig::robot_state) the simulated robot behaves like hardware across
+// a controller crash: its joint positions are written every cycle and a new controller starts from
+// them (robot_state_file.hpp).
+//
 // Extending: another robot driver implements reflex::control::RobotInterface and is passed in.
 #pragma once
 
@@ -36,6 +40,9 @@ struct NodeConfig {
   double max_target_distance = 2.0;  ///< m from the base origin; farther targets are rejected
   bool avoidance = true;             ///< false: collision avoidance off (comparison runs only)
   std::string log_csv;               ///< write the time series (reflex_sim's format) here at exit
+  /// Joint positions of the simulated robot, kept across controller restarts ("" = none: start from
+  /// rest). Loaded at start, written every cycle; see robot_state_file.hpp for format and policy.
+  std::string robot_state;
   std::string module_name = "controller";
 };
 
@@ -49,6 +56,7 @@ struct NodeStats {
   std::uint64_t targets_received = 0;
   std::uint64_t targets_rejected = 0;
   std::uint64_t stale_events = 0;     ///< transitions to "inputs stale"
+  std::uint64_t state_write_errors = 0;  ///< failed writes of the robot state file
   std::vector<double> lateness_us;    ///< per cycle (for percentiles), reserved up front
 };
 
@@ -68,6 +76,8 @@ class ControllerNode {
   void requestEstopReset() noexcept;
 
   const NodeStats& stats() const { return stats_; }
+  /// What the start-up did about the robot state ("" without a robot state file).
+  const std::string& robotStateNote() const;
   bus::Participant& bus();
 
  private:
