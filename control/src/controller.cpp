@@ -84,12 +84,45 @@ Zone zoneOf(double d, const ControllerParams& p) {
   return Zone::kFree;
 }
 
-ControllerData::ControllerData(const Model& model, const ControllerModel& /*cm*/)
+ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
     : kin(model),
       dist(model),
       qdot(Eigen::VectorXd::Zero(model.nq)),
+      qdot_uncontrolled(Eigen::VectorXd::Zero(model.nq)),
+      q_prev(Eigen::VectorXd::Zero(model.nq)),
+      arm_joint(static_cast<std::size_t>(model.nq), 0),
+      q_next(Eigen::VectorXd::Zero(model.nq)),
+      kin_next(model),
+      dist_next(model),
+      dist_hold(model),
       J_full(Eigen::MatrixXd::Zero(3, model.nq)),
-      J_rel_full(Eigen::MatrixXd::Zero(3, model.nq)) {}
+      J_rel_full(Eigen::MatrixXd::Zero(3, model.nq)) {
+  for (const auto& arm : cm.arms)
+    for (int i = 0; i < arm.n; ++i) arm_joint[static_cast<std::size_t>(arm.q[i])] = 1;
+  // reach[l]: the farthest segment surface below link l, measured along the chain from l's origin
+  // (joint offsets summed, so it bounds every configuration).
+  const std::size_t nl = model.links.size();
+  std::vector<double> reach(nl, 0.0);
+  for (const Segment& seg : model.segments) {
+    if (seg.body_schema_slot || seg.link < 0) continue;
+    for (int k = 0; k < seg.num_primitives; ++k) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
+      reach[static_cast<std::size_t>(seg.link)] = std::max(reach[static_cast<std::size_t>(seg.link)],
+                                                           std::max(prim.a_L.norm(), prim.b_L.norm()) + prim.radius);
+    }
+  }
+  for (std::size_t l = nl; l-- > 1;) {  // children after parents: accumulate bottom-up
+    const int parent = model.links[l].parent;
+    if (parent < 0) continue;
+    reach[static_cast<std::size_t>(parent)] =
+        std::max(reach[static_cast<std::size_t>(parent)], model.links[l].X_P_J.translation().norm() + reach[l]);
+  }
+  lever = Eigen::VectorXd::Zero(model.nq);
+  for (int j = 0; j < model.nq; ++j) {
+    const Link& link = model.links[static_cast<std::size_t>(model.q_link[j])];
+    lever[j] = link.type == JointType::kPrismatic ? 1.0 : reach[static_cast<std::size_t>(model.q_link[j])];
+  }
+}
 
 namespace {
 
@@ -309,6 +342,9 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
           for (int i = 0; i < cm.arms[b].n; ++i)
             other_rate += data.dist.rows(p, cm.arms[b].q[i]) * data.qdot[cm.arms[b].q[i]];
         }
+        // Walking and balance move the legs (and everything above them) without asking: their
+        // estimated motion counts too (legs always win, Sec. 7.2), zero on the arm joints.
+        for (int j = 0; j < model.nq; ++j) other_rate += data.dist.rows(p, j) * data.qdot_uncontrolled[j];
         const double rate = row.dot(qdot.transpose()) + other_rate;
         if (rate < allowed - 1e-12) {
           qdot += free_row.transpose() * ((allowed - rate) / rr);
@@ -349,6 +385,88 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   for (int i = 0; i < n; ++i) data.qdot[arm.q[i]] = qdot[i];
 }
 
+/// A pair between physical segments (a virtual occlusion slot never counts for safety).
+bool isPhysical(const Model& model, const ControllerData& data, const PairDistance& pd) {
+  const int sb = pd.seg_b;
+  return !(model.segments[sb].body_schema_slot && data.slot_virtual[sb - model.num_robot_segments]);
+}
+
+/// Predicts the configuration one period ahead: q + dt (scaled arm velocities + uncontrolled ones).
+void predict(const Model& model, const ControllerModel& cm, ControllerData& data,
+             const Eigen::Ref<const Eigen::VectorXd>& q, const std::array<double, 2>& scale, DistanceData& out) {
+  const double dt = cm.params.period;
+  for (int j = 0; j < model.nq; ++j) data.q_next[j] = q[j] + dt * data.qdot_uncontrolled[j];
+  for (int a = 0; a < 2; ++a)
+    for (int i = 0; i < cm.arms[a].n; ++i) data.q_next[cm.arms[a].q[i]] += dt * scale[a] * data.qdot[cm.arms[a].q[i]];
+  out.slots = data.dist.slots;
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -kInf;
+  if (computeForwardKinematics(model, data.kin_next, data.q_next)) {
+    computeSegmentDistances(model, data.kin_next, out, no_rows);
+  } else {
+    for (auto& pd : out.pairs) pd.distance = -kInf;  // cannot happen for finite q; counts as a hit
+  }
+}
+
+/// Predictive guard (not in the paper; ControllerParams::predict_margin). The two filters inside
+/// computeArm bound the approach to first order; this one checks the step itself. Each arm's step is
+/// halved (at most six times, then dropped) while, one period ahead, some physical pair of that arm
+/// would end below d_r + predict_margin AND closer than it is now and than it would be if the arms
+/// held still (so walking motion that no arm step can undo is not blamed on the arms). On the
+/// kinematic robot the prediction is exact for the arms, so no arm motion ever enters the red zone.
+void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerData& data,
+                     const Eigen::Ref<const Eigen::VectorXd>& q) {
+  const ControllerParams& P = cm.params;
+  const double floor = P.d_r + P.predict_margin;
+  data.guard_scale = {1.0, 1.0};
+  // Cheap exit: in one period no point moves more than sum |qdot_j| lever_j dt (body-schema slots
+  // add their own extent to every lever), so no distance changes by more than twice that.
+  double slot_extent = 0.0;
+  for (const BodySchemaSlot& slot : data.dist.slots)
+    if (slot.enabled) slot_extent = std::max(slot_extent, std::max(slot.a_L.norm(), slot.b_L.norm()) + slot.radius);
+  double sweep = 0.0;
+  for (int j = 0; j < model.nq; ++j)
+    sweep += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * P.period;
+  double d_now = kInf;
+  for (const PairDistance& pd : data.dist.pairs)
+    if (pd.active && isPhysical(model, data, pd)) d_now = std::min(d_now, pd.distance);
+  if (d_now - 2.0 * sweep > floor) return;
+
+  bool have_hold = false;
+  std::array<double, 2> scale{1.0, 1.0};
+  for (int iter = 0; iter < 8; ++iter) {
+    predict(model, cm, data, q, scale, data.dist_next);
+    std::array<bool, 2> hit{false, false};
+    for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
+      const PairDistance& pn = data.dist_next.pairs[i];
+      const PairDistance& p0 = data.dist.pairs[i];
+      if (!pn.active || !isPhysical(model, data, pn)) continue;
+      if (!(pn.distance < floor) || !(pn.distance < p0.distance)) continue;
+      const int oa = ownerArm(model, cm, data.dist_next, pn.seg_a);
+      const int ob = ownerArm(model, cm, data.dist_next, pn.seg_b);
+      const bool movable = (oa >= 0 && scale[oa] > 0.0) || (ob >= 0 && scale[ob] > 0.0);
+      if (!movable) continue;
+      if (!have_hold) {
+        const std::array<double, 2> zero{0.0, 0.0};
+        predict(model, cm, data, q, zero, data.dist_hold);
+        have_hold = true;
+      }
+      if (!(pn.distance < data.dist_hold.pairs[i].distance)) continue;  // no worse than holding still
+      if (oa >= 0) hit[oa] = true;
+      if (ob >= 0) hit[ob] = true;
+    }
+    if (!hit[0] && !hit[1]) break;
+    for (int a = 0; a < 2; ++a)
+      if (hit[a]) scale[a] = iter < 6 ? 0.5 * scale[a] : 0.0;
+  }
+  if (scale[0] < 1.0 || scale[1] < 1.0) {
+    ++data.guard_count;
+    for (int a = 0; a < 2; ++a)
+      for (int i = 0; i < cm.arms[a].n; ++i) data.qdot[cm.arms[a].q[i]] *= scale[a];
+  }
+  data.guard_scale = scale;
+}
+
 }  // namespace
 
 ControlResult computeControl(const Model& model, const ControllerModel& cm, ControllerData& data,
@@ -358,6 +476,14 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
     ++data.bad_input_count;
     return ControlResult::kBadInput;
   }
+  // Velocity of the joints the controller does not command, from the previous measured q.
+  for (int j = 0; j < model.nq; ++j) {
+    const double v = data.have_prev && !data.arm_joint[static_cast<std::size_t>(j)]
+                         ? (q[j] - data.q_prev[j]) / cm.params.period : 0.0;
+    data.qdot_uncontrolled[j] = std::isfinite(v) ? v : 0.0;
+  }
+  data.q_prev = q;
+  data.have_prev = true;
   ControlInput in = input;
   for (auto& hand : in.hands) {
     if (hand.status == HandStatus::kGiven && !hand.target_W.allFinite()) {
@@ -421,6 +547,7 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
   const int first = in.priority == MotionPriority::kRightHigher ? kRight : kLeft;
   computeArm(model, cm, data, first, in, false);
   computeArm(model, cm, data, 1 - first, in, false);
+  if (cm.params.mode != AvoidanceMode::kOff && data.qdot.allFinite()) predictiveGuard(model, cm, data, q);
   if (!data.qdot.allFinite()) {
     data.qdot.setZero();
     ++data.bad_input_count;

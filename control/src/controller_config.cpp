@@ -82,6 +82,9 @@ void validateControllerParams(const ControllerParams& p, const std::string& src)
   nonneg(p.guard_margin, "guard_margin");
   if (!(p.d_r + p.guard_margin < p.d_b))
     throw ConfigError(src + ": d_r + guard_margin = " + str(p.d_r + p.guard_margin) + " must be below d_b = " + str(p.d_b));
+  nonneg(p.predict_margin, "predict_margin");
+  if (!(p.d_r + p.predict_margin < p.d_b))
+    throw ConfigError(src + ": d_r + predict_margin = " + str(p.d_r + p.predict_margin) + " must be below d_b = " + str(p.d_b));
 }
 
 ControllerConfig loadControllerConfig(const std::string& yaml_path) {
@@ -104,7 +107,8 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
       {"alpha_t", &p.alpha_t}, {"alpha_jla", &p.alpha_jla}, {"alpha_rest", &p.alpha_rest},
       {"damping", &p.damping}, {"reach_gain", &p.reach_gain}, {"max_task_speed", &p.max_task_speed},
       {"trajectory_speed", &p.trajectory_speed}, {"estop_release_margin", &p.estop_release_margin},
-      {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin}};
+      {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin},
+      {"predict_margin", &p.predict_margin}};
   for (const auto& kv : root) {
     std::string key;
     try {

@@ -116,6 +116,7 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
       result.samples.push_back(std::move(s));
     }
     ++result.cycles;
+    result.guard_cycles = data.guard_count;
     if (k == steps) break;
     // Apply: arms from the controller; legs/heel/body from walking (frozen with the robot on e-stop).
     const bool frozen = cr == ControlResult::kFrozen;

@@ -44,6 +44,7 @@ void WalkingPattern::start(double distance, double speed, double step_period) {
   period_ = step_period;
   phase_ = 0.0;
   travelled_ = 0.0;
+  amplitude_ = 0.0;
   started_ = false;
 }
 
@@ -52,13 +53,16 @@ void WalkingPattern::step(double dt, Eigen::Ref<Eigen::VectorXd> q) {
     x0_ = q[heel_x_];
     started_ = true;
   }
-  double amplitude = 0.0;
   if (walking_) {
     travelled_ = std::min(distance_, travelled_ + speed_ * dt);
-    phase_ += 2.0 * M_PI * dt / period_;
-    amplitude = 1.0;
     if (travelled_ >= distance_) walking_ = false;
   }
+  // The leg motion fades in over the first half step and out over the half step after the goal,
+  // as a walking controller starts and stops (no joint jumps: the arms avoid the legs reactively).
+  const double ramp = 0.5 * period_;
+  amplitude_ = std::clamp(amplitude_ + (walking_ ? dt : -dt) / ramp, 0.0, 1.0);
+  if (amplitude_ > 0.0) phase_ += 2.0 * M_PI * dt / period_;
+  const double amplitude = amplitude_ * amplitude_ * (3.0 - 2.0 * amplitude_);  // smoothstep
   if (heel_x_ >= 0) q[heel_x_] = x0_ + travelled_;
   // Legs swing in anti-phase; the stance knee stays slightly bent; the body bobs with the step.
   for (int s = 0; s < 2; ++s) {

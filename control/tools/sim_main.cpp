@@ -117,6 +117,7 @@ void summarize(std::ostream& os, const Model& model, const Scenario& sc, const S
   if (std::isfinite(r.min_virtual_distance))
     os << "  min virtual distance  " << r.min_virtual_distance * 1000.0 << " mm\n";
   os << "  e-stop fired          " << (r.estop_fired ? "yes" : "no") << "\n";
+  os << "  guard shortened       " << r.guard_cycles << " steps (predictive guard)\n";
   const char* side[2] = {"left", "right"};
   for (int a = 0; a < 2; ++a) {
     if (r.final_error[a] == 0.0 && r.reach_time[a] < 0.0) continue;

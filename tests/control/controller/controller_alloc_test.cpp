@@ -1,6 +1,6 @@
 // The 5 ms control path allocates nothing: global operator new/delete are replaced by counting
 // versions, and a full controller cycle (kinematics, every pair, both controllers, blend, safety
-// filter, e-stop logic, body-schema slots) must leave the count unchanged.
+// filter, predictive guard, e-stop logic, body-schema slots) must leave the count unchanged.
 #include "fixture.hpp"
 
 #include <gtest/gtest.h>
@@ -62,6 +62,27 @@ TEST(ControllerAllocation, ACycleAllocatesNothing) {
     const long after = g_allocations.load();
     EXPECT_EQ(after - before, 0) << "allocations in 1500 cycles";
     EXPECT_GT(max_f, 0) << "the cycles exercised the collision controller";
+    // The predictive guard's path: with the first-order floor at d_r (guard_margin 0) and the
+    // targets jumping between crossing, into the chest and low across, the guard shortens steps; still nothing
+    // is allocated.
+    ControllerModel guarded = cmm;
+    guarded.params.guard_margin = 0.0;
+    ControllerData gdata(model, guarded);
+    Eigen::VectorXd gq = restConfiguration(model, guarded);
+    ControlInput gin = in;
+    computeControl(model, guarded, gdata, gq, gin);
+    const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
+    const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
+    const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
+    const long before_guard = g_allocations.load();
+    for (int k = 0; k < 1500; ++k) {
+      for (int a = 0; a < 2; ++a) gin.hands[a].target_W = phases[(k / 80) % 4][a];
+      gin.priority = static_cast<MotionPriority>((k / 120) % 3);
+      computeControl(model, guarded, gdata, gq, gin);
+      gq += gdata.qdot * guarded.params.period;
+    }
+    EXPECT_EQ(g_allocations.load() - before_guard, 0) << "allocations with the predictive guard acting";
+    EXPECT_GT(gdata.guard_count, 0U) << "the guard shortened steps in these cycles";
     // The e-stop path too.
     in.reset_estop = true;
     const long before2 = g_allocations.load();

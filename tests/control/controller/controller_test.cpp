@@ -4,9 +4,12 @@
 #include "fixture.hpp"
 
 #include "reflex/control/redundancy.hpp"
+#include "reflex/control/simulation.hpp"
 
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cstdio>
 #include <random>
 
 namespace reflex::control {
@@ -314,6 +317,124 @@ TEST(Controller, BadInputGivesADefinedSafeOutput) {
   EXPECT_TRUE(data.qdot.isZero());
   EXPECT_EQ(computeControl(model, cm, data, Eigen::VectorXd::Zero(3), in), ControlResult::kBadInput);
   EXPECT_TRUE(data.qdot.isZero());
+}
+
+TEST(PredictiveGuard, NoStepEndsBelowTheFloorAndCloserThanBefore) {
+  // With guard_margin = 0 the first-order filter lets pairs decay towards d_r itself, so only the
+  // predictive guard keeps them above d_r + predict_margin. Each cycle's step is applied to a
+  // kinematic robot and the distances at the new configuration are computed independently (own
+  // kinematics and distance data): no physical pair may end below the floor closer than it was.
+  const Model& model = shippedModel();
+  ControllerModel cm = defaultControllerModel();
+  cm.params.guard_margin = 0.0;
+  const double floor = cm.params.d_r + cm.params.predict_margin;
+  ControllerData data(model, cm);
+  KinematicRobot robot(model, restConfiguration(model, cm));
+  KinematicsData kin(model);
+  DistanceData dist(model);
+  // Targets that ask for collisions, changing every 0.4 s: inside the chest, across the body into
+  // the other hand, with the motion priority flipping.
+  const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
+  const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
+  const std::array<std::array<Eigen::Vector3d, 2>, 4> phases{{{across_l, across_r}, {inside, across_r},
+                                                              {low_l, inside}, {across_l, low_r}}};
+  double closest = 1.0;
+  int checked = 0;
+  for (int k = 0; k < 1600; ++k) {
+    const int phase = (k / 80) % 4;
+    ControlInput in;
+    in.hands[kLeft] = {HandStatus::kGiven, phases[phase][kLeft]};
+    in.hands[kRight] = {HandStatus::kGiven, phases[phase][kRight]};
+    in.priority = static_cast<MotionPriority>((k / 120) % 3);
+    const Eigen::VectorXd q = robot.jointPositions();
+    ASSERT_EQ(computeControl(model, cm, data, q, in), ControlResult::kOk) << "cycle " << k;
+    robot.command(data.qdot, cm.params.period);
+    ASSERT_TRUE(computeForwardKinematics(model, kin, robot.jointPositions()));
+    computeSegmentDistances(model, kin, dist);
+    for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+      if (!dist.pairs[i].active) continue;
+      closest = std::min(closest, dist.pairs[i].distance);
+      if (dist.pairs[i].distance < floor) {
+        ++checked;
+        EXPECT_GE(dist.pairs[i].distance, data.dist.pairs[i].distance - 1e-12) << "cycle " << k << " pair " << i;
+      }
+    }
+  }
+  EXPECT_GT(data.guard_count, 0U) << "the targets drove pairs to the guard";
+  EXPECT_GE(closest, floor - 1e-12);
+  EXPECT_LT(closest, cm.params.d_r + cm.params.guard_margin + 0.002) << "pairs did come close";
+  EXPECT_EQ(data.estop_count, 0U);
+  std::printf("closest %.3f mm, floor %.3f mm, guard shortened %llu steps, %d pair-cycles below the floor\n",
+              closest * 1e3, floor * 1e3, static_cast<unsigned long long>(data.guard_count), checked);
+}
+
+TEST(PredictiveGuard, JointLeversBoundHowFarAnySegmentPointMoves) {
+  // The guard's cheap exit rests on lever_j: no point of a segment surface moves more than
+  // lever_j * |dq_j| when joint j alone moves by dq_j. Checked on random configurations by moving
+  // each joint and measuring every primitive's endpoints (their displacement plus nothing: surface
+  // points of a capsule move no more than the farthest core point offset by the radius direction,
+  // which the lever includes).
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const ControllerData data(model, cm);
+  KinematicsData k0(model), k1(model);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  double tightest = 0.0;
+  for (int trial = 0; trial < 50; ++trial) {
+    Eigen::VectorXd q(model.nq);
+    for (int j = 0; j < model.nq; ++j) {
+      const double lo = std::max(model.q_lower[j], -3.0), hi = std::min(model.q_upper[j], 3.0);
+      q[j] = lo + (hi - lo) * u(rng);
+    }
+    ASSERT_TRUE(computeForwardKinematics(model, k0, q));
+    for (int j = 0; j < model.nq; ++j) {
+      const double dq = 0.01;
+      Eigen::VectorXd q1 = q;
+      q1[j] += dq;
+      ASSERT_TRUE(computeForwardKinematics(model, k1, q1));
+      for (int s = 0; s < model.num_robot_segments; ++s) {
+        const Segment& seg = model.segments[s];
+        for (int k = 0; k < seg.num_primitives; ++k) {
+          const Primitive& prim = model.primitives[seg.first_primitive + k];
+          for (const Eigen::Vector3d& p_L : {prim.a_L, prim.b_L}) {
+            // The surface point farthest out: the endpoint pushed outwards by the radius.
+            const Eigen::Vector3d out = p_L.norm() > 0 ? Eigen::Vector3d(p_L + prim.radius * p_L.normalized())
+                                                       : Eigen::Vector3d(prim.radius, 0, 0);
+            const double moved = (k1.X_W_L[seg.link] * out - k0.X_W_L[seg.link] * out).norm();
+            EXPECT_LE(moved, data.lever[j] * dq + 1e-12) << model.q_names[j] << " moves " << seg.name;
+            if (moved > 0) tightest = std::max(tightest, moved / (data.lever[j] * dq));
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(tightest, 0.5) << "the levers are bounds, but not absurdly loose ones";
+}
+
+TEST(Walking, LegMotionFadesInAndOutWithoutJumps) {
+  // A walking controller starts and stops smoothly: no walking joint may move more than its
+  // steady-state per-step change (amplitude * 2 pi dt / period bounds it; 0.02 rad at 5 ms here).
+  const Model& model = shippedModel();
+  WalkingPattern walking(model);
+  Eigen::VectorXd q = restConfiguration(model, defaultControllerModel());
+  Eigen::VectorXd prev = q;
+  walking.start(0.3, 0.3, 0.8);
+  double max_step = 0.0;
+  bool stopped = false;
+  for (int k = 0; k < 400; ++k) {
+    walking.step(0.005, q);
+    for (const int j : walking.joints())
+      if (model.q_names[j] != "heel_x") max_step = std::max(max_step, std::abs(q[j] - prev[j]));
+    prev = q;
+    if (!walking.walking()) stopped = true;
+  }
+  EXPECT_TRUE(stopped);
+  EXPECT_LT(max_step, 0.02);
+  EXPECT_NEAR(walking.travelled(), 0.3, 1e-12);
+  const Eigen::VectorXd rest = restConfiguration(model, defaultControllerModel());
+  for (const int j : walking.joints())
+    if (model.q_names[j] != "heel_x") EXPECT_NEAR(q[j], rest[j], 1e-9) << model.q_names[j] << " back at rest after the fade-out";
 }
 
 }  // namespace

@@ -69,6 +69,11 @@ struct ControllerParams {
   double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s)
   double guard_margin = 0.001;        ///< safety filter floor above d_r (m)
   double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m)
+  /// Predictive guard (not in the paper): the commanded step is checked at the configuration it
+  /// leads to, and shortened until no physical pair ends below d_r + predict_margin closer than it
+  /// is now (or than holding the arms still would leave it). Below guard_margin, it acts only where
+  /// the first-order filter above leaves a gap.
+  double predict_margin = 0.0005;
   AvoidanceMode mode = AvoidanceMode::kOneDof;
 };
 
@@ -163,6 +168,23 @@ struct ControllerData {
   std::uint64_t estop_count = 0;
   std::array<bool, kBodySchemaSlots> slot_virtual{};  ///< virtual slots never trigger the e-stop
   std::uint64_t bad_input_count = 0;
+  /// Predictive guard: how many cycles shortened the commanded step, and the last step scale per arm.
+  std::uint64_t guard_count = 0;
+  std::array<double, 2> guard_scale{1.0, 1.0};
+  /// Velocity of the joints the controller does not command (walking, balance, gaze), estimated
+  /// from the previous cycle's measured q; zero on the first cycle.
+  Eigen::VectorXd qdot_uncontrolled;
+  Eigen::VectorXd q_prev;
+  bool have_prev = false;
+  std::vector<char> arm_joint;          ///< per q index: commanded by one of the arms
+  /// Per q index: how far a point of the robot moves at most per unit of that joint (m/rad, or 1 for
+  /// a prismatic joint): the longest path from the joint to a segment surface below it.
+  Eigen::VectorXd lever;
+  // scratch of the predictive guard: the configuration one step ahead
+  Eigen::VectorXd q_next;
+  KinematicsData kin_next;
+  DistanceData dist_next;
+  DistanceData dist_hold;               ///< arms held still, only the uncontrolled joints moving
   // scratch
   Eigen::MatrixXd J_full;               ///< 3 x nq
   Eigen::MatrixXd J_rel_full;           ///< 3 x nq

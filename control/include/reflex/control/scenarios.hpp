@@ -62,6 +62,7 @@ struct SimResult {
   int min_pair = -1;
   double min_virtual_distance = 0.0;
   bool estop_fired = false;
+  std::uint64_t guard_cycles = 0;    ///< cycles whose step the predictive guard shortened
   bool non_finite = false;           ///< a NaN/Inf reached the robot (must never happen)
   double max_joint_speed_ratio = 0.0;  ///< max |qdot_i| / v_max_i
   std::array<double, 2> reach_time{{-1.0, -1.0}};  ///< first time within 1 cm of the final target, -1 never

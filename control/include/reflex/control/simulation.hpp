@@ -41,7 +41,8 @@ class KinematicRobot final : public RobotInterface {
 };
 
 /// A simple walking pattern: the heel moves along x at a constant speed to a goal distance, the legs
-/// swing (hip pitch, knee, ankle pitch) with the step phase, the body bobs slightly. Joints are found
+/// swing (hip pitch, knee, ankle pitch) with the step phase, the body bobs slightly; the leg motion
+/// fades in and out over half a step (no joint jumps). Joints are found
 /// by name (heel_x, {l,r}_hip_pitch, {l,r}_knee, {l,r}_ankle_pitch, body_z); missing ones are skipped.
 class WalkingPattern {
  public:
@@ -61,6 +62,7 @@ class WalkingPattern {
   std::vector<int> joints_;
   bool walking_ = false;
   double distance_ = 0.0, speed_ = 0.0, period_ = 0.8, phase_ = 0.0, travelled_ = 0.0, x0_ = 0.0;
+  double amplitude_ = 0.0;  ///< leg motion amplitude, 0..1, ramped at start and stop
   bool started_ = false;
 };
 
