@@ -141,6 +141,14 @@ def main():
     if not runs:
         raise SystemExit("report.py: no run in %s (expected avoidance/controller.csv)" % args.out)
     summary = {label: summarize(ts) for label, ts in runs.items()}
+    security = {}  # label -> the --secure folder of run_flagship.py, or None (plain DDS)
+    for label in runs:
+        try:
+            with open(os.path.join(args.out, label, "run.json")) as fh:
+                security[label] = json.load(fh).get("secure")
+        except (OSError, ValueError):
+            security[label] = None
+        summary[label]["secure"] = bool(security[label])
 
     # Fig. 13: hand status and arm-to-arm distance.
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1, 1, 3]})
@@ -236,6 +244,11 @@ def main():
     lines = ["# Flagship experiment report", "",
              "Session `%s` replayed through reflex_vision -> reflex_behavior -> reflex_controller over DDS." % args.session,
              "", "| | with avoidance | without avoidance |", "| --- | --- | --- |"]
+    def mode(label):
+        if label not in security:
+            return "-"
+        return "secure (DDS-Security, identities from `%s`)" % security[label] if security[label] else "plain"
+    lines.append("| DDS | %s | %s |" % (mode("avoidance"), mode("no_avoidance")))
     on, off = summary.get("avoidance", {}), summary.get("no_avoidance", {})
     def cell(d, key, scale=1.0, fmt="%.1f"):
         return (fmt % (d[key] * scale)) if key in d else "-"
@@ -256,7 +269,7 @@ def main():
         lines += ["", "![strip](strip.png)"]
     with open(os.path.join(args.out, "report.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines[4:4 + 13]))
+    print("\n".join(lines[4:4 + 14]))
     print("report.py: wrote %s/report.md and plots" % args.out)
     return 0
 

@@ -8,11 +8,22 @@ the bus is recorded when reflex_record exists, and report.py turns the runs into
 with plots (hand status and arm-to-arm distance as in Fig. 13, f(d), targets against hands, a strip of
 camera frames beside the robot's capsules).
 
-Usage: run_flagship.py [--out DIR] [--build DIR] [--domain N] [--rate R] [--only on|off] [--no-report]
+With --secure DIR the same experiment runs with DDS-Security (bringup/security/README.md): every process
+gets the complete profiles file of its own identity, DIR/profiles/<module>.xml (reflex_vision: vision,
+reflex_behavior: behavior, reflex_controller: controller, reflex_record: recorder), so every participant
+authenticates, every topic is access-controlled and encrypted. DIR is made with
+bringup/security/make_security.sh when it does not exist or is empty; a folder that exists is used as it
+is (it may hold deployed credentials without the CA key) and must hold those four profiles with every
+file they name. Authentication takes seconds: vision starts 2 s after the recorder records the first
+samples (it authenticated the controller). run.json, summary.json and report.md say which mode ran.
+
+Usage: run_flagship.py [--out DIR] [--build DIR] [--domain N] [--rate R] [--only on|off] [--secure DIR]
+                       [--no-report]
 """
 import argparse
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -26,12 +37,17 @@ def log(msg):
     print("flagship: " + msg, flush=True)
 
 
+# The identity (bringup/security/make_security.sh) of each process of the experiment.
+SECURE_IDENTITIES = {"controller": "controller", "behavior": "behavior", "recorder": "recorder", "vision": "vision"}
+SECURE_READY_TIMEOUT_S = 45.0  # authentication of controller, behavior and recorder (1-5 s per pair, loaded)
+
+
 class Proc:
-    def __init__(self, name, argv, logfile):
+    def __init__(self, name, argv, logfile, env=None):
         self.name = name
         self.argv = argv
         self.log = open(logfile, "w")
-        self.p = subprocess.Popen(argv, stdout=self.log, stderr=subprocess.STDOUT)
+        self.p = subprocess.Popen(argv, stdout=self.log, stderr=subprocess.STDOUT, env=env)
 
     def alive(self):
         return self.p.poll() is None
@@ -48,6 +64,67 @@ class Proc:
         return self.p.returncode
 
 
+def check_secure_dir(directory):
+    """The security folder of --secure: made with make_security.sh when missing or empty, otherwise
+    checked (a profiles file per identity, every file:// it names readable). Returns the absolute path;
+    raises ValueError with a message naming the folder and what is wrong."""
+    directory = os.path.abspath(directory)
+    if os.path.exists(directory) and not os.path.isdir(directory):
+        raise ValueError("--secure %s: not a folder" % directory)
+    if not os.path.exists(directory) or not os.listdir(directory):
+        script = os.path.join(ROOT, "bringup", "security", "make_security.sh")
+        log("making the security material in %s (%s)" % (directory, os.path.relpath(script, ROOT)))
+        r = subprocess.run([script, directory], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        if r.returncode != 0:
+            raise ValueError("--secure %s: make_security.sh failed (exit %d): %s" % (directory, r.returncode,
+                                                                                   r.stdout.strip()))
+    for identity in sorted(set(SECURE_IDENTITIES.values())):
+        profile = os.path.join(directory, "profiles", identity + ".xml")
+        if not os.path.isfile(profile):
+            raise ValueError("--secure %s: no profiles/%s.xml (make the material with "
+                             "bringup/security/make_security.sh %s)" % (directory, identity, directory))
+        with open(profile) as fh:
+            text = fh.read()
+        if "dds.sec.auth.plugin" not in text:
+            raise ValueError("--secure %s: profiles/%s.xml holds no security properties" % (directory, identity))
+        for path in re.findall(r"file://([^<\s]+)", text):
+            if not os.access(path, os.R_OK):
+                raise ValueError("--secure %s: profiles/%s.xml names %s, which is missing or unreadable (folder "
+                                 "moved? run bringup/security/make_security.sh %s again)"
+                                 % (directory, identity, path, directory))
+    return directory
+
+
+def last_count(path, pattern):
+    """The number of the last match of `pattern` (one group) in the log file, or 0."""
+    try:
+        with open(path, errors="replace") as fh:
+            found = re.findall(pattern, fh.read())
+    except OSError:
+        return 0
+    return int(found[-1]) if found else 0
+
+
+def wait_secure_ready(procs, out):
+    """Secure mode: blocks until the recorder records samples (it authenticated the controller; the
+    other pairs authenticate in parallel), then 2 s more as a plain run waits for discovery; without a
+    recorder 5 s. Raises if a process exits or nothing is recorded within SECURE_READY_TIMEOUT_S."""
+    t0 = time.time()
+    recorder = next((p for p in procs if p.name == "recorder"), None)
+    recorder_log = os.path.join(out, "recorder.log")
+    while recorder is not None and last_count(recorder_log, r"(\d+) samples") == 0:
+        for p in procs:
+            if not p.alive():
+                raise RuntimeError("%s exited during secure start-up (see %s)" % (p.name, p.log.name))
+        if time.time() - t0 > SECURE_READY_TIMEOUT_S:
+            raise RuntimeError("secure start-up: the recorder received nothing in %.0f s (authentication failed? "
+                               "see %s and the other logs in %s)" % (SECURE_READY_TIMEOUT_S, recorder_log, out))
+        time.sleep(0.2)
+    time.sleep(2.0 if recorder is not None else 5.0)
+    log("secure start-up: participants authenticated, %.1f s" % (time.time() - t0))
+    return time.time() - t0
+
+
 def session_length(session):
     with open(os.path.join(session, "timestamps.csv")) as fh:
         rows = [line.split(",") for line in fh.read().split("\n")[1:] if line.strip()]
@@ -60,27 +137,48 @@ def run_once(args, label, avoidance):
     bindir = os.path.join(args.build, "bin")
     length = session_length(args.session) / args.rate
     domain = str(args.domain + (0 if avoidance else 1))
-    env_note = {"domain": int(domain), "avoidance": avoidance, "rate": args.rate, "session": args.session}
+    env_note = {"domain": int(domain), "avoidance": avoidance, "rate": args.rate, "session": args.session,
+                "secure": args.secure}
+    env = None
+    if args.secure:
+        # Only the identity's profiles file: a default profiles file from the environment would be loaded
+        # first and could hold plain participant profiles of the same names.
+        env = {k: v for k, v in os.environ.items() if k != "FASTRTPS_DEFAULT_PROFILES_FILE"}
+
+    def dds(name):
+        """--domain (and, secure, --profiles of the process's identity) for process `name`."""
+        if not args.secure:
+            return ["--domain", domain]
+        return ["--domain", domain, "--profiles",
+                os.path.join(args.secure, "profiles", SECURE_IDENTITIES[name] + ".xml")]
+
     procs = []
     try:
-        ctl = [os.path.join(bindir, "reflex_controller"), "--domain", domain, "--duration", "%.1f" % (length + 6.0),
-               "--log", os.path.join(out, "controller.csv")]
+        # Secure: the controller also runs through the authentication wait (stopped by SIGTERM anyway).
+        ctl_duration = length + 6.0 + (SECURE_READY_TIMEOUT_S if args.secure else 0.0)
+        ctl = [os.path.join(bindir, "reflex_controller")] + dds("controller") + [
+            "--duration", "%.1f" % ctl_duration, "--log", os.path.join(out, "controller.csv")]
         if not avoidance:
             ctl.append("--no-avoidance")
-        procs.append(Proc("controller", ctl, os.path.join(out, "controller.log")))
-        procs.append(Proc("behavior", [os.path.join(bindir, "reflex_behavior"), "--config", args.behavior,
-                                       "--domain", domain], os.path.join(out, "behavior.log")))
+        procs.append(Proc("controller", ctl, os.path.join(out, "controller.log"), env))
+        beh = [os.path.join(bindir, "reflex_behavior"), "--config", args.behavior] + dds("behavior")
+        procs.append(Proc("behavior", beh, os.path.join(out, "behavior.log"), env))
         recorder = os.path.join(bindir, "reflex_record")
         if os.path.exists(recorder):
-            procs.append(Proc("recorder", [recorder, "record", "--domain", domain, "--output",
-                                           os.path.join(out, "bus.rfx")], os.path.join(out, "recorder.log")))
-        time.sleep(2.0)  # discovery
+            rec = [recorder, "record"] + dds("recorder") + ["--output", os.path.join(out, "bus.rfx")]
+            if args.secure:
+                rec.append("--progress")
+            procs.append(Proc("recorder", rec, os.path.join(out, "recorder.log"), env))
+        if args.secure:
+            env_note["secure_startup_s"] = wait_secure_ready(procs, out)
+        else:
+            time.sleep(2.0)  # discovery
         for p in procs:
             if not p.alive():
                 raise RuntimeError("%s exited early (see %s)" % (p.name, p.log.name))
         env_note["vision_start_wall"] = time.time()
-        vision = Proc("vision", [os.path.join(bindir, "reflex_vision"), "--session", args.session, "--domain", domain,
-                                 "--rate", str(args.rate), "--quiet"], os.path.join(out, "vision.log"))
+        vision = Proc("vision", [os.path.join(bindir, "reflex_vision"), "--session", args.session] + dds("vision") +
+                      ["--rate", str(args.rate), "--quiet"], os.path.join(out, "vision.log"), env)
         procs.append(vision)
         t0 = time.time()
         tty = sys.stdout.isatty()
@@ -124,6 +222,10 @@ def main():
     ap.add_argument("--domain", type=int, default=int(os.environ.get("REFLEX_DOMAIN_ID", "30")))
     ap.add_argument("--rate", type=float, default=1.0, help="session replay speed (1 = real time)")
     ap.add_argument("--only", choices=["on", "off"], help="run only with (on) or without (off) avoidance")
+    ap.add_argument("--secure", metavar="DIR",
+                    help="run with DDS-Security: each process with its own identity's profiles file "
+                         "DIR/profiles/<module>.xml (DIR made by bringup/security/make_security.sh when missing "
+                         "or empty)")
     ap.add_argument("--no-report", action="store_true")
     args = ap.parse_args()
     if not (0 <= args.domain <= 231):
@@ -136,13 +238,20 @@ def main():
     for exe in ("reflex_controller", "reflex_behavior", "reflex_vision"):
         if not os.path.exists(os.path.join(args.build, "bin", exe)):
             ap.error("%s not found in %s/bin (build first: bringup/setup.sh)" % (exe, args.build))
+    mode = "plain DDS"
+    if args.secure is not None:
+        try:
+            args.secure = check_secure_dir(args.secure)
+        except ValueError as e:
+            ap.error(str(e))
+        mode = "DDS-Security, identities from %s" % args.secure
     runs = []
     try:
         if args.only in (None, "on"):
-            log("run with collision avoidance (domain %d)" % args.domain)
+            log("run with collision avoidance (domain %d, %s)" % (args.domain, mode))
             runs.append(run_once(args, "avoidance", True))
         if args.only in (None, "off"):
-            log("run WITHOUT collision avoidance, for comparison (domain %d)" % (args.domain + 1))
+            log("run WITHOUT collision avoidance, for comparison (domain %d, %s)" % (args.domain + 1, mode))
             runs.append(run_once(args, "no_avoidance", False))
     except RuntimeError as e:
         log("error: %s" % e)
