@@ -1,5 +1,6 @@
 #include "reflex/control_node/controller_node.hpp"
 
+#include "reflex/control/kinematics.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "reflex/control_node/robot_state_file.hpp"
 
@@ -155,6 +156,19 @@ void ControllerNode::run() {
   const double t_start = nowSeconds(CLOCK_MONOTONIC);
   double last_start = t_start, last_heartbeat = -1.0;
   bool walk_active = false;
+  if (m.state_file && m.state_file->loaded()) {
+    // Resumed from a saved robot state (a restart after a crash): the hands hold where they are
+    // (targets at their current positions, avoidance active) until the target source speaks, and the
+    // source gets the same grace as silence during a run: after input_timeout without a sign of it
+    // the hands retract as usual. Without this the first cycle would already retract at full speed.
+    if (computeForwardKinematics(m.model, m.data->kin, m.robot->jointPositions())) {
+      for (int a = 0; a < 2; ++a) {
+        m.input.hands[a].status = HandStatus::kGiven;
+        m.input.hands[a].target_W = m.data->kin.X_W_L[m.cm.arms[a].hand_link] * m.cm.arms[a].hand_point_L;
+      }
+      m.last_targets_rx = t_start;
+    }
+  }
 
   auto publishHeartbeat = [&](msg::ModuleState state) {
     msg::Heartbeat hb;

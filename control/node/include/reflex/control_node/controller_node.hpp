@@ -8,7 +8,8 @@
 //
 // With a robot state file (NodeConfig::robot_state) the simulated robot behaves like hardware across
 // a controller crash: its joint positions are written every cycle and a new controller starts from
-// them (robot_state_file.hpp).
+// them (robot_state_file.hpp). Resumed that way, the hands hold where they are until the target
+// source speaks, for at most input_timeout (the grace any silence gets), then retract as usual.
 //
 // Extending: another robot driver implements reflex::control::RobotInterface and is passed in.
 #pragma once
