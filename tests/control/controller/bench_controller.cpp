@@ -1,6 +1,7 @@
 // Controller benchmark (issue 4, item 15): one full cycle on the 21-DOF model (kinematics, every
-// pair, both controllers, blend, safety filter) with p50/p99 from per-iteration timing, the
-// distance sweep alone as the in-process peer, and the simulation's real-time factor.
+// pair, both controllers, blend, safety filter, predictive guard) with p50/p99 from per-iteration
+// timing, the same for cycles whose step the predictive guard shortens, the distance sweep alone as
+// the in-process peer, and the simulation's real-time factor.
 // Run: build/bin/bench_controller [--benchmark_repetitions=3]
 #include "reflex/control/controller.hpp"
 #include "reflex/control/scenarios.hpp"
@@ -72,6 +73,44 @@ void BM_ControllerCycle(benchmark::State& state) {
 }
 BENCHMARK(BM_ControllerCycle)->Arg(static_cast<int>(AvoidanceMode::kOneDof))->Arg(static_cast<int>(AvoidanceMode::kThreeDof))
     ->ArgName("mode");
+
+/// Cycles where the predictive guard acts: a closed loop (kinematic robot) whose targets jump every
+/// 0.4 s between crossing, into the chest and low across, with the priority flipping, and the
+/// first-order filter's floor at d_r (guard_margin 0) so the guard must shorten steps. Percentiles
+/// over the cycles whose step the guard shortened (counter guard_share: their fraction).
+void BM_ControllerCycleGuardActing(benchmark::State& state) {
+  ControllerModel cm = cmodel();
+  cm.params.guard_margin = 0.0;
+  ControllerData data(model(), cm);
+  const Eigen::VectorXd q0 = restConfiguration(model(), cm);
+  Eigen::VectorXd q = q0;
+  const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
+  const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
+  const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
+  ControlInput in;
+  std::vector<double> ns;
+  ns.reserve(1 << 20);
+  std::uint64_t k = 0, cycles = 0;
+  for (auto _ : state) {
+    for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
+    in.priority = static_cast<MotionPriority>((k / 120) % 3);
+    const std::uint64_t before = data.guard_count;
+    const auto t0 = std::chrono::steady_clock::now();
+    benchmark::DoNotOptimize(computeControl(model(), cm, data, q, in));
+    const auto t1 = std::chrono::steady_clock::now();
+    if (data.guard_count != before && ns.size() < ns.capacity())
+      ns.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count());
+    q += data.qdot * cm.params.period;
+    ++cycles;
+    if (++k == 1600) {  // start over from rest (a new run of the same 8 s)
+      k = 0;
+      q = q0;
+    }
+  }
+  state.counters["guard_share"] = cycles ? static_cast<double>(ns.size()) / static_cast<double>(cycles) : 0.0;
+  reportPercentiles(state, ns);
+}
+BENCHMARK(BM_ControllerCycleGuardActing);
 
 /// Peer in the same process: forward kinematics + every checked pair with rows, nothing else.
 void BM_KinematicsAndDistancesOnly(benchmark::State& state) {
