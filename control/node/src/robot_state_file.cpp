@@ -59,13 +59,17 @@ struct Slot {
 
 Slot parseSlot(const std::vector<unsigned char>& file, std::size_t offset) {
   Slot s;
-  if (file.size() < offset + kHeaderSize) {
+  if (file.size() < offset + 4) {
     s.why = "missing (file of " + std::to_string(file.size()) + " bytes)";
     return s;
   }
   const unsigned char* p = file.data() + offset;
   if (std::memcmp(p, kMagic, 4) != 0) {
     s.why = "no 'RFXQ' magic";
+    return s;
+  }
+  if (file.size() < offset + kHeaderSize) {
+    s.why = "truncated header (file of " + std::to_string(file.size()) + " bytes)";
     return s;
   }
   const auto version = readAt<std::uint32_t>(p + 4);
