@@ -61,6 +61,7 @@ bool validRecordAt(const std::vector<std::uint8_t>& b, std::size_t pos) {
   if (len < 24 || len > kMaxBodySize || pos + kRecordHeaderSize + len > b.size()) return false;
   const std::uint8_t* body = b.data() + pos + kRecordHeaderSize;
   if (crc32(body, len) != readU32(b.data() + pos + 8)) return false;
+  if (body[7] & 0x80) return false;  // a negative receive time (RecordEntry::receive_ns)
   std::uint64_t at = 16;
   const std::uint64_t topic = readU16(body + at);
   at += 2 + topic;

@@ -4,6 +4,7 @@
 
 #include <cinttypes>
 #include <cstdio>
+#include <limits>
 #include <sstream>
 
 namespace reflex::record {
@@ -135,14 +136,21 @@ void csvRows(std::ostream& o, const std::string& prefix, const msg::Heartbeat& s
 
 // ---- restamping for replay ---------------------------------------------------------------------
 
+// A stamp comes from the recorded payload (any int64): the shifted value saturates instead of
+// overflowing.
+std::int64_t shifted(std::int64_t stamp, std::int64_t shift) {
+  std::int64_t out = 0;
+  if (!__builtin_add_overflow(stamp, shift, &out)) return out;
+  return shift > 0 ? std::numeric_limits<std::int64_t>::max() : std::numeric_limits<std::int64_t>::min();
+}
 template <class T>
 void shiftStamps(T& s, std::int64_t shift) {
-  s.header().stamp_ns(s.header().stamp_ns() + shift);
+  s.header().stamp_ns(shifted(s.header().stamp_ns(), shift));
 }
 template <>
 void shiftStamps(msg::ObjectTargets& s, std::int64_t shift) {
-  s.header().stamp_ns(s.header().stamp_ns() + shift);
-  s.capture_stamp_ns(s.capture_stamp_ns() + shift);
+  s.header().stamp_ns(shifted(s.header().stamp_ns(), shift));
+  s.capture_stamp_ns(shifted(s.capture_stamp_ns(), shift));
 }
 
 // ---- the codec ------------------------------------------------------------------------------------

@@ -43,11 +43,17 @@ Player::Player(const PlayerOptions& options) : options_(options) {
   if (info.records == 0) throw RecordError("recording '" + options.input + "' holds no sample");
   stats_.tail = info.tail;
   first_ns_ = info.first_ns;
-  begin_ns_ = info.first_ns + static_cast<std::int64_t>(std::llround(options.start * 1e9));
-  end_ns_ = options.duration > 0.0 ? begin_ns_ + static_cast<std::int64_t>(std::llround(options.duration * 1e9))
-                                   : info.last_ns;
-  end_ns_ = std::min(end_ns_, info.last_ns);
-  if (begin_ns_ > info.last_ns) {
+  // Offsets are compared with the recording's length (last - first >= 0: receive times are never
+  // negative) before they are added, so no --start / --duration overflows an int64.
+  const double length_ns = static_cast<double>(info.last_ns - info.first_ns);
+  if (options.start * 1e9 <= length_ns) {
+    begin_ns_ = info.first_ns + static_cast<std::int64_t>(std::llround(options.start * 1e9));
+    end_ns_ = options.duration > 0.0 && options.duration * 1e9 < static_cast<double>(info.last_ns - begin_ns_)
+                  ? begin_ns_ + static_cast<std::int64_t>(std::llround(options.duration * 1e9))
+                  : info.last_ns;
+    end_ns_ = std::min(end_ns_, info.last_ns);
+  }
+  if (options.start * 1e9 > length_ns || begin_ns_ > info.last_ns) {
     char buf[160];
     std::snprintf(buf, sizeof(buf), "--start %.3f s is beyond the end of the recording (%.3f s long)", options.start,
                   1e-9 * static_cast<double>(info.last_ns - info.first_ns));

@@ -59,6 +59,9 @@ std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc) noexc
 }
 
 std::vector<std::uint8_t> encodeRecord(const RecordEntry& e) {
+  if (e.receive_ns < 0)
+    throw RecordError("sample of topic '" + e.topic + "' has a negative receive time " + std::to_string(e.receive_ns) +
+                      " ns (ns since the Unix epoch expected)");
   if (e.topic.size() > 0xFFFF) throw RecordError("topic name longer than 65535 bytes: '" + e.topic.substr(0, 64) + "...'");
   if (e.type.size() > 0xFFFF) throw RecordError("type name longer than 65535 bytes: '" + e.type.substr(0, 64) + "...'");
   const std::size_t body_size = 8 + 8 + 2 + e.topic.size() + 2 + e.type.size() + 4 + e.payload.size();
@@ -237,6 +240,7 @@ RecordReader::Parse RecordReader::parseAt(std::uint64_t offset, RecordEntry& out
   const std::uint8_t* p = body_.data();
   const std::uint8_t* end = p + len;
   out.receive_ns = getI64(p);
+  if (out.receive_ns < 0) return Parse::kBad;  // never written by encodeRecord (see RecordEntry)
   out.source_ns = getI64(p + 8);
   p += 16;
   const std::uint16_t topic_len = getU16(p);

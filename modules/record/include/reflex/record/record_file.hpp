@@ -4,7 +4,7 @@
 // Layout (all integers little-endian):
 //   file header (16 bytes): "RFXREC\r\n" | u32 format version (1) | u32 reserved (0)
 //   record:                  u32 sync "RREC" | u32 body length L | u32 CRC-32 (IEEE) of the body | body
-//   body:                    i64 receive time [ns, system clock, Unix epoch]
+//   body:                    i64 receive time [ns, system clock, Unix epoch; >= 0]
 //                            i64 source time [ns, the writer's DDS source timestamp]
 //                            u16 topic length | topic bytes | u16 type length | type bytes
 //                            u32 payload length | payload (XCDR1 with its 4-byte encapsulation)
@@ -47,7 +47,10 @@ inline constexpr std::uint32_t kMaxBodySize = 64u << 20;
 
 /// One recorded sample.
 struct RecordEntry {
-  std::int64_t receive_ns = 0;   ///< when the recorder received it (system clock, ns since epoch)
+  /// When the recorder received it (system clock, ns since epoch). Never negative: a record with a
+  /// negative receive time is invalid (corrupt), so the difference of any two receive times of a
+  /// file fits an int64 (players and exporters subtract them).
+  std::int64_t receive_ns = 0;
   std::int64_t source_ns = 0;    ///< DDS source timestamp of the writer (ns since epoch), 0 if unknown
   std::string topic;             ///< DDS topic name, e.g. "reflex/control_status"
   std::string type;              ///< DDS type name, e.g. "reflex::msg::ControlStatus"
@@ -58,8 +61,9 @@ struct RecordEntry {
 /// (pass 0 to start). crc32("123456789") == 0xCBF43926.
 std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc = 0) noexcept;
 
-/// Encodes a record (header + body) as it is stored in the file. Throws RecordError if the topic or
-/// type name is longer than 65535 bytes or the body exceeds kMaxBodySize.
+/// Encodes a record (header + body) as it is stored in the file. Throws RecordError if the receive
+/// time is negative, the topic or type name is longer than 65535 bytes or the body exceeds
+/// kMaxBodySize.
 std::vector<std::uint8_t> encodeRecord(const RecordEntry& entry);
 
 struct WriterOptions {
