@@ -7,8 +7,9 @@ Two "hosts", network namespaces made by this test and joined by ONE veth pair (1
 discovery, as on a LAN (bringup/dds/reflex_profiles_lan.xml):
 
   robot host     reflex_controller --input-timeout <lease> --log ...   and reflex_record (what arrives)
-  behavior host  reflex_fault_source: hand targets at 10 Hz, one on each side of the body, swaying
-                 up and down (3 cm, period 2 s), so that following is visible; heartbeat at 2 Hz
+  behavior host  reflex_fault_source: hand targets at 10 Hz in front of the chest, 14 cm apart
+                 (reachable; the arms about 2 cm apart, in the yellow zone, so avoidance acts), swaying
+                 up and down (3 cm, period 2 s) so that following is visible; heartbeat at 2 Hz
 
 The behavior host's end of the veth is taken down (`ip link set ... down`: the cable is pulled, the
 robot's end loses its carrier) three times:
@@ -195,7 +196,7 @@ def main():
         start("robot", [f"{args.bin_dir}/reflex_record", "record", "-o", str(rfx), "--name", "observer",
                         "-t", "reflex/hand_targets", "-t", "reflex/heartbeat", "--domain", str(args.domain)],
               "recorder.log")
-        start("behavior", [f"{args.bin_dir}/reflex_fault_source", "--domain", str(args.domain), "--targets", "apart",
+        start("behavior", [f"{args.bin_dir}/reflex_fault_source", "--domain", str(args.domain), "--targets", "near",
                            "--sway", "0.03"], "source.log")
 
         time.sleep(WARM_UP)

@@ -120,7 +120,7 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   const std::vector<std::string> args = {bin("reflex_controller"), "--domain", dom, "--robot-state", state,
                                          "--input-timeout", std::to_string(kInputTimeout)};
   auto a = std::make_unique<testing::ChildProcess>(args, tmp + "restart_controller_a.log");
-  testing::ChildProcess source({bin("reflex_fault_source"), "--domain", dom, "--targets", "apart", "--sway", "0.03"},
+  testing::ChildProcess source({bin("reflex_fault_source"), "--domain", dom, "--targets", "near", "--sway", "0.03"},
                                tmp + "restart_source.log");
   ASSERT_TRUE(a->started() && source.started());
 

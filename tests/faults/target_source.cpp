@@ -1,6 +1,7 @@
 // reflex_fault_source: a stand-in behavior process for the fault tests. Publishes hand targets every
 // 100 ms and a heartbeat every 500 ms until SIGINT / SIGTERM (or SIGKILL in a test). The targets are
-// "crossing" (each hand on the other side of the chest: the arms meet and avoid each other) or
+// "crossing" (each hand on the other side of the chest: the arms meet and avoid each other), "near"
+// (in front of the chest, 14 cm apart: reachable, the arms about 2 cm apart, in the yellow zone) or
 // "apart" (each hand on its own side, reachable), optionally swaying up and down (--sway metres,
 // period 2 s, on the system clock so that a restarted source continues the same motion).
 #include <reflex/bus/bus.hpp>
@@ -18,7 +19,7 @@ int main(int argc, char** argv) {
   app.add_option("--name", name, "module name")->capture_default_str();
   std::string kind = "crossing";
   double sway = 0.0;
-  app.add_option("--targets", kind, "crossing or apart")->capture_default_str()->check(CLI::IsMember({"crossing", "apart"}));
+  app.add_option("--targets", kind, "crossing, apart or near (in front of the chest, hands close together)")->capture_default_str()->check(CLI::IsMember({"crossing", "apart", "near"}));
   app.add_option("--sway", sway, "amplitude (m) of an up-and-down motion of both targets, period 2 s")
       ->capture_default_str()->check(CLI::Range(0.0, 0.1));
   CLI11_PARSE(app, argc, argv);
@@ -30,7 +31,9 @@ int main(int argc, char** argv) {
     auto& targets = bus.makeWriter<reflex::msg::HandTargets>();
     reflex::bus::HeartbeatPublisher heartbeat(bus);
     heartbeat.setState(reflex::msg::STATE_RUNNING);
-    const double y = kind == "crossing" ? 0.08 : -0.20;  // the left hand's y (base frame, +y = left)
+    // The left hand's y (base frame, +y = left); the right hand's is -y.
+    const double y = kind == "crossing" ? -0.08 : kind == "near" ? 0.07 : 0.20;
+    const double x = kind == "near" ? 0.25 : 0.30;
     bus.every(std::chrono::milliseconds(100), [&] {
       timespec ts{};
       clock_gettime(CLOCK_REALTIME, &ts);
@@ -38,12 +41,12 @@ int main(int argc, char** argv) {
       const double z = 0.90 + sway * std::sin(phase);
       reflex::msg::HandTargets t;
       t.left().status(reflex::msg::TARGET_GIVEN);
-      t.left().position_base().x(0.30);
-      t.left().position_base().y(-y);
+      t.left().position_base().x(x);
+      t.left().position_base().y(y);
       t.left().position_base().z(z);
       t.right().status(reflex::msg::TARGET_GIVEN);
-      t.right().position_base().x(0.30);
-      t.right().position_base().y(y);
+      t.right().position_base().x(x);
+      t.right().position_base().y(-y);
       t.right().position_base().z(z);
       targets.publish(t);
     });
