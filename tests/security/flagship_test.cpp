@@ -76,8 +76,10 @@ std::string commandOutput(const std::string& cmd) {
 
 TEST(SecureFlagship, AvoidanceRunGivesThePlainOutcomeAndAnOutsiderReceivesNothing) {
   // The material is made by run_flagship.py itself (the folder does not exist yet): its --secure path.
-  std::string base = ::testing::TempDir() + "reflex_sec_flagship_XXXXXX";
-  ASSERT_NE(mkdtemp(base.data()), nullptr);
+  // One fixed folder, emptied first (a run leaves ~20 MB: recording, plots).
+  const std::string base = ::testing::TempDir() + "reflex_security_flagship_test";
+  std::filesystem::remove_all(base);
+  ASSERT_TRUE(std::filesystem::create_directories(base));
   const std::string dir = base + "/security", out = base + "/out";
 
   // The outsider: plain participant on the run's domain, reading every topic the chain publishes.
@@ -151,8 +153,9 @@ TEST(SecureFlagship, AvoidanceRunGivesThePlainOutcomeAndAnOutsiderReceivesNothin
 }
 
 TEST(SecureFlagship, ABadSecureFolderIsRefusedBeforeAnythingStartsNamingIt) {
-  std::string base = ::testing::TempDir() + "reflex_sec_flagship_bad_XXXXXX";
-  ASSERT_NE(mkdtemp(base.data()), nullptr);
+  const std::string base = ::testing::TempDir() + "reflex_security_flagship_bad_test";
+  std::filesystem::remove_all(base);
+  ASSERT_TRUE(std::filesystem::create_directories(base));
   const std::string out = base + "/out";
   auto expectRefused = [&](const std::string& secure, const std::string& what) {
     SCOPED_TRACE("--secure " + secure);
