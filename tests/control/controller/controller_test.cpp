@@ -18,6 +18,17 @@ namespace {
 using testing::defaultControllerModel;
 using testing::shippedModel;
 
+/// A configuration drawn uniformly inside the joint limits, each clipped to [-bound, bound].
+Eigen::VectorXd randomConfiguration(const Model& model, std::mt19937& rng, double bound) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Eigen::VectorXd q(model.nq);
+  for (int i = 0; i < model.nq; ++i) {
+    const double lo = std::max(model.q_lower[i], -bound), hi = std::min(model.q_upper[i], bound);
+    q[i] = lo + (hi - lo) * u(rng);
+  }
+  return q;
+}
+
 TEST(BlendingCoefficient, MatchesEquation13) {
   const double da = 0.040, db = 0.010;
   EXPECT_DOUBLE_EQ(blendingCoefficient(0.0, da, db), 1.0);
@@ -107,14 +118,9 @@ TEST(SignConvention, PositiveRowVelocitySeparatesThePair) {
   KinematicsData kin(model);
   DistanceData dist(model);
   std::mt19937 rng(3);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
   int checked = 0;
   for (int trial = 0; trial < 300; ++trial) {
-    Eigen::VectorXd q(model.nq);
-    for (int i = 0; i < model.nq; ++i) {
-      const double lo = std::max(model.q_lower[i], -1.5), hi = std::min(model.q_upper[i], 1.5);
-      q[i] = lo + (hi - lo) * u(rng);
-    }
+    const Eigen::VectorXd q = randomConfiguration(model, rng, 1.5);
     computeForwardKinematics(model, kin, q);
     computeSegmentDistances(model, kin, dist);
     for (std::size_t p = 0; p < dist.pairs.size(); ++p) {
@@ -371,22 +377,15 @@ TEST(PredictiveGuard, NoStepEndsBelowTheFloorAndCloserThanBefore) {
 TEST(PredictiveGuard, JointLeversBoundHowFarAnySegmentPointMoves) {
   // The guard's cheap exit rests on lever_j: no point of a segment surface moves more than
   // lever_j * |dq_j| when joint j alone moves by dq_j. Checked on random configurations by moving
-  // each joint and measuring every primitive's endpoints (their displacement plus nothing: surface
-  // points of a capsule move no more than the farthest core point offset by the radius direction,
-  // which the lever includes).
+  // each joint alone and measuring, for every primitive, its endpoints pushed outwards by the radius.
   const Model& model = shippedModel();
   const ControllerModel& cm = defaultControllerModel();
   const ControllerData data(model, cm);
   KinematicsData k0(model), k1(model);
   std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
   double tightest = 0.0;
   for (int trial = 0; trial < 50; ++trial) {
-    Eigen::VectorXd q(model.nq);
-    for (int j = 0; j < model.nq; ++j) {
-      const double lo = std::max(model.q_lower[j], -3.0), hi = std::min(model.q_upper[j], 3.0);
-      q[j] = lo + (hi - lo) * u(rng);
-    }
+    const Eigen::VectorXd q = randomConfiguration(model, rng, 3.0);
     ASSERT_TRUE(computeForwardKinematics(model, k0, q));
     for (int j = 0; j < model.nq; ++j) {
       const double dq = 0.01;
@@ -434,7 +433,9 @@ TEST(Walking, LegMotionFadesInAndOutWithoutJumps) {
   EXPECT_NEAR(walking.travelled(), 0.3, 1e-12);
   const Eigen::VectorXd rest = restConfiguration(model, defaultControllerModel());
   for (const int j : walking.joints())
-    if (model.q_names[j] != "heel_x") EXPECT_NEAR(q[j], rest[j], 1e-9) << model.q_names[j] << " back at rest after the fade-out";
+    if (model.q_names[j] != "heel_x") {
+      EXPECT_NEAR(q[j], rest[j], 1e-9) << model.q_names[j] << " back at rest after the fade-out";
+    }
 }
 
 }  // namespace
