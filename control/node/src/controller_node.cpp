@@ -340,6 +340,7 @@ void ControllerNode::run() {
     }
     stats_.min_distance = std::min(stats_.min_distance, dmin);
     stats_.estop_count = m.data->estop_count;
+    stats_.guard_count = m.data->guard_count;
 
     // 4. Outputs.
     const Eigen::VectorXd& q = m.robot->jointPositions();

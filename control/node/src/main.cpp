@@ -57,11 +57,13 @@ int main(int argc, char** argv) {
     auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))]; };
     std::fprintf(stderr,
                  "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "
-                 "min distance %.1f mm, e-stops %llu, targets %llu (rejected %llu), stale events %llu%s\n",
+                 "min distance %.1f mm, e-stops %llu, targets %llu (rejected %llu), stale events %llu, "
+                 "guard-shortened steps %llu%s\n",
                  static_cast<unsigned long long>(s.cycles), pct(0.5), pct(0.99), s.max_lateness_us,
                  static_cast<unsigned long long>(s.overruns), s.min_distance * 1000.0,
                  static_cast<unsigned long long>(s.estop_count), static_cast<unsigned long long>(s.targets_received),
                  static_cast<unsigned long long>(s.targets_rejected), static_cast<unsigned long long>(s.stale_events),
+                 static_cast<unsigned long long>(s.guard_count),
                  s.state_write_errors > 0 ? (", robot-state writes FAILED " + std::to_string(s.state_write_errors)).c_str() : "");
     return 0;
   } catch (const std::exception& e) {

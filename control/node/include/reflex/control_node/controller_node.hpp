@@ -54,6 +54,7 @@ struct NodeStats {
   double max_lateness_us = 0.0;
   double min_distance = 1e9;          ///< physical pairs, over the run (m)
   std::uint64_t estop_count = 0;
+  std::uint64_t guard_count = 0;      ///< cycles whose step the predictive guard shortened
   std::uint64_t targets_received = 0;
   std::uint64_t targets_rejected = 0;
   std::uint64_t stale_events = 0;     ///< transitions to "inputs stale"
