@@ -8,7 +8,8 @@ set -euo pipefail
 
 usage() {
   cat <<'USAGE'
-usage: fuzz.sh [--time SECONDS] [--build-dir DIR] [--jobs N] [--no-build] [--keep-going] [TARGET...]
+usage: fuzz.sh [--time SECONDS] [--build-dir DIR] [--jobs N] [--no-build] [--configure-only]
+               [--keep-going] [TARGET...]
 
 Builds (clang, -fsanitize=fuzzer,address,undefined) and runs the Reflex fuzz targets.
 
@@ -16,6 +17,9 @@ Builds (clang, -fsanitize=fuzzer,address,undefined) and runs the Reflex fuzz tar
   --build-dir DIR  build folder (default: <repo>/build-fuzz)
   --jobs N         build jobs (default 2)
   --no-build       use an existing build
+  --configure-only configure the build folder (clang, sanitizers, REFLEX_FUZZ=ON) and stop; also
+                   used by sanitize.sh --clang-fuzz, so that one folder holds the fuzz targets and
+                   the sanitized tests (bringup/test.sh)
   --keep-going     survey mode: do not stop at the first finding (libFuzzer -fork=1
                    -ignore_crashes=1); every distinct crash input is kept in the artifacts folder
   TARGET...        only these targets (default: all, e.g. fuzz_urdf fuzz_idl)
@@ -31,6 +35,7 @@ seconds=20
 jobs=2
 do_build=1
 keep_going=0
+configure_only=0
 only=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -43,6 +48,7 @@ while [[ $# -gt 0 ]]; do
       [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--jobs '${2:-}' is not a positive integer"
       jobs="$2"; shift 2 ;;
     --no-build) do_build=0; shift ;;
+    --configure-only) configure_only=1; shift ;;
     --keep-going) keep_going=1; shift ;;
     -*) die "unknown option '$1' (see --help)" ;;
     *) only+=("$1"); shift ;;
@@ -56,12 +62,22 @@ cxx=$(command -v clang++ || command -v clang++-14 || true)
 start=$(date +%s)
 if [[ $do_build -eq 1 ]]; then
   mkdir -p "$build" || die "cannot create the build folder '$build'"
-  flags="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -gline-tables-only"
-  CC="$cc" CXX="$cxx" cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DREFLEX_FUZZ=ON \
+  # __SANITIZE_ADDRESS__: GCC defines it under -fsanitize=address, clang 14 does not, and code
+  # tests it (tests/control/distance_alloc_test.cpp leaves malloc to ASan when it is set).
+  flags="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -gline-tables-only -D__SANITIZE_ADDRESS__=1"
+  # -O1 and line tables only (not RelWithDebInfo's -O2 -g): what ASan recommends, and a shorter
+  # build (CI builds this folder from scratch on every run). Ninja for a new folder: it builds the
+  # many targets named on one `cmake --build --target` line in parallel, where CMake's Makefiles
+  # build them one after the other (.NOTPARALLEL), one core idle most of the time.
+  generator=()
+  if [[ ! -f "$build/CMakeCache.txt" ]] && command -v ninja > /dev/null; then generator=(-G Ninja); fi
+  CC="$cc" CXX="$cxx" cmake -S "$repo" -B "$build" "${generator[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DREFLEX_FUZZ=ON \
+    "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -DNDEBUG" "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -DNDEBUG" \
     -DREFLEX_BUILD_BENCHMARKS=OFF "-DCMAKE_C_FLAGS=$flags" "-DCMAKE_CXX_FLAGS=$flags" \
     > "$build/fuzz.configure.log" 2>&1 ||
     { tail -30 "$build/fuzz.configure.log" >&2; die "configure of '$build' failed"; }
 fi
+[[ $configure_only -eq 0 ]] || { echo "fuzz.sh: configured $build"; exit 0; }
 cache="$build/CMakeCache.txt"
 [[ -f "$cache" ]] || die "'$build' is not a configured build folder"
 entries=$(sed -n 's/^REFLEX_FUZZ_TARGETS:INTERNAL=//p' "$cache")
@@ -102,26 +118,35 @@ for t in "${names[@]}"; do
   if [[ -d "$repo/tests/fuzz/regressions/$t" ]]; then dirs+=("$repo/tests/fuzz/regressions/$t"); fi
   log="$build/fuzz_$t.log"
   echo "fuzz.sh: $t for ${seconds} s (corpus $corpus)"
+  t_start=$(date +%s)
   extra=()
   if [[ $keep_going -eq 1 ]]; then extra=(-fork=1 -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1); fi
+  marker="$artifacts/.run-start"
+  touch "$marker"
   set +e
   "$build/bin/$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -close_fd_mask=3 \
     -print_final_stats=1 -artifact_prefix="$artifacts/" "${extra[@]}" "${dirs[@]}" > "$log" 2>&1
   rc=$?
   set -e
-  # In survey mode libFuzzer exits 0 even after crashes: the saved inputs are the findings.
-  if [[ $keep_going -eq 1 && $rc -eq 0 ]] && compgen -G "$artifacts/crash-*" > /dev/null; then rc=1; fi
+  # In survey mode libFuzzer exits 0 even after crashes: the inputs saved by THIS run are the
+  # findings (not those of earlier runs still in the folder).
+  if [[ $keep_going -eq 1 && $rc -eq 0 && -n "$(find "$artifacts" -name 'crash-*' -newer "$marker")" ]]; then rc=1; fi
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
-  summary+=("$t: ${execs:-?} runs, coverage ${cov:-?} edges, exit $rc")
+  summary+=("$t: ${execs:-?} runs in $(($(date +%s) - t_start)) s, coverage ${cov:-?} edges, exit $rc")
   if [[ $rc -ne 0 ]]; then
     failed+=("$t")
-    crash=$(ls -t "$artifacts"/* 2>/dev/null | head -1 || true)
+    crash=$(find "$artifacts" -type f ! -name .run-start -newer "$marker" -printf '%T@ %p\n' | sort -n | tail -1 | cut -d' ' -f2-)
     echo "fuzz.sh: $t FOUND A PROBLEM (exit $rc); log $log; input ${crash:-none}" >&2
     grep -E "ERROR:|runtime error|FUZZ FINDING|SUMMARY" "$log" | head -5 >&2 || true
     if [[ -n "$crash" ]]; then
       echo "fuzz.sh: replay of $crash:" >&2
       "$build/bin/$t" "$crash" 2>&1 | grep -E "FUZZ FINDING|ERROR:|runtime error|SUMMARY|#[0-3] " | head -12 >&2 || true
+      # A CI machine's build folder is gone after the run: the log keeps a small input.
+      if [[ $(stat -c %s "$crash") -le 8192 ]]; then
+        echo "fuzz.sh: the input, base64 (base64 -d > $(basename "$crash")):" >&2
+        base64 -w 100 "$crash" >&2
+      fi
     fi
   fi
 done

@@ -10,11 +10,14 @@
 # system tests, experiments and the soak (labels system|integration|flagship|netns|launch|experiment|
 # security|soak).
 # Pass --labels '.' --exclude '^$' for everything.
+# CI (bringup/test.sh) runs a named subset instead, in the clang folder of the fuzz targets:
+# --clang-fuzz --tests REGEX (one extra build for both, see tests/fuzz/README.md).
 set -euo pipefail
 
 usage() {
   cat <<'EOF'
-usage: sanitize.sh [--build-dir DIR] [--labels REGEX] [--exclude REGEX] [--dds] [--jobs N] [--no-build]
+usage: sanitize.sh [--build-dir DIR] [--labels REGEX] [--exclude REGEX] [--tests REGEX] [--dds]
+                   [--clang-fuzz] [--jobs N] [--test-jobs N] [--no-build]
 
 Runs the Reflex tests under AddressSanitizer + UndefinedBehaviorSanitizer.
 
@@ -22,12 +25,19 @@ Runs the Reflex tests under AddressSanitizer + UndefinedBehaviorSanitizer.
   --labels REGEX    ctest -L: labels to run (default: 'unit|control|vision|modules|bad_input')
   --exclude REGEX   ctest -LE: labels to skip
                     (default: 'system|integration|flagship|netns|launch|experiment|security|soak')
+  --tests REGEX     ctest -R: only the tests whose name matches (within the labels); only their
+                    own executables are built (and what they declare with add_dependencies), not
+                    every reflex_* executable
+  --clang-fuzz      configure the folder as bringup/fuzz.sh does (clang, -fsanitize=fuzzer-no-link,
+                    address,undefined, REFLEX_FUZZ=ON; default folder <repo>/build-fuzz) instead of
+                    gcc + REFLEX_SANITIZE, so the same build also serves fuzz.sh (CI)
   --dds             the DDS tests instead: labels 'bus|bad_input|faults|security|system', excluding
                     'netns|launch|flagship'; ASan's new-delete-type-mismatch check is off for them
                     (Debian's libfastrtps 2.9.1 reports one inside RTPSReader::~RTPSReader on every
                     reader deletion — third party) and bringup/sanitize_dds.lsan.supp is loaded
                     (Fast DDS Security leaks on a refused participant)
   --jobs N          build jobs (default 2)
+  --test-jobs N     tests run at once (ctest -j; default 1)
   --no-build        run the tests of an existing build only
   -h, --help        this help
 Exit status: 0 clean; 1 a test failed or a sanitizer reported; 2 bad arguments or build failure.
@@ -41,8 +51,11 @@ build="$repo/build-sanitize"
 labels='unit|control|vision|modules|bad_input'
 exclude='system|integration|flagship|netns|launch|experiment|security|soak'
 jobs=2
+test_jobs=1
 do_build=1
 dds=0
+clang_fuzz=0
+names=''
 while [[ $# -gt 0 ]]; do
   case "$1" in
     -h|--help) usage; exit 0 ;;
@@ -52,24 +65,39 @@ while [[ $# -gt 0 ]]; do
     --jobs)
       [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--jobs '${2:-}' is not a positive integer"
       jobs="$2"; shift 2 ;;
+    --tests) [[ $# -ge 2 ]] || die "--tests needs a regex"; names="$2"; shift 2 ;;
+    --clang-fuzz) clang_fuzz=1; shift ;;
+    --test-jobs)
+      [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--test-jobs '${2:-}' is not a positive integer"
+      test_jobs="$2"; shift 2 ;;
     --no-build) do_build=0; shift ;;
     --dds) dds=1; labels='bus|bad_input|faults|security|system'; exclude='netns|launch|flagship'; shift ;;
     *) die "unknown argument '$1' (see --help)" ;;
   esac
 done
 
+if [[ $clang_fuzz -eq 1 && "$build" == "$repo/build-sanitize" ]]; then build="$repo/build-fuzz"; fi
+# ctest's selection: labels, minus excluded labels, and the name regex if given.
+select=(-L "$labels" -LE "$exclude")
+if [[ -n "$names" ]]; then select+=(-R "$names"); fi
+
 start=$(date +%s)
 if [[ $do_build -eq 1 ]]; then
   mkdir -p "$build" || die "cannot create the build folder '$build'"
-  cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DREFLEX_SANITIZE=ON \
-    -DREFLEX_BUILD_BENCHMARKS=OFF > "$build/sanitize.configure.log" 2>&1 ||
-    { cat "$build/sanitize.configure.log" >&2; die "configure of '$build' failed"; }
+  if [[ $clang_fuzz -eq 1 ]]; then
+    "$repo/bringup/fuzz.sh" --configure-only --build-dir "$build" > "$build/sanitize.configure.log" 2>&1 ||
+      { cat "$build/sanitize.configure.log" >&2; die "configure of '$build' (fuzz.sh --configure-only) failed"; }
+  else
+    cmake -S "$repo" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DREFLEX_SANITIZE=ON \
+      -DREFLEX_BUILD_BENCHMARKS=OFF > "$build/sanitize.configure.log" 2>&1 ||
+      { cat "$build/sanitize.configure.log" >&2; die "configure of '$build' failed"; }
+  fi
 fi
 [[ -f "$build/CTestTestfile.cmake" ]] || die "'$build' is not a configured build folder"
 
 # The selected tests; each test's name is its executable's target (reflex_add_test).
-mapfile -t tests < <(cd "$build" && ctest -N -L "$labels" -LE "$exclude" | sed -n 's/^ *Test *#[0-9]*: *//p')
-[[ ${#tests[@]} -gt 0 ]] || die "no test matches labels '$labels' minus '$exclude'"
+mapfile -t tests < <(cd "$build" && ctest -N "${select[@]}" | sed -n 's/^ *Test *#[0-9]*: *//p')
+[[ ${#tests[@]} -gt 0 ]] || die "no test matches labels '$labels' minus '$exclude'${names:+ and names '$names'}"
 echo "sanitize.sh: ${#tests[@]} tests: ${tests[*]}"
 
 # The executables of the selected tests (one program may serve several tests), read from the
@@ -88,22 +116,30 @@ for root, _, files in os.walk(os.path.join(build, "tests")):
                 exes.add(os.path.basename(exe))
 print("\n".join(sorted(exes)))
 PY
+  # With --tests, the tests' own executables only (their add_dependencies come along).
+  [[ -z "$names" ]] || return 0
+  # reflex_* executables, and the fuzz replays / seed writer that script-driven tests run.
+  build_targets | grep -E '^(reflex|fuzz)_[A-Za-z0-9_]*$' || true
+}
+
+# Every build target's name, from `cmake --build --target help`: "... name" with Makefiles,
+# "name: phony" with Ninja (fuzz.sh configures new folders with Ninja).
+build_targets() {
   # (captured first: grep -q on a pipe would SIGPIPE cmake and fail under pipefail)
   local help
   help=$(cmake --build "$build" --target help 2>/dev/null || true)
-  # reflex_* executables, and the fuzz replays / seed writer that script-driven tests run.
-  sed -n 's/^\.\.\. \(reflex_[A-Za-z0-9_]*\|fuzz_[A-Za-z0-9_]*\).*/\1/p' <<< "$help"
+  sed -n -e 's/^\.\.\. \([A-Za-z0-9_.+-]*\).*/\1/p' -e 's/^\([A-Za-z0-9_.+-]*\): phony$/\1/p' <<< "$help"
 }
 
 if [[ $do_build -eq 1 ]]; then
   # Two passes: a CMakeLists.txt changed during the build re-runs CMake and may add tests.
   for pass in 1 2; do
     # Only names that are build targets (a test may run e.g. `cmake -P`).
-    known=$(cmake --build "$build" --target help 2>/dev/null | sed -n 's/^\.\.\. \([A-Za-z0-9_.+-]*\).*/\1/p' || true)
+    known=$(build_targets)
     mapfile -t targets < <(list_targets | sort -u | grep -Fx -f <(printf '%s\n' "$known"))
     nice cmake --build "$build" -j"$jobs" --target "${targets[@]}" > "$build/sanitize.build.log" 2>&1 ||
       { tail -50 "$build/sanitize.build.log" >&2; die "build failed (full log: $build/sanitize.build.log)"; }
-    mapfile -t again < <(cd "$build" && ctest -N -L "$labels" -LE "$exclude" | sed -n 's/^ *Test *#[0-9]*: *//p')
+    mapfile -t again < <(cd "$build" && ctest -N "${select[@]}" | sed -n 's/^ *Test *#[0-9]*: *//p')
     [[ "${again[*]}" == "${tests[*]}" ]] && break
     tests=("${again[@]}")
   done
@@ -127,7 +163,7 @@ fi
 
 log="$build/sanitize.log"
 set +e
-(cd "$build" && ctest -L "$labels" -LE "$exclude" --output-on-failure --timeout 900 -j1) 2>&1 | tee "$log"
+(cd "$build" && ctest "${select[@]}" --output-on-failure --timeout 900 -j"$test_jobs") 2>&1 | tee "$log"
 rc=${PIPESTATUS[0]}
 set -e
 end=$(date +%s)

@@ -37,8 +37,9 @@ packages=(
   libkdl-parser-dev cyclonedds-dev cyclonedds-tools
   # multi-host tests and reports
   iproute2 python3 python3-matplotlib python3-numpy python3-yaml
-  # DDS-Security test credentials (bringup/security/make_security.sh); fuzzing (bringup/fuzz.sh)
-  openssl clang-14 libclang-rt-14-dev
+  # DDS-Security test credentials (bringup/security/make_security.sh); fuzzing and sanitized tests
+  # (bringup/fuzz.sh, sanitize.sh --clang-fuzz, run by test.sh)
+  openssl clang-14 libclang-rt-14-dev ninja-build
 )
 
 missing=()
