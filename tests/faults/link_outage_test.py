@@ -40,35 +40,25 @@ whose process is gone). Needs root and iproute2 (as CI has). Exit 0 = pass. The 
 printed.
 """
 import argparse
-import csv
 import os
 import pathlib
 import re
-import signal
-import subprocess
 import sys
-import tempfile
 import time
 import xml.etree.ElementTree as ET
 
 SOURCE = pathlib.Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(SOURCE / "tests" / "system" / "netns"))
+from netns_support import (Checks, Failure, Processes, add_common_arguments, begin_run,  # noqa: E402
+                           delete_namespaces, export, netns_exec, raise_failure_on_sigterm, read_csv, run_test,
+                           sh)
+
 PROFILES = SOURCE / "bringup" / "dds" / "reflex_profiles_lan.xml"
 NS_XML = "{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}"
 D_R = 0.005
 WARM_UP = 6.0      # s: discovery and reaching before the first outage
 FOLLOW = 0.025     # m: a hand this close to its (swaying) target follows it
 SETTLE = 4.0       # s after the link is back (the 3 s to follow again + margin)
-
-
-class Failure(Exception):
-    pass
-
-
-def sh(*argv, check=True):
-    r = subprocess.run(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if check and r.returncode != 0:
-        raise Failure(f"command failed ({r.returncode}): {' '.join(argv)}\n{r.stdout}")
-    return r.stdout
 
 
 def duration(elem):
@@ -123,48 +113,20 @@ class Link:
         sh("ip", "-n", self.ns[h], "link", "set", self.ifname[h], "down")
 
     def exec_prefix(self, h):
-        return ["ip", "netns", "exec", self.ns[h]]
+        return netns_exec(self.ns[h])
 
     def delete(self):
-        for n in self.made:
-            for pid in sh("ip", "netns", "pids", n, check=False).split():
-                try:
-                    os.kill(int(pid), signal.SIGKILL)
-                except (ValueError, ProcessLookupError):
-                    pass
-            sh("ip", "netns", "del", n, check=False)  # deletes the veth ends too
+        delete_namespaces(self.made)  # deletes the veth ends too
         self.made.clear()
-
-
-def remove_stale():
-    for line in sh("ip", "netns", "list", check=False).splitlines():
-        m = re.match(r"(rfxf-(\d+)-\S+)", line)
-        if m and not os.path.exists(f"/proc/{m.group(2)}"):
-            sh("ip", "netns", "del", m.group(1), check=False)
-
-
-def export(bin_dir, rfx, topic, out):
-    r = subprocess.run([f"{bin_dir}/reflex_record", "export", str(rfx), "--topic", topic, "--csv", str(out)],
-                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if r.returncode != 0:
-        raise Failure(f"export of {topic} from {rfx} failed: {r.stdout}")
-    with open(out) as fh:
-        return list(csv.DictReader(fh))
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--bin-dir", required=True)
-    ap.add_argument("--domain", type=int, required=True, help="DDS domain id; also the second octet of 10.x")
-    ap.add_argument("--work", help="folder for logs and recordings (default: a temporary folder)")
+    add_common_arguments(ap)
     args = ap.parse_args()
-    work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="link_outage_"))
-    work.mkdir(parents=True, exist_ok=True)
-    print(f"link_outage_test: domain {args.domain}, work folder {work}", flush=True)
-    if os.geteuid() != 0:
-        print("link_outage_test: FAIL: needs root (ip netns add)", flush=True)
+    work = begin_run("link_outage_test", f"domain {args.domain}", args.work, "link_outage_", "rfxf")
+    if work is None:
         return 1
-    remove_stale()
     hb_lease, participant_lease, announce = leases(PROFILES)
     input_timeout = hb_lease
     outages = [("short", 0.5 * hb_lease), ("long", 2.0 * hb_lease), ("beyond", participant_lease + 2.0)]
@@ -172,17 +134,15 @@ def main():
           f"{participant_lease:.1f} s (announced every {announce:.1f} s); --input-timeout {input_timeout:.2f} s; outages "
           + ", ".join(f"{n} {d:.2f} s" for n, d in outages), flush=True)
     link = Link(args.domain)
-    procs = []
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(Failure("terminated")))
-    try:
+    procs = Processes(work)
+    raise_failure_on_sigterm()
+
+    def scenario():
         link.build()
         env = dict(os.environ, FASTRTPS_DEFAULT_PROFILES_FILE=str(PROFILES), REFLEX_DOMAIN_ID=str(args.domain))
 
         def start(host, argv, log):
-            fh = open(work / log, "w")
-            p = subprocess.Popen(link.exec_prefix(host) + argv, stdout=fh, stderr=subprocess.STDOUT, env=env)
-            procs.append((p, fh, log))
-            return p
+            return procs.start(link.exec_prefix(host) + argv, log, env=env)
 
         plan = WARM_UP + sum(d + SETTLE for _, d in outages)
         ctl_csv = work / "controller.csv"
@@ -211,24 +171,10 @@ def main():
             print(f"link_outage_test: {name}: link down {t_up - t_down:.2f} s", flush=True)
             time.sleep(SETTLE)
 
-        for p, _, _ in procs:  # the controller writes its log at exit
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        rcs = {}
-        for p, fh, log in procs:
-            try:
-                rcs[log] = p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                rcs[log] = "killed"
-            fh.close()
-        for log, code in rcs.items():
-            if code != 0:
-                raise Failure(f"{log} ended with {code}:\n" + (work / log).read_text()[-3000:])
+        procs.check_exit_codes(procs.stop(timeout=20))  # the controller writes its log at exit
 
         # ---- the evidence ---------------------------------------------------------------------------
-        with open(ctl_csv) as fh:
-            rows = list(csv.DictReader(fh))
+        rows = read_csv(ctl_csv)
         if not rows:
             raise Failure("empty controller log")
         wall = [float(r["wall_time"]) for r in rows]
@@ -258,11 +204,7 @@ def main():
         beats_rx = export(args.bin_dir, rfx, "reflex/heartbeat", work / "heartbeat.csv")
         signs = sorted([int(r["receive_ns"]) * 1e-9 for r in hands_rx] +
                        [int(r["receive_ns"]) * 1e-9 for r in beats_rx if r["module_name"] == "fault_source"])
-        checks = []
-
-        def check(ok, what):
-            checks.append((ok, what))
-            print(f"link_outage_test: {'ok  ' if ok else 'FAIL'} {what}", flush=True)
+        check = Checks("link_outage_test")
 
         dmin = min(float(r["min_distance"]) for r in rows)
         check(dmin >= D_R, f"no pair below d_r = 5 mm over the run (closest {dmin * 1000:.1f} mm)")
@@ -343,26 +285,10 @@ def main():
             fmt = lambda v: "-" if v is None else f"{v:.2f}"
             print(f"link_outage_test: {name} | {d:.2f} | {fmt(tl)} | {fmt(tr)} | {tb:.2f} | {fmt(tf)} | "
                   f"{med:.2f} / {mx:.1f}", flush=True)
-        failed = [w for ok, w in checks if not ok]
-        if failed:
-            raise Failure("; ".join(failed))
+        check.raise_if_failed()
         print("link_outage_test: PASS", flush=True)
-        return 0
-    except Failure as e:
-        print(f"link_outage_test: FAIL: {e}", flush=True)
-        return 1
-    finally:
-        for p, fh, _ in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p, fh, _ in procs:
-            try:
-                p.wait(timeout=8)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-            fh.close()
-        link.delete()
+
+    return run_test("link_outage_test", scenario, procs.close, link.delete)
 
 
 if __name__ == "__main__":

@@ -23,32 +23,20 @@ Namespaces are named rfxt-<pid>-<mode>-<host> and always deleted (also those of 
 process is gone). Needs root and iproute2 (as CI has). Exit 0 = pass.
 """
 import argparse
-import csv
 import os
 import pathlib
 import re
-import signal
-import statistics
 import subprocess
 import sys
-import tempfile
 import time
+
+from netns_support import (Checks, Failure, Processes, add_common_arguments, begin_run, delete_namespaces, export,
+                           netns_exec, raise_failure_on_sigterm, run_test, sh)
 
 SOURCE = pathlib.Path(__file__).resolve().parents[3]
 LAUNCH = SOURCE / "bringup" / "launch.py"
 HOSTS = ["vision", "behavior", "robot"]
 WINDOW = ("40", "12")  # session start, duration [s]: the arms cross at 46 s
-
-
-class Failure(Exception):
-    pass
-
-
-def sh(*argv, check=True):
-    r = subprocess.run(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if check and r.returncode != 0:
-        raise Failure(f"command failed ({r.returncode}): {' '.join(argv)}\n{r.stdout}")
-    return r.stdout
 
 
 class Network:
@@ -109,36 +97,8 @@ class Network:
                 self.addr[h] = f"{net}.2"
 
     def delete(self):
-        for n in self.ns.values():
-            # Whatever still runs inside (started by this test) goes first.
-            for pid in sh("ip", "netns", "pids", n, check=False).split():
-                try:
-                    os.kill(int(pid), signal.SIGKILL)
-                except (ValueError, ProcessLookupError):
-                    pass
-            sh("ip", "netns", "del", n, check=False)  # deletes its veth ends (and their peers)
+        delete_namespaces(self.ns.values())  # with whatever still runs inside, and the veth ends
         self.ns.clear()
-
-
-def remove_stale():
-    """Namespaces left by an earlier run that was killed (its pid no longer exists)."""
-    for line in sh("ip", "netns", "list", check=False).splitlines():
-        m = re.match(r"(rfxt-(\d+)-\S+)", line)
-        if m and not os.path.exists(f"/proc/{m.group(2)}"):
-            sh("ip", "netns", "del", m.group(1), check=False)
-
-
-def read_csv(path):
-    with open(path) as fh:
-        return list(csv.DictReader(fh))
-
-
-def export(bin_dir, rfx, topic, out):
-    r = subprocess.run([f"{bin_dir}/reflex_record", "export", str(rfx), "--topic", topic, "--csv", str(out)],
-                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    if r.returncode != 0:
-        raise Failure(f"export of {topic} from {rfx} failed: {r.stdout}")
-    return read_csv(out)
 
 
 def pct(values, p):
@@ -149,22 +109,17 @@ def pct(values, p):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--mode", choices=["multicast", "discovery", "one_host"], required=True)
-    ap.add_argument("--bin-dir", required=True)
-    ap.add_argument("--domain", type=int, required=True, help="DDS domain id; also the second octet of 10.x")
-    ap.add_argument("--work", help="folder for logs and recordings (default: a temporary folder)")
+    add_common_arguments(ap)
     args = ap.parse_args()
-    work = pathlib.Path(args.work or tempfile.mkdtemp(prefix=f"netns_{args.mode}_"))
-    work.mkdir(parents=True, exist_ok=True)
-    print(f"netns_test: mode {args.mode}, domain {args.domain}, work folder {work}", flush=True)
-    if os.geteuid() != 0:
-        print("netns_test: FAIL: needs root (ip netns add)", flush=True)
+    work = begin_run("netns_test", f"mode {args.mode}, domain {args.domain}", args.work, f"netns_{args.mode}_",
+                     "rfxt")
+    if work is None:
         return 1
-    remove_stale()
     net = Network(args.mode, args.domain)
-    procs = []
-    # ctest's timeout sends SIGTERM: turn it into an exception so that `finally` cleans up.
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(Failure("terminated")))
-    try:
+    procs = Processes(work)
+    raise_failure_on_sigterm()
+
+    def scenario():
         config = {"multicast": "multi_host.yaml", "discovery": "multi_host_discovery.yaml",
                   "one_host": "one_host.yaml"}[args.mode]
         common = [sys.executable, str(LAUNCH), str(SOURCE / "bringup" / "launch" / config), "--domain",
@@ -177,11 +132,7 @@ def main():
             common += ["--discovery-address", net.addr["robot"]]
 
         def start(host, argv, log):
-            prefix = ["ip", "netns", "exec", net.ns[host]] if host else []
-            fh = open(work / log, "w")
-            p = subprocess.Popen(prefix + argv, stdout=fh, stderr=subprocess.STDOUT)
-            procs.append((p, fh, log))
-            return p
+            return procs.start(netns_exec(net.ns[host] if host else None) + argv, log)
 
         # An observer recorder on the vision host (what crossed to it from the robot and behavior).
         # It uses the profiles file the vision host's launcher writes (with the discovery server).
@@ -203,13 +154,10 @@ def main():
         while not profiles.exists() and time.monotonic() < deadline:
             time.sleep(0.1)
         env = dict(os.environ, FASTRTPS_DEFAULT_PROFILES_FILE=str(profiles), REFLEX_DOMAIN_ID=str(args.domain))
-        prefix = ["ip", "netns", "exec", net.ns[obs_host]] if obs_host else []
-        obs_fh = open(work / "observer.log", "w")
-        observer = subprocess.Popen(prefix + [f"{args.bin_dir}/reflex_record", "record", "-o", str(obs_rfx),
-                                              "--name", "observer", "-t", "reflex/hand_targets", "-t",
-                                              "reflex/control_status"],
-                                    stdout=obs_fh, stderr=subprocess.STDOUT, env=env)
-        procs.append((observer, obs_fh, "observer.log"))
+        procs.start(netns_exec(net.ns[obs_host] if obs_host else None)
+                    + [f"{args.bin_dir}/reflex_record", "record", "-o", str(obs_rfx), "--name", "observer",
+                       "-t", "reflex/hand_targets", "-t", "reflex/control_status"],
+                    "observer.log", env=env)
 
         # The vision part ends when its replay window is done; then stop the other hosts (SIGTERM).
         vision_launcher = launchers.get("vision", launchers.get("all"))
@@ -218,21 +166,9 @@ def main():
         except subprocess.TimeoutExpired:
             raise Failure("the vision part did not finish its 12 s replay within 45 s")
         time.sleep(1.0)
-        for p, _, _ in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        rcs = {}
-        for p, fh, log in procs:
-            try:
-                rcs[log] = p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                rcs[log] = "killed"
-            fh.close()
+        rcs = procs.stop(timeout=15)
         print("netns_test: exit codes " + ", ".join(f"{k}={v}" for k, v in rcs.items()), flush=True)
-        for log, code in rcs.items():
-            if code != 0:
-                raise Failure(f"{log} ended with {code}:\n" + (work / log).read_text()[-3000:])
+        procs.check_exit_codes(rcs)
         if rc != 0:
             raise Failure(f"vision launcher exit {rc}")
 
@@ -246,11 +182,7 @@ def main():
         frames = {r["seq"] for r in objects}
         print(f"netns_test: robot host recorded {len(frames)} object-target frames, {len(hands)} hand targets, "
               f"{len(status)} status samples", flush=True)
-        checks = []
-
-        def check(ok, what):
-            checks.append((ok, what))
-            print(f"netns_test: {'ok  ' if ok else 'FAIL'} {what}", flush=True)
+        check = Checks("netns_test")
 
         check(len(frames) >= 80, f"object targets from the vision host reach the robot host ({len(frames)} of ~120 frames)")
         check(len(hands) >= 2, f"hand targets from the behavior host reach the robot host ({len(hands)})")
@@ -301,26 +233,12 @@ def main():
                 print(f"netns_test: latency {name}: p50 {pct(lat, 0.5):.3f} ms, p99 {pct(lat, 0.99):.3f} ms, "
                       f"max {max(lat):.3f} ms (n={len(lat)})", flush=True)
         check(bool(lat_status) and pct(lat_status, 0.99) < 50.0, "status latency across hosts p99 < 50 ms")
-        failed = [w for ok, w in checks if not ok]
-        if failed:
-            raise Failure("; ".join(failed))
+        check.raise_if_failed()
         print(f"netns_test: PASS ({args.mode})", flush=True)
-        return 0
-    except Failure as e:
-        print(f"netns_test: FAIL: {e}", flush=True)
-        return 1
-    finally:
-        for p, fh, _ in procs:  # SIGTERM lets a launcher stop its children; SIGKILL if it hangs
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for p, fh, _ in procs:
-            try:
-                p.wait(timeout=8)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        net.delete()
-        # Processes started with `ip netns exec` die with their launcher; nothing else stays behind.
+
+    # Afterwards, whatever happened: SIGTERM lets a launcher stop its children (SIGKILL if it hangs);
+    # processes started with `ip netns exec` die with their launcher, so nothing else stays behind.
+    return run_test("netns_test", scenario, procs.close, net.delete)
 
 
 if __name__ == "__main__":
