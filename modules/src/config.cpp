@@ -25,7 +25,11 @@ ConfigNode::ConfigNode(YAML::Node node, std::string file, std::string path)
 }
 
 ConfigNode ConfigNode::loadFile(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path)) throw ConfigError("configuration file '" + path + "' does not exist");
+  // The error_code overload: a path the system refuses (a name longer than NAME_MAX, ...) is the
+  // same set-up error as a missing file, not a std::filesystem_error without the key's context.
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw ConfigError("configuration file '" + path + "' does not exist" + (ec ? " (" + ec.message() + ")" : ""));
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
