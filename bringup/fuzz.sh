@@ -138,10 +138,10 @@ for t in "${names[@]}"; do
     failed+=("$t")
     crash=$(find "$artifacts" -type f ! -name .run-start -newer "$marker" -printf '%T@ %p\n' | sort -n | tail -1 | cut -d' ' -f2-)
     echo "fuzz.sh: $t FOUND A PROBLEM (exit $rc); log $log; input ${crash:-none}" >&2
-    grep -E "ERROR:|runtime error|FUZZ FINDING|SUMMARY" "$log" | head -5 >&2 || true
+    grep -a -E "ERROR:|runtime error|FUZZ FINDING|SUMMARY" "$log" | head -5 >&2 || true
     if [[ -n "$crash" ]]; then
       echo "fuzz.sh: replay of $crash:" >&2
-      "$build/bin/$t" "$crash" 2>&1 | grep -E "FUZZ FINDING|ERROR:|runtime error|SUMMARY|#[0-3] " | head -12 >&2 || true
+      "$build/bin/$t" "$crash" 2>&1 | grep -a -E "FUZZ FINDING|ERROR:|runtime error|SUMMARY|#[0-3] " | head -12 >&2 || true
       # A CI machine's build folder is gone after the run: the log keeps a small input.
       if [[ $(stat -c %s "$crash") -le 8192 ]]; then
         echo "fuzz.sh: the input, base64 (base64 -d > $(basename "$crash")):" >&2
