@@ -62,9 +62,7 @@ cxx=$(command -v clang++ || command -v clang++-14 || true)
 start=$(date +%s)
 if [[ $do_build -eq 1 ]]; then
   mkdir -p "$build" || die "cannot create the build folder '$build'"
-  # __SANITIZE_ADDRESS__: GCC defines it under -fsanitize=address, clang 14 does not, and code
-  # tests it (tests/control/distance_alloc_test.cpp leaves malloc to ASan when it is set).
-  flags="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -gline-tables-only -D__SANITIZE_ADDRESS__=1"
+  flags="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer -gline-tables-only"
   # -O1 and line tables only (not RelWithDebInfo's -O2 -g): what ASan recommends, and a shorter
   # build (CI builds this folder from scratch on every run). Ninja for a new folder: it builds the
   # many targets named on one `cmake --build --target` line in parallel, where CMake's Makefiles

@@ -50,7 +50,16 @@ void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
 void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
 
-#if !defined(__SANITIZE_ADDRESS__)
+// Under AddressSanitizer malloc belongs to the sanitizer: count operator new only. GCC says so with
+// __SANITIZE_ADDRESS__, clang with __has_feature(address_sanitizer).
+#if defined(__SANITIZE_ADDRESS__)
+#define REFLEX_UNDER_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define REFLEX_UNDER_ASAN 1
+#endif
+#endif
+#if !defined(REFLEX_UNDER_ASAN)
 #define REFLEX_COUNT_MALLOC 1
 extern "C" {
 void* __libc_malloc(std::size_t);

@@ -54,7 +54,8 @@ int parseInt(const std::string& s, const std::string& where) {
 
 void requireFile(const std::string& dir, const std::string& file, const std::string& what) {
   const std::string p = dir + "/" + file;
-  if (!fs::is_regular_file(p))
+  std::error_code ec;  // a path the system refuses (too long, no permission) is "missing" too
+  if (!fs::is_regular_file(p, ec))
     throw VisionError("session '" + dir + "' is missing its " + what + " file '" + file + "'");
 }
 
@@ -134,12 +135,13 @@ void saveGroundTruth(const std::string& path, const std::vector<GroundTruthRow>&
 }
 
 SessionInfo loadSessionInfo(const std::string& dir) {
-  if (!fs::is_directory(dir)) throw VisionError("session folder '" + dir + "' does not exist");
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw VisionError("session folder '" + dir + "' does not exist");
   SessionInfo info;
   info.dir = dir;
   info.name = fs::path(dir).filename().string();
   const std::string manifest = dir + "/session.yaml";
-  if (fs::exists(manifest)) {
+  if (fs::exists(manifest, ec)) {
     const YAML::Node root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
     if (root["format"] && asString(root["format"], manifest + ": format") != "reflex_stereo_session")
       throw VisionError(manifest + ": format '" + root["format"].as<std::string>() +
@@ -159,7 +161,7 @@ SessionInfo loadSessionInfo(const std::string& dir) {
     file("objects", info.files.objects);
     file("camera_mount", info.files.camera_mount);
     file("ground_truth", info.files.ground_truth);
-  } else if (fs::exists(dir + "/camera_mount.yaml")) {
+  } else if (fs::exists(dir + "/camera_mount.yaml", ec)) {
     info.files.camera_mount = "camera_mount.yaml";
   }
   const SessionFiles& f = info.files;
