@@ -8,12 +8,14 @@ set -euo pipefail
 
 usage() {
   cat <<'USAGE'
-usage: fuzz.sh [--time SECONDS] [--build-dir DIR] [--jobs N] [--no-build] [--configure-only]
-               [--keep-going] [TARGET...]
+usage: fuzz.sh [--time SECONDS] [--seed N] [--build-dir DIR] [--jobs N] [--no-build]
+               [--configure-only] [--keep-going] [TARGET...]
 
 Builds (clang, -fsanitize=fuzzer,address,undefined) and runs the Reflex fuzz targets.
 
   --time SECONDS   fuzzing time per target (default 20; -max_total_time)
+  --seed N         libFuzzer's random seed (-seed; default: a new one each run). With a seed, a run
+                   replays the same inputs in the same order, as far as the time allows (CI)
   --build-dir DIR  build folder (default: <repo>/build-fuzz)
   --jobs N         build jobs (default 2)
   --no-build       use an existing build
@@ -35,6 +37,7 @@ seconds=20
 jobs=2
 do_build=1
 keep_going=0
+seed=""
 configure_only=0
 only=()
 while [[ $# -gt 0 ]]; do
@@ -50,6 +53,9 @@ while [[ $# -gt 0 ]]; do
     --no-build) do_build=0; shift ;;
     --configure-only) configure_only=1; shift ;;
     --keep-going) keep_going=1; shift ;;
+    --seed)
+      [[ $# -ge 2 && "$2" =~ ^[1-9][0-9]*$ ]] || die "--seed '${2:-}' is not a positive integer"
+      seed="$2"; shift 2 ;;
     -*) die "unknown option '$1' (see --help)" ;;
     *) only+=("$1"); shift ;;
   esac
@@ -103,6 +109,8 @@ built=$(date +%s)
 
 export ASAN_OPTIONS="halt_on_error=1:detect_leaks=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
 export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
+# Third-party leaks, each explained in the file (urdfdom's rejected half-built tree).
+export LSAN_OPTIONS="suppressions=$repo/bringup/fuzz.lsan.supp${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
 failed=()
 summary=()
 for t in "${names[@]}"; do
@@ -119,6 +127,7 @@ for t in "${names[@]}"; do
   t_start=$(date +%s)
   extra=()
   if [[ $keep_going -eq 1 ]]; then extra=(-fork=1 -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1); fi
+  if [[ -n "$seed" ]]; then extra+=(-seed="$seed"); fi
   marker="$artifacts/.run-start"
   touch "$marker"
   set +e

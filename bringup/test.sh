@@ -10,12 +10,15 @@
 #      run by hand only; see tests/fuzz/README.md.
 #   --no-hygiene or REFLEX_HYGIENE=0  skip step 2;  --hygiene-only  packages + step 2 only
 #   REFLEX_FUZZ_SECONDS (default 10)  fuzzing time per target
+#   REFLEX_FUZZ_SEED (default 1)      libFuzzer seed: CI replays the same inputs run after run, so a
+#                                     red run is a change's doing; new ground by hand (fuzz.sh, no --seed)
 #   REFLEX_FUZZ_BUILD_DIR             the clang folder (default <repo>/build-fuzz)
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 build_dir=${REFLEX_BUILD_DIR:-$here/build}
 fuzz_dir=${REFLEX_FUZZ_BUILD_DIR:-$here/build-fuzz}
 fuzz_seconds=${REFLEX_FUZZ_SECONDS:-10}
+fuzz_seed=${REFLEX_FUZZ_SEED:-1}
 hygiene=${REFLEX_HYGIENE:-1}
 release=1
 case "${1:-}" in
@@ -23,6 +26,7 @@ case "${1:-}" in
   --no-hygiene) hygiene=0; shift ;;
   --hygiene-only) hygiene=1; release=0; shift ;;
 esac
+[[ "$fuzz_seed" =~ ^[1-9][0-9]*$ ]] || { echo "test.sh: REFLEX_FUZZ_SEED '$fuzz_seed' is not a positive integer" >&2; exit 2; }
 [[ "$fuzz_seconds" =~ ^[1-9][0-9]*$ ]] || { echo "test.sh: REFLEX_FUZZ_SECONDS '$fuzz_seconds' is not a positive integer" >&2; exit 2; }
 
 # The sanitized subset (ctest -R; sanitize.sh's labels still apply): the unit tests of the file
@@ -53,7 +57,7 @@ if [[ "$hygiene" != 0 ]]; then
     san=$?
   t1=$(date +%s)
   fz=0
-  "$here/bringup/fuzz.sh" --build-dir "$fuzz_dir" --time "$fuzz_seconds" || fz=$?
+  "$here/bringup/fuzz.sh" --build-dir "$fuzz_dir" --time "$fuzz_seconds" --seed "$fuzz_seed" || fz=$?
   t2=$(date +%s)
   summary+=("sanitized build+tests $((t1 - t0)) s (exit $san)" "fuzz build+${fuzz_seconds} s per target $((t2 - t1)) s (exit $fz)")
   if [[ $san -ne 0 || $fz -ne 0 ]] && [[ $status -eq 0 ]]; then status=1; fi

@@ -160,6 +160,15 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     fail(origin, std::string("malformed URDF: ") + e.what());
   }
   if (!urdf_model) fail(origin, "malformed URDF (urdfdom could not parse it; see the message above)");
+  // urdfdom holds children by shared_ptr: a kinematic loop in a malformed file (a link made the child
+  // of its own descendant) is a reference cycle that would outlive the model. Break it on every exit.
+  struct ChildLinksReleaser {
+    urdf::ModelInterfaceSharedPtr& m;
+    ~ChildLinksReleaser() {
+      for (auto& entry : m->links_)
+        if (entry.second) entry.second->child_links.clear();
+    }
+  } release_children{urdf_model};
   if (!urdf_model->getRoot()) fail(origin, "URDF has no root link");
 
   Model model;
@@ -167,8 +176,14 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
 
   // Breadth-first over the tree: parents before children.
   std::vector<urdf::LinkConstSharedPtr> order{urdf_model->getRoot()};
+  std::set<std::string> reached{urdf_model->getRoot()->name};
   for (std::size_t i = 0; i < order.size(); ++i)
-    for (const auto& child : order[i]->child_links) order.push_back(child);
+    for (const auto& child : order[i]->child_links)
+      if (reached.insert(child->name).second) order.push_back(child);
+  for (const auto& entry : urdf_model->links_)
+    if (!reached.count(entry.first))
+      fail(origin, "link '" + entry.first + "' is not connected to the root link '" + urdf_model->getRoot()->name +
+                       "' (a kinematic loop: is it the child of its own descendant?)");
 
   std::map<std::string, int> index_of;
   for (const auto& ulink : order) {

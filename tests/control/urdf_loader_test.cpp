@@ -269,6 +269,18 @@ TEST(UrdfLoaderErrors, BadBoxAndJointDefinitions) {
                    {"e.urdf", "no link has collision geometry"});
 }
 
+TEST(UrdfLoaderErrors, KinematicLoopNamesTheDisconnectedLink) {
+  // b is the child of c, its own descendant: urdfdom still returns a model rooted at a, in which b and
+  // c hang in a loop (found by fuzz_urdf as a leak of that loop; tests/fuzz/regressions/fuzz_urdf/).
+  const std::string loop = R"(<robot name="l"><link name="a"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+    <link name="b"/><link name="c"/>
+    <joint name="ab" type="fixed"><parent link="a"/><child link="a2"/></joint><link name="a2"/>
+    <joint name="cb" type="fixed"><parent link="c"/><child link="b"/></joint>
+    <joint name="bc" type="fixed"><parent link="b"/><child link="c"/></joint></robot>)";
+  expectModelError([&] { loadModelFromString(loop, CollisionConfig{}, "loop.urdf"); },
+                   {"loop.urdf", "is not connected to the root link 'a'", "kinematic loop"});
+}
+
 TEST(UrdfLoaderErrors, MissingVelocityLimitWarnsAndDefaults) {
   std::vector<std::string> warnings;
   const Model m = loadModelFromString(
