@@ -129,43 +129,70 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
   ASSERT_GT(hands.size(), 100u);
 
   // 1. Every given target: 0.40 m from its shoulder, towards the true object of the frame it follows.
-  int checked = 0;
+  //    "Follows" is judged by the publishers' own stamps (one host, one clock): the latest object frame
+  //    vision stamped before behavior stamped the targets. Not by when this observer took them: a
+  //    stalled observer takes a backlog of hand targets at once next to only the newest object frame
+  //    (keep-last history). Frames this observer lost altogether (best effort) are the frames vision
+  //    can have sent between that frame and the targets (10 fps, one spare): the target may follow any.
+  int checked = 0, followed_unseen = 0;
   double worst_deg = 0.0;
-  std::size_t k = 0;
-  std::vector<double> latency;  // object frame received -> hand targets received, same observer
+  std::vector<double> latency;  // object frame stamped by vision -> hand targets stamped by behavior
   for (const Hands& h : hands) {
-    while (k + 1 < seen.size() && seen[k + 1].t <= h.t) ++k;
-    if (seen[k].t <= h.t) latency.push_back(h.t - seen[k].t);
+    const std::int64_t h_ns = h.hands.header().stamp_ns();
+    // The latest frame stamped before the targets (holding `name`, if given).
+    auto latestBefore = [&](const std::string* name) {
+      std::size_t k = seen.size();
+      for (std::size_t j = 0; j < seen.size(); ++j) {
+        const std::int64_t ns = seen[j].objects.header().stamp_ns();
+        if (ns > h_ns || (k < seen.size() && ns < seen[k].objects.header().stamp_ns())) continue;
+        bool has = name == nullptr;
+        for (const auto& o : seen[j].objects.objects()) has |= name != nullptr && o.name() == *name;
+        if (has) k = j;
+      }
+      return k;
+    };
+    const std::size_t latest = latestBefore(nullptr);
+    if (latest < seen.size()) latency.push_back(1e-9 * static_cast<double>(h_ns - seen[latest].objects.header().stamp_ns()));
     const msg::HandTarget* t[2] = {&h.hands.left(), &h.hands.right()};
     for (int i = 0; i < 2; ++i) {
       if (t[i]->status() != msg::TARGET_GIVEN) continue;
       const std::string& name = t[i]->object_name();
+      const std::size_t k = latestBefore(&name);
+      if (k == seen.size()) continue;
       EXPECT_EQ(name, i == 0 ? "can" : "cup") << "at " << h.t << " s";  // never swapped
       const Eigen::Vector3d p = vec(t[i]->position_base());
       EXPECT_NEAR((p - shoulder[i]).norm(), 0.40, 1e-6);
-      // The latest frame received before this target that holds the object.
-      for (std::size_t j = k + 1; j-- > 0;) {
-        if (seen[j].t > h.t) continue;
-        bool has = false;
-        for (const auto& o : seen[j].objects.objects()) has |= o.name() == name;
-        if (!has) continue;
-        auto it = gt.find({seen[j].objects.image_index(), name});
-        if (it == gt.end()) break;
+      const std::uint64_t frame = seen[k].objects.image_index();
+      const double gap = 1e-9 * static_cast<double>(h_ns - seen[k].objects.header().stamp_ns());
+      const auto later = static_cast<std::uint64_t>(std::ceil(gap / 0.1)) + 1;
+      double deg = 180.0, deg_frame = 180.0;
+      std::uint64_t best = frame;
+      bool any = false;
+      for (std::uint64_t f = frame; f <= frame + later; ++f) {
+        const auto it = gt.find({f, name});
+        if (it == gt.end()) continue;
+        any = true;
         const double c = (p - shoulder[i]).normalized().dot((it->second - shoulder[i]).normalized());
-        const double deg = std::acos(std::min(1.0, c)) * 180.0 / M_PI;
-        worst_deg = std::max(worst_deg, deg);
-        EXPECT_LT(deg, 3.0) << name << " at " << h.t << " s, frame " << seen[j].objects.image_index();
-        ++checked;
-        break;
+        const double d = std::acos(std::min(1.0, c)) * 180.0 / M_PI;
+        if (f == frame) deg_frame = d;
+        if (d < deg) {
+          deg = d;
+          best = f;
+        }
       }
+      if (!any) continue;
+      if (deg_frame >= 3.0 && deg < 3.0) ++followed_unseen;
+      worst_deg = std::max(worst_deg, deg);
+      EXPECT_LT(deg, 3.0) << name << " at " << h.t << " s, frame " << frame << " (best " << best << ")";
+      ++checked;
     }
   }
-  std::printf("flagship: %d given targets checked against ground truth, worst direction error %.2f deg\n", checked,
-              worst_deg);
+  std::printf("flagship: %d given targets checked against ground truth, worst direction error %.2f deg "
+              "(%d matched a frame this observer lost)\n", checked, worst_deg, followed_unseen);
   EXPECT_GT(checked, 150);
   std::sort(latency.begin(), latency.end());
   if (!latency.empty())
-    std::printf("flagship: object frame -> hand targets at the observer: median %.1f ms, 95%% %.1f ms\n",
+    std::printf("flagship: object frame -> hand targets, publishers' stamps: median %.1f ms, 95%% %.1f ms\n",
                 1e3 * latency[latency.size() / 2], 1e3 * latency[latency.size() * 95 / 100]);
 
   // 2. Lost can (session 13-19 s, first stretch): the left hand turns to "no target" lost_timeout after
