@@ -319,6 +319,21 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   // the collision controller's nullspace can otherwise leak motion into a pair that is not the merged
   // direction; this removes exactly that component and nothing else (inactive above d_b).
   if (P.mode != AvoidanceMode::kOff && !recovery_only) {
+    // What moves each guarded pair besides this arm, fixed for this cycle (computed once, not per
+    // iteration). The higher-priority arm was computed first (computeControl orders them): its motion
+    // is known, so the pair's approach includes it (the obstacle arm does not avoid). Walking and
+    // balance move the legs (and everything above them) without asking: their estimated motion counts
+    // too (legs always win, Sec. 7.2); qdot_uncontrolled is zero on the arm joints.
+    std::array<double, 64> other_rate{};
+    const int b = 1 - a;
+    for (int g = 0; g < nguarded; ++g) {
+      const int p = guarded[g];
+      if (higherPriority(input.priority, b)) {
+        for (int i = 0; i < cm.arms[b].n; ++i)
+          other_rate[g] += data.dist.rows(p, cm.arms[b].q[i]) * data.qdot[cm.arms[b].q[i]];
+      }
+      for (int j = 0; j < model.nq; ++j) other_rate[g] += data.dist.rows(p, j) * data.qdot_uncontrolled[j];
+    }
     for (int iter = 0; iter < 6; ++iter) {
       bool changed = false;
       for (int g = 0; g < nguarded; ++g) {
@@ -334,18 +349,7 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
         const double rr = free_row.squaredNorm();
         if (rr < 1e-12) continue;
         const double allowed = -P.guard_rate * std::max(0.0, d - P.d_r - P.guard_margin);
-        // The higher-priority arm was computed first (computeControl orders them): its motion of this
-        // cycle is known, so the pair's approach includes it (the obstacle arm does not avoid).
-        double other_rate = 0.0;
-        const int b = 1 - a;
-        if (higherPriority(input.priority, b)) {
-          for (int i = 0; i < cm.arms[b].n; ++i)
-            other_rate += data.dist.rows(p, cm.arms[b].q[i]) * data.qdot[cm.arms[b].q[i]];
-        }
-        // Walking and balance move the legs (and everything above them) without asking: their
-        // estimated motion counts too (legs always win, Sec. 7.2), zero on the arm joints.
-        for (int j = 0; j < model.nq; ++j) other_rate += data.dist.rows(p, j) * data.qdot_uncontrolled[j];
-        const double rate = row.dot(qdot.transpose()) + other_rate;
+        const double rate = row.dot(qdot.transpose()) + other_rate[g];
         if (rate < allowed - 1e-12) {
           qdot += free_row.transpose() * ((allowed - rate) / rr);
           for (int i = 0; i < n; ++i) qdot[i] = std::clamp(qdot[i], v_lo[i], v_hi[i]);
@@ -408,17 +412,17 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
   }
 }
 
-/// Predictive guard (not in the paper; ControllerParams::predict_margin). The two filters inside
+/// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's
+/// closest physical pair (computeControl's red-zone check). The two filters inside
 /// computeArm bound the approach to first order; this one checks the step itself. Each arm's step is
 /// halved (at most six times, then dropped) while, one period ahead, some physical pair of that arm
 /// would end below d_r + predict_margin AND closer than it is now and than it would be if the arms
 /// held still (so walking motion that no arm step can undo is not blamed on the arms). On the
 /// kinematic robot the prediction is exact for the arms, so no arm motion ever enters the red zone.
 void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerData& data,
-                     const Eigen::Ref<const Eigen::VectorXd>& q) {
+                     const Eigen::Ref<const Eigen::VectorXd>& q, double d_phys) {
   const ControllerParams& P = cm.params;
   const double floor = P.d_r + P.predict_margin;
-  data.guard_scale = {1.0, 1.0};
   // Cheap exit: in one period no point moves more than sum |qdot_j| lever_j dt (body-schema slots
   // add their own extent to every lever), so no distance changes by more than twice that.
   double slot_extent = 0.0;
@@ -427,10 +431,7 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
   double sweep = 0.0;
   for (int j = 0; j < model.nq; ++j)
     sweep += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * P.period;
-  double d_now = kInf;
-  for (const PairDistance& pd : data.dist.pairs)
-    if (pd.active && isPhysical(model, data, pd)) d_now = std::min(d_now, pd.distance);
-  if (d_now - 2.0 * sweep > floor) return;
+  if (d_phys - 2.0 * sweep > floor) return;
 
   bool have_hold = false;
   std::array<double, 2> scale{1.0, 1.0};
@@ -464,7 +465,6 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     for (int a = 0; a < 2; ++a)
       for (int i = 0; i < cm.arms[a].n; ++i) data.qdot[cm.arms[a].q[i]] *= scale[a];
   }
-  data.guard_scale = scale;
 }
 
 }  // namespace
@@ -500,9 +500,7 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
   int pair_phys = -1;
   for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
     const PairDistance& pd = data.dist.pairs[i];
-    if (!pd.active) continue;
-    const int sb = pd.seg_b;
-    if (model.segments[sb].body_schema_slot && data.slot_virtual[sb - model.num_robot_segments]) continue;
+    if (!pd.active || !isPhysical(model, data, pd)) continue;
     if (pd.distance < d_phys) {
       d_phys = pd.distance;
       pair_phys = static_cast<int>(i);
@@ -547,7 +545,7 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
   const int first = in.priority == MotionPriority::kRightHigher ? kRight : kLeft;
   computeArm(model, cm, data, first, in, false);
   computeArm(model, cm, data, 1 - first, in, false);
-  if (cm.params.mode != AvoidanceMode::kOff && data.qdot.allFinite()) predictiveGuard(model, cm, data, q);
+  if (cm.params.mode != AvoidanceMode::kOff && data.qdot.allFinite()) predictiveGuard(model, cm, data, q, d_phys);
   if (!data.qdot.allFinite()) {
     data.qdot.setZero();
     ++data.bad_input_count;

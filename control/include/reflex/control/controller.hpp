@@ -168,9 +168,8 @@ struct ControllerData {
   std::uint64_t estop_count = 0;
   std::array<bool, kBodySchemaSlots> slot_virtual{};  ///< virtual slots never trigger the e-stop
   std::uint64_t bad_input_count = 0;
-  /// Predictive guard: how many cycles shortened the commanded step, and the last step scale per arm.
+  /// Predictive guard: how many cycles shortened the commanded step.
   std::uint64_t guard_count = 0;
-  std::array<double, 2> guard_scale{1.0, 1.0};
   /// Velocity of the joints the controller does not command (walking, balance, gaze), estimated
   /// from the previous cycle's measured q; zero on the first cycle.
   Eigen::VectorXd qdot_uncontrolled;
