@@ -184,8 +184,8 @@ class Codec final : public TopicCodec {
     return p == bus::kProfileBehavior || p == bus::kProfileHeartbeat;
   }
 
-  void subscribe(bus::Participant& bus, const std::string& topic, const std::string& profile,
-                 std::function<void(RecordEntry&&)> sink) const override {
+  bus::detail::ReaderBase& subscribe(bus::Participant& bus, const std::string& topic, const std::string& profile,
+                                     std::function<void(RecordEntry&&)> sink) const override {
     auto& reader = bus.makeReader<T>(topic, profile);
     reader.onDataWithInfo([sink = std::move(sink), topic, type = name_](const T& s, const bus::dds::SampleInfo& info) {
       RecordEntry e;
@@ -196,6 +196,7 @@ class Codec final : public TopicCodec {
       e.payload = serializeSample(s);
       sink(std::move(e));
     });
+    return reader;
   }
   std::unique_ptr<SamplePublisher> makePublisher(bus::Participant& bus, const std::string& topic,
                                                  const std::string& profile) const override {

@@ -30,14 +30,25 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
   for (const TopicSpec& s : specs) {
     if (counts_.count(s.topic)) throw RecordError("topic '" + s.topic + "' given twice");
     counts_[s.topic].type = s.codec->typeName();
-    const std::string profile =
-        options.late_joiner_state && s.codec->isState() ? s.codec->defaultProfile() : bus::kProfileRecord;
+    // isState(): the writers are reliable (behavior decisions, heartbeats); read them reliably.
+    const std::string profile = !s.codec->isState()        ? bus::kProfileRecord
+                                : options.late_joiner_state ? s.codec->defaultProfile()
+                                                            : bus::kProfileRecordReliable;
     TopicCount* count = &counts_[s.topic];
-    s.codec->subscribe(*bus_, s.topic, profile, [this, count](RecordEntry&& e) {
+    readers_.push_back(&s.codec->subscribe(*bus_, s.topic, profile, [this, count](RecordEntry&& e) {
       writer_->append(e);
       ++count->samples;
-    });
+    }));
   }
+}
+
+bool Recorder::waitForWriters(std::chrono::nanoseconds timeout) const {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  for (const bus::detail::ReaderBase* r : readers_) {
+    const auto left = std::max(std::chrono::nanoseconds(0), std::chrono::nanoseconds(end - std::chrono::steady_clock::now()));
+    if (!r->waitForWriters(1, left)) return false;
+  }
+  return true;
 }
 
 Recorder::~Recorder() = default;

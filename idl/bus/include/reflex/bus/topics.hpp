@@ -44,6 +44,7 @@ inline constexpr const char* kProfileBehavior = "reflex_behavior";           // 
 inline constexpr const char* kProfileObjectTargets = "reflex_object_targets";  // vision output
 inline constexpr const char* kProfileHeartbeat = "reflex_heartbeat";         // module heartbeats
 inline constexpr const char* kProfileRecord = "reflex_record";               // reader only: recorders
+inline constexpr const char* kProfileRecordReliable = "reflex_record_reliable";  // reader only: recorders, reliable topics
 
 template <>
 struct TopicTraits<reflex::msg::ObjectTargets> {

@@ -16,6 +16,7 @@
 #include <reflex/bus/config.hpp>
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -32,8 +33,11 @@ struct RecorderOptions {
   std::string output;                 ///< recording file to create (or append to, see writer.append)
   std::vector<std::string> topics;    ///< topic specs (parseTopicSpec); empty = every known topic
   std::vector<std::string> exclude;   ///< topic names not to record (with the default "all")
-  /// false (default): every topic is read with the reflex_record profile (best effort, keep last 256):
-  /// every sample is kept, also bursts of state changes. true: state topics (behavior decisions,
+  /// false (default): each topic is read with a reader that keeps the writers' promise and every
+  /// sample of a burst: best-effort topics (200 Hz state, vision) with reflex_record (best effort,
+  /// keep last 256), reliable topics (behavior decisions, heartbeats) with reflex_record_reliable
+  /// (reliable, volatile, keep last 256), so a sample dropped on a loaded host is repaired as the
+  /// writer promised instead of lost (issue 16, item 17). true: state topics (behavior decisions,
   /// heartbeats: reliable + transient local) are read with their own reader profile instead, so the
   /// recording starts with the state published BEFORE the recorder started, but that profile keeps
   /// only the newest sample per instance (a burst of changes between two takes keeps its last one).
@@ -66,6 +70,10 @@ class Recorder {
 
   bus::Participant& bus();
   const std::map<std::string, TopicCount>& counts() const { return counts_; }
+  /// Blocks until every recorded topic's reader has matched at least one writer, or `timeout`
+  /// passes; true if all matched. Discovery is asymmetric: a writer that sees this reader may still
+  /// be unknown to it, and a best-effort sample from a writer the reader has not matched is dropped.
+  bool waitForWriters(std::chrono::nanoseconds timeout) const;
   std::uint64_t totalSamples() const;
 
  private:
@@ -73,6 +81,7 @@ class Recorder {
   std::unique_ptr<bus::Participant> bus_;
   std::unique_ptr<RecordWriter> writer_;
   std::map<std::string, TopicCount> counts_;
+  std::vector<const bus::detail::ReaderBase*> readers_;
 };
 
 struct PlayerOptions {
