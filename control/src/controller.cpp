@@ -36,6 +36,26 @@ int segmentLink(const Model& model, const DistanceData& dist, int s) {
                                             : model.segments[s].link;
 }
 
+/// True if `link` lies strictly below `ancestor` in the link tree (O(depth), allocation-free).
+bool descendsFrom(const Model& model, int link, int ancestor) {
+  for (int l = model.links[static_cast<std::size_t>(link)].parent; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent)
+    if (l == ancestor) return true;
+  return false;
+}
+
+/// The side of a pair on which arm `a`'s virtual force acts (Eq. 14-16): +1 for seg_a (the force
+/// acts at p_W_a along +nhat_W), -1 for seg_b. For a pair with another body part that is the arm's
+/// own segment. For a pair of two segments that arm `a` both moves (shoulder-hand, upper arm-hand, a
+/// grasped object against the upper arm) it is the DISTAL one, whose link descends from the other's:
+/// the paper's S_i are the forearm and the hand, and the force must push the hand away from the
+/// shoulder, not the shoulder away from the hand (that flips its direction in the Eq. 17 merge and
+/// can drive the closest pair together; issue 16, item 7). Two segments on one link: seg_a.
+int forceSide(const Model& model, const DistanceData& dist, const PairDistance& pd, int owner_a, int owner_b, int a) {
+  if (owner_a != a) return -1;
+  if (owner_b != a) return 1;
+  return descendsFrom(model, segmentLink(model, dist, pd.seg_b), segmentLink(model, dist, pd.seg_a)) ? -1 : 1;
+}
+
 bool higherPriority(MotionPriority p, int arm) {
   return (p == MotionPriority::kLeftHigher && arm == kLeft) || (p == MotionPriority::kRightHigher && arm == kRight);
 }
@@ -190,7 +210,7 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
     const int oa = ownerArm(model, cm, data.dist, pd.seg_a);
     const int ob = ownerArm(model, cm, data.dist, pd.seg_b);
     if (oa != a && ob != a) continue;
-    const int sign = oa == a ? 1 : -1;
+    const int sign = forceSide(model, data.dist, pd, oa, ob, a);
     const int other = oa == a ? ob : oa;
     const bool arm_pair = other >= 0 && other != a;
     if (arm_pair || other < 0) {
@@ -255,16 +275,21 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   VecA xi_rest = VecA::Zero(n);
   if (!given) xi_rest = -P.alpha_rest * (q - arm.rest.head(n));
 
+  // The virtual-force term of Eq. 8 along the merged direction: row^+ |F^all|.
+  const RowA row_ca = e_all.transpose() * J_ca;  // J_ca|row,y in the merged avoidance frame
+  VecA row_pinv;
+  dampedPseudoInverse(row_ca, P.damping, row_pinv);
+  VecA qdot_force = VecA::Zero(n);
+  if (F_mag > 0.0) qdot_force = row_pinv * F_mag;
+  // three_dof: the whole merged force, J_ca^+ F^all (Eq. 8 with a 3-D task).
+  MatA3 Jca_pinv;
+  if (P.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(J_ca, P.damping, Jca_pinv);
+  status.qdot_force = P.mode == AvoidanceMode::kThreeDof && !recovery_only ? VecA(Jca_pinv * (F_mag * e_all)) : qdot_force;
+
   VecA qdot(n);
   if (recovery_only) {
     // Only the separating motion of Eq. 8: nothing in the nullspace.
-    qdot.setZero();
-    if (F_mag > 0.0) {
-      const RowA row = e_all.transpose() * J_ca;
-      VecA row_pinv;
-      dampedPseudoInverse(row, P.damping, row_pinv);
-      qdot = row_pinv * F_mag;
-    }
+    qdot = qdot_force;
   } else {
     // Whole-body motion, Eq. 2-5.
     MatA3 J_pinv;
@@ -286,18 +311,13 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
       else xi_t = xi_rest;
       VecA qdot_ca(n);
       if (P.mode == AvoidanceMode::kOneDof) {
-        const RowA row = e_all.transpose() * J_ca;  // J_ca|row,y in the merged avoidance frame
-        VecA row_pinv;
-        dampedPseudoInverse(row, P.damping, row_pinv);
         MatA N_ca;
-        nullspaceProjector(row, N_ca);
-        qdot_ca = row_pinv * F_mag + N_ca * xi_t;
+        nullspaceProjector(row_ca, N_ca);
+        qdot_ca = qdot_force + N_ca * xi_t;
       } else {
-        MatA3 Jca_pinv;
-        dampedPseudoInverse(J_ca, P.damping, Jca_pinv);
         MatA N_ca;
         nullspaceProjector(J_ca, N_ca);
-        qdot_ca = Jca_pinv * (F_mag * e_all) + N_ca * xi_t;
+        qdot_ca = status.qdot_force + N_ca * xi_t;
       }
       qdot = (1.0 - f) * qdot_wbm + f * qdot_ca;  // Eq. 1
     }
@@ -516,6 +536,7 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
       for (int a = 0; a < 2; ++a) {
         data.trajectories[a].active = false;
         data.arms[a].f = 1.0;
+        data.arms[a].qdot_force.setZero();
         data.arms[a].zone = Zone::kRed;
       }
       return ControlResult::kFrozen;

@@ -143,6 +143,11 @@ struct ArmStatus {
   Eigen::Vector3d force_point_W = Eigen::Vector3d::Zero(); ///< P_cp1^all, Eq. 18
   Eigen::Vector3d hand_W = Eigen::Vector3d::Zero();
   Eigen::Vector3d reference_W = Eigen::Vector3d::Zero();  ///< point on the linear trajectory
+  /// The virtual-force term of the collision controller alone (rad/s, the arm's joints in
+  /// ControllerModel::Arm::q order): row^+ |F^all| (Eq. 8 with the merged force of Eq. 17-18; in
+  /// three_dof mode J_ca^+ F^all), before blending (Eq. 1), the safety filter and the limits. Zero
+  /// when no pair of the arm is inside the yellow zone, and during a latched e-stop.
+  ArmVector qdot_force;
 };
 
 /// Per-arm linear trajectory state (Sec. 8).
