@@ -50,32 +50,56 @@ enum class HandStatus : std::uint8_t { kNoTarget = 0, kGiven = 1 };
 enum class MotionPriority : std::uint8_t { kEqual = 0, kLeftHigher = 1, kRightHigher = 2 };
 enum class EstopState : std::uint8_t { kClear = 0, kLatched = 1, kRecovering = 2 };
 
-/// Controller parameters; defaults are the paper's (Sec. 8) where it gives them.
+/// Controller parameters; defaults are the paper's (Sec. 8) where it gives them. Every field has a
+/// sane range (in brackets; an end written with another key depends on it), enforced by
+/// validateControllerParams and listed with its reason by controllerParamRanges and in
+/// control/README.md ("Controller parameters"). A value outside it is a ConfigError naming the file,
+/// key, value and range: a configuration that validates can work.
 struct ControllerParams {
-  double d_a = 0.040;        ///< yellow zone boundary (m): virtual force and blending start, Eq. 6, 13
-  double d_b = 0.010;        ///< orange zone boundary (m): f(d) = 1 below, Eq. 13
-  double d_r = 0.005;        ///< red zone (m): emergency stop, Sec. 7.1
-  double period = 0.005;     ///< control period (s)
-  double k_virtual = 5.0;    ///< virtual force gain k (1/s): separation speed k (d_a - d), Eq. 6
-  double alpha_ca = 1.0;     ///< step width of the avoidance gradient in the WBM nullspace (1/(m s)), Eq. 5
-  double d_safe = 0.10;      ///< d_safe of Eq. 5 (m); pairs closer than this feed the gradient
-  double alpha_t = 60.0;     ///< step width of target reaching in the CA nullspace (1/s), Eq. 12
-  double alpha_jla = 0.2;    ///< joint-limit-avoidance gradient step (1/s), Eq. 4
-  double alpha_rest = 1.5;   ///< attraction to the rest posture when a hand has no target (1/s)
-  double damping = 0.02;     ///< singularity-robust inverse damping lambda (m)
-  double reach_gain = 10.0;  ///< trajectory tracking gain (1/s)
-  double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s)
-  double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8
-  double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s)
-  double guard_margin = 0.001;        ///< safety filter floor above d_r (m)
-  double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m)
+  double d_a = 0.040;        ///< yellow zone boundary (m): virtual force and blending start, Eq. 6, 13. (d_b, 0.2]
+  double d_b = 0.010;        ///< orange zone boundary (m): f(d) = 1 below, Eq. 13. (d_r, 0.1]
+  double d_r = 0.005;        ///< red zone (m): emergency stop, Sec. 7.1. (0, 0.05]
+  double period = 0.005;     ///< control period (s). [0.001, 0.1]
+  double k_virtual = 5.0;    ///< virtual force gain k (1/s): separation speed k (d_a - d), Eq. 6. [0.5, 0.5/period]
+  double alpha_ca = 1.0;     ///< step width of the avoidance gradient in the WBM nullspace (1/(m s)), Eq. 5. [0, 100]
+  double d_safe = 0.10;      ///< d_safe of Eq. 5 (m); pairs closer than this feed the gradient. [d_a, 0.5]
+  double alpha_t = 60.0;     ///< step width of target reaching in the CA nullspace (1/s), Eq. 12. [1, 1/period]
+  double alpha_jla = 0.2;    ///< joint-limit-avoidance gradient step (1/s), Eq. 4. [0, 10]
+  double alpha_rest = 1.5;   ///< attraction to the rest posture when a hand has no target (1/s). [0, 1/period]
+  double damping = 0.02;     ///< singularity-robust inverse damping lambda (m). [0.001, 0.2]
+  double reach_gain = 10.0;  ///< trajectory tracking gain (1/s). [1, 1/period]
+  double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s). [0.05, 2]
+  double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8. [0.01, max_task_speed]
+  double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s). [1, 0.5/period]
+  double guard_margin = 0.001;        ///< safety filter floor above d_r (m). [0, d_b - d_r)
+  double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m). [0, d_b - d_r]
   /// Predictive guard (not in the paper): the commanded step is checked at the configuration it
   /// leads to, and shortened until no physical pair ends below d_r + predict_margin closer than it
   /// is now (or than holding the arms still would leave it). Below guard_margin, it acts only where
-  /// the first-order filter above leaves a gap.
+  /// the first-order filter above leaves a gap. (m) [0, d_b - d_r)
   double predict_margin = 0.0005;
   AvoidanceMode mode = AvoidanceMode::kOneDof;
 };
+
+/// The sane range of one numeric parameter, evaluated for a given set of parameters (ends that
+/// depend on other keys, e.g. k_virtual <= 0.5 / period, carry the other keys' current values).
+struct ParamRange {
+  const char* key;
+  double value;               ///< the parameter's value in the set it was evaluated for
+  double lo;
+  bool lo_open;               ///< true: value > lo; false: value >= lo
+  std::string lo_text;        ///< how the lower end is written ("0.001", "d_r", "d_b - d_r")
+  double hi;
+  bool hi_open;
+  std::string hi_text;
+  const char* unit;
+  const char* why;            ///< the reason for the range, one sentence
+  bool contains(double v) const;   ///< finite and inside the range
+  std::string describe() const;    ///< e.g. "[0.5, 0.5 / period = 100] 1/s"
+};
+
+/// Every numeric ControllerParams field with its range, in the order validateControllerParams checks them.
+std::vector<ParamRange> controllerParamRanges(const ControllerParams& params);
 
 /// One arm as the configuration names it.
 struct ArmConfig {
@@ -98,7 +122,8 @@ ControllerConfig defaultControllerConfig();
 /// Reads a YAML file on top of the defaults. Throws ConfigError naming the file, key and bad value.
 ControllerConfig loadControllerConfig(const std::string& yaml_path);
 
-/// Checks a configuration (thresholds ordered, gains positive, ...). Throws ConfigError.
+/// Checks every parameter against its range (controllerParamRanges, in table order). Throws
+/// ConfigError "<source>: <key> = <value> is outside its range <range> <unit>: <why>".
 void validateControllerParams(const ControllerParams& params, const std::string& source);
 
 /// The configuration resolved against a robot model (immutable).
