@@ -489,6 +489,69 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
 
 }  // namespace
 
+bool isArmIndependent(const Model& model, const ControllerModel& cm, const ControllerData& data, int s) {
+  return ownerArm(model, cm, data.dist, s) < 0;
+}
+
+bool checkWalkingStep(const Model& model, const ControllerModel& cm, ControllerData& data,
+                      const Eigen::Ref<const Eigen::VectorXd>& q_next) {
+  if (!computeForwardKinematics(model, data.kin_next, q_next)) return false;
+  data.dist_next.slots = data.dist.slots;
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -kInf;
+  computeSegmentDistances(model, data.kin_next, data.dist_next, no_rows);
+  const double floor = cm.params.d_r + cm.params.predict_margin;
+  for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
+    const PairDistance& pn = data.dist_next.pairs[i];
+    if (!pn.active || !isPhysical(model, data, pn)) continue;
+    if (!(pn.distance < floor) || !(pn.distance < data.dist.pairs[i].distance)) continue;
+    if (isArmIndependent(model, cm, data, pn.seg_a) && isArmIndependent(model, cm, data, pn.seg_b)) return false;
+  }
+  return true;
+}
+
+int findUnresolvableContact(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                            const Eigen::Ref<const Eigen::VectorXd>& q) {
+  if (slot < 0 || slot >= kBodySchemaSlots || !data.dist.slots[static_cast<std::size_t>(slot)].enabled) return -1;
+  const int s = model.num_robot_segments + slot;
+  if (!isArmIndependent(model, cm, data, s)) return -1;
+  if (!computeForwardKinematics(model, data.kin_next, q)) return -1;
+  data.dist_next.slots = data.dist.slots;
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -kInf;
+  computeSegmentDistances(model, data.kin_next, data.dist_next, no_rows);
+  const double limit = cm.params.d_r + cm.params.estop_release_margin;
+  for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
+    const PairDistance& pd = data.dist_next.pairs[i];
+    if (!pd.active || (pd.seg_a != s && pd.seg_b != s)) continue;
+    const int other = pd.seg_a == s ? pd.seg_b : pd.seg_a;
+    if (isArmIndependent(model, cm, data, other) && !(pd.distance >= limit)) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+SegmentAttach attachControllerSegment(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                                      int link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
+                                      std::uint64_t ignore_mask, bool is_virtual,
+                                      const Eigen::Ref<const Eigen::VectorXd>& q) {
+  SegmentAttach result;
+  if (slot < 0 || slot >= kBodySchemaSlots) return result;
+  const BodySchemaSlot previous = data.dist.slots[static_cast<std::size_t>(slot)];
+  if (!attachBodySchemaSegment(model, data.dist, slot, link, a_L, b_L, radius, ignore_mask)) return result;
+  const int pair = is_virtual ? -1 : findUnresolvableContact(model, cm, data, slot, q);
+  if (pair >= 0) {
+    data.dist.slots[static_cast<std::size_t>(slot)] = previous;
+    const PairDistance& pd = data.dist_next.pairs[static_cast<std::size_t>(pair)];
+    result.refusing_pair = pair;
+    result.other_segment = pd.seg_a == model.num_robot_segments + slot ? pd.seg_b : pd.seg_a;
+    result.distance = pd.distance;
+    return result;
+  }
+  data.slot_virtual[static_cast<std::size_t>(slot)] = is_virtual;
+  result.attached = true;
+  return result;
+}
+
 ControlResult computeControl(const Model& model, const ControllerModel& cm, ControllerData& data,
                              const Eigen::Ref<const Eigen::VectorXd>& q, const ControlInput& input) {
   data.qdot.setZero();

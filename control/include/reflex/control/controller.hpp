@@ -200,6 +200,8 @@ struct ControllerData {
   std::uint64_t bad_input_count = 0;
   /// Predictive guard: how many cycles shortened the commanded step.
   std::uint64_t guard_count = 0;
+  /// Walking guard (checkWalkingStep): how many walking steps were held.
+  std::uint64_t walking_hold_count = 0;
   /// Velocity of the joints the controller does not command (walking, balance, gaze), estimated
   /// from the previous cycle's measured q; zero on the first cycle.
   Eigen::VectorXd qdot_uncontrolled;
@@ -244,5 +246,51 @@ Zone zoneOf(double d, const ControllerParams& params);
 /// Allocation-free; never throws; data.qdot is always finite (zero on bad input or e-stop).
 ControlResult computeControl(const Model& model, const ControllerModel& cm, ControllerData& data,
                              const Eigen::Ref<const Eigen::VectorXd>& q, const ControlInput& input);
+
+/// The plant's contract for motion the controller does not command (walking, balance): it may
+/// advance only when the cycle's result is kOk. While the e-stop is latched (kFrozen) or recovering
+/// (kRecovering: only motion that separates every pair below d_r is allowed, and the legs cannot be
+/// asked to separate), or the input was bad (kBadInput), it holds. stepPlant (simulation.hpp) keeps it.
+inline bool walkingMayAdvance(ControlResult result) { return result == ControlResult::kOk; }
+
+/// True if segment s (a robot segment, or a body-schema slot by its link) is moved by neither arm:
+/// a pair of two such segments cannot be changed by any arm motion.
+bool isArmIndependent(const Model& model, const ControllerModel& cm, const ControllerData& data, int s);
+
+/// Walking guard (issue 16, item 1). q_next: the robot's configuration after this cycle's arm step
+/// with the walking joints moved by the walking step under test. Returns false if, at q_next, some
+/// physical pair that no arm can move (both segments arm-independent: a body-schema segment on the
+/// root, body, chest, head or legs against the trunk or the legs) would end below
+/// d_r + predict_margin AND closer than it is this cycle (data.dist): the arms cannot take such a
+/// pair apart, so walking must not close it. Call after computeControl returned kOk; uses
+/// data.kin_next / data.dist_next as scratch. Allocation-free; never throws; false for a non-finite q_next.
+bool checkWalkingStep(const Model& model, const ControllerModel& cm, ControllerData& data,
+                      const Eigen::Ref<const Eigen::VectorXd>& q_next);
+
+/// Body-schema placement check for a PHYSICAL segment just attached to `slot` (issue 16, item 1):
+/// the index of a pair between it and a segment such that no arm can move either of them, whose
+/// distance at configuration q is below d_r + estop_release_margin; -1 if none (or the slot is
+/// disabled or on a link an arm moves). Such a segment would latch the e-stop at once and no arm
+/// motion could ever release it: the caller refuses it (detaches it again, names it and counts it).
+/// Uses data.kin_next / data.dist_next as scratch; allocation-free; -1 for a non-finite q.
+int findUnresolvableContact(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                            const Eigen::Ref<const Eigen::VectorXd>& q);
+
+/// What attachControllerSegment did.
+struct SegmentAttach {
+  bool attached = false;
+  int refusing_pair = -1;       ///< the pair findUnresolvableContact found (refused), else -1
+  int other_segment = -1;       ///< its segment other than the slot
+  double distance = 0.0;        ///< its distance (m)
+};
+
+/// Attaches a body-schema segment for the controller (reflex_controller and the scenarios use it):
+/// attachBodySchemaSegment (endpoints in the link frame, m), then, for a physical segment,
+/// findUnresolvableContact at q. A refused segment leaves the slot exactly as it was; an attached
+/// one sets data.slot_virtual[slot]. Bad arguments (slot, link, non-finite values): not attached,
+/// refusing_pair -1. Allocation-free; never throws.
+SegmentAttach attachControllerSegment(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                                      int link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
+                                      std::uint64_t ignore_mask, bool is_virtual, const Eigen::Ref<const Eigen::VectorXd>& q);
 
 }  // namespace reflex::control
