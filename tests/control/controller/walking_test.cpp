@@ -47,7 +47,7 @@ TEST(Walking, ASecondWalkCommandMidWalkMovesNoJointFasterThanItsLimit) {
   EXPECT_GT(worst, 0.5) << "the legs did move at a good fraction of their limit";
 }
 
-TEST(Walking, AnyCommandSequenceKeepsEveryJointOfThePlantWithinItsVelocityLimit) {
+TEST(Walking, AnyCommandSequenceKeepsEveryJointOfThePlantWithinItsVelocityLimitAndHoldsUnlessClear) {
   const Model& model = shippedModel();
   const ControllerModel& cm = defaultControllerModel();
   const double dt = cm.params.period;
@@ -56,7 +56,7 @@ TEST(Walking, AnyCommandSequenceKeepsEveryJointOfThePlantWithinItsVelocityLimit)
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   double worst_plant = 0.0, worst_pattern = 0.0;
-  int commands = 0;
+  int commands = 0, held_cycles = 0;
   for (int seq = 0; seq < 60; ++seq) {
     ControllerData data(model, cm);
     KinematicRobot robot(model, restConfiguration(model, cm));
@@ -80,18 +80,30 @@ TEST(Walking, AnyCommandSequenceKeepsEveryJointOfThePlantWithinItsVelocityLimit)
       // The plant: arm velocities anywhere up to 3x their limit, sometimes NaN; the controller's result.
       for (int j = 0; j < model.nq; ++j) qdot[j] = (u(rng) < 0.01 ? nan : 3.0 * (2.0 * u(rng) - 1.0) * model.v_max[j]);
       data.qdot = qdot;
+      // The controller's result: mostly clear, sometimes latched, recovering or bad input, in
+      // which walking must hold (item 1).
+      const double pr = u(rng);
+      const ControlResult result = pr < 0.8    ? ControlResult::kOk
+                                   : pr < 0.87 ? ControlResult::kRecovering
+                                   : pr < 0.94 ? ControlResult::kFrozen
+                                               : ControlResult::kBadInput;
       const Eigen::VectorXd before = robot.jointPositions();
-      stepPlant(model, cm, data, ControlResult::kOk, robot, &walking, dt, scratch);
+      stepPlant(model, cm, data, result, robot, &walking, dt, scratch);
       for (int j = 0; j < model.nq; ++j) {
         const double moved = std::abs(robot.jointPositions()[j] - before[j]);
         ASSERT_TRUE(std::isfinite(robot.jointPositions()[j])) << model.q_names[j];
         worst_plant = std::max(worst_plant, moved / (model.v_max[j] * dt));
+      }
+      if (result != ControlResult::kOk) {
+        ++held_cycles;
+        for (const int j : walking.joints()) ASSERT_EQ(robot.jointPositions()[j], before[j]) << model.q_names[j];
       }
     }
   }
   std::printf("%d random walk commands: worst |dq| / (v_max dt) = %.6f (plant), %.6f (pattern)\n", commands,
               worst_plant, worst_pattern);
   EXPECT_GT(commands, 500);
+  EXPECT_GT(held_cycles, 5000);
   EXPECT_LE(worst_plant, 1.0 + 1e-9);
   EXPECT_LE(worst_pattern, 1.0 + 1e-9);
   EXPECT_GT(worst_plant, 0.99) << "the arms were driven at their limit";
