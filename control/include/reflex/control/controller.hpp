@@ -18,6 +18,8 @@
 //   ControllerData data(model, cm);
 //   every 5 ms: computeControl(model, cm, data, q, input);  // allocation-free, never throws, no NaN
 //               -> data.qdot (nq), data.arms[i] status, data.estop
+//               then the plant: stepPlant (simulation.hpp) applies data.qdot and advances walking
+//               only on kOk (walkingMayAdvance) and only by steps checkWalkingStep accepts
 // Extending: a new criterion in the nullspace goes into the xi terms of computeArm() in controller.cpp.
 #pragma once
 
