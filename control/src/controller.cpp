@@ -36,6 +36,26 @@ int segmentLink(const Model& model, const DistanceData& dist, int s) {
                                             : model.segments[s].link;
 }
 
+/// True if `link` lies strictly below `ancestor` in the link tree (O(depth), allocation-free).
+bool descendsFrom(const Model& model, int link, int ancestor) {
+  for (int l = model.links[static_cast<std::size_t>(link)].parent; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent)
+    if (l == ancestor) return true;
+  return false;
+}
+
+/// The side of a pair on which arm `a`'s virtual force acts (Eq. 14-16): +1 for seg_a (the force
+/// acts at p_W_a along +nhat_W), -1 for seg_b. For a pair with another body part that is the arm's
+/// own segment. For a pair of two segments that arm `a` both moves (shoulder-hand, upper arm-hand, a
+/// grasped object against the upper arm) it is the DISTAL one, whose link descends from the other's:
+/// the paper's S_i are the forearm and the hand, and the force must push the hand away from the
+/// shoulder, not the shoulder away from the hand (that flips its direction in the Eq. 17 merge and
+/// can drive the closest pair together; issue 16, item 7). Two segments on one link: seg_a.
+int forceSide(const Model& model, const DistanceData& dist, const PairDistance& pd, int owner_a, int owner_b, int a) {
+  if (owner_a != a) return -1;
+  if (owner_b != a) return 1;
+  return descendsFrom(model, segmentLink(model, dist, pd.seg_b), segmentLink(model, dist, pd.seg_a)) ? -1 : 1;
+}
+
 bool higherPriority(MotionPriority p, int arm) {
   return (p == MotionPriority::kLeftHigher && arm == kLeft) || (p == MotionPriority::kRightHigher && arm == kRight);
 }
@@ -190,7 +210,7 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
     const int oa = ownerArm(model, cm, data.dist, pd.seg_a);
     const int ob = ownerArm(model, cm, data.dist, pd.seg_b);
     if (oa != a && ob != a) continue;
-    const int sign = oa == a ? 1 : -1;
+    const int sign = forceSide(model, data.dist, pd, oa, ob, a);
     const int other = oa == a ? ob : oa;
     const bool arm_pair = other >= 0 && other != a;
     if (arm_pair || other < 0) {
@@ -255,16 +275,21 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   VecA xi_rest = VecA::Zero(n);
   if (!given) xi_rest = -P.alpha_rest * (q - arm.rest.head(n));
 
+  // The virtual-force term of Eq. 8 along the merged direction: row^+ |F^all|.
+  const RowA row_ca = e_all.transpose() * J_ca;  // J_ca|row,y in the merged avoidance frame
+  VecA row_pinv;
+  dampedPseudoInverse(row_ca, P.damping, row_pinv);
+  VecA qdot_force = VecA::Zero(n);
+  if (F_mag > 0.0) qdot_force = row_pinv * F_mag;
+  // three_dof: the whole merged force, J_ca^+ F^all (Eq. 8 with a 3-D task).
+  MatA3 Jca_pinv;
+  if (P.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(J_ca, P.damping, Jca_pinv);
+  status.qdot_force = P.mode == AvoidanceMode::kThreeDof && !recovery_only ? VecA(Jca_pinv * (F_mag * e_all)) : qdot_force;
+
   VecA qdot(n);
   if (recovery_only) {
     // Only the separating motion of Eq. 8: nothing in the nullspace.
-    qdot.setZero();
-    if (F_mag > 0.0) {
-      const RowA row = e_all.transpose() * J_ca;
-      VecA row_pinv;
-      dampedPseudoInverse(row, P.damping, row_pinv);
-      qdot = row_pinv * F_mag;
-    }
+    qdot = qdot_force;
   } else {
     // Whole-body motion, Eq. 2-5.
     MatA3 J_pinv;
@@ -286,18 +311,13 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
       else xi_t = xi_rest;
       VecA qdot_ca(n);
       if (P.mode == AvoidanceMode::kOneDof) {
-        const RowA row = e_all.transpose() * J_ca;  // J_ca|row,y in the merged avoidance frame
-        VecA row_pinv;
-        dampedPseudoInverse(row, P.damping, row_pinv);
         MatA N_ca;
-        nullspaceProjector(row, N_ca);
-        qdot_ca = row_pinv * F_mag + N_ca * xi_t;
+        nullspaceProjector(row_ca, N_ca);
+        qdot_ca = qdot_force + N_ca * xi_t;
       } else {
-        MatA3 Jca_pinv;
-        dampedPseudoInverse(J_ca, P.damping, Jca_pinv);
         MatA N_ca;
         nullspaceProjector(J_ca, N_ca);
-        qdot_ca = Jca_pinv * (F_mag * e_all) + N_ca * xi_t;
+        qdot_ca = status.qdot_force + N_ca * xi_t;
       }
       qdot = (1.0 - f) * qdot_wbm + f * qdot_ca;  // Eq. 1
     }
@@ -469,6 +489,69 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
 
 }  // namespace
 
+bool isArmIndependent(const Model& model, const ControllerModel& cm, const ControllerData& data, int s) {
+  return ownerArm(model, cm, data.dist, s) < 0;
+}
+
+bool checkWalkingStep(const Model& model, const ControllerModel& cm, ControllerData& data,
+                      const Eigen::Ref<const Eigen::VectorXd>& q_next) {
+  if (!computeForwardKinematics(model, data.kin_next, q_next)) return false;
+  data.dist_next.slots = data.dist.slots;
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -kInf;
+  computeSegmentDistances(model, data.kin_next, data.dist_next, no_rows);
+  const double floor = cm.params.d_r + cm.params.predict_margin;
+  for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
+    const PairDistance& pn = data.dist_next.pairs[i];
+    if (!pn.active || !isPhysical(model, data, pn)) continue;
+    if (!(pn.distance < floor) || !(pn.distance < data.dist.pairs[i].distance)) continue;
+    if (isArmIndependent(model, cm, data, pn.seg_a) && isArmIndependent(model, cm, data, pn.seg_b)) return false;
+  }
+  return true;
+}
+
+int findUnresolvableContact(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                            const Eigen::Ref<const Eigen::VectorXd>& q) {
+  if (slot < 0 || slot >= kBodySchemaSlots || !data.dist.slots[static_cast<std::size_t>(slot)].enabled) return -1;
+  const int s = model.num_robot_segments + slot;
+  if (!isArmIndependent(model, cm, data, s)) return -1;
+  if (!computeForwardKinematics(model, data.kin_next, q)) return -1;
+  data.dist_next.slots = data.dist.slots;
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -kInf;
+  computeSegmentDistances(model, data.kin_next, data.dist_next, no_rows);
+  const double limit = cm.params.d_r + cm.params.estop_release_margin;
+  for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
+    const PairDistance& pd = data.dist_next.pairs[i];
+    if (!pd.active || (pd.seg_a != s && pd.seg_b != s)) continue;
+    const int other = pd.seg_a == s ? pd.seg_b : pd.seg_a;
+    if (isArmIndependent(model, cm, data, other) && !(pd.distance >= limit)) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+SegmentAttach attachControllerSegment(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                                      int link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
+                                      std::uint64_t ignore_mask, bool is_virtual,
+                                      const Eigen::Ref<const Eigen::VectorXd>& q) {
+  SegmentAttach result;
+  if (slot < 0 || slot >= kBodySchemaSlots) return result;
+  const BodySchemaSlot previous = data.dist.slots[static_cast<std::size_t>(slot)];
+  if (!attachBodySchemaSegment(model, data.dist, slot, link, a_L, b_L, radius, ignore_mask)) return result;
+  const int pair = is_virtual ? -1 : findUnresolvableContact(model, cm, data, slot, q);
+  if (pair >= 0) {
+    data.dist.slots[static_cast<std::size_t>(slot)] = previous;
+    const PairDistance& pd = data.dist_next.pairs[static_cast<std::size_t>(pair)];
+    result.refusing_pair = pair;
+    result.other_segment = pd.seg_a == model.num_robot_segments + slot ? pd.seg_b : pd.seg_a;
+    result.distance = pd.distance;
+    return result;
+  }
+  data.slot_virtual[static_cast<std::size_t>(slot)] = is_virtual;
+  result.attached = true;
+  return result;
+}
+
 ControlResult computeControl(const Model& model, const ControllerModel& cm, ControllerData& data,
                              const Eigen::Ref<const Eigen::VectorXd>& q, const ControlInput& input) {
   data.qdot.setZero();
@@ -516,6 +599,7 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
       for (int a = 0; a < 2; ++a) {
         data.trajectories[a].active = false;
         data.arms[a].f = 1.0;
+        data.arms[a].qdot_force.setZero();
         data.arms[a].zone = Zone::kRed;
       }
       return ControlResult::kFrozen;

@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <iomanip>
 #include <set>
 #include <sstream>
 
@@ -11,7 +12,7 @@ namespace {
 
 std::string str(double v) {
   std::ostringstream os;
-  os << v;
+  os << std::setprecision(15) << v;
   return os.str();
 }
 
@@ -47,44 +48,75 @@ ControllerConfig defaultControllerConfig() {
   return config;
 }
 
+std::vector<ParamRange> controllerParamRanges(const ControllerParams& p) {
+  // Table order is check order: a bound that depends on other keys comes after them, so the
+  // first error names the key that is out of its own range.
+  const double gap = p.d_b - p.d_r;
+  return {
+      {"d_r", p.d_r, 0.0, true, "0", 0.05, false, "0.05", "m",
+       "the red zone: a positive distance, at most 5 cm (the e-stop fires below it)"},
+      {"d_b", p.d_b, p.d_r, true, "d_r", 0.1, false, "0.1", "m", "zones ordered d_r < d_b < d_a (Eq. 13)"},
+      {"d_a", p.d_a, p.d_b, true, "d_b", 0.2, false, "0.2", "m",
+       "zones ordered d_r < d_b < d_a; at most 20 cm (every pair below it is merged, Eq. 17)"},
+      {"d_safe", p.d_safe, p.d_a, false, "d_a", 0.5, false, "0.5", "m",
+       "Eq. 5 acts on pairs below d_safe: it must include the yellow zone, and at most 0.5 m"},
+      {"period", p.period, 0.001, false, "0.001", 0.1, false, "0.1", "s",
+       "1 kHz .. 10 Hz: a cycle computes in well under 1 ms; shorter periods are overruns every cycle"},
+      {"k_virtual", p.k_virtual, 0.5, false, "0.5", 0.5 / p.period, false, "0.5 / period", "1/s",
+       "the yellow zone must separate pairs (>= 0.5/s), and k * period <= 0.5 so one cycle never "
+       "moves more than half the way to d_a"},
+      {"alpha_ca", p.alpha_ca, 0.0, false, "0", 100.0, false, "100", "1/(m s)",
+       "Eq. 5 gradient step; 0 disables it"},
+      {"alpha_t", p.alpha_t, 1.0, false, "1", 1.0 / p.period, false, "1 / period", "1/s",
+       "Eq. 12 is the only reaching term inside the yellow zone (0 never reaches there); "
+       "alpha_t * period <= 1 keeps the discrete gradient step from overshooting"},
+      {"alpha_jla", p.alpha_jla, 0.0, false, "0", 10.0, false, "10", "1/s", "Eq. 4 gradient step; 0 disables it"},
+      {"alpha_rest", p.alpha_rest, 0.0, false, "0", 1.0 / p.period, false, "1 / period", "1/s",
+       "attraction to the rest posture (0: a hand without target stays where it is); "
+       "alpha_rest * period <= 1 (no overshoot)"},
+      {"damping", p.damping, 0.001, false, "0.001", 0.2, false, "0.2", "m",
+       "singularity-robust inverse: at least 1 mm (0 is singular), at most 0.2 m"},
+      {"reach_gain", p.reach_gain, 1.0, false, "1", 1.0 / p.period, false, "1 / period", "1/s",
+       "trajectory tracking: 0 never corrects a tracking error; reach_gain * period <= 1 (no overshoot)"},
+      {"max_task_speed", p.max_task_speed, 0.05, false, "0.05", 2.0, false, "2", "m/s",
+       "the hand's task-space speed limit"},
+      {"trajectory_speed", p.trajectory_speed, 0.01, false, "0.01", p.max_task_speed, false, "max_task_speed", "m/s",
+       "the reference may not run faster than the hand is allowed to follow it"},
+      {"guard_rate", p.guard_rate, 1.0, false, "1", 0.5 / p.period, false, "0.5 / period", "1/s",
+       "safety filter: at least 1/s (else nothing can approach in the orange zone), and "
+       "guard_rate * period <= 0.5 so two arms approaching each other cannot overshoot the floor"},
+      {"guard_margin", p.guard_margin, 0.0, false, "0", gap, true, "d_b - d_r", "m",
+       "the safety filter's floor d_r + guard_margin lies below d_b"},
+      {"predict_margin", p.predict_margin, 0.0, false, "0", gap, true, "d_b - d_r", "m",
+       "the predictive guard's floor d_r + predict_margin lies below d_b"},
+      {"estop_release_margin", p.estop_release_margin, 0.0, false, "0", gap, false, "d_b - d_r", "m",
+       "recovery ends when every pair is above d_r + this; the recovery's only motion is the virtual "
+       "force, which fades towards d_a, so the release must lie inside the orange zone to be reachable"},
+  };
+}
+
+bool ParamRange::contains(double v) const {
+  if (!std::isfinite(v)) return false;
+  const bool above = lo_open ? v > lo : v >= lo;
+  const bool below = hi_open ? v < hi : v <= hi;
+  return above && below;
+}
+
+std::string ParamRange::describe() const {
+  std::string r = lo_open ? "(" : "[";
+  r += lo_text == str(lo) ? lo_text : lo_text + " = " + str(lo);
+  r += ", ";
+  r += hi_text == str(hi) ? hi_text : hi_text + " = " + str(hi);
+  r += hi_open ? ")" : "]";
+  return r + " " + unit;
+}
+
 void validateControllerParams(const ControllerParams& p, const std::string& src) {
-  auto positive = [&](double v, const char* name) {
-    if (!(v > 0.0) || !std::isfinite(v)) throw ConfigError(src + ": " + name + " = " + str(v) + " must be positive");
-  };
-  auto nonneg = [&](double v, const char* name) {
-    if (!(v >= 0.0) || !std::isfinite(v)) throw ConfigError(src + ": " + name + " = " + str(v) + " must be >= 0");
-  };
-  positive(p.d_r, "d_r");
-  positive(p.d_b, "d_b");
-  positive(p.d_a, "d_a");
-  if (!(p.d_r < p.d_b && p.d_b < p.d_a))
-    throw ConfigError(src + ": thresholds must satisfy d_r < d_b < d_a, got d_r = " + str(p.d_r) +
-                      ", d_b = " + str(p.d_b) + ", d_a = " + str(p.d_a));
-  positive(p.period, "period");
-  if (p.period > 0.1) throw ConfigError(src + ": period = " + str(p.period) + " s is too long (max 0.1)");
-  positive(p.k_virtual, "k_virtual");
-  nonneg(p.alpha_ca, "alpha_ca");
-  positive(p.d_safe, "d_safe");
-  if (!(p.d_safe >= p.d_a))
-    throw ConfigError(src + ": d_safe = " + str(p.d_safe) + " must be >= d_a = " + str(p.d_a) + " (Eq. 5)");
-  nonneg(p.alpha_t, "alpha_t");
-  nonneg(p.alpha_jla, "alpha_jla");
-  nonneg(p.alpha_rest, "alpha_rest");
-  positive(p.damping, "damping");
-  nonneg(p.reach_gain, "reach_gain");
-  positive(p.max_task_speed, "max_task_speed");
-  positive(p.trajectory_speed, "trajectory_speed");
-  nonneg(p.estop_release_margin, "estop_release_margin");
-  positive(p.guard_rate, "guard_rate");
-  if (p.guard_rate * p.period > 0.5)
-    throw ConfigError(src + ": guard_rate * period = " + str(p.guard_rate * p.period) +
-                      " must be <= 0.5 so two arms approaching each other cannot overshoot the floor");
-  nonneg(p.guard_margin, "guard_margin");
-  if (!(p.d_r + p.guard_margin < p.d_b))
-    throw ConfigError(src + ": d_r + guard_margin = " + str(p.d_r + p.guard_margin) + " must be below d_b = " + str(p.d_b));
-  nonneg(p.predict_margin, "predict_margin");
-  if (!(p.d_r + p.predict_margin < p.d_b))
-    throw ConfigError(src + ": d_r + predict_margin = " + str(p.d_r + p.predict_margin) + " must be below d_b = " + str(p.d_b));
+  for (const ParamRange& range : controllerParamRanges(p)) {
+    if (range.contains(range.value)) continue;
+    throw ConfigError(src + ": " + range.key + " = " + str(range.value) + " is outside its range " +
+                      range.describe() + ": " + range.why);
+  }
 }
 
 ControllerConfig loadControllerConfig(const std::string& yaml_path) {

@@ -18,9 +18,7 @@ bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vec
     if (s < 0) return false;
     mask |= std::uint64_t{1} << s;
   }
-  if (!attachBodySchemaSegment(model, data.dist, slot, l, a_L, b_L, radius, mask)) return false;
-  data.slot_virtual[slot] = is_virtual;
-  return true;
+  return attachControllerSegment(model, cm, data, slot, l, a_L, b_L, radius, mask, is_virtual, q).attached;
 }
 
 void ScenarioContext::detach(int slot) {
@@ -55,8 +53,8 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
   ControllerData data(model, cm);
   KinematicRobot robot(model, restConfiguration(model, cm));
   WalkingPattern walking(model);
-  Eigen::VectorXd q_walk = robot.jointPositions();
-  ScenarioContext ctx{model, data};
+  Eigen::VectorXd q_scratch = robot.jointPositions(), q_before = robot.jointPositions();
+  ScenarioContext ctx{model, data, cm, robot.jointPositions()};
   ControlInput input;
   SimResult result;
   result.min_distance = std::numeric_limits<double>::infinity();
@@ -118,20 +116,20 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
     ++result.cycles;
     result.guard_cycles = data.guard_count;
     if (k == steps) break;
-    // Apply: arms from the controller; legs/heel/body from walking (frozen with the robot on e-stop).
-    const bool frozen = cr == ControlResult::kFrozen;
-    if (!frozen) {
-      robot.command(data.qdot, dt);
-      if (scenario.walk_distance > 0.0 && t >= scenario.walk_start) {
-        if (!walk_started) {
-          walking.start(scenario.walk_distance, scenario.walk_speed);
-          walk_started = true;
-        }
-        q_walk = robot.jointPositions();
-        walking.step(dt, q_walk);
-        robot.setWalkingJoints(q_walk, walking.joints());
-      }
+    // Apply (stepPlant): arms from the controller; legs/heel/body from walking, which holds while the
+    // e-stop is latched or recovering and never closes a pair that no arm can move.
+    const bool walk_now = scenario.walk_distance > 0.0 && t >= scenario.walk_start;
+    if (walk_now && !walk_started) {
+      walking.start(scenario.walk_distance, scenario.walk_speed);
+      walk_started = true;
     }
+    q_before = robot.jointPositions();
+    stepPlant(model, cm, data, cr, robot, walk_started ? &walking : nullptr, dt, q_scratch);
+    result.walking_holds = data.walking_hold_count;
+    // What the plant did, every joint (the walking joints too): |dq| / (v_max dt).
+    for (int i = 0; i < model.nq; ++i)
+      result.max_joint_speed_ratio =
+          std::max(result.max_joint_speed_ratio, std::abs(robot.jointPositions()[i] - q_before[i]) / (model.v_max[i] * dt));
   }
   return result;
 }

@@ -262,9 +262,15 @@ void ControllerNode::run() {
       // The boundary check (bounds: BodySchemaLimits): a bad sample is rejected, counted and named.
       const BodySchemaCheck check =
           checkBodySchemaSegment(m.model, link, a, b, change.radius(), change.virtual_segment(), BodySchemaLimits{});
-      if (!check.ok() || slot < 0 || !attachBodySchemaSegment(m.model, m.data->dist, slot, link, a, b, change.radius(), ignore)) {
+      const SegmentAttach att = check.ok() ? attachControllerSegment(m.model, m.cm, *m.data, slot, link, a, b, change.radius(),
+                                                                     ignore, change.virtual_segment(), m.robot->jointPositions())
+                                           : SegmentAttach{};
+      if (!att.attached) {
         ++stats_.targets_rejected;
-        if (check.ok()) {
+        if (att.refusing_pair >= 0) {  // control/README.md: a segment no arm can move away from
+          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')\n",
+                       name.c_str(), att.distance * 1e3, m.model.segments[att.other_segment].name.c_str(), change.parent_link().c_str());
+        } else if (check.ok()) {
           std::fprintf(stderr, "controller: body-schema segment '%s' rejected: no free slot (link '%s')\n", name.c_str(),
                        change.parent_link().c_str());
         } else if (*check.key != '\0') {
@@ -317,14 +323,8 @@ void ControllerNode::run() {
 
     // 3. Control (allocation-free) and the robot.
     const ControlResult cr = computeControl(m.model, m.cm, *m.data, m.robot->jointPositions(), in);
-    if (cr != ControlResult::kFrozen) {
-      m.robot->command(m.data->qdot, period);
-      if (walk_active) {
-        m.q_walk = m.robot->jointPositions();
-        m.walking->step(period, m.q_walk);
-        m.robot->setWalkingJoints(m.q_walk, m.walking->joints());
-      }
-    }
+    // Walking holds while the e-stop is latched or recovering, and never closes a pair no arm can move.
+    stepPlant(m.model, m.cm, *m.data, cr, *m.robot, walk_active ? m.walking.get() : nullptr, period, m.q_walk);
     // The robot state is persisted before it is published: what any reader saw survives a crash.
     if (m.state_file && !m.state_file->save(m.robot->jointPositions())) ++stats_.state_write_errors;
     double dmin = 1e9, dvirt = std::numeric_limits<double>::infinity();

@@ -1,7 +1,10 @@
 // The 5 ms control path allocates nothing: global operator new/delete are replaced by counting
 // versions, and a full controller cycle (kinematics, every pair, both controllers, blend, safety
-// filter, predictive guard, e-stop logic, body-schema slots) must leave the count unchanged.
+// filter, predictive guard, e-stop logic, body-schema slots) must leave the count unchanged, and so
+// must the plant step (walking and its guard) and the controller's body-schema attach.
 #include "fixture.hpp"
+
+#include "reflex/control/simulation.hpp"
 
 #include <gtest/gtest.h>
 
@@ -89,6 +92,36 @@ TEST(ControllerAllocation, ACycleAllocatesNothing) {
     computeControl(model, cmm, data, q, in);
     EXPECT_EQ(g_allocations.load() - before2, 0);
   }
+}
+
+TEST(ControllerAllocation, ThePlantStepWalkingGuardAndSegmentCheckAllocateNothing) {
+  // stepPlant (arms, walking, the walking guard, a held step taken back) and attachControllerSegment
+  // (attach, placement check, refusal) run inside the 5 ms loop of reflex_controller.
+  const Model& model = testing::shippedModel();
+  const ControllerModel& cm = testing::defaultControllerModel();
+  ControllerData data(model, cm);
+  KinematicRobot robot(model, restConfiguration(model, cm));
+  WalkingPattern walking(model);
+  Eigen::VectorXd scratch = robot.jointPositions();
+  ControlResult cr = computeControl(model, cm, data, robot.jointPositions(), ControlInput{});
+  const Eigen::Vector3d chest = data.kin.X_W_L[model.linkIndex("chest")].translation();
+  const Eigen::Vector3d post = chest + Eigen::Vector3d(0.30, 0.0, 0.0);
+  const int world = model.linkIndex("world");
+  walking.start(0.6, 0.25);
+  const long before = g_allocations.load();
+  const SegmentAttach refused =
+      attachControllerSegment(model, cm, data, 1, world, chest, chest, 0.05, 0, false, robot.jointPositions());
+  const SegmentAttach obstacle = attachControllerSegment(model, cm, data, 0, world, post - Eigen::Vector3d(0, 0, 0.1),
+                                                         post + Eigen::Vector3d(0, 0, 0.1), 0.04, 0, false,
+                                                         robot.jointPositions());
+  for (int k = 0; k < 800; ++k) {
+    cr = computeControl(model, cm, data, robot.jointPositions(), ControlInput{});
+    stepPlant(model, cm, data, cr, robot, &walking, cm.params.period, scratch);
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in 800 plant steps";
+  EXPECT_FALSE(refused.attached);
+  EXPECT_TRUE(obstacle.attached);
+  EXPECT_GT(data.walking_hold_count, 0U) << "the walking guard held steps";
 }
 
 }  // namespace

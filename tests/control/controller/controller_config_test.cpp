@@ -1,11 +1,16 @@
 // Controller configuration: defaults are the paper's, YAML overrides them, every bad value is a
-// ConfigError that names the file, the key and the value.
+// ConfigError that names the file, the key and the value. Every numeric key's documented range
+// (control/README.md; written out again here) is tested at both ends: at the end (accepted unless
+// the end is open), just beyond it (refused, naming file, key, value and range) and just inside.
 #include "fixture.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cstdio>
 #include <fstream>
+#include <iomanip>
+#include <sstream>
+#include <vector>
 #include <unistd.h>
 
 namespace reflex::control {
@@ -74,6 +79,140 @@ TEST(ControllerConfig, BadValuesAreClearErrors) {
               "used twice");
   expectError("d_a: [1, 2\n", "malformed YAML");
   EXPECT_THROW(loadControllerConfig("/nonexistent/controller.yaml"), ConfigError);
+}
+
+/// One end of a parameter's documented range (control/README.md, "Controller parameters"), written
+/// here independently of controllerParamRanges. `context` sets other keys so that only this one
+/// can be out of range (e.g. a large d_r needs larger d_b, d_a).
+struct Bound {
+  const char* key;
+  double value;         // the end
+  bool upper;           // true: the upper end
+  bool open;            // true: the end itself is outside
+  const char* context;  // other keys, YAML
+};
+
+const std::vector<Bound>& documentedBounds() {
+  static const std::vector<Bound> bounds = {
+      {"d_r", 0.0, false, true, ""},
+      {"d_r", 0.05, true, false, "d_b: 0.06\nd_a: 0.1\n"},
+      {"d_b", 0.005, false, true, "guard_margin: 0\npredict_margin: 0\nestop_release_margin: 0\n"},
+      {"d_b", 0.1, true, false, "d_a: 0.15\nd_safe: 0.2\n"},
+      {"d_a", 0.01, false, true, ""},
+      {"d_a", 0.2, true, false, "d_safe: 0.3\n"},
+      {"d_safe", 0.04, false, false, ""},
+      {"d_safe", 0.5, true, false, ""},
+      {"period", 0.001, false, false, ""},
+      {"period", 0.1, true, false, "alpha_t: 5\nreach_gain: 5\nguard_rate: 2\n"},
+      {"k_virtual", 0.5, false, false, ""},
+      {"k_virtual", 100.0, true, false, ""},  // 0.5 / period
+      {"alpha_ca", 0.0, false, false, ""},
+      {"alpha_ca", 100.0, true, false, ""},
+      {"alpha_t", 1.0, false, false, ""},
+      {"alpha_t", 200.0, true, false, ""},  // 1 / period
+      {"alpha_jla", 0.0, false, false, ""},
+      {"alpha_jla", 10.0, true, false, ""},
+      {"alpha_rest", 0.0, false, false, ""},
+      {"alpha_rest", 200.0, true, false, ""},  // 1 / period
+      {"damping", 0.001, false, false, ""},
+      {"damping", 0.2, true, false, ""},
+      {"reach_gain", 1.0, false, false, ""},
+      {"reach_gain", 200.0, true, false, ""},  // 1 / period
+      {"max_task_speed", 0.05, false, false, "trajectory_speed: 0.05\n"},
+      {"max_task_speed", 2.0, true, false, ""},
+      {"trajectory_speed", 0.01, false, false, ""},
+      {"trajectory_speed", 0.6, true, false, ""},  // max_task_speed
+      {"guard_rate", 1.0, false, false, ""},
+      {"guard_rate", 100.0, true, false, ""},  // 0.5 / period
+      {"guard_margin", 0.0, false, false, ""},
+      {"guard_margin", 0.005, true, true, ""},  // d_b - d_r
+      {"predict_margin", 0.0, false, false, ""},
+      {"predict_margin", 0.005, true, true, ""},  // d_b - d_r
+      {"estop_release_margin", 0.0, false, false, ""},
+      {"estop_release_margin", 0.005, true, false, ""},  // d_b - d_r
+  };
+  return bounds;
+}
+
+std::string text(double v) {
+  std::ostringstream os;
+  os << std::setprecision(15) << v;
+  return os.str();
+}
+
+/// Loads `yaml`; "" if accepted (library load and model), else the ConfigError's message.
+std::string tryLoad(const std::string& yaml, std::string& path) {
+  path = writeTemp(yaml);
+  std::string error;
+  try {
+    makeControllerModel(testing::shippedModel(), loadControllerConfig(path));
+  } catch (const ConfigError& e) {
+    error = e.what();
+  }
+  std::remove(path.c_str());
+  return error;
+}
+
+TEST(ControllerConfig, EveryBoundHoldsAtItsEndAndFailsJustBeyondNamingKeyValueRangeAndFile) {
+  int accepted = 0, refused = 0;
+  for (const Bound& b : documentedBounds()) {
+    // Just beyond: a relative step of 1e-6 (absolute 1e-6 at an end of 0).
+    const double step = b.value == 0.0 ? 1e-6 : 1e-6 * std::abs(b.value);
+    const double beyond = b.upper ? b.value + step : b.value - step;
+    const double inside = b.upper ? b.value - step : b.value + step;
+    for (const double v : {b.value, beyond, inside}) {
+      const bool should_fail = v == beyond || (v == b.value && b.open);
+      std::string path;
+      const std::string value = text(v);
+      const std::string error = tryLoad(std::string(b.context) + b.key + ": " + value + "\n", path);
+      if (!should_fail) {
+        EXPECT_EQ(error, "") << b.key << " = " << value << " must be accepted";
+        ++accepted;
+        continue;
+      }
+      ++refused;
+      ASSERT_NE(error, "") << b.key << " = " << value << " must be refused";
+      EXPECT_NE(error.find(path), std::string::npos) << error;                               // the file
+      EXPECT_NE(error.find(std::string(b.key) + " = " + value), std::string::npos) << error;  // key and value
+      EXPECT_NE(error.find("outside its range"), std::string::npos) << error;
+      EXPECT_NE(error.find(text(b.value)), std::string::npos) << error;                      // the range's end
+    }
+  }
+  EXPECT_EQ(accepted + refused, 3 * static_cast<int>(documentedBounds().size()));
+}
+
+TEST(ControllerConfig, TheLibrarysRangeTableIsTheDocumentedOne) {
+  // Every numeric key has both ends documented, and the library's table agrees on each end.
+  const ControllerParams defaults;
+  const std::vector<ParamRange> ranges = controllerParamRanges(defaults);
+  EXPECT_EQ(ranges.size(), 18U);
+  for (const ParamRange& r : ranges) {
+    int ends = 0;
+    for (const Bound& b : documentedBounds()) {
+      if (std::string(b.key) != r.key) continue;
+      ++ends;
+      if (b.upper) {
+        EXPECT_NEAR(r.hi, b.value, 1e-12) << r.key;
+        EXPECT_EQ(r.hi_open, b.open) << r.key;
+      } else {
+        EXPECT_NEAR(r.lo, b.value, 1e-12) << r.key;
+        EXPECT_EQ(r.lo_open, b.open) << r.key;
+      }
+    }
+    EXPECT_EQ(ends, 2) << r.key;
+    EXPECT_TRUE(r.contains(r.value)) << r.key << ": the defaults lie inside every range";
+  }
+}
+
+TEST(ControllerConfig, ConfigurationsThatValidateButCannotWorkAreRefused) {
+  // Issue 16, item 6: each validated before and gave a robot that cannot work.
+  expectError("estop_release_margin: 100\n", "estop_release_margin = 100 is outside its range [0, d_b - d_r = 0.005] m");
+  expectError("alpha_t: 0\n", "alpha_t = 0 is outside its range [1, 1 / period = 200] 1/s");
+  expectError("reach_gain: 0\n", "reach_gain = 0 is outside its range");
+  expectError("period: 1e-9\n", "period = 1e-09 is outside its range [0.001, 0.1] s");
+  expectError("trajectory_speed: 1.0\n", "trajectory_speed = 1 is outside its range [0.01, max_task_speed = 0.6] m/s");
+  expectError("damping: 0\n", "damping = 0");
+  expectError("k_virtual: 1000\n", "k_virtual = 1000");
 }
 
 }  // namespace

@@ -411,32 +411,5 @@ TEST(PredictiveGuard, JointLeversBoundHowFarAnySegmentPointMoves) {
   EXPECT_GT(tightest, 0.5) << "the levers are bounds, but not absurdly loose ones";
 }
 
-TEST(Walking, LegMotionFadesInAndOutWithoutJumps) {
-  // A walking controller starts and stops smoothly: no walking joint may move more than its
-  // steady-state per-step change (amplitude * 2 pi dt / period bounds it; 0.02 rad at 5 ms here).
-  const Model& model = shippedModel();
-  WalkingPattern walking(model);
-  Eigen::VectorXd q = restConfiguration(model, defaultControllerModel());
-  Eigen::VectorXd prev = q;
-  walking.start(0.3, 0.3, 0.8);
-  double max_step = 0.0;
-  bool stopped = false;
-  for (int k = 0; k < 400; ++k) {
-    walking.step(0.005, q);
-    for (const int j : walking.joints())
-      if (model.q_names[j] != "heel_x") max_step = std::max(max_step, std::abs(q[j] - prev[j]));
-    prev = q;
-    if (!walking.walking()) stopped = true;
-  }
-  EXPECT_TRUE(stopped);
-  EXPECT_LT(max_step, 0.02);
-  EXPECT_NEAR(walking.travelled(), 0.3, 1e-12);
-  const Eigen::VectorXd rest = restConfiguration(model, defaultControllerModel());
-  for (const int j : walking.joints())
-    if (model.q_names[j] != "heel_x") {
-      EXPECT_NEAR(q[j], rest[j], 1e-9) << model.q_names[j] << " back at rest after the fade-out";
-    }
-}
-
 }  // namespace
 }  // namespace reflex::control

@@ -18,6 +18,8 @@
 //   ControllerData data(model, cm);
 //   every 5 ms: computeControl(model, cm, data, q, input);  // allocation-free, never throws, no NaN
 //               -> data.qdot (nq), data.arms[i] status, data.estop
+//               then the plant: stepPlant (simulation.hpp) applies data.qdot and advances walking
+//               only on kOk (walkingMayAdvance) and only by steps checkWalkingStep accepts
 // Extending: a new criterion in the nullspace goes into the xi terms of computeArm() in controller.cpp.
 #pragma once
 
@@ -50,32 +52,56 @@ enum class HandStatus : std::uint8_t { kNoTarget = 0, kGiven = 1 };
 enum class MotionPriority : std::uint8_t { kEqual = 0, kLeftHigher = 1, kRightHigher = 2 };
 enum class EstopState : std::uint8_t { kClear = 0, kLatched = 1, kRecovering = 2 };
 
-/// Controller parameters; defaults are the paper's (Sec. 8) where it gives them.
+/// Controller parameters; defaults are the paper's (Sec. 8) where it gives them. Every field has a
+/// sane range (in brackets; an end written with another key depends on it), enforced by
+/// validateControllerParams and listed with its reason by controllerParamRanges and in
+/// control/README.md ("Controller parameters"). A value outside it is a ConfigError naming the file,
+/// key, value and range: a configuration that validates can work.
 struct ControllerParams {
-  double d_a = 0.040;        ///< yellow zone boundary (m): virtual force and blending start, Eq. 6, 13
-  double d_b = 0.010;        ///< orange zone boundary (m): f(d) = 1 below, Eq. 13
-  double d_r = 0.005;        ///< red zone (m): emergency stop, Sec. 7.1
-  double period = 0.005;     ///< control period (s)
-  double k_virtual = 5.0;    ///< virtual force gain k (1/s): separation speed k (d_a - d), Eq. 6
-  double alpha_ca = 1.0;     ///< step width of the avoidance gradient in the WBM nullspace (1/(m s)), Eq. 5
-  double d_safe = 0.10;      ///< d_safe of Eq. 5 (m); pairs closer than this feed the gradient
-  double alpha_t = 60.0;     ///< step width of target reaching in the CA nullspace (1/s), Eq. 12
-  double alpha_jla = 0.2;    ///< joint-limit-avoidance gradient step (1/s), Eq. 4
-  double alpha_rest = 1.5;   ///< attraction to the rest posture when a hand has no target (1/s)
-  double damping = 0.02;     ///< singularity-robust inverse damping lambda (m)
-  double reach_gain = 10.0;  ///< trajectory tracking gain (1/s)
-  double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s)
-  double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8
-  double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s)
-  double guard_margin = 0.001;        ///< safety filter floor above d_r (m)
-  double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m)
+  double d_a = 0.040;        ///< yellow zone boundary (m): virtual force and blending start, Eq. 6, 13. (d_b, 0.2]
+  double d_b = 0.010;        ///< orange zone boundary (m): f(d) = 1 below, Eq. 13. (d_r, 0.1]
+  double d_r = 0.005;        ///< red zone (m): emergency stop, Sec. 7.1. (0, 0.05]
+  double period = 0.005;     ///< control period (s). [0.001, 0.1]
+  double k_virtual = 5.0;    ///< virtual force gain k (1/s): separation speed k (d_a - d), Eq. 6. [0.5, 0.5/period]
+  double alpha_ca = 1.0;     ///< step width of the avoidance gradient in the WBM nullspace (1/(m s)), Eq. 5. [0, 100]
+  double d_safe = 0.10;      ///< d_safe of Eq. 5 (m); pairs closer than this feed the gradient. [d_a, 0.5]
+  double alpha_t = 60.0;     ///< step width of target reaching in the CA nullspace (1/s), Eq. 12. [1, 1/period]
+  double alpha_jla = 0.2;    ///< joint-limit-avoidance gradient step (1/s), Eq. 4. [0, 10]
+  double alpha_rest = 1.5;   ///< attraction to the rest posture when a hand has no target (1/s). [0, 1/period]
+  double damping = 0.02;     ///< singularity-robust inverse damping lambda (m). [0.001, 0.2]
+  double reach_gain = 10.0;  ///< trajectory tracking gain (1/s). [1, 1/period]
+  double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s). [0.05, 2]
+  double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8. [0.01, max_task_speed]
+  double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s). [1, 0.5/period]
+  double guard_margin = 0.001;        ///< safety filter floor above d_r (m). [0, d_b - d_r)
+  double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m). [0, d_b - d_r]
   /// Predictive guard (not in the paper): the commanded step is checked at the configuration it
   /// leads to, and shortened until no physical pair ends below d_r + predict_margin closer than it
   /// is now (or than holding the arms still would leave it). Below guard_margin, it acts only where
-  /// the first-order filter above leaves a gap.
+  /// the first-order filter above leaves a gap. (m) [0, d_b - d_r)
   double predict_margin = 0.0005;
   AvoidanceMode mode = AvoidanceMode::kOneDof;
 };
+
+/// The sane range of one numeric parameter, evaluated for a given set of parameters (ends that
+/// depend on other keys, e.g. k_virtual <= 0.5 / period, carry the other keys' current values).
+struct ParamRange {
+  const char* key;
+  double value;               ///< the parameter's value in the set it was evaluated for
+  double lo;
+  bool lo_open;               ///< true: value > lo; false: value >= lo
+  std::string lo_text;        ///< how the lower end is written ("0.001", "d_r", "d_b - d_r")
+  double hi;
+  bool hi_open;
+  std::string hi_text;
+  const char* unit;
+  const char* why;            ///< the reason for the range, one sentence
+  bool contains(double v) const;   ///< finite and inside the range
+  std::string describe() const;    ///< e.g. "[0.5, 0.5 / period = 100] 1/s"
+};
+
+/// Every numeric ControllerParams field with its range, in the order validateControllerParams checks them.
+std::vector<ParamRange> controllerParamRanges(const ControllerParams& params);
 
 /// One arm as the configuration names it.
 struct ArmConfig {
@@ -98,7 +124,8 @@ ControllerConfig defaultControllerConfig();
 /// Reads a YAML file on top of the defaults. Throws ConfigError naming the file, key and bad value.
 ControllerConfig loadControllerConfig(const std::string& yaml_path);
 
-/// Checks a configuration (thresholds ordered, gains positive, ...). Throws ConfigError.
+/// Checks every parameter against its range (controllerParamRanges, in table order). Throws
+/// ConfigError "<source>: <key> = <value> is outside its range <range> <unit>: <why>".
 void validateControllerParams(const ControllerParams& params, const std::string& source);
 
 /// The configuration resolved against a robot model (immutable).
@@ -143,6 +170,11 @@ struct ArmStatus {
   Eigen::Vector3d force_point_W = Eigen::Vector3d::Zero(); ///< P_cp1^all, Eq. 18
   Eigen::Vector3d hand_W = Eigen::Vector3d::Zero();
   Eigen::Vector3d reference_W = Eigen::Vector3d::Zero();  ///< point on the linear trajectory
+  /// The virtual-force term of the collision controller alone (rad/s, the arm's joints in
+  /// ControllerModel::Arm::q order): row^+ |F^all| (Eq. 8 with the merged force of Eq. 17-18; in
+  /// three_dof mode J_ca^+ F^all), before blending (Eq. 1), the safety filter and the limits. Zero
+  /// when no pair of the arm is inside the yellow zone, and during a latched e-stop.
+  ArmVector qdot_force;
 };
 
 /// Per-arm linear trajectory state (Sec. 8).
@@ -170,6 +202,8 @@ struct ControllerData {
   std::uint64_t bad_input_count = 0;
   /// Predictive guard: how many cycles shortened the commanded step.
   std::uint64_t guard_count = 0;
+  /// Walking guard (checkWalkingStep): how many walking steps were held.
+  std::uint64_t walking_hold_count = 0;
   /// Velocity of the joints the controller does not command (walking, balance, gaze), estimated
   /// from the previous cycle's measured q; zero on the first cycle.
   Eigen::VectorXd qdot_uncontrolled;
@@ -214,5 +248,51 @@ Zone zoneOf(double d, const ControllerParams& params);
 /// Allocation-free; never throws; data.qdot is always finite (zero on bad input or e-stop).
 ControlResult computeControl(const Model& model, const ControllerModel& cm, ControllerData& data,
                              const Eigen::Ref<const Eigen::VectorXd>& q, const ControlInput& input);
+
+/// The plant's contract for motion the controller does not command (walking, balance): it may
+/// advance only when the cycle's result is kOk. While the e-stop is latched (kFrozen) or recovering
+/// (kRecovering: only motion that separates every pair below d_r is allowed, and the legs cannot be
+/// asked to separate), or the input was bad (kBadInput), it holds. stepPlant (simulation.hpp) keeps it.
+inline bool walkingMayAdvance(ControlResult result) { return result == ControlResult::kOk; }
+
+/// True if segment s (a robot segment, or a body-schema slot by its link) is moved by neither arm:
+/// a pair of two such segments cannot be changed by any arm motion.
+bool isArmIndependent(const Model& model, const ControllerModel& cm, const ControllerData& data, int s);
+
+/// Walking guard (issue 16, item 1). q_next: the robot's configuration after this cycle's arm step
+/// with the walking joints moved by the walking step under test. Returns false if, at q_next, some
+/// physical pair that no arm can move (both segments arm-independent: a body-schema segment on the
+/// root, body, chest, head or legs against the trunk or the legs) would end below
+/// d_r + predict_margin AND closer than it is this cycle (data.dist): the arms cannot take such a
+/// pair apart, so walking must not close it. Call after computeControl returned kOk; uses
+/// data.kin_next / data.dist_next as scratch. Allocation-free; never throws; false for a non-finite q_next.
+bool checkWalkingStep(const Model& model, const ControllerModel& cm, ControllerData& data,
+                      const Eigen::Ref<const Eigen::VectorXd>& q_next);
+
+/// Body-schema placement check for a PHYSICAL segment just attached to `slot` (issue 16, item 1):
+/// the index of a pair between it and a segment such that no arm can move either of them, whose
+/// distance at configuration q is below d_r + estop_release_margin; -1 if none (or the slot is
+/// disabled or on a link an arm moves). Such a segment would latch the e-stop at once and no arm
+/// motion could ever release it: the caller refuses it (detaches it again, names it and counts it).
+/// Uses data.kin_next / data.dist_next as scratch; allocation-free; -1 for a non-finite q.
+int findUnresolvableContact(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                            const Eigen::Ref<const Eigen::VectorXd>& q);
+
+/// What attachControllerSegment did.
+struct SegmentAttach {
+  bool attached = false;
+  int refusing_pair = -1;       ///< the pair findUnresolvableContact found (refused), else -1
+  int other_segment = -1;       ///< its segment other than the slot
+  double distance = 0.0;        ///< its distance (m)
+};
+
+/// Attaches a body-schema segment for the controller (reflex_controller and the scenarios use it):
+/// attachBodySchemaSegment (endpoints in the link frame, m), then, for a physical segment,
+/// findUnresolvableContact at q. A refused segment leaves the slot exactly as it was; an attached
+/// one sets data.slot_virtual[slot]. Bad arguments (slot, link, non-finite values): not attached,
+/// refusing_pair -1. Allocation-free; never throws.
+SegmentAttach attachControllerSegment(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
+                                      int link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
+                                      std::uint64_t ignore_mask, bool is_virtual, const Eigen::Ref<const Eigen::VectorXd>& q);
 
 }  // namespace reflex::control

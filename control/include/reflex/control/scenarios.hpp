@@ -17,8 +17,12 @@ namespace reflex::control {
 struct ScenarioContext {
   const Model& model;
   ControllerData& data;
+  const ControllerModel& cm;
+  const Eigen::VectorXd& q;          ///< the robot's current configuration
   /// Attaches a capsule to a link (body schema, Sec. 8.5.1) or, with is_virtual, a virtual segment
-  /// (occlusion, Sec. 8.5.2). Endpoints in the link frame. Returns false for bad arguments.
+  /// (occlusion, Sec. 8.5.2). Endpoints in the link frame. Returns false for bad arguments, and for a
+  /// physical segment that findUnresolvableContact refuses (it overlaps, within d_r +
+  /// estop_release_margin, a segment that no arm can move away from it; the slot stays as it was).
   bool attach(int slot, const std::string& link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L,
               double radius, bool is_virtual, const std::vector<std::string>& ignore = {});
   void detach(int slot);
@@ -63,8 +67,10 @@ struct SimResult {
   double min_virtual_distance = 0.0;
   bool estop_fired = false;
   std::uint64_t guard_cycles = 0;    ///< cycles whose step the predictive guard shortened
+  std::uint64_t walking_holds = 0;   ///< walking steps the walking guard held (checkWalkingStep)
   bool non_finite = false;           ///< a NaN/Inf reached the robot (must never happen)
-  double max_joint_speed_ratio = 0.0;  ///< max |qdot_i| / v_max_i
+  double max_joint_speed_ratio = 0.0;  ///< max over cycles and joints of |qdot_i| / v_max_i (commanded) and
+                                       ///< |dq_i| / (v_max_i dt) (what the plant did, walking joints included)
   std::array<double, 2> reach_time{{-1.0, -1.0}};  ///< first time within 1 cm of the final target, -1 never
   std::array<double, 2> final_error{{0.0, 0.0}};   ///< |hand - target| at the end (m)
   std::uint64_t cycles = 0;
