@@ -75,6 +75,10 @@ struct ControllerParams {
   /// the first-order filter above leaves a gap.
   double predict_margin = 0.0005;
   AvoidanceMode mode = AvoidanceMode::kOneDof;
+  /// The red-zone emergency stop (Sec. 7.1), a switch of its own: `mode = kOff` (no avoidance) keeps
+  /// it. Not read from the controller YAML: only a program sets it false (reflex_controller
+  /// --disable-estop, reflex_sim --no-avoidance for the paper's comparison plots).
+  bool estop = true;
 };
 
 /// One arm as the configuration names it.
