@@ -204,7 +204,7 @@ TEST(ControllerContract, HangUpUser2AlarmAndRealTimeSignalsStopCleanlyWithTheWho
     ExitSummary s;
     ASSERT_EQ(run.finish(s), 0) << "not killed by the signal:\n" << run.output;
     ASSERT_TRUE(s.found) << run.output;
-    EXPECT_GT(s.cycles, 200);
+    EXPECT_GT(s.cycles, 100) << "ran about 1.5 s (fewer cycles on a loaded host: the loop re-anchors when late)";
     EXPECT_EQ(csvRows(csv), s.cycles) << "one row per cycle, none lost";
     EXPECT_NE(run.output.find("(dropped 0)"), std::string::npos) << run.output;
   }
