@@ -82,6 +82,7 @@ int main(int argc, char** argv) {
     std::sort(lat.begin(), lat.end());
     auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))]; };
     std::string extra;
+    if (lat.size() < s.cycles) extra += " (percentiles over the first " + std::to_string(lat.size()) + " cycles)";
     if (s.state_write_errors > 0) extra += ", robot-state writes FAILED " + std::to_string(s.state_write_errors);
     if (!config.log_csv.empty()) extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
     if (s.peer_controller_samples > 0) extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
