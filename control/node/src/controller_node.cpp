@@ -162,12 +162,6 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.robot = std::make_unique<KinematicRobot>(m.model, q0);
   m.walking = std::make_unique<WalkingPattern>(m.model);
   m.q_walk = m.robot->jointPositions();
-  // Opened before the bus and the loop: an unwritable --log is an error at start (LogError).
-  if (!config.log_csv.empty()) {
-    m.log = std::make_unique<TimeseriesLog>(m.model, config.log_csv);
-    m.log_row.q.setZero(m.model.nq);
-    m.log_row.qdot.setZero(m.model.nq);
-  }
 
   bus::BusConfig bc;
   bc.module_name = config.module_name;
@@ -205,6 +199,13 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     }
     if (std::chrono::steady_clock::now() >= probe_end) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  // Opened before the loop (an unwritable --log is an error at start, LogError) but after the probe:
+  // a refused second controller never truncates the log of the one that runs.
+  if (!config.log_csv.empty()) {
+    m.log = std::make_unique<TimeseriesLog>(m.model, config.log_csv);
+    m.log_row.q.setZero(m.model.nq);
+    m.log_row.qdot.setZero(m.model.nq);
   }
   m.joint_writer = &m.participant->makeWriter<msg::JointState>();
   m.status_writer = &m.participant->makeWriter<msg::ControlStatus>();
