@@ -159,7 +159,9 @@ def run_once(args, label, avoidance):
         ctl = [os.path.join(bindir, "reflex_controller")] + dds("controller") + [
             "--duration", "%.1f" % ctl_duration, "--log", os.path.join(out, "controller.csv")]
         if not avoidance:
-            ctl.append("--no-avoidance")
+            # The comparison run shows what happens without protection: avoidance AND the e-stop off,
+            # each by its own loudly named option (the controller says so in its banner and exit line).
+            ctl += ["--no-avoidance", "--disable-estop"]
         procs.append(Proc("controller", ctl, os.path.join(out, "controller.log"), env))
         beh = [os.path.join(bindir, "reflex_behavior"), "--config", args.behavior] + dds("behavior")
         procs.append(Proc("behavior", beh, os.path.join(out, "behavior.log"), env))

@@ -190,11 +190,13 @@ publish[vision]="reflex/object_targets reflex/heartbeat"
 subscribe[vision]="reflex/heartbeat"
 publish[behavior]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat"
 subscribe[behavior]="reflex/object_targets reflex/joint_state reflex/control_status reflex/heartbeat"
-publish[controller]="reflex/joint_state reflex/control_status reflex/heartbeat"
-subscribe[controller]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat"
+# reflex/controller_protection: what protects the robot; each controller also reads it to find a
+# second controller on the domain (issue 16, items 3 and 16).
+publish[controller]="reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection"
+subscribe[controller]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat reflex/controller_protection"
 # The recorder only listens (every topic); it may announce itself with a heartbeat.
 publish[recorder]="reflex/heartbeat"
-subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat"
+subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection"
 # The player (reflex_play) republishes recorded OBSERVATIONS only: what vision saw and what the
 # robot did, so a recording can re-run behavior modules and feed monitoring. Not the four command
 # topics the controller obeys (a recording replayed in a secure system never commands the robot),

@@ -589,7 +589,7 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
       pair_phys = static_cast<int>(i);
     }
   }
-  if (cm.params.mode != AvoidanceMode::kOff && data.estop == EstopState::kClear && d_phys < cm.params.d_r) {
+  if (cm.params.estop && data.estop == EstopState::kClear && d_phys < cm.params.d_r) {
     data.estop = EstopState::kLatched;
     data.estop_pair = pair_phys;
     ++data.estop_count;

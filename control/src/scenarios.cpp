@@ -50,6 +50,7 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
                       const SimOptions& options) {
   ControllerModel cm = cm_in;
   cm.params.mode = options.mode;
+  cm.params.estop = options.estop;
   ControllerData data(model, cm);
   KinematicRobot robot(model, restConfiguration(model, cm));
   WalkingPattern walking(model);
@@ -153,11 +154,7 @@ std::string pairName(const Model& model, int pair) {
 
 }  // namespace
 
-void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
-                        const std::string& path) {
-  std::ofstream out(path);
-  if (!out) throw ConfigError(path + ": cannot write time series");
-  out << std::setprecision(9);
+void writeTimeseriesCsvHeader(const Model& model, std::ostream& out) {
   out << "time";
   const char* side[2] = {"left", "right"};
   for (const char* s : side)
@@ -168,25 +165,35 @@ void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const Sim
         << s << "_target_y," << s << "_target_z," << s << "_ref_x," << s << "_ref_y," << s << "_ref_z";
   for (int i = 0; i < model.nq; ++i) out << ",q_" << model.q_names[i];
   out << '\n';
+}
+
+void writeTimeseriesCsvRow(const Model& model, const SimSample& s, std::ostream& out) {
   auto num = [](double v) { return std::isfinite(v) ? v : 1e9; };  // inf (no pair) as a large number
-  for (const auto& s : result.samples) {
-    out << s.t;
-    for (int a = 0; a < 2; ++a)
-      out << ',' << s.arms[a].f << ',' << num(s.arms[a].distance) << ',' << pairName(model, s.arms[a].closest_pair)
-          << ',' << zoneName(s.arms[a].zone) << ',' << s.arms[a].force;
-    out << ',' << static_cast<int>(s.estop) << ',' << num(s.min_distance) << ',' << pairName(model, s.min_pair) << ','
-        << num(s.virtual_distance) << ',' << num(s.arm_distance) << ',' << std::setprecision(16) << s.wall_time
-        << std::setprecision(9);
-    for (int a = 0; a < 2; ++a) {
-      const bool given = s.commands[a].status == HandStatus::kGiven;
-      out << ',' << (given ? "given" : "no_target");
-      for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].hand_W[i];
-      for (int i = 0; i < 3; ++i) out << ',' << (given ? s.commands[a].target_W[i] : std::nan(""));
-      for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].reference_W[i];
-    }
-    for (int i = 0; i < model.nq; ++i) out << ',' << s.q[i];
-    out << '\n';
+  out << std::setprecision(9);
+  out << s.t;
+  for (int a = 0; a < 2; ++a)
+    out << ',' << s.arms[a].f << ',' << num(s.arms[a].distance) << ',' << pairName(model, s.arms[a].closest_pair)
+        << ',' << zoneName(s.arms[a].zone) << ',' << s.arms[a].force;
+  out << ',' << static_cast<int>(s.estop) << ',' << num(s.min_distance) << ',' << pairName(model, s.min_pair) << ','
+      << num(s.virtual_distance) << ',' << num(s.arm_distance) << ',' << std::setprecision(16) << s.wall_time
+      << std::setprecision(9);
+  for (int a = 0; a < 2; ++a) {
+    const bool given = s.commands[a].status == HandStatus::kGiven;
+    out << ',' << (given ? "given" : "no_target");
+    for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].hand_W[i];
+    for (int i = 0; i < 3; ++i) out << ',' << (given ? s.commands[a].target_W[i] : std::nan(""));
+    for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].reference_W[i];
   }
+  for (int i = 0; i < model.nq; ++i) out << ',' << s.q[i];
+  out << '\n';
+}
+
+void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
+                        const std::string& path) {
+  std::ofstream out(path);
+  if (!out) throw ConfigError(path + ": cannot write time series");
+  writeTimeseriesCsvHeader(model, out);
+  for (const auto& s : result.samples) writeTimeseriesCsvRow(model, s, out);
   (void)cm;
 }
 

@@ -140,7 +140,7 @@ int main(int argc, char** argv) {
   app.add_option("scenario", scenario_name, "scenario name (see --list) or 'all'");
   app.add_flag("--list", list, "list the scenarios");
   app.add_option("--out", out_dir, "output folder (created)");
-  app.add_flag("--no-avoidance", no_avoidance, "run with collision avoidance off (for comparison)");
+  app.add_flag("--no-avoidance", no_avoidance, "run with collision avoidance AND the e-stop off (the paper's comparison; simulation only)");
   app.add_option("--mode", mode, "avoidance variant")->check(CLI::IsMember({"one_dof", "three_dof"}));
   app.add_option("--urdf", urdf, "robot URDF")->default_str(REFLEX_DEFAULT_URDF);
   app.add_option("--collision", collision, "collision configuration YAML (default: next to the URDF)");
@@ -214,6 +214,7 @@ int main(int argc, char** argv) {
       auto run = [&](AvoidanceMode m, const std::string& csv, const char* label) {
         SimOptions opt;
         opt.mode = m;
+        opt.estop = !no_avoidance;  // the paper's comparison: neither avoidance nor the e-stop
         const auto t0 = std::chrono::steady_clock::now();
         SimResult r = runScenario(model, cm, *sc, opt);
         const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -224,7 +225,7 @@ int main(int argc, char** argv) {
       };
       const AvoidanceMode m = no_avoidance ? AvoidanceMode::kOff
                                            : (mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
-      const SimResult main = run(m, "timeseries.csv", no_avoidance ? "avoidance off" : mode.c_str());
+      const SimResult main = run(m, "timeseries.csv", no_avoidance ? "avoidance off, e-stop off" : mode.c_str());
       writePostures(model, main, (dir / "postures.csv").string(), evenPicks(main.samples.size(), 6));
       if (sc->name == "one_vs_three_dof" && !no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
       if (!no_plots) {

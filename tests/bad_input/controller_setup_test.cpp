@@ -91,6 +91,15 @@ std::vector<Case> cases() {
       {"zero input timeout", {"--input-timeout", "0"}, "0"},
       {"NaN input timeout", {"--input-timeout", "nan"}, "nan"},
       {"unknown option", {"--no-such-option"}, "--no-such-option"},
+      // Issue 16, item 14: a --log that cannot be written is an error before the loop.
+      {"--log on a full device", {"--domain", d, "--log", "/dev/full"}, "'/dev/full': No space left on device"},
+      {"--log in a missing folder", {"--domain", d, "--log", tmp("no_such_folder/run.csv")},
+       tmp("no_such_folder/run.csv")},
+      {"--log is a folder", {"--domain", d, "--log", tmp("")}, "Is a directory"},
+      // Issue 16, item 9: the module name is the key of the heartbeat (at most 255 bytes).
+      {"--name of 256 bytes", {"--domain", d, "--name", std::string(256, 'n')}, "at most 255 bytes"},
+      {"--name of 100000 bytes", {"--domain", d, "--name", std::string(100000, 'n')}, "100000 bytes long"},
+      {"negative --peer-probe", {"--peer-probe", "-1"}, "--peer-probe"},
   };
 }
 

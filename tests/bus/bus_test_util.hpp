@@ -37,5 +37,8 @@ template <> inline msg::WalkCommand sampleOf<msg::WalkCommand>(int k) { return w
 template <> inline msg::JointState sampleOf<msg::JointState>(int k) { return jointState(k); }
 template <> inline msg::ControlStatus sampleOf<msg::ControlStatus>(int k) { return controlStatus(k); }
 template <> inline msg::Heartbeat sampleOf<msg::Heartbeat>(int k) { return heartbeat(k); }
+template <> inline msg::ControllerProtection sampleOf<msg::ControllerProtection>(int k) {
+  return controllerProtection(k);
+}
 
 }  // namespace reflex::bus::test

@@ -143,6 +143,15 @@ inline void diff(const std::string& p, const msg::Heartbeat& e, const msg::Heart
   diffValue(p + ".period_ms", e.period_ms(), a.period_ms(), out);
   diffValue(p + ".detail", e.detail(), a.detail(), out);
 }
+inline void diff(const std::string& p, const msg::ControllerProtection& e, const msg::ControllerProtection& a,
+                 Diffs& out) {
+  diff(p + ".header", e.header(), a.header(), out);
+  diffValue(p + ".avoidance", e.avoidance(), a.avoidance(), out);
+  diffValue(p + ".estop", e.estop(), a.estop(), out);
+  diffValue(p + ".reason", e.reason(), a.reason(), out);
+  diffValue(p + ".period", e.period(), a.period(), out);
+  diffValue(p + ".robot", e.robot(), a.robot(), out);
+}
 
 template <class T>
 Diffs diffSample(const T& expected, const T& actual) {
@@ -277,6 +286,17 @@ inline msg::Heartbeat heartbeat(int k) {
   m.state(msg::STATE_STOPPING);
   m.period_ms(500);
   m.detail(std::string(300, 'd'));  // longer than the 255 bytes fastddsgen assumes for unbounded strings
+  return m;
+}
+
+inline msg::ControllerProtection controllerProtection(int k) {
+  msg::ControllerProtection m;
+  m.header(header(k));
+  m.avoidance(k % 2 == 0);
+  m.estop(true);
+  m.reason("collision avoidance OFF by 'avoidance: off' in /tmp/c" + std::to_string(k) + ".yaml");
+  m.period(0.005);
+  m.robot("asimo_like");
   return m;
 }
 

@@ -44,6 +44,21 @@ TEST(TwoProcess, SigintStopsTheRunLoopCleanly) {
       << pub.output();
 }
 
+// Issue 16, item 10: StopOnSignal (shared by every DDS process) stops the loop cleanly on every
+// catchable terminating signal, not only SIGINT / SIGTERM (each of these killed the process before).
+TEST(TwoProcess, EveryCatchableTerminatingSignalStopsTheRunLoopCleanly) {
+  for (const int sig : {SIGHUP, SIGUSR1, SIGUSR2, SIGQUIT, SIGALRM, SIGVTALRM, SIGPROF, SIGPWR, SIGRTMIN, SIGRTMAX}) {
+    SCOPED_TRACE("signal " + std::to_string(sig));
+    Child pub({binPath("bus_pub_program"), "--domain", "48", "--types", "joint_state", "--max-seconds", "30"});
+    ASSERT_NE(pub.readUntil("running", 10s).find("running"), std::string::npos) << pub.output();
+    pub.signal(sig);
+    const auto code = pub.wait(10s);
+    ASSERT_TRUE(code.has_value()) << "publisher ignored the signal";
+    EXPECT_EQ(*code, 0) << "killed instead of stopped: " << pub.output();
+    EXPECT_NE(pub.output().find("stopped by signal " + std::to_string(sig)), std::string::npos) << pub.output();
+  }
+}
+
 TEST(TwoProcess, ProgramsRejectBadArguments) {
   Child bad_domain({binPath("bus_pub_program"), "--domain", "999"});
   EXPECT_NE(bad_domain.wait(10s).value_or(0), 0);

@@ -314,8 +314,10 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   const double t_restart_vision = now();
   const std::int64_t restart_vision_ns = bus::nowNs();
   vision = std::make_unique<testing::ChildProcess>(visionArgs(), tmp + "chain_vision2.log");
-  // Until targets are given again AND this watcher holds the restarted vision's first frame.
-  pumpUntil(t_restart_vision + 6.0,
+  // Until targets are given again AND this watcher holds the restarted vision's first frame. The
+  // wait covers the process's own start-up (opening the videos: 0.2 s idle, above 6 s seen under a
+  // load of 7 on 2 cores); what is asserted is measured from its first frame.
+  pumpUntil(t_restart_vision + 15.0,
             [&] { return lastGiven() && firstAfter(object_stamps, restart_vision_ns) >= 0; });
   ASSERT_TRUE(lastGiven());
   const std::int64_t first_frame_ns = firstAfter(object_stamps, restart_vision_ns);
@@ -338,7 +340,7 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   const double t_restart_behavior = now();
   const std::int64_t restart_behavior_ns = bus::nowNs();
   behavior = std::make_unique<testing::ChildProcess>(behaviorArgs(), tmp + "chain_behavior2.log");
-  pumpUntil(t_restart_behavior + 6.0, [&] {
+  pumpUntil(t_restart_behavior + 15.0, [&] {  // start-up included, as for vision
     return lastGiven() && firstGivenAfter(restart_behavior_ns) >= 0 &&
            firstAfter(behavior_beat_stamps, restart_behavior_ns) >= 0;
   });

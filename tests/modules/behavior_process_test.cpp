@@ -312,6 +312,71 @@ TEST(BehaviorProcess, StartUpErrorsNameTheBadValue) {
 
   EXPECT_EQ(runToExit({kBin + "/reflex_behavior"}, "noconfig.log", log), 2);
   EXPECT_NE(log.find("--config"), std::string::npos) << log;
+
+  // Issue 16, item 9: the process name and a body-schema segment name are DDS keys (heartbeat,
+  // body schema): above 255 bytes a clear error at start, not an abort in the first publish.
+  const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
+  const std::string long_name(256, 'p');
+  const std::string long_process = ::testing::TempDir() + "modules_long_process.yaml";
+  std::ofstream(long_process) << "process: " << long_name << "\nrobot:\n  urdf: " << urdf
+                              << "\nmodules:\n  - name: s\n    type: scripted\n    config:\n      timeline:\n"
+                                 "        - {t: 0.0, right: [0.35, -0.18, 0.95]}\n";
+  EXPECT_EQ(runToExit(behavior(long_process), "long_process.log", log), 2) << log;
+  EXPECT_NE(log.find("'" + long_name + "' is 256 bytes long; at most 255 bytes"), std::string::npos) << log;
+  const std::string long_segment = ::testing::TempDir() + "modules_long_segment.yaml";
+  std::ofstream(long_segment) << "process: behavior\nrobot:\n  urdf: " << urdf
+                              << "\nmodules:\n  - name: bar\n    type: grasped_bar\n    config:\n      hand: left\n"
+                                 "      segment: "
+                              << std::string(300, 's') << "\n";
+  EXPECT_EQ(runToExit(behavior(long_segment), "long_segment.log", log), 2) << log;
+  EXPECT_NE(log.find("body-schema segment name '" + std::string(300, 's') + "' is 300 bytes long; at most 255 bytes"),
+            std::string::npos)
+      << log;
+}
+
+// Issue 16, item 16: two writers of reflex/joint_state (two controllers) — the behavior process
+// follows the one it heard first, ignores the other (counted, said on stderr), and takes the second
+// one only after the first has been silent for 0.5 s (a restarted controller).
+TEST(BehaviorProcess, JointStatesFromASecondWriterAreIgnoredAndCounted) {
+  const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
+  const control::Model model = control::loadModel(urdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(urdf)));
+  Child proc(behavior(kBehaviorDir + "/scripted.yaml", {"--duration", "6"}),
+             ::testing::TempDir() + "modules_behavior_two_writers.log");
+  ASSERT_TRUE(proc.started());
+  bus::BusConfig config;
+  config.domain_id = kDomain;
+  config.module_name = "fake_controller_a";
+  auto a = std::make_unique<bus::Participant>(config);
+  config.module_name = "fake_controller_b";
+  bus::Participant b(config);
+  auto& writer_a = a->makeWriter<msg::JointState>();
+  auto& writer_b = b.makeWriter<msg::JointState>();
+  ASSERT_TRUE(writer_a.waitForReaders(1, 15s) && writer_b.waitForReaders(1, 15s));
+  msg::JointState js;
+  js.names(model.q_names);
+  js.positions().assign(static_cast<std::size_t>(model.nq), 0.0);
+  js.velocities().assign(static_cast<std::size_t>(model.nq), 0.0);
+  int sent_b_while_a = 0;
+  for (int k = 0; k < 200; ++k) {  // 2 s: a from the start, b from 0.5 s on
+    writer_a.publish(js);
+    if (k >= 50) {
+      writer_b.publish(js);
+      ++sent_b_while_a;
+    }
+    std::this_thread::sleep_for(10ms);
+  }
+  a.reset();  // a stops (and leaves): after 0.5 s of silence b is followed
+  for (int k = 0; k < 150; ++k) {
+    writer_b.publish(js);
+    std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_EQ(proc.wait(15000ms), 0) << proc.log();
+  const std::string log = proc.log();
+  const long ignored = statValue(log, "joint_states_other_writer");
+  EXPECT_GE(ignored, sent_b_while_a * 6 / 10) << log;  // best effort: most of b's samples arrive
+  EXPECT_LE(ignored, sent_b_while_a + 50) << "only b's samples while a lived, plus a's last 0.5 s of silence" << log;
+  EXPECT_EQ(statValue(log, "joint_writer_changes"), 1) << log;
+  EXPECT_NE(log.find("joint states from a second writer ('fake_controller_b') ignored"), std::string::npos) << log;
 }
 
 }  // namespace

@@ -3,16 +3,21 @@
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "reflex/control_node/robot_state_file.hpp"
+#include "reflex/control_node/timeseries_log.hpp"
 
 #include <reflex/bus/bus.hpp>
 
+#include <algorithm>
+#include <array>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <fstream>
 #include <limits>
 #include <map>
+#include <thread>
 #include <unistd.h>
 
 namespace reflex::control_node {
@@ -44,7 +49,20 @@ std::string hostName() {
   return buf;
 }
 
+/// The DDS participant of a writer: the first 12 bytes (GUID prefix) of its publication handle.
+using ParticipantId = std::array<unsigned char, 12>;
+ParticipantId participantOf(const bus::dds::SampleInfo& info) {
+  ParticipantId id{};
+  const unsigned char* handle = info.publication_handle.value;  // 16 bytes: the writer GUID
+  std::copy(handle, handle + id.size(), id.begin());
+  return id;
+}
+
 }  // namespace
+
+std::string Protection::describe() const {
+  return full() ? std::string("full (collision avoidance and e-stop on)") : "REDUCED: " + reason;
+}
 
 struct ControllerNode::Impl {
   NodeConfig config;
@@ -64,24 +82,38 @@ struct ControllerNode::Impl {
   bus::Reader<msg::BodySchemaChange>* schema_reader = nullptr;
   bus::Reader<msg::WalkCommand>* walk_reader = nullptr;
   bus::Reader<msg::Heartbeat>* heartbeat_reader = nullptr;
+  bus::Writer<msg::ControllerProtection>* protection_writer = nullptr;
+  bus::Reader<msg::ControllerProtection>* protection_reader = nullptr;
+  ParticipantId own_participant{};
+  std::int64_t protection_stamp_ns = 0;  ///< when this controller claimed the domain (its protection sample)
+  std::string peer_refusal;              ///< why this controller yielded to an earlier one ("" if it did not)
+  Protection protection;
+  std::unique_ptr<TimeseriesLog> log;  ///< null without --log
+  std::string log_error;
   std::atomic<bool> stop{false};
   std::atomic<bool> reset{false};
 
   // Inputs as last received.
   ControlInput input;
   MotionPriority topic_priority = MotionPriority::kEqual;
-  std::string targets_source;
+  // The target source is the DDS participant that wrote the last hand targets; only ITS heartbeats
+  // (state RUNNING) count as a sign of life (issue 16, item 4), never a module name in a message.
+  bool have_target_writer = false;
+  ParticipantId target_writer{};
   double last_targets_rx = -1.0;
-  std::map<std::string, double> heartbeat_rx;  // module -> monotonic time of its last heartbeat
+  double last_source_heartbeat = -1.0;  // monotonic time of the last heartbeat of target_writer
   bool stale = true;
   std::map<std::string, int> schema_slots;     // segment name -> slot
   std::array<int, kBodySchemaSlots> slot_priority{};
   // Preallocated messages.
   msg::JointState joint_msg;
   msg::ControlStatus status_msg;
+  msg::HandTargets targets_msg;
+  msg::Heartbeat heartbeat_msg;
+  msg::ControllerProtection peer_msg;
   std::vector<msg::BodySchemaChange> schema_scratch;
   Eigen::VectorXd q_walk;
-  std::vector<SimSample> log;
+  SimSample log_row;  ///< q / qdot sized once: filling it does not allocate
 };
 
 ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_unique<Impl>()) {
@@ -93,9 +125,25 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   CollisionConfig cc;
   if (!config.collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
   m.model = loadModel(config.urdf, cc);
+  if (!(config.peer_probe >= 0.0 && config.peer_probe <= 60.0))
+    throw ConfigError("--peer-probe " + std::to_string(config.peer_probe) + " must be in [0, 60] s");
   ControllerConfig ctl = config.controller.empty() ? defaultControllerConfig() : loadControllerConfig(config.controller);
+  // Protection (issue 16, item 3): avoidance off by the option or the file; the e-stop only by the option.
+  std::string reason;
+  if (!config.avoidance) {
+    reason = "collision avoidance OFF by --no-avoidance";
+  } else if (ctl.params.mode == AvoidanceMode::kOff) {
+    reason = "collision avoidance OFF by 'avoidance: off' in " + ctl.source;
+  }
   if (!config.avoidance) ctl.params.mode = AvoidanceMode::kOff;
+  ctl.params.estop = config.estop;
+  if (!config.estop) reason += std::string(reason.empty() ? "" : "; ") + "E-STOP OFF by --disable-estop";
+  m.protection.avoidance = ctl.params.mode != AvoidanceMode::kOff;
+  m.protection.estop = ctl.params.estop;
+  m.protection.reason = reason;
+  m.protection.period = ctl.params.period;
   m.cm = makeControllerModel(m.model, ctl);
+  m.protection.robot = m.model.name;
   m.data = std::make_unique<ControllerData>(m.model, m.cm);
   Eigen::VectorXd q0 = restConfiguration(m.model, m.cm);
   if (!config.robot_state.empty()) {
@@ -121,6 +169,44 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   bc.profiles_file = config.profiles_file;
   bc.participant_profile = config.participant_profile;
   m.participant = std::make_unique<bus::Participant>(bc);
+  m.protection_writer = &m.participant->makeWriter<msg::ControllerProtection>();
+  m.protection_reader = &m.participant->makeReader<msg::ControllerProtection>();
+  const auto& prefix = m.participant->native().guid().guidPrefix;
+  std::copy(prefix.value, prefix.value + 12, m.own_participant.begin());
+
+  // Who protects the robot, for late joiners; then one controller per domain (issue 16, item 16).
+  // Every controller publishes this sample first and then looks for others' for peer_probe seconds;
+  // the one that published EARLIER (Header.stamp_ns; equal stamps: the smaller participant id) keeps
+  // the domain and every later one refuses to start, so two controllers started at the same instant
+  // leave exactly one running. The robot's output writers (joint state, status, heartbeat) are made
+  // only after the probe: nothing of a refused controller ever reaches the robot's topics.
+  msg::ControllerProtection mine;
+  mine.avoidance(m.protection.avoidance);
+  mine.estop(m.protection.estop);
+  mine.reason(m.protection.reason);
+  mine.period(m.protection.period);
+  mine.robot(m.protection.robot);
+  m.protection_writer->publish(mine);
+  m.protection_stamp_ns = mine.header().stamp_ns();
+  const auto probe_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(config.peer_probe);
+  for (;;) {
+    msg::ControllerProtection other;
+    bus::dds::SampleInfo info;
+    while (m.protection_reader->takeNext(other, &info)) {
+      const ParticipantId them = participantOf(info);
+      if (them == m.own_participant) continue;
+      if (notePeerController(other, them)) throw ConfigError(m.peer_refusal);
+    }
+    if (std::chrono::steady_clock::now() >= probe_end) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  // Opened before the loop (an unwritable --log is an error at start, LogError) but after the probe:
+  // a refused second controller never truncates the log of the one that runs.
+  if (!config.log_csv.empty()) {
+    m.log = std::make_unique<TimeseriesLog>(m.model, config.log_csv);
+    m.log_row.q.setZero(m.model.nq);
+    m.log_row.qdot.setZero(m.model.nq);
+  }
   m.joint_writer = &m.participant->makeWriter<msg::JointState>();
   m.status_writer = &m.participant->makeWriter<msg::ControlStatus>();
   m.heartbeat_writer = &m.participant->makeWriter<msg::Heartbeat>();
@@ -134,17 +220,43 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.joint_msg.positions().assign(m.model.nq, 0.0);
   m.joint_msg.velocities().assign(m.model.nq, 0.0);
   m.schema_scratch.reserve(64);
-  const double expected_cycles = config.duration > 0.0 ? config.duration / m.cm.params.period + 10.0 : 200.0 * 600.0;
+  // Lateness percentiles: at most the first 10 minutes (or the whole run) are kept.
+  const double expected_cycles =
+      (config.duration > 0.0 ? std::min(config.duration, 600.0) : 600.0) / m.cm.params.period + 10.0;
   stats_.lateness_us.reserve(static_cast<std::size_t>(expected_cycles));
-  if (!config.log_csv.empty()) m.log.reserve(static_cast<std::size_t>(expected_cycles));
 }
 
 ControllerNode::~ControllerNode() = default;
 
 bus::Participant& ControllerNode::bus() { return *impl_->participant; }
 const std::string& ControllerNode::robotStateNote() const { return impl_->state_note; }
+const Protection& ControllerNode::protection() const { return impl_->protection; }
+std::string ControllerNode::logFailure() const { return impl_->log_error; }
+const std::string& ControllerNode::peerRefusal() const { return impl_->peer_refusal; }
 
 void ControllerNode::stop() noexcept { impl_->stop = true; }
+
+bool ControllerNode::notePeerController(const msg::ControllerProtection& other, const std::array<unsigned char, 12>& them) {
+  Impl& m = *impl_;
+  const std::int64_t stamp = other.header().stamp_ns();
+  const bool they_were_first =
+      stamp < m.protection_stamp_ns || (stamp == m.protection_stamp_ns && them < m.own_participant);
+  if (they_were_first) {
+    m.peer_refusal = "another controller ('" + other.header().source() + "', robot '" + other.robot() +
+                     "') already runs on DDS domain " + std::to_string(m.participant->domainId()) +
+                     "; refusing to run a second one (two controllers would both publish the robot's joint "
+                     "states): stop it, or use another --domain";
+    return true;
+  }
+  // A later one: it refuses as soon as it sees this one. Said once (stderr), counted always.
+  if (stats_.peer_controller_samples++ == 0) {
+    std::fprintf(stderr,
+                 "reflex_controller: WARNING: another controller ('%s', robot '%s') appeared on this DDS domain "
+                 "(it refuses to start if it saw this one in time; else two controllers publish joint states)\n",
+                 other.header().source().c_str(), other.robot().c_str());
+  }
+  return false;
+}
 void ControllerNode::requestEstopReset() noexcept { impl_->reset = true; }
 
 void ControllerNode::run() {
@@ -195,11 +307,15 @@ void ControllerNode::run() {
     if (m.config.duration > 0.0 && t >= m.config.duration) break;
 
     // 1. Inputs (poll; never block).
-    msg::HandTargets targets;
-    if (m.targets_reader->takeLatest(targets)) {
+    msg::HandTargets& targets = m.targets_msg;
+    bus::dds::SampleInfo targets_info;
+    if (m.targets_reader->takeLatest(targets, &targets_info)) {
       ++stats_.targets_received;
       m.last_targets_rx = t_now;
-      m.targets_source = targets.header().source();
+      const ParticipantId writer = participantOf(targets_info);
+      if (!m.have_target_writer || writer != m.target_writer) m.last_source_heartbeat = -1.0;  // a new source
+      m.target_writer = writer;
+      m.have_target_writer = true;
       const msg::HandTarget* hands[2] = {&targets.left(), &targets.right()};
       for (int a = 0; a < 2; ++a) {
         const auto& p = hands[a]->position_base();
@@ -219,8 +335,23 @@ void ControllerNode::run() {
                          : prio.priority() == msg::PRIORITY_RIGHT_HIGHER ? MotionPriority::kRightHigher
                                                                          : MotionPriority::kEqual;
     }
-    msg::Heartbeat hb;
-    while (m.heartbeat_reader->takeNext(hb)) m.heartbeat_rx[hb.module_name()] = t_now;
+    // A heartbeat is a sign of life of the target source only if the participant that wrote the
+    // targets wrote it too, in state RUNNING; the name it carries is not looked at.
+    bus::dds::SampleInfo hb_info;
+    while (m.heartbeat_reader->takeNext(m.heartbeat_msg, &hb_info)) {
+      if (m.have_target_writer && m.heartbeat_msg.state() == msg::STATE_RUNNING &&
+          participantOf(hb_info) == m.target_writer)
+        m.last_source_heartbeat = t_now;
+    }
+    // Another controller on the domain (both started at the same instant, so neither saw the
+    // other at start): loud once, counted.
+    bus::dds::SampleInfo peer_info;
+    bool yield_to_peer = false;
+    while (m.protection_reader->takeNext(m.peer_msg, &peer_info)) {
+      const ParticipantId them = participantOf(peer_info);
+      if (them != m.own_participant) yield_to_peer |= notePeerController(m.peer_msg, them);
+    }
+    if (yield_to_peer) break;  // discovered late: the earlier controller keeps the domain (peerRefusal())
     m.schema_scratch.clear();
     m.schema_reader->takeAll(m.schema_scratch);
     for (const auto& change : m.schema_scratch) {
@@ -302,9 +433,7 @@ void ControllerNode::run() {
     }
 
     // 2. Staleness: the target source is silent (no sample, no heartbeat) for input_timeout -> retract.
-    double last_sign = m.last_targets_rx;
-    auto hb_it = m.heartbeat_rx.find(m.targets_source);
-    if (hb_it != m.heartbeat_rx.end()) last_sign = std::max(last_sign, hb_it->second);
+    const double last_sign = std::max(m.last_targets_rx, m.last_source_heartbeat);
     const bool stale_now = last_sign < 0.0 || t_now - last_sign > m.config.input_timeout;
     if (stale_now && !m.stale) ++stats_.stale_events;
     m.stale = stale_now;
@@ -372,8 +501,8 @@ void ControllerNode::run() {
     ++stats_.cycles;
     stats_.max_lateness_us = std::max(stats_.max_lateness_us, lateness_us);
     if (stats_.lateness_us.size() < stats_.lateness_us.capacity()) stats_.lateness_us.push_back(lateness_us);
-    if (!m.config.log_csv.empty() && m.log.size() < m.log.capacity()) {
-      SimSample s;
+    if (m.log) {  // a copy into the ring: no allocation, no I/O; a full ring is counted
+      SimSample& s = m.log_row;
       s.t = t;
       s.arms = m.data->arms;
       s.commands = in.hands;
@@ -384,7 +513,7 @@ void ControllerNode::run() {
       s.wall_time = nowSeconds(CLOCK_REALTIME);
       s.q = q;
       s.qdot = m.data->qdot;
-      m.log.push_back(std::move(s));
+      m.log->push(s);
     }
     if (t_now - last_heartbeat >= 0.5) {
       publishHeartbeat(msg::STATE_RUNNING);
@@ -394,10 +523,11 @@ void ControllerNode::run() {
     if (lateness_us > period * 1e6) clock_gettime(CLOCK_MONOTONIC, &next);
   }
   publishHeartbeat(msg::STATE_STOPPING);
-  if (!m.config.log_csv.empty()) {
-    SimResult r;
-    r.samples = std::move(m.log);
-    writeTimeseriesCsv(m.model, m.cm, r, m.config.log_csv);
+  if (m.log) {
+    m.log->close();
+    m.log_error = m.log->error();
+    stats_.log_rows = m.log->writtenRows();
+    stats_.log_dropped = m.log->droppedRows();
   }
 }
 

@@ -1,4 +1,4 @@
-// reflex_controller: the onboard controller process (200 Hz) over DDS. See controller_node.hpp.
+// reflex_controller: the onboard controller process over DDS. See controller_node.hpp.
 #include "reflex/control_node/controller_node.hpp"
 
 #include <reflex/bus/bus.hpp>
@@ -17,15 +17,20 @@ extern "C" void onUsr1(int) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_controller: onboard reactive controller (200 Hz) with the simulated robot, over DDS.\n"
-               "Subscribes hand targets, motion priority, body schema, walk commands; publishes joint state,\n"
-               "controller status and a heartbeat. SIGUSR1 asks to leave a latched e-stop."};
+  CLI::App app{"reflex_controller: onboard reactive controller (one cycle per controller 'period', 5 ms by default)\n"
+               "with the simulated robot, over DDS. Subscribes hand targets, motion priority, body schema, walk\n"
+               "commands; publishes joint state, controller status, its protection state and a heartbeat.\n"
+               "SIGUSR1 asks to leave a latched e-stop; SIGINT, SIGTERM, SIGHUP, SIGUSR2 and every other catchable\n"
+               "terminating signal stop it cleanly (summary, --log closed); SIGPIPE is ignored.\n"
+               "Exit codes: 0 success, 1 set-up error, 3 the --log file could not be written completely."};
   reflex::control_node::NodeConfig config;
   config.urdf = REFLEX_DEFAULT_URDF;
-  bool no_avoidance = false;
+  bool no_avoidance = false, disable_estop = false;
   app.add_option("--urdf", config.urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", config.collision, "collision configuration (default: next to the URDF)");
-  app.add_option("--controller", config.controller, "controller configuration YAML (default: built-in)");
+  app.add_option("--controller", config.controller,
+                 "controller configuration YAML (default: built-in); 'avoidance: off' there switches avoidance "
+                 "off but never the e-stop");
   app.add_option("--domain", config.domain_id, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
   app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
@@ -33,28 +38,55 @@ int main(int argc, char** argv) {
   app.add_option("--duration", config.duration, "seconds to run (0: until Ctrl-C)")->check(CLI::NonNegativeNumber);
   app.add_option("--input-timeout", config.input_timeout, "seconds of silence from the target source before the hands retract")
       ->capture_default_str()->check(CLI::PositiveNumber);
-  app.add_flag("--no-avoidance", no_avoidance, "collision avoidance off (comparison runs only; never on a robot)");
-  app.add_option("--log", config.log_csv, "write the per-cycle time series CSV here at exit");
+  app.add_flag("--no-avoidance", no_avoidance,
+               "collision avoidance off (comparison runs only; never on a robot); the e-stop stays on");
+  app.add_flag("--disable-estop", disable_estop,
+               "DANGER: switch the red-zone emergency stop off (comparison runs in simulation only; never on a "
+               "robot). Printed in the banner, the exit line and on reflex/controller_protection");
+  app.add_option("--peer-probe", config.peer_probe,
+                 "seconds to look for another controller on the domain before starting (refuses to start if one "
+                 "runs; 0: no wait)")
+      ->capture_default_str();
+  app.add_option("--log", config.log_csv,
+                 "stream the per-cycle time series CSV to this file (opened at start; a write error is exit code 3)");
   app.add_option("--robot-state", config.robot_state,
                  "keep the simulated robot's joint positions in this file across restarts (loaded at start, "
                  "written every cycle; refused if it holds another robot or is damaged)");
-  app.add_option("--name", config.module_name, "module name on the bus")->capture_default_str();
+  app.add_option("--name", config.module_name,
+                 "module name on the bus (1.." + std::to_string(reflex::bus::kMaxKeyStringBytes) + " bytes)")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   config.avoidance = !no_avoidance;
+  config.estop = !disable_estop;
+  std::signal(SIGPIPE, SIG_IGN);  // from the start: a closed stderr never ends the process,
+  std::signal(SIGXFSZ, SIG_IGN);  // nor a file size limit (the failed write is reported instead)
+  std::signal(SIGUSR1, onUsr1);   // ignored until the node exists (g_node)
   try {
     reflex::control_node::ControllerNode node(config);
+    // Every catchable terminating signal stops the loop (the log is closed, the summary printed);
+    // SIGUSR1 is the e-stop reset, handled here.
+    std::vector<int> stop_signals = reflex::bus::stopSignals();
+    stop_signals.erase(std::remove(stop_signals.begin(), stop_signals.end(), SIGUSR1), stop_signals.end());
+    reflex::bus::StopOnSignal stop_on_signal(node.bus(), stop_signals);
     g_node = &node;
-    std::signal(SIGUSR1, onUsr1);
-    reflex::bus::StopOnSignal stop_on_signal(node.bus());
     if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
-    std::fprintf(stderr, "reflex_controller: running at %.0f Hz on domain %d%s\n", 200.0, node.bus().domainId(),
-                 config.avoidance ? "" : " (AVOIDANCE OFF)");
+    const auto& protection = node.protection();
+    std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s'; protection %s\n",
+                 1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
+                 protection.describe().c_str());
+    if (!protection.full())
+      std::fprintf(stderr, "reflex_controller: WARNING: THIS RUN IS NOT PROTECTED: %s\n", protection.reason.c_str());
     node.run();
-    g_node = nullptr;
     const auto& s = node.stats();
     std::vector<double> lat = s.lateness_us;
     std::sort(lat.begin(), lat.end());
     auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))]; };
+    std::string extra;
+    if (lat.size() < s.cycles) extra += " (percentiles over the first " + std::to_string(lat.size()) + " cycles)";
+    if (s.state_write_errors > 0) extra += ", robot-state writes FAILED " + std::to_string(s.state_write_errors);
+    if (!config.log_csv.empty()) extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
+    if (s.peer_controller_samples > 0) extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
+    extra += ", protection " + protection.describe();
     std::fprintf(stderr,
                  "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "
                  "min distance %.1f mm, e-stops %llu, targets %llu (rejected %llu), stale events %llu, "
@@ -63,8 +95,16 @@ int main(int argc, char** argv) {
                  static_cast<unsigned long long>(s.overruns), s.min_distance * 1000.0,
                  static_cast<unsigned long long>(s.estop_count), static_cast<unsigned long long>(s.targets_received),
                  static_cast<unsigned long long>(s.targets_rejected), static_cast<unsigned long long>(s.stale_events),
-                 static_cast<unsigned long long>(s.guard_count),
-                 s.state_write_errors > 0 ? (", robot-state writes FAILED " + std::to_string(s.state_write_errors)).c_str() : "");
+                 static_cast<unsigned long long>(s.guard_count), extra.c_str());
+    g_node = nullptr;
+    if (!node.peerRefusal().empty()) {
+      std::fprintf(stderr, "reflex_controller: error: %s\n", node.peerRefusal().c_str());
+      return 1;
+    }
+    if (const std::string log_error = node.logFailure(); !log_error.empty()) {
+      std::fprintf(stderr, "reflex_controller: error: %s\n", log_error.c_str());
+      return 3;
+    }
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "reflex_controller: error: %s\n", e.what());

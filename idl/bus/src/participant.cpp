@@ -143,6 +143,13 @@ Participant::Participant(const BusConfig& config)
       domain_id_(resolveDomainId(config.domain_id)),
       profiles_file_(resolveProfilesFile(config.profiles_file)) {
   if (module_name_.empty()) throw BusError("empty module name in the bus configuration");
+  // The module name is the key of this process's heartbeat: a longer one would abort the process in
+  // its first heartbeat (issue 16, item 9).
+  if (module_name_.size() > kMaxKeyStringBytes) {
+    throw BusError("module name '" + module_name_ + "' is " + std::to_string(module_name_.size()) +
+                   " bytes long; at most " + std::to_string(kMaxKeyStringBytes) +
+                   " bytes (it is the DDS key of the process's heartbeat)");
+  }
 
   const std::string origin = profilesFileOrigin(config.profiles_file);
   if (!std::ifstream(profiles_file_).good()) {

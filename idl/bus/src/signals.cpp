@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cstring>
 #include <string>
+#include <utility>
 
 #include "reflex/bus/error.hpp"
 #include "reflex/bus/participant.hpp"
@@ -30,8 +31,15 @@ extern "C" void onStopSignal(int signal_number) {
 
 }  // namespace
 
-StopOnSignal::StopOnSignal(Participant& participant, std::initializer_list<int> signals)
-    : signals_(signals) {
+std::vector<int> stopSignals() {
+  std::vector<int> s = {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGVTALRM,
+                        SIGPROF, SIGPOLL, SIGPWR, SIGSTKFLT, SIGXCPU};
+  for (int r = SIGRTMIN; r <= SIGRTMAX; ++r) s.push_back(r);
+  return s;
+}
+
+StopOnSignal::StopOnSignal(Participant& participant, std::vector<int> signals)
+    : signals_(std::move(signals)) {
   if (g_installed.exchange(true)) {
     throw BusError("a StopOnSignal already exists in this process; only one may be installed");
   }
@@ -61,11 +69,20 @@ StopOnSignal::StopOnSignal(Participant& participant, std::initializer_list<int> 
     }
     previous_.push_back(old);
   }
+  // A write to a pipe without a reader or past the file size limit fails with EPIPE / EFBIG where it
+  // happens instead of killing the process (the old dispositions come back with the destructor).
+  struct sigaction ignore {};
+  ignore.sa_handler = SIG_IGN;
+  sigemptyset(&ignore.sa_mask);
+  ::sigaction(SIGPIPE, &ignore, &previous_pipe_);
+  ::sigaction(SIGXFSZ, &ignore, &previous_xfsz_);
   watcher_ = std::thread([this, &participant] { watch(participant); });
 }
 
 StopOnSignal::~StopOnSignal() {
   for (std::size_t i = 0; i < previous_.size(); ++i) ::sigaction(signals_[i], &previous_[i], nullptr);
+  ::sigaction(SIGPIPE, &previous_pipe_, nullptr);
+  ::sigaction(SIGXFSZ, &previous_xfsz_, nullptr);
   const unsigned char quit = 0;  // byte 0 is no signal number: it tells the watcher to leave
   [[maybe_unused]] const ssize_t n = ::write(g_pipe_write, &quit, 1);
   if (watcher_.joinable()) watcher_.join();

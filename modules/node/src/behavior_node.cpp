@@ -2,7 +2,10 @@
 
 #include <reflex/bus/bus.hpp>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <sstream>
 
@@ -36,14 +39,14 @@ class DdsSink final : public OutputSink {
   void handTargets(const HandTarget& left, const HandTarget& right) override {
     fillHand(hands_msg_.left(), left);
     fillHand(hands_msg_.right(), right);
-    hands_->publish(hands_msg_);
+    count(hands_->publish(hands_msg_), "hand targets", "");
   }
   void motionPriority(ArmPriority p) override {
     msg::MotionPriority m;
     m.priority(p == ArmPriority::kLeftHigher    ? msg::PRIORITY_LEFT_HIGHER
                : p == ArmPriority::kRightHigher ? msg::PRIORITY_RIGHT_HIGHER
                                                 : msg::PRIORITY_EQUAL);
-    priority_->publish(m);
+    count(priority_->publish(m), "motion priority", "");
   }
   void segmentAttached(const SegmentSpec& s) override {
     msg::BodySchemaChange m;
@@ -57,14 +60,14 @@ class DdsSink final : public OutputSink {
     m.motion_priority(s.motion_priority);
     m.enabled(s.enabled);
     m.virtual_segment(s.virtual_segment);
-    schema_->publish(m);
+    count(schema_->publish(m), "body-schema segment", s.name);
   }
   void segmentDetached(const std::string& name) override {
     msg::BodySchemaChange m;
     m.segment_name(name);
     m.operation(msg::SCHEMA_DETACH);
     m.enabled(false);
-    schema_->publish(m);
+    count(schema_->publish(m), "body-schema segment", name);
   }
   void walk(const WalkGoal& g) override {
     msg::WalkCommand m;
@@ -73,8 +76,10 @@ class DdsSink final : public OutputSink {
     m.goal_yaw(g.yaw);
     m.speed(g.speed);
     m.stop(g.stop);
-    walk_->publish(m);
+    count(walk_->publish(m), "walk command", "");
   }
+  /// Samples the bus refused (e.g. a key string above bus::kMaxKeyStringBytes), counted.
+  std::uint64_t refused() const { return refused_; }
   /// Waits until every matched reader acknowledged what was published (reliable writers).
   void waitForAcknowledgments(std::chrono::milliseconds timeout) {
     const eprosima::fastrtps::Duration_t d(static_cast<std::int32_t>(timeout.count() / 1000),
@@ -91,6 +96,17 @@ class DdsSink final : public OutputSink {
   bus::Writer<msg::BodySchemaChange>* schema_ = nullptr;
   bus::Writer<msg::WalkCommand>* walk_ = nullptr;
   msg::HandTargets hands_msg_;
+  std::uint64_t refused_ = 0;
+
+  // A refused sample is counted and said on stderr (the first, then every 1000th).
+  void count(bool published, const char* what, const std::string& name) {
+    if (published) return;
+    if (refused_++ % 1000 == 0) {
+      std::fprintf(stderr, "reflex_behavior: %s %s%.60s%s refused by the bus (%llu so far; a key longer than %zu bytes?)\n",
+                   what, name.empty() ? "" : "'", name.c_str(), name.empty() ? "" : (name.size() > 60 ? "...'" : "'"),
+                   static_cast<unsigned long long>(refused_), bus::kMaxKeyStringBytes);
+    }
+  }
 };
 
 }  // namespace
@@ -105,6 +121,15 @@ struct BehaviorNode::Impl {
   std::chrono::steady_clock::time_point t_start = std::chrono::steady_clock::now();
   ObjectsFrame frame;
   JointStateSample joints;
+  // Joint states come from ONE controller (issue 16, item 16): the writer heard first is followed;
+  // samples of any other writer are ignored, counted and said on stderr. The followed writer is
+  // replaced only after kJointWriterSilence without a sample from it (a restarted controller).
+  static constexpr double kJointWriterSilence = 0.5;  // s (the controller publishes every 5 ms)
+  bool have_joint_writer = false;
+  std::array<unsigned char, 16> joint_writer{};
+  double joint_writer_last = -1.0;                    // host time of its last sample
+  std::uint64_t joint_states_other_writer = 0;        // samples ignored: from a second writer
+  std::uint64_t joint_writer_changes = 0;             // a silent writer replaced by a new one
 
   Now now() const {
     return Now{std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count(), bus::nowNs()};
@@ -118,6 +143,14 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
   BehaviorHost::LogFn log;
   if (options.quiet) log = [](const std::string&) {};
   m.host = std::make_unique<BehaviorHost>(m.config, registry, m.sink, log, options.module);
+  // A body-schema segment name is the DDS key of its samples (issue 16, item 9): bounded here, at start.
+  for (const std::string& segment : m.host->claims().segments) {
+    if (segment.size() > bus::kMaxKeyStringBytes) {
+      throw ConfigError(options.config + ": body-schema segment name '" + segment + "' is " +
+                        std::to_string(segment.size()) + " bytes long; at most " +
+                        std::to_string(bus::kMaxKeyStringBytes) + " bytes (it is the DDS key of its samples)");
+    }
+  }
 
   bus::BusConfig bc;
   bc.module_name = m.host->processName();
@@ -148,7 +181,27 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
     });
   }
   auto& joints = m.bus->makeReader<msg::JointState>();
-  joints.onData([&m](const msg::JointState& js) {
+  joints.onDataWithInfo([&m](const msg::JointState& js, const eprosima::fastdds::dds::SampleInfo& info) {
+    std::array<unsigned char, 16> writer{};
+    const unsigned char* handle = info.publication_handle.value;  // 16 bytes: the writer GUID
+    std::copy(handle, handle + writer.size(), writer.begin());
+    const double t = m.now().t;
+    if (m.have_joint_writer && writer != m.joint_writer) {
+      if (t - m.joint_writer_last <= Impl::kJointWriterSilence) {
+        if (m.joint_states_other_writer++ % 1000 == 0) {
+          std::fprintf(stderr,
+                       "%s: WARNING: joint states from a second writer ('%s') ignored (%llu so far): another "
+                       "controller on this domain?\n",
+                       m.host->processName().c_str(), js.header().source().c_str(),
+                       static_cast<unsigned long long>(m.joint_states_other_writer));
+        }
+        return;
+      }
+      ++m.joint_writer_changes;
+    }
+    m.have_joint_writer = true;
+    m.joint_writer = writer;
+    m.joint_writer_last = t;
     m.joints.stamp_ns = js.header().stamp_ns();
     m.joints.names = js.names();
     m.joints.positions = js.positions();
@@ -201,7 +254,10 @@ std::string BehaviorNode::report() const {
     << " joint_states_rejected=" << s.joint_states_rejected << " hand_targets=" << s.hand_targets_published
     << " priority=" << s.priority_published << " segment_changes=" << s.segment_changes_published
     << " walk=" << s.walk_published << " outputs_rejected=" << s.outputs_rejected
-    << " forced_cleanups=" << s.forced_cleanups;
+    << " forced_cleanups=" << s.forced_cleanups
+    << " outputs_refused_by_bus=" << impl_->sink.refused()
+    << " joint_states_other_writer=" << impl_->joint_states_other_writer
+    << " joint_writer_changes=" << impl_->joint_writer_changes;
   return m.str();
 }
 

@@ -19,6 +19,7 @@ SimResult run(const std::string& name, AvoidanceMode mode) {
   EXPECT_NE(s, nullptr) << name;
   SimOptions options;
   options.mode = mode;
+  options.estop = mode != AvoidanceMode::kOff;  // the paper's comparison: neither avoidance nor the e-stop
   return runScenario(shippedModel(), defaultControllerModel(), *s, options);
 }
 

@@ -81,6 +81,10 @@ struct ControllerParams {
   /// the first-order filter above leaves a gap. (m) [0, d_b - d_r)
   double predict_margin = 0.0005;
   AvoidanceMode mode = AvoidanceMode::kOneDof;
+  /// The red-zone emergency stop (Sec. 7.1), a switch of its own: `mode = kOff` (no avoidance) keeps
+  /// it. Not read from the controller YAML: only a program sets it false (reflex_controller
+  /// --disable-estop, reflex_sim --no-avoidance for the paper's comparison plots).
+  bool estop = true;
 };
 
 /// The sane range of one numeric parameter, evaluated for a given set of parameters (ends that

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 
 #include <functional>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,7 @@ struct Scenario {
 
 struct SimOptions {
   AvoidanceMode mode = AvoidanceMode::kOneDof;
+  bool estop = true;                 ///< the red-zone e-stop (a switch of its own: mode kOff keeps it)
   bool record = true;                ///< keep one SimSample per cycle
 };
 
@@ -94,5 +96,10 @@ double armToArmDistance(const Model& model, const ControllerModel& cm, const Con
 /// Writes the time series as CSV: header row, one row per cycle.
 void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
                         const std::string& path);
+
+/// The CSV header row of writeTimeseriesCsv (with its newline), and one data row: the pieces a
+/// streaming writer (reflex_controller --log) uses. Stream errors are left in `out`'s state.
+void writeTimeseriesCsvHeader(const Model& model, std::ostream& out);
+void writeTimeseriesCsvRow(const Model& model, const SimSample& sample, std::ostream& out);
 
 }  // namespace reflex::control

@@ -11,6 +11,26 @@
 // them (robot_state_file.hpp). Resumed that way, the hands hold where they are until the target
 // source speaks, for at most input_timeout (the grace any silence gets), then retract as usual.
 //
+// Protection (issue 16, item 3): collision avoidance and the red-zone e-stop are separate switches.
+// Avoidance may be switched off by --no-avoidance or by `avoidance: off` in the controller YAML
+// (comparison runs); the e-stop only by NodeConfig::estop = false, i.e. the loudly named
+// --disable-estop option, never by a file. What is on is published on reflex/controller_protection
+// (late joiners get it), printed in the banner and in the exit line.
+//
+// Liveliness of the target source (issue 16, item 4) is tied to the DDS participant that wrote the
+// last hand targets: only a heartbeat from that same participant counts as a sign of life, whatever
+// module name it or any other participant claims.
+//
+// One controller per domain (issue 16, item 16): the constructor publishes this controller's
+// protection sample and then looks, for NodeConfig::peer_probe seconds, for the sample of another
+// controller (a different participant). The one that published first keeps the domain: a later one
+// throws (refuses to start), naming the first; if discovery was slower than the probe (measured here:
+// 0.5 to 3 s), the later one leaves its loop as soon as it sees the first (peerRefusal(), exit 1), and
+// the behavior side follows one joint-state writer only. The first one reports the later one.
+//
+// The --log file is streamed by a writer thread from a preallocated ring (timeseries_log.hpp): opened
+// before the loop, every write checked; it survives any stop but SIGKILL.
+//
 // Extending: another robot driver implements reflex::control::RobotInterface and is passed in.
 #pragma once
 
@@ -18,6 +38,7 @@
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control/simulation.hpp"
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -25,6 +46,9 @@
 
 namespace reflex::bus {
 class Participant;
+}
+namespace reflex::msg {
+class ControllerProtection;
 }
 
 namespace reflex::control_node {
@@ -40,7 +64,13 @@ struct NodeConfig {
   double input_timeout = 1.0;        ///< s without targets and heartbeat from their source -> retract
   double max_target_distance = 2.0;  ///< m from the base origin; farther targets are rejected
   bool avoidance = true;             ///< false: collision avoidance off (comparison runs only)
-  std::string log_csv;               ///< write the time series (reflex_sim's format) here at exit
+  /// The red-zone emergency stop (Sec. 7.1). false ONLY from the loudly named --disable-estop option;
+  /// no configuration file can switch it off.
+  bool estop = true;
+  /// s to look for another controller on the domain before the loop starts (>= 0; 0: no wait, the
+  /// run-time detection still reports one).
+  double peer_probe = 1.0;
+  std::string log_csv;               ///< stream the time series (reflex_sim's format) to this file
   /// Joint positions of the simulated robot, kept across controller restarts ("" = none: start from
   /// rest). Loaded at start, written every cycle; see robot_state_file.hpp for format and policy.
   std::string robot_state;
@@ -60,6 +90,21 @@ struct NodeStats {
   std::uint64_t stale_events = 0;     ///< transitions to "inputs stale"
   std::uint64_t state_write_errors = 0;  ///< failed writes of the robot state file
   std::vector<double> lateness_us;    ///< per cycle (for percentiles), reserved up front
+  std::uint64_t peer_controller_samples = 0;  ///< protection samples of ANOTHER controller seen while running
+  std::uint64_t log_rows = 0;         ///< --log rows written
+  std::uint64_t log_dropped = 0;      ///< --log rows dropped (the writer could not keep up)
+};
+
+/// What protects the robot in this run (published on reflex/controller_protection).
+struct Protection {
+  bool avoidance = true;
+  bool estop = true;
+  std::string reason;  ///< "" when both are on; else what switched which off and from where
+  double period = 0.005;
+  std::string robot;
+  bool full() const { return avoidance && estop; }
+  /// "full (avoidance one_dof, e-stop on)" or "REDUCED: <reason>".
+  std::string describe() const;
 };
 
 class ControllerNode {
@@ -71,7 +116,8 @@ class ControllerNode {
   ControllerNode(const ControllerNode&) = delete;
   ControllerNode& operator=(const ControllerNode&) = delete;
 
-  /// Runs the 200 Hz loop until stop(), a signal, or the configured duration.
+  /// Runs the control loop (every ControllerParams::period) until stop(), a signal, or the
+  /// configured duration. Closes the --log file at the end (see logFailure()).
   void run();
   void stop() noexcept;
   /// Asks the controller to leave a latched e-stop (only separating motion, Sec. 7.1).
@@ -80,9 +126,19 @@ class ControllerNode {
   const NodeStats& stats() const { return stats_; }
   /// What the start-up did about the robot state ("" without a robot state file).
   const std::string& robotStateNote() const;
+  const Protection& protection() const;
+  /// After run(): "" if the --log file (if any) got every row and closed cleanly; else the error
+  /// naming the file and the reason.
+  std::string logFailure() const;
+  /// After run(): "" or why the loop stopped early for another controller that claimed the domain
+  /// first but was discovered only after the start-up probe (exit code 1).
+  const std::string& peerRefusal() const;
   bus::Participant& bus();
 
  private:
+  /// A protection sample of another controller (participant `them`): true if that one claimed the
+  /// domain first (peerRefusal() then says so); else said once on stderr and counted.
+  bool notePeerController(const reflex::msg::ControllerProtection& other, const std::array<unsigned char, 12>& them);
   struct Impl;
   std::unique_ptr<Impl> impl_;
   NodeStats stats_;

@@ -72,6 +72,9 @@ struct WriterStats {
   std::uint64_t liveliness_lost = 0;    ///< times this writer failed to assert liveliness in its lease
   std::uint64_t incompatible_qos = 0;   ///< readers seen whose requested QoS does not match
   std::int32_t matched_readers = 0;     ///< matched readers now
+  /// Samples publish() / write() refused because a @key string exceeds kMaxKeyStringBytes (never
+  /// handed to DDS, whose key computation would abort the process).
+  std::uint64_t refused_key_too_long = 0;
 };
 
 namespace detail {
@@ -116,7 +119,11 @@ class WriterBase {
 
   const std::string& topicName() const { return topic_name_; }
   const std::string& profileName() const { return profile_name_; }
-  WriterStats stats() const { return counters_.snapshot(); }
+  WriterStats stats() const {
+    WriterStats w = counters_.snapshot();
+    w.refused_key_too_long = refused_key_.load(std::memory_order_relaxed);
+    return w;
+  }
   /// Blocks until at least `count` readers are matched or `timeout` passes; true if matched.
   bool waitForReaders(int count, std::chrono::nanoseconds timeout) const;
   /// The underlying Fast DDS writer (for what this layer does not wrap).
@@ -130,6 +137,7 @@ class WriterBase {
 
   std::string topic_name_, profile_name_, source_;
   std::atomic<std::uint64_t> seq_{0};
+  std::atomic<std::uint64_t> refused_key_{0};
   dds::DataWriter* writer_ = nullptr;
   WriterCounters counters_;
 
@@ -173,18 +181,29 @@ template <class T>
 class Writer final : public detail::WriterBase {
  public:
   /// Stamps sample.header() — stamp_ns = nowNs(), seq = previous + 1 (first is 1), source = the
-  /// participant's module name — then writes it. Returns false if the middleware refused the sample.
-  /// Does not allocate once the source string has been assigned once (the header's string keeps
-  /// its capacity). Never throws.
+  /// participant's module name — then writes it. Returns false if the middleware refused the sample,
+  /// or if a @key string is longer than kMaxKeyStringBytes: such a sample is refused before DDS sees
+  /// it (its key computation would abort the process), counted in stats().refused_key_too_long, and
+  /// takes no sequence number. Does not allocate once the source string has been assigned once (the
+  /// header's string keeps its capacity). Never throws.
   bool publish(T& sample) noexcept {
+    if (keyStringBytes(sample) > kMaxKeyStringBytes) {
+      refused_key_.fetch_add(1, std::memory_order_relaxed);
+      return false;
+    }
     auto& header = sample.header();
     header.stamp_ns(nowNs());
     header.seq(seq_.fetch_add(1, std::memory_order_relaxed) + 1);
     if (header.source() != source_) header.source(source_);
     return writeRaw(&sample);
   }
-  /// Writes the sample as is, header untouched (replay, tests). Returns false on refusal.
+  /// Writes the sample as is, header untouched (replay, tests). Returns false on refusal (also a key
+  /// string above kMaxKeyStringBytes: refused and counted as in publish()).
   bool write(const T& sample) noexcept {
+    if (keyStringBytes(sample) > kMaxKeyStringBytes) {
+      refused_key_.fetch_add(1, std::memory_order_relaxed);
+      return false;
+    }
     // Fast DDS 2.9 takes a non-const void* but only reads (serializes) the sample.
     return writeRaw(const_cast<T*>(&sample));
   }
@@ -211,11 +230,15 @@ class Reader final : public detail::ReaderBase {
     }
     return false;
   }
-  /// Takes every available sample and keeps only the newest in `out`; false if there was none.
-  bool takeLatest(T& out) noexcept {
+  /// Takes every available sample and keeps only the newest in `out` (and its SampleInfo in `info`,
+  /// if given: e.g. the publication_handle, whose first 12 bytes are the writer's participant);
+  /// false if there was none.
+  bool takeLatest(T& out, dds::SampleInfo* info = nullptr) noexcept {
     bool got = false;
-    while (takeNext(scratch_)) {
+    dds::SampleInfo i;
+    while (takeNext(scratch_, &i)) {
       std::swap(out, scratch_);
+      if (info) *info = i;
       got = true;
     }
     return got;

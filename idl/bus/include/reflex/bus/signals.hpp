@@ -1,8 +1,19 @@
-// Clean shutdown on SIGINT / SIGTERM for a Reflex DDS process.
+// Clean shutdown on any catchable terminating signal for a Reflex DDS process (issue 16, item 10).
 //
 //   reflex::bus::Participant bus(config);
 //   reflex::bus::StopOnSignal stop_on_signal(bus);   // installs the handlers
-//   bus.run();                                       // returns after Ctrl-C or `kill <pid>`
+//   bus.run();                                       // returns after Ctrl-C, `kill <pid>`, a hang-up, ...
+//
+// The contract: a process that holds a StopOnSignal never dies of a signal it can handle. Every
+// signal whose default action ends the process and that may be caught (stopSignals(): SIGINT,
+// SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGVTALRM, SIGPROF, SIGPOLL, SIGPWR,
+// SIGSTKFLT, SIGXCPU and every real-time signal) stops the participant, so the process leaves its
+// loop and finishes as after SIGTERM (summary, files closed). SIGPIPE and SIGXFSZ are IGNORED while
+// it exists: a write to a pipe without a reader (e.g. stderr of a closed terminal) or beyond the file
+// size limit then fails with EPIPE / EFBIG where it happens, and the writer reports it. Program-error
+// signals (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP, SIGSYS) and SIGKILL / SIGSTOP are not
+// caught. A process that uses a signal itself (reflex_controller: SIGUSR1 leaves a latched e-stop)
+// passes stopSignals() without it and installs its own handler.
 //
 // The signal handler is async-signal-safe: it only writes the signal number to a self-pipe. A
 // watcher thread reads the pipe and calls Participant::stop() (which takes locks, so it must not run
@@ -12,7 +23,6 @@
 
 #include <atomic>
 #include <csignal>
-#include <initializer_list>
 #include <thread>
 #include <vector>
 
@@ -20,11 +30,14 @@ namespace reflex::bus {
 
 class Participant;
 
+/// The catchable signals whose default action ends the process (see the opening comment).
+std::vector<int> stopSignals();
+
 class StopOnSignal {
  public:
-  /// Installs handlers for `signals` that stop `participant`. Throws BusError if another
-  /// StopOnSignal exists or the pipe / handlers cannot be set up.
-  explicit StopOnSignal(Participant& participant, std::initializer_list<int> signals = {SIGINT, SIGTERM});
+  /// Installs handlers for `signals` that stop `participant`, and ignores SIGPIPE and SIGXFSZ.
+  /// Throws BusError if another StopOnSignal exists or the pipe / handlers cannot be set up.
+  explicit StopOnSignal(Participant& participant, std::vector<int> signals = stopSignals());
   ~StopOnSignal();
   StopOnSignal(const StopOnSignal&) = delete;
   StopOnSignal& operator=(const StopOnSignal&) = delete;
@@ -37,6 +50,7 @@ class StopOnSignal {
 
   std::vector<int> signals_;
   std::vector<struct sigaction> previous_;
+  struct sigaction previous_pipe_ {}, previous_xfsz_ {};
   int pipe_read_ = -1;
   std::atomic<int> last_signal_{0};
   std::thread watcher_;

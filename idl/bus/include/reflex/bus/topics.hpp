@@ -15,19 +15,49 @@
 
 #include <fastcdr/exceptions/Exception.h>
 
+#include <cstddef>
+
 namespace reflex::bus {
+
+/// Longest string (bytes, without the terminating NUL) that may be a DDS key: fastddsgen 2.3 sizes
+/// the key buffer of an unbounded `@key string` as 4 (length) + 255 + 1 (NUL) bytes, and a longer
+/// key makes getKey throw inside DataWriter::write, which ends the process (SIGABRT; issue 16,
+/// item 9). Measured: 255 bytes publish, 256 abort (tests/bus/key_bound_test.cpp).
+inline constexpr std::size_t kMaxKeyStringBytes = 255;
+
+/// Length in bytes of the longest @key string of a sample (0 for a type without a key). Every keyed
+/// type of idl/ has an overload here; Writer::publish / write refuse a sample above kMaxKeyStringBytes
+/// and SafePubSubType rejects one arriving from the wire.
+template <class T>
+std::size_t keyStringBytes(const T&) noexcept {
+  return 0;
+}
+inline std::size_t keyStringBytes(const reflex::msg::Heartbeat& s) noexcept { return s.module_name().size(); }
+inline std::size_t keyStringBytes(const reflex::msg::BodySchemaChange& s) noexcept {
+  return s.segment_name().size();
+}
 
 /// The generated type support with a deserializer that never throws: fastddsgen 2.3 code catches only
 /// NotEnoughMemoryException, so a malformed payload (bad encapsulation, a boolean byte of 2, ...)
 /// let a fastcdr BadParamException escape through DataReader::take into the process (a fuzz finding:
 /// one rogue sample ended reflex_controller). Here every fastcdr exception makes deserialize return
-/// false, and Fast DDS drops the sample.
+/// false, and Fast DDS drops the sample. A sample whose key string is longer than kMaxKeyStringBytes
+/// (another vendor's writer does not stop it) is rejected the same way: computing its key would throw.
+/// getKey never lets an exception out either (the writer checks first; this is the last line).
 template <class Generated>
 class SafePubSubType final : public Generated {
  public:
   bool deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) override {
     try {
-      return Generated::deserialize(payload, data);
+      if (!Generated::deserialize(payload, data)) return false;
+    } catch (const eprosima::fastcdr::exception::Exception&) {
+      return false;
+    }
+    return keyStringBytes(*static_cast<const typename Generated::type*>(data)) <= kMaxKeyStringBytes;
+  }
+  bool getKey(void* data, eprosima::fastrtps::rtps::InstanceHandle_t* handle, bool force_md5) override {
+    try {
+      return Generated::getKey(data, handle, force_md5);
     } catch (const eprosima::fastcdr::exception::Exception&) {
       return false;
     }
@@ -45,6 +75,7 @@ inline constexpr const char* kProfileObjectTargets = "reflex_object_targets";  /
 inline constexpr const char* kProfileHeartbeat = "reflex_heartbeat";         // module heartbeats
 inline constexpr const char* kProfileRecord = "reflex_record";               // reader only: recorders
 inline constexpr const char* kProfileRecordReliable = "reflex_record_reliable";  // reader only: recorders, reliable topics
+inline constexpr const char* kProfileControllerInfo = "reflex_controller_info";  // controller protection
 
 template <>
 struct TopicTraits<reflex::msg::ObjectTargets> {
@@ -100,6 +131,13 @@ struct TopicTraits<reflex::msg::Heartbeat> {
   using PubSubType = SafePubSubType<reflex::msg::HeartbeatPubSubType>;
   static constexpr const char* kTopicName = "reflex/heartbeat";
   static constexpr const char* kProfile = kProfileHeartbeat;
+};
+
+template <>
+struct TopicTraits<reflex::msg::ControllerProtection> {
+  using PubSubType = SafePubSubType<reflex::msg::ControllerProtectionPubSubType>;
+  static constexpr const char* kTopicName = "reflex/controller_protection";
+  static constexpr const char* kProfile = kProfileControllerInfo;
 };
 
 }  // namespace reflex::bus
