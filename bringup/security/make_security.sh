@@ -84,6 +84,25 @@ umask 077   # private keys are readable by the owner only
 modules=(vision behavior controller recorder player)
 identities=("${modules[@]}" intruder)
 
+# ---- private keys found with loose permissions -----------------------------------------------
+# A private key readable by anyone but its owner may have been copied: it is not repaired silently
+# (a chmod would hide that it was exposed). Without --force the script refuses, naming every such
+# key and its mode; the operator either makes new material (--force: new CA and identities) or,
+# knowing nobody else could read it, restricts it (chmod 600) and runs the script again.
+if [[ $force -eq 0 ]]; then
+  loose=()
+  for key in "$out/ca/ca.key.pem" "$out/intruder_ca/ca.key.pem" "$out"/*/key.pem; do
+    [[ -e "$key" ]] || continue
+    mode="$(stat -c '%a' "$key")" || die "cannot read the mode of '$key'"
+    if (( 8#$mode & 8#077 )); then loose+=("'$key' (mode 0$mode)"); fi
+  done
+  if [[ ${#loose[@]} -gt 0 ]]; then
+    die "private key(s) readable by group or others: ${loose[*]}; a key others could read may have been" \
+        "copied: make new material with --force, or, if you know nobody else read it, chmod 600 it and run" \
+        "again"
+  fi
+fi
+
 # ---- certificate authorities -----------------------------------------------------------------
 
 # make_ca DIR COMMON_NAME: self-signed ECDSA P-256 CA (kept if present, unless --force).
