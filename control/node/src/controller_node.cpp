@@ -80,6 +80,9 @@ struct ControllerNode::Impl {
   msg::JointState joint_msg;
   msg::ControlStatus status_msg;
   std::vector<msg::BodySchemaChange> schema_scratch;
+  // One per-sample log line (a rejected body-schema segment): rate-limited, issue 16 item 8f.
+  bus::LogLimiter schema_log;
+  char schema_line[512] = {};
   Eigen::VectorXd q_walk;
   std::vector<SimSample> log;
 };
@@ -264,17 +267,22 @@ void ControllerNode::run() {
           checkBodySchemaSegment(m.model, link, a, b, change.radius(), change.virtual_segment(), BodySchemaLimits{});
       if (!check.ok() || slot < 0 || !attachBodySchemaSegment(m.model, m.data->dist, slot, link, a, b, change.radius(), ignore)) {
         ++stats_.targets_rejected;
+        // The line is formatted into a fixed buffer and printed at most LogLimiter's rate: a flood
+        // of bad segments is counted (targets_rejected) but cannot flood stderr.
+        char* const line = m.schema_line;
+        const std::size_t size = sizeof(m.schema_line);
         if (check.ok()) {
-          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: no free slot (link '%s')\n", name.c_str(),
-                       change.parent_link().c_str());
+          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: no free slot (link '%s')",
+                        name.c_str(), change.parent_link().c_str());
         } else if (*check.key != '\0') {
-          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)\n",
-                       name.c_str(), describe(check.fault), check.value, check.key, check.limit,
-                       change.parent_link().c_str(), change.virtual_segment() ? "virtual" : "physical");
+          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)",
+                        name.c_str(), describe(check.fault), check.value, check.key, check.limit,
+                        change.parent_link().c_str(), change.virtual_segment() ? "virtual" : "physical");
         } else {
-          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %s (value %g, link '%s')\n", name.c_str(),
-                       describe(check.fault), check.value, change.parent_link().c_str());
+          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %s (value %g, link '%s')",
+                        name.c_str(), describe(check.fault), check.value, change.parent_link().c_str());
         }
+        m.schema_log.print(stderr, line);
         continue;
       }
       m.data->slot_virtual[slot] = change.virtual_segment();

@@ -65,6 +65,8 @@ int main(int argc, char** argv) {
                  static_cast<unsigned long long>(s.targets_rejected), static_cast<unsigned long long>(s.stale_events),
                  static_cast<unsigned long long>(s.guard_count),
                  s.state_write_errors > 0 ? (", robot-state writes FAILED " + std::to_string(s.state_write_errors)).c_str() : "");
+    // DDS-Security material that expired during the run stopped the loop (bus::Participant): not success.
+    if (node.bus().credentialsExpired()) return 1;
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "reflex_controller: error: %s\n", e.what());
