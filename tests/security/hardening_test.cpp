@@ -14,7 +14,7 @@
 //     by default, the player only when named (the replay set-up), counted in its exit stats.
 //   - a flood of bad samples (thousands of invalid body-schema segments) gives the real controller a
 //     bounded stderr: at most LogLimiter's lines per second, the rest counted as suppressed.
-// Credentials: bringup/security/make_security.sh into temporary folders. Domains 120..125.
+// Credentials: bringup/security/make_security.sh into temporary folders. Domains 120..126.
 #include "security_support.hpp"
 
 #include "../bad_input/controller_run.hpp"
@@ -274,6 +274,31 @@ TEST(SecurityHardening, AParticipantStopsItselfWhenItsCertificateExpires) {
   // Later calls stop at once and say so again.
   EXPECT_THROW(vision->runFor(5s), bus::BusError);
   (void)reader;
+}
+
+// The real controller process with a controller certificate that expires 8 s after it is made:
+// it runs, then stops itself at the expiry (not at its 40 s --duration), says why and exits 1.
+TEST(SecurityHardening, TheControllerStopsLoudlyWhenItsCertificateExpires) {
+  const std::string& dir = material();
+  const Restore restore(dir + "/controller/cert.pem");
+  makeCertificate(dir, "controller", -60, 8);
+  const std::string log = ::testing::TempDir() + "hardening_controller_expiry.log";
+  const auto t0 = std::chrono::steady_clock::now();
+  testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--profiles",
+                                    dir + "/profiles/controller.xml", "--domain", "126", "--duration", "40"},
+                                   log);
+  ASSERT_TRUE(controller.started());
+  const int rc = controller.wait(30s);
+  const double ran = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const std::string out = readFile(log);
+  EXPECT_EQ(rc, 1) << out;
+  EXPECT_GT(ran, 4.0) << out;
+  EXPECT_LT(ran, 12.0) << "stopped at the expiry, not at --duration\n" << out;
+  EXPECT_NE(out.find("identity certificate '" + dir + "/controller/cert.pem' of participant 'controller' expired at"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find(" cycles, lateness"), std::string::npos) << "the exit summary is still printed\n" << out;
+  std::printf("controller stopped %.1f s after start (certificate lifetime 8 s), exit %d\n", ran, rc);
 }
 
 // ---- c. what discovery tells an outsider --------------------------------------------------------
