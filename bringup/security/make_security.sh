@@ -22,6 +22,8 @@
 #                                            identity), for processes or tests that hold several
 #                                            identities and load the QoS profiles from the base file
 #
+# A private key found readable by group or others is refused (exit 1, naming it): it may have been
+# copied; --force remakes everything, chmod 600 accepts it.
 # Idempotent: existing keys and certificates are kept while they still verify against their CA;
 # XML documents are rewritten, and re-signed only when their text changed or their signature no
 # longer verifies. --force makes everything anew (new CA: every module needs the new files).
@@ -38,7 +40,8 @@ usage: make_security.sh [--force] [--base-profiles FILE] [--days N] [OUT_DIR]
 Makes the DDS-Security material of Reflex (CA, identities, signed governance and permissions,
 secure Fast DDS participant profiles) into OUT_DIR (default: <repo>/out/security).
 
-  --force               regenerate everything, CA included
+  --force               regenerate everything, CA included (also the answer to a refused key:
+                        a private key readable by group or others stops the script)
   --base-profiles FILE  QoS profiles copied into profiles/<module>.xml
                         (default: <repo>/bringup/dds/reflex_profiles.xml)
   --days N              validity of new certificates and of the permissions, days (default 3650)
