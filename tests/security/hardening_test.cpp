@@ -445,7 +445,7 @@ TEST(SecurityHardening, BehaviorTakesObjectsOnlyFromTheConfiguredIdentities) {
                          long& player_sent) {
     std::vector<std::string> argv = {bin + "/reflex_behavior", "--config", src + "/bringup/behavior/pointing.yaml",
                                      "--profiles", dir + "/profiles/behavior.xml", "--domain",
-                                     std::to_string(kDomain), "--duration", "16", "--progress", "0"};
+                                     std::to_string(kDomain), "--duration", "60", "--progress", "0"};
     argv.insert(argv.end(), extra.begin(), extra.end());
     const std::string log = ::testing::TempDir() + "hardening_behavior_" + tag + ".log";
     std::string output;
@@ -456,7 +456,7 @@ TEST(SecurityHardening, BehaviorTakesObjectsOnlyFromTheConfiguredIdentities) {
       auto player = secureParticipant(dir, "player", kDomain);
       auto& wv = vision->makeWriter<msg::ObjectTargets>();
       auto& wp = player->makeWriter<msg::ObjectTargets>();
-      EXPECT_TRUE(wv.waitForReaders(1, 12s) && wp.waitForReaders(1, 12s)) << "behavior did not match";
+      EXPECT_TRUE(wv.waitForReaders(1, 25s) && wp.waitForReaders(1, 25s)) << "behavior did not match";
       std::this_thread::sleep_for(500ms);
       auto frame = [](const char* name, int tag, double y) {
         msg::ObjectTargets o;
