@@ -226,6 +226,7 @@ SecurityMaterial securityMaterialOf(const std::vector<std::pair<std::string, std
   SecurityMaterial m;
   for (const auto& [name, value] : properties) {
     if (name == "dds.sec.auth.plugin") m.enabled = !value.empty();
+    if (name == "dds.sec.access.plugin") m.access_control = !value.empty();
   }
   if (!m.enabled) return m;
   const std::string auth = kPrefixAuth, access = kPrefixAccess;
@@ -284,7 +285,8 @@ SecurityCheck checkSecurityMaterial(const SecurityMaterial& m, Clock::time_point
     }
   }
 
-  // Access control: governance and permissions signed by the permissions CA.
+  // Access control (when configured): governance and permissions signed by the permissions CA.
+  if (!m.access_control) return result;
   const File pca_file = readMaterial(access + "permissions_ca", m.permissions_ca);
   const Cert pca = parseCert(pca_file);
   until(checkCertTimes(pca_file, pca.get(), now), "permissions CA '" + pca_file.path + "'");

@@ -36,6 +36,7 @@ namespace reflex::bus {
 /// The files of one participant's DDS-Security configuration (paths without "file://").
 struct SecurityMaterial {
   bool enabled = false;                ///< the QoS names an authentication plugin
+  bool access_control = false;         ///< the QoS names an access-control plugin (governance, permissions)
   std::string identity_ca;             ///< dds.sec.auth.builtin.PKI-DH.identity_ca
   std::string identity_certificate;    ///< dds.sec.auth.builtin.PKI-DH.identity_certificate
   std::string private_key;             ///< dds.sec.auth.builtin.PKI-DH.private_key
