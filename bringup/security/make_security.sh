@@ -22,6 +22,8 @@
 #                                            identity), for processes or tests that hold several
 #                                            identities and load the QoS profiles from the base file
 #
+# A private key found readable by group or others is refused (exit 1, naming it): it may have been
+# copied; --force remakes everything, chmod 600 accepts it.
 # Idempotent: existing keys and certificates are kept while they still verify against their CA;
 # XML documents are rewritten, and re-signed only when their text changed or their signature no
 # longer verifies. --force makes everything anew (new CA: every module needs the new files).
@@ -38,7 +40,8 @@ usage: make_security.sh [--force] [--base-profiles FILE] [--days N] [OUT_DIR]
 Makes the DDS-Security material of Reflex (CA, identities, signed governance and permissions,
 secure Fast DDS participant profiles) into OUT_DIR (default: <repo>/out/security).
 
-  --force               regenerate everything, CA included
+  --force               regenerate everything, CA included (also the answer to a refused key:
+                        a private key readable by group or others stops the script)
   --base-profiles FILE  QoS profiles copied into profiles/<module>.xml
                         (default: <repo>/bringup/dds/reflex_profiles.xml)
   --days N              validity of new certificates and of the permissions, days (default 3650)
@@ -83,6 +86,25 @@ umask 077   # private keys are readable by the owner only
 
 modules=(vision behavior controller recorder player)
 identities=("${modules[@]}" intruder)
+
+# ---- private keys found with loose permissions -----------------------------------------------
+# A private key readable by anyone but its owner may have been copied: it is not repaired silently
+# (a chmod would hide that it was exposed). Without --force the script refuses, naming every such
+# key and its mode; the operator either makes new material (--force: new CA and identities) or,
+# knowing nobody else could read it, restricts it (chmod 600) and runs the script again.
+if [[ $force -eq 0 ]]; then
+  loose=()
+  for key in "$out/ca/ca.key.pem" "$out/intruder_ca/ca.key.pem" "$out"/*/key.pem; do
+    [[ -e "$key" ]] || continue
+    mode="$(stat -c '%a' "$key")" || die "cannot read the mode of '$key'"
+    if (( 8#$mode & 8#077 )); then loose+=("'$key' (mode 0$mode)"); fi
+  done
+  if [[ ${#loose[@]} -gt 0 ]]; then
+    die "private key(s) readable by group or others: ${loose[*]}; a key others could read may have been" \
+        "copied: make new material with --force, or, if you know nobody else read it, chmod 600 it and run" \
+        "again"
+  fi
+fi
 
 # ---- certificate authorities -----------------------------------------------------------------
 

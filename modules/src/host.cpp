@@ -6,6 +6,7 @@
 #include <set>
 #include <sstream>
 #include <stdexcept>
+#include <tuple>
 
 namespace reflex::modules {
 
@@ -28,12 +29,21 @@ HostConfig parseHostConfig(const ConfigNode& root, const ModuleRegistry& registr
   c.process = root.string("process", c.process);
   c.robot = readRobotConfig(root.child("robot"));
   const ConfigNode in = root.child("inputs");
-  in.rejectUnknown({"known_objects", "future_tolerance", "max_range", "frames"});
+  in.rejectUnknown({"known_objects", "future_tolerance", "max_range", "frames", "object_sources", "joint_state_sources"});
   c.inputs.known_objects = in.strings("known_objects", {});
   c.inputs.future_tolerance = in.number("future_tolerance", c.inputs.future_tolerance, 0.0, 60.0);
   c.inputs.max_range = in.number("max_range", c.inputs.max_range, 0.1, 100.0);
   c.inputs.frames = in.strings("frames", c.inputs.frames);
   if (c.inputs.frames.empty()) in.fail("frames", "must name at least one base frame, got");
+  // Writers whose samples are accepted (identities, never a name inside the message).
+  for (auto [key, list, example] : {std::make_tuple("object_sources", &c.inputs.object_sources, "vision"),
+                                    std::make_tuple("joint_state_sources", &c.inputs.joint_state_sources, "controller")}) {
+    *list = in.strings(key, *list);
+    if (list->empty()) in.fail(key, std::string("must name at least one identity whose samples are accepted (e.g. ") + example + "), got");
+    for (const auto& src : *list) {
+      if (src.empty()) in.fail(key, "holds an empty identity name:");
+    }
+  }
   c.tick_period = root.number("tick_period", c.tick_period, 0.001, 1.0);
   c.joint_state_period = root.number("joint_state_period", c.joint_state_period, 0.0, 10.0);
   if (!root.has("modules")) throw ConfigError(root.where("modules") + ": required key missing (a list of modules)");
@@ -240,6 +250,18 @@ void BehaviorHost::start(const Now& now) {
 void BehaviorHost::onObjects(const ObjectsFrame& frame, const Now& now) {
   if (!running_) return;
   ++stats_.frames_received;
+  // The writer first: a frame from a writer the configuration does not name is never looked at.
+  const auto& sources = inputs_.object_sources;
+  if (std::find(sources.begin(), sources.end(), frame.source) == sources.end()) {
+    ++stats_.frames_rejected_source;
+    std::string accepted;
+    for (const auto& s : sources) accepted += (accepted.empty() ? "'" : ", '") + s + "'";
+    logRejected(stats_.frames_rejected_source,
+                "object targets frame " + std::to_string(frame.image_index) + " rejected: written by " +
+                    (frame.source.empty() ? std::string("an unknown participant") : "'" + frame.source + "'") +
+                    ", not one of inputs.object_sources (" + accepted + ")");
+    return;
+  }
   const double tol_ns = inputs_.future_tolerance * 1e9;
   const auto ahead = [&](std::int64_t stamp) {
     return stamp != 0 && static_cast<double>(stamp - now.wall_ns) > tol_ns;
@@ -266,6 +288,7 @@ void BehaviorHost::onObjects(const ObjectsFrame& frame, const Now& now) {
   scratch_.stamp_ns = frame.stamp_ns;
   scratch_.capture_stamp_ns = frame.capture_stamp_ns;
   scratch_.image_index = frame.image_index;
+  scratch_.source = frame.source;
   scratch_.objects.clear();
   const auto& known = inputs_.known_objects;
   for (const ObjectObservation& o : frame.objects) {
@@ -300,6 +323,15 @@ void BehaviorHost::onObjects(const ObjectsFrame& frame, const Now& now) {
 void BehaviorHost::onJointState(const JointStateSample& js, const Now& now) {
   if (!running_) return;
   ++stats_.joint_states;
+  const auto& sources = inputs_.joint_state_sources;
+  if (std::find(sources.begin(), sources.end(), js.source) == sources.end()) {
+    ++stats_.joint_states_rejected_source;
+    logRejected(stats_.joint_states_rejected_source,
+                "joint state rejected: written by " +
+                    (js.source.empty() ? std::string("an unknown participant") : "'" + js.source + "'") +
+                    ", not one of inputs.joint_state_sources");
+    return;
+  }
   if (!robot_->update(js)) {
     ++stats_.joint_states_rejected;
     logRejected(stats_.joint_states_rejected, "joint state rejected: names/positions mismatch or non-finite value");
@@ -373,7 +405,8 @@ std::string BehaviorHost::status() const {
     m << s->module->name() << (st.empty() ? "" : "[" + st + "]") << " ";
   }
   m << "frames=" << stats_.frames_received << " objects=" << stats_.objects_accepted
-    << " rejected=" << stats_.rejectedObjects() + stats_.frames_rejected_future + stats_.frames_rejected_frame;
+    << " rejected=" << stats_.rejectedObjects() + stats_.frames_rejected_future + stats_.frames_rejected_frame +
+                           stats_.frames_rejected_source;
   return m.str();
 }
 

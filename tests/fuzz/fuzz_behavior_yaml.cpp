@@ -38,10 +38,12 @@ void run(BehaviorHost& host) {
   host.start(at(0.0));
   ObjectsFrame frame;
   frame.stamp_ns = frame.capture_stamp_ns = at(0.1).wall_ns;
+  frame.source = "vision";
   frame.objects.push_back({"cup", 3, Eigen::Vector3d(0.40, 0.15, 0.95), 0.9});
   frame.objects.push_back({"can", 4, Eigen::Vector3d(0.40, -0.15, 0.95), 0.8});
   host.onObjects(frame, at(0.1));
   JointStateSample js;
+  js.source = "controller";  // the default joint_state_sources
   js.stamp_ns = at(0.2).wall_ns;
   js.names = {"l_elbow", "r_elbow"};
   js.positions = {-0.5, -0.5};

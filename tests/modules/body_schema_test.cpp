@@ -101,6 +101,7 @@ TEST(Occlusion, CapsuleFromTheHeadCameraToAFixedPointFollowsTheHead) {
   expectGazeLine(*h.host, h.sink.attached[0], {0.5, -0.02, 0.85}, 0.1);
   // The head pitches down: the capsule, in the head frame, is recomputed and still hits the point.
   JointStateSample js;
+  js.source = "controller";  // the default joint_state_sources
   js.names = {"neck_pitch", "neck_yaw"};
   js.positions = {0.4, 0.2};
   h->onJointState(js, at(0.1));
@@ -159,6 +160,7 @@ TEST(Walking, RelativeGoalAddsTheRobotPosition) {
   TestHost h("modules:\n  - {name: walk, type: walking, config: {goal: [1.5, 0.0, 0.0], relative: true, start_after: 0.5}}\n");
   h->start(at(0.0));
   JointStateSample js;
+  js.source = "controller";  // the default joint_state_sources
   js.names = {"heel_x", "heel_y"};
   js.positions = {0.4, -0.1};
   h->onJointState(js, at(0.1));

@@ -1,5 +1,5 @@
-// BehaviorHost with fake inputs: input validation (NaN, future stamps, unknown frame_id, unknown
-// objects, range, duplicates: rejected, counted, never forwarded), joint states, output ownership, merging of
+// BehaviorHost with fake inputs: input validation (writer not a configured object source, NaN, future
+// stamps, unknown frame_id, unknown objects, range, duplicates: rejected, counted, never forwarded), joint states, output ownership, merging of
 // several modules, --module selection, and the clean-up guarantee at stop.
 #include "modules_test_support.hpp"
 
@@ -153,6 +153,59 @@ TEST_F(HostTest, FramesInAnUnknownFrameAreRejectedWhole) {
   }
 }
 
+// Issue 16 item 8a: object targets are accepted only from the identities inputs.object_sources names
+// (default: vision), judged by ObjectsFrame::source — the identity of the participant that WROTE the
+// frame (filled by the DDS adapter from the writer's GUID, authenticated under DDS-Security), never
+// by a name inside the message. Every other writer ("player": a replayed recording; another module;
+// an unknown participant "": not yet discovered; near-misses in case or spacing) is rejected whole,
+// counted, logged naming the writer, and never reaches a module. Naming the player accepts it (the
+// replay set-up) and then vision is refused.
+TEST_F(HostTest, ObjectsAreAcceptedOnlyFromTheConfiguredWriters) {
+  TestHost h(kProbe, probeRegistry());
+  h->start(at(0.0));
+  for (const char* bad : {"player", "", "behavior", "recorder", "Vision", "vision ", "reflex.vision", "CN=reflex.vision"}) {
+    ObjectsFrame f = frameAt(0.0, {object("cup", {0.45, -0.1, 0.95})});
+    f.source = bad;
+    h->onObjects(f, at(0.0));
+  }
+  EXPECT_TRUE(frames_.empty()) << "no frame of an unnamed writer reached the module";
+  EXPECT_EQ(h->stats().frames_rejected_source, 8u);
+  EXPECT_EQ(h->stats().objects_accepted, 0u);
+  EXPECT_EQ(h->stats().frames_received, 8u);
+  bool named = false, unknown = false;
+  for (const auto& line : h.log) {
+    named |= line.find("written by 'player', not one of inputs.object_sources ('vision')") != std::string::npos;
+    unknown |= line.find("written by an unknown participant") != std::string::npos;
+  }
+  EXPECT_TRUE(named && unknown) << "the log names the writer";
+  ObjectsFrame good = frameAt(0.0, {object("cup", {0.45, -0.1, 0.95})});
+  ASSERT_EQ(good.source, "vision");
+  h->onObjects(good, at(0.0));
+  ASSERT_EQ(frames_.size(), 1u);
+  EXPECT_EQ(h->stats().frames_rejected_source, 8u);
+
+  // A replay configuration: the player is named, vision is not.
+  frames_.clear();
+  TestHost replay("inputs: {object_sources: [player]}\nmodules:\n  - {name: probe, type: probe}\n", probeRegistry());
+  replay->start(at(0.0));
+  ObjectsFrame played = good;
+  played.source = "player";
+  replay->onObjects(played, at(0.0));
+  replay->onObjects(good, at(0.0));
+  ASSERT_EQ(frames_.size(), 1u);
+  EXPECT_EQ(frames_[0].source, "player");
+  EXPECT_EQ(replay->stats().frames_rejected_source, 1u);
+
+  for (const char* yaml : {"inputs: {object_sources: []}\n", "inputs: {object_sources: ['']}\n"}) {
+    try {
+      TestHost bad(std::string(yaml) + "modules:\n  - {name: probe, type: probe}\n", probeRegistry());
+      ADD_FAILURE() << "expected ConfigError for " << yaml;
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("object_sources"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST_F(HostTest, UnknownOutOfRangeAndDuplicateObjectsAreRejected) {
   TestHost h(kProbe, probeRegistry());
   h->start(at(0.0));
@@ -207,6 +260,7 @@ TEST_F(HostTest, JointStatesMoveTheRobotAndBadOnesAreRejected) {
   h->start(at(0.0));
   const Eigen::Vector3d s0 = h->robot().shoulder_B(Hand::kRight);
   JointStateSample js;
+  js.source = "controller";  // the default joint_state_sources
   js.names = {"heel_x", "no_such_joint"};
   js.positions = {0.5, 3.0};
   h->onJointState(js, at(0.0));
@@ -220,6 +274,15 @@ TEST_F(HostTest, JointStatesMoveTheRobotAndBadOnesAreRejected) {
   h->onJointState(mismatch, at(0.02));
   EXPECT_EQ(h->stats().joint_states_rejected, 2u);
   EXPECT_NEAR(h->robot().shoulder_B(Hand::kRight).x(), s0.x() + 0.5, 1e-12);  // kept
+  // Issue 16 item 8a: joint states only from the configured writers (default: the controller).
+  for (const char* bad_writer : {"player", "", "behavior", "Controller"}) {
+    JointStateSample forged = js;
+    forged.source = bad_writer;
+    forged.positions = {1.5, 0.0};
+    h->onJointState(forged, at(0.03));
+  }
+  EXPECT_EQ(h->stats().joint_states_rejected_source, 4u);
+  EXPECT_NEAR(h->robot().shoulder_B(Hand::kRight).x(), s0.x() + 0.5, 1e-12) << "a forged joint state moved the robot";
   // Modules hear of joint states at most every joint_state_period (0.1 s).
   for (int k = 0; k < 100; ++k) h->onJointState(js, at(0.2 + 0.005 * k));  // 0.5 s at 200 Hz
   EXPECT_GE(ProbeModule::joint_callbacks, 5);

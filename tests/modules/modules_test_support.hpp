@@ -65,6 +65,7 @@ inline ObjectsFrame frameAt(double t, std::vector<ObjectObservation> objects) {
   ObjectsFrame f;
   f.stamp_ns = at(t).wall_ns;
   f.capture_stamp_ns = f.stamp_ns;
+  f.source = "vision";  // written by the default object source (InputPolicy::object_sources)
   f.objects = std::move(objects);
   return f;
 }

@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
     std::vector<Obj> objects;
     for (const auto& t : object_texts) objects.push_back(parseObject(t));
     bus::BusConfig config;
-    config.module_name = "test_vision";
+    config.module_name = "vision";  // the default inputs.object_sources of reflex_behavior
     config.domain_id = bus::parseDomainId(domain, "--domain");
     bus::Participant participant(config);
     auto& writer = participant.makeWriter<msg::ObjectTargets>();
@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
         const std::int64_t ahead = bus::nowNs() + 10'000'000'000LL;
         future.header().stamp_ns(ahead);
         future.header().seq(index);
-        future.header().source("test_vision");
+        future.header().source("vision");
         future.capture_stamp_ns(ahead);
         future.image_index(index);
         future.frame_id("base_link");

@@ -7,6 +7,8 @@
 #include "reflex/vision/stereo_pipeline.hpp"
 
 #ifdef REFLEX_VISION_WITH_BUS
+#include <reflex/bus/log_limit.hpp>
+
 #include "vision_publisher.hpp"
 #endif
 
@@ -158,8 +160,18 @@ int main(int argc, char** argv) {
              << o.p_B[0] << ',' << o.p_B[1] << ',' << o.p_B[2] << ',' << o.p_C[0] << ',' << o.p_C[1] << ','
              << o.p_C[2] << ',' << std::setprecision(4) << o.confidence << '\n';
     };
+#ifdef REFLEX_VISION_WITH_BUS
+    // One line per skipped frame, rate-limited (issue 16 item 8f): a long corrupt stretch of video
+    // is counted (stats.skipped, exit line) but cannot flood stderr.
+    reflex::bus::LogLimiter skip_log;
+#endif
     cb.on_skip = [&](int frame, const std::string& why) {
-      std::cerr << "\nreflex_vision: skipped frame " << frame << ": " << why << "\n";
+      const std::string line = "\nreflex_vision: skipped frame " + std::to_string(frame) + ": " + why;
+#ifdef REFLEX_VISION_WITH_BUS
+      skip_log.print(stderr, line);
+#else
+      std::cerr << line << "\n";
+#endif
     };
 #ifdef REFLEX_VISION_WITH_BUS
     cb.on_publish = [&](const Publication& p) {

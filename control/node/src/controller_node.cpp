@@ -112,6 +112,9 @@ struct ControllerNode::Impl {
   msg::Heartbeat heartbeat_msg;
   msg::ControllerProtection peer_msg;
   std::vector<msg::BodySchemaChange> schema_scratch;
+  // One per-sample log line (a rejected body-schema segment): rate-limited, issue 16 item 8f.
+  bus::LogLimiter schema_log;
+  char schema_line[512] = {};
   Eigen::VectorXd q_walk;
   SimSample log_row;  ///< q / qdot sized once: filling it does not allocate
 };
@@ -398,20 +401,26 @@ void ControllerNode::run() {
                                            : SegmentAttach{};
       if (!att.attached) {
         ++stats_.targets_rejected;
+        // The line is formatted into a fixed buffer and printed at most LogLimiter's rate: a flood
+        // of bad segments is counted (targets_rejected) but cannot flood stderr.
+        char* const line = m.schema_line;
+        const std::size_t size = sizeof(m.schema_line);
         if (att.refusing_pair >= 0) {  // control/README.md: a segment no arm can move away from
-          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')\n",
-                       name.c_str(), att.distance * 1e3, m.model.segments[att.other_segment].name.c_str(), change.parent_link().c_str());
+          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')",
+                        name.c_str(), att.distance * 1e3, m.model.segments[att.other_segment].name.c_str(),
+                        change.parent_link().c_str());
         } else if (check.ok()) {
-          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: no free slot (link '%s')\n", name.c_str(),
-                       change.parent_link().c_str());
+          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: no free slot (link '%s')",
+                        name.c_str(), change.parent_link().c_str());
         } else if (*check.key != '\0') {
-          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)\n",
-                       name.c_str(), describe(check.fault), check.value, check.key, check.limit,
-                       change.parent_link().c_str(), change.virtual_segment() ? "virtual" : "physical");
+          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)",
+                        name.c_str(), describe(check.fault), check.value, check.key, check.limit,
+                        change.parent_link().c_str(), change.virtual_segment() ? "virtual" : "physical");
         } else {
-          std::fprintf(stderr, "controller: body-schema segment '%s' rejected: %s (value %g, link '%s')\n", name.c_str(),
-                       describe(check.fault), check.value, change.parent_link().c_str());
+          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %s (value %g, link '%s')",
+                        name.c_str(), describe(check.fault), check.value, change.parent_link().c_str());
         }
+        m.schema_log.print(stderr, line);
         continue;
       }
       m.data->slot_virtual[slot] = change.virtual_segment();

@@ -105,6 +105,8 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "reflex_controller: error: %s\n", log_error.c_str());
       return 3;
     }
+    // DDS-Security material that expired during the run stopped the loop (bus::Participant): not success.
+    if (node.bus().credentialsExpired()) return 1;
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "reflex_controller: error: %s\n", e.what());

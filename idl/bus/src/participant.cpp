@@ -9,9 +9,15 @@
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastrtps/rtps/participant/ParticipantDiscoveryInfo.h>
+
 #include <algorithm>
+#include <condition_variable>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <mutex>
 #include <thread>
 
 namespace reflex::bus {
@@ -138,10 +144,66 @@ bool ReaderBase::waitForData(std::chrono::nanoseconds timeout) {
 
 // ---- participant -----------------------------------------------------------------------------
 
+// What the Participant keeps beside its entities: the names remote participants announce
+// (discovery, Fast DDS threads), the result of the security check, and the expiry watchdog.
+struct Participant::Extras final : public dds::DomainParticipantListener {
+  // Discovery: GUID prefix -> announced name (not authenticated).
+  void on_participant_discovery(dds::DomainParticipant*, eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
+    using Status = eprosima::fastrtps::rtps::ParticipantDiscoveryInfo;
+    GuidPrefix prefix{};
+    std::copy(std::begin(info.info.m_guid.guidPrefix.value), std::end(info.info.m_guid.guidPrefix.value),
+              prefix.begin());
+    const std::lock_guard<std::mutex> lock(names_mutex);
+    if (info.status == Status::DISCOVERED_PARTICIPANT || info.status == Status::CHANGED_QOS_PARTICIPANT) {
+      names[prefix] = info.info.m_participantName.to_string();
+    } else if (info.status == Status::REMOVED_PARTICIPANT || info.status == Status::DROPPED_PARTICIPANT) {
+      names.erase(prefix);
+    }
+  }
+
+  // Sleeps until the material expires (or the participant closes); then says so and stops it.
+  void watchExpiry(Participant& owner) {
+    std::unique_lock<std::mutex> lock(expiry_mutex);
+    if (expiry_cv.wait_until(lock, check.valid_until, [&] { return closing; })) return;
+    expiry_message = "the DDS-Security " + check.valid_until_what + " of participant '" + owner.module_name_ +
+                     "' expired at " + formatUtc(check.valid_until) +
+                     "; stopping (Fast DDS checks validity only when peers authenticate, so Reflex stops the "
+                     "process itself: deploy new credentials and restart it)";
+    expired.store(true);  // after the message: run() reads it once it sees the flag
+    std::fprintf(stderr, "reflex::bus: %s\n", expiry_message.c_str());
+    std::fflush(stderr);
+    owner.stop();
+  }
+
+  mutable std::mutex names_mutex;
+  std::map<GuidPrefix, std::string> names;
+  bool secure = false;
+  SecurityCheck check;
+  std::mutex expiry_mutex;
+  std::condition_variable expiry_cv;
+  bool closing = false;
+  std::atomic<bool> expired{false};
+  std::string expiry_message;
+  std::thread watchdog;
+};
+
+bool Participant::secure() const noexcept { return extras_->secure; }
+const std::string& Participant::identitySubject() const noexcept { return extras_->check.subject; }
+std::chrono::system_clock::time_point Participant::credentialsValidUntil() const noexcept {
+  return extras_->secure ? extras_->check.valid_until : std::chrono::system_clock::time_point::max();
+}
+bool Participant::credentialsExpired() const noexcept { return extras_->expired.load(); }
+std::string Participant::discoveredName(const GuidPrefix& prefix) const {
+  const std::lock_guard<std::mutex> lock(extras_->names_mutex);
+  auto it = extras_->names.find(prefix);
+  return it == extras_->names.end() ? std::string() : it->second;
+}
+
 Participant::Participant(const BusConfig& config)
     : module_name_(config.module_name),
       domain_id_(resolveDomainId(config.domain_id)),
-      profiles_file_(resolveProfilesFile(config.profiles_file)) {
+      profiles_file_(resolveProfilesFile(config.profiles_file)),
+      extras_(std::make_unique<Extras>()) {
   if (module_name_.empty()) throw BusError("empty module name in the bus configuration");
   // The module name is the key of this process's heartbeat: a longer one would abort the process in
   // its first heartbeat (issue 16, item 9).
@@ -166,8 +228,30 @@ Participant::Participant(const BusConfig& config)
       ReturnCode_t::RETCODE_OK) {
     throw BusError("unknown participant QoS profile '" + config.participant_profile + "'" + where());
   }
-  qos.name(module_name_);
-  participant_ = factory->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, nullptr,
+  // Security material: checked here so that a bad file is named (Fast DDS would only fail below).
+  std::vector<std::pair<std::string, std::string>> properties;
+  for (const auto& p : qos.properties().properties()) properties.emplace_back(p.name(), p.value());
+  const SecurityMaterial material = securityMaterialOf(properties);
+  extras_->secure = material.enabled;
+  if (material.enabled) {
+    try {
+      extras_->check = checkSecurityMaterial(material, std::chrono::system_clock::now());
+    } catch (const BusError& e) {
+      throw BusError("participant '" + module_name_ + "': " + e.what() + where());
+    }
+  }
+  // Discovery (SPDP) is plain text even under DDS-Security: announce no more than peers need. The
+  // host name, user name and process id Fast DDS adds for its monitor are left out; a secure
+  // participant announces no name either (its certificate identifies it to authenticated peers).
+  auto& props = qos.properties().properties();
+  props.erase(std::remove_if(props.begin(), props.end(),
+                             [](const eprosima::fastrtps::rtps::Property& p) {
+                               return p.name().rfind("fastdds.physical_data.", 0) == 0;
+                             }),
+              props.end());
+  qos.name(material.enabled ? std::string() : module_name_);
+  // The listener gets participant discovery only (it is not in the status mask for anything else).
+  participant_ = factory->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, extras_.get(),
                                              dds::StatusMask::none());
   if (participant_ == nullptr) {
     throw BusError("could not create the DDS participant '" + module_name_ + "' on domain " +
@@ -191,9 +275,20 @@ Participant::Participant(const BusConfig& config)
     participant_ = nullptr;
     throw;
   }
+  if (extras_->secure && extras_->check.valid_until != std::chrono::system_clock::time_point::max()) {
+    extras_->watchdog = std::thread([this] { extras_->watchExpiry(*this); });
+  }
 }
 
 Participant::~Participant() {
+  if (extras_->watchdog.joinable()) {
+    {
+      const std::lock_guard<std::mutex> lock(extras_->expiry_mutex);
+      extras_->closing = true;
+    }
+    extras_->expiry_cv.notify_all();
+    extras_->watchdog.join();
+  }
   // Entities first (readers, writers, publisher, subscriber, topics), then the participant; the
   // Writer/Reader objects (and their listeners) are destroyed after this body, once nothing can
   // call them any more.
@@ -271,11 +366,16 @@ void Participant::every(std::chrono::nanoseconds period, std::function<void()> f
   timers_.push_back(Timer{period, std::move(fn), Clock::now() + period});
 }
 
-void Participant::run() { loop(nullptr); }
+void Participant::run() {
+  loop(nullptr);
+  if (credentialsExpired()) throw BusError(extras_->expiry_message);
+}
 
 bool Participant::runFor(std::chrono::nanoseconds duration) {
   const auto end = Clock::now() + duration;
-  return loop(&end);
+  const bool ran_out = loop(&end);
+  if (!ran_out && credentialsExpired()) throw BusError(extras_->expiry_message);
+  return ran_out;
 }
 
 void Participant::stop() noexcept {

@@ -130,6 +130,8 @@ struct BehaviorNode::Impl {
   double joint_writer_last = -1.0;                    // host time of its last sample
   std::uint64_t joint_states_other_writer = 0;        // samples ignored: from a second writer
   std::uint64_t joint_writer_changes = 0;             // a silent writer replaced by a new one
+  std::unique_ptr<bus::WriterIdentities> writers;  // who wrote an object frame (inputs.object_sources)
+  bus::LogLimiter host_log;                        // the host's per-sample lines, rate-limited
 
   Now now() const {
     return Now{std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count(), bus::nowNs()};
@@ -140,7 +142,11 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
   Impl& m = *impl_;
   m.options = options;
   m.config = loadHostConfig(options.config, registry);
-  BehaviorHost::LogFn log;
+  if (!options.object_sources.empty()) m.config.inputs.object_sources = options.object_sources;
+  if (!options.joint_state_sources.empty()) m.config.inputs.joint_state_sources = options.joint_state_sources;
+  // Every host line goes through one rate limiter (issue 16 item 8f): a flood of bad samples is
+  // counted in the host's stats but prints at most LogLimiter's rate.
+  BehaviorHost::LogFn log = [&m](const std::string& line) { m.host_log.print(stderr, line); };
   if (options.quiet) log = [](const std::string&) {};
   m.host = std::make_unique<BehaviorHost>(m.config, registry, m.sink, log, options.module);
   // A body-schema segment name is the DDS key of its samples (issue 16, item 9): bounded here, at start.
@@ -161,9 +167,31 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
   m.sink.bind(*m.bus, m.host->claims());
   m.heartbeat = std::make_unique<bus::HeartbeatPublisher>(*m.bus);  // 500 ms: 2 Hz
 
+  // The writer of each input sample is identified from its participant (authenticated under
+  // DDS-Security): the configured sources and the Reflex identities are recognised, anything else is "".
+  std::vector<std::string> known = m.config.inputs.object_sources;
+  known.insert(known.end(), m.config.inputs.joint_state_sources.begin(), m.config.inputs.joint_state_sources.end());
+  for (const char* id : {"vision", "behavior", "controller", "recorder", "player"}) known.emplace_back(id);
+  std::sort(known.begin(), known.end());
+  known.erase(std::unique(known.begin(), known.end()), known.end());
+  m.writers = std::make_unique<bus::WriterIdentities>(*m.bus, known);
+  if (!options.quiet) {
+    auto list = [](const std::vector<std::string>& v) {
+      std::string out;
+      for (const auto& n : v) out += (out.empty() ? "'" : ", '") + n + "'";
+      return out;
+    };
+    std::fprintf(stderr, "%s: object targets accepted only from %s, joint states only from %s (%s)\n",
+                 m.host->processName().c_str(), list(m.config.inputs.object_sources).c_str(),
+                 list(m.config.inputs.joint_state_sources).c_str(),
+                 m.writers->authenticated() ? "the writer's certificate, authenticated by DDS-Security"
+                                            : "the name the writer's participant announces: NOT authenticated, "
+                                              "plain DDS");
+  }
   if (m.host->claims().objects) {
     auto& objects = m.bus->makeReader<msg::ObjectTargets>();
-    objects.onData([&m](const msg::ObjectTargets& o) {
+    objects.onDataWithInfo([&m](const msg::ObjectTargets& o, const bus::dds::SampleInfo& info) {
+      m.frame.source = m.writers->identify(info);
       m.frame.stamp_ns = o.header().stamp_ns();
       m.frame.capture_stamp_ns = o.capture_stamp_ns();
       m.frame.image_index = o.image_index();
@@ -182,6 +210,18 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
   }
   auto& joints = m.bus->makeReader<msg::JointState>();
   joints.onDataWithInfo([&m](const msg::JointState& js, const eprosima::fastdds::dds::SampleInfo& info) {
+    // A writer that is not an accepted source (inputs.joint_state_sources) is rejected and counted by
+    // the host; it never becomes the followed writer (a replayed joint state cannot lock the real
+    // controller out).
+    m.joints.source = m.writers->identify(info);
+    const auto& accepted = m.config.inputs.joint_state_sources;
+    if (std::find(accepted.begin(), accepted.end(), m.joints.source) == accepted.end()) {
+      m.joints.stamp_ns = js.header().stamp_ns();
+      m.joints.names = js.names();
+      m.joints.positions = js.positions();
+      m.host->onJointState(m.joints, m.now());
+      return;
+    }
     std::array<unsigned char, 16> writer{};
     const unsigned char* handle = info.publication_handle.value;  // 16 bytes: the writer GUID
     std::copy(handle, handle + writer.size(), writer.begin());
@@ -247,11 +287,13 @@ std::string BehaviorNode::report() const {
   const HostStats& s = impl_->host->stats();
   std::ostringstream m;
   m << "frames=" << s.frames_received << " objects_accepted=" << s.objects_accepted
-    << " rejected_future=" << s.frames_rejected_future << " rejected_frame=" << s.frames_rejected_frame
+    << " rejected_source=" << s.frames_rejected_source << " rejected_future=" << s.frames_rejected_future
+    << " rejected_frame=" << s.frames_rejected_frame
     << " rejected_invalid=" << s.objects_rejected_invalid
     << " rejected_unknown=" << s.objects_rejected_unknown << " rejected_range=" << s.objects_rejected_range
     << " rejected_duplicate=" << s.objects_rejected_duplicate << " joint_states=" << s.joint_states
-    << " joint_states_rejected=" << s.joint_states_rejected << " hand_targets=" << s.hand_targets_published
+    << " joint_states_rejected=" << s.joint_states_rejected
+    << " joint_states_rejected_source=" << s.joint_states_rejected_source << " hand_targets=" << s.hand_targets_published
     << " priority=" << s.priority_published << " segment_changes=" << s.segment_changes_published
     << " walk=" << s.walk_published << " outputs_rejected=" << s.outputs_rejected
     << " forced_cleanups=" << s.forced_cleanups

@@ -23,6 +23,15 @@ int main(int argc, char** argv) {
   bool list = false;
   app.add_option("--config", options.config, "behavior configuration YAML (see bringup/behavior/)");
   app.add_option("--module", options.module, "run only the module of this name from the configuration");
+  app.add_option("--object-source", options.object_sources,
+                 "identity whose reflex/object_targets are accepted, replacing the configuration's "
+                 "inputs.object_sources (repeatable; default there: vision). Replaying a recording with reflex_play "
+                 "in place of reflex_vision: --object-source player. Under DDS-Security the identity is the writer's "
+                 "certificate (CN=reflex.<name>); without it, the name its participant announces (not authenticated)");
+  app.add_option("--joint-state-source", options.joint_state_sources,
+                 "identity whose reflex/joint_state samples are accepted, replacing the configuration's "
+                 "inputs.joint_state_sources (repeatable; default there: controller). A recording replayed without a "
+                 "live controller: --joint-state-source player");
   app.add_option("--domain", domain, "DDS domain id 0..232 (default: $REFLEX_DOMAIN_ID, else 0)");
   app.add_option("--profiles", options.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
   app.add_option("--participant-profile", options.participant_profile, "participant profile in the profiles file")

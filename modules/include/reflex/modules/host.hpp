@@ -6,6 +6,11 @@
 // OutputSink: the DDS adapter in modules/node, or a recording sink in tests.
 //
 // Input validation (InputPolicy), counted in HostStats and never forwarded to a module:
+//   - an ObjectTargets frame whose writer (ObjectsFrame::source: the identity of the participant
+//     that wrote it, authenticated under DDS-Security) is not one of `object_sources` (default:
+//     "vision"): the whole frame is dropped — a recording replayed by reflex_play (identity
+//     "player") or any other permitted writer does not steer the arms unless the configuration
+//     names it;
 //   - an ObjectTargets frame stamped in the future (stamp_ns or capture_stamp_ns later than the
 //     host's wall clock + future_tolerance): the whole frame is dropped;
 //   - an ObjectTargets frame whose frame_id is not one of `frames` (default: "base_link", the name
@@ -14,12 +19,14 @@
 //   - an object with a non-finite position or confidence, or a confidence outside [0, 1];
 //   - an object with an unknown name ("" or not in known_objects when that list is given);
 //   - an object farther than max_range from the base origin; a second object of the same name;
-//   - a joint state whose names and positions differ in length or hold a non-finite value.
+//   - a joint state written by an identity not in `joint_state_sources` (default "controller"), or
+//     whose names and positions differ in length or hold a non-finite value.
 //
 // Configuration file (a YAML map; see bringup/behavior/*.yaml and modules/README.md):
 //   process: behavior          # module name on the bus (Header.source, heartbeat)
 //   robot: {urdf: ..., ...}    # readRobotConfig
-//   inputs: {known_objects: [cup, can], future_tolerance: 0.5, max_range: 3.0, frames: [base_link]}
+//   inputs: {known_objects: [cup, can], future_tolerance: 0.5, max_range: 3.0, frames: [base_link],
+//            object_sources: [vision], joint_state_sources: [controller]}
 //   tick_period: 0.02          # s, how often modules' step() timers are checked
 //   joint_state_period: 0.1    # s, modules hear of joint states at most this often
 //   modules:
@@ -59,6 +66,12 @@ struct InputPolicy {
   double max_range = 3.0;                  ///< [m] objects farther from the base origin are rejected
   /// Names of the base frame B accepted in ObjectTargets.frame_id (exact, case-sensitive; not empty).
   std::vector<std::string> frames = {kBaseFrameId};
+  /// Identities whose ObjectTargets are accepted (exact; not empty): "vision" is reflex_vision
+  /// (certificate CN=reflex.vision), "player" is reflex_play (CN=reflex.player).
+  std::vector<std::string> object_sources = {"vision"};
+  /// Identities whose JointState samples are accepted (exact; not empty): "controller" is
+  /// reflex_controller; "player" when a recording replays the robot's joint states.
+  std::vector<std::string> joint_state_sources = {"controller"};
 };
 
 struct ModuleEntry {
@@ -87,6 +100,7 @@ struct HostStats {
   std::uint64_t frames_received = 0;
   std::uint64_t frames_rejected_future = 0;
   std::uint64_t frames_rejected_frame = 0;       ///< frame_id not one of InputPolicy::frames
+  std::uint64_t frames_rejected_source = 0;      ///< writer not one of InputPolicy::object_sources
   std::uint64_t objects_accepted = 0;
   std::uint64_t objects_rejected_invalid = 0;    ///< NaN / inf position or confidence, confidence out of [0, 1]
   std::uint64_t objects_rejected_unknown = 0;    ///< "" or not in known_objects
@@ -94,6 +108,7 @@ struct HostStats {
   std::uint64_t objects_rejected_duplicate = 0;  ///< same name twice in one frame
   std::uint64_t joint_states = 0;
   std::uint64_t joint_states_rejected = 0;
+  std::uint64_t joint_states_rejected_source = 0;  ///< writer not one of InputPolicy::joint_state_sources
   std::uint64_t outputs_rejected = 0;            ///< non-finite hand target / bad segment from a module
   std::uint64_t hand_targets_published = 0;
   std::uint64_t priority_published = 0;

@@ -40,12 +40,18 @@ struct ObjectsFrame {
   std::int64_t capture_stamp_ns = 0;  ///< capture time of the image pair, system clock (0 = unknown)
   std::uint64_t image_index = 0;
   std::string frame_id = kBaseFrameId;  ///< frame the sender says p_B is in (ObjectTargets.frame_id)
+  /// Identity of the participant that WROTE the frame (not Header.source, which any writer can set):
+  /// under DDS-Security the authenticated identity name ("vision" for CN=reflex.vision), otherwise the
+  /// name its participant announced; "" when unknown. Filled by the DDS adapter (bus::WriterIdentities).
+  std::string source;
   std::vector<ObjectObservation> objects;
 };
 
 /// A joint state sample (reflex::msg::JointState): names and positions of equal length.
 struct JointStateSample {
   std::int64_t stamp_ns = 0;
+  /// Identity of the participant that wrote the sample, as ObjectsFrame::source ("" = unknown).
+  std::string source;
   std::vector<std::string> names;
   std::vector<double> positions;  ///< [rad] or [m]
 };

@@ -43,6 +43,7 @@
 
 #include "reflex/bus/config.hpp"
 #include "reflex/bus/error.hpp"
+#include "reflex/bus/security.hpp"
 #include "reflex/bus/topics.hpp"
 
 namespace reflex::bus {
@@ -326,7 +327,8 @@ class Participant {
   void every(std::chrono::nanoseconds period, std::function<void()> fn);
 
   /// Waits on a WaitSet (readers with an onData callback + the stop guard condition) and dispatches
-  /// samples and timers until stop(). Exceptions thrown by callbacks propagate out.
+  /// samples and timers until stop(). Exceptions thrown by callbacks propagate out. Throws BusError
+  /// when it stopped because the security material expired (credentialsExpired()).
   void run();
   /// As run(), but returns after `duration`: true if the time ran out, false if stop() was called.
   bool runFor(std::chrono::nanoseconds duration);
@@ -334,6 +336,28 @@ class Participant {
   /// from a signal handler use StopOnSignal (signals.hpp).
   void stop() noexcept;
   bool stopRequested() const noexcept { return stop_.load(); }
+
+  // ---- security and identity (issue 16 item 8) ----
+  // A participant whose profile enables DDS-Security has its material checked before Fast DDS sees
+  // it (checkSecurityMaterial: a bad file is a BusError naming the file and the cause), announces no
+  // participant name in discovery (its certificate subject identifies it to authenticated peers),
+  // and stops itself when the material expires: at credentialsValidUntil() it prints one line
+  // naming what expired to stderr and calls stop(); run() / runFor() then throw BusError saying so.
+  // Every participant leaves out Fast DDS's fastdds.physical_data.* discovery properties (host
+  // name, user name, process id).
+
+  /// True when the participant profile enables DDS-Security (an authentication plugin is set).
+  bool secure() const noexcept;
+  /// Subject of this participant's identity certificate, RFC 2253 ("" when not secure).
+  const std::string& identitySubject() const noexcept;
+  /// When this participant's security material stops being valid (time_point::max() when not secure).
+  std::chrono::system_clock::time_point credentialsValidUntil() const noexcept;
+  /// True once credentialsValidUntil() has passed (the participant has then stopped).
+  bool credentialsExpired() const noexcept;
+  /// The participant name a discovered remote participant announced, or "" (unknown, left, or none
+  /// announced). NOT authenticated: any participant can announce any name; see security.hpp for what
+  /// a writer's GUID prefix does authenticate.
+  std::string discoveredName(const GuidPrefix& prefix) const;
 
   const std::string& moduleName() const { return module_name_; }
   int domainId() const { return domain_id_; }
@@ -358,6 +382,7 @@ class Participant {
   bool loop(const std::chrono::steady_clock::time_point* end);
   std::string where() const;  // " (profiles file '...')" for error messages
 
+  struct Extras;  // discovery listener, security check result, expiry watchdog (participant.cpp)
   std::string module_name_;
   int domain_id_ = 0;
   std::string profiles_file_;
@@ -372,6 +397,7 @@ class Participant {
   dds::GuardCondition stop_guard_;
   std::atomic<bool> stop_{false};
   bool running_ = false;
+  std::unique_ptr<Extras> extras_;
 };
 
 }  // namespace reflex::bus

@@ -15,12 +15,17 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace reflex::modules {
 
 struct NodeOptions {
   std::string config;            ///< behavior configuration YAML
   std::string module;            ///< run only this module of the configuration ("" = all)
+  /// Replaces the configuration's inputs.object_sources when not empty (--object-source).
+  std::vector<std::string> object_sources;
+  /// Replaces the configuration's inputs.joint_state_sources when not empty (--joint-state-source).
+  std::vector<std::string> joint_state_sources;
   std::optional<int> domain_id;  ///< DDS domain (empty: $REFLEX_DOMAIN_ID, else 0)
   std::string profiles_file;     ///< QoS profiles ("" = bus default)
   std::string participant_profile = "reflex_participant";
