@@ -4,6 +4,7 @@
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "reflex/common/files.hpp"
 
 #include <CLI/CLI.hpp>
 
@@ -59,6 +60,8 @@ void setJoint(const Model& model, Eigen::VectorXd& q, const std::string& name, c
 
 /// CSV with a header row of joint names and value rows; `row` selects the row (0 = first after header).
 void readCsvRow(const Model& model, Eigen::VectorXd& q, const std::string& path, int row) {
+  if (const std::string why = reflex::common::inputFileProblem(path); !why.empty())
+    throw std::runtime_error("joint CSV " + why);
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open joint CSV");
   std::string header;
@@ -110,13 +113,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
-    reflex::control::CollisionConfig config;
-    if (config_path.empty()) {
-      const std::string guess = reflex::control::defaultCollisionConfigPath(urdf_path);
-      if (std::ifstream(guess).good()) config = reflex::control::loadCollisionConfig(guess);
-    } else {
-      config = reflex::control::loadCollisionConfig(config_path);
-    }
+    const reflex::control::CollisionConfig config = reflex::control::loadCollisionConfigFor(urdf_path, config_path);
     std::vector<std::string> warnings;
     const Model model = reflex::control::loadModel(urdf_path, config, &warnings);
     for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";

@@ -6,6 +6,7 @@
 #include "reflex/control/controller.hpp"
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "reflex/common/files.hpp"
 
 #include <CLI/CLI.hpp>
 
@@ -64,6 +65,8 @@ std::vector<std::size_t> evenPicks(std::size_t n, int frames) {
 /// Reads the joint columns (q_<name>) and the time column of a time-series CSV (reflex_sim or
 /// reflex_controller --log) into samples.
 SimResult readTimeseries(const Model& model, const std::string& path) {
+  if (const std::string why = reflex::common::inputFileProblem(path); !why.empty())
+    throw ConfigError("time series " + why);
   std::ifstream in(path);
   if (!in) throw ConfigError(path + ": cannot open time series");
   std::string line;
@@ -157,10 +160,7 @@ int main(int argc, char** argv) {
   if (!postures_from.empty()) {
     try {
       if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
-      const std::string coll = collision.empty() ? defaultCollisionConfigPath(urdf) : collision;
-      CollisionConfig cc;
-      if (!collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
-      const Model model = loadModel(urdf, cc);
+      const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
       const SimResult r = readTimeseries(model, postures_from);
       if (r.samples.empty()) throw ConfigError(postures_from + ": no rows");
       std::vector<std::size_t> picks;
@@ -200,10 +200,7 @@ int main(int argc, char** argv) {
   }
   try {
     if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
-    const std::string coll = collision.empty() ? defaultCollisionConfigPath(urdf) : collision;
-    CollisionConfig cc;
-    if (!collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
-    const Model model = loadModel(urdf, cc);
+    const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
     const ControllerConfig config = controller_cfg.empty() ? defaultControllerConfig() : loadControllerConfig(controller_cfg);
     const ControllerModel cm = makeControllerModel(model, config);
     int failures = 0;

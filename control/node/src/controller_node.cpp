@@ -89,9 +89,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.config = config;
   if (!(config.input_timeout > 0.0))
     throw ConfigError("--input-timeout " + std::to_string(config.input_timeout) + " must be positive");
-  const std::string coll = config.collision.empty() ? defaultCollisionConfigPath(config.urdf) : config.collision;
-  CollisionConfig cc;
-  if (!config.collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
+  const CollisionConfig cc = loadCollisionConfigFor(config.urdf, config.collision);
   m.model = loadModel(config.urdf, cc);
   ControllerConfig ctl = config.controller.empty() ? defaultControllerConfig() : loadControllerConfig(config.controller);
   if (!config.avoidance) ctl.params.mode = AvoidanceMode::kOff;
