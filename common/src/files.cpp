@@ -1,7 +1,9 @@
 #include "reflex/common/files.hpp"
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
+#include <iostream>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -43,6 +45,18 @@ std::string inputFileProblem(const std::string& path) {
 
 std::string writeError(const std::string& path, int err) {
   return "cannot write " + quoted(path) + ": " + std::strerror(err);
+}
+
+std::string flushStandardOutput() {
+  errno = 0;
+  std::cout.flush();
+  const bool cout_ok = static_cast<bool>(std::cout);
+  const int cout_errno = errno;
+  errno = 0;
+  const bool stdout_ok = std::fflush(stdout) == 0 && !std::ferror(stdout);
+  if (cout_ok && stdout_ok) return "";
+  const int err = !stdout_ok && errno != 0 ? errno : (cout_errno != 0 ? cout_errno : EIO);
+  return std::string("cannot write the standard output: ") + std::strerror(err);
 }
 
 std::string outputFileProblem(const std::string& path) {

@@ -1,5 +1,8 @@
 #include "reflex/control/scenarios.hpp"
 
+#include "reflex/common/files.hpp"
+
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -157,8 +160,9 @@ std::string pairName(const Model& model, int pair) {
 
 void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
                         const std::string& path) {
+  errno = 0;
   std::ofstream out(path);
-  if (!out) throw ConfigError(path + ": cannot write time series");
+  if (!out) throw ConfigError("time series: " + common::writeError(path, errno ? errno : EIO));
   out << std::setprecision(9);
   out << "time";
   const char* side[2] = {"left", "right"};
@@ -189,6 +193,9 @@ void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const Sim
     for (int i = 0; i < model.nq; ++i) out << ',' << s.q[i];
     out << '\n';
   }
+  errno = 0;
+  out.close();  // flushes: a full disk (ENOSPC) is an error here, never a silently short file
+  if (!out) throw ConfigError("time series: " + common::writeError(path, errno ? errno : EIO));
   (void)cm;
 }
 

@@ -92,7 +92,7 @@ std::string jsonString(const std::string& s) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{"reflex_inspect: check a robot's collision model (segments, checked pairs, distances)"};
   std::string urdf_path;
   std::string config_path;
@@ -204,4 +204,14 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  const int status = run(argc, argv);
+  // Output that could not be written (reflex_inspect robot.urdf > /dev/full) is not success.
+  if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
+    std::fprintf(stderr, "reflex_inspect: error: %s\n", why.c_str());
+    return 1;
+  }
+  return status;
 }

@@ -7,6 +7,12 @@
 // reports whether the loader threw its documented error type with the path and the kind ("is a FIFO
 // (named pipe)", "is a character device", "is a directory") in the message. A blocked child is killed
 // and the case fails. Tools: the real executables under `timeout`, exit status and stderr checked.
+//
+// Issue 16, item 14 (recorder and tools): output that cannot be written is not success. /dev/full
+// (every write fails with ENOSPC) as a recording, a CSV export, a time series (through a symbolic
+// link in the output folder) and as standard output; a missing or impossible output folder is an
+// error at start, before any work. /dev/null stays a valid output. reflex_record record uses DDS
+// domain 111 (it fails before it records anything).
 #include "reflex/bus/error.hpp"
 #include "reflex/bus/participant.hpp"
 #include "reflex/control/controller.hpp"
@@ -14,6 +20,7 @@
 #include "reflex/modules/config.hpp"
 #include "reflex/modules/scripted.hpp"
 #include "reflex/record/record_file.hpp"
+#include "reflex/record/recorder.hpp"
 #include "reflex/vision/calibration.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/object_map.hpp"
@@ -195,6 +202,86 @@ TEST(FileKind, ToolsExitWithAnErrorNamingThePathInsteadOfHanging) {
     EXPECT_LT(s, 4.0) << cmd;
     EXPECT_NE(err.find(nf.fifo), std::string::npos) << cmd << ": " << err;
     EXPECT_NE(err.find("is a FIFO"), std::string::npos) << cmd << ": " << err;
+  }
+}
+
+// ---------------------------------------------------------------- item 14: outputs
+TEST(OutputFiles, TheRecordingWriterAndTheExporterNameTheFileAndTheCause) {
+  using reflex::record::RecordError;
+  auto message = [](const std::function<void()>& fn) -> std::string {
+    try {
+      fn();
+    } catch (const RecordError& e) {
+      return e.what();
+    }
+    return "(no error)";
+  };
+  // /dev/full: the file header cannot be written -- at construction, not at the end.
+  EXPECT_EQ(message([] { reflex::record::RecordWriter w("/dev/full"); }),
+            "cannot write recording '/dev/full': No space left on device");
+  // A folder that does not exist, and a folder in the file's place.
+  const std::string missing = message([] { reflex::record::RecordWriter w("/nonexistent_reflex_dir/run.rfx"); });
+  EXPECT_NE(missing.find("folder '/nonexistent_reflex_dir' of output file '/nonexistent_reflex_dir/run.rfx' does not exist"),
+            std::string::npos)
+      << missing;
+  const NonFiles nf;
+  EXPECT_NE(message([&] { reflex::record::RecordWriter w(nf.folder); }).find("is a directory"), std::string::npos);
+  // /dev/null stays a valid output (its fsync fails with EINVAL: nothing to lose there).
+  {
+    reflex::record::RecordWriter w("/dev/null");
+    w.append(reflex::record::RecordEntry{1, 2, "t", "T", {1, 2, 3}});
+    EXPECT_NO_THROW(w.close());
+  }
+  // Export: the CSV's folder is checked before the recording is read (the input does not even exist).
+  const std::string early = message([] {
+    reflex::record::exportCsv("/nonexistent_input.rfx", "reflex/joint_state", "/nonexistent_reflex_dir/x.csv");
+  });
+  EXPECT_NE(early.find("/nonexistent_reflex_dir"), std::string::npos) << early;
+  EXPECT_NE(early.find("does not exist"), std::string::npos) << early;
+  const std::string seed = std::string(REFLEX_SOURCE_DIR) + "/tests/fuzz/seeds/recording.rfx";
+  EXPECT_EQ(message([&] { reflex::record::exportCsv(seed, "reflex/joint_state", "/dev/full"); }),
+            "cannot write '/dev/full': No space left on device");
+}
+
+TEST(OutputFiles, ToolsExitNonZeroNamingTheOutputAndTheCause) {
+  const NonFiles nf;
+  const std::string bin = REFLEX_BIN_DIR;
+  const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
+  const std::string seed = std::string(REFLEX_SOURCE_DIR) + "/tests/fuzz/seeds/recording.rfx";
+  // A time series that cannot be written: its name in the output folder links to /dev/full.
+  const std::string sim_out = nf.dir + "/sim";
+  fs::create_directories(sim_out);
+  fs::create_symlink("/dev/full", sim_out + "/timeseries.csv");
+  struct Case {
+    std::string cmd, expected;
+  };
+  const std::vector<Case> cases = {
+      {bin + "/reflex_inspect " + urdf + " > /dev/full", "cannot write the standard output: No space left on device"},
+      {bin + "/reflex_record info " + seed + " > /dev/full",
+       "cannot write the standard output: No space left on device"},
+      {bin + "/reflex_record export " + seed + " --topic reflex/joint_state --csv /dev/full",
+       "cannot write '/dev/full': No space left on device"},
+      {bin + "/reflex_record export " + seed + " --dir /dev/null/csv", "'/dev/null/csv'"},
+      {bin + "/reflex_record record --domain 111 -o /dev/full --duration 1", "'/dev/full': No space left on device"},
+      {bin + "/reflex_record record --domain 111 -o " + nf.dir + "/no/such/run.rfx --duration 1",
+       "'" + nf.dir + "/no/such' of output file"},
+      {bin + "/reflex_sim target_inside_body --no-plots --out " + nf.dir + "/sim_stdout > /dev/full",
+       "cannot write the standard output: No space left on device"},
+      {bin + "/reflex_sim target_inside_body --no-plots --out " + sim_out + " > /dev/null",
+       "cannot write '" + sim_out + "/timeseries.csv': No space left on device"},
+      {bin + "/reflex_sim target_inside_body --no-plots --out /dev/null/sim", "output folder '/dev/null/sim'"},
+      {bin + "/reflex_sim --postures-from " + seed + " --out /dev/null/sim", "output folder '/dev/null/sim'"},
+  };
+  for (const Case& c : cases) {
+    // stderr only (the commands redirect their own stdout).
+    FILE* p = popen(("{ timeout -s KILL 20 " + c.cmd + "; } 2>&1").c_str(), "r");
+    ASSERT_NE(p, nullptr);
+    std::string err;
+    std::array<char, 512> buf{};
+    while (fgets(buf.data(), buf.size(), p)) err += buf.data();
+    const int st = pclose(p);
+    EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) != 0 && WEXITSTATUS(st) != 137) << c.cmd << "\n" << err;
+    EXPECT_NE(err.find(c.expected), std::string::npos) << c.cmd << "\n" << err;
   }
 }
 

@@ -50,4 +50,9 @@ std::string outputFolderProblem(const std::string& dir);
 /// "cannot write '<path>': <strerror(err)>" -- the one wording of a failed write / flush / close.
 std::string writeError(const std::string& path, int err);
 
+/// Flushes std::cout and stdout; "" if everything written to them reached the kernel, else
+/// "cannot write the standard output: <cause>" (e.g. `tool > /dev/full`: No space left on device).
+/// Tools call it last and exit non-zero with the message: output that was lost is not success.
+std::string flushStandardOutput();
+
 }  // namespace reflex::common
