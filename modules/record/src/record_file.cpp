@@ -290,7 +290,7 @@ RecordReader::RecordReader(const std::string& path) : path_(path) {
     throw RecordError("recording '" + path + "' is " + common::fileKind(st.st_mode) + ", not a regular file");
   }
   size_ = static_cast<std::uint64_t>(st.st_size);
-  window_.resize(kCacheBlocks * kBlock);
+  window_.reset(new std::uint8_t[kCacheBlocks * kBlock]);  // filled block by block before any use
   block_index_.assign(kCacheBlocks, ~std::uint64_t{0});
   crc_marks_.assign(1, 0u);  // the CRC of no bytes
   std::uint8_t header[kFileHeaderSize];
@@ -318,7 +318,7 @@ bool RecordReader::readAt(std::uint64_t offset, void* dst, std::size_t n) {
   while (n > 0) {
     const std::uint64_t index = offset / kBlock;
     const std::size_t slot = static_cast<std::size_t>(index % kCacheBlocks);
-    std::uint8_t* block = window_.data() + slot * kBlock;
+    std::uint8_t* block = window_.get() + slot * kBlock;
     if (block_index_[slot] != index) {
       const std::uint64_t start = index * kBlock;
       const std::size_t len = static_cast<std::size_t>(std::min<std::uint64_t>(kBlock, size_ - start));

@@ -32,6 +32,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -182,7 +183,7 @@ class RecordReader {
 
   std::string path_;
   int fd_ = -1;
-  std::vector<std::uint8_t> window_;       ///< read cache: direct-mapped 4 KiB blocks of the file
+  std::unique_ptr<std::uint8_t[]> window_;  ///< read cache: direct-mapped 4 KiB blocks (not zeroed)
   std::vector<std::uint64_t> block_index_; ///< which block each cache slot holds (~0: none)
   std::vector<std::uint32_t> crc_marks_;   ///< crc_marks_[i] = CRC-32 of the file's bytes [0, i * stride)
   std::uint64_t size_ = 0, pos_ = kFileHeaderSize, valid_end_ = kFileHeaderSize;
