@@ -186,6 +186,8 @@ void checkJoint(const XMLElement& joint, std::vector<std::string>& out) {
 
 /// Collision elements and links anywhere but where urdfdom looks (<robot><link><collision>). Inside
 /// <gazebo> extension blocks, <collision> carries simulator surface parameters, not geometry.
+/// Recursive: the depth is bounded by tinyxml2, which refuses documents nested deeper than
+/// TINYXML2_MAX_ELEMENT_DEPTH (100) with a parse error.
 void findStrays(const XMLElement& e, const XMLElement& robot, bool in_gazebo, std::vector<std::string>& out) {
   for (const XMLElement* c = e.FirstChildElement(); c; c = c->NextSiblingElement()) {
     const bool gazebo = in_gazebo || isName(*c, "gazebo");
