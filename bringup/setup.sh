@@ -28,7 +28,7 @@ packages=(
   # bus: Fast DDS 2.9 + code generator (needs a JRE) + discovery server CLI
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools default-jre-headless
   # control: math, robot description, configuration
-  libeigen3-dev liburdfdom-dev liburdfdom-headers-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
+  libeigen3-dev liburdfdom-dev liburdfdom-headers-dev libyaml-cpp-dev libtinyxml2-dev libcli11-dev libspdlog-dev
   # vision
   libapriltag-dev libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
   libopencv-videoio-dev libopencv-calib3d-dev libopencv-contrib-dev ffmpeg

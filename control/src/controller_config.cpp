@@ -1,5 +1,7 @@
 #include "reflex/control/controller.hpp"
 
+#include "reflex/common/files.hpp"
+
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
@@ -122,6 +124,8 @@ void validateControllerParams(const ControllerParams& p, const std::string& src)
 ControllerConfig loadControllerConfig(const std::string& yaml_path) {
   ControllerConfig config = defaultControllerConfig();
   config.source = yaml_path;
+  if (const std::string why = common::inputFileProblem(yaml_path); !why.empty())
+    throw ConfigError("controller configuration " + why);  // a FIFO or device would block or never end
   YAML::Node root;
   try {
     root = YAML::LoadFile(yaml_path);

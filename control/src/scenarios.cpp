@@ -1,5 +1,8 @@
 #include "reflex/control/scenarios.hpp"
 
+#include "reflex/common/files.hpp"
+
+#include <cerrno>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -190,10 +193,14 @@ void writeTimeseriesCsvRow(const Model& model, const SimSample& s, std::ostream&
 
 void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
                         const std::string& path) {
+  errno = 0;
   std::ofstream out(path);
-  if (!out) throw ConfigError(path + ": cannot write time series");
+  if (!out) throw ConfigError("time series: " + common::writeError(path, errno ? errno : EIO));
   writeTimeseriesCsvHeader(model, out);
   for (const auto& s : result.samples) writeTimeseriesCsvRow(model, s, out);
+  errno = 0;
+  out.close();  // flushes: a full disk (ENOSPC) is an error here, never a silently short file
+  if (!out) throw ConfigError("time series: " + common::writeError(path, errno ? errno : EIO));
   (void)cm;
 }
 

@@ -1,5 +1,8 @@
 #include "reflex/control/urdf_loader.hpp"
 
+#include "reflex/common/files.hpp"
+#include "urdf_audit.hpp"
+
 #include <urdf_model/model.h>
 #include <urdf_parser/urdf_parser.h>
 #include <yaml-cpp/yaml.h>
@@ -10,12 +13,22 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <sys/stat.h>
 
 namespace reflex::control {
 namespace {
 
 [[noreturn]] void fail(const std::string& origin, const std::string& what) {
   throw ModelError(origin + ": " + what);
+}
+
+/// One ModelError for all problems found, one per line, each naming its link or joint.
+[[noreturn]] void failWithProblems(const std::string& origin, const std::string& what,
+                                   const std::vector<std::string>& problems) {
+  std::string msg = what + " (" + std::to_string(problems.size()) + " problem" + (problems.size() == 1 ? "" : "s") +
+                    "; the model is refused rather than loaded without them):";
+  for (const auto& p : problems) msg += "\n  " + p;
+  fail(origin, msg);
 }
 
 Eigen::Isometry3d toIsometry(const urdf::Pose& pose) {
@@ -107,6 +120,8 @@ std::string defaultCollisionConfigPath(const std::string& urdf_path) {
 CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
   CollisionConfig config;
   config.source = yaml_path;
+  if (const std::string why = common::inputFileProblem(yaml_path); !why.empty())
+    throw ModelError("collision configuration " + why);  // a FIFO or device would block or never end
   YAML::Node root;
   try {
     root = YAML::LoadFile(yaml_path);
@@ -142,8 +157,18 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
   return config;
 }
 
+CollisionConfig loadCollisionConfigFor(const std::string& urdf_path, const std::string& collision_path) {
+  if (!collision_path.empty()) return loadCollisionConfig(collision_path);
+  const std::string guess = defaultCollisionConfigPath(urdf_path);
+  struct stat st {};
+  if (::stat(guess.c_str(), &st) != 0) return CollisionConfig{};  // nothing there: the defaults
+  return loadCollisionConfig(guess);  // something there: read it (a FIFO or device is refused)
+}
+
 Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
                 std::vector<std::string>* warnings) {
+  if (const std::string why = common::inputFileProblem(urdf_path); !why.empty())
+    throw ModelError("URDF file " + why);  // a FIFO or device would block or never end
   std::ifstream in(urdf_path);
   if (!in) throw ModelError(urdf_path + ": cannot open URDF file");
   std::stringstream ss;
@@ -153,13 +178,48 @@ Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
 
 Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config,
                           const std::string& origin, std::vector<std::string>* warnings) {
+  // Our own reading of the XML first: it finds what urdfdom would drop silently (urdf_audit.hpp).
+  const detail::UrdfAudit audit = detail::auditUrdf(urdf_xml);
+  if (!audit.xml_error.empty()) fail(origin, "malformed URDF: " + audit.xml_error);
+  std::vector<std::string> problems = audit.problems;
   urdf::ModelInterfaceSharedPtr urdf_model;
   try {
     urdf_model = urdf::parseURDF(urdf_xml);
   } catch (const std::exception& e) {
-    fail(origin, std::string("malformed URDF: ") + e.what());
+    problems.push_back(std::string("urdfdom: ") + e.what());
   }
-  if (!urdf_model) fail(origin, "malformed URDF (urdfdom could not parse it; see the message above)");
+  // One line per affected link: how many collision elements urdfdom kept (if not all), and every
+  // reason found. Visual / inertial problems are reasons only where urdfdom dropped something (or
+  // refused the file): they cost urdfdom the whole link's collision elements.
+  for (const auto& [link, expected] : audit.collisions) {
+    int read = expected;
+    if (urdf_model) {
+      const auto ulink = urdf_model->getLink(link);
+      read = !ulink ? 0
+                    : !ulink->collision_array.empty() ? static_cast<int>(ulink->collision_array.size())
+                                                      : (ulink->collision ? 1 : 0);
+    }
+    const bool dropped = read != expected;
+    std::string line;
+    if (dropped)
+      line = "; urdfdom read " + std::to_string(read) + " of its " + std::to_string(expected) + " collision elements";
+    for (const auto& p : audit.collision_problems.at(link)) line += "; " + p;
+    if (dropped || !urdf_model)
+      for (const auto& p : audit.other_problems.at(link)) line += "; " + p;
+    if (dropped && line.find("; ", 2) == std::string::npos) line += "; no reason found here (urdfdom's message above says why)";
+    if (!line.empty()) problems.push_back("link '" + link + "'" + line.replace(0, 1, ":"));
+  }
+  if (!urdf_model) {
+    if (problems.empty()) fail(origin, "malformed URDF (urdfdom could not parse it; see the message above)");
+    failWithProblems(origin, "malformed URDF", problems);
+  }
+  // Every collision element of the file is accounted for, or the load fails naming the link.
+  if (!problems.empty()) {
+    // Release urdfdom's child links even on this exit (the reference cycle below).
+    for (auto& entry : urdf_model->links_)
+      if (entry.second) entry.second->child_links.clear();
+    failWithProblems(origin, "collision geometry would be left out or is out of range", problems);
+  }
   // urdfdom holds children by shared_ptr: a kinematic loop in a malformed file (a link made the child
   // of its own descendant) is a reference cycle that would outlive the model. Break it on every exit.
   struct ChildLinksReleaser {

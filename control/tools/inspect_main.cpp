@@ -4,6 +4,7 @@
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "reflex/common/files.hpp"
 
 #include <CLI/CLI.hpp>
 
@@ -59,6 +60,8 @@ void setJoint(const Model& model, Eigen::VectorXd& q, const std::string& name, c
 
 /// CSV with a header row of joint names and value rows; `row` selects the row (0 = first after header).
 void readCsvRow(const Model& model, Eigen::VectorXd& q, const std::string& path, int row) {
+  if (const std::string why = reflex::common::inputFileProblem(path); !why.empty())
+    throw std::runtime_error("joint CSV " + why);
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open joint CSV");
   std::string header;
@@ -89,7 +92,7 @@ std::string jsonString(const std::string& s) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{"reflex_inspect: check a robot's collision model (segments, checked pairs, distances)"};
   std::string urdf_path;
   std::string config_path;
@@ -110,13 +113,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
-    reflex::control::CollisionConfig config;
-    if (config_path.empty()) {
-      const std::string guess = reflex::control::defaultCollisionConfigPath(urdf_path);
-      if (std::ifstream(guess).good()) config = reflex::control::loadCollisionConfig(guess);
-    } else {
-      config = reflex::control::loadCollisionConfig(config_path);
-    }
+    const reflex::control::CollisionConfig config = reflex::control::loadCollisionConfigFor(urdf_path, config_path);
     std::vector<std::string> warnings;
     const Model model = reflex::control::loadModel(urdf_path, config, &warnings);
     for (const auto& w : warnings) std::cerr << "warning: " << w << "\n";
@@ -207,4 +204,14 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  const int status = run(argc, argv);
+  // Output that could not be written (reflex_inspect robot.urdf > /dev/full) is not success.
+  if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
+    std::fprintf(stderr, "reflex_inspect: error: %s\n", why.c_str());
+    return 1;
+  }
+  return status;
 }

@@ -6,9 +6,11 @@
 #include "reflex/control/controller.hpp"
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "reflex/common/files.hpp"
 
 #include <CLI/CLI.hpp>
 
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -35,8 +37,9 @@ std::string exeDir() {
 /// Writes the capsules of the robot at the given samples (frame = position in `picks`).
 void writePostures(const Model& model, const SimResult& result, const std::string& path,
                    const std::vector<std::size_t>& picks) {
+  errno = 0;
   std::ofstream out(path);
-  if (!out) throw ConfigError(path + ": cannot write postures");
+  if (!out) throw ConfigError("postures: " + reflex::common::writeError(path, errno ? errno : EIO));
   out << "frame,time,segment,ax,ay,az,bx,by,bz,radius\n";
   KinematicsData kin(model);
   for (std::size_t f = 0; f < picks.size(); ++f) {
@@ -52,6 +55,25 @@ void writePostures(const Model& model, const SimResult& result, const std::strin
       }
     }
   }
+  errno = 0;
+  out.close();  // flushes: ENOSPC is an error here
+  if (!out) throw ConfigError("postures: " + reflex::common::writeError(path, errno ? errno : EIO));
+}
+
+/// Closes a text output and throws naming it if anything written to it was lost.
+void closeChecked(std::ofstream& out, const std::string& path) {
+  errno = 0;
+  out.close();
+  if (!out) throw ConfigError(reflex::common::writeError(path, errno ? errno : EIO));
+}
+
+/// The exit status after the work: `status`, or 1 with a message if standard output was lost.
+int finish(int status) {
+  if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
+    std::fprintf(stderr, "reflex_sim: error: %s\n", why.c_str());
+    return 1;
+  }
+  return status;
 }
 
 std::vector<std::size_t> evenPicks(std::size_t n, int frames) {
@@ -64,6 +86,8 @@ std::vector<std::size_t> evenPicks(std::size_t n, int frames) {
 /// Reads the joint columns (q_<name>) and the time column of a time-series CSV (reflex_sim or
 /// reflex_controller --log) into samples.
 SimResult readTimeseries(const Model& model, const std::string& path) {
+  if (const std::string why = reflex::common::inputFileProblem(path); !why.empty())
+    throw ConfigError("time series " + why);
   std::ifstream in(path);
   if (!in) throw ConfigError(path + ": cannot open time series");
   std::string line;
@@ -154,13 +178,17 @@ int main(int argc, char** argv) {
   app.add_option("--at", at, "times (s) of the rows for --postures-from (nearest row each)")->delimiter(',');
   CLI11_PARSE(app, argc, argv);
 
+  // A folder that cannot be made is an error now, before any simulation (not after the first one).
+  if (!list && !out_dir.empty()) {
+    if (const std::string why = reflex::common::outputFolderProblem(out_dir); !why.empty()) {
+      std::fprintf(stderr, "reflex_sim: error: %s\n", why.c_str());
+      return 1;
+    }
+  }
   if (!postures_from.empty()) {
     try {
       if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
-      const std::string coll = collision.empty() ? defaultCollisionConfigPath(urdf) : collision;
-      CollisionConfig cc;
-      if (!collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
-      const Model model = loadModel(urdf, cc);
+      const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
       const SimResult r = readTimeseries(model, postures_from);
       if (r.samples.empty()) throw ConfigError(postures_from + ": no rows");
       std::vector<std::size_t> picks;
@@ -174,7 +202,7 @@ int main(int argc, char** argv) {
       fs::create_directories(out_dir);
       writePostures(model, r, (fs::path(out_dir) / "postures.csv").string(), picks);
       std::cout << "wrote " << (fs::path(out_dir) / "postures.csv").string() << "\n";
-      return 0;
+      return finish(0);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
       return 1;
@@ -183,7 +211,7 @@ int main(int argc, char** argv) {
 
   if (list) {
     for (const auto& s : builtinScenarios()) std::printf("%-22s %-22s %s\n", s.name.c_str(), s.paper.c_str(), s.description.c_str());
-    return 0;
+    return finish(0);
   }
   if (scenario_name.empty()) {
     std::fprintf(stderr, "reflex_sim: error: name a scenario (reflex_sim --list) or 'all'\n");
@@ -200,17 +228,16 @@ int main(int argc, char** argv) {
   }
   try {
     if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
-    const std::string coll = collision.empty() ? defaultCollisionConfigPath(urdf) : collision;
-    CollisionConfig cc;
-    if (!collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
-    const Model model = loadModel(urdf, cc);
+    const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
     const ControllerConfig config = controller_cfg.empty() ? defaultControllerConfig() : loadControllerConfig(controller_cfg);
     const ControllerModel cm = makeControllerModel(model, config);
     int failures = 0;
     for (const Scenario* sc : chosen) {
       const fs::path dir = chosen.size() > 1 ? fs::path(out_dir) / sc->name : fs::path(out_dir);
       fs::create_directories(dir);
-      std::ofstream summary(dir / "summary.txt");
+      const std::string summary_path = (dir / "summary.txt").string();
+      std::ofstream summary(summary_path);
+      if (!summary) throw ConfigError("summary: " + reflex::common::writeError(summary_path, errno ? errno : EIO));
       auto run = [&](AvoidanceMode m, const std::string& csv, const char* label) {
         SimOptions opt;
         opt.mode = m;
@@ -228,6 +255,7 @@ int main(int argc, char** argv) {
       const SimResult main = run(m, "timeseries.csv", no_avoidance ? "avoidance off, e-stop off" : mode.c_str());
       writePostures(model, main, (dir / "postures.csv").string(), evenPicks(main.samples.size(), 6));
       if (sc->name == "one_vs_three_dof" && !no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
+      closeChecked(summary, summary_path);
       if (!no_plots) {
         const std::string script = exeDir() + "/reflex_plot_sim.py";
         const std::string cmd = std::string(REFLEX_PYTHON) + " '" + script + "' '" + dir.string() + "' '" + sc->name + "'";
@@ -238,7 +266,7 @@ int main(int argc, char** argv) {
       }
       std::cout << "  wrote " << dir.string() << "/\n";
     }
-    return failures ? 1 : 0;
+    return finish(failures ? 1 : 0);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
     return 1;

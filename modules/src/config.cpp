@@ -1,5 +1,6 @@
 #include "reflex/modules/config.hpp"
 
+#include "reflex/common/files.hpp"
 #include <cmath>
 #include <filesystem>
 #include <sstream>
@@ -27,6 +28,8 @@ ConfigNode::ConfigNode(YAML::Node node, std::string file, std::string path)
 ConfigNode ConfigNode::loadFile(const std::string& path) {
   // The error_code overload: a path the system refuses (a name longer than NAME_MAX, ...) is the
   // same set-up error as a missing file, not a std::filesystem_error without the key's context.
+  if (const std::string why = common::inputFileProblem(path); !why.empty())
+    throw ConfigError("configuration file " + why);  // a FIFO or device would block or never end
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
     throw ConfigError("configuration file '" + path + "' does not exist" + (ec ? " (" + ec.message() + ")" : ""));

@@ -1,5 +1,7 @@
 #include "reflex/modules/scripted.hpp"
 
+#include "reflex/common/files.hpp"
+
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -35,6 +37,8 @@ ArmPriority parsePriority(const std::string& s, bool& ok) {
 }  // namespace
 
 std::vector<TimelineEvent> readTimelineCsv(const std::string& path) {
+  if (const std::string why = common::inputFileProblem(path); !why.empty())
+    throw ConfigError("timeline file " + why);  // a FIFO or device would block or never end
   std::ifstream in(path);
   if (!in) throw ConfigError("timeline file '" + path + "' cannot be opened");
   std::vector<TimelineEvent> events;

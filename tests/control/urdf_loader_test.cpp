@@ -1,7 +1,11 @@
 // Tests of control/include/reflex/control/urdf_loader.hpp (and the Model of model.hpp): the shipped
 // robots load with the structure the issue asks for; collision elements become the documented
 // primitives (hand-computed endpoints; boxes enclosed by their capsules); every bad input throws a
-// ModelError whose message names the source and the bad value.
+// ModelError whose message names the source and the bad value. Issue 16 item 2: every collision
+// element of the file is accounted for -- generated variants of the shipped URDFs (every collision
+// element, every attribute, each bad value: NaN, inf, 1e300, 1e999, "1 2", "", "0.001 ") must fail
+// naming the link, and the shipped files' primitive counts match an independent count of their
+// <collision> elements (a regular expression over the text, comments removed).
 #include "reflex/control/urdf_loader.hpp"
 
 #include "test_support.hpp"
@@ -10,10 +14,13 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <tinyxml2.h>
 
 #include <cstdio>
 #include <fstream>
+#include <regex>
 #include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -346,6 +353,208 @@ TEST(UrdfLoaderConfig, MalformedYaml) {
   expectModelError([&] { loadCollisionConfig(top); }, {top, "top level must be a map"});
   expectModelError([] { loadCollisionConfig("/nonexistent/x.collision.yaml"); },
                    {"/nonexistent/x.collision.yaml", "cannot open"});
+}
+
+// ---------------------------------------------------------------- issue 16 item 2: nothing dropped silently
+std::string readText(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+/// Number of <collision> elements in the text, comments removed (independent of any XML parser).
+int countCollisionElements(std::string text) {
+  text = std::regex_replace(text, std::regex("<!--[\\s\\S]*?-->"), "");
+  const std::regex tag("<collision[\\s>]");
+  return static_cast<int>(std::distance(std::sregex_iterator(text.begin(), text.end(), tag), std::sregex_iterator()));
+}
+
+TEST(UrdfLoaderAccounting, ShippedRobotsKeepEveryCollisionElement) {
+  for (const char* robot : {test::kAsimo, test::kSmall}) {
+    const std::string text = readText(test::robotPath(std::string(robot) + ".urdf"));
+    const Model m = test::loadRobot(robot);
+    const int primitives = static_cast<int>(m.primitives.size()) - kBodySchemaSlots;
+    EXPECT_EQ(primitives, countCollisionElements(text)) << robot;
+    EXPECT_GT(primitives, 15) << robot;
+  }
+}
+
+/// One generated variant: attribute `attr` of element `element_path` (relative to the k-th collision
+/// element of the file) set to `value`; returns the link's name in `link`.
+struct Variant {
+  std::string xml, link, what;
+};
+
+/// Every (collision element, attribute) of `urdf_text`, each with every value of `values`.
+std::vector<Variant> collisionVariants(const std::string& urdf_text, const std::vector<std::string>& scalar_values,
+                                       const std::vector<std::string>& vector_values) {
+  std::vector<Variant> out;
+  tinyxml2::XMLDocument probe;
+  EXPECT_EQ(probe.Parse(urdf_text.c_str()), tinyxml2::XML_SUCCESS);
+  int n = 0;
+  for (auto* l = probe.RootElement()->FirstChildElement("link"); l; l = l->NextSiblingElement("link"))
+    for (auto* c = l->FirstChildElement("collision"); c; c = c->NextSiblingElement("collision")) ++n;
+  for (int k = 0; k < n; ++k) {
+    // (element, attribute, is a vector) of the k-th collision element; an absent <origin> is added.
+    struct Target {
+      std::string element, attr;
+      bool vector;
+    };
+    std::vector<Target> targets = {{"origin", "xyz", true}, {"origin", "rpy", true}};
+    {
+      tinyxml2::XMLDocument d;
+      d.Parse(urdf_text.c_str());
+      int i = 0;
+      for (auto* l = d.RootElement()->FirstChildElement("link"); l; l = l->NextSiblingElement("link"))
+        for (auto* c = l->FirstChildElement("collision"); c; c = c->NextSiblingElement("collision"), ++i) {
+          if (i != k) continue;
+          auto* shape = c->FirstChildElement("geometry")->FirstChildElement();
+          const std::string kind = shape->Name();
+          if (kind == "sphere") targets.push_back({kind, "radius", false});
+          if (kind == "cylinder") {
+            targets.push_back({kind, "radius", false});
+            targets.push_back({kind, "length", false});
+          }
+          if (kind == "box") targets.push_back({kind, "size", true});
+        }
+    }
+    for (const Target& t : targets) {
+      for (const std::string& value : t.vector ? vector_values : scalar_values) {
+        tinyxml2::XMLDocument d;
+        d.Parse(urdf_text.c_str());
+        int i = 0;
+        Variant v;
+        for (auto* l = d.RootElement()->FirstChildElement("link"); l; l = l->NextSiblingElement("link"))
+          for (auto* c = l->FirstChildElement("collision"); c; c = c->NextSiblingElement("collision"), ++i) {
+            if (i != k) continue;
+            tinyxml2::XMLElement* e = t.element == "origin" ? c->FirstChildElement("origin")
+                                                            : c->FirstChildElement("geometry")->FirstChildElement();
+            if (!e) {
+              e = d.NewElement("origin");
+              c->InsertFirstChild(e);
+            }
+            e->SetAttribute(t.attr.c_str(), value.c_str());
+            v.link = l->Attribute("name");
+            v.what = "collision " + std::to_string(k) + " of link " + v.link + ": <" + t.element + "> " + t.attr +
+                     "='" + value + "'";
+          }
+        tinyxml2::XMLPrinter printer;
+        d.Print(&printer);
+        v.xml = printer.CStr();
+        out.push_back(v);
+      }
+    }
+  }
+  return out;
+}
+
+TEST(UrdfLoaderAccounting, EveryBadValueInEveryCollisionAttributeFailsNamingTheLink) {
+  // Values urdfdom cannot parse (it drops every collision element of the link) and values it
+  // accepts but that move or size geometry out of any robot (1e300).
+  const std::vector<std::string> scalars = {"nan", "inf", "1e300", "1e999", "1 2", "", "0.001 "};
+  const std::vector<std::string> vectors = {"nan 0 0", "0 inf 0", "0 0 1e300", "0 0 1e999", "1 2", "", "0.001 0 0.1x"};
+  int checked = 0;
+  for (const char* robot : {test::kAsimo, test::kSmall}) {
+    const std::string text = readText(test::robotPath(std::string(robot) + ".urdf"));
+    for (const Variant& v : collisionVariants(text, scalars, vectors)) {
+      ++checked;
+      try {
+        loadModelFromString(v.xml, CollisionConfig{}, "variant.urdf");
+        ADD_FAILURE() << robot << ": loaded although " << v.what;
+      } catch (const ModelError& e) {
+        EXPECT_THAT(e.what(), AllOf(HasSubstr("variant.urdf"), HasSubstr("link '" + v.link + "'"))) << v.what;
+      }
+    }
+  }
+  std::printf("%d variants, each refused naming its link\n", checked);
+  EXPECT_GT(checked, 800);  // 38 collision elements x 3-4 attributes x 7 values
+}
+
+TEST(UrdfLoaderAccounting, TheIssueCaseNamesTheLinkAndTheValue) {
+  // issue 16: a NaN in one collision <origin> of the left hand dropped it; crossing_arms then went to -70.9 mm.
+  std::string text = readText(test::robotPath("asimo_like.urdf"));
+  tinyxml2::XMLDocument d;
+  ASSERT_EQ(d.Parse(text.c_str()), tinyxml2::XML_SUCCESS);
+  for (auto* l = d.RootElement()->FirstChildElement("link"); l; l = l->NextSiblingElement("link"))
+    if (std::string(l->Attribute("name")) == "l_hand")
+      l->FirstChildElement("collision")->FirstChildElement("origin")->SetAttribute("xyz", "0 nan 0");
+  tinyxml2::XMLPrinter printer;
+  d.Print(&printer);
+  expectModelError([&] { loadModelFromString(printer.CStr(), CollisionConfig{}, "asimo_nan.urdf"); },
+                   {"asimo_nan.urdf", "link 'l_hand'", "'nan' is not a finite number", "urdfdom read 0 of its 1"});
+}
+
+TEST(UrdfLoaderAccounting, OneMessageNamesEveryAffectedLink) {
+  const std::string xml = R"(<robot name="t">
+<link name="base"><collision><origin xyz="nan 0 0"/><geometry><sphere radius="0.1"/></geometry></collision></link>
+<link name="arm"><visual><geometry><sphere radius="0.1"/></geometry><material/></visual>
+  <collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+<link name="hand"><collision><geometry><capsule radius="0.1" length="0.2"/></geometry></collision></link>
+<link name="foot"><inertial><mass value="1e999"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>
+  <collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+<link name="head"><collision><geometry><sphere radius="0.1 "/></geometry></collision></link>
+<joint name="j1" type="fixed"><parent link="base"/><child link="arm"/></joint>
+<joint name="j2" type="fixed"><parent link="arm"/><child link="hand"/></joint>
+<joint name="j3" type="fixed"><parent link="base"/><child link="foot"/></joint>
+<joint name="j4" type="fixed"><parent link="base"/><child link="head"/></joint></robot>)";
+  expectModelError([&] { loadModelFromString(xml, CollisionConfig{}, "many.urdf"); },
+                   {"many.urdf", "5 problems", "link 'base'", "'nan' is not a finite number", "link 'arm'",
+                    "<material> (line 3) has no name", "link 'hand'", "unknown geometry <capsule>", "link 'foot'",
+                    "mass> value '1e999'", "link 'head'", "radius '0.1 '", "'0.1 ' is not a number"});
+}
+
+TEST(UrdfLoaderAccounting, GeometryOutsideEveryLinkIsRefusedButGazeboBlocksAreNot) {
+  const std::string base = R"(<link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>)";
+  // A <link> nested in another element (urdfdom reads only <robot>'s own children).
+  expectModelError(
+      [&] {
+        loadModelFromString(R"(<robot name="t">)" + base +
+                                R"(<group><link name="l_hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link></group></robot>)",
+                            CollisionConfig{}, "nested.urdf");
+      },
+      {"nested.urdf", "link 'l_hand'", "inside <group>", "urdfdom ignores it"});
+  // A <collision> inside a <visual> or directly in <robot>.
+  expectModelError(
+      [&] {
+        loadModelFromString(R"(<robot name="t"><collision><geometry><sphere radius="0.05"/></geometry></collision>)" +
+                                base + "</robot>",
+                            CollisionConfig{}, "stray.urdf");
+      },
+      {"stray.urdf", "<collision> element (line 1) inside <robot>", "outside every <link>"});
+  // Two shapes in one geometry: urdfdom reads the first only.
+  expectModelError(
+      [&] {
+        loadModelFromString(R"(<robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/><box size="1 1 1"/></geometry></collision></link></robot>)",
+                            CollisionConfig{}, "two.urdf");
+      },
+      {"two.urdf", "link 'base'", "more than one shape"});
+  // Gazebo extension blocks carry <collision> surface parameters, not geometry: accepted.
+  const Model m = loadModelFromString(
+      R"(<robot name="t">)" + base +
+          R"(<gazebo reference="base"><collision><surface><friction/></surface></collision></gazebo></robot>)",
+      CollisionConfig{}, "gazebo.urdf");
+  EXPECT_EQ(m.num_robot_segments, 1);
+}
+
+TEST(UrdfLoaderAccounting, JointValuesMustBeFiniteAndInRange) {
+  // urdfdom refuses a NaN in a joint origin or limit (the whole file); it accepts 1e300, which would
+  // put a link out of reach or make a velocity limit that limits nothing.
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {R"(<origin xyz="0 0 nan"/>)", "'nan' is not a finite number"},
+      {R"(<origin xyz="0 0 1e300"/>)", "1e+300 is out of range"},
+      {R"(<origin rpy="0 1e300 0"/>)", "1e+300 is out of range"},
+      {R"(<origin xyz="0 0 1"/><safety_controller k_velocity="nan"/>)", "k_velocity 'nan'"},
+  };
+  for (const auto& [extra, expected] : cases)
+    expectModelError([&] { loadModelFromString(oneLink(R"(<collision><geometry><sphere radius="0.04"/></geometry></collision>)", extra),
+                                               CollisionConfig{}, "joint.urdf"); },
+                     {"joint.urdf", "joint 'j'", expected});
+  const std::string fast = R"(<?xml version="1.0"?><robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+<link name="arm"/><joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
+<limit lower="-1" upper="1e300" velocity="1e300" effort="1"/></joint></robot>)";
+  expectModelError([&] { loadModelFromString(fast, CollisionConfig{}, "fast.urdf"); },
+                   {"fast.urdf", "joint 'j'", "upper '1e300'", "velocity '1e300'", "out of range"});
 }
 
 }  // namespace

@@ -1,11 +1,22 @@
 // The recording file format (modules/record/include/reflex/record/record_file.hpp): records read back
 // byte for byte; a file cut anywhere inside its last record reads as the records before it (torn
 // tail), never as garbage; a corrupted record in the middle is reported and skipped; bad files and
-// options are clear errors.
+// options are clear errors. Issue 16: reading is linear in the file size on crafted input (item 12:
+// the work counter and the wall time of crafted files of 2 and 8 MB against each other and against a
+// valid file of the same size; crc32Combine against the CRC of the concatenated bytes); a FIFO or a
+// device named as a recording is refused at once, never read (item 11).
 #include "reflex/record/record_file.hpp"
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <csignal>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -251,6 +262,197 @@ TEST(RecordFile, BadFilesAndValuesAreClearErrors) {
   WriterOptions neg;
   neg.flush_interval = std::chrono::milliseconds(-1);
   EXPECT_THROW(RecordWriter(tempPath("neg.rfx"), neg), RecordError);
+}
+
+// ---------------------------------------------------------------- issue 16 item 12: linear time
+TEST(Crc32, CombineEqualsTheCrcOfTheConcatenation) {
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<std::uint8_t> a(rng() % 600), b(trial < 5 ? trial : rng() % 5000);
+    for (auto& x : a) x = static_cast<std::uint8_t>(rng());
+    for (auto& x : b) x = static_cast<std::uint8_t>(rng());
+    std::vector<std::uint8_t> ab = a;
+    ab.insert(ab.end(), b.begin(), b.end());
+    EXPECT_EQ(crc32Combine(crc32(a.data(), a.size()), crc32(b.data(), b.size()), b.size()),
+              crc32(ab.data(), ab.size()))
+        << a.size() << " + " << b.size();
+  }
+}
+
+void putU32(std::vector<std::uint8_t>& b, std::size_t at, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+
+/// `size` bytes: the file header, then a record header every 36 bytes whose body runs to the end of
+/// the file, with consistent inner fields (receive time >= 0, empty topic and type, the payload
+/// length that fills the body) and a wrong CRC; one valid record at the very end. The old reader
+/// computed the CRC of every one of those bodies while resynchronising: quadratic.
+std::vector<std::uint8_t> craftedRecording(std::size_t size) {
+  const RecordEntry last{1, 2, "t", "T", {1, 2, 3}};
+  const std::vector<std::uint8_t> tail = encodeRecord(last);
+  std::vector<std::uint8_t> b(size, 0);
+  std::copy(kFileMagic, kFileMagic + 8, b.begin());
+  putU32(b, 8, kFormatVersion);
+  const std::size_t end = size - tail.size();
+  for (std::size_t at = kFileHeaderSize + 1; at + 36 <= end; at += 36) {
+    const std::uint32_t len = static_cast<std::uint32_t>(end - at - kRecordHeaderSize);
+    putU32(b, at, kRecordSync);
+    putU32(b, at + 4, len);
+    putU32(b, at + 8, 0xDEADBEEFu);  // wrong CRC
+    // receive_ns, source_ns = 0; topic length 0, type length 0 (bytes at +28..+32 stay 0)
+    putU32(b, at + 32, len - 24);      // payload length: the rest of the body
+  }
+  std::copy(tail.begin(), tail.end(), b.begin() + static_cast<std::ptrdiff_t>(end));
+  return b;
+}
+
+/// A valid recording of about `size` bytes (records of 300-byte payloads).
+std::vector<std::uint8_t> validRecording(const std::string& path, std::size_t size) {
+  {
+    RecordWriter w(path);
+    RecordEntry e{1'000, 0, "reflex/joint_state", "reflex::msg::JointState", std::vector<std::uint8_t>(300, 7)};
+    for (std::size_t n = kFileHeaderSize; n < size; n += kRecordHeaderSize + 8 + 8 + 2 + 18 + 2 + 23 + 4 + 300) {
+      w.append(e);
+      e.receive_ns += 5'000'000;
+    }
+    w.close();
+  }
+  return readBytes(path);
+}
+
+struct ReadStats {
+  double seconds = 0.0;
+  std::uint64_t records = 0, examined = 0;
+  TailState tail = TailState::kClean;
+};
+
+/// CPU time of this thread (s): unlike wall time, hardly changed by other processes on the machine.
+double threadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+/// Reads `path` to the end: CPU time of the fastest of `runs` runs (robust against a loaded machine).
+ReadStats readAll(const std::string& path, int runs = 3) {
+  ReadStats best;
+  best.seconds = 1e9;
+  for (int run = 0; run < runs; ++run) {
+    const double t0 = threadCpuSeconds();
+    RecordReader r(path);
+    RecordEntry e;
+    std::uint64_t n = 0;
+    while (r.next(e)) ++n;
+    const double s = threadCpuSeconds() - t0;
+    if (s < best.seconds) best = {s, n, r.bytesExamined(), r.tailState()};
+  }
+  return best;
+}
+
+TEST(RecordFileLinearTime, CraftedResyncInputReadsInLinearTime) {
+  const std::size_t mb = 1u << 20;
+  const std::string p2 = tempPath("crafted2.rfx"), p8 = tempPath("crafted8.rfx"), pv = tempPath("valid2.rfx");
+  const auto c2 = craftedRecording(2 * mb), c8 = craftedRecording(8 * mb);
+  writeBytes(p2, c2, c2.size());
+  writeBytes(p8, c8, c8.size());
+  const auto v2 = validRecording(pv, 2 * mb);
+  const ReadStats s2 = readAll(p2), s8 = readAll(p8), sv = readAll(pv);
+  std::printf("crafted 2 MB: %.4f s, %llu bytes examined; crafted 8 MB: %.4f s, %llu bytes; valid %.1f MB: %.4f s, "
+              "%llu bytes\n",
+              s2.seconds, static_cast<unsigned long long>(s2.examined), s8.seconds,
+              static_cast<unsigned long long>(s8.examined), v2.size() / 1048576.0, sv.seconds,
+              static_cast<unsigned long long>(sv.examined));
+  // The crafted files hold exactly one valid record (the last), after corrupt bytes.
+  EXPECT_EQ(s2.records, 1u);
+  EXPECT_EQ(s8.records, 1u);
+  EXPECT_EQ(s2.tail, TailState::kCorrupt);
+  // Work: a fixed multiple of the size (deterministic). Quadratic would be ~ size / 72 per byte.
+  EXPECT_LT(s2.examined, 64u * c2.size());
+  EXPECT_LT(s8.examined, 64u * c8.size());
+  EXPECT_LT(static_cast<double>(s8.examined) / static_cast<double>(s2.examined), 4.5);
+  // CPU time: 4 x the bytes, about 4 x the time (quadratic: 16 x); against a valid file of the same size.
+  EXPECT_LT(s8.seconds / s2.seconds, 8.0) << "2 MB " << s2.seconds << " s, 8 MB " << s8.seconds << " s";
+  EXPECT_LT(s2.seconds / sv.seconds, 100.0) << "crafted " << s2.seconds << " s, valid " << sv.seconds << " s";
+}
+
+TEST(RecordFileLinearTime, LongCorruptHeadersBetweenValidRecordsCostNoMoreThanTheirHeader) {
+  // A valid record, then a header claiming a body to the end of the file with a wrong CRC, and so
+  // on: each damaged header was read and CRC-checked to the end of the file (quadratic).
+  const std::string path = tempPath("longheaders.rfx");
+  std::vector<std::uint8_t> b(kFileMagic, kFileMagic + 8);
+  b.insert(b.end(), {1, 0, 0, 0, 0, 0, 0, 0});
+  const std::size_t records = 20000;
+  const std::vector<std::uint8_t> rec = encodeRecord(RecordEntry{5, 6, "a", "B", {9, 9}});
+  const std::size_t total = b.size() + records * (rec.size() + 12);
+  for (std::size_t i = 0; i < records; ++i) {
+    b.insert(b.end(), rec.begin(), rec.end());
+    const std::size_t at = b.size();
+    b.resize(at + 12);
+    putU32(b, at, kRecordSync);
+    putU32(b, at + 4, static_cast<std::uint32_t>(total - at - 12));
+    putU32(b, at + 8, 0);
+  }
+  writeBytes(path, b, b.size());
+  const ReadStats s = readAll(path, 1);
+  EXPECT_EQ(s.records, records);
+  EXPECT_EQ(s.tail, TailState::kCorrupt);
+  EXPECT_LT(s.examined, 64u * b.size()) << s.examined << " bytes examined for a " << b.size() << "-byte file";
+}
+
+// ---------------------------------------------------------------- issue 16 item 11: not a regular file
+/// Runs `fn` in a child process; true if it finished within `seconds` (a blocked child is killed).
+template <class Fn>
+bool finishesWithin(double seconds, Fn fn) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    fn();
+    _exit(0);
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  int status = 0;
+  while (waitpid(pid, &status, WNOHANG) == 0) {
+    if (std::chrono::steady_clock::now() > deadline) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      return false;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+}
+
+TEST(RecordFile, AFifoOrADeviceIsRefusedAtOnceNeverRead) {
+  const std::string fifo = tempPath("recording.fifo");
+  std::filesystem::remove(fifo);
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const std::string dir = tempPath("a_folder.rfx");
+  std::filesystem::create_directories(dir);
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {fifo, "is a FIFO (named pipe)"}, {"/dev/zero", "is a character device"}, {dir, "is a directory"}};
+  for (const auto& [path, kind] : cases) {
+    // In a child process with a deadline: the old reader blocked forever on the FIFO.
+    EXPECT_TRUE(finishesWithin(1.0, [&, p = path, k = kind] {
+      try {
+        RecordReader r(p);
+        _exit(2);
+      } catch (const RecordError& e) {
+        const std::string what = e.what();
+        _exit(what.find(p) != std::string::npos && what.find(k) != std::string::npos ? 0 : 3);
+      }
+    })) << path;
+    // Appending to one is refused the same way (it reads the file first).
+    EXPECT_TRUE(finishesWithin(1.0, [&, p = path] {
+      try {
+        WriterOptions o;
+        o.append = true;
+        RecordWriter w(p, o);
+        _exit(p == "/dev/zero" ? 0 : 2);  // /dev/zero is empty for stat: nothing to read
+      } catch (const RecordError&) {
+        _exit(0);
+      }
+    })) << path;
+  }
+  std::filesystem::remove(fifo);
 }
 
 }  // namespace

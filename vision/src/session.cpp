@@ -62,6 +62,8 @@ void requireFile(const std::string& dir, const std::string& file, const std::str
 }  // namespace
 
 std::vector<double> loadTimestamps(const std::string& path) {
+  if (const std::string why = common::inputFileProblem(path); !why.empty())
+    throw VisionError("timestamps file " + why);  // a FIFO or device would block or never end
   std::ifstream in(path);
   if (!in) throw VisionError("cannot open timestamps file '" + path + "'");
   std::string line;
@@ -90,6 +92,8 @@ std::vector<double> loadTimestamps(const std::string& path) {
 }
 
 std::vector<GroundTruthRow> loadGroundTruth(const std::string& path) {
+  if (const std::string why = common::inputFileProblem(path); !why.empty())
+    throw VisionError("ground truth file " + why);  // a FIFO or device would block or never end
   std::ifstream in(path);
   if (!in) throw VisionError("cannot open ground truth file '" + path + "'");
   std::string line;

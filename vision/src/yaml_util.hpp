@@ -1,6 +1,7 @@
 #pragma once
 // Internal helpers for reading YAML setup files with errors that name the file and field.
 #include "reflex/vision/error.hpp"
+#include "reflex/common/files.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -13,6 +14,8 @@
 namespace reflex::vision::detail {
 
 inline std::string readTextFile(const std::string& path, const std::string& what) {
+  if (const std::string why = common::inputFileProblem(path); !why.empty())
+    throw VisionError(what + " file " + why);  // a FIFO or device would block or never end
   std::ifstream in(path, std::ios::binary);
   if (!in) throw VisionError("cannot open " + what + " file '" + path + "'");
   std::ostringstream os;

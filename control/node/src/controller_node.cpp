@@ -124,9 +124,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.config = config;
   if (!(config.input_timeout > 0.0))
     throw ConfigError("--input-timeout " + std::to_string(config.input_timeout) + " must be positive");
-  const std::string coll = config.collision.empty() ? defaultCollisionConfigPath(config.urdf) : config.collision;
-  CollisionConfig cc;
-  if (!config.collision.empty() || std::ifstream(coll).good()) cc = loadCollisionConfig(coll);
+  const CollisionConfig cc = loadCollisionConfigFor(config.urdf, config.collision);
   m.model = loadModel(config.urdf, cc);
   if (!(config.peer_probe >= 0.0 && config.peer_probe <= 60.0))
     throw ConfigError("--peer-probe " + std::to_string(config.peer_probe) + " must be in [0, 60] s");

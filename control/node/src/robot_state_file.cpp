@@ -1,5 +1,7 @@
 #include "reflex/control_node/robot_state_file.hpp"
 
+#include "reflex/common/files.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cerrno>
@@ -139,7 +141,8 @@ RobotStateFile::RobotStateFile(const std::string& path, const std::vector<std::s
       throw RobotStateError(where + " is in use by another process (locked): " + errnoText());
     struct stat st {};
     if (::fstat(fd_, &st) != 0) throw RobotStateError("cannot stat " + where + ": " + errnoText());
-    if (!S_ISREG(st.st_mode)) throw RobotStateError(where + " is not a regular file");
+    if (!S_ISREG(st.st_mode))
+      throw RobotStateError(where + " is " + common::fileKind(st.st_mode) + ", not a regular file");
     if (st.st_size > kMaxFileSize)
       throw RobotStateError(where + ": " + std::to_string(st.st_size) + " bytes, too large to be a robot state file");
     std::vector<unsigned char> file(static_cast<std::size_t>(st.st_size));

@@ -1,5 +1,7 @@
 #include "reflex/bus/participant.hpp"
 
+#include "reflex/common/files.hpp"
+
 #include <fastdds/dds/core/condition/StatusCondition.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
@@ -214,6 +216,9 @@ Participant::Participant(const BusConfig& config)
   }
 
   const std::string origin = profilesFileOrigin(config.profiles_file);
+  // Checked before any open: a FIFO or device named as the profiles file would block or never end.
+  if (const std::string why = common::inputFileProblem(profiles_file_); !why.empty())
+    throw BusError("DDS QoS profiles file " + why + " (from " + origin + ")");
   if (!std::ifstream(profiles_file_).good()) {
     throw BusError("cannot open the DDS QoS profiles file '" + profiles_file_ + "' (from " + origin + ")");
   }

@@ -4,6 +4,8 @@
 
 #include <reflex/bus/bus.hpp>
 
+#include "reflex/common/files.hpp"
+
 #include <unistd.h>
 
 #include <cstdio>
@@ -35,14 +37,21 @@ struct BusOptions {
   }
 };
 
+/// Runs a command: an exception is an error message and exit status 1; so is standard output that
+/// could not be written (`reflex_record info run.rfx > /dev/full`).
 template <class F>
 int guarded(const char* tool, F&& f) {
+  int status = 1;
   try {
-    return f();
+    status = f();
   } catch (const std::exception& e) {
     std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
+  }
+  if (const std::string why = common::flushStandardOutput(); !why.empty()) {
+    std::fprintf(stderr, "%s: error: %s\n", tool, why.c_str());
     return 1;
   }
+  return status;
 }
 
 }  // namespace
@@ -150,6 +159,7 @@ std::function<int()> addExport(CLI::App& app) {
                      topics->front().c_str(), csv->c_str());
         return 0;
       }
+      if (const std::string why = common::outputFolderProblem(*dir); !why.empty()) throw RecordError(why);
       std::error_code ec;
       std::filesystem::create_directories(*dir, ec);
       if (ec) throw RecordError("cannot create folder '" + *dir + "': " + ec.message());

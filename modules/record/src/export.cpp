@@ -1,5 +1,8 @@
 #include "reflex/record/recorder.hpp"
 
+#include "reflex/common/files.hpp"
+
+#include <cerrno>
 #include <fstream>
 
 namespace reflex::record {
@@ -11,6 +14,8 @@ std::string csvFileNameForTopic(const std::string& topic) {
 }
 
 std::uint64_t exportCsv(const std::string& input, const std::string& topic, const std::string& csv_path) {
+  // Before reading the recording: a missing folder is an error at start, not after the scan.
+  if (const std::string why = common::outputFileProblem(csv_path); !why.empty()) throw RecordError("CSV " + why);
   const RecordingInfo info = scanRecording(input);
   const auto it = info.topics.find(topic);
   if (it == info.topics.end()) {
@@ -21,8 +26,9 @@ std::uint64_t exportCsv(const std::string& input, const std::string& topic, cons
   }
   const TopicCodec* codec = findCodecByType(it->second.type);
   if (!codec) throw RecordError("topic '" + topic + "' has unknown type '" + it->second.type + "'");
+  errno = 0;
   std::ofstream out(csv_path);
-  if (!out) throw RecordError("cannot write CSV file '" + csv_path + "'");
+  if (!out) throw RecordError(common::writeError(csv_path, errno ? errno : EIO));
   RecordReader reader(input);
   RecordEntry e;
   CsvContext ctx;
@@ -34,8 +40,9 @@ std::uint64_t exportCsv(const std::string& input, const std::string& topic, cons
     codec->writeCsvRows(out, e, ctx);
     ++n;
   }
-  out.flush();
-  if (!out) throw RecordError("error while writing CSV file '" + csv_path + "'");
+  errno = 0;
+  out.close();  // flushes: a full disk or /dev/full (ENOSPC) shows here at the latest
+  if (!out) throw RecordError(common::writeError(csv_path, errno ? errno : EIO));
   return n;
 }
 

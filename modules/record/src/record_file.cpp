@@ -1,5 +1,8 @@
 #include "reflex/record/record_file.hpp"
 
+#include "reflex/common/files.hpp"
+
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cstring>
@@ -50,6 +53,43 @@ std::string sysError(const std::string& what, const std::string& path) {
 
 }  // namespace
 
+namespace {
+
+constexpr std::uint32_t kCrcPoly = 0xEDB88320u;  // reflected: bit 31 is x^0, bit 0 is x^31
+
+/// a * b modulo the CRC-32 polynomial, both in the reflected bit order of the CRC register.
+std::uint32_t mulModCrcPoly(std::uint32_t a, std::uint32_t b) noexcept {
+  std::uint32_t product = 0;
+  for (int i = 0; i < 32; ++i) {  // b holds (original b) * x^i
+    if (a & (0x80000000u >> i)) product ^= b;
+    b = (b & 1u) ? (b >> 1) ^ kCrcPoly : (b >> 1);
+  }
+  return product;
+}
+
+/// x^(8 n) modulo the CRC-32 polynomial: the factor that moves a CRC register past n zero bytes.
+std::uint32_t xPow8n(std::uint64_t n) noexcept {
+  static const std::array<std::uint32_t, 64> x_pow_2k = [] {  // x^(2^k)
+    std::array<std::uint32_t, 64> t{};
+    t[0] = 0x40000000u;  // x^1
+    for (std::size_t k = 1; k < t.size(); ++k) t[k] = mulModCrcPoly(t[k - 1], t[k - 1]);
+    return t;
+  }();
+  std::uint32_t result = 0x80000000u;  // x^0
+  std::uint64_t bits = n;
+  for (std::size_t k = 3; bits != 0 && k < x_pow_2k.size(); ++k, bits >>= 1)  // 8 n = n << 3
+    if (bits & 1u) result = mulModCrcPoly(result, x_pow_2k[k]);
+  return result;
+}
+
+}  // namespace
+
+std::uint32_t crc32Combine(std::uint32_t crc_a, std::uint32_t crc_b, std::uint64_t size_b) noexcept {
+  // CRC-32 is affine in the message: the register after A, carried through |B| more bytes, is
+  // crc_a * x^(8|B|) mod P; the init / final inversions of A and B cancel in the XOR.
+  return mulModCrcPoly(crc_a, xPow8n(size_b)) ^ crc_b;
+}
+
 std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc) noexcept {
   static const std::array<std::uint32_t, 256> table = makeCrcTable();
   const auto* p = static_cast<const std::uint8_t*>(data);
@@ -94,8 +134,13 @@ RecordWriter::RecordWriter(const std::string& path, const WriterOptions& options
     throw RecordError("flush/sync intervals must not be negative (recording '" + path + "')");
   std::uint64_t keep = 0;
   bool existing = false;
+  // At start, not at the end of a recording: a missing folder, a folder in the file's place, ...
+  if (const std::string why = common::outputFileProblem(path); !why.empty()) throw RecordError("recording: " + why);
   if (options.append) {
     struct stat st{};
+    if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+      throw RecordError("cannot append to recording '" + path + "': it is " + common::fileKind(st.st_mode) +
+                        ", not a regular file");
     if (::stat(path.c_str(), &st) == 0 && st.st_size > 0) {
       RecordReader check(path);  // throws if it is not a recording
       check.setResync(false);
@@ -108,9 +153,18 @@ RecordWriter::RecordWriter(const std::string& path, const WriterOptions& options
       existing = true;
     }
   }
-  const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | (existing ? 0 : O_TRUNC);
+  // O_NONBLOCK for the open only: a FIFO without a reader is an error at once (ENXIO), not a hang.
+  const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | O_NONBLOCK | (existing ? 0 : O_TRUNC);
   fd_ = ::open(path.c_str(), flags, 0644);
   if (fd_ < 0) throw RecordError(sysError("cannot open recording", path));
+  struct stat st{};
+  if (::fstat(fd_, &st) == 0) regular_ = S_ISREG(st.st_mode);
+  if (::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK) != 0) {
+    const std::string msg = sysError("cannot set up recording", path);
+    ::close(fd_);
+    fd_ = -1;
+    throw RecordError(msg);
+  }
   if (existing) {
     if (::ftruncate(fd_, static_cast<off_t>(keep)) != 0 || ::lseek(fd_, static_cast<off_t>(keep), SEEK_SET) < 0) {
       const std::string msg = sysError("cannot position at the end of recording", path);
@@ -171,7 +225,9 @@ void RecordWriter::flush() {
 void RecordWriter::sync() {
   if (fd_ < 0) return;
   flush();
-  if (::fsync(fd_) != 0) throw RecordError(sysError("cannot fsync recording", path_));
+  // A device or pipe (/dev/null, a FIFO) cannot be synchronised (EINVAL): nothing is lost there.
+  if (::fsync(fd_) != 0 && (regular_ || (errno != EINVAL && errno != EROFS)))
+    throw RecordError(sysError("cannot fsync recording", path_));
   last_sync_ = std::chrono::steady_clock::now();
 }
 
@@ -192,36 +248,134 @@ void RecordWriter::close() {
 // ---------------------------------------------------------------------------------------------
 // RecordReader
 
+namespace {
+
+/// Reads exactly n bytes at offset (false on a short read or an error).
+bool preadAll(int fd, std::uint64_t offset, void* dst, std::size_t n) {
+  auto* out = static_cast<std::uint8_t*>(dst);
+  while (n > 0) {
+    const ssize_t got = ::pread(fd, out, n, static_cast<off_t>(offset));
+    if (got < 0 && errno == EINTR) continue;
+    if (got <= 0) return false;
+    out += got;
+    offset += static_cast<std::uint64_t>(got);
+    n -= static_cast<std::size_t>(got);
+  }
+  return true;
+}
+
+constexpr std::size_t kBlock = 4096;        // read cache: direct-mapped blocks of the file
+constexpr std::size_t kCacheBlocks = 64;
+constexpr std::size_t kDirectRead = 4 * kBlock;  // larger reads bypass the cache
+/// A body longer than this is checked (checkAt: CRC from the marks) before it is read, so that a
+/// corrupt header claiming a long body costs O(1), not O(length) (a file of such headers between
+/// valid records was quadratic too).
+constexpr std::uint32_t kCheckBeforeReading = 64 * 1024;
+
+}  // namespace
+
 RecordReader::RecordReader(const std::string& path) : path_(path) {
-  file_ = std::fopen(path.c_str(), "rb");
-  if (!file_) throw RecordError(sysError("cannot open recording", path));
+  // Before any open: a FIFO blocks open(2) and read(2) until a writer appears; a device never ends.
+  if (const std::string why = common::inputFileProblem(path); !why.empty()) throw RecordError("recording " + why);
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  if (fd_ < 0) throw RecordError(sysError("cannot open recording", path));
   struct stat st{};
-  if (::fstat(fileno(file_), &st) != 0) {
-    std::fclose(file_);
-    throw RecordError(sysError("cannot stat recording", path));
+  if (::fstat(fd_, &st) != 0) {
+    const std::string msg = sysError("cannot stat recording", path);
+    ::close(fd_);
+    throw RecordError(msg);
+  }
+  if (!S_ISREG(st.st_mode)) {  // replaced between the check and the open
+    ::close(fd_);
+    throw RecordError("recording '" + path + "' is " + common::fileKind(st.st_mode) + ", not a regular file");
   }
   size_ = static_cast<std::uint64_t>(st.st_size);
+  window_.reset(new std::uint8_t[kCacheBlocks * kBlock]);  // filled block by block before any use
+  block_index_.assign(kCacheBlocks, ~std::uint64_t{0});
+  crc_marks_.assign(1, 0u);  // the CRC of no bytes
   std::uint8_t header[kFileHeaderSize];
   if (size_ < kFileHeaderSize || !readAt(0, header, kFileHeaderSize) || std::memcmp(header, kFileMagic, 8) != 0) {
-    std::fclose(file_);
+    ::close(fd_);
     throw RecordError("'" + path + "' is not a Reflex recording (no RFXREC header)");
   }
   const std::uint32_t version = getU32(header + 8);
   if (version != kFormatVersion) {
-    std::fclose(file_);
+    ::close(fd_);
     throw RecordError("recording '" + path + "' has format version " + std::to_string(version) +
                       "; this tool reads version " + std::to_string(kFormatVersion));
   }
 }
 
 RecordReader::~RecordReader() {
-  if (file_) std::fclose(file_);
+  if (fd_ >= 0) ::close(fd_);
 }
 
 bool RecordReader::readAt(std::uint64_t offset, void* dst, std::size_t n) {
-  if (offset + n > size_) return false;
-  if (fseeko(file_, static_cast<off_t>(offset), SEEK_SET) != 0) return false;
-  return std::fread(dst, 1, n, file_) == n;
+  if (offset > size_ || n > size_ - offset) return false;
+  examined_ += n;
+  if (n >= kDirectRead) return preadAll(fd_, offset, dst, n);
+  auto* out = static_cast<std::uint8_t*>(dst);
+  while (n > 0) {
+    const std::uint64_t index = offset / kBlock;
+    const std::size_t slot = static_cast<std::size_t>(index % kCacheBlocks);
+    std::uint8_t* block = window_.get() + slot * kBlock;
+    if (block_index_[slot] != index) {
+      const std::uint64_t start = index * kBlock;
+      const std::size_t len = static_cast<std::size_t>(std::min<std::uint64_t>(kBlock, size_ - start));
+      block_index_[slot] = ~std::uint64_t{0};
+      if (!preadAll(fd_, start, block, len)) return false;
+      block_index_[slot] = index;
+    }
+    const std::size_t in_block = static_cast<std::size_t>(offset - index * kBlock);
+    const std::size_t take = std::min(n, kBlock - in_block);
+    std::memcpy(out, block + in_block, take);
+    out += take;
+    offset += take;
+    n -= take;
+  }
+  return true;
+}
+
+bool RecordReader::prefixCrc(std::uint64_t x, std::uint32_t& crc) {
+  if (x > size_) return false;
+  const std::uint64_t mark = x / kCrcMarkStride;
+  std::uint8_t buf[kCrcMarkStride];
+  while (crc_marks_.size() <= mark) {  // extend the marks (each byte of the file is read once for them)
+    const std::uint64_t j = crc_marks_.size() - 1;
+    if (!readAt(j * kCrcMarkStride, buf, kCrcMarkStride)) return false;
+    crc_marks_.push_back(crc32(buf, kCrcMarkStride, crc_marks_[j]));
+  }
+  const std::size_t rest = static_cast<std::size_t>(x - mark * kCrcMarkStride);
+  if (!readAt(mark * kCrcMarkStride, buf, rest)) return false;
+  crc = crc32(buf, rest, crc_marks_[mark]);
+  return true;
+}
+
+RecordReader::Parse RecordReader::checkAt(std::uint64_t offset) {
+  std::uint8_t head[kRecordHeaderSize];
+  if (offset + kRecordHeaderSize > size_ || !readAt(offset, head, kRecordHeaderSize)) return Parse::kShort;
+  if (getU32(head) != kRecordSync) return Parse::kBad;
+  const std::uint32_t len = getU32(head + 4);
+  if (len < 8 + 8 + 2 + 2 + 4 || len > kMaxBodySize) return Parse::kBad;
+  if (offset + kRecordHeaderSize + len > size_) return Parse::kShort;
+  const std::uint64_t body = offset + kRecordHeaderSize;
+  // The inner fields, as parseAt checks them (O(1) reads).
+  std::uint8_t b[8];
+  if (!readAt(body, b, 8)) return Parse::kShort;
+  if (getI64(b) < 0) return Parse::kBad;
+  if (!readAt(body + 16, b, 2)) return Parse::kShort;
+  const std::uint64_t topic_len = getU16(b);
+  if (len - 18 < topic_len + 2) return Parse::kBad;
+  if (!readAt(body + 18 + topic_len, b, 2)) return Parse::kShort;
+  const std::uint64_t type_len = getU16(b);
+  if (len - 20 - topic_len < type_len + 4) return Parse::kBad;
+  if (!readAt(body + 20 + topic_len + type_len, b, 4)) return Parse::kShort;
+  if (getU32(b) != len - 24 - topic_len - type_len) return Parse::kBad;
+  // CRC of the body from two prefix CRCs: crc(body) = C(end) ^ (C(body) shifted by len bytes).
+  std::uint32_t c_body = 0, c_end = 0;
+  if (!prefixCrc(body, c_body) || !prefixCrc(body + len, c_end)) return Parse::kShort;
+  if ((c_end ^ crc32Combine(c_body, 0, len)) != getU32(head + 8)) return Parse::kBad;
+  return Parse::kOk;
 }
 
 RecordReader::Parse RecordReader::parseAt(std::uint64_t offset, RecordEntry& out, std::uint64_t& record_size) {
@@ -233,6 +387,10 @@ RecordReader::Parse RecordReader::parseAt(std::uint64_t offset, RecordEntry& out
   const std::uint32_t crc = getU32(head + 8);
   if (len < 8 + 8 + 2 + 2 + 4 || len > kMaxBodySize) return Parse::kBad;
   if (offset + kRecordHeaderSize + len > size_) return Parse::kShort;
+  if (len > kCheckBeforeReading) {
+    const Parse checked = checkAt(offset);
+    if (checked != Parse::kOk) return checked;
+  }
   body_.resize(len);
   if (!readAt(offset + kRecordHeaderSize, body_.data(), len)) return Parse::kShort;
   if (crc32(body_.data(), len) != crc) return Parse::kBad;
@@ -261,12 +419,11 @@ RecordReader::Parse RecordReader::parseAt(std::uint64_t offset, RecordEntry& out
   return Parse::kOk;
 }
 
-bool RecordReader::findValid(std::uint64_t from, std::uint64_t& at, RecordEntry& scratch) {
+bool RecordReader::findValid(std::uint64_t from, std::uint64_t& at) {
   std::uint8_t b4[4];
   for (std::uint64_t scan = from; scan + kRecordHeaderSize <= size_; ++scan) {
     if (!readAt(scan, b4, 4) || getU32(b4) != kRecordSync) continue;
-    std::uint64_t sz = 0;
-    if (parseAt(scan, scratch, sz) == Parse::kOk) {
+    if (checkAt(scan) == Parse::kOk) {
       at = scan;
       return true;
     }
@@ -289,7 +446,7 @@ bool RecordReader::next(RecordEntry& out) {
     // them off).
     const bool maybe_torn = r == Parse::kShort && state_ != TailState::kCorrupt;
     std::uint64_t next_valid = size_;
-    const bool later = (maybe_torn || resync_) && findValid(pos_ + 1, next_valid, out);
+    const bool later = (maybe_torn || resync_) && findValid(pos_ + 1, next_valid);
     if (maybe_torn && !later) {
       state_ = TailState::kTorn;
       return false;

@@ -43,6 +43,11 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path);
 /// "dir/robot.urdf" -> "dir/robot.collision.yaml".
 std::string defaultCollisionConfigPath(const std::string& urdf_path);
 
+/// The collision configuration of a robot as every tool chooses it: `collision_path` if given;
+/// else defaultCollisionConfigPath(urdf_path) if anything exists there (read and checked like any
+/// other: a FIFO or device there is a ModelError, never a blocked open); else the defaults.
+CollisionConfig loadCollisionConfigFor(const std::string& urdf_path, const std::string& collision_path);
+
 /// Loads a URDF file. Warnings (e.g. boxes replaced by capsules) are appended to `warnings` if given.
 /// Throws ModelError for a missing or malformed file, mesh-only collision, non-positive radius,
 /// zero-length cylinder, bad limits, and unknown link names in the configuration.

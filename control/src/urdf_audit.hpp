@@ -1,0 +1,41 @@
+// An independent reading of a URDF's XML (tinyxml2), made to account for every collision element
+// (issue 16, item 2). urdfdom drops a link's collision elements without failing when anything in the
+// link does not parse (a NaN, "1e999", "0.001 " with a space, "1 2" for a 3-vector, an unnamed
+// <material>, an unknown geometry such as <capsule>, a bad mass), and it accepts finite absurd values
+// (an origin at 1e300 m) that move geometry out of reach just as surely. loadModelFromString compares
+// the counts found here with what urdfdom returned and refuses the model, naming every affected link
+// and the reason found, in one message.
+//
+// Internal to reflex::control (not installed): the contract is tested through loadModelFromString.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace reflex::control::detail {
+
+/// Ranges a humanoid's URDF must respect (checked for every collision element and every joint).
+inline constexpr double kMaxUrdfLength = 10.0;               ///< m: |origin xyz|, radius, length, box size
+inline constexpr double kMaxUrdfAngle = 12.566370614359172;  ///< rad (4 pi): |origin rpy|
+inline constexpr double kMaxJointLimit = 1000.0;             ///< rad or m: |limit lower/upper|
+inline constexpr double kMaxJointVelocity = 100.0;           ///< rad/s or m/s: limit velocity
+
+struct UrdfAudit {
+  std::string xml_error;  ///< non-empty: the text is not well-formed XML (tinyxml2's message and line)
+  /// Number of <collision> children of every <link> that is a direct child of <robot>.
+  std::map<std::string, int> collisions;
+  /// Per link: problems in its collision elements (always fatal: not finite, malformed, out of range).
+  std::map<std::string, std::vector<std::string>> collision_problems;
+  /// Per link: problems in its visual / inertial elements. urdfdom drops the whole link's collision
+  /// elements for these; they are reported as the reason when the counts differ.
+  std::map<std::string, std::vector<std::string>> other_problems;
+  /// Problems outside links (joints, collision elements outside every link, nested links,
+  /// duplicate or unnamed links): always fatal. Each names its element and line.
+  std::vector<std::string> problems;
+};
+
+/// Reads `xml` and fills the audit. Never throws for bad input (only std::bad_alloc).
+UrdfAudit auditUrdf(const std::string& xml);
+
+}  // namespace reflex::control::detail

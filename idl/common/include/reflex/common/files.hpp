@@ -1,0 +1,58 @@
+// Checks on the files a user names to a Reflex tool (issue 16, items 11 and 14).
+//
+// Inputs: every loader of a file given by a user (URDF, collision / controller / behavior YAML,
+// timeline CSV, DDS profiles XML, recordings, robot-state file, vision calibration / session / mount /
+// object map files, joint CSVs) calls inputFileProblem() before opening it. Only a regular file (or a
+// symbolic link to one) is read: a FIFO blocks the reader until some writer appears (forever), a
+// character device such as /dev/zero or /dev/urandom never ends, a terminal waits for typing, a
+// directory "opens" and then fails obscurely. Each of those is refused at once with a message naming
+// the path and what it is.
+//
+// Outputs: outputFileProblem() says at start-up, before any work is done, why a file cannot be
+// written where the user asked (missing folder, a folder in its place); devices (/dev/null,
+// /dev/stdout) and FIFOs stay allowed as outputs. Write errors found later (/dev/full: ENOSPC) are
+// reported by the writer naming the file (writeError()).
+//
+// No dependency beyond the C++ library and POSIX: usable from every layer (see CMakeLists.txt).
+#pragma once
+
+#include <string>
+#include <sys/types.h>
+
+namespace reflex::common {
+
+/// "a regular file", "a directory", "a FIFO (named pipe)", "a character device", "a block device",
+/// "a socket", "a symbolic link" (only from lstat) or "an unknown kind of file", from st_mode.
+const char* fileKind(mode_t mode) noexcept;
+
+/// Why `path` must not be read as an input file, or "" if it may be.
+///   ""  : a regular file, or a symbolic link to one; also a path stat() cannot see (missing, no
+///         permission, too long): the caller's own open reports that with its own message.
+///   else: "'<path>' is a FIFO (named pipe), not a regular file" (likewise "is a character device",
+///         "is a directory", "is a block device", "is a socket").
+/// Never blocks (stat(2) only).
+std::string inputFileProblem(const std::string& path);
+
+/// Why `path` cannot be created or written as an output file, or "" if it can (as far as can be
+/// known before writing):
+///   ""  : the path is a regular file, a character device (/dev/null, /dev/stdout on a terminal),
+///         a FIFO (a pipe the user set up), or does not exist yet while its folder does.
+///   else: "folder '<dir>' of output file '<path>' does not exist", "... is not a folder",
+///         "output file '<path>' is a directory", "cannot write into folder '<dir>': Permission denied".
+std::string outputFileProblem(const std::string& path);
+
+/// Why `dir` cannot serve as an output folder that the tool will create if missing, or "" if it
+/// can: "" when it is a folder, or when it does not exist but its nearest existing ancestor is a
+/// writable folder; else "output folder '<dir>' is a regular file", "... cannot be created under
+/// '<ancestor>': Permission denied", and so on.
+std::string outputFolderProblem(const std::string& dir);
+
+/// "cannot write '<path>': <strerror(err)>" -- the one wording of a failed write / flush / close.
+std::string writeError(const std::string& path, int err);
+
+/// Flushes std::cout and stdout; "" if everything written to them reached the kernel, else
+/// "cannot write the standard output: <cause>" (e.g. `tool > /dev/full`: No space left on device).
+/// Tools call it last and exit non-zero with the message: output that was lost is not success.
+std::string flushStandardOutput();
+
+}  // namespace reflex::common

@@ -1,0 +1,111 @@
+#include "reflex/common/files.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <iostream>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace reflex::common {
+
+namespace {
+
+/// The folder part of `path` ("." when there is none; "/" for "/x").
+std::string parentOf(const std::string& path) {
+  std::string p = path;
+  while (p.size() > 1 && p.back() == '/') p.pop_back();  // "out/" names the folder "out"
+  const auto slash = p.rfind('/');
+  if (slash == std::string::npos) return ".";
+  if (slash == 0) return "/";
+  return p.substr(0, slash);
+}
+
+std::string quoted(const std::string& s) { return "'" + s + "'"; }
+
+}  // namespace
+
+const char* fileKind(mode_t mode) noexcept {
+  if (S_ISREG(mode)) return "a regular file";
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISFIFO(mode)) return "a FIFO (named pipe)";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISSOCK(mode)) return "a socket";
+  if (S_ISLNK(mode)) return "a symbolic link";
+  return "an unknown kind of file";
+}
+
+std::string inputFileProblem(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return "";  // missing etc.: the caller's open says so
+  if (S_ISREG(st.st_mode)) return "";
+  return quoted(path) + " is " + fileKind(st.st_mode) + ", not a regular file";
+}
+
+std::string writeError(const std::string& path, int err) {
+  return "cannot write " + quoted(path) + ": " + std::strerror(err);
+}
+
+std::string flushStandardOutput() {
+  errno = 0;
+  std::cout.flush();
+  const bool cout_ok = static_cast<bool>(std::cout);
+  const int cout_errno = errno;
+  errno = 0;
+  const bool stdout_ok = std::fflush(stdout) == 0 && !std::ferror(stdout);
+  if (cout_ok && stdout_ok) return "";
+  const int err = !stdout_ok && errno != 0 ? errno : (cout_errno != 0 ? cout_errno : EIO);
+  return std::string("cannot write the standard output: ") + std::strerror(err);
+}
+
+std::string outputFileProblem(const std::string& path) {
+  if (path.empty()) return "empty output file name";
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) {
+    if (S_ISDIR(st.st_mode)) return "output file " + quoted(path) + " is a directory";
+    if (!S_ISREG(st.st_mode) && !S_ISCHR(st.st_mode) && !S_ISFIFO(st.st_mode))
+      return "output file " + quoted(path) + " is " + fileKind(st.st_mode);
+    if (::access(path.c_str(), W_OK) != 0) return writeError(path, errno);
+    return "";
+  }
+  if (errno != ENOENT) return writeError(path, errno);
+  const std::string dir = parentOf(path);
+  if (::stat(dir.c_str(), &st) != 0) {
+    if (errno == ENOENT) return "folder " + quoted(dir) + " of output file " + quoted(path) + " does not exist";
+    return "cannot write " + quoted(path) + ": folder " + quoted(dir) + ": " + std::strerror(errno);
+  }
+  if (!S_ISDIR(st.st_mode))
+    return "folder " + quoted(dir) + " of output file " + quoted(path) + " is " + fileKind(st.st_mode);
+  if (::access(dir.c_str(), W_OK | X_OK) != 0)
+    return "cannot create " + quoted(path) + " in folder " + quoted(dir) + ": " + std::strerror(errno);
+  return "";
+}
+
+std::string outputFolderProblem(const std::string& dir) {
+  if (dir.empty()) return "empty output folder name";
+  std::string probe = dir;
+  for (;;) {
+    struct stat st {};
+    if (::stat(probe.c_str(), &st) == 0) {
+      if (!S_ISDIR(st.st_mode)) {
+        if (probe == dir) return "output folder " + quoted(dir) + " is " + fileKind(st.st_mode);
+        return "output folder " + quoted(dir) + " cannot be created: " + quoted(probe) + " is " +
+               fileKind(st.st_mode);
+      }
+      if (::access(probe.c_str(), W_OK | X_OK) != 0) {
+        if (probe == dir) return "cannot write into output folder " + quoted(dir) + ": " + std::strerror(errno);
+        return "output folder " + quoted(dir) + " cannot be created in " + quoted(probe) + ": " +
+               std::strerror(errno);
+      }
+      return "";
+    }
+    if (errno != ENOENT)
+      return "output folder " + quoted(dir) + " cannot be used: " + quoted(probe) + ": " + std::strerror(errno);
+    const std::string up = parentOf(probe);
+    if (up == probe) return "output folder " + quoted(dir) + ": no existing ancestor folder";
+    probe = up;
+  }
+}
+
+}  // namespace reflex::common
