@@ -438,6 +438,8 @@ TEST_F(BadInput, SessionWriterReportsFilesItCouldNotWrite) {
   EXPECT_THAT(errorOf([&] { SessionWriter w(dir_ / "no/such/parent/s", info.calibration, info.objects, {}, {}); }),
               AllOf(HasSubstr("folder '" + (dir_ / "no/such/parent") + "' does not exist")));
   EXPECT_FALSE(fs::exists(dir_ / "no"));
+  { SessionWriter w(dir_ / "trailing/", info.calibration, info.objects, {}, {}); }  // "x/" is the folder x
+  EXPECT_TRUE(fs::is_regular_file(dir_ / "trailing/session.yaml"));
 
   struct rlimit old {};
   ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);

@@ -356,7 +356,9 @@ SessionWriter::SessionWriter(const std::string& dir, const StereoCalibration& ca
   std::error_code ec;
   // The session folder itself is created; its parent must exist (a mistyped path is an error now,
   // not a tree of folders created somewhere unexpected).
-  const fs::path parent = fs::path(dir_).lexically_normal().parent_path();
+  fs::path folder = fs::path(dir_).lexically_normal();
+  if (!folder.has_filename()) folder = folder.parent_path();  // "out/" names the folder "out"
+  const fs::path parent = folder.parent_path();
   if (!parent.empty() && !fs::is_directory(parent, ec))
     throw VisionError("cannot create session folder '" + dir_ + "': folder '" + parent.string() + "' does not exist");
   fs::create_directory(dir_, ec);
