@@ -175,8 +175,86 @@ TEST(ObjectMap, ParseAndErrors) {
   EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, name: a, size: 0.06}\n  - {id: 0, name: b, size: 0.06}\n", "o.yaml"); }),
               AllOf(HasSubstr("o.yaml"), HasSubstr("duplicate tag id")));
   EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, name: a, size: -1}\n", "o.yaml"); }),
-              HasSubstr("size = -1 must be positive"));
+              HasSubstr("size = -1 m must be in [0.002, 5] m"));
   EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, size: 0.06}\n", "o.yaml"); }),
               HasSubstr("objects[0]: missing field 'name'"));
   EXPECT_THAT(errorOf([] { parseObjectMap("family: tag36h11\n", "o.yaml"); }), HasSubstr("'objects'"));
+}
+
+// Issue 16, item 15: values no physical camera has, each refused with the file, field, value and
+// range (the ranges are CalibrationLimits / ObjectMap::kMin/kMaxTagSize, documented in
+// vision/README.md). Each of these parsed without error before.
+TEST(Calibration, PhysicallyImpossibleValuesAreRefused) {
+  auto bad = [](const std::string& from, const std::string& to) {
+    return errorOf([&] { parseCameraInfo(std::regex_replace(kLeft, std::regex(from), to), "cam.yaml"); });
+  };
+  EXPECT_EQ(bad("xxx", "xxx"), "no error");
+  // focal length against the 640 px width: [32, 32000] px
+  EXPECT_THAT(bad("501.2", "0.001"), AllOf(HasSubstr("cam.yaml: camera_matrix"), HasSubstr("fx = 0.001 px"),
+                                           HasSubstr("[32, 32000]")));
+  EXPECT_THAT(bad("501.2", "1e9"), HasSubstr("fx = 1000000000 px"));
+  EXPECT_EQ(bad("501.2, 0, 318.7, 0, 500.9", "32, 0, 318.7, 0, 32"), "no error");  // the limit itself is accepted
+  // pixel aspect fy/fx in [0.25, 4]
+  EXPECT_THAT(bad("500.9", "50000"), AllOf(HasSubstr("fy = 50000 px"), HasSubstr("pixel aspect")));
+  // principal point inside the image, K and P
+  EXPECT_THAT(bad("318.7", "-5"), AllOf(HasSubstr("principal point"), HasSubstr("(-5, 241.3)"), HasSubstr("640x480")));
+  EXPECT_THAT(bad("241.3", "481"), HasSubstr("principal point (cx, cy) = (318.7, 481)"));
+  EXPECT_THAT(bad(R"(495.0, 240.0, 0)", "495.0, 9000, 0"),
+              AllOf(HasSubstr("projection_matrix"), HasSubstr("(cx', cy') = (320, 9000)")));
+  EXPECT_THAT(bad(R"(\[495.0, 0, 320.0, 0, 0, 495.0)", "[1e7, 0, 320.0, 0, 0, 1e7"),
+              AllOf(HasSubstr("projection_matrix"), HasSubstr("fx' = 10000000 px")));
+  // P's last row
+  EXPECT_THAT(bad("0, 0, 1, 0]", "0, 0, 2, 0]"), HasSubstr("projection_matrix: last row must be [0, 0, 1, 0]"));
+  // image size
+  EXPECT_THAT(bad("image_width: 640", "image_width: 4"), HasSubstr("image_width = 4 must be in [16, 16384]"));
+  EXPECT_THAT(bad("image_height: 480", "image_height: 100000"), HasSubstr("image_height = 100000"));
+}
+
+TEST(Calibration, BaselineOutsideThePhysicalRangeIsRefused) {
+  const CameraInfo l = parseCameraInfo(kLeft, "l");
+  CameraInfo r = parseCameraInfo(rightFrom(kLeft), "r");
+  EXPECT_NO_THROW(validateStereoCalibration({l, r}, "L.yaml", "R.yaml"));  // 6 cm
+  for (const double baseline : {1e-9, 5e-4, 11.0, 1e5}) {
+    r.P(0, 3) = -r.P(0, 0) * baseline;
+    EXPECT_THAT(errorOf([&] { validateStereoCalibration({l, r}, "L.yaml", "R.yaml"); }),
+                AllOf(HasSubstr("R.yaml"), HasSubstr("baseline"), HasSubstr("[0.001, 10] m")))
+        << baseline;
+  }
+  r.P(0, 3) = -r.P(0, 0) * 0.0011;
+  EXPECT_NO_THROW(validateStereoCalibration({l, r}, "L.yaml", "R.yaml"));
+}
+
+TEST(ObjectMap, ImpossibleTagSizesAndEmptyMapsAreRefused) {
+  for (const char* size : {"1e-6", "0.0019", "5.1", "1e6"})
+    EXPECT_THAT(errorOf([&] { parseObjectMap(std::string("objects:\n  - {id: 0, name: a, size: ") + size + "}\n", "o.yaml"); }),
+                AllOf(HasSubstr("o.yaml"), HasSubstr("size = "), HasSubstr("m must be in [0.002, 5] m")))
+        << size;
+  EXPECT_NO_THROW(parseObjectMap("objects:\n  - {id: 0, name: a, size: 0.002}\n  - {id: 1, name: b, size: 5}\n", "o"));
+  EXPECT_THAT(errorOf([] { parseObjectMap("objects: []\n", "o.yaml"); }),
+              AllOf(HasSubstr("o.yaml: objects"), HasSubstr("empty")));
+}
+
+// Issue 16, item 15: a distortion no lens has leaves the rectified image black (zero detections).
+// Independent answer: with k1 = +-1e6 a ray 0.1 rad off-axis lands ~1e3 * f px away, so nearly no
+// rectified pixel sees the raw image; a real plumb_bob lens (kLeft) keeps the whole image.
+TEST(Calibration, DistortionNoLensHasIsRefused) {
+  const CameraInfo l = parseCameraInfo(kLeft, "l");
+  const CameraInfo r = parseCameraInfo(rightFrom(kLeft), "r");
+  for (const double k1 : {1e6, -1e6}) {
+    StereoCalibration c{l, r};
+    c.left.D[0] = k1;
+    EXPECT_THAT(errorOf([&] { validateStereoCalibration(c, "L.yaml", "R.yaml"); }),
+                AllOf(HasSubstr("L.yaml"), HasSubstr("% of the rectified image"), HasSubstr("at least 25 %")))
+        << k1;
+  }
+  StereoCalibration fine{l, r};
+  fine.right.D[0] = -0.3;  // a strong but real barrel distortion
+  EXPECT_NO_THROW(validateStereoCalibration(fine, "L.yaml", "R.yaml"));
+}
+
+TEST(CameraMount, AMountFarFromTheRobotIsRefused) {
+  EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0.1, 1e6, 1.0]\nrotation_matrix: [0,0,1, -1,0,0, 0,-1,0]\n",
+                                            "m.yaml"); }),
+              AllOf(HasSubstr("m.yaml"), HasSubstr("translation[1] = 1000000 m"), HasSubstr("10 m")));
+  EXPECT_NO_THROW(parseCameraMount("translation: [0.1, -9.9, 1.0]\nrotation_matrix: [0,0,1, -1,0,0, 0,-1,0]\n", "m"));
 }

@@ -2,6 +2,7 @@
 // publishes reflex/object_targets; this process reads them with reflex::bus and checks the rate
 // (10 Hz +- 2 % from the publisher's header stamps), the header, and the positions against the
 // session's ground truth.
+#include "../system/process.hpp"
 #include "vision_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
@@ -10,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <thread>
 
@@ -79,4 +81,32 @@ TEST(VisionDds, PublishesObjectTargetsAt10HzMatchingGroundTruth) {
     }
   }
   EXPECT_GT(compared, 50);
+}
+
+// Issue 16, item 13: the publishing reflex_vision (DDS path: the bus loop on the main thread, vision
+// on a worker) ends within a second of SIGTERM while the replay waits 9.5 s for the next frame (a
+// valid gap). Before, the worker slept through the whole wait after the bus had stopped (on stamps
+// near 1e17 s it spun for 14 minutes). Domain 85.
+TEST(VisionDds, SigtermEndsTheProcessWithinASecondDuringAWait) {
+  TempDir dir("dds_term");
+  makeSession(parseSceneScript(nearScript(1.0), "near"), dir / "s");
+  std::string ts = "frame,stamp\n";
+  for (int k = 0; k < 10; ++k) ts += std::to_string(k) + "," + std::to_string(0.1 * k + (k >= 3 ? 9.5 : 0.0)) + "\n";
+  writeText(dir / "s/timestamps.csv", ts);
+  reflex::testing::ChildProcess p({std::string(REFLEX_BIN_DIR) + "/reflex_vision", "--session", dir / "s", "--domain",
+                                   "85", "--progress"},
+                                  dir / "log.txt");
+  ASSERT_TRUE(p.started());
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto since = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+  };
+  while (readText(dir / "log.txt").find("[pass 1]") == std::string::npos && since(t0) < 30.0)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ASSERT_NE(readText(dir / "log.txt").find("[pass 1]"), std::string::npos) << readText(dir / "log.txt");
+  std::this_thread::sleep_for(std::chrono::milliseconds(800));  // inside the 9.5 s wait for frame 3
+  const auto t_signal = std::chrono::steady_clock::now();
+  p.signal(SIGTERM);
+  EXPECT_EQ(p.wait(std::chrono::milliseconds(1500)), 0) << readText(dir / "log.txt");
+  EXPECT_LT(since(t_signal), 1.5);
 }

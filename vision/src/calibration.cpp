@@ -1,10 +1,14 @@
 #include "reflex/vision/calibration.hpp"
 
+#include "reflex/vision/output_file.hpp"
 #include "yaml_util.hpp"
+
+#include <opencv2/calib3d.hpp>
 
 #include <cmath>
 #include <fstream>
 #include <iomanip>
+#include <sstream>
 
 namespace reflex::vision {
 namespace {
@@ -43,6 +47,54 @@ bool isRotation(const cv::Matx33d& R) {
   return err < 1e-5 && cv::determinant(R) > 0.0;
 }
 
+// Focal lengths against the image width, pixel aspect, principal point inside the image
+// (CalibrationLimits). `prime` is "'" for the rectified P, "" for K.
+void checkIntrinsics(double fx, double fy, double cx, double cy, const cv::Size& size, const std::string& where,
+                     const std::string& prime) {
+  using L = CalibrationLimits;
+  const double w = size.width, h = size.height;
+  if (fx < L::kMinFocalPerWidth * w || fx > L::kMaxFocalPerWidth * w)
+    throw VisionError(where + ": focal length fx" + prime + " = " + fmt(fx) + " px is outside [" +
+                      fmt(L::kMinFocalPerWidth * w) + ", " + fmt(L::kMaxFocalPerWidth * w) + "] for a " +
+                      std::to_string(size.width) + " px wide image (a field of view between ~1 and ~169 deg)");
+  if (fy < L::kMinAspect * fx || fy > L::kMaxAspect * fx)
+    throw VisionError(where + ": focal length fy" + prime + " = " + fmt(fy) + " px is outside [" +
+                      fmt(L::kMinAspect * fx) + ", " + fmt(L::kMaxAspect * fx) + "] (fx" + prime + " = " + fmt(fx) +
+                      ": pixel aspect between " + fmt(L::kMinAspect) + " and " + fmt(L::kMaxAspect) + ")");
+  if (!(cx >= 0.0 && cx <= w) || !(cy >= 0.0 && cy <= h))
+    throw VisionError(where + ": principal point (cx" + prime + ", cy" + prime + ") = (" + fmt(cx) + ", " + fmt(cy) +
+                      ") is outside the " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+                      " image");
+}
+
+// Fraction of the rectified image (a 32 x 24 grid of pixel centres) that sees the raw image: each
+// rectified pixel is taken back to a raw camera ray (P^-1, R^T) and projected with K and D. A
+// distortion or rectification no lens has (k1 = 1e6, say) leaves the rectified image black.
+double rectifiedCoverage(const CameraInfo& c) {
+  constexpr int kCols = 32, kRows = 24;
+  const cv::Matx33d P3(c.P(0, 0), c.P(0, 1), c.P(0, 2), c.P(1, 0), c.P(1, 1), c.P(1, 2), c.P(2, 0), c.P(2, 1),
+                       c.P(2, 2));
+  const cv::Matx33d back = c.R.t() * P3.inv();
+  std::vector<cv::Point3d> rays;
+  for (int r = 0; r < kRows; ++r)
+    for (int k = 0; k < kCols; ++k) {
+      const cv::Vec3d ray = back * cv::Vec3d((k + 0.5) * c.image_size.width / kCols,
+                                              (r + 0.5) * c.image_size.height / kRows, 1.0);
+      if (ray[2] > 1e-9) rays.emplace_back(ray[0] / ray[2], ray[1] / ray[2], 1.0);  // behind the camera: unseen
+    }
+  if (rays.empty()) return 0.0;
+  std::vector<cv::Point2d> raw;
+  const cv::Vec3d no_rotation(0, 0, 0), no_translation(0, 0, 0);
+  if (c.distortion_model == "equidistant")
+    cv::fisheye::projectPoints(rays, raw, no_rotation, no_translation, c.K, c.D);
+  else
+    cv::projectPoints(rays, no_rotation, no_translation, c.K, c.D, raw);
+  int inside = 0;
+  for (const cv::Point2d& p : raw)
+    if (p.x >= 0.0 && p.y >= 0.0 && p.x < c.image_size.width && p.y < c.image_size.height) ++inside;
+  return static_cast<double>(inside) / (kCols * kRows);
+}
+
 void writeRosMatrix(std::ostream& os, const std::string& key, int rows, int cols, const double* data) {
   os << key << ":\n  rows: " << rows << "\n  cols: " << cols << "\n  data: [";
   for (int i = 0; i < rows * cols; ++i) os << (i ? ", " : "") << std::setprecision(12) << data[i];
@@ -56,8 +108,13 @@ CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& sour
   CameraInfo info;
   const int w = asInt(require(root, "image_width", source), source + ": image_width");
   const int h = asInt(require(root, "image_height", source), source + ": image_height");
-  if (w <= 0) throw VisionError(source + ": image_width = " + std::to_string(w) + " must be positive");
-  if (h <= 0) throw VisionError(source + ": image_height = " + std::to_string(h) + " must be positive");
+  using L = CalibrationLimits;
+  const std::string side_range = " must be in [" + std::to_string(L::kMinImageSide) + ", " +
+                                 std::to_string(L::kMaxImageSide) + "] pixels";
+  if (w < L::kMinImageSide || w > L::kMaxImageSide)
+    throw VisionError(source + ": image_width = " + std::to_string(w) + side_range);
+  if (h < L::kMinImageSide || h > L::kMaxImageSide)
+    throw VisionError(source + ": image_height = " + std::to_string(h) + side_range);
   info.image_size = cv::Size(w, h);
   if (root["camera_name"]) info.camera_name = asString(root["camera_name"], source + ": camera_name");
 
@@ -69,6 +126,8 @@ CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& sour
     throw VisionError(source + ": camera_matrix: focal length fy = " + fmt(info.K(1, 1)) + " must be positive");
   if (info.K(2, 0) != 0.0 || info.K(2, 1) != 0.0 || info.K(2, 2) != 1.0)
     throw VisionError(source + ": camera_matrix: last row must be [0, 0, 1]");
+  checkIntrinsics(info.K(0, 0), info.K(1, 1), info.K(0, 2), info.K(1, 2), info.image_size,
+                  source + ": camera_matrix", "");
 
   info.distortion_model =
       asString(require(root, "distortion_model", source), source + ": distortion_model");
@@ -89,6 +148,10 @@ CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& sour
     throw VisionError(source + ": projection_matrix: focal length fx' = " + fmt(info.P(0, 0)) + " must be positive");
   if (!(info.P(1, 1) > 0.0))
     throw VisionError(source + ": projection_matrix: focal length fy' = " + fmt(info.P(1, 1)) + " must be positive");
+  if (info.P(2, 0) != 0.0 || info.P(2, 1) != 0.0 || info.P(2, 2) != 1.0 || info.P(2, 3) != 0.0)
+    throw VisionError(source + ": projection_matrix: last row must be [0, 0, 1, 0]");
+  checkIntrinsics(info.P(0, 0), info.P(1, 1), info.P(0, 2), info.P(1, 2), info.image_size,
+                  source + ": projection_matrix", "'");
   return info;
 }
 
@@ -97,8 +160,7 @@ CameraInfo loadCameraInfo(const std::string& path) {
 }
 
 void saveCameraInfo(const std::string& path, const CameraInfo& info) {
-  std::ofstream os(path);
-  if (!os) throw VisionError("cannot write calibration file '" + path + "'");
+  std::ostringstream os;
   os << "image_width: " << info.image_size.width << "\n";
   os << "image_height: " << info.image_size.height << "\n";
   os << "camera_name: " << (info.camera_name.empty() ? "camera" : info.camera_name) << "\n";
@@ -107,7 +169,7 @@ void saveCameraInfo(const std::string& path, const CameraInfo& info) {
   writeRosMatrix(os, "distortion_coefficients", 1, static_cast<int>(info.D.size()), info.D.data());
   writeRosMatrix(os, "rectification_matrix", 3, 3, info.R.val);
   writeRosMatrix(os, "projection_matrix", 3, 4, info.P.val);
-  if (!os) throw VisionError("failed writing calibration file '" + path + "'");
+  writeTextFile(path, os.str(), "calibration file");
 }
 
 void validateStereoCalibration(const StereoCalibration& calib, const std::string& left_source,
@@ -125,6 +187,20 @@ void validateStereoCalibration(const StereoCalibration& calib, const std::string
   if (!(r.P(0, 3) < 0.0))
     throw VisionError(right_source + ": projection_matrix P[0][3] = " + fmt(r.P(0, 3)) +
                       " must be negative (-fx' * baseline) for the right camera (is left/right swapped?)");
+  for (const auto& [camera, source] : {std::pair<const CameraInfo*, const std::string*>{&l, &left_source},
+                                      std::pair<const CameraInfo*, const std::string*>{&r, &right_source}}) {
+    const double coverage = rectifiedCoverage(*camera);
+    if (coverage < CalibrationLimits::kMinRectifiedCoverage)
+      throw VisionError(*source + ": only " + fmt(100.0 * coverage) +
+                        " % of the rectified image sees the camera image (at least " +
+                        fmt(100.0 * CalibrationLimits::kMinRectifiedCoverage) +
+                        " % expected): distortion_coefficients, rectification_matrix or projection_matrix no lens has");
+  }
+  const double baseline = calib.baseline();
+  if (baseline < CalibrationLimits::kMinBaseline || baseline > CalibrationLimits::kMaxBaseline)
+    throw VisionError(right_source + ": projection_matrix P[0][3] = " + fmt(r.P(0, 3)) + " gives a baseline of " +
+                      fmt(baseline) + " m, outside [" + fmt(CalibrationLimits::kMinBaseline) + ", " +
+                      fmt(CalibrationLimits::kMaxBaseline) + "] m (P[0][3] = -fx' * baseline)");
   if (std::abs(l.P(1, 3)) > tol || std::abs(r.P(1, 3)) > tol)
     throw VisionError(right_source + ": projection_matrix P[1][3] must be 0 (only horizontal stereo is supported)");
   auto same = [&](double a, double b, const char* field) {
@@ -163,6 +239,10 @@ CameraMount parseCameraMount(const std::string& yaml_text, const std::string& so
   const std::vector<double> r =
       asDoublesN(require(root, "rotation_matrix", source), 9, source + ": rotation_matrix");
   for (int i = 0; i < 9; ++i) m.R_B_C.val[i] = r[static_cast<std::size_t>(i)];
+  for (int i = 0; i < 3; ++i)
+    if (std::abs(t[static_cast<std::size_t>(i)]) > kMaxMountOffset)
+      throw VisionError(source + ": translation[" + std::to_string(i) + "] = " + fmt(t[static_cast<std::size_t>(i)]) +
+                        " m is more than " + fmt(kMaxMountOffset) + " m from the robot base frame");
   if (!isRotation(m.R_B_C))
     throw VisionError(source + ": rotation_matrix is not a rotation (R R^T != I within 1e-5, or det <= 0)");
   return m;
@@ -173,8 +253,7 @@ CameraMount loadCameraMount(const std::string& path) {
 }
 
 void saveCameraMount(const std::string& path, const CameraMount& mount, const std::string& comment) {
-  std::ofstream os(path);
-  if (!os) throw VisionError("cannot write camera mount file '" + path + "'");
+  std::ostringstream os;
   os << "# Left camera optical frame C (z forward, x right, y down) in the robot base frame B\n"
         "# (x forward, y left, z up, metres): p_B = R_B_C p_C + p_B_C.\n";
   if (!comment.empty()) os << "# " << comment << "\n";
@@ -182,7 +261,7 @@ void saveCameraMount(const std::string& path, const CameraMount& mount, const st
      << mount.p_B_C[2] << "]\nrotation_matrix: [";
   for (int i = 0; i < 9; ++i) os << (i ? ", " : "") << mount.R_B_C.val[i];
   os << "]  # row-major R_B_C\n";
-  if (!os) throw VisionError("failed writing camera mount file '" + path + "'");
+  writeTextFile(path, os.str(), "camera mount file");
 }
 
 }  // namespace reflex::vision

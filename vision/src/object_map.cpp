@@ -1,9 +1,11 @@
 #include "reflex/vision/object_map.hpp"
 
+#include "reflex/vision/output_file.hpp"
 #include "yaml_util.hpp"
 
 #include <fstream>
 #include <set>
+#include <sstream>
 
 namespace reflex::vision {
 using namespace detail;
@@ -17,7 +19,9 @@ ObjectMap::ObjectMap(std::string family, std::vector<ObjectSpec> objects, const 
     const std::string where = source + ": object id " + std::to_string(o.tag_id);
     if (o.tag_id < 0) throw VisionError(where + ": tag id must be >= 0");
     if (o.name.empty()) throw VisionError(where + ": empty name");
-    if (!(o.tag_size > 0.0)) throw VisionError(where + ": size = " + fmt(o.tag_size) + " must be positive");
+    if (!(o.tag_size >= kMinTagSize && o.tag_size <= kMaxTagSize))
+      throw VisionError(where + ": size = " + fmt(o.tag_size) + " m must be in [" + fmt(kMinTagSize) + ", " +
+                        fmt(kMaxTagSize) + "] m (edge of the black square)");
     if (!ids.insert(o.tag_id).second) throw VisionError(where + ": duplicate tag id");
     if (!names.insert(o.name).second) throw VisionError(where + ": duplicate object name '" + o.name + "'");
   }
@@ -41,6 +45,7 @@ ObjectMap parseObjectMap(const std::string& yaml_text, const std::string& source
   if (root["family"]) family = asString(root["family"], source + ": family");
   const YAML::Node list = require(root, "objects", source);
   if (!list.IsSequence()) throw VisionError(source + ": objects: expected a list");
+  if (list.size() == 0) throw VisionError(source + ": objects: the list is empty (no tag would ever be reported)");
   std::vector<ObjectSpec> objects;
   for (std::size_t i = 0; i < list.size(); ++i) {
     const std::string where = source + ": objects[" + std::to_string(i) + "]";
@@ -58,13 +63,12 @@ ObjectMap loadObjectMap(const std::string& path) {
 }
 
 void saveObjectMap(const std::string& path, const ObjectMap& map) {
-  std::ofstream os(path);
-  if (!os) throw VisionError("cannot write object map '" + path + "'");
+  std::ostringstream os;
   os << "# Tag id -> object name; size = edge of the tag's black square in metres.\n";
   os << "family: " << map.family() << "\nobjects:\n";
   for (const ObjectSpec& o : map.objects())
     os << "  - {id: " << o.tag_id << ", name: " << o.name << ", size: " << fmt(o.tag_size) << "}\n";
-  if (!os) throw VisionError("failed writing object map '" + path + "'");
+  writeTextFile(path, os.str(), "object map");
 }
 
 }  // namespace reflex::vision

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <algorithm>
 #include <mutex>
 #include <thread>
 
@@ -22,8 +23,10 @@ class ReplayClock {
  public:
   ReplayClock(double rate, double s0) : rate_(rate), s0_(s0), w0_(SteadyClock::now()), unix0_(unixNow()) {}
   bool paced() const { return rate_ > 0.0; }
+  // Clamped to +-1e9 s (31 years) so that the conversion to integer nanoseconds cannot overflow.
   SteadyClock::time_point wallAt(double s) const {
-    return w0_ + std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>((s - s0_) / rate_));
+    const double dt = std::clamp((s - s0_) / rate_, -1e9, 1e9);
+    return w0_ + std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(dt));
   }
   double unixAt(double s) const { return paced() ? unix0_ + (s - s0_) / rate_ : s; }
   double lagAt(double s) const {
@@ -107,8 +110,22 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
     started.notify_all();
   };
 
+  source.watchStop(&stop);
+  // Paced waits sleep in slices and look at `stop` between them, so SIGINT/SIGTERM end a run within
+  // a slice whatever the stamps say (issue 16, item 13).
+  constexpr auto kWaitSlice = std::chrono::milliseconds(50);
+  const auto sleepUntil = [&](SteadyClock::time_point until) {
+    while (!stop.load()) {
+      const auto now = SteadyClock::now();
+      if (now >= until) return;
+      std::this_thread::sleep_for(std::min<SteadyClock::duration>(until - now, kWaitSlice));
+    }
+  };
   double loop_offset = 0.0;
-  double next_due = 0.0;  // unpaced publication schedule
+  // Unpaced publication schedule: publication k is due at s0 + k * period. Computed from the integer
+  // k, never by adding period to a running sum: near large stamps that sum stops advancing.
+  std::uint64_t next_k = 0;
+  const auto dueAt = [&](std::uint64_t k) { return s0 + static_cast<double>(k) * period; };
   double last_stamp = 0.0;
   StereoFrame frame;
   StereoResult result;
@@ -132,10 +149,7 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
       continue;
     }
     const double s = frame.stamp + loop_offset;
-    if (!have_s0) {
-      startClock(s);
-      next_due = s0;
-    }
+    if (!have_s0) startClock(s);
     if (options.duration > 0.0 && s - s0 > options.duration + 1e-9) break;
     if (clock->paced()) {
       // Keep up with the clock like a live camera: a frame already a period late is dropped.
@@ -143,12 +157,12 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
         ++stats.dropped;
         continue;
       }
-      std::this_thread::sleep_until(clock->wallAt(s));
+      sleepUntil(clock->wallAt(s));
+      if (stop.load()) break;
     } else {
-      while (next_due < s - 1e-9) {  // publications due before this frame carry the previous one
-        publish(next_due);
-        next_due += period;
-      }
+      // Publications due before this frame carry the previous one. Bounded: stamps are at most
+      // kMaxFrameGap apart in a session (checked at load), and `stop` ends it in any case.
+      while (dueAt(next_k) < s - 1e-9 && !stop.load()) publish(dueAt(next_k++));
     }
     pipeline.process(frame.left, frame.right, result);
     last_stamp = s;
@@ -176,12 +190,8 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
       cb.on_progress(p);
     }
   }
-  if (have_s0 && !clock->paced()) {
-    while (next_due <= last_stamp + 1e-9) {
-      publish(next_due);
-      next_due += period;
-    }
-  }
+  if (have_s0 && !clock->paced())
+    while (dueAt(next_k) <= last_stamp + 1e-9 && !stop.load()) publish(dueAt(next_k++));
   {
     std::lock_guard<std::mutex> lock(mutex);
     finished = true;

@@ -1,5 +1,7 @@
 #include "reflex/vision/session.hpp"
 
+#include "reflex/vision/output_file.hpp"
+#include "reflex/vision/stereo_pipeline.hpp"
 #include "yaml_util.hpp"
 
 #include <opencv2/imgproc.hpp>
@@ -8,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <sstream>
 
 namespace fs = std::filesystem;
 
@@ -83,8 +86,15 @@ std::vector<double> loadTimestamps(const std::string& path) {
     if (frame != static_cast<int>(stamps.size()))
       throw VisionError(where + ": frame " + std::to_string(frame) + " out of order (expected " +
                         std::to_string(stamps.size()) + ")");
+    if (!(std::abs(stamp) <= kMaxSessionStamp))
+      throw VisionError(where + ": stamp " + fmt(stamp) + " s is outside +-" + fmt(kMaxSessionStamp) +
+                        " s (a double no longer resolves microseconds there; UNIX time or 0-based seconds expected)");
     if (!stamps.empty() && !(stamp > stamps.back()))
       throw VisionError(where + ": stamp " + fmt(stamp) + " is not after the previous " + fmt(stamps.back()));
+    if (!stamps.empty() && stamp - stamps.back() > kMaxFrameGap)
+      throw VisionError(where + ": stamp " + fmt(stamp) + " is " + fmt(stamp - stamps.back()) +
+                        " s after the previous " + fmt(stamps.back()) + " (more than the " + fmt(kMaxFrameGap) +
+                        " s a session may skip; split the recording there)");
     stamps.push_back(stamp);
   }
   if (stamps.empty()) throw VisionError(path + ": no frames");
@@ -125,8 +135,7 @@ std::vector<GroundTruthRow> loadGroundTruth(const std::string& path) {
 }
 
 void saveGroundTruth(const std::string& path, const std::vector<GroundTruthRow>& rows) {
-  std::ofstream os(path);
-  if (!os) throw VisionError("cannot write ground truth file '" + path + "'");
+  std::ostringstream os;
   os << "stamp,frame,object,tag_id,x,y,z,x_cam,y_cam,z_cam,visible,present\n" << std::fixed;
   for (const GroundTruthRow& r : rows) {
     os << std::setprecision(6) << r.stamp << ',' << r.frame << ',' << r.object << ',' << r.tag_id
@@ -135,16 +144,17 @@ void saveGroundTruth(const std::string& path, const std::vector<GroundTruthRow>&
     for (int k = 0; k < 3; ++k) os << ',' << r.p_C[k];
     os << ',' << (r.visible ? 1 : 0) << ',' << (r.present ? 1 : 0) << '\n';
   }
-  if (!os) throw VisionError("failed writing ground truth file '" + path + "'");
+  writeTextFile(path, os.str(), "ground truth file");
 }
 
 SessionInfo loadSessionInfo(const std::string& dir) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw VisionError("session folder '" + dir + "' does not exist");
+  const std::string manifest = dir + "/session.yaml";
   SessionInfo info;
+  int manifest_frames = -1;  // session.yaml "frames", -1 if absent
   info.dir = dir;
   info.name = fs::path(dir).filename().string();
-  const std::string manifest = dir + "/session.yaml";
   if (fs::exists(manifest, ec)) {
     const YAML::Node root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
     if (root["format"] && asString(root["format"], manifest + ": format") != "reflex_stereo_session")
@@ -153,7 +163,16 @@ SessionInfo loadSessionInfo(const std::string& dir) {
     if (root["version"] && asInt(root["version"], manifest + ": version") != 1)
       throw VisionError(manifest + ": version " + root["version"].as<std::string>() + " is not supported (1)");
     if (root["name"]) info.name = asString(root["name"], manifest + ": name");
-    if (root["fps"]) info.fps = asDouble(root["fps"], manifest + ": fps");
+    if (root["fps"]) {
+      info.fps = asDouble(root["fps"], manifest + ": fps");
+      if (!(info.fps > 0.0) || info.fps > kMaxSessionFps)
+        throw VisionError(manifest + ": fps = " + fmt(info.fps) + " must be in (0, " + fmt(kMaxSessionFps) + "]");
+    }
+    if (root["frames"]) {
+      manifest_frames = asInt(root["frames"], manifest + ": frames");
+      if (manifest_frames < 1)
+        throw VisionError(manifest + ": frames = " + std::to_string(manifest_frames) + " must be at least 1");
+    }
     auto file = [&](const char* key, std::string& field) {
       if (root[key]) field = asString(root[key], manifest + ": " + key);
     };
@@ -178,7 +197,14 @@ SessionInfo loadSessionInfo(const std::string& dir) {
   if (!f.camera_mount.empty()) requireFile(dir, f.camera_mount, "camera mount");
   if (!f.ground_truth.empty()) requireFile(dir, f.ground_truth, "ground truth");
 
+  // The same video file named twice can never give a disparity (left and right images identical).
+  if (fs::equivalent(info.path(f.left_video), info.path(f.right_video), ec))
+    throw VisionError("session '" + dir + "': left video '" + f.left_video + "' and right video '" + f.right_video +
+                      "' are the same file (the same video twice cannot give any stereo detection)");
   info.stamps = loadTimestamps(info.path(f.timestamps));
+  if (manifest_frames >= 0 && manifest_frames != info.frameCount())
+    throw VisionError(manifest + ": frames = " + std::to_string(manifest_frames) + " but '" + f.timestamps +
+                      "' lists " + std::to_string(info.frameCount()));
   info.calibration = loadStereoCalibration(info.path(f.left_calibration), info.path(f.right_calibration));
   info.objects = loadObjectMap(info.path(f.objects));
   if (!f.camera_mount.empty()) info.mount = loadCameraMount(info.path(f.camera_mount));
@@ -189,7 +215,75 @@ SessionInfo loadSessionInfo(const std::string& dir) {
   return info;
 }
 
-SessionReader::SessionReader(const std::string& dir) : info_(loadSessionInfo(dir)) { open(); }
+SessionReader::SessionReader(const std::string& dir) : info_(loadSessionInfo(dir)) {
+  open();
+  checkLeftAndRightDiffer();
+}
+
+void SessionReader::checkLeftAndRightDiffer() {
+  // The first pairs with content (a blank drop-out frame proves nothing):
+  //  - identical images (up to compression noise) in every compared pair: the same video was given
+  //    twice (under two names), and no tag can ever have a disparity;
+  //  - a dominant horizontal shift between the rectified images pointing the wrong way: in a
+  //    correct rig every point in front of the cameras has a disparity u_L - u_R >= 0, so a clearly
+  //    negative one in every compared pair means the videos are swapped (the right camera's video
+  //    given as the left one). The shift is the phase-correlation peak of the rectified images.
+  constexpr int kPairs = 5;
+  constexpr double kMinContentStdDev = 2.0;  // grey levels
+  constexpr double kSwapDisparityPx = -1.0;  // dominant disparity below this: the pair looks swapped
+  constexpr double kMinPeakResponse = 0.02;  // phase-correlation peak strength to believe the shift
+  int identical = 0, compared = 0, swapped = 0, straight = 0;
+  double largest_diff = 0.0, swapped_disparity = 0.0;
+  const StereoRectifier rectifier(info_.calibration);
+  cv::Mat raw[2], grey[2], rect[2], rect_f[2], window;
+  for (int i = 0; i < std::min(kPairs, info_.frameCount()); ++i) {
+    if (!cap_[0].read(raw[0]) || !cap_[1].read(raw[1]) || raw[0].empty() || raw[1].empty() ||
+        raw[0].size() != raw[1].size() || raw[0].size() != info_.calibration.left.image_size)
+      break;  // reading problems are reported by read(), frame by frame
+    for (int k = 0; k < 2; ++k) {
+      if (raw[k].channels() == 1)
+        grey[k] = raw[k];
+      else
+        cv::cvtColor(raw[k], grey[k], raw[k].channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
+    }
+    cv::Scalar mean, stddev;
+    cv::meanStdDev(grey[0], mean, stddev);
+    if (stddev[0] < kMinContentStdDev) continue;
+    ++compared;
+    const double diff = cv::norm(grey[0], grey[1], cv::NORM_L1) / static_cast<double>(grey[0].total());
+    if (diff < kSameImagesMeanAbsDiff) {
+      ++identical;
+      largest_diff = std::max(largest_diff, diff);
+      continue;
+    }
+    for (int k = 0; k < 2; ++k) {
+      rectifier.rectifyImage(grey[k], rect[k], k == 1);
+      rect[k].convertTo(rect_f[k], CV_64F);
+    }
+    if (window.empty()) cv::createHanningWindow(window, rect_f[0].size(), CV_64F);
+    double response = 0.0;
+    // phaseCorrelate gives the shift of the second image against the first: u_R - u_L = -disparity.
+    const double disparity = -cv::phaseCorrelate(rect_f[0], rect_f[1], window, &response).x;
+    if (response < kMinPeakResponse) continue;
+    if (disparity < kSwapDisparityPx) {
+      ++swapped;
+      swapped_disparity = disparity;
+    } else {
+      ++straight;
+    }
+  }
+  open();  // back to the first frame
+  if (compared > 0 && identical == compared)
+    throw VisionError("session '" + info_.dir + "': left video '" + info_.files.left_video + "' and right video '" +
+                      info_.files.right_video + "' show the same images (mean difference " + fmt(largest_diff) +
+                      " grey levels in the first " + std::to_string(identical) +
+                      " pair(s) with content): the same video twice cannot give any stereo detection");
+  if (swapped > 0 && straight == 0)
+    throw VisionError("session '" + info_.dir + "': left video '" + info_.files.left_video + "' and right video '" +
+                      info_.files.right_video + "' look swapped: the rectified images are shifted the wrong way (" +
+                      "dominant disparity " + fmt(swapped_disparity) + " px, negative, in " + std::to_string(swapped) +
+                      " of the first pairs; a correct pair never has a negative one)");
+}
 
 void SessionReader::open() {
   const std::string paths[2] = {info_.path(info_.files.left_video), info_.path(info_.files.right_video)};
@@ -224,10 +318,10 @@ void SessionReader::open() {
   next_ = 0;
 }
 
-void SessionReader::restart(int first) {
+void SessionReader::restart(int first, const std::atomic<bool>* stop) {
   open();
   first = std::clamp(first, 0, info_.frameCount());
-  for (; next_ < first; ++next_) {
+  for (; next_ < first && !(stop && stop->load()); ++next_) {
     if (!cap_[0].grab() || !cap_[1].grab()) break;
   }
 }
@@ -264,8 +358,16 @@ SessionWriter::SessionWriter(const std::string& dir, const StereoCalibration& ca
     : dir_(dir), options_(options), size_(calibration.left.image_size) {
   if (!(options_.fps > 0.0)) throw VisionError("session writer: fps = " + fmt(options_.fps) + " must be positive");
   std::error_code ec;
-  fs::create_directories(dir_, ec);
-  if (ec || !fs::is_directory(dir_)) throw VisionError("cannot create session folder '" + dir_ + "'");
+  // The session folder itself is created; its parent must exist (a mistyped path is an error now,
+  // not a tree of folders created somewhere unexpected).
+  fs::path folder = fs::path(dir_).lexically_normal();
+  if (!folder.has_filename()) folder = folder.parent_path();  // "out/" names the folder "out"
+  const fs::path parent = folder.parent_path();
+  if (!parent.empty() && !fs::is_directory(parent, ec))
+    throw VisionError("cannot create session folder '" + dir_ + "': folder '" + parent.string() + "' does not exist");
+  fs::create_directory(dir_, ec);
+  if (!fs::is_directory(dir_, ec))
+    throw VisionError("cannot create session folder '" + dir_ + "'" + (ec ? ": " + ec.message() : std::string()));
   validateStereoCalibration(calibration, "left calibration", "right calibration");
   saveCameraInfo(dir_ + "/" + files_.left_calibration, calibration.left);
   saveCameraInfo(dir_ + "/" + files_.right_calibration, calibration.right);
@@ -315,8 +417,13 @@ void SessionWriter::write(double stamp, const cv::Mat& left, const cv::Mat& righ
                         " (8-bit expected), calibration says " + std::to_string(size_.width) + "x" +
                         std::to_string(size_.height));
   }
+  if (!(std::abs(stamp) <= kMaxSessionStamp))
+    throw VisionError("session writer: stamp " + fmt(stamp) + " s is outside +-" + fmt(kMaxSessionStamp) + " s");
   if (!stamps_.empty() && !(stamp > stamps_.back()))
     throw VisionError("session writer: stamp " + fmt(stamp) + " is not after the previous " + fmt(stamps_.back()));
+  if (!stamps_.empty() && stamp - stamps_.back() > kMaxFrameGap)
+    throw VisionError("session writer: stamp " + fmt(stamp) + " is " + fmt(stamp - stamps_.back()) +
+                      " s after the previous one (more than " + fmt(kMaxFrameGap) + " s)");
   for (int i = 0; i < 2; ++i) {
     if (in[i]->channels() == 3) {
       writer_[i].write(*in[i]);
@@ -335,14 +442,30 @@ void SessionWriter::finish(const std::string& ground_truth_file) {
   writer_[0].release();
   writer_[1].release();
   files_.ground_truth = ground_truth_file;
+  std::error_code ec;
+  // cv::VideoWriter reports no write errors: the videos are opened again and must hold every pair.
+  for (const std::string& video : {files_.left_video, files_.right_video}) {
+    if (stamps_.empty()) break;
+    const std::string path = dir_ + "/" + video;
+    cv::VideoCapture check;
+    const bool opened = check.open(path, cv::CAP_FFMPEG) && check.isOpened();
+    const long frames = opened ? std::lround(check.get(cv::CAP_PROP_FRAME_COUNT)) : 0;  // <= 0: unknown
+    std::uintmax_t bytes = fs::file_size(path, ec);
+    if (ec) bytes = 0;
+    if (!opened || (frames > 0 && frames != static_cast<long>(stamps_.size())) || bytes == 0) {
+      throw VisionError("cannot write video '" + path + "': it holds " +
+                        (opened ? std::to_string(std::max(frames, 0L)) + " frames" : std::string("no readable video")) + " (" +
+                        std::to_string(bytes) + " bytes) but " + std::to_string(stamps_.size()) +
+                        " pairs were written (disk full or write error?)");
+    }
+  }
   {
-    std::ofstream ts(dir_ + "/" + files_.timestamps);
-    if (!ts) throw VisionError("cannot write '" + dir_ + "/" + files_.timestamps + "'");
+    std::ostringstream ts;
     ts << "frame,stamp\n" << std::fixed << std::setprecision(6);
     for (std::size_t i = 0; i < stamps_.size(); ++i) ts << i << ',' << stamps_[i] << '\n';
+    writeTextFile(dir_ + "/" + files_.timestamps, ts.str(), "timestamps file");
   }
-  std::ofstream os(dir_ + "/session.yaml");
-  if (!os) throw VisionError("cannot write '" + dir_ + "/session.yaml'");
+  std::ostringstream os;
   os << "# Reflex stereo session (see vision/README.md, \"Session folder format\").\n"
      << "format: reflex_stereo_session\nversion: 1\nname: " << options_.name << "\nfps: " << fmt(options_.fps)
      << "\nframes: " << stamps_.size() << "\ncodec: " << codec_ << "\nleft_video: " << files_.left_video
@@ -351,6 +474,7 @@ void SessionWriter::finish(const std::string& ground_truth_file) {
      << "\nobjects: " << files_.objects << "\n";
   if (!files_.camera_mount.empty()) os << "camera_mount: " << files_.camera_mount << "\n";
   if (!files_.ground_truth.empty()) os << "ground_truth: " << files_.ground_truth << "\n";
+  writeTextFile(dir_ + "/session.yaml", os.str(), "session manifest");
 }
 
 }  // namespace reflex::vision

@@ -22,7 +22,7 @@ ReadStatus SessionSource::next(StereoFrame& frame, std::string& message) { retur
 
 bool SessionSource::restart() {
   try {
-    reader_.restart(first_);
+    reader_.restart(first_, stop_);
   } catch (const VisionError&) {
     return false;
   }
@@ -50,6 +50,9 @@ CameraSource::CameraSource(std::unique_ptr<cv::VideoCapture> left, std::unique_p
                            const StereoCalibration& calibration, double pace_fps)
     : calibration_(calibration), pace_(pace_fps) {
   if (!left) throw VisionError("camera source: no left (or side-by-side) capture");
+  if (!(pace_ == 0.0 || (pace_ >= kMinPaceFps && pace_ <= kMaxSessionFps)))
+    throw VisionError("camera source: frame rate " + std::to_string(pace_) + " fps of the stand-in video is outside [" +
+                      std::to_string(kMinPaceFps) + ", " + std::to_string(kMaxSessionFps) + "]");
   cap_[0] = std::move(left);
   cap_[1] = std::move(right);
   const double fps = cap_[0]->get(cv::CAP_PROP_FPS);
@@ -61,7 +64,14 @@ ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
   if (pace_ > 0.0) {
     const auto now = std::chrono::steady_clock::now();
     if (next_due_.time_since_epoch().count() == 0) next_due_ = now;
-    std::this_thread::sleep_until(next_due_);
+    // At most 1 / kMinPaceFps = 10 s, slept in 50 ms slices that look at the stop flag.
+    while (std::chrono::steady_clock::now() < next_due_ && !(stop_ && stop_->load()))
+      std::this_thread::sleep_for(std::min<std::chrono::steady_clock::duration>(
+          next_due_ - std::chrono::steady_clock::now(), std::chrono::milliseconds(50)));
+    if (stop_ && stop_->load()) {
+      message.clear();
+      return ReadStatus::kEnd;  // stopped: a normal end
+    }
     next_due_ += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / pace_));
   }
   const bool stereo = static_cast<bool>(cap_[1]);
@@ -106,10 +116,11 @@ ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
 RecordStats recordSession(StereoSource& source, SessionWriter& writer, const RecordOptions& options,
                           const std::atomic<bool>& stop, const std::function<void(int, const std::string&)>& on_skip,
                           const std::function<void(int, double)>& on_progress) {
+  source.watchStop(&stop);
   RecordStats stats;
   StereoFrame frame;
   std::string message;
-  double first = 0.0;
+  double first = 0.0, last = 0.0;
   while (!stop.load()) {
     if (options.max_frames > 0 && stats.recorded >= options.max_frames) break;
     const ReadStatus st = source.next(frame, message);
@@ -124,6 +135,12 @@ RecordStats recordSession(StereoSource& source, SessionWriter& writer, const Rec
     }
     if (stats.recorded == 0) first = frame.stamp;
     if (options.duration > 0.0 && frame.stamp - first > options.duration) break;
+    if (stats.recorded > 0 && frame.stamp - last > kMaxFrameGap) {
+      stats.end_message = "no frame for " + std::to_string(frame.stamp - last) + " s after pair " +
+                          std::to_string(stats.recorded - 1) + " (a session may skip at most " +
+                          std::to_string(kMaxFrameGap) + " s): the recording ends there";
+      break;
+    }
     try {
       writer.write(frame.stamp, frame.left, frame.right);
     } catch (const VisionError& e) {
@@ -132,6 +149,7 @@ RecordStats recordSession(StereoSource& source, SessionWriter& writer, const Rec
       continue;
     }
     ++stats.recorded;
+    last = frame.stamp;
     if (on_progress) on_progress(stats.recorded, frame.stamp - first);
   }
   return stats;

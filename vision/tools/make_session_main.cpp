@@ -9,12 +9,14 @@
 #include <iostream>
 
 int main(int argc, char** argv) {
-  CLI::App app{"Render a synthetic stereo AprilTag session folder from a scene script (YAML)."};
+  CLI::App app{
+      "Render a synthetic stereo AprilTag session folder from a scene script (YAML).\n"
+      "Exit: 0 written, 2 bad script or a file that could not be written (named, with the cause)."};
   std::string script_path, out_dir;
   bool quiet = false;
   app.add_option("--script", script_path, "scene script YAML (e.g. bringup/sessions/flagship/scene.yaml)")
       ->required();
-  app.add_option("--out", out_dir, "session folder to write (created; existing files are overwritten)")->required();
+  app.add_option("--out", out_dir, "session folder to write (created, its parent must exist; existing files are overwritten)")->required();
   app.add_flag("--quiet", quiet, "no progress display");
   CLI11_PARSE(app, argc, argv);
   try {

@@ -21,7 +21,9 @@ int main(int argc, char** argv) {
   CLI::App app{
       "reflex_vision_record: record a stereo session folder from live cameras (two devices or one\n"
       "side-by-side device). A camera is a device index or a video file/URL (a file is read at its own\n"
-      "frame rate, as a stand-in camera). Stops at --frames/--duration, at the end of the source, or on Ctrl-C."};
+      "frame rate, as a stand-in camera). Stops at --frames/--duration, at the end of the source, or on Ctrl-C.\n"
+      "The --out folder is created; its parent must exist. Exit: 0 recorded, 2 bad option or input (named),\n"
+      "3 nothing recorded, 4 the session could not be written (file and cause named)."};
   std::string cam_left, cam_right, sbs, calib_left, calib_right, objects_path, mount_path, out, name = "recording";
   std::string codec;
   RecordOptions ro;
@@ -82,10 +84,17 @@ int main(int argc, char** argv) {
         [&](int n, double s) {
           if (show && n % 10 == 0) std::fprintf(stderr, "\rrecorded %d pairs, %.1f s", n, s);
         });
-    writer.finish();
     if (show) std::fprintf(stderr, "\n");
+    try {
+      writer.finish();  // checks every file written and that the videos hold every pair
+    } catch (const VisionError& e) {
+      std::cerr << "reflex_vision_record: error: " << e.what() << "\n";
+      return 4;
+    }
     std::cout << "recorded " << stats.recorded << " pairs (" << stats.skipped << " skipped) into " << out
               << " with codec " << writer.codec() << "\n";
+    if (stats.recorded > 0 && !stats.end_message.empty())
+      std::cerr << "reflex_vision_record: the source stopped: " << stats.end_message << "\n";
     if (stats.recorded == 0) {
       std::cerr << "reflex_vision_record: error: no frame recorded"
                 << (stats.end_message.empty() ? "" : ": " + stats.end_message) << "\n";

@@ -2,6 +2,7 @@
 // pipeline, run reflex::vision::runVision, hand publications to the DDS writer (if built with the
 // bus) and/or every detection to a CSV (--dump, offline, no DDS).
 #include "reflex/vision/error.hpp"
+#include "reflex/vision/output_file.hpp"
 #include "reflex/vision/runner.hpp"
 #include "reflex/vision/source.hpp"
 #include "reflex/vision/stereo_pipeline.hpp"
@@ -25,6 +26,7 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <sstream>
 #include <thread>
 
 namespace {
@@ -40,7 +42,9 @@ int main(int argc, char** argv) {
       "reflex_vision: stereo AprilTag vision. Detects tags in both images, triangulates them and publishes\n"
       "ObjectTargets (robot frame, stamped with the capture time) at --publish-hz on the replay clock.\n"
       "Sources: a recorded session (--session) or live cameras (--camera-left/--camera-right or\n"
-      "--side-by-side). --dump writes every detection to CSV and runs offline, without DDS."};
+      "--side-by-side). --dump writes every detection to CSV and runs offline, without DDS.\n"
+      "Exit: 0 done (also after SIGINT/SIGTERM), 2 bad option or input (named), 3 the video ended early,\n"
+      "4 the --dump file could not be written (named, with the cause)."};
   std::string session, cam_left, cam_right, sbs, calib_left, calib_right, objects_path, mount_path, dump_path;
   std::string rectify = "images";
   ReplayOptions replay;
@@ -130,11 +134,10 @@ int main(int argc, char** argv) {
     popt.detector.family = family.empty() ? objects.family() : family;
     StereoTagPipeline pipeline(source->calibration(), *mount, objects, popt);
 
-    std::ofstream dump;
+    std::unique_ptr<OutputFile> dump;  // every write and the close checked (a full disk is an error, exit 4)
     if (!dump_path.empty()) {
-      dump.open(dump_path);
-      if (!dump) throw VisionError("cannot write dump file '" + dump_path + "'");
-      dump << "time,frame,object,tag_id,x,y,z,x_cam,y_cam,z_cam,confidence\n" << std::fixed;
+      dump = std::make_unique<OutputFile>(dump_path, "dump file");
+      dump->write("time,frame,object,tag_id,x,y,z,x_cam,y_cam,z_cam,confidence\n");
     }
 #ifdef REFLEX_VISION_WITH_BUS
     std::unique_ptr<VisionPublisher> publisher;
@@ -153,12 +156,18 @@ int main(int argc, char** argv) {
     const bool show = !quiet && (progress_flag || isatty(STDERR_FILENO));
     auto last_shown = std::chrono::steady_clock::now() - std::chrono::seconds(1);
     RunCallbacks cb;
+    std::ostringstream row;
+    row << std::fixed;
     cb.on_frame = [&](const StereoFrame& f, double stamp, const StereoResult& r) {
-      if (!dump.is_open()) return;
-      for (const ObjectObservation& o : r.objects)
-        dump << std::setprecision(6) << stamp << ',' << f.index << ',' << o.name << ',' << o.tag_id << ','
-             << o.p_B[0] << ',' << o.p_B[1] << ',' << o.p_B[2] << ',' << o.p_C[0] << ',' << o.p_C[1] << ','
-             << o.p_C[2] << ',' << std::setprecision(4) << o.confidence << '\n';
+      if (!dump) return;
+      for (const ObjectObservation& o : r.objects) {
+        row.str("");
+        row << std::setprecision(6) << stamp << ',' << f.index << ',' << o.name << ',' << o.tag_id << ','
+            << o.p_B[0] << ',' << o.p_B[1] << ',' << o.p_B[2] << ',' << o.p_C[0] << ',' << o.p_C[1] << ','
+            << o.p_C[2] << ',' << std::setprecision(4) << o.confidence << '\n';
+        dump->write(row.str());
+      }
+      if (dump->failed()) g_stop.store(true);  // no point in going on: reported after the run (exit 4)
     };
 #ifdef REFLEX_VISION_WITH_BUS
     // One line per skipped frame, rate-limited (issue 16 item 8f): a long corrupt stretch of video
@@ -224,6 +233,14 @@ int main(int argc, char** argv) {
               << stats.dropped << " dropped to keep up, "
               << stats.publications << " publications" << (dump_path.empty() ? "" : " (dump: " + dump_path + ")")
               << "\n";
+    if (dump) {
+      try {
+        dump->close();
+      } catch (const VisionError& e) {
+        std::cerr << "reflex_vision: error: " << e.what() << "\n";
+        return 4;
+      }
+    }
     if (!stats.end_message.empty()) {
       std::cerr << "reflex_vision: error: " << stats.end_message << "\n";
       return 3;

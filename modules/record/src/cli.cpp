@@ -71,6 +71,10 @@ std::function<int()> addPlay(CLI::App& app) {
   app.add_option("-x,--exclude", o->exclude, "topic not to play (repeatable)");
   app.add_flag("--restamp", o->restamp,
                "move sample time stamps (header.stamp_ns, capture_stamp_ns) to the playing time");
+  app.add_option("--max-gap", o->max_gap,
+                 "longest wait between two records, seconds of recording time; longer gaps are played "
+                 "this long (reported)")
+      ->capture_default_str();
   app.add_flag("--progress", o->progress, "show progress even if stderr is not a terminal");
   app.add_flag("-q,--quiet", *quiet, "no progress display");
   b->add(app);
@@ -82,6 +86,12 @@ std::function<int()> addPlay(CLI::App& app) {
       bus::StopOnSignal stop_on_signal(player.bus());
       std::fprintf(stderr, "reflex_play: %s, %.2f s window, rate %g%s, domain %d\n", o->input.c_str(),
                    player.windowSeconds(), o->rate, o->loop ? ", loop" : "", player.bus().domainId());
+      if (player.stats().gaps_shortened > 0)
+        std::fprintf(stderr,
+                     "reflex_play: %llu gap(s) between records longer than --max-gap %g s are played as %g s "
+                     "(longest %.6g s, ending %.6g s into the window); a pass takes %.3f s at rate 1\n",
+                     static_cast<unsigned long long>(player.stats().gaps_shortened), o->max_gap, o->max_gap,
+                     player.stats().longest_gap, player.stats().longest_gap_at, player.playedSeconds());
       player.run();
       const auto& s = player.stats();
       std::fprintf(stderr, "reflex_play: published %llu samples (%llu failed), %llu complete passes; file: %s\n",

@@ -10,6 +10,34 @@
 
 namespace reflex::record {
 
+// Recording time -> playing time (seconds after the start offset, at rate 1) with every forward
+// gap between consecutive played records longer than max_gap shortened to max_gap. Records are
+// taken in file order; one that goes back in time is played at once (no wait), as before.
+class PlayClock {
+ public:
+  explicit PlayClock(double max_gap) : max_gap_(max_gap) {}
+  /// Gap in recording time between the previous record (or the start offset) and this one, s.
+  double gapBefore(std::int64_t since_begin_ns) const {
+    return 1e-9 * static_cast<double>(since_begin_ns - prev_ns_);
+  }
+  /// Playing time of this record; advances the clock.
+  double playTime(std::int64_t since_begin_ns) {
+    const double gap = gapBefore(since_begin_ns);
+    if (gap > max_gap_) removed_ += gap - max_gap_;
+    if (since_begin_ns > prev_ns_) prev_ns_ = since_begin_ns;
+    last_ = 1e-9 * static_cast<double>(since_begin_ns) - removed_;
+    return last_;
+  }
+  void reset() { prev_ns_ = 0, removed_ = 0.0, last_ = 0.0; }
+  double last() const { return last_; }
+
+ private:
+  double max_gap_;
+  std::int64_t prev_ns_ = 0;  // latest recording time seen, ns after the start offset
+  double removed_ = 0.0;      // seconds cut out of the gaps so far
+  double last_ = 0.0;
+};
+
 RecordingInfo scanRecording(const std::string& path) {
   RecordReader reader(path);
   RecordingInfo info;
@@ -39,6 +67,8 @@ Player::Player(const PlayerOptions& options) : options_(options) {
     throw RecordError("--duration " + std::to_string(options.duration) + " s must not be negative");
   if (!std::isfinite(options.delay) || options.delay < 0.0)
     throw RecordError("--delay " + std::to_string(options.delay) + " s must not be negative");
+  if (!std::isfinite(options.max_gap) || !(options.max_gap > 0.0))
+    throw RecordError("--max-gap " + std::to_string(options.max_gap) + " s must be positive");
   const RecordingInfo info = scanRecording(options.input);
   if (info.records == 0) throw RecordError("recording '" + options.input + "' holds no sample");
   stats_.tail = info.tail;
@@ -83,10 +113,26 @@ Player::Player(const PlayerOptions& options) : options_(options) {
     if (!codec) throw RecordError("topic '" + t + "' in '" + options.input + "' has unknown type '" + type + "'");
     publishers_[t] = codec->makePublisher(*bus_, t, codec->defaultProfile());
   }
+  // One pass over the window as run() plays it: count the records and the gaps run() shortens.
   RecordReader reader(options.input);
   RecordEntry e;
-  while (reader.next(e))
-    if (e.receive_ns >= begin_ns_ && e.receive_ns <= end_ns_ && publishers_.count(e.topic)) ++window_records_;
+  PlayClock clock(options_.max_gap);
+  while (reader.next(e)) {
+    if (e.receive_ns < begin_ns_) continue;
+    if (e.receive_ns > end_ns_) break;
+    if (!publishers_.count(e.topic)) continue;
+    ++window_records_;
+    const double gap = clock.gapBefore(e.receive_ns - begin_ns_);
+    if (gap > options_.max_gap) {
+      ++stats_.gaps_shortened;
+      if (gap > stats_.longest_gap) {
+        stats_.longest_gap = gap;
+        stats_.longest_gap_at = 1e-9 * static_cast<double>(e.receive_ns - begin_ns_);
+      }
+    }
+    (void)clock.playTime(e.receive_ns - begin_ns_);
+  }
+  played_seconds_ = clock.last();
 }
 
 Player::~Player() = default;
@@ -106,8 +152,10 @@ void Player::run() {
   auto last_print = Clock::now() - std::chrono::seconds(1);
   RecordReader reader(options_.input);
   RecordEntry e;
+  PlayClock clock(options_.max_gap);
   do {
     reader.rewind();
+    clock.reset();
     std::uint64_t in_pass = 0;
     const auto pass_start = Clock::now();
     while (!stop_ && !bus_->stopRequested() && reader.next(e)) {
@@ -116,9 +164,11 @@ void Player::run() {
       auto it = publishers_.find(e.topic);
       if (it == publishers_.end()) continue;
       const double t_rec = 1e-9 * static_cast<double>(e.receive_ns - begin_ns_);
+      const double t_play = clock.playTime(e.receive_ns - begin_ns_);  // gaps shortened to max_gap
       if (!fast) {
+        // Slept in slices of at most 50 ms, each followed by a look at stop (SIGINT/SIGTERM).
         const auto due = pass_start + std::chrono::duration_cast<Clock::duration>(
-                                          std::chrono::duration<double>(t_rec / options_.rate));
+                                          std::chrono::duration<double>(t_play / options_.rate));
         while (!stop_ && !bus_->stopRequested() && Clock::now() < due)
           std::this_thread::sleep_for(std::min<Clock::duration>(due - Clock::now(), std::chrono::milliseconds(50)));
         if (stop_ || bus_->stopRequested()) break;

@@ -19,9 +19,32 @@
 
 namespace reflex::vision {
 
+/// Physically possible ranges, checked at load (VisionError naming the file, field and value and
+/// the range); a calibration outside them cannot produce any detection (issue 16, item 15).
+struct CalibrationLimits {
+  static constexpr int kMinImageSide = 16;       ///< pixels, width and height
+  static constexpr int kMaxImageSide = 16384;    ///< pixels (beyond: the rectification maps alone take GBs)
+  /// Focal length per image width, fx / width, for K and P: 0.05 is a ~169 deg horizontal field of
+  /// view (beyond a fisheye's), 50 a ~1.1 deg telephoto.
+  static constexpr double kMinFocalPerWidth = 0.05;
+  static constexpr double kMaxFocalPerWidth = 50.0;
+  /// Pixel aspect fy / fx (K and P).
+  static constexpr double kMinAspect = 0.25;
+  static constexpr double kMaxAspect = 4.0;
+  /// Stereo baseline B = -P_R[0][3] / fx', metres.
+  static constexpr double kMinBaseline = 0.001;
+  static constexpr double kMaxBaseline = 10.0;
+  /// Least fraction of the rectified image that must see the raw image (rectified pixels taken back
+  /// through P, R, K and D); below it the distortion or rectification is no lens's.
+  static constexpr double kMinRectifiedCoverage = 0.25;
+};
+
 /// One camera's calibration (a ROS camera_info YAML file).
-/// Invariants after load: image_size > 0; K(0,0), K(1,1) > 0; D.size() matches distortion_model
-/// (plumb_bob 5, rational_polynomial 8, equidistant 4); R orthonormal; P(0,0), P(1,1) > 0.
+/// Invariants after load: image sides in [kMinImageSide, kMaxImageSide]; fx in [kMinFocalPerWidth,
+/// kMaxFocalPerWidth] * width and fy / fx in [kMinAspect, kMaxAspect], for K and for P; principal
+/// points (K and P) inside the image, [0, width] x [0, height]; K's last row [0 0 1] and P's
+/// [0 0 1 0]; D.size() matches distortion_model (plumb_bob 5, rational_polynomial 8, equidistant 4);
+/// R a rotation.
 struct CameraInfo {
   std::string camera_name;
   cv::Size image_size;
@@ -50,14 +73,20 @@ struct StereoCalibration {
 };
 
 /// Checks the pair is consistent: equal image sizes, left P(0,3) = 0, right P(0,3) < 0 (the right
-/// camera lies to the right of the left one), P(1,3) = 0 (horizontal pair), and the rectified
-/// intrinsics fx', fy', cy' equal in both P. Throws VisionError naming the file and field.
+/// camera lies to the right of the left one; else "left/right swapped?"), the baseline in
+/// [kMinBaseline, kMaxBaseline], P(1,3) = 0 (horizontal pair), the rectified intrinsics fx',
+/// fy', cy' equal in both P, and at least kMinRectifiedCoverage of each rectified image seeing its
+/// raw image. Throws VisionError naming the file and field.
 void validateStereoCalibration(const StereoCalibration& calib, const std::string& left_source,
                                const std::string& right_source);
 /// Loads and validates a stereo pair from two camera_info files.
 StereoCalibration loadStereoCalibration(const std::string& left_path, const std::string& right_path);
 
-/// Left optical frame C in robot base frame B. Invariant: R_B_C is a rotation (orthonormal, det +1).
+/// Largest |coordinate| of the camera in the robot base frame, metres (a head is not 10 m away).
+inline constexpr double kMaxMountOffset = 10.0;
+
+/// Left optical frame C in robot base frame B. Invariants: R_B_C is a rotation (orthonormal, det +1);
+/// each coordinate of p_B_C within kMaxMountOffset of the base frame origin.
 struct CameraMount {
   cv::Matx33d R_B_C;
   cv::Vec3d p_B_C;

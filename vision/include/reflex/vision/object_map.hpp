@@ -5,7 +5,8 @@
 //   objects:
 //     - {id: 0, name: cup, size: 0.06}   # size: outer edge of the black border, metres
 //
-// Invariants: ids >= 0 and unique, names non-empty and unique, sizes > 0.
+// Invariants: ids >= 0 and unique, names non-empty and unique, sizes in [kMinTagSize, kMaxTagSize];
+// a file (parseObjectMap) names at least one object (with none, no tag is ever reported).
 #include <optional>
 #include <string>
 #include <vector>
@@ -20,8 +21,12 @@ struct ObjectSpec {
 
 class ObjectMap {
  public:
+  /// Tag edge length range, metres: below 2 mm no camera resolves the bits, above 5 m it is a wall.
+  static constexpr double kMinTagSize = 0.002;
+  static constexpr double kMaxTagSize = 5.0;
   ObjectMap() = default;
-  /// Throws VisionError on duplicate ids/names, empty names or non-positive sizes; `source` is quoted.
+  /// Throws VisionError on duplicate ids/names, empty names or sizes outside [kMinTagSize,
+  /// kMaxTagSize]; `source` is quoted.
   ObjectMap(std::string family, std::vector<ObjectSpec> objects, const std::string& source);
 
   const std::string& family() const { return family_; }

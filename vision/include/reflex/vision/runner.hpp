@@ -15,6 +15,10 @@
 // frame never delays a publication, and a frame that is already one frame period late when it is
 // read is dropped (counted in RunStats::dropped), as a live camera would: targets stay fresh.
 // Unpaced runs (rate 0, --dump) process every frame.
+// Stopping: every wait (a paced frame's due time) is slept in 50 ms slices that look at `stop`, the
+// unpaced publication schedule s0 + k / publish_hz is computed from the integer k (a running sum
+// stops advancing near large stamps) and looks at `stop` too, and the source gets `stop` for its own
+// loops (StereoSource::watchStop). So SIGINT/SIGTERM end a run within ~50 ms whatever the stamps.
 #include "reflex/vision/source.hpp"
 #include "reflex/vision/stereo_pipeline.hpp"
 
@@ -70,8 +74,10 @@ struct RunStats {
   std::string end_message;  ///< non-empty if the source stopped early (truncated video, camera lost)
 };
 
-/// Runs until the source ends (and loop is off), the duration is reached, or `stop` becomes true.
-/// Never throws for bad frames (reported through on_skip / end_message).
+/// Runs until the source ends (and loop is off), the duration is reached, or `stop` becomes true
+/// (seen within ~50 ms, also during a wait). Never throws for bad frames (reported through on_skip /
+/// end_message). Callbacks must not throw; one that cannot go on (a dump file that cannot be
+/// written) sets `stop` and reports after the run.
 RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const ReplayOptions& options,
                    const RunCallbacks& callbacks, const std::atomic<bool>& stop);
 

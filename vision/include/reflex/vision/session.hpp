@@ -17,11 +17,25 @@
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <atomic>
 #include <optional>
 #include <string>
 #include <vector>
 
 namespace reflex::vision {
+
+/// Limits on capture stamps (seconds), checked when a session is opened (loadTimestamps) and when
+/// one is written (SessionWriter::write). A replay clock subtracts stamps and steps by fractions of
+/// a frame period, which needs a double that still resolves microseconds: |stamp| <= 1e10 s (UNIX
+/// time up to the year 2286) resolves 2 us, while near 1e17 s a double moves in steps of 16 s and a
+/// schedule that adds 0.1 s never advances (issue 16, item 13: `--dump` spun forever).
+inline constexpr double kMaxSessionStamp = 1e10;
+/// Largest gap between consecutive stamps of a session, seconds. A longer gap is not one recording
+/// (a paced replay would wait through it in silence); such a session is refused at load, naming the
+/// line and the gap. The recorder ends a recording at such a gap instead of writing it.
+inline constexpr double kMaxFrameGap = 10.0;
+/// Nominal frame rate range (session.yaml `fps`), frames per second.
+inline constexpr double kMaxSessionFps = 1000.0;
 
 /// One stereo pair. stamp: capture time in seconds (session clock: 0-based for synthetic sessions,
 /// UNIX time for live recordings).
@@ -58,7 +72,9 @@ struct SessionInfo {
 /// Reads and validates everything but the video contents. Throws VisionError naming the file.
 SessionInfo loadSessionInfo(const std::string& dir);
 
-/// Parses timestamps.csv (header "frame,stamp"); frames must be 0..N-1, stamps strictly increasing.
+/// Parses timestamps.csv (header "frame,stamp"); frames must be 0..N-1, stamps strictly increasing,
+/// |stamp| <= kMaxSessionStamp and consecutive stamps at most kMaxFrameGap apart (VisionError
+/// naming the file, line and value otherwise).
 std::vector<double> loadTimestamps(const std::string& path);
 
 /// One row of ground_truth.csv. visible: tag fully visible in both images (inside the image, facing
@@ -87,19 +103,27 @@ class SessionReader {
  public:
   /// Opens and validates the session (VisionError naming the file for a missing file, a video that
   /// cannot be opened, left/right frame counts or sizes that differ from each other, from the
-  /// timestamps or from the calibration).
+  /// timestamps or from the calibration; left and right videos that show the same images, see
+  /// kSameImagesMeanAbsDiff, or that look swapped: the first pairs with content, rectified, are
+  /// shifted the wrong way, a negative dominant disparity that no correct pair has).
   explicit SessionReader(const std::string& dir);
+  /// Left and right images whose mean absolute grey difference is below this (grey levels, 0..255)
+  /// are "the same image" (the same video twice differs only by compression noise; two cameras
+  /// differ by parallax and sensor noise, several grey levels).
+  static constexpr double kSameImagesMeanAbsDiff = 1.0;
 
   const SessionInfo& info() const { return info_; }
   /// Next frame. Never throws.
   ReadStatus read(StereoFrame& frame, std::string& message);
-  /// Restarts at frame `first` (0-based, clamped to the session), decoding and dropping earlier frames.
-  void restart(int first);
+  /// Restarts at frame `first` (0-based, clamped to the session), decoding and dropping earlier frames;
+  /// stops early (at a frame before `first`) when *stop becomes true.
+  void restart(int first, const std::atomic<bool>* stop = nullptr);
   /// Index of the next frame read() returns.
   int position() const { return next_; }
 
  private:
   void open();
+  void checkLeftAndRightDiffer();
   SessionInfo info_;
   cv::VideoCapture cap_[2];
   int next_ = 0;
@@ -112,8 +136,11 @@ struct SessionWriterOptions {
   std::vector<std::pair<std::string, std::string>> codecs = {{"avc1", "mp4"}, {"mp4v", "mp4"}, {"MJPG", "avi"}};
 };
 
-/// Writes a session folder. The constructor creates the folder and writes the calibration, object
-/// map and mount; write() appends one pair; finish() writes timestamps.csv and session.yaml.
+/// Writes a session folder. The constructor creates the folder (its parent folder must exist: a
+/// missing one is an error at the start, naming it) and writes the calibration, object map and
+/// mount; write() appends one pair; finish() writes timestamps.csv and session.yaml and checks the
+/// videos hold every written pair. Every file written is checked (write and close): a failure
+/// throws VisionError naming the file and the cause (e.g. "No space left on device").
 class SessionWriter {
  public:
   SessionWriter(const std::string& dir, const StereoCalibration& calibration, const ObjectMap& objects,
@@ -122,10 +149,12 @@ class SessionWriter {
   SessionWriter(const SessionWriter&) = delete;
   SessionWriter& operator=(const SessionWriter&) = delete;
 
-  /// Appends a pair (8-bit BGR or gray, the calibration's size). Throws VisionError on a wrong size
-  /// or a stamp not after the previous one.
+  /// Appends a pair (8-bit BGR or gray, the calibration's size). Throws VisionError on a wrong size,
+  /// a stamp not after the previous one, |stamp| > kMaxSessionStamp or a gap > kMaxFrameGap.
   void write(double stamp, const cv::Mat& left, const cv::Mat& right);
   /// Finishes the folder; ground_truth_file (already written into the folder) is listed if non-empty.
+  /// Throws VisionError naming the file if a file could not be written or a video holds fewer
+  /// frames than were written (disk full, write error).
   void finish(const std::string& ground_truth_file = "");
   int frames() const { return static_cast<int>(stamps_.size()); }
   const std::string& codec() const { return codec_; }

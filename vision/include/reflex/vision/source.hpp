@@ -29,6 +29,9 @@ class StereoSource {
   virtual double firstStamp() const = 0;
   virtual double framePeriod() const = 0;
   virtual const StereoCalibration& calibration() const = 0;
+  /// The run's stop flag: loops inside the source (skipping to the start offset on a restart) end
+  /// early once it is true. runVision sets it; `stop` must outlive the source's use.
+  virtual void watchStop(const std::atomic<bool>* stop) { (void)stop; }
 };
 
 /// A recorded session, from `start` seconds after its first frame.
@@ -44,10 +47,12 @@ class SessionSource : public StereoSource {
   double framePeriod() const override { return 1.0 / reader_.info().fps; }
   const StereoCalibration& calibration() const override { return reader_.info().calibration; }
   const SessionInfo& info() const { return reader_.info(); }
+  void watchStop(const std::atomic<bool>* stop) override { stop_ = stop; }
 
  private:
   SessionReader reader_;
   int first_ = 0;
+  const std::atomic<bool>* stop_ = nullptr;
 };
 
 /// True if a capture spec names a device index ("0", "1", ...) rather than a file or URL.
@@ -59,9 +64,11 @@ std::unique_ptr<cv::VideoCapture> openCapture(const std::string& spec);
 /// Live stereo cameras. Stamps are UNIX time (system clock) taken right after both grab() calls.
 class CameraSource : public StereoSource {
  public:
+  static constexpr double kMinPaceFps = 0.1;
   /// Two captures (left, right), or right == nullptr with side_by_side: the left half of each
   /// frame is the left image. pace_fps > 0 throttles reading to that rate (used when a file stands
-  /// in for a camera, which would otherwise be read as fast as it decodes).
+  /// in for a camera, which would otherwise be read as fast as it decodes); it must be 0 or in
+  /// [kMinPaceFps, kMaxSessionFps] (a file claiming 1e-6 fps would wait days per frame): VisionError.
   CameraSource(std::unique_ptr<cv::VideoCapture> left, std::unique_ptr<cv::VideoCapture> right,
                const StereoCalibration& calibration, double pace_fps);
   ReadStatus next(StereoFrame& frame, std::string& message) override;
@@ -71,9 +78,11 @@ class CameraSource : public StereoSource {
   double firstStamp() const override { return first_stamp_; }
   double framePeriod() const override { return period_; }
   const StereoCalibration& calibration() const override { return calibration_; }
+  void watchStop(const std::atomic<bool>* stop) override { stop_ = stop; }
 
  private:
   std::unique_ptr<cv::VideoCapture> cap_[2];
+  const std::atomic<bool>* stop_ = nullptr;
   StereoCalibration calibration_;
   double period_ = 0.1;
   double pace_ = 0.0;
@@ -97,6 +106,8 @@ struct RecordStats {
 
 /// Copies pairs from a (live) source into a session writer until a limit, the end of the source, or
 /// `stop`. Skipped frames are reported through on_skip and not written. Never throws for bad frames.
+/// A pair more than kMaxFrameGap after the previous one (a camera that stalled) ends the recording
+/// with end_message saying so: a session never holds a gap its reader would refuse.
 RecordStats recordSession(StereoSource& source, SessionWriter& writer, const RecordOptions& options,
                           const std::atomic<bool>& stop,
                           const std::function<void(int frame, const std::string& why)>& on_skip = {},

@@ -95,6 +95,10 @@ struct PlayerOptions {
   std::vector<std::string> exclude;   ///< topic names not to play
   bool restamp = false;               ///< move sample time stamps to the playing time (see SamplePublisher)
   bool progress = false;              ///< status line on stderr
+  /// Longest wait between consecutive played records, seconds of recording time (> 0). A longer gap
+  /// (a recording resumed hours later, crafted receive times 100 years apart) is played as max_gap:
+  /// the player never waits in silence for longer; the shortened gaps are counted and reported.
+  double max_gap = 10.0;
   bus::BusConfig bus;
 };
 
@@ -102,6 +106,9 @@ struct PlayerStats {
   std::uint64_t published = 0;        ///< samples written
   std::uint64_t failed = 0;           ///< payloads that did not deserialize or writes refused
   std::uint64_t loops = 0;            ///< completed passes
+  std::uint64_t gaps_shortened = 0;   ///< gaps in the played window longer than max_gap (one pass)
+  double longest_gap = 0.0;           ///< the longest of them, seconds of recording time (0 if none)
+  double longest_gap_at = 0.0;        ///< where it ends, seconds after the start offset
   TailState tail = TailState::kClean; ///< how the file ended
 };
 
@@ -122,6 +129,8 @@ class Player {
   const PlayerStats& stats() const { return stats_; }
   /// Length of the played window, seconds of recording time.
   double windowSeconds() const { return 1e-9 * static_cast<double>(end_ns_ - begin_ns_); }
+  /// How long one pass takes at rate 1 once gaps are shortened to max_gap, seconds.
+  double playedSeconds() const { return played_seconds_; }
 
  private:
   PlayerOptions options_;
@@ -129,6 +138,7 @@ class Player {
   std::map<std::string, std::unique_ptr<SamplePublisher>> publishers_;
   std::int64_t first_ns_ = 0, begin_ns_ = 0, end_ns_ = 0;
   std::uint64_t window_records_ = 0;
+  double played_seconds_ = 0.0;
   std::atomic<bool> stop_{false};
   PlayerStats stats_;
 };
