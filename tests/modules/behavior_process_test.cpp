@@ -345,9 +345,10 @@ TEST(BehaviorProcess, JointStatesFromASecondWriterAreIgnoredAndCounted) {
   ASSERT_TRUE(proc.started());
   bus::BusConfig config;
   config.domain_id = kDomain;
-  config.module_name = "fake_controller_a";
+  // Both named "controller": the identity inputs.joint_state_sources accepts, as two real
+  // controllers would be (a writer of any other name is rejected before this check).
+  config.module_name = "controller";
   auto a = std::make_unique<bus::Participant>(config);
-  config.module_name = "fake_controller_b";
   bus::Participant b(config);
   auto& writer_a = a->makeWriter<msg::JointState>();
   auto& writer_b = b.makeWriter<msg::JointState>();
@@ -376,7 +377,7 @@ TEST(BehaviorProcess, JointStatesFromASecondWriterAreIgnoredAndCounted) {
   EXPECT_GE(ignored, sent_b_while_a * 6 / 10) << log;  // best effort: most of b's samples arrive
   EXPECT_LE(ignored, sent_b_while_a + 50) << "only b's samples while a lived, plus a's last 0.5 s of silence" << log;
   EXPECT_EQ(statValue(log, "joint_writer_changes"), 1) << log;
-  EXPECT_NE(log.find("joint states from a second writer ('fake_controller_b') ignored"), std::string::npos) << log;
+  EXPECT_NE(log.find("joint states from a second writer ('controller') ignored"), std::string::npos) << log;
 }
 
 }  // namespace
