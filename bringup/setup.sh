@@ -27,6 +27,8 @@ packages=(
   build-essential cmake pkg-config git
   # bus: Fast DDS 2.9 + code generator (needs a JRE) + discovery server CLI
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools default-jre-headless
+  # bus: checks the DDS-Security material itself (OpenSSL libcrypto, idl/bus/src/security.cpp)
+  libssl-dev
   # control: math, robot description, configuration
   libeigen3-dev liburdfdom-dev liburdfdom-headers-dev libyaml-cpp-dev libtinyxml2-dev libcli11-dev libspdlog-dev
   # vision
