@@ -546,10 +546,12 @@ TEST(UrdfLoaderAccounting, JointValuesMustBeFiniteAndInRange) {
       {R"(<origin rpy="0 1e300 0"/>)", "1e+300 is out of range"},
       {R"(<origin xyz="0 0 1"/><safety_controller k_velocity="nan"/>)", "k_velocity 'nan'"},
   };
-  for (const auto& [extra, expected] : cases)
+  for (const auto& c : cases) {  // not a structured binding: a lambda may not capture one (clang 14, C++17)
+    const std::string& extra = c.first;
     expectModelError([&] { loadModelFromString(oneLink(R"(<collision><geometry><sphere radius="0.04"/></geometry></collision>)", extra),
                                                CollisionConfig{}, "joint.urdf"); },
-                     {"joint.urdf", "joint 'j'", expected});
+                     {"joint.urdf", "joint 'j'", c.second});
+  }
   const std::string fast = R"(<?xml version="1.0"?><robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
 <link name="arm"/><joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
 <limit lower="-1" upper="1e300" velocity="1e300" effort="1"/></joint></robot>)";
