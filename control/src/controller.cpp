@@ -415,6 +415,18 @@ bool isPhysical(const Model& model, const ControllerData& data, const PairDistan
   return !(model.segments[sb].body_schema_slot && data.slot_virtual[sb - model.num_robot_segments]);
 }
 
+/// Distances (no avoidance rows) of every pair at configuration q, with this cycle's body-schema
+/// slots, into `out` (kin_next is the scratch). False if q is not finite (out is then untouched).
+bool computeDistancesAt(const Model& model, ControllerData& data, const Eigen::Ref<const Eigen::VectorXd>& q,
+                        DistanceData& out) {
+  if (!computeForwardKinematics(model, data.kin_next, q)) return false;
+  out.slots = data.dist.slots;
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -kInf;
+  computeSegmentDistances(model, data.kin_next, out, no_rows);
+  return true;
+}
+
 /// Predicts the configuration one period ahead: q + dt (scaled arm velocities + uncontrolled ones).
 void predict(const Model& model, const ControllerModel& cm, ControllerData& data,
              const Eigen::Ref<const Eigen::VectorXd>& q, const std::array<double, 2>& scale, DistanceData& out) {
@@ -422,12 +434,7 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
   for (int j = 0; j < model.nq; ++j) data.q_next[j] = q[j] + dt * data.qdot_uncontrolled[j];
   for (int a = 0; a < 2; ++a)
     for (int i = 0; i < cm.arms[a].n; ++i) data.q_next[cm.arms[a].q[i]] += dt * scale[a] * data.qdot[cm.arms[a].q[i]];
-  out.slots = data.dist.slots;
-  DistanceOptions no_rows;
-  no_rows.row_threshold = -kInf;
-  if (computeForwardKinematics(model, data.kin_next, data.q_next)) {
-    computeSegmentDistances(model, data.kin_next, out, no_rows);
-  } else {
+  if (!computeDistancesAt(model, data, data.q_next, out)) {
     for (auto& pd : out.pairs) pd.distance = -kInf;  // cannot happen for finite q; counts as a hit
   }
 }
@@ -495,11 +502,7 @@ bool isArmIndependent(const Model& model, const ControllerModel& cm, const Contr
 
 bool checkWalkingStep(const Model& model, const ControllerModel& cm, ControllerData& data,
                       const Eigen::Ref<const Eigen::VectorXd>& q_next) {
-  if (!computeForwardKinematics(model, data.kin_next, q_next)) return false;
-  data.dist_next.slots = data.dist.slots;
-  DistanceOptions no_rows;
-  no_rows.row_threshold = -kInf;
-  computeSegmentDistances(model, data.kin_next, data.dist_next, no_rows);
+  if (!computeDistancesAt(model, data, q_next, data.dist_next)) return false;
   const double floor = cm.params.d_r + cm.params.predict_margin;
   for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
     const PairDistance& pn = data.dist_next.pairs[i];
@@ -515,11 +518,7 @@ int findUnresolvableContact(const Model& model, const ControllerModel& cm, Contr
   if (slot < 0 || slot >= kBodySchemaSlots || !data.dist.slots[static_cast<std::size_t>(slot)].enabled) return -1;
   const int s = model.num_robot_segments + slot;
   if (!isArmIndependent(model, cm, data, s)) return -1;
-  if (!computeForwardKinematics(model, data.kin_next, q)) return -1;
-  data.dist_next.slots = data.dist.slots;
-  DistanceOptions no_rows;
-  no_rows.row_threshold = -kInf;
-  computeSegmentDistances(model, data.kin_next, data.dist_next, no_rows);
+  if (!computeDistancesAt(model, data, q, data.dist_next)) return -1;
   const double limit = cm.params.d_r + cm.params.estop_release_margin;
   for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
     const PairDistance& pd = data.dist_next.pairs[i];
