@@ -85,6 +85,7 @@ struct Sent {
   std::vector<msg::JointState> joints;
   std::vector<msg::ControlStatus> status;
   std::vector<msg::Heartbeat> beats;
+  std::vector<msg::ControllerProtection> protection;
 };
 
 template <class T>
@@ -105,7 +106,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   ro.output = file;
   ro.bus = busConfig("recorder");
   Recorder recorder(ro);
-  EXPECT_EQ(recorder.counts().size(), 8u) << "all Reflex topics by default";
+  EXPECT_EQ(recorder.counts().size(), 9u) << "all Reflex topics by default";
   std::thread rec_thread([&] { recorder.run(); });
 
   Sent sent;
@@ -119,13 +120,14 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     auto& w_joint = src.makeWriter<msg::JointState>();
     auto& w_status = src.makeWriter<msg::ControlStatus>();
     auto& w_beat = src.makeWriter<msg::Heartbeat>();
+    auto& w_protection = src.makeWriter<msg::ControllerProtection>();
     for (bus::detail::WriterBase* w : std::initializer_list<bus::detail::WriterBase*>{
-             &w_obj, &w_hand, &w_prio, &w_schema, &w_walk, &w_joint, &w_status, &w_beat})
+             &w_obj, &w_hand, &w_prio, &w_schema, &w_walk, &w_joint, &w_status, &w_beat, &w_protection})
       ASSERT_TRUE(w->waitForReaders(1, 10s)) << w->topicName();
     // Both sides: a writer that matched the recorder may still be unknown to the recorder's reader,
     // which then drops a best-effort sample (on a loaded host that window lasted long enough to lose
     // 24 of 40 samples: issue 16, item 17). Once both sides matched, every sample here is delivered:
-    // the reliable topics are read reliably (repaired if dropped), and 40 samples in 150 ms never
+    // the reliable topics are read reliably (repaired if dropped), and 45 samples in 150 ms never
     // fill a best-effort transport queue on one host.
     ASSERT_TRUE(recorder.waitForWriters(10s)) << "the recorder matched every writer";
     for (int k = 0; k < 5; ++k) {
@@ -137,6 +139,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
       sent.joints.push_back(bus::test::jointState(k));
       sent.status.push_back(bus::test::controlStatus(k));
       sent.beats.push_back(bus::test::heartbeat(k));
+      sent.protection.push_back(bus::test::controllerProtection(k));
       w_obj.write(sent.objects.back());
       w_hand.write(sent.hands.back());
       w_prio.write(sent.prio.back());
@@ -145,13 +148,14 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
       w_joint.write(sent.joints.back());
       w_status.write(sent.status.back());
       w_beat.write(sent.beats.back());
+      w_protection.write(sent.protection.back());
       std::this_thread::sleep_for(30ms);
     }
     std::this_thread::sleep_for(500ms);
   }
   recorder.stop();
   rec_thread.join();
-  EXPECT_EQ(recorder.totalSamples(), 40u);
+  EXPECT_EQ(recorder.totalSamples(), 45u);
 
   // Read back: every sample, unchanged, receive times ordered, DDS source times set.
   std::vector<RecordEntry> all;
@@ -161,7 +165,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     while (r.next(e)) all.push_back(e);
     EXPECT_EQ(r.tailState(), TailState::kClean);
   }
-  ASSERT_EQ(all.size(), 40u);
+  ASSERT_EQ(all.size(), 45u);
   for (std::size_t i = 1; i < all.size(); ++i) EXPECT_GE(all[i].receive_ns, all[i - 1].receive_ns);
   for (const auto& e : all) {
     EXPECT_GT(e.source_ns, 0);
@@ -175,6 +179,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   expectRecorded(all, sent.joints);
   expectRecorded(all, sent.status);
   expectRecorded(all, sent.beats);
+  expectRecorded(all, sent.protection);
 
   std::vector<std::int64_t> status_rx;  // recorded receive times of the control status samples
   for (const auto& e : all)
@@ -247,6 +252,21 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     msg::HandTargets hand;
     ASSERT_TRUE(r_hand.takeLatest(hand));
     EXPECT_EQ(hand.left().position_base().y(), sent.hands.back().left().position_base().y());
+  }
+
+  // Play everything (no --topic): every recorded sample but the controller's protection state, a
+  // live controller's claim that a replay must not make beside a live controller (issue 16, item 16);
+  // named with --topic it is played.
+  for (bool named : {false, true}) {
+    PlayerOptions po;
+    po.input = file;
+    if (named) po.topics = {"reflex/controller_protection"};
+    po.bus = busConfig("player");
+    po.delay = 0.2;
+    po.rate = 0.0;  // as fast as possible
+    Player player(po);
+    player.run();
+    EXPECT_EQ(player.stats().published, named ? 5u : 40u) << (named ? "named" : "everything");
   }
 }
 

@@ -134,6 +134,12 @@ void csvRows(std::ostream& o, const std::string& prefix, const msg::Heartbeat& s
     << static_cast<int>(s.state()) << ',' << s.period_ms() << ',' << csvField(s.detail()) << '\n';
 }
 
+void csvColumns(std::ostream& o, const msg::ControllerProtection&) { o << ",avoidance,estop,reason,period,robot"; }
+void csvRows(std::ostream& o, const std::string& prefix, const msg::ControllerProtection& s) {
+  o << prefix << ',' << (s.avoidance() ? 1 : 0) << ',' << (s.estop() ? 1 : 0) << ',' << csvField(s.reason()) << ','
+    << num(s.period()) << ',' << csvField(s.robot()) << '\n';
+}
+
 // ---- restamping for replay ---------------------------------------------------------------------
 
 // A stamp comes from the recorded payload (any int64): the shifted value saturates instead of
@@ -181,7 +187,7 @@ class Codec final : public TopicCodec {
   const char* defaultProfile() const override { return bus::TopicTraits<T>::kProfile; }
   bool isState() const override {
     const std::string p = defaultProfile();
-    return p == bus::kProfileBehavior || p == bus::kProfileHeartbeat;
+    return p == bus::kProfileBehavior || p == bus::kProfileHeartbeat || p == bus::kProfileControllerInfo;
   }
 
   bus::detail::ReaderBase& subscribe(bus::Participant& bus, const std::string& topic, const std::string& profile,
@@ -253,8 +259,10 @@ const std::vector<const TopicCodec*>& allCodecs() {
   static const Codec<msg::JointState> joint_state;
   static const Codec<msg::ControlStatus> control_status;
   static const Codec<msg::Heartbeat> heartbeat;
-  static const std::vector<const TopicCodec*> all = {&object_targets, &hand_targets, &motion_priority, &body_schema,
-                                                     &walk_command,   &joint_state,  &control_status,  &heartbeat};
+  static const Codec<msg::ControllerProtection> controller_protection;  // issue 16, item 3
+  static const std::vector<const TopicCodec*> all = {&object_targets, &hand_targets, &motion_priority,
+                                                     &body_schema,    &walk_command, &joint_state,
+                                                     &control_status, &heartbeat,    &controller_protection};
   return all;
 }
 
