@@ -40,16 +40,23 @@ std::string numberProblem(const std::string& token, double max_abs, const char* 
   return "";
 }
 
+/// The text of attribute `attr` of `e`, or null; a missing required attribute is appended to `out`
+/// as "<where>: missing (line N)". `where` becomes "<prefix><element> <attr>".
+const char* attributeText(const XMLElement& e, const char* attr, bool required, const std::string& prefix,
+                          std::string& where, std::vector<std::string>& out) {
+  const char* text = e.Attribute(attr);
+  where = prefix + "<" + e.Name() + "> " + attr;
+  if (!text && required) out.push_back(where + ": missing (" + lineOf(e) + ")");
+  return text;
+}
+
 /// Checks attribute `attr` of `e`: a single number written without spaces (urdfdom refuses
 /// "0.001 "). Appends "<prefix><element> <attr> '<text>': <reason>" to `out`.
 void checkScalar(const XMLElement& e, const char* attr, bool required, double max_abs, const char* unit,
                  const std::string& prefix, std::vector<std::string>& out) {
-  const char* text = e.Attribute(attr);
-  const std::string where = prefix + "<" + e.Name() + "> " + attr;
-  if (!text) {
-    if (required) out.push_back(where + ": missing (" + lineOf(e) + ")");
-    return;
-  }
+  std::string where;
+  const char* text = attributeText(e, attr, required, prefix, where, out);
+  if (!text) return;
   double v = 0.0;
   const std::string why = numberProblem(text, max_abs, unit, v);
   if (!why.empty()) out.push_back(where + " '" + text + "' (" + lineOf(e) + "): " + why);
@@ -59,12 +66,9 @@ void checkScalar(const XMLElement& e, const char* attr, bool required, double ma
 /// around the numbers, so this does too).
 void checkVector(const XMLElement& e, const char* attr, int n, bool required, double max_abs, const char* unit,
                  const std::string& prefix, std::vector<std::string>& out) {
-  const char* text = e.Attribute(attr);
-  const std::string where = prefix + "<" + e.Name() + "> " + attr;
-  if (!text) {
-    if (required) out.push_back(where + ": missing (" + lineOf(e) + ")");
-    return;
-  }
+  std::string where;
+  const char* text = attributeText(e, attr, required, prefix, where, out);
+  if (!text) return;
   std::istringstream is{std::string(text)};
   std::vector<std::string> tokens;
   for (std::string t; is >> t;) tokens.push_back(t);
