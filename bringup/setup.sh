@@ -42,6 +42,13 @@ packages=(
   # DDS-Security test credentials (bringup/security/make_security.sh); fuzzing and sanitized tests
   # (bringup/fuzz.sh, sanitize.sh --clang-fuzz, run by test.sh)
   openssl clang-14 libclang-rt-14-dev ninja-build
+  # the robot boundary: the physics-simulated robot (control/mujoco, issue 13)
+  libmujoco-dev
+  # your own robot description: meshes, convex hulls (issue 12)
+  libassimp-dev assimp-testmodels libqhull-dev
+  # recordings and the live view (issue 14): MCAP chunk compression, WebSocket, JSON, a real browser
+  libzstd-dev liblz4-dev libwebsocketpp-dev libboost-dev nlohmann-json3-dev
+  chromium chromium-headless-shell
 )
 
 missing=()
@@ -57,6 +64,25 @@ if [ ${#missing[@]} -gt 0 ]; then
   $sudo_cmd apt-get install -y -qq --no-install-recommends "${missing[@]}"
 else
   echo "setup.sh: all ${#packages[@]} packages already installed"
+fi
+
+# Node.js + npm: this image may bring its own (Node 20); a fresh Debian 12 gets Node 18 + npm 9 from
+# apt. Installed only when missing, so an existing Node is never replaced.
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  echo "setup.sh: installing nodejs and npm from Debian"
+  sudo_cmd=""
+  [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
+  DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends nodejs npm
+fi
+# JavaScript packages (bringup/web/package.json), exactly the versions of the committed lock file.
+# Skipped when node_modules already matches the lock file.
+web=$here/bringup/web
+if ! cmp -s "$web/package-lock.json" "$web/node_modules/.package-lock.json" 2>/dev/null \
+   && ! (cd "$web" && npm ls --depth=0 >/dev/null 2>&1); then
+  echo "setup.sh: installing the JavaScript packages of bringup/web (npm ci)"
+  (cd "$web" && npm ci --no-audit --no-fund --loglevel=error)
+else
+  echo "setup.sh: JavaScript packages of bringup/web already installed"
 fi
 
 [ "$do_build" -eq 1 ] || exit 0
