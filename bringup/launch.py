@@ -3,12 +3,14 @@
 
     bringup/launch.py bringup/launch/one_host.yaml                      # everything on this host
     bringup/launch.py bringup/launch/multi_host.yaml --host robot       # this host's part only
+    bringup/launch.py bringup/launch/multi_host.yaml --host vision,behavior   # two roles on one machine
     bringup/launch.py bringup/launch/multi_host.yaml --dry-run          # show what would start where
     bringup/launch.py CONFIG --set session=/data/my_session --duration 70
 
 Every process gets the configuration's DDS domain (REFLEX_DOMAIN_ID) and profiles file
 (FASTRTPS_DEFAULT_PROFILES_FILE), both read by reflex::bus in every Reflex process; its output is
-prefixed with its name on this terminal and written whole to <log_dir>/<name>.log. Ctrl-C / SIGTERM
+prefixed with its name on this terminal and written whole to <log_dir>/<name>.log (by default under
+$REFLEX_LOG_DIR, else ~/.reflex/log: outside the checkout, like ROS's ~/.ros/log). Ctrl-C / SIGTERM
 stops all processes (SIGTERM to each process group in reverse start order, one after the other,
 SIGKILL after stop_timeout). A process that exits is reported; by default (on_exit: shutdown) its exit stops the
 others. Exit code: 0 if every process ended normally (finished with 0 or stopped by the launcher),
@@ -117,10 +119,14 @@ class Launch:
         self.domain = domain
         build = os.environ.get("REFLEX_BUILD_DIR", str(SOURCE / "build"))
         bin_dir = args.bin_dir or doc.get("bin_dir") or os.environ.get("REFLEX_BIN_DIR") or os.path.join(build, "bin")
-        # HOST: the host this launcher starts (--host), "all" without --host; in a process's own
-        # fields it is that process's host.
+        # HOST: the host(s) this launcher starts (--host; several joined with "+"), "all" without
+        # --host; in a process's own fields it is that process's host.
+        # LOG_ROOT: where logs go unless a configuration says otherwise: $REFLEX_LOG_DIR, else
+        # ~/.reflex/log (never inside the checkout, which may be read-only or shared).
+        self.hosts_selected = parse_hosts(args.host)
         variables = {"BRINGUP": str(HERE), "SOURCE": str(SOURCE), "CONFIG_DIR": str(self.path.resolve().parent),
-                     "DOMAIN": str(domain), "BIN": bin_dir, "HOST": args.host or "all"}
+                     "DOMAIN": str(domain), "BIN": bin_dir, "LOG_ROOT": default_log_root(),
+                     "HOST": "+".join(self.hosts_selected) if self.hosts_selected else "all"}
         vars_ = doc.get("vars") or {}
         if not isinstance(vars_, dict):
             raise ConfigError(f"{where}: 'vars' must be a mapping")
@@ -135,7 +141,7 @@ class Launch:
             variables[k] = v
         self.bin_dir = os.path.abspath(substitute(bin_dir, variables, f"{where}: bin_dir"))
         variables["BIN"] = self.bin_dir
-        log_dir = args.log_dir or doc.get("log_dir", "${SOURCE}/out/launch/${NAME}")
+        log_dir = args.log_dir or doc.get("log_dir", "${LOG_ROOT}/launch/${NAME}")
         variables["NAME"] = re.sub(r"[^A-Za-z0-9_.-]", "_", str(doc.get("name", self.path.stem)))
         self.log_dir = pathlib.Path(substitute(log_dir, variables, f"{where}: log_dir"))
         variables["LOG_DIR"] = str(self.log_dir)
@@ -145,8 +151,9 @@ class Launch:
         if not isinstance(hosts, dict):
             raise ConfigError(f"{where}: 'hosts' must be a mapping of host name -> {{address: ...}}")
         self.hosts = hosts
-        if args.host is not None and args.host not in hosts:
-            raise ConfigError(f"--host '{args.host}' is not a host of {where} (hosts: {sorted(hosts) or 'none'})")
+        for h in self.hosts_selected or []:
+            if h not in hosts:
+                raise ConfigError(f"--host '{h}' is not a host of {where} (hosts: {sorted(hosts) or 'none'})")
 
         profiles = doc.get("profiles")
         self.profiles = substitute(profiles, variables, f"{where}: profiles") if profiles else None
@@ -224,13 +231,13 @@ class Launch:
         return found if found else candidate  # reported as missing at start
 
     def selected(self):
-        if self.args.host is None:
+        if self.hosts_selected is None:
             return list(self.processes)
-        return [p for p in self.processes if p.host == self.args.host]
+        return [p for p in self.processes if p.host in self.hosts_selected]
 
     def runs_discovery_server(self):
         d = self.discovery
-        return d is not None and (self.args.host is None or d["host"] in (None, self.args.host))
+        return d is not None and (self.hosts_selected is None or d["host"] is None or d["host"] in self.hosts_selected)
 
     def common_env(self):
         env = {"REFLEX_DOMAIN_ID": str(self.domain)}
@@ -269,14 +276,15 @@ class Launch:
     # ---- dry run -----------------------------------------------------------------------------
     def dry_run(self):
         out = sys.stdout
-        target = f"host '{self.args.host}'" if self.args.host else "all hosts"
-        out.write(f"# {self.doc.get('name', self.path.stem)}: {target}, domain {self.domain}, logs in {self.log_dir}\n")
+        target = f"host(s) {', '.join(repr(h) for h in self.hosts_selected)}" if self.hosts_selected else "all hosts"
+        out.write(f"# dry run: nothing is started or written\n")
+        out.write(f"# {self.doc.get('name', self.path.stem)}: {target}, domain {self.domain}, logs would go to {self.log_dir}\n")
         env = self.common_env()
         for k, v in env.items():
             out.write(f"export {k}={shlex.quote(v)}\n")
         if self.discovery:
-            out.write(f"# profiles written with discovery server {self.discovery['address']}:{self.discovery['port']}"
-                      f" (from {self.profiles})\n")
+            out.write(f"# profiles would be written to {self.effective_profiles()} with discovery server "
+                      f"{self.discovery['address']}:{self.discovery['port']} (from {self.profiles})\n")
         if self.runs_discovery_server():
             out.write(f"[discovery_server] {' '.join(shlex.quote(a) for a in self.discovery_argv())}\n")
         for p in self.selected():
@@ -374,7 +382,7 @@ class Launch:
             ds.env, ds.delay, ds.on_exit, ds.stop_signal = {}, 0.0, "shutdown", signal.SIGTERM
             chosen.insert(0, ds)
         if not chosen:
-            self.say(f"nothing to start for host '{self.args.host}'")
+            self.say(f"nothing to start for host(s) {', '.join(self.hosts_selected or [])}")
             return 0
         self.all_started = chosen
         self.say(f"{self.doc.get('name', self.path.stem)}: domain {self.domain}, profiles "
@@ -426,15 +434,53 @@ class Launch:
                 if rc not in (0, -p.stop_signal, 128 + p.stop_signal, 130, 143):
                     failed = True
                     self.say(f"{p.name} ended badly when stopped (exit {rc})")
-        summary = ", ".join(f"{p.name}={p.returncode}" for p in started)
+        summary = ", ".join(f"{p.name}={outcome(p)}" for p in started)
         self.say(f"all stopped: {summary}")
         return 1 if failed else 0
+
+
+def parse_hosts(values):
+    """--host values (repeatable, comma-separated) -> list of host names in the order given, or None."""
+    if not values:
+        return None
+    hosts = []
+    for v in values:
+        for h in v.split(","):
+            h = h.strip()
+            if not h:
+                raise ConfigError(f"--host '{v}': empty host name")
+            if h not in hosts:
+                hosts.append(h)
+    return hosts
+
+
+def default_log_root():
+    """$REFLEX_LOG_DIR, else ~/.reflex/log."""
+    root = os.environ.get("REFLEX_LOG_DIR")
+    if root:
+        return root
+    return str(pathlib.Path.home() / ".reflex" / "log")
+
+
+def outcome(p):
+    """How a process ended, for the final line: its exit code; "stopped" when the launcher stopped it
+    and it ended by that stop (exit 0 or its stop signal); a signal by name otherwise."""
+    rc = p.returncode
+    if rc is None:
+        return "?"
+    if p.stopped_by_launcher and rc in (0, -p.stop_signal, 128 + p.stop_signal, 130, 143):
+        return "stopped"
+    if rc < 0:
+        return signal.Signals(-rc).name
+    return str(rc)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="launch.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("config", help="launch configuration YAML (e.g. bringup/launch/one_host.yaml)")
-    ap.add_argument("--host", help="start only the processes assigned to this host (multi-host configurations)")
+    ap.add_argument("--host", action="append", metavar="HOST[,HOST...]",
+                    help="start only the processes assigned to these hosts (multi-host configurations); "
+                         "repeat or separate with commas to run several roles on one machine")
     ap.add_argument("--dry-run", action="store_true", help="print the environment and commands, start nothing")
     ap.add_argument("--duration", type=float, default=0.0, help="stop everything after this many seconds")
     ap.add_argument("--domain", type=int, help="override the configuration's DDS domain id")

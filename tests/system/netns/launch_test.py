@@ -184,6 +184,82 @@ class LaunchTest(unittest.TestCase):
         copy = (self.dir / "logs_a" / "profiles_reflex_profiles_discovery.xml").read_text()
         self.assertNotIn("<address>127.0.0.1</address>", copy)
 
+    def test_several_roles_on_one_host_and_a_dry_run_that_writes_nothing(self):
+        # issue 17, item 14: --host takes several roles (repeated or comma-separated); the dry run
+        # says what it WOULD write and writes nothing (no log folder, no profiles copy).
+        cfg = self.config(f"""
+            log_dir: {self.dir}/logs_${{HOST}}
+            profiles: ${{BRINGUP}}/dds/reflex_profiles_discovery.xml
+            hosts: {{a: {{}}, b: {{}}, c: {{}}}}
+            discovery_server: {{host: b, address: 10.1.2.3, port: 12345}}
+            processes:
+              - {{name: on_a, host: a, cmd: /bin/true}}
+              - {{name: on_b, host: b, cmd: /bin/true}}
+              - {{name: on_c, host: c, cmd: /bin/true}}
+            """)
+        for hosts in (["--host", "a,b"], ["--host", "a", "--host", "b"]):
+            rc, out = self.run_launch(cfg, "--dry-run", *hosts)
+            self.assertEqual(rc, 0, out)
+            self.assertIn("[on_a @a]", out)
+            self.assertIn("[on_b @b]", out)
+            self.assertIn("[discovery_server]", out)
+            self.assertNotIn("on_c", out)
+            self.assertIn(f"profiles would be written to {self.dir}/logs_a+b/profiles_reflex_profiles_discovery.xml", out)
+            self.assertNotIn("profiles written", out)
+        self.assertEqual(sorted(p.name for p in self.dir.iterdir()), ["c.yaml"], "a dry run writes nothing")
+        rc, out = self.run_launch(cfg, "--dry-run", "--host", "a,moon")
+        self.assertEqual(rc, 2, out)
+        self.assertIn("--host 'moon'", out)
+        rc, out = self.run_launch(cfg, "--dry-run", "--host", "a,")
+        self.assertEqual(rc, 2, out)
+        self.assertIn("empty host name", out)
+
+    def test_the_final_line_says_stopped_for_what_the_launcher_stopped(self):
+        # issue 17, item 14: a process the launcher stopped (SIGTERM) showed as "-15".
+        cfg = self.config(f"""
+            log_dir: {self.dir}/logs
+            processes:
+              - {{name: sleeper, cmd: /bin/sh, args: [-c, 'exec sleep 60']}}
+              - {{name: trapper, cmd: /bin/sh, args: [-c, 'trap "exit 0" TERM; while true; do sleep 0.1; done']}}
+              - {{name: oneshot, cmd: /bin/sh, on_exit: ignore, args: [-c, 'exit 0']}}
+            """)
+        rc, out = self.run_launch(cfg, "--duration", "1")
+        self.assertEqual(rc, 0, out)
+        self.assertIn("all stopped: sleeper=stopped, trapper=stopped, oneshot=0", out)
+        self.assertNotIn("-15", out)
+
+    def test_logs_default_outside_the_checkout(self):
+        # issue 17, item 14: without log_dir the logs go to $REFLEX_LOG_DIR/launch/<name> (else
+        # ~/.reflex/log/...), never into the source tree; every shipped configuration follows it.
+        cfg = self.config("""
+            name: nolog
+            processes:
+              - {name: hello, cmd: /bin/sh, args: [-c, 'echo hi']}
+            """)
+        env = dict(os.environ, REFLEX_LOG_DIR=str(self.dir / "root"))
+        r = subprocess.run([sys.executable, str(LAUNCH), str(cfg)], stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True, timeout=30, env=env)
+        self.assertEqual(r.returncode, 0, r.stdout)
+        self.assertIn("hi", (self.dir / "root" / "launch" / "nolog" / "hello.log").read_text())
+        for shipped in sorted((SOURCE / "bringup" / "launch").glob("*.yaml")):
+            r = subprocess.run([sys.executable, str(LAUNCH), str(shipped), "--dry-run"], stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True, timeout=30, env=env)
+            self.assertEqual(r.returncode, 0, r.stdout)
+            self.assertIn(f"logs would go to {self.dir / 'root' / 'launch'}", r.stdout, shipped)
+            self.assertNotIn(str(SOURCE / "out"), r.stdout, shipped)
+
+    def test_the_session_loop_is_a_launch_variable(self):
+        # issue 17, item 14: --loop for the session replay without editing the configuration.
+        for shipped in sorted((SOURCE / "bringup" / "launch").glob("*.yaml")):
+            rc, out = self.run_launch(shipped, "--dry-run")
+            vision = [line for line in out.splitlines() if line.startswith("[vision")]
+            self.assertEqual(len(vision), 1, out)
+            self.assertNotIn("--loop", vision[0])
+            rc, out = self.run_launch(shipped, "--dry-run", "--set", "session_loop=--loop")
+            self.assertEqual(rc, 0, out)
+            vision = [line for line in out.splitlines() if line.startswith("[vision")]
+            self.assertIn(" --loop ", vision[0], shipped)
+
     def test_bad_configurations_name_the_bad_value(self):
         cases = [
             ("processes: [{name: x, cmd: /bin/true, colour: red}]", "colour"),
