@@ -30,7 +30,7 @@ packages=(
   # bus: checks the DDS-Security material itself (OpenSSL libcrypto, idl/bus/src/security.cpp)
   libssl-dev
   # control: math, robot description, configuration
-  libeigen3-dev liburdfdom-dev liburdfdom-headers-dev libyaml-cpp-dev libtinyxml2-dev libcli11-dev libspdlog-dev
+  libeigen3-dev liburdfdom-dev liburdfdom-headers-dev libyaml-cpp-dev libtinyxml2-dev libcli11-dev
   # vision
   libapriltag-dev libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
   libopencv-videoio-dev libopencv-calib3d-dev libopencv-contrib-dev ffmpeg
