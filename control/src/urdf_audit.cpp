@@ -96,7 +96,7 @@ void checkOrigin(const XMLElement& parent, bool limited, const std::string& pref
   }
 }
 
-/// <geometry>: exactly one shape urdfdom knows, with well-formed sizes (collision: also in range).
+/// <geometry>: exactly one shape of URDF (urdfdom's four and URDF 1.1's capsule), with well-formed sizes (collision: also in range).
 /// Signs are left to the loader, which names them ("radius -0.25 must be positive").
 void checkGeometry(const XMLElement& owner, bool limited, const std::string& prefix, std::vector<std::string>& out) {
   const XMLElement* g = owner.FirstChildElement("geometry");
@@ -115,7 +115,7 @@ void checkGeometry(const XMLElement& owner, bool limited, const std::string& pre
   const double max = limited ? kMaxUrdfLength : HUGE_VAL;
   if (isName(*shape, "sphere")) {
     checkScalar(*shape, "radius", true, max, "m", prefix, out);
-  } else if (isName(*shape, "cylinder")) {
+  } else if (isName(*shape, "cylinder") || isName(*shape, "capsule")) {
     checkScalar(*shape, "radius", true, max, "m", prefix, out);
     checkScalar(*shape, "length", true, max, "m", prefix, out);
   } else if (isName(*shape, "box")) {
@@ -125,7 +125,7 @@ void checkGeometry(const XMLElement& owner, bool limited, const std::string& pre
     checkVector(*shape, "scale", 3, false, HUGE_VAL, "", prefix, out);
   } else {
     out.push_back(prefix + "unknown geometry <" + std::string(shape->Name()) + "> (" + lineOf(*shape) +
-                  "); urdfdom reads sphere, cylinder, box, mesh");
+                  "); a URDF geometry is a sphere, cylinder, capsule, box or mesh");
   }
 }
 
@@ -249,6 +249,20 @@ UrdfAudit auditUrdf(const std::string& xml) {
   for (const XMLElement* m = robot->FirstChildElement("material"); m; m = m->NextSiblingElement("material"))
     if (!m->Attribute("name")) audit.problems.push_back("a <material> of <robot> without a name (" + lineOf(*m) + ")");
   findStrays(*robot, *robot, false, audit.problems);
+  // URDF 1.1 capsules of links' collision and visual elements -> cylinders of the same size, for urdfdom.
+  for (XMLElement* link = doc.RootElement()->FirstChildElement("link"); link; link = link->NextSiblingElement("link"))
+    for (const char* kind : {"collision", "visual"})
+      for (XMLElement* c = link->FirstChildElement(kind); c; c = c->NextSiblingElement(kind))
+        if (XMLElement* g = c->FirstChildElement("geometry"))
+          for (XMLElement* shape = g->FirstChildElement("capsule"); shape; shape = shape->NextSiblingElement("capsule")) {
+            shape->SetName("cylinder");
+            ++audit.capsules;
+          }
+  if (audit.capsules > 0) {
+    tinyxml2::XMLPrinter printer;
+    doc.Print(&printer);
+    audit.urdfdom_xml.assign(printer.CStr(), static_cast<std::size_t>(printer.CStrSize() > 0 ? printer.CStrSize() - 1 : 0));
+  }
   return audit;
 }
 

@@ -2,7 +2,8 @@
 // (issue 16, item 2). urdfdom drops a link's collision elements without failing when anything in the
 // link does not parse (a NaN, "1e999", "0.001 " with a space, "1 2" for a 3-vector, an unnamed
 // <material>, an unknown geometry such as <capsule>, a bad mass), and it accepts finite absurd values
-// (an origin at 1e300 m) that move geometry out of reach just as surely. loadModelFromString compares
+// (an origin at 1e300 m) that move geometry out of reach just as surely. It also reads URDF 1.1
+// <capsule> (issue 12, item 2), handing urdfdom the same document with capsules as cylinders. loadModelFromString compares
 // the counts found here with what urdfdom returned and refuses the model, naming every affected link
 // and the reason found, in one message.
 //
@@ -33,6 +34,12 @@ struct UrdfAudit {
   /// Problems outside links (joints, collision elements outside every link, nested links,
   /// duplicate or unnamed links): always fatal. Each names its element and line.
   std::vector<std::string> problems;
+  /// URDF 1.1 <capsule radius length> elements (collision and visual), which urdfdom 3 does not
+  /// know. When there are any, `urdfdom_xml` is the document with each of them written as a
+  /// <cylinder> of the same radius and length, for urdfdom to parse; the loader reads a cylinder as
+  /// the capsule around its axis, which is exactly the capsule (radius r, core length = length).
+  int capsules = 0;
+  std::string urdfdom_xml;
 };
 
 /// Reads `xml` and fills the audit. Never throws for bad input (only std::bad_alloc).

@@ -7,7 +7,10 @@
 #include <urdf_parser/urdf_parser.h>
 #include <yaml-cpp/yaml.h>
 
+#include <tinyxml2.h>
+
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -150,11 +153,52 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
                            "' must be a pair [segment_a, segment_b]");
         config.exclude.emplace_back(item[0].as<std::string>(), item[1].as<std::string>());
       }
+    } else if (key == "cylinder_as") {
+      const std::string v = kv.second.IsScalar() ? kv.second.as<std::string>() : YAML::Dump(kv.second);
+      if (v != "capsule")
+        throw ModelError(yaml_path + ": cylinder_as '" + v +
+                         "' is not a cylinder policy; 'capsule' (the capsule around the cylinder's axis) is the "
+                         "only one until the mesh fitter reads cylinders as shapes to fit");
+      config.cylinder_as = v;
+    } else if (key == "srdf") {
+      if (!kv.second.IsScalar() || kv.second.as<std::string>().empty())
+        throw ModelError(yaml_path + ": srdf must be the path of an SRDF file, got '" + YAML::Dump(kv.second) + "'");
+      std::string path = kv.second.as<std::string>();
+      if (path[0] != '/') {  // relative to the configuration's folder
+        const auto slash = yaml_path.rfind('/');
+        if (slash != std::string::npos) path = yaml_path.substr(0, slash + 1) + path;
+      }
+      config.srdf = path;
+      config.srdf_disabled = loadSrdfDisabledCollisions(path);
     } else {
-      throw ModelError(yaml_path + ": unknown key '" + key + "' (expected exclude_adjacent, exclude)");
+      throw ModelError(yaml_path + ": unknown key '" + key +
+                       "' (expected exclude_adjacent, exclude, srdf, cylinder_as)");
     }
   }
   return config;
+}
+
+std::vector<SrdfPair> loadSrdfDisabledCollisions(const std::string& srdf_path) {
+  if (const std::string why = common::inputFileProblem(srdf_path); !why.empty()) throw ModelError("SRDF file " + why);
+  tinyxml2::XMLDocument doc;
+  if (doc.LoadFile(srdf_path.c_str()) != tinyxml2::XML_SUCCESS) {
+    const char* e = doc.ErrorStr();
+    throw ModelError(srdf_path + ": cannot read SRDF: " + (e ? e : "XML error"));
+  }
+  const tinyxml2::XMLElement* robot = doc.RootElement();
+  if (!robot || std::strcmp(robot->Name(), "robot") != 0)
+    throw ModelError(srdf_path + ": the top element must be <robot>, found <" + (robot ? robot->Name() : "") + ">");
+  std::vector<SrdfPair> pairs;
+  for (const auto* d = robot->FirstChildElement("disable_collisions"); d; d = d->NextSiblingElement("disable_collisions")) {
+    const char* l1 = d->Attribute("link1");
+    const char* l2 = d->Attribute("link2");
+    const std::string where = srdf_path + ":" + std::to_string(d->GetLineNum());
+    if (!l1 || !l2 || !*l1 || !*l2)
+      throw ModelError(where + ": <disable_collisions> needs link1 and link2");
+    const char* reason = d->Attribute("reason");
+    pairs.push_back({l1, l2, reason ? reason : "", where});
+  }
+  return pairs;
 }
 
 CollisionConfig loadCollisionConfigFor(const std::string& urdf_path, const std::string& collision_path) {
@@ -184,7 +228,7 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
   std::vector<std::string> problems = audit.problems;
   urdf::ModelInterfaceSharedPtr urdf_model;
   try {
-    urdf_model = urdf::parseURDF(urdf_xml);
+    urdf_model = urdf::parseURDF(audit.capsules > 0 ? audit.urdfdom_xml : urdf_xml);
   } catch (const std::exception& e) {
     problems.push_back(std::string("urdfdom: ") + e.what());
   }
@@ -355,6 +399,17 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
   };
 
   std::set<std::pair<int, int>> excluded;
+  // SRDF <disable_collisions>: both links must be links of this robot; a link without collision
+  // geometry has no segment, so its entries exclude nothing (MoveIt lists every link pair).
+  for (const auto& d : config.srdf_disabled) {
+    for (const std::string* name : {&d.link1, &d.link2})
+      if (model.linkIndex(*name) < 0)
+        fail(d.where, "disable_collisions names link '" + *name + "', which " + origin + " does not have");
+    const int a = model.segmentIndex(d.link1);
+    const int b = model.segmentIndex(d.link2);
+    if (a >= 0 && b >= 0 && a != b && a < model.num_robot_segments && b < model.num_robot_segments)
+      excluded.insert({std::min(a, b), std::max(a, b)});
+  }
   for (const auto& [na, nb] : config.exclude) {
     const int a = model.segmentIndex(na);
     const int b = model.segmentIndex(nb);
@@ -365,13 +420,33 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     if (a == b) fail(config.source, "exclude pair [" + na + ", " + nb + "]: a segment is never paired with itself");
     excluded.insert({std::min(a, b), std::max(a, b)});
   }
+  // Rigid bodies: links joined by fixed joints move together, so their segments keep one distance
+  // that no joint can change. Never checked, whatever the configuration says.
+  std::vector<int> body_of_link(model.links.size());
+  for (std::size_t l = 0; l < model.links.size(); ++l) {
+    const Link& link = model.links[l];
+    body_of_link[l] = (link.parent >= 0 && link.type == JointType::kFixed) ? body_of_link[link.parent] : static_cast<int>(l);
+  }
+  // Adjacency (issue 12, item 4), looking through links without collision geometry as the field
+  // does: a segment and the nearest segment up its chain (joined by one joint, or through links
+  // without geometry), and two segments whose links are children of the same link without
+  // geometry (siblings, e.g. two hip links under a bare pelvis). Deliberately no further: cousins
+  // through longer geometry-less chains (two arms under a bare torso) stay checked.
+  auto siblingsUnderBareParent = [&](int a, int b) {
+    const int pa = model.links[model.segments[a].link].parent;
+    return pa >= 0 && pa == model.links[model.segments[b].link].parent && segment_of_link[pa] < 0;
+  };
+  auto adjacent = [&](int a, int b) {
+    return segmentParent(a) == b || segmentParent(b) == a || siblingsUnderBareParent(a, b);
+  };
   const int nseg = static_cast<int>(model.segments.size());
   for (int a = 0; a < nseg; ++a) {
     for (int b = a + 1; b < nseg; ++b) {
       if (model.segments[a].body_schema_slot) continue;  // slot-slot pairs are never checked
       if (!model.segments[b].body_schema_slot) {
         if (excluded.count({a, b})) continue;
-        if (config.exclude_adjacent && (segmentParent(a) == b || segmentParent(b) == a)) continue;
+        if (body_of_link[model.segments[a].link] == body_of_link[model.segments[b].link]) continue;
+        if (config.exclude_adjacent && adjacent(a, b)) continue;
       }
       model.pairs.push_back({a, b});
     }

@@ -490,7 +490,7 @@ TEST(UrdfLoaderAccounting, OneMessageNamesEveryAffectedLink) {
 <link name="base"><collision><origin xyz="nan 0 0"/><geometry><sphere radius="0.1"/></geometry></collision></link>
 <link name="arm"><visual><geometry><sphere radius="0.1"/></geometry><material/></visual>
   <collision><geometry><sphere radius="0.1"/></geometry></collision></link>
-<link name="hand"><collision><geometry><capsule radius="0.1" length="0.2"/></geometry></collision></link>
+<link name="hand"><collision><geometry><cone radius="0.1" length="0.2"/></geometry></collision></link>
 <link name="foot"><inertial><mass value="1e999"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>
   <collision><geometry><sphere radius="0.1"/></geometry></collision></link>
 <link name="head"><collision><geometry><sphere radius="0.1 "/></geometry></collision></link>
@@ -500,7 +500,7 @@ TEST(UrdfLoaderAccounting, OneMessageNamesEveryAffectedLink) {
 <joint name="j4" type="fixed"><parent link="base"/><child link="head"/></joint></robot>)";
   expectModelError([&] { loadModelFromString(xml, CollisionConfig{}, "many.urdf"); },
                    {"many.urdf", "5 problems", "link 'base'", "'nan' is not a finite number", "link 'arm'",
-                    "<material> (line 3) has no name", "link 'hand'", "unknown geometry <capsule>", "link 'foot'",
+                    "<material> (line 3) has no name", "link 'hand'", "unknown geometry <cone>", "link 'foot'",
                     "mass> value '1e999'", "link 'head'", "radius '0.1 '", "'0.1 ' is not a number"});
 }
 

@@ -4,15 +4,23 @@
 //   sphere              -> sphere
 //   cylinder (r, L)     -> capsule of radius r whose core segment is the cylinder's axis, length L,
 //                          centred on the collision origin (the capsule is L + 2r long overall)
+//   capsule (r, L)      -> URDF 1.1 <capsule radius length> (urdfdom 3 does not know it): the same
+//                          capsule, core length L along the element's z axis
 //   box (x, y, z)       -> the enclosing capsule along the box's longest axis, with a warning
 //   mesh                -> refused: a std::runtime_error says which link and how to fix it
 // A link with collision elements is one segment named like the link.
 //
 // Which pairs are checked is configuration (a YAML file next to the robot, <robot>.collision.yaml):
-//   exclude_adjacent: true     # default; pairs of segments on links joined by one joint (or by a chain
-//                              # of fixed joints and collision-free links) are never checked
+//   exclude_adjacent: true     # default; pairs of segments on adjacent links are never checked:
+//                              # joined by one joint or by a chain of links without collision
+//                              # geometry, or siblings under a parent link without geometry
 //   exclude:                   # further pairs that cannot collide or must not be checked
 //     - [l_thigh, r_thigh]
+//   srdf: robot.srdf           # optional, relative to this file: its <disable_collisions> pairs are
+//                              # excluded too (entries naming links without geometry exclude nothing)
+//   cylinder_as: capsule       # the cylinder policy (the only one until the mesh fitter exists)
+// Segments on links joined by fixed joints form one rigid body and are never checked against each
+// other, whatever the configuration says (no joint can change their distance).
 // Every error names the file, the element and the bad value.
 #pragma once
 
@@ -31,11 +39,25 @@ class ModelError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// One <disable_collisions link1 link2 reason> entry of an SRDF.
+struct SrdfPair {
+  std::string link1, link2, reason;
+  std::string where;  ///< "file:line", for error messages
+};
+
 struct CollisionConfig {
   bool exclude_adjacent = true;
   std::vector<std::pair<std::string, std::string>> exclude;
+  std::string srdf;                        ///< SRDF path ("" if none)
+  std::vector<SrdfPair> srdf_disabled;     ///< its disable_collisions entries
+  std::string cylinder_as = "capsule";     ///< cylinder policy
   std::string source = "<defaults>";  ///< where it was read from, for error messages
 };
+
+/// Reads the <disable_collisions> entries of an SRDF (tinyxml2; other SRDF elements are ignored).
+/// Throws ModelError naming the file (and line) for an unreadable file, a top element that is not
+/// <robot>, or an entry without link1 / link2. Link names are checked against the URDF by loadModel.
+std::vector<SrdfPair> loadSrdfDisabledCollisions(const std::string& srdf_path);
 
 /// Reads a collision configuration YAML. Throws ModelError naming the file and the bad entry.
 CollisionConfig loadCollisionConfig(const std::string& yaml_path);
