@@ -3,10 +3,12 @@
 // points, and the closest pair, as CSV or JSON.
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
+#include "reflex/control/pair_sampling.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "reflex/common/files.hpp"
 
 #include <CLI/CLI.hpp>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -110,9 +112,65 @@ int run(int argc, char** argv) {
   app.add_option("--row", csv_row, "row of --csv to use (0 = first after the header)")->check(CLI::NonNegativeNumber);
   app.add_option("--format", format, "output format")->check(CLI::IsMember({"csv", "json"}));
   app.add_flag("--segments", list_only, "print only the segments and their primitives");
+  reflex::control::PairSamplingOptions sampling;
+  int sample_pairs = 0;
+  std::string write_path;
+  bool force = false;
+  app.add_option("--sample-pairs", sample_pairs,
+                 "propose which pairs to check: sample N random configurations within the limits and print a "
+                 "commented collision configuration (always in collision: excluded; never close: commented out)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--seed", sampling.seed, "random seed of --sample-pairs (same seed, same proposal)");
+  app.add_option("--near", sampling.near_distance, "--sample-pairs: 'never close' means never closer than this (m)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--always-fraction", sampling.always_fraction,
+                 "--sample-pairs: 'always in collision' means penetrating in at least this fraction of samples")
+      ->check(CLI::Range(1e-9, 1.0));
+  app.add_option("--write", write_path, "--sample-pairs: write the proposal to this file instead of standard output");
+  app.add_flag("--force", force, "--write may replace an existing file");
   CLI11_PARSE(app, argc, argv);
 
   try {
+    if (sample_pairs > 0) {
+      sampling.samples = sample_pairs;
+      const reflex::control::CollisionConfig user_config = reflex::control::loadCollisionConfigFor(urdf_path, config_path);
+      reflex::control::CollisionConfig every;  // the user's cylinder policy; no exclusions at all
+      every.cylinder_as = user_config.cylinder_as;
+      every.exclude_adjacent = false;
+      reflex::control::CollisionConfig non_adjacent = every;
+      non_adjacent.exclude_adjacent = true;
+      const Model all = reflex::control::loadModel(urdf_path, every);
+      const Model nonadj = reflex::control::loadModel(urdf_path, non_adjacent);
+      if (!write_path.empty() && !force && ::access(write_path.c_str(), F_OK) == 0)
+        throw std::runtime_error("--write '" + write_path + "' exists; give --force to replace it");
+      int shown = -1;  // progress every 10 %
+      const auto report = reflex::control::samplePairs(all, nonadj, sampling, [&shown](double f) {
+        const int tenth = static_cast<int>(f * 10.0 + 1e-9);
+        if (tenth == shown) return;
+        shown = tenth;
+        std::fprintf(stderr, "reflex_inspect: sampling %d %%\n", 10 * tenth);
+      });
+      const std::string yaml = reflex::control::exclusionYaml(report);
+      if (write_path.empty()) {
+        std::fputs(yaml.c_str(), stdout);
+      } else {
+        std::ofstream out(write_path);
+        out << yaml;
+        out.flush();
+        if (!out) throw std::runtime_error("cannot write '" + write_path + "'");
+      }
+      int always = 0, never = 0;
+      for (const auto& p : report.pairs) {
+        always += p.verdict == reflex::control::PairVerdict::kAlwaysInCollision;
+        never += p.verdict == reflex::control::PairVerdict::kNeverClose;
+      }
+      std::fprintf(stderr, "reflex_inspect: %s: %d samples: %d pairs always in collision (excluded), %d never "
+                   "closer than %.0f mm (commented out), %d checked, %zu adjacent%s%s\n",
+                   report.robot.c_str(), sampling.samples, always, never, sampling.near_distance * 1000.0,
+                   static_cast<int>(report.pairs.size()) - always - never, report.adjacent.size(),
+                   write_path.empty() ? "" : "; written to ", write_path.c_str());
+      return 0;
+    }
     const reflex::control::CollisionConfig config = reflex::control::loadCollisionConfigFor(urdf_path, config_path);
     std::vector<std::string> warnings;
     const Model model = reflex::control::loadModel(urdf_path, config, &warnings);

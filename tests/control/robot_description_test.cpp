@@ -13,6 +13,7 @@
 // every case in it.
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
+#include "reflex/control/pair_sampling.hpp"
 #include "reflex/control/urdf_loader.hpp"
 
 #include <gmock/gmock.h>
@@ -20,6 +21,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <map>
 #include <tuple>
 #include <set>
 #include <string>
@@ -287,6 +289,79 @@ TEST(PairRules, SrdfErrorsNameTheFileLineAndLink) {
               HasSubstr("missing.srdf"));
   const std::string yaml = tempFile("emptysrdf.collision.yaml", "srdf: \"\"\n");
   EXPECT_THAT(modelErrorOf([&] { loadCollisionConfig(yaml); }), HasSubstr("srdf must be the path of an SRDF file"));
+}
+
+// ---- the sampling tool ------------------------------------------------------------------------
+
+/// A robot whose pair verdicts are known by construction (distances in metres, spheres only):
+///   base: r 0.1 at the origin
+///   l1 (revolute x at (0,0,1), +-0.05 rad): r 0.01 at its origin
+///   l2 (revolute z on l1): r 0.2 at (0,0,-0.95): its centre stays within 0.07 of the base's
+///        centre (0.95 sin 0.05 sideways, 1 - 0.95 cos(q) up), so base-l2 always penetrate (0.07 < 0.3)
+///   l3 (revolute z at (0,2,0)): r 0.1 at its origin, 2 m away from everything: never close
+///   l4 (revolute y at (0.5,0,0), +-pi): r 0.05 at (0,0,0.45): sweeps a circle of radius 0.45 in the
+///        xz plane that passes 0.085 from l2's centre (at q = -pi/2): sometimes in collision with l2,
+///        never within 0.55 of l1 or 1.5 of l3.
+std::string verdictRobot() {
+  auto link = [](const std::string& n, const std::string& xyz, double r) {
+    return "<link name=\"" + n + "\"><collision><origin xyz=\"" + xyz + "\"/><geometry><sphere radius=\"" +
+           std::to_string(r) + "\"/></geometry></collision></link>\n";
+  };
+  auto joint = [](const std::string& n, const std::string& parent, const std::string& child, const std::string& xyz,
+                  const std::string& axis, double lim) {
+    return "<joint name=\"" + n + "\" type=\"revolute\"><parent link=\"" + parent + "\"/><child link=\"" + child +
+           "\"/><origin xyz=\"" + xyz + "\"/><axis xyz=\"" + axis + "\"/><limit lower=\"" + std::to_string(-lim) +
+           "\" upper=\"" + std::to_string(lim) + "\" velocity=\"1\" effort=\"1\"/></joint>\n";
+  };
+  return "<?xml version=\"1.0\"?><robot name=\"verdicts\">\n" + link("base", "0 0 0", 0.1) + link("l1", "0 0 0", 0.01) +
+         link("l2", "0 0 -0.95", 0.2) + link("l3", "0 0 0", 0.1) + link("l4", "0 0 0.45", 0.05) +
+         joint("j1", "base", "l1", "0 0 1", "1 0 0", 0.05) + joint("j2", "l1", "l2", "0 0 0", "0 0 1", 1.0) +
+         joint("j3", "base", "l3", "0 2 0", "0 0 1", 1.0) + joint("j4", "base", "l4", "0.5 0 0", "0 1 0", 3.14159) +
+         "</robot>\n";
+}
+
+TEST(PairSampling, VerdictsMatchTheConstruction) {
+  const std::string urdf = verdictRobot();
+  CollisionConfig every;
+  every.exclude_adjacent = false;
+  const Model all = loadModelFromString(urdf, every, "verdicts.urdf");
+  const Model nonadj = loadModelFromString(urdf, CollisionConfig{}, "verdicts.urdf");
+  PairSamplingOptions o;
+  o.samples = 4000;
+  const PairSamplingReport r = samplePairs(all, nonadj, o);
+  std::map<std::pair<std::string, std::string>, PairVerdict> got;
+  for (const auto& p : r.pairs) got[{p.a, p.b}] = p.verdict;
+  const std::map<std::pair<std::string, std::string>, PairVerdict> want = {
+      {{"base", "l2"}, PairVerdict::kAlwaysInCollision}, {{"l1", "l3"}, PairVerdict::kNeverClose},
+      {{"l1", "l4"}, PairVerdict::kNeverClose},          {{"l2", "l3"}, PairVerdict::kNeverClose},
+      {{"l2", "l4"}, PairVerdict::kChecked},             {{"l3", "l4"}, PairVerdict::kNeverClose}};
+  EXPECT_EQ(got, want);
+  const std::vector<std::pair<std::string, std::string>> adjacent = {
+      {"base", "l1"}, {"base", "l3"}, {"base", "l4"}, {"l1", "l2"}};
+  EXPECT_EQ(r.adjacent, adjacent);
+  for (const auto& p : r.pairs) {
+    if (p.a == "base" && p.b == "l2") {
+      EXPECT_EQ(p.in_collision, o.samples);
+      EXPECT_GT(p.max_distance, -0.3 + 0.0) << "centres at most 0.07 apart";
+      EXPECT_LT(p.max_distance, 0.07 - 0.3 + 1e-9);
+    }
+    if (p.a == "l2" && p.b == "l4") {
+      // l4's point is within 0.25 of l2's centre on an arc of roughly 1.1 rad of the 2 pi it sweeps.
+      EXPECT_GT(p.in_collision, o.samples / 20);
+      EXPECT_LT(p.in_collision, o.samples * 2 / 5);
+      EXPECT_LT(p.min_distance, 0.085 - 0.25 + 0.02);
+    }
+  }
+  // The proposal is a collision configuration the loader reads, excluding exactly the always pair.
+  const std::string path = tempFile("verdicts.collision.yaml", exclusionYaml(r));
+  const CollisionConfig proposed = loadCollisionConfig(path);
+  const std::vector<std::pair<std::string, std::string>> excluded = {{"base", "l2"}};
+  EXPECT_EQ(proposed.exclude, excluded);
+  EXPECT_TRUE(proposed.exclude_adjacent);
+  // Same seed, same report; bad options are named.
+  EXPECT_EQ(exclusionYaml(samplePairs(all, nonadj, o)), exclusionYaml(r));
+  o.samples = 0;
+  EXPECT_THROW(samplePairs(all, nonadj, o), std::invalid_argument);
 }
 
 }  // namespace

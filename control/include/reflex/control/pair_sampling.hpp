@@ -1,0 +1,62 @@
+// Which pairs to check, found by sampling (issue 12, item 4), as MoveIt's setup assistant does it:
+// N random configurations within the joint limits; every pair of robot segments that the adjacency
+// rule does not already drop is classified by the distances it takes over the samples:
+//   always in collision  penetrating (distance < 0) in at least `always_fraction` of the samples;
+//                        checking it would hold the robot in the red zone (e-stop) from the start;
+//   never close          never closer than `near_distance` (default d_a = 40 mm, where avoidance
+//                        begins) in any sample: avoidance would never act on it;
+//   checked              everything else.
+// The result is written as a commented exclusion list for the user to review: always-in-collision
+// pairs as active entries, never-close pairs COMMENTED OUT (random sampling can miss the rare
+// configuration where they meet, and a dropped pair is protection lost: the user opts in), adjacent
+// pairs listed for information.
+#pragma once
+
+#include "reflex/control/model.hpp"
+
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace reflex::control {
+
+struct PairSamplingOptions {
+  int samples = 10000;            ///< random configurations (> 0)
+  std::uint64_t seed = 1;         ///< the same seed gives the same report
+  double always_fraction = 0.95;  ///< in (0, 1]
+  double near_distance = 0.04;    ///< m, >= 0
+};
+
+enum class PairVerdict { kChecked, kAlwaysInCollision, kNeverClose };
+
+struct SampledPair {
+  std::string a, b;  ///< segment names
+  int in_collision = 0;  ///< samples with distance < 0
+  double min_distance = std::numeric_limits<double>::infinity();
+  double max_distance = -std::numeric_limits<double>::infinity();
+  PairVerdict verdict = PairVerdict::kChecked;
+};
+
+struct PairSamplingReport {
+  std::string robot;
+  PairSamplingOptions options;
+  std::vector<SampledPair> pairs;                              ///< non-adjacent robot pairs
+  std::vector<std::pair<std::string, std::string>> adjacent;  ///< dropped by the adjacency rule
+};
+
+/// Samples `options.samples` configurations uniformly within the limits (continuous joints in
+/// [-pi, pi]). `all_pairs` is the robot loaded with exclude_adjacent false and no exclusions;
+/// `non_adjacent` the same robot with exclude_adjacent true (their difference is the adjacent set).
+/// `progress` (optional) is called with the fraction done, at most ~100 times.
+/// Throws std::invalid_argument naming a bad option.
+PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent, const PairSamplingOptions& options,
+                               const std::function<void(double)>& progress = {});
+
+/// The report as a collision-configuration YAML (exclude_adjacent + exclude), every entry commented
+/// with its reason and the distances seen.
+std::string exclusionYaml(const PairSamplingReport& report);
+
+}  // namespace reflex::control
