@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
+#include <vector>
 
 namespace reflex::control {
 namespace {
@@ -69,11 +71,27 @@ void expectSafeAndSmooth(const std::string& name) {
   }
 }
 
+// The paper's seven experiments (Sec. 8.2.1 to 8.5.2), by name: the loops below would pass on an
+// empty or shortened list (issue 17, item 6).
+TEST(Experiments, TheListHoldsThePapersSevenExperiments) {
+  std::vector<std::string> names;
+  for (const auto& s : builtinScenarios()) names.push_back(s.name);
+  const std::vector<std::string> paper = {"target_inside_body", "through_body",  "one_vs_three_dof", "crossing_arms",
+                                          "walking_target_behind", "grasped_bar", "occlusion"};
+  EXPECT_EQ(names, paper);
+}
+
 TEST(Experiments, EveryScenarioIsSafeAndSmoothWithAvoidance) {
-  for (const auto& s : builtinScenarios()) expectSafeAndSmooth(s.name);
+  int ran = 0;
+  for (const auto& s : builtinScenarios()) {
+    expectSafeAndSmooth(s.name);
+    ++ran;
+  }
+  EXPECT_EQ(ran, 7);
 }
 
 TEST(Experiments, WithoutAvoidanceTheSegmentsPenetrate) {
+  ASSERT_EQ(builtinScenarios().size(), 7u);
   for (const auto& s : builtinScenarios()) {
     const SimResult off = run(s.name, AvoidanceMode::kOff);
     if (s.name == "occlusion") {
