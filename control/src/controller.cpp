@@ -98,8 +98,9 @@ double blendingCoefficient(double d, double d_a, double d_b) {
 }
 
 Zone zoneOf(double d, const ControllerParams& p) {
+  // Sec. 7.1: red below d_r (the e-stop's own test, d < d_r); Eq. 13: f = 1 up to and including d_b.
   if (!(d >= p.d_r)) return Zone::kRed;
-  if (d < p.d_b) return Zone::kOrange;
+  if (d <= p.d_b) return Zone::kOrange;
   if (d < p.d_a) return Zone::kYellow;
   return Zone::kFree;
 }

@@ -6,9 +6,15 @@
 #include "reflex/control/redundancy.hpp"
 #include "reflex/control/simulation.hpp"
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <array>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <string>
 #include <cstdio>
 #include <random>
 
@@ -49,6 +55,36 @@ TEST(Zones, Boundaries) {
   EXPECT_EQ(zoneOf(0.009, p), Zone::kOrange);
   EXPECT_EQ(zoneOf(0.004, p), Zone::kRed);
   EXPECT_EQ(zoneOf(std::nan(""), p), Zone::kRed);
+}
+
+// Issue 17, item 3: the exact boundary values, as the paper puts them (Sec. 7.1: the red zone is a
+// distance LESS than d_r; Eq. 13: f(d) = 1 for d <= d_b, so d_b itself is orange; f(d_a) = 0, so d_a
+// is free), and control.idl's documentation of the Zone enumerators says the same.
+TEST(Zones, ExactBoundariesFollowThePaperAndTheIdl) {
+  ControllerParams p;
+  const double inf = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(zoneOf(std::nextafter(p.d_r, 0.0), p), Zone::kRed);
+  EXPECT_EQ(zoneOf(p.d_r, p), Zone::kOrange);
+  EXPECT_EQ(zoneOf(p.d_b, p), Zone::kOrange);
+  EXPECT_DOUBLE_EQ(blendingCoefficient(p.d_b, p.d_a, p.d_b), 1.0);
+  EXPECT_EQ(zoneOf(std::nextafter(p.d_b, inf), p), Zone::kYellow);
+  EXPECT_EQ(zoneOf(std::nextafter(p.d_a, 0.0), p), Zone::kYellow);
+  EXPECT_EQ(zoneOf(p.d_a, p), Zone::kFree);
+  EXPECT_DOUBLE_EQ(blendingCoefficient(p.d_a, p.d_a, p.d_b), 0.0);
+  // control.idl: one comment per enumerator, with these inequalities.
+  std::ifstream idl(std::string(REFLEX_SOURCE_DIR) + "/idl/control.idl");
+  ASSERT_TRUE(idl.good());
+  std::map<std::string, std::string> comment;
+  for (std::string line; std::getline(idl, line);) {
+    for (const char* e : {"ZONE_FREE", "ZONE_YELLOW", "ZONE_ORANGE", "ZONE_RED"}) {
+      const auto at = line.find(e);
+      if (at != std::string::npos && line.find("//") != std::string::npos) comment[e] = line.substr(line.find("//"));
+    }
+  }
+  EXPECT_THAT(comment["ZONE_FREE"], ::testing::HasSubstr("d >= d_a"));
+  EXPECT_THAT(comment["ZONE_YELLOW"], ::testing::HasSubstr("d_b < d < d_a"));
+  EXPECT_THAT(comment["ZONE_ORANGE"], ::testing::HasSubstr("d_r <= d <= d_b"));
+  EXPECT_THAT(comment["ZONE_RED"], ::testing::HasSubstr("d < d_r"));
 }
 
 TEST(VirtualForces, Equations17And18OnHandMadePairs) {
