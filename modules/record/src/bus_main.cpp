@@ -1,0 +1,76 @@
+// reflex_bus: what runs on the Reflex bus, like `ros2 node list` / `ros2 topic hz` (issue 17, item 10).
+//   reflex_bus list [--window S]            processes from their heartbeats: host, pid, modules, state
+//   reflex_bus hz [TOPIC...] [--window S]    samples per second of every topic (or the ones named)
+// Reads only: it publishes nothing (not even a heartbeat of its own).
+#include "reflex/record/bus_survey.hpp"
+#include "reflex/record/record_file.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include "reflex/common/files.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+namespace {
+
+void printProcesses(const reflex::record::BusSurvey& s) {
+  std::printf("# domain %d, %zu process(es) seen in %.1f s\n", s.domain, s.processes.size(), s.window_s);
+  std::printf("%-16s %8s  %-12s %-24s %8s %6s  %s\n", "HOST", "PID", "STATE", "MODULE", "AGE_S", "BEATS", "DETAIL");
+  for (const auto& p : s.processes)
+    for (const auto& m : p.modules)
+      std::printf("%-16s %8d  %-12s %-24s %8.2f %6d  %s\n", p.host.c_str(), p.pid, m.state.c_str(),
+                  m.module_name.c_str(), m.age_s, m.heartbeats, m.detail.c_str());
+}
+
+void printTopics(const reflex::record::BusSurvey& s) {
+  std::printf("# domain %d, rates over %.1f s\n", s.domain, s.window_s);
+  std::printf("%-32s %-36s %10s %9s %8s\n", "TOPIC", "TYPE", "HZ", "SAMPLES", "WRITERS");
+  for (const auto& t : s.topics)
+    std::printf("%-32s %-36s %10.1f %9llu %8d\n", t.topic.c_str(), t.type.c_str(), t.hz,
+                static_cast<unsigned long long>(t.samples), t.writers);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"reflex_bus: what runs on the Reflex bus (reads only).\n"
+               "  reflex_bus list [--window 2]                   processes and modules from their heartbeats\n"
+               "  reflex_bus hz [reflex/joint_state ...] [--window 2]   samples per second of every topic"};
+  app.require_subcommand(1);
+  double window = 2.0;
+  int domain = -1;
+  std::string profiles;
+  std::vector<std::string> topics;
+  auto* list = app.add_subcommand("list", "live processes and their modules (from reflex/heartbeat)");
+  auto* hz = app.add_subcommand("hz", "samples per second and matched writers of each topic");
+  hz->add_option("topic", topics, "topics to measure (default: every Reflex topic); NAME or NAME:TYPE");
+  for (CLI::App* sub : {list, hz}) {
+    sub->add_option("-w,--window", window, "seconds to listen")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
+    sub->add_option("--domain", domain, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
+        ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
+    sub->add_option("--profiles", profiles, "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped one)");
+  }
+  CLI11_PARSE(app, argc, argv);
+  int status = 1;
+  try {
+    reflex::bus::BusConfig config;
+    config.module_name = "reflex_bus";
+    if (domain >= 0) config.domain_id = domain;
+    config.profiles_file = profiles;
+    const reflex::record::BusSurvey s = reflex::record::surveyBus(config, window, list->parsed() ? std::vector<std::string>{} : topics);
+    if (list->parsed()) printProcesses(s);
+    else printTopics(s);
+    status = 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "reflex_bus: error: %s\n", e.what());
+  }
+  if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
+    std::fprintf(stderr, "reflex_bus: error: %s\n", why.c_str());
+    return 1;
+  }
+  return status;
+}

@@ -1,0 +1,89 @@
+#include "reflex/record/bus_survey.hpp"
+
+#include "reflex/record/codecs.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <memory>
+#include <tuple>
+
+namespace reflex::record {
+namespace {
+
+const char* stateName(msg::ModuleState s) {
+  switch (s) {
+    case msg::STATE_CONFIGURING: return "CONFIGURING";
+    case msg::STATE_RUNNING: return "RUNNING";
+    case msg::STATE_STOPPING: return "STOPPING";
+    case msg::STATE_ERROR: return "ERROR";
+  }
+  return "?";
+}
+
+}  // namespace
+
+BusSurvey surveyBus(const bus::BusConfig& config, double window_s, const std::vector<std::string>& topics) {
+  if (!(window_s > 0.0) || !std::isfinite(window_s))
+    throw RecordError("listening window " + std::to_string(window_s) + " s must be positive");
+  std::vector<TopicSpec> specs;
+  if (topics.empty()) {
+    for (const TopicCodec* c : allCodecs()) specs.push_back({c->defaultTopic(), c});
+  } else {
+    for (const std::string& t : topics) specs.push_back(parseTopicSpec(t));
+  }
+  BusSurvey survey;
+  survey.window_s = window_s;
+  bus::Participant bus(config);
+  survey.domain = bus.domainId();
+
+  // Heartbeats: the modules' own profile (transient local), so every running module's last beat
+  // arrives at once; a module that died is gone with its writer (its liveliness lease, 1.5 s).
+  std::map<std::string, ModuleSeen> modules;
+  auto& hb = bus.makeReader<msg::Heartbeat>();
+  hb.onData([&](const msg::Heartbeat& h) {
+    ModuleSeen& m = modules[h.module_name()];
+    m.module_name = h.module_name();
+    m.host = h.host();
+    m.pid = h.pid();
+    m.state = stateName(h.state());
+    m.period_ms = h.period_ms();
+    m.detail = h.detail();
+    m.age_s = static_cast<double>(h.header().stamp_ns());  // stamp for now; made an age below
+    ++m.heartbeats;
+  });
+  // Topics: the recorder's best-effort volatile reader matches every writer and counts only what
+  // arrives in the window (no late-joiner history).
+  std::vector<std::pair<TopicSeen, bus::detail::ReaderBase*>> seen;
+  seen.reserve(specs.size());
+  for (const TopicSpec& s : specs) {
+    seen.push_back({TopicSeen{s.topic, s.codec->typeName()}, nullptr});
+    TopicSeen* t = &seen.back().first;
+    seen.back().second = &s.codec->subscribe(bus, s.topic, bus::kProfileRecord, [t](RecordEntry&&) { ++t->samples; });
+  }
+  bus.runFor(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(window_s)));
+
+  const double now_ns = static_cast<double>(bus::nowNs());
+  std::map<std::pair<std::string, int>, ProcessSeen> processes;
+  for (auto& [name, m] : modules) {
+    m.age_s = (now_ns - m.age_s) * 1e-9;
+    ProcessSeen& p = processes[{m.host, m.pid}];
+    p.host = m.host;
+    p.pid = m.pid;
+    p.modules.push_back(m);
+  }
+  for (auto& [key, p] : processes) survey.processes.push_back(std::move(p));
+  for (auto& [t, reader] : seen) {
+    t.hz = static_cast<double>(t.samples) / window_s;
+    t.writers = static_cast<int>(reader->stats().matched_writers);
+    survey.topics.push_back(t);
+  }
+  std::sort(survey.topics.begin(), survey.topics.end(),
+            [](const TopicSeen& a, const TopicSeen& b) { return a.topic < b.topic; });
+  return survey;
+}
+
+}  // namespace reflex::record

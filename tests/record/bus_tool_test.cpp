@@ -1,0 +1,100 @@
+// reflex_bus (issue 17, item 10), real processes on DDS domain 84: with a reflex_controller running,
+// `reflex_bus list` names it with the pid the test started it with and state RUNNING, and does not
+// list itself (it publishes nothing); `reflex_bus hz` measures the controller's streams at its
+// nominal rate (200 Hz: the period of the controller configuration; 2 Hz heartbeat) with one writer
+// each; an unknown topic is an error naming it.
+#include "../system/process.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace reflex::record {
+namespace {
+
+using namespace std::chrono_literals;
+const std::string kDomain = "84";
+
+std::string bin(const std::string& name) { return std::string(REFLEX_BIN_DIR) + "/" + name; }
+std::string tempPath(const std::string& name) { return ::testing::TempDir() + "bus_tool_test_" + name; }
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+int runTool(std::vector<std::string> argv, const std::string& log) {
+  testing::ChildProcess p(std::move(argv), log);
+  return p.wait(60s);
+}
+/// The whitespace-separated fields of the first line of `text` whose first field is `first`.
+std::vector<std::string> row(const std::string& text, const std::string& first) {
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    std::istringstream f(line);
+    std::vector<std::string> fields;
+    for (std::string w; f >> w;) fields.push_back(w);
+    if (!fields.empty() && fields[0] == first) return fields;
+  }
+  return {};
+}
+
+TEST(BusTool, ListsTheControllerAndMeasuresItsRates) {
+  testing::ChildProcess controller({bin("reflex_controller"), "--domain", kDomain, "--duration", "20"},
+                                   tempPath("controller.log"));
+  ASSERT_TRUE(controller.started());
+  std::this_thread::sleep_for(3s);  // start-up: model, peer probe (1 s), first cycles
+
+  const std::string list_log = tempPath("list.log");
+  ASSERT_EQ(runTool({bin("reflex_bus"), "list", "--domain", kDomain, "--window", "2"}, list_log), 0) << slurp(list_log);
+  const std::string list = slurp(list_log);
+  std::istringstream lines(list);
+  bool found = false;
+  for (std::string line; std::getline(lines, line);) {
+    std::istringstream f(line);
+    std::string host, pid, state, module;
+    f >> host >> pid >> state >> module;
+    if (module == "controller") {
+      found = true;
+      EXPECT_EQ(pid, std::to_string(controller.pid())) << line;
+      EXPECT_EQ(state, "RUNNING") << line;
+    }
+  }
+  EXPECT_TRUE(found) << list;
+  EXPECT_EQ(list.find("reflex_bus"), std::string::npos) << "the tool must not publish a heartbeat of its own:\n" << list;
+
+  const std::string hz_log = tempPath("hz.log");
+  ASSERT_EQ(runTool({bin("reflex_bus"), "hz", "--domain", kDomain, "--window", "3", "reflex/control_status",
+                     "reflex/heartbeat", "reflex/hand_targets"},
+                    hz_log),
+            0)
+      << slurp(hz_log);
+  const std::string hz = slurp(hz_log);
+  const auto status = row(hz, "reflex/control_status");
+  ASSERT_EQ(status.size(), 5u) << hz;
+  EXPECT_GT(std::stod(status[2]), 100.0) << hz;  // nominal 200 Hz; this machine is loaded
+  EXPECT_LT(std::stod(status[2]), 205.0) << hz;
+  EXPECT_EQ(status[4], "1") << hz;
+  const auto beat = row(hz, "reflex/heartbeat");
+  ASSERT_EQ(beat.size(), 5u) << hz;
+  EXPECT_GE(std::stod(beat[2]), 1.0) << hz;  // every 500 ms
+  EXPECT_LE(std::stod(beat[2]), 3.0) << hz;
+  const auto targets = row(hz, "reflex/hand_targets");
+  ASSERT_EQ(targets.size(), 5u) << hz;
+  EXPECT_EQ(targets[3], "0") << hz;  // nobody sends targets
+  EXPECT_EQ(row(hz, "reflex/joint_state").size(), 0u) << "only the topics asked for";
+}
+
+TEST(BusTool, BadInputIsNamed) {
+  const std::string log = tempPath("bad.log");
+  EXPECT_EQ(runTool({bin("reflex_bus"), "hz", "--domain", kDomain, "--window", "0.2", "no/such_topic"}, log), 1);
+  EXPECT_NE(slurp(log).find("no/such_topic"), std::string::npos) << slurp(log);
+  EXPECT_NE(runTool({bin("reflex_bus"), "list", "--window", "0"}, log), 0);
+  EXPECT_NE(slurp(log).find("--window"), std::string::npos) << slurp(log);
+  EXPECT_NE(runTool({bin("reflex_bus")}, log), 0);
+}
+
+}  // namespace
+}  // namespace reflex::record
