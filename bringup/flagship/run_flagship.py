@@ -154,8 +154,11 @@ def run_once(args, label, avoidance):
 
     procs = []
     try:
-        # Secure: the controller also runs through the authentication wait (stopped by SIGTERM anyway).
-        ctl_duration = length + 6.0 + (SECURE_READY_TIMEOUT_S if args.secure else 0.0)
+        # The controller is stopped by SIGTERM when vision has finished; its --duration is only a safety
+        # net should this runner die. Generous: on a loaded machine the vision replay falls behind real
+        # time (seen: a 36 s session took 41 s with seven builds running), and a controller that ended on
+        # its own duration first was reported as "died during the run".
+        ctl_duration = 2.0 * length + 60.0 + (SECURE_READY_TIMEOUT_S if args.secure else 0.0)
         ctl = [os.path.join(bindir, "reflex_controller")] + dds("controller") + [
             "--duration", "%.1f" % ctl_duration, "--log", os.path.join(out, "controller.csv")]
         if not avoidance:

@@ -13,12 +13,16 @@ namespace reflex::control {
 bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vector3d& a_L,
                              const Eigen::Vector3d& b_L, double radius, bool is_virtual,
                              const std::vector<std::string>& ignore) {
+  // A scenario that needs a link or segment this robot lacks is an error naming it, never a silent
+  // skip (issue 12, item 6: a missing l_hand used to drop the bar without a word).
   const int l = model.linkIndex(link);
-  if (l < 0) return false;
+  if (l < 0) throw ConfigError("the scenario attaches a segment to link '" + link + "', which robot '" + model.name + "' does not have");
   std::uint64_t mask = 0;
   for (const auto& name : ignore) {
     const int s = model.segmentIndex(name);
-    if (s < 0) return false;
+    if (s < 0 || s >= model.num_robot_segments)
+      throw ConfigError("the scenario's segment on '" + link + "' ignores segment '" + name + "', which robot '" +
+                        model.name + "' does not have");
     mask |= std::uint64_t{1} << s;
   }
   return attachControllerSegment(model, cm, data, slot, l, a_L, b_L, radius, mask, is_virtual, q).attached;

@@ -114,8 +114,10 @@ std::vector<Scenario> makeScenarios() {
     s.script = [](double t, ControlInput& in, ScenarioContext& ctx) {
       const Eigen::Vector3d object(0.45, 0.05, 0.92);
       const int cam = ctx.model.linkIndex("head_camera");
-      const Eigen::Vector3d camera = cam >= 0 ? Eigen::Vector3d(ctx.data.kin.X_W_L[cam].translation())
-                                              : Eigen::Vector3d(0.08, 0.03, 1.15);
+      if (cam < 0)  // the gaze line starts at the camera: no camera link, no experiment (never a guess)
+        throw ConfigError("scenario 'occlusion' needs the camera link 'head_camera', which robot '" + ctx.model.name +
+                          "' does not have");
+      const Eigen::Vector3d camera = ctx.data.kin.X_W_L[cam].translation();
       // The gaze line, re-attached every cycle as the head and object move; in the world frame.
       ctx.attach(1, ctx.model.links[0].name, camera, object, 0.03, true, {"head"});
       none(in, kLeft);

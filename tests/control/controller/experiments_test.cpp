@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -15,6 +17,7 @@ namespace {
 
 using testing::defaultControllerModel;
 using testing::shippedModel;
+using testing::kUrdf;
 
 SimResult run(const std::string& name, AvoidanceMode mode) {
   const Scenario* s = findScenario(name);
@@ -100,6 +103,46 @@ TEST(Experiments, WithoutAvoidanceTheSegmentsPenetrate) {
       EXPECT_GT(on.min_virtual_distance, 0.0) << "with avoidance the hand stays off the gaze line";
     } else {
       EXPECT_LT(off.min_distance, 0.0) << s.name << ": expected a collision without avoidance";
+    }
+  }
+}
+
+// Issue 12, item 6: a scenario that needs a link the robot lacks is an error naming it, never a
+// silent skip (the occlusion scenario used to put the camera at a fixed guess; a missing forearm
+// silently dropped the grasped bar).
+TEST(Experiments, AScenarioOnARobotWithoutItsLinksNamesThem) {
+  std::ifstream in(kUrdf);
+  const std::string urdf((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  auto renamed = [&](const std::string& from, const std::string& to) {
+    std::string out = urdf;
+    for (std::size_t at = 0; (at = out.find("\"" + from + "\"", at)) != std::string::npos; at += to.size() + 2)
+      out.replace(at, from.size() + 2, "\"" + to + "\"");
+    return out;
+  };
+  const CollisionConfig collision = loadCollisionConfig(defaultCollisionConfigPath(kUrdf));
+  {
+    const Model m = loadModelFromString(renamed("head_camera", "eye"), collision, "no_camera.urdf");
+    const ControllerModel cm = makeControllerModel(m, defaultControllerConfig());
+    try {
+      runScenario(m, cm, *findScenario("occlusion"));
+      ADD_FAILURE() << "no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_STREQ(e.what(), "scenario 'occlusion' needs the camera link 'head_camera', which robot 'asimo_like' does not have");
+    }
+  }
+  {
+    CollisionConfig c = collision;
+    for (auto& [a, b] : c.exclude) {
+      if (a == "l_forearm") a = "l_lower_arm";
+      if (b == "l_forearm") b = "l_lower_arm";
+    }
+    const Model m = loadModelFromString(renamed("l_forearm", "l_lower_arm"), c, "renamed_forearm.urdf");
+    const ControllerModel cm = makeControllerModel(m, defaultControllerConfig());
+    try {
+      runScenario(m, cm, *findScenario("grasped_bar"));
+      ADD_FAILURE() << "no ConfigError";
+    } catch (const ConfigError& e) {
+      EXPECT_STREQ(e.what(), "the scenario's segment on 'l_hand' ignores segment 'l_forearm', which robot 'asimo_like' does not have");
     }
   }
 }

@@ -21,7 +21,8 @@ struct ScenarioContext {
   const ControllerModel& cm;
   const Eigen::VectorXd& q;          ///< the robot's current configuration
   /// Attaches a capsule to a link (body schema, Sec. 8.5.1) or, with is_virtual, a virtual segment
-  /// (occlusion, Sec. 8.5.2). Endpoints in the link frame. Returns false for bad arguments, and for a
+  /// (occlusion, Sec. 8.5.2). Endpoints in the link frame. Throws ConfigError naming a link or an
+  /// ignored segment the robot does not have. Returns false for other bad arguments, and for a
   /// physical segment that findUnresolvableContact refuses (it overlaps, within d_r +
   /// estop_release_margin, a segment that no arm can move away from it; the slot stays as it was).
   bool attach(int slot, const std::string& link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L,
