@@ -224,8 +224,19 @@ ViewServer::ViewServer(const ServerOptions& options, std::vector<Channel> channe
   m.server.init_asio(ec);
   if (ec) throw ViewError("cannot start the WebSocket server: " + ec.message());
   m.server.set_reuse_addr(true);
-  m.server.listen(websocketpp::lib::asio::ip::tcp::endpoint(address, static_cast<unsigned short>(options.port)), ec);
+  const websocketpp::lib::asio::ip::tcp::endpoint endpoint(address, static_cast<unsigned short>(options.port));
   const std::string where = (address.is_v6() ? "[" + options.bind + "]" : options.bind) + ":" + std::to_string(options.port);
+  {
+    // websocketpp reports every bind failure as "Underlying Transport Error": bind once here with the
+    // same options to name the cause (address in use, not an address of this machine, permission).
+    websocketpp::lib::asio::io_service probe_io;
+    websocketpp::lib::asio::ip::tcp::acceptor probe(probe_io);
+    probe.open(endpoint.protocol(), addr_ec);
+    if (!addr_ec) probe.set_option(websocketpp::lib::asio::socket_base::reuse_address(true), addr_ec);
+    if (!addr_ec) probe.bind(endpoint, addr_ec);
+    if (addr_ec) throw ViewError("cannot listen on " + where + ": " + addr_ec.message() + " (--bind / --port)");
+  }
+  m.server.listen(endpoint, ec);
   if (ec) throw ViewError("cannot listen on " + where + ": " + ec.message() + " (--bind / --port)");
   const auto local = m.server.get_local_endpoint(addr_ec);
   if (addr_ec) throw ViewError("cannot read the listening port of " + where + ": " + addr_ec.message());
