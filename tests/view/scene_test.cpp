@@ -13,6 +13,8 @@
 //     schema's type, oneOf consts, time bounds); the schemas name the foxglove fields of the published
 //     definitions (written out again here);
 //   - bad input: NaN joints, unknown joint names, NaN targets / objects, unknown pair names.
+#include "../control/test_support.hpp"
+
 #include <reflex/control/geometry.hpp>
 #include <reflex/control/urdf_loader.hpp>
 #include <reflex/view/scene.hpp>
@@ -34,16 +36,6 @@ using nlohmann::json;
 std::string robotPath(const std::string& file) { return std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/" + file; }
 
 SceneModel asimo() { return loadSceneModel(robotPath("asimo_like.urdf"), "", ""); }
-
-Eigen::VectorXd randomQ(const control::Model& model, std::mt19937_64& rng) {
-  Eigen::VectorXd q(model.nq);
-  for (int i = 0; i < model.nq; ++i) {
-    const double lo = std::isfinite(model.q_lower[i]) ? model.q_lower[i] : -M_PI;
-    const double hi = std::isfinite(model.q_upper[i]) ? model.q_upper[i] : M_PI;
-    q[i] = std::uniform_real_distribution<double>(lo, hi)(rng);
-  }
-  return q;
-}
 
 Eigen::Vector3d vec(const json& j) { return {j.at("x").get<double>(), j.at("y").get<double>(), j.at("z").get<double>()}; }
 Eigen::Quaterniond quat(const json& j) {
@@ -100,7 +92,7 @@ std::set<std::string> keys(const json& properties) {
 SceneInput inputAt(const SceneModel& scene, std::mt19937_64& rng) {
   SceneInput in;
   in.stamp_ns = 1'700'000'000'123'456'789;
-  in.q = randomQ(scene.model, rng);
+  in.q = control::test::randomConfiguration(scene.model, rng);
   return in;
 }
 

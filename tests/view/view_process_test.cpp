@@ -115,24 +115,18 @@ class DiscoveryWatch final : public eprosima::fastdds::dds::DomainParticipantLis
   void on_participant_discovery(eprosima::fastdds::dds::DomainParticipant*,
                                 eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
     if (info.status != eprosima::fastrtps::rtps::ParticipantDiscoveryInfo::DISCOVERED_PARTICIPANT) return;
-    std::ostringstream guid;
-    guid << info.info.m_guid.guidPrefix;
     const std::lock_guard<std::mutex> lock(mutex_);
-    names_[guid.str()] = info.info.m_participantName.to_string();
+    names_[text(info.info.m_guid.guidPrefix)] = info.info.m_participantName.to_string();
   }
   void on_publisher_discovery(eprosima::fastdds::dds::DomainParticipant*,
                               eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) override {
-    std::ostringstream guid;
-    guid << info.info.guid().guidPrefix;
     const std::lock_guard<std::mutex> lock(mutex_);
-    writers_[guid.str()].insert(info.info.topicName().to_string());
+    writers_[text(info.info.guid().guidPrefix)].insert(info.info.topicName().to_string());
   }
   void on_subscriber_discovery(eprosima::fastdds::dds::DomainParticipant*,
                                eprosima::fastrtps::rtps::ReaderDiscoveryInfo&& info) override {
-    std::ostringstream guid;
-    guid << info.info.guid().guidPrefix;
     const std::lock_guard<std::mutex> lock(mutex_);
-    readers_[guid.str()].insert(info.info.topicName().to_string());
+    readers_[text(info.info.guid().guidPrefix)].insert(info.info.topicName().to_string());
   }
   /// GUID prefix of the participant that announced `name` ("" if none yet).
   std::string prefixOf(const std::string& name) {
@@ -151,6 +145,11 @@ class DiscoveryWatch final : public eprosima::fastdds::dds::DomainParticipantLis
   }
 
  private:
+  static std::string text(const eprosima::fastrtps::rtps::GuidPrefix_t& prefix) {
+    std::ostringstream out;
+    out << prefix;
+    return out.str();
+  }
   std::mutex mutex_;
   std::map<std::string, std::string> names_;
   std::map<std::string, std::set<std::string>> writers_, readers_;

@@ -58,20 +58,11 @@ int main(int argc, char** argv) {
     std::printf("reflex_view: stats %s\n", node.report().c_str());
     std::fflush(stdout);
     return 0;
-  } catch (const view_node::ViewError& e) {
-    std::fprintf(stderr, "reflex_view: error: %s\n", e.what());
-    return 2;
-  } catch (const control::ModelError& e) {
-    std::fprintf(stderr, "reflex_view: error: %s\n", e.what());
-    return 2;
-  } catch (const control::ConfigError& e) {
-    std::fprintf(stderr, "reflex_view: error: %s\n", e.what());
-    return 2;
-  } catch (const bus::BusError& e) {
-    std::fprintf(stderr, "reflex_view: error: %s\n", e.what());
-    return 2;
   } catch (const std::exception& e) {
+    // Set-up errors (server, robot files, bus configuration) are exit code 2; anything else 1.
+    const bool setup = dynamic_cast<const view_node::ViewError*>(&e) || dynamic_cast<const control::ModelError*>(&e) ||
+                       dynamic_cast<const control::ConfigError*>(&e) || dynamic_cast<const bus::BusError*>(&e);
     std::fprintf(stderr, "reflex_view: error: %s\n", e.what());
-    return 1;
+    return setup ? 2 : 1;
   }
 }
