@@ -337,6 +337,54 @@ TEST(Scene, MessagesValidateAgainstTheirSchemasAndSchemasNameTheFoxgloveFields) 
             (std::set<std::string>{"timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"}));
 }
 
+TEST(Scene, BodySchemaSegmentsAreDrawnInTheirParentLinkFrame) {
+  const SceneModel scene = asimo();
+  SceneData data(scene);
+  std::mt19937_64 rng(5);
+  SceneInput in = inputAt(scene, rng);
+  SchemaSegmentState bar;
+  bar.name = "grasped_bar";
+  bar.parent_link = "l_hand";
+  bar.a_L = {0.0, -0.15, -0.06};
+  bar.b_L = {0.0, 0.15, -0.06};
+  bar.radius = 0.02;
+  SchemaSegmentState gaze = bar, off = bar, unknown = bar, nan = bar;
+  gaze.name = "gaze_line";
+  gaze.parent_link = "head";
+  gaze.virtual_segment = true;
+  off.name = "off";
+  off.enabled = false;
+  unknown.name = "unknown";
+  unknown.parent_link = "no_such_link";
+  nan.name = "nan";
+  nan.b_L.x() = std::nan("");
+  in.schema_segments = {bar, gaze, off, unknown, nan};
+  ASSERT_TRUE(updateScene(scene, data, in));
+  const json su = json::parse(buildSceneUpdate(scene, data, in).dump());
+  std::map<std::string, json> by_id;
+  for (const json& e : su["entities"]) by_id[e["id"].get<std::string>()] = e;
+  for (const char* gone : {"schema/off", "schema/unknown", "schema/nan"}) EXPECT_EQ(by_id.count(gone), 0U) << gone;
+  ASSERT_EQ(by_id.count("schema/grasped_bar"), 1U);
+  ASSERT_EQ(by_id.count("schema/gaze_line"), 1U);
+  const Eigen::Isometry3d& X_W_hand = data.kin.X_W_L[scene.model.linkIndex("l_hand")];
+  const json& e = by_id["schema/grasped_bar"];
+  ASSERT_EQ(e["cylinders"].size(), 1U);
+  ASSERT_EQ(e["spheres"].size(), 2U);
+  EXPECT_LT((vec(e["spheres"][0]["pose"]["position"]) - X_W_hand * bar.a_L).norm(), 1e-12);
+  EXPECT_LT((vec(e["spheres"][1]["pose"]["position"]) - X_W_hand * bar.b_L).norm(), 1e-12);
+  EXPECT_NEAR(e["cylinders"][0]["size"]["z"].get<double>(), 0.30, 1e-12);
+  EXPECT_LT(by_id["schema/gaze_line"]["spheres"][0]["color"]["a"].get<double>(), 0.5) << "virtual: translucent";
+  // One delete-all, stamped before the entities, so that a detached segment disappears.
+  ASSERT_EQ(su["deletions"].size(), 1U);
+  EXPECT_EQ(su["deletions"][0]["type"], 1);
+  const std::int64_t del = su["deletions"][0]["timestamp"]["sec"].get<std::int64_t>() * 1000000000 +
+                           su["deletions"][0]["timestamp"]["nsec"].get<std::int64_t>();
+  EXPECT_EQ(del, in.stamp_ns - 1);
+  std::vector<std::string> errors;
+  validate(su, sceneUpdateSchema(), "scene", errors);
+  EXPECT_TRUE(errors.empty()) << errors.front();
+}
+
 TEST(Scene, BadJointInputIsSkippedAndCounted) {
   const SceneModel scene = asimo();
   SceneData data(scene);

@@ -1,6 +1,6 @@
 // reflex_view as a real process (issue 14, items 3 and 4 of its tests): fed by a running
-// reflex_controller and reflex_behavior (scripted crossing arms, separate processes, real DDS), checked
-// by independent clients:
+// reflex_controller and reflex_behavior (scripted crossing arms; for the page also the grasped bar, the
+// gaze line and synthetic vision objects: separate processes, real DDS), checked by independent clients:
 //   - the Foxglove protocol's reference client (@foxglove/ws-protocol in Node, ws_client_check.js):
 //     >= 20 scene updates/s, capsule / sphere / transform counts from the URDF text, every message valid
 //     against its advertised schema, protocol errors answered with a status message;
@@ -84,13 +84,17 @@ nlohmann::json runJson(std::vector<std::string> argv, const std::string& log, st
 }
 
 /// Controller + scripted behavior + reflex_view on one domain; the view's port from its banner.
+/// `behavior_config`: a file of bringup/behavior/; `objects`: NAME=X,Y,Z published as vision objects
+/// by reflex_modules_object_publisher (none: no publisher).
 struct LiveSystem {
-  explicit LiveSystem(int domain, const std::string& name)
+  LiveSystem(int domain, const std::string& name, const std::string& behavior_config = "scripted.yaml",
+             const std::vector<std::string>& objects = {})
       : controller({kBin + "/reflex_controller", "--domain", std::to_string(domain), "--duration", "60"},
                    ::testing::TempDir() + name + "_controller.log"),
-        behavior({kBin + "/reflex_behavior", "--config", kSource + "/bringup/behavior/scripted.yaml", "--domain",
+        behavior({kBin + "/reflex_behavior", "--config", kSource + "/bringup/behavior/" + behavior_config, "--domain",
                   std::to_string(domain), "--duration", "60"},
                  ::testing::TempDir() + name + "_behavior.log"),
+        publisher(publisherArgs(domain, objects), ::testing::TempDir() + name + "_objects.log"),
         view_log(::testing::TempDir() + name + "_view.log"),
         view({kBin + "/reflex_view", "--domain", std::to_string(domain), "--port", "0", "--duration", "60"}, view_log) {
     const auto end = std::chrono::steady_clock::now() + 20s;
@@ -103,7 +107,14 @@ struct LiveSystem {
     }
   }
   std::string url() const { return "http://127.0.0.1:" + std::to_string(port) + "/"; }
-  testing::ChildProcess controller, behavior;
+  static std::vector<std::string> publisherArgs(int domain, const std::vector<std::string>& objects) {
+    if (objects.empty()) return {"/bin/true"};
+    std::vector<std::string> argv{kBin + "/reflex_modules_object_publisher", "--domain", std::to_string(domain),
+                                  "--duration", "60", "--rate", "10"};
+    for (const std::string& o : objects) argv.insert(argv.end(), {"--object", o});
+    return argv;
+  }
+  testing::ChildProcess controller, behavior, publisher;
   std::string view_log;
   testing::ChildProcess view;
   int port = 0;
@@ -205,7 +216,8 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     EXPECT_TRUE(watch.writersOf(prefix).empty()) << "reflex_view writes " << *watch.writersOf(prefix).begin();
     const std::set<std::string> readers = watch.readersOf(prefix);
     EXPECT_EQ(readers, (std::set<std::string>{"reflex/joint_state", "reflex/control_status", "reflex/hand_targets",
-                                              "reflex/object_targets", "reflex/controller_protection"}));
+                                              "reflex/object_targets", "reflex/controller_protection",
+                                              "reflex/body_schema"}));
     EXPECT_FALSE(watch.writersOf(watch.prefixOf("controller")).empty()) << "the watch sees writers at all";
 
     EXPECT_EQ(sys.view.terminate(), 0);
@@ -218,7 +230,8 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
 
 TEST(ReflexView, PageRendersTheRobotInHeadlessChromium) {
   ASSERT_TRUE(toolsPresent(true));
-  LiveSystem sys(131, "view_page");
+  // The grasped bar and the gaze line (body schema), scripted targets, and two vision objects.
+  LiveSystem sys(131, "view_page", "bar_occlusion.yaml", {"red_cup=0.50,0.10,1.00", "can=0.45,-0.25,0.90"});
   ASSERT_GT(sys.port, 0) << readText(sys.view_log);
   const std::string shot = std::string(REFLEX_ARTEFACT_DIR) + "/reflex_view_page.png";
   std::remove(shot.c_str());
@@ -246,6 +259,8 @@ TEST(ReflexView, PageRendersTheRobotInHeadlessChromium) {
   int given = 0;
   for (const auto& a : v["lastStatus"]["arms"]) given += a["target_given"].get<bool>() ? 1 : 0;
   EXPECT_NEAR(v["targetsDrawn"].get<int>(), given, 1) << "targets drawn follow the hand targets (one may change in between)";
+  EXPECT_EQ(v["objectsDrawn"], 2) << "the two published objects";
+  EXPECT_GE(v["schemaDrawn"].get<int>(), 1) << "the grasped bar (and the gaze line while it is enabled)";
   EXPECT_FALSE(v["cameraImage"].get<bool>());
   EXPECT_EQ(r["cameraPanel"], "no camera image on the bus");
   EXPECT_GT(r["robotPixels"].get<int>(), 2000) << "the robot is really rendered (WebGL read back)";

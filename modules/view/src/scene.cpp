@@ -61,6 +61,23 @@ json entityJson(const SceneModel& scene, std::int64_t stamp_ns, const std::strin
 
 json keyValue(const std::string& key, const std::string& value) { return json{{"key", key}, {"value", value}}; }
 
+/// A capsule a_W -> b_W of `radius` (a sphere at a_W when `sphere`): one CylinderPrimitive along the
+/// core and two SpherePrimitives at its ends (foxglove has no capsule).
+void appendCapsule(json& entity, const Eigen::Vector3d& a_W, const Eigen::Vector3d& b_W, double radius, bool sphere,
+                   const Rgba& colour) {
+  const double diameter = 2.0 * radius;
+  entity["spheres"].push_back(sphereJson(a_W, diameter, colour));
+  if (sphere) return;
+  entity["spheres"].push_back(sphereJson(b_W, diameter, colour));
+  const Eigen::Vector3d axis_W = b_W - a_W;
+  const Eigen::Quaterniond R_W_cyl = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), axis_W);
+  entity["cylinders"].push_back(json{{"pose", poseJson(0.5 * (a_W + b_W), R_W_cyl)},
+                                     {"size", vec3Json(Eigen::Vector3d(diameter, diameter, axis_W.norm()))},
+                                     {"bottom_scale", 1.0},
+                                     {"top_scale", 1.0},
+                                     {"color", colourJson(colour)}});
+}
+
 /// One collision segment: a cylinder and two spheres per capsule, a sphere per sphere primitive.
 void appendSegmentEntity(const SceneModel& scene, const SceneData& data, int s, json& entity) {
   const control::Model& model = scene.model;
@@ -71,19 +88,7 @@ void appendSegmentEntity(const SceneModel& scene, const SceneData& data, int s, 
                           : neutralColour();
   for (int k = 0; k < seg.num_primitives; ++k) {
     const control::Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
-    const Eigen::Vector3d a_W = X_W_L * prim.a_L;
-    const Eigen::Vector3d b_W = X_W_L * prim.b_L;
-    const double diameter = 2.0 * prim.radius;
-    entity["spheres"].push_back(sphereJson(a_W, diameter, colour));
-    if (prim.sphere) continue;
-    entity["spheres"].push_back(sphereJson(b_W, diameter, colour));
-    const Eigen::Vector3d axis_W = b_W - a_W;
-    const Eigen::Quaterniond R_W_cyl = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), axis_W);
-    entity["cylinders"].push_back(json{{"pose", poseJson(0.5 * (a_W + b_W), R_W_cyl)},
-                                       {"size", vec3Json(Eigen::Vector3d(diameter, diameter, axis_W.norm()))},
-                                       {"bottom_scale", 1.0},
-                                       {"top_scale", 1.0},
-                                       {"color", colourJson(colour)}});
+    appendCapsule(entity, X_W_L * prim.a_L, X_W_L * prim.b_L, prim.radius, prim.sphere, colour);
   }
   const std::string zone = data.segment_in_arm[static_cast<std::size_t>(s)]
                                ? zoneName(data.segment_zone[static_cast<std::size_t>(s)])
@@ -279,7 +284,22 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
                                         Rgba{0.1, 0.8, 0.9, 1.0}));
   }
   entities.push_back(std::move(objects));
-  return json{{"deletions", json::array()}, {"entities", std::move(entities)}};
+  for (const SchemaSegmentState& b : input.schema_segments) {
+    const int link = model.linkIndex(b.parent_link);
+    if (!b.enabled || link < 0 || !(b.radius > 0.0) || !std::isfinite(b.radius) || !finite(b.a_L) || !finite(b.b_L)) continue;
+    json e = entityJson(scene, input.stamp_ns, "schema/" + b.name);
+    const Eigen::Isometry3d& X_W_L = data.kin.X_W_L[static_cast<std::size_t>(link)];
+    const Eigen::Vector3d a_W = X_W_L * b.a_L, b_W = X_W_L * b.b_L;
+    const Rgba c = b.virtual_segment ? Rgba{0.45, 0.75, 1.0, 0.30} : Rgba{0.80, 0.60, 0.35, 0.85};
+    appendCapsule(e, a_W, b_W, b.radius, !b.capsule || !((b_W - a_W).norm() > 0.0), c);
+    e["metadata"].push_back(keyValue("body_schema", b.virtual_segment ? "virtual" : "physical"));
+    e["metadata"].push_back(keyValue("parent_link", b.parent_link));
+    entities.push_back(std::move(e));
+  }
+  // Delete-all first (stamped 1 ns before the entities: only older ones go), so that an entity not in
+  // this update (a detached body-schema segment) disappears in every viewer.
+  json deletions = json::array({json{{"timestamp", stampJson(input.stamp_ns - 1)}, {"type", 1}, {"id", ""}}});
+  return json{{"deletions", std::move(deletions)}, {"entities", std::move(entities)}};
 }
 
 nlohmann::json buildViewStatus(const SceneModel& scene, const SceneInput& input, const std::string& protection) {

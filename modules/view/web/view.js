@@ -13,7 +13,7 @@ import * as THREE from "three";
 
 const state = {
   connected: false, channels: [], framesReceived: 0, statusReceived: 0, capsulesDrawn: 0, spheresDrawn: 0,
-  closestLines: 0, targetsDrawn: 0, objectsDrawn: 0, zoneColours: {}, zonesSeen: {}, lastStatus: null,
+  closestLines: 0, targetsDrawn: 0, objectsDrawn: 0, schemaDrawn: 0, zoneColours: {}, zonesSeen: {}, lastStatus: null,
   cameraImage: false, errors: [], rendered: 0,
 };
 window.reflexView = state;
@@ -130,12 +130,23 @@ function drawEntity(e) {
   return { spheres: spheres.length, cylinders: cylinders.length, lines: lines.length };
 }
 
+function removeEntity(id) {
+  const g = entities.get(id);
+  if (!g) return;
+  scene.remove(g.group);
+  for (const m of [...g.spheres, ...g.cylinders, ...g.lines]) m.material.dispose();
+  for (const l of g.lines) l.geometry.dispose();
+  entities.delete(id);
+}
 function onSceneUpdate(update) {
+  // A delete-all followed by the same entities (reflex_view sends one every time) keeps the meshes:
+  // only entities absent from this update are removed.
+  const present = new Set((update.entities || []).map((e) => e.id));
   for (const d of update.deletions || []) {
-    const ids = d.type === 1 ? [...entities.keys()] : [d.id];
-    for (const id of ids) { const g = entities.get(id); if (g) { scene.remove(g.group); entities.delete(id); } }
+    const ids = d.type === 1 ? [...entities.keys()].filter((id) => !present.has(id)) : [d.id];
+    ids.forEach(removeEntity);
   }
-  let capsules = 0, primitiveSpheres = 0, lines = 0, targets = 0, objects = 0;
+  let capsules = 0, primitiveSpheres = 0, lines = 0, targets = 0, objects = 0, schema = 0;
   const colours = {};
   for (const e of update.entities || []) {
     const n = drawEntity(e);
@@ -150,6 +161,8 @@ function onSceneUpdate(update) {
       targets += n.spheres;
     } else if (e.id === "objects") {
       objects += n.spheres;
+    } else if (e.id.startsWith("schema/")) {
+      schema += 1;
     }
   }
   state.capsulesDrawn = capsules;
@@ -157,6 +170,7 @@ function onSceneUpdate(update) {
   state.closestLines = lines;
   state.targetsDrawn = targets;
   state.objectsDrawn = objects;
+  state.schemaDrawn = schema;
   state.zoneColours = colours;
   for (const z of Object.keys(colours)) state.zonesSeen[z] = (state.zonesSeen[z] || 0) + 1;
   state.framesReceived += 1;

@@ -6,12 +6,14 @@
 
 #include <chrono>
 #include <cstdio>
+#include <map>
 #include <sstream>
 
 namespace reflex::view_node {
 namespace {
 
 constexpr std::uint32_t kChannelTf = 1, kChannelScene = 2, kChannelStatus = 3;
+constexpr std::size_t kMaxSchemaSegments = 64;  ///< the reflex_behavior profile's instance limit
 
 view::ArmState armState(const msg::ArmStatus& a) {
   view::ArmState s;
@@ -49,11 +51,14 @@ struct ViewNode::Impl {
   bus::Reader<msg::HandTargets>* targets = nullptr;
   bus::Reader<msg::ObjectTargets>* objects = nullptr;
   bus::Reader<msg::ControllerProtection>* protection_reader = nullptr;
+  bus::Reader<msg::BodySchemaChange>* schema_reader = nullptr;
+  std::map<std::string, view::SchemaSegmentState> schema;  ///< by segment name (the topic key)
   msg::JointState joint_msg;
   msg::ControlStatus status_msg;
   msg::HandTargets targets_msg;
   msg::ObjectTargets objects_msg;
   msg::ControllerProtection protection_msg;
+  msg::BodySchemaChange schema_msg;
   bool have_joints = false;
   bool fresh = false;  ///< a joint state arrived since the last scene
 };
@@ -87,6 +92,7 @@ ViewNode::ViewNode(const ViewOptions& options) : impl_(std::make_unique<Impl>())
   m.targets = &m.bus->makeReader<msg::HandTargets>();
   m.objects = &m.bus->makeReader<msg::ObjectTargets>();
   m.protection_reader = &m.bus->makeReader<msg::ControllerProtection>();
+  m.schema_reader = &m.bus->makeReader<msg::BodySchemaChange>();
 }
 
 ViewNode::~ViewNode() = default;
@@ -102,7 +108,8 @@ std::string ViewNode::report() const {
   std::ostringstream out;
   out << "joint_states=" << stats_.joint_states << " joint_entries_skipped=" << stats_.joint_entries_skipped
       << " statuses=" << stats_.statuses << " hand_targets=" << stats_.hand_targets
-      << " object_frames=" << stats_.object_frames << " scenes=" << stats_.scenes
+      << " object_frames=" << stats_.object_frames << " object_frames_other_frame=" << stats_.object_frames_other_frame
+      << " schema_changes=" << stats_.schema_changes << " scenes=" << stats_.scenes
       << " connections=" << s.connections.load() << " subscriptions=" << s.subscriptions.load()
       << " messages_sent=" << s.messages_sent.load() << " dropped_slow_client=" << s.dropped.load()
       << " bad_client_messages=" << s.bad_client_messages.load() << " http_requests=" << s.http_requests.load()
@@ -140,6 +147,11 @@ void ViewNode::run() {
     }
     while (m.objects->takeNext(m.objects_msg)) {
       ++stats_.object_frames;
+      // Positions in another frame than the robot's base are not base-frame positions: not drawn.
+      if (m.objects_msg.frame_id() != "base_link" && m.objects_msg.frame_id() != m.scene.root_frame) {
+        ++stats_.object_frames_other_frame;
+        continue;
+      }
       m.input.objects.clear();
       for (const msg::ObjectTarget& o : m.objects_msg.objects()) {
         view::ObjectState s;
@@ -148,6 +160,30 @@ void ViewNode::run() {
         s.confidence = o.confidence();
         m.input.objects.push_back(std::move(s));
       }
+    }
+    bool schema_changed = false;
+    while (m.schema_reader->takeNext(m.schema_msg)) {
+      ++stats_.schema_changes;
+      schema_changed = true;
+      const msg::BodySchemaChange& c = m.schema_msg;
+      if (c.operation() == msg::SCHEMA_DETACH) {
+        m.schema.erase(c.segment_name());
+        continue;
+      }
+      if (m.schema.size() >= kMaxSchemaSegments && !m.schema.count(c.segment_name())) continue;
+      view::SchemaSegmentState& b = m.schema[c.segment_name()];
+      b.name = c.segment_name();
+      b.parent_link = c.parent_link();
+      b.capsule = c.shape() == msg::SHAPE_CAPSULE;
+      b.a_L = Eigen::Vector3d(c.point_a().x(), c.point_a().y(), c.point_a().z());
+      b.b_L = Eigen::Vector3d(c.point_b().x(), c.point_b().y(), c.point_b().z());
+      b.radius = c.radius();
+      b.enabled = c.enabled();
+      b.virtual_segment = c.virtual_segment();
+    }
+    if (schema_changed) {
+      m.input.schema_segments.clear();
+      for (const auto& kv : m.schema) m.input.schema_segments.push_back(kv.second);
     }
     while (m.protection_reader->takeNext(m.protection_msg)) {
       m.protection = std::string(m.protection_msg.avoidance() ? "avoidance on" : "AVOIDANCE OFF") +

@@ -90,6 +90,21 @@ struct ObjectState {
   double confidence = 0.0;
 };
 
+/// A body-schema segment from reflex/body_schema (Sec. 8.5: a grasped object, or a virtual gaze-line
+/// segment): a capsule (or a sphere, a_L only) in the frame of `parent_link`. Drawn as entity
+/// "schema/<name>": physical ones in the schema colour, virtual ones translucent; disabled ones, an
+/// unknown link or a non-finite value are not drawn. (Not part of the view's own distances: the
+/// controller's pairs with a slot are not drawn as closest lines.)
+struct SchemaSegmentState {
+  std::string name;
+  std::string parent_link;
+  bool capsule = true;
+  Eigen::Vector3d a_L = Eigen::Vector3d::Zero(), b_L = Eigen::Vector3d::Zero();
+  double radius = 0.0;
+  bool enabled = true;
+  bool virtual_segment = false;
+};
+
 /// Everything one scene is built from. Non-finite positions are skipped when drawing (never emitted).
 struct SceneInput {
   std::int64_t stamp_ns = 0;   ///< system clock [ns]: the joint state's Header.stamp_ns
@@ -97,6 +112,7 @@ struct SceneInput {
   std::array<ArmState, 2> arms;
   std::array<HandTargetState, 2> targets;
   std::vector<ObjectState> objects;
+  std::vector<SchemaSegmentState> schema_segments;
 };
 
 /// Per-scene results, sized from the model (one per thread of use).
@@ -125,8 +141,9 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
 nlohmann::json buildFrameTransforms(const SceneModel& scene, const SceneData& data, const SceneInput& input);
 
 /// `foxglove.SceneUpdate` with the entities described at the top of this file ("segment/<name>",
-/// "closest/left", "closest/right", "target/left", "target/right", "objects"); every entity is sent
-/// every time (no deletions). Call after updateScene.
+/// "closest/left", "closest/right", "target/left", "target/right", "objects", "schema/<name>"); every
+/// entity is sent every time, and one deletion (type ALL, stamped just before) first, so that a
+/// body-schema segment that went away disappears too. Call after updateScene.
 nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, const SceneInput& input);
 
 /// The Reflex status channel the bundled page plots (`reflex.ViewStatus`): stamp, d_a/d_b/d_r, each

@@ -3,7 +3,7 @@
 //
 // Reads (never writes: it creates no DDS writer and publishes no heartbeat; tested):
 //   reflex/joint_state, reflex/control_status, reflex/hand_targets, reflex/object_targets,
-//   reflex/controller_protection.
+//   reflex/controller_protection, reflex/body_schema (grasped objects and virtual segments, drawn).
 // Serves, at most `rate` times per second and only when a joint state arrived since the last time,
 // only to channels someone subscribed to (view_server.hpp):
 //   channel 1 "/tf"            foxglove.FrameTransforms  every link (scene.hpp)
@@ -12,7 +12,8 @@
 // The camera image is not on the bus today (vision publishes object targets only), so there is no
 // image channel; the page says so.
 // Bad samples: a joint state with a name the robot does not have or a non-finite position has those
-// entries skipped (counted); objects and targets with non-finite positions are not drawn.
+// entries skipped (counted); objects and targets with non-finite positions are not drawn; an object
+// frame whose frame_id is neither "base_link" nor the URDF root is not drawn (counted).
 #pragma once
 
 #include "reflex/view_node/view_server.hpp"
@@ -44,6 +45,8 @@ struct ViewStats {
   std::uint64_t scenes = 0;              ///< scene updates built
   std::uint64_t hand_targets = 0;
   std::uint64_t object_frames = 0;
+  std::uint64_t object_frames_other_frame = 0;  ///< frame_id neither "base_link" nor the URDF root: not drawn
+  std::uint64_t schema_changes = 0;         ///< reflex/body_schema samples
 };
 
 class ViewNode {
