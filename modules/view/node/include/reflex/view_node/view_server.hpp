@@ -64,7 +64,7 @@ struct ServerStats {
 
 class ViewServer {
  public:
-  static constexpr std::size_t kMaxBufferedBytes = 8u << 20;
+  static constexpr std::size_t kMaxBufferedBytes = 2u << 20;  ///< ~3 s of scene at 30 Hz: older is useless to a viewer
 
   /// Checks the folders and the address, binds and listens (not yet serving: see start()).
   /// Throws ViewError: "--bind 'x' is not an IP address", "cannot listen on 127.0.0.1:8765: Address
