@@ -1,0 +1,76 @@
+// reflex_view (issue 14, item 3): a read-only process on the bus that serves the live scene to
+// Foxglove (Foxglove WebSocket protocol) and to the bundled three.js page, on one port.
+//
+// Reads (never writes: it creates no DDS writer and publishes no heartbeat; tested):
+//   reflex/joint_state, reflex/control_status, reflex/hand_targets, reflex/object_targets,
+//   reflex/controller_protection, reflex/body_schema (grasped objects and virtual segments, drawn).
+// Serves, at most `rate` times per second and only when a joint state arrived since the last time,
+// only to channels someone subscribed to (view_server.hpp):
+//   channel 1 "/tf"            foxglove.FrameTransforms  every link (scene.hpp)
+//   channel 2 "/reflex/scene"  foxglove.SceneUpdate      capsules by zone, closest pairs, targets, objects
+//   channel 3 "/reflex/status" reflex.ViewStatus         distances, f(d), zones, d_a/d_b/d_r, targets
+// The camera image is not on the bus today (vision publishes object targets only), so there is no
+// image channel; the page says so.
+// Bad samples: a joint state with a name the robot does not have or a non-finite position has those
+// entries skipped (counted); objects and targets with non-finite positions are not drawn; an object
+// frame whose frame_id is neither "base_link" nor the URDF root is not drawn (counted).
+#pragma once
+
+#include "reflex/view_node/view_server.hpp"
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+namespace reflex::view_node {
+
+struct ViewOptions {
+  std::string urdf;                 ///< robot description (as given to reflex_controller)
+  std::string collision;            ///< "" = next to the URDF
+  std::string controller;           ///< controller YAML ("" = defaults): arms and zone thresholds
+  std::string profiles_file;
+  std::string participant_profile = "reflex_participant";
+  int domain_id = -1;               ///< -1 = bus default
+  double duration = 0.0;            ///< s (0 = until SIGINT / SIGTERM)
+  double rate = 30.0;               ///< scene messages per second at most, (0, 200]
+  double progress_period = 0.0;     ///< s between status lines on stderr (0 = none)
+  ServerOptions server;
+  std::string module_name = "view";
+};
+
+struct ViewStats {
+  std::uint64_t joint_states = 0;        ///< joint state samples taken
+  std::uint64_t joint_entries_skipped = 0;  ///< names unknown to the robot or non-finite positions
+  std::uint64_t statuses = 0;
+  std::uint64_t scenes = 0;              ///< scene updates built
+  std::uint64_t hand_targets = 0;
+  std::uint64_t object_frames = 0;
+  std::uint64_t object_frames_other_frame = 0;  ///< frame_id neither "base_link" nor the URDF root: not drawn
+  std::uint64_t schema_changes = 0;         ///< reflex/body_schema samples
+};
+
+class ViewNode {
+ public:
+  /// Loads the robot, opens the server (binds) and creates the participant and readers. Throws
+  /// control::ModelError / ConfigError, ViewError, bus::BusError naming the bad value.
+  explicit ViewNode(const ViewOptions& options);
+  ~ViewNode();
+  ViewNode(const ViewNode&) = delete;
+  ViewNode& operator=(const ViewNode&) = delete;
+
+  /// Serves until stop(), a signal, or the duration.
+  void run();
+  void stop() noexcept;
+
+  const ViewServer& server() const;
+  const ViewStats& stats() const { return stats_; }
+  /// One line of counters (the exit line).
+  std::string report() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  ViewStats stats_;
+};
+
+}  // namespace reflex::view_node

@@ -1,0 +1,227 @@
+// reflex_view's bus side (view_node.hpp): readers -> scene (reflex::scene) -> server.
+#include "reflex/view_node/view_node.hpp"
+
+#include <reflex/bus/bus.hpp>
+#include <reflex/view/scene.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <map>
+#include <sstream>
+
+namespace reflex::view_node {
+namespace {
+
+constexpr std::uint32_t kChannelTf = 1, kChannelScene = 2, kChannelStatus = 3;
+constexpr std::size_t kMaxSchemaSegments = 64;  ///< the reflex_behavior profile's instance limit
+
+view::ArmState armState(const msg::ArmStatus& a) {
+  view::ArmState s;
+  s.valid = true;
+  s.blend_f = a.blend_f();
+  s.closest_a = a.closest_segment_a();
+  s.closest_b = a.closest_segment_b();
+  s.distance = a.distance();
+  const int z = static_cast<int>(a.zone());
+  s.zone = z >= 0 && z <= 3 ? static_cast<view::Zone>(z) : view::Zone::kRed;  // unknown: the worst
+  s.estop_latched = a.estop_latched();
+  return s;
+}
+
+view::HandTargetState targetState(const msg::HandTarget& t) {
+  view::HandTargetState s;
+  s.given = t.status() == msg::TARGET_GIVEN;
+  s.p_W = Eigen::Vector3d(t.position_base().x(), t.position_base().y(), t.position_base().z());
+  s.object = t.object_name();
+  return s;
+}
+
+}  // namespace
+
+struct ViewNode::Impl {
+  ViewOptions options;
+  view::SceneModel scene;
+  std::unique_ptr<view::SceneData> data;
+  view::SceneInput input;
+  std::string protection;
+  std::unique_ptr<ViewServer> server;
+  std::unique_ptr<bus::Participant> bus;
+  bus::Reader<msg::JointState>* joints = nullptr;
+  bus::Reader<msg::ControlStatus>* status = nullptr;
+  bus::Reader<msg::HandTargets>* targets = nullptr;
+  bus::Reader<msg::ObjectTargets>* objects = nullptr;
+  bus::Reader<msg::ControllerProtection>* protection_reader = nullptr;
+  bus::Reader<msg::BodySchemaChange>* schema_reader = nullptr;
+  std::map<std::string, view::SchemaSegmentState> schema;  ///< by segment name (the topic key)
+  msg::JointState joint_msg;
+  msg::ControlStatus status_msg;
+  msg::HandTargets targets_msg;
+  msg::ObjectTargets objects_msg;
+  msg::ControllerProtection protection_msg;
+  msg::BodySchemaChange schema_msg;
+  bool have_joints = false;
+  bool fresh = false;  ///< a joint state arrived since the last scene
+};
+
+ViewNode::ViewNode(const ViewOptions& options) : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.options = options;
+  if (!(options.rate > 0.0 && options.rate <= 200.0))
+    throw ViewError("--rate " + std::to_string(options.rate) + " must be in (0, 200] messages per second");
+  m.scene = view::loadSceneModel(options.urdf, options.collision, options.controller);
+  m.data = std::make_unique<view::SceneData>(m.scene);
+  m.input.q = Eigen::VectorXd::Zero(m.scene.model.nq);
+
+  std::vector<Channel> channels{
+      {kChannelTf, "/tf", "foxglove.FrameTransforms", view::frameTransformsSchema().dump()},
+      {kChannelScene, "/reflex/scene", "foxglove.SceneUpdate", view::sceneUpdateSchema().dump()},
+      {kChannelStatus, "/reflex/status", "reflex.ViewStatus", view::viewStatusSchema().dump()}};
+  ServerOptions so = options.server;
+  so.metadata_robot = m.scene.model.name;
+  m.server = std::make_unique<ViewServer>(so, std::move(channels));
+
+  bus::BusConfig config;
+  config.module_name = options.module_name;
+  if (options.domain_id >= 0) config.domain_id = options.domain_id;
+  config.profiles_file = options.profiles_file;
+  config.participant_profile = options.participant_profile;
+  m.bus = std::make_unique<bus::Participant>(config);
+  // Readers only, with each topic's own reader profile (TopicTraits): the view never writes.
+  m.joints = &m.bus->makeReader<msg::JointState>();
+  m.status = &m.bus->makeReader<msg::ControlStatus>();
+  m.targets = &m.bus->makeReader<msg::HandTargets>();
+  m.objects = &m.bus->makeReader<msg::ObjectTargets>();
+  m.protection_reader = &m.bus->makeReader<msg::ControllerProtection>();
+  m.schema_reader = &m.bus->makeReader<msg::BodySchemaChange>();
+}
+
+ViewNode::~ViewNode() = default;
+
+const ViewServer& ViewNode::server() const { return *impl_->server; }
+
+void ViewNode::stop() noexcept {
+  if (impl_->bus) impl_->bus->stop();
+}
+
+std::string ViewNode::report() const {
+  const ServerStats& s = impl_->server->stats();
+  std::ostringstream out;
+  out << "joint_states=" << stats_.joint_states << " joint_entries_skipped=" << stats_.joint_entries_skipped
+      << " statuses=" << stats_.statuses << " hand_targets=" << stats_.hand_targets
+      << " object_frames=" << stats_.object_frames << " object_frames_other_frame=" << stats_.object_frames_other_frame
+      << " schema_changes=" << stats_.schema_changes << " scenes=" << stats_.scenes
+      << " connections=" << s.connections.load() << " subscriptions=" << s.subscriptions.load()
+      << " messages_sent=" << s.messages_sent.load() << " dropped_slow_client=" << s.dropped.load()
+      << " bad_client_messages=" << s.bad_client_messages.load() << " http_requests=" << s.http_requests.load()
+      << " http_not_found=" << s.http_not_found.load();
+  return out.str();
+}
+
+void ViewNode::run() {
+  Impl& m = *impl_;
+  m.server->start();
+  std::printf("reflex_view: serving %s (web page) and %s (Foxglove: Open connection -> Foxglove WebSocket); robot %s, "
+              "domain %d\n",
+              m.server->url().c_str(), ("ws" + m.server->url().substr(4)).c_str(), m.scene.model.name.c_str(),
+              m.bus->domainId());
+  std::fflush(stdout);
+
+  auto poll = [&m, this] {
+    while (m.joints->takeNext(m.joint_msg)) {
+      ++stats_.joint_states;
+      int unknown = 0, rejected = 0;
+      view::jointPositionsToQ(m.scene, m.joint_msg.names(), m.joint_msg.positions(), m.input.q, &unknown, &rejected);
+      stats_.joint_entries_skipped += static_cast<std::uint64_t>(unknown + rejected);
+      m.input.stamp_ns = m.joint_msg.header().stamp_ns();
+      m.have_joints = m.fresh = true;
+    }
+    while (m.status->takeNext(m.status_msg)) {
+      ++stats_.statuses;
+      m.input.arms[0] = armState(m.status_msg.left());
+      m.input.arms[1] = armState(m.status_msg.right());
+    }
+    while (m.targets->takeNext(m.targets_msg)) {
+      ++stats_.hand_targets;
+      m.input.targets[0] = targetState(m.targets_msg.left());
+      m.input.targets[1] = targetState(m.targets_msg.right());
+    }
+    while (m.objects->takeNext(m.objects_msg)) {
+      ++stats_.object_frames;
+      // Positions in another frame than the robot's base are not base-frame positions: not drawn.
+      if (m.objects_msg.frame_id() != "base_link" && m.objects_msg.frame_id() != m.scene.root_frame) {
+        ++stats_.object_frames_other_frame;
+        continue;
+      }
+      m.input.objects.clear();
+      for (const msg::ObjectTarget& o : m.objects_msg.objects()) {
+        view::ObjectState s;
+        s.name = o.name();
+        s.p_W = Eigen::Vector3d(o.position_base().x(), o.position_base().y(), o.position_base().z());
+        s.confidence = o.confidence();
+        m.input.objects.push_back(std::move(s));
+      }
+    }
+    bool schema_changed = false;
+    while (m.schema_reader->takeNext(m.schema_msg)) {
+      ++stats_.schema_changes;
+      schema_changed = true;
+      const msg::BodySchemaChange& c = m.schema_msg;
+      if (c.operation() == msg::SCHEMA_DETACH) {
+        m.schema.erase(c.segment_name());
+        continue;
+      }
+      if (m.schema.size() >= kMaxSchemaSegments && !m.schema.count(c.segment_name())) continue;
+      view::SchemaSegmentState& b = m.schema[c.segment_name()];
+      b.name = c.segment_name();
+      b.parent_link = c.parent_link();
+      b.capsule = c.shape() == msg::SHAPE_CAPSULE;
+      b.a_L = Eigen::Vector3d(c.point_a().x(), c.point_a().y(), c.point_a().z());
+      b.b_L = Eigen::Vector3d(c.point_b().x(), c.point_b().y(), c.point_b().z());
+      b.radius = c.radius();
+      b.enabled = c.enabled();
+      b.virtual_segment = c.virtual_segment();
+    }
+    if (schema_changed) {
+      m.input.schema_segments.clear();
+      for (const auto& kv : m.schema) m.input.schema_segments.push_back(kv.second);
+    }
+    while (m.protection_reader->takeNext(m.protection_msg)) {
+      m.protection = std::string(m.protection_msg.avoidance() ? "avoidance on" : "AVOIDANCE OFF") +
+                     (m.protection_msg.estop() ? ", e-stop on" : ", E-STOP OFF") +
+                     (m.protection_msg.reason().empty() ? "" : " (" + m.protection_msg.reason() + ")");
+    }
+  };
+  auto serve = [&m, this, poll] {
+    poll();
+    if (!m.fresh || !m.have_joints) return;
+    m.fresh = false;
+    if (!view::updateScene(m.scene, *m.data, m.input)) return;
+    ++stats_.scenes;
+    const auto stamp = static_cast<std::uint64_t>(std::max<std::int64_t>(m.input.stamp_ns, 0));
+    if (m.server->subscribed(kChannelTf))
+      m.server->publish(kChannelTf, stamp,
+                        std::make_shared<const std::string>(view::buildFrameTransforms(m.scene, *m.data, m.input).dump()));
+    if (m.server->subscribed(kChannelScene))
+      m.server->publish(kChannelScene, stamp,
+                        std::make_shared<const std::string>(view::buildSceneUpdate(m.scene, *m.data, m.input).dump()));
+    if (m.server->subscribed(kChannelStatus))
+      m.server->publish(kChannelStatus, stamp,
+                        std::make_shared<const std::string>(view::buildViewStatus(m.scene, m.input, m.protection).dump()));
+  };
+  const auto period = std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / m.options.rate));
+  m.bus->every(period, serve);
+  if (m.options.progress_period > 0.0) {
+    m.bus->every(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 * m.options.progress_period)), [this] {
+      std::fprintf(stderr, "reflex_view: %s\n", report().c_str());
+    });
+  }
+  bus::StopOnSignal stop_on_signal(*m.bus);
+  if (m.options.duration > 0.0) {
+    m.bus->runFor(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 * m.options.duration)));
+  } else {
+    m.bus->run();
+  }
+  m.server->stop();
+}
+
+}  // namespace reflex::view_node

@@ -1,0 +1,286 @@
+// Reflex live view page: a Foxglove WebSocket protocol client (foxglove.websocket.v1, written for the
+// browser's own WebSocket) that subscribes to reflex_view's /reflex/scene (foxglove.SceneUpdate) and
+// /reflex/status (reflex.ViewStatus) channels and draws them with three.js (served by reflex_view from
+// bringup/web/node_modules/three, never from a CDN).
+//
+// window.reflexView holds the page's state for tests and for the curious:
+//   connected, channels (advertised topics), framesReceived (scene updates drawn), statusReceived,
+//   capsulesDrawn / spheresDrawn (collision primitives of the robot in the last scene: cylinders of
+//   capsules, and sphere primitives), closestLines, targetsDrawn, objectsDrawn, zoneColours ({zone:
+//   "#rrggbb"} of the robot segments in the last scene), zonesSeen ({zone: count of scenes}),
+//   lastStatus, cameraImage (false: no image topic on the bus), errors (status messages of the server).
+import * as THREE from "three";
+
+const state = {
+  connected: false, channels: [], framesReceived: 0, statusReceived: 0, capsulesDrawn: 0, spheresDrawn: 0,
+  closestLines: 0, targetsDrawn: 0, objectsDrawn: 0, schemaDrawn: 0, zoneColours: {}, zonesSeen: {}, lastStatus: null,
+  cameraImage: false, errors: [], rendered: 0,
+};
+window.reflexView = state;
+
+// ---------- three.js scene: z up, the robot's root frame is the world frame -----------------------
+const container = document.getElementById("scene3d");
+const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio || 1);
+container.appendChild(renderer.domElement);
+const scene = new THREE.Scene();
+scene.background = new THREE.Color(0x16181d);
+const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 50);
+camera.up.set(0, 0, 1);
+const orbit = { azimuth: 0.6, elevation: 0.25, radius: 2.6, target: new THREE.Vector3(0, 0, 0.85) };
+function placeCamera() {
+  const c = Math.cos(orbit.elevation);
+  camera.position.set(orbit.target.x + orbit.radius * c * Math.cos(orbit.azimuth),
+                      orbit.target.y + orbit.radius * c * Math.sin(orbit.azimuth),
+                      orbit.target.z + orbit.radius * Math.sin(orbit.elevation));
+  camera.lookAt(orbit.target);
+}
+placeCamera();
+scene.add(new THREE.AmbientLight(0xffffff, 0.55));
+const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+sun.position.set(2, 1.5, 3);
+scene.add(sun);
+const grid = new THREE.GridHelper(4, 40, 0x445066, 0x2b313d);
+grid.rotation.x = Math.PI / 2;  // GridHelper lies in x-z; the floor here is x-y
+scene.add(grid);
+scene.add(new THREE.AxesHelper(0.3));
+
+// Drag to orbit, wheel to zoom.
+let drag = null;
+renderer.domElement.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY }; });
+window.addEventListener("pointerup", () => { drag = null; });
+window.addEventListener("pointermove", (e) => {
+  if (!drag) return;
+  orbit.azimuth -= (e.clientX - drag.x) * 0.01;
+  orbit.elevation = Math.max(-1.4, Math.min(1.4, orbit.elevation + (e.clientY - drag.y) * 0.01));
+  drag = { x: e.clientX, y: e.clientY };
+  placeCamera();
+});
+renderer.domElement.addEventListener("wheel", (e) => {
+  orbit.radius = Math.max(0.5, Math.min(10, orbit.radius * (e.deltaY > 0 ? 1.1 : 0.9)));
+  placeCamera();
+  e.preventDefault();
+}, { passive: false });
+
+function resize() {
+  const w = container.clientWidth || 640, h = container.clientHeight || 480;
+  renderer.setSize(w, h);
+  camera.aspect = w / h;
+  camera.updateProjectionMatrix();
+}
+window.addEventListener("resize", resize);
+resize();
+
+// Unit shapes scaled per primitive: sphere of diameter 1; cylinder of diameter 1 and height 1 along z
+// (foxglove.CylinderPrimitive: flat faces perpendicular to its z axis).
+const unitSphere = new THREE.SphereGeometry(0.5, 24, 16);
+const unitCylinder = new THREE.CylinderGeometry(0.5, 0.5, 1, 24, 1, true);
+unitCylinder.rotateX(Math.PI / 2);
+
+function material(c) {
+  return new THREE.MeshStandardMaterial({ color: new THREE.Color(c.r, c.g, c.b), transparent: c.a < 1,
+                                          opacity: c.a, roughness: 0.6, metalness: 0.05 });
+}
+function setColour(mat, c) {
+  mat.color.setRGB(c.r, c.g, c.b);
+  mat.opacity = c.a;
+  mat.transparent = c.a < 1;
+}
+function hex(c) {
+  const h = (v) => Math.round(Math.max(0, Math.min(1, v)) * 255).toString(16).padStart(2, "0");
+  return "#" + h(c.r) + h(c.g) + h(c.b);
+}
+
+// One THREE.Group per entity id; its meshes are reused while the primitive counts stay the same.
+const entities = new Map();
+function pool(list, group, count, make) {
+  while (list.length < count) { const o = make(); list.push(o); group.add(o); }
+  for (let i = 0; i < list.length; ++i) list[i].visible = i < count;
+}
+function drawEntity(e) {
+  let g = entities.get(e.id);
+  if (!g) {
+    g = { group: new THREE.Group(), spheres: [], cylinders: [], lines: [] };
+    entities.set(e.id, g);
+    scene.add(g.group);
+  }
+  const spheres = e.spheres || [], cylinders = e.cylinders || [], lines = e.lines || [];
+  pool(g.spheres, g.group, spheres.length, () => new THREE.Mesh(unitSphere, material({ r: 1, g: 1, b: 1, a: 1 })));
+  spheres.forEach((s, i) => {
+    const m = g.spheres[i];
+    m.position.set(s.pose.position.x, s.pose.position.y, s.pose.position.z);
+    m.scale.set(s.size.x, s.size.y, s.size.z);
+    setColour(m.material, s.color);
+  });
+  pool(g.cylinders, g.group, cylinders.length, () => new THREE.Mesh(unitCylinder, material({ r: 1, g: 1, b: 1, a: 1 })));
+  cylinders.forEach((c, i) => {
+    const m = g.cylinders[i];
+    const o = c.pose.orientation;
+    m.position.set(c.pose.position.x, c.pose.position.y, c.pose.position.z);
+    m.quaternion.set(o.x, o.y, o.z, o.w);
+    m.scale.set(c.size.x, c.size.y, c.size.z);
+    setColour(m.material, c.color);
+  });
+  pool(g.lines, g.group, lines.length, () => new THREE.Line(new THREE.BufferGeometry(), new THREE.LineBasicMaterial()));
+  lines.forEach((l, i) => {
+    const m = g.lines[i];
+    m.geometry.setFromPoints(l.points.map((p) => new THREE.Vector3(p.x, p.y, p.z)));
+    m.material.color.setRGB(l.color.r, l.color.g, l.color.b);
+  });
+  return { spheres: spheres.length, cylinders: cylinders.length, lines: lines.length };
+}
+
+function removeEntity(id) {
+  const g = entities.get(id);
+  if (!g) return;
+  scene.remove(g.group);
+  for (const m of [...g.spheres, ...g.cylinders, ...g.lines]) m.material.dispose();
+  for (const l of g.lines) l.geometry.dispose();
+  entities.delete(id);
+}
+function onSceneUpdate(update) {
+  // A delete-all followed by the same entities (reflex_view sends one every time) keeps the meshes:
+  // only entities absent from this update are removed.
+  const present = new Set((update.entities || []).map((e) => e.id));
+  for (const d of update.deletions || []) {
+    const ids = d.type === 1 ? [...entities.keys()].filter((id) => !present.has(id)) : [d.id];
+    ids.forEach(removeEntity);
+  }
+  let capsules = 0, primitiveSpheres = 0, lines = 0, targets = 0, objects = 0, schema = 0;
+  const colours = {};
+  for (const e of update.entities || []) {
+    const n = drawEntity(e);
+    if (e.id.startsWith("segment/")) {
+      capsules += n.cylinders;
+      primitiveSpheres += n.spheres - 2 * n.cylinders;  // a capsule is drawn with two end spheres
+      const zone = (e.metadata || []).find((kv) => kv.key === "zone");
+      if (zone && zone.value !== "none" && e.spheres && e.spheres.length) colours[zone.value] = hex(e.spheres[0].color);
+    } else if (e.id.startsWith("closest/")) {
+      lines += n.lines;
+    } else if (e.id.startsWith("target/")) {
+      targets += n.spheres;
+    } else if (e.id === "objects") {
+      objects += n.spheres;
+    } else if (e.id.startsWith("schema/")) {
+      schema += 1;
+    }
+  }
+  state.capsulesDrawn = capsules;
+  state.spheresDrawn = primitiveSpheres;
+  state.closestLines = lines;
+  state.targetsDrawn = targets;
+  state.objectsDrawn = objects;
+  state.schemaDrawn = schema;
+  state.zoneColours = colours;
+  for (const z of Object.keys(colours)) state.zonesSeen[z] = (state.zonesSeen[z] || 0) + 1;
+  state.framesReceived += 1;
+}
+
+// ---------- distance plot and hand table ------------------------------------------------------------
+const history = [];  // {t [s], d: [left, right] (m or null), f: [left, right]}
+const kPlotSeconds = 10, kPlotMaxDistance = 0.10;
+const plot = document.getElementById("plot");
+const armColours = ["#4c9dff", "#e05ce0"];
+function drawPlot() {
+  const ctx = plot.getContext("2d"), W = plot.width, H = plot.height, s = state.lastStatus;
+  ctx.clearRect(0, 0, W, H);
+  if (!s || !history.length) return;
+  const t1 = history[history.length - 1].t, x = (t) => W - (t1 - t) / kPlotSeconds * W;
+  const y = (d) => H - Math.min(d, kPlotMaxDistance) / kPlotMaxDistance * (H - 10);
+  ctx.font = "11px sans-serif";
+  for (const [name, d, colour] of [["d_a", s.d_a, "#ddcc22"], ["d_b", s.d_b, "#ff8822"], ["d_r", s.d_r, "#ff3333"]]) {
+    ctx.strokeStyle = colour; ctx.setLineDash([4, 4]); ctx.beginPath();
+    ctx.moveTo(0, y(d)); ctx.lineTo(W, y(d)); ctx.stroke();
+    ctx.fillStyle = colour; ctx.fillText(`${name} ${(d * 1000).toFixed(0)} mm`, 4, y(d) - 2);
+  }
+  ctx.setLineDash([]);
+  for (let arm = 0; arm < 2; ++arm) {
+    ctx.strokeStyle = armColours[arm]; ctx.lineWidth = 2; ctx.beginPath();
+    let pen = false;
+    for (const h of history) {
+      if (h.d[arm] === null) { pen = false; continue; }
+      pen ? ctx.lineTo(x(h.t), y(h.d[arm])) : ctx.moveTo(x(h.t), y(h.d[arm]));
+      pen = true;
+    }
+    ctx.stroke();
+    ctx.setLineDash([2, 3]); ctx.lineWidth = 1; ctx.beginPath();  // f(d) in [0, 1] over the full height
+    history.forEach((h, i) => {
+      const yy = H - (h.f[arm] ?? 0) * (H - 10);
+      i ? ctx.lineTo(x(h.t), yy) : ctx.moveTo(x(h.t), yy);
+    });
+    ctx.stroke(); ctx.setLineDash([]);
+  }
+  ctx.fillStyle = "#889";
+  ctx.fillText(`0–${kPlotMaxDistance * 1000} mm, last ${kPlotSeconds} s; f(d) 0–1 dotted`, W - 230, 12);
+}
+function setCells(row, values, zone) {
+  const cells = document.querySelectorAll(`#hand-${row} td`);
+  values.forEach((v, i) => { cells[i].textContent = v; });
+  cells[1].className = "zone-" + zone;
+}
+function onStatus(s) {
+  state.lastStatus = s;
+  state.statusReceived += 1;
+  const t = s.timestamp.sec + s.timestamp.nsec * 1e-9;
+  history.push({ t, d: s.arms.map((a) => a.distance), f: s.arms.map((a) => a.blend_f) });
+  while (history.length && history[0].t < t - kPlotSeconds) history.shift();
+  s.arms.forEach((a) => {
+    const target = a.target_given && a.target
+        ? `${a.target_object || "point"} (${a.target.x.toFixed(2)}, ${a.target.y.toFixed(2)}, ${a.target.z.toFixed(2)})`
+        : "none";
+    setCells(a.name, [target, a.zone + (a.estop_latched ? " E-STOP" : ""),
+                      a.distance === null ? "–" : (a.distance * 1000).toFixed(1),
+                      a.blend_f === null ? "–" : a.blend_f.toFixed(2),
+                      a.closest_a ? `${a.closest_a} – ${a.closest_b}` : ""], a.zone);
+  });
+  document.getElementById("protection").textContent = s.protection ? "protection: " + s.protection : "";
+}
+
+// ---------- Foxglove WebSocket protocol client ------------------------------------------------------
+const kSubprotocol = "foxglove.websocket.v1";
+const decoder = new TextDecoder();
+const handlers = { "/reflex/scene": onSceneUpdate, "/reflex/status": onStatus };
+function connect() {
+  const ws = new WebSocket(`ws://${location.host}/`, [kSubprotocol]);
+  ws.binaryType = "arraybuffer";
+  const bySubscription = new Map();
+  let nextId = 0;
+  const label = document.getElementById("connection");
+  ws.onopen = () => { state.connected = true; label.textContent = "connected"; label.className = "ok"; };
+  ws.onclose = () => {
+    state.connected = false; label.textContent = "disconnected, retrying…"; label.className = "bad";
+    setTimeout(connect, 1000);
+  };
+  ws.onmessage = (event) => {
+    if (typeof event.data === "string") {
+      const m = JSON.parse(event.data);
+      if (m.op === "serverInfo") {
+        document.getElementById("robot").textContent = m.metadata && m.metadata.robot ? "robot: " + m.metadata.robot : "";
+      } else if (m.op === "advertise") {
+        const subscriptions = [];
+        for (const c of m.channels) {
+          state.channels.push(c.topic);
+          if (handlers[c.topic]) { const id = nextId++; bySubscription.set(id, handlers[c.topic]); subscriptions.push({ id, channelId: c.id }); }
+        }
+        if (subscriptions.length) ws.send(JSON.stringify({ op: "subscribe", subscriptions }));
+      } else if (m.op === "status") {
+        state.errors.push(m.message);
+      }
+      return;
+    }
+    const view = new DataView(event.data);
+    if (view.getUint8(0) !== 1) return;  // only messageData (opcode 0x01) is expected
+    const handler = bySubscription.get(view.getUint32(1, true));
+    // bytes 5..12: uint64 timestamp [ns]; the payload (JSON) follows.
+    if (handler) handler(JSON.parse(decoder.decode(new Uint8Array(event.data, 13))));
+  };
+}
+connect();
+
+function animate() {
+  requestAnimationFrame(animate);
+  drawPlot();
+  renderer.render(scene, camera);
+  state.rendered += 1;
+}
+animate();

@@ -1,0 +1,133 @@
+// Foxglove WebSocket client check of reflex_view (issue 14, tests): the protocol's reference client
+// (@foxglove/ws-protocol FoxgloveClient, over the `ws` package: Node has no global WebSocket before 22)
+// connects to a running reflex_view, subscribes to every channel and measures, over --seconds:
+//   - messages per second per channel;
+//   - the capsules and spheres of the robot in each /reflex/scene message, against counts taken from
+//     the URDF text here (each <collision> element: <cylinder> or <box> = one capsule = 1 cylinder and 2
+//     spheres, <sphere> = 1 sphere), independent of the C++ scene builder;
+//   - the transforms of each /tf message against the URDF's <link> count - 1;
+//   - every message against its channel's advertised JSON schema (a small validator below: every key
+//     must be a schema property with the schema's type, enums/consts respected);
+//   - protocol behaviour: a subscription to an unknown channel gets a status error; after unsubscribe
+//     no more messages arrive on that subscription.
+// Prints one JSON line with the results (the C++ test asserts on it). Exit 1 if it cannot connect.
+// Usage: node ws_client_check.js --url ws://127.0.0.1:PORT --urdf FILE --modules DIR [--seconds S]
+"use strict";
+const fs = require("fs");
+const path = require("path");
+
+const args = {};
+for (let i = 2; i < process.argv.length; i += 2) args[process.argv[i].replace(/^--/, "")] = process.argv[i + 1];
+for (const k of ["url", "urdf", "modules"]) {
+  if (!args[k]) { console.error(`ws_client_check: --${k} is required`); process.exit(2); }
+}
+const seconds = Number(args.seconds || 3);
+const modules = path.resolve(args.modules);
+const WebSocket = require(path.join(modules, "ws"));
+const { FoxgloveClient } = require(path.join(modules, "@foxglove/ws-protocol"));
+
+// ---- expected counts from the URDF text ----
+const urdf = fs.readFileSync(args.urdf, "utf8").replace(/<!--[\s\S]*?-->/g, "");
+let expectedCapsules = 0, expectedSpheres = 0;
+for (const block of urdf.match(/<collision[\s>][\s\S]*?<\/collision>/g) || []) {
+  if (/<cylinder[\s/>]/.test(block) || /<box[\s/>]/.test(block)) expectedCapsules += 1;
+  else if (/<sphere[\s/>]/.test(block)) expectedSpheres += 1;
+}
+const expectedTransforms = (urdf.match(/<link[\s>]/g) || []).length - 1;
+
+// ---- a small JSON-schema check (the subset the advertised schemas use) ----
+function typeOf(v) {
+  if (v === null) return "null";
+  if (Array.isArray(v)) return "array";
+  if (typeof v === "number") return Number.isInteger(v) ? "integer" : "number";
+  return typeof v;
+}
+function validate(v, schema, where, errors) {
+  if (errors.length > 20) return;
+  if (schema.oneOf) {
+    if (!schema.oneOf.some((o) => o.const === v)) errors.push(`${where}: ${JSON.stringify(v)} is none of the oneOf consts`);
+    return;
+  }
+  const types = schema.type === undefined ? [] : [].concat(schema.type);
+  const t = typeOf(v);
+  if (types.length && !types.includes(t) && !(t === "integer" && types.includes("number"))) {
+    errors.push(`${where}: ${t} where the schema says ${types.join("|")}`);
+    return;
+  }
+  if (schema.enum && !schema.enum.includes(v)) errors.push(`${where}: ${JSON.stringify(v)} not in ${schema.enum}`);
+  if (schema.minimum !== undefined && v < schema.minimum) errors.push(`${where}: ${v} < ${schema.minimum}`);
+  if (schema.maximum !== undefined && v > schema.maximum) errors.push(`${where}: ${v} > ${schema.maximum}`);
+  if (t === "number" && !Number.isFinite(v)) errors.push(`${where}: not finite`);
+  if (t === "object" && schema.properties) {
+    for (const k of Object.keys(v)) {
+      if (!schema.properties[k]) errors.push(`${where}.${k}: not in the schema`);
+      else validate(v[k], schema.properties[k], `${where}.${k}`, errors);
+    }
+  }
+  if (t === "array" && schema.items) v.forEach((x, i) => validate(x, schema.items, `${where}[${i}]`, errors));
+}
+
+// ---- the client ----
+const result = {
+  expectedCapsules, expectedSpheres, expectedTransforms, channels: [], rates: {}, counts: {},
+  capsules: [], spheres: [], transforms: [], schemaErrors: [], statusErrors: [], afterUnsubscribe: null,
+  serverInfo: null, subprotocol: null,
+};
+const ws = new WebSocket(args.url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+const client = new FoxgloveClient({ ws });
+const channelsById = new Map(), subs = new Map();
+let measuring = false, tfSubscription = null, unsubscribedAt = null;
+const decoder = new TextDecoder();
+
+client.on("error", (e) => { console.error("ws_client_check: " + (e && e.message)); process.exit(1); });
+client.on("serverInfo", (info) => { result.serverInfo = info; result.subprotocol = ws.protocol; });
+client.on("status", (s) => { result.statusErrors.push({ level: s.level, message: s.message }); });
+client.on("advertise", (channels) => {
+  for (const c of channels) {
+    channelsById.set(c.id, c);
+    result.channels.push({ topic: c.topic, encoding: c.encoding, schemaName: c.schemaName, schemaEncoding: c.schemaEncoding });
+    const id = client.subscribe(c.id);
+    subs.set(id, { channel: c, schema: JSON.parse(c.schema) });
+    result.counts[c.topic] = 0;
+    if (c.topic === "/tf") tfSubscription = id;
+  }
+  ws.send(JSON.stringify({ op: "subscribe", subscriptions: [{ id: 9999, channelId: 4242 }] }));  // unknown channel
+  setTimeout(() => { measuring = true; result.start = Date.now(); }, 500);
+  setTimeout(() => {
+    result.seconds = (Date.now() - result.start) / 1000;
+    for (const [topic, n] of Object.entries(result.counts)) result.rates[topic] = n / result.seconds;
+    client.unsubscribe(tfSubscription);
+    unsubscribedAt = Date.now();
+    result.afterUnsubscribe = 0;
+  }, 500 + seconds * 1000);
+  setTimeout(() => {
+    console.log(JSON.stringify(result));
+    client.close();
+    process.exit(0);
+  }, 500 + seconds * 1000 + 800);
+});
+client.on("message", ({ subscriptionId, timestamp, data }) => {
+  const sub = subs.get(subscriptionId);
+  if (!sub) return;
+  if (unsubscribedAt !== null) {
+    // Frames already queued when the unsubscribe was sent may still come within a round trip.
+    if (subscriptionId === tfSubscription && Date.now() - unsubscribedAt > 300) result.afterUnsubscribe += 1;
+    return;
+  }
+  if (!measuring) return;
+  const msg = JSON.parse(decoder.decode(data));
+  result.counts[sub.channel.topic] += 1;
+  if (result.schemaErrors.length < 20) validate(msg, sub.schema, sub.channel.topic, result.schemaErrors);
+  if (typeof timestamp !== "bigint" || timestamp <= 0n) result.schemaErrors.push("messageData timestamp " + timestamp);
+  if (sub.channel.topic === "/reflex/scene") {
+    let capsules = 0, spheres = 0;
+    for (const e of msg.entities) {
+      if (!e.id.startsWith("segment/")) continue;
+      capsules += e.cylinders.length;
+      spheres += e.spheres.length;
+    }
+    if (result.capsules.length < 1000) { result.capsules.push(capsules); result.spheres.push(spheres); }
+  } else if (sub.channel.topic === "/tf") {
+    if (result.transforms.length < 1000) result.transforms.push(msg.transforms.length);
+  }
+});
