@@ -163,6 +163,8 @@ std::function<int()> addRecord(CLI::App& app) {
     return guarded("reflex_record", [&] {
       o->bus = b->config(*name);
       const RecordingOptions recording = out->options(o->output);
+      if (o->writer.append && recording.format == RecordingFormat::kMcap)  // before any DDS entity
+        throw RecordError("--append works for .rfx recordings only ('" + o->output + "' would be MCAP)");
       o->format = recording.format;
       o->mcap = recording.mcap;
       o->writer.flush_interval = std::chrono::milliseconds(*flush_ms);

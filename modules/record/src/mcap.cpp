@@ -283,15 +283,17 @@ void McapWriter::write(std::uint16_t channel, std::uint32_t sequence, std::uint6
     throw RecordError("MCAP recording '" + path_ + "': no channel " + std::to_string(channel));
   Channel& ch = channels_[channel - 1];
   if (chunk_.empty()) chunk_opened_ = std::chrono::steady_clock::now();
-  Out o(chunk_);
-  if (!ch.in_file) {  // its schema and channel go into this chunk, before its first message
-    if (ch.schema_id != 0) {
+  if (!ch.in_file) {  // its schema and channel go into the data section just before this chunk
+    Out defs(definitions_);
+    if (ch.schema_id != 0 && !schemas_[ch.schema_id - 1].in_file) {
       const Schema& s = schemas_[ch.schema_id - 1];
-      putSchema(o, s.id, s.name, s.encoding, s.data);  // a repeated, identical Schema record is allowed
+      putSchema(defs, s.id, s.name, s.encoding, s.data);
+      schemas_[ch.schema_id - 1].in_file = true;
     }
-    putChannel(o, ch.id, ch.schema_id, ch.spec);
+    putChannel(defs, ch.id, ch.schema_id, ch.spec);
     ch.in_file = true;
   }
+  Out o(chunk_);
   Out index(chunk_message_index_[channel]);
   index.u64(log_time);
   index.u64(chunk_.size());
@@ -328,13 +330,14 @@ void McapWriter::flushChunk() {
   if (fd_ < 0 || chunk_.empty()) return;
   const std::vector<std::uint8_t> packed = compress(options_.compression, chunk_);
   const std::vector<std::uint8_t>& records = options_.compression == McapCompression::kNone ? chunk_ : packed;
-  std::vector<std::uint8_t> out;
-  out.reserve(records.size() + 128 + 32 * chunk_message_index_.size());
+  std::vector<std::uint8_t> out = std::move(definitions_);  // Schema and Channel records first
+  definitions_.clear();
+  out.reserve(out.size() + records.size() + 128 + 32 * chunk_message_index_.size());
   Out o(out);
   ChunkIndex ci{};
   ci.start_time = chunk_has_messages_ ? chunk_start_ : 0;
   ci.end_time = chunk_has_messages_ ? chunk_end_ : 0;
-  ci.offset = offset_;
+  ci.offset = offset_ + out.size();
   ci.compressed = records.size();
   ci.uncompressed = chunk_.size();
   const std::size_t at = o.begin(kChunk);
@@ -346,7 +349,7 @@ void McapWriter::flushChunk() {
   o.u64(records.size());
   o.bytes(records.data(), records.size());
   o.end(at);
-  ci.length = out.size();
+  ci.length = offset_ + out.size() - ci.offset;
   for (const auto& kv : chunk_message_index_) {  // one MessageIndex per channel of the chunk
     ci.index_offsets[kv.first] = offset_ + out.size();
     const std::size_t mi = o.begin(kMessageIndex);
@@ -355,7 +358,7 @@ void McapWriter::flushChunk() {
     o.bytes(kv.second.data(), kv.second.size());
     o.end(mi);
   }
-  ci.index_length = out.size() - ci.length;
+  ci.index_length = offset_ + out.size() - ci.offset - ci.length;
   emit(out);
   chunk_indexes_.push_back(std::move(ci));
   chunk_.clear();

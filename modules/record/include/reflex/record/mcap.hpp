@@ -4,11 +4,12 @@
 //
 // File written by McapWriter (all integers little-endian, as the specification says):
 //   magic "\x89MCAP0\r\n" | Header (profile "", library "reflex")
-//   data section:   Chunk | MessageIndex per channel of the chunk | Chunk | MessageIndex ... | DataEnd
-//                   A chunk holds Schema and Channel records (each before the first message that
-//                   uses it, in the chunk where it is first used) and Message records; its records
-//                   are optionally compressed (zstd frame, lz4 frame) and carry the CRC-32 of their
-//                   uncompressed bytes. DataEnd carries the CRC-32 of every byte before it.
+//   data section:   [Schema Channel ...] Chunk | MessageIndex per channel of the chunk | ... | DataEnd
+//                   The Schema and Channel records of a channel stand outside the chunks, just before
+//                   the chunk of its first message (so a damaged chunk loses its own messages only,
+//                   not the channels of the later ones). A chunk holds Message records, optionally
+//                   compressed (zstd frame, lz4 frame), with the CRC-32 of their uncompressed bytes.
+//                   DataEnd carries the CRC-32 of every byte before it (magic included).
 //   summary:        Schema* | Channel* | Statistics | ChunkIndex* (grouped by opcode)
 //   summary offset: SummaryOffset per group
 //   Footer (summary start, summary offset start, CRC-32 of the summary through the footer's offsets)
@@ -101,11 +102,12 @@ class McapWriter {
   struct Schema {
     std::uint16_t id;
     std::string name, encoding, data;
+    bool in_file = false;  ///< its record is written or waits in definitions_
   };
   struct Channel {
     std::uint16_t id, schema_id;
     McapChannelSpec spec;
-    bool in_file = false;  ///< its Schema/Channel records are in a written or the open chunk
+    bool in_file = false;  ///< its Channel record is written or waits in definitions_
     std::uint64_t messages = 0;
   };
   struct ChunkIndex {
@@ -125,7 +127,8 @@ class McapWriter {
   std::vector<Channel> channels_;
   std::vector<ChunkIndex> chunk_indexes_;
   std::uint64_t message_count_ = 0, start_time_ = 0, end_time_ = 0;
-  // the open chunk
+  // the open chunk, and the Schema / Channel records of its new channels (written just before it)
+  std::vector<std::uint8_t> definitions_;
   std::vector<std::uint8_t> chunk_;
   std::map<std::uint16_t, std::vector<std::uint8_t>> chunk_message_index_;  ///< channel -> (time, offset) pairs
   std::uint64_t chunk_start_ = 0, chunk_end_ = 0;
