@@ -1,5 +1,5 @@
 // MCAP recording of a live bus (issue 14, item 1), real processes on domain 120: reflex_controller
-// (joint state, status, heartbeat, protection), reflex_fault_source (hand targets, heartbeat) and
+// (joint state, status, heartbeat), reflex_fault_source (hand targets, heartbeat) and
 // reflex_modules_object_publisher (object targets) publish; two reflex_record processes record them,
 // one stopped with SIGINT (a finished file), one killed with SIGKILL (a torn file). Independent
 // answers:
@@ -75,8 +75,10 @@ TEST(McapProcess, LiveBusRecordingReadsInTheReferenceReaderAsInTheCsvExport) {
   const RecordingInfo info = scanRecording(finished);
   EXPECT_EQ(info.format, "mcap");
   EXPECT_EQ(info.tail, TailState::kClean) << info.problem;
+  // (reflex/controller_protection is published once at the controller's start: a recorder started
+  // at the same time may or may not see it.)
   for (const char* t : {"reflex/control_status", "reflex/joint_state", "reflex/hand_targets", "reflex/object_targets",
-                        "reflex/heartbeat", "reflex/controller_protection"})
+                        "reflex/heartbeat"})
     EXPECT_EQ(info.topics.count(t), 1u) << t << "\n" << slurp(tempPath("recorder.log"));
   ASSERT_GT(info.topics.count("reflex/control_status") ? info.topics.at("reflex/control_status").samples : 0, 400u);
   const std::string dir = tempPath("csv");
