@@ -165,7 +165,7 @@ std::function<int()> addRecord(CLI::App& app) {
       const RecordingOptions recording = out->options(o->output);
       if (o->writer.append && recording.format == RecordingFormat::kMcap)  // before any DDS entity
         throw RecordError("--append works for .rfx recordings only ('" + o->output + "' would be MCAP)");
-      o->format = recording.format;
+      o->format = recording.format == RecordingFormat::kMcap ? "mcap" : "rfx";
       o->mcap = recording.mcap;
       o->writer.flush_interval = std::chrono::milliseconds(*flush_ms);
       o->writer.sync_interval = std::chrono::milliseconds(*sync_ms);
@@ -174,7 +174,7 @@ std::function<int()> addRecord(CLI::App& app) {
       Recorder recorder(*o);
       bus::StopOnSignal stop_on_signal(recorder.bus());
       std::fprintf(stderr, "reflex_record: recording %zu topics to %s (%s) on domain %d\n", recorder.counts().size(),
-                   o->output.c_str(), o->format == RecordingFormat::kMcap ? "MCAP" : "rfx", recorder.bus().domainId());
+                   o->output.c_str(), o->format == "mcap" ? "MCAP" : "rfx", recorder.bus().domainId());
       recorder.run();
       std::fprintf(stderr, "reflex_record: %llu samples written to %s\n",
                    static_cast<unsigned long long>(recorder.totalSamples()), o->output.c_str());

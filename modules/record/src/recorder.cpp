@@ -27,7 +27,7 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
 
   bus_ = std::make_unique<bus::Participant>(options.bus);
   RecordingOptions recording;
-  recording.format = options.format;
+  recording.format = recordingFormatFor(options.output, options.format);
   recording.rfx = options.writer;
   recording.mcap = options.mcap;
   writer_ = createRecording(options.output, recording);

@@ -33,7 +33,7 @@ namespace reflex::record {
 
 struct RecorderOptions {
   std::string output;                 ///< recording file to create (or append to, see writer.append)
-  RecordingFormat format = RecordingFormat::kMcap;  ///< see recordingFormatFor
+  std::string format = "auto";        ///< "mcap", "rfx" or "auto": rfx for a name ending in .rfx, else MCAP
   std::vector<std::string> topics;    ///< topic specs (parseTopicSpec); empty = every known topic
   std::vector<std::string> exclude;   ///< topic names not to record (with the default "all")
   /// false (default): each topic is read with a reader that keeps the writers' promise and every
