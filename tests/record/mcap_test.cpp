@@ -320,6 +320,7 @@ TEST(Mcap, BadInputsAreNamed) {
       {{bin("reflex_record"), "convert", seedPath(), tempPath("x.mcap"), "--format", "bag"}, "'bag'"},
       {{bin("reflex_record"), "convert", text, tempPath("x.mcap")}, "not a Reflex recording"},
       {{bin("reflex_record"), "info", stub}, "cut inside its magic"},
+      {{bin("reflex_record"), "convert", good, good}, "is the input recording"},
       {{bin("reflex_record"), "record", "-o", tempPath("x.mcap"), "--append", "--domain", "129"}, "--append"},
       {{bin("reflex_record"), "record", "-o", tempPath("x.mcap"), "--compression", "gzip", "--domain", "129"},
        "'gzip'"},

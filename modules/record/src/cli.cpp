@@ -234,7 +234,10 @@ std::function<int()> addInfo(CLI::App& app) {
       const RecordingInfo info = scanRecording(*input);
       std::printf("file:      %s (%s, %llu bytes, valid up to byte %llu)\n", input->c_str(), info.format.c_str(),
                   static_cast<unsigned long long>(info.file_size), static_cast<unsigned long long>(info.valid_end));
-      std::printf("end:       %s%s\n", toString(info.tail),
+      const bool unfinished_mcap = info.format == "mcap" && info.tail == TailState::kTorn;
+      std::printf("end:       %s%s\n",
+                  unfinished_mcap ? "unfinished (no footer: the recorder did not close it); every complete chunk read"
+                                  : toString(info.tail),
                   info.skipped_bytes ? (" (" + std::to_string(info.skipped_bytes) + " bytes skipped)").c_str() : "");
       if (!info.problem.empty()) std::printf("problem:   %s\n", info.problem.c_str());
       std::printf("samples:   %llu\n", static_cast<unsigned long long>(info.records));

@@ -3,12 +3,16 @@
 #include "reflex/common/files.hpp"
 
 #include <cerrno>
+#include <filesystem>
 #include <fstream>
 
 namespace reflex::record {
 
 std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options) {
   const std::unique_ptr<SampleReader> reader = openRecording(input);
+  std::error_code ec;
+  if (std::filesystem::equivalent(input, output, ec))  // creating the output would truncate the input
+    throw RecordError("convert: output '" + output + "' is the input recording '" + input + "'");
   const std::unique_ptr<SampleWriter> writer = createRecording(output, options);
   RecordEntry e;
   std::uint64_t n = 0;

@@ -168,8 +168,9 @@ RecordingInfo scanRecording(const std::string& path);
 std::uint64_t exportCsv(const std::string& input, const std::string& topic, const std::string& csv_path);
 
 /// Copies every sample of `input` (either format) into a new recording `output` (options.format),
-/// e.g. an .rfx log into MCAP. Returns the number of samples. Throws RecordError as openRecording /
-/// createRecording.
+/// e.g. an .rfx log into MCAP (a torn or damaged input gives every sample its reader yields). Returns
+/// the number of samples. Throws RecordError as openRecording / createRecording, and if `output` is
+/// `input` (naming both).
 std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options);
 
 /// A file name for a topic's CSV: "reflex/control_status" -> "reflex_control_status.csv".
