@@ -59,6 +59,11 @@ Recorder::~Recorder() = default;
 
 bus::Participant& Recorder::bus() { return *bus_; }
 
+McapWriter* Recorder::mcap() {
+  auto* w = dynamic_cast<McapSampleWriter*>(writer_.get());
+  return w ? &w->mcap() : nullptr;
+}
+
 void Recorder::stop() noexcept { bus_->stop(); }
 
 std::uint64_t Recorder::totalSamples() const {

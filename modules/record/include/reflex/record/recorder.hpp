@@ -79,6 +79,10 @@ class Recorder {
   /// be unknown to it, and a best-effort sample from a writer the reader has not matched is dropped.
   bool waitForWriters(std::chrono::nanoseconds timeout) const;
   std::uint64_t totalSamples() const;
+  /// The MCAP writer of an MCAP recording (nullptr for .rfx), to add channels of other encodings
+  /// (McapWriter::addChannel) and write to them. Use it from the bus thread only (bus().every(...) or a
+  /// reader callback): the recorder writes samples from there.
+  McapWriter* mcap();
 
  private:
   RecorderOptions options_;
