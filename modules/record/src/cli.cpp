@@ -37,6 +37,34 @@ struct BusOptions {
   }
 };
 
+/// Format and MCAP options of a command that writes a recording (record, convert).
+struct OutputOptions {
+  std::string format = "auto";
+  std::string compression = "zstd";
+  std::uint64_t chunk_bytes = 1u << 20;
+  int chunk_ms = 500;
+  void add(CLI::App& app) {
+    app.add_option("--format", format,
+                   "file format: mcap, rfx, or auto (rfx if the file name ends in .rfx, else MCAP)")
+        ->capture_default_str();
+    app.add_option("--compression", compression, "MCAP chunk compression: none, zstd or lz4")->capture_default_str();
+    app.add_option("--chunk-size", chunk_bytes, "MCAP: close a chunk when its records reach this many bytes")
+        ->capture_default_str()->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 30));
+    app.add_option("--chunk-ms", chunk_ms,
+                   "MCAP: close a chunk when its first message is this old (ms); a crash loses the open chunk")
+        ->capture_default_str()->check(CLI::Range(1, 600000));
+  }
+  /// Throws RecordError naming a bad --format or --compression value.
+  RecordingOptions options(const std::string& path) const {
+    RecordingOptions o;
+    o.format = recordingFormatFor(path, format);
+    o.mcap.compression = parseMcapCompression(compression);
+    o.mcap.chunk_bytes = chunk_bytes;
+    o.mcap.chunk_interval = std::chrono::milliseconds(chunk_ms);
+    return o;
+  }
+};
+
 /// Runs a command: an exception is an error message and exit status 1; so is standard output that
 /// could not be written (`reflex_record info run.rfx > /dev/full`).
 template <class F>
@@ -109,18 +137,21 @@ std::function<int()> addRecord(CLI::App& app) {
   auto sync_ms = std::make_shared<int>(1000);
   auto late_joiner = std::make_shared<bool>(false);
   auto name = std::make_shared<std::string>("recorder");
-  app.add_option("-o,--output", o->output, "recording file to write")->required();
+  auto out = std::make_shared<OutputOptions>();
+  app.add_option("-o,--output", o->output, "recording file to write (run.mcap; run.rfx for the old format)")->required();
   app.add_option("-t,--topic", o->topics,
                  "topic to record (repeatable): a Reflex topic name, or NAME:TYPE for another topic name "
                  "(default: every Reflex topic)");
   app.add_option("-x,--exclude", o->exclude, "topic not to record (repeatable)");
   app.add_option("--duration", o->duration, "seconds to record (0: until Ctrl-C / SIGTERM)")
       ->check(CLI::NonNegativeNumber);
-  app.add_option("--flush-ms", *flush_ms, "hand buffered records to the kernel at least this often (ms)")
+  out->add(app);
+  app.add_option("--flush-ms", *flush_ms, "rfx: hand buffered records to the kernel at least this often (ms)")
       ->capture_default_str()->check(CLI::Range(0, 60000));
   app.add_option("--sync-ms", *sync_ms, "fsync the file this often (ms; 0: after every flush)")
       ->capture_default_str()->check(CLI::Range(0, 600000));
-  app.add_flag("--append", o->writer.append, "append to an existing recording (a torn last record is cut off)");
+  app.add_flag("--append", o->writer.append,
+               "rfx: append to an existing recording (a torn last record is cut off)");
   app.add_flag("--late-joiner-state", *late_joiner,
                "read state topics (hand targets, priority, body schema, walk, heartbeat) with their own "
                "reliable transient-local profile: the recording starts with the state published before it "
@@ -128,16 +159,22 @@ std::function<int()> addRecord(CLI::App& app) {
   app.add_flag("--progress", o->progress, "print a status line every second");
   app.add_option("--name", *name, "module name on the bus")->capture_default_str();
   b->add(app);
-  return [o, b, flush_ms, sync_ms, late_joiner, name] {
+  return [o, b, flush_ms, sync_ms, late_joiner, name, out] {
     return guarded("reflex_record", [&] {
       o->bus = b->config(*name);
+      const RecordingOptions recording = out->options(o->output);
+      if (o->writer.append && recording.format == RecordingFormat::kMcap)  // before any DDS entity
+        throw RecordError("--append works for .rfx recordings only ('" + o->output + "' would be MCAP)");
+      o->format = recording.format == RecordingFormat::kMcap ? "mcap" : "rfx";
+      o->mcap = recording.mcap;
       o->writer.flush_interval = std::chrono::milliseconds(*flush_ms);
       o->writer.sync_interval = std::chrono::milliseconds(*sync_ms);
+      o->mcap.sync_interval = std::chrono::milliseconds(*sync_ms);
       o->late_joiner_state = *late_joiner;
       Recorder recorder(*o);
       bus::StopOnSignal stop_on_signal(recorder.bus());
-      std::fprintf(stderr, "reflex_record: recording %zu topics to %s on domain %d\n", recorder.counts().size(),
-                   o->output.c_str(), recorder.bus().domainId());
+      std::fprintf(stderr, "reflex_record: recording %zu topics to %s (%s) on domain %d\n", recorder.counts().size(),
+                   o->output.c_str(), o->format == "mcap" ? "MCAP" : "rfx", recorder.bus().domainId());
       recorder.run();
       std::fprintf(stderr, "reflex_record: %llu samples written to %s\n",
                    static_cast<unsigned long long>(recorder.totalSamples()), o->output.c_str());
@@ -195,24 +232,48 @@ std::function<int()> addInfo(CLI::App& app) {
   return [input, print] {
     return guarded("reflex_record info", [&] {
       const RecordingInfo info = scanRecording(*input);
-      std::printf("file:      %s (%llu bytes, valid up to byte %llu)\n", input->c_str(),
+      std::printf("file:      %s (%s, %llu bytes, valid up to byte %llu)\n", input->c_str(), info.format.c_str(),
                   static_cast<unsigned long long>(info.file_size), static_cast<unsigned long long>(info.valid_end));
-      std::printf("end:       %s%s\n", toString(info.tail),
+      const bool unfinished_mcap = info.format == "mcap" && info.tail == TailState::kTorn;
+      std::printf("end:       %s%s\n",
+                  unfinished_mcap ? "unfinished (no footer: the recorder did not close it); every complete chunk read"
+                                  : toString(info.tail),
                   info.skipped_bytes ? (" (" + std::to_string(info.skipped_bytes) + " bytes skipped)").c_str() : "");
+      if (!info.problem.empty()) std::printf("problem:   %s\n", info.problem.c_str());
       std::printf("samples:   %llu\n", static_cast<unsigned long long>(info.records));
       std::printf("duration:  %.3f s\n", 1e-9 * static_cast<double>(info.last_ns - info.first_ns));
       for (const auto& kv : info.topics)
         std::printf("  %-28s %-30s %8llu\n", kv.first.c_str(), kv.second.type.c_str(),
                     static_cast<unsigned long long>(kv.second.samples));
       if (*print > 0) {
-        RecordReader reader(*input);
+        const std::unique_ptr<SampleReader> reader = openRecording(*input);
         RecordEntry e;
-        for (int i = 0; i < *print && reader.next(e); ++i) {
+        for (int i = 0; i < *print && reader->next(e); ++i) {
           const TopicCodec* c = findCodecByType(e.type);
           std::printf("%.6f %s\n", 1e-9 * static_cast<double>(e.receive_ns - info.first_ns),
                       c ? c->summary(e).c_str() : (e.topic + " (unknown type " + e.type + ")").c_str());
         }
       }
+      return 0;
+    });
+  };
+}
+
+std::function<int()> addConvert(CLI::App& app) {
+  auto input = std::make_shared<std::string>();
+  auto output = std::make_shared<std::string>();
+  auto out = std::make_shared<OutputOptions>();
+  app.add_option("input", *input, "recording to read (.rfx or MCAP, detected by its first bytes)")->required();
+  app.add_option("output", *output, "recording to write (format: --format, by default from the name)")->required();
+  out->add(app);
+  return [input, output, out] {
+    return guarded("reflex_record convert", [&] {
+      const RecordingOptions options = out->options(*output);
+      const std::uint64_t n = convertRecording(*input, *output, options);
+      const RecordingInfo info = scanRecording(*input);
+      std::fprintf(stderr, "reflex_record: %llu samples of %s (%s) -> %s (%s)\n", static_cast<unsigned long long>(n),
+                   input->c_str(), toString(info.tail), output->c_str(),
+                   options.format == RecordingFormat::kMcap ? "MCAP" : "rfx");
       return 0;
     });
   };

@@ -13,5 +13,6 @@ std::function<int()> addPlay(CLI::App& app);
 std::function<int()> addRecord(CLI::App& app);
 std::function<int()> addExport(CLI::App& app);
 std::function<int()> addInfo(CLI::App& app);
+std::function<int()> addConvert(CLI::App& app);
 
 }  // namespace reflex::record::cli

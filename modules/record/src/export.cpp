@@ -3,9 +3,26 @@
 #include "reflex/common/files.hpp"
 
 #include <cerrno>
+#include <filesystem>
 #include <fstream>
 
 namespace reflex::record {
+
+std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options) {
+  const std::unique_ptr<SampleReader> reader = openRecording(input);
+  std::error_code ec;
+  if (std::filesystem::equivalent(input, output, ec))  // creating the output would truncate the input
+    throw RecordError("convert: output '" + output + "' is the input recording '" + input + "'");
+  const std::unique_ptr<SampleWriter> writer = createRecording(output, options);
+  RecordEntry e;
+  std::uint64_t n = 0;
+  while (reader->next(e)) {
+    writer->append(e);
+    ++n;
+  }
+  writer->close();
+  return n;
+}
 
 std::string csvFileNameForTopic(const std::string& topic) {
   std::string name;
@@ -29,12 +46,12 @@ std::uint64_t exportCsv(const std::string& input, const std::string& topic, cons
   errno = 0;
   std::ofstream out(csv_path);
   if (!out) throw RecordError(common::writeError(csv_path, errno ? errno : EIO));
-  RecordReader reader(input);
+  const std::unique_ptr<SampleReader> reader = openRecording(input);
   RecordEntry e;
   CsvContext ctx;
   ctx.t0_ns = info.first_ns;
   std::uint64_t n = 0;
-  while (reader.next(e)) {
+  while (reader->next(e)) {
     if (e.topic != topic) continue;
     if (n == 0) codec->writeCsvHeader(out, e);
     codec->writeCsvRows(out, e, ctx);

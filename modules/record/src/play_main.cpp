@@ -1,4 +1,4 @@
-// reflex_play: publish a reflex_record recording again (same as `reflex_record play`).
+// reflex_play: publish a reflex_record recording (MCAP or .rfx) again (same as `reflex_record play`).
 #include "cli.hpp"
 
 int main(int argc, char** argv) {

@@ -39,8 +39,10 @@ class PlayClock {
 };
 
 RecordingInfo scanRecording(const std::string& path) {
-  RecordReader reader(path);
+  const std::unique_ptr<SampleReader> source = openRecording(path);
+  SampleReader& reader = *source;
   RecordingInfo info;
+  info.format = reader.formatName();
   RecordEntry e;
   while (reader.next(e)) {
     if (info.records == 0) info.first_ns = info.last_ns = e.receive_ns;
@@ -55,6 +57,7 @@ RecordingInfo scanRecording(const std::string& path) {
   info.valid_end = reader.validEnd();
   info.file_size = reader.fileSize();
   info.skipped_bytes = reader.skippedBytes();
+  info.problem = reader.problem();
   return info;
 }
 
@@ -121,7 +124,8 @@ Player::Player(const PlayerOptions& options) : options_(options) {
     publishers_[t] = codec->makePublisher(*bus_, t, codec->defaultProfile());
   }
   // One pass over the window as run() plays it: count the records and the gaps run() shortens.
-  RecordReader reader(options.input);
+  const std::unique_ptr<SampleReader> source = openRecording(options.input);
+  SampleReader& reader = *source;
   RecordEntry e;
   PlayClock clock(options_.max_gap);
   while (reader.next(e)) {
@@ -157,7 +161,8 @@ void Player::run() {
   sleepFor(options_.delay);
   const double window = windowSeconds();
   auto last_print = Clock::now() - std::chrono::seconds(1);
-  RecordReader reader(options_.input);
+  const std::unique_ptr<SampleReader> source = openRecording(options_.input);
+  SampleReader& reader = *source;
   RecordEntry e;
   PlayClock clock(options_.max_gap);
   do {

@@ -127,6 +127,42 @@ std::vector<std::uint8_t> encodeRecord(const RecordEntry& e) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Output file helpers (RecordWriter, McapWriter)
+
+int detail::openOutputFile(const std::string& path, bool truncate, bool& regular) {
+  // O_NONBLOCK for the open only: a FIFO without a reader is an error at once (ENXIO), not a hang.
+  const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | O_NONBLOCK | (truncate ? O_TRUNC : 0);
+  const int fd = ::open(path.c_str(), flags, 0644);
+  if (fd < 0) throw RecordError(sysError("cannot open recording", path));
+  struct stat st{};
+  regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
+  if (::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK) != 0) {
+    const std::string msg = sysError("cannot set up recording", path);
+    ::close(fd);
+    throw RecordError(msg);
+  }
+  return fd;
+}
+
+void detail::writeAll(int fd, const std::uint8_t* data, std::size_t size, const std::string& path) {
+  std::size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::write(fd, data + done, size - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw RecordError(sysError("cannot write recording", path));
+    }
+    done += static_cast<std::size_t>(n);
+  }
+}
+
+void detail::syncFile(int fd, bool regular, const std::string& path) {
+  // A device or pipe (/dev/null, a FIFO) cannot be synchronised (EINVAL): nothing is lost there.
+  if (::fsync(fd) != 0 && (regular || (errno != EINVAL && errno != EROFS)))
+    throw RecordError(sysError("cannot fsync recording", path));
+}
+
+// ---------------------------------------------------------------------------------------------
 // RecordWriter
 
 RecordWriter::RecordWriter(const std::string& path, const WriterOptions& options) : path_(path), options_(options) {
@@ -153,18 +189,7 @@ RecordWriter::RecordWriter(const std::string& path, const WriterOptions& options
       existing = true;
     }
   }
-  // O_NONBLOCK for the open only: a FIFO without a reader is an error at once (ENXIO), not a hang.
-  const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | O_NONBLOCK | (existing ? 0 : O_TRUNC);
-  fd_ = ::open(path.c_str(), flags, 0644);
-  if (fd_ < 0) throw RecordError(sysError("cannot open recording", path));
-  struct stat st{};
-  if (::fstat(fd_, &st) == 0) regular_ = S_ISREG(st.st_mode);
-  if (::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK) != 0) {
-    const std::string msg = sysError("cannot set up recording", path);
-    ::close(fd_);
-    fd_ = -1;
-    throw RecordError(msg);
-  }
+  fd_ = detail::openOutputFile(path, !existing, regular_);
   if (existing) {
     if (::ftruncate(fd_, static_cast<off_t>(keep)) != 0 || ::lseek(fd_, static_cast<off_t>(keep), SEEK_SET) < 0) {
       const std::string msg = sysError("cannot position at the end of recording", path);
@@ -209,25 +234,15 @@ void RecordWriter::poll() {
 }
 
 void RecordWriter::flush() {
-  std::size_t done = 0;
-  while (done < buffer_.size()) {
-    const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      throw RecordError(sysError("cannot write recording", path_));
-    }
-    done += static_cast<std::size_t>(n);
-  }
-  bytes_ += done;
+  detail::writeAll(fd_, buffer_.data(), buffer_.size(), path_);
+  bytes_ += buffer_.size();
   buffer_.clear();
 }
 
 void RecordWriter::sync() {
   if (fd_ < 0) return;
   flush();
-  // A device or pipe (/dev/null, a FIFO) cannot be synchronised (EINVAL): nothing is lost there.
-  if (::fsync(fd_) != 0 && (regular_ || (errno != EINVAL && errno != EROFS)))
-    throw RecordError(sysError("cannot fsync recording", path_));
+  detail::syncFile(fd_, regular_, path_);
   last_sync_ = std::chrono::steady_clock::now();
 }
 
@@ -296,7 +311,7 @@ RecordReader::RecordReader(const std::string& path) : path_(path) {
   std::uint8_t header[kFileHeaderSize];
   if (size_ < kFileHeaderSize || !readAt(0, header, kFileHeaderSize) || std::memcmp(header, kFileMagic, 8) != 0) {
     ::close(fd_);
-    throw RecordError("'" + path + "' is not a Reflex recording (no RFXREC header)");
+    throw RecordError("'" + path + "' is not a Reflex recording (neither an MCAP file nor an RFXREC log)");
   }
   const std::uint32_t version = getU32(header + 8);
   if (version != kFormatVersion) {
@@ -465,6 +480,12 @@ void RecordReader::rewind() {
   pos_ = valid_end_ = kFileHeaderSize;
   skipped_ = first_corrupt_ = 0;
   state_ = TailState::kClean;
+}
+
+std::string RecordReader::problem() const {
+  if (state_ == TailState::kCorrupt) return "corrupt record at byte " + std::to_string(first_corrupt_);
+  if (state_ == TailState::kTorn) return "torn last record at byte " + std::to_string(valid_end_);
+  return "";
 }
 
 const char* toString(TailState s) {

@@ -26,7 +26,11 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
   if (specs.empty()) throw RecordError("no topic left to record");
 
   bus_ = std::make_unique<bus::Participant>(options.bus);
-  writer_ = std::make_unique<RecordWriter>(options.output, options.writer);
+  RecordingOptions recording;
+  recording.format = recordingFormatFor(options.output, options.format);
+  recording.rfx = options.writer;
+  recording.mcap = options.mcap;
+  writer_ = createRecording(options.output, recording);
   for (const TopicSpec& s : specs) {
     if (counts_.count(s.topic)) throw RecordError("topic '" + s.topic + "' given twice");
     counts_[s.topic].type = s.codec->typeName();
@@ -54,6 +58,11 @@ bool Recorder::waitForWriters(std::chrono::nanoseconds timeout) const {
 Recorder::~Recorder() = default;
 
 bus::Participant& Recorder::bus() { return *bus_; }
+
+McapWriter* Recorder::mcap() {
+  auto* w = dynamic_cast<McapSampleWriter*>(writer_.get());
+  return w ? &w->mcap() : nullptr;
+}
 
 void Recorder::stop() noexcept { bus_->stop(); }
 

@@ -73,6 +73,54 @@ std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc = 0) n
 /// crc32Combine(crc32(A), crc32(B), |B|) == crc32(A || B). O(log |B|).
 std::uint32_t crc32Combine(std::uint32_t crc_a, std::uint32_t crc_b, std::uint64_t size_b) noexcept;
 
+/// How the reader's scan of a file ended.
+enum class TailState {
+  kClean,    ///< the last record ended exactly at the end of the file (MCAP: footer and closing magic read)
+  kTorn,     ///< the file ends inside a record (e.g. killed while writing) and no valid record
+             ///< follows its start; that record was dropped (MCAP: the file has no footer, i.e. the
+             ///< writer did not finish; every complete chunk before the cut was read)
+  kCorrupt,  ///< a record with a bad sync word, length or CRC that is NOT at the end (see skipped);
+             ///< also one whose length runs past the end of the file while a valid record follows
+             ///< (MCAP: a chunk, data section or summary whose CRC does not check)
+};
+
+/// A recording being written, whatever its format (.rfx: RecordWriter; .mcap: McapSampleWriter in
+/// mcap.hpp; made by createRecording in recording.hpp). Not thread-safe (one writer thread).
+class SampleWriter {
+ public:
+  virtual ~SampleWriter() = default;
+  /// Stores one sample. Throws RecordError on I/O failure or a sample the format cannot hold.
+  virtual void append(const RecordEntry& entry) = 0;
+  /// Applies the time-based part of the durability policy (call it periodically).
+  virtual void poll() = 0;
+  /// Finishes the file (MCAP: last chunk, summary, footer), fsyncs and closes; later calls do nothing.
+  virtual void close() = 0;
+  virtual const std::string& path() const = 0;
+  /// Bytes handed to the kernel so far.
+  virtual std::uint64_t bytesWritten() const = 0;
+};
+
+/// A recording being read in file order, whatever its format (openRecording in recording.hpp).
+/// Never returns a sample whose CRC does not check.
+class SampleReader {
+ public:
+  virtual ~SampleReader() = default;
+  /// Reads the next valid sample into `out`; false at the end (or where reading had to stop).
+  virtual bool next(RecordEntry& out) = 0;
+  /// Goes back to the first sample (counters reset).
+  virtual void rewind() = 0;
+  virtual TailState tailState() const = 0;
+  /// Byte offset just after the last valid record read.
+  virtual std::uint64_t validEnd() const = 0;
+  virtual std::uint64_t fileSize() const = 0;
+  /// Bytes skipped as corrupt.
+  virtual std::uint64_t skippedBytes() const = 0;
+  /// The first problem met, with its byte offset ("" if none): "corrupt record at byte 1234".
+  virtual std::string problem() const = 0;
+  /// "rfx" or "mcap".
+  virtual const char* formatName() const = 0;
+};
+
 /// Spacing of the CRC prefix values RecordReader keeps while resynchronising (bytes).
 inline constexpr std::size_t kCrcMarkStride = 256;
 
@@ -90,7 +138,7 @@ struct WriterOptions {
 
 /// Appends records to a recording file. Not thread-safe (one writer thread). The destructor flushes
 /// and fsyncs (errors there are swallowed; call close() to see them).
-class RecordWriter {
+class RecordWriter final : public SampleWriter {
  public:
   /// Creates (or, with options.append, opens and checks the header of) `path`. Throws RecordError
   /// naming the path and the cause: a missing folder or a directory in the file's place (before
@@ -103,19 +151,19 @@ class RecordWriter {
   RecordWriter& operator=(const RecordWriter&) = delete;
 
   /// Buffers one record, then flushes / syncs as the policy says. Throws RecordError on I/O failure.
-  void append(const RecordEntry& entry);
+  void append(const RecordEntry& entry) override;
   /// Applies the time-based part of the policy (call it periodically when no records arrive).
-  void poll();
+  void poll() override;
   /// Hands the buffer to the kernel (write(2)).
   void flush();
   /// flush() + fsync(2).
   void sync();
   /// sync() and close the file; later calls do nothing.
-  void close();
+  void close() override;
 
-  const std::string& path() const { return path_; }
+  const std::string& path() const override { return path_; }
   std::uint64_t recordsWritten() const { return records_; }
-  std::uint64_t bytesWritten() const { return bytes_; }
+  std::uint64_t bytesWritten() const override { return bytes_; }
 
  private:
   std::string path_;
@@ -128,17 +176,9 @@ class RecordWriter {
   std::uint64_t records_ = 0, bytes_ = 0;
 };
 
-/// How the reader's scan of a file ended.
-enum class TailState {
-  kClean,    ///< the last record ended exactly at the end of the file
-  kTorn,     ///< the file ends inside a record (e.g. killed while writing) and no valid record
-             ///< follows its start; that record was dropped
-  kCorrupt,  ///< a record with a bad sync word, length or CRC that is NOT at the end (see skipped);
-             ///< also one whose length runs past the end of the file while a valid record follows
-};
 
 /// Reads a recording sequentially. Never returns a record whose CRC does not check.
-class RecordReader {
+class RecordReader final : public SampleReader {
  public:
   /// Opens `path` and checks the file header. Throws RecordError naming the path and what is wrong
   /// (missing, not a regular file -- a FIFO or device is refused before it is opened --, not a
@@ -151,16 +191,18 @@ class RecordReader {
   /// Reads the next valid record into `out`; false at the end. With resync (the default) a corrupt
   /// record in the middle is skipped by scanning for the next sync word whose record checks
   /// (counted in skippedBytes(), state kCorrupt); without it reading stops there.
-  bool next(RecordEntry& out);
+  bool next(RecordEntry& out) override;
   /// Goes back to the first record (counters reset).
-  void rewind();
+  void rewind() override;
   void setResync(bool on) { resync_ = on; }
 
-  TailState tailState() const { return state_; }
+  TailState tailState() const override { return state_; }
   /// Byte offset just after the last valid record read.
-  std::uint64_t validEnd() const { return valid_end_; }
-  std::uint64_t fileSize() const { return size_; }
-  std::uint64_t skippedBytes() const { return skipped_; }
+  std::uint64_t validEnd() const override { return valid_end_; }
+  std::uint64_t fileSize() const override { return size_; }
+  std::uint64_t skippedBytes() const override { return skipped_; }
+  std::string problem() const override;
+  const char* formatName() const override { return "rfx"; }
   /// Offset of the first corrupt record seen (meaningful if tailState() == kCorrupt).
   std::uint64_t firstCorruptOffset() const { return first_corrupt_; }
   const std::string& path() const { return path_; }
@@ -192,6 +234,17 @@ class RecordReader {
   bool resync_ = true;
   std::vector<std::uint8_t> body_;
 };
+
+namespace detail {
+/// Opens `path` for writing (created with mode 0644, truncated if `truncate`), after
+/// common::outputFileProblem; a FIFO without a reader fails at once (ENXIO) instead of blocking.
+/// `regular` tells whether it is a regular file (fsync possible). Throws RecordError naming the path.
+int openOutputFile(const std::string& path, bool truncate, bool& regular);
+/// write(2) of all `size` bytes (EINTR retried). Throws RecordError naming `path` on failure.
+void writeAll(int fd, const std::uint8_t* data, std::size_t size, const std::string& path);
+/// fsync(2); a device or pipe (EINVAL/EROFS when not `regular`) is not an error. Throws RecordError.
+void syncFile(int fd, bool regular, const std::string& path);
+}  // namespace detail
 
 /// Human-readable name of a tail state ("clean", "torn last record", "corrupt records skipped").
 const char* toString(TailState s);

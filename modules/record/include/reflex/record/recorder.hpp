@@ -1,7 +1,8 @@
 // reflex::record — the bus recorder, player and exporter (issue 7, item 2).
 //
 //   Recorder  subscribes chosen (or all) Reflex topics and appends every received sample to a
-//             recording file (record_file.hpp: survives kill -9, torn tail detected);
+//             recording file: MCAP (mcap.hpp, the default) or .rfx (record_file.hpp); both survive
+//             kill -9 with a torn tail detected;
 //   Player    publishes a recording again with its original timing, scaled by a rate, from a
 //             start offset, optionally looped (like `ros2 bag play`);
 //   exportCsv writes the samples of one topic as a CSV table (for reports and plots).
@@ -12,6 +13,7 @@
 
 #include "reflex/record/codecs.hpp"
 #include "reflex/record/record_file.hpp"
+#include "reflex/record/recording.hpp"
 
 #include <reflex/bus/config.hpp>
 
@@ -31,6 +33,7 @@ namespace reflex::record {
 
 struct RecorderOptions {
   std::string output;                 ///< recording file to create (or append to, see writer.append)
+  std::string format = "auto";        ///< "mcap", "rfx" or "auto": rfx for a name ending in .rfx, else MCAP
   std::vector<std::string> topics;    ///< topic specs (parseTopicSpec); empty = every known topic
   std::vector<std::string> exclude;   ///< topic names not to record (with the default "all")
   /// false (default): each topic is read with a reader that keeps the writers' promise and every
@@ -44,7 +47,8 @@ struct RecorderOptions {
   bool late_joiner_state = false;
   double duration = 0.0;              ///< seconds to record (0: until stop())
   bool progress = false;              ///< print a status line to stderr about once a second
-  WriterOptions writer;
+  WriterOptions writer;               ///< .rfx durability policy (and append)
+  McapWriterOptions mcap;             ///< MCAP chunking, compression, fsync period
   bus::BusConfig bus;
 };
 
@@ -75,11 +79,15 @@ class Recorder {
   /// be unknown to it, and a best-effort sample from a writer the reader has not matched is dropped.
   bool waitForWriters(std::chrono::nanoseconds timeout) const;
   std::uint64_t totalSamples() const;
+  /// The MCAP writer of an MCAP recording (nullptr for .rfx), to add channels of other encodings
+  /// (McapWriter::addChannel) and write to them. Use it from the bus thread only (bus().every(...) or a
+  /// reader callback): the recorder writes samples from there.
+  McapWriter* mcap();
 
  private:
   RecorderOptions options_;
   std::unique_ptr<bus::Participant> bus_;
-  std::unique_ptr<RecordWriter> writer_;
+  std::unique_ptr<SampleWriter> writer_;
   std::map<std::string, TopicCount> counts_;
   std::vector<const bus::detail::ReaderBase*> readers_;
 };
@@ -151,8 +159,10 @@ struct RecordingInfo {
   std::map<std::string, TopicCount> topics;  ///< topic -> type + count
   TailState tail = TailState::kClean;
   std::uint64_t valid_end = 0, file_size = 0, skipped_bytes = 0;
+  std::string format;   ///< "mcap" or "rfx"
+  std::string problem;  ///< the first problem met, with its byte offset ("" if none)
 };
-/// Scans a recording. Throws RecordError if it cannot be opened or is not a recording.
+/// Scans a recording (either format). Throws RecordError if it cannot be opened or is not a recording.
 RecordingInfo scanRecording(const std::string& path);
 
 /// Writes the samples of `topic` in `input` as CSV to `csv_path` (header from the first sample,
@@ -160,6 +170,12 @@ RecordingInfo scanRecording(const std::string& path);
 /// RecordError if the topic is not in the recording (naming the topics that are), its type is
 /// unknown, or the output cannot be written.
 std::uint64_t exportCsv(const std::string& input, const std::string& topic, const std::string& csv_path);
+
+/// Copies every sample of `input` (either format) into a new recording `output` (options.format),
+/// e.g. an .rfx log into MCAP (a torn or damaged input gives every sample its reader yields). Returns
+/// the number of samples. Throws RecordError as openRecording / createRecording, and if `output` is
+/// `input` (naming both).
+std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options);
 
 /// A file name for a topic's CSV: "reflex/control_status" -> "reflex_control_status.csv".
 std::string csvFileNameForTopic(const std::string& topic);
