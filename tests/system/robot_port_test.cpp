@@ -192,15 +192,19 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
       std::vector<std::string>{bin + "/reflex_test_robot", "--domain", std::to_string(kDomain)}, robot_log2);
   ASSERT_TRUE(robot->started());
   const auto restarted = Clock::now();
-  double recovered_after = -1.0;
+  double recovered_after = -1.0, state_after = -1.0, command_after = -1.0;
   while (Clock::now() - restarted < std::chrono::seconds(6)) {
     pump(0.05, true);
+    const double since = std::chrono::duration<double>(Clock::now() - restarted).count();
+    if (have_state && state_after < 0.0) state_after = since;
+    if (!cmds.empty() && command_after < 0.0) command_after = since;
     if (!cmds.empty() && ctl_detail.empty() && have_state && last_state.applied_command_seq() > 0) {
       recovered_after = std::chrono::duration<double>(Clock::now() - restarted).count();
       break;
     }
   }
-  std::printf("recovered %.2f s after the robot restarted\n", recovered_after);
+  std::printf("recovered %.2f s after the robot restarted (its first state seen here %.2f s, the first command %.2f s)\n",
+              recovered_after, state_after, command_after);
   ASSERT_GE(recovered_after, 0.0) << readFile(ctl_log);
   EXPECT_LT(recovered_after, 3.0);
   EXPECT_LT(cmds.back().state_seq(), 10000U) << "answers the new robot's counter (it restarted at 1)";

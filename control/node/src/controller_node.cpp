@@ -111,6 +111,9 @@ struct ControllerNode::Impl {
   // One per-sample log line (a rejected body-schema segment): rate-limited, issue 16 item 8f.
   bus::LogLimiter schema_log;
   bus::LogLimiter robot_log;  ///< rejected robot states (--robot dds)
+  /// Robot state stale / fresh lines: a robot (or a loaded host) that flaps around --robot-timeout
+  /// is counted (exit line) but cannot flood stderr.
+  bus::LogLimiter robot_state_log{4};
   char schema_line[512] = {};
   SimSample log_row;  ///< q / qdot sized once: filling it does not allocate
 };
@@ -213,16 +216,9 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     m.log_row.q.setZero(m.model.nq);
     m.log_row.qdot.setZero(m.model.nq);
   }
-  m.joint_writer = &m.participant->makeWriter<msg::JointState>();
-  m.status_writer = &m.participant->makeWriter<msg::ControlStatus>();
-  m.heartbeat_writer = &m.participant->makeWriter<msg::Heartbeat>();
-  m.targets_reader = &m.participant->makeReader<msg::HandTargets>();
-  m.priority_reader = &m.participant->makeReader<msg::MotionPriority>();
-  m.schema_reader = &m.participant->makeReader<msg::BodySchemaChange>();
-  m.walk_reader = &m.participant->makeReader<msg::WalkCommand>();
-  m.heartbeat_reader = &m.participant->makeReader<msg::Heartbeat>();
-  // The robot port and the onboard controller, after the probe too: a refused controller never
-  // commands the robot.
+  // The robot port and the onboard controller, after the probe too (a refused controller never
+  // commands the robot), and before the readers: the first cycle follows their creation at once, as
+  // before issue 13 (a late-joiner sample is not yet there when a resumed controller starts holding).
   OnboardOptions oo;
   oo.input_timeout = config.input_timeout;
   oo.max_target_distance = config.max_target_distance;
@@ -238,6 +234,14 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     port = m.kinematic.get();
   }
   m.ctl = std::make_unique<OnboardController>(m.model, m.cm, *port, q0, oo);
+  m.joint_writer = &m.participant->makeWriter<msg::JointState>();
+  m.status_writer = &m.participant->makeWriter<msg::ControlStatus>();
+  m.heartbeat_writer = &m.participant->makeWriter<msg::Heartbeat>();
+  m.targets_reader = &m.participant->makeReader<msg::HandTargets>();
+  m.priority_reader = &m.participant->makeReader<msg::MotionPriority>();
+  m.schema_reader = &m.participant->makeReader<msg::BodySchemaChange>();
+  m.walk_reader = &m.participant->makeReader<msg::WalkCommand>();
+  m.heartbeat_reader = &m.participant->makeReader<msg::Heartbeat>();
 
   m.joint_msg.names(m.model.q_names);
   m.joint_msg.positions().assign(m.model.nq, 0.0);
@@ -411,16 +415,19 @@ void ControllerNode::run() {
       said_robot = true;
       if (robot_ok) {
         detail.clear();
-        if (m.dds)
-          std::fprintf(stderr, "reflex_controller: robot state fresh (seq %llu): commanding the robot\n",
-                       static_cast<unsigned long long>(m.dds->stateSeq()));
+        if (m.dds) {
+          std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: robot state fresh (seq %llu): commanding the robot",
+                        static_cast<unsigned long long>(m.dds->stateSeq()));
+          m.robot_state_log.print(stderr, m.schema_line);
+        }
       } else {
         char text[200];
         std::snprintf(text, sizeof(text), "robot state stale: %s (timeout %.0f ms); command frozen, the robot holds",
                       m.dds && m.dds->haveState() ? "no fresh reflex/robot_state" : "no reflex/robot_state yet",
                       m.config.robot_timeout * 1e3);
         detail = text;
-        std::fprintf(stderr, "reflex_controller: %s\n", text);
+        std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: %s", text);
+        m.robot_state_log.print(stderr, m.schema_line);
       }
       publishHeartbeat(msg::STATE_RUNNING);
       last_heartbeat = t_now;
