@@ -1,6 +1,6 @@
 // The robot over DDS (issue 13, item 2) with real processes: reflex_controller --robot dds against
 // reflex_test_robot (test_robot_driver.cpp: a kinematic integrator of reflex/joint_command publishing
-// reflex/robot_state at 1 kHz), a target source and a watcher in this process. Domain 140.
+// reflex/robot_state at 1 kHz), a target source and a watcher in this process. Domains 140..142.
 //
 // Independent answers:
 // - reaching: the same targets given to the in-process kinematic plant (OnboardController +
@@ -10,6 +10,9 @@
 // - the robot dies (kill -9): the controller's heartbeat says "robot state stale" and no new command
 //   is published; a restarted robot gets commands again within 3 s (the issue's bound), answering its
 //   own states (state_seq of the new robot's counter);
+// - bad states (a missing joint, NaN, lengths that differ, a stamp from the future) from a robot in
+//   this test: never answered, named in the log and counted in the exit line; good states with the
+//   names in another order: every command answers one of them, within v_max * period of it;
 // - the controller dies (kill -9): the robot reports holding (RobotState.holding) within the command
 //   deadline plus a margin, and its measured positions do not change for 1 s.
 #include "process.hpp"
@@ -25,6 +28,8 @@
 #include <csignal>
 #include <cmath>
 #include <fstream>
+#include <functional>
+#include <map>
 #include <sstream>
 
 namespace reflex {
@@ -240,6 +245,109 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
   const std::string text = readFile(ctl_log);
   EXPECT_NE(text.find("robot state stale"), std::string::npos) << text;
   EXPECT_NE(text.find("robot state fresh"), std::string::npos) << text;
+}
+
+TEST(RobotPort, BadRobotStatesAreRejectedNamedAndCountedAndNeverAnswered) {
+  // This test is the robot: it publishes states that lack a joint, carry a NaN, have lengths that
+  // differ, or are stamped 1 s in the future (each kind for 0.5 s at 200 Hz). None may be answered
+  // by a command. Then good states with the names in reverse order (the name map): every command
+  // answers one of them and moves no driven joint more than v_max * period from the state it answers.
+  Fixture fx;
+  const std::string bin = REFLEX_BIN_DIR;
+  const std::string ctl_log = ::testing::TempDir() + "robot_port_test.bad_states.log";
+  testing::ChildProcess controller({bin + "/reflex_controller", "--domain", std::to_string(kDomain + 2), "--robot", "dds",
+                                    "--peer-probe", "0", "--duration", "30"},
+                                   ctl_log);
+  ASSERT_TRUE(controller.started());
+  bus::BusConfig config;
+  config.module_name = "test_robot_in_test";
+  config.domain_id = kDomain + 2;
+  bus::Participant robot(config);
+  auto& states = robot.makeWriter<msg::RobotState>();
+  auto& commands = robot.makeReader<msg::JointCommand>("reflex/joint_command", bus::kProfileRecord);
+  ASSERT_TRUE(states.waitForReaders(1, std::chrono::seconds(15))) << readFile(ctl_log);
+  ASSERT_TRUE(commands.waitForWriters(1, std::chrono::seconds(15))) << readFile(ctl_log);
+  const Eigen::VectorXd q0 = control::restConfiguration(fx.model, fx.cm);
+  auto good = [&](bool reversed) {
+    msg::RobotState st;
+    for (int k = 0; k < fx.model.nq; ++k) {
+      const int i = reversed ? fx.model.nq - 1 - k : k;
+      st.names().push_back(fx.model.q_names[i]);
+      st.positions().push_back(q0[i]);
+      st.velocities().push_back(0.0);
+    }
+    return st;
+  };
+  std::vector<msg::JointCommand> got;
+  auto send = [&](const char* what, const std::function<void(msg::RobotState&)>& spoil, bool future) {
+    for (int k = 0; k < 100; ++k) {
+      msg::RobotState st = good(false);
+      spoil(st);
+      if (future) {
+        st.header().stamp_ns(bus::nowNs() + 1'000'000'000);
+        st.header().seq(static_cast<std::uint64_t>(k + 1));
+        states.write(st);
+      } else {
+        states.publish(st);
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    commands.takeAll(got);
+    EXPECT_EQ(got.size(), 0U) << "a command answered a state that " << what;
+  };
+  const std::string elbow = "l_elbow";
+  ASSERT_GE(fx.model.qIndex(elbow), 0);
+  send("lacks l_elbow", [&](msg::RobotState& st) {
+    for (std::size_t k = 0; k < st.names().size(); ++k)
+      if (st.names()[k] == elbow) {
+        st.names().erase(st.names().begin() + static_cast<long>(k));
+        st.positions().erase(st.positions().begin() + static_cast<long>(k));
+        st.velocities().erase(st.velocities().begin() + static_cast<long>(k));
+        break;
+      }
+  }, false);
+  send("has a NaN", [](msg::RobotState& st) { st.positions()[3] = std::nan(""); }, false);
+  send("has lengths that differ", [](msg::RobotState& st) { st.velocities().pop_back(); }, false);
+  send("is stamped 1 s in the future", [](msg::RobotState&) {}, true);
+
+  // Good states, names reversed.
+  std::map<std::uint64_t, msg::RobotState> sent;
+  for (int k = 0; k < 200; ++k) {
+    msg::RobotState st = good(true);
+    states.publish(st);
+    sent[st.header().seq()] = st;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    commands.takeAll(got);
+  }
+  ASSERT_GT(got.size(), 50U) << "good states are answered";
+  const double period = fx.cm.params.period;
+  for (const auto& c : got) {
+    ASSERT_TRUE(sent.count(c.state_seq())) << "answers a state that was sent: seq " << c.state_seq();
+    const msg::RobotState& st = sent[c.state_seq()];
+    EXPECT_EQ(c.state_stamp_ns(), st.header().stamp_ns());
+    for (std::size_t k = 0; k < c.names().size(); ++k) {
+      const int i = fx.model.qIndex(c.names()[k]);
+      ASSERT_GE(i, 0);
+      const double measured = st.positions()[static_cast<std::size_t>(fx.model.nq - 1 - i)];  // reversed
+      EXPECT_LE(std::abs(c.positions()[k] - measured), fx.model.v_max[i] * period * (1 + 1e-9)) << c.names()[k];
+      EXPECT_NEAR(c.velocities()[k], (c.positions()[k] - measured) / period, 1e-9) << c.names()[k];
+    }
+  }
+  controller.signal(SIGTERM);
+  EXPECT_EQ(controller.wait(std::chrono::seconds(10)), 0);
+  const std::string text = readFile(ctl_log);
+  EXPECT_NE(text.find("joint 'l_elbow' is missing"), std::string::npos) << text;
+  EXPECT_NE(text.find("position nan"), std::string::npos) << text;
+  EXPECT_NE(text.find("names but"), std::string::npos) << text;
+  EXPECT_NE(text.find("in the future"), std::string::npos) << text;
+  const std::size_t at = text.find("robot dds: states ");
+  ASSERT_NE(at, std::string::npos) << text;
+  unsigned long long accepted = 0, rejected = 0;
+  ASSERT_EQ(std::sscanf(text.c_str() + at, "robot dds: states %llu (rejected %llu)", &accepted, &rejected), 2) << text;
+  std::printf("controller exit: %llu states accepted, %llu rejected (400 bad sent, best effort)\n", accepted, rejected);
+  EXPECT_GT(rejected, 300U);
+  EXPECT_LE(rejected, 400U);
+  EXPECT_GT(accepted, 100U);
 }
 
 TEST(RobotPort, BadRobotOptionsAreRefusedNamingTheValue) {

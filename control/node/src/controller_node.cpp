@@ -110,7 +110,8 @@ struct ControllerNode::Impl {
   std::vector<msg::BodySchemaChange> schema_scratch;
   // One per-sample log line (a rejected body-schema segment): rate-limited, issue 16 item 8f.
   bus::LogLimiter schema_log;
-  bus::LogLimiter robot_log;  ///< rejected robot states (--robot dds)
+  /// Rejected robot states (--robot dds), one limiter per cause: a flood of one kind never hides another.
+  std::array<bus::LogLimiter, DdsRobotPort::kCauses> robot_log;
   /// Robot state stale / fresh lines: a robot (or a loaded host) that flaps around --robot-timeout
   /// is counted (exit line) but cannot flood stderr.
   bus::LogLimiter robot_state_log{4};
@@ -403,7 +404,7 @@ void ControllerNode::run() {
     if (m.reset.exchange(false)) ctl.requestEstopReset();
     if (m.dds && m.dds->poll() > 0) {
       std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", m.dds->lastRejection());
-      m.robot_log.print(stderr, m.schema_line);
+      m.robot_log[static_cast<std::size_t>(m.dds->lastCause())].print(stderr, m.schema_line);
     }
 
     // 2.-3. Staleness, priority, control (allocation-free) and the robot port: one step.

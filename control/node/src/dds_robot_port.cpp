@@ -32,6 +32,7 @@ bool DdsRobotPort::accept(const msg::RobotState& s) noexcept {
   const std::size_t n = s.names().size();
   if (s.positions().size() != n || s.velocities().size() != n || (!s.efforts().empty() && s.efforts().size() != n)) {
     ++counts_.rejected_length;
+    cause_ = 0;
     std::snprintf(rejection_, sizeof(rejection_),
                   "robot state seq %llu rejected: %zu names but %zu positions, %zu velocities, %zu efforts", seq, n,
                   s.positions().size(), s.velocities().size(), s.efforts().size());
@@ -52,6 +53,7 @@ bool DdsRobotPort::accept(const msg::RobotState& s) noexcept {
     const int k = index_[static_cast<std::size_t>(i)];
     if (k < 0) {
       ++counts_.rejected_missing;
+      cause_ = 1;
       std::snprintf(rejection_, sizeof(rejection_), "robot state seq %llu rejected: joint '%s' is missing", seq,
                     model_.q_names[i].c_str());
       return false;
@@ -59,6 +61,7 @@ bool DdsRobotPort::accept(const msg::RobotState& s) noexcept {
     const double p = s.positions()[static_cast<std::size_t>(k)], v = s.velocities()[static_cast<std::size_t>(k)];
     if (!std::isfinite(p) || !std::isfinite(v)) {
       ++counts_.rejected_non_finite;
+      cause_ = 2;
       std::snprintf(rejection_, sizeof(rejection_), "robot state seq %llu rejected: joint '%s' position %g velocity %g",
                     seq, model_.q_names[i].c_str(), p, v);
       return false;
@@ -68,6 +71,7 @@ bool DdsRobotPort::accept(const msg::RobotState& s) noexcept {
   const std::int64_t ahead = s.header().stamp_ns() - now;
   if (static_cast<double>(ahead) > kFutureTolerance * 1e9) {
     ++counts_.rejected_future;
+    cause_ = 3;
     std::snprintf(rejection_, sizeof(rejection_),
                   "robot state seq %llu rejected: stamped %.1f ms in the future (tolerance %.1f ms)", seq,
                   static_cast<double>(ahead) * 1e-6, kFutureTolerance * 1e3);
@@ -75,6 +79,7 @@ bool DdsRobotPort::accept(const msg::RobotState& s) noexcept {
   }
   if (have_state_ && s.header().stamp_ns() <= state_stamp_ns_) {
     ++counts_.rejected_old;
+    cause_ = 4;
     std::snprintf(rejection_, sizeof(rejection_), "robot state seq %llu rejected: stamp not newer than seq %llu's",
                   seq, static_cast<unsigned long long>(state_seq_));
     return false;

@@ -66,6 +66,9 @@ class DdsRobotPort final : public control::RobotPort {
 
   const Counts& counts() const { return counts_; }
   const char* lastRejection() const { return rejection_; }
+  /// The cause of the last rejection: 0 lengths, 1 missing joint, 2 non-finite, 3 future stamp, 4 old.
+  static constexpr int kCauses = 5;
+  int lastCause() const { return cause_; }
   bool haveState() const { return have_state_; }
   /// Age (s) of the newest accepted state now, +inf without one.
   double stateAge() const noexcept;
@@ -89,6 +92,7 @@ class DdsRobotPort final : public control::RobotPort {
   std::int64_t state_stamp_ns_ = 0;
   Counts counts_;
   char rejection_[300] = {};
+  int cause_ = 0;
 };
 
 }  // namespace reflex::control_node
