@@ -25,6 +25,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <csignal>
 #include <cmath>
 #include <fstream>
@@ -179,6 +180,15 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
   EXPECT_GT(c.valid_until_ns(), c.header().stamp_ns());
   EXPECT_LE(c.valid_until_ns() - c.header().stamp_ns(), 16'000'000) << "three 5 ms periods";
   EXPECT_EQ(c.names().size(), control::drivenJoints(fx.model, fx.cm).size());
+  // Latency from the robot's measurement to the command answering it (one host, one clock): never
+  // above --robot-timeout (20 ms: an older state is not answered).
+  std::vector<double> latency_ms;
+  for (const auto& cmd : cmds) latency_ms.push_back(static_cast<double>(cmd.header().stamp_ns() - cmd.state_stamp_ns()) * 1e-6);
+  std::sort(latency_ms.begin(), latency_ms.end());
+  std::printf("state -> command latency over %zu commands: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n", latency_ms.size(),
+              latency_ms[latency_ms.size() / 2], latency_ms[latency_ms.size() * 99 / 100], latency_ms.back());
+  EXPECT_GE(latency_ms.front(), 0.0);
+  EXPECT_LE(latency_ms.back(), 20.0 + 1e-6);
 
   // 2. The robot dies: the controller says so and stops commanding.
   robot->signal(SIGKILL);
@@ -197,22 +207,25 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
       std::vector<std::string>{bin + "/reflex_test_robot", "--domain", std::to_string(kDomain)}, robot_log2);
   ASSERT_TRUE(robot->started());
   const auto restarted = Clock::now();
-  double recovered_after = -1.0, state_after = -1.0, command_after = -1.0;
-  while (Clock::now() - restarted < std::chrono::seconds(6)) {
-    pump(0.05, true);
+  // The controller's recovery: commands again (they stopped while the state was stale, so any
+  // command now answers the new robot) and its heartbeat's detail is empty again. Whether this
+  // watcher has discovered the new robot yet is a separate matter (DDS discovery of a third
+  // participant, measured up to 3.2 s under load), so the robot's applying is checked after.
+  double recovered_after = -1.0, state_after = -1.0, applied_after = -1.0;
+  while (Clock::now() - restarted < std::chrono::seconds(10) && (recovered_after < 0.0 || applied_after < 0.0)) {
+    pump(0.02, true);
     const double since = std::chrono::duration<double>(Clock::now() - restarted).count();
     if (have_state && state_after < 0.0) state_after = since;
-    if (!cmds.empty() && command_after < 0.0) command_after = since;
-    if (!cmds.empty() && ctl_detail.empty() && have_state && last_state.applied_command_seq() > 0) {
-      recovered_after = std::chrono::duration<double>(Clock::now() - restarted).count();
-      break;
-    }
+    if (recovered_after < 0.0 && !cmds.empty() && ctl_detail.empty()) recovered_after = since;
+    if (applied_after < 0.0 && have_state && last_state.applied_command_seq() > 0) applied_after = since;
   }
-  std::printf("recovered %.2f s after the robot restarted (its first state seen here %.2f s, the first command %.2f s)\n",
-              recovered_after, state_after, command_after);
+  std::printf("restart: the controller commanded again %.2f s after the robot restarted; the new robot's state first "
+              "seen here after %.2f s, applying commands after %.2f s\n",
+              recovered_after, state_after, applied_after);
   ASSERT_GE(recovered_after, 0.0) << readFile(ctl_log);
   EXPECT_LT(recovered_after, 3.0);
-  EXPECT_LT(cmds.back().state_seq(), 10000U) << "answers the new robot's counter (it restarted at 1)";
+  ASSERT_GE(applied_after, 0.0) << "the restarted robot applies the controller's commands";
+  EXPECT_LT(cmds.back().state_seq(), 20000U) << "answers the new robot's counter (it restarted at 1)";
   pump(4.0, true);
   const auto again = fx.hands(last_state);
   for (int a = 0; a < 2; ++a) EXPECT_LT((again[a] - kTargets[a]).norm(), 0.01) << "arm " << a << " after the restart";
