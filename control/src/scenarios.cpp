@@ -1,6 +1,7 @@
 #include "reflex/control/scenarios.hpp"
 
 #include "reflex/common/files.hpp"
+#include "reflex/control/onboard.hpp"
 
 #include <cerrno>
 #include <cmath>
@@ -58,11 +59,13 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
   ControllerModel cm = cm_in;
   cm.params.mode = options.mode;
   cm.params.estop = options.estop;
-  ControllerData data(model, cm);
-  KinematicRobot robot(model, restConfiguration(model, cm));
-  WalkingPattern walking(model);
-  Eigen::VectorXd q_scratch = robot.jointPositions(), q_before = robot.jointPositions();
-  ScenarioContext ctx{model, data, cm, robot.jointPositions()};
+  // The same onboard controller as reflex_controller (onboard.hpp), on the in-process kinematic plant.
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort robot(q0);
+  OnboardController controller(model, cm, robot, q0);
+  ControllerData& data = controller.data();
+  Eigen::VectorXd q_before = q0;
+  ScenarioContext ctx{model, data, cm, robot.positions()};
   ControlInput input;
   SimResult result;
   result.min_distance = std::numeric_limits<double>::infinity();
@@ -74,29 +77,26 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
   for (std::uint64_t k = 0; k <= steps; ++k) {
     const double t = static_cast<double>(k) * dt;
     if (scenario.script) scenario.script(t, input, ctx);
-    const ControlResult cr = computeControl(model, cm, data, robot.jointPositions(), input);
+    controller.setControlInput(input, t);  // the script owns the whole input: never stale
     input.reset_estop = false;
+    // Walking starts with the plant step of the cycle at walk_start (it does not change the control).
+    const bool walk_now = scenario.walk_distance > 0.0 && t >= scenario.walk_start && k < steps;
+    if (walk_now && !walk_started) {
+      controller.startWalking(scenario.walk_distance, scenario.walk_speed);
+      walk_started = true;
+    }
+    q_before = robot.positions();
+    // One cycle: computeControl at the robot's q, then stepPlant (arms from the controller; legs,
+    // heel and body from walking, which holds while the e-stop is latched or recovering and never
+    // closes a pair that no arm can move).
+    const CycleReport& rep = controller.step(t);
     if (!data.qdot.allFinite()) result.non_finite = true;
-    // Distances of this cycle (computed inside the controller for the current q).
-    double dmin = std::numeric_limits<double>::infinity(), dvirt = dmin;
-    int pmin = -1;
-    for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
-      const PairDistance& pd = data.dist.pairs[i];
-      if (!pd.active) continue;
-      const bool virt = model.segments[pd.seg_b].body_schema_slot && data.slot_virtual[pd.seg_b - model.num_robot_segments];
-      if (virt) {
-        dvirt = std::min(dvirt, pd.distance);
-      } else if (pd.distance < dmin) {
-        dmin = pd.distance;
-        pmin = static_cast<int>(i);
-      }
-    }
-    if (dmin < result.min_distance) {
-      result.min_distance = dmin;
+    if (rep.min_distance < result.min_distance) {
+      result.min_distance = rep.min_distance;
       result.min_time = t;
-      result.min_pair = pmin;
+      result.min_pair = rep.min_pair;
     }
-    result.min_virtual_distance = std::min(result.min_virtual_distance, dvirt);
+    result.min_virtual_distance = std::min(result.min_virtual_distance, rep.virtual_distance);
     if (data.estop != EstopState::kClear) result.estop_fired = true;
     for (int i = 0; i < model.nq; ++i)
       result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
@@ -113,31 +113,22 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
       s.arms = data.arms;
       s.commands = input.hands;
       s.estop = data.estop;
-      s.min_distance = dmin;
-      s.min_pair = pmin;
-      s.virtual_distance = dvirt;
-      s.arm_distance = armToArmDistance(model, cm, data);
-      s.q = robot.jointPositions();
+      s.min_distance = rep.min_distance;
+      s.min_pair = rep.min_pair;
+      s.virtual_distance = rep.virtual_distance;
+      s.arm_distance = rep.arm_distance;
+      s.q = q_before;  // the configuration this cycle computed from
       s.qdot = data.qdot;
       result.samples.push_back(std::move(s));
     }
     ++result.cycles;
     result.guard_cycles = data.guard_count;
     if (k == steps) break;
-    // Apply (stepPlant): arms from the controller; legs/heel/body from walking, which holds while the
-    // e-stop is latched or recovering and never closes a pair that no arm can move.
-    const bool walk_now = scenario.walk_distance > 0.0 && t >= scenario.walk_start;
-    if (walk_now && !walk_started) {
-      walking.start(scenario.walk_distance, scenario.walk_speed);
-      walk_started = true;
-    }
-    q_before = robot.jointPositions();
-    stepPlant(model, cm, data, cr, robot, walk_started ? &walking : nullptr, dt, q_scratch);
     result.walking_holds = data.walking_hold_count;
     // What the plant did, every joint (the walking joints too): |dq| / (v_max dt).
     for (int i = 0; i < model.nq; ++i)
       result.max_joint_speed_ratio =
-          std::max(result.max_joint_speed_ratio, std::abs(robot.jointPositions()[i] - q_before[i]) / (model.v_max[i] * dt));
+          std::max(result.max_joint_speed_ratio, std::abs(robot.positions()[i] - q_before[i]) / (model.v_max[i] * dt));
   }
   return result;
 }

@@ -136,6 +136,7 @@ std::string pairName(const Model& model, int pair) {
 void summarize(std::ostream& os, const Model& model, const Scenario& sc, const SimResult& r, const char* label,
                double wall) {
   os << "scenario " << sc.name << " (" << sc.paper << "), " << label << "\n";
+  os << "  robot                 kinematic (in-process plant, OnboardController + KinematicPort)\n";
   os << "  min distance          " << r.min_distance * 1000.0 << " mm at t = " << r.min_time << " s ("
      << pairName(model, r.min_pair) << ")\n";
   if (std::isfinite(r.min_virtual_distance))
@@ -159,6 +160,7 @@ void summarize(std::ostream& os, const Model& model, const Scenario& sc, const S
 
 int main(int argc, char** argv) {
   CLI::App app{"reflex_sim: the paper's experiments on the kinematic robot (no DDS)"};
+  std::string robot_side = "kinematic";
   std::string scenario_name, out_dir = "out/sim", urdf, collision, controller_cfg, mode = "one_dof";
   bool list = false, no_avoidance = false, no_plots = false;
   app.add_option("scenario", scenario_name, "scenario name (see --list) or 'all'");
@@ -176,7 +178,18 @@ int main(int argc, char** argv) {
                  "instead of simulating: write OUT/postures.csv (the robot's capsules) for rows of this time-series "
                  "CSV (reflex_sim or reflex_controller --log)");
   app.add_option("--at", at, "times (s) of the rows for --postures-from (nearest row each)")->delimiter(',');
+  app.add_option("--robot", robot_side,
+                 "the robot side: 'kinematic' (the in-process plant; the only one reflex_sim runs today; a robot over "
+                 "DDS is reflex_controller --robot dds)")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (robot_side != "kinematic") {
+    std::fprintf(stderr,
+                 "reflex_sim: error: --robot '%s': reflex_sim runs the in-process kinematic plant only ('kinematic'); "
+                 "drive a robot over DDS with reflex_controller --robot dds\n",
+                 robot_side.c_str());
+    return 1;
+  }
 
   // A folder that cannot be made is an error now, before any simulation (not after the first one).
   if (!list && !out_dir.empty()) {

@@ -1,7 +1,9 @@
 #include "reflex/control_node/controller_node.hpp"
 
 #include "reflex/control/kinematics.hpp"
+#include "reflex/control/onboard.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "reflex/control_node/dds_robot_port.hpp"
 #include "reflex/control_node/robot_state_file.hpp"
 #include "reflex/control_node/timeseries_log.hpp"
 
@@ -68,11 +70,13 @@ struct ControllerNode::Impl {
   NodeConfig config;
   Model model;
   ControllerModel cm;
-  std::unique_ptr<ControllerData> data;
-  std::unique_ptr<KinematicRobot> robot;
+  // The robot port (issue 13, item 2): the in-process kinematic plant or the robot over DDS.
+  std::unique_ptr<KinematicPort> kinematic;  ///< --robot kinematic
+  std::unique_ptr<DdsRobotPort> dds;         ///< --robot dds
+  std::unique_ptr<OnboardController> ctl;    ///< everything per cycle but the bus (onboard.hpp)
   std::unique_ptr<RobotStateFile> state_file;  ///< null without --robot-state
   std::string state_note;
-  std::unique_ptr<WalkingPattern> walking;
+  Eigen::VectorXd q0;
   std::unique_ptr<bus::Participant> participant;
   bus::Writer<msg::JointState>* joint_writer = nullptr;
   bus::Writer<msg::ControlStatus>* status_writer = nullptr;
@@ -93,18 +97,10 @@ struct ControllerNode::Impl {
   std::atomic<bool> stop{false};
   std::atomic<bool> reset{false};
 
-  // Inputs as last received.
-  ControlInput input;
-  MotionPriority topic_priority = MotionPriority::kEqual;
   // The target source is the DDS participant that wrote the last hand targets; only ITS heartbeats
   // (state RUNNING) count as a sign of life (issue 16, item 4), never a module name in a message.
   bool have_target_writer = false;
   ParticipantId target_writer{};
-  double last_targets_rx = -1.0;
-  double last_source_heartbeat = -1.0;  // monotonic time of the last heartbeat of target_writer
-  bool stale = true;
-  std::map<std::string, int> schema_slots;     // segment name -> slot
-  std::array<int, kBodySchemaSlots> slot_priority{};
   // Preallocated messages.
   msg::JointState joint_msg;
   msg::ControlStatus status_msg;
@@ -114,8 +110,12 @@ struct ControllerNode::Impl {
   std::vector<msg::BodySchemaChange> schema_scratch;
   // One per-sample log line (a rejected body-schema segment): rate-limited, issue 16 item 8f.
   bus::LogLimiter schema_log;
+  /// Rejected robot states (--robot dds), one limiter per cause: a flood of one kind never hides another.
+  std::array<bus::LogLimiter, DdsRobotPort::kCauses> robot_log;
+  /// Robot state stale / fresh lines: a robot (or a loaded host) that flaps around --robot-timeout
+  /// is counted (exit line) but cannot flood stderr.
+  bus::LogLimiter robot_state_log{4};
   char schema_line[512] = {};
-  Eigen::VectorXd q_walk;
   SimSample log_row;  ///< q / qdot sized once: filling it does not allocate
 };
 
@@ -124,6 +124,14 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.config = config;
   if (!(config.input_timeout > 0.0))
     throw ConfigError("--input-timeout " + std::to_string(config.input_timeout) + " must be positive");
+  if (config.robot != "kinematic" && config.robot != "dds")
+    throw ConfigError("--robot '" + config.robot + "' is not a robot side: use 'kinematic' (the in-process plant) or 'dds' "
+                      "(a robot driver on reflex/robot_state and reflex/joint_command)");
+  if (!(config.robot_timeout > 0.0 && config.robot_timeout <= 1.0))
+    throw ConfigError("--robot-timeout " + std::to_string(config.robot_timeout) + " must be in (0, 1] s");
+  if (config.robot == "dds" && !config.robot_state.empty())
+    throw ConfigError("--robot-state '" + config.robot_state + "' keeps the simulated robot's joints across restarts; "
+                      "with --robot dds the robot measures its own: drop one of the two options");
   const CollisionConfig cc = loadCollisionConfigFor(config.urdf, config.collision);
   m.model = loadModel(config.urdf, cc);
   if (!(config.peer_probe >= 0.0 && config.peer_probe <= 60.0))
@@ -145,7 +153,10 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.protection.period = ctl.params.period;
   m.cm = makeControllerModel(m.model, ctl);
   m.protection.robot = m.model.name;
-  m.data = std::make_unique<ControllerData>(m.model, m.cm);
+  const double deadline = config.command_deadline > 0.0 ? config.command_deadline : 3.0 * m.cm.params.period;
+  if (!(deadline >= m.cm.params.period && deadline <= 1.0))
+    throw ConfigError("--command-deadline " + std::to_string(config.command_deadline) + " must be in [period = " +
+                      std::to_string(m.cm.params.period) + ", 1] s (0: three periods)");
   Eigen::VectorXd q0 = restConfiguration(m.model, m.cm);
   if (!config.robot_state.empty()) {
     m.state_file = std::make_unique<RobotStateFile>(config.robot_state, m.model.q_names, m.model.q_lower, m.model.q_upper);
@@ -160,9 +171,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     }
     m.state_note = note;
   }
-  m.robot = std::make_unique<KinematicRobot>(m.model, q0);
-  m.walking = std::make_unique<WalkingPattern>(m.model);
-  m.q_walk = m.robot->jointPositions();
+  m.q0 = q0;
 
   bus::BusConfig bc;
   bc.module_name = config.module_name;
@@ -208,6 +217,24 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     m.log_row.q.setZero(m.model.nq);
     m.log_row.qdot.setZero(m.model.nq);
   }
+  // The robot port and the onboard controller, after the probe too (a refused controller never
+  // commands the robot), and before the readers: the first cycle follows their creation at once, as
+  // before issue 13 (a late-joiner sample is not yet there when a resumed controller starts holding).
+  OnboardOptions oo;
+  oo.input_timeout = config.input_timeout;
+  oo.max_target_distance = config.max_target_distance;
+  RobotPort* port = nullptr;
+  if (config.robot == "dds") {
+    DdsRobotPort::Options po;
+    po.timeout = config.robot_timeout;
+    po.deadline = deadline;
+    m.dds = std::make_unique<DdsRobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, po);
+    port = m.dds.get();
+  } else {
+    m.kinematic = std::make_unique<KinematicPort>(q0);
+    port = m.kinematic.get();
+  }
+  m.ctl = std::make_unique<OnboardController>(m.model, m.cm, *port, q0, oo);
   m.joint_writer = &m.participant->makeWriter<msg::JointState>();
   m.status_writer = &m.participant->makeWriter<msg::ControlStatus>();
   m.heartbeat_writer = &m.participant->makeWriter<msg::Heartbeat>();
@@ -262,27 +289,25 @@ void ControllerNode::requestEstopReset() noexcept { impl_->reset = true; }
 
 void ControllerNode::run() {
   Impl& m = *impl_;
+  OnboardController& ctl = *m.ctl;
+  ControllerData& data = ctl.data();
   const double period = m.cm.params.period;
   const auto period_ns = static_cast<long>(std::llround(period * 1e9));
   timespec next{};
   clock_gettime(CLOCK_MONOTONIC, &next);
   const double t_start = nowSeconds(CLOCK_MONOTONIC);
   double last_start = t_start, last_heartbeat = -1.0;
-  bool walk_active = false;
   if (m.state_file && m.state_file->loaded()) {
     // Resumed from a saved robot state (a restart after a crash): the hands hold where they are
     // (targets at their current positions, avoidance active) until the target source speaks, and the
     // source gets the same grace as silence during a run: after input_timeout without a sign of it
     // the hands retract as usual. Without this the first cycle would already retract at full speed.
-    if (computeForwardKinematics(m.model, m.data->kin, m.robot->jointPositions())) {
-      for (int a = 0; a < 2; ++a) {
-        m.input.hands[a].status = HandStatus::kGiven;
-        m.input.hands[a].target_W = m.data->kin.X_W_L[m.cm.arms[a].hand_link] * m.cm.arms[a].hand_point_L;
-      }
-      m.last_targets_rx = t_start;
-    }
+    ctl.holdHandsHere(t_start);
   }
 
+  // The heartbeat's detail says what the controller cannot do: "" when it runs normally; with
+  // --robot dds "robot state stale ..." while it has no fresh robot state (it commands nothing).
+  std::string detail;
   auto publishHeartbeat = [&](msg::ModuleState state) {
     msg::Heartbeat hb;
     hb.module_name(m.config.module_name);
@@ -290,9 +315,12 @@ void ControllerNode::run() {
     hb.pid(static_cast<std::int32_t>(getpid()));
     hb.state(state);
     hb.period_ms(500);
+    hb.detail(detail);
     m.heartbeat_writer->publish(hb);
   };
   publishHeartbeat(msg::STATE_RUNNING);
+  bool robot_ok = true;  // as last said (log, heartbeat)
+  bool said_robot = false;
 
   while (!m.stop && !m.participant->stopRequested()) {
     next.tv_nsec += period_ns;
@@ -307,34 +335,28 @@ void ControllerNode::run() {
     const double t = t_now - t_start;
     if (m.config.duration > 0.0 && t >= m.config.duration) break;
 
-    // 1. Inputs (poll; never block).
+    // 1. Inputs (poll; never block), handed to the onboard controller by value.
     msg::HandTargets& targets = m.targets_msg;
     bus::dds::SampleInfo targets_info;
     if (m.targets_reader->takeLatest(targets, &targets_info)) {
-      ++stats_.targets_received;
-      m.last_targets_rx = t_now;
       const ParticipantId writer = participantOf(targets_info);
-      if (!m.have_target_writer || writer != m.target_writer) m.last_source_heartbeat = -1.0;  // a new source
+      if (!m.have_target_writer || writer != m.target_writer) ctl.newTargetSource();
       m.target_writer = writer;
       m.have_target_writer = true;
       const msg::HandTarget* hands[2] = {&targets.left(), &targets.right()};
+      std::array<HandCommand, 2> commands;
       for (int a = 0; a < 2; ++a) {
         const auto& p = hands[a]->position_base();
-        const Eigen::Vector3d target(p.x(), p.y(), p.z());
-        const bool given = hands[a]->status() == msg::TARGET_GIVEN;
-        if (given && (!target.allFinite() || target.norm() > m.config.max_target_distance)) {
-          ++stats_.targets_rejected;  // never followed; the hand keeps what it had
-          continue;
-        }
-        m.input.hands[a].status = given ? HandStatus::kGiven : HandStatus::kNoTarget;
-        if (given) m.input.hands[a].target_W = target;
+        commands[a].status = hands[a]->status() == msg::TARGET_GIVEN ? HandStatus::kGiven : HandStatus::kNoTarget;
+        commands[a].target_W = Eigen::Vector3d(p.x(), p.y(), p.z());
       }
+      ctl.setHandTargets(commands, t_now);
     }
     msg::MotionPriority prio;
     if (m.priority_reader->takeLatest(prio)) {
-      m.topic_priority = prio.priority() == msg::PRIORITY_LEFT_HIGHER    ? MotionPriority::kLeftHigher
-                         : prio.priority() == msg::PRIORITY_RIGHT_HIGHER ? MotionPriority::kRightHigher
-                                                                         : MotionPriority::kEqual;
+      ctl.setPriority(prio.priority() == msg::PRIORITY_LEFT_HIGHER    ? MotionPriority::kLeftHigher
+                      : prio.priority() == msg::PRIORITY_RIGHT_HIGHER ? MotionPriority::kRightHigher
+                                                                      : MotionPriority::kEqual);
     }
     // A heartbeat is a sign of life of the target source only if the participant that wrote the
     // targets wrote it too, in state RUNNING; the name it carries is not looked at.
@@ -342,7 +364,7 @@ void ControllerNode::run() {
     while (m.heartbeat_reader->takeNext(m.heartbeat_msg, &hb_info)) {
       if (m.have_target_writer && m.heartbeat_msg.state() == msg::STATE_RUNNING &&
           participantOf(hb_info) == m.target_writer)
-        m.last_source_heartbeat = t_now;
+        ctl.noteSourceHeartbeat(t_now);
     }
     // Another controller on the domain (both started at the same instant, so neither saw the
     // other at start): loud once, counted.
@@ -356,145 +378,100 @@ void ControllerNode::run() {
     m.schema_scratch.clear();
     m.schema_reader->takeAll(m.schema_scratch);
     for (const auto& change : m.schema_scratch) {
-      const std::string& name = change.segment_name();
-      auto it = m.schema_slots.find(name);
-      if (change.operation() == msg::SCHEMA_DETACH || !change.enabled()) {
-        if (it != m.schema_slots.end()) {
-          detachBodySchemaSegment(m.data->dist, it->second);
-          m.data->slot_virtual[it->second] = false;
-          if (change.operation() == msg::SCHEMA_DETACH) m.schema_slots.erase(it);
-        }
-        continue;
+      BodySchemaRequest rq;
+      rq.operation = change.operation() == msg::SCHEMA_DETACH ? BodySchemaRequest::Operation::kDetach
+                                                               : BodySchemaRequest::Operation::kAttach;
+      rq.enabled = change.enabled();
+      rq.name = &change.segment_name();
+      rq.parent_link = &change.parent_link();
+      rq.a_L = Eigen::Vector3d(change.point_a().x(), change.point_a().y(), change.point_a().z());
+      rq.b_L = change.shape() == msg::SHAPE_SPHERE
+                   ? rq.a_L
+                   : Eigen::Vector3d(change.point_b().x(), change.point_b().y(), change.point_b().z());
+      rq.radius = change.radius();
+      rq.is_virtual = change.virtual_segment();
+      rq.motion_priority = change.motion_priority();
+      const BodySchemaOutcome& outcome = ctl.changeBodySchema(rq);
+      if (outcome.rejected()) {
+        // Formatted into a fixed buffer and printed at most LogLimiter's rate: a flood of bad
+        // segments is counted (targets_rejected) but cannot flood stderr.
+        std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", outcome.text);
+        m.schema_log.print(stderr, m.schema_line);
       }
-      int slot = -1;
-      if (it != m.schema_slots.end()) {
-        slot = it->second;
-      } else {
-        for (int s = 0; s < kBodySchemaSlots && slot < 0; ++s) {
-          bool used = false;
-          for (const auto& kv : m.schema_slots) used |= kv.second == s;
-          if (!used) slot = s;
-        }
-      }
-      const int link = m.model.linkIndex(change.parent_link());
-      const Eigen::Vector3d a(change.point_a().x(), change.point_a().y(), change.point_a().z());
-      const Eigen::Vector3d b = change.shape() == msg::SHAPE_SPHERE
-                                    ? a
-                                    : Eigen::Vector3d(change.point_b().x(), change.point_b().y(), change.point_b().z());
-      std::uint64_t ignore = 0;
-      const int own = m.model.segmentIndex(change.parent_link());
-      if (own >= 0) ignore |= std::uint64_t{1} << own;
-      if (change.virtual_segment()) {  // the gaze line starts inside the head
-        const int head = m.model.segmentIndex("head");
-        if (head >= 0) ignore |= std::uint64_t{1} << head;
-      } else if (link >= 0 && m.model.links[link].parent >= 0) {
-        const int parent_seg = m.model.segmentIndex(m.model.links[m.model.links[link].parent].name);
-        if (parent_seg >= 0) ignore |= std::uint64_t{1} << parent_seg;
-      }
-      // The boundary check (bounds: BodySchemaLimits): a bad sample is rejected, counted and named.
-      const BodySchemaCheck check =
-          checkBodySchemaSegment(m.model, link, a, b, change.radius(), change.virtual_segment(), BodySchemaLimits{});
-      const SegmentAttach att = check.ok() ? attachControllerSegment(m.model, m.cm, *m.data, slot, link, a, b, change.radius(),
-                                                                     ignore, change.virtual_segment(), m.robot->jointPositions())
-                                           : SegmentAttach{};
-      if (!att.attached) {
-        ++stats_.targets_rejected;
-        // The line is formatted into a fixed buffer and printed at most LogLimiter's rate: a flood
-        // of bad segments is counted (targets_rejected) but cannot flood stderr.
-        char* const line = m.schema_line;
-        const std::size_t size = sizeof(m.schema_line);
-        if (att.refusing_pair >= 0) {  // control/README.md: a segment no arm can move away from
-          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')",
-                        name.c_str(), att.distance * 1e3, m.model.segments[att.other_segment].name.c_str(),
-                        change.parent_link().c_str());
-        } else if (check.ok()) {
-          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: no free slot (link '%s')",
-                        name.c_str(), change.parent_link().c_str());
-        } else if (*check.key != '\0') {
-          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)",
-                        name.c_str(), describe(check.fault), check.value, check.key, check.limit,
-                        change.parent_link().c_str(), change.virtual_segment() ? "virtual" : "physical");
-        } else {
-          std::snprintf(line, size, "controller: body-schema segment '%s' rejected: %s (value %g, link '%s')",
-                        name.c_str(), describe(check.fault), check.value, change.parent_link().c_str());
-        }
-        m.schema_log.print(stderr, line);
-        continue;
-      }
-      m.data->slot_virtual[slot] = change.virtual_segment();
-      m.slot_priority[slot] = change.motion_priority();
-      m.schema_slots[name] = slot;
     }
     msg::WalkCommand walk;
-    if (m.walk_reader->takeLatest(walk)) {
-      const int heel = m.model.qIndex("heel_x");
-      const double x = heel >= 0 ? m.robot->jointPositions()[heel] : 0.0;
-      if (walk.stop()) {
-        m.walking->stop();
-      } else if (std::isfinite(walk.goal_x()) && std::isfinite(walk.speed()) && walk.speed() > 0.0) {
-        m.walking->start(walk.goal_x() - x, std::min(walk.speed(), 0.5));
-        walk_active = true;
+    if (m.walk_reader->takeLatest(walk)) ctl.walkCommand(walk.stop(), walk.goal_x(), walk.speed());
+    if (m.reset.exchange(false)) ctl.requestEstopReset();
+    if (m.dds && m.dds->poll() > 0) {
+      std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", m.dds->lastRejection());
+      m.robot_log[static_cast<std::size_t>(m.dds->lastCause())].print(stderr, m.schema_line);
+    }
+
+    // 2.-3. Staleness, priority, control (allocation-free) and the robot port: one step.
+    const CycleReport& rep = ctl.step(t_now);
+    const ControlResult cr = rep.result;
+    if (rep.robot_state_ok != robot_ok || !said_robot) {
+      // Said at once (stderr, heartbeat), not at the next 2 Hz heartbeat.
+      robot_ok = rep.robot_state_ok;
+      said_robot = true;
+      if (robot_ok) {
+        detail.clear();
+        if (m.dds) {
+          std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: robot state fresh (seq %llu): commanding the robot",
+                        static_cast<unsigned long long>(m.dds->stateSeq()));
+          m.robot_state_log.print(stderr, m.schema_line);
+        }
       } else {
-        ++stats_.targets_rejected;
+        char text[200];
+        std::snprintf(text, sizeof(text), "robot state stale: %s (timeout %.0f ms); command frozen, the robot holds",
+                      m.dds && m.dds->haveState() ? "no fresh reflex/robot_state" : "no reflex/robot_state yet",
+                      m.config.robot_timeout * 1e3);
+        detail = text;
+        std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: %s", text);
+        m.robot_state_log.print(stderr, m.schema_line);
       }
+      publishHeartbeat(msg::STATE_RUNNING);
+      last_heartbeat = t_now;
     }
-
-    // 2. Staleness: the target source is silent (no sample, no heartbeat) for input_timeout -> retract.
-    const double last_sign = std::max(m.last_targets_rx, m.last_source_heartbeat);
-    const bool stale_now = last_sign < 0.0 || t_now - last_sign > m.config.input_timeout;
-    if (stale_now && !m.stale) ++stats_.stale_events;
-    m.stale = stale_now;
-    ControlInput in = m.input;
-    if (m.stale) in.hands[kLeft].status = in.hands[kRight].status = HandStatus::kNoTarget;
-    in.priority = m.topic_priority;
-    if (in.priority == MotionPriority::kEqual) {  // a grasped object with priority makes its arm higher
-      for (int s = 0; s < kBodySchemaSlots; ++s) {
-        if (!m.data->dist.slots[s].enabled || m.data->slot_virtual[s] || m.slot_priority[s] <= 0) continue;
-        for (int a = 0; a < 2; ++a)
-          if (m.cm.arms[a].link_in_arm[m.data->dist.slots[s].link])
-            in.priority = a == kLeft ? MotionPriority::kLeftHigher : MotionPriority::kRightHigher;
-      }
-    }
-    in.reset_estop = m.reset.exchange(false);
-
-    // 3. Control (allocation-free) and the robot.
-    const ControlResult cr = computeControl(m.model, m.cm, *m.data, m.robot->jointPositions(), in);
-    // Walking holds while the e-stop is latched or recovering, and never closes a pair no arm can move.
-    stepPlant(m.model, m.cm, *m.data, cr, *m.robot, walk_active ? m.walking.get() : nullptr, period, m.q_walk);
     // The robot state is persisted before it is published: what any reader saw survives a crash.
-    if (m.state_file && !m.state_file->save(m.robot->jointPositions())) ++stats_.state_write_errors;
-    double dmin = 1e9, dvirt = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < m.data->dist.pairs.size(); ++i) {
-      const auto& pd = m.data->dist.pairs[i];
-      if (!pd.active) continue;
-      const int sb = pd.seg_b;
-      if (m.model.segments[sb].body_schema_slot && m.data->slot_virtual[sb - m.model.num_robot_segments]) {
-        dvirt = std::min(dvirt, pd.distance);
-        continue;
-      }
-      dmin = std::min(dmin, pd.distance);
+    if (m.state_file && !m.state_file->save(m.kinematic->positions())) ++stats_.state_write_errors;
+    const OnboardCounts& counts = rep.counts;
+    if (rep.robot_state_ok) stats_.min_distance = std::min(stats_.min_distance, rep.min_distance);
+    stats_.estop_count = counts.estop_count;
+    stats_.guard_count = counts.guard_count;
+    stats_.targets_received = counts.targets_received;
+    stats_.targets_rejected = counts.targets_rejected;
+    stats_.stale_events = counts.stale_events;
+    stats_.robot_stale_events = counts.robot_stale_events;
+    stats_.robot_stale_cycles = counts.robot_stale_cycles;
+    stats_.robot_stale_at_exit = !rep.robot_state_ok;
+    if (m.dds) {
+      const DdsRobotPort::Counts& pc = m.dds->counts();
+      stats_.robot_states_accepted = pc.accepted;
+      stats_.robot_states_rejected = pc.rejected();
+      stats_.robot_commands = pc.commands;
     }
-    stats_.min_distance = std::min(stats_.min_distance, dmin);
-    stats_.estop_count = m.data->estop_count;
-    stats_.guard_count = m.data->guard_count;
 
-    // 4. Outputs.
-    const Eigen::VectorXd& q = m.robot->jointPositions();
-    for (int i = 0; i < m.model.nq; ++i) {
-      m.joint_msg.positions()[i] = q[i];
-      m.joint_msg.velocities()[i] = cr == ControlResult::kFrozen ? 0.0 : m.data->qdot[i];
+    // 4. Outputs. Joint state: the kinematic robot after the step, or the robot's measured state
+    // the step answered (nothing while the robot state is stale).
+    if (rep.robot_state_ok) {
+      const Eigen::VectorXd& q = m.kinematic ? m.kinematic->positions() : ctl.measuredPositions();
+      for (int i = 0; i < m.model.nq; ++i) {
+        m.joint_msg.positions()[i] = q[i];
+        m.joint_msg.velocities()[i] = cr == ControlResult::kFrozen ? 0.0 : data.qdot[i];
+      }
+      m.joint_writer->publish(m.joint_msg);
     }
-    m.joint_writer->publish(m.joint_msg);
     msg::ArmStatus* arms[2] = {&m.status_msg.left(), &m.status_msg.right()};
     for (int a = 0; a < 2; ++a) {
-      const ArmStatus& s = m.data->arms[a];
+      const ArmReport& s = rep.arms[a];
       arms[a]->blend_f(s.f);
       arms[a]->distance(std::isfinite(s.distance) ? s.distance : 1e9);
       arms[a]->zone(toMsg(s.zone));
-      arms[a]->estop_latched(m.data->estop != EstopState::kClear);
+      arms[a]->estop_latched(rep.estop != EstopState::kClear);
       if (s.closest_pair >= 0) {
-        arms[a]->closest_segment_a(m.model.segments[m.model.pairs[s.closest_pair].a].name);
-        arms[a]->closest_segment_b(m.model.segments[m.model.pairs[s.closest_pair].b].name);
+        arms[a]->closest_segment_a(s.segment_a);
+        arms[a]->closest_segment_b(s.segment_b);
       }
     }
     const double compute_us = (nowSeconds(CLOCK_MONOTONIC) - t_now) * 1e6;
@@ -508,18 +485,18 @@ void ControllerNode::run() {
     ++stats_.cycles;
     stats_.max_lateness_us = std::max(stats_.max_lateness_us, lateness_us);
     if (stats_.lateness_us.size() < stats_.lateness_us.capacity()) stats_.lateness_us.push_back(lateness_us);
-    if (m.log) {  // a copy into the ring: no allocation, no I/O; a full ring is counted
+    if (m.log && rep.robot_state_ok) {  // a copy into the ring: no allocation, no I/O; a full ring is counted
       SimSample& s = m.log_row;
       s.t = t;
-      s.arms = m.data->arms;
-      s.commands = in.hands;
-      s.estop = m.data->estop;
-      s.min_distance = dmin;
-      s.virtual_distance = dvirt;
-      s.arm_distance = armToArmDistance(m.model, m.cm, *m.data);
+      s.arms = data.arms;
+      s.commands = rep.commands;
+      s.estop = data.estop;
+      s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : 1e9;
+      s.virtual_distance = rep.virtual_distance;
+      s.arm_distance = rep.arm_distance;
       s.wall_time = nowSeconds(CLOCK_REALTIME);
-      s.q = q;
-      s.qdot = m.data->qdot;
+      s.q = m.kinematic ? m.kinematic->positions() : ctl.measuredPositions();
+      s.qdot = data.qdot;
       m.log->push(s);
     }
     if (t_now - last_heartbeat >= 0.5) {

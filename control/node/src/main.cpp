@@ -18,8 +18,11 @@ extern "C" void onUsr1(int) {
 
 int main(int argc, char** argv) {
   CLI::App app{"reflex_controller: onboard reactive controller (one cycle per controller 'period', 5 ms by default)\n"
-               "with the simulated robot, over DDS. Subscribes hand targets, motion priority, body schema, walk\n"
-               "commands; publishes joint state, controller status, its protection state and a heartbeat.\n"
+               "over DDS, with the in-process kinematic robot (--robot kinematic, default) or a robot driver on the bus\n"
+               "(--robot dds: reads reflex/robot_state, writes reflex/joint_command; idl/README.md). Subscribes hand\n"
+               "targets, motion priority, body schema, walk commands; publishes joint state, controller status, its\n"
+               "protection state and a heartbeat (its detail says 'robot state stale ...' while --robot dds has no\n"
+               "fresh robot state: the controller then commands nothing and the robot holds).\n"
                "SIGUSR1 asks to leave a latched e-stop; SIGINT, SIGTERM, SIGHUP, SIGUSR2 and every other catchable\n"
                "terminating signal stop it cleanly (summary, --log closed); SIGPIPE is ignored.\n"
                "Exit codes: 0 success, 1 set-up error, 3 the --log file could not be written completely."};
@@ -52,6 +55,18 @@ int main(int argc, char** argv) {
   app.add_option("--robot-state", config.robot_state,
                  "keep the simulated robot's joint positions in this file across restarts (loaded at start, "
                  "written every cycle; refused if it holds another robot or is damaged)");
+  app.add_option("--robot", config.robot,
+                 "the robot side: 'kinematic' (the in-process plant) or 'dds' (a robot driver on reflex/robot_state "
+                 "and reflex/joint_command)")
+      ->capture_default_str();
+  app.add_option("--robot-timeout", config.robot_timeout,
+                 "seconds (system clock, against the state's stamp) after which the newest robot state is stale "
+                 "(--robot dds): the controller then commands nothing until fresh state returns; (0, 1]")
+      ->capture_default_str();
+  app.add_option("--command-deadline", config.command_deadline,
+                 "seconds each joint command stays valid (--robot dds; JointCommand.valid_until_ns = now + this); "
+                 "0: three controller periods; else [period, 1]")
+      ->capture_default_str();
   app.add_option("--name", config.module_name,
                  "module name on the bus (1.." + std::to_string(reflex::bus::kMaxKeyStringBytes) + " bytes)")
       ->capture_default_str();
@@ -71,9 +86,9 @@ int main(int argc, char** argv) {
     g_node = &node;
     if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
     const auto& protection = node.protection();
-    std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s'; protection %s\n",
+    std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
                  1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
-                 protection.describe().c_str());
+                 config.robot == "dds" ? "robot over DDS" : "kinematic plant", protection.describe().c_str());
     if (!protection.full())
       std::fprintf(stderr, "reflex_controller: WARNING: THIS RUN IS NOT PROTECTED: %s\n", protection.reason.c_str());
     node.run();
@@ -86,6 +101,13 @@ int main(int argc, char** argv) {
     if (s.state_write_errors > 0) extra += ", robot-state writes FAILED " + std::to_string(s.state_write_errors);
     if (!config.log_csv.empty()) extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
     if (s.peer_controller_samples > 0) extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
+    if (config.robot == "dds") {
+      extra += ", robot dds: states " + std::to_string(s.robot_states_accepted) + " (rejected " +
+               std::to_string(s.robot_states_rejected) + "), commands " + std::to_string(s.robot_commands) +
+               ", robot stale events " + std::to_string(s.robot_stale_events) + " (" +
+               std::to_string(s.robot_stale_cycles) + " cycles without state)";
+      if (s.robot_stale_at_exit) extra += ", ROBOT STATE STALE at exit";
+    }
     extra += ", protection " + protection.describe();
     std::fprintf(stderr,
                  "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "

@@ -1,9 +1,12 @@
 // The 5 ms control path allocates nothing: global operator new/delete are replaced by counting
 // versions, and a full controller cycle (kinematics, every pair, both controllers, blend, safety
 // filter, predictive guard, e-stop logic, body-schema slots) must leave the count unchanged, and so
-// must the plant step (walking and its guard) and the controller's body-schema attach.
+// must the plant step (walking and its guard) and the controller's body-schema attach, and the
+// onboard controller (onboard.hpp: every input call and step(), with its refusals) that
+// reflex_controller and runScenario drive.
 #include "fixture.hpp"
 
+#include "reflex/control/onboard.hpp"
 #include "reflex/control/simulation.hpp"
 
 #include <gtest/gtest.h>
@@ -122,6 +125,67 @@ TEST(ControllerAllocation, ThePlantStepWalkingGuardAndSegmentCheckAllocateNothin
   EXPECT_FALSE(refused.attached);
   EXPECT_TRUE(obstacle.attached);
   EXPECT_GT(data.walking_hold_count, 0U) << "the walking guard held steps";
+}
+
+TEST(ControllerAllocation, TheOnboardControllersInputsAndStepAllocateNothing) {
+  const Model& model = testing::shippedModel();
+  const ControllerModel& cm = testing::defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  std::array<HandCommand, 2> crossing;
+  crossing[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};
+  crossing[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
+  std::array<HandCommand, 2> bad = crossing;
+  bad[kLeft].target_W.x() = std::nan("");
+  // Names and links as a DDS sample holds them (made before counting).
+  const std::string cup = "a_cup_with_a_name_longer_than_the_small_string_buffer", hand = "l_hand";
+  const std::string pack = "pack", world = "world", unknown = "no_such_link";
+  ctl.step(0.0);  // warm-up
+  const Eigen::Vector3d chest = ctl.data().kin.X_W_L[model.linkIndex("chest")].translation();
+  BodySchemaRequest attach;
+  attach.name = &cup;
+  attach.parent_link = &hand;
+  attach.a_L = Eigen::Vector3d(-0.16, 0, -0.06);
+  attach.b_L = Eigen::Vector3d(0.16, 0, -0.06);
+  attach.radius = 0.015;
+  attach.motion_priority = 1;
+  BodySchemaRequest refused = attach;
+  refused.name = &pack;
+  refused.parent_link = &world;
+  refused.a_L = refused.b_L = chest;
+  refused.radius = 0.05;
+  BodySchemaRequest unknown_link = attach;
+  unknown_link.name = &pack;
+  unknown_link.parent_link = &unknown;
+  BodySchemaRequest detach = attach;
+  detach.operation = BodySchemaRequest::Operation::kDetach;
+  ControlInput scripted;
+  scripted.hands = crossing;
+  long stepped = 0;
+  const long before = g_allocations.load();
+  double t = 0.0;
+  for (int k = 0; k < 1000; ++k, t += 0.005) {
+    if (k % 50 == 0) ctl.setHandTargets(k % 100 == 0 ? crossing : bad, t);
+    if (k % 200 == 10) ctl.changeBodySchema(attach);
+    if (k % 200 == 20) ctl.changeBodySchema(refused);
+    if (k % 200 == 30) ctl.changeBodySchema(unknown_link);
+    if (k % 200 == 150) ctl.changeBodySchema(detach);
+    if (k % 300 == 40) ctl.walkCommand(false, 0.4, 0.2);
+    if (k % 300 == 200) ctl.walkCommand(true, 0.0, 0.0);
+    if (k % 300 == 210) ctl.walkCommand(false, std::nan(""), 0.2);
+    if (k % 100 == 60) ctl.noteSourceHeartbeat(t);
+    if (k == 500) ctl.setControlInput(scripted, t);
+    if (k == 600) ctl.holdHandsHere(t);
+    if (k == 700) ctl.requestEstopReset();
+    ctl.setPriority(static_cast<MotionPriority>((k / 120) % 3));
+    stepped += ctl.step(t).robot_state_ok;
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in 1000 onboard cycles with every input";
+  EXPECT_EQ(stepped, 1000);
+  EXPECT_GT(ctl.report().counts.schema_rejected, 0U);
+  EXPECT_GT(ctl.report().counts.hand_targets_rejected, 0U);
+  EXPECT_GT(ctl.report().counts.walk_rejected, 0U);
 }
 
 }  // namespace

@@ -1,5 +1,5 @@
 // Kinematic simulation of the robot (first order, as the paper's system: Sec. 9.2) and a simple
-// walking pattern, behind a robot interface that a real robot's driver could implement.
+// walking pattern; the robot side of a real robot is RobotPort (onboard.hpp).
 //
 // The controller commands joint velocities of the arms; walking writes the legs, the heel and the
 // virtual heel->body link directly (the paper's walking and balancing control owns them, Sec. 8).
@@ -16,7 +16,10 @@
 
 namespace reflex::control {
 
-/// What the controller needs from a robot. A real robot's driver implements the same calls.
+/// The robot of one plant step (stepPlant). OnboardController (onboard.hpp) steps a KinematicRobot
+/// started from the measured state as its one-cycle integrator and hands the result to a RobotPort:
+/// a real robot's driver is reached through RobotPort (over DDS: idl/README.md, "Writing a robot
+/// driver"), not through this interface.
 class RobotInterface {
  public:
   virtual ~RobotInterface() = default;

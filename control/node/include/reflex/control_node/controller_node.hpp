@@ -31,7 +31,17 @@
 // The --log file is streamed by a writer thread from a preallocated ring (timeseries_log.hpp): opened
 // before the loop, every write checked; it survives any stop but SIGKILL.
 //
-// Extending: another robot driver implements reflex::control::RobotInterface and is passed in.
+// The cycle itself (staleness, priority, body schema by name, walking, computeControl, the plant) is
+// reflex::control::OnboardController (control/include/reflex/control/onboard.hpp): this node is the
+// thin adapter between DDS samples and that object.
+//
+// The robot side (issue 13, item 2; NodeConfig::robot): "kinematic" (default) is the in-process
+// kinematic plant; "dds" is a robot driver on the bus (DdsRobotPort, dds_robot_port.hpp): the
+// controller computes from the measured reflex/robot_state and answers each cycle with one
+// reflex/joint_command. Without a state newer than robot_timeout it computes and commands nothing
+// (the robot holds once the last command's deadline passed) and says so at once: a line on stderr,
+// the heartbeat's `detail` ("robot state stale: ..."; "" again when fresh state returns), the exit
+// line; joint state is not published meanwhile.
 #pragma once
 
 #include "reflex/control/controller.hpp"
@@ -75,6 +85,12 @@ struct NodeConfig {
   /// rest). Loaded at start, written every cycle; see robot_state_file.hpp for format and policy.
   std::string robot_state;
   std::string module_name = "controller";
+  /// The robot side: "kinematic" (the in-process plant) or "dds" (reflex/robot_state in,
+  /// reflex/joint_command out; idl/README.md "Writing a robot driver"). Anything else: ConfigError.
+  std::string robot = "kinematic";
+  double robot_timeout = 0.020;      ///< s: with "dds", a newest robot state older than this is stale. (0, 1]
+  /// s: with "dds", JointCommand.valid_until_ns = now + this. 0 = three controller periods; else [period, 1].
+  double command_deadline = 0.0;
 };
 
 /// Counters reported at exit and in tests.
@@ -93,6 +109,13 @@ struct NodeStats {
   std::uint64_t peer_controller_samples = 0;  ///< protection samples of ANOTHER controller seen while running
   std::uint64_t log_rows = 0;         ///< --log rows written
   std::uint64_t log_dropped = 0;      ///< --log rows dropped (the writer could not keep up)
+  // The robot side (--robot dds; zero with the kinematic plant).
+  std::uint64_t robot_stale_events = 0;    ///< transitions to "no fresh robot state" (the first missing state counts)
+  std::uint64_t robot_stale_cycles = 0;    ///< cycles that computed and commanded nothing for lack of state
+  bool robot_stale_at_exit = false;
+  std::uint64_t robot_states_accepted = 0;
+  std::uint64_t robot_states_rejected = 0;  ///< wrong lengths, a missing joint, NaN, a future or old stamp
+  std::uint64_t robot_commands = 0;         ///< JointCommand samples published
 };
 
 /// What protects the robot in this run (published on reflex/controller_protection).

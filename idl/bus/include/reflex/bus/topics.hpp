@@ -10,6 +10,7 @@
 
 #include <reflex/msg/behaviorPubSubTypes.h>
 #include <reflex/msg/controlPubSubTypes.h>
+#include <reflex/msg/robotPubSubTypes.h>
 #include <reflex/msg/systemPubSubTypes.h>
 #include <reflex/msg/visionPubSubTypes.h>
 
@@ -76,6 +77,7 @@ inline constexpr const char* kProfileHeartbeat = "reflex_heartbeat";         // 
 inline constexpr const char* kProfileRecord = "reflex_record";               // reader only: recorders
 inline constexpr const char* kProfileRecordReliable = "reflex_record_reliable";  // reader only: recorders, reliable topics
 inline constexpr const char* kProfileControllerInfo = "reflex_controller_info";  // controller protection
+inline constexpr const char* kProfileRobot = "reflex_robot";                 // robot state / joint command (1 kHz / 200 Hz)
 
 template <>
 struct TopicTraits<reflex::msg::ObjectTargets> {
@@ -138,6 +140,21 @@ struct TopicTraits<reflex::msg::ControllerProtection> {
   using PubSubType = SafePubSubType<reflex::msg::ControllerProtectionPubSubType>;
   static constexpr const char* kTopicName = "reflex/controller_protection";
   static constexpr const char* kProfile = kProfileControllerInfo;
+};
+
+// The robot boundary (idl/robot.idl, issue 13): the robot's measured state and the controller's command.
+template <>
+struct TopicTraits<reflex::msg::RobotState> {
+  using PubSubType = SafePubSubType<reflex::msg::RobotStatePubSubType>;
+  static constexpr const char* kTopicName = "reflex/robot_state";
+  static constexpr const char* kProfile = kProfileRobot;
+};
+
+template <>
+struct TopicTraits<reflex::msg::JointCommand> {
+  using PubSubType = SafePubSubType<reflex::msg::JointCommandPubSubType>;
+  static constexpr const char* kTopicName = "reflex/joint_command";
+  static constexpr const char* kProfile = kProfileRobot;
 };
 
 }  // namespace reflex::bus

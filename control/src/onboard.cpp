@@ -1,0 +1,293 @@
+#include "reflex/control/onboard.hpp"
+
+#include "reflex/control/scenarios.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+namespace reflex::control {
+
+namespace {
+
+std::string rangeError(const char* key, double value, const char* range) {
+  char buf[200];
+  std::snprintf(buf, sizeof(buf), "onboard controller: %s = %g is outside its range %s", key, value, range);
+  return buf;
+}
+
+}  // namespace
+
+std::vector<int> drivenJoints(const Model& model, const ControllerModel& cm) {
+  std::vector<int> driven;
+  for (const auto& arm : cm.arms)
+    for (int i = 0; i < arm.n; ++i) driven.push_back(arm.q[i]);
+  const WalkingPattern walking(model);
+  for (const int j : walking.joints())
+    if (std::find(driven.begin(), driven.end(), j) == driven.end()) driven.push_back(j);
+  return driven;
+}
+
+OnboardController::OnboardController(const Model& model, const ControllerModel& cm, RobotPort& port,
+                                     const Eigen::VectorXd& q0, const OnboardOptions& options)
+    : model_(model),
+      cm_(cm),
+      port_(port),
+      options_(options),
+      data_(model, cm),
+      integrator_(model, q0.size() == model.nq ? q0 : Eigen::VectorXd::Zero(model.nq)),
+      walking_(model) {
+  if (!(options.input_timeout > 0.0) || !std::isfinite(options.input_timeout))
+    throw ConfigError(rangeError("input_timeout", options.input_timeout, "(0, inf) s"));
+  if (!(options.max_target_distance > 0.0))
+    throw ConfigError(rangeError("max_target_distance", options.max_target_distance, "(0, inf] m"));
+  if (!(options.max_walk_speed > 0.0) || !std::isfinite(options.max_walk_speed))
+    throw ConfigError(rangeError("max_walk_speed", options.max_walk_speed, "(0, inf) m/s"));
+  if (q0.size() != model.nq)
+    throw ConfigError("onboard controller: the initial configuration has " + std::to_string(q0.size()) +
+                      " entries, the model '" + model.name + "' has " + std::to_string(model.nq) + " joints");
+  for (int i = 0; i < model.nq; ++i)
+    if (!std::isfinite(q0[i]))
+      throw ConfigError("onboard controller: the initial position of joint '" + model.q_names[i] + "' is " +
+                        std::to_string(q0[i]) + " (not finite)");
+  q_measured_ = q0;
+  q_expected_ = q0;
+  q_command_ = q0;
+  qdot_command_.setZero(model.nq);
+  q_scratch_ = q0;
+  driven_ = reflex::control::drivenJoints(model, cm);
+  for (auto& name : slot_names_) name.reserve(256);  // a bus key is at most 255 bytes: no allocation later
+}
+
+int OnboardController::slotOf(const std::string& name) const noexcept {
+  for (int s = 0; s < kBodySchemaSlots; ++s)
+    if (!slot_names_[s].empty() && slot_names_[s] == name) return s;
+  return -1;
+}
+
+int OnboardController::setHandTargets(const std::array<HandCommand, 2>& hands, double now) noexcept {
+  ++report_.counts.targets_received;
+  last_targets_rx_ = now;
+  int rejected = 0;
+  for (int a = 0; a < 2; ++a) {
+    const HandCommand& h = hands[a];
+    const bool given = h.status == HandStatus::kGiven;
+    // !(norm <= max): a NaN norm is rejected too.
+    if (given && (!h.target_W.allFinite() || !(h.target_W.norm() <= options_.max_target_distance))) {
+      ++rejected;  // never followed; the hand keeps what it had
+      continue;
+    }
+    input_.hands[a].status = h.status;
+    if (given) input_.hands[a].target_W = h.target_W;
+  }
+  report_.counts.hand_targets_rejected += static_cast<std::uint64_t>(rejected);
+  report_.counts.targets_rejected += static_cast<std::uint64_t>(rejected);
+  return rejected;
+}
+
+void OnboardController::setControlInput(const ControlInput& input, double now) noexcept {
+  input_.hands = input.hands;
+  priority_ = input.priority;
+  if (input.reset_estop) reset_ = true;
+  last_targets_rx_ = now;
+}
+
+bool OnboardController::holdHandsHere(double now) noexcept {
+  if (!computeForwardKinematics(model_, data_.kin, q_expected_)) return false;
+  for (int a = 0; a < 2; ++a) {
+    input_.hands[a].status = HandStatus::kGiven;
+    input_.hands[a].target_W = data_.kin.X_W_L[cm_.arms[a].hand_link] * cm_.arms[a].hand_point_L;
+  }
+  last_targets_rx_ = now;
+  return true;
+}
+
+const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaRequest& rq) noexcept {
+  BodySchemaOutcome& out = schema_outcome_;
+  out = BodySchemaOutcome{};
+  static const std::string kEmpty;
+  const std::string& name = rq.name ? *rq.name : kEmpty;
+  const std::string& parent = rq.parent_link ? *rq.parent_link : kEmpty;
+  const int known = slotOf(name);
+  if (rq.operation == BodySchemaRequest::Operation::kDetach || !rq.enabled) {
+    if (known < 0) return out;  // kUnknownName: nothing to take away
+    detachBodySchemaSegment(data_.dist, known);
+    data_.slot_virtual[known] = false;
+    slot_priority_[known] = 0;
+    if (rq.operation == BodySchemaRequest::Operation::kDetach) slot_names_[known].clear();  // the slot is free
+    out.kind = BodySchemaOutcome::Kind::kDetached;
+    out.slot = known;
+    return out;
+  }
+  int slot = known;
+  for (int s = 0; s < kBodySchemaSlots && slot < 0; ++s)
+    if (slot_names_[s].empty()) slot = s;
+  const int link = model_.linkIndex(parent);
+  const Eigen::Vector3d& a = rq.a_L;
+  const Eigen::Vector3d& b = rq.b_L;
+  // Pairs never checked: the segment against its own link's segment, and a physical one against its
+  // parent link's segment (it touches them by construction); a virtual (gaze) line starts in the head.
+  std::uint64_t ignore = 0;
+  const int own = model_.segmentIndex(parent);
+  if (own >= 0) ignore |= std::uint64_t{1} << own;
+  if (rq.is_virtual) {
+    const int head = model_.segmentIndex("head");
+    if (head >= 0) ignore |= std::uint64_t{1} << head;
+  } else if (link >= 0 && model_.links[link].parent >= 0) {
+    const int parent_seg = model_.segmentIndex(model_.links[model_.links[link].parent].name);
+    if (parent_seg >= 0) ignore |= std::uint64_t{1} << parent_seg;
+  }
+  // The boundary check (bounds: BodySchemaLimits), then the placement check at the expected configuration.
+  out.check = checkBodySchemaSegment(model_, link, a, b, rq.radius, rq.is_virtual, BodySchemaLimits{});
+  if (out.check.ok())
+    out.attach = attachControllerSegment(model_, cm_, data_, slot, link, a, b, rq.radius, ignore, rq.is_virtual, q_expected_);
+  if (out.attach.attached) {
+    data_.slot_virtual[slot] = rq.is_virtual;
+    slot_priority_[slot] = rq.motion_priority;
+    if (known < 0) slot_names_[slot] = name;
+    out.kind = BodySchemaOutcome::Kind::kAttached;
+    out.slot = slot;
+    return out;
+  }
+  ++report_.counts.schema_rejected;
+  ++report_.counts.targets_rejected;
+  char* const line = out.text;
+  const std::size_t size = sizeof(out.text);
+  if (out.attach.refusing_pair >= 0) {  // control/README.md: a segment no arm can move away from
+    out.kind = BodySchemaOutcome::Kind::kRejectedUnresolvable;
+    std::snprintf(line, size, "body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')",
+                  name.c_str(), out.attach.distance * 1e3, model_.segments[out.attach.other_segment].name.c_str(),
+                  parent.c_str());
+  } else if (out.check.ok()) {
+    out.kind = BodySchemaOutcome::Kind::kRejectedNoSlot;
+    std::snprintf(line, size, "body-schema segment '%s' rejected: no free slot (link '%s')", name.c_str(), parent.c_str());
+  } else if (*out.check.key != '\0') {
+    out.kind = BodySchemaOutcome::Kind::kRejectedCheck;
+    std::snprintf(line, size, "body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)", name.c_str(),
+                  describe(out.check.fault), out.check.value, out.check.key, out.check.limit, parent.c_str(),
+                  rq.is_virtual ? "virtual" : "physical");
+  } else {
+    out.kind = BodySchemaOutcome::Kind::kRejectedCheck;
+    std::snprintf(line, size, "body-schema segment '%s' rejected: %s (value %g, link '%s')", name.c_str(),
+                  describe(out.check.fault), out.check.value, parent.c_str());
+  }
+  return out;
+}
+
+bool OnboardController::walkCommand(bool stop, double goal_x, double speed) noexcept {
+  if (stop) {
+    walking_.stop();
+    return true;
+  }
+  if (!(std::isfinite(goal_x) && std::isfinite(speed) && speed > 0.0)) {
+    ++report_.counts.walk_rejected;
+    ++report_.counts.targets_rejected;
+    return false;
+  }
+  const int heel = model_.qIndex("heel_x");
+  const double x = heel >= 0 ? q_expected_[heel] : 0.0;
+  walking_.start(goal_x - x, std::min(speed, options_.max_walk_speed));
+  walk_active_ = true;
+  return true;
+}
+
+bool OnboardController::startWalking(double distance, double speed) noexcept {
+  walk_active_ = true;
+  return walking_.start(distance, speed);
+}
+
+const CycleReport& OnboardController::step(double now) noexcept {
+  CycleReport& r = report_;
+  ++r.counts.cycles;
+  r.now = now;
+  // Staleness: the target source is silent (no sample, no heartbeat) for input_timeout -> retract.
+  const double last_sign = std::max(last_targets_rx_, last_source_heartbeat_);
+  const bool stale_now = last_sign < 0.0 || now - last_sign > options_.input_timeout;
+  if (stale_now && !stale_) ++r.counts.stale_events;
+  stale_ = stale_now;
+  r.inputs_stale = stale_;
+  ControlInput in = input_;
+  if (stale_) in.hands[kLeft].status = in.hands[kRight].status = HandStatus::kNoTarget;
+  in.priority = priority_;
+  if (in.priority == MotionPriority::kEqual) {  // a grasped object with priority makes its arm higher
+    for (int s = 0; s < kBodySchemaSlots; ++s) {
+      if (!data_.dist.slots[s].enabled || data_.slot_virtual[s] || slot_priority_[s] <= 0) continue;
+      for (int a = 0; a < 2; ++a)
+        if (cm_.arms[a].link_in_arm[data_.dist.slots[s].link])
+          in.priority = a == kLeft ? MotionPriority::kLeftHigher : MotionPriority::kRightHigher;
+    }
+  }
+  r.commands = in.hands;
+  r.priority = in.priority;
+
+  // The robot's measured state; without one nothing is computed and nothing commanded (the robot holds).
+  const Eigen::VectorXd* q = port_.measuredPositions(now);
+  if (q == nullptr || q->size() != model_.nq) {
+    if (robot_ok_) ++r.counts.robot_stale_events;
+    robot_ok_ = false;
+    ++r.counts.robot_stale_cycles;
+    r.robot_state_ok = false;
+    r.walking_advanced = false;
+    return r;  // the reset request waits for a cycle that computes
+  }
+  robot_ok_ = true;
+  r.robot_state_ok = true;
+  q_measured_ = *q;
+  in.reset_estop = reset_;
+  reset_ = false;
+
+  // Control (allocation-free), then the plant step on a one-cycle integrator from the measured state.
+  const ControlResult cr = computeControl(model_, cm_, data_, q_measured_, in);
+  integrator_.reset(q_measured_);
+  r.walking_advanced = stepPlant(model_, cm_, data_, cr, integrator_, walk_active_ ? &walking_ : nullptr,
+                                 cm_.params.period, q_scratch_);
+  q_command_ = integrator_.jointPositions();
+  const double dt = cm_.params.period;
+  for (int i = 0; i < model_.nq; ++i) qdot_command_[i] = (q_command_[i] - q_measured_[i]) / dt;
+  port_.command(q_command_, qdot_command_, dt);
+  q_expected_ = q_command_;
+  ++r.counts.computed_cycles;
+  fillReport(cr);
+  return r;
+}
+
+void OnboardController::fillReport(ControlResult result) noexcept {
+  CycleReport& r = report_;
+  r.result = result;
+  r.estop = data_.estop;
+  for (int a = 0; a < 2; ++a) {
+    const ArmStatus& s = data_.arms[a];
+    ArmReport& ar = r.arms[a];
+    ar.f = s.f;
+    ar.distance = s.distance;
+    ar.zone = s.zone;
+    ar.closest_pair = s.closest_pair;
+    ar.segment_a = s.closest_pair >= 0 ? model_.segments[model_.pairs[s.closest_pair].a].name.c_str() : nullptr;
+    ar.segment_b = s.closest_pair >= 0 ? model_.segments[model_.pairs[s.closest_pair].b].name.c_str() : nullptr;
+  }
+  // Distances of this cycle (computed inside the controller for the measured q).
+  r.min_distance = r.virtual_distance = std::numeric_limits<double>::infinity();
+  r.min_pair = r.virtual_pair = -1;
+  for (std::size_t i = 0; i < data_.dist.pairs.size(); ++i) {
+    const PairDistance& pd = data_.dist.pairs[i];
+    if (!pd.active) continue;
+    const bool virt = model_.segments[pd.seg_b].body_schema_slot && data_.slot_virtual[pd.seg_b - model_.num_robot_segments];
+    if (virt) {
+      if (pd.distance < r.virtual_distance) {
+        r.virtual_distance = pd.distance;
+        r.virtual_pair = static_cast<int>(i);
+      }
+    } else if (pd.distance < r.min_distance) {
+      r.min_distance = pd.distance;
+      r.min_pair = static_cast<int>(i);
+    }
+  }
+  r.arm_distance = armToArmDistance(model_, cm_, data_);
+  r.counts.estop_count = data_.estop_count;
+  r.counts.guard_count = data_.guard_count;
+  r.counts.walking_holds = data_.walking_hold_count;
+  r.counts.bad_input_count = data_.bad_input_count;
+}
+
+}  // namespace reflex::control

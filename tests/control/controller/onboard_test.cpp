@@ -1,0 +1,483 @@
+// OnboardController (control/include/reflex/control/onboard.hpp, issue 13 item 1): the controller's
+// whole reaction to its inputs, without processes. Checked against independent answers:
+// - staleness: the timeout from the options (hold at exactly input_timeout after the last sign of
+//   life, retract strictly after it), and the rest posture from restConfiguration + forward kinematics;
+// - body schema by name: the distance module called directly (attachBodySchemaSegment +
+//   computeSegmentDistances on a DistanceData of its own) for the attached segment and for a refusal's
+//   distance; the refusal causes from BodySchemaLimits and kBodySchemaSlots;
+// - walking: the heel's analytic travel (speed x dt per cycle the controller is clear, nothing while
+//   the e-stop is latched or recovering: the paper's rule as control/README.md states it);
+// - priority: the paper's rule (Sec. 7.2: the given priority; a grasped object with priority makes
+//   its arm higher) and computeControl called directly with that priority (same joint velocities);
+// - the plant loop: the pre-issue-13 loop written out here (computeControl + stepPlant on a
+//   KinematicRobot) gives bit-identical joint positions over 1200 cycles with walking;
+// - the robot port: a port without state gets no command; the command is measured + qdot dt.
+#include "fixture.hpp"
+
+#include "reflex/control/onboard.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+
+namespace reflex::control {
+namespace {
+
+using testing::defaultControllerModel;
+using testing::shippedModel;
+
+constexpr double kDt = 0.005;
+
+std::array<HandCommand, 2> crossing() {
+  std::array<HandCommand, 2> h;
+  h[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};
+  h[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
+  return h;
+}
+
+std::array<HandCommand, 2> reachable() {
+  std::array<HandCommand, 2> h;
+  h[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.20, 0.85)};
+  h[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.20, 0.85)};
+  return h;
+}
+
+Eigen::Vector3d handAt(const Model& model, const ControllerModel& cm, const Eigen::VectorXd& q, int arm) {
+  KinematicsData kin(model);
+  EXPECT_TRUE(computeForwardKinematics(model, kin, q));
+  return kin.X_W_L[cm.arms[arm].hand_link] * cm.arms[arm].hand_point_L;
+}
+
+// ---------------------------------------------------------------- staleness
+
+TEST(OnboardStaleness, HoldsUntilExactlyTheTimeoutThenRetractsToRest) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardOptions options;
+  options.input_timeout = 0.5;  // the independent answer: the configured timeout
+  OnboardController ctl(model, cm, port, q0, options);
+  // Before any sign of life the inputs are stale.
+  EXPECT_TRUE(ctl.step(0.0).inputs_stale);
+  ctl.setHandTargets(reachable(), 0.0);
+  // Times as exact binary fractions so "now - last == timeout" is exact.
+  int k = 1;
+  for (; k * 0.0625 <= 0.5; ++k) {
+    const CycleReport& r = ctl.step(k * 0.0625);
+    ASSERT_FALSE(r.inputs_stale) << "held at t = " << k * 0.0625;
+    ASSERT_EQ(r.commands[kLeft].status, HandStatus::kGiven);
+  }
+  EXPECT_EQ(k * 0.0625, 0.5625);
+  EXPECT_FALSE(ctl.step(0.5).inputs_stale) << "exactly input_timeout after the sample: still held";
+  const CycleReport& late = ctl.step(std::nextafter(0.5, 1.0));
+  EXPECT_TRUE(late.inputs_stale) << "strictly later than input_timeout: stale";
+  EXPECT_EQ(late.commands[kLeft].status, HandStatus::kNoTarget);
+  EXPECT_EQ(late.commands[kRight].status, HandStatus::kNoTarget);
+  EXPECT_EQ(late.counts.stale_events, 1U) << "the first staleness (before any input) is not an event";
+
+  // A heartbeat of the source extends the hold by the same timeout; a new source forgets it.
+  ctl.setHandTargets(reachable(), 1.0);
+  ctl.noteSourceHeartbeat(1.4);
+  EXPECT_FALSE(ctl.step(1.9).inputs_stale) << "0.5 s after the heartbeat";
+  EXPECT_TRUE(ctl.step(std::nextafter(1.9, 2.0)).inputs_stale);
+  EXPECT_EQ(ctl.report().counts.stale_events, 2U);
+  ctl.setHandTargets(reachable(), 3.0);
+  ctl.noteSourceHeartbeat(3.25);
+  ctl.newTargetSource();
+  EXPECT_TRUE(ctl.step(std::nextafter(3.5, 4.0)).inputs_stale) << "the old source's heartbeat no longer counts";
+
+  // Retract: from here the arms move exactly as the controller told "no target" for both hands
+  // (computeControl + stepPlant written out, from the same configuration).
+  ControllerData ref(model, cm);
+  KinematicRobot robot(model, port.positions());
+  Eigen::VectorXd scratch = port.positions();
+  double t = 4.0;
+  for (int i = 0; i < 1200; ++i, t += kDt) {
+    ASSERT_TRUE(ctl.step(t).inputs_stale);
+    const ControlResult cr = computeControl(model, cm, ref, robot.jointPositions(), ControlInput{});
+    stepPlant(model, cm, ref, cr, robot, nullptr, kDt, scratch);
+  }
+  EXPECT_LT((port.positions() - robot.jointPositions()).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_GT((port.positions() - q0).cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(OnboardStaleness, HeldTargetsAreReachedAndRejectedTargetsKeepThePreviousOne) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  ctl.setHandTargets(reachable(), 0.0);
+  std::array<HandCommand, 2> bad = reachable();
+  bad[kLeft].target_W.x() = std::nan("");
+  bad[kRight].target_W = Eigen::Vector3d(2.0, 0.1, 0.0);  // 2.0025 m > max_target_distance 2 m
+  EXPECT_EQ(ctl.setHandTargets(bad, 0.0), 2);
+  EXPECT_EQ(ctl.report().counts.hand_targets_rejected, 2U);
+  EXPECT_EQ(ctl.report().counts.targets_rejected, 2U);
+  EXPECT_EQ(ctl.report().counts.targets_received, 2U);
+  double t = 0.0;
+  for (int i = 0; i < 370; ++i, t += kDt) {  // 1.85 s: no further sample, one heartbeat at 0.9 s
+    if (i == 180) ctl.noteSourceHeartbeat(t);
+    const CycleReport& r = ctl.step(t);
+    ASSERT_FALSE(r.inputs_stale);
+    ASSERT_TRUE(r.commands[kLeft].target_W.isApprox(reachable()[kLeft].target_W));
+  }
+  for (int a = 0; a < 2; ++a)
+    EXPECT_LT((handAt(model, cm, port.positions(), a) - reachable()[a].target_W).norm(), 0.01) << "arm " << a;
+}
+
+// ---------------------------------------------------------------- body schema by name
+
+BodySchemaRequest attachRequest(const std::string& name, const std::string& link, const Eigen::Vector3d& a,
+                                const Eigen::Vector3d& b, double radius, bool is_virtual = false, int priority = 0) {
+  BodySchemaRequest rq;
+  rq.name = &name;
+  rq.parent_link = &link;
+  rq.a_L = a;
+  rq.b_L = b;
+  rq.radius = radius;
+  rq.is_virtual = is_virtual;
+  rq.motion_priority = priority;
+  return rq;
+}
+
+TEST(OnboardBodySchema, AttachByNameMatchesTheDistanceModuleAndDetachFreesTheSlot) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  const std::string cup = "cup", hand = "l_hand";
+  const Eigen::Vector3d a(-0.16, 0.0, -0.06), b(0.16, 0.0, -0.06);
+  const BodySchemaOutcome& out = ctl.changeBodySchema(attachRequest(cup, hand, a, b, 0.015));
+  ASSERT_EQ(out.kind, BodySchemaOutcome::Kind::kAttached) << out.text;
+  EXPECT_EQ(ctl.slotOf(cup), 0);
+  const CycleReport& r = ctl.step(0.0);
+  // The independent answer: the distance module with the same slot on its own DistanceData.
+  KinematicsData kin(model);
+  DistanceData dist(model);
+  ASSERT_TRUE(computeForwardKinematics(model, kin, q0));
+  const int link = model.linkIndex(hand);
+  std::uint64_t ignore = std::uint64_t{1} << model.segmentIndex(hand);
+  ignore |= std::uint64_t{1} << model.segmentIndex(model.links[model.links[link].parent].name);
+  ASSERT_TRUE(attachBodySchemaSegment(model, dist, 0, link, a, b, 0.015, ignore));
+  computeSegmentDistances(model, kin, dist);
+  double dmin = std::numeric_limits<double>::infinity();
+  for (const auto& pd : dist.pairs)
+    if (pd.active) dmin = std::min(dmin, pd.distance);
+  EXPECT_NEAR(r.min_distance, dmin, 1e-12);
+  int slot_pairs = 0;
+  for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+    if (!dist.pairs[i].active || dist.pairs[i].seg_b != model.num_robot_segments) continue;
+    ++slot_pairs;
+    EXPECT_NEAR(ctl.data().dist.pairs[i].distance, dist.pairs[i].distance, 1e-12) << "pair " << i;
+  }
+  EXPECT_GT(slot_pairs, 5);
+
+  // The same name again re-places its slot; another name takes the next slot.
+  const std::string other = "tray";
+  EXPECT_EQ(ctl.changeBodySchema(attachRequest(cup, hand, a, b, 0.02)).slot, 0);
+  EXPECT_EQ(ctl.changeBodySchema(attachRequest(other, "r_hand", a, b, 0.02)).slot, 1);
+  // Disabled: the segment is gone but the name keeps its slot; detached: the slot is free.
+  BodySchemaRequest off = attachRequest(cup, hand, a, b, 0.02);
+  off.enabled = false;
+  EXPECT_EQ(ctl.changeBodySchema(off).kind, BodySchemaOutcome::Kind::kDetached);
+  EXPECT_FALSE(ctl.data().dist.slots[0].enabled);
+  EXPECT_EQ(ctl.slotOf(cup), 0);
+  BodySchemaRequest det = off;
+  det.operation = BodySchemaRequest::Operation::kDetach;
+  EXPECT_EQ(ctl.changeBodySchema(det).kind, BodySchemaOutcome::Kind::kDetached);
+  EXPECT_EQ(ctl.slotOf(cup), -1);
+  EXPECT_EQ(ctl.changeBodySchema(det).kind, BodySchemaOutcome::Kind::kUnknownName) << "a second detach: nothing";
+  EXPECT_EQ(ctl.report().counts.schema_rejected, 0U);
+}
+
+TEST(OnboardBodySchema, RefusalsAreNamedAndCounted) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  const Eigen::Vector3d z = Eigen::Vector3d::Zero(), x(0.1, 0.0, 0.0);
+  const BodySchemaLimits limits;
+  // Beyond BodySchemaLimits::max_radius.
+  const std::string big = "boulder";
+  const BodySchemaOutcome& r1 = ctl.changeBodySchema(attachRequest(big, "l_hand", z, x, limits.max_radius * 2.0));
+  EXPECT_EQ(r1.kind, BodySchemaOutcome::Kind::kRejectedCheck);
+  EXPECT_EQ(r1.check.fault, BodySchemaFault::kRadiusTooLarge);
+  EXPECT_NE(std::string(r1.text).find("'boulder' rejected"), std::string::npos) << r1.text;
+  EXPECT_NE(std::string(r1.text).find("max_radius"), std::string::npos) << r1.text;
+  // An unknown link.
+  const std::string lost = "lost";
+  const BodySchemaOutcome& r2 = ctl.changeBodySchema(attachRequest(lost, "no_such_link", z, x, 0.02));
+  EXPECT_EQ(r2.check.fault, BodySchemaFault::kUnknownLink);
+  EXPECT_NE(std::string(r2.text).find("link 'no_such_link'"), std::string::npos) << r2.text;
+  // NaN.
+  const std::string nan_name = "nan";
+  const BodySchemaOutcome& r3 =
+      ctl.changeBodySchema(attachRequest(nan_name, "l_hand", z, Eigen::Vector3d(std::nan(""), 0, 0), 0.02));
+  EXPECT_EQ(r3.check.fault, BodySchemaFault::kNonFinite);
+  // A physical segment on the root overlapping the chest: no arm can move it apart (README rule 2).
+  KinematicsData kin(model);
+  ASSERT_TRUE(computeForwardKinematics(model, kin, q0));
+  const Eigen::Vector3d chest = kin.X_W_L[model.linkIndex("chest")].translation();
+  const std::string pack = "pack";
+  const BodySchemaOutcome& r4 = ctl.changeBodySchema(attachRequest(pack, "world", chest, chest, 0.05));
+  ASSERT_EQ(r4.kind, BodySchemaOutcome::Kind::kRejectedUnresolvable) << r4.text;
+  EXPECT_NE(std::string(r4.text).find("which no arm can move away from it (link 'world')"), std::string::npos) << r4.text;
+  // Its distance, from the distance module directly: the sphere against the segment it names.
+  DistanceData dist(model);
+  ASSERT_TRUE(attachBodySchemaSegment(model, dist, 0, model.linkIndex("world"), chest, chest, 0.05));
+  computeSegmentDistances(model, kin, dist);
+  const int other = r4.attach.other_segment;
+  ASSERT_GE(other, 0);
+  EXPECT_NE(std::string(r4.text).find("'" + model.segments[other].name + "'"), std::string::npos);
+  bool found = false;
+  for (const auto& pd : dist.pairs)
+    if (pd.active && pd.seg_a == other && pd.seg_b == model.num_robot_segments) {
+      EXPECT_NEAR(pd.distance, r4.attach.distance, 1e-12);
+      found = true;
+    }
+  EXPECT_TRUE(found);
+  EXPECT_EQ(ctl.slotOf(pack), -1) << "a refused name holds no slot";
+  // No free slot: kBodySchemaSlots names fill every slot, the next is refused.
+  std::vector<std::string> names;
+  for (int s = 0; s <= kBodySchemaSlots; ++s) names.push_back("obj" + std::to_string(s));
+  for (int s = 0; s < kBodySchemaSlots; ++s)
+    ASSERT_EQ(ctl.changeBodySchema(attachRequest(names[s], "r_hand", z, x, 0.01)).kind,
+              BodySchemaOutcome::Kind::kAttached);
+  const BodySchemaOutcome& r5 = ctl.changeBodySchema(attachRequest(names.back(), "r_hand", z, x, 0.01));
+  EXPECT_EQ(r5.kind, BodySchemaOutcome::Kind::kRejectedNoSlot);
+  EXPECT_NE(std::string(r5.text).find("no free slot"), std::string::npos) << r5.text;
+  EXPECT_EQ(ctl.report().counts.schema_rejected, 5U);
+  EXPECT_EQ(ctl.report().counts.targets_rejected, 5U);
+}
+
+// ---------------------------------------------------------------- walking
+
+TEST(OnboardWalking, TheHeelTravelsSpeedTimesDtPerClearCycleAndHoldsInEstopAndRecovery) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  const int heel = model.qIndex("heel_x");
+  ASSERT_GE(heel, 0);
+  EXPECT_FALSE(ctl.walkCommand(false, std::nan(""), 0.2));
+  EXPECT_FALSE(ctl.walkCommand(false, 0.5, 0.0));
+  EXPECT_EQ(ctl.report().counts.walk_rejected, 2U);
+  EXPECT_EQ(port.positions()[heel], q0[heel]) << "a rejected command does not walk";
+  const double speed = 0.2;
+  ASSERT_TRUE(ctl.walkCommand(false, q0[heel] + 0.5, speed));
+  int clear_cycles = 0;
+  double t = 0.0;
+  for (int k = 0; k < 40; ++k, t += kDt) clear_cycles += ctl.step(t).result == ControlResult::kOk;
+  EXPECT_EQ(clear_cycles, 40);
+  EXPECT_NEAR(port.positions()[heel] - q0[heel], 40 * speed * kDt, 1e-12);
+  // A physical segment on the root where the right hand is: the e-stop latches.
+  const Eigen::Vector3d hand = ctl.data().arms[kRight].hand_W;
+  const std::string post = "post";
+  ASSERT_EQ(ctl.changeBodySchema(attachRequest(post, "world", hand, hand + Eigen::Vector3d(0, 0, 0.02), 0.03)).kind,
+            BodySchemaOutcome::Kind::kAttached);
+  int latched = 0, recovering = 0;
+  for (int k = 0; k < 600; ++k, t += kDt) {
+    if (k == 60) ctl.requestEstopReset();
+    if (k == 300) {
+      BodySchemaRequest det = attachRequest(post, "world", hand, hand, 0.03);
+      det.operation = BodySchemaRequest::Operation::kDetach;
+      ctl.changeBodySchema(det);
+    }
+    const double before = port.positions()[heel];
+    const CycleReport& r = ctl.step(t);
+    if (r.result == ControlResult::kOk) {
+      ++clear_cycles;
+      ASSERT_TRUE(r.walking_advanced || r.counts.walking_holds > 0);
+    } else {
+      (r.estop == EstopState::kLatched ? latched : recovering) += 1;
+      ASSERT_EQ(port.positions()[heel], before) << "the heel moved while the e-stop was "
+                                                << (r.estop == EstopState::kLatched ? "latched" : "recovering");
+      ASSERT_FALSE(r.walking_advanced);
+    }
+  }
+  EXPECT_GT(latched, 10);
+  EXPECT_GT(recovering, 0);
+  EXPECT_EQ(ctl.report().estop, EstopState::kClear);
+  EXPECT_EQ(ctl.report().counts.walking_holds, 0U);
+  // The analytic travel: speed x dt per clear cycle, up to the goal.
+  EXPECT_NEAR(port.positions()[heel] - q0[heel], std::min(0.5, clear_cycles * speed * kDt), 1e-9);
+  // Speed capped at max_walk_speed (0.5 m/s), goal relative to where the heel is now.
+  const double x1 = port.positions()[heel];
+  ASSERT_TRUE(ctl.walkCommand(false, x1 + 1.0, 50.0));
+  for (int k = 0; k < 20; ++k, t += kDt) ASSERT_EQ(ctl.step(t).result, ControlResult::kOk);
+  EXPECT_NEAR(port.positions()[heel] - x1, 20 * 0.5 * kDt, 1e-12);
+  ASSERT_TRUE(ctl.walkCommand(true, 0.0, 0.0));
+  const double x2 = port.positions()[heel];
+  for (int k = 0; k < 20; ++k, t += kDt) ctl.step(t);
+  EXPECT_EQ(port.positions()[heel], x2) << "stop: the heel stops at once";
+}
+
+// ---------------------------------------------------------------- priority
+
+TEST(OnboardPriority, GivenPriorityOrAGraspedObjectsArmAndTheSameVelocitiesAsComputeControl) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  ControllerData ref(model, cm);  // computeControl directly, the same inputs
+  double t = 0.0;
+  auto check = [&](MotionPriority expected, const char* what) {
+    const Eigen::VectorXd q = port.positions();
+    const CycleReport& r = ctl.step(t);
+    EXPECT_EQ(r.priority, expected) << what;
+    ControlInput in;
+    in.hands = crossing();
+    in.priority = expected;
+    computeControl(model, cm, ref, q, in);
+    for (int i = 0; i < model.nq; ++i) ASSERT_EQ(ctl.data().qdot[i], ref.qdot[i]) << what << ", joint " << model.q_names[i];
+    t += kDt;
+  };
+  ctl.setHandTargets(crossing(), 0.0);
+  for (int k = 0; k < 50; ++k) check(MotionPriority::kEqual, "no priority given");
+  ctl.setPriority(MotionPriority::kLeftHigher);
+  for (int k = 0; k < 50; ++k) check(MotionPriority::kLeftHigher, "left given");
+  ctl.setPriority(MotionPriority::kEqual);
+  const std::string cup = "cup", gaze = "gaze";
+  const Eigen::Vector3d a(0.0, 0.0, -0.05), b(0.0, 0.0, -0.08);
+  // A virtual segment with priority does not count; a grasped object in the right hand does.
+  ASSERT_EQ(ctl.changeBodySchema(attachRequest(gaze, "l_hand", a, b, 0.01, true, 1)).kind, BodySchemaOutcome::Kind::kAttached);
+  ref.dist.slots = ctl.data().dist.slots;  // the reference needs the same slots: mirror them
+  ref.slot_virtual = ctl.data().slot_virtual;
+  for (int k = 0; k < 20; ++k) check(MotionPriority::kEqual, "virtual segment with priority");
+  ASSERT_EQ(ctl.changeBodySchema(attachRequest(cup, "r_hand", a, b, 0.01, false, 1)).kind, BodySchemaOutcome::Kind::kAttached);
+  ref.dist.slots = ctl.data().dist.slots;
+  ref.slot_virtual = ctl.data().slot_virtual;
+  for (int k = 0; k < 50; ++k) check(MotionPriority::kRightHigher, "grasped object in the right hand");
+  ctl.setPriority(MotionPriority::kLeftHigher);
+  for (int k = 0; k < 20; ++k) check(MotionPriority::kLeftHigher, "a given priority wins over the object's");
+}
+
+// ---------------------------------------------------------------- the plant loop and the port
+
+TEST(OnboardPlant, TheSameJointPositionsAsThePreIssue13LoopWithWalking) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  // The loop reflex_controller ran before issue 13, written out.
+  ControllerData data(model, cm);
+  KinematicRobot robot(model, q0);
+  WalkingPattern walking(model);
+  Eigen::VectorXd scratch = q0;
+  ControlInput in;
+  in.hands = crossing();
+  ctl.setHandTargets(crossing(), 0.0);
+  const int heel = model.qIndex("heel_x");
+  ASSERT_TRUE(ctl.walkCommand(false, q0[heel] + 0.3, 0.25));
+  walking.start(0.3, 0.25);
+  int not_ok = 0;
+  double max_f = 0.0;
+  for (int k = 0; k < 1200; ++k) {
+    const double t = k * kDt;
+    if (k % 100 == 0) ctl.setHandTargets(k % 200 == 0 ? crossing() : reachable(), t);
+    in.hands = k / 100 % 2 == 0 ? crossing() : reachable();
+    ctl.step(t);
+    const ControlResult cr = computeControl(model, cm, data, robot.jointPositions(), in);
+    not_ok += cr != ControlResult::kOk;
+    max_f = std::max({max_f, data.arms[kLeft].f, data.arms[kRight].f});
+    stepPlant(model, cm, data, cr, robot, &walking, kDt, scratch);
+    for (int i = 0; i < model.nq; ++i) ASSERT_EQ(port.positions()[i], robot.jointPositions()[i]) << "cycle " << k << " " << model.q_names[i];
+    ASSERT_EQ(ctl.report().result, cr);
+  }
+  EXPECT_NEAR(port.positions()[heel] - q0[heel], 0.3, 1e-9) << "walked the whole way";
+  EXPECT_GT(max_f, 0.5) << "the arms met (avoidance acted)";
+  EXPECT_EQ(not_ok, 0);
+  EXPECT_EQ(ctl.report().counts.guard_count, data.guard_count);
+}
+
+class ScriptedPort final : public RobotPort {
+ public:
+  explicit ScriptedPort(const Eigen::VectorXd& q) : q_(q), q_end_(q), qdot_(q) {}
+  const Eigen::VectorXd* measuredPositions(double) noexcept override { return have_ ? &q_ : nullptr; }
+  void command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double dt) noexcept override {
+    q_end_ = q_end;
+    qdot_ = qdot;
+    dt_ = dt;
+    ++commands_;
+  }
+  Eigen::VectorXd q_, q_end_, qdot_;
+  double dt_ = 0.0;
+  bool have_ = false;
+  int commands_ = 0;
+};
+
+TEST(OnboardPort, NoStateNoCommandAndTheCommandIsMeasuredPlusQdotDt) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  ScriptedPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  ctl.setHandTargets(reachable(), 0.0);
+  for (int k = 0; k < 5; ++k) EXPECT_FALSE(ctl.step(k * kDt).robot_state_ok);
+  EXPECT_EQ(port.commands_, 0);
+  EXPECT_EQ(ctl.report().counts.robot_stale_events, 1U);
+  EXPECT_EQ(ctl.report().counts.robot_stale_cycles, 5U);
+  port.have_ = true;
+  // A measured state that is not where the controller sent the robot (servo lag): it computes from it.
+  port.q_ = q0;
+  const std::vector<int> driven = drivenJoints(model, cm);
+  for (int k = 5; k < 60; ++k) {
+    port.q_[cm.arms[kLeft].q[1]] += 0.001;  // the robot drifts
+    const Eigen::VectorXd measured = port.q_;
+    const CycleReport& r = ctl.step(k * kDt);
+    ASSERT_TRUE(r.robot_state_ok);
+    ASSERT_EQ(port.dt_, kDt);
+    for (int i = 0; i < model.nq; ++i) {
+      const bool arm = std::find(driven.begin(), driven.begin() + cm.arms[0].n + cm.arms[1].n, i) !=
+                       driven.begin() + cm.arms[0].n + cm.arms[1].n;
+      const double v = std::clamp(ctl.data().qdot[i], -model.v_max[i], model.v_max[i]);
+      const double expect = arm ? std::clamp(measured[i] + v * kDt, model.q_lower[i], model.q_upper[i]) : measured[i];
+      ASSERT_NEAR(port.q_end_[i], expect, 1e-15) << model.q_names[i];
+      ASSERT_NEAR(port.qdot_[i], (port.q_end_[i] - measured[i]) / kDt, 1e-9) << model.q_names[i];
+      ASSERT_LE(std::abs(port.qdot_[i]), model.v_max[i] * (1.0 + 1e-12)) << model.q_names[i];
+    }
+    // the robot follows halfway
+    port.q_ = measured + 0.5 * (port.q_end_ - measured);
+  }
+  EXPECT_EQ(port.commands_, 55);
+  port.have_ = false;
+  EXPECT_FALSE(ctl.step(1.0).robot_state_ok);
+  EXPECT_EQ(ctl.report().counts.robot_stale_events, 2U);
+  EXPECT_EQ(port.commands_, 55) << "no command without state";
+}
+
+TEST(OnboardSetup, BadOptionsAndInitialConfigurationsAreNamed) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardOptions o;
+  o.input_timeout = 0.0;
+  try {
+    OnboardController c(model, cm, port, q0, o);
+    ADD_FAILURE() << "accepted input_timeout 0";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("input_timeout = 0"), std::string::npos) << e.what();
+  }
+  Eigen::VectorXd bad = q0;
+  bad[3] = std::nan("");
+  try {
+    OnboardController c(model, cm, port, bad);
+    ADD_FAILURE() << "accepted a NaN initial position";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("'" + model.q_names[3] + "'"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(OnboardController(model, cm, port, Eigen::VectorXd::Zero(3)), ConfigError);
+}
+
+}  // namespace
+}  // namespace reflex::control
