@@ -10,6 +10,7 @@
 
 #include <reflex/msg/behaviorPubSubTypes.h>
 #include <reflex/msg/controlPubSubTypes.h>
+#include <reflex/msg/robotPubSubTypes.h>
 #include <reflex/msg/systemPubSubTypes.h>
 #include <reflex/msg/visionPubSubTypes.h>
 
@@ -138,6 +139,29 @@ struct TopicTraits<reflex::msg::ControllerProtection> {
   using PubSubType = SafePubSubType<reflex::msg::ControllerProtectionPubSubType>;
   static constexpr const char* kTopicName = "reflex/controller_protection";
   static constexpr const char* kProfile = kProfileControllerInfo;
+};
+
+// The robot boundary (robot.idl). reflex_state's QoS (best effort, keep last 1, 20 ms deadline):
+// only the newest measured state / command matters, and a robot or controller that stops is noticed.
+template <>
+struct TopicTraits<reflex::msg::RobotState> {
+  using PubSubType = SafePubSubType<reflex::msg::RobotStatePubSubType>;
+  static constexpr const char* kTopicName = "reflex/robot_state";
+  static constexpr const char* kProfile = kProfileState;
+};
+
+template <>
+struct TopicTraits<reflex::msg::JointCommand> {
+  using PubSubType = SafePubSubType<reflex::msg::JointCommandPubSubType>;
+  static constexpr const char* kTopicName = "reflex/joint_command";
+  static constexpr const char* kProfile = kProfileState;
+};
+
+template <>
+struct TopicTraits<reflex::msg::RobotContacts> {
+  using PubSubType = SafePubSubType<reflex::msg::RobotContactsPubSubType>;
+  static constexpr const char* kTopicName = "reflex/robot_contacts";
+  static constexpr const char* kProfile = kProfileState;
 };
 
 }  // namespace reflex::bus
