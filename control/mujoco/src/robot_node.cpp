@@ -15,6 +15,14 @@ namespace {
 
 constexpr std::size_t kMaxLatencySamples = 1000000;
 
+constexpr std::int64_t kMaxCatchUp = 20;  // periods run at once after a late wake-up
+
+std::int64_t monotonicNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
+}
+
 double monotonicSeconds() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -125,25 +133,29 @@ void RobotNode::run() {
   stats_.worst_contacts.clear();
 
   const auto period_ns = static_cast<std::int64_t>(std::llround(config_.period * 1e9));
-  timespec next{};
-  clock_gettime(CLOCK_MONOTONIC, &next);
+  const std::int64_t t_start = monotonicNs();
+  std::int64_t next = t_start;          // start of the next period [ns, CLOCK_MONOTONIC]
+  std::int64_t simulated_periods = 0;   // periods of physics run since t_start
   const double t_end = config_.duration > 0.0 ? monotonicSeconds() + config_.duration : 0.0;
   while (!bus_->stopRequested() && (t_end == 0.0 || monotonicSeconds() < t_end)) {
-    // Sleep to the start of this period; a late start is an overrun (continue from now).
-    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
-    timespec now{};
-    clock_gettime(CLOCK_MONOTONIC, &now);
-    const double late_us = 1e6 * (static_cast<double>(now.tv_sec - next.tv_sec)) + 1e-3 * (now.tv_nsec - next.tv_nsec);
+    // Sleep to the start of this period. Simulated time follows wall time: a late period runs the
+    // periods it missed (an overrun), up to kMaxCatchUp; time beyond that is lost (counted).
+    const timespec wake{static_cast<time_t>(next / 1000000000), static_cast<long>(next % 1000000000)};
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &wake, nullptr);
+    const std::int64_t now_mono = monotonicNs();
+    const double late_us = 1e-3 * static_cast<double>(now_mono - next);
     stats_.max_lateness_us = std::max(stats_.max_lateness_us, late_us);
-    if (late_us > 1e-3 * static_cast<double>(period_ns)) {
-      ++stats_.overruns;
-      next = now;
+    const std::int64_t due = (now_mono - t_start) / period_ns + 1;  // periods that should have run by now
+    std::int64_t periods = due - simulated_periods;
+    if (periods > 1) ++stats_.overruns;
+    if (periods > kMaxCatchUp) {
+      stats_.lost_periods += static_cast<std::uint64_t>(periods - kMaxCatchUp);
+      simulated_periods += periods - kMaxCatchUp;
+      periods = kMaxCatchUp;
     }
-    next.tv_nsec += period_ns;
-    while (next.tv_nsec >= 1000000000L) {
-      next.tv_nsec -= 1000000000L;
-      ++next.tv_sec;
-    }
+    periods = std::max<std::int64_t>(periods, 1);
+    simulated_periods += periods;
+    next = t_start + simulated_periods * period_ns;
 
     // 1. Commands: every sample that arrived, oldest first (each counted); the last accepted one rules.
     std::int64_t now_ns = bus::nowNs();
@@ -161,8 +173,8 @@ void RobotNode::run() {
     }
 
     // 2. Physics.
-    robot_->step(substeps_, now_ns);
-    ++stats_.periods;
+    robot_->step(substeps_ * static_cast<int>(periods), now_ns);
+    stats_.periods += static_cast<std::uint64_t>(periods);
 
     // 3. The measured state and the judge's contacts of the same instant.
     for (int qi = 0; qi < model_.nq; ++qi) {
@@ -202,7 +214,7 @@ std::string RobotNode::exitSummary() const {
   const double dt = robot_->timestep();
   std::ostringstream os;
   os << "steps " << meas.steps << " (" << fixed(meas.steps * dt, 3) << " s simulated), periods " << stats_.periods
-     << ", overruns " << stats_.overruns << ", max lateness " << fixed(stats_.max_lateness_us, 0) << " us"
+     << ", overruns " << stats_.overruns << " (periods lost " << stats_.lost_periods << "), max lateness " << fixed(stats_.max_lateness_us, 0) << " us"
      << ", contact steps " << meas.contact_steps << ", contact periods " << stats_.contact_periods
      << ", commands applied " << c.accepted << " rejected " << c.rejected() << " (unknown name " << c.rejected_unknown
      << ", length " << c.rejected_length << ", not finite " << c.rejected_not_finite << ", duplicate "

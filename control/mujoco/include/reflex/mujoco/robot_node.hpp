@@ -4,8 +4,9 @@
 //   accepted or rejected and counted; see MujocoRobot::offerCommand), advance the physics by
 //   period / timestep steps, publish RobotState (reflex/robot_state) and RobotContacts
 //   (reflex/robot_contacts) of the same instant.
-// A period that starts late is counted as an overrun; the loop then continues from "now" (the
-// simulation does not try to catch up, so simulated time runs slower than wall time by the overruns).
+// Simulated time follows wall time: a wake-up that is late by whole periods (an overrun, counted)
+// runs the missed periods' physics at once, up to 20 periods; beyond that the time is lost (counted
+// as lost periods) and simulated time falls behind. States are published once per wake-up.
 #pragma once
 
 #include "reflex/control/model.hpp"
@@ -35,7 +36,7 @@ struct NodeConfig {
 };
 
 struct NodeStats {
-  std::uint64_t periods = 0, overruns = 0, states_published = 0;
+  std::uint64_t periods = 0, overruns = 0, lost_periods = 0, states_published = 0;
   double max_lateness_us = 0.0;
   std::uint64_t contact_periods = 0;          ///< published states with at least one contact
   std::vector<SegmentContact> worst_contacts; ///< the smallest distance seen per pair (names via model)
