@@ -188,16 +188,18 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
   std::printf("[ measured ] tracking a %.1f rad %.1f Hz sinusoid (peak %.2f rad/s) on 4 arm joints over %zu states: "
               "error RMS %.4f rad, max %.4f rad; servo lag %.0f ms (residual RMS %.4f rad, max %.4f rad)\n",
               kAmp, kFreq, kAmp * 2 * M_PI * kFreq, samples.size(), rms, max_err, best_lag * 1e3, best_rms, best_max);
-  // Bounds: the servo (10 Hz, velocity feed-forward) alone tracks to a few mrad; the rest is this
+  // Bounds: the servo (10 Hz, velocity feed-forward) alone tracks to ~1 mrad RMS, 6 mrad at most
+  // (measured); the rest is this
   // loaded machine (a commander or robot stalled for tens of ms; a command older than its 20 ms
   // deadline makes the robot hold). The largest error allows a 200 ms stall at the peak speed.
-  EXPECT_LT(rms, 0.03);
+  EXPECT_LT(rms, 0.01);
   EXPECT_LT(max_err, 0.2);
-  EXPECT_LT(best_lag, 0.06);
-  EXPECT_LT(best_rms, 0.02);
+  EXPECT_LT(best_lag, 0.03);
+  EXPECT_LT(best_rms, 0.01);
 
-  // Commands stop: after the last deadline (20 ms) the robot holds.
-  std::this_thread::sleep_for(100ms);
+  // Commands stop: after the last deadline (20 ms) the robot holds; the drift is measured from 0.5 s
+  // on (the servo has settled from the motion it was stopped in).
+  std::this_thread::sleep_for(500ms);
   cmd.received.clear();
   std::this_thread::sleep_for(20ms);
   ASSERT_TRUE(cmd.waitForState(5s));
@@ -215,7 +217,7 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
   for (int i : arm) gravity_torque = std::max(gravity_torque, std::abs(hold_end.efforts()[i]));
   std::printf("[ measured ] holding over %.2f s (robot clock): arm drift %.2e rad, largest arm holding torque %.2f N m\n",
               seconds(hold_end.header().stamp_ns() - hold_start.header().stamp_ns()), drift, gravity_torque);
-  EXPECT_LT(drift, 1e-3);
+  EXPECT_LT(drift, 1e-4);  // measured: 1.5e-9 rad (PD hold with gravity feed-forward)
   EXPECT_GT(gravity_torque, 1.0) << "the arms are loaded by gravity";
 
   EXPECT_EQ(robot.terminate(), 0);

@@ -179,10 +179,13 @@ void MujocoRobot::step(int substeps, std::int64_t now_ns) {
   if (!measured_.holding && valid_until_ns_ <= now_ns) beginHold();
   const double dt = m_->opt.timestep;
   for (int k = 0; k < substeps; ++k) {
-    mj_step1(m_.get(), d_.get());
+    mj_step1(m_.get(), d_.get());  // positions, collision detection, bias forces at the current state
     ++measured_.steps;
     if (d_->ncon > 0) ++measured_.contact_steps;
     if (measured_.holding) ++measured_.hold_steps;
+    // The state and contacts published are those of the last step's start: one collision pass serves
+    // the judge and the physics.
+    if (k == substeps - 1) readMeasurement();
     for (int qi = 0; qi < model_.nq; ++qi) {
       // The reference approaches the target at most at the joint's velocity limit.
       const double max_move = model_.v_max[qi] * dt;
@@ -193,13 +196,12 @@ void MujocoRobot::step(int substeps, std::int64_t now_ns) {
       d_->ctrl[actuator_[qi]] = g.kp * q_ref_[qi] + g.kd * qdot_ref_[qi] + d_->qfrc_bias[dof_adr_[qi]];
     }
     const int bad_before = d_->warning[mjWARN_BADQACC].number;
-    mj_step2(m_.get(), d_.get());
+    mj_step2(m_.get(), d_.get());  // actuation, constraint forces, integration
     if (d_->warning[mjWARN_BADQACC].number != bad_before) ++measured_.unstable_steps;
   }
-  // State and contacts of the same instant: positions after the last integration, contacts from a
-  // fresh position pass at those positions.
-  mj_fwdPosition(m_.get(), d_.get());
-  readMeasurement();
+  // The drive torques applied from the published state on.
+  for (int qi = 0; qi < model_.nq; ++qi)
+    measured_.effort[qi] = d_->actuator_force[actuator_[qi]] - gains_[qi].kd * measured_.qdot[qi];
 }
 
 void MujocoRobot::readMeasurement() {
@@ -207,7 +209,7 @@ void MujocoRobot::readMeasurement() {
     measured_.q[qi] = d_->qpos[qpos_adr_[qi]];
     measured_.qdot[qi] = d_->qvel[dof_adr_[qi]];
     // The drive's torque: actuator (stiffness + feed-forward) plus its velocity gain (joint damping).
-    measured_.effort[qi] = d_->actuator_force[actuator_[qi]] - gains_[qi].kd * measured_.qdot[qi];
+    measured_.effort[qi] = d_->actuator_force[actuator_[qi]] - gains_[qi].kd * measured_.qdot[qi];  // (see step)
   }
   collectContacts(measured_.contacts);
 }

@@ -45,7 +45,7 @@ struct ServoGains {
 /// Everything the generated MJCF depends on besides the Model. Defaults are the values stated in
 /// control/README.md.
 struct MjcfOptions {
-  double timestep = 0.0005;   ///< physics step [s]
+  double timestep = 0.001;    ///< physics step [s]
   double margin = 0.005;      ///< contact margin = gap = d_r [m]: pairs below it are reported
   double density = 1000.0;    ///< [kg/m^3] for links without URDF inertial (about that of the human body)
   double min_mass = 0.01;     ///< [kg] for links with neither inertial nor collision geometry

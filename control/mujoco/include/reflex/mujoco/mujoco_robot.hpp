@@ -13,9 +13,9 @@
 //      no more than the joint's velocity limit (Model::v_max), so no command can move a joint faster;
 //      the actuator gets ctrl = kp q_ref + kd qdot_ref + the bias force (gravity and Coriolis, as
 //      drives with gravity feed-forward do), its force clamped to ±effort;
-//   4. the measured state (positions, velocities, actuator forces) and the segment pairs MuJoCo
-//      reports closer than the margin, both at the same instant (after the last step's collision
-//      detection, before its integration... see step()).
+//   4. the measured state (positions, velocities) and the segment pairs MuJoCo reports closer than
+//      the margin, both at the same instant: the start of the last physics step (one collision pass
+//      serves the judge and the physics); the efforts are the drive torques applied from then on.
 // step() allocates nothing and never throws.
 #pragma once
 
