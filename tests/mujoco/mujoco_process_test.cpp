@@ -11,10 +11,18 @@
 //   - bad and late commands: expired deadlines, NaN, an unknown joint, wrong lengths and a joint named
 //     twice, each aimed 0.5 rad away, never move the robot (it keeps holding; every joint within
 //     2 mrad) and are counted by category in reflex_mujoco's exit summary;
+//   - the judge on the bus: the robot started where the project's distance module puts the closest
+//     pair 2 mm apart (l_shoulder_roll found by bisection) publishes that pair, and only pairs the
+//     module puts below d_r, in RobotContacts with MuJoCo's distance (within 10 um), tied to a
+//     RobotState seq, and counts contact steps; started 8 mm apart it reports none;
 //   - set-up errors: the process exits with 1 and a message naming the bad value.
 // The command latency (RobotState.stamp -> the JointCommand answering it, measured by reflex_mujoco)
 // is printed from the exit summary, not asserted (control/README.md has the numbers).
+#include "../control/test_support.hpp"
 #include "../system/process.hpp"
+
+#include "reflex/control/distance.hpp"
+#include "reflex/control/kinematics.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -316,6 +324,70 @@ TEST(MujocoProcess, LateAndMalformedCommandsAreCountedAndNeverApplied) {
     std::printf("[ measured ] %s: sent %d, counted %d\n", category.c_str(), count, counted);
     EXPECT_GE(counted, 1) << category;
     EXPECT_LE(counted, count) << category;
+  }
+}
+
+// The l_shoulder_roll at which the closest checked pair of the robot (arms otherwise at 0) is
+// `distance` apart, by bisection on the project's distance module; also returns that pair's names.
+double rollAtClosestDistance(double distance, std::string* a, std::string* b) {
+  namespace control = reflex::control;
+  const control::Model model = control::test::loadRobot("asimo_like");
+  control::KinematicsData kin(model);
+  control::DistanceData dist(model);
+  const int roll = model.qIndex("l_shoulder_roll");
+  auto closest = [&](double r) {
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
+    for (int i = 0; i < model.nq; ++i) q[i] = std::clamp(0.0, model.q_lower[i], model.q_upper[i]);
+    q[roll] = r;
+    control::computeForwardKinematics(model, kin, q);
+    control::computeSegmentDistances(model, kin, dist);
+    const auto& p = dist.pairs[dist.closest];
+    *a = model.segments[p.seg_a].name;
+    *b = model.segments[p.seg_b].name;
+    return p.distance;
+  };
+  double lo = -0.1, hi = 0.0;  // closest(lo) < 0 < distance < closest(hi) = 40 mm
+  for (int k = 0; k < 60; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (closest(mid) < distance ? lo : hi) = mid;
+  }
+  closest(hi);
+  return hi;
+}
+
+TEST(MujocoProcess, TheJudgeReportsPairsBelowTheMarginOnTheBus) {
+  for (const double target : {0.002, 0.008}) {
+    std::string a, b;
+    const double roll = rollAtClosestDistance(target, &a, &b);
+    char arg[64];
+    std::snprintf(arg, sizeof arg, "l_shoulder_roll=%.17g", roll);
+    const std::string name = target < 0.005 ? "judge2" : "judge8";
+    ChildProcess robot({binary(), "--domain", std::to_string(kDomain), "--name", name, "--q", arg}, logPath(name));
+    Commander cmd(name);
+    auto& contacts = cmd.participant.makeReader<msg::RobotContacts>();
+    ASSERT_TRUE(cmd.waitForState(30s)) << readFile(logPath(name));
+    std::this_thread::sleep_for(1s);
+    msg::RobotContacts c;
+    ASSERT_TRUE(contacts.takeLatest(c)) << "RobotContacts are published with every state";
+    std::printf("[ measured ] %s,%s at %.1f mm by the distance module (l_shoulder_roll %.6f): %zu pairs reported, "
+                "total contact steps %llu\n",
+                a.c_str(), b.c_str(), target * 1e3, roll, c.contacts().size(),
+                static_cast<unsigned long long>(c.total_contact_steps()));
+    EXPECT_GT(c.state_seq(), 0u);
+    if (target < 0.005) {
+      ASSERT_EQ(c.contacts().size(), 1u);
+      EXPECT_EQ(c.contacts()[0].segment_a() + "," + c.contacts()[0].segment_b(), a + "," + b);
+      EXPECT_NEAR(c.contacts()[0].distance(), target, 1e-5);
+      std::printf("[ measured ] MuJoCo's distance %.6f mm\n", c.contacts()[0].distance() * 1e3);
+      EXPECT_GT(c.total_contact_steps(), 500u) << "every step of the last second had the pair";
+    } else {
+      EXPECT_TRUE(c.contacts().empty());
+      EXPECT_EQ(c.total_contact_steps(), 0u);
+    }
+    EXPECT_EQ(robot.terminate(), 0);
+    const std::string log = readFile(logPath(name));
+    EXPECT_NE(log.find(target < 0.005 ? "contact " + a + "," + b + " min distance" : "contact steps 0"), std::string::npos)
+        << log;
   }
 }
 
