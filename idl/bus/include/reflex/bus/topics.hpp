@@ -77,6 +77,7 @@ inline constexpr const char* kProfileHeartbeat = "reflex_heartbeat";         // 
 inline constexpr const char* kProfileRecord = "reflex_record";               // reader only: recorders
 inline constexpr const char* kProfileRecordReliable = "reflex_record_reliable";  // reader only: recorders, reliable topics
 inline constexpr const char* kProfileControllerInfo = "reflex_controller_info";  // controller protection
+inline constexpr const char* kProfileRobot = "reflex_robot";                 // robot state / joint command (1 kHz / 200 Hz)
 
 template <>
 struct TopicTraits<reflex::msg::ObjectTargets> {
@@ -113,6 +114,14 @@ struct TopicTraits<reflex::msg::WalkCommand> {
   static constexpr const char* kProfile = kProfileBehavior;
 };
 
+// reflex_mujoco's judge (robot.idl RobotContacts), published with each RobotState: same QoS.
+template <>
+struct TopicTraits<reflex::msg::RobotContacts> {
+  using PubSubType = SafePubSubType<reflex::msg::RobotContactsPubSubType>;
+  static constexpr const char* kTopicName = "reflex/robot_contacts";
+  static constexpr const char* kProfile = kProfileRobot;
+};
+
 template <>
 struct TopicTraits<reflex::msg::JointState> {
   using PubSubType = SafePubSubType<reflex::msg::JointStatePubSubType>;
@@ -141,27 +150,19 @@ struct TopicTraits<reflex::msg::ControllerProtection> {
   static constexpr const char* kProfile = kProfileControllerInfo;
 };
 
-// The robot boundary (robot.idl). reflex_state's QoS (best effort, keep last 1, 20 ms deadline):
-// only the newest measured state / command matters, and a robot or controller that stops is noticed.
+// The robot boundary (idl/robot.idl, issue 13): the robot's measured state and the controller's command.
 template <>
 struct TopicTraits<reflex::msg::RobotState> {
   using PubSubType = SafePubSubType<reflex::msg::RobotStatePubSubType>;
   static constexpr const char* kTopicName = "reflex/robot_state";
-  static constexpr const char* kProfile = kProfileState;
+  static constexpr const char* kProfile = kProfileRobot;
 };
 
 template <>
 struct TopicTraits<reflex::msg::JointCommand> {
   using PubSubType = SafePubSubType<reflex::msg::JointCommandPubSubType>;
   static constexpr const char* kTopicName = "reflex/joint_command";
-  static constexpr const char* kProfile = kProfileState;
-};
-
-template <>
-struct TopicTraits<reflex::msg::RobotContacts> {
-  using PubSubType = SafePubSubType<reflex::msg::RobotContactsPubSubType>;
-  static constexpr const char* kTopicName = "reflex/robot_contacts";
-  static constexpr const char* kProfile = kProfileState;
+  static constexpr const char* kProfile = kProfileRobot;
 };
 
 }  // namespace reflex::bus
