@@ -322,10 +322,23 @@ TEST(CommandGate, BadCommandsAreRejectedCountedAndChangeNothing) {
   const double v_max = model.v_max[qi];
   const double start = robot.reference()[qi];
   EXPECT_EQ(offer(names, {-2.0, -2.0}, zero, later), CommandVerdict::kAccepted);
-  robot.step(100, kNow);  // 50 ms
+  double max_speed = 0.0;
+  for (int k = 0; k < 100; ++k) {
+    robot.step(1, kNow);
+    max_speed = std::max(max_speed, std::abs(robot.measurement().qdot[qi]));
+  }
   EXPECT_NEAR(robot.reference()[qi], start - v_max * 100 * robot.timestep(), 1e-9);
   EXPECT_FALSE(robot.measurement().holding);
+  for (int k = 0; k < 900; ++k) {  // on to the target (-2 rad, 0.8 s at the limit) and settled
+    robot.step(1, kNow);
+    max_speed = std::max(max_speed, std::abs(robot.measurement().qdot[qi]));
+  }
+  std::printf("[ measured ] l_elbow to a target 2 rad away: largest speed %.4f rad/s (limit %.2f), at %.4f rad after 1 s\n",
+              max_speed, v_max, robot.measurement().q[qi]);
+  EXPECT_LT(max_speed, 1.02 * v_max) << "the joint follows the rate-limited reference";
+  EXPECT_NEAR(robot.measurement().q[qi], -2.0, 1e-3);
   // Its deadline passes: the robot holds where it is measured.
+  ASSERT_FALSE(robot.measurement().holding);
   robot.step(1, later + 1);
   EXPECT_TRUE(robot.measurement().holding);
   EXPECT_EQ(robot.counters().holds, 1u);
