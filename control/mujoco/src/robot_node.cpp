@@ -16,6 +16,7 @@ namespace {
 constexpr std::size_t kMaxLatencySamples = 1000000;
 
 constexpr std::int64_t kMaxCatchUp = 20;  // periods run at once after a late wake-up
+constexpr std::int64_t kHeartbeatPeriodNs = 500'000'000;  // as bus::HeartbeatPublisher's default
 
 std::int64_t monotonicNs() {
   timespec ts{};
@@ -96,6 +97,7 @@ RobotNode::RobotNode(const NodeConfig& config) : config_(config) {
   state_writer_ = &bus_->makeWriter<msg::RobotState>();
   contacts_writer_ = &bus_->makeWriter<msg::RobotContacts>();
   command_reader_ = &bus_->makeReader<msg::JointCommand>();
+  heartbeat_ = std::make_unique<bus::HeartbeatPublisher>(*bus_);
   stats_.command_latency_us.reserve(4096);
 }
 
@@ -137,6 +139,9 @@ void RobotNode::run() {
   std::int64_t next = t_start;          // start of the next period [ns, CLOCK_MONOTONIC]
   std::int64_t simulated_periods = 0;   // periods of physics run since t_start
   const double t_end = config_.duration > 0.0 ? monotonicSeconds() + config_.duration : 0.0;
+  // The heartbeat (reflex/heartbeat) from this loop: setState publishes at once; every 500 ms.
+  heartbeat_->setState(msg::STATE_RUNNING);
+  std::int64_t next_heartbeat = t_start + kHeartbeatPeriodNs;
   while (!bus_->stopRequested() && (t_end == 0.0 || monotonicSeconds() < t_end)) {
     // Sleep to the start of this period. Simulated time follows wall time: a late period runs the
     // periods it missed (an overrun), up to kMaxCatchUp; time beyond that is lost (counted).
@@ -205,7 +210,12 @@ void RobotNode::run() {
     if (!meas.contacts.empty()) ++stats_.contact_periods;
     contacts.total_contact_steps(meas.contact_steps);
     contacts_writer_->publish(contacts);
+    if (now_mono >= next_heartbeat) {
+      heartbeat_->setState(msg::STATE_RUNNING);
+      next_heartbeat = now_mono + kHeartbeatPeriodNs;
+    }
   }
+  heartbeat_->setState(msg::STATE_STOPPING);
 }
 
 std::string RobotNode::exitSummary() const {

@@ -3,7 +3,8 @@
 //   take every JointCommand that arrived (reflex/joint_command) and offer it to the robot (each is
 //   accepted or rejected and counted; see MujocoRobot::offerCommand), advance the physics by
 //   period / timestep steps, publish RobotState (reflex/robot_state) and RobotContacts
-//   (reflex/robot_contacts) of the same instant.
+//   (reflex/robot_contacts) of the same instant. A heartbeat (reflex/heartbeat, module name
+//   --name) every 500 ms, STATE_STOPPING at the end.
 // Simulated time follows wall time: a wake-up that is late by whole periods (an overrun, counted)
 // runs the missed periods' physics at once, up to 20 periods; beyond that the time is lost (counted
 // as lost periods) and simulated time falls behind. States are published once per wake-up.
@@ -68,6 +69,7 @@ class RobotNode {
   bus::Writer<msg::RobotState>* state_writer_ = nullptr;
   bus::Writer<msg::RobotContacts>* contacts_writer_ = nullptr;
   bus::Reader<msg::JointCommand>* command_reader_ = nullptr;
+  std::unique_ptr<bus::HeartbeatPublisher> heartbeat_;
   int substeps_ = 1;
   NodeStats stats_;
 };
