@@ -109,27 +109,21 @@ TEST_P(ModelFidelity, MassIsTheCollisionVolumeAtTheStatedDensity) {
   const MjcfOptions options;
   MujocoRobot robot(model, options);
   const mjModel& m = robot.mjModelRef();
+  // Capsule volume pi r^2 L + 4/3 pi r^3 (a sphere: L = 0). The root link's geoms belong to the
+  // world (static), not to a body's mass.
+  auto volume = [](const control::Primitive& p) {
+    return M_PI * p.radius * p.radius * (p.b_L - p.a_L).norm() + 4.0 / 3.0 * M_PI * std::pow(p.radius, 3);
+  };
   double expected = 0.0;
   std::vector<bool> has_segment(model.links.size(), false);
   for (int s = 0; s < model.num_robot_segments; ++s) {
     has_segment[model.segments[s].link] = true;
-    for (int k = 0; k < model.segments[s].num_primitives; ++k) {
-      const auto& p = model.primitives[model.segments[s].first_primitive + k];
-      const double length = (p.b_L - p.a_L).norm();
-      expected += options.density * (M_PI * p.radius * p.radius * length + 4.0 / 3.0 * M_PI * std::pow(p.radius, 3));
-    }
+    if (model.segments[s].link == 0) continue;
+    for (int k = 0; k < model.segments[s].num_primitives; ++k)
+      expected += options.density * volume(model.primitives[model.segments[s].first_primitive + k]);
   }
   for (std::size_t l = 1; l < model.links.size(); ++l)
     if (!has_segment[l]) expected += options.min_mass;
-  if (has_segment[0]) {  // the root link's geoms are part of the world (static), not of a body's mass
-    for (int s = 0; s < model.num_robot_segments; ++s)
-      if (model.segments[s].link == 0)
-        for (int k = 0; k < model.segments[s].num_primitives; ++k) {
-          const auto& p = model.primitives[model.segments[s].first_primitive + k];
-          expected -= options.density * (M_PI * p.radius * p.radius * (p.b_L - p.a_L).norm() +
-                                         4.0 / 3.0 * M_PI * std::pow(p.radius, 3));
-        }
-  }
   double mass = 0.0;
   for (int b = 1; b < m.nbody; ++b) mass += m.body_mass[b];
   std::printf("[ measured ] %s: mass %.3f kg (expected %.3f kg)\n", GetParam(), mass, expected);
