@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 namespace reflex::mujoco {
@@ -16,9 +17,15 @@ struct VfsGuard {
   ~VfsGuard() { mj_deleteVFS(vfs); }
 };
 
+// MuJoCo's run-time warnings (an unstable simulation, a full contact list) go to stderr, counted by the
+// caller from mjData.warning; without a handler MuJoCo also appends them to MUJOCO_LOG.TXT in the
+// working directory.
+extern "C" void warnToStderr(const char* message) { std::fprintf(stderr, "MuJoCo warning: %s\n", message); }
+
 }  // namespace
 
 MjModelPtr compileMjcf(const std::string& mjcf) {
+  mju_user_warning = warnToStderr;
   // mjVFS holds 2000 file names of 1000 bytes: on the heap, not the stack.
   auto vfs = std::make_unique<mjVFS>();
   mj_defaultVFS(vfs.get());
