@@ -317,6 +317,16 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
         model.q_link.push_back(static_cast<int>(model.links.size()));
       }
     }
+    if (ulink->inertial) {
+      const auto& in = *ulink->inertial;
+      const Eigen::Isometry3d X_L_I = toIsometry(in.origin);
+      Eigen::Matrix3d I_I;
+      I_I << in.ixx, in.ixy, in.ixz, in.ixy, in.iyy, in.iyz, in.ixz, in.iyz, in.izz;
+      link.has_inertial = true;
+      link.mass = in.mass;
+      link.com_L = X_L_I.translation();
+      link.inertia_L = X_L_I.linear() * I_I * X_L_I.linear().transpose();
+    }
     index_of[link.name] = static_cast<int>(model.links.size());
     model.links.push_back(link);
   }

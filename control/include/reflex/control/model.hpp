@@ -27,6 +27,13 @@ struct Link {
   Eigen::Vector3d axis_J = Eigen::Vector3d::UnitZ();      ///< unit joint axis in the joint frame
   int q_index = -1;                                       ///< index into q, -1 if fixed
   std::string joint_name;                                 ///< empty for the root
+  /// The URDF <inertial>, if the link has one (the controller does not use it; the physics robot
+  /// reflex_mujoco does): mass [kg], centre of mass in L [m], inertia about the centre of mass in
+  /// L's axes [kg m^2] (the URDF's inertial-frame tensor rotated into L).
+  bool has_inertial = false;
+  double mass = 0.0;
+  Eigen::Vector3d com_L = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d inertia_L = Eigen::Matrix3d::Zero();
 };
 
 /// A sphere-swept line (capsule) in a link frame; a sphere when a_L == b_L (`sphere` is then true).

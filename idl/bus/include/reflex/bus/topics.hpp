@@ -114,6 +114,14 @@ struct TopicTraits<reflex::msg::WalkCommand> {
   static constexpr const char* kProfile = kProfileBehavior;
 };
 
+// reflex_mujoco's judge (robot.idl RobotContacts), published with each RobotState: same QoS.
+template <>
+struct TopicTraits<reflex::msg::RobotContacts> {
+  using PubSubType = SafePubSubType<reflex::msg::RobotContactsPubSubType>;
+  static constexpr const char* kTopicName = "reflex/robot_contacts";
+  static constexpr const char* kProfile = kProfileRobot;
+};
+
 template <>
 struct TopicTraits<reflex::msg::JointState> {
   using PubSubType = SafePubSubType<reflex::msg::JointStatePubSubType>;

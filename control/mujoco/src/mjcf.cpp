@@ -1,0 +1,252 @@
+// MJCF generation from the project's Model (see mjcf.hpp for what it contains and why).
+#include "reflex/mujoco/mjcf.hpp"
+
+#include "reflex/mujoco/mujoco_robot.hpp"
+
+#include <mujoco/mujoco.h>
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+#include <stdexcept>
+
+namespace reflex::mujoco {
+namespace {
+
+using control::JointType;
+using control::Model;
+
+constexpr double kTwoPi = 6.283185307179586;
+
+// Shortest round-trip text of a double.
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+std::string vec(const Eigen::Vector3d& v) { return num(v.x()) + " " + num(v.y()) + " " + num(v.z()); }
+
+// XML attribute text: the five characters XML reserves, escaped.
+std::string esc(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      case '\'': out += "&apos;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+void requirePositive(double v, const char* name) {
+  if (!(v > 0.0) || !std::isfinite(v))
+    throw std::invalid_argument(std::string("MJCF option ") + name + " = " + num(v) +
+                                " must be finite and positive");
+}
+
+void checkOptions(const MjcfOptions& o) {
+  requirePositive(o.timestep, "timestep");
+  requirePositive(o.margin, "margin");
+  requirePositive(o.density, "density");
+  requirePositive(o.min_mass, "min_mass");
+  requirePositive(o.min_inertia, "min_inertia");
+  requirePositive(o.limb_bandwidth_hz, "limb_bandwidth_hz");
+  requirePositive(o.base_bandwidth_hz, "base_bandwidth_hz");
+  requirePositive(o.limb_effort, "limb_effort");
+  requirePositive(o.base_effort, "base_effort");
+  if (!(o.limb_armature >= 0.0) || !std::isfinite(o.limb_armature))
+    throw std::invalid_argument("MJCF option limb_armature = " + num(o.limb_armature) + " must be >= 0");
+  if (!(o.limb_damping >= 0.0) || !std::isfinite(o.limb_damping))
+    throw std::invalid_argument("MJCF option limb_damping = " + num(o.limb_damping) + " must be >= 0");
+  if (!(o.gravity >= 0.0) || !std::isfinite(o.gravity))
+    throw std::invalid_argument("MJCF option gravity = " + num(o.gravity) + " must be >= 0");
+}
+
+// The children of every link, in Model order (topological: a parent before its children).
+std::vector<std::vector<int>> childrenOf(const Model& model) {
+  std::vector<std::vector<int>> children(model.links.size());
+  for (std::size_t i = 1; i < model.links.size(); ++i) children[model.links[i].parent].push_back(static_cast<int>(i));
+  return children;
+}
+
+class MjcfWriter {
+ public:
+  MjcfWriter(const Model& model, const MjcfOptions& options, const std::vector<ServoGains>& gains)
+      : model_(model), options_(options), gains_(gains), children_(childrenOf(model)),
+        segment_of_link_(model.links.size(), -1) {
+    for (int s = 0; s < model.num_robot_segments; ++s) segment_of_link_[model.segments[s].link] = s;
+  }
+
+  std::string write() {
+    int primitive_pairs = 0;
+    for (const auto& pair : model_.pairs)
+      if (pair.b < model_.num_robot_segments)
+        primitive_pairs += model_.segments[pair.a].num_primitives * model_.segments[pair.b].num_primitives;
+    out_ << "<mujoco model=\"" << esc(model_.name) << "\">\n"
+         << "  <compiler angle=\"radian\" inertiafromgeom=\"auto\" boundmass=\"0\" boundinertia=\"0\"/>\n"
+         << "  <option timestep=\"" << num(options_.timestep) << "\" gravity=\"0 0 " << num(-options_.gravity)
+         << "\" integrator=\"Euler\"/>\n"
+         // Up to 2 contacts per primitive pair (parallel capsules), constraint rows for contacts
+         // (pyramidal, condim 3: 4 rows) and joint limits.
+         << "  <size nconmax=\"" << 2 * primitive_pairs + 16 << "\" njmax=\"" << 8 * primitive_pairs + 2 * model_.nq + 64
+         << "\"/>\n"
+         << "  <default><geom contype=\"0\" conaffinity=\"0\" density=\"" << num(options_.density)
+         << "\"/></default>\n"
+         << "  <worldbody>\n";
+    writeGeoms(0, "    ");
+    for (int child : children_[0]) writeBody(child, "    ");
+    out_ << "  </worldbody>\n";
+    writeContactPairs();
+    writeActuators();
+    out_ << "</mujoco>\n";
+    return out_.str();
+  }
+
+ private:
+  void writeBody(int l, const std::string& in) {
+    const auto& link = model_.links[l];
+    const Eigen::Quaterniond quat(link.X_P_J.linear());
+    out_ << in << "<body name=\"" << esc(link.name) << "\" pos=\"" << vec(link.X_P_J.translation())
+         << "\" quat=\"" << num(quat.w()) << " " << num(quat.x()) << " " << num(quat.y()) << " " << num(quat.z())
+         << "\">\n";
+    const std::string in2 = in + "  ";
+    if (link.has_inertial) {
+      const Eigen::Matrix3d& I = link.inertia_L;
+      out_ << in2 << "<inertial pos=\"" << vec(link.com_L) << "\" mass=\"" << num(link.mass) << "\" fullinertia=\""
+           << num(I(0, 0)) << " " << num(I(1, 1)) << " " << num(I(2, 2)) << " " << num(I(0, 1)) << " "
+           << num(I(0, 2)) << " " << num(I(1, 2)) << "\"/>\n";
+    } else if (segment_of_link_[l] < 0) {
+      const std::string i = num(options_.min_inertia);
+      out_ << in2 << "<inertial pos=\"0 0 0\" mass=\"" << num(options_.min_mass) << "\" diaginertia=\"" << i << " " << i
+           << " " << i << "\"/>\n";
+    }
+    if (link.type != JointType::kFixed) writeJoint(link, in2);
+    writeGeoms(l, in2);
+    for (int child : children_[l]) writeBody(child, in2);
+    out_ << in << "</body>\n";
+  }
+
+  void writeJoint(const control::Link& link, const std::string& indent) {
+    const int qi = link.q_index;
+    const double lo = model_.q_lower[qi], hi = model_.q_upper[qi];
+    const bool limited = std::isfinite(lo) && std::isfinite(hi);
+    const ServoGains g = gains_.empty() ? ServoGains{} : gains_[qi];
+    out_ << indent << "<joint name=\"" << esc(link.joint_name) << "\" type=\""
+         << (link.type == JointType::kRevolute ? "hinge" : "slide") << "\" pos=\"0 0 0\" axis=\"" << vec(link.axis_J)
+         << "\" limited=\"" << (limited ? "true" : "false") << "\"";
+    if (limited) out_ << " range=\"" << num(lo) << " " << num(hi) << "\"";
+    // The servo's velocity gain is joint damping: MuJoCo's Euler integrator treats it implicitly, which
+    // keeps the stiff chain of parallel virtual joints (heel_x and body_x both along x, joined by
+    // nearly massless links) stable at the 0.5 ms step; the servo's kd * qdot_ref is in ctrl.
+    out_ << " armature=\"" << num(g.armature) << "\" damping=\"" << num(g.damping + g.kd) << "\"/>\n";
+  }
+
+  void writeGeoms(int l, const std::string& in) {
+    const int s = segment_of_link_[l];
+    if (s < 0) return;
+    const auto& seg = model_.segments[s];
+    for (int k = 0; k < seg.num_primitives; ++k) {
+      const auto& p = model_.primitives[seg.first_primitive + k];
+      out_ << in << "<geom name=\"" << esc(geomName(model_, s, k)) << "\" ";
+      if (p.sphere)
+        out_ << "type=\"sphere\" pos=\"" << vec(p.a_L) << "\" size=\"" << num(p.radius) << "\"/>\n";
+      else
+        out_ << "type=\"capsule\" fromto=\"" << vec(p.a_L) << " " << vec(p.b_L) << "\" size=\"" << num(p.radius)
+             << "\"/>\n";
+    }
+  }
+
+  void writeContactPairs() {
+    out_ << "  <contact>\n";
+    const std::string margin = num(options_.margin);
+    for (const auto& pair : model_.pairs) {
+      if (pair.b >= model_.num_robot_segments) continue;  // body-schema slots: not part of this robot
+      const auto& a = model_.segments[pair.a];
+      const auto& b = model_.segments[pair.b];
+      for (int i = 0; i < a.num_primitives; ++i)
+        for (int j = 0; j < b.num_primitives; ++j)
+          out_ << "    <pair geom1=\"" << esc(geomName(model_, pair.a, i)) << "\" geom2=\""
+               << esc(geomName(model_, pair.b, j)) << "\" condim=\"3\" margin=\"" << margin << "\" gap=\"" << margin
+               << "\"/>\n";
+    }
+    out_ << "  </contact>\n";
+  }
+
+  void writeActuators() {
+    out_ << "  <actuator>\n";
+    for (int qi = 0; qi < model_.nq; ++qi) {
+      const ServoGains g = gains_.empty() ? ServoGains{} : gains_[qi];
+      const double effort = gains_.empty() ? 1.0 : g.effort;
+      out_ << "    <general name=\"" << esc(model_.q_names[qi]) << "\" joint=\"" << esc(model_.q_names[qi])
+           << "\" gaintype=\"fixed\" gainprm=\"1\" biastype=\"affine\" biasprm=\"0 " << num(-g.kp)
+           << " 0\" ctrllimited=\"false\" forcelimited=\"true\" forcerange=\"" << num(-effort) << " "
+           << num(effort) << "\"/>\n";
+    }
+    out_ << "  </actuator>\n";
+  }
+
+  const Model& model_;
+  const MjcfOptions& options_;
+  const std::vector<ServoGains>& gains_;
+  std::vector<std::vector<int>> children_;
+  std::vector<int> segment_of_link_;
+  std::ostringstream out_;
+};
+
+}  // namespace
+
+std::string geomName(const control::Model& model, int segment, int k) {
+  return model.segments[segment].name + "/" + std::to_string(k);
+}
+
+std::vector<JointClass> classifyJoints(const control::Model& model) {
+  // below_segment[l]: l or an ancestor of l carries a collision segment. The base chain: the movable
+  // joints down to (and including) the one that moves the first segment-carrying link of each path.
+  std::vector<bool> below_segment(model.links.size(), false);
+  for (int s = 0; s < model.num_robot_segments; ++s) below_segment[model.segments[s].link] = true;
+  for (std::size_t l = 1; l < model.links.size(); ++l)
+    if (below_segment[model.links[l].parent]) below_segment[l] = true;
+  std::vector<JointClass> classes(model.nq, JointClass::kLimb);
+  for (int qi = 0; qi < model.nq; ++qi)  // the joint moves q_link: base if no ancestor carries a segment
+    if (!below_segment[model.links[model.q_link[qi]].parent]) classes[qi] = JointClass::kBase;
+  return classes;
+}
+
+std::string makeMjcf(const control::Model& model, const MjcfOptions& options, const std::vector<ServoGains>& gains) {
+  checkOptions(options);
+  if (!gains.empty() && static_cast<int>(gains.size()) != model.nq)
+    throw std::invalid_argument("makeMjcf: " + std::to_string(gains.size()) + " servo gains for " +
+                                std::to_string(model.nq) + " joints");
+  return MjcfWriter(model, options, gains).write();
+}
+
+std::vector<ServoGains> servoGains(const control::Model& model, const MjcfOptions& options) {
+  checkOptions(options);
+  const std::vector<JointClass> classes = classifyJoints(model);
+  // Armature and damping first (they change the inertia the gains are designed for).
+  std::vector<ServoGains> gains(model.nq);
+  for (int qi = 0; qi < model.nq; ++qi) {
+    gains[qi].joint_class = classes[qi];
+    const bool limb = classes[qi] == JointClass::kLimb;
+    gains[qi].armature = limb && model.links[model.q_link[qi]].type == JointType::kRevolute ? options.limb_armature : 0.0;
+    gains[qi].damping = limb ? options.limb_damping : 0.0;
+    gains[qi].effort = limb ? options.limb_effort : options.base_effort;
+  }
+  const MjModelPtr m = compileMjcf(makeMjcf(model, options, gains));
+  for (int qi = 0; qi < model.nq; ++qi) {
+    const int joint = mj_name2id(m.get(), mjOBJ_JOINT, model.q_names[qi].c_str());
+    const double inertia = m->dof_M0[m->jnt_dofadr[joint]];
+    const double w = kTwoPi * (gains[qi].joint_class == JointClass::kLimb ? options.limb_bandwidth_hz
+                                                                           : options.base_bandwidth_hz);
+    gains[qi].kp = inertia * w * w;
+    gains[qi].kd = 2.0 * inertia * w;
+  }
+  return gains;
+}
+
+}  // namespace reflex::mujoco
