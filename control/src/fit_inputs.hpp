@@ -29,7 +29,8 @@ std::vector<FitElement> fitElementsOf(const urdf::Link& link);
 
 /// FNV-1a 64-bit hash (16 hex digits) of every element's kind, filename, scale, size, origin, and
 /// mesh file bytes. Meshes that cannot be resolved or read are appended to `problems` (one line each,
-/// naming the link, the filename and why); `resolved` gets each mesh's path ("" if unresolved).
+/// naming the link, the filename and why); `resolved` gets each mesh's path ("" if unresolved or
+/// unreadable: already reported).
 std::string fitInputsHash(const std::string& link, const std::vector<FitElement>& elements,
                           const std::string& urdf_dir, const PackagePaths& paths,
                           std::vector<std::string>* problems, std::vector<std::string>* resolved);

@@ -13,7 +13,7 @@
 // is shorter than a tenth of the link's extent, so each piece stays inside the triangle it came from)
 // are split into clusters greedily: the cluster and cut (by triangle centroid along each principal
 // axis of the cluster and each frame axis, at the 10, 20, ... 90 % quantiles) that reduce the summed
-// volume most, improved by moving triangles to the primitive they fit best (refineSplit); repeated
+// volume most (ranked with a quick fit: principal axis only, coarse steps; the chosen one refitted), improved by moving triangles to the primitive they fit best (refineSplit); repeated
 // while the summed volume / the link's hull volume is above split_ratio and a cut gains at least
 // min_split_gain of the summed volume. Greedy, so not optimal: a T-shaped torso with a backpack box
 // stays at 2 primitives (README, "Meshes", gives the numbers).
@@ -213,7 +213,7 @@ Hull convexHull(const std::vector<Eigen::Vector3d>& pts) {
 }
 
 /// The smallest-volume single primitive enclosing pts (see the opening block).
-Primitive fitOne(const std::vector<Eigen::Vector3d>& all) {
+Primitive fitOne(const std::vector<Eigen::Vector3d>& all, bool quick = false) {
   const Hull hull = convexHull(all);
   std::vector<Eigen::Vector3d> pts;
   pts.reserve(hull.vertices.size());
@@ -224,11 +224,12 @@ Primitive fitOne(const std::vector<Eigen::Vector3d>& all) {
   const Eigen::Matrix3d axes = principalAxes(pts);
   std::vector<Eigen::Vector3d> starts{axes.col(2), axes.col(1), axes.col(0), Eigen::Vector3d::UnitX(),
                                       Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
+  if (quick) starts.resize(1);  // the principal axis only, coarse steps: to rank candidate cuts
   for (const Eigen::Vector3d& start : starts) {
     Eigen::Vector3d u = start;
     Primitive cur = capsuleAlong(pts, u);
     double cur_volume = primitiveVolume(cur);
-    for (double step = 0.2; step > 0.003; step *= 0.5) {
+    for (double step = 0.2; step > (quick ? 0.04 : 0.003); step *= 0.5) {
       bool improved = true;
       for (int iter = 0; improved && iter < 20; ++iter) {
         improved = false;
@@ -270,10 +271,10 @@ std::vector<Eigen::Vector3d> clusterPoints(const TriangleMesh& mesh, const std::
   return pts;
 }
 
-Cluster makeCluster(const TriangleMesh& mesh, std::vector<int> tris) {
+Cluster makeCluster(const TriangleMesh& mesh, std::vector<int> tris, bool quick = false) {
   Cluster c;
   c.triangles = std::move(tris);
-  c.prim = fitOne(clusterPoints(mesh, c.triangles));
+  c.prim = fitOne(clusterPoints(mesh, c.triangles), quick);
   c.volume = primitiveVolume(c.prim);
   return c;
 }
@@ -436,13 +437,15 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
           for (std::size_t i = 0; i < order.size(); ++i) (i < cut ? ta : tb).push_back(order[i].second);
           std::sort(ta.begin(), ta.end());
           std::sort(tb.begin(), tb.end());
-          Cluster a = makeCluster(work, std::move(ta)), b = makeCluster(work, std::move(tb));
+          Cluster a = makeCluster(work, std::move(ta), true), b = makeCluster(work, std::move(tb), true);
           const double gain = c.volume - a.volume - b.volume;
           if (gain > best_gain) best_gain = gain, best_cluster = ci, best_a = std::move(a), best_b = std::move(b);
         }
       }
     }
     if (!(best_gain > 0.0)) break;  // no cut helps (best_a, best_b are empty)
+    best_a = makeCluster(work, std::move(best_a.triangles));  // the full fit of the chosen cut
+    best_b = makeCluster(work, std::move(best_b.triangles));
     refineSplit(work, best_a, best_b);
     best_gain = clusters[best_cluster].volume - best_a.volume - best_b.volume;
     if (!(best_gain >= options.min_split_gain * total())) break;

@@ -219,20 +219,23 @@ std::string detail::fitInputsHash(const std::string& link, const std::vector<Fit
     if (e.box) continue;
     std::string why;
     const std::string path = resolveMeshFilename(e.filename, urdf_dir, paths, &why);
-    if (resolved) resolved->push_back(path);
     if (path.empty()) {
+      if (resolved) resolved->push_back("");
       if (problems) problems->push_back("link '" + link + "': mesh '" + e.filename + "': " + why);
       continue;
     }
     struct stat st {};
+    const bool exists = ::stat(path.c_str(), &st) == 0;
     std::ifstream in;
-    if (::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode)) in.open(path, std::ios::binary);
-    if (!in) {
+    if (exists && S_ISREG(st.st_mode)) in.open(path, std::ios::binary);
+    if (!in.is_open()) {  // reported once here; "" tells the caller not to read it again
+      if (resolved) resolved->push_back("");
       if (problems)
         problems->push_back("link '" + link + "': mesh '" + e.filename + "': cannot read '" + path + "'" +
-                            (::stat(path.c_str(), &st) != 0 ? " (no such file)" : ""));
+                            (!exists ? " (no such file)" : !S_ISREG(st.st_mode) ? " (not a regular file)" : ""));
       continue;
     }
+    if (resolved) resolved->push_back(path);
     std::stringstream bytes;
     bytes << in.rdbuf();
     const std::string b = bytes.str();
