@@ -13,10 +13,10 @@
 // is shorter than a tenth of the link's extent, so each piece stays inside the triangle it came from)
 // are split into clusters greedily: the cluster and cut (by triangle centroid along each principal
 // axis of the cluster and each frame axis, at the 10, 20, ... 90 % quantiles) that reduce the summed
-// volume most (ranked with a quick fit: principal axis only, coarse steps; the chosen one refitted), improved by moving triangles to the primitive they fit best (refineSplit); repeated
+// volume most, or a connected piece of the cluster (>= 5 % of its triangles) against the rest
+// (ranked with a quick fit: principal axis only, coarse steps; the chosen one refitted), improved by moving triangles to the primitive they fit best (refineSplit); repeated
 // while the summed volume / the link's hull volume is above split_ratio and a cut gains at least
-// min_split_gain of the summed volume. Greedy, so not optimal: a T-shaped torso with a backpack box
-// stays at 2 primitives (README, "Meshes", gives the numbers).
+// min_split_gain of the summed volume. Greedy, so not optimal (README, "Meshes", gives the numbers).
 // Each cluster's primitive encloses every vertex of its triangles, so every triangle is inside one
 // primitive. Finally end points are rounded to FitOptions::quantum and radii recomputed from the
 // points and rounded UP, so the written numbers keep the guarantee.
@@ -30,6 +30,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <random>
 
@@ -403,6 +404,18 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
   const double extent = (hi - lo).norm();
   if (options.max_primitives > 1) work = subdivide(work, 0.1 * extent);
 
+  // Connected pieces (shared vertices) of the triangles: a piece against the rest of its cluster is a
+  // candidate cut too (a T-shaped torso of two shells, a box element beside a mesh, fingers).
+  std::vector<int> parent(work.vertices.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](int v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& t : work.triangles) parent[root(t[1])] = root(t[0]), parent[root(t[2])] = root(t[0]);
+  std::vector<int> piece(work.triangles.size());
+  for (std::size_t t = 0; t < work.triangles.size(); ++t) piece[t] = root(work.triangles[t][0]);
+
   std::vector<int> all(work.triangles.size());
   std::iota(all.begin(), all.end(), 0);
   std::vector<Cluster> clusters{makeCluster(work, all)};
@@ -423,6 +436,25 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
       for (int t : c.triangles)
         centroids.push_back((work.vertices[work.triangles[t][0]] + work.vertices[work.triangles[t][1]] +
                              work.vertices[work.triangles[t][2]]) / 3.0);
+      auto consider = [&](std::vector<int> ta, std::vector<int> tb) {
+        Cluster a = makeCluster(work, std::move(ta), true), b = makeCluster(work, std::move(tb), true);
+        const double gain = c.volume - a.volume - b.volume;
+        if (gain > best_gain) best_gain = gain, best_cluster = ci, best_a = std::move(a), best_b = std::move(b);
+      };
+      std::map<int, int> piece_size;
+      for (int t : c.triangles) ++piece_size[piece[t]];
+      if (piece_size.size() > 1) {
+        std::vector<std::pair<int, int>> pieces;  // (-size, piece): the largest first, ties by id
+        for (const auto& [id, n] : piece_size)
+          if (20 * n >= static_cast<int>(c.triangles.size())) pieces.push_back({-n, id});
+        std::sort(pieces.begin(), pieces.end());
+        if (pieces.size() > 8) pieces.resize(8);
+        for (const auto& pc : pieces) {
+          std::vector<int> ta, tb;
+          for (int t : c.triangles) (piece[t] == pc.second ? ta : tb).push_back(t);
+          consider(std::move(ta), std::move(tb));
+        }
+      }
       const Eigen::Matrix3d pca = principalAxes(centroids);
       const std::array<Eigen::Vector3d, 6> axes{pca.col(2), pca.col(1), pca.col(0), Eigen::Vector3d::UnitX(),
                                                 Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
@@ -437,9 +469,7 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
           for (std::size_t i = 0; i < order.size(); ++i) (i < cut ? ta : tb).push_back(order[i].second);
           std::sort(ta.begin(), ta.end());
           std::sort(tb.begin(), tb.end());
-          Cluster a = makeCluster(work, std::move(ta), true), b = makeCluster(work, std::move(tb), true);
-          const double gain = c.volume - a.volume - b.volume;
-          if (gain > best_gain) best_gain = gain, best_cluster = ci, best_a = std::move(a), best_b = std::move(b);
+          consider(std::move(ta), std::move(tb));
         }
       }
     }
