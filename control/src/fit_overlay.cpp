@@ -27,6 +27,22 @@ std::string num(double v, const char* format = "%.10g") {
   return buf;
 }
 
+/// A YAML double-quoted scalar (names and paths may hold ':', '#', spaces).
+std::string quoted(const std::string& text) {
+  std::string out = "\"";
+  for (const char ch : text) {
+    if (static_cast<unsigned char>(ch) < 0x20) {  // control characters as \xHH
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", static_cast<unsigned>(static_cast<unsigned char>(ch)));
+      out += buf;
+      continue;
+    }
+    if (ch == '"' || ch == '\\') out += '\\';
+    out += ch;
+  }
+  return out + "\"";
+}
+
 std::string vec(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
 
 /// `path` relative to `dir` (both made absolute first), for paths written into the overlay.
@@ -180,10 +196,10 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
      << "# fitted_volume: sum of the primitives' volumes; volume_ratio: that / convex-hull volume;\n"
      << "# worst_gap: largest distance from the primitives' outer surface (sampled) to the mesh.\n"
      << "format: 1\n"
-     << "urdf: " << relativeTo(overlay.urdf, dir) << "\n";
+     << "urdf: " << quoted(relativeTo(overlay.urdf, dir)) << "\n";
   if (!overlay.packages.empty()) {
     os << "packages:\n";
-    for (const auto& [name, path] : overlay.packages) os << "  " << name << ": " << relativeTo(path, dir) << "\n";
+    for (const auto& [name, path] : overlay.packages) os << "  " << quoted(name) << ": " << quoted(relativeTo(path, dir)) << "\n";
   }
   const FitOptions& o = overlay.options;
   os << "options: {max_primitives: " << o.max_primitives << ", split_ratio: " << num(o.split_ratio)
@@ -191,7 +207,7 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
      << "links:\n";
   for (const auto& l : overlay.links) {
     const FitStats& s = l.stats;
-    os << "  " << l.link << ":\n"
+    os << "  " << quoted(l.link) << ":\n"
        << "    inputs: \"" << l.inputs << "\"\n"
        << "    elements: " << l.elements << "\n"
        << "    vertices: " << s.vertices << "\n"

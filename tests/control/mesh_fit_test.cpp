@@ -416,6 +416,41 @@ TEST(MeshFitErrors, StaleOverlayNamesTheLink) {
   EXPECT_TRUE(std::regex_match(msg, expected)) << msg;
 }
 
+TEST(MeshFit, OverlayTextRoundTripsNamesAndNumbers) {
+  TempDir dir;
+  FitOverlay o;
+  o.urdf = dir / "odd: #robot.urdf";
+  o.packages["pkg"] = dir / "pkg dir";
+  LinkFit l;
+  l.link = "arm: #1 \"left\"\\x";
+  l.inputs = "0123456789abcdef";
+  Primitive cap;
+  cap.a_L = Vector3d(0.123456, -0.5, 1e-6);
+  cap.b_L = Vector3d(0.2, 0.3, -0.000001);
+  cap.radius = 0.050001;
+  cap.sphere = false;
+  Primitive ball;
+  ball.a_L = ball.b_L = Vector3d(-0.25, 0, 0.75);
+  ball.radius = 0.1;
+  l.primitives = {cap, ball};
+  o.links.push_back(l);
+  const std::string path = dir / "o.fit.yaml";
+  std::ofstream(path) << fitOverlayText(o, path);
+  const FitOverlay back = loadFitOverlay(path);
+  ASSERT_EQ(back.links.size(), 1u);
+  EXPECT_EQ(back.links[0].link, l.link);
+  EXPECT_EQ(back.links[0].inputs, l.inputs);
+  EXPECT_EQ(back.urdf, o.urdf);
+  EXPECT_EQ(back.packages.at("pkg"), o.packages.at("pkg"));
+  ASSERT_EQ(back.links[0].primitives.size(), 2u);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_EQ(back.links[0].primitives[i].a_L, l.primitives[i].a_L);
+    EXPECT_EQ(back.links[0].primitives[i].b_L, l.primitives[i].b_L);
+    EXPECT_EQ(back.links[0].primitives[i].radius, l.primitives[i].radius);
+    EXPECT_EQ(back.links[0].primitives[i].sphere, l.primitives[i].sphere);
+  }
+}
+
 TEST(MeshFitResolve, PackageFileAndRelativePaths) {
   TempDir dir;
   fs::create_directories(dir.path / "src" / "folder_name");
