@@ -1,6 +1,8 @@
 #include "reflex/control/urdf_loader.hpp"
 
 #include "reflex/common/files.hpp"
+#include "fit_inputs.hpp"
+#include "reflex/control/mesh_fit.hpp"
 #include "urdf_audit.hpp"
 
 #include <urdf_model/model.h>
@@ -9,6 +11,7 @@
 
 #include <tinyxml2.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -103,10 +106,63 @@ void addCollision(const std::string& origin, const std::string& link_name,
     }
     case urdf::Geometry::MESH:
     default:
-      fail(origin, where + ": mesh collision geometry is not supported; replace it with spheres and "
-                           "cylinders (read as capsules) that enclose the mesh");
+      fail(origin, where + ": mesh collision geometry needs a fit; run: reflex_fit " + origin);
   }
   out.push_back(prim);
+}
+
+/// The overlay's fit for each link that has one, checked: every link with a mesh element has a fit,
+/// every fit's inputs hash matches the link's elements now, every fitted link exists and has mesh or
+/// box elements. Otherwise one ModelError names every such link and the command to run.
+std::map<std::string, const LinkFit*> fittedLinks(const std::string& origin,
+                                                  const std::vector<urdf::LinkConstSharedPtr>& links,
+                                                  const FitOverlay& overlay) {
+  std::map<std::string, const LinkFit*> by_name, out;
+  for (const auto& l : overlay.links) by_name[l.link] = &l;
+  std::vector<std::string> missing, stale;
+  std::set<std::string> seen;
+  PackagePaths paths;
+  paths.packages = overlay.packages;
+  for (const auto& ulink : links) {
+    const std::vector<detail::FitElement> elements = detail::fitElementsOf(*ulink);
+    const bool has_mesh = std::any_of(elements.begin(), elements.end(), [](const auto& e) { return !e.box; });
+    const auto it = by_name.find(ulink->name);
+    if (it == by_name.end()) {
+      if (has_mesh) missing.push_back("'" + ulink->name + "'");
+      continue;
+    }
+    seen.insert(ulink->name);
+    if (elements.empty()) {
+      stale.push_back("link '" + ulink->name + "' has no mesh or box collision elements now");
+      continue;
+    }
+    std::vector<std::string> unreadable;
+    const std::string inputs = detail::fitInputsHash(ulink->name, elements, overlay.urdf_dir, paths, &unreadable, nullptr);
+    if (!unreadable.empty()) stale.insert(stale.end(), unreadable.begin(), unreadable.end());
+    else if (inputs != it->second->inputs)
+      stale.push_back("link '" + ulink->name + "': its meshes, filenames, scales, origins or boxes changed since the fit (inputs " +
+                      inputs + ", fitted " + it->second->inputs + ")");
+    else
+      out[ulink->name] = it->second;
+  }
+  for (const auto& l : overlay.links)
+    if (!seen.count(l.link)) stale.push_back("link '" + l.link + "' is not a link of " + origin);
+  if (missing.empty() && stale.empty()) return out;
+  std::string msg;
+  if (!missing.empty()) {
+    msg = origin + ": " + std::to_string(missing.size()) + " link" + (missing.size() == 1 ? " has" : "s have") +
+          " mesh collision geometry and no fit:";
+    for (const auto& m : missing) msg += " " + m;
+    msg += "; run: reflex_fit " + origin + " (it writes " + defaultFitOverlayPath(origin) +
+           ", which the loader reads; or name an overlay with 'fit:' in the collision YAML)";
+  }
+  if (!stale.empty()) {
+    if (!msg.empty()) msg += "\n";
+    msg += overlay.source + ": the fit is stale or cannot be checked for " + std::to_string(stale.size()) + " link" +
+           (stale.size() == 1 ? "" : "s") + " (rerun: reflex_fit " + overlay.urdf + " -o " + overlay.source + "):";
+    for (const auto& l : stale) msg += "\n  " + l;
+  }
+  throw ModelError(msg);
 }
 
 }  // namespace
@@ -160,6 +216,16 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
                          "' is not a cylinder policy; 'capsule' (the capsule around the cylinder's axis) is the "
                          "only one until the mesh fitter reads cylinders as shapes to fit");
       config.cylinder_as = v;
+    } else if (key == "fit") {
+      if (!kv.second.IsScalar() || kv.second.as<std::string>().empty())
+        throw ModelError(yaml_path + ": fit must be the path of a fit overlay (written by reflex_fit), got '" +
+                         YAML::Dump(kv.second) + "'");
+      std::string path = kv.second.as<std::string>();
+      if (path[0] != '/') {  // relative to the configuration's folder
+        const auto slash = yaml_path.rfind('/');
+        if (slash != std::string::npos) path = yaml_path.substr(0, slash + 1) + path;
+      }
+      config.fit = path;
     } else if (key == "srdf") {
       if (!kv.second.IsScalar() || kv.second.as<std::string>().empty())
         throw ModelError(yaml_path + ": srdf must be the path of an SRDF file, got '" + YAML::Dump(kv.second) + "'");
@@ -172,7 +238,7 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
       config.srdf_disabled = loadSrdfDisabledCollisions(path);
     } else {
       throw ModelError(yaml_path + ": unknown key '" + key +
-                       "' (expected exclude_adjacent, exclude, srdf, cylinder_as)");
+                       "' (expected exclude_adjacent, exclude, srdf, cylinder_as, fit)");
     }
   }
   return config;
@@ -217,6 +283,15 @@ Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
   if (!in) throw ModelError(urdf_path + ": cannot open URDF file");
   std::stringstream ss;
   ss << in.rdbuf();
+  if (config.fit.empty()) {  // the default overlay next to the robot, if there is one
+    const std::string guess = defaultFitOverlayPath(urdf_path);
+    struct stat st {};
+    if (::stat(guess.c_str(), &st) == 0) {
+      CollisionConfig with_fit = config;
+      with_fit.fit = guess;
+      return loadModelFromString(ss.str(), with_fit, urdf_path, warnings);
+    }
+  }
   return loadModelFromString(ss.str(), config, urdf_path, warnings);
 }
 
@@ -274,6 +349,9 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     }
   } release_children{urdf_model};
   if (!urdf_model->getRoot()) fail(origin, "URDF has no root link");
+
+  FitOverlay overlay;
+  if (!config.fit.empty()) overlay = loadFitOverlay(config.fit);
 
   Model model;
   model.name = urdf_model->getName();
@@ -368,6 +446,9 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     if (link.q_index >= 0) model.link_support[i].push_back(link.q_index);
   }
 
+  // Meshes (and, on fitted links, boxes): the fit overlay's primitives, checked fresh.
+  const std::map<std::string, const LinkFit*> fitted = fittedLinks(origin, order, overlay);
+
   // Segments: one per link with collision elements.
   for (std::size_t i = 0; i < order.size(); ++i) {
     const auto& ulink = order[i];
@@ -378,7 +459,14 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     seg.name = ulink->name;
     seg.link = static_cast<int>(i);
     seg.first_primitive = static_cast<int>(model.primitives.size());
-    for (const auto& c : collisions) addCollision(origin, ulink->name, *c, model.primitives, warnings);
+    const auto fit = fitted.find(ulink->name);
+    if (fit != fitted.end())
+      for (const auto& p : fit->second->primitives) model.primitives.push_back(p);
+    for (const auto& c : collisions) {
+      const bool replaced = fit != fitted.end() && c->geometry &&
+                            (c->geometry->type == urdf::Geometry::MESH || c->geometry->type == urdf::Geometry::BOX);
+      if (!replaced) addCollision(origin, ulink->name, *c, model.primitives, warnings);
+    }
     seg.num_primitives = static_cast<int>(model.primitives.size()) - seg.first_primitive;
     model.segments.push_back(seg);
   }

@@ -103,7 +103,8 @@ int run(int argc, char** argv) {
   int csv_row = 0;
   std::string format = "csv";
   bool list_only = false;
-  app.add_option("urdf", urdf_path, "URDF file (collision elements: spheres, cylinders read as capsules)")
+  app.add_option("urdf", urdf_path, "URDF file (collision elements: spheres, cylinders and capsules; meshes and boxes through the fit "
+                 "overlay <urdf stem>.fit.yaml written by reflex_fit; boxes otherwise read as enclosing capsules)")
       ->required();
   app.add_option("--config", config_path,
                  "collision configuration YAML (default: <urdf stem>.collision.yaml if it exists)");

@@ -224,7 +224,7 @@ TEST(UrdfLoaderErrors, MeshOnlyCollisionIsRefusedWithAFix) {
         loadModelFromString(oneLink(R"(<collision><geometry><mesh filename="arm.stl"/></geometry></collision>)"),
                             CollisionConfig{}, "mesh.urdf");
       },
-      {"mesh.urdf", "link 'arm'", "mesh", "replace it with spheres and cylinders"});
+      {"mesh.urdf", "1 link has mesh collision geometry and no fit: 'arm'", "run: reflex_fit mesh.urdf"});
 }
 
 TEST(UrdfLoaderErrors, NonPositiveRadius) {

@@ -6,8 +6,13 @@
 //                          centred on the collision origin (the capsule is L + 2r long overall)
 //   capsule (r, L)      -> URDF 1.1 <capsule radius length> (urdfdom 3 does not know it): the same
 //                          capsule, core length L along the element's z axis
-//   box (x, y, z)       -> the enclosing capsule along the box's longest axis, with a warning
-//   mesh                -> refused: a std::runtime_error says which link and how to fix it
+//   box (x, y, z)       -> the enclosing capsule along the box's longest axis, with a warning;
+//                          on a link of the fit overlay: fitted like a mesh (below)
+//   mesh                -> the primitives of the fit overlay (mesh_fit.hpp, `reflex_fit URDF`):
+//                          capsules and spheres enclosing every vertex of the link's mesh and box
+//                          elements. A mesh link without a fit, or whose fit is stale (a mesh file,
+//                          filename, scale, origin or box changed), is refused: one ModelError
+//                          names every such link and the command to run.
 // A link with collision elements is one segment named like the link.
 //
 // Which pairs are checked is configuration (a YAML file next to the robot, <robot>.collision.yaml):
@@ -19,6 +24,8 @@
 //   srdf: robot.srdf           # optional, relative to this file: its <disable_collisions> pairs are
 //                              # excluded too (entries naming links without geometry exclude nothing)
 //   cylinder_as: capsule       # the cylinder policy (the only one until the mesh fitter exists)
+//   fit: robot.fit.yaml        # optional, relative to this file: the fit overlay; default: the
+//                              # URDF's <stem>.fit.yaml if it exists (loadModel)
 // Segments on links joined by fixed joints form one rigid body and are never checked against each
 // other, whatever the configuration says (no joint can change their distance).
 // Every error names the file, the element and the bad value.
@@ -51,6 +58,7 @@ struct CollisionConfig {
   std::string srdf;                        ///< SRDF path ("" if none)
   std::vector<SrdfPair> srdf_disabled;     ///< its disable_collisions entries
   std::string cylinder_as = "capsule";     ///< cylinder policy
+  std::string fit;                         ///< fit overlay path ("" = loadModel's default, if present)
   std::string source = "<defaults>";  ///< where it was read from, for error messages
 };
 

@@ -1,0 +1,120 @@
+// Collision meshes to capsules (issue 12, item 1): loading a link's collision meshes, fitting
+// sphere-swept lines (capsules) and spheres that ENCLOSE every vertex, and the fit overlay
+// (`<urdf stem>.fit.yaml`) that caches the result next to the robot. README: "Meshes".
+//
+// The guarantee: every vertex of every mesh and box element of a fitted link (in the link frame,
+// with the element's origin and scale) lies inside one of the link's fitted primitives, and every
+// triangle lies inside one primitive (a capsule is convex; triangles are assigned whole to a
+// cluster, long ones subdivided first). So a pair distance computed on the fitted primitives never
+// exceeds the true mesh distance: the fit is conservative.
+//
+// Mesh files are read with assimp (STL, OBJ, DAE and whatever else assimp reads): triangulated, the
+// node hierarchy pre-transformed, COLLADA <unit> applied (metres) and COLLADA <up_axis> IGNORED, as
+// ROS tools do (RViz, MoveIt's geometric_shapes): a DAE authored Z_UP comes out in the URDF's frame,
+// unrotated. Units: metres everywhere.
+//
+// Extending: a new primitive kind needs a fit (fitCluster in mesh_fit.cpp), a volume, a surface
+// sampler for the gap, and an overlay key.
+#pragma once
+
+#include "reflex/control/model.hpp"
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace reflex::control {
+
+/// A triangle mesh in one frame (metres).
+struct TriangleMesh {
+  std::vector<Eigen::Vector3d> vertices;
+  std::vector<std::array<int, 3>> triangles;  ///< indices into vertices
+};
+
+/// Where `package://NAME/...` URIs are looked up: `packages` first (NAME -> folder, from
+/// --package-path NAME=DIR), then the folders of ROS_PACKAGE_PATH (colon-separated) when
+/// `use_ros_package_path`: a folder there, or one of its direct children, that is named NAME or whose
+/// package.xml has <name>NAME</name>.
+struct PackagePaths {
+  std::map<std::string, std::string> packages;
+  bool use_ros_package_path = true;
+};
+
+/// Resolves a URDF mesh filename to a file path: `package://NAME/rel` (PackagePaths), `file:///abs`,
+/// an absolute path, or a path relative to `urdf_dir`. Returns "" and sets `why` (naming the package
+/// or the path tried) when it cannot; does not check that the file is readable.
+std::string resolveMeshFilename(const std::string& filename, const std::string& urdf_dir,
+                                const PackagePaths& paths, std::string* why);
+
+/// Reads a mesh file with assimp (see the opening block) and multiplies every vertex by `scale`.
+/// Throws ModelError naming the file and assimp's reason (unreadable, not a mesh, no triangles).
+TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale);
+
+/// Fitting options. The defaults are what reflex_fit uses.
+struct FitOptions {
+  int max_primitives = 6;        ///< per link
+  /// Split a link's cluster while (sum of fitted volumes) / (convex-hull volume) is above this...
+  double split_ratio = 1.3;
+  /// ...and a split reduces the summed fitted volume by at least this fraction of it.
+  double min_split_gain = 0.05;
+  double quantum = 1e-6;         ///< m: written coordinates are multiples of it, radii rounded up
+  int gap_samples_per_primitive = 600;  ///< surface samples per primitive for the worst gap
+};
+
+/// Per-link numbers of a fit (what the overlay records and reflex_fit prints).
+struct FitStats {
+  int vertices = 0;             ///< mesh + box vertices of the link (after scale and origin)
+  int vertices_enclosed = 0;    ///< of those, inside a fitted primitive (re-checked after rounding)
+  int triangles = 0;
+  double hull_volume = 0.0;     ///< m^3, convex hull of all vertices (qhull); 0 for a flat set
+  double fitted_volume = 0.0;   ///< m^3, sum of the primitives' volumes (an upper bound of their union)
+  double volume_ratio = 0.0;    ///< fitted / hull; 0 when the hull volume is 0
+  double worst_gap = 0.0;       ///< m, largest distance from a sampled point of the primitives'
+                                ///< outer surface (not inside another primitive) to the mesh
+};
+
+/// Fits primitives (link frame) enclosing every vertex and triangle of `mesh`. Deterministic: the
+/// same mesh and options give the same primitives, bit for bit. Throws ModelError for an empty mesh.
+std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions& options, FitStats* stats);
+
+/// Distance from p to the primitive's surface (negative inside).
+double signedDistanceToPrimitive(const Primitive& prim, const Eigen::Vector3d& p);
+
+/// One fitted link of the overlay.
+struct LinkFit {
+  std::string link;
+  std::string inputs;   ///< hash of the inputs (fitInputsHash)
+  int elements = 0;     ///< mesh and box elements fitted
+  FitStats stats;
+  std::vector<Primitive> primitives;  ///< link frame
+};
+
+/// A fit overlay: every link with mesh or box collision elements, fitted.
+struct FitOverlay {
+  std::string urdf;                               ///< as written (relative to the overlay's folder)
+  std::string urdf_dir;                           ///< resolved, for relative mesh paths
+  std::map<std::string, std::string> packages;    ///< NAME -> folder (resolved when read)
+  FitOptions options;
+  std::vector<LinkFit> links;
+  std::string source;                             ///< the overlay file, for messages
+};
+
+/// "dir/robot.urdf" -> "dir/robot.fit.yaml".
+std::string defaultFitOverlayPath(const std::string& urdf_path);
+
+/// Fits every link of the URDF with mesh or box collision elements. Throws ModelError naming every
+/// unresolved or unreadable mesh in one message. `progress` (if set) gets one line per link.
+FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, const FitOptions& options,
+                    const std::function<void(const std::string&)>& progress = {});
+
+/// The overlay's text (YAML). Reproducible: same overlay, same bytes. Paths are written relative to
+/// the folder of `overlay_path`.
+std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay_path);
+
+/// Reads an overlay written by fitOverlayText. Throws ModelError naming the file and the bad entry.
+FitOverlay loadFitOverlay(const std::string& overlay_path);
+
+}  // namespace reflex::control

@@ -1,0 +1,301 @@
+// The fit overlay: fitting a whole robot, writing `<stem>.fit.yaml`, reading it back.
+#include "fit_inputs.hpp"
+#include "reflex/common/files.hpp"
+#include "reflex/control/mesh_fit.hpp"
+#include "reflex/control/urdf_loader.hpp"
+#include "urdf_audit.hpp"
+
+#include <urdf_model/model.h>
+#include <urdf_parser/urdf_parser.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace reflex::control {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string num(double v, const char* format = "%.10g") {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, format, v == 0.0 ? 0.0 : v);  // never "-0"
+  return buf;
+}
+
+/// A YAML double-quoted scalar (names and paths may hold ':', '#', spaces).
+std::string quoted(const std::string& text) {
+  std::string out = "\"";
+  for (const char ch : text) {
+    if (static_cast<unsigned char>(ch) < 0x20) {  // control characters as \xHH
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", static_cast<unsigned>(static_cast<unsigned char>(ch)));
+      out += buf;
+      continue;
+    }
+    if (ch == '"' || ch == '\\') out += '\\';
+    out += ch;
+  }
+  return out + "\"";
+}
+
+std::string vec(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
+
+/// `path` relative to `dir` (both made absolute first), for paths written into the overlay.
+std::string relativeTo(const std::string& path, const std::string& dir) {
+  std::error_code ec;
+  const fs::path abs = fs::weakly_canonical(fs::absolute(path), ec);
+  const fs::path base = fs::weakly_canonical(fs::absolute(dir), ec);
+  const fs::path rel = abs.lexically_relative(base);
+  return rel.empty() ? abs.string() : rel.string();
+}
+
+std::string joinPath(const std::string& dir, const std::string& path) {
+  if (!path.empty() && path[0] == '/') return path;
+  return (fs::path(dir) / path).lexically_normal().string();
+}
+
+/// The 8 corners and 12 triangles of a box of size `size` centred on the origin.
+TriangleMesh boxMesh(const Eigen::Vector3d& size) {
+  TriangleMesh m;
+  for (int i = 0; i < 8; ++i)
+    m.vertices.emplace_back((i & 1 ? 0.5 : -0.5) * size.x(), (i & 2 ? 0.5 : -0.5) * size.y(), (i & 4 ? 0.5 : -0.5) * size.z());
+  m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                 {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  return m;
+}
+
+void append(TriangleMesh& to, const TriangleMesh& from, const Eigen::Isometry3d& X) {
+  const int base = static_cast<int>(to.vertices.size());
+  for (const auto& v : from.vertices) to.vertices.push_back(X * v);
+  for (const auto& t : from.triangles) to.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+}
+
+}  // namespace
+
+std::string defaultFitOverlayPath(const std::string& urdf_path) {
+  const auto dot = urdf_path.rfind('.');
+  const auto slash = urdf_path.rfind('/');
+  const std::string stem =
+      (dot != std::string::npos && (slash == std::string::npos || dot > slash)) ? urdf_path.substr(0, dot) : urdf_path;
+  return stem + ".fit.yaml";
+}
+
+FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, const FitOptions& options,
+                    const std::function<void(const std::string&)>& progress) {
+  if (const std::string why = common::inputFileProblem(urdf_path); !why.empty()) throw ModelError("URDF file " + why);
+  std::ifstream in(urdf_path);
+  if (!in) throw ModelError(urdf_path + ": cannot open URDF file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const detail::UrdfAudit audit = detail::auditUrdf(ss.str());
+  if (!audit.xml_error.empty()) throw ModelError(urdf_path + ": malformed URDF: " + audit.xml_error);
+  urdf::ModelInterfaceSharedPtr model;
+  try {
+    model = urdf::parseURDF(audit.capsules > 0 ? audit.urdfdom_xml : ss.str());
+  } catch (const std::exception& e) {
+    throw ModelError(urdf_path + ": urdfdom: " + e.what());
+  }
+  if (!model) throw ModelError(urdf_path + ": malformed URDF (urdfdom could not parse it; reflex_inspect says why)");
+  struct Release {  // urdfdom's parent/child shared_ptr cycle
+    urdf::ModelInterfaceSharedPtr& m;
+    ~Release() {
+      for (auto& e : m->links_)
+        if (e.second) e.second->child_links.clear();
+    }
+  } release{model};
+
+  FitOverlay overlay;
+  overlay.urdf = urdf_path;
+  overlay.urdf_dir = detail::folderOf(urdf_path);
+  overlay.options = options;
+  std::vector<std::string> problems;
+  struct Job {
+    std::string link;
+    std::vector<detail::FitElement> elements;
+    std::vector<std::string> resolved;
+    std::string hash;
+  };
+  std::vector<Job> jobs;
+  for (const auto& [name, link] : model->links_) {  // std::map: sorted by name
+    Job job{name, detail::fitElementsOf(*link), {}, {}};
+    if (job.elements.empty()) continue;
+    job.hash = detail::fitInputsHash(name, job.elements, overlay.urdf_dir, paths, &problems, &job.resolved);
+    jobs.push_back(std::move(job));
+  }
+  // The packages used, as found (recorded so the loader finds the same files).
+  for (const auto& job : jobs)
+    for (std::size_t i = 0, m = 0; i < job.elements.size(); ++i) {
+      if (job.elements[i].box) continue;
+      const std::string& f = job.elements[i].filename;
+      const std::string& r = job.resolved[m++];
+      if (r.empty() || f.compare(0, 10, "package://") != 0) continue;
+      const std::string rest = f.substr(10);
+      const std::string pkg = rest.substr(0, rest.find('/'));
+      const std::string rel = rest.substr(pkg.size() + 1);
+      overlay.packages[pkg] = r.substr(0, r.size() - rel.size() - 1);
+    }
+  // Read every mesh once; unreadable ones are problems too, all named in one message.
+  std::vector<TriangleMesh> meshes(jobs.size());
+  for (std::size_t j = 0; j < jobs.size(); ++j) {
+    const Job& job = jobs[j];
+    for (std::size_t i = 0, m = 0; i < job.elements.size(); ++i) {
+      const auto& e = job.elements[i];
+      if (e.box) {
+        if (!(e.size.minCoeff() > 0.0) || !e.size.allFinite())
+          problems.push_back("link '" + job.link + "': box size must be positive");
+        else
+          append(meshes[j], boxMesh(e.size), e.X_L_C);
+        continue;
+      }
+      const std::string& path = job.resolved[m++];
+      if (path.empty()) continue;  // already a problem
+      try {
+        append(meshes[j], loadMeshFile(path, e.scale), e.X_L_C);
+      } catch (const ModelError& err) {
+        problems.push_back("link '" + job.link + "': mesh '" + e.filename + "': " + err.what());
+      }
+    }
+  }
+  if (!problems.empty()) {
+    std::string msg = urdf_path + ": cannot fit: " + std::to_string(problems.size()) + " mesh" +
+                      (problems.size() == 1 ? "" : "es") + " not resolved or not readable:";
+    for (const auto& p : problems) msg += "\n  " + p;
+    throw ModelError(msg);
+  }
+  for (std::size_t j = 0; j < jobs.size(); ++j) {
+    LinkFit fit;
+    fit.link = jobs[j].link;
+    fit.inputs = jobs[j].hash;
+    fit.elements = static_cast<int>(jobs[j].elements.size());
+    fit.primitives = fitPrimitives(meshes[j], options, &fit.stats);
+    if (progress) {
+      std::ostringstream os;
+      os << "fitted " << fit.link << ": " << fit.primitives.size() << " primitive(s), " << fit.stats.vertices_enclosed
+         << "/" << fit.stats.vertices << " vertices enclosed, volume ratio " << num(fit.stats.volume_ratio, "%.3f")
+         << ", worst gap " << num(fit.stats.worst_gap, "%.4f") << " m (" << j + 1 << "/" << jobs.size() << ")";
+      progress(os.str());
+    }
+    overlay.links.push_back(std::move(fit));
+  }
+  return overlay;
+}
+
+std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay_path) {
+  const std::string dir = detail::folderOf(overlay_path);
+  std::ostringstream os;
+  os << "# Collision fit of " << fs::path(overlay.urdf).filename().string()
+     << ", written by reflex_fit: do not edit, rerun reflex_fit.\n"
+     << "# The URDF is never edited: the loader reads the primitives below instead of the links' mesh and\n"
+     << "# box elements. Primitives in the link frame (m). inputs: hash of the mesh bytes, filenames,\n"
+     << "# scales, origins and box sizes; a link whose inputs changed is refused as stale.\n"
+     << "# fitted_volume: sum of the primitives' volumes; volume_ratio: that / convex-hull volume;\n"
+     << "# worst_gap: largest distance from the primitives' outer surface (sampled) to the mesh.\n"
+     << "format: 1\n"
+     << "urdf: " << quoted(relativeTo(overlay.urdf, dir)) << "\n";
+  if (!overlay.packages.empty()) {
+    os << "packages:\n";
+    for (const auto& [name, path] : overlay.packages) os << "  " << quoted(name) << ": " << quoted(relativeTo(path, dir)) << "\n";
+  }
+  const FitOptions& o = overlay.options;
+  os << "options: {max_primitives: " << o.max_primitives << ", split_ratio: " << num(o.split_ratio)
+     << ", min_split_gain: " << num(o.min_split_gain) << ", quantum: " << num(o.quantum) << "}\n"
+     << "links:\n";
+  for (const auto& l : overlay.links) {
+    const FitStats& s = l.stats;
+    os << "  " << quoted(l.link) << ":\n"
+       << "    inputs: \"" << l.inputs << "\"\n"
+       << "    elements: " << l.elements << "\n"
+       << "    vertices: " << s.vertices << "\n"
+       << "    vertices_enclosed: " << s.vertices_enclosed << "\n"
+       << "    triangles: " << s.triangles << "\n"
+       << "    hull_volume: " << num(s.hull_volume, "%.6g") << "\n"
+       << "    fitted_volume: " << num(s.fitted_volume, "%.6g") << "\n"
+       << "    volume_ratio: " << num(s.volume_ratio, "%.4f") << "\n"
+       << "    worst_gap: " << num(s.worst_gap, "%.6f") << "\n"
+       << "    primitives:\n";
+    for (const auto& p : l.primitives) {
+      if (p.sphere)
+        os << "      - {sphere: " << vec(p.a_L) << ", radius: " << num(p.radius) << "}\n";
+      else
+        os << "      - {a: " << vec(p.a_L) << ", b: " << vec(p.b_L) << ", radius: " << num(p.radius) << "}\n";
+    }
+  }
+  return os.str();
+}
+
+FitOverlay loadFitOverlay(const std::string& path) {
+  if (const std::string why = common::inputFileProblem(path); !why.empty()) throw ModelError("fit overlay " + why);
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    throw ModelError(path + ": cannot open fit overlay");
+  } catch (const YAML::Exception& e) {
+    throw ModelError(path + ": malformed YAML: " + e.what());
+  }
+  auto bad = [&](const std::string& what) { return ModelError(path + ": " + what + " (rerun reflex_fit)"); };
+  if (!root.IsMap() || !root["format"] || root["format"].as<std::string>("") != "1")
+    throw bad("not a reflex_fit overlay of format 1");
+  const std::string dir = detail::folderOf(path);
+  FitOverlay o;
+  o.source = path;
+  try {
+    o.urdf = joinPath(dir, root["urdf"].as<std::string>());
+    o.urdf_dir = detail::folderOf(o.urdf);
+    if (root["packages"])
+      for (const auto& kv : root["packages"]) o.packages[kv.first.as<std::string>()] = joinPath(dir, kv.second.as<std::string>());
+    const YAML::Node links = root["links"];
+    if (!links || !links.IsMap()) throw bad("'links' must be a map");
+    auto point = [&](const YAML::Node& n, const std::string& where) {
+      if (!n.IsSequence() || n.size() != 3) throw bad(where + " must be [x, y, z]");
+      const Eigen::Vector3d v(n[0].as<double>(), n[1].as<double>(), n[2].as<double>());
+      if (!v.allFinite()) throw bad(where + " is not finite");
+      return v;
+    };
+    for (const auto& kv : links) {
+      LinkFit l;
+      l.link = kv.first.as<std::string>();
+      const YAML::Node& n = kv.second;
+      const std::string where = "link '" + l.link + "'";
+      if (!n.IsMap() || !n["inputs"] || !n["primitives"] || !n["primitives"].IsSequence() || n["primitives"].size() == 0)
+        throw bad(where + " needs inputs and a non-empty primitives list");
+      l.inputs = n["inputs"].as<std::string>();
+      l.elements = n["elements"].as<int>(0);
+      l.stats.vertices = n["vertices"].as<int>(0);
+      l.stats.vertices_enclosed = n["vertices_enclosed"].as<int>(0);
+      l.stats.triangles = n["triangles"].as<int>(0);
+      l.stats.hull_volume = n["hull_volume"].as<double>(0.0);
+      l.stats.fitted_volume = n["fitted_volume"].as<double>(0.0);
+      l.stats.volume_ratio = n["volume_ratio"].as<double>(0.0);
+      l.stats.worst_gap = n["worst_gap"].as<double>(0.0);
+      for (const auto& pn : n["primitives"]) {
+        Primitive p;
+        if (!pn.IsMap() || !pn["radius"]) throw bad(where + ": a primitive needs a radius");
+        p.radius = pn["radius"].as<double>();
+        if (!(p.radius > 0.0) || !std::isfinite(p.radius)) throw bad(where + ": radius " + pn["radius"].as<std::string>() + " must be positive");
+        if (pn["sphere"]) {
+          p.a_L = p.b_L = point(pn["sphere"], where + " sphere");
+          p.sphere = true;
+        } else {
+          if (!pn["a"] || !pn["b"]) throw bad(where + ": a capsule needs a and b");
+          p.a_L = point(pn["a"], where + " a");
+          p.b_L = point(pn["b"], where + " b");
+          p.sphere = false;
+          if (!((p.b_L - p.a_L).norm() > 0.0)) throw bad(where + ": a capsule needs a != b (write a sphere)");
+        }
+        l.primitives.push_back(p);
+      }
+      o.links.push_back(std::move(l));
+    }
+  } catch (const YAML::Exception& e) {
+    throw bad(std::string("bad entry: ") + e.what());
+  }
+  return o;
+}
+
+}  // namespace reflex::control
