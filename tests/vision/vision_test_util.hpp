@@ -36,6 +36,14 @@ class TempDir {
   std::string path_;
 };
 
+#ifdef REFLEX_SOURCE_DIR
+/// The shipped robot's camera mount (head joints at zero), from its configuration file: there is no
+/// built-in default mount (issue 15, item 2).
+inline CameraMount shippedMount() {
+  return loadCameraMount(std::string(REFLEX_SOURCE_DIR) + "/bringup/vision/camera_mount.yaml");
+}
+#endif
+
 /// The rig shared by the generated sessions: 640x480, f ~ 500 px, plumb_bob distortion, 6 cm
 /// baseline, right camera slightly rotated (so rectification matters).
 inline std::string rigYaml() {
@@ -44,6 +52,9 @@ inline std::string rigYaml() {
   right: {fx: 503, fy: 502, cx: 322.0, cy: 241.0, distortion: [-0.038, 0.010, -0.0004, 0.0002, 0]}
   baseline: 0.06
   right_rpy_deg: [0.3, -0.5, 0.2]
+  mount:   # the shipped robot, head joints at zero (bringup/vision/camera_mount.yaml)
+    translation: [0.08, 0.03, 1.15]
+    rotation_matrix: [0, 0, 1,  -1, 0, 0,  0, -1, 0]
 )";
 }
 
@@ -165,7 +176,7 @@ inline Evaluation evaluate(const std::vector<GroundTruthRow>& truth, const std::
 inline std::vector<Detection> detectSession(const std::string& dir, PipelineOptions options = {}) {
   SessionSource source(dir, 0.0);
   options.detector.family = source.info().objects.family();
-  StereoTagPipeline pipeline(source.calibration(), source.info().mount.value_or(defaultCameraMount()),
+  StereoTagPipeline pipeline(source.calibration(), source.info().mount.value(),
                              source.info().objects, options);
   std::vector<Detection> out;
   RunCallbacks cb;

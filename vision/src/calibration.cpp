@@ -229,16 +229,6 @@ StereoCalibration loadStereoCalibration(const std::string& left_path, const std:
   return c;
 }
 
-CameraMount defaultCameraMount() {
-  CameraMount m;
-  // Columns are the optical axes in base coordinates: x_C = -y_B, y_C = -z_B, z_C = +x_B.
-  m.R_B_C = cv::Matx33d(0, 0, 1,
-                        -1, 0, 0,
-                        0, -1, 0);
-  m.p_B_C = cv::Vec3d(0.08, 0.03, 1.15);
-  return m;
-}
-
 CameraMount parseCameraMount(const std::string& yaml_text, const std::string& source) {
   const YAML::Node root = parseYaml(yaml_text, source);
   CameraMount m;
