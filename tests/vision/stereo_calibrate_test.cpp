@@ -23,6 +23,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
 
 #include <sys/wait.h>
 
@@ -549,6 +550,33 @@ TEST(Cli, CalibratesFromPngPairs) {
   std::printf("%s", out.c_str());
   const StereoCalibration c = loadStereoCalibration(d / "calib/left.yaml", d / "calib/right.yaml");
   expectRig(c, c.right.R.t() * c.left.R, "reflex_calibrate on PNG pairs");
+
+  // The same pairs as a session's videos (lossless FFV1, named by session.yaml): the same calibration.
+  std::filesystem::create_directories(d / "session");
+  cv::VideoWriter vw[2];
+  for (int k = 0; k < 2; ++k)
+    ASSERT_TRUE(vw[k].open(d / (k ? "session/right.avi" : "session/left.avi"), cv::CAP_FFMPEG,
+                           cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 10, kSize, false));
+  for (const auto& [l, rr] : r.images) {
+    vw[0].write(l);
+    vw[1].write(rr);
+  }
+  vw[0].write(blank);
+  vw[1].write(blank);
+  vw[0].release();
+  vw[1].release();
+  test::writeText(d / "session/session.yaml", "left_video: left.avi\nright_video: right.avi\n");
+  ASSERT_EQ(runCalibrate("calibrate --session " + (d / "session") + boardArgs(b.spec) + " --out " + (d / "calib2"), out, err),
+            0)
+      << out << err;
+  EXPECT_THAT(err, HasSubstr("view 15/15 frame 14: left 0 points"));
+  const StereoCalibration c2 = loadStereoCalibration(d / "calib2/left.yaml", d / "calib2/right.yaml");
+  for (int i = 0; i < 12; ++i) EXPECT_NEAR(c2.right.P.val[i], c.right.P.val[i], 1e-6 * std::max(1.0, std::abs(c.right.P.val[i])));
+  EXPECT_EQ(runCalibrate("calibrate --session " + (d / "session") + boardArgs(b.spec) + " --every 0 --out " +
+                             (d / "calib3"),
+                         out, err),
+            2);
+  EXPECT_THAT(err, HasSubstr("--every 0"));
 
   // convert: FileStorage files -> the same format.
   writeOpenCvFiles(d / "intrinsics.yml", d / "extrinsics.yml", 1.0, true);

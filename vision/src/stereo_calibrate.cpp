@@ -413,15 +413,15 @@ StereoCalibrateResult calibrateStereo(const BoardSpec& board, const std::vector<
     }
     const double med = median(err);
     const double limit = std::max(options.outlier_factor * med, options.min_outlier_px);
-    say("round " + std::to_string(res.rounds) + ": reprojection RMS " + fmt(res.rms) + " px, per-view median " + fmt(med) +
-        " px, outlier above " + fmt(limit) + " px");
+    say("round " + std::to_string(res.rounds) + ": reprojection RMS " + cv::format("%.3f", res.rms) +
+        " px, per-view median " + cv::format("%.3f", med) + " px, outlier above " + cv::format("%.3f", limit) + " px");
     std::vector<std::size_t> next;
     for (std::size_t j = 0; j < kept.size(); ++j) {
       if (err[j] > limit) {
         ViewReport& v = res.views[kept[j]];
         v.dropped = true;
-        v.why = "outlier in round " + std::to_string(res.rounds) + ": reprojection RMS " + fmt(err[j]) + " px > " +
-                fmt(options.outlier_factor) + " x median " + fmt(med) + " px";
+        v.why = "outlier in round " + std::to_string(res.rounds) + ": reprojection RMS " + cv::format("%.3f", err[j]) +
+                " px > " + fmt(options.outlier_factor) + " x median " + cv::format("%.3f", med) + " px";
         say("dropped " + v.name + ": " + v.why);
       } else {
         next.push_back(kept[j]);

@@ -3,6 +3,9 @@
 // printable calibration board (board). Thin wrapper over reflex/vision/stereo_calibrate.hpp.
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/stereo_calibrate.hpp"
+#include "mount_kinematics.hpp"
+
+#include <reflex/control/urdf_loader.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -14,6 +17,7 @@
 #include <filesystem>
 #include <iostream>
 #include <regex>
+#include <sstream>
 
 namespace {
 using namespace reflex::vision;
@@ -158,6 +162,94 @@ int runCalibrate(const BoardArgs& ba, const std::string& pairs, const std::strin
   return 0;
 }
 
+struct MountArgs {
+  std::string urdf, collision, head_link = "head", hand_link, tag_point, observations, out, camera_link;
+  MountOptions options;
+};
+
+cv::Vec3d rpyOf(const cv::Matx33d& R) {  // URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll)
+  return cv::Vec3d(std::atan2(R(2, 1), R(2, 2)), std::asin(std::max(-1.0, std::min(1.0, -R(2, 0)))),
+                   std::atan2(R(1, 0), R(0, 0)));
+}
+
+cv::Matx33d toCv(const Eigen::Matrix3d& m) {
+  cv::Matx33d r;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r(i, j) = m(i, j);
+  return r;
+}
+
+int runMount(const MountArgs& a) {
+  std::vector<double> tp;
+  {
+    std::stringstream ss(a.tag_point);
+    std::string c;
+    while (std::getline(ss, c, ',')) {
+      std::size_t used = 0;
+      double v = 0.0;
+      try {
+        v = std::stod(c, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used == 0 || used != c.size() || !std::isfinite(v) || std::abs(v) > 2.0)
+        throw VisionError("--tag-point '" + a.tag_point + "': '" + c + "' is not a coordinate in metres within 2 m of the hand");
+      tp.push_back(v);
+    }
+  }
+  if (tp.size() != 3) throw VisionError("--tag-point '" + a.tag_point + "' must be X,Y,Z (metres, in the hand link frame)");
+  reflex::control::Model model;
+  try {
+    model = reflex::control::loadModel(a.urdf, reflex::control::loadCollisionConfigFor(a.urdf, a.collision));
+  } catch (const reflex::control::ModelError& e) {
+    throw VisionError(e.what());
+  }
+  auto link = [&](const std::string& name, const char* option) {
+    const int i = model.linkIndex(name);
+    if (i < 0) throw VisionError(std::string(option) + " '" + name + "': no such link in " + a.urdf);
+    return i;
+  };
+  MountKinematics k;
+  k.model = &model;
+  k.head_link = link(a.head_link, "--head-link");
+  k.hand_link = link(a.hand_link, "--hand-link");
+  k.p_hand = Eigen::Vector3d(tp[0], tp[1], tp[2]);
+  const int camera_link = a.camera_link.empty() ? -1 : link(a.camera_link, "--camera-link");
+  if (std::error_code ec; !fs::is_directory(fs::path(a.out).has_parent_path() ? fs::path(a.out).parent_path() : ".", ec))
+    throw VisionError("--out '" + a.out + "': its folder does not exist");
+  const std::vector<MountObservation> obs = readMountObservations(a.observations, k);
+  const MountResult r = estimateCameraInHead(obs, a.options, [](const std::string& s) { std::fprintf(stderr, "%s\n", s.c_str()); });
+
+  std::printf("%-20s %12s  %s\n", "view", "residual_mm", "status");
+  for (const MountViewReport& v : r.views)
+    std::printf("%-20s %12.2f  %s\n", v.name.c_str(), 1000.0 * v.residual, v.dropped ? ("dropped: " + v.why).c_str() : "kept");
+  int kept = 0;
+  for (const MountViewReport& v : r.views) kept += !v.dropped;
+  const cv::Vec3d rpy = rpyOf(r.R_H_C);
+  std::printf("\nviews: %d kept of %zu; residual RMS %.2f mm, max %.2f mm (good: a few mm, about the stereo error at "
+              "that distance)\n", kept, r.views.size(), 1000.0 * r.rms, 1000.0 * r.max);
+  std::printf("camera in %s (URDF origin of a fixed joint %s -> camera): xyz=\"%.5f %.5f %.5f\" rpy=\"%.5f %.5f %.5f\"\n",
+              a.head_link.c_str(), a.head_link.c_str(), r.p_H_C[0], r.p_H_C[1], r.p_H_C[2], rpy[0], rpy[1], rpy[2]);
+  const Eigen::Isometry3d X_B_H = linkPoseAtZero(model, k.head_link);
+  CameraMount mount;
+  mount.R_B_C = toCv(X_B_H.linear()) * r.R_H_C;
+  const Eigen::Vector3d t = X_B_H.translation();
+  mount.p_B_C = toCv(X_B_H.linear()) * r.p_H_C + cv::Vec3d(t.x(), t.y(), t.z());
+  if (camera_link >= 0) {
+    const Eigen::Isometry3d X_B_Cu = linkPoseAtZero(model, camera_link);
+    const Eigen::Vector3d tc = X_B_Cu.translation();
+    cv::Vec3d rv;
+    cv::Rodrigues(mount.R_B_C * toCv(X_B_Cu.linear()).t(), rv);
+    std::printf("against the URDF's %s: %.2f mm, %.3f deg apart\n", a.camera_link.c_str(),
+                1000.0 * cv::norm(mount.p_B_C - cv::Vec3d(tc.x(), tc.y(), tc.z())), cv::norm(rv) * 180.0 / M_PI);
+  }
+  saveCameraMount(a.out, mount,
+                  "measured by reflex_calibrate mount (" + std::to_string(kept) + " views, residual RMS " +
+                      cv::format("%.2f", 1000.0 * r.rms) + " mm); every joint of " + model.name + " at zero");
+  std::printf("wrote %s (the mount with every joint at zero, for reflex_vision --mount)\n", a.out.c_str());
+  return 0;
+}
+
 cv::Size parseSize(const std::string& text) {
   if (text.empty()) return {};
   std::smatch m;
@@ -177,6 +269,8 @@ int main(int argc, char** argv) {
       "             (ROS camera_info, what --calib-left/--calib-right and session folders take)\n"
       "  convert    an OpenCV stereoCalibrate FileStorage file (M1 D1 M2 D2 R T [R1 R2 P1 P2]) -> the same pair\n"
       "  board      a printable board image (PNG) for the board options given\n"
+      "  mount      the camera in the head frame and camera_mount.yaml, from a tag on a hand seen in several robot\n"
+      "             poses (joint values + the tag centre measured by reflex_vision --dump) and the robot's URDF\n"
       "Exit: 0 done, 2 bad option or input (named), 3 calibration failed (too few views, ...)."};
   app.require_subcommand(1);
 
@@ -225,8 +319,27 @@ int main(int argc, char** argv) {
   draw->add_option("--pixels", ppu, "pixels per square (checkerboard, charuco) or per tag cell (aprilgrid)")
       ->capture_default_str();
 
+  MountArgs mount_args;
+  CLI::App* mnt = app.add_subcommand(
+      "mount", "the camera in the head frame (and camera_mount.yaml) from a tag on a hand seen in several poses");
+  mnt->add_option("--urdf", mount_args.urdf, "the robot's URDF (kinematics)")->required();
+  mnt->add_option("--collision", mount_args.collision, "its collision YAML (default: next to the URDF, if any)");
+  mnt->add_option("--head-link", mount_args.head_link, "link the cameras are fixed to")->capture_default_str();
+  mnt->add_option("--hand-link", mount_args.hand_link, "link the tag is fixed to")->required();
+  mnt->add_option("--tag-point", mount_args.tag_point, "the tag centre in the hand link frame: X,Y,Z metres")->required();
+  mnt->add_option("--observations", mount_args.observations,
+                  "CSV: view,x_cam,y_cam,z_cam,<joint>,... (tag centre in the left optical frame, joint values)")
+      ->required();
+  mnt->add_option("--out", mount_args.out, "camera_mount.yaml to write (every joint at zero)")->required();
+  mnt->add_option("--camera-link", mount_args.camera_link, "compare with this URDF frame (e.g. head_camera)");
+  mnt->add_option("--outlier-factor", mount_args.options.outlier_factor,
+                  "drop views whose residual exceeds this x the median (and 5 mm), refit")
+      ->capture_default_str();
+  mnt->add_option("--min-views", mount_args.options.min_views, "fewest usable views")->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
+    if (mnt->parsed()) return runMount(mount_args);
     if (cal->parsed()) return runCalibrate(cal_board, pairs, session, every, cal_out, opt, quiet);
     if (conv->parsed()) {
       copt.size = parseSize(conv_size);

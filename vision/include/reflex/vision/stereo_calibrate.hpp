@@ -188,3 +188,53 @@ class CalibrationImages {
 };
 
 }  // namespace reflex::vision
+
+namespace reflex::vision {
+
+// ---- Camera mount (issue 15, item 2) ------------------------------------------------------------
+// A tag fixed on a hand at a known point; per view the robot's joint angles (so the point is known in
+// the head frame H by the robot's kinematics) and the point measured by the camera in its left optical
+// frame C. Then p_H = R_H_C p_C + p_H_C for every view: the camera in the head frame is the rigid
+// transform that best maps the measured points onto the kinematic ones (least squares, Kabsch/SVD).
+// A known point on the hand makes this a point registration; the AX = XB of cv::calibrateHandEye is
+// needed only when the target's place on the hand is unknown.
+
+struct MountObservation {
+  std::string name;  ///< shown in reports
+  cv::Vec3d p_C;     ///< tag point in the left optical frame, metres (reflex_vision --dump x_cam,y_cam,z_cam)
+  cv::Vec3d p_H;     ///< the same point in the head link frame from the kinematics, metres
+};
+
+struct MountOptions {
+  /// A view is an outlier when its residual exceeds outlier_factor x the median residual AND
+  /// min_outlier_m; outliers are dropped and the fit repeated until none is left.
+  double outlier_factor = 3.0;
+  double min_outlier_m = 0.005;
+  int min_views = 6;
+  /// The measured points must spread at least this much (RMS distance from their centroid along the
+  /// second principal direction, metres): points on a line leave the rotation about it unknown.
+  double min_spread_m = 0.02;
+};
+
+struct MountViewReport {
+  std::string name;
+  double residual = 0.0;  ///< |R p_C + t - p_H|, metres, in the last fit the view was in
+  bool dropped = false;
+  std::string why;
+};
+
+struct MountResult {
+  cv::Matx33d R_H_C;       ///< left optical frame in the head frame
+  cv::Vec3d p_H_C;         ///< metres
+  double rms = 0.0;        ///< residual RMS of the kept views, metres
+  double max = 0.0;        ///< largest kept residual, metres
+  int rounds = 0;
+  std::vector<MountViewReport> views;
+};
+
+/// Fits the camera in the head frame. Throws VisionError for fewer than min_views usable views,
+/// non-finite values (naming the view) or points without spread (naming the spread).
+MountResult estimateCameraInHead(const std::vector<MountObservation>& observations, const MountOptions& options,
+                                 const CalibrateLog& log = nullptr);
+
+}  // namespace reflex::vision
