@@ -300,15 +300,6 @@ std::string withMatrixElement(const std::string& text, const std::string& key, i
   return text.substr(0, begin) + value + text.substr(end);
 }
 std::string bin(const std::string& name) { return std::string(REFLEX_BIN_DIR) + "/" + name; }
-template <typename F>
-std::string errorOf(F f) {
-  try {
-    f();
-  } catch (const VisionError& e) {
-    return e.what();
-  }
-  return "no error";
-}
 double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }

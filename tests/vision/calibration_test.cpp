@@ -12,6 +12,7 @@
 #include <regex>
 
 using namespace reflex::vision;
+using reflex::vision::test::errorOf;
 using ::testing::HasSubstr;
 
 namespace {
@@ -44,15 +45,6 @@ std::string rightFrom(const std::string& left) {
   return std::regex_replace(r, std::regex(R"(\[495.0, 0, 320.0, 0,)"), "[495.0, 0, 320.0, -29.7,");
 }
 
-template <typename F>
-std::string errorOf(F f) {
-  try {
-    f();
-  } catch (const VisionError& e) {
-    return e.what();
-  }
-  return "no error";
-}
 
 }  // namespace
 

@@ -157,8 +157,9 @@ TEST(Mount, RegistrationIsExactOnExactDataAndRefusesDegenerateData) {
 
 // reflex_calibrate mount end to end: 30 noisy views (1 mm per axis) and one with the tag moved by
 // 5 cm: the camera within 2 mm and 0.5 deg (the hand's points fill a small region ~0.5 m from the
-// camera, so a small turn about them trades against a shift: 1 mm noise leaves ~0.3 deg), the moved view dropped and named, camera_mount.yaml
-// (every joint at zero) equal to the true head-zero mount and loadable by vision.
+// camera, so a small turn about them trades against a shift: 1 mm noise leaves ~0.3 deg), the moved
+// view dropped and named, camera_mount.yaml (every joint at zero) equal to the true head-zero mount
+// and loadable by vision.
 TEST(Mount, CliRecoversTheKnownMountAndDropsTheMovedTag) {
   const reflex::control::Model m = robot();
   const TrueMount t = trueMount(m);

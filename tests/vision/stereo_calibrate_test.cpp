@@ -32,6 +32,7 @@
 #include <fstream>
 
 using namespace reflex::vision;
+using reflex::vision::test::errorOf;
 using reflex::vision::test::TempDir;
 using ::testing::HasSubstr;
 
@@ -222,31 +223,18 @@ RenderedViews renderViews(const DrawnBoard& b, int n, std::uint64_t seed, bool k
   return out;
 }
 
-BoardSpec checkerboard() {
+BoardSpec board(BoardKind kind, int cols, int rows, double square) {
   BoardSpec s;
-  s.kind = BoardKind::kCheckerboard;
-  s.cols = 9;
-  s.rows = 6;
-  s.square = 0.025;
+  s.kind = kind;
+  s.cols = cols;
+  s.rows = rows;
+  s.square = square;
   return s;
 }
-
-BoardSpec aprilgrid() {
-  BoardSpec s;
-  s.kind = BoardKind::kAprilGrid;
-  s.cols = 5;
-  s.rows = 4;
-  s.square = 0.032;
-  s.family = "tag36h11";
-  return s;
-}
-
+BoardSpec checkerboard() { return board(BoardKind::kCheckerboard, 9, 6, 0.025); }
+BoardSpec aprilgrid() { return board(BoardKind::kAprilGrid, 5, 4, 0.032); }  // tag36h11, the default family
 BoardSpec charuco() {
-  BoardSpec s;
-  s.kind = BoardKind::kCharuco;
-  s.cols = 7;
-  s.rows = 5;
-  s.square = 0.03;
+  BoardSpec s = board(BoardKind::kCharuco, 7, 5, 0.03);
   s.marker = 0.022;
   s.dictionary = "DICT_5X5_100";
   return s;
@@ -285,16 +273,7 @@ TEST(Board, BadBoardsAreNamed) {
   BoardSpec s = checkerboard();
   s.cols = 7;
   s.rows = 7;
-  EXPECT_THAT(
-      [&] {
-        try {
-          validateBoard(s);
-        } catch (const VisionError& e) {
-          return std::string(e.what());
-        }
-        return std::string("no error");
-      }(),
-      HasSubstr("turned by 90 degrees"));
+  EXPECT_THAT(errorOf([&] { validateBoard(s); }), HasSubstr("turned by 90 degrees"));
   s = checkerboard();
   s.square = -0.02;
   EXPECT_THROW(validateBoard(s), VisionError);
@@ -405,15 +384,6 @@ void writeOpenCvFiles(const std::string& intr, const std::string& extr, double t
   fe.release();
 }
 
-template <typename F>
-std::string errorOf(F f) {
-  try {
-    f();
-  } catch (const VisionError& e) {
-    return e.what();
-  }
-  return "no error";
-}
 
 }  // namespace
 

@@ -1,6 +1,7 @@
 #pragma once
 // Shared helpers of the vision tests: temporary folders, the scene scripts of the sessions that the
 // tests generate at run time, and the evaluation of detections against a session's ground truth.
+#include "reflex/vision/error.hpp"
 #include "reflex/vision/runner.hpp"
 #include "reflex/vision/session.hpp"
 #include "reflex/vision/session_maker.hpp"
@@ -16,6 +17,17 @@
 #include <vector>
 
 namespace reflex::vision::test {
+
+/// The message of the VisionError `f` throws, or "no error".
+template <typename F>
+std::string errorOf(F f) {
+  try {
+    f();
+  } catch (const VisionError& e) {
+    return e.what();
+  }
+  return "no error";
+}
 
 /// A fresh folder under the system temp dir, removed when the object dies.
 class TempDir {

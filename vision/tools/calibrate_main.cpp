@@ -185,15 +185,9 @@ int runMount(const MountArgs& a) {
     std::stringstream ss(a.tag_point);
     std::string c;
     while (std::getline(ss, c, ',')) {
-      std::size_t used = 0;
-      double v = 0.0;
-      try {
-        v = std::stod(c, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used == 0 || used != c.size() || !std::isfinite(v) || std::abs(v) > 2.0)
-        throw VisionError("--tag-point '" + a.tag_point + "': '" + c + "' is not a coordinate in metres within 2 m of the hand");
+      const double v = parseNumber(c, "--tag-point '" + a.tag_point + "'");
+      if (std::abs(v) > 2.0)
+        throw VisionError("--tag-point '" + a.tag_point + "': " + c + " m is more than 2 m from the hand link");
       tp.push_back(v);
     }
   }

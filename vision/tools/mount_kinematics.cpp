@@ -24,7 +24,9 @@ std::vector<std::string> splitCsv(const std::string& line) {
   return out;
 }
 
-double number(const std::string& text, const std::string& where) {
+}  // namespace
+
+double parseNumber(const std::string& text, const std::string& where) {
   std::size_t used = 0;
   double v = 0.0;
   try {
@@ -36,8 +38,6 @@ double number(const std::string& text, const std::string& where) {
     throw VisionError(where + ": '" + text + "' is not a finite number");
   return v;
 }
-
-}  // namespace
 
 Eigen::Isometry3d linkPoseAtZero(const control::Model& model, int link) {
   control::KinematicsData data(model);
@@ -83,7 +83,7 @@ std::vector<MountObservation> readMountObservations(const std::string& path, con
                         std::to_string(header.size()));
     MountObservation m;
     m.name = col_view >= 0 ? cells[static_cast<std::size_t>(col_view)] : "line " + std::to_string(line_no);
-    auto cell = [&](int c) { return number(cells[static_cast<std::size_t>(c)], where + ", " + header[static_cast<std::size_t>(c)]); };
+    auto cell = [&](int c) { return parseNumber(cells[static_cast<std::size_t>(c)], where + ", " + header[static_cast<std::size_t>(c)]); };
     m.p_C = cv::Vec3d(cell(col_x), cell(col_y), cell(col_z));
     q.setZero();
     for (const auto& [c, qi] : q_of_col) q[qi] = cell(c);

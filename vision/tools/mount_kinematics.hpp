@@ -28,6 +28,9 @@ struct MountKinematics {
 /// Reads the CSV; p_H = X_B_H(q)^-1 X_B_hand(q) p_hand per row. Throws VisionError naming the file/line.
 std::vector<MountObservation> readMountObservations(const std::string& csv_path, const MountKinematics& k);
 
+/// `text` as a finite number (the whole text); VisionError "<where>: '<text>' is not a finite number".
+double parseNumber(const std::string& text, const std::string& where);
+
 /// Pose of `link` in the model's root frame (the robot base frame B) with every joint at zero.
 Eigen::Isometry3d linkPoseAtZero(const control::Model& model, int link);
 
