@@ -62,7 +62,7 @@ class BadInput : public ::testing::Test {
   // Runs the whole --dump path; returns stats (throws only for setup errors).
   static RunStats runAll(const std::string& dir) {
     SessionSource source(dir, 0.0);
-    StereoTagPipeline pipeline(source.calibration(), defaultCameraMount(), source.info().objects, PipelineOptions{});
+    StereoTagPipeline pipeline(source.calibration(), test::shippedMount(), source.info().objects, PipelineOptions{});
     ReplayOptions ro;
     ro.rate = 0.0;
     std::atomic<bool> stop{false};
@@ -202,7 +202,7 @@ TEST_F(BadInput, UnknownTagFamily) {
   PipelineOptions o;
   o.detector.family = source.info().objects.family();
   try {
-    StereoTagPipeline p(source.calibration(), defaultCameraMount(), source.info().objects, o);
+    StereoTagPipeline p(source.calibration(), test::shippedMount(), source.info().objects, o);
     FAIL() << "unknown family accepted";
   } catch (const VisionError& e) {
     EXPECT_THAT(e.what(), HasSubstr("unknown tag family 'tag99h1'"));
@@ -239,11 +239,31 @@ TEST_F(BadInput, CommandLineErrorsNameTheBadValue) {
   EXPECT_EQ(runCli("--dump " + (dir_ / "x.csv"), err), 2);
   EXPECT_THAT(err, HasSubstr("exactly one source"));
   EXPECT_EQ(runCli("--camera-left 7 --camera-right 8 --calib-left " + (*base_ / "mp4/left.yaml") + " --calib-right " +
+                       (*base_ / "mp4/right.yaml") + " --objects " + (*base_ / "mp4/objects.yaml") + " --mount " +
+                       (*base_ / "mp4/camera_mount.yaml") + " --dump " + (dir_ / "x.csv"),
+                   err),
+            2);
+  EXPECT_THAT(err, HasSubstr("cannot open camera '7'"));
+  // No silent default mount (issue 15, item 2): live cameras without --mount, and a session without
+  // camera_mount.yaml, are errors naming what to pass.
+  EXPECT_EQ(runCli("--camera-left 7 --camera-right 8 --calib-left " + (*base_ / "mp4/left.yaml") + " --calib-right " +
                        (*base_ / "mp4/right.yaml") + " --objects " + (*base_ / "mp4/objects.yaml") + " --dump " +
                        (dir_ / "x.csv"),
                    err),
             2);
-  EXPECT_THAT(err, HasSubstr("cannot open camera '7'"));
+  EXPECT_THAT(err, HasSubstr("live cameras need --mount FILE"));
+  EXPECT_THAT(err, HasSubstr("bringup/vision/camera_mount.yaml"));
+  const std::string no_mount = copyOf("mp4");
+  std::filesystem::remove(no_mount + "/camera_mount.yaml");
+  writeText(no_mount + "/session.yaml",
+            std::regex_replace(readText(no_mount + "/session.yaml"), std::regex("camera_mount: .*\n"), ""));
+  EXPECT_EQ(runCli("--session " + no_mount + " --dump " + (dir_ / "x.csv"), err), 2);
+  EXPECT_THAT(err, HasSubstr("has no camera_mount.yaml: pass --mount FILE"));
+  EXPECT_EQ(runCli("--session " + no_mount + " --dump " + (dir_ / "x.csv") + " --mount " +
+                       (*base_ / "mp4/camera_mount.yaml"),
+                   err),
+            0)
+      << err;
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump /no/such/dir/x.csv", err), 2);
   EXPECT_THAT(err, HasSubstr("/no/such/dir/x.csv"));
   EXPECT_NE(runCli("--bogus-flag", err), 0);
@@ -280,15 +300,6 @@ std::string withMatrixElement(const std::string& text, const std::string& key, i
   return text.substr(0, begin) + value + text.substr(end);
 }
 std::string bin(const std::string& name) { return std::string(REFLEX_BIN_DIR) + "/" + name; }
-template <typename F>
-std::string errorOf(F f) {
-  try {
-    f();
-  } catch (const VisionError& e) {
-    return e.what();
-  }
-  return "no error";
-}
 double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }

@@ -31,7 +31,7 @@ class Replay : public ::testing::Test {
   };
   static Run run(const std::string& session, double rate, double duration, bool loop = false, double start = 0.0) {
     SessionSource source(session, start);
-    StereoTagPipeline pipeline(source.calibration(), source.info().mount.value_or(defaultCameraMount()),
+    StereoTagPipeline pipeline(source.calibration(), source.info().mount.value(),
                                source.info().objects, PipelineOptions{});
     Run r;
     RunCallbacks cb;

@@ -5,6 +5,7 @@
 #include "reflex/vision/session_maker.hpp"
 #include "reflex/vision/stereo_pipeline.hpp"
 #include "reflex/vision/tag_detector.hpp"
+#include "vision_test_util.hpp"
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -171,7 +172,7 @@ TEST(TagDetector, BadFamilyOptionsAndImagesAreErrors) {
 TEST(StereoTagPipeline, BadFramesAreSkippedNotThrown) {
   const StereoCalibration c = testRig();
   ObjectMap objects("tag36h11", {{0, "cup", 0.06}}, "test");
-  StereoTagPipeline p(c, defaultCameraMount(), objects, PipelineOptions{});
+  StereoTagPipeline p(c, test::shippedMount(), objects, PipelineOptions{});
   StereoResult r;
   p.process(cv::Mat(), cv::Mat(480, 640, CV_8U), r);
   EXPECT_EQ(r.status, FrameStatus::kSkipped);
@@ -187,7 +188,7 @@ TEST(StereoTagPipeline, BadFramesAreSkippedNotThrown) {
   // Family mismatch and out-of-range ids are setup errors.
   PipelineOptions other;
   other.detector.family = "tag25h9";
-  EXPECT_THROW(StereoTagPipeline(c, defaultCameraMount(), objects, other), VisionError);
+  EXPECT_THROW(StereoTagPipeline(c, test::shippedMount(), objects, other), VisionError);
   ObjectMap huge("tag36h11", {{5000, "x", 0.06}}, "test");
-  EXPECT_THROW(StereoTagPipeline(c, defaultCameraMount(), huge, PipelineOptions{}), VisionError);
+  EXPECT_THROW(StereoTagPipeline(c, test::shippedMount(), huge, PipelineOptions{}), VisionError);
 }

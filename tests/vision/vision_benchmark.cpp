@@ -34,7 +34,7 @@ const Frames& frames() {
     SessionReader reader(dir / "s");
     out.calib = reader.info().calibration;
     out.objects = reader.info().objects;
-    out.mount = reader.info().mount.value_or(defaultCameraMount());
+    out.mount = reader.info().mount.value();
     StereoFrame fr;
     std::string msg;
     while (reader.read(fr, msg) == ReadStatus::kOk) {

@@ -1,6 +1,7 @@
 #pragma once
 // Shared helpers of the vision tests: temporary folders, the scene scripts of the sessions that the
 // tests generate at run time, and the evaluation of detections against a session's ground truth.
+#include "reflex/vision/error.hpp"
 #include "reflex/vision/runner.hpp"
 #include "reflex/vision/session.hpp"
 #include "reflex/vision/session_maker.hpp"
@@ -16,6 +17,17 @@
 #include <vector>
 
 namespace reflex::vision::test {
+
+/// The message of the VisionError `f` throws, or "no error".
+template <typename F>
+std::string errorOf(F f) {
+  try {
+    f();
+  } catch (const VisionError& e) {
+    return e.what();
+  }
+  return "no error";
+}
 
 /// A fresh folder under the system temp dir, removed when the object dies.
 class TempDir {
@@ -36,6 +48,14 @@ class TempDir {
   std::string path_;
 };
 
+#ifdef REFLEX_SOURCE_DIR
+/// The shipped robot's camera mount (head joints at zero), from its configuration file: there is no
+/// built-in default mount (issue 15, item 2).
+inline CameraMount shippedMount() {
+  return loadCameraMount(std::string(REFLEX_SOURCE_DIR) + "/bringup/vision/camera_mount.yaml");
+}
+#endif
+
 /// The rig shared by the generated sessions: 640x480, f ~ 500 px, plumb_bob distortion, 6 cm
 /// baseline, right camera slightly rotated (so rectification matters).
 inline std::string rigYaml() {
@@ -44,6 +64,9 @@ inline std::string rigYaml() {
   right: {fx: 503, fy: 502, cx: 322.0, cy: 241.0, distortion: [-0.038, 0.010, -0.0004, 0.0002, 0]}
   baseline: 0.06
   right_rpy_deg: [0.3, -0.5, 0.2]
+  mount:   # the shipped robot, head joints at zero (bringup/vision/camera_mount.yaml)
+    translation: [0.08, 0.03, 1.15]
+    rotation_matrix: [0, 0, 1,  -1, 0, 0,  0, -1, 0]
 )";
 }
 
@@ -165,7 +188,7 @@ inline Evaluation evaluate(const std::vector<GroundTruthRow>& truth, const std::
 inline std::vector<Detection> detectSession(const std::string& dir, PipelineOptions options = {}) {
   SessionSource source(dir, 0.0);
   options.detector.family = source.info().objects.family();
-  StereoTagPipeline pipeline(source.calibration(), source.info().mount.value_or(defaultCameraMount()),
+  StereoTagPipeline pipeline(source.calibration(), source.info().mount.value(),
                              source.info().objects, options);
   std::vector<Detection> out;
   RunCallbacks cb;

@@ -104,6 +104,14 @@ void writeRosMatrix(std::ostream& os, const std::string& key, int rows, int cols
 }  // namespace
 
 CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& source) {
+  // An OpenCV FileStorage calibration (stereoCalibrate's M1 D1 ..., "%YAML:1.0", !!opencv-matrix or
+  // XML) is not camera_info: say how to turn it into one instead of naming the first missing field.
+  const bool opencv_file = yaml_text.rfind("%YAML:1.0", 0) == 0 || yaml_text.find("!!opencv-matrix") != std::string::npos ||
+                           yaml_text.find("<opencv_storage>") != std::string::npos;
+  if (opencv_file && yaml_text.find("camera_matrix:") == std::string::npos)
+    throw VisionError(source + ": missing field 'camera_matrix': this is an OpenCV FileStorage calibration, not a ROS "
+                      "camera_info file; convert it with `reflex_calibrate convert " + source +
+                      " [EXTRINSICS_FILE] --out DIR` (writes DIR/left.yaml and DIR/right.yaml, see vision/README.md)");
   const YAML::Node root = parseYaml(yaml_text, source);
   CameraInfo info;
   const int w = asInt(require(root, "image_width", source), source + ": image_width");
@@ -219,16 +227,6 @@ StereoCalibration loadStereoCalibration(const std::string& left_path, const std:
   c.right = loadCameraInfo(right_path);
   validateStereoCalibration(c, left_path, right_path);
   return c;
-}
-
-CameraMount defaultCameraMount() {
-  CameraMount m;
-  // Columns are the optical axes in base coordinates: x_C = -y_B, y_C = -z_B, z_C = +x_B.
-  m.R_B_C = cv::Matx33d(0, 0, 1,
-                        -1, 0, 0,
-                        0, -1, 0);
-  m.p_B_C = cv::Vec3d(0.08, 0.03, 1.15);
-  return m;
 }
 
 CameraMount parseCameraMount(const std::string& yaml_text, const std::string& source) {

@@ -326,7 +326,12 @@ SceneScript parseSceneScript(const std::string& yaml_text, const std::string& so
       const std::vector<double> v = asDoublesN(rig["right_rpy_deg"], 3, w + ".right_rpy_deg");
       s.rig.right_rpy_deg = cv::Vec3d(v[0], v[1], v[2]);
     }
-    if (rig["mount"]) s.rig.mount = parseCameraMount(YAML::Dump(rig["mount"]), w + ".mount");
+    if (!rig["mount"])
+      throw VisionError(w + ": missing field 'mount' (the left camera in the robot base frame, the format of "
+                        "camera_mount.yaml; the shipped robot with its head at zero: bringup/vision/camera_mount.yaml)");
+    s.rig.mount = parseCameraMount(YAML::Dump(rig["mount"]), w + ".mount");
+  } else {
+    throw VisionError(source + ": missing field 'rig' (image size, cameras, baseline and mount)");
   }
   if (const YAML::Node r = root["render"]) {
     const std::string w = source + ": render";

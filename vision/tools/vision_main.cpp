@@ -32,6 +32,10 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
+// No silent default mount (issue 15, item 2): what to pass instead.
+const char* const kMountHelp =
+    " (the left camera in the robot base frame; the shipped robot with its head at zero: "
+    "bringup/vision/camera_mount.yaml; your own robot: see \"Measure the mount\" in vision/README.md)";
 void onSignal(int) { g_stop.store(true); }
 
 }  // namespace
@@ -63,7 +67,8 @@ int main(int argc, char** argv) {
   app.add_option("--calib-right", calib_right, "right camera_info YAML (cameras; overrides the session's)");
   app.add_option("--objects", objects_path, "object map YAML (tag id -> name, size); default: the session's");
   app.add_option("--mount", mount_path,
-                 "camera mount YAML; default: the session's camera_mount.yaml, else the built-in head-zero mount");
+                 "camera mount YAML (left camera in the robot base frame); default: the session's camera_mount.yaml. "
+                 "Required otherwise (the shipped robot, head at zero: bringup/vision/camera_mount.yaml)");
   app.add_option("--dump", dump_path, "write every detection to this CSV and do not publish (offline, no DDS)");
   auto* rate_opt = app.add_option("--rate", replay.rate,
                                   "replay speed: 1 real time, 2 twice as fast, 0 as fast as possible "
@@ -115,6 +120,7 @@ int main(int argc, char** argv) {
       if (calib_left.empty() || calib_right.empty())
         throw VisionError("live cameras need --calib-left and --calib-right");
       if (objects_path.empty()) throw VisionError("live cameras need --objects");
+      if (mount_path.empty()) throw VisionError(std::string("live cameras need --mount FILE") + kMountHelp);
       if (start != 0.0 || replay.loop) throw VisionError("--start and --loop apply to sessions only");
       const StereoCalibration calib = loadStereoCalibration(calib_left, calib_right);
       // A video file standing in for a camera is paced at its own frame rate.
@@ -130,7 +136,7 @@ int main(int argc, char** argv) {
     }
     if (!objects_path.empty()) objects = loadObjectMap(objects_path);
     if (!mount_path.empty()) mount = loadCameraMount(mount_path);
-    if (!mount) mount = defaultCameraMount();
+    if (!mount) throw VisionError("the session " + session + " has no camera_mount.yaml: pass --mount FILE" + kMountHelp);
     popt.detector.family = family.empty() ? objects.family() : family;
     StereoTagPipeline pipeline(source->calibration(), *mount, objects, popt);
 

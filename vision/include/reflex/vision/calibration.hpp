@@ -93,9 +93,9 @@ struct CameraMount {
   cv::Vec3d toBase(const cv::Vec3d& p_C) const { return R_B_C * p_C + p_B_C; }
 };
 
-/// The shipped robot's left camera with head joints at zero: p_B_C = (0.08, 0.03, 1.15),
-/// x_C = -y_B, y_C = -z_B, z_C = +x_B.
-CameraMount defaultCameraMount();
+// There is deliberately no built-in mount (issue 15, item 2): a mount is always a file the user
+// names (the shipped robot's, head joints at zero: bringup/vision/camera_mount.yaml), so a missing
+// one is an error, never the shipped robot's head taken silently for another rig.
 /// Parses a mount YAML node text:  translation: [x, y, z]  (metres) and
 /// rotation_matrix: [9 numbers, row-major R_B_C]. Throws VisionError naming source and field.
 CameraMount parseCameraMount(const std::string& yaml_text, const std::string& source);

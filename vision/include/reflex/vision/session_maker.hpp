@@ -69,7 +69,7 @@ struct RigSpec {
   std::vector<double> D_right = std::vector<double>(5, 0.0);
   double baseline = 0.06;                  ///< m, right camera along +x of the left optical frame
   cv::Vec3d right_rpy_deg{0, 0, 0};        ///< right camera rotation relative to the left
-  CameraMount mount = defaultCameraMount();
+  CameraMount mount;                       ///< required in a scene script (rig.mount), no default
 };
 
 struct RenderSpec {
