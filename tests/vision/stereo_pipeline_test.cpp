@@ -169,6 +169,35 @@ TEST(TagDetector, BadFamilyOptionsAndImagesAreErrors) {
   EXPECT_THROW(TagFamily("tag36h11").bitmap(100000), VisionError);
 }
 
+// Issue 15, the vision_benchmark crash: libapriltag before 3.4.3 starts its worker pool racily
+// (tag_detector.hpp; tests/vision/apriltag_pool_race.cpp crashed libapriltag 3.3.0 alone in 5 of 6
+// runs of up to 30000 pool starts). Built against such a library, a detector with worker threads is refused,
+// naming the option, the version and the fix; with a fixed library it detects what one thread does.
+TEST(TagDetector, WorkerThreadsOnlyWithALibapriltagWhosePoolStartsSafely) {
+  DetectorOptions o;
+  o.threads = 2;
+  if (!apriltagWorkerPoolIsSafe()) {
+    try {
+      TagDetector d(o);
+      FAIL() << "threads = 2 accepted with libapriltag " << apriltagVersion();
+    } catch (const VisionError& e) {
+      EXPECT_THAT(e.what(), AllOf(HasSubstr("threads = 2"), HasSubstr("libapriltag " + apriltagVersion()),
+                                  HasSubstr("3.4.3")));
+    }
+    return;
+  }
+  TagFamily family("tag36h11");
+  cv::Mat img(480, 640, CV_8U, cv::Scalar(200));
+  cv::Mat big;
+  cv::resize(family.bitmap(7), big, cv::Size(), 12, 12, cv::INTER_NEAREST);
+  big.copyTo(img(cv::Rect(200, 100, big.cols, big.rows)));
+  TagDetector one(DetectorOptions{}), two(o);
+  const std::vector<TagDetection> a = one.detect(img), b = two.detect(img);
+  ASSERT_EQ(a.size(), 1u);
+  ASSERT_EQ(b.size(), 1u);
+  for (std::size_t k = 0; k < 4; ++k) EXPECT_LT(cv::norm(a[0].corners[k] - b[0].corners[k]), 1e-9);
+}
+
 TEST(StereoTagPipeline, BadFramesAreSkippedNotThrown) {
   const StereoCalibration c = testRig();
   ObjectMap objects("tag36h11", {{0, "cup", 0.06}}, "test");

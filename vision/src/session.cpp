@@ -436,6 +436,12 @@ void SessionWriter::write(double stamp, const cv::Mat& left, const cv::Mat& righ
   stamps_.push_back(stamp);
 }
 
+void SessionWriter::abandon() {
+  finished_ = true;
+  writer_[0].release();
+  writer_[1].release();
+}
+
 void SessionWriter::finish(const std::string& ground_truth_file) {
   if (finished_) return;
   finished_ = true;

@@ -55,6 +55,10 @@ CameraSource::CameraSource(std::unique_ptr<cv::VideoCapture> left, std::unique_p
                       std::to_string(kMinPaceFps) + ", " + std::to_string(kMaxSessionFps) + "]");
   cap_[0] = std::move(left);
   cap_[1] = std::move(right);
+  for (int k = 0; k < 2; ++k) {
+    const double count = cap_[k] ? cap_[k]->get(cv::CAP_PROP_FRAME_COUNT) : 0.0;  // -1 or 0: a device or stream
+    file_frames_[k] = std::isfinite(count) && count > 0.0 ? std::lround(count) : 0;
+  }
   const double fps = cap_[0]->get(cv::CAP_PROP_FPS);
   period_ = pace_ > 0.0 ? 1.0 / pace_ : (fps > 0.0 && fps < 500.0 ? 1.0 / fps : 1.0 / 30.0);
 }
@@ -75,7 +79,19 @@ ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
     next_due_ += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / pace_));
   }
   const bool stereo = static_cast<bool>(cap_[1]);
-  const bool grabbed = cap_[0]->grab() && (!stereo || cap_[1]->grab());
+  const bool grabbed_left = cap_[0]->grab();
+  const bool grabbed_right = grabbed_left && stereo && cap_[1]->grab();
+  grabbed_[0] += grabbed_left;
+  grabbed_[1] += grabbed_right;
+  const bool grabbed = grabbed_left && (!stereo || grabbed_right);
+  if (!grabbed) {
+    // The normal end of a stand-in video file: it delivered every frame its container lists.
+    const int which = grabbed_left && stereo ? 1 : 0;
+    if (file_frames_[which] > 0 && grabbed_[which] >= file_frames_[which]) {
+      message.clear();
+      return ReadStatus::kEnd;
+    }
+  }
   const double stamp =
       std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
   bool ok = grabbed;
@@ -89,10 +105,15 @@ ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
     }
   }
   if (!ok || frame.left.empty() || frame.right.empty()) {
-    // A camera that stops delivering (unplugged, end of a stand-in file) ends the stream after a
+    // A camera that stops delivering (unplugged; a stand-in file cut short) ends the stream after a
     // few consecutive failures; a single failure is a skipped frame.
     if (++failures_ >= 5 || !grabbed) {
-      message = "camera stopped delivering frames after " + std::to_string(index_) + " frames";
+      const int which = grabbed_left && stereo ? 1 : 0;
+      message = file_frames_[which] > 0
+                    ? std::string(which ? "right" : "left") + " video file ended after " +
+                          std::to_string(grabbed_[which]) + " of the " + std::to_string(file_frames_[which]) +
+                          " frames it lists (truncated or corrupt file)"
+                    : "camera stopped delivering frames after " + std::to_string(index_) + " frames";
       return ReadStatus::kEnd;
     }
     message = "camera frame " + std::to_string(index_) + " could not be retrieved";

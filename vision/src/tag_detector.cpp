@@ -46,6 +46,10 @@ std::string knownList() {
 
 }  // namespace
 
+std::string apriltagVersion() { return REFLEX_APRILTAG_VERSION; }
+
+bool apriltagWorkerPoolIsSafe() { return REFLEX_APRILTAG_POOL_SAFE != 0; }
+
 std::vector<std::string> knownTagFamilies() {
   std::vector<std::string> out;
   for (const FamilyEntry& f : kFamilies) out.emplace_back(f.name);
@@ -89,6 +93,11 @@ void validateDetectorOptions(const DetectorOptions& o) {
     throw VisionError("detector option decimate = " + std::to_string(o.decimate) + " must be >= 1");
   if (o.threads < 1 || o.threads > 64)
     throw VisionError("detector option threads = " + std::to_string(o.threads) + " must be in 1..64");
+  if (o.threads > 1 && !apriltagWorkerPoolIsSafe())
+    throw VisionError("detector option threads = " + std::to_string(o.threads) + ": libapriltag " + apriltagVersion() +
+                      " (this build's) can crash when its worker threads start (a race fixed in libapriltag 3.4.3, "
+                      "AprilRobotics/apriltag PR #339), so only 1 thread per image is allowed; the stereo pipeline "
+                      "already detects the left and right images on two threads");
   if (!(o.blur_sigma >= 0.0) || !std::isfinite(o.blur_sigma))
     throw VisionError("detector option blur_sigma = " + std::to_string(o.blur_sigma) + " must be >= 0");
   if (o.max_hamming < 0 || o.max_hamming > 2)

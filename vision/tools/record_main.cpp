@@ -1,12 +1,16 @@
 // reflex_vision_record: records a session folder (videos, timestamps, calibration, object map,
-// mount) from live stereo cameras. Thin wrapper over reflex::vision::recordSession.
+// mount) from live stereo cameras, or imports recorded video files offline as fast as the machine
+// allows. Thin wrapper over reflex::vision::recordSession and reflex::vision::importVideoFiles.
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/source.hpp"
+#include "reflex/vision/video_files.hpp"
 
 #include <CLI/CLI.hpp>
 
 #include <unistd.h>
 
+#include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
@@ -14,6 +18,61 @@
 namespace {
 std::atomic<bool> g_stop{false};
 void onSignal(int) { g_stop.store(true); }
+
+/// Container for a FourCC: the lossless FFV1 and MJPEG go into AVI (exact frame counts), the rest into MP4.
+std::string containerFor(const std::string& fourcc) { return fourcc == "MJPG" || fourcc == "FFV1" ? "avi" : "mp4"; }
+
+/// Offline import of video files (--from-files / --from-side-by-side); returns the exit code.
+int importFiles(const reflex::vision::VideoFilesSpec& spec, const reflex::vision::StereoCalibration& calib,
+                const reflex::vision::ObjectMap& objects, const std::optional<reflex::vision::CameraMount>& mount,
+                reflex::vision::SessionWriterOptions wo, double fps_given, const std::string& out, bool show) {
+  using namespace reflex::vision;
+  VideoFilesReader reader(spec, calib.left.image_size);  // every check before decoding: VisionError (exit 2)
+  wo.fps = fps_given > 0.0 ? fps_given : reader.nominalFps();
+  SessionWriter writer(out, calib, objects, mount, wo);
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+  auto last_shown = std::chrono::steady_clock::now();
+  const auto t0 = last_shown;
+  ImportStats stats;
+  try {
+    stats = importVideoFiles(reader, writer, g_stop, [&](int done, int total) {
+      const auto now = std::chrono::steady_clock::now();
+      if (!show || now - last_shown < std::chrono::milliseconds(200)) return;
+      last_shown = now;
+      const double rate = done / std::max(1e-9, std::chrono::duration<double>(now - t0).count());
+      if (total > 0)
+        std::fprintf(stderr, "\rimported %d/%d pairs (%.0f pairs/s)   ", done, total, rate);
+      else
+        std::fprintf(stderr, "\rimported %d pairs (%.0f pairs/s)   ", done, rate);
+    });
+  } catch (const VisionError& e) {
+    writer.abandon();  // no session.yaml: the half-written folder is not taken for a session
+    if (show) std::fprintf(stderr, "\n");
+    std::cerr << "reflex_vision_record: error: " << e.what() << " (nothing usable written to '" << out << "')\n";
+    return 2;
+  }
+  if (show) std::fprintf(stderr, "\n");
+  if (stats.frames == 0) {
+    writer.abandon();
+    std::cerr << "reflex_vision_record: error: no frame imported: the video" << (spec.side_by_side() ? "" : "s")
+              << " hold no frame\n";
+    return 3;
+  }
+  try {
+    writer.finish();  // checks every file written and that the videos hold every pair
+  } catch (const VisionError& e) {
+    std::cerr << "reflex_vision_record: error: " << e.what() << "\n";
+    return 4;
+  }
+  const double span = stats.last_stamp - stats.first_stamp;
+  std::printf("imported %d pairs%s into %s with codec %s: stamps %.6f .. %.6f s (span %.3f s, %.2f pairs/s of "
+              "session time); %.1f pairs/s achieved (%.2f s)\n",
+              stats.frames, stats.stopped ? " (interrupted)" : "", out.c_str(), writer.codec().c_str(),
+              stats.first_stamp, stats.last_stamp, span, stats.frames > 1 && span > 0.0 ? (stats.frames - 1) / span : 0.0,
+              stats.frames / std::max(1e-9, stats.wall_seconds), stats.wall_seconds);
+  return 0;
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -21,17 +80,25 @@ int main(int argc, char** argv) {
   CLI::App app{
       "reflex_vision_record: record a stereo session folder from live cameras (two devices or one\n"
       "side-by-side device). A camera is a device index or a video file/URL (a file is read at its own\n"
-      "frame rate, as a stand-in camera). Stops at --frames/--duration, at the end of the source, or on Ctrl-C.\n"
+      "frame rate, as a stand-in camera, and its end is a normal end). Stops at --frames/--duration, at the\n"
+      "end of the source, or on Ctrl-C. Offline, --from-files LEFT RIGHT or --from-side-by-side FILE imports\n"
+      "recorded videos as fast as the machine allows, stamped by --timestamps CSV (frame,stamp), --fps F\n"
+      "(stamp i = i/F) or the video's own frame rate; --codec FFV1 keeps the images exactly (lossless).\n"
       "The --out folder is created; its parent must exist. Exit: 0 recorded, 2 bad option or input (named),\n"
       "3 nothing recorded, 4 the session could not be written (file and cause named)."};
   std::string cam_left, cam_right, sbs, calib_left, calib_right, objects_path, mount_path, out, name = "recording";
-  std::string codec;
+  std::string codec, from_sbs, timestamps;
+  std::vector<std::string> from_files;
   RecordOptions ro;
   double fps = 0.0;
-  bool quiet = false;
+  bool quiet = false, progress = false;
   app.add_option("--camera-left", cam_left, "left camera: device index or video file/URL");
   app.add_option("--camera-right", cam_right, "right camera: device index or video file/URL");
   app.add_option("--side-by-side", sbs, "one side-by-side stereo camera: device index or video file/URL");
+  app.add_option("--from-files", from_files, "offline: import LEFT RIGHT video files (as fast as possible)")
+      ->expected(2);
+  app.add_option("--from-side-by-side", from_sbs, "offline: import one side-by-side video file (left half = left)");
+  app.add_option("--timestamps", timestamps, "offline: capture stamps, CSV 'frame,stamp' (seconds), one row per frame");
   app.add_option("--calib-left", calib_left, "left camera_info YAML")->required();
   app.add_option("--calib-right", calib_right, "right camera_info YAML")->required();
   app.add_option("--objects", objects_path, "object map YAML copied into the session")->required();
@@ -40,22 +107,51 @@ int main(int argc, char** argv) {
   app.add_option("--name", name, "session name")->capture_default_str();
   app.add_option("--frames", ro.max_frames, "stop after this many pairs (0 = no limit)");
   app.add_option("--duration", ro.duration, "stop after this many seconds (0 = no limit)");
-  app.add_option("--fps", fps, "nominal frame rate written to the videos (default: the camera's)");
-  app.add_option("--codec", codec, "FourCC to use first (default avc1/mp4, then mp4v/mp4, MJPG/avi)");
+  auto* fps_opt = app.add_option("--fps", fps,
+                                  "cameras: nominal frame rate written to the videos (default: the camera's); "
+                                  "offline: stamp i = i / F (default: the video's rate)");
+  app.add_option("--codec", codec,
+                 "FourCC to use first (default avc1/mp4, then mp4v/mp4, MJPG/avi; FFV1/avi is lossless)");
   app.add_flag("--quiet", quiet, "no progress display");
+  app.add_flag("--progress", progress, "show progress even if stderr is not a terminal");
   CLI11_PARSE(app, argc, argv);
   try {
-    const int sources = (!cam_left.empty() || !cam_right.empty()) + (!sbs.empty());
-    if (sources != 1) throw VisionError("give --camera-left N --camera-right M, or --side-by-side N");
+    const bool offline = !from_files.empty() || !from_sbs.empty();
+    const int sources = (!cam_left.empty() || !cam_right.empty()) + (!sbs.empty()) + (!from_files.empty()) +
+                        (!from_sbs.empty());
+    if (sources != 1)
+      throw VisionError("give one source: --camera-left N --camera-right M, --side-by-side N, --from-files LEFT RIGHT "
+                        "or --from-side-by-side FILE");
+    if (fps_opt->count() > 0 && !(fps > 0.0 && fps <= kMaxSessionFps))
+      throw VisionError("--fps " + std::to_string(fps) + " must be a number in (0, " + std::to_string(kMaxSessionFps) +
+                        "]");
+    if (!timestamps.empty() && !offline)
+      throw VisionError("--timestamps applies to --from-files / --from-side-by-side (cameras are stamped live)");
+    if (offline && (ro.max_frames != 0 || ro.duration != 0.0))
+      throw VisionError("--frames and --duration apply to cameras; an import takes every frame of the videos");
     if (!cam_left.empty() != !cam_right.empty())
       throw VisionError("--camera-left and --camera-right must be given together");
     if (ro.max_frames < 0) throw VisionError("--frames " + std::to_string(ro.max_frames) + " must be >= 0");
     if (ro.duration < 0.0) throw VisionError("--duration " + std::to_string(ro.duration) + " must be >= 0");
-    if (fps < 0.0) throw VisionError("--fps " + std::to_string(fps) + " must be > 0");
     const StereoCalibration calib = loadStereoCalibration(calib_left, calib_right);
     const ObjectMap objects = loadObjectMap(objects_path);
     std::optional<CameraMount> mount;
     if (!mount_path.empty()) mount = loadCameraMount(mount_path);
+    SessionWriterOptions wo;
+    wo.name = name;
+    if (!codec.empty()) {
+      if (codec.size() != 4) throw VisionError("--codec '" + codec + "' is not a FourCC");
+      wo.codecs.insert(wo.codecs.begin(), {codec, containerFor(codec)});
+    }
+    const bool show = !quiet && (progress || isatty(STDERR_FILENO));
+    if (offline) {
+      VideoFilesSpec spec;
+      spec.left = from_sbs.empty() ? from_files[0] : from_sbs;
+      spec.right = from_sbs.empty() ? from_files[1] : std::string();
+      spec.timestamps = timestamps;
+      spec.fps = fps;
+      return importFiles(spec, calib, objects, mount, wo, fps, out, show);
+    }
     const std::string& first_spec = sbs.empty() ? cam_left : sbs;
     auto left = openCapture(first_spec);
     const double cam_fps = left->get(cv::CAP_PROP_FPS);
@@ -65,17 +161,10 @@ int main(int argc, char** argv) {
       source = std::make_unique<CameraSource>(std::move(left), nullptr, calib, pace);
     else
       source = std::make_unique<CameraSource>(std::move(left), openCapture(cam_right), calib, pace);
-    SessionWriterOptions wo;
-    wo.name = name;
     wo.fps = fps > 0.0 ? fps : (cam_fps > 0.0 && cam_fps < 500.0 ? cam_fps : 30.0);
-    if (!codec.empty()) {
-      if (codec.size() != 4) throw VisionError("--codec '" + codec + "' is not a FourCC");
-      wo.codecs.insert(wo.codecs.begin(), {codec, codec == "MJPG" ? "avi" : "mp4"});
-    }
     SessionWriter writer(out, calib, objects, mount, wo);
     std::signal(SIGINT, onSignal);
     std::signal(SIGTERM, onSignal);
-    const bool show = !quiet && isatty(STDERR_FILENO);
     const RecordStats stats = recordSession(
         *source, writer, ro, g_stop,
         [](int frame, const std::string& why) {

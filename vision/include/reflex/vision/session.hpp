@@ -156,6 +156,9 @@ class SessionWriter {
   /// Throws VisionError naming the file if a file could not be written or a video holds fewer
   /// frames than were written (disk full, write error).
   void finish(const std::string& ground_truth_file = "");
+  /// Stops without finishing (after an error part-way): the videos are closed, and neither
+  /// timestamps.csv nor session.yaml is written, so no reader takes the folder for a session.
+  void abandon();
   int frames() const { return static_cast<int>(stamps_.size()); }
   const std::string& codec() const { return codec_; }
 

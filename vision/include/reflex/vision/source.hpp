@@ -62,6 +62,10 @@ bool isDeviceSpec(const std::string& spec);
 std::unique_ptr<cv::VideoCapture> openCapture(const std::string& spec);
 
 /// Live stereo cameras. Stamps are UNIX time (system clock) taken right after both grab() calls.
+/// A camera that stops delivering frames ends the stream with a message (an error for the caller).
+/// A video file standing in for a camera (a capture that reports a frame count > 0; devices and live
+/// streams report none) ends normally (kEnd, empty message) once it has delivered that many frames;
+/// ending earlier is still an error (a truncated file).
 class CameraSource : public StereoSource {
  public:
   static constexpr double kMinPaceFps = 0.1;
@@ -82,6 +86,8 @@ class CameraSource : public StereoSource {
 
  private:
   std::unique_ptr<cv::VideoCapture> cap_[2];
+  long file_frames_[2] = {0, 0};  ///< frame count of a stand-in video file, 0 for a device or stream
+  long grabbed_[2] = {0, 0};      ///< frames grabbed so far from each capture
   const std::atomic<bool>* stop_ = nullptr;
   StereoCalibration calibration_;
   double period_ = 0.1;

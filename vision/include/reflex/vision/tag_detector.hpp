@@ -1,6 +1,15 @@
 #pragma once
 // RAII wrappers around the AprilTag 3 C library: a tag family and a detector.
 // One TagDetector is not safe to call from two threads at once; use one per thread.
+//
+// Worker threads per image (DetectorOptions::threads > 1) are libapriltag's own worker pool. Before
+// libapriltag 3.4.3 that pool starts racily: its threads take tasks from a list the caller is still
+// filling, without a lock, and when the list grows (realloc) a worker calls a function pointer read
+// from freed memory -- SIGSEGV: 5 of 6 runs of up to 30000 pool starts crashed, after 3000-22000,
+// on this 2-core machine at load ~15 (tests/vision/apriltag_pool_race.cpp, libapriltag alone;
+// upstream issue #70, fixed by PR #339). It was the vision_benchmark crash of issue 15. Built against such a library,
+// threads > 1 is refused (VisionError naming the version); the stereo pipeline's parallelism
+// (left and right image on two threads, one detector each) does not use the pool.
 #include <opencv2/core.hpp>
 
 #include <array>
@@ -12,6 +21,11 @@ struct apriltag_family;
 struct apriltag_detector;
 
 namespace reflex::vision {
+
+/// libapriltag's version this library was built against (pkg-config), e.g. "3.3.0".
+std::string apriltagVersion();
+/// False if that version's worker pool has the start race above (then threads must be 1).
+bool apriltagWorkerPoolIsSafe();
 
 /// Names accepted by TagFamily (those shipped with libapriltag 3.3).
 std::vector<std::string> knownTagFamilies();
@@ -43,7 +57,7 @@ class TagFamily {
 struct DetectorOptions {
   std::string family = "tag36h11";
   double decimate = 1.0;        ///< quad_decimate (>= 1); corners are refined at full resolution
-  int threads = 1;              ///< worker threads of one detector (>= 1)
+  int threads = 1;              ///< libapriltag worker threads of one detector (1..64; only 1 if !apriltagWorkerPoolIsSafe())
   double blur_sigma = 0.0;      ///< quad_sigma (>= 0)
   bool refine_edges = true;
   int max_hamming = 1;          ///< detections with more corrected bits are dropped (0..2)
