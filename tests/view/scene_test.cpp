@@ -205,6 +205,65 @@ TEST(Scene, CapsulesAreTheDistanceModuleSegments) {
   std::printf("capsule ends vs distance module: max %.2e m\n", worst);
 }
 
+// When the controller names a body-schema slot as an arm's closest segment ("body_schema_0": the slot
+// numbering is the controller's), the line goes from the arm's segment to the nearest enabled body-schema
+// segment of the input (the grasped bar), witness points recomputed here by brute force; a disabled one
+// is not used, and none enabled draws no line.
+TEST(Scene, ClosestLineToABodySchemaSegment) {
+  const SceneModel scene = asimo();
+  const control::Model& model = scene.model;
+  SceneData data(scene);
+  std::mt19937_64 rng(5);
+  SceneInput in = inputAt(scene, rng);
+  in.arms[1].valid = true;
+  in.arms[1].closest_a = "r_hand";
+  in.arms[1].closest_b = "body_schema_0";
+  in.arms[1].zone = Zone::kYellow;
+  SchemaSegmentState bar;
+  bar.name = "bar";
+  bar.parent_link = "l_hand";
+  bar.a_L = Eigen::Vector3d(-0.16, 0.0, -0.06);
+  bar.b_L = Eigen::Vector3d(0.16, 0.0, -0.06);
+  bar.radius = 0.015;
+  SchemaSegmentState far = bar;  // disabled, and nearer the right hand: must not be used
+  far.name = "old";
+  far.parent_link = "r_hand";
+  far.enabled = false;
+  in.schema_segments = {far, bar};
+  ASSERT_TRUE(updateScene(scene, data, in));
+  control::KinematicsData kin(model);
+  ASSERT_TRUE(control::computeForwardKinematics(model, kin, in.q));
+  const int sa = model.segmentIndex("r_hand");
+  const Eigen::Isometry3d& XA = kin.X_W_L[model.segments[sa].link];
+  const Eigen::Isometry3d& XB = kin.X_W_L[model.linkIndex("l_hand")];
+  double best = 1e9;
+  Eigen::Vector3d pa = Eigen::Vector3d::Zero(), pb = Eigen::Vector3d::Zero();
+  for (int i = 0; i < model.segments[sa].num_primitives; ++i) {
+    const auto& A = model.primitives[static_cast<std::size_t>(model.segments[sa].first_primitive + i)];
+    double d;
+    Eigen::Vector3d a, b, n;
+    control::capsuleCapsuleDistance(XA * A.a_L, XA * A.b_L, A.radius, XB * bar.a_L, XB * bar.b_L, bar.radius,
+                                    Eigen::Vector3d::UnitZ(), d, a, b, n);
+    if (d < best) {
+      best = d;
+      pa = a;
+      pb = b;
+    }
+  }
+  const json update = buildSceneUpdate(scene, data, in);
+  std::map<std::string, json> by_id;
+  for (const json& e : update["entities"]) by_id[e["id"].get<std::string>()] = e;
+  const json& right = by_id.at("closest/right");
+  ASSERT_EQ(right["lines"].size(), 1U);
+  EXPECT_LT((vec(right["lines"][0]["points"][0]) - pa).norm() + (vec(right["lines"][0]["points"][1]) - pb).norm(), 1e-12);
+  in.schema_segments = {far};
+  ASSERT_TRUE(updateScene(scene, data, in));
+  by_id.clear();
+  const json update_without = buildSceneUpdate(scene, data, in);
+  for (const json& e : update_without["entities"]) by_id[e["id"].get<std::string>()] = e;
+  EXPECT_TRUE(by_id.at("closest/right")["lines"].empty()) << "no enabled body-schema segment: no line";
+}
+
 TEST(Scene, ClosestPairLineAndZoneColours) {
   const SceneModel scene = asimo();
   const control::Model& model = scene.model;

@@ -1,6 +1,7 @@
 // Scene channels (scene.hpp): frame transforms, scene entities and status as foxglove JSON.
 #include "reflex/view/scene.hpp"
 
+#include <reflex/control/geometry.hpp>
 #include <reflex/control/urdf_loader.hpp>
 
 #include <Eigen/Geometry>
@@ -213,6 +214,47 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
     for (std::size_t p = 0; p < model.pairs.size(); ++p)
       if (model.pairs[p].a == lo && model.pairs[p].b == hi && data.dist.pairs[p].active) data.closest_pair[arm] = static_cast<int>(p);
   }
+  // The lines: the named pair's witness points, or for a body-schema slot (the view does not know the
+  // controller's slot numbering) the nearest enabled schema segment of the input to the arm's segment.
+  for (std::size_t arm = 0; arm < 2; ++arm) {
+    data.closest_line[arm] = false;
+    const int p = data.closest_pair[arm];
+    if (p >= 0) {
+      const control::PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
+      data.closest_a_W[arm] = pd.p_W_a;
+      data.closest_b_W[arm] = pd.p_W_b;
+      data.closest_line[arm] = finite(pd.p_W_a) && finite(pd.p_W_b);
+      continue;
+    }
+    const ArmState& st = input.arms[arm];
+    const int a = model.segmentIndex(st.closest_a);
+    const int b = model.segmentIndex(st.closest_b);
+    if (!st.valid || a < 0 || a >= model.num_robot_segments || b < model.num_robot_segments) continue;
+    const control::Segment& seg = model.segments[static_cast<std::size_t>(a)];
+    const Eigen::Isometry3d& X_W_A = data.kin.X_W_L[static_cast<std::size_t>(seg.link)];
+    double best = std::numeric_limits<double>::infinity();
+    for (const SchemaSegmentState& sch : input.schema_segments) {
+      const int link = model.linkIndex(sch.parent_link);
+      if (!sch.enabled || link < 0 || !(sch.radius > 0.0) ||
+          !std::isfinite(sch.radius) || !finite(sch.a_L) || !finite(sch.b_L))
+        continue;
+      const Eigen::Isometry3d& X_W_S = data.kin.X_W_L[static_cast<std::size_t>(link)];
+      const Eigen::Vector3d s0 = X_W_S * sch.a_L, s1 = X_W_S * (sch.capsule ? sch.b_L : sch.a_L);
+      for (int k = 0; k < seg.num_primitives; ++k) {
+        const control::Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
+        double d = 0.0;
+        Eigen::Vector3d pa, pb, n;
+        control::capsuleCapsuleDistance(X_W_A * prim.a_L, X_W_A * prim.b_L, prim.radius, s0, s1, sch.radius,
+                                        Eigen::Vector3d::UnitZ(), d, pa, pb, n);
+        if (d < best && finite(pa) && finite(pb)) {
+          best = d;
+          data.closest_a_W[arm] = pa;
+          data.closest_b_W[arm] = pb;
+          data.closest_line[arm] = true;
+        }
+      }
+    }
+  }
   return true;
 }
 
@@ -245,21 +287,18 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
   }
   for (std::size_t arm = 0; arm < 2; ++arm) {
     json e = entityJson(scene, input.stamp_ns, "closest/" + scene.arm_names[arm]);
-    const int p = data.closest_pair[arm];
-    if (p >= 0) {
-      const control::PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
-      if (finite(pd.p_W_a) && finite(pd.p_W_b)) {
+    if (data.closest_line[arm]) {
+      {
         const Rgba c = zoneColour(input.arms[arm].zone);
         e["lines"].push_back(json{{"type", 2},  // LINE_LIST: one segment a -> b
                                   {"pose", poseJson(Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity())},
                                   {"thickness", 3.0},
                                   {"scale_invariant", true},
-                                  {"points", json::array({vec3Json(pd.p_W_a), vec3Json(pd.p_W_b)})},
+                                  {"points", json::array({vec3Json(data.closest_a_W[arm]), vec3Json(data.closest_b_W[arm])})},
                                   {"color", colourJson({c.r, c.g, c.b, 1.0})},
                                   {"colors", json::array()},
                                   {"indices", json::array()}});
-        e["metadata"].push_back(keyValue("pair", model.segments[static_cast<std::size_t>(pd.seg_a)].name + "," +
-                                                     model.segments[static_cast<std::size_t>(pd.seg_b)].name));
+        e["metadata"].push_back(keyValue("pair", input.arms[arm].closest_a + "," + input.arms[arm].closest_b));
       }
     }
     entities.push_back(std::move(e));

@@ -121,6 +121,12 @@ struct SceneData {
   control::KinematicsData kin;
   control::DistanceData dist;
   std::array<int, 2> closest_pair{-1, -1};  ///< index into model.pairs of each arm's named pair, -1 if none
+  /// The line drawn for each arm's closest pair (witness points in the world frame): the named robot
+  /// pair's, or, when the controller names a body-schema slot (`body_schema_N`, whose slot numbering
+  /// is the controller's own), the nearest enabled body-schema segment of the input to the arm's
+  /// named segment. closest_line[arm] false: nothing to draw.
+  std::array<bool, 2> closest_line{false, false};
+  std::array<Eigen::Vector3d, 2> closest_a_W, closest_b_W;
   std::vector<Zone> segment_zone;           ///< per segment: the zone it is coloured with
   std::vector<bool> segment_in_arm;         ///< per segment: moved by an arm or named in a closest pair
 };
