@@ -19,7 +19,8 @@ esac
 export REFLEX_BUILD_DIR=$build_dir
 if [ "$sim_only" -eq 0 ]; then
   echo "demo.sh: flagship experiment (about 2.5 minutes: two real-time replays of a 60 s session)"
-  /usr/bin/python3 "$here/bringup/flagship/run_flagship.py" --out "$here/out/flagship"
+  # --view: the live 3D view of the run with avoidance at http://localhost:8765 (open it while it runs).
+  /usr/bin/python3 "$here/bringup/flagship/run_flagship.py" --out "$here/out/flagship" --view "${REFLEX_VIEW_PORT:-8765}"
 fi
 out=$here/out/sim
 echo "demo.sh: the paper's experiments on the kinematic robot (reflex_sim all)"
@@ -28,3 +29,9 @@ echo "demo.sh: the paper's experiments on the kinematic robot (reflex_sim all)"
 echo "demo.sh: the same without avoidance (a closest distance < 0 means the segments penetrate):"
 grep -E "^scenario|min distance|min virtual" "$out/no_avoidance.txt"
 echo "demo.sh: done. Flagship report: out/flagship/report.md; simulation plots: out/sim/<scenario>/"
+if [ "$sim_only" -eq 0 ]; then
+  port=${REFLEX_VIEW_PORT:-8765}
+  echo "demo.sh: the flagship run's MCAP recording (Foxglove: File -> Open local file): out/flagship/avoidance/bus.mcap"
+  echo "demo.sh: the live 3D view served the run at http://localhost:$port (Foxglove: ws://localhost:$port); to watch"
+  echo "         the recording there again: build/bin/reflex_view --port $port & build/bin/reflex_play out/flagship/avoidance/bus.mcap"
+fi

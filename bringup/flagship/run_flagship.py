@@ -170,10 +170,19 @@ def run_once(args, label, avoidance):
         procs.append(Proc("behavior", beh, os.path.join(out, "behavior.log"), env))
         recorder = os.path.join(bindir, "reflex_record")
         if os.path.exists(recorder):
-            rec = [recorder, "record"] + dds("recorder") + ["--output", os.path.join(out, "bus.rfx")]
+            # MCAP (issue 14): the recording opens in Foxglove (File -> Open local file).
+            rec = [recorder, "record"] + dds("recorder") + ["--output", os.path.join(out, "bus.mcap")]
             if args.secure:
                 rec.append("--progress")
             procs.append(Proc("recorder", rec, os.path.join(out, "recorder.log"), env))
+        # The live 3D view (reflex_view, reads only) during the run with avoidance, if asked for. Not with
+        # DDS-Security: the view has no identity of its own yet. A view that cannot start (port in use)
+        # is reported and the experiment goes on: it is a window onto the run, not part of it.
+        view = os.path.join(bindir, "reflex_view")
+        if args.view and avoidance and not args.secure and os.path.exists(view):
+            procs.append(Proc("view", [view, "--port", str(args.view)] + dds("view"),
+                              os.path.join(out, "view.log"), env))
+            log("live 3D view of this run: http://localhost:%d (Foxglove: ws://localhost:%d)" % (args.view, args.view))
         if args.secure:
             env_note["secure_startup_s"] = wait_secure_ready(procs, out)
         else:
@@ -198,7 +207,7 @@ def run_once(args, label, avoidance):
                 last_tenth = int(done * 10)
                 print("flagship: %s run %3.0f%%" % (label, 100 * done), flush=True)
             for p in procs:
-                if p is not vision and not p.alive() and p.name != "recorder":
+                if p is not vision and not p.alive() and p.name not in ("recorder", "view"):
                     raise RuntimeError("%s died during the run (see %s)" % (p.name, p.log.name))
         if tty:
             print("", flush=True)
@@ -212,7 +221,11 @@ def run_once(args, label, avoidance):
         env_note["exit_codes"] = codes
         with open(os.path.join(out, "run.json"), "w") as fh:
             json.dump(env_note, fh, indent=2)
-    bad = {k: v for k, v in codes.items() if v not in (0, -signal.SIGTERM, 128 + signal.SIGTERM, None)}
+    ok_codes = (0, -signal.SIGTERM, 128 + signal.SIGTERM, None)
+    if codes.get("view") not in ok_codes:
+        log("warning: the live view ended with exit code %s (see %s); the run itself is unaffected"
+            % (codes.get("view"), os.path.join(out, "view.log")))
+    bad = {k: v for k, v in codes.items() if v not in ok_codes and k != "view"}
     if bad:
         raise RuntimeError("processes ended badly: %s (logs in %s)" % (bad, out))
     return out
@@ -232,9 +245,13 @@ def main():
                          "DIR/profiles/<module>.xml (DIR made by bringup/security/make_security.sh when missing "
                          "or empty)")
     ap.add_argument("--no-report", action="store_true")
+    ap.add_argument("--view", type=int, metavar="PORT", default=0,
+                    help="serve the live 3D view (reflex_view) on this port during the run with avoidance")
     args = ap.parse_args()
     if not (0 <= args.domain <= 231):
         ap.error("--domain %d: must be in 0..231 (two consecutive ids are used)" % args.domain)
+    if args.view and not 1 <= args.view <= 65535:
+        ap.error("--view %d: a TCP port is 1..65535" % args.view)
     if not args.rate > 0:
         ap.error("--rate %g: must be positive" % args.rate)
     for path, what in ((args.session, "session folder"), (args.behavior, "behavior configuration")):

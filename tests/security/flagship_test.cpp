@@ -136,7 +136,7 @@ TEST(SecureFlagship, AvoidanceRunGivesThePlainOutcomeAndAnOutsiderReceivesNothin
 
   // The recorder (its own identity) recorded the chain: vision's objects (10 Hz for 60 s), behavior's
   // hand targets, the controller's status (200 Hz); best effort on a loaded machine, hence the margins.
-  const std::string info = commandOutput(std::string(REFLEX_BIN_DIR) + "/reflex_record info " + out + "/avoidance/bus.rfx");
+  const std::string info = commandOutput(std::string(REFLEX_BIN_DIR) + "/reflex_record info " + out + "/avoidance/bus.mcap");
   EXPECT_GT(recordedCount(info, "reflex/object_targets"), 400) << info;
   EXPECT_GT(recordedCount(info, "reflex/hand_targets"), 100) << info;
   EXPECT_GT(recordedCount(info, "reflex/control_status"), 6000) << info;
