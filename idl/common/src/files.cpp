@@ -108,4 +108,17 @@ std::string outputFolderProblem(const std::string& dir) {
   }
 }
 
+bool preadAll(int fd, std::uint64_t offset, void* dst, std::size_t n) noexcept {
+  auto* out = static_cast<std::uint8_t*>(dst);
+  while (n > 0) {
+    const ssize_t got = ::pread(fd, out, n, static_cast<off_t>(offset));
+    if (got < 0 && errno == EINTR) continue;
+    if (got <= 0) return false;
+    out += got;
+    offset += static_cast<std::uint64_t>(got);
+    n -= static_cast<std::size_t>(got);
+  }
+  return true;
+}
+
 }  // namespace reflex::common

@@ -489,18 +489,7 @@ McapReader::~McapReader() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-bool McapReader::readAt(std::uint64_t offset, void* dst, std::size_t n) {
-  auto* out = static_cast<std::uint8_t*>(dst);
-  while (n > 0) {
-    const ssize_t got = ::pread(fd_, out, n, static_cast<off_t>(offset));
-    if (got < 0 && errno == EINTR) continue;
-    if (got <= 0) return false;
-    out += got;
-    offset += static_cast<std::uint64_t>(got);
-    n -= static_cast<std::size_t>(got);
-  }
-  return true;
-}
+bool McapReader::readAt(std::uint64_t offset, void* dst, std::size_t n) { return common::preadAll(fd_, offset, dst, n); }
 
 void McapReader::rewind() {
   pos_ = valid_end_ = 8;

@@ -265,19 +265,7 @@ void RecordWriter::close() {
 
 namespace {
 
-/// Reads exactly n bytes at offset (false on a short read or an error).
-bool preadAll(int fd, std::uint64_t offset, void* dst, std::size_t n) {
-  auto* out = static_cast<std::uint8_t*>(dst);
-  while (n > 0) {
-    const ssize_t got = ::pread(fd, out, n, static_cast<off_t>(offset));
-    if (got < 0 && errno == EINTR) continue;
-    if (got <= 0) return false;
-    out += got;
-    offset += static_cast<std::uint64_t>(got);
-    n -= static_cast<std::size_t>(got);
-  }
-  return true;
-}
+using common::preadAll;
 
 constexpr std::size_t kBlock = 4096;        // read cache: direct-mapped blocks of the file
 constexpr std::size_t kCacheBlocks = 64;

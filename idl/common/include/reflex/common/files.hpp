@@ -16,6 +16,8 @@
 // No dependency beyond the C++ library and POSIX: usable from every layer (see CMakeLists.txt).
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <string>
 #include <sys/types.h>
 
@@ -54,5 +56,9 @@ std::string writeError(const std::string& path, int err);
 /// "cannot write the standard output: <cause>" (e.g. `tool > /dev/full`: No space left on device).
 /// Tools call it last and exit non-zero with the message: output that was lost is not success.
 std::string flushStandardOutput();
+
+/// Reads exactly n bytes of file descriptor `fd` at `offset` (pread, EINTR retried): false on a short
+/// read or an error. The one home of this loop (the .rfx and the MCAP readers).
+bool preadAll(int fd, std::uint64_t offset, void* dst, std::size_t n) noexcept;
 
 }  // namespace reflex::common
