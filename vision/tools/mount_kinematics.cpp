@@ -1,4 +1,5 @@
 #include "mount_kinematics.hpp"
+#include "reflex/common/files.hpp"
 
 #include "reflex/vision/error.hpp"
 
@@ -27,14 +28,8 @@ std::vector<std::string> splitCsv(const std::string& line) {
 }  // namespace
 
 double parseNumber(const std::string& text, const std::string& where) {
-  std::size_t used = 0;
   double v = 0.0;
-  try {
-    v = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != text.size() || !std::isfinite(v))
+  if (!common::parseFiniteNumber(text, v))
     throw VisionError(where + ": '" + text + "' is not a finite number");
   return v;
 }

@@ -1,5 +1,6 @@
 // reflex_mujoco's DDS adapter (see robot_node.hpp).
 #include "reflex/mujoco/robot_node.hpp"
+#include "reflex/common/files.hpp"
 
 #include "reflex/control/urdf_loader.hpp"
 
@@ -59,14 +60,8 @@ Eigen::VectorXd parseInitialConfiguration(const control::Model& model, const std
     const std::string name = entry.substr(0, eq), text = entry.substr(eq + 1);
     const int qi = model.qIndex(name);
     if (qi < 0) throw std::invalid_argument("--q '" + entry + "': unknown joint '" + name + "'");
-    std::size_t used = 0;
     double v = 0.0;
-    try {
-      v = std::stod(text, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != text.size() || !std::isfinite(v))
+    if (!common::parseFiniteNumber(text, v))
       throw std::invalid_argument("--q '" + entry + "': '" + text + "' is not a finite number");
     if (v < model.q_lower[qi] || v > model.q_upper[qi])
       throw std::invalid_argument("--q '" + entry + "': outside the joint limits [" + std::to_string(model.q_lower[qi]) +

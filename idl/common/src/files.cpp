@@ -1,6 +1,8 @@
 #include "reflex/common/files.hpp"
 
 #include <cerrno>
+#include <cmath>
+#include <exception>
 #include <cstdio>
 #include <cstring>
 #include <iostream>
@@ -106,6 +108,19 @@ std::string outputFolderProblem(const std::string& dir) {
     if (up == probe) return "output folder " + quoted(dir) + ": no existing ancestor folder";
     probe = up;
   }
+}
+
+bool parseFiniteNumber(const std::string& text, double& out) noexcept {
+  std::size_t used = 0;
+  double v = 0.0;
+  try {
+    v = std::stod(text, &used);
+  } catch (const std::exception&) {
+    return false;
+  }
+  if (used == 0 || used != text.size() || !std::isfinite(v)) return false;
+  out = v;
+  return true;
 }
 
 bool preadAll(int fd, std::uint64_t offset, void* dst, std::size_t n) noexcept {

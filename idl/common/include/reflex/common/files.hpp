@@ -57,6 +57,11 @@ std::string writeError(const std::string& path, int err);
 /// Tools call it last and exit non-zero with the message: output that was lost is not success.
 std::string flushStandardOutput();
 
+/// Parses `text` as one finite number written whole (no leading/trailing characters, no NaN/inf):
+/// true and the value in `out`, else false (out unchanged). The callers name the bad text in their
+/// own error type. Never throws.
+bool parseFiniteNumber(const std::string& text, double& out) noexcept;
+
 /// Reads exactly n bytes of file descriptor `fd` at `offset` (pread, EINTR retried): false on a short
 /// read or an error. The one home of this loop (the .rfx and the MCAP readers).
 bool preadAll(int fd, std::uint64_t offset, void* dst, std::size_t n) noexcept;
