@@ -1,0 +1,756 @@
+// Finding a humanoid's arms, hands, head, rest posture and collision gaps (robot_setup.hpp).
+#include "reflex/control/robot_setup.hpp"
+
+#include "reflex/control/distance.hpp"
+#include "reflex/control/kinematics.hpp"
+#include "reflex/control/mesh_fit.hpp"
+#include "reflex/control/onboard.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <random>
+#include <sstream>
+
+namespace reflex::control {
+namespace {
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
+std::string vec(const Eigen::Vector3d& v) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", v.x(), v.y(), v.z());
+  return buf;
+}
+
+// A serial run of movable joints (see the header): its links (child of each joint, in order, with
+// the fixed links between them), its revolute joints, the branching link above it.
+struct Chain {
+  int branch = -1;
+  std::vector<int> links;   // every link of the run, top first
+  std::vector<int> joints;  // q indices of its joints, top first
+  bool prismatic = false;
+  int first_link = -1;      // link moved by the first joint
+  Eigen::Vector3d start_W = Eigen::Vector3d::Zero();  // first joint's origin at the neutral configuration
+  std::string describe(const Model& m) const {
+    std::string s = "[";
+    for (std::size_t i = 0; i < joints.size(); ++i) s += (i ? " " : "") + m.q_names[joints[i]];
+    return s + "]";
+  }
+};
+
+struct Tree {
+  std::vector<std::vector<int>> children;
+  std::vector<bool> movable_below;  // the link's subtree (its own joint included) holds a movable joint
+  std::vector<int> segment_of;      // robot segment on the link, -1 none
+  explicit Tree(const Model& m)
+      : children(m.links.size()), movable_below(m.links.size(), false), segment_of(m.links.size(), -1) {
+    for (std::size_t l = 0; l < m.links.size(); ++l)
+      if (m.links[l].parent >= 0) children[m.links[l].parent].push_back(static_cast<int>(l));
+    for (int l = static_cast<int>(m.links.size()) - 1; l >= 0; --l) {  // children come after parents
+      if (m.links[l].q_index >= 0) movable_below[l] = true;
+      if (movable_below[l] && m.links[l].parent >= 0) movable_below[m.links[l].parent] = true;
+    }
+    for (int s = 0; s < m.num_robot_segments; ++s) segment_of[m.segments[s].link] = s;
+  }
+  std::vector<int> movableChildren(int l) const {
+    std::vector<int> r;
+    for (int c : children[l])
+      if (movable_below[c]) r.push_back(c);
+    return r;
+  }
+  bool isBranch(int l) const { return movableChildren(l).size() >= 2; }
+};
+
+Chain walkDown(const Model& m, const Tree& t, int branch, int child) {
+  Chain c;
+  c.branch = branch;
+  int cur = child;
+  while (true) {
+    c.links.push_back(cur);
+    const Link& L = m.links[cur];
+    if (L.q_index >= 0) {
+      if (L.type == JointType::kPrismatic) c.prismatic = true;
+      if (c.joints.empty()) c.first_link = cur;
+      c.joints.push_back(L.q_index);
+    }
+    const std::vector<int> next = t.movableChildren(cur);
+    if (next.size() != 1) break;
+    cur = next[0];
+  }
+  return c;
+}
+
+std::vector<Chain> allChains(const Model& m, const Tree& t, const KinematicsData& kin) {
+  std::vector<Chain> chains;
+  for (std::size_t b = 0; b < m.links.size(); ++b) {
+    if (!t.isBranch(static_cast<int>(b))) continue;
+    for (int c : t.movableChildren(static_cast<int>(b))) {
+      Chain ch = walkDown(m, t, static_cast<int>(b), c);
+      if (ch.joints.empty()) continue;
+      ch.start_W = kin.X_W_L[ch.first_link].translation();
+      chains.push_back(ch);
+    }
+  }
+  return chains;
+}
+
+// The arm chain that ends at a given hand link: its revolute joints up to the nearest branching link.
+Chain chainToHand(const Model& m, const Tree& t, const KinematicsData& kin, int hand) {
+  Chain c;
+  std::vector<int> up;
+  int cur = hand;
+  while (cur >= 0 && !t.isBranch(cur)) {
+    up.push_back(cur);
+    cur = m.links[cur].parent;
+  }
+  c.branch = cur;
+  for (auto it = up.rbegin(); it != up.rend(); ++it) {
+    c.links.push_back(*it);
+    const Link& L = m.links[*it];
+    if (L.q_index < 0) continue;
+    if (L.type == JointType::kPrismatic) c.prismatic = true;
+    if (c.joints.empty()) c.first_link = *it;
+    c.joints.push_back(L.q_index);
+  }
+  if (!c.joints.empty()) c.start_W = kin.X_W_L[c.first_link].translation();
+  return c;
+}
+
+bool mirrored(const Chain& a, const Chain& b) {
+  const double tol = 0.01;
+  return a.joints.size() == b.joints.size() && std::abs(a.start_W.x() - b.start_W.x()) < tol &&
+         std::abs(a.start_W.z() - b.start_W.z()) < tol && std::abs(a.start_W.y() + b.start_W.y()) < tol &&
+         std::abs(a.start_W.y()) > tol;
+}
+
+int nameScore(const Model& m, const Chain& c) {
+  static const char* const kArm[] = {"shoulder", "arm", "elbow", "wrist", "hand"};
+  static const char* const kLeg[] = {"hip", "leg", "knee", "ankle", "foot", "thigh", "shin"};
+  int score = 0;
+  for (int l : c.links) {
+    std::string names = m.links[l].name + " " + m.links[l].joint_name;
+    std::transform(names.begin(), names.end(), names.begin(), [](unsigned char ch) { return std::tolower(ch); });
+    for (const char* w : kArm) score += names.find(w) != std::string::npos;
+    for (const char* w : kLeg) score -= names.find(w) != std::string::npos;
+  }
+  return score;
+}
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char ch) { return std::tolower(ch); });
+  return s;
+}
+
+// The hand link of a chain: its last link, or the first link with geometry rigidly below it.
+int handOfChain(const Model& m, const Tree& t, const Chain& c) {
+  const int last = c.links.back();
+  if (t.segment_of[last] >= 0) return last;
+  std::vector<int> stack = t.children[last];
+  while (!stack.empty()) {
+    const int l = stack.front();
+    stack.erase(stack.begin());
+    if (m.links[l].q_index >= 0) continue;
+    if (t.segment_of[l] >= 0) return l;
+    for (int ch : t.children[l]) stack.push_back(ch);
+  }
+  return last;
+}
+
+Eigen::Vector3d handPoint(const Model& m, const Tree& t, int hand, bool* has_geometry) {
+  const int s = t.segment_of[hand];
+  *has_geometry = s >= 0;
+  if (s < 0) return Eigen::Vector3d::Zero();
+  const Segment& seg = m.segments[s];
+  Eigen::Vector3d best = Eigen::Vector3d::Zero();
+  double best_n = -1.0;
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    for (const Eigen::Vector3d& e : {m.primitives[p].a_L, m.primitives[p].b_L}) {
+      if (e.norm() > best_n + 1e-12) {
+        best_n = e.norm();
+        best = e;
+      }
+    }
+  }
+  return best;
+}
+
+int linkOrThrow(const Model& m, const std::string& name, const char* what) {
+  const int l = m.linkIndex(name);
+  if (l < 0) throw SetupError(std::string(what) + " '" + name + "' is not a link of robot '" + m.name + "'");
+  return l;
+}
+
+}  // namespace
+
+Eigen::VectorXd neutralConfiguration(const Model& model) {
+  Eigen::VectorXd q(model.nq);
+  for (int i = 0; i < model.nq; ++i) q[i] = std::min(std::max(0.0, model.q_lower[i]), model.q_upper[i]);
+  return q;
+}
+
+RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
+  RobotSetup setup;
+  const Tree t(m);
+  KinematicsData kin(m);
+  computeForwardKinematics(m, kin, neutralConfiguration(m));
+  std::array<Chain, 2> arms;
+  if (!o.left_hand.empty() || !o.right_hand.empty()) {
+    if (o.left_hand.empty() || o.right_hand.empty())
+      throw SetupError("give both --left-hand and --right-hand (got only " +
+                       std::string(o.left_hand.empty() ? "--right-hand '" + o.right_hand : "--left-hand '" + o.left_hand) + "')");
+    const std::string given[2] = {o.left_hand, o.right_hand};
+    for (int a = 0; a < 2; ++a) {
+      const int hand = linkOrThrow(m, given[a], a == 0 ? "--left-hand" : "--right-hand");
+      arms[a] = chainToHand(m, t, kin, hand);
+      int revolute = 0;
+      for (int qi : arms[a].joints) revolute += m.links[m.q_link[qi]].type == JointType::kRevolute;
+      if (revolute < 1 || arms[a].prismatic)
+        throw SetupError(std::string(a == 0 ? "--left-hand" : "--right-hand") + " '" + given[a] +
+                         "': no chain of revolute joints leads to it from a branching link (found " +
+                         arms[a].describe(m) + ")");
+      if (static_cast<int>(arms[a].joints.size()) > 8)
+        throw SetupError(std::string(a == 0 ? "--left-hand" : "--right-hand") + " '" + given[a] + "': its chain " +
+                         arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
+                         " joints; the controller takes at most 8");
+      arms[a].links.erase(std::find(arms[a].links.begin(), arms[a].links.end(), hand) + 1, arms[a].links.end());
+    }
+    setup.decisions.push_back("arms: the revolute joints from the given hand links up to their branching links '" +
+                              m.links[arms[0].branch].name + "' / '" + m.links[arms[1].branch].name + "': left " +
+                              arms[0].describe(m) + ", right " + arms[1].describe(m) + " (--left-hand, --right-hand)");
+  } else {
+    const std::vector<Chain> chains = allChains(m, t, kin);
+    std::vector<const Chain*> cands;
+    for (const Chain& c : chains)
+      if (c.joints.size() >= 4 && !c.prismatic) cands.push_back(&c);
+    std::vector<std::array<const Chain*, 2>> pairs;  // [left, right]
+    for (std::size_t i = 0; i < cands.size(); ++i)
+      for (std::size_t j = i + 1; j < cands.size(); ++j)
+        if (mirrored(*cands[i], *cands[j])) {
+          const bool i_left = cands[i]->start_W.y() > 0;
+          pairs.push_back({i_left ? cands[i] : cands[j], i_left ? cands[j] : cands[i]});
+        }
+    if (pairs.empty()) {
+      std::string found;
+      for (const Chain& c : chains)
+        found += " " + c.describe(m) + " (" + std::to_string(c.joints.size()) + " joints" +
+                 (c.prismatic ? ", prismatic" : "") + ", from '" + m.links[c.branch].name + "' at y " +
+                 fmt("%.3f", c.start_W.y()) + ")";
+      throw SetupError("no arms found in robot '" + m.name +
+                       "': need two mirrored serial chains of >= 4 revolute joints branching from the trunk "
+                       "(first joints at (x, y, z) and (x, -y, z)); chains found:" +
+                       (found.empty() ? std::string(" none") : found) + "; give --left-hand and --right-hand");
+    }
+    std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) { return a[0]->start_W.z() > b[0]->start_W.z(); });
+    std::size_t pick = 0;
+    std::string why;
+    if (pairs.size() == 1) {
+      why = "the only mirrored pair of chains with >= 4 revolute joints";
+    } else if (pairs[0][0]->start_W.z() > pairs[1][0]->start_W.z() + 0.05) {
+      why = "of " + std::to_string(pairs.size()) + " mirrored pairs the one starting highest (z " +
+            fmt("%.3f", pairs[0][0]->start_W.z()) + " m, next " + fmt("%.3f", pairs[1][0]->start_W.z()) +
+            " m: legs hang below the arms)";
+    } else {
+      std::vector<int> score;
+      for (const auto& p : pairs) score.push_back(nameScore(m, *p[0]) + nameScore(m, *p[1]));
+      const auto best = std::max_element(score.begin(), score.end());
+      if (std::count(score.begin(), score.end(), *best) == 1 && *best > 0) {
+        pick = static_cast<std::size_t>(best - score.begin());
+        why = "of " + std::to_string(pairs.size()) + " mirrored pairs starting at the same height, the one whose "
+              "names read like an arm (shoulder/arm/elbow/wrist/hand)";
+      } else {
+        std::string list;
+        for (const auto& p : pairs) list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (z " +
+                                            fmt("%.3f", p[0]->start_W.z()) + ");";
+        throw SetupError("ambiguous arms in robot '" + m.name + "': " + std::to_string(pairs.size()) +
+                         " mirrored pairs of chains start within 5 cm of the same height and their names do not "
+                         "tell which are arms:" + list + " give --left-hand and --right-hand");
+      }
+    }
+    arms[0] = *pairs[pick][0];
+    arms[1] = *pairs[pick][1];
+    setup.decisions.push_back("arms: left " + arms[0].describe(m) + ", right " + arms[1].describe(m) + " from '" +
+                              m.links[arms[0].branch].name + "': " + why + "; left = y > 0 (" +
+                              fmt("%.3f", arms[0].start_W.y()) + " m)");
+    for (int a = 0; a < 2; ++a) {
+      if (static_cast<int>(arms[a].joints.size()) > 8)
+        throw SetupError("arm " + arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
+                         " joints; the controller takes at most 8: give --left-hand and --right-hand");
+    }
+  }
+  for (int a = 0; a < 2; ++a) {
+    ArmSetup& arm = setup.arms[a];
+    const Chain& c = arms[a];
+    arm.side = a == 0 ? "left" : "right";
+    for (int qi : c.joints) arm.joints.push_back(m.q_names[qi]);
+    arm.shoulder_link = m.links[c.first_link].name;
+    const int hand = (a == 0 ? o.left_hand : o.right_hand).empty() ? handOfChain(m, t, c)
+                                                                   : m.linkIndex(a == 0 ? o.left_hand : o.right_hand);
+    arm.hand_link = m.links[hand].name;
+    bool geometry = false;
+    arm.hand_point_L = handPoint(m, t, hand, &geometry);
+    setup.decisions.push_back(arm.side + " hand: link '" + arm.hand_link + "' (" +
+                              (hand == c.links.back() ? "the last link of the chain" : "the link with geometry at the chain's end") +
+                              "); hand point " + vec(arm.hand_point_L) + " m in it: " +
+                              (geometry ? "the farthest end of its collision geometry's core from the wrist"
+                                        : "its origin (the link has no collision geometry)"));
+  }
+  // Head: the highest chain end with geometry below the arms' branching link (and its ancestors) that
+  // is not an arm; a name with "head" wins. Camera: "camera" in a name rigidly below the head.
+  int head = -1;
+  std::string head_why;
+  if (!o.head.empty()) {
+    head = linkOrThrow(m, o.head, "--head");
+    head_why = "(--head)";
+  } else {
+    std::vector<int> ends;
+    for (const Chain& c : allChains(m, t, kin)) {
+      if (c.first_link == arms[0].first_link || c.first_link == arms[1].first_link) continue;
+      const int e = handOfChain(m, t, c);
+      if (t.segment_of[e] >= 0 && c.joints.size() <= 3) ends.push_back(e);
+    }
+    for (int e : ends)
+      if (lower(m.links[e].name).find("head") != std::string::npos && head < 0) {
+        head = e;
+        head_why = "the end of a chain of at most 3 joints, named like a head";
+      }
+    if (head < 0) {
+      for (int e : ends)
+        if (head < 0 || kin.X_W_L[e].translation().z() > kin.X_W_L[head].translation().z()) head = e;
+      head_why = "the highest end of a chain of at most 3 joints that is not an arm";
+    }
+    if (head < 0)
+      throw SetupError("no head found in robot '" + m.name +
+                       "': no chain of 1 to 3 joints other than the arms ends in a link with collision geometry; "
+                       "give --head and --camera");
+  }
+  setup.head_link = m.links[head].name;
+  setup.decisions.push_back("head: link '" + setup.head_link + "', " + head_why);
+  if (!o.camera.empty()) {
+    setup.camera_link = m.links[linkOrThrow(m, o.camera, "--camera")].name;
+    setup.decisions.push_back("camera: link '" + setup.camera_link + "' (--camera)");
+  } else {
+    std::vector<int> stack = {head};
+    while (!stack.empty() && setup.camera_link.empty()) {
+      const int l = stack.front();
+      stack.erase(stack.begin());
+      if (lower(m.links[l].name).find("camera") != std::string::npos) setup.camera_link = m.links[l].name;
+      for (int ch : t.children[l])
+        if (m.links[ch].q_index < 0) stack.push_back(ch);
+    }
+    if (setup.camera_link.empty()) {
+      setup.camera_link = setup.head_link;
+      setup.decisions.push_back("camera: the head link '" + setup.head_link +
+                                "' (no link named like a camera is fixed below it; give --camera)");
+    } else {
+      setup.decisions.push_back("camera: link '" + setup.camera_link +
+                                "', the first link named like a camera fixed below the head");
+    }
+  }
+  return setup;
+}
+
+namespace {
+
+struct ArmIndex {
+  std::array<std::vector<int>, 2> q;  // q indices per arm
+  std::vector<double> mirror;         // per left joint: right = mirror * left (0: not mirrored)
+};
+
+ArmIndex armIndex(const Model& m, const RobotSetup& s) {
+  ArmIndex ix;
+  for (int a = 0; a < 2; ++a)
+    for (const std::string& j : s.arms[a].joints) ix.q[a].push_back(m.qIndex(j));
+  KinematicsData kin(m);
+  computeForwardKinematics(m, kin, neutralConfiguration(m));
+  for (std::size_t i = 0; i < ix.q[0].size(); ++i) {
+    double sign = 0.0;
+    if (i < ix.q[1].size()) {
+      // A rotation about axis u mirrored through the x-z plane is a rotation by -angle about M u.
+      Eigen::Vector3d mu = kin.axis_W[m.q_link[ix.q[0][i]]];
+      mu.y() = -mu.y();
+      const Eigen::Vector3d ur = kin.axis_W[m.q_link[ix.q[1][i]]];
+      if ((ur - mu).norm() < 1e-6) sign = -1.0;
+      else if ((ur + mu).norm() < 1e-6) sign = 1.0;
+    }
+    ix.mirror.push_back(sign);
+  }
+  return ix;
+}
+
+double lo80(const Model& m, int qi) {
+  const double lo = std::isfinite(m.q_lower[qi]) ? m.q_lower[qi] : -M_PI;
+  const double hi = std::isfinite(m.q_upper[qi]) ? m.q_upper[qi] : M_PI;
+  return lo + 0.1 * (hi - lo);
+}
+double hi80(const Model& m, int qi) {
+  const double lo = std::isfinite(m.q_lower[qi]) ? m.q_lower[qi] : -M_PI;
+  const double hi = std::isfinite(m.q_upper[qi]) ? m.q_upper[qi] : M_PI;
+  return hi - 0.1 * (hi - lo);
+}
+
+}  // namespace
+
+void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
+  const ArmIndex ix = armIndex(m, s);
+  const Eigen::VectorXd q0 = neutralConfiguration(m);
+  KinematicsData kin(m);
+  DistanceData dist(m);
+  DistanceOptions dopt;
+  dopt.row_threshold = -std::numeric_limits<double>::infinity();
+  computeForwardKinematics(m, kin, q0);
+  std::array<int, 2> hand{}, shoulder{};
+  std::array<Eigen::Vector3d, 2> S, goal;
+  double reach = 0.0;
+  for (int a = 0; a < 2; ++a) {
+    hand[a] = m.linkIndex(s.arms[a].hand_link);
+    shoulder[a] = m.q_link[ix.q[a][0]];
+    S[a] = kin.X_W_L[shoulder[a]].translation();
+  }
+  {  // arm length: shoulder to hand point with every arm joint at 0 (stretched, as RobotState measures it)
+    Eigen::VectorXd qz = q0;
+    for (int a = 0; a < 2; ++a)
+      for (int qi : ix.q[a]) qz[qi] = std::min(std::max(0.0, m.q_lower[qi]), m.q_upper[qi]);
+    computeForwardKinematics(m, kin, qz);
+    reach = (kin.X_W_L[hand[0]] * s.arms[0].hand_point_L - S[0]).norm();
+  }
+  // Hand below and in front of the shoulder, slightly out: elbow bent, arm not touching the body.
+  for (int a = 0; a < 2; ++a)
+    goal[a] = S[a] + reach * Eigen::Vector3d(0.35, a == 0 ? 0.2 : -0.2, -0.7);
+  auto place = [&](const std::vector<double>& left, const std::vector<double>& right, Eigen::VectorXd& q) {
+    q = q0;
+    for (std::size_t i = 0; i < ix.q[0].size(); ++i) q[ix.q[0][i]] = left[i];
+    for (std::size_t i = 0; i < ix.q[1].size(); ++i) q[ix.q[1][i]] = right[i];
+  };
+  auto mirrorOf = [&](const std::vector<double>& left, const std::vector<double>& right_free) {
+    std::vector<double> r = right_free;
+    for (std::size_t i = 0; i < ix.q[1].size() && i < left.size(); ++i)
+      if (ix.mirror[i] != 0.0) r[i] = std::clamp(ix.mirror[i] * left[i], lo80(m, ix.q[1][i]), hi80(m, ix.q[1][i]));
+    return r;
+  };
+  struct Eval {
+    bool clear = false;
+    double cost = std::numeric_limits<double>::infinity();
+    double dmin = -std::numeric_limits<double>::infinity();
+    int pair = -1;
+  };
+  // Only pairs with an arm segment: the rest posture cannot change the others (legs, head, trunk).
+  std::vector<bool> moved(m.links.size(), false);
+  for (int a = 0; a < 2; ++a) moved[m.q_link[ix.q[a][0]]] = true;
+  for (std::size_t l = 0; l < m.links.size(); ++l)
+    if (m.links[l].parent >= 0 && moved[m.links[l].parent]) moved[l] = true;
+  std::vector<bool> arm_pair(m.pairs.size(), false);
+  for (std::size_t i = 0; i < m.pairs.size(); ++i)
+    arm_pair[i] = !m.segments[m.pairs[i].b].body_schema_slot &&
+                  (moved[m.segments[m.pairs[i].a].link] || moved[m.segments[m.pairs[i].b].link]);
+  Eigen::VectorXd q(m.nq);
+  // What each arm pair can reach: its distance range over random arm postures (full limits). A pair the
+  // arms cannot move (a shoulder sphere turning about its centre) is not asked to clear anything; a pair
+  // never farther apart than d_a + margin (a short arm's upper arm and hand) is asked for 90 % of its maximum.
+  std::vector<double> required(m.pairs.size(), o.d_a + o.rest_margin);
+  {
+    std::vector<double> lo_d(m.pairs.size(), std::numeric_limits<double>::infinity());
+    std::vector<double> hi_d(m.pairs.size(), -std::numeric_limits<double>::infinity());
+    std::mt19937_64 pre(o.seed + 5);
+    for (int k = 0; k < std::max(200, o.rest_samples / 2); ++k) {
+      q = q0;
+      for (int a = 0; a < 2; ++a)
+        for (int qi : ix.q[a]) {
+          const double lo = std::isfinite(m.q_lower[qi]) ? m.q_lower[qi] : -M_PI;
+          const double hi = std::isfinite(m.q_upper[qi]) ? m.q_upper[qi] : M_PI;
+          q[qi] = std::uniform_real_distribution<double>(lo, hi)(pre);
+        }
+      computeForwardKinematics(m, kin, q);
+      computeSegmentDistances(m, kin, dist, dopt);
+      for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+        if (!arm_pair[i]) continue;
+        lo_d[i] = std::min(lo_d[i], dist.pairs[i].distance);
+        hi_d[i] = std::max(hi_d[i], dist.pairs[i].distance);
+      }
+    }
+    int fixed_pairs = 0;
+    std::string fixed_example;
+    for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+      if (!arm_pair[i]) continue;
+      const std::string name = "'" + m.segments[m.pairs[i].a].name + "'-'" + m.segments[m.pairs[i].b].name + "'";
+      if (hi_d[i] - lo_d[i] < 1e-6) {
+        arm_pair[i] = false;
+        ++fixed_pairs;
+        if (fixed_example.empty()) fixed_example = name + " " + fmt("%.3f", hi_d[i]) + " m";
+      } else if (hi_d[i] < required[i]) {
+        required[i] = 0.9 * hi_d[i];
+        s.decisions.push_back("rest: pair " + name + " is never farther apart than " + fmt("%.3f", hi_d[i]) +
+                              " m (sampled): rest keeps it at >= " + fmt("%.3f", required[i]) +
+                              " m, inside the avoidance zone d_a " + fmt("%.3f", o.d_a) + " m");
+      }
+    }
+    if (fixed_pairs > 0)
+      s.decisions.push_back("rest: " + std::to_string(fixed_pairs) + " arm pairs keep their distance whatever the arm "
+                            "joints do (e.g. " + fixed_example + ": a shoulder sphere turning about its centre): "
+                            "not part of the rest search");
+  }
+  auto evaluate = [&](const std::vector<double>& left, const std::vector<double>& right) {
+    Eval e;
+    place(left, right, q);
+    computeForwardKinematics(m, kin, q);
+    computeSegmentDistances(m, kin, dist, dopt);
+    e.dmin = std::numeric_limits<double>::infinity();  // the smallest clearance beyond what is required
+    e.clear = true;
+    for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+      if (!dist.pairs[i].active || !arm_pair[i]) continue;
+      if (dist.pairs[i].distance <= required[i]) e.clear = false;
+      if (dist.pairs[i].distance - required[i] < e.dmin) {
+        e.dmin = dist.pairs[i].distance - required[i];
+        e.pair = static_cast<int>(i);
+      }
+    }
+    double c = 0.0;
+    for (int a = 0; a < 2; ++a) c += (kin.X_W_L[hand[a]] * s.arms[a].hand_point_L - goal[a]).norm() / reach;
+    double centre = 0.0;
+    for (int a = 0; a < 2; ++a)
+      for (int qi : ix.q[a]) {
+        const double mid = 0.5 * (lo80(m, qi) + hi80(m, qi));
+        const double half = 0.5 * (hi80(m, qi) - lo80(m, qi)) + 1e-9;
+        centre += std::abs((q[qi] - mid) / half);
+      }
+    e.cost = c + 0.05 * centre / static_cast<double>(ix.q[0].size() + ix.q[1].size());
+    return e;
+  };
+  std::mt19937_64 rng(o.seed);
+  std::vector<double> best_l, best_r, l(ix.q[0].size()), r(ix.q[1].size());
+  Eval best;
+  Eval closest;  // the clearest posture, for the error message
+  for (int k = 0; k < o.rest_samples; ++k) {
+    for (std::size_t i = 0; i < l.size(); ++i)
+      l[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[0][i]), hi80(m, ix.q[0][i]))(rng);
+    for (std::size_t i = 0; i < r.size(); ++i)
+      r[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[1][i]), hi80(m, ix.q[1][i]))(rng);
+    r = mirrorOf(l, r);
+    const Eval e = evaluate(l, r);
+    if (e.dmin > closest.dmin) closest = e;
+    if (e.clear && e.cost < best.cost) {
+      best = e;
+      best_l = l;
+      best_r = r;
+    }
+  }
+  if (!best.clear) {
+    const SegmentPair& p = m.pairs[closest.pair];
+    throw SetupError("no rest posture found for robot '" + m.name + "': of " + std::to_string(o.rest_samples) +
+                     " postures within the middle 80 % of the arm joints' limits none clears every checked pair of an arm segment by " +
+                     fmt("%.3f", o.d_a + o.rest_margin) + " m (d_a + margin); the clearest has '" +
+                     m.segments[p.a].name + "'-'" + m.segments[p.b].name + "' at " +
+                     fmt("%.3f", closest.dmin + required[closest.pair]) +
+                     " m: exclude pairs that cannot collide (collision YAML) or give a smaller --rest-margin");
+  }
+  // Coordinate descent: each left joint by +-step (the right one mirrored), then unmirrored right joints.
+  for (double step : {0.2, 0.1, 0.05, 0.02, 0.01}) {
+    bool improved = true;
+    while (improved) {
+      improved = false;
+      for (int a = 0; a < 2; ++a)
+        for (std::size_t i = 0; i < ix.q[a].size(); ++i) {
+          if (a == 1 && i < ix.mirror.size() && ix.mirror[i] != 0.0) continue;
+          for (double d : {step, -step}) {
+            std::vector<double> tl = best_l, tr = best_r;
+            std::vector<double>& v = a == 0 ? tl : tr;
+            v[i] = std::clamp(v[i] + d, lo80(m, ix.q[a][i]), hi80(m, ix.q[a][i]));
+            if (a == 0) tr = mirrorOf(tl, tr);
+            const Eval e = evaluate(tl, tr);
+            if (e.clear && e.cost < best.cost - 1e-9) {
+              best = e;
+              best_l = tl;
+              best_r = tr;
+              improved = true;
+            }
+          }
+        }
+    }
+  }
+  s.arms[0].rest = best_l;
+  s.arms[1].rest = best_r;
+  const Eval e = evaluate(best_l, best_r);
+  const SegmentPair& p = m.pairs[e.pair];
+  s.rest_distance = e.dmin + required[e.pair];
+  s.rest_pair = m.segments[p.a].name + "-" + m.segments[p.b].name;
+  Eigen::Vector3d h = kin.X_W_L[hand[0]] * s.arms[0].hand_point_L - S[0];
+  std::ostringstream os;
+  os << "rest: the posture (of " << o.rest_samples << " random ones in the middle 80 % of the limits, then refined) "
+     << "closest to the left hand " << fmt("%.2f", h.x()) << " m in front of, " << fmt("%.2f", h.y())
+     << " m beside and " << fmt("%.2f", -h.z()) << " m below the shoulder (arm reach " << fmt("%.2f", reach)
+     << " m) with every checked pair of an arm above d_a + " << fmt("%.3f", o.rest_margin) << " m; tightest arm pair at rest '"
+     << m.segments[p.a].name << "'-'" << m.segments[p.b].name << "' " << fmt("%.3f", s.rest_distance)
+     << " m (its least clearance over what it must keep); right arm mirrored";
+  s.decisions.push_back(os.str());
+}
+
+ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::array<Eigen::Vector3d, 2>& target_W,
+                      double duration, double tolerance) {
+  ReachCheck r;
+  r.target_W = target_W;
+  Eigen::VectorXd q0 = neutralConfiguration(model);
+  for (const auto& arm : cm.arms)
+    for (int i = 0; i < arm.n; ++i) q0[arm.q[i]] = arm.rest[i];
+  KinematicPort port(q0);
+  OnboardOptions options;
+  options.input_timeout = duration + 1.0;
+  OnboardController ctl(model, cm, port, q0, options);
+  std::array<HandCommand, 2> hands;
+  for (int a = 0; a < 2; ++a) hands[a] = {HandStatus::kGiven, target_W[a]};
+  KinematicsData kin(model);
+  r.min_distance = std::numeric_limits<double>::infinity();
+  const double dt = cm.params.period;
+  const int cycles = static_cast<int>(std::ceil(duration / dt));
+  for (int k = 0; k <= cycles; ++k) {
+    const double now = k * dt;
+    ctl.setHandTargets(hands, now);
+    const CycleReport& rep = ctl.step(now);
+    r.min_distance = std::min(r.min_distance, rep.min_distance);
+    computeForwardKinematics(model, kin, port.positions());
+    for (int a = 0; a < 2; ++a)
+      r.error[a] = (kin.X_W_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L - target_W[a]).norm();
+    if (r.reached_at < 0 && r.error[0] < tolerance && r.error[1] < tolerance) r.reached_at = now;
+  }
+  r.estops = ctl.report().counts.estop_count;
+  return r;
+}
+
+std::string collisionElementForCapsule(const Primitive& c, const std::string& name) {
+  const Eigen::Vector3d mid = 0.5 * (c.a_L + c.b_L);
+  const Eigen::Vector3d d = c.b_L - c.a_L;
+  const double len = d.norm();
+  // The cylinder's axis is the origin's z: rotate z onto d by pitch then yaw (rpy = (0, pitch, yaw)).
+  const double yaw = len > 0 ? std::atan2(d.y(), d.x()) : 0.0;
+  const double pitch = len > 0 ? std::atan2(std::hypot(d.x(), d.y()), d.z()) : 0.0;
+  char buf[400];
+  if (len < 1e-9) {
+    std::snprintf(buf, sizeof buf,
+                  "<collision name=\"%s\"><origin xyz=\"%.4f %.4f %.4f\" rpy=\"0 0 0\"/>"
+                  "<geometry><sphere radius=\"%.4f\"/></geometry></collision>",
+                  name.c_str(), mid.x(), mid.y(), mid.z(), c.radius);
+  } else {
+    std::snprintf(buf, sizeof buf,
+                  "<collision name=\"%s\"><origin xyz=\"%.4f %.4f %.4f\" rpy=\"0 %.6f %.6f\"/>"
+                  "<geometry><cylinder radius=\"%.4f\" length=\"%.4f\"/></geometry></collision>",
+                  name.c_str(), mid.x(), mid.y(), mid.z(), pitch, yaw, c.radius, len);
+  }
+  return buf;
+}
+
+int findArmGaps(const Model& m, const SetupOptions& o, RobotSetup& s) {
+  s.gaps.clear();
+  const ArmIndex ix = armIndex(m, s);
+  const Tree t(m);
+  KinematicsData kin(m);
+  std::mt19937_64 rng(o.seed + 17);
+  Eigen::VectorXd q = neutralConfiguration(m);
+  for (int a = 0; a < 2; ++a)
+    for (std::size_t i = 0; i < ix.q[a].size(); ++i) q[ix.q[a][i]] = s.arms[a].rest[i];
+  std::vector<Eigen::VectorXd> configs = {q};
+  for (int k = 0; k < o.gap_configs; ++k) {
+    Eigen::VectorXd qr = q;
+    for (int a = 0; a < 2; ++a)
+      for (int qi : ix.q[a]) qr[qi] = std::uniform_real_distribution<double>(lo80(m, qi), hi80(m, qi))(rng);
+    configs.push_back(qr);
+  }
+  for (int a = 0; a < 2; ++a) {
+    const ArmSetup& arm = s.arms[a];
+    const int hand = m.linkIndex(arm.hand_link);
+    // The skeleton: links from the first arm joint's link to the hand (each stretch belongs to the
+    // link whose frame holds both its ends), then the hand point.
+    std::vector<int> path;
+    for (int l = hand; l >= 0; l = m.links[l].parent) {
+      path.push_back(l);
+      if (l == m.q_link[ix.q[a][0]]) break;
+    }
+    std::reverse(path.begin(), path.end());
+    std::vector<bool> in_arm(m.links.size(), false);
+    in_arm[path.front()] = true;
+    for (std::size_t l = 0; l < m.links.size(); ++l)
+      if (m.links[l].parent >= 0 && in_arm[m.links[l].parent]) in_arm[l] = true;
+    struct Stretch {
+      int link;
+      Eigen::Vector3d from_L, to_L;
+    };
+    std::vector<Stretch> stretches;
+    for (std::size_t i = 0; i + 1 < path.size(); ++i)
+      stretches.push_back({path[i], Eigen::Vector3d::Zero(), m.links[path[i + 1]].X_P_J.translation()});
+    stretches.push_back({hand, Eigen::Vector3d::Zero(), arm.hand_point_L});
+    for (const Stretch& st : stretches) {
+      const double len = (st.to_L - st.from_L).norm();
+      if (len < 1e-9 && &st != &stretches.back()) continue;
+      const int n = std::max(1, static_cast<int>(std::ceil(len / 0.005)));
+      double worst = 0.0;
+      Eigen::Vector3d worst_p = Eigen::Vector3d::Zero();
+      double t_first = 2.0, t_last = -1.0;
+      for (int k = 0; k <= n; ++k) {
+        const double tt = static_cast<double>(k) / n;
+        const Eigen::Vector3d p_L = st.from_L + tt * (st.to_L - st.from_L);
+        double gap_here = 0.0;  // worst over configurations of the distance to the nearest arm primitive
+        for (const Eigen::VectorXd& qc : configs) {
+          computeForwardKinematics(m, kin, qc);
+          const Eigen::Vector3d p_W = kin.X_W_L[st.link] * p_L;
+          double dmin = std::numeric_limits<double>::infinity();
+          for (int sg = 0; sg < m.num_robot_segments; ++sg) {
+            const Segment& seg = m.segments[sg];
+            if (!in_arm[seg.link]) continue;
+            const Eigen::Vector3d p_S = kin.X_W_L[seg.link].inverse() * p_W;
+            for (int pi = seg.first_primitive; pi < seg.first_primitive + seg.num_primitives; ++pi)
+              dmin = std::min(dmin, signedDistanceToPrimitive(m.primitives[pi], p_S));
+          }
+          gap_here = std::max(gap_here, dmin);
+        }
+        if (gap_here > o.gap_tolerance) {
+          t_first = std::min(t_first, tt);
+          t_last = std::max(t_last, tt);
+        }
+        if (gap_here > worst) {
+          worst = gap_here;
+          worst_p = p_L;
+        }
+      }
+      if (worst <= o.gap_tolerance) continue;
+      ArmGap g;
+      g.side = arm.side;
+      g.link = m.links[st.link].name;
+      g.gap = worst;
+      g.point_L = worst_p;
+      const Eigen::Vector3d p0 = st.from_L + t_first * (st.to_L - st.from_L);
+      const Eigen::Vector3d p1 = st.from_L + t_last * (st.to_L - st.from_L);
+      // From the nearest core end of the link's own primitives (continuing the last one) to the last uncovered point.
+      g.closing.radius = 0.0;
+      g.closing.a_L = p0;
+      double best_d = std::numeric_limits<double>::infinity();
+      if (const int sg = t.segment_of[st.link]; sg >= 0) {
+        const Segment& seg = m.segments[sg];
+        for (int pi = seg.first_primitive; pi < seg.first_primitive + seg.num_primitives; ++pi)
+          for (const Eigen::Vector3d& e : {m.primitives[pi].a_L, m.primitives[pi].b_L})
+            if ((e - p0).norm() < best_d) {
+              best_d = (e - p0).norm();
+              g.closing.a_L = e;
+              g.closing.radius = m.primitives[pi].radius;
+            }
+      }
+      if (g.closing.radius <= 0.0) g.closing.radius = std::max(o.gap_tolerance, 0.02);
+      g.closing.b_L = p1;
+      g.closing.sphere = (g.closing.b_L - g.closing.a_L).norm() < 1e-9;
+      std::ostringstream msg;
+      msg << "warning: " << arm.side << " arm: link '" << g.link << "': the arm's skeleton (link origins to the hand point) "
+          << "lies up to " << fmt("%.3f", worst) << " m outside every collision primitive of the arm, at "
+          << vec(worst_p) << " m in '" << g.link << "' (tolerance " << fmt("%.3f", o.gap_tolerance)
+          << " m); a capsule from " << vec(g.closing.a_L) << " to " << vec(g.closing.b_L) << ", radius "
+          << fmt("%.3f", g.closing.radius) << " m closes it";
+      g.message = msg.str();
+      g.urdf_snippet = collisionElementForCapsule(g.closing, g.link + "_gap");
+      s.gaps.push_back(g);
+    }
+  }
+  return static_cast<int>(s.gaps.size());
+}
+
+}  // namespace reflex::control

@@ -1,0 +1,306 @@
+// reflex_setup: from a humanoid's URDF (and SRDF, meshes) to the three configuration files Reflex needs:
+// DIR/controller.yaml, DIR/collision.yaml, DIR/behavior.yaml (and DIR/<stem>.fit.yaml when the robot
+// has meshes). Prints every decision with its reason, one line each; warns about stretches of an arm
+// outside every collision primitive. Every file written is read back with the project's own readers.
+// See control/README.md, "Setting up a new robot", and robot_setup.hpp for the rules.
+#include "reflex/common/files.hpp"
+#include "reflex/control/controller.hpp"
+#include "reflex/control/mesh_fit.hpp"
+#include "reflex/control/pair_sampling.hpp"
+#include "reflex/control/robot_setup.hpp"
+#include "reflex/control/urdf_loader.hpp"
+
+#include <CLI/CLI.hpp>
+#include <tinyxml2.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using reflex::control::Model;
+
+namespace {
+
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.4f", v);
+  std::string s = buf;
+  while (s.size() > 1 && s.back() == '0') s.pop_back();
+  if (s.back() == '.') s.pop_back();
+  return s == "-0" ? "0" : s;
+}
+
+void writeFile(const std::string& path, const std::string& text) {
+  if (const std::string why = reflex::common::outputFileProblem(path); !why.empty())
+    throw std::runtime_error("output " + why);
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary);
+    out << text;
+    out.flush();
+    if (!out) throw std::runtime_error(reflex::common::writeError(tmp, errno));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error(reflex::common::writeError(path, errno));
+}
+
+// Whether any <collision> of the URDF holds a <mesh> (then the robot needs a fit overlay).
+bool hasMeshCollision(const std::string& urdf) {
+  tinyxml2::XMLDocument doc;
+  if (doc.LoadFile(urdf.c_str()) != tinyxml2::XML_SUCCESS)
+    throw std::runtime_error(urdf + ": cannot read the URDF as XML: " + std::string(doc.ErrorStr()));
+  const tinyxml2::XMLElement* robot = doc.FirstChildElement("robot");
+  for (auto* l = robot ? robot->FirstChildElement("link") : nullptr; l; l = l->NextSiblingElement("link"))
+    for (auto* c = l->FirstChildElement("collision"); c; c = c->NextSiblingElement("collision"))
+      if (const auto* g = c->FirstChildElement("geometry"); g && g->FirstChildElement("mesh")) return true;
+  return false;
+}
+
+// A copy of the URDF with the gap-closing <collision> elements added to their links; relative mesh
+// filenames are made absolute so they still resolve from the copy's folder.
+void writeClosedUrdf(const std::string& urdf, const std::string& out, const std::vector<reflex::control::ArmGap>& gaps) {
+  tinyxml2::XMLDocument doc;
+  if (doc.LoadFile(urdf.c_str()) != tinyxml2::XML_SUCCESS) throw std::runtime_error(urdf + ": cannot read the URDF");
+  tinyxml2::XMLElement* robot = doc.FirstChildElement("robot");
+  const fs::path dir = fs::absolute(fs::path(urdf)).parent_path();
+  for (auto* l = robot->FirstChildElement("link"); l; l = l->NextSiblingElement("link")) {
+    for (auto* c = l->FirstChildElement("collision"); c; c = c->NextSiblingElement("collision")) {
+      auto* g = c->FirstChildElement("geometry");
+      auto* mesh = g ? g->FirstChildElement("mesh") : nullptr;
+      const char* f = mesh ? mesh->Attribute("filename") : nullptr;
+      if (f && std::string(f).find("://") == std::string::npos && f[0] != '/')
+        mesh->SetAttribute("filename", (dir / f).lexically_normal().string().c_str());
+    }
+    for (const auto& gap : gaps) {
+      if (gap.link != l->Attribute("name")) continue;
+      tinyxml2::XMLDocument frag;
+      frag.Parse(gap.urdf_snippet.c_str());
+      l->InsertEndChild(frag.FirstChildElement("collision")->DeepClone(&doc));
+    }
+  }
+  if (doc.SaveFile(out.c_str()) != tinyxml2::XML_SUCCESS) throw std::runtime_error(reflex::common::writeError(out, errno));
+}
+
+// `path` as written into a file in `dir`: relative to dir when that stays near it (at most two levels
+// up, so the folder can move with the robot), else absolute.
+std::string relativeTo(const std::string& path, const std::string& dir) {
+  const fs::path abs = fs::absolute(path).lexically_normal();
+  const fs::path rel = fs::relative(abs, fs::absolute(dir)).lexically_normal();
+  int up = 0;
+  for (const auto& part : rel) up += part == "..";
+  return rel.empty() || up > 2 ? abs.string() : rel.string();
+}
+
+std::string vec3(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
+
+}  // namespace
+
+int run(int argc, char** argv) {
+  CLI::App app{"reflex_setup: find a humanoid's arms, hands, head, rest posture and collision pairs from its "
+               "URDF and write DIR/controller.yaml, DIR/collision.yaml and DIR/behavior.yaml (and the mesh fit), "
+               "printing every choice and why. See control/README.md, \"Setting up a new robot\"."};
+  std::string urdf, srdf, out_dir;
+  std::vector<std::string> package_args;
+  reflex::control::SetupOptions o;
+  reflex::control::PairSamplingOptions sampling;
+  sampling.samples = 5000;
+  bool close_gaps = false, force = false;
+  app.add_option("urdf", urdf, "the robot's URDF")->required();
+  app.add_option("--srdf", srdf, "SRDF whose <disable_collisions> pairs are excluded (written as srdf: in collision.yaml)");
+  app.add_option("--package-path", package_args, "NAME=DIR: where package://NAME/... meshes are (repeatable)");
+  app.add_option("--out", out_dir, "folder to write the configuration files into (created)")->required();
+  app.add_option("--left-hand", o.left_hand, "left hand link (default: found by structure; give with --right-hand)");
+  app.add_option("--right-hand", o.right_hand, "right hand link");
+  app.add_option("--head", o.head, "head link (default: found by structure)");
+  app.add_option("--camera", o.camera, "head camera link (default: a link named like a camera fixed below the head)");
+  app.add_option("--samples", sampling.samples, "random configurations for the pair sampling")->check(CLI::Range(100, 1000000));
+  app.add_option("--seed", sampling.seed, "random seed (pair sampling, rest search, gap check)");
+  app.add_option("--gap-tolerance", o.gap_tolerance, "m: an arm skeleton point farther than this from the arm's "
+                 "primitives is a gap")->check(CLI::Range(0.001, 0.5));
+  app.add_option("--rest-margin", o.rest_margin, "m: the rest posture clears every arm pair by d_a + this")
+      ->check(CLI::Range(0.0, 0.2));
+  app.add_flag("--close-gaps", close_gaps, "write DIR/<stem>.urdf, a copy of the URDF with the capsules that close "
+               "the gaps, and configure the robot from it");
+  app.add_flag("--force", force, "replace files already in DIR");
+  CLI11_PARSE(app, argc, argv);
+  o.seed = sampling.seed;
+  o.d_a = reflex::control::ControllerParams{}.d_a;
+  sampling.near_distance = o.d_a;
+
+  try {
+    if (const std::string why = reflex::common::inputFileProblem(urdf); !why.empty()) throw std::runtime_error("URDF " + why);
+    if (!srdf.empty())
+      if (const std::string why = reflex::common::inputFileProblem(srdf); !why.empty()) throw std::runtime_error("--srdf " + why);
+    reflex::control::PackagePaths paths;
+    for (const auto& arg : package_args) {
+      const auto eq = arg.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == arg.size())
+        throw std::runtime_error("--package-path '" + arg + "' must be NAME=DIR");
+      paths.packages[arg.substr(0, eq)] = arg.substr(eq + 1);
+    }
+    std::error_code ec;
+    fs::create_directories(out_dir, ec);
+    if (ec) throw std::runtime_error("--out '" + out_dir + "': cannot create the folder: " + ec.message());
+    if (const std::string why = reflex::common::outputFolderProblem(out_dir); !why.empty())
+      throw std::runtime_error("--out " + why);
+    const std::string stem = fs::path(urdf).stem().string();
+    const std::string controller_path = (fs::path(out_dir) / "controller.yaml").string();
+    const std::string collision_path = (fs::path(out_dir) / "collision.yaml").string();
+    const std::string behavior_path = (fs::path(out_dir) / "behavior.yaml").string();
+    const std::string fit_path = (fs::path(out_dir) / (stem + ".fit.yaml")).string();
+    const std::string closed_urdf = (fs::path(out_dir) / (stem + ".urdf")).string();
+    if (!force)
+      for (const std::string& p : {controller_path, collision_path, behavior_path})
+        if (fs::exists(p)) throw std::runtime_error("'" + p + "' exists; give --force to replace it");
+    if (close_gaps && fs::exists(closed_urdf) && fs::equivalent(closed_urdf, urdf))
+      throw std::runtime_error("--close-gaps would overwrite the URDF '" + urdf + "' itself; choose another --out");
+
+    // 1. The mesh fit, when the robot has meshes.
+    const bool meshes = hasMeshCollision(urdf);
+    auto fit = [&](const std::string& robot_urdf) {
+      std::printf("fit: the URDF has mesh collision geometry: fitting capsules and spheres (reflex_fit) into %s\n",
+                  fit_path.c_str());
+      const auto overlay = reflex::control::fitRobot(robot_urdf, paths, reflex::control::FitOptions{});
+      writeFile(fit_path, reflex::control::fitOverlayText(overlay, fit_path));
+      for (const auto& l : overlay.links)
+        std::printf("fit: %s: %zu primitives, %d/%d vertices enclosed, volume ratio %.3f, worst gap %.4f m\n",
+                    l.link.c_str(), l.primitives.size(), l.stats.vertices_enclosed, l.stats.vertices,
+                    l.stats.volume_ratio, l.stats.worst_gap);
+    };
+    if (meshes) fit(urdf);
+
+    // 2. Which pairs to check: SRDF + sampling (as reflex_inspect --sample-pairs).
+    reflex::control::CollisionConfig every;
+    every.exclude_adjacent = false;
+    if (meshes) every.fit = fit_path;
+    reflex::control::CollisionConfig nonadj_config = every;
+    nonadj_config.exclude_adjacent = true;
+    if (!srdf.empty()) {
+      nonadj_config.srdf = srdf;
+      nonadj_config.srdf_disabled = reflex::control::loadSrdfDisabledCollisions(srdf);
+    }
+    const Model all = reflex::control::loadModel(urdf, every);
+    const Model nonadj = reflex::control::loadModel(urdf, nonadj_config);
+    std::fprintf(stderr, "reflex_setup: sampling %d configurations for the pair list\n", sampling.samples);
+    const auto report = reflex::control::samplePairs(all, nonadj, sampling);
+    int always = 0, never = 0;
+    for (const auto& p : report.pairs) {
+      always += p.verdict == reflex::control::PairVerdict::kAlwaysInCollision;
+      never += p.verdict == reflex::control::PairVerdict::kNeverClose;
+    }
+    std::string collision = "# Written by reflex_setup for " + urdf + " (keys: control/docs/configuration.md).\n" +
+                            reflex::control::exclusionYaml(report);
+    if (!srdf.empty()) collision += "srdf: " + relativeTo(srdf, out_dir) + "   # its <disable_collisions> pairs are excluded too\n";
+    if (meshes) collision += "fit: " + fs::path(fit_path).filename().string() + "   # the mesh fit (reflex_fit)\n";
+    writeFile(collision_path, collision);
+    std::printf("pairs: %d sampled configurations%s: %d pairs always in collision (excluded), %d never closer than "
+                "d_a (listed, commented out: still checked), %zu adjacent (not checked)\n",
+                sampling.samples, srdf.empty() ? "" : " after the SRDF's exclusions", always, never, report.adjacent.size());
+
+    // 3. The robot as the controller will load it, and what the setup finds on it.
+    std::string robot_urdf = urdf;
+    Model model = reflex::control::loadModel(urdf, reflex::control::loadCollisionConfig(collision_path));
+    reflex::control::RobotSetup setup = reflex::control::findRobotStructure(model, o);
+    reflex::control::findRestPosture(model, o, setup);
+    reflex::control::findArmGaps(model, o, setup);
+    for (const auto& g : setup.gaps) {
+      std::printf("%s\n", g.message.c_str());
+      std::printf("  paste into <link name=\"%s\"> of the URDF (Reflex reads a cylinder as that capsule), or rerun "
+                  "with --close-gaps:\n  %s\n", g.link.c_str(), g.urdf_snippet.c_str());
+    }
+    if (close_gaps && !setup.gaps.empty()) {
+      writeClosedUrdf(urdf, closed_urdf, setup.gaps);
+      std::printf("gaps: wrote %s with %zu closing capsules; configuring that robot\n", closed_urdf.c_str(), setup.gaps.size());
+      robot_urdf = closed_urdf;
+      if (meshes) fit(robot_urdf);
+      model = reflex::control::loadModel(robot_urdf, reflex::control::loadCollisionConfig(collision_path));
+      const auto before = setup.decisions.size();
+      setup = reflex::control::findRobotStructure(model, o);
+      reflex::control::findRestPosture(model, o, setup);
+      if (const int left = reflex::control::findArmGaps(model, o, setup); left > 0)
+        std::printf("gaps: %d remain after closing\n", left);
+      (void)before;
+    }
+
+    // 4. controller.yaml, read back and resolved against the robot.
+    std::string ctl = "# Controller configuration of " + model.name + ", written by reflex_setup (every key: "
+                      "control/docs/configuration.md).\n# Parameters not given take their defaults (control/README.md, "
+                      "\"Controller parameters\").\n";
+    for (const auto& d : setup.decisions) ctl += "# " + d + "\n";
+    ctl += "arms:\n";
+    for (const auto& arm : setup.arms) {
+      ctl += "  " + arm.side + ":\n    joints: [";
+      for (std::size_t i = 0; i < arm.joints.size(); ++i) ctl += (i ? ", " : "") + arm.joints[i];
+      ctl += "]\n    hand_link: " + arm.hand_link + "\n    hand_point: " + vec3(arm.hand_point_L) + "   # m, in " +
+             arm.hand_link + "\n    rest: [";
+      for (std::size_t i = 0; i < arm.rest.size(); ++i) ctl += (i ? ", " : "") + num(arm.rest[i]);
+      ctl += "]   # rad\n";
+    }
+    writeFile(controller_path, ctl);
+    const auto cconf = reflex::control::loadControllerConfig(controller_path);
+    const auto cm = reflex::control::makeControllerModel(model, cconf);
+
+    // 5. A behavior that works with this robot: both hands to points 8 cm in front of (and 5 cm above) their
+    // rest positions, checked here by a closed-loop run of the controller (smaller steps if not reached).
+    reflex::control::KinematicsData kin(model);
+    Eigen::VectorXd q = reflex::control::neutralConfiguration(model);
+    for (const auto& arm : cm.arms)
+      for (int i = 0; i < arm.n; ++i) q[arm.q[i]] = arm.rest[i];
+    reflex::control::computeForwardKinematics(model, kin, q);
+    reflex::control::ReachCheck reach;
+    double offset = 0.0;
+    for (double off : {0.08, 0.05, 0.03}) {
+      std::array<Eigen::Vector3d, 2> t;
+      for (int a = 0; a < 2; ++a)
+        t[a] = kin.X_W_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L + Eigen::Vector3d(off, 0.0, 0.6 * off);
+      for (auto& v : t)
+        for (int i = 0; i < 3; ++i) v[i] = std::round(v[i] * 1000.0) / 1000.0;  // as written (mm)
+      reach = reflex::control::checkReach(model, cm, t, 4.0, 0.01);
+      offset = off;
+      if (reach.reached_at >= 0 && reach.estops == 0 && reach.min_distance > cm.params.d_r) break;
+    }
+    const bool reached = reach.reached_at >= 0 && reach.estops == 0 && reach.min_distance > cm.params.d_r;
+    std::printf("behavior: both hands to %s / %s (rest + %.2f m forward, %.3f m up): %s; closest pair during the "
+                "run %.3f m (d_r %.3f m), %llu e-stops\n",
+                vec3(reach.target_W[0]).c_str(), vec3(reach.target_W[1]).c_str(), offset, 0.6 * offset,
+                reached ? ("reached within 10 mm after " + num(reach.reached_at) + " s of a closed-loop run").c_str()
+                        : ("NOT reached in 4 s (errors " + num(reach.error[0]) + " / " + num(reach.error[1]) + " m)").c_str(),
+                reach.min_distance, cm.params.d_r, static_cast<unsigned long long>(reach.estops));
+    std::string beh = "# Behavior configuration for " + model.name + ", written by reflex_setup: both hands reach to a\n"
+                      "# point in front of their rest positions and stay (checked by a closed-loop run at set-up).\n"
+                      "#   reflex_behavior --config " + behavior_path + "\n# Keys: modules/README.md, control/docs/configuration.md.\n"
+                      "process: behavior\n\nrobot:\n";
+    beh += "  urdf: " + relativeTo(robot_urdf, out_dir) + "   # relative to this file\n";
+    beh += "  collision: collision.yaml\n";
+    beh += "  left_shoulder: " + setup.arms[0].shoulder_link + "\n  right_shoulder: " + setup.arms[1].shoulder_link + "\n";
+    beh += "  left_hand: " + setup.arms[0].hand_link + "\n  right_hand: " + setup.arms[1].hand_link + "\n";
+    beh += "  head: " + setup.head_link + "\n  head_camera: " + setup.camera_link + "\n";
+    beh += "  hand_point: " + vec3(setup.arms[0].hand_point_L) + "   # m, in the hand link (the left hand's; "
+           "the controller has one per arm)\n\n";
+    beh += "modules:\n  - name: reach\n    type: scripted\n    config:\n      timeline:\n        - {t: 0.0, left: " +
+           vec3(reach.target_W[0]) + ", right: " + vec3(reach.target_W[1]) + "}\n";
+    writeFile(behavior_path, beh);
+    for (const auto& d : setup.decisions) std::printf("%s\n", d.c_str());
+    std::printf("wrote %s, %s, %s%s%s\n", controller_path.c_str(), collision_path.c_str(), behavior_path.c_str(),
+                meshes ? ", " : "", meshes ? fit_path.c_str() : "");
+    std::printf("next: reflex_sim --urdf %s --collision %s --controller %s\n", robot_urdf.c_str(), collision_path.c_str(),
+                controller_path.c_str());
+    return reached ? 0 : 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "reflex_setup: error: %s\n", e.what());
+    return 1;
+  }
+}
+
+int main(int argc, char** argv) {
+  const int status = run(argc, argv);
+  if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
+    std::fprintf(stderr, "reflex_setup: error: %s\n", why.c_str());
+    return 1;
+  }
+  return status;
+}
