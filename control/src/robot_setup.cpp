@@ -24,7 +24,8 @@ std::string fmt(const char* f, double v) {
 
 std::string vec(const Eigen::Vector3d& v) {
   char buf[96];
-  std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", v.x(), v.y(), v.z());
+  const auto r = [](double x) { return std::round(x * 1000.0) / 1000.0 + 0.0; };  // no "-0.000"
+  std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", r(v.x()), r(v.y()), r(v.z()));
   return buf;
 }
 
@@ -589,6 +590,78 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
   s.decisions.push_back(os.str());
 }
 
+namespace {
+
+// The primitives of `link`'s rigid body in the link frame (one set); if that body has none, those of
+// the nearest body above it (not above the arm's first link) with primitives, one set per combination of
+// the joints in between at {lower, middle, upper} of the middle 80 % of their ranges.
+std::vector<std::vector<Primitive>> bodyPrimitivesInLink(const Model& m, const Tree& t, int link, int arm_first) {
+  auto bodyOf = [&](int l) {
+    while (m.links[l].parent >= 0 && m.links[l].q_index < 0) l = m.links[l].parent;
+    return l;
+  };
+  auto collect = [&](int body) {  // body's primitives in the body frame
+    std::vector<Primitive> prims;
+    std::vector<std::pair<int, Eigen::Isometry3d>> stack = {{body, Eigen::Isometry3d::Identity()}};
+    while (!stack.empty()) {
+      const auto [l, X_B_l] = stack.back();
+      stack.pop_back();
+      if (const int sg = t.segment_of[l]; sg >= 0) {
+        const Segment& seg = m.segments[sg];
+        for (int pi = seg.first_primitive; pi < seg.first_primitive + seg.num_primitives; ++pi) {
+          Primitive p = m.primitives[pi];
+          p.a_L = X_B_l * p.a_L;
+          p.b_L = X_B_l * p.b_L;
+          prims.push_back(p);
+        }
+      }
+      for (int ch : t.children[l])
+        if (m.links[ch].q_index < 0) stack.push_back({ch, X_B_l * m.links[ch].X_P_J});
+    }
+    return prims;
+  };
+  int body = bodyOf(link);
+  std::vector<int> between;  // links whose joints lie between the geometric body and `link`
+  std::vector<Primitive> prims = collect(body);
+  while (prims.empty() && body != arm_first && m.links[body].parent >= 0) {
+    between.push_back(body);
+    body = bodyOf(m.links[body].parent);
+    prims = collect(body);
+  }
+  // X_body_link for one combination of the joint values.
+  const int combos = static_cast<int>(std::pow(3.0, static_cast<double>(between.size())));
+  std::vector<std::vector<Primitive>> sets;
+  for (int c = 0; c < combos; ++c) {
+    std::vector<double> value(m.links.size(), 0.0);
+    int code = c;
+    for (int l : between) {
+      const int qi = m.links[l].q_index;
+      const double lo = std::isfinite(m.q_lower[qi]) ? m.q_lower[qi] : -M_PI;
+      const double hi = std::isfinite(m.q_upper[qi]) ? m.q_upper[qi] : M_PI;
+      value[l] = lo + (0.1 + 0.4 * (code % 3)) * (hi - lo);
+      code /= 3;
+    }
+    Eigen::Isometry3d X_body_link = Eigen::Isometry3d::Identity();
+    for (int l = link; l != body; l = m.links[l].parent) {
+      Eigen::Isometry3d X_J = Eigen::Isometry3d::Identity();
+      if (m.links[l].q_index >= 0 && m.links[l].type == JointType::kRevolute)
+        X_J.linear() = Eigen::AngleAxisd(value[l], m.links[l].axis_J).toRotationMatrix();
+      else if (m.links[l].q_index >= 0)
+        X_J.translation() = value[l] * m.links[l].axis_J;
+      X_body_link = m.links[l].X_P_J * X_J * X_body_link;
+    }
+    std::vector<Primitive> in_link = prims;
+    for (Primitive& p : in_link) {
+      p.a_L = X_body_link.inverse() * p.a_L;
+      p.b_L = X_body_link.inverse() * p.b_L;
+    }
+    sets.push_back(in_link);
+  }
+  return sets;
+}
+
+}  // namespace
+
 ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::array<Eigen::Vector3d, 2>& target_W,
                       double duration, double tolerance) {
   ReachCheck r;
@@ -644,107 +717,86 @@ std::string collisionElementForCapsule(const Primitive& c, const std::string& na
 
 int findArmGaps(const Model& m, const SetupOptions& o, RobotSetup& s) {
   s.gaps.clear();
-  const ArmIndex ix = armIndex(m, s);
   const Tree t(m);
-  KinematicsData kin(m);
-  std::mt19937_64 rng(o.seed + 17);
-  Eigen::VectorXd q = neutralConfiguration(m);
-  for (int a = 0; a < 2; ++a)
-    for (std::size_t i = 0; i < ix.q[a].size(); ++i) q[ix.q[a][i]] = s.arms[a].rest[i];
-  std::vector<Eigen::VectorXd> configs = {q};
-  for (int k = 0; k < o.gap_configs; ++k) {
-    Eigen::VectorXd qr = q;
-    for (int a = 0; a < 2; ++a)
-      for (int qi : ix.q[a]) qr[qi] = std::uniform_real_distribution<double>(lo80(m, qi), hi80(m, qi))(rng);
-    configs.push_back(qr);
-  }
-  for (int a = 0; a < 2; ++a) {
-    const ArmSetup& arm = s.arms[a];
+  for (const ArmSetup& arm : s.arms) {
     const int hand = m.linkIndex(arm.hand_link);
-    // The skeleton: links from the first arm joint's link to the hand (each stretch belongs to the
-    // link whose frame holds both its ends), then the hand point.
+    const int first = m.q_link[m.qIndex(arm.joints.front())];
+    // The skeleton: the links from the first arm joint's link to the hand (each stretch runs from a
+    // link's origin to its child's origin on the path), then the hand link's origin to the hand point.
     std::vector<int> path;
     for (int l = hand; l >= 0; l = m.links[l].parent) {
       path.push_back(l);
-      if (l == m.q_link[ix.q[a][0]]) break;
+      if (l == first) break;
     }
     std::reverse(path.begin(), path.end());
-    std::vector<bool> in_arm(m.links.size(), false);
-    in_arm[path.front()] = true;
-    for (std::size_t l = 0; l < m.links.size(); ++l)
-      if (m.links[l].parent >= 0 && in_arm[m.links[l].parent]) in_arm[l] = true;
     struct Stretch {
       int link;
-      Eigen::Vector3d from_L, to_L;
+      Eigen::Vector3d to_L;
     };
     std::vector<Stretch> stretches;
-    for (std::size_t i = 0; i + 1 < path.size(); ++i)
-      stretches.push_back({path[i], Eigen::Vector3d::Zero(), m.links[path[i + 1]].X_P_J.translation()});
-    stretches.push_back({hand, Eigen::Vector3d::Zero(), arm.hand_point_L});
-    for (const Stretch& st : stretches) {
-      const double len = (st.to_L - st.from_L).norm();
-      if (len < 1e-9 && &st != &stretches.back()) continue;
+    for (std::size_t i = 0; i + 1 < path.size(); ++i) stretches.push_back({path[i], m.links[path[i + 1]].X_P_J.translation()});
+    stretches.push_back({hand, arm.hand_point_L});
+    for (std::size_t si = 0; si < stretches.size(); ++si) {
+      const Stretch& st = stretches[si];
+      const double len = st.to_L.norm();
+      if (len < 1e-9 && si + 1 < stretches.size()) continue;
+      // The primitives of the link's rigid body (the link and every link joined to it by fixed joints),
+      // in the link frame: the stretch and they move together, so the gap is the same at every q. A body
+      // without primitives (a bare link between two joints, e.g. an arm-yaw link) is checked against the
+      // nearest body above it with primitives, with the joints in between at the ends and middle of
+      // their ranges (every combination; the worst counts).
+      std::vector<std::vector<Primitive>> prim_sets = bodyPrimitivesInLink(m, t, st.link, first);
       const int n = std::max(1, static_cast<int>(std::ceil(len / 0.005)));
-      double worst = 0.0;
+      double worst = -std::numeric_limits<double>::infinity();
       Eigen::Vector3d worst_p = Eigen::Vector3d::Zero();
-      double t_first = 2.0, t_last = -1.0;
+      int k_first = -1, k_last = -1;
       for (int k = 0; k <= n; ++k) {
-        const double tt = static_cast<double>(k) / n;
-        const Eigen::Vector3d p_L = st.from_L + tt * (st.to_L - st.from_L);
-        double gap_here = 0.0;  // worst over configurations of the distance to the nearest arm primitive
-        for (const Eigen::VectorXd& qc : configs) {
-          computeForwardKinematics(m, kin, qc);
-          const Eigen::Vector3d p_W = kin.X_W_L[st.link] * p_L;
-          double dmin = std::numeric_limits<double>::infinity();
-          for (int sg = 0; sg < m.num_robot_segments; ++sg) {
-            const Segment& seg = m.segments[sg];
-            if (!in_arm[seg.link]) continue;
-            const Eigen::Vector3d p_S = kin.X_W_L[seg.link].inverse() * p_W;
-            for (int pi = seg.first_primitive; pi < seg.first_primitive + seg.num_primitives; ++pi)
-              dmin = std::min(dmin, signedDistanceToPrimitive(m.primitives[pi], p_S));
-          }
-          gap_here = std::max(gap_here, dmin);
+        const Eigen::Vector3d p_L = (static_cast<double>(k) / n) * st.to_L;
+        double d = -std::numeric_limits<double>::infinity();
+        for (const auto& prims : prim_sets) {
+          double dc = std::numeric_limits<double>::infinity();
+          for (const Primitive& p : prims) dc = std::min(dc, signedDistanceToPrimitive(p, p_L));
+          d = std::max(d, dc);
         }
-        if (gap_here > o.gap_tolerance) {
-          t_first = std::min(t_first, tt);
-          t_last = std::max(t_last, tt);
+        if (d > o.gap_tolerance) {
+          if (k_first < 0) k_first = k;
+          k_last = k;
         }
-        if (gap_here > worst) {
-          worst = gap_here;
+        if (d > worst) {
+          worst = d;
           worst_p = p_L;
         }
       }
-      if (worst <= o.gap_tolerance) continue;
+      if (k_first < 0) continue;
       ArmGap g;
       g.side = arm.side;
       g.link = m.links[st.link].name;
       g.gap = worst;
       g.point_L = worst_p;
-      const Eigen::Vector3d p0 = st.from_L + t_first * (st.to_L - st.from_L);
-      const Eigen::Vector3d p1 = st.from_L + t_last * (st.to_L - st.from_L);
-      // From the nearest core end of the link's own primitives (continuing the last one) to the last uncovered point.
-      g.closing.radius = 0.0;
+      const Eigen::Vector3d p0 = (static_cast<double>(k_first) / n) * st.to_L;
+      const Eigen::Vector3d p1 = (static_cast<double>(k_last) / n) * st.to_L;
+      // From the nearest core end of the body's primitives (continuing it) to the last uncovered point.
       g.closing.a_L = p0;
+      g.closing.radius = 0.0;
       double best_d = std::numeric_limits<double>::infinity();
-      if (const int sg = t.segment_of[st.link]; sg >= 0) {
-        const Segment& seg = m.segments[sg];
-        for (int pi = seg.first_primitive; pi < seg.first_primitive + seg.num_primitives; ++pi)
-          for (const Eigen::Vector3d& e : {m.primitives[pi].a_L, m.primitives[pi].b_L})
-            if ((e - p0).norm() < best_d) {
-              best_d = (e - p0).norm();
-              g.closing.a_L = e;
-              g.closing.radius = m.primitives[pi].radius;
-            }
-      }
-      if (g.closing.radius <= 0.0) g.closing.radius = std::max(o.gap_tolerance, 0.02);
+      for (const Primitive& p : prim_sets.front())
+        for (const Eigen::Vector3d& e : {p.a_L, p.b_L})
+          if ((e - p0).norm() < best_d) {
+            best_d = (e - p0).norm();
+            g.closing.a_L = e;
+            g.closing.radius = p.radius;
+          }
+      if (g.closing.radius <= 0.0) g.closing.radius = std::max(2.0 * o.gap_tolerance, 0.02);
       g.closing.b_L = p1;
       g.closing.sphere = (g.closing.b_L - g.closing.a_L).norm() < 1e-9;
+      if (g.closing.sphere) g.closing.b_L = g.closing.a_L;
       std::ostringstream msg;
-      msg << "warning: " << arm.side << " arm: link '" << g.link << "': the arm's skeleton (link origins to the hand point) "
-          << "lies up to " << fmt("%.3f", worst) << " m outside every collision primitive of the arm, at "
+      msg << "warning: " << arm.side << " arm: link '" << g.link << "': "
+          << (si + 1 == stretches.size() ? "the stretch to the hand point" : "the stretch between its joints")
+          << " lies up to " << fmt("%.3f", worst) << " m outside every collision primitive of the link, at "
           << vec(worst_p) << " m in '" << g.link << "' (tolerance " << fmt("%.3f", o.gap_tolerance)
-          << " m); a capsule from " << vec(g.closing.a_L) << " to " << vec(g.closing.b_L) << ", radius "
-          << fmt("%.3f", g.closing.radius) << " m closes it";
+          << " m): a capsule from " << vec(g.closing.a_L) << " to " << vec(g.closing.b_L) << " m, radius "
+          << fmt("%.3f", g.closing.radius) << " m, closes it";
       g.message = msg.str();
       g.urdf_snippet = collisionElementForCapsule(g.closing, g.link + "_gap");
       s.gaps.push_back(g);

@@ -18,12 +18,14 @@
 //   head        the end link with geometry of the highest chain below the arms' branching link that is
 //               not an arm (a name with "head" wins); camera: a link rigidly fixed below the head whose
 //               name holds "camera" (first in the tree), else the head link.
-//   gaps        points every 5 mm along each arm's skeleton (the origins of the links from the first
-//               arm joint to the hand link, then the hand point) at q = rest and at `gap_configs`
-//               random arm configurations: a point whose distance to the surface of every primitive of
-//               its arm (the segments the arm moves) exceeds `gap_tolerance` is a gap; reported per
-//               link with the largest gap and the capsule that closes it (link frame: from the nearest
-//               core end of the link's primitives to the last uncovered point, radius of that primitive).
+//   gaps        points every 5 mm along each arm's skeleton (each link's origin to the next link's
+//               origin on the path from the first arm joint to the hand link, then the hand link's
+//               origin to the hand point): a point farther than `gap_tolerance` from the surface of
+//               every primitive of its link's rigid body (the link and the links fixed to it) is a gap.
+//               Stretch and primitives are rigid in the link frame, so the check holds at every q.
+//               Reported per link with the largest gap and the capsule that closes it (link frame:
+//               from the nearest core end of the body's primitives to the last uncovered point, with
+//               that primitive's radius).
 //   rest        a posture inside the limits (the middle 80 % of each range) and clear of the body:
 //               every checked pair with an arm segment > d_a + rest_margin (the others: legs,
 //               trunk, head, the rest posture cannot change), searched by deterministic random sampling then
@@ -56,7 +58,6 @@ struct SetupOptions {
   double d_a = 0.04;                  ///< m: the controller's avoidance distance (rest must clear it)
   double rest_margin = 0.01;          ///< m: rest clears every checked pair by d_a + this
   double gap_tolerance = 0.01;        ///< m: a skeleton point farther than this from its arm's primitives is a gap
-  int gap_configs = 8;                ///< random arm configurations checked for gaps (besides rest)
   int rest_samples = 4000;            ///< random postures tried for rest
   std::uint64_t seed = 1;
 };
@@ -101,7 +102,7 @@ Eigen::VectorXd neutralConfiguration(const Model& model);
 /// posture clears every pair by d_a + rest_margin, naming the best one found and its closest pair.
 void findRestPosture(const Model& model, const SetupOptions& options, RobotSetup& setup);
 
-/// Fills setup.gaps (needs the rest posture). Returns the number of gaps.
+/// Fills setup.gaps. Returns the number of gaps.
 int findArmGaps(const Model& model, const SetupOptions& options, RobotSetup& setup);
 
 /// A short closed-loop run of the OnboardController (KinematicPort) from the rest posture, both hands
