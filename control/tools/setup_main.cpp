@@ -185,6 +185,8 @@ int run(int argc, char** argv) {
     }
     const Model all = reflex::control::loadModel(urdf, every);
     const Model nonadj = reflex::control::loadModel(urdf, nonadj_config);
+    // The structure first (it does not depend on the pair list): a robot without clear arms writes nothing.
+    (void)reflex::control::findRobotStructure(nonadj, o);
     std::fprintf(stderr, "reflex_setup: sampling %d configurations for the pair list\n", sampling.samples);
     const auto report = reflex::control::samplePairs(all, nonadj, sampling);
     int always = 0, never = 0;
