@@ -147,7 +147,9 @@ TEST_P(ShippedRobot, FindsTheKnownArmsHeadAndARestClearOfTheBodyAndTheFilesWorkI
       EXPECT_LE(arm.rest[i], model.q_upper[arm.q[i]]);
       q_rest[arm.q[i]] = arm.rest[i];
     }
-  std::vector<double> max_d(model.pairs.size(), 0.0), min_d(model.pairs.size(), 1e9);
+  const std::size_t npairs = model.pairs.size();
+  Eigen::VectorXd max_d = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(npairs));
+  Eigen::VectorXd min_d = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(npairs), 1e9);
   KinematicsData kin(model);
   DistanceData dist(model);
   std::mt19937_64 rng(7);
@@ -159,8 +161,8 @@ TEST_P(ShippedRobot, FindsTheKnownArmsHeadAndARestClearOfTheBodyAndTheFilesWorkI
     computeForwardKinematics(model, kin, q);
     computeSegmentDistances(model, kin, dist);
     for (std::size_t i = 0; i < model.pairs.size(); ++i) {
-      max_d[i] = std::max(max_d[i], dist.pairs[i].distance);
-      min_d[i] = std::min(min_d[i], dist.pairs[i].distance);
+      max_d[static_cast<Eigen::Index>(i)] = std::max(max_d[static_cast<Eigen::Index>(i)], dist.pairs[i].distance);
+      min_d[static_cast<Eigen::Index>(i)] = std::min(min_d[static_cast<Eigen::Index>(i)], dist.pairs[i].distance);
     }
   }
   computeForwardKinematics(model, kin, q_rest);
