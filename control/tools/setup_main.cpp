@@ -289,8 +289,10 @@ int run(int argc, char** argv) {
     for (const auto& d : setup.decisions) std::printf("%s\n", d.c_str());
     std::printf("wrote %s, %s, %s%s%s\n", controller_path.c_str(), collision_path.c_str(), behavior_path.c_str(),
                 meshes ? ", " : "", meshes ? fit_path.c_str() : "");
-    std::printf("next: reflex_sim --urdf %s --collision %s --controller %s\n", robot_urdf.c_str(), collision_path.c_str(),
-                controller_path.c_str());
+    std::printf("next: reflex_sim SCENARIO --urdf %s --collision %s --controller %s --out RUN\n", robot_urdf.c_str(),
+                collision_path.c_str(), controller_path.c_str());
+    std::printf("next: reflex_controller --urdf %s --collision %s --controller %s; reflex_behavior --config %s\n",
+                robot_urdf.c_str(), collision_path.c_str(), controller_path.c_str(), behavior_path.c_str());
     return reached ? 0 : 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "reflex_setup: error: %s\n", e.what());
