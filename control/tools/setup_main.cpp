@@ -132,9 +132,11 @@ int run(int argc, char** argv) {
   sampling.near_distance = o.d_a;
 
   try {
-    if (const std::string why = reflex::common::inputFileProblem(urdf); !why.empty()) throw std::runtime_error("URDF " + why);
-    if (!srdf.empty())
-      if (const std::string why = reflex::common::inputFileProblem(srdf); !why.empty()) throw std::runtime_error("--srdf " + why);
+    for (const auto& [what, path] : {std::pair<std::string, std::string>{"URDF", urdf}, {"--srdf", srdf}}) {
+      if (path.empty()) continue;
+      if (!fs::exists(path)) throw std::runtime_error(what + " '" + path + "' does not exist");
+      if (const std::string why = reflex::common::inputFileProblem(path); !why.empty()) throw std::runtime_error(what + " " + why);
+    }
     reflex::control::PackagePaths paths;
     for (const auto& arg : package_args) {
       const auto eq = arg.find('=');
@@ -220,12 +222,10 @@ int run(int argc, char** argv) {
       robot_urdf = closed_urdf;
       if (meshes) fit(robot_urdf);
       model = reflex::control::loadModel(robot_urdf, reflex::control::loadCollisionConfig(collision_path));
-      const auto before = setup.decisions.size();
       setup = reflex::control::findRobotStructure(model, o);
       reflex::control::findRestPosture(model, o, setup);
       if (const int left = reflex::control::findArmGaps(model, o, setup); left > 0)
         std::printf("gaps: %d remain after closing\n", left);
-      (void)before;
     }
 
     // 4. controller.yaml, read back and resolved against the robot.

@@ -341,6 +341,19 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: give both --left-hand and --right-hand (got only --left-hand 'a_l4')\n"));
   r = setupRun(dir + "/one.urdf --out " + dir + "/one --left-hand a_l4 --right-hand nope");
   EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: --right-hand 'nope' is not a link of robot 'one'\n"));
+  // Bad set-up input, each named.
+  r = setupRun(dir + "/nope.urdf --out " + dir + "/x");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.err, "reflex_setup: error: URDF '" + dir + "/nope.urdf' does not exist\n");
+  r = setupRun(dir + "/one.urdf --out " + dir + "/x --srdf " + dir + "/nope.srdf");
+  EXPECT_EQ(r.err, "reflex_setup: error: --srdf '" + dir + "/nope.srdf' does not exist\n");
+  r = setupRun(dir + "/one.urdf --out " + dir + "/x --package-path foo");
+  EXPECT_EQ(r.err, "reflex_setup: error: --package-path 'foo' must be NAME=DIR\n");
+  r = setupRun(dir + "/one.urdf --out /dev/null/x");
+  EXPECT_EQ(r.err, "reflex_setup: error: --out '/dev/null/x': cannot create the folder: Not a directory\n");
+  r = setupRun("--help");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_THAT(r.out, HasSubstr("--close-gaps"));
   // Files already there are not replaced without --force.
   r = setupRun(dir + "/amb.urdf --out " + dir + "/amb --left-hand c_l4 --right-hand d_l4 --head trunk");
   EXPECT_EQ(r.exit_code, 1);
