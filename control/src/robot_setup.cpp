@@ -581,12 +581,13 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
   s.rest_pair = m.segments[p.a].name + "-" + m.segments[p.b].name;
   Eigen::Vector3d h = kin.X_W_L[hand[0]] * s.arms[0].hand_point_L - S[0];
   std::ostringstream os;
-  os << "rest: the posture (of " << o.rest_samples << " random ones in the middle 80 % of the limits, then refined) "
-     << "closest to the left hand " << fmt("%.2f", h.x()) << " m in front of, " << fmt("%.2f", h.y())
-     << " m beside and " << fmt("%.2f", -h.z()) << " m below the shoulder (arm reach " << fmt("%.2f", reach)
-     << " m) with every checked pair of an arm above d_a + " << fmt("%.3f", o.rest_margin) << " m; tightest arm pair at rest '"
-     << m.segments[p.a].name << "'-'" << m.segments[p.b].name << "' " << fmt("%.3f", s.rest_distance)
-     << " m (its least clearance over what it must keep); right arm mirrored";
+  os << "rest: left hand " << fmt("%.2f", h.x()) << " m in front of, " << fmt("%.2f", h.y()) << " m beside and "
+     << fmt("%.2f", -h.z()) << " m below the shoulder (arm reach " << fmt("%.2f", reach)
+     << " m): the posture nearest to 'hand below and in front of the shoulder, arm slightly out' of " << o.rest_samples
+     << " random ones in the middle 80 % of the limits (then refined) with every checked pair of an arm above d_a + "
+     << fmt("%.3f", o.rest_margin) << " m; at rest the pair with the least margin over what it must keep is '"
+     << m.segments[p.a].name << "'-'" << m.segments[p.b].name << "', " << fmt("%.3f", s.rest_distance)
+     << " m apart; right arm mirrored";
   s.decisions.push_back(os.str());
 }
 

@@ -246,6 +246,8 @@ int run(int argc, char** argv) {
     const auto cconf = reflex::control::loadControllerConfig(controller_path);
     const auto cm = reflex::control::makeControllerModel(model, cconf);
 
+    for (const auto& d : setup.decisions) std::printf("%s\n", d.c_str());
+
     // 5. A behavior that works with this robot: both hands to points 8 cm in front of (and 5 cm above) their
     // rest positions, checked here by a closed-loop run of the controller (smaller steps if not reached).
     reflex::control::KinematicsData kin(model);
@@ -286,7 +288,6 @@ int run(int argc, char** argv) {
     beh += "modules:\n  - name: reach\n    type: scripted\n    config:\n      timeline:\n        - {t: 0.0, left: " +
            vec3(reach.target_W[0]) + ", right: " + vec3(reach.target_W[1]) + "}\n";
     writeFile(behavior_path, beh);
-    for (const auto& d : setup.decisions) std::printf("%s\n", d.c_str());
     std::printf("wrote %s, %s, %s%s%s\n", controller_path.c_str(), collision_path.c_str(), behavior_path.c_str(),
                 meshes ? ", " : "", meshes ? fit_path.c_str() : "");
     std::printf("next: reflex_sim SCENARIO --urdf %s --collision %s --controller %s --out RUN\n", robot_urdf.c_str(),

@@ -117,7 +117,7 @@ TEST_P(ShippedRobot, FindsTheKnownArmsHeadAndARestClearOfTheBodyAndTheFilesWorkI
   EXPECT_THAT(r.out, Not(HasSubstr("warning"))) << "the shipped robots have no gaps";
   // One line per decision, each with its reason.
   for (const char* d : {"arms: left [", "left hand: link '", "right hand: link '", "head: link '", "camera: link '",
-                        "rest: the posture", "behavior: both hands to", "pairs: 5000 sampled configurations"})
+                        "rest: left hand ", "behavior: both hands to", "pairs: 5000 sampled configurations"})
     EXPECT_THAT(r.out, HasSubstr(d));
 
   // collision.yaml (and the fit) load with the project's readers; the model the controller will use.
