@@ -12,7 +12,7 @@
 set -euo pipefail
 src=$1 build=$2 domain=$3
 work=$(mktemp -d /tmp/reflex_install_test.XXXXXX)
-trap 'rm -rf "$work"' EXIT
+trap '[[ -n ${KEEP_WORK:-} ]] || rm -rf "$work"' EXIT
 prefix=$work/prefix
 fail() { echo "install_test: FAIL: $*" >&2; exit 1; }
 step() { echo "install_test: [$(date +%T)] $*"; }
@@ -33,7 +33,8 @@ urdf=$src/bringup/robots/asimo_like.urdf
 session=$src/bringup/sessions/flagship
 out=$("$work/outside/outside_check" "$urdf" "$session/left.yaml" "$session/right.yaml")
 echo "$out"
-want=$("$build/bin/reflex_inspect" "$urdf" | head -1 | sed -E 's/^# (robot [^:]+: [0-9]+ segments, [0-9]+ checked pairs).*/\1/')
+"$build/bin/reflex_inspect" "$urdf" > "$work/inspect.out"
+want=$(sed -n -E '1s/^# (robot [^:]+: [0-9]+ segments, [0-9]+ checked pairs).*/\1/p' "$work/inspect.out")
 [[ $(echo "$out" | head -1) == "$want" ]] || fail "outside_check says '$(echo "$out" | head -1)', reflex_inspect '$want'"
 baseline=$(python3 -c "
 import re,sys
@@ -76,17 +77,46 @@ msg=$("$behavior" --config "$config" --plugin "$plugin" --plugin "$plugin" 2>&1)
 set -e
 [[ $rc -eq 2 ]] && grep -qF "module type 'wave' is already registered" <<<"$msg" || fail "plugin twice: exit $rc, $msg"
 
+# Two hand-made libraries with the entry points: another API tag, and a plugin that registers nothing.
+for kind in old_api empty; do
+  tag='"reflex-module-api/1"'; [[ $kind == old_api ]] && tag='"reflex-module-api/0"'
+  cat > "$work/$kind.cpp" <<CPP
+namespace reflex::modules { class ModuleRegistry; }
+extern "C" const char* reflex_module_api_tag() { return $tag; }
+extern "C" void reflex_register_modules(reflex::modules::ModuleRegistry&) {}
+CPP
+  g++ -shared -fPIC -o "$work/lib$kind.so" "$work/$kind.cpp" || fail "cannot build lib$kind.so"
+done
+set +e
+msg=$("$behavior" --config "$config" --plugin "$work/libold_api.so" 2>&1); rc=$?
+set -e
+[[ $rc -eq 2 ]] && grep -qF "module plugin '$work/libold_api.so': built for 'reflex-module-api/0', this reflex_behavior is 'reflex-module-api/1'" <<<"$msg" \
+  || fail "plugin of another API: exit $rc, $msg"
+set +e
+msg=$("$behavior" --config "$config" --plugin "$work/libempty.so" 2>&1); rc=$?
+set -e
+[[ $rc -eq 2 ]] && grep -qF "module plugin '$work/libempty.so': registers no module type" <<<"$msg" \
+  || fail "plugin registering nothing: exit $rc, $msg"
+
 step "the plugin's module in the installed reflex_behavior, on the bus (domain $domain)"
-"$behavior" --config "$config" --plugin "$plugin" --domain "$domain" --duration 6 > "$work/behavior.out" 2> "$work/behavior.err" &
+"$behavior" --config "$config" --plugin "$plugin" --domain "$domain" --duration 120 > "$work/behavior.out" 2> "$work/behavior.err" &
 bpid=$!
-sleep 1.5
-"$prefix/bin/reflex_bus" list --domain "$domain" --window 2 > "$work/list.out" 2>&1 || true
-"$prefix/bin/reflex_bus" hz reflex/hand_targets --domain "$domain" --window 2 > "$work/hz.out" 2>&1 || true
-wait $bpid || { cat "$work/behavior.err"; fail "reflex_behavior with the plugin exited $?"; }
+# Discovery on a loaded machine can take seconds: ask until the module is seen (at most ~40 s).
+seen=0
+for _ in $(seq 20); do
+  "$prefix/bin/reflex_bus" list --domain "$domain" --window 2 > "$work/list.out" 2>&1 || true
+  if grep -q "modules: wave" "$work/list.out"; then seen=1; break; fi
+  kill -0 $bpid 2>/dev/null || break
+done
+"$prefix/bin/reflex_bus" hz reflex/hand_targets --domain "$domain" --window 3 > "$work/hz.out" 2>&1 || true
+kill -TERM $bpid 2>/dev/null || true
+rc=0; wait $bpid || rc=$?
 cat "$work/list.out" "$work/hz.out"
+[[ $rc -eq 0 ]] || fail "reflex_behavior with the plugin exited $rc after SIGTERM (0 expected: main's StopOnSignal): $(cat "$work/behavior.err")"
 grep -q "plugin $plugin: module types wave" "$work/behavior.err" || fail "no plugin line on stderr: $(cat "$work/behavior.err")"
-grep -q "wave" "$work/list.out" || fail "reflex_bus list does not show the wave module"
-rate=$(awk '/reflex\/hand_targets/ {for (i=1;i<=NF;i++) if ($i ~ /^[0-9.]+$/) {print $i; exit}}' "$work/hz.out")
+[[ $seen -eq 1 ]] || fail "reflex_bus list never showed the wave module: $(cat "$work/list.out")"
+grep -q "hand_targets=[1-9]" "$work/behavior.out" || fail "the exit line counts no hand target: $(cat "$work/behavior.out")"
+rate=$(awk '/reflex\/hand_targets/ {print $3; exit}' "$work/hz.out")
 python3 -c "import sys; r=float('${rate:-0}'); sys.exit(0 if r >= 5 else 1)" \
   || fail "hand targets from the plugin at ${rate:-0}/s (>= 5 expected: it steps every 50 ms)"
 step "PASS (hand targets ${rate}/s)"

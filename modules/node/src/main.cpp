@@ -83,6 +83,7 @@ int main(int argc, char** argv) {
   try {
     if (!domain.empty()) options.domain_id = bus::parseDomainId(domain, "--domain");
     modules::BehaviorNode node(options, registry);
+    bus::StopOnSignal stop_on_signal(node.bus());  // SIGINT / SIGTERM / ... -> a clean stop
     node.run();
     std::printf("reflex_behavior: stats %s\n", node.report().c_str());
     std::fflush(stdout);
