@@ -23,7 +23,8 @@ const char* priorityName(ArmPriority p) {
 }
 
 HostConfig parseHostConfig(const ConfigNode& root, const ModuleRegistry& registry) {
-  root.rejectUnknown({"process", "robot", "inputs", "tick_period", "joint_state_period", "modules"});
+  root.rejectUnknown({"process", "robot", "inputs", "tick_period", "joint_state_period", "plugins", "modules"});
+  // `plugins` is read (and loaded) before this, by loadModulePlugins (plugin.hpp): types are checked below.
   HostConfig c;
   c.file = root.file();
   c.process = root.string("process", c.process);

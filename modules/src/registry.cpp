@@ -36,6 +36,11 @@ std::string ModuleRegistry::typeList() const {
   return out;
 }
 
+void ModuleRegistry::merge(ModuleRegistry&& other) {
+  for (auto& kv : other.entries_) add(kv.first, kv.second.summary, std::move(kv.second.factory));
+  other.entries_.clear();
+}
+
 namespace {
 template <class M>
 ModuleFactory factoryOf() {

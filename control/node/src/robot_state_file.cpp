@@ -24,17 +24,6 @@ constexpr std::size_t kHeaderSize = 40;           // bytes before q
 constexpr std::uint32_t kMaxJoints = 4096;        // a sanity bound for a file of unknown origin
 constexpr off_t kMaxFileSize = 2 * static_cast<off_t>(robotStateSlotSize(static_cast<int>(kMaxJoints)));
 
-constexpr std::array<std::uint32_t, 256> makeCrcTable() {
-  std::array<std::uint32_t, 256> table{};
-  for (std::uint32_t i = 0; i < 256; ++i) {
-    std::uint32_t c = i;
-    for (int k = 0; k < 8; ++k) c = (c & 1U) ? 0xEDB88320U ^ (c >> 1) : c >> 1;
-    table[i] = c;
-  }
-  return table;
-}
-constexpr std::array<std::uint32_t, 256> kCrcTable = makeCrcTable();
-
 template <typename T>
 T readAt(const unsigned char* p) {
   T v;
@@ -120,12 +109,6 @@ std::uint64_t jointNamesHash(const std::vector<std::string>& q_names) {
     add(0);
   }
   return h;
-}
-
-std::uint32_t crc32(const unsigned char* data, std::size_t size) noexcept {
-  std::uint32_t c = 0xFFFFFFFFU;
-  for (std::size_t i = 0; i < size; ++i) c = kCrcTable[(c ^ data[i]) & 0xFFU] ^ (c >> 8);
-  return c ^ 0xFFFFFFFFU;
 }
 
 RobotStateFile::RobotStateFile(const std::string& path, const std::vector<std::string>& q_names,

@@ -261,9 +261,10 @@ const BehaviorHost& BehaviorNode::host() const { return *impl_->host; }
 
 void BehaviorNode::stop() noexcept { impl_->bus->stop(); }
 
+bus::Participant& BehaviorNode::bus() { return *impl_->bus; }
+
 void BehaviorNode::run() {
   Impl& m = *impl_;
-  bus::StopOnSignal stop_on_signal(*m.bus);
   std::string names;
   for (const auto& n : m.host->moduleNames()) names += (names.empty() ? "" : ",") + n;
   try {

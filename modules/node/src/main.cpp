@@ -1,9 +1,11 @@
 // reflex_behavior: runs the behavior modules a configuration names, on the bus.
 //   reflex_behavior --config bringup/behavior/pointing.yaml [--domain N]
 //   reflex_behavior --config bringup/behavior/bar_occlusion.yaml --module occlusion   # one module alone
-//   reflex_behavior --list-modules
+//   reflex_behavior --list-modules [--config FILE | --plugin LIB]
+//   reflex_behavior --config my.yaml --plugin build/libwave_module.so      # a module type from a shared library
 // Swapping a module is a change of configuration: start it with another file.
 #include "reflex/modules/behavior_node.hpp"
+#include "reflex/modules/plugin.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -21,6 +23,7 @@ int main(int argc, char** argv) {
   modules::NodeOptions options;
   std::string domain;
   bool list = false;
+  std::vector<std::string> plugin_files;
   app.add_option("--config", options.config, "behavior configuration YAML (see bringup/behavior/)");
   app.add_option("--module", options.module, "run only the module of this name from the configuration");
   app.add_option("--object-source", options.object_sources,
@@ -43,14 +46,32 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_flag("--quiet", options.quiet, "no log lines on stderr");
-  app.add_flag("--list-modules", list, "list the module types and exit");
+  app.add_option("--plugin", plugin_files,
+                 "shared library adding module types (REFLEX_MODULE_PLUGIN, modules/README.md), loaded before the "
+                 "configuration's own `plugins:` list (repeatable). Its code runs in this process: load only files you "
+                 "trust");
+  app.add_flag("--list-modules", list, "list the module types (built-in and from plugins) and exit");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
 
-  const modules::ModuleRegistry registry = modules::builtinRegistry();
+  modules::ModuleRegistry registry = modules::builtinRegistry();
+  try {
+    std::vector<modules::PluginInfo> loaded;
+    for (const auto& p : plugin_files) loaded.push_back(modules::loadModulePlugin(p, registry));
+    if (!options.config.empty())
+      for (auto& info : modules::loadModulePlugins(options.config, registry)) loaded.push_back(std::move(info));
+    for (const auto& info : loaded) {
+      std::string types;
+      for (const auto& t : info.types) types += (types.empty() ? "" : ", ") + t;
+      std::fprintf(stderr, "reflex_behavior: plugin %s: module types %s\n", info.path.c_str(), types.c_str());
+    }
+  } catch (const modules::ConfigError& e) {
+    std::fprintf(stderr, "reflex_behavior: error: %s\n", e.what());
+    return 2;
+  }
   if (list) {
     for (const auto& t : registry.types()) std::printf("%-12s %s\n", t.c_str(), registry.summary(t).c_str());
     return 0;
@@ -62,6 +83,7 @@ int main(int argc, char** argv) {
   try {
     if (!domain.empty()) options.domain_id = bus::parseDomainId(domain, "--domain");
     modules::BehaviorNode node(options, registry);
+    bus::StopOnSignal stop_on_signal(node.bus());  // SIGINT / SIGTERM / ... -> a clean stop
     node.run();
     std::printf("reflex_behavior: stats %s\n", node.report().c_str());
     std::fflush(stdout);

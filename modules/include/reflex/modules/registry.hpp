@@ -27,6 +27,8 @@ class ModuleRegistry {
   std::string summary(const std::string& type) const;
   /// "a, b, c" for messages.
   std::string typeList() const;
+  /// Moves every type of `other` into this registry. Throws ConfigError on a type registered in both.
+  void merge(ModuleRegistry&& other);
 
  private:
   struct Entry {

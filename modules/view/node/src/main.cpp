@@ -54,6 +54,7 @@ int main(int argc, char** argv) {
   try {
     if (!domain.empty()) options.domain_id = bus::parseDomainId(domain, "--domain");
     view_node::ViewNode node(options);
+    bus::StopOnSignal stop_on_signal(node.bus());  // SIGINT / SIGTERM / ... -> a clean stop
     node.run();
     std::printf("reflex_view: stats %s\n", node.report().c_str());
     std::fflush(stdout);

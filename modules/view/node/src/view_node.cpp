@@ -99,6 +99,8 @@ ViewNode::~ViewNode() = default;
 
 const ViewServer& ViewNode::server() const { return *impl_->server; }
 
+bus::Participant& ViewNode::bus() { return *impl_->bus; }
+
 void ViewNode::stop() noexcept {
   if (impl_->bus) impl_->bus->stop();
 }
@@ -215,7 +217,6 @@ void ViewNode::run() {
       std::fprintf(stderr, "reflex_view: %s\n", report().c_str());
     });
   }
-  bus::StopOnSignal stop_on_signal(*m.bus);
   if (m.options.duration > 0.0) {
     m.bus->runFor(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 * m.options.duration)));
   } else {

@@ -31,6 +31,8 @@
 // (flock) while open, so two controllers can never drive one robot state.
 #pragma once
 
+#include "reflex/common/crc32.hpp"
+
 #include <Eigen/Core>
 
 #include <cstdint>
@@ -48,8 +50,8 @@ class RobotStateError : public std::runtime_error {
 /// FNV-1a 64 of the joint names in order, each followed by '\0' (the identity of a robot's joint set).
 std::uint64_t jointNamesHash(const std::vector<std::string>& q_names);
 
-/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, initial and final xor 0xFFFFFFFF).
-std::uint32_t crc32(const unsigned char* data, std::size_t size) noexcept;
+/// CRC-32 (IEEE 802.3): the project's one implementation (reflex/common/crc32.hpp).
+using common::crc32;
 
 /// Size in bytes of one slot for nq joints.
 constexpr std::size_t robotStateSlotSize(int nq) { return 48 + 8 * static_cast<std::size_t>(nq); }

@@ -17,6 +17,10 @@
 #include <string>
 #include <vector>
 
+namespace reflex::bus {
+class Participant;
+}  // namespace reflex::bus
+
 namespace reflex::modules {
 
 struct NodeOptions {
@@ -43,11 +47,14 @@ class BehaviorNode {
   BehaviorNode(const BehaviorNode&) = delete;
   BehaviorNode& operator=(const BehaviorNode&) = delete;
 
-  /// Starts the modules, runs until stop() / a signal / the duration, then stops the modules and
-  /// waits (up to 2 s) until the removals are acknowledged by matched readers.
+  /// Starts the modules, runs until stop() / the duration, then stops the modules and waits (up to
+  /// 2 s) until the removals are acknowledged by matched readers. Signals are the program's business:
+  /// main installs reflex::bus::StopOnSignal on bus() (so nodes compose in one process).
   void run();
   /// Thread-safe.
   void stop() noexcept;
+  /// The node's participant (to stop it from a signal: bus::StopOnSignal).
+  bus::Participant& bus();
 
   const BehaviorHost& host() const;
   /// "frames=... objects_accepted=... rejected_future=... ..." (the exit report).

@@ -29,6 +29,8 @@
 // process (page cache) and, after the next fsync, also a power loss or kernel crash.
 #pragma once
 
+#include "reflex/common/crc32.hpp"
+
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
@@ -65,13 +67,9 @@ struct RecordEntry {
   std::vector<std::uint8_t> payload;  ///< serialized sample: encapsulation header + XCDR1 body
 };
 
-/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320) of `size` bytes, continuing from `crc`
-/// (pass 0 to start). crc32("123456789") == 0xCBF43926.
-std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc = 0) noexcept;
-
-/// The CRC-32 of A followed by B from crc32(A), crc32(B) and the length of B, without the bytes:
-/// crc32Combine(crc32(A), crc32(B), |B|) == crc32(A || B). O(log |B|).
-std::uint32_t crc32Combine(std::uint32_t crc_a, std::uint32_t crc_b, std::uint64_t size_b) noexcept;
+/// CRC-32 and its combination: the project's one implementation (reflex/common/crc32.hpp).
+using common::crc32;
+using common::crc32Combine;
 
 /// How the reader's scan of a file ended.
 enum class TailState {

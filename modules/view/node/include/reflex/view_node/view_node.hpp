@@ -22,6 +22,10 @@
 #include <memory>
 #include <string>
 
+namespace reflex::bus {
+class Participant;
+}  // namespace reflex::bus
+
 namespace reflex::view_node {
 
 struct ViewOptions {
@@ -58,9 +62,12 @@ class ViewNode {
   ViewNode(const ViewNode&) = delete;
   ViewNode& operator=(const ViewNode&) = delete;
 
-  /// Serves until stop(), a signal, or the duration.
+  /// Serves until stop() or the duration. Signals are the program's business: main installs
+  /// reflex::bus::StopOnSignal on bus() (so nodes compose in one process).
   void run();
   void stop() noexcept;
+  /// The node's participant (to stop it from a signal: bus::StopOnSignal).
+  bus::Participant& bus();
 
   const ViewServer& server() const;
   const ViewStats& stats() const { return stats_; }
