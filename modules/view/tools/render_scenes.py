@@ -3,13 +3,17 @@
 
 reflex_scene (this folder's C++ tool) turns the rows into the foxglove.SceneUpdate that reflex_view
 sends live; the view's page (modules/view/web, static mode: index.html?render=FILE.js) draws them
-with three.js in Debian's Chromium, headless with software WebGL (SwiftShader), and
-`chromium --screenshot` keeps the picture. No second drawing code: the same view.js draws the live view.
+with three.js in Debian's Chromium, headless with software WebGL (SwiftShader). Driven through the
+DevTools protocol over --remote-debugging-pipe (no Node, no WebSocket): it waits for the page's own
+signal that it has drawn (window.reflexView.staticDrawn; `chromium --screenshot` alone was tried and
+often captured the page before it drew), then captures the canvas. No second drawing code: the same
+view.js draws the live view.
 
 Writes into OUT (made if missing):
   scenes.png      every tile side by side (the canvas of the page, cropped from the screenshot)
   scene_<i>.png   tile i alone (the row nearest to the i-th --at time)
   render.js       the module reflex_scene made (scenes, camera, tile size)
+  screenshot.png  what Chromium captured (the canvas; kept also when the robot-pixel check fails)
   render.json     {"tiles": [{"time", "row", "png", "robot_pixels"}], "tile": [w, h], "camera": [...]}
 
 Exit codes: 0 drawn; 2 bad arguments; 3 Chromium, three.js or reflex_scene missing (the message says
@@ -22,12 +26,15 @@ Usage: render_scenes.py --log controller.csv --at 5.4,17.3 --out DIR [--tile 360
                         [--urdf F] [--collision F] [--controller F] [--timeout S] [--min-pixels N]
 """
 import argparse
+import base64
 import json
 import os
+import select
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
@@ -46,6 +53,90 @@ def robot_pixels(tile):
     rgb = tile[:, :, :3] * 255.0
     d2 = sum((rgb[:, :, k] - BACKGROUND[k]) ** 2 for k in range(3))
     return int(((d2 > 80 * 80) & ((rgb[:, :, 0] > 120) | (rgb[:, :, 1] > 120))).sum())
+
+
+class DevToolsPipe:
+    """The Chrome DevTools protocol over --remote-debugging-pipe (Chromium reads JSON messages ending in
+    a NUL byte from its fd 3 and writes them to its fd 4): no WebSocket, no Node needed."""
+
+    def __init__(self, argv, deadline):
+        self.deadline = deadline
+        to_r, self.to_w = os.pipe()
+        self.from_r, from_w = os.pipe()
+
+        def child_fds():  # runs in the child before exec: the pipe ends become its fds 3 and 4
+            os.dup2(to_r, 3)
+            os.dup2(from_w, 4)
+        self.proc = subprocess.Popen(argv + ["--remote-debugging-pipe"], preexec_fn=child_fds, pass_fds=(3, 4),
+                                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        os.close(to_r)
+        os.close(from_w)
+        self.buf = b""
+        self.next_id = 0
+
+    def call(self, method, params=None, session=None):
+        self.next_id += 1
+        msg = {"id": self.next_id, "method": method, "params": params or {}}
+        if session:
+            msg["sessionId"] = session
+        os.write(self.to_w, json.dumps(msg).encode() + b"\0")
+        while True:
+            while b"\0" in self.buf:
+                raw, self.buf = self.buf.split(b"\0", 1)
+                m = json.loads(raw)
+                if m.get("id") == self.next_id:
+                    if "error" in m:
+                        raise RuntimeError("%s: %s" % (method, m["error"].get("message", m["error"])))
+                    return m["result"]
+            ready, _, _ = select.select([self.from_r], [], [], max(0.0, self.deadline - time.time()))
+            if not ready:
+                raise TimeoutError("no answer to %s before the --timeout" % method)
+            chunk = os.read(self.from_r, 1 << 20)
+            if not chunk:
+                raise RuntimeError("Chromium closed the DevTools pipe (exit %s): %s"
+                                   % (self.proc.poll(), self.proc.stderr.read().decode(errors="replace")[-300:]))
+            self.buf += chunk
+
+    def close(self):
+        try:
+            self.proc.kill()
+            self.proc.wait(10)
+        except OSError:
+            pass
+        for fd in (self.to_w, self.from_r):
+            os.close(fd)
+
+
+def capture(chromium, url, profile, width, height, png, timeout):
+    """Opens `url` in headless Chromium (software WebGL), waits until the page in static mode says it
+    has drawn (window.reflexView.staticDrawn) or reports an error, and writes the top-left width x height
+    CSS px of the page to `png`. Returns {"drawn", "errors", "title"} as the page reported them."""
+    argv = [chromium, "--headless=new", "--use-gl=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox",
+            "--no-first-run", "--no-default-browser-check", "--disable-extensions", "--allow-file-access-from-files",
+            "--force-device-scale-factor=1", "--hide-scrollbars", "--window-size=%d,%d" % (width + 40, height + 200),
+            "--user-data-dir=" + profile, url]
+    cdp = DevToolsPipe(argv, time.time() + timeout)
+    try:
+        page = next((t for t in cdp.call("Target.getTargets")["targetInfos"] if t["type"] == "page"), None)
+        if page is None:
+            raise RuntimeError("no page target")
+        session = cdp.call("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})["sessionId"]
+        probe = ("JSON.stringify({drawn: window.reflexView ? window.reflexView.staticDrawn : 0, "
+                 "errors: window.reflexView ? window.reflexView.errors : [], title: document.title})")
+        while True:
+            state = json.loads(cdp.call("Runtime.evaluate", {"expression": probe, "returnByValue": True},
+                                        session)["result"]["value"])
+            if state["drawn"] or state["errors"]:
+                break
+            time.sleep(0.2)
+        if state["drawn"]:
+            shot = cdp.call("Page.captureScreenshot", {"format": "png", "clip": {"x": 0, "y": 0, "width": width,
+                                                                               "height": height, "scale": 1}}, session)
+            with open(png, "wb") as fh:
+                fh.write(base64.b64decode(shot["data"]))
+        return state
+    finally:
+        cdp.close()
 
 
 def main():
@@ -103,20 +194,16 @@ def main():
         spec = json.loads(text[text.index("export default ") + len("export default "):].rstrip().rstrip(";"))
         n = len(spec["scenes"])
         shot = os.path.join(page, "screenshot.png")
-        # The window is taller than the canvas: headless Chromium's viewport is shorter than its window.
-        browser = [args.chromium, "--headless=new", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
-                   "--no-sandbox", "--no-first-run", "--no-default-browser-check", "--disable-extensions",
-                   "--allow-file-access-from-files", "--force-device-scale-factor=1", "--hide-scrollbars",
-                   "--window-size=%d,%d" % (max(width * n, 500), height + 200),
-                   "--user-data-dir=" + os.path.join(page, "profile"), "--screenshot=" + shot,
-                   "file://%s/index.html?render=render.js" % page]
+        url = "file://%s/index.html?render=render.js" % page
         try:
-            b = subprocess.run(browser, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                               timeout=args.timeout)
-        except subprocess.TimeoutExpired:
-            fail(4, "Chromium took more than %.0f s (--timeout)" % args.timeout)
-        if b.returncode != 0 or not os.path.isfile(shot):
-            fail(4, "Chromium exit %d, no screenshot: %s" % (b.returncode, b.stdout.strip()[-300:]))
+            drawn = capture(args.chromium, url, os.path.join(page, "profile"), width * n, height, shot, args.timeout)
+        except (OSError, RuntimeError, TimeoutError) as e:
+            fail(4, "Chromium: %s" % e)
+        if drawn.get("errors"):
+            fail(4, "the page did not draw the scenes: %s" % "; ".join(drawn["errors"]))
+        if drawn.get("drawn") != n:
+            fail(4, "the page drew %s of %d scenes (title '%s')" % (drawn.get("drawn"), n, drawn.get("title")))
+        shutil.copy(shot, os.path.join(args.out, "screenshot.png"))  # kept: what Chromium saw, drawn or not
         image = mpimg.imread(shot)
         if image.shape[0] < height or image.shape[1] < width * n:
             fail(4, "screenshot %dx%d is smaller than the %d tiles of %dx%d" % (image.shape[1], image.shape[0], n,
@@ -126,8 +213,8 @@ def main():
             tile = image[:height, i * width:(i + 1) * width, :3]
             count = robot_pixels(tile)
             if count < args.min_pixels:
-                fail(4, "tile %d (t = %.2f s) shows %d robot pixels (< %d): the page did not draw the scene"
-                     % (i, s["time"], count, args.min_pixels))
+                fail(4, "tile %d (t = %.2f s) shows %d robot pixels (< %d): the robot is not in the picture (see %s)"
+                     % (i, s["time"], count, args.min_pixels, os.path.join(args.out, "screenshot.png")))
             png = os.path.join(args.out, "scene_%d.png" % i)
             mpimg.imsave(png, tile)
             tiles.append({"time": s["time"], "row": s["row"], "png": png, "robot_pixels": count})

@@ -34,6 +34,8 @@ const renderModule = new URLSearchParams(location.search).get("render");
 let renderSpec = null;
 if (renderModule !== null) {
   document.body.classList.add("static");
+  // Anything thrown later (no WebGL context, a malformed scene) is reported too, not only waited for.
+  window.addEventListener("error", (e) => { state.errors.push(String(e.message || e)); });
   try {
     if (!/^[A-Za-z0-9_.-]+\.js$/.test(renderModule) || renderModule.startsWith(".")) {
       throw new Error(`render=${renderModule}: not a plain .js file name in the page's folder`);
@@ -46,6 +48,10 @@ if (renderModule !== null) {
   } catch (e) {
     state.errors.push(String(e.message || e));
     document.title = "Reflex view: error";
+    const note = document.createElement("pre");  // in the screenshot too: never a silently empty picture
+    note.style.color = "#f55";
+    note.textContent = "Reflex view (static mode): " + String(e.message || e);
+    document.body.prepend(note);
     renderSpec = null;
   }
 }
