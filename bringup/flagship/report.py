@@ -248,7 +248,11 @@ def main():
         if lost is not None:
             picks.append(min(last, lost + 200))
         picks += [max(first, k_min - 800), k_min, max(first, last - int(0.25 / rate / 0.005))]
-        picks = sorted(set(picks))
+        kept = []
+        for k in sorted(set(picks)):  # at least 1 s apart (the end of the video is often the closest approach)
+            if not kept or t[k] - t[kept[-1]] >= 1.0:
+                kept.append(k)
+        picks = kept
         times = [t[k] for k in picks]
         tmp = os.path.join(args.out, "strip")
         os.makedirs(tmp, exist_ok=True)

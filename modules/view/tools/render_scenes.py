@@ -14,7 +14,9 @@ Writes into OUT (made if missing):
   scene_<i>.png   tile i alone (the row nearest to the i-th --at time)
   render.js       the module reflex_scene made (scenes, camera, tile size)
   screenshot.png  what Chromium captured (the canvas; kept also when the robot-pixel check fails)
-  render.json     {"tiles": [{"time", "row", "png", "robot_pixels"}], "tile": [w, h], "camera": [...]}
+  render.json     {"tiles": [{"time", "row", "png", "robot_pixels", "page"}], "tile": [w, h], "camera": {...}};
+                  "page": what the page says it drew in that tile (view.js state.tiles: capsulesDrawn,
+                  spheresDrawn, closestLines, targetsDrawn, zoneColours)
 
 Exit codes: 0 drawn; 2 bad arguments; 3 Chromium, three.js or reflex_scene missing (the message says
 what to install); 4 the picture was not drawn (Chromium failed, timed out, or a tile shows no robot:
@@ -31,6 +33,7 @@ import json
 import os
 import select
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -122,7 +125,8 @@ def capture(chromium, url, profile, width, height, png, timeout):
             raise RuntimeError("no page target")
         session = cdp.call("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})["sessionId"]
         probe = ("JSON.stringify({drawn: window.reflexView ? window.reflexView.staticDrawn : 0, "
-                 "errors: window.reflexView ? window.reflexView.errors : [], title: document.title})")
+                 "errors: window.reflexView ? window.reflexView.errors : [], "
+                 "tiles: window.reflexView ? window.reflexView.tiles : [], title: document.title})")
         while True:
             state = json.loads(cdp.call("Runtime.evaluate", {"expression": probe, "returnByValue": True},
                                         session)["result"]["value"])
@@ -140,6 +144,8 @@ def capture(chromium, url, profile, width, height, png, timeout):
 
 
 def main():
+    # SIGTERM (a test's clean-up, a user's kill) unwinds like an error, so Chromium is stopped too.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--log", required=True, help="time series CSV (reflex_controller --log)")
     ap.add_argument("--at", required=True, help="times [s], comma-separated (the nearest row each)")
@@ -217,7 +223,8 @@ def main():
                      % (i, s["time"], count, args.min_pixels, os.path.join(args.out, "screenshot.png")))
             png = os.path.join(args.out, "scene_%d.png" % i)
             mpimg.imsave(png, tile)
-            tiles.append({"time": s["time"], "row": s["row"], "png": png, "robot_pixels": count})
+            tiles.append({"time": s["time"], "row": s["row"], "png": png, "robot_pixels": count,
+                          "page": drawn["tiles"][i] if i < len(drawn.get("tiles", [])) else None})
         mpimg.imsave(os.path.join(args.out, "scenes.png"), image[:height, :width * n, :3])
         shutil.copy(module, os.path.join(args.out, "render.js"))
     with open(os.path.join(args.out, "render.json"), "w") as fh:
