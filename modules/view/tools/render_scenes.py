@@ -153,7 +153,9 @@ def main():
     ap.add_argument("--tile", default="360x420", help="WIDTHxHEIGHT of each scene's picture [px]")
     ap.add_argument("--camera", help="AZ,EL,RADIUS,TX,TY,TZ (reflex_scene --help; default: reflex_scene's)")
     ap.add_argument("--build", default=os.environ.get("REFLEX_BUILD_DIR", os.path.join(ROOT, "build")))
-    ap.add_argument("--chromium", default=shutil.which("chromium") or shutil.which("chromium-browser"))
+    ap.add_argument("--chromium", default=os.environ.get("REFLEX_CHROMIUM") or shutil.which("chromium")
+                    or shutil.which("chromium-browser"), help="the browser (default: $REFLEX_CHROMIUM, else "
+                    "chromium on PATH)")
     ap.add_argument("--three", default=os.path.join(ROOT, "bringup", "web", "node_modules", "three", "build"))
     ap.add_argument("--urdf")
     ap.add_argument("--collision")
