@@ -172,7 +172,8 @@ def main():
 
     # Fig. 13: hand status and arm-to-arm distance.
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1, 1, 3]})
-    main_ts = runs.get("avoidance", next(iter(runs.values())))
+    main_label = "avoidance" if "avoidance" in runs else next(iter(runs))
+    main_ts = runs[main_label]
     t = main_ts["time"]
     for ax, side in zip(axes[:2], ("left", "right")):
         ax.step(t, [1 if s == "given" else 0 for s in main_ts[side + "_status"]], where="post")
@@ -224,13 +225,11 @@ def main():
     strip_ok = False
     strip_robot = None  # "3d" or "2d: <why the 3D render did not run>"
     try:
-        run_info = {}
-        if "avoidance" in runs:
-            try:
-                with open(os.path.join(args.out, "avoidance", "run.json")) as fh:
-                    run_info = json.load(fh)
-            except (OSError, ValueError):
-                run_info = {}
+        try:
+            with open(os.path.join(args.out, main_label, "run.json")) as fh:
+                run_info = json.load(fh)
+        except (OSError, ValueError):
+            run_info = {}
         rate = float(run_info.get("rate", 1.0)) or 1.0
         offset, synced_by = session_offset(main_ts, run_info)  # controller time of the session's first frame
         frames = session_frames(args.session)
@@ -256,7 +255,7 @@ def main():
         times = [t[k] for k in picks]
         tmp = os.path.join(args.out, "strip")
         os.makedirs(tmp, exist_ok=True)
-        log_csv = os.path.join(args.out, "avoidance", "controller.csv")
+        log_csv = os.path.join(args.out, main_label, "controller.csv")
         render = subprocess.run([sys.executable, os.path.join(ROOT, "modules", "view", "tools", "render_scenes.py"),
                                  "--log", log_csv, "--at", ",".join("%.4f" % x for x in times), "--out", tmp,
                                  "--tile", "320x380", "--build", args.build],
