@@ -159,7 +159,10 @@ std::vector<LogScene> readLogScenes(const SceneModel& scene, const std::string& 
     if (v.size() < header.size())
       throw ConfigError(path + " row " + std::to_string(row) + ": " + std::to_string(v.size()) + " values, the header has " +
                         std::to_string(header.size()));
-    times.push_back(parseAnyNumber(v[static_cast<std::size_t>(columns.time)], path + " row " + std::to_string(row) + " column time"));
+    const std::string where = path + " row " + std::to_string(row) + " column time";
+    const double t = parseAnyNumber(v[static_cast<std::size_t>(columns.time)], where);
+    if (!std::isfinite(t)) throw ConfigError(where + ": '" + v[static_cast<std::size_t>(columns.time)] + "' is not finite");
+    times.push_back(t);
     lines.push_back(std::move(line));
   }
   if (lines.empty()) throw ConfigError(path + ": no rows");

@@ -14,7 +14,7 @@
 // <arm> is SceneModel::arm_names ("left", "right").
 //
 // Bad input (setup-time, so it throws control::ConfigError naming the file, the row and the value):
-// a missing file or column, a row with fewer values than the header, a non-finite joint position, a
+// a missing file or column, a row with fewer values than the header, a non-finite time or joint position, a
 // zone that is none of the four names, a number that does not parse. Times in `at` pick the nearest
 // row each (ties: the earlier row); a non-finite time is an error.
 #pragma once
