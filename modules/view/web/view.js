@@ -17,10 +17,11 @@
 // foxglove.SceneUpdate}]}`. The page then opens no WebSocket and shows only the 3D canvas, at the top
 // left, of size (tiles x width) x height: scene i drawn in tile i (x from i * width), each with the same
 // camera (vertical field of view 40 deg, aspect width / height, z up, looking at the target from
-// target + radius (cos el cos az, cos el sin az, sin el)). It draws before the page's load event (so
-// `chromium --headless --screenshot` sees it) and then sets state.staticDrawn (number of tiles),
-// state.tiles ([{time, capsulesDrawn, spheresDrawn, closestLines, targetsDrawn, zoneColours}]) and the
-// title "Reflex view: N scenes drawn"; on a bad module: state.errors and the title "Reflex view: error".
+// target + radius (cos el cos az, cos el sin az, sin el)). Once drawn it sets state.staticDrawn (number
+// of tiles), state.tiles ([{time, capsulesDrawn, spheresDrawn, closestLines, targetsDrawn, zoneColours}])
+// and the title "Reflex view: N scenes drawn": a driver waits for that signal before capturing (the
+// load event may come first). A bad module, or anything thrown later (no WebGL context): state.errors,
+// the title "Reflex view: error" (bad module) and the message written on the page.
 import * as THREE from "three";
 
 const state = {
