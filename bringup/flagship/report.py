@@ -7,10 +7,14 @@ missing) and writes into OUT_DIR:
   fig13_status_distance.png  hand status and arm-to-arm distance with the zone boundaries (Fig. 13)
   blending.png               f(d) of both arms
   tracking.png               hand targets against hand positions
-  strip.png                  left camera frames beside the robot's capsules at key instants (Fig. 12)
+  strip.png                  left camera frames above the robot at the same instants (Fig. 12): the
+                             robot drawn in 3D by the live view's own renderer (modules/view/web,
+                             static mode, headless Chromium: modules/view/tools/render_scenes.py); if
+                             that cannot run, 2D capsules, and the strip's title and report.md say why
   summary.json, report.md    the outcome figures
 """
 import argparse
+import bisect
 import csv
 import json
 import math
@@ -102,6 +106,22 @@ def first_given_time(ts):
     return ts["time"][0]
 
 
+def session_offset(ts, run):
+    """Controller time [s] of the session's first frame, and how it was found: the first row with a hand
+    target (vision sees both objects from the first frame; later by the detection and pointing latency,
+    tens of ms), never before run.json's vision_start_wall (the row whose wall_time it is: the vision
+    process was started then and needs its start-up, about 1.5 s here, before the first frame).
+    (Fitting the targets to the session's ground truth was tried: its error curve is too flat.)"""
+    late = first_given_time(ts)
+    wall = run.get("vision_start_wall")
+    walls = ts.get("wall_time")
+    if isinstance(wall, (int, float)) and walls and all(isinstance(w, float) and w > 0 for w in (walls[0], walls[-1])):
+        k = bisect.bisect_left(walls, wall)
+        if k < len(walls) and ts["time"][k] > late:
+            return ts["time"][k], "vision start"
+    return late, "first hand target"
+
+
 def extract_frame(session, stamp, dest):
     """The left image at session time `stamp` (ffmpeg, from the session's left video)."""
     with open(os.path.join(session, "session.yaml")) as fh:
@@ -152,7 +172,8 @@ def main():
 
     # Fig. 13: hand status and arm-to-arm distance.
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1, 1, 3]})
-    main_ts = runs.get("avoidance", next(iter(runs.values())))
+    main_label = "avoidance" if "avoidance" in runs else next(iter(runs))
+    main_ts = runs[main_label]
     t = main_ts["time"]
     for ax, side in zip(axes[:2], ("left", "right")):
         ax.step(t, [1 if s == "given" else 0 for s in main_ts[side + "_status"]], where="post")
@@ -200,44 +221,94 @@ def main():
     fig.savefig(os.path.join(args.out, "tracking.png"), dpi=90)
     plt.close(fig)
 
-    # Strip: camera frame beside the robot at key instants.
+    # Strip: camera frame above the robot at key instants, all inside the session's video.
     strip_ok = False
+    strip_robot = None  # "3d" or "2d: <why the 3D render did not run>"
     try:
-        offset = first_given_time(main_ts)  # controller time of the session's first frame (approx.)
+        try:
+            with open(os.path.join(args.out, main_label, "run.json")) as fh:
+                run_info = json.load(fh)
+        except (OSError, ValueError):
+            run_info = {}
+        rate = float(run_info.get("rate", 1.0)) or 1.0
+        offset, synced_by = session_offset(main_ts, run_info)  # controller time of the session's first frame
         frames = session_frames(args.session)
+        # Controller time of session stamp s: offset + (s - first stamp) / rate. The last pick is the last
+        # frame of the video (the controller keeps running a little after it: no picture there).
+        video_end = offset + (frames[-1][1] - frames[0][1]) / rate
+        in_video = [k for k in range(len(t)) if offset <= t[k] <= video_end]
+        if not in_video:
+            raise ValueError("no controller row during the session's video (%.1f..%.1f s)" % (offset, video_end))
+        first, last = in_video[0], in_video[-1]
         arm = main_ts["arm_distance"]
-        k_min = arm.index(min(arm))
-        lost = next((k for k in range(1, len(t)) if main_ts["left_status"][k] != "given" and main_ts["left_status"][k - 1] == "given"), None)
-        picks = [min(len(t) - 1, int((offset + 3.0 - t[0]) / 0.005))]
+        k_min = min(in_video, key=lambda k: arm[k])
+        lost = next((k for k in range(first + 1, last + 1) if main_ts["left_status"][k] != "given" and main_ts["left_status"][k - 1] == "given"), None)
+        picks = [min(last, first + int(3.0 / 0.005))]
         if lost is not None:
-            picks.append(min(len(t) - 1, lost + 200))
-        picks += [max(0, k_min - 800), k_min, len(t) - 1]
-        picks = sorted(set(picks))
+            picks.append(min(last, lost + 200))
+        picks += [max(first, k_min - 800), k_min, max(first, last - int(0.25 / rate / 0.005))]
+        kept = []
+        for k in sorted(set(picks)):  # at least 1 s apart (the end of the video is often the closest approach)
+            if not kept or t[k] - t[kept[-1]] >= 1.0:
+                kept.append(k)
+        picks = kept
         times = [t[k] for k in picks]
         tmp = os.path.join(args.out, "strip")
         os.makedirs(tmp, exist_ok=True)
-        sim = os.path.join(args.build, "bin", "reflex_sim")
-        subprocess.check_call([sim, "--postures-from", os.path.join(args.out, "avoidance", "controller.csv"), "--at",
-                               ",".join("%.3f" % x for x in times), "--out", tmp], stdout=subprocess.DEVNULL)
-        with open(os.path.join(tmp, "postures.csv")) as fh:
-            prow = list(csv.DictReader(fh))
-        fig, axes = plt.subplots(2, len(times), figsize=(3.0 * len(times), 6.2))
+        log_csv = os.path.join(args.out, main_label, "controller.csv")
+        render = subprocess.run([sys.executable, os.path.join(ROOT, "modules", "view", "tools", "render_scenes.py"),
+                                 "--log", log_csv, "--at", ",".join("%.4f" % x for x in times), "--out", tmp,
+                                 "--tile", "320x380", "--build", args.build],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        tiles = []
+        if render.returncode == 0:
+            with open(os.path.join(tmp, "render.json")) as fh:
+                tiles = [tile["png"] for tile in json.load(fh)["tiles"]]
+            strip_robot = "3d"
+        else:
+            lines = render.stdout.strip().splitlines()
+            strip_robot = "2d: " + (lines[-1] if lines else "render_scenes.py exit %d" % render.returncode)
+            print("report.py: warning: the strip's robot is NOT drawn in 3D (%s); drawing 2D capsules instead"
+                  % strip_robot[4:], file=sys.stderr)
+            sim = os.path.join(args.build, "bin", "reflex_sim")
+            subprocess.check_call([sim, "--postures-from", log_csv, "--at", ",".join("%.4f" % x for x in times),
+                                   "--out", tmp], stdout=subprocess.DEVNULL)
+            with open(os.path.join(tmp, "postures.csv")) as fh:
+                prow = list(csv.DictReader(fh))
+        fig, axes = plt.subplots(2, len(times), figsize=(3.2 * len(times), 7.0), squeeze=False,
+                                 gridspec_kw={"height_ratios": [3, 4]})
         for i, tt in enumerate(times):
-            st = tt - offset + frames[0][1]
+            st = (tt - offset) * rate + frames[0][1]
             img = os.path.join(tmp, "frame_%d.png" % i)
-            if extract_frame(args.session, st, img):
+            if extract_frame(args.session, min(st, frames[-1][1]), img):
                 axes[0][i].imshow(mpimg.imread(img))
+            else:  # never a silently empty panel
+                print("report.py: warning: no camera frame at session time %.2f s (ffmpeg)" % st, file=sys.stderr)
+                axes[0][i].text(0.5, 0.5, "no camera frame\nat session t = %.1f s" % st, ha="center", va="center",
+                                color="red", transform=axes[0][i].transAxes)
             axes[0][i].set_title("t = %.1f s, d_arms = %.0f mm" % (tt, main_ts["arm_distance"][picks[i]] * 1000), fontsize=8)
             axes[0][i].axis("off")
-            draw_capsules(axes[1][i], [r for r in prow if int(r["frame"]) == i])
-        axes[1][0].set_ylabel("robot (seen from the camera)")
-        fig.suptitle("camera (left image) and the robot's collision capsules (right arm blue, left arm green)")
+            if tiles:
+                axes[1][i].imshow(mpimg.imread(tiles[i]))
+                axes[1][i].axis("off")
+            else:
+                draw_capsules(axes[1][i], [r for r in prow if int(r["frame"]) == i])
+        if tiles:
+            fig.suptitle("camera (left image) and the robot as the live view draws it (capsules coloured by zone: "
+                         "green free, yellow, orange, red; grey not in an arm's closest pair)\n"
+                         "camera frame at controller time t: session start %.2f s, from the %s" % (offset, synced_by),
+                         fontsize=9)
+        else:
+            axes[1][0].set_ylabel("robot (seen from the camera)")
+            fig.suptitle("camera (left image) and the robot's collision capsules (right arm blue, left arm green)\n"
+                         "2D: the 3D render did not run: %s" % strip_robot[4:], fontsize=9, color="darkred")
         fig.tight_layout()
         fig.savefig(os.path.join(args.out, "strip.png"), dpi=80)
         plt.close(fig)
         strip_ok = True
     except (subprocess.CalledProcessError, OSError, ValueError, KeyError, IndexError) as e:
         print("report.py: warning: no frame strip: %s" % e, file=sys.stderr)
+    summary["strip_robot"] = strip_robot or "none"
 
     with open(os.path.join(args.out, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=2)
@@ -267,6 +338,9 @@ def main():
     lines += ["", "![Fig. 13](fig13_status_distance.png)", "", "![f(d)](blending.png)", "", "![tracking](tracking.png)"]
     if strip_ok:
         lines += ["", "![strip](strip.png)"]
+        if strip_robot != "3d":
+            lines += ["", "**The strip draws the robot as 2D capsules: the 3D render (the live view's renderer in "
+                          "headless Chromium) did not run: %s**" % strip_robot[4:]]
     with open(os.path.join(args.out, "report.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
     print("\n".join(lines[4:4 + 14]))

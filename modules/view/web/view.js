@@ -9,14 +9,53 @@
 //   capsules, and sphere primitives), closestLines, targetsDrawn, objectsDrawn, zoneColours ({zone:
 //   "#rrggbb"} of the robot segments in the last scene), zonesSeen ({zone: count of scenes}),
 //   lastStatus, cameraImage (false: no image topic on the bus), errors (status messages of the server).
+//
+// Static mode (issue 14, item 4: the flagship report and tests draw recorded postures with this same
+// renderer): index.html?render=FILE.js, FILE a plain name in the page's folder (no "/", no ":") of an ES
+// module made by reflex_scene: `export default {tile: {width, height} [CSS px], camera: {azimuth,
+// elevation [rad], radius [m], target: [x, y, z] [m, root frame]}, scenes: [{time, row, update:
+// foxglove.SceneUpdate}]}`. The page then opens no WebSocket and shows only the 3D canvas, at the top
+// left, of size (tiles x width) x height: scene i drawn in tile i (x from i * width), each with the same
+// camera (vertical field of view 40 deg, aspect width / height, z up, looking at the target from
+// target + radius (cos el cos az, cos el sin az, sin el)). Once drawn it sets state.staticDrawn (number
+// of tiles), state.tiles ([{time, capsulesDrawn, spheresDrawn, closestLines, targetsDrawn, zoneColours}])
+// and the title "Reflex view: N scenes drawn": a driver waits for that signal before capturing (the
+// load event may come first). A bad module, or anything thrown later (no WebGL context): state.errors,
+// the title "Reflex view: error" (bad module) and the message written on the page.
 import * as THREE from "three";
 
 const state = {
   connected: false, channels: [], framesReceived: 0, statusReceived: 0, capsulesDrawn: 0, spheresDrawn: 0,
   closestLines: 0, targetsDrawn: 0, objectsDrawn: 0, schemaDrawn: 0, zoneColours: {}, zonesSeen: {}, lastStatus: null,
-  cameraImage: false, errors: [], rendered: 0,
+  cameraImage: false, errors: [], rendered: 0, staticDrawn: 0, tiles: [],
 };
 window.reflexView = state;
+
+const renderModule = new URLSearchParams(location.search).get("render");
+let renderSpec = null;
+if (renderModule !== null) {
+  document.body.classList.add("static");
+  // Anything thrown later (no WebGL context, a malformed scene) is reported too, not only waited for.
+  window.addEventListener("error", (e) => { state.errors.push(String(e.message || e)); });
+  try {
+    if (!/^[A-Za-z0-9_.-]+\.js$/.test(renderModule) || renderModule.startsWith(".")) {
+      throw new Error(`render=${renderModule}: not a plain .js file name in the page's folder`);
+    }
+    renderSpec = (await import(new URL(renderModule, location.href).href)).default;
+    const t = renderSpec && renderSpec.tile;
+    if (!t || !(t.width >= 16) || !(t.height >= 16) || !Array.isArray(renderSpec.scenes) || !renderSpec.camera) {
+      throw new Error(`render=${renderModule}: no tile / camera / scenes (not made by reflex_scene?)`);
+    }
+  } catch (e) {
+    state.errors.push(String(e.message || e));
+    document.title = "Reflex view: error";
+    const note = document.createElement("pre");  // in the screenshot too: never a silently empty picture
+    note.style.color = "#f55";
+    note.textContent = "Reflex view (static mode): " + String(e.message || e);
+    document.body.prepend(note);
+    renderSpec = null;
+  }
+}
 
 // ---------- three.js scene: z up, the robot's root frame is the world frame -----------------------
 const container = document.getElementById("scene3d");
@@ -63,6 +102,7 @@ renderer.domElement.addEventListener("wheel", (e) => {
 }, { passive: false });
 
 function resize() {
+  if (renderModule !== null) return;  // static mode: drawStatic sets the size once
   const w = container.clientWidth || 640, h = container.clientHeight || 480;
   renderer.setSize(w, h);
   camera.aspect = w / h;
@@ -275,12 +315,44 @@ function connect() {
     if (handler) handler(JSON.parse(decoder.decode(new Uint8Array(event.data, 13))));
   };
 }
-connect();
-
 function animate() {
   requestAnimationFrame(animate);
   drawPlot();
   renderer.render(scene, camera);
   state.rendered += 1;
 }
-animate();
+
+// Static mode: every scene of the module in its own tile, drawn once (see the top of this file).
+function drawStatic(spec) {
+  const w = spec.tile.width, h = spec.tile.height, n = spec.scenes.length;
+  container.style.width = `${w * n}px`;
+  container.style.height = `${h}px`;
+  renderer.setSize(w * n, h);
+  orbit.azimuth = spec.camera.azimuth;
+  orbit.elevation = spec.camera.elevation;
+  orbit.radius = spec.camera.radius;
+  orbit.target.set(...spec.camera.target);
+  placeCamera();
+  camera.aspect = w / h;
+  camera.updateProjectionMatrix();
+  renderer.setScissorTest(true);
+  spec.scenes.forEach((s, i) => {
+    onSceneUpdate(s.update);
+    renderer.setViewport(i * w, 0, w, h);  // CSS px from the bottom left; one row, so y = 0
+    renderer.setScissor(i * w, 0, w, h);
+    renderer.render(scene, camera);
+    state.tiles.push({ time: s.time, capsulesDrawn: state.capsulesDrawn, spheresDrawn: state.spheresDrawn,
+                       closestLines: state.closestLines, targetsDrawn: state.targetsDrawn,
+                       zoneColours: { ...state.zoneColours } });
+  });
+  state.rendered = n;
+  state.staticDrawn = n;
+  document.title = `Reflex view: ${n} scenes drawn`;
+}
+
+if (renderModule === null) {
+  connect();
+  animate();
+} else if (renderSpec) {
+  drawStatic(renderSpec);
+}
