@@ -1,0 +1,104 @@
+// The scenarios' frame of reference (issue 12, item 6): landmarks of a robot at its rest posture, and
+// the map that carries the seven scenarios from the reference robot's coordinates to any robot.
+#include "reflex/control/scenarios.hpp"
+
+#include "reflex/control/kinematics.hpp"
+
+#include <cmath>
+#include <iomanip>
+#include <sstream>
+
+namespace reflex::control {
+namespace {
+
+// asimo_like (bringup/robots/asimo_like.urdf) with defaultControllerConfig(), measured by
+// scenarioFrame at its rest posture (17 significant digits: they read back to the same doubles).
+// Controller test Experiments.TheReferenceFrameIsTheShippedRobots checks them against the robot.
+const Eigen::Vector3d kRefChest(0.0, 0.0, 1.04);
+constexpr double kRefHalfWidth = 0.23000000000000001;
+constexpr double kRefArmLength = 0.47999999999999998;
+
+// Two landmarks closer than this are the same (the reference robot measured with another compiler's
+// rounding is still the reference robot, and its scenarios keep their exact numbers).
+constexpr double kSameLandmark = 1e-9;
+
+std::string mm(double v) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(1) << v * 1000.0;
+  return os.str();
+}
+
+}  // namespace
+
+Eigen::Vector3d ScenarioFrame::place(const Eigen::Vector3d& p_ref) const {
+  if (reference) return p_ref;  // bit for bit: the scenarios' numbers on the robot they were written for
+  return chest + scale.cwiseProduct(p_ref - kRefChest);
+}
+
+double ScenarioFrame::length(double l_ref) const { return reference ? l_ref : l_ref * scale.x(); }
+
+ScenarioFrame referenceScenarioFrame() {
+  ScenarioFrame f;
+  f.chest = kRefChest;
+  f.half_width = kRefHalfWidth;
+  f.arm_length = kRefArmLength;
+  f.shoulder[kLeft] = kRefChest + Eigen::Vector3d(0.0, kRefHalfWidth, 0.0);
+  f.shoulder[kRight] = kRefChest - Eigen::Vector3d(0.0, kRefHalfWidth, 0.0);
+  f.reference = true;
+  return f;
+}
+
+ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
+  KinematicsData kin(model);
+  computeForwardKinematics(model, kin, restConfiguration(model, cm));
+  ScenarioFrame f;
+  double length[2] = {0.0, 0.0};
+  for (int a = 0; a < 2; ++a) {
+    const ControllerModel::Arm& arm = cm.arms[a];
+    // A link frame is its parent joint's frame (URDF): the arm's joints are the origins of the links
+    // they move. Their distances are fixed by the links, so the sum is the straight arm's reach.
+    Eigen::Vector3d previous = kin.X_W_L[model.q_link[arm.q[0]]].translation();
+    f.shoulder[a] = previous;
+    for (int i = 1; i < arm.n; ++i) {
+      const Eigen::Vector3d joint = kin.X_W_L[model.q_link[arm.q[i]]].translation();
+      length[a] += (joint - previous).norm();
+      previous = joint;
+    }
+    f.hand_rest[a] = kin.X_W_L[arm.hand_link] * arm.hand_point_L;
+    length[a] += (f.hand_rest[a] - previous).norm();
+  }
+  f.chest = 0.5 * (f.shoulder[kLeft] + f.shoulder[kRight]);
+  f.half_width = 0.5 * (f.shoulder[kLeft] - f.shoulder[kRight]).norm();
+  f.arm_length = 0.5 * (length[kLeft] + length[kRight]);
+  // The scenarios are written in x forward, y left, z up (REP 103, the shipped robots' root frame): a
+  // robot whose left shoulder is not on the left of its right one cannot be placed in them.
+  const Eigen::Vector3d across = f.shoulder[kLeft] - f.shoulder[kRight];
+  if (!(across.y() > 0.5 * across.norm()))
+    throw ConfigError("the scenarios need the root frame x forward, y left, z up: robot '" + model.name +
+                      "' has its left arm's shoulder at y = " + mm(f.shoulder[kLeft].y()) +
+                      " mm and its right arm's at y = " + mm(f.shoulder[kRight].y()) +
+                      " mm (the left one must be the larger)");
+  if (!(f.arm_length > 0.0))
+    throw ConfigError("robot '" + model.name + "': the arms' joints and hand points coincide (arm length 0)");
+  f.reference = (f.chest - kRefChest).norm() < kSameLandmark && std::abs(f.half_width - kRefHalfWidth) < kSameLandmark &&
+                std::abs(f.arm_length - kRefArmLength) < kSameLandmark;
+  if (!f.reference)
+    f.scale = Eigen::Vector3d(f.arm_length / kRefArmLength, f.half_width / kRefHalfWidth, f.arm_length / kRefArmLength);
+  return f;
+}
+
+const ScenarioFrame& ScenarioContext::frame() {
+  if (!frame_cache) frame_cache = scenarioFrame(model, cm);
+  return *frame_cache;
+}
+
+int ScenarioContext::carrierSegment(int link) const {
+  for (int l = link; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent) {
+    for (int s = 0; s < model.num_robot_segments; ++s)
+      if (model.segments[static_cast<std::size_t>(s)].link == l) return s;
+    if (model.links[static_cast<std::size_t>(l)].type != JointType::kFixed) return -1;  // only what it is fixed to
+  }
+  return -1;
+}
+
+}  // namespace reflex::control
