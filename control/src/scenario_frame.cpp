@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <iomanip>
+#include <limits>
 #include <sstream>
 
 namespace reflex::control {
@@ -17,6 +18,7 @@ namespace {
 const Eigen::Vector3d kRefChest(0.0, 0.0, 1.04);
 constexpr double kRefHalfWidth = 0.23000000000000001;
 constexpr double kRefArmLength = 0.47999999999999998;
+constexpr double kRefTrunkHalfWidth = 0.14999999999919045;
 
 // Two landmarks closer than this are the same (the reference robot measured with another compiler's
 // rounding is still the reference robot, and its scenarios keep their exact numbers).
@@ -42,6 +44,7 @@ ScenarioFrame referenceScenarioFrame() {
   f.chest = kRefChest;
   f.half_width = kRefHalfWidth;
   f.arm_length = kRefArmLength;
+  f.trunk_half_width = kRefTrunkHalfWidth;
   f.shoulder[kLeft] = kRefChest + Eigen::Vector3d(0.0, kRefHalfWidth, 0.0);
   f.shoulder[kRight] = kRefChest - Eigen::Vector3d(0.0, kRefHalfWidth, 0.0);
   f.reference = true;
@@ -80,10 +83,33 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
                       " mm (the left one must be the larger)");
   if (!(f.arm_length > 0.0))
     throw ConfigError("robot '" + model.name + "': the arms' joints and hand points coincide (arm length 0)");
+  // The trunk: the segment on the link the left arm's first joint hangs from (or what that link is
+  // fixed to). Its width, not the shoulders', says where "inside the body" and "beside it" are.
+  const int hung_from = model.links[static_cast<std::size_t>(model.q_link[cm.arms[kLeft].q[0]])].parent;
+  for (int l = hung_from; l >= 0 && f.trunk_segment < 0; l = model.links[static_cast<std::size_t>(l)].parent)
+    for (int s = 0; s < model.num_robot_segments && f.trunk_segment < 0; ++s)
+      if (model.segments[static_cast<std::size_t>(s)].link == l) f.trunk_segment = s;
+  if (f.trunk_segment < 0)
+    throw ConfigError("the scenarios need collision geometry on the trunk the arms hang from: robot '" + model.name +
+                      "' has none on link '" + model.links[static_cast<std::size_t>(std::max(hung_from, 0))].name +
+                      "' nor on any link above it");
+  const Segment& trunk = model.segments[static_cast<std::size_t>(f.trunk_segment)];
+  double y_lo = std::numeric_limits<double>::infinity(), y_hi = -y_lo;
+  for (int p = trunk.first_primitive; p < trunk.first_primitive + trunk.num_primitives; ++p) {
+    const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+    for (const Eigen::Vector3d& end : {prim.a_L, prim.b_L}) {
+      const double y = (kin.X_W_L[static_cast<std::size_t>(trunk.link)] * end).y();
+      y_lo = std::min(y_lo, y - prim.radius);
+      y_hi = std::max(y_hi, y + prim.radius);
+    }
+  }
+  f.trunk_half_width = 0.5 * (y_hi - y_lo);
   f.reference = (f.chest - kRefChest).norm() < kSameLandmark && std::abs(f.half_width - kRefHalfWidth) < kSameLandmark &&
-                std::abs(f.arm_length - kRefArmLength) < kSameLandmark;
+                std::abs(f.arm_length - kRefArmLength) < kSameLandmark &&
+                std::abs(f.trunk_half_width - kRefTrunkHalfWidth) < kSameLandmark;
   if (!f.reference)
-    f.scale = Eigen::Vector3d(f.arm_length / kRefArmLength, f.half_width / kRefHalfWidth, f.arm_length / kRefArmLength);
+    f.scale = Eigen::Vector3d(f.arm_length / kRefArmLength, f.trunk_half_width / kRefTrunkHalfWidth,
+                              f.arm_length / kRefArmLength);
   return f;
 }
 

@@ -98,9 +98,10 @@ std::vector<Scenario> makeScenarios() {
       give(in, ctx, kRight, 0.80, -0.12, 0.85);
       // A robot whose root does not walk (no heel_x joint: the legs swing, the root stays) sees the
       // target come towards it and pass it as it would walking: the target moves back in the root
-      // frame by the distance walked (1.5 m at 0.25 m/s from t = 0.5 s, as startWalking is asked).
+      // frame by the distance walked (1.5 m at 0.25 m/s from t = 0.5 s, as startWalking is asked),
+      // in proportion to the arm like the target.
       if (ctx.model.qIndex("heel_x") < 0)
-        in.hands[kRight].target_W.x() -= std::clamp(0.25 * (t - 0.5), 0.0, 1.5);
+        in.hands[kRight].target_W.x() -= ctx.frame().length(std::clamp(0.25 * (t - 0.5), 0.0, 1.5));
     };
     list.push_back(s);
   }

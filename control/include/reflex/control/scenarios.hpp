@@ -26,15 +26,18 @@ struct ScenarioFrame {
   std::array<Eigen::Vector3d, 2> shoulder;   ///< [kLeft], [kRight]: origin of the arm's first joint
   Eigen::Vector3d chest = Eigen::Vector3d::Zero();  ///< midpoint of the two shoulders
   double half_width = 0.0;                   ///< half the shoulder-to-shoulder distance
+  int trunk_segment = -1;                    ///< the segment the arms hang from (asimo_like: chest)
+  double trunk_half_width = 0.0;             ///< half its width (y extent of its primitives)
   double arm_length = 0.0;                   ///< shoulder -> hand point along the chain (joint origins,
                                              ///< then the hand point): the straight arm's reach
   std::array<Eigen::Vector3d, 2> hand_rest;  ///< hand points at the rest posture
-  /// The scales of place(): forward and up by arm_length, sideways by half_width, each over the
-  /// reference robot's. Exactly 1 (and place() the identity, bit for bit) on the reference robot.
+  /// The scales of place(): forward and up by arm_length, sideways by trunk_half_width, each over
+  /// the reference robot's. Exactly 1 (and place() the identity, bit for bit) on the reference robot.
   Eigen::Vector3d scale = Eigen::Vector3d::Ones();
   bool reference = false;                    ///< this robot's landmarks are the reference robot's (1 nm)
 
-  /// A point of the reference robot's scenario coordinates on this robot: chest + scale * (p - chest_ref).
+  /// A point of the reference robot's scenario coordinates on this robot, about the chest:
+  /// chest + scale * (p - chest_ref). For what is about the body: inside it, across its midline.
   Eigen::Vector3d place(const Eigen::Vector3d& p_ref) const;
   /// A length of the reference robot (a bar, a reach) on this robot: times scale.x() (arm lengths).
   double length(double l_ref) const;
