@@ -4,6 +4,7 @@
 
 #include "reflex/control/kinematics.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <iomanip>
 #include <limits>
@@ -116,6 +117,57 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
 const ScenarioFrame& ScenarioContext::frame() {
   if (!frame_cache) frame_cache = scenarioFrame(model, cm);
   return *frame_cache;
+}
+
+namespace {
+
+/// How far the arm's hand point stays from p_W after damped least squares from the rest posture,
+/// joints clamped to their limits (m).
+double reachResidual(const Model& model, const ControllerModel& cm, int arm, const Eigen::Vector3d& p_W) {
+  const ControllerModel::Arm& a = cm.arms[static_cast<std::size_t>(arm)];
+  KinematicsData kin(model);
+  Eigen::VectorXd q = restConfiguration(model, cm);
+  Eigen::MatrixXd J(3, model.nq), Ja(3, a.n);
+  double residual = std::numeric_limits<double>::infinity();
+  for (int it = 0; it < 400; ++it) {
+    computeForwardKinematics(model, kin, q);
+    const Eigen::Vector3d hand = kin.X_W_L[static_cast<std::size_t>(a.hand_link)] * a.hand_point_L;
+    const Eigen::Vector3d e = p_W - hand;
+    residual = e.norm();
+    if (residual < 1e-4) break;
+    J.setZero();
+    computePointJacobian(model, kin, a.hand_link, hand, J);
+    for (int i = 0; i < a.n; ++i) Ja.col(i) = J.col(a.q[static_cast<std::size_t>(i)]);
+    Eigen::VectorXd dq = Ja.transpose() * (Ja * Ja.transpose() + 1e-4 * Eigen::Matrix3d::Identity()).ldlt().solve(e);
+    const double largest = dq.cwiseAbs().maxCoeff();
+    if (largest > 0.2) dq *= 0.2 / largest;  // small steps: the clamping below stays meaningful
+    for (int i = 0; i < a.n; ++i) {
+      const int j = a.q[static_cast<std::size_t>(i)];
+      q[j] = std::clamp(q[j] + dq[i], model.q_lower[j], model.q_upper[j]);
+    }
+  }
+  return residual;
+}
+
+}  // namespace
+
+Eigen::Vector3d ScenarioContext::reachable(int arm, const Eigen::Vector3d& p_W) {
+  auto& cache = reach_cache[arm];
+  for (const auto& entry : cache)
+    if (entry[0] == p_W) return entry[1];
+  constexpr double kReached = 0.002;
+  Eigen::Vector3d answer = p_W;
+  if (reachResidual(model, cm, arm, p_W) > kReached) {
+    const Eigen::Vector3d rest = frame().hand_rest[static_cast<std::size_t>(arm)];
+    double lo = 0.0, hi = 1.0;  // fractions of the way from the rest hand point to p_W
+    for (int i = 0; i < 14; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (reachResidual(model, cm, arm, rest + mid * (p_W - rest)) <= kReached ? lo : hi) = mid;
+    }
+    answer = rest + 0.9 * lo * (p_W - rest);
+  }
+  cache.push_back({p_W, answer});
+  return answer;
 }
 
 int ScenarioContext::carrierSegment(int link) const {

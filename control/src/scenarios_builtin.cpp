@@ -17,6 +17,13 @@ void give(ControlInput& in, ScenarioContext& ctx, int arm, double x, double y, d
   in.hands[arm].target_W = ctx.frame().place(Eigen::Vector3d(x, y, z));
 }
 
+/// Gives `arm` the target p_ref (reference robot coordinates) placed on this robot, as a target the
+/// scenario means it to reach: moved within the arm's reach where this robot's arm cannot get there.
+void reach(ControlInput& in, ScenarioContext& ctx, int arm, double x, double y, double z) {
+  in.hands[arm].status = HandStatus::kGiven;
+  in.hands[arm].target_W = ctx.reachable(arm, ctx.frame().place(Eigen::Vector3d(x, y, z)));
+}
+
 /// The segment on `link` (or what it is fixed to) a scenario needs; a ConfigError naming the
 /// scenario, the link, what it is for and the robot if there is none.
 int neededSegment(const ScenarioContext& ctx, const char* scenario, const std::string& link, const char* role) {
@@ -52,8 +59,8 @@ std::vector<Scenario> makeScenarios() {
     s.duration = 7.0;
     s.script = [](double t, ControlInput& in, ScenarioContext& ctx) {
       none(in, kLeft);
-      if (t < 2.0) give(in, ctx, kRight, -0.10, -0.33, 0.80);
-      else give(in, ctx, kRight, 0.30, -0.05, 0.85);
+      if (t < 2.0) reach(in, ctx, kRight, -0.10, -0.33, 0.80);
+      else reach(in, ctx, kRight, 0.30, -0.05, 0.85);
     };
     list.push_back(s);
   }
@@ -66,8 +73,8 @@ std::vector<Scenario> makeScenarios() {
     s.duration = 8.0;
     s.script = [](double t, ControlInput& in, ScenarioContext& ctx) {
       none(in, kLeft);
-      if (t < 2.0) give(in, ctx, kRight, -0.10, -0.33, 0.80);
-      else give(in, ctx, kRight, 0.27, 0.03, 0.82);
+      if (t < 2.0) reach(in, ctx, kRight, -0.10, -0.33, 0.80);
+      else reach(in, ctx, kRight, 0.27, 0.03, 0.82);
     };
     list.push_back(s);
   }

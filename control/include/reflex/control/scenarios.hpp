@@ -73,7 +73,14 @@ struct ScenarioContext {
   /// The link with collision geometry that carries `link` (itself, or its nearest ancestor with a
   /// segment; fixed sensor frames are carried by what they are fixed to), -1 if none.
   int carrierSegment(int link) const;
+  /// A target the scenario means `arm` to reach (p_W, placed on this robot): p_W itself if the arm
+  /// can put its hand point there within its joint limits (damped least squares from the rest
+  /// posture, 2 mm); else the point 90 % of the way from the hand's rest point to the farthest point
+  /// towards p_W it can reach (a robot's joint limits differ from the reference robot's: the mesh
+  /// humanoid's shoulder rolls 0.2 rad inwards). Computed once per target (not on the control path).
+  Eigen::Vector3d reachable(int arm, const Eigen::Vector3d& p_W);
   std::optional<ScenarioFrame> frame_cache{};  ///< filled by frame()
+  std::vector<std::array<Eigen::Vector3d, 2>> reach_cache[2]{};  ///< filled by reachable(): {asked, answer}
 };
 
 struct Scenario {
