@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
@@ -371,6 +372,34 @@ TEST(ScenarioFrame, AnotherRobotsLandmarksAreItsOwn) {
     EXPECT_NEAR((f.place(referenceScenarioFrame().chest) - f.chest).norm(), 0.0, 1e-12) << k.stem;
     EXPECT_NEAR(f.scale.x(), k.arm / referenceScenarioFrame().arm_length, 1e-12) << k.stem;
   }
+}
+
+// The controller YAML's camera_link (the occlusion experiment's camera) is read; an empty one is
+// named; the robot's own file beside the URDF is found, and nothing there means the defaults.
+TEST(ScenarioFrame, TheControllerYamlNamesTheCamera) {
+  const std::string dir = ::testing::TempDir() + "/scenario_robots_test";
+  std::filesystem::create_directories(dir);
+  auto write = [&](const std::string& name, const std::string& text) {
+    std::ofstream out(dir + "/" + name);
+    out << text;
+    return dir + "/" + name;
+  };
+  EXPECT_EQ(loadControllerConfig(write("eye.yaml", "camera_link: eye\n")).camera_link, "eye");
+  EXPECT_EQ(defaultControllerConfig().camera_link, "head_camera");
+  const std::string empty = write("empty.yaml", "camera_link: ''\n");
+  try {
+    loadControllerConfig(empty);
+    ADD_FAILURE() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()), empty + ": camera_link: must name a link");
+  }
+  EXPECT_EQ(defaultControllerConfigPath(dir + "/robot.urdf"), dir + "/robot.controller.yaml");
+  EXPECT_EQ(loadControllerConfigFor(dir + "/robot.urdf", "").source, "<defaults>");
+  write("robot.controller.yaml", "camera_link: cam\n");
+  const ControllerConfig found = loadControllerConfigFor(dir + "/robot.urdf", "");
+  EXPECT_EQ(found.source, dir + "/robot.controller.yaml");
+  EXPECT_EQ(found.camera_link, "cam");
+  EXPECT_EQ(loadControllerConfigFor(dir + "/robot.urdf", dir + "/eye.yaml").camera_link, "eye");
 }
 
 }  // namespace
