@@ -1,6 +1,8 @@
 // reflex_sim: runs the paper's experiments on the kinematic robot, without DDS.
 //   reflex_sim --list
-//   reflex_sim SCENARIO --out DIR [--no-avoidance] [--mode one_dof|three_dof]
+//   reflex_sim SCENARIO --out DIR [--urdf R [--controller C]] [--no-avoidance] [--mode one_dof|three_dof]
+// On any robot: the scenarios' targets are placed by the robot's own landmarks (ScenarioFrame, printed
+// first); its controller configuration is <R stem>.controller.yaml beside the URDF unless --controller.
 // Writes DIR/timeseries.csv (one row per 5 ms cycle), DIR/postures.csv (capsules at a few instants),
 // DIR/summary.txt, and PNG plots like the paper's figures (through python3-matplotlib).
 #include "reflex/control/controller.hpp"
