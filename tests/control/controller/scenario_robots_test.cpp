@@ -23,6 +23,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 namespace reflex::control {
 namespace {
 
@@ -377,7 +379,8 @@ TEST(ScenarioFrame, AnotherRobotsLandmarksAreItsOwn) {
 // The controller YAML's camera_link (the occlusion experiment's camera) is read; an empty one is
 // named; the robot's own file beside the URDF is found, and nothing there means the defaults.
 TEST(ScenarioFrame, TheControllerYamlNamesTheCamera) {
-  const std::string dir = ::testing::TempDir() + "/scenario_robots_test";
+  const std::string dir = ::testing::TempDir() + "/scenario_robots_test." + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);  // a file left by an earlier run would be found as the robot's own
   std::filesystem::create_directories(dir);
   auto write = [&](const std::string& name, const std::string& text) {
     std::ofstream out(dir + "/" + name);
@@ -400,6 +403,7 @@ TEST(ScenarioFrame, TheControllerYamlNamesTheCamera) {
   EXPECT_EQ(found.source, dir + "/robot.controller.yaml");
   EXPECT_EQ(found.camera_link, "cam");
   EXPECT_EQ(loadControllerConfigFor(dir + "/robot.urdf", dir + "/eye.yaml").camera_link, "eye");
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
