@@ -1,8 +1,11 @@
 #include "reflex/control/controller.hpp"
 
 #include "reflex/common/files.hpp"
+#include "reflex/control/urdf_loader.hpp"
 
 #include <yaml-cpp/yaml.h>
+
+#include <sys/stat.h>
 
 #include <cmath>
 #include <iomanip>
@@ -170,6 +173,9 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
       else if (mode == "three_dof") p.mode = AvoidanceMode::kThreeDof;
       else if (mode == "off") p.mode = AvoidanceMode::kOff;
       else throw ConfigError(where + ": unknown avoidance mode '" + mode + "' (one_dof, three_dof, off)");
+    } else if (key == "camera_link") {
+      config.camera_link = kv.second.as<std::string>();
+      if (config.camera_link.empty()) throw ConfigError(where + ": must name a link");
     } else if (key == "arms") {
       if (!kv.second.IsMap()) throw ConfigError(where + ": must be a map with 'left' and 'right'");
       for (const auto& arm_kv : kv.second) {
@@ -205,6 +211,20 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
   }
   validateControllerParams(p, yaml_path);
   return config;
+}
+
+std::string defaultControllerConfigPath(const std::string& urdf_path) {
+  const std::string collision = defaultCollisionConfigPath(urdf_path);  // the same stem, one rule
+  const std::string suffix = ".collision.yaml";
+  return collision.substr(0, collision.size() - suffix.size()) + ".controller.yaml";
+}
+
+ControllerConfig loadControllerConfigFor(const std::string& urdf_path, const std::string& yaml_path) {
+  if (!yaml_path.empty()) return loadControllerConfig(yaml_path);
+  const std::string guess = defaultControllerConfigPath(urdf_path);
+  struct stat st {};
+  if (::stat(guess.c_str(), &st) != 0) return defaultControllerConfig();  // nothing there: the defaults
+  return loadControllerConfig(guess);  // something there: read it (a FIFO or device is refused)
 }
 
 ControllerModel makeControllerModel(const Model& model, const ControllerConfig& config) {

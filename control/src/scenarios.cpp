@@ -66,6 +66,7 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
   ControllerData& data = controller.data();
   Eigen::VectorXd q_before = q0;
   ScenarioContext ctx{model, data, cm, robot.positions()};
+  ctx.camera_link = options.camera_link;
   ControlInput input;
   SimResult result;
   result.min_distance = std::numeric_limits<double>::infinity();

@@ -135,6 +135,23 @@ def main():
         with open(post) as fh:
             rows = list(csv.DictReader(fh))
         frames = sorted({int(r["frame"]) for r in rows})
+        # The view: asimo_like's box (x -0.5..0.6, y -0.55..0.55, z 0..1.4) when the robot fills it;
+        # another robot (smaller, or with its root at the pelvis) gets a box around all its frames,
+        # and line widths in proportion.
+        def extent(keys):
+            vals = [float(r[k]) + sgn * float(r["radius"]) for r in rows for k in keys for sgn in (-1, 1)]
+            return min(vals), max(vals)
+        zlo, zhi = extent(("az", "bz"))
+        xlo, xhi = extent(("ax", "bx"))
+        ylo, yhi = extent(("ay", "by"))
+        if zlo >= -0.01 and zhi <= 1.4 and zhi - zlo > 0.7 and xlo >= -0.5 and xhi <= 0.6 and ylo >= -0.55 and yhi <= 0.55:
+            box = ((-0.5, 0.6), (-0.55, 0.55), (0.0, 1.4))
+        else:
+            pad = 0.05 * (zhi - zlo)
+            half = 0.5 * max(xhi - xlo, yhi - ylo) + pad
+            box = ((0.5 * (xlo + xhi) - half, 0.5 * (xlo + xhi) + half), (0.5 * (ylo + yhi) - half, 0.5 * (ylo + yhi) + half),
+                   (zlo - pad, zhi + pad))
+        width_scale = 1.4 / (box[2][1] - box[2][0])
         fig, axes = plt.subplots(2, len(frames), figsize=(2.2 * len(frames), 6.5))
         for i, fr in enumerate(frames):
             sel = [r for r in rows if int(r["frame"]) == fr]
@@ -146,10 +163,11 @@ def main():
                     rad = float(r["radius"])
                     arm = r["segment"][:2] in ("l_", "r_") and any(s in r["segment"] for s in ("arm", "hand", "shoulder"))
                     color = "tab:blue" if arm and r["segment"].startswith("r_") else ("tab:green" if arm else "silver")
-                    ax.plot([a[0], b[0]], [a[1], b[1]], color=color, lw=rad * 2 * 72 / 0.9 * 0.9, solid_capstyle="round", alpha=0.7)
+                    ax.plot([a[0], b[0]], [a[1], b[1]], color=color, lw=rad * 2 * 72 / 0.9 * 0.9 * width_scale,
+                            solid_capstyle="round", alpha=0.7)
                 ax.set_aspect("equal")
-                ax.set_xlim(-0.5, 0.6) if view == 0 else ax.set_xlim(-0.55, 0.55)
-                ax.set_ylim(0.0, 1.4)
+                ax.set_xlim(*box[view])
+                ax.set_ylim(*box[2])
                 ax.set_xticks([])
                 ax.set_yticks([])
                 if view == 0:

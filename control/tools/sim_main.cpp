@@ -1,6 +1,8 @@
 // reflex_sim: runs the paper's experiments on the kinematic robot, without DDS.
 //   reflex_sim --list
-//   reflex_sim SCENARIO --out DIR [--no-avoidance] [--mode one_dof|three_dof]
+//   reflex_sim SCENARIO --out DIR [--urdf R [--controller C]] [--no-avoidance] [--mode one_dof|three_dof]
+// On any robot: the scenarios' targets are placed by the robot's own landmarks (ScenarioFrame, printed
+// first); its controller configuration is <R stem>.controller.yaml beside the URDF unless --controller.
 // Writes DIR/timeseries.csv (one row per 5 ms cycle), DIR/postures.csv (capsules at a few instants),
 // DIR/summary.txt, and PNG plots like the paper's figures (through python3-matplotlib).
 #include "reflex/control/controller.hpp"
@@ -16,6 +18,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -133,6 +136,21 @@ std::string pairName(const Model& model, int pair) {
   return model.segments[model.pairs[pair].a].name + "-" + model.segments[model.pairs[pair].b].name;
 }
 
+/// The robot's landmarks the scenarios are placed by (ScenarioFrame), one line.
+void printScenarioFrame(std::ostream& os, const Model& model, const ScenarioFrame& f) {
+  auto mm = [](const Eigen::Vector3d& p) {
+    std::ostringstream s;
+    s << std::fixed << std::setprecision(0) << '(' << p.x() * 1000 << ", " << p.y() * 1000 << ", " << p.z() * 1000 << ')';
+    return s.str();
+  };
+  os << "robot " << model.name << ": chest " << mm(f.chest) << " mm, shoulders " << std::fixed << std::setprecision(0)
+     << 2000 * f.half_width << " mm apart, arm " << f.arm_length * 1000 << " mm; scenarios "
+     << (f.reference ? std::string("as written (the reference robot)")
+                     : "scaled x " + std::to_string(f.scale.x()).substr(0, 5) + ", y " + std::to_string(f.scale.y()).substr(0, 5) +
+                           ", z " + std::to_string(f.scale.z()).substr(0, 5) + " about the chest")
+     << '\n' << std::defaultfloat << std::setprecision(6);
+}
+
 void summarize(std::ostream& os, const Model& model, const Scenario& sc, const SimResult& r, const char* label,
                double wall) {
   os << "scenario " << sc.name << " (" << sc.paper << "), " << label << "\n";
@@ -170,7 +188,9 @@ int main(int argc, char** argv) {
   app.add_option("--mode", mode, "avoidance variant")->check(CLI::IsMember({"one_dof", "three_dof"}));
   app.add_option("--urdf", urdf, "robot URDF")->default_str(REFLEX_DEFAULT_URDF);
   app.add_option("--collision", collision, "collision configuration YAML (default: next to the URDF)");
-  app.add_option("--controller", controller_cfg, "controller configuration YAML (default: built-in)");
+  app.add_option("--controller", controller_cfg,
+                 "controller configuration YAML (default: <URDF stem>.controller.yaml next to the URDF if it exists, "
+                 "else the built-in asimo_like arms)");
   app.add_flag("--no-plots", no_plots, "do not render PNG plots");
   std::string postures_from;
   std::vector<double> at;
@@ -242,8 +262,9 @@ int main(int argc, char** argv) {
   try {
     if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
     const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
-    const ControllerConfig config = controller_cfg.empty() ? defaultControllerConfig() : loadControllerConfig(controller_cfg);
+    const ControllerConfig config = loadControllerConfigFor(urdf, controller_cfg);
     const ControllerModel cm = makeControllerModel(model, config);
+    printScenarioFrame(std::cout, model, scenarioFrame(model, cm));
     int failures = 0;
     for (const Scenario* sc : chosen) {
       const fs::path dir = chosen.size() > 1 ? fs::path(out_dir) / sc->name : fs::path(out_dir);
@@ -255,6 +276,7 @@ int main(int argc, char** argv) {
         SimOptions opt;
         opt.mode = m;
         opt.estop = !no_avoidance;  // the paper's comparison: neither avoidance nor the e-stop
+        opt.camera_link = config.camera_link;
         const auto t0 = std::chrono::steady_clock::now();
         SimResult r = runScenario(model, cm, *sc, opt);
         const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

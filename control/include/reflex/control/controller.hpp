@@ -119,6 +119,9 @@ struct ArmConfig {
 struct ControllerConfig {
   ControllerParams params;
   std::array<ArmConfig, 2> arms;    ///< [kLeft], [kRight]
+  /// The head camera's link: where the gaze line of the occlusion experiment starts (Sec. 8.5.2,
+  /// reflex_sim). Checked by whoever uses it (a scenario names it if the robot lacks it).
+  std::string camera_link = "head_camera";
   std::string source = "<defaults>";
 };
 
@@ -127,6 +130,14 @@ ControllerConfig defaultControllerConfig();
 
 /// Reads a YAML file on top of the defaults. Throws ConfigError naming the file, key and bad value.
 ControllerConfig loadControllerConfig(const std::string& yaml_path);
+
+/// `<URDF without extension>.controller.yaml` (the robot's own controller configuration, beside it
+/// like its collision configuration).
+std::string defaultControllerConfigPath(const std::string& urdf_path);
+
+/// `yaml_path` if given; else defaultControllerConfigPath(urdf_path) if anything exists there (read
+/// and checked like any other); else the defaults (the shipped asimo_like robot's arms).
+ControllerConfig loadControllerConfigFor(const std::string& urdf_path, const std::string& yaml_path);
 
 /// Checks every parameter against its range (controllerParamRanges, in table order). Throws
 /// ConfigError "<source>: <key> = <value> is outside its range <range> <unit>: <why>".

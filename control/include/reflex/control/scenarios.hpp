@@ -7,12 +7,49 @@
 
 #include <Eigen/Core>
 
+#include <array>
 #include <functional>
+#include <optional>
 #include <ostream>
 #include <string>
 #include <vector>
 
 namespace reflex::control {
+
+/// A robot's frame of reference for the scenarios (issue 12, item 6): landmarks measured on the
+/// model at the rest posture (restConfiguration), in the root frame W (metres). The seven scenarios
+/// are written in the coordinates of the reference robot (asimo_like: floor, x forward, y left, z up);
+/// place() carries a point from there to this robot through its landmarks, so a target at the
+/// reference robot's chest lands at this robot's chest, one arm length in front of the reference
+/// shoulders lands one arm length in front of this robot's shoulders, and so on.
+struct ScenarioFrame {
+  std::array<Eigen::Vector3d, 2> shoulder;   ///< [kLeft], [kRight]: origin of the arm's first joint
+  Eigen::Vector3d chest = Eigen::Vector3d::Zero();  ///< midpoint of the two shoulders
+  double half_width = 0.0;                   ///< half the shoulder-to-shoulder distance
+  int trunk_segment = -1;                    ///< the segment the arms hang from (asimo_like: chest)
+  double trunk_half_width = 0.0;             ///< half its width (y extent of its primitives)
+  double arm_length = 0.0;                   ///< shoulder -> hand point along the chain (joint origins,
+                                             ///< then the hand point): the straight arm's reach
+  std::array<Eigen::Vector3d, 2> hand_rest;  ///< hand points at the rest posture
+  /// The scales of place(): forward and up by arm_length, sideways by trunk_half_width, each over
+  /// the reference robot's. Exactly 1 (and place() the identity, bit for bit) on the reference robot.
+  Eigen::Vector3d scale = Eigen::Vector3d::Ones();
+  bool reference = false;                    ///< this robot's landmarks are the reference robot's (1 nm)
+
+  /// A point of the reference robot's scenario coordinates on this robot, about the chest:
+  /// chest + scale * (p - chest_ref). For what is about the body: inside it, across its midline.
+  Eigen::Vector3d place(const Eigen::Vector3d& p_ref) const;
+  /// A length of the reference robot (a bar, a reach) on this robot: times scale.x() (arm lengths).
+  double length(double l_ref) const;
+};
+
+/// The reference robot's landmarks (asimo_like at its default controller configuration's rest
+/// posture; measured by scenarioFrame and written here to 17 digits; the experiments test checks they
+/// still agree with the shipped robot).
+ScenarioFrame referenceScenarioFrame();
+
+/// Measures a robot's landmarks at restConfiguration(model, cm).
+ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm);
 
 /// What a scenario script may do each cycle besides setting the hand commands.
 struct ScenarioContext {
@@ -28,6 +65,22 @@ struct ScenarioContext {
   bool attach(int slot, const std::string& link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L,
               double radius, bool is_virtual, const std::vector<std::string>& ignore = {});
   void detach(int slot);
+  /// The camera link the gaze line starts at (occlusion, Sec. 8.5.2): the controller configuration's
+  /// camera_link (ControllerConfig::camera_link, default head_camera).
+  std::string camera_link = "head_camera";
+  /// This robot's frame of reference (measured once, at the rest posture, on first use).
+  const ScenarioFrame& frame();
+  /// The link with collision geometry that carries `link` (itself, or its nearest ancestor with a
+  /// segment; fixed sensor frames are carried by what they are fixed to), -1 if none.
+  int carrierSegment(int link) const;
+  /// A target the scenario means `arm` to reach (p_W, placed on this robot): p_W itself if the arm
+  /// can put its hand point there within its joint limits (damped least squares from the rest
+  /// posture, 2 mm); else the point 90 % of the way from the hand's rest point to the farthest point
+  /// towards p_W it can reach (a robot's joint limits differ from the reference robot's: the mesh
+  /// humanoid's shoulder rolls 0.2 rad inwards). Computed once per target (not on the control path).
+  Eigen::Vector3d reachable(int arm, const Eigen::Vector3d& p_W);
+  std::optional<ScenarioFrame> frame_cache{};  ///< filled by frame()
+  std::vector<std::array<Eigen::Vector3d, 2>> reach_cache[2]{};  ///< filled by reachable(): {asked, answer}
 };
 
 struct Scenario {
@@ -46,6 +99,7 @@ struct SimOptions {
   AvoidanceMode mode = AvoidanceMode::kOneDof;
   bool estop = true;                 ///< the red-zone e-stop (a switch of its own: mode kOff keeps it)
   bool record = true;                ///< keep one SimSample per cycle
+  std::string camera_link = "head_camera";  ///< ScenarioContext::camera_link (ControllerConfig::camera_link)
 };
 
 struct SimSample {
