@@ -242,6 +242,8 @@ int run(int argc, char** argv) {
       for (std::size_t i = 0; i < arm.rest.size(); ++i) ctl += (i ? ", " : "") + num(arm.rest[i]);
       ctl += "]   # rad\n";
     }
+    if (!setup.camera_link.empty())
+      ctl += "camera_link: " + setup.camera_link + "   # the head camera (reflex_sim's occlusion gaze line starts here)\n";
     writeFile(controller_path, ctl);
     const auto cconf = reflex::control::loadControllerConfig(controller_path);
     const auto cm = reflex::control::makeControllerModel(model, cconf);
