@@ -35,8 +35,7 @@ import time
 
 SOURCE = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(SOURCE / "tests" / "system" / "netns"))
-from netns_support import (Failure, Processes, delete_namespaces, netns_exec, raise_failure_on_sigterm,  # noqa: E402
-                           remove_stale, sh)
+from netns_support import Failure, Processes, VethHosts, raise_failure_on_sigterm, remove_stale  # noqa: E402
 
 TAG = "bench_mujoco_controller_latency"
 LAN_PROFILES = SOURCE / "bringup" / "dds" / "reflex_profiles_lan.xml"
@@ -46,41 +45,10 @@ CTL_LATENESS = re.compile(r"lateness p50 (\d+) us p99 (\d+) us max (\d+) us, ove
 CTL_ROBOT = re.compile(r"robot dds: states (\d+) \(rejected (\d+)\), commands (\d+), robot stale events (\d+)")
 
 
-class TwoHosts:
-    """Two namespaces and the veth between them; delete() removes everything it made."""
-
-    def __init__(self, domain):
-        pid = os.getpid()
-        self.ns = {"robot": f"rfxb-{pid}-robot", "controller": f"rfxb-{pid}-controller"}
-        self.ifname = {"robot": f"rb{pid % 1000000}r", "controller": f"rb{pid % 1000000}c"}
-        self.addr = {"robot": f"10.{domain}.0.1", "controller": f"10.{domain}.0.2"}
-        self.made = []
-
-    def build(self):
-        for h in ("robot", "controller"):
-            sh("ip", "netns", "add", self.ns[h])
-            self.made.append(self.ns[h])
-            sh("ip", "-n", self.ns[h], "link", "set", "lo", "up")
-        sh("ip", "link", "add", self.ifname["robot"], "type", "veth", "peer", "name", self.ifname["controller"])
-        for h in ("robot", "controller"):
-            sh("ip", "link", "set", self.ifname[h], "netns", self.ns[h])
-            sh("ip", "-n", self.ns[h], "addr", "add", f"{self.addr[h]}/24", "dev", self.ifname[h])
-            sh("ip", "-n", self.ns[h], "link", "set", self.ifname[h], "up")
-            # RTPS multicast discovery (239.255.0.1) leaves through the veth.
-            sh("ip", "-n", self.ns[h], "route", "replace", "224.0.0.0/4", "dev", self.ifname[h])
-
-    def prefix(self, h):
-        return netns_exec(self.ns[h])
-
-    def delete(self):
-        delete_namespaces(self.made)  # deletes the veth ends too
-        self.made.clear()
-
-
 def run(args, hosts, work):
     """One run; returns a dict of figures. Raises Failure when a process fails or a figure is missing."""
     procs = Processes(work)
-    net = TwoHosts(args.domain) if hosts == "two" else None
+    net = VethHosts("rfxb", args.domain, ("robot", "controller")) if hosts == "two" else None
     try:
         env = dict(os.environ, REFLEX_DOMAIN_ID=str(args.domain))
         profiles = []
@@ -89,7 +57,7 @@ def run(args, hosts, work):
             profiles = ["--profiles", str(LAN_PROFILES)]
 
         def start(host, argv, log):
-            return procs.start((net.prefix(host) if net else []) + argv, f"{hosts}_{log}", env=env)
+            return procs.start((net.exec_prefix(host) if net else []) + argv, f"{hosts}_{log}", env=env)
 
         dom = ["--domain", str(args.domain)]
         total = args.duration
