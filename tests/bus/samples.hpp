@@ -339,7 +339,7 @@ inline msg::RobotState robotState(int k) {
   for (int i = 0; i < 64; ++i) {
     m.names().push_back(i == 5 ? "l_shoulder_pitch" : "joint_" + std::to_string(i));
     m.positions().push_back(-3.0 + 0.1 * i + 1e-6 * k);
-    m.velocities().push_back(i % 2 == 0 ? -0.25 * i : 1e-308);
+    m.velocities().push_back(i % 2 == 0 ? -0.25 * i - 0.125 : 1e-308);  // no -0.0: JSON (the reference reader) has none
     if (i < 63) m.efforts().push_back(-100.0 + 3.5 * i);  // one short: efforts need not be complete here
   }
   m.applied_command_seq(0xFFFF'FFFF'FFFF'FFFEULL - static_cast<std::uint64_t>(k));
