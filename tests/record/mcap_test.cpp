@@ -28,6 +28,7 @@
 #include <reflex/bus/bus.hpp>
 
 #include "samples.hpp"
+#include "sample_entry.hpp"
 
 #include <gtest/gtest.h>
 
@@ -375,21 +376,6 @@ TEST(Mcap, WriterTakesChannelsOfAnyEncoding) {
 
 // The robot types (issue 13): their MCAP schemas (from robot.idl) decode in Foxglove's OMG IDL reader
 // to the values of the project's CSV export.
-template <class T>
-RecordEntry entryOf(const T& sample, std::int64_t receive_ns) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  void* data = const_cast<T*>(&sample);
-  eprosima::fastrtps::rtps::SerializedPayload_t p(type.getSerializedSizeProvider(data)());
-  EXPECT_TRUE(type.serialize(data, &p));
-  RecordEntry e;
-  e.receive_ns = receive_ns;
-  e.source_ns = receive_ns - 1000;
-  e.topic = bus::TopicTraits<T>::kTopicName;
-  e.type = type.getName();
-  e.payload.assign(p.data, p.data + p.length);
-  return e;
-}
-
 TEST(Mcap, RobotTypesDecodeInTheReferenceReaderAsInTheCsvExport) {
   const std::string file = tempPath("robot.mcap");
   {
@@ -398,9 +384,9 @@ TEST(Mcap, RobotTypesDecodeInTheReferenceReaderAsInTheCsvExport) {
       const std::int64_t t = 1'700'000'000'000'000'000LL + k * 1'000'000LL;
       msg::RobotContacts contacts = bus::test::robotContacts(k);
       if (k == 1) contacts.contacts().clear();  // a sample without pairs: one row of empty cells
-      w.append(entryOf(bus::test::robotState(k), t));
-      w.append(entryOf(bus::test::jointCommand(k), t + 1));
-      w.append(entryOf(contacts, t + 2));
+      w.append(test::entryOf(bus::test::robotState(k), t));
+      w.append(test::entryOf(bus::test::jointCommand(k), t + 1));
+      w.append(test::entryOf(contacts, t + 2));
     }
     w.close();
   }

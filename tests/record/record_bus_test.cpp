@@ -7,6 +7,7 @@
 #include <reflex/bus/bus.hpp>
 
 #include "samples.hpp"
+#include "sample_entry.hpp"
 
 #include <gtest/gtest.h>
 
@@ -40,19 +41,6 @@ T decode(const RecordEntry& e) {
   EXPECT_TRUE(type.deserialize(&p, &out)) << e.topic;
   EXPECT_EQ(e.type, type.getName());
   return out;
-}
-template <class T>
-RecordEntry encode(const T& s, std::int64_t receive_ns) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  void* data = const_cast<T*>(&s);
-  eprosima::fastrtps::rtps::SerializedPayload_t p(type.getSerializedSizeProvider(data)());
-  EXPECT_TRUE(type.serialize(data, &p));
-  RecordEntry e;
-  e.receive_ns = receive_ns;
-  e.topic = bus::TopicTraits<T>::kTopicName;
-  e.type = type.getName();
-  e.payload.assign(p.data, p.data + p.length);
-  return e;
 }
 
 std::vector<std::vector<std::string>> readCsv(const std::string& path) {
@@ -371,7 +359,7 @@ std::string syntheticRecording() {
   const std::int64_t t0 = 1'700'000'000'000'000'000LL;
   for (int k = 0; k <= 20; ++k) {
     msg::ControlStatus s = bus::test::controlStatus(k);
-    w.append(encode(s, t0 + k * 100'000'000LL));
+    w.append(test::entryOf(s, t0 + k * 100'000'000LL));
   }
   return file;
 }
