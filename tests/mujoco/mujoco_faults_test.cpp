@@ -265,7 +265,7 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
     for (const Seen& s : w.seen_states)
       if (s.at == first_state) first_stamp = s.state.header().stamp_ns();
     // Asserted from the new robot's first state: what comes before is the robot booting (MuJoCo
-    // building it: 0.7-5.3 s measured on a loaded two-core host), not the system recovering.
+    // building it: 0.3-5.3 s measured on a loaded two-core host), not the system recovering.
     std::printf("[ measured ] robot restarted: back to normal %.0f ms after its first state (%.2f s after the restart, "
                 "which includes building the robot in MuJoCo and discovery)\n",
                 1e-6 * static_cast<double>(back - first_stamp), sec(back - t_restart_robot));
