@@ -40,5 +40,8 @@ template <> inline msg::Heartbeat sampleOf<msg::Heartbeat>(int k) { return heart
 template <> inline msg::ControllerProtection sampleOf<msg::ControllerProtection>(int k) {
   return controllerProtection(k);
 }
+template <> inline msg::RobotState sampleOf<msg::RobotState>(int k) { return robotState(k); }
+template <> inline msg::JointCommand sampleOf<msg::JointCommand>(int k) { return jointCommand(k); }
+template <> inline msg::RobotContacts sampleOf<msg::RobotContacts>(int k) { return robotContacts(k); }
 
 }  // namespace reflex::bus::test

@@ -3,6 +3,7 @@
 
 #include <reflex/msg/behavior.h>
 #include <reflex/msg/control.h>
+#include <reflex/msg/robot.h>
 #include <reflex/msg/system.h>
 #include <reflex/msg/vision.h>
 
@@ -14,7 +15,8 @@ namespace reflex::bus::test {
 
 inline const std::vector<std::string> kAllTypeNames = {
     "object_targets", "hand_targets", "motion_priority", "body_schema",
-    "walk_command",   "joint_state",  "control_status",  "heartbeat"};
+    "walk_command",   "joint_state",  "control_status",  "heartbeat",
+    "robot_state",    "joint_command", "robot_contacts"};
 
 /// Calls fn(static_cast<T*>(nullptr)) for the type named `name`; false if the name is unknown.
 template <class Fn>
@@ -27,6 +29,9 @@ bool forTypeName(const std::string& name, Fn&& fn) {
   if (name == "joint_state") return fn(static_cast<msg::JointState*>(nullptr)), true;
   if (name == "control_status") return fn(static_cast<msg::ControlStatus*>(nullptr)), true;
   if (name == "heartbeat") return fn(static_cast<msg::Heartbeat*>(nullptr)), true;
+  if (name == "robot_state") return fn(static_cast<msg::RobotState*>(nullptr)), true;
+  if (name == "joint_command") return fn(static_cast<msg::JointCommand*>(nullptr)), true;
+  if (name == "robot_contacts") return fn(static_cast<msg::RobotContacts*>(nullptr)), true;
   return false;
 }
 

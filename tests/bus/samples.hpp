@@ -6,6 +6,7 @@
 
 #include <reflex/msg/behavior.h>
 #include <reflex/msg/control.h>
+#include <reflex/msg/robot.h>
 #include <reflex/msg/system.h>
 #include <reflex/msg/vision.h>
 
@@ -153,6 +154,37 @@ inline void diff(const std::string& p, const msg::ControllerProtection& e, const
   diffValue(p + ".robot", e.robot(), a.robot(), out);
 }
 
+inline void diff(const std::string& p, const msg::RobotState& e, const msg::RobotState& a, Diffs& out) {
+  diff(p + ".header", e.header(), a.header(), out);
+  diffVector(p + ".names", e.names(), a.names(), out);
+  diffVector(p + ".positions", e.positions(), a.positions(), out);
+  diffVector(p + ".velocities", e.velocities(), a.velocities(), out);
+  diffVector(p + ".efforts", e.efforts(), a.efforts(), out);
+  diffValue(p + ".applied_command_seq", e.applied_command_seq(), a.applied_command_seq(), out);
+  diffValue(p + ".holding", e.holding(), a.holding(), out);
+}
+inline void diff(const std::string& p, const msg::JointCommand& e, const msg::JointCommand& a, Diffs& out) {
+  diff(p + ".header", e.header(), a.header(), out);
+  diffVector(p + ".names", e.names(), a.names(), out);
+  diffVector(p + ".positions", e.positions(), a.positions(), out);
+  diffVector(p + ".velocities", e.velocities(), a.velocities(), out);
+  diffValue(p + ".valid_until_ns", e.valid_until_ns(), a.valid_until_ns(), out);
+  diffValue(p + ".state_seq", e.state_seq(), a.state_seq(), out);
+  diffValue(p + ".state_stamp_ns", e.state_stamp_ns(), a.state_stamp_ns(), out);
+}
+inline void diff(const std::string& p, const msg::RobotContacts& e, const msg::RobotContacts& a, Diffs& out) {
+  diff(p + ".header", e.header(), a.header(), out);
+  diffValue(p + ".state_seq", e.state_seq(), a.state_seq(), out);
+  diffValue(p + ".contacts.size()", e.contacts().size(), a.contacts().size(), out);
+  for (std::size_t i = 0; i < e.contacts().size() && i < a.contacts().size(); ++i) {
+    const std::string c = p + ".contacts[" + std::to_string(i) + "]";
+    diffValue(c + ".segment_a", e.contacts()[i].segment_a(), a.contacts()[i].segment_a(), out);
+    diffValue(c + ".segment_b", e.contacts()[i].segment_b(), a.contacts()[i].segment_b(), out);
+    diffValue(c + ".distance", e.contacts()[i].distance(), a.contacts()[i].distance(), out);
+  }
+  diffValue(p + ".total_contact_steps", e.total_contact_steps(), a.total_contact_steps(), out);
+}
+
 template <class T>
 Diffs diffSample(const T& expected, const T& actual) {
   Diffs out;
@@ -297,6 +329,50 @@ inline msg::ControllerProtection controllerProtection(int k) {
   m.reason("collision avoidance OFF by 'avoidance: off' in /tmp/c" + std::to_string(k) + ".yaml");
   m.period(0.005);
   m.robot("asimo_like");
+  return m;
+}
+
+// The robot boundary (idl/robot.idl): 64 joints (the IDL's bound) in the state, a few in the command.
+inline msg::RobotState robotState(int k) {
+  msg::RobotState m;
+  m.header(header(k));
+  for (int i = 0; i < 64; ++i) {
+    m.names().push_back(i == 5 ? "l_shoulder_pitch" : "joint_" + std::to_string(i));
+    m.positions().push_back(-3.0 + 0.1 * i + 1e-6 * k);
+    m.velocities().push_back(i % 2 == 0 ? -0.25 * i - 0.125 : 1e-308);  // no -0.0: JSON (the reference reader) has none
+    if (i < 63) m.efforts().push_back(-100.0 + 3.5 * i);  // one short: efforts need not be complete here
+  }
+  m.applied_command_seq(0xFFFF'FFFF'FFFF'FFFEULL - static_cast<std::uint64_t>(k));
+  m.holding(k % 2 == 1);
+  return m;
+}
+
+inline msg::JointCommand jointCommand(int k) {
+  msg::JointCommand m;
+  m.header(header(k));
+  for (int i = 0; i < 10; ++i) {
+    m.names().push_back((i < 5 ? "l_" : "r_") + std::to_string(i));
+    m.positions().push_back(0.5 - 0.125 * i);
+    m.velocities().push_back(-2.0 + 0.5 * i + 1e-3 * k);
+  }
+  m.valid_until_ns(-1 - k);  // negative on purpose: the sign must survive
+  m.state_seq(77u + static_cast<std::uint64_t>(k));
+  m.state_stamp_ns(1'700'000'000'000'000'001LL + k);
+  return m;
+}
+
+inline msg::RobotContacts robotContacts(int k) {
+  msg::RobotContacts m;
+  m.header(header(k));
+  m.state_seq(123456789u + static_cast<std::uint64_t>(k));
+  for (int i = 0; i < 3; ++i) {
+    msg::SegmentContact c;
+    c.segment_a(i == 2 ? std::string() : "l_forearm_" + std::to_string(i));
+    c.segment_b("torso");
+    c.distance(i == 0 ? -0.0015 : 0.004 + 1e-4 * i);  // negative: penetration
+    m.contacts().push_back(c);
+  }
+  m.total_contact_steps(0xFFFF'FFFF'0000'0000ULL + static_cast<std::uint64_t>(k));
   return m;
 }
 

@@ -49,9 +49,8 @@ import xml.etree.ElementTree as ET
 
 SOURCE = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(SOURCE / "tests" / "system" / "netns"))
-from netns_support import (Checks, Failure, Processes, add_common_arguments, begin_run,  # noqa: E402
-                           delete_namespaces, export, netns_exec, raise_failure_on_sigterm, read_csv, run_test,
-                           sh)
+from netns_support import (Checks, Failure, Processes, VethHosts, add_common_arguments, begin_run,  # noqa: E402
+                           export, raise_failure_on_sigterm, read_csv, run_test)
 
 PROFILES = SOURCE / "bringup" / "dds" / "reflex_profiles_lan.xml"
 NS_XML = "{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}"
@@ -83,41 +82,9 @@ def leases(path):
     return hb, part, announce
 
 
-class Link:
-    """Two namespaces and the veth between them; delete() removes everything it made."""
-
-    def __init__(self, domain):
-        pid = os.getpid()
-        self.ns = {"robot": f"rfxf-{pid}-robot", "behavior": f"rfxf-{pid}-behavior"}
-        self.ifname = {"robot": f"rf{pid % 1000000}r", "behavior": f"rf{pid % 1000000}b"}
-        self.addr = {"robot": f"10.{domain}.0.1", "behavior": f"10.{domain}.0.2"}
-        self.made = []
-
-    def build(self):
-        for h in ("robot", "behavior"):
-            sh("ip", "netns", "add", self.ns[h])
-            self.made.append(self.ns[h])
-            sh("ip", "-n", self.ns[h], "link", "set", "lo", "up")
-        sh("ip", "link", "add", self.ifname["robot"], "type", "veth", "peer", "name", self.ifname["behavior"])
-        for h in ("robot", "behavior"):
-            sh("ip", "link", "set", self.ifname[h], "netns", self.ns[h])
-            sh("ip", "-n", self.ns[h], "addr", "add", f"{self.addr[h]}/24", "dev", self.ifname[h])
-            self.up(h)
-
-    def up(self, h):
-        sh("ip", "-n", self.ns[h], "link", "set", self.ifname[h], "up")
-        # RTPS multicast discovery (239.255.0.1) leaves through the veth; the route goes with the link.
-        sh("ip", "-n", self.ns[h], "route", "replace", "224.0.0.0/4", "dev", self.ifname[h])
-
-    def down(self, h):
-        sh("ip", "-n", self.ns[h], "link", "set", self.ifname[h], "down")
-
-    def exec_prefix(self, h):
-        return netns_exec(self.ns[h])
-
-    def delete(self):
-        delete_namespaces(self.made)  # deletes the veth ends too
-        self.made.clear()
+def Link(domain):
+    """The robot host and the behavior host (rf<pid>r / rf<pid>b, 10.<domain>.0.1 / .2)."""
+    return VethHosts("rfxf", domain, ("robot", "behavior"))
 
 
 def main():

@@ -132,7 +132,12 @@ inline std::size_t expectCsvMatches(const json& messages, const std::string& top
     if (m["topic"] != topic) continue;
     const std::string type = m["schema"];
     const bool objects = type == "reflex::msg::ObjectTargets";
-    const std::size_t n_rows = objects ? std::max<std::size_t>(1, m["msg"]["objects"].size()) : 1;
+    const bool contacts = type == "reflex::msg::RobotContacts";  // one row per pair, like objects
+    const std::size_t n_rows = objects    ? std::max<std::size_t>(1, m["msg"]["objects"].size())
+                               : contacts ? std::max<std::size_t>(1, m["msg"]["contacts"].size())
+                                          : 1;
+    const bool per_joint = type == "reflex::msg::JointState" || type == "reflex::msg::RobotState" ||
+                           type == "reflex::msg::JointCommand";
     for (std::size_t k = 0; k < n_rows; ++k, ++row) {
       if (row >= rows.size()) {
         ADD_FAILURE() << topic << ": the reference reader has more messages than " << csv_path << " has rows";
@@ -147,12 +152,19 @@ inline std::size_t expectCsvMatches(const json& messages, const std::string& top
         const std::string& col = header[c];
         if (col == "t") continue;  // seconds since the file's first record: receive_ns is compared instead
         json v;
-        if (type == "reflex::msg::JointState" && (col.rfind("q_", 0) == 0 || col.rfind("qd_", 0) == 0)) {
-          const bool vel = col[1] == 'd';
-          const std::string name = col.substr(vel ? 3 : 2);
+        if (per_joint && (col.rfind("q_", 0) == 0 || col.rfind("qd_", 0) == 0 || col.rfind("effort_", 0) == 0)) {
+          // q_<joint>, qd_<joint>, effort_<joint>: the value at that joint's index in names ("" past
+          // the end of a shorter list: efforts not measured).
+          const std::size_t cut = col.find('_');
+          const std::string kind = col.substr(0, cut), name = col.substr(cut + 1);
+          const json& list = m["msg"][kind == "q" ? "positions" : kind == "qd" ? "velocities" : "efforts"];
           const json& names = m["msg"]["names"];
           for (std::size_t i = 0; i < names.size(); ++i)
-            if (names[i] == name) v = m["msg"][vel ? "velocities" : "positions"][i];
+            if (names[i] == name) v = i < list.size() ? list[i] : json("");
+        } else if (contacts && col == "n_contacts") {
+          v = m["msg"]["contacts"].size();
+        } else if (contacts && (col == "segment_a" || col == "segment_b" || col == "distance")) {
+          v = m["msg"]["contacts"].empty() ? json("") : m["msg"]["contacts"][k][col];
         } else if (objects && col == "n_objects") {
           v = m["msg"]["objects"].size();
         } else if (objects && std::string(",object,tag_id,x,y,z,x_cam,y_cam,z_cam,confidence,").find("," + col + ",") !=

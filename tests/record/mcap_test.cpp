@@ -13,6 +13,10 @@
 //    end before the cut (chunk offsets from the reference reader's chunk index, message counts per
 //    chunk from its stream reader), reports a torn tail, never corrupt, never crashes; the reference
 //    stream reader reads the same count at every cut;
+//  - the robot boundary (RobotState, JointCommand, RobotContacts; samples.hpp's distinctive values):
+//    written to MCAP, they decode in the reference reader with the schemas made from robot.idl to the
+//    values of the CSV export, column by column (per-joint columns, a short efforts list, one row per
+//    contact pair);
 //  - bad inputs: not an MCAP file, cut inside the magic, a damaged chunk (named with its byte offset;
 //    the reference reader rejects its CRC too), a damaged message index (data section CRC), unknown
 //    --compression / --format values, --append on MCAP: errors naming the value.
@@ -20,6 +24,11 @@
 
 #include "reflex/record/recorder.hpp"
 #include "reflex/record/recording.hpp"
+
+#include <reflex/bus/bus.hpp>
+
+#include "samples.hpp"
+#include "sample_entry.hpp"
 
 #include <gtest/gtest.h>
 
@@ -363,6 +372,34 @@ TEST(Mcap, WriterTakesChannelsOfAnyEncoding) {
   EXPECT_EQ(idx["statistics"]["chunk_count"], 0);
   EXPECT_TRUE(idx["messages"].empty());
   EXPECT_EQ(readAll(empty).size(), 0u);
+}
+
+// The robot types (issue 13): their MCAP schemas (from robot.idl) decode in Foxglove's OMG IDL reader
+// to the values of the project's CSV export.
+TEST(Mcap, RobotTypesDecodeInTheReferenceReaderAsInTheCsvExport) {
+  const std::string file = tempPath("robot.mcap");
+  {
+    McapSampleWriter w(file, {});
+    for (int k = 0; k < 3; ++k) {
+      const std::int64_t t = 1'700'000'000'000'000'000LL + k * 1'000'000LL;
+      msg::RobotContacts contacts = bus::test::robotContacts(k);
+      if (k == 1) contacts.contacts().clear();  // a sample without pairs: one row of empty cells
+      w.append(test::entryOf(bus::test::robotState(k), t));
+      w.append(test::entryOf(bus::test::jointCommand(k), t + 1));
+      w.append(test::entryOf(contacts, t + 2));
+    }
+    w.close();
+  }
+  const json idx = mcap_check::runReference("indexed", file, tempPath("robot"));
+  ASSERT_TRUE(idx.is_object());
+  ASSERT_EQ(idx["messages"].size(), 9u);
+  for (const json& c : idx["channels"]) EXPECT_EQ(c["schema_encoding"], "omgidl");
+  const std::string dir = tempPath("csv_robot");
+  std::filesystem::remove_all(dir);
+  ASSERT_EQ(runTool({bin("reflex_record"), "export", file, "--dir", dir}, tempPath("export_robot.log")), 0)
+      << slurp(tempPath("export_robot.log"));
+  for (const std::string topic : {"reflex/robot_state", "reflex/joint_command", "reflex/robot_contacts"})
+    EXPECT_EQ(mcap_check::expectCsvMatches(idx["messages"], topic, dir + "/" + csvFileNameForTopic(topic)), 3u) << topic;
 }
 
 }  // namespace

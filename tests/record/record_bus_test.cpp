@@ -7,6 +7,7 @@
 #include <reflex/bus/bus.hpp>
 
 #include "samples.hpp"
+#include "sample_entry.hpp"
 
 #include <gtest/gtest.h>
 
@@ -41,19 +42,6 @@ T decode(const RecordEntry& e) {
   EXPECT_EQ(e.type, type.getName());
   return out;
 }
-template <class T>
-RecordEntry encode(const T& s, std::int64_t receive_ns) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  void* data = const_cast<T*>(&s);
-  eprosima::fastrtps::rtps::SerializedPayload_t p(type.getSerializedSizeProvider(data)());
-  EXPECT_TRUE(type.serialize(data, &p));
-  RecordEntry e;
-  e.receive_ns = receive_ns;
-  e.topic = bus::TopicTraits<T>::kTopicName;
-  e.type = type.getName();
-  e.payload.assign(p.data, p.data + p.length);
-  return e;
-}
 
 std::vector<std::vector<std::string>> readCsv(const std::string& path) {
   std::ifstream in(path);
@@ -86,6 +74,9 @@ struct Sent {
   std::vector<msg::ControlStatus> status;
   std::vector<msg::Heartbeat> beats;
   std::vector<msg::ControllerProtection> protection;
+  std::vector<msg::RobotState> robot;  // the robot boundary (issue 13)
+  std::vector<msg::JointCommand> command;
+  std::vector<msg::RobotContacts> contacts;
 };
 
 template <class T>
@@ -106,7 +97,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   ro.output = file;
   ro.bus = busConfig("recorder");
   Recorder recorder(ro);
-  EXPECT_EQ(recorder.counts().size(), 9u) << "all Reflex topics by default";
+  EXPECT_EQ(recorder.counts().size(), 12u) << "all Reflex topics by default";
   std::thread rec_thread([&] { recorder.run(); });
 
   Sent sent;
@@ -121,8 +112,12 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     auto& w_status = src.makeWriter<msg::ControlStatus>();
     auto& w_beat = src.makeWriter<msg::Heartbeat>();
     auto& w_protection = src.makeWriter<msg::ControllerProtection>();
+    auto& w_robot = src.makeWriter<msg::RobotState>();
+    auto& w_command = src.makeWriter<msg::JointCommand>();
+    auto& w_contacts = src.makeWriter<msg::RobotContacts>();
     for (bus::detail::WriterBase* w : std::initializer_list<bus::detail::WriterBase*>{
-             &w_obj, &w_hand, &w_prio, &w_schema, &w_walk, &w_joint, &w_status, &w_beat, &w_protection})
+             &w_obj, &w_hand, &w_prio, &w_schema, &w_walk, &w_joint, &w_status, &w_beat, &w_protection, &w_robot,
+             &w_command, &w_contacts})
       ASSERT_TRUE(w->waitForReaders(1, 10s)) << w->topicName();
     // Both sides: a writer that matched the recorder may still be unknown to the recorder's reader,
     // which then drops a best-effort sample (on a loaded host that window lasted long enough to lose
@@ -140,6 +135,9 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
       sent.status.push_back(bus::test::controlStatus(k));
       sent.beats.push_back(bus::test::heartbeat(k));
       sent.protection.push_back(bus::test::controllerProtection(k));
+      sent.robot.push_back(bus::test::robotState(k));
+      sent.command.push_back(bus::test::jointCommand(k));
+      sent.contacts.push_back(bus::test::robotContacts(k));
       w_obj.write(sent.objects.back());
       w_hand.write(sent.hands.back());
       w_prio.write(sent.prio.back());
@@ -149,13 +147,16 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
       w_status.write(sent.status.back());
       w_beat.write(sent.beats.back());
       w_protection.write(sent.protection.back());
+      w_robot.write(sent.robot.back());
+      w_command.write(sent.command.back());
+      w_contacts.write(sent.contacts.back());
       std::this_thread::sleep_for(30ms);
     }
     std::this_thread::sleep_for(500ms);
   }
   recorder.stop();
   rec_thread.join();
-  EXPECT_EQ(recorder.totalSamples(), 45u);
+  EXPECT_EQ(recorder.totalSamples(), 60u);
 
   // Read back: every sample, unchanged, receive times ordered, DDS source times set.
   std::vector<RecordEntry> all;
@@ -165,7 +166,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     while (r.next(e)) all.push_back(e);
     EXPECT_EQ(r.tailState(), TailState::kClean);
   }
-  ASSERT_EQ(all.size(), 45u);
+  ASSERT_EQ(all.size(), 60u);
   for (std::size_t i = 1; i < all.size(); ++i) EXPECT_GE(all[i].receive_ns, all[i - 1].receive_ns);
   for (const auto& e : all) {
     EXPECT_GT(e.source_ns, 0);
@@ -180,6 +181,9 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   expectRecorded(all, sent.status);
   expectRecorded(all, sent.beats);
   expectRecorded(all, sent.protection);
+  expectRecorded(all, sent.robot);
+  expectRecorded(all, sent.command);
+  expectRecorded(all, sent.contacts);
 
   std::vector<std::int64_t> status_rx;  // recorded receive times of the control status samples
   for (const auto& e : all)
@@ -215,6 +219,31 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   rows = readCsv(csv_js);
   EXPECT_DOUBLE_EQ(std::stod(rows[3][col(rows[0], "q_joint_20")]), 0.2 - 1.0 + 2e-3);
   EXPECT_DOUBLE_EQ(std::stod(rows[3][col(rows[0], "qd_joint_4")]), -2.0);
+  // The robot boundary: one row per state / command, one per reported pair (samples.hpp's values).
+  const std::string csv_robot = tempPath("robot.csv");
+  EXPECT_EQ(exportCsv(file, "reflex/robot_state", csv_robot), 5u);
+  rows = readCsv(csv_robot);
+  ASSERT_EQ(rows.size(), 6u);
+  ASSERT_EQ(rows[3].size(), rows[0].size()) << "a short efforts list keeps the row's width";
+  EXPECT_DOUBLE_EQ(std::stod(rows[3][col(rows[0], "q_l_shoulder_pitch")]), -3.0 + 0.5 + 2e-6);
+  EXPECT_DOUBLE_EQ(std::stod(rows[3][col(rows[0], "effort_joint_2")]), -93.0);
+  EXPECT_EQ(rows[3][col(rows[0], "effort_joint_63")], "") << "not measured";
+  EXPECT_EQ(rows[3][col(rows[0], "applied_command_seq")], "18446744073709551612");
+  EXPECT_EQ(rows[3][col(rows[0], "holding")], "0");
+  const std::string csv_cmd = tempPath("command.csv");
+  EXPECT_EQ(exportCsv(file, "reflex/joint_command", csv_cmd), 5u);
+  rows = readCsv(csv_cmd);
+  EXPECT_EQ(rows[2][col(rows[0], "valid_until_ns")], "-2");
+  EXPECT_EQ(rows[2][col(rows[0], "state_seq")], "78");
+  EXPECT_DOUBLE_EQ(std::stod(rows[2][col(rows[0], "qd_r_9")]), 2.5 + 1e-3);
+  const std::string csv_contacts = tempPath("contacts.csv");
+  EXPECT_EQ(exportCsv(file, "reflex/robot_contacts", csv_contacts), 5u);
+  rows = readCsv(csv_contacts);
+  ASSERT_EQ(rows.size(), 1u + 5u * 3u) << "one row per pair";
+  EXPECT_EQ(rows[1][col(rows[0], "segment_a")], "l_forearm_0");
+  EXPECT_DOUBLE_EQ(std::stod(rows[1][col(rows[0], "distance")]), -0.0015);
+  EXPECT_EQ(rows[3][col(rows[0], "segment_a")], "");
+  EXPECT_EQ(rows[3][col(rows[0], "n_contacts")], "3");
   EXPECT_THROW(exportCsv(file, "reflex/nothing", csv), RecordError);
 
   // Play back two topics: the same samples arrive, headers untouched; with --restamp the stamps move.
@@ -255,18 +284,45 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   }
 
   // Play everything (no --topic): every recorded sample but the controller's protection state, a
-  // live controller's claim that a replay must not make beside a live controller (issue 16, item 16);
-  // named with --topic it is played.
+  // live controller's claim that a replay must not make beside a live controller (issue 16, item 16),
+  // and the joint commands, which a live robot would obey (issue 13); named with --topic they are played.
   for (bool named : {false, true}) {
     PlayerOptions po;
     po.input = file;
-    if (named) po.topics = {"reflex/controller_protection"};
+    if (named) po.topics = {"reflex/controller_protection", "reflex/joint_command"};
     po.bus = busConfig("player");
     po.delay = 0.2;
     po.rate = 0.0;  // as fast as possible
     Player player(po);
     player.run();
-    EXPECT_EQ(player.stats().published, named ? 5u : 40u) << (named ? "named" : "everything");
+    EXPECT_EQ(player.stats().published, named ? 10u : 50u) << (named ? "named" : "everything");
+  }
+
+  // A replayed command, restamped, keeps its age: its deadline and the answered state's stamp move
+  // with its header (else a robot would get a command with a deadline in the past, or a forever one).
+  {
+    bus::Participant sink(busConfig("sink"));
+    auto& r_cmd = sink.makeReader<msg::JointCommand>("reflex/joint_command", bus::kProfileRecord);
+    PlayerOptions po;
+    po.input = file;
+    po.topics = {"reflex/joint_command"};
+    po.bus = busConfig("player");
+    po.delay = 1.0;
+    po.restamp = true;
+    Player player(po);
+    player.run();
+    std::this_thread::sleep_for(200ms);
+    std::vector<msg::JointCommand> got;
+    r_cmd.takeAll(got);
+    ASSERT_FALSE(got.empty());
+    for (const msg::JointCommand& c : got) {
+      ASSERT_GE(c.header().seq(), 1000u);
+      const msg::JointCommand& was = sent.command.at(c.header().seq() - 1000u);
+      EXPECT_GT(c.header().stamp_ns(), was.header().stamp_ns()) << "restamped";
+      EXPECT_EQ(c.valid_until_ns() - c.header().stamp_ns(), was.valid_until_ns() - was.header().stamp_ns())
+          << "deadline moved with the stamp";
+      EXPECT_EQ(c.state_stamp_ns() - c.header().stamp_ns(), was.state_stamp_ns() - was.header().stamp_ns());
+    }
   }
 }
 
@@ -303,7 +359,7 @@ std::string syntheticRecording() {
   const std::int64_t t0 = 1'700'000'000'000'000'000LL;
   for (int k = 0; k <= 20; ++k) {
     msg::ControlStatus s = bus::test::controlStatus(k);
-    w.append(encode(s, t0 + k * 100'000'000LL));
+    w.append(test::entryOf(s, t0 + k * 100'000'000LL));
   }
   return file;
 }

@@ -181,14 +181,14 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
   EXPECT_LE(c.valid_until_ns() - c.header().stamp_ns(), 16'000'000) << "three 5 ms periods";
   EXPECT_EQ(c.names().size(), control::drivenJoints(fx.model, fx.cm).size());
   // Latency from the robot's measurement to the command answering it (one host, one clock): never
-  // above --robot-timeout (20 ms: an older state is not answered).
+  // above --robot-timeout (50 ms by default: an older state is not answered).
   std::vector<double> latency_ms;
   for (const auto& cmd : cmds) latency_ms.push_back(static_cast<double>(cmd.header().stamp_ns() - cmd.state_stamp_ns()) * 1e-6);
   std::sort(latency_ms.begin(), latency_ms.end());
   std::printf("state -> command latency over %zu commands: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n", latency_ms.size(),
               latency_ms[latency_ms.size() / 2], latency_ms[latency_ms.size() * 99 / 100], latency_ms.back());
   EXPECT_GE(latency_ms.front(), 0.0);
-  EXPECT_LE(latency_ms.back(), 20.0 + 1e-6);
+  EXPECT_LE(latency_ms.back(), 50.0 + 1e-6);
 
   // 2. The robot dies: the controller says so and stops commanding.
   robot->signal(SIGKILL);

@@ -61,7 +61,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--robot-timeout", config.robot_timeout,
                  "seconds (system clock, against the state's stamp) after which the newest robot state is stale "
-                 "(--robot dds): the controller then commands nothing until fresh state returns; (0, 1]")
+                 "(--robot dds): the controller then commands nothing until fresh state returns; (0, 1]. Commands "
+                 "are anchored at the state they answer, so the timeout is about liveness: 50 ms rides out a loaded "
+                 "host's scheduling stalls")
       ->capture_default_str();
   app.add_option("--command-deadline", config.command_deadline,
                  "seconds each joint command stays valid (--robot dds; JointCommand.valid_until_ns = now + this); "

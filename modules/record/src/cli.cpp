@@ -95,7 +95,9 @@ std::function<int()> addPlay(CLI::App& app) {
   app.add_option("-s,--start", o->start, "start offset, seconds after the first sample")->capture_default_str();
   app.add_option("--duration", o->duration, "play only this many seconds of recording time (0: to the end)");
   app.add_option("--delay", o->delay, "seconds to wait after creating the writers (discovery)")->capture_default_str();
-  app.add_option("-t,--topic", o->topics, "topic to play (repeatable; default: every topic in the file)");
+  app.add_option("-t,--topic", o->topics,
+                 "topic to play (repeatable; default: every topic in the file but reflex/controller_protection "
+                 "and reflex/joint_command, which a live controller / robot would take for real)");
   app.add_option("-x,--exclude", o->exclude, "topic not to play (repeatable)");
   app.add_flag("--restamp", o->restamp,
                "move sample time stamps (header.stamp_ns, capture_stamp_ns) to the playing time");

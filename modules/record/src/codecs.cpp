@@ -140,6 +140,47 @@ void csvRows(std::ostream& o, const std::string& prefix, const msg::ControllerPr
     << num(s.period()) << ',' << csvField(s.robot()) << '\n';
 }
 
+// The robot boundary (idl/robot.idl, issue 13): one row per sample; the joints named by the first
+// sample give the columns (like JointState).
+void csvColumns(std::ostream& o, const msg::RobotState& first) {
+  for (const auto& n : first.names()) o << ",q_" << n;
+  for (const auto& n : first.names()) o << ",qd_" << n;
+  for (const auto& n : first.names()) o << ",effort_" << n;
+  o << ",applied_command_seq,holding";
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::RobotState& s) {
+  o << prefix;
+  for (double v : s.positions()) o << ',' << num(v);
+  for (double v : s.velocities()) o << ',' << num(v);
+  // Efforts may be empty (not measured): empty cells, so the row keeps the header's width.
+  for (std::size_t i = 0; i < s.names().size(); ++i) o << ',' << (i < s.efforts().size() ? num(s.efforts()[i]) : "");
+  o << ',' << s.applied_command_seq() << ',' << (s.holding() ? 1 : 0) << '\n';
+}
+
+void csvColumns(std::ostream& o, const msg::JointCommand& first) {
+  o << ",valid_until_ns,state_seq,state_stamp_ns";
+  for (const auto& n : first.names()) o << ",q_" << n;
+  for (const auto& n : first.names()) o << ",qd_" << n;
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::JointCommand& s) {
+  o << prefix << ',' << s.valid_until_ns() << ',' << s.state_seq() << ',' << s.state_stamp_ns();
+  for (double v : s.positions()) o << ',' << num(v);
+  for (double v : s.velocities()) o << ',' << num(v);
+  o << '\n';
+}
+
+// One row per reported pair (like ObjectTargets); a sample without pairs is one row with empty cells.
+void csvColumns(std::ostream& o, const msg::RobotContacts&) {
+  o << ",state_seq,total_contact_steps,n_contacts,segment_a,segment_b,distance";
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::RobotContacts& s) {
+  const std::string head = prefix + "," + std::to_string(s.state_seq()) + "," + std::to_string(s.total_contact_steps()) +
+                           "," + std::to_string(s.contacts().size());
+  if (s.contacts().empty()) o << head << ",,,\n";
+  for (const auto& c : s.contacts())
+    o << head << ',' << csvField(c.segment_a()) << ',' << csvField(c.segment_b()) << ',' << num(c.distance()) << '\n';
+}
+
 // ---- restamping for replay ---------------------------------------------------------------------
 
 // A stamp comes from the recorded payload (any int64): the shifted value saturates instead of
@@ -157,6 +198,14 @@ template <>
 void shiftStamps(msg::ObjectTargets& s, std::int64_t shift) {
   s.header().stamp_ns(shifted(s.header().stamp_ns(), shift));
   s.capture_stamp_ns(shifted(s.capture_stamp_ns(), shift));
+}
+// A command's deadline and the stamp of the state it answered move with it (a replayed command keeps
+// its age and its latency; it is played only when named with --topic, see player.cpp).
+template <>
+void shiftStamps(msg::JointCommand& s, std::int64_t shift) {
+  s.header().stamp_ns(shifted(s.header().stamp_ns(), shift));
+  s.valid_until_ns(shifted(s.valid_until_ns(), shift));
+  s.state_stamp_ns(shifted(s.state_stamp_ns(), shift));
 }
 
 // ---- the codec ------------------------------------------------------------------------------------
@@ -260,9 +309,12 @@ const std::vector<const TopicCodec*>& allCodecs() {
   static const Codec<msg::ControlStatus> control_status;
   static const Codec<msg::Heartbeat> heartbeat;
   static const Codec<msg::ControllerProtection> controller_protection;  // issue 16, item 3
-  static const std::vector<const TopicCodec*> all = {&object_targets, &hand_targets, &motion_priority,
-                                                     &body_schema,    &walk_command, &joint_state,
-                                                     &control_status, &heartbeat,    &controller_protection};
+  static const Codec<msg::RobotState> robot_state;                      // issue 13: the robot boundary
+  static const Codec<msg::JointCommand> joint_command;
+  static const Codec<msg::RobotContacts> robot_contacts;
+  static const std::vector<const TopicCodec*> all = {
+      &object_targets, &hand_targets, &motion_priority,       &body_schema, &walk_command,  &joint_state,
+      &control_status, &heartbeat,    &controller_protection, &robot_state, &joint_command, &robot_contacts};
   return all;
 }
 

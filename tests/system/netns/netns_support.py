@@ -86,6 +86,51 @@ def netns_exec(ns):
     return ["ip", "netns", "exec", ns] if ns else []
 
 
+class VethHosts:
+    """Two "hosts": network namespaces <prefix>-<pid>-<host> joined by ONE veth pair, 10.<domain>.0.1 for
+    the first host and 10.<domain>.0.2 for the second (nothing on the machine's real interfaces), with
+    the multicast route through the veth (RTPS discovery, 239.255.0.1). build() makes them, up(h) /
+    down(h) plug / pull one end, exec_prefix(h) runs a program inside, delete() removes everything it
+    made (also what still runs inside). Used by tests/faults/link_outage_test.py and
+    tests/mujoco/bench_mujoco_controller_latency.py."""
+
+    def __init__(self, prefix, domain, hosts):
+        pid = os.getpid()
+        self.hosts = hosts
+        self.ns = {h: f"{prefix}-{pid}-{h}" for h in hosts}
+        # Interface names are at most 15 bytes: the prefix without its first letter, the pid, the host's initial.
+        self.ifname = {h: f"{prefix[1:]}{pid % 1000000}{h[0]}" for h in hosts}
+        self.addr = {h: f"10.{domain}.0.{k + 1}" for k, h in enumerate(hosts)}
+        self.made = []
+
+    def build(self):
+        for h in self.hosts:
+            sh("ip", "netns", "add", self.ns[h])
+            self.made.append(self.ns[h])
+            sh("ip", "-n", self.ns[h], "link", "set", "lo", "up")
+        a, b = self.hosts
+        sh("ip", "link", "add", self.ifname[a], "type", "veth", "peer", "name", self.ifname[b])
+        for h in self.hosts:
+            sh("ip", "link", "set", self.ifname[h], "netns", self.ns[h])
+            sh("ip", "-n", self.ns[h], "addr", "add", f"{self.addr[h]}/24", "dev", self.ifname[h])
+            self.up(h)
+
+    def up(self, h):
+        sh("ip", "-n", self.ns[h], "link", "set", self.ifname[h], "up")
+        # RTPS multicast discovery (239.255.0.1) leaves through the veth; the route goes with the link.
+        sh("ip", "-n", self.ns[h], "route", "replace", "224.0.0.0/4", "dev", self.ifname[h])
+
+    def down(self, h):
+        sh("ip", "-n", self.ns[h], "link", "set", self.ifname[h], "down")
+
+    def exec_prefix(self, h):
+        return netns_exec(self.ns[h])
+
+    def delete(self):
+        delete_namespaces(self.made)  # deletes the veth ends too
+        self.made.clear()
+
+
 def read_csv(path):
     """The rows of a CSV file with a header line, as dicts of strings."""
     with open(path) as fh:

@@ -37,7 +37,7 @@ class DdsRobotPort final : public control::RobotPort {
   static constexpr double kFutureTolerance = 0.002;  ///< s a state's stamp may lie ahead of this host's clock
 
   struct Options {
-    double timeout = 0.020;   ///< s: a newest state older than this is stale (--robot-timeout)
+    double timeout = 0.050;   ///< s: a newest state older than this is stale (--robot-timeout; NodeConfig says why 50 ms)
     double deadline = 0.015;  ///< s: valid_until_ns = now + this (--command-deadline)
   };
 

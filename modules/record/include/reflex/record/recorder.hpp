@@ -100,7 +100,8 @@ struct PlayerOptions {
   double duration = 0.0;              ///< seconds of recording time to play from the start (0: to the end)
   double delay = 0.5;                 ///< seconds between creating the writers and the first sample (discovery)
   std::vector<std::string> topics;    ///< topic names to play; empty = every topic in the file but
-                                      ///< reflex/controller_protection (a live controller's claim; see player.cpp)
+                                      ///< reflex/controller_protection (a live controller's claim) and
+                                      ///< reflex/joint_command (a live robot would obey it); see player.cpp
   std::vector<std::string> exclude;   ///< topic names not to play
   bool restamp = false;               ///< move sample time stamps to the playing time (see SamplePublisher)
   bool progress = false;              ///< status line on stderr
