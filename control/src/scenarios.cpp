@@ -114,7 +114,8 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
     result.min_virtual_distance = std::min(result.min_virtual_distance, rep.virtual_distance);
     if (data.estop != EstopState::kClear) result.estop_fired = true;
     for (int i = 0; i < model.nq; ++i)
-      result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
+      result.max_command_speed_ratio = std::max(result.max_command_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
+    result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, result.max_command_speed_ratio);
     for (int a = 0; a < 2; ++a) {
       if (input.hands[a].status != HandStatus::kGiven) continue;
       const double err = (data.arms[a].hand_W - input.hands[a].target_W).norm();

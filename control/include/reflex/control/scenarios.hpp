@@ -81,6 +81,7 @@ struct SimResult {
   bool non_finite = false;           ///< a NaN/Inf reached the robot (must never happen)
   double max_joint_speed_ratio = 0.0;  ///< max over cycles and joints of |qdot_i| / v_max_i (commanded) and
                                        ///< |dq_i| / (v_max_i dt) (what the plant did, walking joints included)
+  double max_command_speed_ratio = 0.0;  ///< max over cycles and joints of |qdot_i| / v_max_i (commanded only)
   std::array<double, 2> reach_time{{-1.0, -1.0}};  ///< first time within 1 cm of the final target, -1 never
   std::array<double, 2> final_error{{0.0, 0.0}};   ///< |hand - target| at the end (m)
   std::uint64_t cycles = 0;
