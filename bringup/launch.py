@@ -6,6 +6,7 @@
     bringup/launch.py bringup/launch/multi_host.yaml --host vision,behavior   # two roles on one machine
     bringup/launch.py bringup/launch/multi_host.yaml --dry-run          # show what would start where
     bringup/launch.py CONFIG --set session=/data/my_session --duration 70
+    bringup/launch.py bringup/launch/one_host.yaml --robot mujoco       # the physics robot (reflex_mujoco)
 
 Every process gets the configuration's DDS domain (REFLEX_DOMAIN_ID) and profiles file
 (FASTRTPS_DEFAULT_PROFILES_FILE), both read by reflex::bus in every Reflex process; its output is
@@ -39,9 +40,13 @@ except ImportError:  # python3-yaml (Debian) is installed by bringup/setup.sh
 HERE = pathlib.Path(__file__).resolve().parent          # bringup/
 SOURCE = HERE.parent                                    # the checkout
 
-PROCESS_KEYS = {"name", "cmd", "args", "host", "env", "prefix", "on_exit", "delay", "stop_signal", "enabled"}
+PROCESS_KEYS = {"name", "cmd", "args", "host", "env", "prefix", "on_exit", "delay", "stop_signal", "enabled", "robot"}
 TOP_KEYS = {"name", "description", "domain", "profiles", "log_dir", "bin_dir", "env", "vars", "hosts",
-            "discovery_server", "processes", "stop_timeout"}
+            "discovery_server", "processes", "stop_timeout", "robot"}
+# The robot side (issue 13): "kinematic" = the controller's in-process plant; "mujoco" = reflex_mujoco
+# on the bus, the controller with --robot dds. A process with `robot: X` starts only on side X;
+# ${ROBOT} is the side, ${ROBOT_PORT} the controller's --robot value (kinematic | dds).
+ROBOT_SIDES = {"kinematic": "kinematic", "mujoco": "dds"}
 SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGKILL": signal.SIGKILL, "SIGUSR1": signal.SIGUSR1}
 
 
@@ -124,9 +129,15 @@ class Launch:
         # LOG_ROOT: where logs go unless a configuration says otherwise: $REFLEX_LOG_DIR, else
         # ~/.reflex/log (never inside the checkout, which may be read-only or shared).
         self.hosts_selected = parse_hosts(args.host)
+        robot = args.robot or str(doc.get("robot", "kinematic"))
+        if robot not in ROBOT_SIDES:
+            origin = "--robot" if args.robot else f"{where}: robot"
+            raise ConfigError(f"{origin} '{robot}' must be one of {sorted(ROBOT_SIDES)}")
+        self.robot = robot
         variables = {"BRINGUP": str(HERE), "SOURCE": str(SOURCE), "CONFIG_DIR": str(self.path.resolve().parent),
                      "DOMAIN": str(domain), "BIN": bin_dir, "LOG_ROOT": default_log_root(),
-                     "HOST": "+".join(self.hosts_selected) if self.hosts_selected else "all"}
+                     "HOST": "+".join(self.hosts_selected) if self.hosts_selected else "all",
+                     "ROBOT": robot, "ROBOT_PORT": ROBOT_SIDES[robot]}
         vars_ = doc.get("vars") or {}
         if not isinstance(vars_, dict):
             raise ConfigError(f"{where}: 'vars' must be a mapping")
@@ -199,7 +210,10 @@ class Launch:
             sig = spec.get("stop_signal", "SIGTERM")
             if sig not in SIGNALS:
                 raise ConfigError(f"{w} ('{spec['name']}'): stop_signal '{sig}' must be one of {sorted(SIGNALS)}")
-            if not spec.get("enabled", True):
+            side = spec.get("robot")
+            if side is not None and side not in ROBOT_SIDES:
+                raise ConfigError(f"{w} ('{spec['name']}'): robot '{side}' must be one of {sorted(ROBOT_SIDES)}")
+            if not spec.get("enabled", True) or (side is not None and side != robot):
                 continue
             p = Process(spec, i, self)
             pv = dict(variables, HOST=str(spec.get("host") or ""), PROCESS=spec["name"])
@@ -490,6 +504,9 @@ def main(argv=None):
     ap.add_argument("--log-dir", help="folder for the process logs (default: the configuration's log_dir)")
     ap.add_argument("--set", action="append", metavar="NAME=VALUE", help="set a variable of the configuration's vars")
     ap.add_argument("--quiet", action="store_true", help="do not echo process output (logs are still written)")
+    ap.add_argument("--robot", help="the robot side: kinematic (the controller's in-process plant) or mujoco "
+                                    "(starts the processes marked 'robot: mujoco', i.e. reflex_mujoco, and the "
+                                    "controller with --robot dds); default: the configuration's 'robot' or kinematic")
     args = ap.parse_args(argv)
     if args.duration < 0:
         ap.error(f"--duration {args.duration} must not be negative")

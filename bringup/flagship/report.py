@@ -162,13 +162,20 @@ def main():
         raise SystemExit("report.py: no run in %s (expected avoidance/controller.csv)" % args.out)
     summary = {label: summarize(ts) for label, ts in runs.items()}
     security = {}  # label -> the --secure folder of run_flagship.py, or None (plain DDS)
+    plant = {}     # label -> run.json: "robot" (kinematic | mujoco) and MuJoCo's contact counts
     for label in runs:
         try:
             with open(os.path.join(args.out, label, "run.json")) as fh:
-                security[label] = json.load(fh).get("secure")
+                note = json.load(fh)
         except (OSError, ValueError):
-            security[label] = None
+            note = {}
+        security[label] = note.get("secure")
         summary[label]["secure"] = bool(security[label])
+        plant[label] = note
+        summary[label]["robot"] = note.get("robot", "kinematic")
+        if "robot_contact_steps" in note:
+            summary[label]["mujoco_contact_steps"] = note["robot_contact_steps"]
+            summary[label]["mujoco_contact_periods"] = note.get("robot_contact_periods", 0)
 
     # Fig. 13: hand status and arm-to-arm distance.
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1, 1, 3]})
@@ -320,6 +327,13 @@ def main():
             return "-"
         return "secure (DDS-Security, identities from `%s`)" % security[label] if security[label] else "plain"
     lines.append("| DDS | %s | %s |" % (mode("avoidance"), mode("no_avoidance")))
+    def robot(label):
+        if label not in plant:
+            return "-"
+        if plant[label].get("robot") == "mujoco":
+            return "mujoco (reflex_mujoco over DDS, the controller with --robot dds; distances from the measured state)"
+        return "kinematic (the controller's in-process plant)"
+    lines.append("| robot | %s | %s |" % (robot("avoidance"), robot("no_avoidance")))
     on, off = summary.get("avoidance", {}), summary.get("no_avoidance", {})
     def cell(d, key, scale=1.0, fmt="%.1f"):
         return (fmt % (d[key] * scale)) if key in d else "-"
@@ -333,7 +347,10 @@ def main():
                                   ("left_lost_events", "left target lost (events)", 1, "%d"),
                                   ("right_lost_events", "right target lost (events)", 1, "%d"),
                                   ("left_tracking_error_median_m", "left hand tracking error, median (mm)", 1000, "%.1f"),
-                                  ("right_tracking_error_median_m", "right hand tracking error, median (mm)", 1000, "%.1f")):
+                                  ("right_tracking_error_median_m", "right hand tracking error, median (mm)", 1000, "%.1f"),
+                                  ("mujoco_contact_steps", "MuJoCo contact steps (pairs closer than d_r)", 1, "%d")):
+        if key == "mujoco_contact_steps" and key not in on and key not in off:
+            continue  # the kinematic plant has no judge
         lines.append("| %s | %s | %s |" % (name, cell(on, key, scale, fmt), cell(off, key, scale, fmt)))
     lines += ["", "![Fig. 13](fig13_status_distance.png)", "", "![f(d)](blending.png)", "", "![tracking](tracking.png)"]
     if strip_ok:
@@ -343,7 +360,7 @@ def main():
                           "headless Chromium) did not run: %s**" % strip_robot[4:]]
     with open(os.path.join(args.out, "report.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines[4:4 + 14]))
+    print("\n".join(lines[4:4 + 16]))
     print("report.py: wrote %s/report.md and plots" % args.out)
     return 0
 

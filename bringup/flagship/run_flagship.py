@@ -17,8 +17,13 @@ is (it may hold deployed credentials without the CA key) and must hold those fou
 file they name. Authentication takes seconds: vision starts 2 s after the recorder records the first
 samples (it authenticated the controller). run.json, summary.json and report.md say which mode ran.
 
+With --robot mujoco the robot is the physics-simulated humanoid (issue 13): reflex_mujoco is started on
+the run's domain before the controller, which then runs with --robot dds (it reads the measured state
+from reflex/robot_state and commands reflex/joint_command); MuJoCo's contact count (pairs closer than
+d_r, from reflex_mujoco's exit line) goes into run.json and the report, which names the plant.
+
 Usage: run_flagship.py [--out DIR] [--build DIR] [--domain N] [--rate R] [--only on|off] [--secure DIR]
-                       [--no-report]
+                       [--robot kinematic|mujoco] [--no-report]
 """
 import argparse
 import json
@@ -138,7 +143,7 @@ def run_once(args, label, avoidance):
     length = session_length(args.session) / args.rate
     domain = str(args.domain + (0 if avoidance else 1))
     env_note = {"domain": int(domain), "avoidance": avoidance, "rate": args.rate, "session": args.session,
-                "secure": args.secure}
+                "secure": args.secure, "robot": args.robot}
     env = None
     if args.secure:
         # Only the identity's profiles file: a default profiles file from the environment would be loaded
@@ -165,6 +170,11 @@ def run_once(args, label, avoidance):
             # The comparison run shows what happens without protection: avoidance AND the e-stop off,
             # each by its own loudly named option (the controller says so in its banner and exit line).
             ctl += ["--no-avoidance", "--disable-estop"]
+        if args.robot == "mujoco":
+            # The physics robot first, so that the controller finds its state; stopped last (reverse order).
+            procs.append(Proc("robot", [os.path.join(bindir, "reflex_mujoco"), "--domain", domain,
+                                        "--name", "reflex_mujoco"], os.path.join(out, "robot.log"), env))
+            ctl += ["--robot", "dds"]
         procs.append(Proc("controller", ctl, os.path.join(out, "controller.log"), env))
         beh = [os.path.join(bindir, "reflex_behavior"), "--config", args.behavior] + dds("behavior")
         procs.append(Proc("behavior", beh, os.path.join(out, "behavior.log"), env))
@@ -219,6 +229,12 @@ def run_once(args, label, avoidance):
         for p in reversed(procs):
             codes[p.name] = p.stop()
         env_note["exit_codes"] = codes
+        if args.robot == "mujoco":
+            # MuJoCo's judge: physics steps and state periods with a pair closer than d_r (exit line).
+            robot_log = os.path.join(out, "robot.log")
+            env_note["robot_contact_steps"] = last_count(robot_log, r"contact steps (\d+)")
+            env_note["robot_contact_periods"] = last_count(robot_log, r"contact periods (\d+)")
+            env_note["robot_holds"] = last_count(robot_log, r"holds begun (\d+)")
         with open(os.path.join(out, "run.json"), "w") as fh:
             json.dump(env_note, fh, indent=2)
     ok_codes = (0, -signal.SIGTERM, 128 + signal.SIGTERM, None)
@@ -244,6 +260,9 @@ def main():
                     help="run with DDS-Security: each process with its own identity's profiles file "
                          "DIR/profiles/<module>.xml (DIR made by bringup/security/make_security.sh when missing "
                          "or empty)")
+    ap.add_argument("--robot", choices=["kinematic", "mujoco"], default="kinematic",
+                    help="the plant: the controller's in-process kinematic robot, or reflex_mujoco over DDS "
+                         "(the controller with --robot dds)")
     ap.add_argument("--no-report", action="store_true")
     ap.add_argument("--view", type=int, metavar="PORT", default=0,
                     help="serve the live 3D view (reflex_view) on this port during the run with avoidance")
@@ -257,7 +276,10 @@ def main():
     for path, what in ((args.session, "session folder"), (args.behavior, "behavior configuration")):
         if not os.path.exists(path):
             ap.error("%s %s does not exist" % (what, path))
-    for exe in ("reflex_controller", "reflex_behavior", "reflex_vision"):
+    if args.robot == "mujoco" and args.secure is not None:
+        ap.error("--robot mujoco with --secure: reflex_mujoco has no DDS-Security identity yet")
+    exes = ("reflex_controller", "reflex_behavior", "reflex_vision") + (("reflex_mujoco",) if args.robot == "mujoco" else ())
+    for exe in exes:
         if not os.path.exists(os.path.join(args.build, "bin", exe)):
             ap.error("%s not found in %s/bin (build first: bringup/setup.sh)" % (exe, args.build))
     mode = "plain DDS"
@@ -270,10 +292,11 @@ def main():
     runs = []
     try:
         if args.only in (None, "on"):
-            log("run with collision avoidance (domain %d, %s)" % (args.domain, mode))
+            log("run with collision avoidance (domain %d, %s, robot %s)" % (args.domain, mode, args.robot))
             runs.append(run_once(args, "avoidance", True))
         if args.only in (None, "off"):
-            log("run WITHOUT collision avoidance, for comparison (domain %d, %s)" % (args.domain + 1, mode))
+            log("run WITHOUT collision avoidance, for comparison (domain %d, %s, robot %s)"
+                % (args.domain + 1, mode, args.robot))
             runs.append(run_once(args, "no_avoidance", False))
     except RuntimeError as e:
         log("error: %s" % e)

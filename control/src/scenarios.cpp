@@ -4,6 +4,7 @@
 #include "reflex/control/onboard.hpp"
 
 #include <cerrno>
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -54,18 +55,23 @@ Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm)
   return q;
 }
 
-SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Scenario& scenario,
+SimResult runScenario(const Model& model, const ControllerModel& cm, const Scenario& scenario,
                       const SimOptions& options) {
+  KinematicScenarioPlant plant(restConfiguration(model, cm));
+  return runScenario(model, cm, scenario, options, plant);
+}
+
+SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Scenario& scenario,
+                      const SimOptions& options, ScenarioPlant& plant) {
   ControllerModel cm = cm_in;
   cm.params.mode = options.mode;
   cm.params.estop = options.estop;
-  // The same onboard controller as reflex_controller (onboard.hpp), on the in-process kinematic plant.
-  const Eigen::VectorXd q0 = restConfiguration(model, cm);
-  KinematicPort robot(q0);
-  OnboardController controller(model, cm, robot, q0);
+  // The same onboard controller as reflex_controller (onboard.hpp), on the plant's robot.
+  const Eigen::VectorXd q0 = plant.positions();
+  OnboardController controller(model, cm, plant.port(), q0);
   ControllerData& data = controller.data();
   Eigen::VectorXd q_before = q0;
-  ScenarioContext ctx{model, data, cm, robot.positions()};
+  ScenarioContext ctx{model, data, cm, plant.positions()};
   ctx.camera_link = options.camera_link;
   ControlInput input;
   SimResult result;
@@ -77,6 +83,15 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
   bool walk_started = false;
   for (std::uint64_t k = 0; k <= steps; ++k) {
     const double t = static_cast<double>(k) * dt;
+    if (plant.awaitCycle(t, dt)) ++result.late_cycles;
+    // What the plant did since the last cycle, every joint (the walking joints too): |dq| / (v_max dt)
+    // over the interval between the two states.
+    if (k > 0) {
+      const double interval = plant.stateInterval(dt);
+      for (int i = 0; i < model.nq; ++i)
+        result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio,
+                                                std::abs(plant.positions()[i] - q_before[i]) / (model.v_max[i] * interval));
+    }
     if (scenario.script) scenario.script(t, input, ctx);
     controller.setControlInput(input, t);  // the script owns the whole input: never stale
     input.reset_estop = false;
@@ -86,7 +101,7 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
       controller.startWalking(scenario.walk_distance, scenario.walk_speed);
       walk_started = true;
     }
-    q_before = robot.positions();
+    q_before = plant.positions();
     // One cycle: computeControl at the robot's q, then stepPlant (arms from the controller; legs,
     // heel and body from walking, which holds while the e-stop is latched or recovering and never
     // closes a pair that no arm can move).
@@ -100,7 +115,8 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
     result.min_virtual_distance = std::min(result.min_virtual_distance, rep.virtual_distance);
     if (data.estop != EstopState::kClear) result.estop_fired = true;
     for (int i = 0; i < model.nq; ++i)
-      result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
+      result.max_command_speed_ratio = std::max(result.max_command_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
+    result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, result.max_command_speed_ratio);
     for (int a = 0; a < 2; ++a) {
       if (input.hands[a].status != HandStatus::kGiven) continue;
       const double err = (data.arms[a].hand_W - input.hands[a].target_W).norm();
@@ -120,18 +136,59 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
       s.arm_distance = rep.arm_distance;
       s.q = q_before;  // the configuration this cycle computed from
       s.qdot = data.qdot;
+      s.commanded = rep.robot_state_ok;
+      s.q_command = controller.commandedPositions();
       result.samples.push_back(std::move(s));
     }
     ++result.cycles;
     result.guard_cycles = data.guard_count;
+    result.robot_stale_cycles = rep.counts.robot_stale_cycles;
     if (k == steps) break;
     result.walking_holds = data.walking_hold_count;
-    // What the plant did, every joint (the walking joints too): |dq| / (v_max dt).
-    for (int i = 0; i < model.nq; ++i)
-      result.max_joint_speed_ratio =
-          std::max(result.max_joint_speed_ratio, std::abs(robot.positions()[i] - q_before[i]) / (model.v_max[i] * dt));
   }
   return result;
+}
+
+std::array<ArmTracking, 2> computeTracking(const ControllerModel& cm, const SimResult& result) {
+  std::array<ArmTracking, 2> out;
+  const double dt = cm.params.period;
+  constexpr int kMaxShift = 40;  // cycles: 0.2 s at 5 ms
+  const auto& s = result.samples;
+  for (int a = 0; a < 2; ++a) {
+    const auto& arm = cm.arms[a];
+    // Sum of squared errors of measured(k) against command(k - 1 - shift), per shift.
+    std::array<double, kMaxShift + 1> sse{};
+    std::array<std::uint64_t, kMaxShift + 1> count{};
+    for (std::size_t k = 1; k < s.size(); ++k) {
+      if (!s[k].commanded) continue;
+      for (int shift = 0; shift <= kMaxShift; ++shift) {
+        if (k < static_cast<std::size_t>(shift) + 1) break;
+        const SimSample& c = s[k - 1 - static_cast<std::size_t>(shift)];
+        if (!c.commanded || c.q_command.size() != s[k].q.size()) continue;
+        for (int i = 0; i < arm.n; ++i) {
+          const double e = s[k].q[arm.q[i]] - c.q_command[arm.q[i]];
+          sse[shift] += e * e;
+          ++count[shift];
+          if (shift == 0) out[a].max_error = std::max(out[a].max_error, std::abs(e));
+        }
+      }
+    }
+    if (count[0] == 0) continue;
+    out[a].cycles = count[0] / static_cast<std::uint64_t>(std::max(1, arm.n));
+    out[a].rms_error = std::sqrt(sse[0] / static_cast<double>(count[0]));
+    int best = 0;
+    auto mean = [&](int shift) { return count[shift] ? sse[shift] / static_cast<double>(count[shift]) : 1e300; };
+    for (int shift = 1; shift <= kMaxShift; ++shift)
+      if (mean(shift) < mean(best)) best = shift;
+    double frac = 0.0;
+    if (best > 0 && best < kMaxShift) {
+      const double y0 = mean(best - 1), y1 = mean(best), y2 = mean(best + 1);
+      const double den = y0 - 2.0 * y1 + y2;
+      if (den > 0.0) frac = std::clamp(0.5 * (y0 - y2) / den, -0.5, 0.5);
+    }
+    out[a].lag = (static_cast<double>(best) + frac) * dt;
+  }
+  return out;
 }
 
 namespace {

@@ -1,10 +1,13 @@
-// reflex_sim: runs the paper's experiments on the kinematic robot, without DDS.
+// reflex_sim: runs the paper's experiments on the kinematic robot (in process, simulated time) or on
+// a robot over DDS in real time (--robot mujoco: it spawns reflex_mujoco; --robot dds: a robot already
+// on the bus), through the same OnboardController and scenario scripts.
 //   reflex_sim --list
-//   reflex_sim SCENARIO --out DIR [--urdf R [--controller C]] [--no-avoidance] [--mode one_dof|three_dof]
-// On any robot: the scenarios' targets are placed by the robot's own landmarks (ScenarioFrame, printed
-// first); its controller configuration is <R stem>.controller.yaml beside the URDF unless --controller.
+//   reflex_sim SCENARIO --out DIR [--no-avoidance] [--mode one_dof|three_dof] [--robot kinematic|mujoco|dds]
 // Writes DIR/timeseries.csv (one row per 5 ms cycle), DIR/postures.csv (capsules at a few instants),
-// DIR/summary.txt, and PNG plots like the paper's figures (through python3-matplotlib).
+// DIR/summary.txt, and PNG plots like the paper's figures (through python3-matplotlib). With a robot
+// over DDS the summary adds the plant's figures (robot_summary below) and DIR/reflex_mujoco*.log holds
+// the spawned robot's output.
+#include "reflex/control_node/bus_plant.hpp"
 #include "reflex/control/controller.hpp"
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control/urdf_loader.hpp"
@@ -16,6 +19,8 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
+#include <optional>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -152,9 +157,12 @@ void printScenarioFrame(std::ostream& os, const Model& model, const ScenarioFram
 }
 
 void summarize(std::ostream& os, const Model& model, const Scenario& sc, const SimResult& r, const char* label,
-               double wall) {
+               double wall, const std::string& robot = "kinematic") {
   os << "scenario " << sc.name << " (" << sc.paper << "), " << label << "\n";
-  os << "  robot                 kinematic (in-process plant, OnboardController + KinematicPort)\n";
+  if (robot == "kinematic")
+    os << "  robot                 kinematic (in-process plant, OnboardController + KinematicPort)\n";
+  else
+    os << "  robot                 " << robot << " (a robot over DDS, OnboardController + DdsRobotPort)\n";
   os << "  min distance          " << r.min_distance * 1000.0 << " mm at t = " << r.min_time << " s ("
      << pairName(model, r.min_pair) << ")\n";
   if (std::isfinite(r.min_virtual_distance))
@@ -168,16 +176,67 @@ void summarize(std::ostream& os, const Model& model, const Scenario& sc, const S
        << (r.reach_time[a] >= 0.0 ? "from t = " + std::to_string(r.reach_time[a]) + " s" : std::string("never"))
        << "\n";
   }
-  os << "  max |qdot|/v_max      " << r.max_joint_speed_ratio << "\n";
+  if (robot == "kinematic")
+    os << "  max |qdot|/v_max      " << r.max_joint_speed_ratio << "\n";
+  else  // the measured speed is over the robot's state stamps: a robot catching up late periods inflates it
+    os << "  max |qdot|/v_max      " << r.max_command_speed_ratio << " commanded; " << r.max_joint_speed_ratio
+       << " measured (between the states' stamps)\n";
   os << "  non-finite output     " << (r.non_finite ? "YES" : "no") << "\n";
-  os << "  cycles " << r.cycles << ", simulated " << r.cycles * 0.005 << " s in " << wall * 1000.0
-     << " ms wall (" << (wall > 0 ? r.cycles * 0.005 / wall : 0.0) << "x real time)\n";
+  if (robot == "kinematic")
+    os << "  cycles " << r.cycles << ", simulated " << r.cycles * 0.005 << " s in " << wall * 1000.0
+       << " ms wall (" << (wall > 0 ? r.cycles * 0.005 / wall : 0.0) << "x real time)\n";
+  else
+    os << "  cycles " << r.cycles << ", " << r.cycles * 0.005 << " s of scenario in " << wall * 1000.0
+       << " ms wall (real time)\n";
+}
+
+/// What a run on a robot over DDS measured besides the scenario's own figures.
+struct PlantFigures {
+  std::string robot;                     ///< "mujoco" / "dds"
+  int domain = 0;
+  std::array<ArmTracking, 2> tracking;
+  std::uint64_t below_d_r = 0;           ///< cycles whose measured state had a physical pair below d_r
+  std::uint64_t contact_samples = 0, contacts_received = 0, total_contact_steps = 0;
+  double min_contact = std::numeric_limits<double>::infinity();
+  std::string min_contact_pair;
+  int robot_exit = 0;
+  std::string log;
+  // The same scenario on the kinematic plant, for comparison.
+  double kin_min_distance = 0.0;
+  std::array<ArmTracking, 2> kin_tracking;
+  bool kin_estop = false;
+};
+
+/// The lines a run over DDS adds to the summary (after summarize's). Every figure in mm / mrad / ms.
+void summarizePlant(std::ostream& os, const SimResult& r, const PlantFigures& p, double d_r) {
+  os << "  plant                 " << p.robot << " over DDS on domain " << p.domain
+     << " (OnboardController + DdsRobotPort, real time; the distances above are our distance module on the MEASURED "
+        "joint positions)\n";
+  os << "  measured below d_r    " << p.below_d_r << " cycles (d_r = " << d_r * 1000.0 << " mm)\n";
+  os << "  MuJoCo contacts       " << p.contact_samples << " of " << p.contacts_received
+     << " RobotContacts samples name a pair closer than d_r; robot's contact steps " << p.total_contact_steps;
+  if (std::isfinite(p.min_contact)) os << "; smallest " << p.min_contact * 1000.0 << " mm (" << p.min_contact_pair << ")";
+  os << "\n";
+  const char* side[2] = {"left", "right"};
+  for (int a = 0; a < 2; ++a)
+    os << "  " << side[a] << " arm tracking     max " << p.tracking[a].max_error * 1000.0 << " mrad, RMS "
+       << p.tracking[a].rms_error * 1000.0 << " mrad, lag " << p.tracking[a].lag * 1000.0 << " ms ("
+       << p.tracking[a].cycles << " cycles); kinematic plant: max " << p.kin_tracking[a].max_error * 1000.0
+       << " mrad, RMS " << p.kin_tracking[a].rms_error * 1000.0 << " mrad, lag " << p.kin_tracking[a].lag * 1000.0
+       << " ms\n";
+  os << "  kinematic plant       min distance " << p.kin_min_distance * 1000.0 << " mm, e-stop fired "
+     << (p.kin_estop ? "yes" : "no") << " (the same scenario in process, for comparison)\n";
+  os << "  robot state stale     " << r.robot_stale_cycles << " cycles (nothing commanded), late cycles "
+     << r.late_cycles << "\n";
+  if (!p.log.empty()) os << "  robot log             " << p.log << " (exit status " << p.robot_exit << ")\n";
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_sim: the paper's experiments on the kinematic robot (no DDS)"};
+  CLI::App app{"reflex_sim: the paper's experiments on the kinematic robot (in process, no DDS), or on a robot over DDS\n"
+               "in real time (--robot mujoco spawns reflex_mujoco on its own domain; --robot dds joins a robot already\n"
+               "on the bus), through the same onboard controller and scenario scripts"};
   std::string robot_side = "kinematic";
   std::string scenario_name, out_dir = "out/sim", urdf, collision, controller_cfg, mode = "one_dof";
   bool list = false, no_avoidance = false, no_plots = false;
@@ -198,17 +257,37 @@ int main(int argc, char** argv) {
                  "instead of simulating: write OUT/postures.csv (the robot's capsules) for rows of this time-series "
                  "CSV (reflex_sim or reflex_controller --log)");
   app.add_option("--at", at, "times (s) of the rows for --postures-from (nearest row each)")->delimiter(',');
+  std::optional<int> domain;
+  double robot_timeout = 0.020, command_deadline = 0.015, robot_wait = 30.0;
   app.add_option("--robot", robot_side,
-                 "the robot side: 'kinematic' (the in-process plant; the only one reflex_sim runs today; a robot over "
-                 "DDS is reflex_controller --robot dds)")
-      ->capture_default_str();
+                 "the robot side: 'kinematic' (the in-process plant, simulated time), 'mujoco' (spawns reflex_mujoco "
+                 "on --domain and drives it over DDS in real time) or 'dds' (a robot already on the bus, real time)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"kinematic", "mujoco", "dds"}));
+  app.add_option("--domain", domain,
+                 "DDS domain id of the robot (--robot mujoco: default 197; dds: $REFLEX_DOMAIN_ID or 0)")
+      ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
+  app.add_option("--robot-timeout", robot_timeout,
+                 "seconds after which the newest robot state is stale (mujoco, dds): nothing is commanded; (0, 1]")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-4, 1.0));
+  app.add_option("--command-deadline", command_deadline,
+                 "seconds each joint command stays valid (mujoco, dds); (0, 1]")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-4, 1.0));
+  app.add_option("--robot-wait", robot_wait, "seconds to wait for the robot's first state (mujoco, dds); (0, 600]")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-3, 600.0));
   CLI11_PARSE(app, argc, argv);
-  if (robot_side != "kinematic") {
-    std::fprintf(stderr,
-                 "reflex_sim: error: --robot '%s': reflex_sim runs the in-process kinematic plant only ('kinematic'); "
-                 "drive a robot over DDS with reflex_controller --robot dds\n",
-                 robot_side.c_str());
-    return 1;
+  const bool over_bus = robot_side != "kinematic";
+  int robot_domain = 0;
+  if (over_bus) {
+    try {
+      robot_domain = robot_side == "mujoco" ? domain.value_or(197) : reflex::bus::resolveDomainId(domain);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
+      return 1;
+    }
   }
 
   // A folder that cannot be made is an error now, before any simulation (not after the first one).
@@ -272,17 +351,71 @@ int main(int argc, char** argv) {
       const std::string summary_path = (dir / "summary.txt").string();
       std::ofstream summary(summary_path);
       if (!summary) throw ConfigError("summary: " + reflex::common::writeError(summary_path, errno ? errno : EIO));
+      int run_index = 0;
       auto run = [&](AvoidanceMode m, const std::string& csv, const char* label) {
         SimOptions opt;
         opt.mode = m;
         opt.estop = !no_avoidance;  // the paper's comparison: neither avoidance nor the e-stop
         opt.camera_link = config.camera_link;
-        const auto t0 = std::chrono::steady_clock::now();
-        SimResult r = runScenario(model, cm, *sc, opt);
-        const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (!over_bus) {
+          const auto t0 = std::chrono::steady_clock::now();
+          SimResult r = runScenario(model, cm, *sc, opt);
+          const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          writeTimeseriesCsv(model, cm, r, (dir / csv).string());
+          summarize(std::cout, model, *sc, r, label, wall);
+          summarize(summary, model, *sc, r, label, wall);
+          return r;
+        }
+        // A robot over DDS: a fresh reflex_mujoco per run (mujoco), started at the rest configuration.
+        reflex::control_node::BusPlantOptions po;
+        po.domain = robot_domain;
+        po.q_start = restConfiguration(model, cm);
+        po.margin = cm.params.d_r;
+        po.port.timeout = robot_timeout;
+        po.port.deadline = command_deadline;
+        po.first_state_timeout = robot_wait;
+        PlantFigures fig;
+        fig.robot = robot_side;
+        fig.domain = robot_domain;
+        if (robot_side == "mujoco") {
+          po.robot_binary = exeDir() + "/reflex_mujoco";
+          po.robot_args = {"--urdf", urdf};
+          if (!collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", collision});
+          fig.log = (dir / (run_index == 0 ? "reflex_mujoco.log" : "reflex_mujoco_" + std::to_string(run_index) + ".log"))
+                        .string();
+          po.robot_log = fig.log;
+        }
+        ++run_index;
+        std::cout << "  " << sc->name << " (" << label << "): " << (robot_side == "mujoco" ? "starting reflex_mujoco" : "joining")
+                  << " on domain " << robot_domain << ", then " << sc->duration << " s in real time ..." << std::endl;
+        SimResult r;
+        double wall = 0.0;
+        {
+          reflex::control_node::BusScenarioPlant plant(model, drivenJoints(model, cm), po);
+          const auto t0 = std::chrono::steady_clock::now();
+          r = runScenario(model, cm, *sc, opt, plant);
+          wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          // The judge's last words: contacts published after the last cycle.
+          plant.awaitCycle(static_cast<double>(r.cycles) * cm.params.period, cm.params.period);
+          fig.robot_exit = plant.stop();
+          fig.contact_samples = plant.contactSamples();
+          fig.contacts_received = plant.contactsReceived();
+          fig.total_contact_steps = plant.totalContactSteps();
+          fig.min_contact = plant.minContact();
+          fig.min_contact_pair = plant.minContactPair();
+        }
+        fig.tracking = computeTracking(cm, r);
+        for (const auto& s : r.samples)
+          if (s.commanded && s.min_distance < cm.params.d_r) ++fig.below_d_r;
+        const SimResult kin = runScenario(model, cm, *sc, opt);
+        fig.kin_min_distance = kin.min_distance;
+        fig.kin_tracking = computeTracking(cm, kin);
+        fig.kin_estop = kin.estop_fired;
         writeTimeseriesCsv(model, cm, r, (dir / csv).string());
-        summarize(std::cout, model, *sc, r, label, wall);
-        summarize(summary, model, *sc, r, label, wall);
+        for (std::ostream* os : {static_cast<std::ostream*>(&std::cout), static_cast<std::ostream*>(&summary)}) {
+          summarize(*os, model, *sc, r, label, wall, robot_side);
+          summarizePlant(*os, r, fig, cm.params.d_r);
+        }
         return r;
       };
       const AvoidanceMode m = no_avoidance ? AvoidanceMode::kOff

@@ -204,14 +204,20 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
               "error median %.4f rad, p95 %.4f, RMS %.4f, max %.4f; servo lag %.0f ms (residual RMS %.4f rad, max %.4f)\n",
               kAmp, kFreq, kAmp * 2 * M_PI * kFreq, samples.size(), median, p95, rms, max_err, best_lag * 1e3, best_rms,
               best_max);
-  // Bounds: the servo (10 Hz, velocity feed-forward) alone tracks to ~1 mrad (median and RMS on a quiet
-  // run, 2.4 mrad at most); the tail is this loaded machine: a commander stalled beyond the 20 ms
-  // deadline makes the robot hold, a robot stalled beyond 20 periods loses time. So the median is
-  // bounded tightly, RMS and max loosely (max: a 200 ms stall at the peak speed).
-  EXPECT_LT(median, 0.005);
-  EXPECT_LT(rms, 0.03);
+  // Bounds: the servo (10 Hz, critically damped) follows its reference with a lag of about 25 ms: its
+  // velocity feed-forward acts only while the reference travels to a commanded position, never past
+  // it (measured on a loaded run: median 15.5 mrad, RMS 15.9, lag 24 ms, residual after the lag 2.5
+  // mrad). Until issue 13's scenarios on this robot the feed-forward stayed on after the reference
+  // arrived, which held the joint 2 qdot / omega PAST the command (a lead that hid the lag here:
+  // median 1.3 mrad, lag 0-1 ms) and carried arms below d_r when a command was late. The tail is this
+  // loaded machine: a commander stalled beyond the 20 ms deadline makes the robot hold, a robot
+  // stalled beyond 20 periods loses time. So the shape (the residual once the lag is removed) is
+  // bounded as the RMS was before (30 mrad), the median and lag to the servo's, max loosely (a 200 ms stall).
+  EXPECT_LT(median, 0.03);
+  EXPECT_LT(rms, 0.05);
   EXPECT_LT(max_err, 0.2);
-  EXPECT_LT(best_lag, 0.03);
+  EXPECT_LT(best_lag, 0.05);
+  EXPECT_LT(best_rms, 0.03);
 
   // Commands stop: after the last deadline (20 ms) the robot holds; the drift is measured from 0.5 s
   // on (the servo has settled from the motion it was stopped in).

@@ -198,7 +198,12 @@ void MujocoRobot::step(int substeps, std::int64_t now_ns) {
       const double max_move = model_.v_max[qi] * dt;
       const double move = std::clamp(q_target_[qi] - q_ref_[qi], -max_move, max_move);
       q_ref_[qi] += move;
-      qdot_ref_[qi] = measured_.holding ? 0.0 : qdot_target_[qi];
+      // The velocity feed-forward only while the reference still travels: once it has reached the
+      // commanded position it stops there, and so does its velocity. A feed-forward kept after the
+      // reference arrived held the joint kd qdot / kp = 2 qdot / omega past the commanded position
+      // (51 mrad at 1.6 rad/s) until the next command -- up to the deadline when one was late -- and
+      // carried arms 1-3 mm below d_r in reflex_sim --robot mujoco (walking_target_behind, grasped_bar).
+      qdot_ref_[qi] = measured_.holding || q_ref_[qi] == q_target_[qi] ? 0.0 : qdot_target_[qi];
       const ServoGains& g = gains_[qi];
       d_->ctrl[actuator_[qi]] = g.kp * q_ref_[qi] + g.kd * qdot_ref_[qi] + d_->qfrc_bias[dof_adr_[qi]];
     }

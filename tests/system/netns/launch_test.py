@@ -260,6 +260,33 @@ class LaunchTest(unittest.TestCase):
             vision = [line for line in out.splitlines() if line.startswith("[vision")]
             self.assertIn(" --loop ", vision[0], shipped)
 
+    def test_the_robot_side_starts_reflex_mujoco_and_the_controller_over_dds(self):
+        # issue 13, item 4: --robot mujoco starts the processes marked robot: mujoco (reflex_mujoco)
+        # before the controller, which then runs with --robot dds; kinematic (the default) neither.
+        for shipped in sorted((SOURCE / "bringup" / "launch").glob("*.yaml")):
+            for side, port in (("kinematic", "kinematic"), ("mujoco", "dds")):
+                extra = ["--host", "robot"] if "hosts:" in shipped.read_text() else []
+                rc, out = self.run_launch(shipped, "--dry-run", "--robot", side, *extra)
+                self.assertEqual(rc, 0, f"{shipped} --robot {side}: {out}")
+                lines = [line for line in out.splitlines() if line.startswith("[")]
+                names = [line.split("]")[0].strip("[").split(" ")[0] for line in lines]
+                controller = [line for line in lines if line.startswith("[controller")]
+                self.assertEqual(len(controller), 1, out)
+                self.assertIn(f" --robot {port}", controller[0], shipped)
+                if side == "mujoco":
+                    self.assertIn("robot", names, out)
+                    self.assertIn("reflex_mujoco", lines[names.index("robot")])
+                    self.assertLess(names.index("robot"), names.index("controller"), out)
+                else:
+                    self.assertNotIn("robot", names, out)
+        cfg = self.config(f"log_dir: {self.dir}/r\nprocesses: [{{name: x, cmd: /bin/true, robot: gazebo}}]", "r.yaml")
+        rc, out = self.run_launch(cfg, "--dry-run")
+        self.assertEqual(rc, 2, out)
+        self.assertIn("robot 'gazebo'", out)
+        rc, out = self.run_launch(SOURCE / "bringup" / "launch" / "one_host.yaml", "--dry-run", "--robot", "gazebo")
+        self.assertEqual(rc, 2, out)
+        self.assertIn("--robot 'gazebo'", out)
+
     def test_bad_configurations_name_the_bad_value(self):
         cases = [
             ("processes: [{name: x, cmd: /bin/true, colour: red}]", "colour"),

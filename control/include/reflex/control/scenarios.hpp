@@ -1,13 +1,17 @@
 // The paper's experiments as simulation scenarios (Sec. 8.2, 8.3, 8.5) and the runner that drives
-// the controller with the kinematic robot. Used by reflex_sim, the experiment tests and benchmarks.
+// the controller with a plant: the in-process kinematic robot (simulated time), or any robot behind a
+// RobotPort in real time (ScenarioPlant; reflex_sim --robot mujoco|dds, whose plant over DDS lives in
+// control/node: this library never links DDS). Used by reflex_sim, the experiment tests and benchmarks.
 #pragma once
 
 #include "reflex/control/controller.hpp"
+#include "reflex/control/onboard.hpp"
 #include "reflex/control/simulation.hpp"
 
 #include <Eigen/Core>
 
 #include <array>
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <ostream>
@@ -112,8 +116,10 @@ struct SimSample {
   double virtual_distance = 0.0;     ///< closest pair with a virtual segment (m), +inf if none
   double arm_distance = 0.0;         ///< closest pair between the two arms (m), the paper's Fig. 13
   double wall_time = 0.0;            ///< system clock (s since the epoch) when logged by a process; 0 in simulation
-  Eigen::VectorXd q;
+  Eigen::VectorXd q;                 ///< the configuration this cycle computed from (measured by the plant)
   Eigen::VectorXd qdot;
+  bool commanded = true;             ///< a command was sent this cycle (false: no usable robot state)
+  Eigen::VectorXd q_command;         ///< the command's end-of-cycle positions (nq; the last one if !commanded)
 };
 
 struct SimResult {
@@ -128,15 +134,70 @@ struct SimResult {
   bool non_finite = false;           ///< a NaN/Inf reached the robot (must never happen)
   double max_joint_speed_ratio = 0.0;  ///< max over cycles and joints of |qdot_i| / v_max_i (commanded) and
                                        ///< |dq_i| / (v_max_i dt) (what the plant did, walking joints included)
+  double max_command_speed_ratio = 0.0;  ///< max over cycles and joints of |qdot_i| / v_max_i (commanded only)
   std::array<double, 2> reach_time{{-1.0, -1.0}};  ///< first time within 1 cm of the final target, -1 never
   std::array<double, 2> final_error{{0.0, 0.0}};   ///< |hand - target| at the end (m)
   std::uint64_t cycles = 0;
+  std::uint64_t robot_stale_cycles = 0;  ///< cycles without a usable robot state (nothing commanded)
+  std::uint64_t late_cycles = 0;         ///< real-time plants: cycles that began a whole period late or more
+};
+
+/// The robot side runScenario drives. The kinematic plant (KinematicScenarioPlant) runs in simulated
+/// time; a real-time plant (a robot over DDS) paces the cycles on the wall clock and reads the robot
+/// between them.
+class ScenarioPlant {
+ public:
+  virtual ~ScenarioPlant() = default;
+  /// Where the controller reads the measured state and sends each cycle's command.
+  virtual RobotPort& port() = 0;
+  /// Waits until the cycle at scenario time t (s since the scenario began) is due and takes what the
+  /// robot sent since the last call. Returns true if the cycle began a whole period late or more.
+  virtual bool awaitCycle(double t, double period) = 0;
+  /// The robot's newest configuration (nq, model order): what the next step() computes from if the
+  /// port has a usable state. The reference stays valid for the plant's life (ScenarioContext::q).
+  virtual const Eigen::VectorXd& positions() const = 0;
+  /// Seconds between the states behind the last two awaitCycle calls (what the measured joint speed
+  /// is taken over); the kinematic plant: exactly the period.
+  virtual double stateInterval(double period) const = 0;
+};
+
+/// The in-process kinematic plant (KinematicPort) in simulated time.
+class KinematicScenarioPlant final : public ScenarioPlant {
+ public:
+  explicit KinematicScenarioPlant(const Eigen::VectorXd& q0) : port_(q0) {}
+  RobotPort& port() override { return port_; }
+  bool awaitCycle(double /*t*/, double /*period*/) override { return false; }
+  const Eigen::VectorXd& positions() const override { return port_.positions(); }
+  double stateInterval(double period) const override { return period; }
+
+ private:
+  KinematicPort port_;
 };
 
 /// Runs a scenario from the robot's rest posture. Throws ConfigError if the scenario refers to
 /// names the model does not have.
 SimResult runScenario(const Model& model, const ControllerModel& cm, const Scenario& scenario,
                       const SimOptions& options = {});
+
+/// Runs a scenario on `plant` from where the plant's robot is (plant.positions(), finite, nq). The
+/// same loop as above (which is this one on a KinematicScenarioPlant at the rest configuration).
+SimResult runScenario(const Model& model, const ControllerModel& cm, const Scenario& scenario,
+                      const SimOptions& options, ScenarioPlant& plant);
+
+/// How closely one arm's measured joints followed the commands (issue 13, item 4). The command of
+/// cycle k names the positions for the start of cycle k+1; the error of cycle k+1 is measured(k+1) -
+/// command(k), over the arm's joints, over cycle pairs that both had a robot state.
+struct ArmTracking {
+  double max_error = 0.0;   ///< rad (largest |error| of any joint of the arm)
+  double rms_error = 0.0;   ///< rad (over joints and cycles)
+  double lag = 0.0;         ///< s: the shift of the commands (0 .. 0.2 s, refined between cycles by a
+                            ///< parabola through the best three) that best fits the measurement
+  std::uint64_t cycles = 0; ///< cycle pairs counted
+};
+
+/// Tracking error and servo lag per arm from recorded samples (SimOptions::record). The kinematic
+/// plant gives exactly 0, 0, 0 (its next measured state IS the command).
+std::array<ArmTracking, 2> computeTracking(const ControllerModel& cm, const SimResult& result);
 
 /// The rest configuration: zeros (clamped to limits) with the arms at their rest postures.
 Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm);

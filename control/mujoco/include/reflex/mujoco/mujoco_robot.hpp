@@ -12,6 +12,7 @@
 //   3. `substeps` physics steps. Per step the servo reference moves towards the commanded position at
 //      no more than the joint's velocity limit (Model::v_max), whatever the command (the joint follows
 //      the reference with the servo's dynamics: mujoco_model_test measures its overshoot);
+//      qdot_ref is the commanded velocity while q_ref still travels, 0 once it reached the target;
 //      the actuator gets ctrl = kp q_ref + kd qdot_ref + the bias force (gravity and Coriolis, as
 //      drives with gravity feed-forward do), its force clamped to ±effort;
 //   4. the measured state (positions, velocities) and the segment pairs MuJoCo reports closer than

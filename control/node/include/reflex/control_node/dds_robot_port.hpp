@@ -73,6 +73,8 @@ class DdsRobotPort final : public control::RobotPort {
   /// Age (s) of the newest accepted state now, +inf without one.
   double stateAge() const noexcept;
   std::uint64_t stateSeq() const { return state_seq_; }
+  /// Header.stamp_ns of the newest accepted state (system clock, ns), 0 without one.
+  std::int64_t stateStampNs() const { return state_stamp_ns_; }
 
  private:
   bool accept(const msg::RobotState& s) noexcept;
