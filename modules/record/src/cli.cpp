@@ -241,8 +241,14 @@ std::function<int()> addExport(CLI::App& app) {
       std::filesystem::create_directories(*dir, ec);
       if (ec) throw RecordError("cannot create folder '" + *dir + "': " + ec.message());
       std::vector<std::string> list = *topics;
-      if (list.empty())
-        for (const auto& kv : scanRecording(*input).topics) list.push_back(kv.first);
+      if (list.empty()) {
+        for (const auto& kv : scanRecording(*input).topics) {
+          if (findCodecByType(kv.second.type)) list.push_back(kv.first);
+          else  // the scene channels (/tf, /reflex/scene: JSON for viewers) have no CSV form
+            std::fprintf(stderr, "reflex_record: %s (%s) is not a Reflex topic type: no CSV\n", kv.first.c_str(),
+                         kv.second.type.c_str());
+        }
+      }
       for (const std::string& t : list) {
         const std::string path = (std::filesystem::path(*dir) / csvFileNameForTopic(t)).string();
         const auto n = exportCsv(*input, t, path);

@@ -95,12 +95,14 @@ Player::Player(const PlayerOptions& options) : options_(options) {
   // Played by default: every recorded topic but the controller's protection state. That sample is a
   // live controller's claim to be THE controller of this domain (reflex_controller refuses to start,
   // or leaves, when it sees an earlier one: issue 16, item 16); replayed beside a live controller it
-  // would be a phantom peer. It is played only when named with --topic.
+  // would be a phantom peer. It is played only when named with --topic. Nor are channels of a type
+  // that is no Reflex topic type (the scene channels /tf and /reflex/scene of an MCAP recording, JSON
+  // for viewers, not bus samples): naming one with --topic is an error (unknown type) below.
   const std::string protection_topic = bus::TopicTraits<msg::ControllerProtection>::kTopicName;
   std::vector<std::string> topics = options.topics;
   if (topics.empty())
     for (const auto& kv : info.topics)
-      if (kv.first != protection_topic) topics.push_back(kv.first);
+      if (kv.first != protection_topic && findCodecByType(kv.second.type)) topics.push_back(kv.first);
   for (const std::string& t : options.topics) {
     if (!info.topics.count(t)) {
       std::string have;
@@ -110,7 +112,8 @@ Player::Player(const PlayerOptions& options) : options_(options) {
   }
   for (const std::string& ex : options.exclude) {
     const auto it = std::find(topics.begin(), topics.end(), ex);
-    if (it == topics.end() && ex == protection_topic && options.topics.empty()) continue;  // not played anyway
+    const bool not_played = ex == protection_topic || (info.topics.count(ex) && !findCodecByType(info.topics.at(ex).type));
+    if (it == topics.end() && not_played && options.topics.empty()) continue;  // not played anyway
     if (it == topics.end()) throw RecordError("--exclude '" + ex + "' is not among the played topics");
     topics.erase(it);
   }
