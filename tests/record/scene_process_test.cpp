@@ -169,7 +169,9 @@ TEST(SceneChannels, RecordingsOfALiveBusCarryTheRobotForFoxglove) {
             std::string::npos)
       << live_log;
   for (const json& c : live_check["channels"]) {
-    if (c["topic"] == "/reflex/scene") EXPECT_EQ(c["metadata"].value("robot", ""), "asimo_like") << c.dump();
+    if (c["topic"] == "/reflex/scene") {
+      EXPECT_EQ(c["metadata"].value("robot", ""), "asimo_like") << c.dump();
+    }
   }
 
   // Converting it again makes the same scene messages (from the recorded samples only).
