@@ -72,7 +72,11 @@ void SceneChannels::add(const RecordEntry& e, McapWriter& writer) {
     ++stats_.out_of_order;
     return;
   }
-  if (m.have_scene && e.receive_ns - m.last_scene_ns < m.period_ns) return;
+  // receive_ns >= last_scene_ns here; the difference in unsigned arithmetic cannot overflow (crafted
+  // receive times of a converted file may be anything).
+  if (m.have_scene && static_cast<std::uint64_t>(e.receive_ns) - static_cast<std::uint64_t>(m.last_scene_ns) <
+                          static_cast<std::uint64_t>(m.period_ns))
+    return;
   const view::SceneInput& input = m.feed->input();
   if (!view::updateScene(m.scene, *m.data, input)) {
     ++stats_.not_drawn;
@@ -100,10 +104,9 @@ std::string SceneChannels::summary() const {
   if (stats_.joint_states == 0) {
     std::snprintf(line, sizeof(line), "no reflex/joint_state sample: no scene channels (/tf, /reflex/scene)");
   } else {
-    std::snprintf(line, sizeof(line),
-                  "scene channels /tf and /reflex/scene: %llu scenes from %llu joint states (robot %s)%s",
+    std::snprintf(line, sizeof(line), "scene channels /tf and /reflex/scene: %llu scenes from %llu joint states (robot %s)",
                   static_cast<unsigned long long>(stats_.scenes), static_cast<unsigned long long>(stats_.joint_states),
-                  robotName().c_str(), "");
+                  robotName().c_str());
   }
   std::string out = line;
   if (stats_.joint_entries_skipped)

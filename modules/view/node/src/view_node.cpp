@@ -8,7 +8,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <map>
 #include <sstream>
 
 namespace reflex::view_node {
