@@ -41,8 +41,11 @@ struct SceneChannels::Impl {
 };
 
 SceneChannels::SceneChannels(const SceneChannelOptions& options) : impl_(std::make_unique<Impl>()) {
-  if (!(options.rate > 0.0 && options.rate <= 200.0))
-    throw RecordError("scene rate " + std::to_string(options.rate) + " must be in (0, 200] messages per second");
+  if (!(options.rate > 0.0 && options.rate <= 200.0)) {
+    char text[120];
+    std::snprintf(text, sizeof(text), "--scene-rate %g must be in (0, 200] scene messages per second", options.rate);
+    throw RecordError(text);
+  }
   Impl& m = *impl_;
   m.scene = view::loadSceneModel(options.urdf, options.collision, options.controller);
   m.data = std::make_unique<view::SceneData>(m.scene);

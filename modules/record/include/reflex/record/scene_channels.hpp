@@ -45,7 +45,7 @@ struct SceneChannelStats {
 class SceneChannels {
  public:
   /// Loads the robot as reflex_controller does (before any file is made, so a bad robot file leaves
-  /// none). Throws RecordError for a bad rate, and control::ModelError / ConfigError naming the robot
+  /// none). Throws RecordError for a bad rate ("--scene-rate 500 must be in (0, 200] ..."), and control::ModelError / ConfigError naming the robot
   /// file and value.
   explicit SceneChannels(const SceneChannelOptions& options);
   ~SceneChannels();
