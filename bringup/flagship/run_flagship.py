@@ -43,7 +43,8 @@ def log(msg):
 
 
 # The identity (bringup/security/make_security.sh) of each process of the experiment.
-SECURE_IDENTITIES = {"controller": "controller", "behavior": "behavior", "recorder": "recorder", "vision": "vision"}
+SECURE_IDENTITIES = {"controller": "controller", "behavior": "behavior", "recorder": "recorder", "vision": "vision",
+                     "view": "view"}  # view: reflex_view's read-only identity (subscribe rules only)
 SECURE_READY_TIMEOUT_S = 45.0  # authentication of controller, behavior and recorder (1-5 s per pair, loaded)
 
 
@@ -185,11 +186,11 @@ def run_once(args, label, avoidance):
             if args.secure:
                 rec.append("--progress")
             procs.append(Proc("recorder", rec, os.path.join(out, "recorder.log"), env))
-        # The live 3D view (reflex_view, reads only) during the run with avoidance, if asked for. Not with
-        # DDS-Security: the view has no identity of its own yet. A view that cannot start (port in use)
+        # The live 3D view (reflex_view, reads only) during the run with avoidance, if asked for. With
+        # DDS-Security: under its own identity `view`, which may only read. A view that cannot start (port in use)
         # is reported and the experiment goes on: it is a window onto the run, not part of it.
         view = os.path.join(bindir, "reflex_view")
-        if args.view and avoidance and not args.secure and os.path.exists(view):
+        if args.view and avoidance and os.path.exists(view):
             procs.append(Proc("view", [view, "--port", str(args.view)] + dds("view"),
                               os.path.join(out, "view.log"), env))
             log("live 3D view of this run: http://localhost:%d (Foxglove: ws://localhost:%d)" % (args.view, args.view))

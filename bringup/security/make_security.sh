@@ -6,7 +6,7 @@
 #                                            it is both the identity CA and the permissions CA
 #   intruder_ca/ca.cert.pem, .key.pem        a DIFFERENT CA, only for tests (the "intruder" identity)
 #   <module>/cert.pem, <module>/key.pem      identity of each module: vision, behavior, controller,
-#                                            recorder, player (CA-signed) and intruder
+#                                            recorder, player, view (CA-signed) and intruder
 #                                            (intruder-CA-signed)
 #   governance.xml, governance.p7s           domain rules (authentication required, discovery +
 #                                            liveliness encrypted, RTPS messages signed, every
@@ -84,7 +84,7 @@ mkdir -p "$out" || die "cannot create the output folder '$out'"
 out="$(cd "$out" && pwd)"
 umask 077   # private keys are readable by the owner only
 
-modules=(vision behavior controller recorder player)
+modules=(vision behavior controller recorder player view)
 identities=("${modules[@]}" intruder)
 
 # ---- private keys found with loose permissions -----------------------------------------------
@@ -226,6 +226,10 @@ subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_pri
 # source alive for the controller's staleness check). It reads nothing.
 publish[player]="reflex/object_targets reflex/joint_state reflex/control_status"
 subscribe[player]=""
+# The live view (reflex_view) only reads what it draws: it has no publish rule at all, so Fast DDS
+# refuses to create any writer for it (not even a heartbeat), and its samples could not be accepted.
+publish[view]=""
+subscribe[view]="reflex/joint_state reflex/control_status reflex/hand_targets reflex/object_targets reflex/controller_protection reflex/body_schema"
 # The intruder asks for everything, but its identity and permissions come from another CA.
 all_topics="${subscribe[recorder]}"
 publish[intruder]="$all_topics"

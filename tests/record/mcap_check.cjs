@@ -53,8 +53,13 @@ function plain(value) {
   return value;
 }
 
-/** Decoder of the messages of one channel, from its schema (omgidl) and message encoding (cdr). */
+/** Decoder of the messages of one channel, from its schema (omgidl) and message encoding (cdr); the
+ *  scene channels (message encoding json, schema encoding jsonschema) are parsed as JSON. */
 function makeDecoder(schema, channel) {
+  if (channel.messageEncoding === "json") {
+    if (!schema || schema.encoding !== "jsonschema") throw new Error(`channel ${channel.topic}: json without a jsonschema`);
+    return (data) => JSON.parse(new TextDecoder().decode(data));
+  }
   if (channel.messageEncoding !== "cdr") throw new Error(`channel ${channel.topic}: encoding ${channel.messageEncoding}`);
   if (!schema || schema.encoding !== "omgidl") throw new Error(`channel ${channel.topic}: no omgidl schema`);
   const reader = new MessageReader(schema.name, parseIDL(new TextDecoder().decode(schema.data)));
@@ -109,8 +114,13 @@ async function indexed(file) {
     chunk_indexes: reader.chunkIndexes.map((c) =>
       plain({ offset: c.chunkStartOffset, length: c.chunkLength, compression: c.compression,
               start: c.messageStartTime, end: c.messageEndTime })),
-    channels: [...reader.channelsById.values()].map((c) => ({ id: c.id, topic: c.topic, encoding: c.messageEncoding,
-      schema: reader.schemasById.get(c.schemaId).name, schema_encoding: reader.schemasById.get(c.schemaId).encoding })),
+    channels: [...reader.channelsById.values()].map((c) => {
+      const schema = reader.schemasById.get(c.schemaId);
+      const out = { id: c.id, topic: c.topic, encoding: c.messageEncoding, schema: schema.name,
+                    schema_encoding: schema.encoding, metadata: Object.fromEntries(c.metadata) };
+      if (schema.encoding === "jsonschema") out.schema_data = new TextDecoder().decode(schema.data);
+      return out;
+    }),
     reads_before_messages: reads.slice(0, readsBeforeMessages),
     reads,
     messages,
@@ -184,7 +194,11 @@ async function main() {
   fs.writeFileSync(outPath, JSON.stringify(result));
 }
 
-main().catch((e) => {
-  process.stderr.write(`mcap_check: ${e && e.stack ? e.stack : e}\n`);
-  process.exit(1);
-});
+module.exports = { need, indexed };
+
+if (require.main === module) {
+  main().catch((e) => {
+    process.stderr.write(`mcap_check: ${e && e.stack ? e.stack : e}\n`);
+    process.exit(1);
+  });
+}

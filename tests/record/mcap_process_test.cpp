@@ -100,6 +100,7 @@ TEST(McapProcess, LiveBusRecordingReadsInTheReferenceReaderAsInTheCsvExport) {
   EXPECT_LT(read_before, size / 4) << "the summary, not a scan of the file";
   for (const auto& kv : info.topics) {
     SCOPED_TRACE(kv.first);
+    if (!findCodecByType(kv.second.type)) continue;  // the scene channels (record_scene_process_test): no CSV
     EXPECT_EQ(mcap_check::expectCsvMatches(idx["messages"], kv.first, dir + "/" + csvFileNameForTopic(kv.first)),
               kv.second.samples);
   }

@@ -6,8 +6,8 @@
 //     the URDF text here (each <collision> element: <cylinder> or <box> = one capsule = 1 cylinder and 2
 //     spheres, <sphere> = 1 sphere), independent of the C++ scene builder;
 //   - the transforms of each /tf message against the URDF's <link> count - 1;
-//   - every message against its channel's advertised JSON schema (a small validator below: every key
-//     must be a schema property with the schema's type, enums/consts respected);
+//   - every message against its channel's advertised JSON schema (scene_check_lib.js: every key must be
+//     a schema property with the schema's type, enums/consts respected);
 //   - protocol behaviour: a subscription to an unknown channel gets a status error; after unsubscribe
 //     no more messages arrive on that subscription.
 // Prints one JSON line with the results (the C++ test asserts on it). Exit 1 if it cannot connect.
@@ -26,46 +26,11 @@ const modules = path.resolve(args.modules);
 const WebSocket = require(path.join(modules, "ws"));
 const { FoxgloveClient } = require(path.join(modules, "@foxglove/ws-protocol"));
 
-// ---- expected counts from the URDF text ----
-const urdf = fs.readFileSync(args.urdf, "utf8").replace(/<!--[\s\S]*?-->/g, "");
-let expectedCapsules = 0, expectedSpheres = 0;
-for (const block of urdf.match(/<collision[\s>][\s\S]*?<\/collision>/g) || []) {
-  if (/<cylinder[\s/>]/.test(block) || /<box[\s/>]/.test(block)) expectedCapsules += 1;
-  else if (/<sphere[\s/>]/.test(block)) expectedSpheres += 1;
-}
-const expectedTransforms = (urdf.match(/<link[\s>]/g) || []).length - 1;
-
-// ---- a small JSON-schema check (the subset the advertised schemas use) ----
-function typeOf(v) {
-  if (v === null) return "null";
-  if (Array.isArray(v)) return "array";
-  if (typeof v === "number") return Number.isInteger(v) ? "integer" : "number";
-  return typeof v;
-}
-function validate(v, schema, where, errors) {
-  if (errors.length > 20) return;
-  if (schema.oneOf) {
-    if (!schema.oneOf.some((o) => o.const === v)) errors.push(`${where}: ${JSON.stringify(v)} is none of the oneOf consts`);
-    return;
-  }
-  const types = schema.type === undefined ? [] : [].concat(schema.type);
-  const t = typeOf(v);
-  if (types.length && !types.includes(t) && !(t === "integer" && types.includes("number"))) {
-    errors.push(`${where}: ${t} where the schema says ${types.join("|")}`);
-    return;
-  }
-  if (schema.enum && !schema.enum.includes(v)) errors.push(`${where}: ${JSON.stringify(v)} not in ${schema.enum}`);
-  if (schema.minimum !== undefined && v < schema.minimum) errors.push(`${where}: ${v} < ${schema.minimum}`);
-  if (schema.maximum !== undefined && v > schema.maximum) errors.push(`${where}: ${v} > ${schema.maximum}`);
-  if (t === "number" && !Number.isFinite(v)) errors.push(`${where}: not finite`);
-  if (t === "object" && schema.properties) {
-    for (const k of Object.keys(v)) {
-      if (!schema.properties[k]) errors.push(`${where}.${k}: not in the schema`);
-      else validate(v[k], schema.properties[k], `${where}.${k}`, errors);
-    }
-  }
-  if (t === "array" && schema.items) v.forEach((x, i) => validate(x, schema.items, `${where}[${i}]`, errors));
-}
+// ---- expected counts from the URDF text, and the schema check (scene_check_lib.js) ----
+const { urdfFacts, validate } = require("./scene_check_lib.js");
+const facts = urdfFacts(fs.readFileSync(args.urdf, "utf8"));
+const expectedCapsules = facts.capsules, expectedSpheres = facts.spheres;
+const expectedTransforms = facts.links.length - 1;
 
 // ---- the client ----
 const result = {

@@ -65,6 +65,30 @@ struct OutputOptions {
   }
 };
 
+/// The robot model of the scene channels (record, convert; scene_channels.hpp). Defaults as the
+/// controller's: the shipped URDF, its collision file, the built-in controller configuration.
+struct SceneOptions {
+  SceneChannelOptions scene;
+  bool none = false;
+  void add(CLI::App& app) {
+    scene.urdf = REFLEX_DEFAULT_URDF;
+    app.add_option("--urdf", scene.urdf, "scene channels: robot URDF (the controller's)")->capture_default_str();
+    app.add_option("--collision", scene.collision, "scene channels: collision configuration (default: next to the URDF)");
+    app.add_option("--controller", scene.controller,
+                   "scene channels: controller YAML, arms and zone thresholds (default: built-in)");
+    app.add_option("--scene-rate", scene.rate, "scene channels: messages per second of recording time at most, (0, 200]")
+        ->capture_default_str();
+    app.add_flag("--no-scene", none,
+                 "MCAP without the scene channels /tf and /reflex/scene (made by default from reflex/joint_state, "
+                 "status, targets, objects and body schema, so Foxglove's 3D panel shows the robot)");
+  }
+  SceneChannelOptions options() const {
+    SceneChannelOptions o = scene;
+    o.enabled = !none;
+    return o;
+  }
+};
+
 /// Runs a command: an exception is an error message and exit status 1; so is standard output that
 /// could not be written (`reflex_record info run.rfx > /dev/full`).
 template <class F>
@@ -140,6 +164,7 @@ std::function<int()> addRecord(CLI::App& app) {
   auto late_joiner = std::make_shared<bool>(false);
   auto name = std::make_shared<std::string>("recorder");
   auto out = std::make_shared<OutputOptions>();
+  auto scene = std::make_shared<SceneOptions>();
   app.add_option("-o,--output", o->output, "recording file to write (run.mcap; run.rfx for the old format)")->required();
   app.add_option("-t,--topic", o->topics,
                  "topic to record (repeatable): a Reflex topic name, or NAME:TYPE for another topic name "
@@ -160,8 +185,9 @@ std::function<int()> addRecord(CLI::App& app) {
                "started, but keeps only the newest of a burst (default: every topic with reflex_record)");
   app.add_flag("--progress", o->progress, "print a status line every second");
   app.add_option("--name", *name, "module name on the bus")->capture_default_str();
+  scene->add(app);
   b->add(app);
-  return [o, b, flush_ms, sync_ms, late_joiner, name, out] {
+  return [o, b, flush_ms, sync_ms, late_joiner, name, out, scene] {
     return guarded("reflex_record", [&] {
       o->bus = b->config(*name);
       const RecordingOptions recording = out->options(o->output);
@@ -173,16 +199,20 @@ std::function<int()> addRecord(CLI::App& app) {
       o->writer.sync_interval = std::chrono::milliseconds(*sync_ms);
       o->mcap.sync_interval = std::chrono::milliseconds(*sync_ms);
       o->late_joiner_state = *late_joiner;
+      o->scene = scene->options();
       Recorder recorder(*o);
       bus::StopOnSignal stop_on_signal(recorder.bus());
       std::fprintf(stderr, "reflex_record: recording %zu topics to %s (%s) on domain %d\n", recorder.counts().size(),
                    o->output.c_str(), o->format == "mcap" ? "MCAP" : "rfx", recorder.bus().domainId());
+      if (!recorder.sceneChannels() && !recorder.sceneNote().empty())
+        std::fprintf(stderr, "reflex_record: %s\n", recorder.sceneNote().c_str());
       recorder.run();
       std::fprintf(stderr, "reflex_record: %llu samples written to %s\n",
                    static_cast<unsigned long long>(recorder.totalSamples()), o->output.c_str());
       for (const auto& kv : recorder.counts())
         std::fprintf(stderr, "  %-28s %-30s %llu\n", kv.first.c_str(), kv.second.type.c_str(),
                      static_cast<unsigned long long>(kv.second.samples));
+      if (recorder.sceneChannels()) std::fprintf(stderr, "reflex_record: %s\n", recorder.sceneNote().c_str());
       return 0;
     });
   };
@@ -213,8 +243,14 @@ std::function<int()> addExport(CLI::App& app) {
       std::filesystem::create_directories(*dir, ec);
       if (ec) throw RecordError("cannot create folder '" + *dir + "': " + ec.message());
       std::vector<std::string> list = *topics;
-      if (list.empty())
-        for (const auto& kv : scanRecording(*input).topics) list.push_back(kv.first);
+      if (list.empty()) {
+        for (const auto& kv : scanRecording(*input).topics) {
+          if (findCodecByType(kv.second.type)) list.push_back(kv.first);
+          else  // the scene channels (/tf, /reflex/scene: JSON for viewers) have no CSV form
+            std::fprintf(stderr, "reflex_record: %s (%s) is not a Reflex topic type: no CSV\n", kv.first.c_str(),
+                         kv.second.type.c_str());
+        }
+      }
       for (const std::string& t : list) {
         const std::string path = (std::filesystem::path(*dir) / csvFileNameForTopic(t)).string();
         const auto n = exportCsv(*input, t, path);
@@ -267,15 +303,19 @@ std::function<int()> addConvert(CLI::App& app) {
   auto out = std::make_shared<OutputOptions>();
   app.add_option("input", *input, "recording to read (.rfx or MCAP, detected by its first bytes)")->required();
   app.add_option("output", *output, "recording to write (format: --format, by default from the name)")->required();
+  auto scene = std::make_shared<SceneOptions>();
   out->add(app);
-  return [input, output, out] {
+  scene->add(app);
+  return [input, output, out, scene] {
     return guarded("reflex_record convert", [&] {
       const RecordingOptions options = out->options(*output);
-      const std::uint64_t n = convertRecording(*input, *output, options);
+      std::string scene_note;
+      const std::uint64_t n = convertRecording(*input, *output, options, scene->options(), &scene_note);
       const RecordingInfo info = scanRecording(*input);
       std::fprintf(stderr, "reflex_record: %llu samples of %s (%s) -> %s (%s)\n", static_cast<unsigned long long>(n),
                    input->c_str(), toString(info.tail), output->c_str(),
                    options.format == RecordingFormat::kMcap ? "MCAP" : "rfx");
+      if (!scene_note.empty()) std::fprintf(stderr, "reflex_record: %s\n", scene_note.c_str());
       return 0;
     });
   };

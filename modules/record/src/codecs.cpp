@@ -1,5 +1,7 @@
 #include "reflex/record/codecs.hpp"
 
+#include "sample_serialization.hpp"
+
 #include <reflex/bus/bus.hpp>
 
 #include <cinttypes>
@@ -12,32 +14,6 @@ namespace reflex::record {
 namespace msg = reflex::msg;
 
 namespace {
-
-// ---- serialization through the Fast DDS type support ----------------------------------------
-
-template <class T>
-std::vector<std::uint8_t> serializeSample(const T& sample) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  void* data = const_cast<T*>(&sample);  // the type support only reads it
-  const std::uint32_t size = type.getSerializedSizeProvider(data)();
-  eprosima::fastrtps::rtps::SerializedPayload_t payload(size);
-  if (!type.serialize(data, &payload))
-    throw RecordError(std::string("cannot serialize a ") + type.getName() + " sample (" + std::to_string(size) + " bytes)");
-  return std::vector<std::uint8_t>(payload.data, payload.data + payload.length);
-}
-
-template <class T>
-bool deserializeSample(const std::vector<std::uint8_t>& bytes, T& out) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<std::uint32_t>(bytes.size()));
-  std::copy(bytes.begin(), bytes.end(), payload.data);
-  payload.length = static_cast<std::uint32_t>(bytes.size());
-  try {
-    return type.deserialize(&payload, &out);
-  } catch (const std::exception&) {  // fastcdr throws BadParamException on inconsistent lengths
-    return false;
-  }
-}
 
 // ---- CSV columns per type ----------------------------------------------------------------------
 

@@ -8,19 +8,29 @@
 
 namespace reflex::record {
 
-std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options) {
+std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options,
+                               const SceneChannelOptions& scene, std::string* scene_note) {
   const std::unique_ptr<SampleReader> reader = openRecording(input);
   std::error_code ec;
   if (std::filesystem::equivalent(input, output, ec))  // creating the output would truncate the input
     throw RecordError("convert: output '" + output + "' is the input recording '" + input + "'");
+  std::unique_ptr<SceneChannels> channels;  // the robot files before the output file
+  if (scene.enabled && options.format == RecordingFormat::kMcap) channels = std::make_unique<SceneChannels>(scene);
   const std::unique_ptr<SampleWriter> writer = createRecording(output, options);
+  auto* mcap = dynamic_cast<McapSampleWriter*>(writer.get());
   RecordEntry e;
   std::uint64_t n = 0;
   while (reader->next(e)) {
+    if (e.type.rfind("foxglove.", 0) == 0) continue;  // the input's scene channels: made again, or not wanted
     writer->append(e);
     ++n;
+    if (channels && mcap) channels->add(e, mcap->mcap());
   }
   writer->close();
+  if (scene_note)
+    *scene_note = channels      ? channels->summary()
+                  : scene.enabled ? "an .rfx output has no scene channels (/tf, /reflex/scene)"
+                                  : "";
   return n;
 }
 

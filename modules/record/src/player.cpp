@@ -96,14 +96,16 @@ Player::Player(const PlayerOptions& options) : options_(options) {
   // live controller's claim to be THE controller of this domain (reflex_controller refuses to start,
   // or leaves, when it sees an earlier one: issue 16, item 16); replayed beside a live controller it
   // would be a phantom peer. Nor the joint commands (issue 13): a replayed command, restamped, is a
-  // valid command to a live robot on the domain. Both are played only when named with --topic.
+  // valid command to a live robot on the domain. Both are played only when named with --topic. Nor are
+  // channels of a type that is no Reflex topic type (the scene channels /tf and /reflex/scene of an MCAP
+  // recording, JSON for viewers, not bus samples): naming one with --topic is an error (unknown type) below.
   const std::string protection_topic = bus::TopicTraits<msg::ControllerProtection>::kTopicName;
   const std::string command_topic = bus::TopicTraits<msg::JointCommand>::kTopicName;
   auto notByDefault = [&](const std::string& t) { return t == protection_topic || t == command_topic; };
   std::vector<std::string> topics = options.topics;
   if (topics.empty())
     for (const auto& kv : info.topics)
-      if (!notByDefault(kv.first)) topics.push_back(kv.first);
+      if (!notByDefault(kv.first) && findCodecByType(kv.second.type)) topics.push_back(kv.first);
   for (const std::string& t : options.topics) {
     if (!info.topics.count(t)) {
       std::string have;
@@ -113,7 +115,9 @@ Player::Player(const PlayerOptions& options) : options_(options) {
   }
   for (const std::string& ex : options.exclude) {
     const auto it = std::find(topics.begin(), topics.end(), ex);
-    if (it == topics.end() && notByDefault(ex) && options.topics.empty()) continue;  // not played anyway
+    const bool not_played =
+        notByDefault(ex) || (info.topics.count(ex) && !findCodecByType(info.topics.at(ex).type));
+    if (it == topics.end() && not_played && options.topics.empty()) continue;  // not played anyway
     if (it == topics.end()) throw RecordError("--exclude '" + ex + "' is not among the played topics");
     topics.erase(it);
   }

@@ -13,7 +13,9 @@ int main(int argc, char** argv) {
       "  reflex_record info run.mcap [--print 10]\n"
       "  reflex_record convert run.rfx run.mcap [--compression lz4]\n"
       "Recordings are MCAP (open them in Foxglove: File > Open local file; one channel per topic, CDR\n"
-      "messages, OMG IDL schemas from idl/) or, for names ending in .rfx or --format rfx, the Reflex log\n"
+      "messages, OMG IDL schemas from idl/; plus the scene channels /tf and /reflex/scene, JSON, made from\n"
+      "the joint state and the robot model (--urdf; --no-scene: none), so a 3D panel shows the robot in\n"
+      "frame 'world') or, for names ending in .rfx or --format rfx, the Reflex log\n"
       "format. Both stay readable after kill -9: MCAP loses the open chunk (--chunk-ms), .rfx the\n"
       "records of the last --flush-ms. play, export and info read both (detected by the first bytes)."};
   app.require_subcommand(1);

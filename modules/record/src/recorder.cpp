@@ -30,6 +30,16 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
   recording.format = recordingFormatFor(options.output, options.format);
   recording.rfx = options.writer;
   recording.mcap = options.mcap;
+  if (options.scene.enabled) {  // the robot files before the recording file: a bad one leaves no file
+    const bool joints = std::any_of(specs.begin(), specs.end(),
+                                    [](const TopicSpec& s) { return s.topic == "reflex/joint_state"; });
+    if (recording.format != RecordingFormat::kMcap)
+      scene_note_ = "an .rfx recording has no scene channels (/tf, /reflex/scene): record MCAP or convert it";
+    else if (!joints)
+      scene_note_ = "reflex/joint_state is not recorded: no scene channels (/tf, /reflex/scene)";
+    else
+      scene_ = std::make_unique<SceneChannels>(options.scene);
+  }
   writer_ = createRecording(options.output, recording);
   for (const TopicSpec& s : specs) {
     if (counts_.count(s.topic)) throw RecordError("topic '" + s.topic + "' given twice");
@@ -42,6 +52,7 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
     readers_.push_back(&s.codec->subscribe(*bus_, s.topic, profile, [this, count](RecordEntry&& e) {
       writer_->append(e);
       ++count->samples;
+      if (scene_) scene_->add(e, *mcap());
     }));
   }
 }
@@ -63,6 +74,8 @@ McapWriter* Recorder::mcap() {
   auto* w = dynamic_cast<McapSampleWriter*>(writer_.get());
   return w ? &w->mcap() : nullptr;
 }
+
+std::string Recorder::sceneNote() const { return scene_ ? scene_->summary() : scene_note_; }
 
 void Recorder::stop() noexcept { bus_->stop(); }
 

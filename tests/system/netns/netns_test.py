@@ -173,7 +173,7 @@ def main():
             raise Failure(f"vision launcher exit {rc}")
 
         # ---- what the robot host recorded ----------------------------------------------------
-        rfx = logdir["robot"] / "run.rfx"
+        rfx = logdir["robot"] / "run.mcap"
         out = work / "csv"
         out.mkdir(exist_ok=True)
         objects = export(args.bin_dir, rfx, "reflex/object_targets", out / "objects.csv")

@@ -1,48 +1,26 @@
 // reflex_view's bus side (view_node.hpp): readers -> scene (reflex::scene) -> server.
 #include "reflex/view_node/view_node.hpp"
 
+#include "reflex/view_node/scene_feed.hpp"
+
 #include <reflex/bus/bus.hpp>
 #include <reflex/view/scene.hpp>
 
 #include <chrono>
 #include <cstdio>
-#include <map>
 #include <sstream>
 
 namespace reflex::view_node {
 namespace {
 
 constexpr std::uint32_t kChannelTf = 1, kChannelScene = 2, kChannelStatus = 3;
-constexpr std::size_t kMaxSchemaSegments = 64;  ///< the reflex_behavior profile's instance limit
-
-view::ArmState armState(const msg::ArmStatus& a) {
-  view::ArmState s;
-  s.valid = true;
-  s.blend_f = a.blend_f();
-  s.closest_a = a.closest_segment_a();
-  s.closest_b = a.closest_segment_b();
-  s.distance = a.distance();
-  const int z = static_cast<int>(a.zone());
-  s.zone = z >= 0 && z <= 3 ? static_cast<view::Zone>(z) : view::Zone::kRed;  // unknown: the worst
-  s.estop_latched = a.estop_latched();
-  return s;
-}
-
-view::HandTargetState targetState(const msg::HandTarget& t) {
-  view::HandTargetState s;
-  s.given = t.status() == msg::TARGET_GIVEN;
-  s.p_W = Eigen::Vector3d(t.position_base().x(), t.position_base().y(), t.position_base().z());
-  s.object = t.object_name();
-  return s;
-}
-
 }  // namespace
 
 struct ViewNode::Impl {
   ViewOptions options;
   view::SceneModel scene;
   std::unique_ptr<view::SceneData> data;
-  view::SceneInput input;
+  std::unique_ptr<SceneFeed> feed;
   std::string protection;
   std::unique_ptr<ViewServer> server;
   std::unique_ptr<bus::Participant> bus;
@@ -52,15 +30,12 @@ struct ViewNode::Impl {
   bus::Reader<msg::ObjectTargets>* objects = nullptr;
   bus::Reader<msg::ControllerProtection>* protection_reader = nullptr;
   bus::Reader<msg::BodySchemaChange>* schema_reader = nullptr;
-  std::map<std::string, view::SchemaSegmentState> schema;  ///< by segment name (the topic key)
   msg::JointState joint_msg;
   msg::ControlStatus status_msg;
   msg::HandTargets targets_msg;
   msg::ObjectTargets objects_msg;
   msg::ControllerProtection protection_msg;
   msg::BodySchemaChange schema_msg;
-  bool have_joints = false;
-  bool fresh = false;  ///< a joint state arrived since the last scene
 };
 
 ViewNode::ViewNode(const ViewOptions& options) : impl_(std::make_unique<Impl>()) {
@@ -70,7 +45,7 @@ ViewNode::ViewNode(const ViewOptions& options) : impl_(std::make_unique<Impl>())
     throw ViewError("--rate " + std::to_string(options.rate) + " must be in (0, 200] messages per second");
   m.scene = view::loadSceneModel(options.urdf, options.collision, options.controller);
   m.data = std::make_unique<view::SceneData>(m.scene);
-  m.input.q = Eigen::VectorXd::Zero(m.scene.model.nq);
+  m.feed = std::make_unique<SceneFeed>(m.scene);
 
   std::vector<Channel> channels{
       {kChannelTf, "/tf", "foxglove.FrameTransforms", view::frameTransformsSchema().dump()},
@@ -129,64 +104,12 @@ void ViewNode::run() {
   std::fflush(stdout);
 
   auto poll = [&m, this] {
-    while (m.joints->takeNext(m.joint_msg)) {
-      ++stats_.joint_states;
-      int unknown = 0, rejected = 0;
-      view::jointPositionsToQ(m.scene, m.joint_msg.names(), m.joint_msg.positions(), m.input.q, &unknown, &rejected);
-      stats_.joint_entries_skipped += static_cast<std::uint64_t>(unknown + rejected);
-      m.input.stamp_ns = m.joint_msg.header().stamp_ns();
-      m.have_joints = m.fresh = true;
-    }
-    while (m.status->takeNext(m.status_msg)) {
-      ++stats_.statuses;
-      m.input.arms[0] = armState(m.status_msg.left());
-      m.input.arms[1] = armState(m.status_msg.right());
-    }
-    while (m.targets->takeNext(m.targets_msg)) {
-      ++stats_.hand_targets;
-      m.input.targets[0] = targetState(m.targets_msg.left());
-      m.input.targets[1] = targetState(m.targets_msg.right());
-    }
-    while (m.objects->takeNext(m.objects_msg)) {
-      ++stats_.object_frames;
-      // Positions in another frame than the robot's base are not base-frame positions: not drawn.
-      if (m.objects_msg.frame_id() != "base_link" && m.objects_msg.frame_id() != m.scene.root_frame) {
-        ++stats_.object_frames_other_frame;
-        continue;
-      }
-      m.input.objects.clear();
-      for (const msg::ObjectTarget& o : m.objects_msg.objects()) {
-        view::ObjectState s;
-        s.name = o.name();
-        s.p_W = Eigen::Vector3d(o.position_base().x(), o.position_base().y(), o.position_base().z());
-        s.confidence = o.confidence();
-        m.input.objects.push_back(std::move(s));
-      }
-    }
-    bool schema_changed = false;
-    while (m.schema_reader->takeNext(m.schema_msg)) {
-      ++stats_.schema_changes;
-      schema_changed = true;
-      const msg::BodySchemaChange& c = m.schema_msg;
-      if (c.operation() == msg::SCHEMA_DETACH) {
-        m.schema.erase(c.segment_name());
-        continue;
-      }
-      if (m.schema.size() >= kMaxSchemaSegments && !m.schema.count(c.segment_name())) continue;
-      view::SchemaSegmentState& b = m.schema[c.segment_name()];
-      b.name = c.segment_name();
-      b.parent_link = c.parent_link();
-      b.capsule = c.shape() == msg::SHAPE_CAPSULE;
-      b.a_L = Eigen::Vector3d(c.point_a().x(), c.point_a().y(), c.point_a().z());
-      b.b_L = Eigen::Vector3d(c.point_b().x(), c.point_b().y(), c.point_b().z());
-      b.radius = c.radius();
-      b.enabled = c.enabled();
-      b.virtual_segment = c.virtual_segment();
-    }
-    if (schema_changed) {
-      m.input.schema_segments.clear();
-      for (const auto& kv : m.schema) m.input.schema_segments.push_back(kv.second);
-    }
+    while (m.joints->takeNext(m.joint_msg)) m.feed->add(m.joint_msg);
+    while (m.status->takeNext(m.status_msg)) m.feed->add(m.status_msg);
+    while (m.targets->takeNext(m.targets_msg)) m.feed->add(m.targets_msg);
+    while (m.objects->takeNext(m.objects_msg)) m.feed->add(m.objects_msg);
+    while (m.schema_reader->takeNext(m.schema_msg)) m.feed->add(m.schema_msg);
+    static_cast<SceneFeedStats&>(stats_) = m.feed->stats();
     while (m.protection_reader->takeNext(m.protection_msg)) {
       m.protection = std::string(m.protection_msg.avoidance() ? "avoidance on" : "AVOIDANCE OFF") +
                      (m.protection_msg.estop() ? ", e-stop on" : ", E-STOP OFF") +
@@ -195,20 +118,20 @@ void ViewNode::run() {
   };
   auto serve = [&m, this, poll] {
     poll();
-    if (!m.fresh || !m.have_joints) return;
-    m.fresh = false;
-    if (!view::updateScene(m.scene, *m.data, m.input)) return;
+    if (!m.feed->takeFresh()) return;
+    const view::SceneInput& input = m.feed->input();
+    if (!view::updateScene(m.scene, *m.data, input)) return;
     ++stats_.scenes;
-    const auto stamp = static_cast<std::uint64_t>(std::max<std::int64_t>(m.input.stamp_ns, 0));
+    const auto stamp = static_cast<std::uint64_t>(std::max<std::int64_t>(input.stamp_ns, 0));
     if (m.server->subscribed(kChannelTf))
       m.server->publish(kChannelTf, stamp,
-                        std::make_shared<const std::string>(view::buildFrameTransforms(m.scene, *m.data, m.input).dump()));
+                        std::make_shared<const std::string>(dumpJson(view::buildFrameTransforms(m.scene, *m.data, input))));
     if (m.server->subscribed(kChannelScene))
       m.server->publish(kChannelScene, stamp,
-                        std::make_shared<const std::string>(view::buildSceneUpdate(m.scene, *m.data, m.input).dump()));
+                        std::make_shared<const std::string>(dumpJson(view::buildSceneUpdate(m.scene, *m.data, input))));
     if (m.server->subscribed(kChannelStatus))
       m.server->publish(kChannelStatus, stamp,
-                        std::make_shared<const std::string>(view::buildViewStatus(m.scene, m.input, m.protection).dump()));
+                        std::make_shared<const std::string>(dumpJson(view::buildViewStatus(m.scene, input, m.protection))));
   };
   const auto period = std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / m.options.rate));
   m.bus->every(period, serve);

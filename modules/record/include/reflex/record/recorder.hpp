@@ -14,6 +14,7 @@
 #include "reflex/record/codecs.hpp"
 #include "reflex/record/record_file.hpp"
 #include "reflex/record/recording.hpp"
+#include "reflex/record/scene_channels.hpp"
 
 #include <reflex/bus/config.hpp>
 
@@ -49,6 +50,10 @@ struct RecorderOptions {
   bool progress = false;              ///< print a status line to stderr about once a second
   WriterOptions writer;               ///< .rfx durability policy (and append)
   McapWriterOptions mcap;             ///< MCAP chunking, compression, fsync period
+  /// MCAP only: also write the scene channels /tf and /reflex/scene (scene_channels.hpp) from the
+  /// recorded joint state, status, targets, objects and body schema. Not for .rfx, nor when
+  /// reflex/joint_state is not recorded (sceneNote() says why).
+  SceneChannelOptions scene;
   bus::BusConfig bus;
 };
 
@@ -83,11 +88,18 @@ class Recorder {
   /// (McapWriter::addChannel) and write to them. Use it from the bus thread only (bus().every(...) or a
   /// reader callback): the recorder writes samples from there.
   McapWriter* mcap();
+  /// The scene channels (nullptr if not written: not asked for, .rfx, or no joint state recorded).
+  const SceneChannels* sceneChannels() const { return scene_.get(); }
+  /// One line about the scene channels: why there are none, or (after run()) what was written; "" if
+  /// they were not asked for.
+  std::string sceneNote() const;
 
  private:
   RecorderOptions options_;
   std::unique_ptr<bus::Participant> bus_;
   std::unique_ptr<SampleWriter> writer_;
+  std::unique_ptr<SceneChannels> scene_;
+  std::string scene_note_;
   std::map<std::string, TopicCount> counts_;
   std::vector<const bus::detail::ReaderBase*> readers_;
 };
@@ -175,8 +187,11 @@ std::uint64_t exportCsv(const std::string& input, const std::string& topic, cons
 /// Copies every sample of `input` (either format) into a new recording `output` (options.format),
 /// e.g. an .rfx log into MCAP (a torn or damaged input gives every sample its reader yields). Returns
 /// the number of samples. Throws RecordError as openRecording / createRecording, and if `output` is
-/// `input` (naming both).
-std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options);
+/// `input` (naming both). The input's own viewer channels (schema foxglove.*: the scene channels of an
+/// MCAP input) are not copied; with `scene.enabled` and an MCAP output they are made again from the
+/// copied samples (scene_channels.hpp). `scene_note` (if given) gets the line saying what was written.
+std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options,
+                               const SceneChannelOptions& scene = {}, std::string* scene_note = nullptr);
 
 /// A file name for a topic's CSV: "reflex/control_status" -> "reflex_control_status.csv".
 std::string csvFileNameForTopic(const std::string& topic);

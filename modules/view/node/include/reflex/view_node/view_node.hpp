@@ -16,6 +16,7 @@
 // frame whose frame_id is neither "base_link" nor the URDF root is not drawn (counted).
 #pragma once
 
+#include "reflex/view_node/scene_feed.hpp"
 #include "reflex/view_node/view_server.hpp"
 
 #include <cstdint>
@@ -42,15 +43,9 @@ struct ViewOptions {
   std::string module_name = "view";
 };
 
-struct ViewStats {
-  std::uint64_t joint_states = 0;        ///< joint state samples taken
-  std::uint64_t joint_entries_skipped = 0;  ///< names unknown to the robot or non-finite positions
-  std::uint64_t statuses = 0;
-  std::uint64_t scenes = 0;              ///< scene updates built
-  std::uint64_t hand_targets = 0;
-  std::uint64_t object_frames = 0;
-  std::uint64_t object_frames_other_frame = 0;  ///< frame_id neither "base_link" nor the URDF root: not drawn
-  std::uint64_t schema_changes = 0;         ///< reflex/body_schema samples
+/// The feed's counts (scene_feed.hpp) and the scenes built.
+struct ViewStats : SceneFeedStats {
+  std::uint64_t scenes = 0;  ///< scene updates built
 };
 
 class ViewNode {
