@@ -157,10 +157,10 @@ namespace {
 /// the trajectory is reset to the hand.
 void followTrajectory(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
                       const ControlInput& input, bool recovery_only, ArmWorkspace& ws) {
-  const ControllerParams& P = cm.params;
+  const ControllerParams& params = cm.params;
   const ControllerModel::Arm& arm = cm.arms[a];
   Trajectory& traj = data.trajectories[a];
-  const double dt = P.period;
+  const double dt = params.period;
   ws.q.resize(arm.n);
   for (int i = 0; i < arm.n; ++i) ws.q[i] = data.kin.q[arm.q[i]];
   ws.hand_W = data.kin.X_W_L[arm.hand_link] * arm.hand_point_L;
@@ -178,18 +178,18 @@ void followTrajectory(const Model& model, const ControllerModel& cm, ControllerD
     }
     traj.goal_W = cmd.target_W;
     const Eigen::Vector3d to_goal = traj.goal_W - traj.ref_W;
-    const double step = P.trajectory_speed * dt;
+    const double step = params.trajectory_speed * dt;
     const double remaining = to_goal.norm();
     Eigen::Vector3d v_ref = Eigen::Vector3d::Zero();
     if (remaining <= step) {
       traj.ref_W = traj.goal_W;
     } else {
-      v_ref = to_goal * (P.trajectory_speed / remaining);
+      v_ref = to_goal * (params.trajectory_speed / remaining);
       traj.ref_W += v_ref * dt;
     }
-    ws.hand_velocity_W = v_ref + P.reach_gain * (traj.ref_W - ws.hand_W);
+    ws.hand_velocity_W = v_ref + params.reach_gain * (traj.ref_W - ws.hand_W);
     const double speed = ws.hand_velocity_W.norm();
-    if (speed > P.max_task_speed) ws.hand_velocity_W *= P.max_task_speed / speed;
+    if (speed > params.max_task_speed) ws.hand_velocity_W *= params.max_task_speed / speed;
   } else {
     traj.active = false;
     traj.ref_W = ws.hand_W;
@@ -204,7 +204,7 @@ void followTrajectory(const Model& model, const ControllerModel& cm, ControllerD
 /// ignores the other arm (it is the obstacle).
 void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
                       const ControlInput& input, bool recovery_only, ArmWorkspace& ws) {
-  const ControllerParams& P = cm.params;
+  const ControllerParams& params = cm.params;
   const ControllerModel::Arm& arm = cm.arms[a];
   ArmStatus& status = data.arms[a];
   ws.num_force_terms = 0;
@@ -238,15 +238,15 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
       d_min = pd.distance;
       closest = p;
     }
-    if (pd.has_row && pd.distance < P.d_safe && !recovery_only) {
-      for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] += data.dist.rows(p, arm.q[i]) * (P.d_safe - pd.distance);
+    if (pd.has_row && pd.distance < params.d_safe && !recovery_only) {
+      for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] += data.dist.rows(p, arm.q[i]) * (params.d_safe - pd.distance);
     }
     // Both lists hold one entry per candidate pair at most (sized at set-up): never full here.
-    if (pd.distance < P.d_b && pd.has_row) ws.guarded_pairs[static_cast<std::size_t>(ws.num_guarded++)] = p;
-    if (pd.distance < P.d_a) {
+    if (pd.distance < params.d_b && pd.has_row) ws.guarded_pairs[static_cast<std::size_t>(ws.num_guarded++)] = p;
+    if (pd.distance < params.d_a) {
       // e_f,ij points from the other segment towards the arm's closest point (Eq. 16).
-      ws.forces.add(P.k_virtual, P.d_a, pd.distance, side * pd.nhat_W, side > 0 ? pd.p_W_a : pd.p_W_b);
-      ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, P.k_virtual * (P.d_a - pd.distance)};
+      ws.forces.add(params.k_virtual, params.d_a, pd.distance, side * pd.nhat_W, side > 0 ? pd.p_W_a : pd.p_W_b);
+      ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, params.k_virtual * (params.d_a - pd.distance)};
     }
   }
   if (pruned_floor < d_min) {
@@ -270,8 +270,8 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
   }
   status.distance = d_min;
   status.closest_pair = closest;
-  status.zone = zoneOf(d_min, P);
-  status.f = P.mode == AvoidanceMode::kOff ? 0.0 : blendingCoefficient(d_min, P.d_a, P.d_b);
+  status.zone = zoneOf(d_min, params);
+  status.f = params.mode == AvoidanceMode::kOff ? 0.0 : blendingCoefficient(d_min, params.d_a, params.d_b);
 }
 
 /// Stage 3, the merged avoidance task (Eq. 17-18): F^all, its direction and point, and J_avoid, the
@@ -308,7 +308,7 @@ void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm,
 /// recovery only the separating term of Eq. 8. Writes ws.qdot and status.qdot_force.
 void blendControllers(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
                       bool recovery_only, ArmWorkspace& ws) {
-  const ControllerParams& P = cm.params;
+  const ControllerParams& params = cm.params;
   const ControllerModel::Arm& arm = cm.arms[a];
   ArmStatus& status = data.arms[a];
   const int n = arm.n;
@@ -317,21 +317,21 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
     const int qi = arm.q[i];
     const double lo = model.q_lower[qi], hi = model.q_upper[qi];
     const double half = 0.5 * (hi - lo);
-    xi_jla[i] = std::isfinite(half) && half > 0.0 ? -P.alpha_jla * (ws.q[i] - 0.5 * (hi + lo)) / (half * half) : 0.0;
+    xi_jla[i] = std::isfinite(half) && half > 0.0 ? -params.alpha_jla * (ws.q[i] - 0.5 * (hi + lo)) / (half * half) : 0.0;
   }
   VecA xi_rest = VecA::Zero(n);
-  if (!ws.target_given) xi_rest = -P.alpha_rest * (ws.q - arm.rest.head(n));
+  if (!ws.target_given) xi_rest = -params.alpha_rest * (ws.q - arm.rest.head(n));
 
   // The virtual-force term of Eq. 8 along the merged direction: row^+ |F^all|.
   const RowA avoid_row = ws.force_dir_W.transpose() * ws.J_avoid;  // J_ca|row,y in the merged frame
   VecA avoid_row_pinv;
-  dampedPseudoInverse(avoid_row, P.damping, avoid_row_pinv);
+  dampedPseudoInverse(avoid_row, params.damping, avoid_row_pinv);
   VecA qdot_force = VecA::Zero(n);
   if (ws.force_magnitude > 0.0) qdot_force = avoid_row_pinv * ws.force_magnitude;
   // three_dof: the whole merged force, J_ca^+ F^all (Eq. 8 with a 3-D task).
   MatA3 J_avoid_pinv;
-  if (P.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(ws.J_avoid, P.damping, J_avoid_pinv);
-  status.qdot_force = P.mode == AvoidanceMode::kThreeDof && !recovery_only
+  if (params.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(ws.J_avoid, params.damping, J_avoid_pinv);
+  status.qdot_force = params.mode == AvoidanceMode::kThreeDof && !recovery_only
                           ? VecA(J_avoid_pinv * (ws.force_magnitude * ws.force_dir_W)) : qdot_force;
 
   ws.qdot.resize(n);
@@ -341,26 +341,26 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   }
   // Whole-body motion, Eq. 2-5.
   MatA3 J_hand_pinv;
-  dampedPseudoInverse(ws.J_hand, P.damping, J_hand_pinv);
+  dampedPseudoInverse(ws.J_hand, params.damping, J_hand_pinv);
   MatA N_wbm;
   nullspaceProjector(ws.J_hand, N_wbm);
   VecA xi_ca = VecA::Zero(n);
-  if (P.mode != AvoidanceMode::kOff) xi_ca = P.alpha_ca * ws.avoidance_gradient.transpose();
+  if (params.mode != AvoidanceMode::kOff) xi_ca = params.alpha_ca * ws.avoidance_gradient.transpose();
   VecA qdot_wbm(n);
   if (ws.target_given) qdot_wbm = J_hand_pinv * ws.hand_velocity_W + N_wbm * (xi_ca + xi_jla);
   else qdot_wbm = xi_ca + xi_jla + xi_rest;
 
-  if (P.mode == AvoidanceMode::kOff || status.f <= 0.0) {
+  if (params.mode == AvoidanceMode::kOff || status.f <= 0.0) {
     ws.qdot = qdot_wbm;
     return;
   }
   // Collision avoidance, Eq. 8-12: the virtual force along one direction, reaching in its nullspace.
   VecA xi_t(n);
-  if (ws.target_given) xi_t = -P.alpha_t * (ws.J_hand.transpose() * (ws.hand_W - data.trajectories[a].ref_W));  // Eq. 12, W_t = I
+  if (ws.target_given) xi_t = -params.alpha_t * (ws.J_hand.transpose() * (ws.hand_W - data.trajectories[a].ref_W));  // Eq. 12, W_t = I
   else xi_t = xi_rest;
   VecA qdot_ca(n);
   MatA N_ca;
-  if (P.mode == AvoidanceMode::kOneDof) {
+  if (params.mode == AvoidanceMode::kOneDof) {
     nullspaceProjector(avoid_row, N_ca);
     qdot_ca = qdot_force + N_ca * xi_t;
   } else {
@@ -390,7 +390,7 @@ void limitToJointRange(const Model& model, const ControllerModel::Arm& arm, doub
 /// pair that is not the merged direction; this removes exactly that component and nothing else.
 void applySafetyFilter(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
                        const ControlInput& input, ArmWorkspace& ws) {
-  const ControllerParams& P = cm.params;
+  const ControllerParams& params = cm.params;
   const ControllerModel::Arm& arm = cm.arms[a];
   const int n = arm.n;
   // What moves each guarded pair besides this arm, fixed for this cycle (computed once, not per
@@ -423,7 +423,7 @@ void applySafetyFilter(const Model& model, const ControllerModel& cm, Controller
       }
       const double free_norm_sq = free_row.squaredNorm();
       if (free_norm_sq < 1e-12) continue;
-      const double allowed = -P.guard_rate * std::max(0.0, d - P.d_r - P.guard_margin);
+      const double allowed = -params.guard_rate * std::max(0.0, d - params.d_r - params.guard_margin);
       const double rate = row.dot(ws.qdot.transpose()) + ws.other_rate[static_cast<std::size_t>(g)];
       if (rate < allowed - 1e-12) {
         ws.qdot += free_row.transpose() * ((allowed - rate) / free_norm_sq);
@@ -456,16 +456,16 @@ void scaleToVelocityLimits(const Model& model, const ControllerModel::Arm& arm, 
 /// the last resort).
 void capStepInOrangeZone(const ControllerModel& cm, const ControllerData& data, const ControllerModel::Arm& arm,
                          const Model& model, const ControlInput& input, ArmWorkspace& ws) {
-  const ControllerParams& P = cm.params;
+  const ControllerParams& params = cm.params;
   const bool equal = input.priority == MotionPriority::kEqual;
   const double d_contact = equal ? std::min(ws.d_static, ws.d_other_arm) : ws.d_static;
-  if (!(d_contact < P.d_b)) return;
+  if (!(d_contact < params.d_b)) return;
   double sweep = 0.0;
   for (int i = 0; i < arm.n; ++i) {
     const double lever = (ws.hand_W - data.kin.X_W_L[model.q_link[arm.q[i]]].translation()).norm() + 0.1;
-    sweep += std::abs(ws.qdot[i]) * lever * P.period;
+    sweep += std::abs(ws.qdot[i]) * lever * params.period;
   }
-  const double budget = 0.5 * std::max(0.0, d_contact - P.d_r);
+  const double budget = 0.5 * std::max(0.0, d_contact - params.d_r);
   if (sweep > budget) ws.qdot *= budget / sweep;
 }
 
@@ -581,8 +581,8 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
 /// kinematic robot the prediction is exact for the arms, so no arm motion ever enters the red zone.
 void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerData& data,
                      const Eigen::Ref<const Eigen::VectorXd>& q, double d_phys) {
-  const ControllerParams& P = cm.params;
-  const double floor = P.d_r + P.predict_margin;
+  const ControllerParams& params = cm.params;
+  const double floor = params.d_r + params.predict_margin;
   // Cheap exit: in one period no point moves more than sum |qdot_j| lever_j dt (body-schema slots
   // add their own extent to every lever), so no distance changes by more than twice that.
   double slot_extent = 0.0;
@@ -590,7 +590,7 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     if (slot.enabled) slot_extent = std::max(slot_extent, std::max(slot.a_L.norm(), slot.b_L.norm()) + slot.radius);
   double sweep = 0.0;
   for (int j = 0; j < model.nq; ++j)
-    sweep += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * P.period;
+    sweep += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * params.period;
   if (d_phys - 2.0 * sweep > floor) return;
 
   bool have_hold = false;
