@@ -552,11 +552,10 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
 bool computeDistancesAt(const Model& model, const ControllerModel& cm, ControllerData& data,
                         const Eigen::Ref<const Eigen::VectorXd>& q, DistanceData& out) {
   if (!computeForwardKinematics(model, data.kin_next, q)) return false;
-  out.slots = data.dist.slots;
   DistanceOptions no_rows;
   no_rows.row_threshold = -kInf;
   if (cm.broad_phase) no_rows.prune_distance = cm.params.d_b;
-  computeSegmentDistances(model, data.kin_next, out, no_rows);
+  computeSegmentDistances(model, data.kin_next, data.dist.slots, out, no_rows);  // this cycle's schema, not copied
   return true;
 }
 
@@ -603,9 +602,10 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
       const PairDistance& p0 = data.dist.pairs[i];
       if (!pn.active || !isPhysical(model, data, pn)) continue;
       if (!(pn.distance < floor) || !(pn.distance < p0.distance)) continue;
-      const int oa = ownerArm(model, cm, data.dist_next, pn.seg_a);
-      const int ob = ownerArm(model, cm, data.dist_next, pn.seg_b);
-      const bool movable = (oa >= 0 && scale[oa] > 0.0) || (ob >= 0 && scale[ob] > 0.0);
+      // Ownership from this cycle's body schema (data.dist.slots, which the prediction used).
+      const int owner_a = ownerArm(model, cm, data.dist, pn.seg_a);
+      const int owner_b = ownerArm(model, cm, data.dist, pn.seg_b);
+      const bool movable = (owner_a >= 0 && scale[owner_a] > 0.0) || (owner_b >= 0 && scale[owner_b] > 0.0);
       if (!movable) continue;
       if (!have_hold) {
         const std::array<double, 2> zero{0.0, 0.0};
@@ -613,8 +613,8 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
         have_hold = true;
       }
       if (!(pn.distance < data.dist_hold.pairs[i].distance)) continue;  // no worse than holding still
-      if (oa >= 0) hit[oa] = true;
-      if (ob >= 0) hit[ob] = true;
+      if (owner_a >= 0) hit[owner_a] = true;
+      if (owner_b >= 0) hit[owner_b] = true;
     }
     if (!hit[0] && !hit[1]) break;
     for (int a = 0; a < 2; ++a)

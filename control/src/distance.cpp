@@ -83,17 +83,17 @@ inline double coreDistance(const SegmentW& A, const SegmentW& B, double& s, doub
 }
 
 /// Whether a pair that involves a body-schema slot is checked this cycle; sets the links.
-bool slotPairActive(const Model& model, const DistanceData& data, const SegmentPair& pair, int& link_a,
+bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const SegmentPair& pair, int& link_a,
                     int& link_b) {
   const Segment& sa = model.segments[pair.a];
   const Segment& sb = model.segments[pair.b];
   if (sa.body_schema_slot) {
-    const BodySchemaSlot& slot = data.slots[pair.a - model.num_robot_segments];
+    const BodySchemaSlot& slot = slots[static_cast<std::size_t>(pair.a - model.num_robot_segments)];
     if (!slot.enabled) return false;
     link_a = slot.link;
   }
   if (sb.body_schema_slot) {
-    const BodySchemaSlot& slot = data.slots[pair.b - model.num_robot_segments];
+    const BodySchemaSlot& slot = slots[static_cast<std::size_t>(pair.b - model.num_robot_segments)];
     if (!slot.enabled) return false;
     link_b = slot.link;
     if ((slot.ignore_mask >> pair.a) & 1U) return false;
@@ -165,6 +165,11 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
 
 void computeSegmentDistances(const Model& model, const KinematicsData& kin, DistanceData& data,
                              const DistanceOptions& options) {
+  computeSegmentDistances(model, kin, data.slots, data, options);
+}
+
+void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                             DistanceData& data, const DistanceOptions& options) {
   assert(data.pairs.size() == model.pairs.size());
   assert(data.prim_W.size() == model.primitives.size());
   constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -176,7 +181,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
   for (int s = 0; s < nseg; ++s) {
     const Segment& seg = model.segments[s];
     if (seg.body_schema_slot) {
-      const BodySchemaSlot& slot = data.slots[s - model.num_robot_segments];
+      const BodySchemaSlot& slot = slots[static_cast<std::size_t>(s - model.num_robot_segments)];
       if (!slot.enabled) continue;
       const Eigen::Isometry3d& X = kin.X_W_L[slot.link];
       data.prim_W[seg.first_primitive].set(X * slot.a_L, X * slot.b_L);
@@ -274,13 +279,13 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
 
   // 5. Pairs with a body-schema slot: usually all disabled; each computed directly when active.
   bool any_slot = false;
-  for (const BodySchemaSlot& slot : data.slots) any_slot = any_slot || slot.enabled;
+  for (const BodySchemaSlot& slot : slots) any_slot = any_slot || slot.enabled;
   for (const int i : data.slot_pairs) {
     const SegmentPair& pair = model.pairs[i];
     const Segment& sa = model.segments[pair.a];
     const Segment& sb = model.segments[pair.b];
     int link_a = sa.link, link_b = sb.link;
-    if (!any_slot || !slotPairActive(model, data, pair, link_a, link_b)) {
+    if (!any_slot || !slotPairActive(model, slots, pair, link_a, link_b)) {
       PairDistance& out = data.pairs[i];
       out.active = false;
       out.has_row = false;

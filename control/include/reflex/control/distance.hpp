@@ -54,6 +54,9 @@ struct BodySchemaSlot {
   std::uint64_t ignore_mask = 0;             ///< bit i set: never checked against segment i
 };
 
+/// The body-schema slots of a model (index = segment - Model::num_robot_segments).
+using BodySchemaSlots = std::array<BodySchemaSlot, kBodySchemaSlots>;
+
 struct DistanceOptions {
   /// Avoidance rows are computed for pairs with distance below this (m). +inf: every pair.
   double row_threshold = std::numeric_limits<double>::infinity();
@@ -72,7 +75,7 @@ struct DistanceData {
 
   std::vector<PairDistance> pairs;  ///< same order as Model::pairs
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows;  ///< npairs x nq
-  std::array<BodySchemaSlot, kBodySchemaSlots> slots;
+  BodySchemaSlots slots;            ///< the body schema computeSegmentDistances(model, kin, data) uses
   int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
   // Scratch of computeSegmentDistances (built from the model here; values valid only during the call).
   // Per primitive:
@@ -96,6 +99,11 @@ struct DistanceData {
 /// Call after computeForwardKinematics. Allocates nothing, never throws.
 void computeSegmentDistances(const Model& model, const KinematicsData& kin, DistanceData& data,
                              const DistanceOptions& options = {});
+
+/// The same with the body schema `slots` (read, never copied) instead of data.slots: a second
+/// DistanceData (a predicted configuration) computed with the body schema of the first.
+void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                             DistanceData& data, const DistanceOptions& options = {});
 
 /// Computes pair `pair` exactly (after computeSegmentDistances for the same kinematics and options):
 /// for a pair the broad phase skipped, the result computeSegmentDistances gives without pruning
