@@ -18,17 +18,11 @@ using RowA = ArmRow;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-/// The arm (kLeft / kRight) that moves segment s this cycle, or -1.
+/// The arm (kLeft / kRight) that moves segment s this cycle, or -1 (ControllerModel's ownership; a
+/// body-schema slot belongs to the arm of the link it hangs on).
 int ownerArm(const Model& model, const ControllerModel& cm, const DistanceData& dist, int s) {
-  if (!model.segments[s].body_schema_slot) {
-    for (int a = 0; a < 2; ++a)
-      if ((cm.arms[a].segment_mask >> s) & 1U) return a;
-    return -1;
-  }
-  const int link = dist.slots[s - model.num_robot_segments].link;
-  for (int a = 0; a < 2; ++a)
-    if (cm.arms[a].link_in_arm[link]) return a;
-  return -1;
+  if (!model.segments[s].body_schema_slot) return cm.segment_owner[static_cast<std::size_t>(s)];
+  return cm.link_owner[static_cast<std::size_t>(dist.slots[s - model.num_robot_segments].link)];
 }
 
 int segmentLink(const Model& model, const DistanceData& dist, int s) {
@@ -56,6 +50,16 @@ int forceSide(const Model& model, const DistanceData& dist, const PairDistance& 
   return descendsFrom(model, segmentLink(model, dist, pd.seg_b), segmentLink(model, dist, pd.seg_a)) ? -1 : 1;
 }
 
+/// The distance options of the control cycle: rows for every pair that can feed a term (within
+/// d_safe, Eq. 5, or the yellow zone, Eq. 6); pairs beyond that take no part in any term, so the
+/// broad phase may skip them (their distance is then a lower bound above the threshold).
+DistanceOptions cycleDistanceOptions(const ControllerModel& cm) {
+  DistanceOptions options;
+  options.row_threshold = std::max(cm.params.d_safe, cm.params.d_a);
+  if (cm.broad_phase) options.prune_distance = options.row_threshold;
+  return options;
+}
+
 bool higherPriority(MotionPriority p, int arm) {
   return (p == MotionPriority::kLeftHigher && arm == kLeft) || (p == MotionPriority::kRightHigher && arm == kRight);
 }
@@ -66,12 +70,6 @@ void gather(const ControllerModel::Arm& arm, const Eigen::MatrixXd& full, Mat3A&
   for (int i = 0; i < arm.n; ++i) out.col(i) = full.col(arm.q[i]);
 }
 
-/// What one arm's pair contributes to the merged force (Eq. 14-18).
-struct PairTerm {
-  int pair;
-  int sign;          ///< +1: the arm's point is p_W_a, -1: p_W_b
-  double weight;     ///< |F_ij|
-};
 
 }  // namespace
 
@@ -118,8 +116,15 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
       dist_hold(model),
       J_full(Eigen::MatrixXd::Zero(3, model.nq)),
       J_rel_full(Eigen::MatrixXd::Zero(3, model.nq)) {
-  for (const auto& arm : cm.arms)
+  std::size_t most_pairs = 0;
+  for (const auto& arm : cm.arms) {
     for (int i = 0; i < arm.n; ++i) arm_joint[static_cast<std::size_t>(arm.q[i])] = 1;
+    most_pairs = std::max(most_pairs, arm.candidate_pairs.size());
+  }
+  // One entry per candidate pair: the pair-term stage can never run out of room.
+  arm_ws.force_terms.resize(most_pairs);
+  arm_ws.guarded_pairs.resize(most_pairs);
+  arm_ws.other_rate.resize(most_pairs);
   // reach[l]: the farthest segment surface below link l, measured along the chain from l's origin
   // (joint offsets summed, so it bounds every configuration).
   const std::size_t nl = model.links.size();
@@ -147,267 +152,340 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
 
 namespace {
 
-/// Controller for one arm: Eq. 1-18 on its own joints. Writes the arm's joint velocities into qdot.
-void computeArm(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
-                const ControlInput& input, bool recovery_only) {
-  const ControllerParams& P = cm.params;
+/// Stage 1, the reaching task (Sec. 8): the hand point, its Jacobian, the linear trajectory towards
+/// the target and the task velocity of Eq. 2 (limited to max_task_speed). No target (or recovery):
+/// the trajectory is reset to the hand.
+void followTrajectory(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
+                      const ControlInput& input, bool recovery_only, ArmWorkspace& ws) {
+  const ControllerParams& params = cm.params;
   const ControllerModel::Arm& arm = cm.arms[a];
-  ArmStatus& status = data.arms[a];
   Trajectory& traj = data.trajectories[a];
-  const int n = arm.n;
-  const double dt = P.period;
-
-  VecA q(n);
-  for (int i = 0; i < n; ++i) q[i] = data.kin.q[arm.q[i]];
-
-  // Hand, its Jacobian, the linear trajectory (Sec. 8) and the task velocity.
-  const Eigen::Vector3d r = data.kin.X_W_L[arm.hand_link] * arm.hand_point_L;
-  status.hand_W = r;
-  computePointJacobian(model, data.kin, arm.hand_link, r, data.J_full);
-  Mat3A J;
-  gather(arm, data.J_full, J);
+  const double dt = params.period;
+  ws.q.resize(arm.n);
+  for (int i = 0; i < arm.n; ++i) ws.q[i] = data.kin.q[arm.q[i]];
+  ws.hand_W = data.kin.X_W_L[arm.hand_link] * arm.hand_point_L;
+  data.arms[a].hand_W = ws.hand_W;
+  computePointJacobian(model, data.kin, arm.hand_link, ws.hand_W, data.J_full);
+  gather(arm, data.J_full, ws.J_hand);
 
   const HandCommand& cmd = input.hands[a];
-  const bool given = cmd.status == HandStatus::kGiven && !recovery_only;
-  Eigen::Vector3d rdot = Eigen::Vector3d::Zero();
-  if (given) {
+  ws.target_given = cmd.status == HandStatus::kGiven && !recovery_only;
+  ws.hand_velocity_W.setZero();
+  if (ws.target_given) {
     if (!traj.active) {
       traj.active = true;
-      traj.ref_W = r;
+      traj.ref_W = ws.hand_W;
     }
     traj.goal_W = cmd.target_W;
-    const Eigen::Vector3d delta = traj.goal_W - traj.ref_W;
-    const double step = P.trajectory_speed * dt;
-    const double len = delta.norm();
+    const Eigen::Vector3d to_goal = traj.goal_W - traj.ref_W;
+    const double step = params.trajectory_speed * dt;
+    const double remaining = to_goal.norm();
     Eigen::Vector3d v_ref = Eigen::Vector3d::Zero();
-    if (len <= step) {
+    if (remaining <= step) {
       traj.ref_W = traj.goal_W;
     } else {
-      v_ref = delta * (P.trajectory_speed / len);
+      v_ref = to_goal * (params.trajectory_speed / remaining);
       traj.ref_W += v_ref * dt;
     }
-    rdot = v_ref + P.reach_gain * (traj.ref_W - r);
-    const double speed = rdot.norm();
-    if (speed > P.max_task_speed) rdot *= P.max_task_speed / speed;
+    ws.hand_velocity_W = v_ref + params.reach_gain * (traj.ref_W - ws.hand_W);
+    const double speed = ws.hand_velocity_W.norm();
+    if (speed > params.max_task_speed) ws.hand_velocity_W *= params.max_task_speed / speed;
   } else {
     traj.active = false;
-    traj.ref_W = r;
+    traj.ref_W = ws.hand_W;
   }
-  status.reference_W = traj.ref_W;
+  data.arms[a].reference_W = traj.ref_W;
+}
 
-  // Pairs of this arm, their merged virtual force (Eq. 14-18) and the closest distance.
-  std::array<PairTerm, 64> terms;  // pairs inside the yellow zone
-  int nterms = 0;
-  std::array<int, 64> guarded;     // pairs inside the orange zone, for the safety filter
-  int nguarded = 0;
-  VirtualForceSum forces;
-  RowA xi_row_sum = RowA::Zero(n);  // sum of row^T (d_safe - d) for Eq. 5
+/// Stage 2, the arm's pair terms: for every candidate pair the arm moves, its share of the merged
+/// force (Eq. 14-18, inside the yellow zone), of the Eq. 5 gradient (within d_safe), the safety
+/// filter's list (inside the orange zone), the step cap's contacts, and the arm's closest pair,
+/// zone and f(d) (Eq. 13) into the status. Motion priority (Sec. 7.2): the higher-priority arm
+/// ignores the other arm (it is the obstacle).
+void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
+                      const ControlInput& input, bool recovery_only, ArmWorkspace& ws) {
+  const ControllerParams& params = cm.params;
+  const ControllerModel::Arm& arm = cm.arms[a];
+  ArmStatus& status = data.arms[a];
+  ws.num_force_terms = 0;
+  ws.num_guarded = 0;
+  ws.forces = VirtualForceSum{};
+  ws.avoidance_gradient = ArmRow::Zero(arm.n);
+  ws.d_other_arm = kInf;
+  ws.d_static = kInf;
   double d_min = kInf;
-  double d_arm_contact = kInf, d_static_contact = kInf;
+  double pruned_floor = kInf;  // smallest lower bound of the pairs the broad phase skipped
   int closest = -1;
   for (const int p : arm.candidate_pairs) {
     const PairDistance& pd = data.dist.pairs[p];
     if (!pd.active) continue;
-    const int oa = ownerArm(model, cm, data.dist, pd.seg_a);
-    const int ob = ownerArm(model, cm, data.dist, pd.seg_b);
-    if (oa != a && ob != a) continue;
-    const int sign = forceSide(model, data.dist, pd, oa, ob, a);
-    const int other = oa == a ? ob : oa;
-    const bool arm_pair = other >= 0 && other != a;
-    if (arm_pair || other < 0) {
-      // For the step cap below: contacts with the other arm, and with everything that is not it.
-      if (arm_pair) d_arm_contact = std::min(d_arm_contact, pd.distance);
-      else d_static_contact = std::min(d_static_contact, pd.distance);
+    if (!pd.exact) {
+      // Skipped by the broad phase: beyond every zone, d_safe and d_b, so it feeds no term and no
+      // contact; it can only be the arm's closest pair (checked below with the filters that follow).
+      pruned_floor = std::min(pruned_floor, pd.distance);
+      continue;
     }
-    // Motion priority (Sec. 7.2): the higher-priority arm ignores the other arm (it is the obstacle).
-    if (arm_pair && higherPriority(input.priority, a) && !recovery_only) continue;
+    const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
+    const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
+    if (owner_a != a && owner_b != a) continue;
+    const int side = forceSide(model, data.dist, pd, owner_a, owner_b, a);
+    const int other = owner_a == a ? owner_b : owner_a;
+    const bool with_other_arm = other >= 0 && other != a;
+    if (with_other_arm) ws.d_other_arm = std::min(ws.d_other_arm, pd.distance);
+    else if (other < 0) ws.d_static = std::min(ws.d_static, pd.distance);
+    if (with_other_arm && higherPriority(input.priority, a) && !recovery_only) continue;
     if (pd.distance < d_min) {
       d_min = pd.distance;
       closest = p;
     }
-    if (pd.has_row && pd.distance < P.d_safe && !recovery_only) {
-      for (int i = 0; i < n; ++i) xi_row_sum[i] += data.dist.rows(p, arm.q[i]) * (P.d_safe - pd.distance);
+    if (pd.has_row && pd.distance < params.d_safe && !recovery_only) {
+      for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] += data.dist.rows(p, arm.q[i]) * (params.d_safe - pd.distance);
     }
-    if (pd.distance < P.d_b && pd.has_row && nguarded < static_cast<int>(guarded.size())) guarded[nguarded++] = p;
-    if (pd.distance < P.d_a && nterms < static_cast<int>(terms.size())) {
+    // Both lists hold one entry per candidate pair at most (sized at set-up): never full here.
+    if (pd.distance < params.d_b && pd.has_row) ws.guarded_pairs[static_cast<std::size_t>(ws.num_guarded++)] = p;
+    if (pd.distance < params.d_a) {
       // e_f,ij points from the other segment towards the arm's closest point (Eq. 16).
-      forces.add(P.k_virtual, P.d_a, pd.distance, sign * pd.nhat_W, sign > 0 ? pd.p_W_a : pd.p_W_b);
-      terms[nterms++] = {p, sign, P.k_virtual * (P.d_a - pd.distance)};
+      ws.forces.add(params.k_virtual, params.d_a, pd.distance, side * pd.nhat_W, side > 0 ? pd.p_W_a : pd.p_W_b);
+      ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, params.k_virtual * (params.d_a - pd.distance)};
+    }
+  }
+  if (pruned_floor < d_min) {
+    // The arm's closest pair may be one the broad phase skipped: compute those that could be exactly
+    // (their lower bound is below the closest exact distance), so the status is what it is unpruned.
+    const DistanceOptions options = cycleDistanceOptions(cm);
+    for (const int p : arm.candidate_pairs) {
+      const PairDistance& pd = data.dist.pairs[p];
+      if (!pd.active || pd.exact || !(pd.distance < d_min)) continue;
+      const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
+      const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
+      if (owner_a != a && owner_b != a) continue;
+      const int other = owner_a == a ? owner_b : owner_a;
+      if (other >= 0 && other != a && higherPriority(input.priority, a) && !recovery_only) continue;
+      refinePairDistance(model, data.kin, data.dist, p, options);
+      if (pd.distance < d_min || (pd.distance == d_min && p < closest)) {
+        d_min = pd.distance;
+        closest = p;
+      }
     }
   }
   status.distance = d_min;
   status.closest_pair = closest;
-  status.zone = zoneOf(d_min, P);
-  const double f = P.mode == AvoidanceMode::kOff ? 0.0 : blendingCoefficient(d_min, P.d_a, P.d_b);
-  status.f = f;
+  status.zone = zoneOf(d_min, params);
+  status.f = params.mode == AvoidanceMode::kOff ? 0.0 : blendingCoefficient(d_min, params.d_a, params.d_b);
+}
 
-  // Merged force, point and avoidance Jacobian (weighted relative Jacobians of the pairs).
-  Mat3A J_ca = Mat3A::Zero(3, n);
-  double F_mag = 0.0;
-  Eigen::Vector3d e_all = Eigen::Vector3d::Zero();
-  const double weight_sum = forces.weight;
-  const Eigen::Vector3d F_all = forces.force();
-  const Eigen::Vector3d P_all = forces.point();
+/// Stage 3, the merged avoidance task (Eq. 17-18): F^all, its direction and point, and J_avoid, the
+/// force-weighted relative Jacobians of the yellow-zone pairs (rate of p1 - p2, arm side first).
+void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm, ControllerData& data,
+                            ArmStatus& status, ArmWorkspace& ws) {
+  ws.J_avoid = TaskJacobian::Zero(3, arm.n);
+  ws.force_magnitude = 0.0;
+  ws.force_dir_W.setZero();
+  const double weight_sum = ws.forces.weight;
+  const Eigen::Vector3d F_all = ws.forces.force();
   if (weight_sum > 0.0) {
-    F_mag = F_all.norm();
-    if (F_mag > 1e-12) e_all = F_all / F_mag;
-    Mat3A J_rel(3, n);
-    for (int t = 0; t < nterms; ++t) {
-      const PairDistance& pd = data.dist.pairs[terms[t].pair];
-      const int la = segmentLink(model, data.dist, pd.seg_a);
-      const int lb = segmentLink(model, data.dist, pd.seg_b);
-      computeRelativeJacobian(model, data.kin, la, pd.p_W_a, lb, pd.p_W_b, data.J_rel_full);
+    ws.force_magnitude = F_all.norm();
+    if (ws.force_magnitude > 1e-12) ws.force_dir_W = F_all / ws.force_magnitude;
+    TaskJacobian J_rel(3, arm.n);
+    for (int t = 0; t < ws.num_force_terms; ++t) {
+      const ArmWorkspace::ForceTerm& term = ws.force_terms[static_cast<std::size_t>(t)];
+      const PairDistance& pd = data.dist.pairs[term.pair];
+      const int link_a = segmentLink(model, data.dist, pd.seg_a);
+      const int link_b = segmentLink(model, data.dist, pd.seg_b);
+      computeRelativeJacobian(model, data.kin, link_a, pd.p_W_a, link_b, pd.p_W_b, data.J_rel_full);
       gather(arm, data.J_rel_full, J_rel);
-      J_ca += (terms[t].weight / weight_sum) * terms[t].sign * J_rel;  // rate of p1 - p2 (arm side first)
+      ws.J_avoid += (term.weight / weight_sum) * term.side * J_rel;
     }
   }
-  status.force = F_mag;
-  status.force_dir_W = e_all;
-  status.force_point_W = P_all;
+  status.force = ws.force_magnitude;
+  status.force_dir_W = ws.force_dir_W;
+  status.force_point_W = ws.forces.point();
+}
 
-  // Nullspace criteria: joint-limit avoidance (Eq. 4), rest posture without a target.
+/// Stage 4, the two controllers and their blend: whole-body motion (Eq. 2-5, with joint-limit
+/// avoidance Eq. 4 and the rest posture without a target in its nullspace), collision avoidance
+/// (Eq. 8-12: the merged virtual force, reaching in its nullspace), blended by f(d) (Eq. 1). In
+/// recovery only the separating term of Eq. 8. Writes ws.qdot and status.qdot_force.
+void blendControllers(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
+                      bool recovery_only, ArmWorkspace& ws) {
+  const ControllerParams& params = cm.params;
+  const ControllerModel::Arm& arm = cm.arms[a];
+  ArmStatus& status = data.arms[a];
+  const int n = arm.n;
   VecA xi_jla(n);
   for (int i = 0; i < n; ++i) {
     const int qi = arm.q[i];
     const double lo = model.q_lower[qi], hi = model.q_upper[qi];
     const double half = 0.5 * (hi - lo);
-    xi_jla[i] = std::isfinite(half) && half > 0.0 ? -P.alpha_jla * (q[i] - 0.5 * (hi + lo)) / (half * half) : 0.0;
+    xi_jla[i] = std::isfinite(half) && half > 0.0 ? -params.alpha_jla * (ws.q[i] - 0.5 * (hi + lo)) / (half * half) : 0.0;
   }
   VecA xi_rest = VecA::Zero(n);
-  if (!given) xi_rest = -P.alpha_rest * (q - arm.rest.head(n));
+  if (!ws.target_given) xi_rest = -params.alpha_rest * (ws.q - arm.rest.head(n));
 
   // The virtual-force term of Eq. 8 along the merged direction: row^+ |F^all|.
-  const RowA row_ca = e_all.transpose() * J_ca;  // J_ca|row,y in the merged avoidance frame
-  VecA row_pinv;
-  dampedPseudoInverse(row_ca, P.damping, row_pinv);
+  const RowA avoid_row = ws.force_dir_W.transpose() * ws.J_avoid;  // J_ca|row,y in the merged frame
+  VecA avoid_row_pinv;
+  dampedPseudoInverse(avoid_row, params.damping, avoid_row_pinv);
   VecA qdot_force = VecA::Zero(n);
-  if (F_mag > 0.0) qdot_force = row_pinv * F_mag;
+  if (ws.force_magnitude > 0.0) qdot_force = avoid_row_pinv * ws.force_magnitude;
   // three_dof: the whole merged force, J_ca^+ F^all (Eq. 8 with a 3-D task).
-  MatA3 Jca_pinv;
-  if (P.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(J_ca, P.damping, Jca_pinv);
-  status.qdot_force = P.mode == AvoidanceMode::kThreeDof && !recovery_only ? VecA(Jca_pinv * (F_mag * e_all)) : qdot_force;
+  MatA3 J_avoid_pinv;
+  if (params.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(ws.J_avoid, params.damping, J_avoid_pinv);
+  status.qdot_force = params.mode == AvoidanceMode::kThreeDof && !recovery_only
+                          ? VecA(J_avoid_pinv * (ws.force_magnitude * ws.force_dir_W)) : qdot_force;
 
-  VecA qdot(n);
+  ws.qdot.resize(n);
   if (recovery_only) {
-    // Only the separating motion of Eq. 8: nothing in the nullspace.
-    qdot = qdot_force;
+    ws.qdot = qdot_force;  // only the separating motion of Eq. 8: nothing in the nullspace
+    return;
+  }
+  // Whole-body motion, Eq. 2-5.
+  MatA3 J_hand_pinv;
+  dampedPseudoInverse(ws.J_hand, params.damping, J_hand_pinv);
+  MatA N_wbm;
+  nullspaceProjector(ws.J_hand, N_wbm);
+  VecA xi_ca = VecA::Zero(n);
+  if (params.mode != AvoidanceMode::kOff) xi_ca = params.alpha_ca * ws.avoidance_gradient.transpose();
+  VecA qdot_wbm(n);
+  if (ws.target_given) qdot_wbm = J_hand_pinv * ws.hand_velocity_W + N_wbm * (xi_ca + xi_jla);
+  else qdot_wbm = xi_ca + xi_jla + xi_rest;
+
+  if (params.mode == AvoidanceMode::kOff || status.f <= 0.0) {
+    ws.qdot = qdot_wbm;
+    return;
+  }
+  // Collision avoidance, Eq. 8-12: the virtual force along one direction, reaching in its nullspace.
+  VecA xi_t(n);
+  if (ws.target_given) xi_t = -params.alpha_t * (ws.J_hand.transpose() * (ws.hand_W - data.trajectories[a].ref_W));  // Eq. 12, W_t = I
+  else xi_t = xi_rest;
+  VecA qdot_ca(n);
+  MatA N_ca;
+  if (params.mode == AvoidanceMode::kOneDof) {
+    nullspaceProjector(avoid_row, N_ca);
+    qdot_ca = qdot_force + N_ca * xi_t;
   } else {
-    // Whole-body motion, Eq. 2-5.
-    MatA3 J_pinv;
-    dampedPseudoInverse(J, P.damping, J_pinv);
-    MatA N_wbm;
-    nullspaceProjector(J, N_wbm);
-    VecA xi_ca = VecA::Zero(n);
-    if (P.mode != AvoidanceMode::kOff) xi_ca = P.alpha_ca * xi_row_sum.transpose();
-    VecA qdot_wbm(n);
-    if (given) qdot_wbm = J_pinv * rdot + N_wbm * (xi_ca + xi_jla);
-    else qdot_wbm = xi_ca + xi_jla + xi_rest;
-
-    if (P.mode == AvoidanceMode::kOff || f <= 0.0) {
-      qdot = qdot_wbm;
-    } else {
-      // Collision avoidance, Eq. 8-12: the virtual force along one direction, reaching in its nullspace.
-      VecA xi_t(n);
-      if (given) xi_t = -P.alpha_t * (J.transpose() * (r - traj.ref_W));  // Eq. 12, W_t = I
-      else xi_t = xi_rest;
-      VecA qdot_ca(n);
-      if (P.mode == AvoidanceMode::kOneDof) {
-        MatA N_ca;
-        nullspaceProjector(row_ca, N_ca);
-        qdot_ca = qdot_force + N_ca * xi_t;
-      } else {
-        MatA N_ca;
-        nullspaceProjector(J_ca, N_ca);
-        qdot_ca = status.qdot_force + N_ca * xi_t;
-      }
-      qdot = (1.0 - f) * qdot_wbm + f * qdot_ca;  // Eq. 1
-    }
+    nullspaceProjector(ws.J_avoid, N_ca);
+    qdot_ca = status.qdot_force + N_ca * xi_t;
   }
+  ws.qdot = (1.0 - status.f) * qdot_wbm + status.f * qdot_ca;  // Eq. 1
+}
 
-  // Joint position limits: a step never crosses a limit (the robot would clamp the motion away, so
-  // what it does would differ from what the filter below checked). The box contains 0.
-  VecA v_lo(n), v_hi(n);
-  for (int i = 0; i < n; ++i) {
+/// Stage 5, joint position limits: a step never crosses a limit (the robot would clamp the motion
+/// away, so what it does would differ from what the filter checked). The box [v_lo, v_hi] holds 0.
+void limitToJointRange(const Model& model, const ControllerModel::Arm& arm, double dt, ArmWorkspace& ws) {
+  ws.v_lo.resize(arm.n);
+  ws.v_hi.resize(arm.n);
+  for (int i = 0; i < arm.n; ++i) {
     const int qi = arm.q[i];
-    v_lo[i] = std::min(0.0, (model.q_lower[qi] - q[i]) / dt);
-    v_hi[i] = std::max(0.0, (model.q_upper[qi] - q[i]) / dt);
-    qdot[i] = std::clamp(qdot[i], v_lo[i], v_hi[i]);
+    ws.v_lo[i] = std::min(0.0, (model.q_lower[qi] - ws.q[i]) / dt);
+    ws.v_hi[i] = std::max(0.0, (model.q_upper[qi] - ws.q[i]) / dt);
+    ws.qdot[i] = std::clamp(ws.qdot[i], ws.v_lo[i], ws.v_hi[i]);
   }
+}
 
-  // Safety filter (not in the paper): inside the orange zone, this arm may approach a pair no faster
-  // than guard_rate (d - d_r - guard_margin), so the distance decays at most exponentially towards a
-  // floor above d_r. Merging several pairs into one direction (Eq. 17) and the reaching gradient in
-  // the collision controller's nullspace can otherwise leak motion into a pair that is not the merged
-  // direction; this removes exactly that component and nothing else (inactive above d_b).
-  if (P.mode != AvoidanceMode::kOff && !recovery_only) {
-    // What moves each guarded pair besides this arm, fixed for this cycle (computed once, not per
-    // iteration). The higher-priority arm was computed first (computeControl orders them): its motion
-    // is known, so the pair's approach includes it (the obstacle arm does not avoid). Walking and
-    // balance move the legs (and everything above them) without asking: their estimated motion counts
-    // too (legs always win, Sec. 7.2); qdot_uncontrolled is zero on the arm joints.
-    std::array<double, 64> other_rate{};
-    const int b = 1 - a;
-    for (int g = 0; g < nguarded; ++g) {
-      const int p = guarded[g];
-      if (higherPriority(input.priority, b)) {
-        for (int i = 0; i < cm.arms[b].n; ++i)
-          other_rate[g] += data.dist.rows(p, cm.arms[b].q[i]) * data.qdot[cm.arms[b].q[i]];
-      }
-      for (int j = 0; j < model.nq; ++j) other_rate[g] += data.dist.rows(p, j) * data.qdot_uncontrolled[j];
+/// Stage 6, the safety filter (not in the paper): inside the orange zone, this arm may approach a
+/// pair no faster than guard_rate (d - d_r - guard_margin), so the distance decays at most
+/// exponentially towards a floor above d_r. Merging several pairs into one direction (Eq. 17) and
+/// the reaching gradient in the collision controller's nullspace can otherwise leak motion into a
+/// pair that is not the merged direction; this removes exactly that component and nothing else.
+void applySafetyFilter(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
+                       const ControlInput& input, ArmWorkspace& ws) {
+  const ControllerParams& params = cm.params;
+  const ControllerModel::Arm& arm = cm.arms[a];
+  const int n = arm.n;
+  // What moves each guarded pair besides this arm, fixed for this cycle (computed once, not per
+  // iteration). The higher-priority arm was computed first (computeControl orders them): its motion
+  // is known, so the pair's approach includes it (the obstacle arm does not avoid). Walking and
+  // balance move the legs (and everything above them) without asking: their estimated motion counts
+  // too (legs always win, Sec. 7.2); qdot_uncontrolled is zero on the arm joints.
+  const ControllerModel::Arm& other_arm = cm.arms[1 - a];
+  const bool other_arm_known = higherPriority(input.priority, 1 - a);
+  for (int g = 0; g < ws.num_guarded; ++g) {
+    const int p = ws.guarded_pairs[static_cast<std::size_t>(g)];
+    double rate = 0.0;
+    if (other_arm_known) {
+      for (int i = 0; i < other_arm.n; ++i) rate += data.dist.rows(p, other_arm.q[i]) * data.qdot[other_arm.q[i]];
     }
-    for (int iter = 0; iter < 6; ++iter) {
-      bool changed = false;
-      for (int g = 0; g < nguarded; ++g) {
-        const int p = guarded[g];
-        const double d = data.dist.pairs[p].distance;
-        RowA row(n), free_row(n);
-        for (int i = 0; i < n; ++i) {
-          row[i] = data.dist.rows(p, arm.q[i]);
-          // A joint whose correction would leave its limit box cannot take it.
-          const bool blocked = (row[i] > 0.0 && qdot[i] >= v_hi[i]) || (row[i] < 0.0 && qdot[i] <= v_lo[i]);
-          free_row[i] = blocked ? 0.0 : row[i];
-        }
-        const double rr = free_row.squaredNorm();
-        if (rr < 1e-12) continue;
-        const double allowed = -P.guard_rate * std::max(0.0, d - P.d_r - P.guard_margin);
-        const double rate = row.dot(qdot.transpose()) + other_rate[g];
-        if (rate < allowed - 1e-12) {
-          qdot += free_row.transpose() * ((allowed - rate) / rr);
-          for (int i = 0; i < n; ++i) qdot[i] = std::clamp(qdot[i], v_lo[i], v_hi[i]);
-          changed = true;
-        }
-      }
-      if (!changed) break;
-    }
+    for (int j = 0; j < model.nq; ++j) rate += data.dist.rows(p, j) * data.qdot_uncontrolled[j];
+    ws.other_rate[static_cast<std::size_t>(g)] = rate;
   }
+  for (int iter = 0; iter < 6; ++iter) {
+    bool changed = false;
+    for (int g = 0; g < ws.num_guarded; ++g) {
+      const int p = ws.guarded_pairs[static_cast<std::size_t>(g)];
+      const double d = data.dist.pairs[p].distance;
+      RowA row(n), free_row(n);
+      for (int i = 0; i < n; ++i) {
+        row[i] = data.dist.rows(p, arm.q[i]);
+        // A joint whose correction would leave its limit box cannot take it.
+        const bool blocked = (row[i] > 0.0 && ws.qdot[i] >= ws.v_hi[i]) || (row[i] < 0.0 && ws.qdot[i] <= ws.v_lo[i]);
+        free_row[i] = blocked ? 0.0 : row[i];
+      }
+      const double free_norm_sq = free_row.squaredNorm();
+      if (free_norm_sq < 1e-12) continue;
+      const double allowed = -params.guard_rate * std::max(0.0, d - params.d_r - params.guard_margin);
+      const double rate = row.dot(ws.qdot.transpose()) + ws.other_rate[static_cast<std::size_t>(g)];
+      if (rate < allowed - 1e-12) {
+        ws.qdot += free_row.transpose() * ((allowed - rate) / free_norm_sq);
+        for (int i = 0; i < n; ++i) ws.qdot[i] = std::clamp(ws.qdot[i], ws.v_lo[i], ws.v_hi[i]);
+        changed = true;
+      }
+    }
+    if (!changed) break;
+  }
+}
 
-  // Joint velocity limits: uniform scaling keeps the direction (and every filtered pair's bound).
+/// Stage 7, joint velocity limits: uniform scaling keeps the direction (and every filtered pair's bound).
+void scaleToVelocityLimits(const Model& model, const ControllerModel::Arm& arm, ArmWorkspace& ws) {
   double scale = 1.0;
-  for (int i = 0; i < n; ++i) {
+  for (int i = 0; i < arm.n; ++i) {
     const int qi = arm.q[i];
-    const double v = std::abs(qdot[i]);
+    const double v = std::abs(ws.qdot[i]);
     if (v > model.v_max[qi]) scale = std::min(scale, model.v_max[qi] / v);
   }
-  qdot *= scale;
+  ws.qdot *= scale;
+}
 
-  // Step cap inside the orange zone (part of the safety filter): the filter bounds the approach to
-  // first order along each pair's current normal, but a large step can make another primitive of the
-  // same segment the closest one (the chest has three). So no point of the arm may move more than half the remaining gap above d_r in one cycle: sum |qdot_i| * lever_i * dt <= (d - d_r) / 2, with
-  // lever_i the distance from joint i to the hand plus 0.1 m. Scaling keeps every bound above.
-  // Against the other arm only with equal priority: a yielding arm must be free to get out of the way,
-  // and a higher-priority arm is untouched by the other arm (Sec. 7.2; the e-stop is the last resort).
+/// Stage 8, the step cap inside the orange zone (part of the safety filter): the filter bounds the
+/// approach to first order along each pair's current normal, but a large step can make another
+/// primitive of the same segment the closest one (the chest has three). So no point of the arm may
+/// move more than half the remaining gap above d_r in one cycle: sum |qdot_i| * lever_i * dt <=
+/// (d - d_r) / 2, with lever_i the distance from joint i to the hand plus 0.1 m. Scaling keeps every
+/// bound above. Against the other arm only with equal priority: a yielding arm must be free to get
+/// out of the way, and a higher-priority arm is untouched by the other arm (Sec. 7.2; the e-stop is
+/// the last resort).
+void capStepInOrangeZone(const ControllerModel& cm, const ControllerData& data, const ControllerModel::Arm& arm,
+                         const Model& model, const ControlInput& input, ArmWorkspace& ws) {
+  const ControllerParams& params = cm.params;
   const bool equal = input.priority == MotionPriority::kEqual;
-  const double d_cap = equal ? std::min(d_static_contact, d_arm_contact) : d_static_contact;
-  if (P.mode != AvoidanceMode::kOff && !recovery_only && d_cap < P.d_b) {
-    double sweep = 0.0;
-    for (int i = 0; i < n; ++i) {
-      const double lever = (r - data.kin.X_W_L[model.q_link[arm.q[i]]].translation()).norm() + 0.1;
-      sweep += std::abs(qdot[i]) * lever * dt;
-    }
-    const double budget = 0.5 * std::max(0.0, d_cap - P.d_r);
-    if (sweep > budget) qdot *= budget / sweep;
+  const double d_contact = equal ? std::min(ws.d_static, ws.d_other_arm) : ws.d_static;
+  if (!(d_contact < params.d_b)) return;
+  double sweep = 0.0;
+  for (int i = 0; i < arm.n; ++i) {
+    const double lever = (ws.hand_W - data.kin.X_W_L[model.q_link[arm.q[i]]].translation()).norm() + 0.1;
+    sweep += std::abs(ws.qdot[i]) * lever * params.period;
   }
-  for (int i = 0; i < n; ++i) data.qdot[arm.q[i]] = qdot[i];
+  const double budget = 0.5 * std::max(0.0, d_contact - params.d_r);
+  if (sweep > budget) ws.qdot *= budget / sweep;
+}
+
+/// Controller for one arm: Eq. 1-18 on its own joints, stage by stage (ArmWorkspace). Writes the
+/// arm's joint velocities into data.qdot. recovery_only: leaving a latched e-stop, only the
+/// separating motion of Eq. 8.
+void computeArm(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
+                const ControlInput& input, bool recovery_only) {
+  const ControllerModel::Arm& arm = cm.arms[a];
+  ArmWorkspace& ws = data.arm_ws;
+  followTrajectory(model, cm, data, a, input, recovery_only, ws);
+  collectPairTerms(model, cm, data, a, input, recovery_only, ws);
+  mergeAvoidanceJacobian(model, arm, data, data.arms[a], ws);
+  blendControllers(model, cm, data, a, recovery_only, ws);
+  limitToJointRange(model, arm, cm.params.period, ws);
+  const bool filter = cm.params.mode != AvoidanceMode::kOff && !recovery_only;
+  if (filter) applySafetyFilter(model, cm, data, a, input, ws);
+  scaleToVelocityLimits(model, arm, ws);
+  if (filter) capStepInOrangeZone(cm, data, arm, model, input, ws);
+  for (int i = 0; i < arm.n; ++i) data.qdot[arm.q[i]] = ws.qdot[i];
 }
 
 /// A pair between physical segments (a virtual occlusion slot never counts for safety).
@@ -416,15 +494,68 @@ bool isPhysical(const Model& model, const ControllerData& data, const PairDistan
   return !(model.segments[sb].body_schema_slot && data.slot_virtual[sb - model.num_robot_segments]);
 }
 
+/// This cycle's closest physical pair, closest virtual pair and closest pair between the two arms
+/// (ties: the lower pair index). A pair the broad phase skipped is computed exactly when its lower
+/// bound is below the closest exact distance of a kind it belongs to, so all three are what the
+/// unpruned sweep gives.
+void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerData& data) {
+  ClosestPair physical, virtual_slot, between_arms;
+  auto betweenArms = [&](const PairDistance& pd) {
+    if (pd.seg_b >= model.num_robot_segments) return false;
+    const int owner_a = cm.segment_owner[static_cast<std::size_t>(pd.seg_a)];
+    const int owner_b = cm.segment_owner[static_cast<std::size_t>(pd.seg_b)];
+    return owner_a >= 0 && owner_b >= 0 && owner_a != owner_b;
+  };
+  auto take = [](ClosestPair& best, double d, int i) {
+    if (d < best.distance || (d == best.distance && i < best.pair)) {
+      best.distance = d;
+      best.pair = i;
+    }
+  };
+  bool skipped = false;
+  const int npairs = static_cast<int>(data.dist.pairs.size());
+  for (int i = 0; i < npairs; ++i) {
+    const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+    if (!pd.active) continue;
+    if (!pd.exact) {
+      skipped = true;
+      continue;
+    }
+    if (!isPhysical(model, data, pd)) {
+      take(virtual_slot, pd.distance, i);
+      continue;
+    }
+    take(physical, pd.distance, i);
+    if (betweenArms(pd)) take(between_arms, pd.distance, i);
+  }
+  if (skipped) {  // robot pairs only (slot pairs are always exact): physical
+    const DistanceOptions options = cycleDistanceOptions(cm);
+    for (int i = 0; i < npairs; ++i) {
+      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+      if (!pd.active || pd.exact) continue;
+      const bool arms = betweenArms(pd);
+      if (!(pd.distance < physical.distance) && !(arms && pd.distance < between_arms.distance)) continue;
+      refinePairDistance(model, data.kin, data.dist, i, options);
+      take(physical, pd.distance, i);
+      if (arms) take(between_arms, pd.distance, i);
+    }
+  }
+  data.closest_physical = physical;
+  data.closest_virtual = virtual_slot;
+  data.closest_between_arms = between_arms;
+}
+
 /// Distances (no avoidance rows) of every pair at configuration q, with this cycle's body-schema
 /// slots, into `out` (kin_next is the scratch). False if q is not finite (out is then untouched).
-bool computeDistancesAt(const Model& model, ControllerData& data, const Eigen::Ref<const Eigen::VectorXd>& q,
-                        DistanceData& out) {
+/// Pairs farther than d_b may be skipped by the broad phase (distance: a lower bound above d_b): every
+/// caller compares with d_r + predict_margin or d_r + estop_release_margin, both at most d_b.
+bool computeDistancesAt(const Model& model, const ControllerModel& cm, ControllerData& data,
+                        const Eigen::Ref<const Eigen::VectorXd>& q, DistanceData& out) {
   if (!computeForwardKinematics(model, data.kin_next, q)) return false;
-  out.slots = data.dist.slots;
   DistanceOptions no_rows;
   no_rows.row_threshold = -kInf;
-  computeSegmentDistances(model, data.kin_next, out, no_rows);
+  if (cm.broad_phase) no_rows.prune_distance = cm.params.d_b;
+  computeSegmentDistances(model, data.kin_next, data.dist.slots, out, no_rows);  // this cycle's schema, not copied
   return true;
 }
 
@@ -435,7 +566,7 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
   for (int j = 0; j < model.nq; ++j) data.q_next[j] = q[j] + dt * data.qdot_uncontrolled[j];
   for (int a = 0; a < 2; ++a)
     for (int i = 0; i < cm.arms[a].n; ++i) data.q_next[cm.arms[a].q[i]] += dt * scale[a] * data.qdot[cm.arms[a].q[i]];
-  if (!computeDistancesAt(model, data, data.q_next, out)) {
+  if (!computeDistancesAt(model, cm, data, data.q_next, out)) {
     for (auto& pd : out.pairs) pd.distance = -kInf;  // cannot happen for finite q; counts as a hit
   }
 }
@@ -449,8 +580,8 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
 /// kinematic robot the prediction is exact for the arms, so no arm motion ever enters the red zone.
 void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerData& data,
                      const Eigen::Ref<const Eigen::VectorXd>& q, double d_phys) {
-  const ControllerParams& P = cm.params;
-  const double floor = P.d_r + P.predict_margin;
+  const ControllerParams& params = cm.params;
+  const double floor = params.d_r + params.predict_margin;
   // Cheap exit: in one period no point moves more than sum |qdot_j| lever_j dt (body-schema slots
   // add their own extent to every lever), so no distance changes by more than twice that.
   double slot_extent = 0.0;
@@ -458,7 +589,7 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     if (slot.enabled) slot_extent = std::max(slot_extent, std::max(slot.a_L.norm(), slot.b_L.norm()) + slot.radius);
   double sweep = 0.0;
   for (int j = 0; j < model.nq; ++j)
-    sweep += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * P.period;
+    sweep += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * params.period;
   if (d_phys - 2.0 * sweep > floor) return;
 
   bool have_hold = false;
@@ -471,9 +602,10 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
       const PairDistance& p0 = data.dist.pairs[i];
       if (!pn.active || !isPhysical(model, data, pn)) continue;
       if (!(pn.distance < floor) || !(pn.distance < p0.distance)) continue;
-      const int oa = ownerArm(model, cm, data.dist_next, pn.seg_a);
-      const int ob = ownerArm(model, cm, data.dist_next, pn.seg_b);
-      const bool movable = (oa >= 0 && scale[oa] > 0.0) || (ob >= 0 && scale[ob] > 0.0);
+      // Ownership from this cycle's body schema (data.dist.slots, which the prediction used).
+      const int owner_a = ownerArm(model, cm, data.dist, pn.seg_a);
+      const int owner_b = ownerArm(model, cm, data.dist, pn.seg_b);
+      const bool movable = (owner_a >= 0 && scale[owner_a] > 0.0) || (owner_b >= 0 && scale[owner_b] > 0.0);
       if (!movable) continue;
       if (!have_hold) {
         const std::array<double, 2> zero{0.0, 0.0};
@@ -481,8 +613,8 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
         have_hold = true;
       }
       if (!(pn.distance < data.dist_hold.pairs[i].distance)) continue;  // no worse than holding still
-      if (oa >= 0) hit[oa] = true;
-      if (ob >= 0) hit[ob] = true;
+      if (owner_a >= 0) hit[owner_a] = true;
+      if (owner_b >= 0) hit[owner_b] = true;
     }
     if (!hit[0] && !hit[1]) break;
     for (int a = 0; a < 2; ++a)
@@ -503,7 +635,7 @@ bool isArmIndependent(const Model& model, const ControllerModel& cm, const Contr
 
 bool checkWalkingStep(const Model& model, const ControllerModel& cm, ControllerData& data,
                       const Eigen::Ref<const Eigen::VectorXd>& q_next) {
-  if (!computeDistancesAt(model, data, q_next, data.dist_next)) return false;
+  if (!computeDistancesAt(model, cm, data, q_next, data.dist_next)) return false;
   const double floor = cm.params.d_r + cm.params.predict_margin;
   for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
     const PairDistance& pn = data.dist_next.pairs[i];
@@ -519,7 +651,7 @@ int findUnresolvableContact(const Model& model, const ControllerModel& cm, Contr
   if (slot < 0 || slot >= kBodySchemaSlots || !data.dist.slots[static_cast<std::size_t>(slot)].enabled) return -1;
   const int s = model.num_robot_segments + slot;
   if (!isArmIndependent(model, cm, data, s)) return -1;
-  if (!computeDistancesAt(model, data, q, data.dist_next)) return -1;
+  if (!computeDistancesAt(model, cm, data, q, data.dist_next)) return -1;
   const double limit = cm.params.d_r + cm.params.estop_release_margin;
   for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
     const PairDistance& pd = data.dist_next.pairs[i];
@@ -574,21 +706,12 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
       ++data.bad_input_count;
     }
   }
-  DistanceOptions options;
-  options.row_threshold = std::max(cm.params.d_safe, cm.params.d_a);
-  computeSegmentDistances(model, data.kin, data.dist, options);
+  computeSegmentDistances(model, data.kin, data.dist, cycleDistanceOptions(cm));
 
-  // Red zone (Sec. 7.1): the closest physical pair.
-  double d_phys = kInf;
-  int pair_phys = -1;
-  for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
-    const PairDistance& pd = data.dist.pairs[i];
-    if (!pd.active || !isPhysical(model, data, pd)) continue;
-    if (pd.distance < d_phys) {
-      d_phys = pd.distance;
-      pair_phys = static_cast<int>(i);
-    }
-  }
+  // Red zone (Sec. 7.1): the closest physical pair (and, for the callers, the closest virtual one).
+  findClosestPairs(model, cm, data);
+  const double d_phys = data.closest_physical.distance;
+  const int pair_phys = data.closest_physical.pair;
   if (cm.params.estop && data.estop == EstopState::kClear && d_phys < cm.params.d_r) {
     data.estop = EstopState::kLatched;
     data.estop_pair = pair_phys;

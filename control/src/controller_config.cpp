@@ -229,6 +229,10 @@ ControllerConfig loadControllerConfigFor(const std::string& urdf_path, const std
 
 ControllerModel makeControllerModel(const Model& model, const ControllerConfig& config) {
   validateControllerParams(config.params, config.source);
+  if (model.segments.size() > static_cast<std::size_t>(kMaxSegments))
+    throw ConfigError(config.source + ": robot " + model.name + " has " + std::to_string(model.segments.size()) +
+                      " segments (collision segments and body-schema slots); at most " +
+                      std::to_string(kMaxSegments) + " are supported");
   ControllerModel cm;
   cm.params = config.params;
   std::set<int> used;
@@ -276,6 +280,14 @@ ControllerModel makeControllerModel(const Model& model, const ControllerConfig& 
       if (mine || slot) arm.candidate_pairs.push_back(static_cast<int>(i));
     }
   }
+  // Ownership, once: the left arm first (as the per-pair lookup it replaces did).
+  cm.link_owner.assign(model.links.size(), -1);
+  for (std::size_t l = 0; l < model.links.size(); ++l)
+    for (int a = 1; a >= 0; --a)
+      if (cm.arms[a].link_in_arm[l]) cm.link_owner[l] = a;
+  cm.segment_owner.assign(static_cast<std::size_t>(model.num_robot_segments), -1);
+  for (int s = 0; s < model.num_robot_segments; ++s)
+    cm.segment_owner[static_cast<std::size_t>(s)] = cm.link_owner[static_cast<std::size_t>(model.segments[s].link)];
   return cm;
 }
 

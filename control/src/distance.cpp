@@ -39,6 +39,32 @@ DistanceData::DistanceData(const Model& model)
     }
   }
   pp_begin.push_back(static_cast<int>(pp_a.size()));
+  exact_pairs.assign(robot_pairs.size(), -1);
+  // Bounding sphere of every robot segment in its link frame: centred on the middle of the box
+  // around its primitives' end points; the radius reaches the farthest end point plus its radius
+  // (a capsule lies inside the spheres around its two ends' hull, so the sphere encloses it).
+  bound_center_L.assign(model.segments.size(), Eigen::Vector3d::Zero());
+  bound_center_W.assign(model.segments.size(), Eigen::Vector3d::Zero());
+  bound_radius.assign(model.segments.size(), 0.0);
+  for (std::size_t s = 0; s < model.segments.size(); ++s) {
+    const Segment& seg = model.segments[s];
+    if (seg.body_schema_slot || seg.num_primitives == 0) continue;
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+    Eigen::Vector3d hi = -lo;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      lo = lo.cwiseMin(prim.a_L).cwiseMin(prim.b_L);
+      hi = hi.cwiseMax(prim.a_L).cwiseMax(prim.b_L);
+    }
+    const Eigen::Vector3d c = 0.5 * (lo + hi);
+    double r = 0.0;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      r = std::max(r, std::max((prim.a_L - c).norm(), (prim.b_L - c).norm()) + prim.radius);
+    }
+    bound_center_L[s] = c;
+    bound_radius[s] = r;
+  }
   pp_s.assign(pp_a.size(), 0.0);
   pp_t.assign(pp_a.size(), 0.0);
   pp_core.assign(pp_a.size(), 0.0);
@@ -57,17 +83,17 @@ inline double coreDistance(const SegmentW& A, const SegmentW& B, double& s, doub
 }
 
 /// Whether a pair that involves a body-schema slot is checked this cycle; sets the links.
-bool slotPairActive(const Model& model, const DistanceData& data, const SegmentPair& pair, int& link_a,
+bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const SegmentPair& pair, int& link_a,
                     int& link_b) {
   const Segment& sa = model.segments[pair.a];
   const Segment& sb = model.segments[pair.b];
   if (sa.body_schema_slot) {
-    const BodySchemaSlot& slot = data.slots[pair.a - model.num_robot_segments];
+    const BodySchemaSlot& slot = slots[static_cast<std::size_t>(pair.a - model.num_robot_segments)];
     if (!slot.enabled) return false;
     link_a = slot.link;
   }
   if (sb.body_schema_slot) {
-    const BodySchemaSlot& slot = data.slots[pair.b - model.num_robot_segments];
+    const BodySchemaSlot& slot = slots[static_cast<std::size_t>(pair.b - model.num_robot_segments)];
     if (!slot.enabled) return false;
     link_b = slot.link;
     if ((slot.ignore_mask >> pair.a) & 1U) return false;
@@ -76,20 +102,86 @@ bool slotPairActive(const Model& model, const DistanceData& data, const SegmentP
   return true;
 }
 
+/// Writes pair i's result from its closest primitive pair (pa, pb: core distance `core`, parameters
+/// s, t; surface distance `best`): normal, witness points and, below the threshold, the row.
+/// Inlined into every loop (GCC otherwise keeps one out-of-line copy: a call per pair).
+REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const KinematicsData& kin, DistanceData& data,
+                                            const DistanceOptions& options, int i, int link_a, int link_b,
+                                            double best, double core, int pa, int pb, double s, double t) {
+  PairDistance& out = data.pairs[i];
+  const SegmentW& A = data.prim_W[pa];
+  const SegmentW& B = data.prim_W[pb];
+  const Eigen::Vector3d c_a = A.start + s * A.d;
+  const Eigen::Vector3d c_b = B.start + t * B.d;
+  // Unit normal from b towards a; coincident cores: the direction between the link origins.
+  Eigen::Vector3d n;
+  out.well_defined = core > kCoincidentEps;
+  if (out.well_defined) {
+    n = (c_a - c_b) * (1.0 / core);
+  } else {
+    n = kin.X_W_L[link_a].translation() - kin.X_W_L[link_b].translation();
+    const double norm = n.norm();
+    n = norm > kCoincidentEps ? Eigen::Vector3d(n / norm) : Eigen::Vector3d::UnitZ();
+  }
+  out.active = true;
+  out.exact = true;
+  out.distance = best;
+  out.nhat_W = n;
+  out.p_W_a = c_a - data.prim_r[pa] * n;
+  out.p_W_b = c_b + data.prim_r[pb] * n;
+  out.has_row = best < options.row_threshold;
+  if (out.has_row)
+    computeDirectionalRow(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n, data.rows.row(i));
+}
+
+/// The closest primitive pair of segments sa and sb, computed directly (slot pairs, refinement);
+/// the same arithmetic and order as the flat loop of computeSegmentDistances.
+void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceData& data,
+                        const DistanceOptions& options, int i, const Segment& sa, const Segment& sb, int link_a,
+                        int link_b) {
+  const SegmentW* prim = data.prim_W.data();
+  const double* radius = data.prim_r.data();
+  double best = std::numeric_limits<double>::infinity(), best_core = 0.0, best_s = 0.0, best_t = 0.0;
+  int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
+  for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
+    for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
+      double s, t;
+      const double core = coreDistance(prim[pa], prim[pb], s, t);
+      const double d = core - radius[pa] - radius[pb];
+      if (d < best) {
+        best = d;
+        best_core = core;
+        best_s = s;
+        best_t = t;
+        best_pa = pa;
+        best_pb = pb;
+      }
+    }
+  }
+  finishPair(model, kin, data, options, i, link_a, link_b, best, best_core, best_pa, best_pb, best_s, best_t);
+}
+
 }  // namespace
 
 void computeSegmentDistances(const Model& model, const KinematicsData& kin, DistanceData& data,
                              const DistanceOptions& options) {
+  computeSegmentDistances(model, kin, data.slots, data, options);
+}
+
+void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                             DistanceData& data, const DistanceOptions& options) {
   assert(data.pairs.size() == model.pairs.size());
   assert(data.prim_W.size() == model.primitives.size());
   constexpr double kInf = std::numeric_limits<double>::infinity();
+  const bool prune = options.prune_distance < kInf;
 
-  // 1. Every enabled primitive's core into W, once (a primitive takes part in several pairs).
+  // 1. Every enabled primitive's core into W, once (a primitive takes part in several pairs); with
+  //    the broad phase, every robot segment's bounding sphere centre too.
   const int nseg = static_cast<int>(model.segments.size());
   for (int s = 0; s < nseg; ++s) {
     const Segment& seg = model.segments[s];
     if (seg.body_schema_slot) {
-      const BodySchemaSlot& slot = data.slots[s - model.num_robot_segments];
+      const BodySchemaSlot& slot = slots[static_cast<std::size_t>(s - model.num_robot_segments)];
       if (!slot.enabled) continue;
       const Eigen::Isometry3d& X = kin.X_W_L[slot.link];
       data.prim_W[seg.first_primitive].set(X * slot.a_L, X * slot.b_L);
@@ -97,6 +189,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
       continue;
     }
     const Eigen::Isometry3d& X = kin.X_W_L[seg.link];
+    if (prune) data.bound_center_W[s] = X * data.bound_center_L[s];
     for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
       const Primitive& prim = model.primitives[p];
       SegmentW& w = data.prim_W[p];
@@ -114,54 +207,62 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
     }
   }
 
-  // 2. The core closest points of every robot primitive pair, in one tight loop (independent
-  //    iterations: the long sqrt / division latency chains of neighbouring pairs overlap).
+  // 2. Broad phase: robot pairs whose bounding spheres are more than prune_distance apart get that
+  //    gap as a lower bound; the others are computed exactly below.
   const SegmentW* prim = data.prim_W.data();
   const double* radius = data.prim_r.data();
-  const int npp = static_cast<int>(data.pp_a.size());
-  for (int k = 0; k < npp; ++k) {
-    double s, t;  // locals: writing through pp_s / pp_t directly would force reloads (aliasing)
-    data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], s, t);
-    data.pp_s[k] = s;
-    data.pp_t[k] = t;
+  const int* exact_pairs = data.robot_pairs.data();
+  int nexact = static_cast<int>(data.robot_pairs.size());
+  data.num_pruned_pairs = 0;
+  double pruned_floor = kInf;  // the smallest lower bound of a skipped pair
+  if (prune) {
+    nexact = 0;
+    for (const int i : data.robot_pairs) {
+      const SegmentPair& pair = model.pairs[i];
+      const double gap = (data.bound_center_W[pair.a] - data.bound_center_W[pair.b]).norm() -
+                         data.bound_radius[pair.a] - data.bound_radius[pair.b];
+      if (gap > options.prune_distance) {
+        PairDistance& out = data.pairs[i];
+        out.active = true;
+        out.exact = false;
+        out.has_row = false;
+        out.distance = gap;
+        pruned_floor = std::min(pruned_floor, gap);
+        ++data.num_pruned_pairs;
+      } else {
+        data.exact_pairs[nexact++] = i;
+      }
+    }
+    exact_pairs = data.exact_pairs.data();
+  }
+  data.num_exact_pairs = nexact;
+
+  // 3. The core closest points of every primitive pair of those robot pairs, in one tight loop
+  //    (independent iterations: the long sqrt / division latency chains of neighbouring pairs overlap).
+  if (!prune) {
+    const int npp = static_cast<int>(data.pp_a.size());
+    for (int k = 0; k < npp; ++k) {
+      double s, t;  // locals: writing through pp_s / pp_t directly would force reloads (aliasing)
+      data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], s, t);
+      data.pp_s[k] = s;
+      data.pp_t[k] = t;
+    }
+  } else {
+    for (int e = 0; e < nexact; ++e) {
+      const int i = exact_pairs[e];
+      for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k) {
+        double s, t;
+        data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], s, t);
+        data.pp_s[k] = s;
+        data.pp_t[k] = t;
+      }
+    }
   }
 
-  // 3. Every checked pair: the best of its primitive pairs, then normal, witness points and row.
-  data.closest = -1;
-  double closest_d = kInf;
-  // Inlined into both loops (GCC otherwise keeps one out-of-line copy: a call per pair).
-  auto finish = [&](int i, int link_a, int link_b, double best, double core, int pa, int pb, double s,
-                    double t) REFLEX_ALWAYS_INLINE {
-    PairDistance& out = data.pairs[i];
-    const SegmentW& A = prim[pa];
-    const SegmentW& B = prim[pb];
-    const Eigen::Vector3d c_a = A.start + s * A.d;
-    const Eigen::Vector3d c_b = B.start + t * B.d;
-    // Unit normal from b towards a; coincident cores: the direction between the link origins.
-    Eigen::Vector3d n;
-    out.well_defined = core > kCoincidentEps;
-    if (out.well_defined) {
-      n = (c_a - c_b) * (1.0 / core);
-    } else {
-      n = kin.X_W_L[link_a].translation() - kin.X_W_L[link_b].translation();
-      const double norm = n.norm();
-      n = norm > kCoincidentEps ? Eigen::Vector3d(n / norm) : Eigen::Vector3d::UnitZ();
-    }
-    out.active = true;
-    out.distance = best;
-    out.nhat_W = n;
-    out.p_W_a = c_a - radius[pa] * n;
-    out.p_W_b = c_b + radius[pb] * n;
-    out.has_row = best < options.row_threshold;
-    if (out.has_row)
-      computeDirectionalRow(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n, data.rows.row(i));
-    if (best < closest_d) {
-      closest_d = best;
-      data.closest = i;
-    }
-  };
-
-  for (const int i : data.robot_pairs) {
+  // 4. Every exactly computed robot pair: the best of its primitive pairs, then normal, witness
+  //    points and row.
+  for (int e = 0; e < nexact; ++e) {
+    const int i = exact_pairs[e];
     const SegmentPair& pair = model.pairs[i];
     int k_best = data.pp_begin[i];
     double best = data.pp_core[k_best] - radius[data.pp_a[k_best]] - radius[data.pp_b[k_best]];
@@ -172,53 +273,59 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
         k_best = k;
       }
     }
-    finish(i, model.segments[pair.a].link, model.segments[pair.b].link, best, data.pp_core[k_best],
-           data.pp_a[k_best], data.pp_b[k_best], data.pp_s[k_best], data.pp_t[k_best]);
+    finishPair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link, best,
+               data.pp_core[k_best], data.pp_a[k_best], data.pp_b[k_best], data.pp_s[k_best], data.pp_t[k_best]);
   }
 
-  // Pairs with a body-schema slot: usually all disabled; each computed directly when active.
+  // 5. Pairs with a body-schema slot: usually all disabled; each computed directly when active.
   bool any_slot = false;
-  for (const BodySchemaSlot& slot : data.slots) any_slot = any_slot || slot.enabled;
-  if (!any_slot) {
-    for (const int i : data.slot_pairs) {
-      PairDistance& out = data.pairs[i];
-      out.active = false;
-      out.has_row = false;
-      out.distance = kInf;
-    }
-    return;
-  }
+  for (const BodySchemaSlot& slot : slots) any_slot = any_slot || slot.enabled;
   for (const int i : data.slot_pairs) {
     const SegmentPair& pair = model.pairs[i];
     const Segment& sa = model.segments[pair.a];
     const Segment& sb = model.segments[pair.b];
     int link_a = sa.link, link_b = sb.link;
-    if (!slotPairActive(model, data, pair, link_a, link_b)) {
+    if (!any_slot || !slotPairActive(model, slots, pair, link_a, link_b)) {
       PairDistance& out = data.pairs[i];
       out.active = false;
       out.has_row = false;
       out.distance = kInf;
       continue;
     }
-    double best = kInf, best_core = 0.0, best_s = 0.0, best_t = 0.0;
-    int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
-    for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
-      for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
-        double s, t;
-        const double core = coreDistance(prim[pa], prim[pb], s, t);
-        const double d = core - radius[pa] - radius[pb];
-        if (d < best) {
-          best = d;
-          best_core = core;
-          best_s = s;
-          best_t = t;
-          best_pa = pa;
-          best_pb = pb;
-        }
-      }
-    }
-    finish(i, link_a, link_b, best, best_core, best_pa, best_pb, best_s, best_t);
+    computeSegmentPair(model, kin, data, options, i, sa, sb, link_a, link_b);
   }
+
+  // 6. The closest active pair (the lowest index among equals): over the exact pairs; then a skipped
+  //    pair whose lower bound is below that distance is computed exactly, so `closest` is the true one.
+  data.closest = -1;
+  double closest_d = kInf;
+  auto take = [&](int i) {
+    const double d = data.pairs[i].distance;
+    if (d < closest_d || (d == closest_d && i < data.closest)) {
+      closest_d = d;
+      data.closest = i;
+    }
+  };
+  for (int e = 0; e < nexact; ++e) take(exact_pairs[e]);
+  if (any_slot)
+    for (const int i : data.slot_pairs)
+      if (data.pairs[i].active) take(i);
+  if (pruned_floor < closest_d) {
+    for (const int i : data.robot_pairs) {
+      if (data.pairs[i].exact || !(data.pairs[i].distance < closest_d)) continue;
+      refinePairDistance(model, kin, data, i, options);
+      take(i);
+    }
+  }
+}
+
+void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceData& data, int pair,
+                        const DistanceOptions& options) {
+  if (pair < 0 || pair >= static_cast<int>(data.pairs.size()) || data.pairs[pair].exact) return;
+  const SegmentPair& p = model.pairs[pair];
+  const Segment& sa = model.segments[p.a];
+  const Segment& sb = model.segments[p.b];
+  computeSegmentPair(model, kin, data, options, pair, sa, sb, sa.link, sb.link);
 }
 
 bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link,

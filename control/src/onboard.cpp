@@ -267,22 +267,10 @@ void OnboardController::fillReport(ControlResult result) noexcept {
     ar.segment_b = s.closest_pair >= 0 ? model_.segments[model_.pairs[s.closest_pair].b].name.c_str() : nullptr;
   }
   // Distances of this cycle (computed inside the controller for the measured q).
-  r.min_distance = r.virtual_distance = std::numeric_limits<double>::infinity();
-  r.min_pair = r.virtual_pair = -1;
-  for (std::size_t i = 0; i < data_.dist.pairs.size(); ++i) {
-    const PairDistance& pd = data_.dist.pairs[i];
-    if (!pd.active) continue;
-    const bool virt = model_.segments[pd.seg_b].body_schema_slot && data_.slot_virtual[pd.seg_b - model_.num_robot_segments];
-    if (virt) {
-      if (pd.distance < r.virtual_distance) {
-        r.virtual_distance = pd.distance;
-        r.virtual_pair = static_cast<int>(i);
-      }
-    } else if (pd.distance < r.min_distance) {
-      r.min_distance = pd.distance;
-      r.min_pair = static_cast<int>(i);
-    }
-  }
+  r.min_distance = data_.closest_physical.distance;
+  r.min_pair = data_.closest_physical.pair;
+  r.virtual_distance = data_.closest_virtual.distance;
+  r.virtual_pair = data_.closest_virtual.pair;
   r.arm_distance = armToArmDistance(model_, cm_, data_);
   r.counts.estop_count = data_.estop_count;
   r.counts.guard_count = data_.guard_count;

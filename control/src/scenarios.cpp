@@ -34,17 +34,8 @@ void ScenarioContext::detach(int slot) {
   if (detachBodySchemaSegment(data.dist, slot)) data.slot_virtual[slot] = false;
 }
 
-double armToArmDistance(const Model& model, const ControllerModel& cm, const ControllerData& data) {
-  double d = std::numeric_limits<double>::infinity();
-  const std::uint64_t left = cm.arms[kLeft].segment_mask, right = cm.arms[kRight].segment_mask;
-  for (std::size_t i = 0; i < data.dist.pairs.size(); ++i) {
-    const PairDistance& pd = data.dist.pairs[i];
-    if (!pd.active || pd.seg_b >= model.num_robot_segments) continue;
-    const bool la = (left >> pd.seg_a) & 1U, lb = (left >> pd.seg_b) & 1U;
-    const bool ra = (right >> pd.seg_a) & 1U, rb = (right >> pd.seg_b) & 1U;
-    if ((la && rb) || (ra && lb)) d = std::min(d, pd.distance);
-  }
-  return d;
+double armToArmDistance(const Model& /*model*/, const ControllerModel& /*cm*/, const ControllerData& data) {
+  return data.closest_between_arms.distance;  // computed by computeControl (exact under the broad phase)
 }
 
 Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm) {

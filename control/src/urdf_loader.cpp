@@ -473,9 +473,9 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
   model.num_robot_segments = static_cast<int>(model.segments.size());
   if (model.num_robot_segments == 0)
     fail(origin, "no link has collision geometry; add spheres or cylinders (read as capsules)");
-  if (model.num_robot_segments + kBodySchemaSlots > 64)
+  if (model.num_robot_segments + kBodySchemaSlots > kMaxSegments)
     fail(origin, "too many collision segments (" + std::to_string(model.num_robot_segments) +
-                     "); at most " + std::to_string(64 - kBodySchemaSlots) + " are supported");
+                     "); at most " + std::to_string(kMaxSegments - kBodySchemaSlots) + " are supported");
   for (int s = 0; s < kBodySchemaSlots; ++s) {
     Segment seg;
     seg.name = "body_schema_" + std::to_string(s);

@@ -1,6 +1,9 @@
-// bench_distance: the self-distance sweep of the shipped robot, side by side with FCL and KDL
-// (issue 3, item 8). Not a CTest test; run by hand:
-//   build-*/bin/bench_distance --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+// bench_distance: the self-distance sweep of a robot, side by side with FCL and KDL (issue 3,
+// item 8), and the broad phase against the brute force (issue 12, item 7). Not a CTest test; run by hand:
+//   build-*/bin/bench_distance [--robot=NAME] --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+// --robot: a robot of bringup/robots by name (asimo_like, the default; many_segment_humanoid, the
+// >= 1,000-pair robot; small_humanoid; mesh_humanoid) or a URDF path; its collision configuration
+// is the default one next to it. Every benchmark prints `pairs` (checked robot pairs).
 //
 // Every benchmark cycles through the same 256 random configurations (within the joint limits),
 // precomputed outside the timed loop; one iteration = one configuration.
@@ -11,12 +14,18 @@
 //                   minimum over each pair's primitive pairs, nearest points on
 //   FCL_Analytic/*  the same, calling FCL's analytic functions (fcl::detail::sphereSphereDistance,
 //                   sphereCapsuleDistance, capsuleCapsuleDistance) directly: FCL without its dispatch
+//   Reflex_Broadphase/prune:1 vs prune:0   the control cycle's sweep (FK + every pair, rows below
+//                   d_safe = 0.10 m) with the broad phase skipping pairs whose bounding spheres are more
+//                   than 0.10 m apart, and the same without it (the brute force, the peer in the same
+//                   process); ns_per_pair = sweep time / checked pairs, exact_share = share of the pairs
+//                   computed exactly
 //   KDL/*           kdl_parser tree, one KDL::Chain per tip: ChainFkSolverPos_recursive +
 //                   ChainJntToJacSolver; tips: both hands, the 17 segment links, every link
 //                   (Reflex: one computeForwardKinematics + computePointJacobian per tip)
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "bench_support.hpp"
 
 #include <benchmark/benchmark.h>
 #include <fcl/narrowphase/detail/primitive_shape_algorithm/capsule_capsule.h>
@@ -32,6 +41,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <memory>
 #include <random>
@@ -46,6 +56,9 @@ using namespace reflex::control;
 constexpr int kConfigurations = 256;
 
 std::string robotPath(const std::string& file) { return std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/" + file; }
+
+/// The URDF of --robot (bench_support.hpp).
+std::string g_urdf = robotPath("asimo_like.urdf");
 
 struct FclPrimitive {
   std::shared_ptr<fcl::CollisionGeometryd> geometry;
@@ -73,7 +86,7 @@ struct Setup {
   std::vector<std::pair<int, int>> robot_pairs;      // checked robot segment pairs
   KDL::Tree tree;
 
-  Setup() : model(loadModel(robotPath("asimo_like.urdf"), loadCollisionConfig(robotPath("asimo_like.collision.yaml")))) {
+  Setup() : model(loadModel(g_urdf, loadCollisionConfig(defaultCollisionConfigPath(g_urdf)))) {
     std::mt19937_64 rng(42);
     for (int c = 0; c < kConfigurations; ++c) {
       Eigen::VectorXd q(model.nq);
@@ -107,7 +120,7 @@ struct Setup {
     }
     for (const SegmentPair& p : model.pairs)
       if (!model.segments[p.b].body_schema_slot) robot_pairs.emplace_back(p.a, p.b);
-    if (!kdl_parser::treeFromFile(robotPath("asimo_like.urdf"), tree)) throw std::runtime_error("kdl_parser failed");
+    if (!kdl_parser::treeFromFile(g_urdf, tree)) throw std::runtime_error("kdl_parser failed on " + g_urdf);
   }
 
   std::unique_ptr<KdlTip> kdlTip(const std::string& tip) const {
@@ -170,6 +183,32 @@ void Reflex_Sweep_RowsBelow40mm(benchmark::State& state) { sweep(state, 0.04, tr
 void Reflex_Sweep_RowsAll(benchmark::State& state) { sweep(state, std::numeric_limits<double>::infinity(), true); }
 void Reflex_DistancesOnly_RowsOff(benchmark::State& state) {
   sweep(state, -std::numeric_limits<double>::infinity(), false);
+}
+
+/// The control cycle's sweep with (range 0 = 1) or without the broad phase.
+void Reflex_Broadphase(benchmark::State& state) {
+  const Setup& s = setup();
+  KinematicsData kin(s.model);
+  DistanceData dist(s.model);
+  DistanceOptions options;
+  options.row_threshold = 0.10;
+  if (state.range(0) != 0) options.prune_distance = 0.10;
+  int c = 0;
+  double exact = 0.0;
+  for (auto _ : state) {
+    computeForwardKinematics(s.model, kin, s.qs[c]);
+    computeSegmentDistances(s.model, kin, dist, options);
+    benchmark::DoNotOptimize(dist.pairs.data());
+    benchmark::ClobberMemory();
+    exact += dist.num_exact_pairs;
+    c = (c + 1) % kConfigurations;
+  }
+  const double pairs = static_cast<double>(s.robot_pairs.size());
+  state.counters["pairs"] = pairs;
+  state.counters["exact_share"] = exact / (pairs * static_cast<double>(state.iterations()));
+  // Seconds per checked pair, printed in ns: sweep time / (iterations * pairs).
+  state.counters["ns_per_pair"] = benchmark::Counter(pairs * static_cast<double>(state.iterations()) * 1e-9,
+                                                     benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 
 // ---------------------------------------------------------------- FCL
@@ -333,6 +372,7 @@ REFLEX_BENCH(Reflex_Sweep_RowsOff);
 REFLEX_BENCH(Reflex_Sweep_RowsBelow40mm);
 REFLEX_BENCH(Reflex_Sweep_RowsAll);
 REFLEX_BENCH(Reflex_DistancesOnly_RowsOff);
+REFLEX_BENCH(Reflex_Broadphase)->ArgName("prune")->Arg(1)->Arg(0);
 REFLEX_BENCH(FCL_DistancesOnly);
 REFLEX_BENCH(FCL_Analytic_DistancesOnly);
 REFLEX_BENCH(FCL_Sweep_ReflexFK);
@@ -345,4 +385,12 @@ REFLEX_BENCH(KDL_FK_Jac_AllLinks);
 
 }  // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  return reflex::control::bench::benchMain(
+      argc, argv, "bench_distance",
+      "bench_distance [--robot=NAME|PATH.urdf] [benchmark options]\n"
+      "  --robot  a robot of bringup/robots by name (default asimo_like; many_segment_humanoid:\n"
+      "           the >= 1,000-pair robot) or a URDF path; collision configuration next to it\n",
+      &g_urdf, nullptr,
+      [] { std::printf("robot: %s, %zu checked robot pairs\n", g_urdf.c_str(), setup().robot_pairs.size()); });
+}

@@ -1,7 +1,8 @@
 // Tests of control/include/reflex/control/distance.hpp on whole robots: the checked pair list, the
 // PairDistance invariants, distances and witness points against FCL at random configurations, the
 // avoidance rows against the Jacobians and against finite differences of the pair distance,
-// body-schema slots, the coincident-core fallback, and NaN joint values.
+// body-schema slots, the coincident-core fallback, NaN joint values, and the broad phase against
+// the brute force.
 #include "reflex/control/distance.hpp"
 
 #include "reflex/control/kinematics.hpp"
@@ -14,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <limits>
 #include <memory>
@@ -284,6 +286,113 @@ TEST(DistanceRows, ThresholdSelectsRows) {
   EXPECT_GT(with, 0);
   computeSegmentDistances(m, kin, dist, DistanceOptions{-std::numeric_limits<double>::infinity()});
   for (const PairDistance& pd : dist.pairs) EXPECT_FALSE(pd.has_row);
+}
+
+// ---------------------------------------------------------------- broad phase (issue 12, item 7)
+// The pruned sweep against the brute force (the unpruned sweep, itself checked against FCL above):
+// over random configurations, every pair whose true distance is within the prune distance is
+// identical bit for bit (distance, witness points, normal, row), every skipped pair reports a lower
+// bound above the prune distance and at most its true distance, the closest pair and its distance
+// are identical, and refinePairDistance turns a skipped pair into the brute-force result.
+void checkBroadPhase(const Model& m, double prune_distance, int configurations, unsigned seed) {
+  KinematicsData kin(m);
+  DistanceData brute(m), pruned(m);
+  DistanceOptions exact_options;
+  exact_options.row_threshold = prune_distance;
+  DistanceOptions prune_options = exact_options;
+  prune_options.prune_distance = prune_distance;
+  std::mt19937_64 rng(seed);
+  // A stick in the left hand: slot pairs take part too (always exact).
+  ASSERT_TRUE(attachBodySchemaSegment(m, brute, 0, m.linkIndex("l_hand"), Vector3d(0, 0, -0.08),
+                                      Vector3d(0.2, 0, -0.08), 0.02));
+  pruned.slots = brute.slots;
+  long within = 0, skipped = 0, refined = 0;
+  for (int c = 0; c < configurations; ++c) {
+    ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+    computeSegmentDistances(m, kin, brute, exact_options);
+    computeSegmentDistances(m, kin, pruned, prune_options);
+    ASSERT_EQ(pruned.closest, brute.closest) << "configuration " << c;
+    ASSERT_EQ(pruned.pairs[pruned.closest].distance, brute.pairs[brute.closest].distance);
+    ASSERT_TRUE(pruned.pairs[pruned.closest].exact);
+    for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+      const PairDistance& b = brute.pairs[i];
+      const PairDistance& p = pruned.pairs[i];
+      ASSERT_TRUE(b.exact);
+      ASSERT_EQ(p.active, b.active);
+      if (!b.active) continue;
+      const std::string name = m.segments[b.seg_a].name + "-" + m.segments[b.seg_b].name;
+      if (!p.exact) {
+        ++skipped;
+        EXPECT_GT(p.distance, prune_distance) << name;
+        EXPECT_LE(p.distance, b.distance) << name << ": the broad phase's bound must be a lower bound";
+        EXPECT_FALSE(p.has_row);
+        if (skipped % 7 == 0) {  // refined: the brute-force result exactly
+          refinePairDistance(m, kin, pruned, static_cast<int>(i), prune_options);
+          EXPECT_TRUE(p.exact);
+          EXPECT_EQ(p.distance, b.distance) << name;
+          EXPECT_EQ(p.p_W_a, b.p_W_a) << name;
+          EXPECT_EQ(p.nhat_W, b.nhat_W) << name;
+          ++refined;
+        }
+        continue;
+      }
+      if (b.distance <= prune_distance) ++within;
+      EXPECT_EQ(p.distance, b.distance) << name;
+      EXPECT_EQ(p.p_W_a, b.p_W_a) << name;
+      EXPECT_EQ(p.p_W_b, b.p_W_b) << name;
+      EXPECT_EQ(p.nhat_W, b.nhat_W) << name;
+      EXPECT_EQ(p.well_defined, b.well_defined) << name;
+      ASSERT_EQ(p.has_row, b.has_row) << name;
+      if (p.has_row) {
+        EXPECT_EQ(pruned.rows.row(static_cast<Eigen::Index>(i)), brute.rows.row(static_cast<Eigen::Index>(i))) << name;
+      }
+    }
+  }
+  // Not vacuous: pairs inside the distance were compared, and pairs were skipped and refined.
+  std::printf("%s, prune distance %.3f m, %d configurations: %ld pairs within it identical, %ld skipped "
+              "(lower bounds), %ld of them refined\n", m.name.c_str(), prune_distance, configurations, within,
+              skipped, refined);
+  EXPECT_GT(within, configurations / 2);
+  EXPECT_GT(skipped, configurations);
+  EXPECT_GT(refined, 0);
+}
+
+TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheShippedRobot) {
+  const Model m = test::loadRobot(test::kAsimo);
+  checkBroadPhase(m, 0.10, 400, 21);
+  checkBroadPhase(m, 0.01, 200, 22);
+}
+
+TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheSecondHumanoid) {
+  checkBroadPhase(test::loadRobot(test::kSmall), 0.10, 400, 23);
+}
+
+TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheThousandPairRobot) {
+  const Model m = test::loadRobot("many_segment_humanoid");
+  // The benchmark robot of issue 12, item 7 (bringup/robots/make_many_segment_humanoid.py).
+  EXPECT_GE(robotPairCount(m), 1000);
+  checkBroadPhase(m, 0.10, 150, 24);
+}
+
+TEST(DistanceBroadPhase, BoundingSpheresEncloseEveryPrimitive) {
+  // Independent of the sweep: sample points on every primitive's surface and check the segment's
+  // bounding sphere (in the link frame) contains them.
+  const Model m = test::loadRobot("many_segment_humanoid");
+  const DistanceData dist(m);
+  std::mt19937_64 rng(25);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int s = 0; s < m.num_robot_segments; ++s) {
+    const Segment& seg = m.segments[s];
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const Primitive& prim = m.primitives[p];
+      for (int k = 0; k < 200; ++k) {
+        const Vector3d dir = Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+        const Vector3d x = prim.a_L + unit(rng) * (prim.b_L - prim.a_L) + prim.radius * dir;
+        EXPECT_LE((x - dist.bound_center_L[s]).norm(), dist.bound_radius[s] + 1e-12) << seg.name;
+      }
+    }
+  }
 }
 
 // ---------------------------------------------------------------- body schema

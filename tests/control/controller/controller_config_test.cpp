@@ -215,5 +215,22 @@ TEST(ControllerConfig, ConfigurationsThatValidateButCannotWorkAreRefused) {
   expectError("k_virtual: 1000\n", "k_virtual = 1000");
 }
 
+TEST(ControllerConfig, AModelWithMoreSegmentsThanTheMasksHoldIsRefusedNamingCountAndLimit) {
+  // Segment sets are 64-bit masks (kMaxSegments): a model built by hand past the loader's check is
+  // refused at set-up, never truncated. 64 passes, 65 fails.
+  Model model = testing::shippedModel();
+  ASSERT_LE(model.segments.size(), static_cast<std::size_t>(kMaxSegments));
+  while (model.segments.size() < static_cast<std::size_t>(kMaxSegments)) model.segments.push_back(model.segments.back());
+  EXPECT_NO_THROW(makeControllerModel(model, defaultControllerConfig()));
+  model.segments.push_back(model.segments.back());
+  try {
+    makeControllerModel(model, defaultControllerConfig());
+    FAIL() << "65 segments accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("has 65 segments (collision segments and body-schema slots); at most 64 are supported"),
+              std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace reflex::control

@@ -447,5 +447,81 @@ TEST(PredictiveGuard, JointLeversBoundHowFarAnySegmentPointMoves) {
   EXPECT_GT(tightest, 0.5) << "the levers are bounds, but not absurdly loose ones";
 }
 
+// ---------------------------------------------------------------- broad phase (issue 12, item 7)
+// The control cycle skips pairs whose bounding spheres are beyond max(d_safe, d_a) (d_b in the
+// guards). Its output must be the brute force's bit for bit: every built-in scenario and a closed
+// loop where the predictive guard acts, run with ControllerModel::broad_phase on and off, on the
+// shipped robot and on the >= 1,000-pair robot, give identical commands, statuses and reports.
+namespace broad_phase {
+
+void expectSameRuns(const SimResult& pruned, const SimResult& brute, const std::string& what) {
+  ASSERT_EQ(pruned.samples.size(), brute.samples.size()) << what;
+  for (std::size_t k = 0; k < brute.samples.size(); ++k) {
+    const SimSample& p = pruned.samples[k];
+    const SimSample& b = brute.samples[k];
+    ASSERT_EQ(p.q, b.q) << what << " cycle " << k;
+    ASSERT_EQ(p.qdot, b.qdot) << what << " cycle " << k;
+    ASSERT_EQ(p.min_distance, b.min_distance) << what << " cycle " << k;
+    ASSERT_EQ(p.min_pair, b.min_pair) << what << " cycle " << k;
+    ASSERT_EQ(p.virtual_distance, b.virtual_distance) << what << " cycle " << k;
+    ASSERT_EQ(p.arm_distance, b.arm_distance) << what << " cycle " << k;
+    for (int a = 0; a < 2; ++a) {
+      ASSERT_EQ(p.arms[a].distance, b.arms[a].distance) << what << " cycle " << k << " arm " << a;
+      ASSERT_EQ(p.arms[a].closest_pair, b.arms[a].closest_pair) << what << " cycle " << k << " arm " << a;
+      ASSERT_EQ(p.arms[a].f, b.arms[a].f) << what << " cycle " << k;
+      ASSERT_EQ(p.arms[a].force_dir_W, b.arms[a].force_dir_W) << what << " cycle " << k;
+    }
+  }
+  EXPECT_EQ(pruned.guard_cycles, brute.guard_cycles) << what;
+  EXPECT_EQ(pruned.walking_holds, brute.walking_holds) << what;
+  EXPECT_EQ(pruned.estop_fired, brute.estop_fired) << what;
+  EXPECT_EQ(pruned.min_distance, brute.min_distance) << what;
+}
+
+void checkRobot(const Model& model) {
+  ControllerModel pruned = makeControllerModel(model, defaultControllerConfig());
+  ControllerModel brute = pruned;
+  brute.broad_phase = false;
+  ASSERT_TRUE(pruned.broad_phase);
+  for (const Scenario& sc : builtinScenarios()) {
+    expectSameRuns(runScenario(model, pruned, sc), runScenario(model, brute, sc), model.name + " " + sc.name);
+  }
+  // A closed loop whose targets jump into the chest and across, priority flipping, guard_margin 0:
+  // the predictive guard acts (the benchmark's GuardActing loop).
+  pruned.params.guard_margin = brute.params.guard_margin = 0.0;
+  ControllerData dp(model, pruned), db(model, brute);
+  Eigen::VectorXd qp = restConfiguration(model, pruned), qb = qp;
+  const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
+  const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
+  const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
+  long skipped = 0;
+  for (int k = 0; k < 1600; ++k) {
+    ControlInput in;
+    for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
+    in.priority = static_cast<MotionPriority>((k / 120) % 3);
+    ASSERT_EQ(computeControl(model, pruned, dp, qp, in), computeControl(model, brute, db, qb, in)) << k;
+    ASSERT_EQ(dp.qdot, db.qdot) << model.name << " cycle " << k;
+    ASSERT_EQ(dp.closest_physical.distance, db.closest_physical.distance) << k;
+    ASSERT_EQ(dp.closest_physical.pair, db.closest_physical.pair) << k;
+    ASSERT_EQ(dp.closest_between_arms.distance, db.closest_between_arms.distance) << k;
+    EXPECT_EQ(db.dist.num_pruned_pairs, 0);
+    skipped += dp.dist.num_pruned_pairs;
+    qp += dp.qdot * pruned.params.period;
+    qb += db.qdot * brute.params.period;
+  }
+  EXPECT_EQ(dp.guard_count, db.guard_count);
+  EXPECT_GT(dp.guard_count, 0U) << "the loop must make the predictive guard act";
+  EXPECT_GT(skipped, 1600) << "the broad phase must skip pairs, else this test compares nothing";
+}
+
+}  // namespace broad_phase
+
+TEST(BroadPhase, ControlOutputIsTheBruteForcesBitForBitOnTheShippedRobot) { broad_phase::checkRobot(shippedModel()); }
+
+TEST(BroadPhase, ControlOutputIsTheBruteForcesBitForBitOnTheThousandPairRobot) {
+  const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/many_segment_humanoid.urdf";
+  broad_phase::checkRobot(loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf))));
+}
+
 }  // namespace
 }  // namespace reflex::control

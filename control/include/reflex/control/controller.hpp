@@ -20,7 +20,7 @@
 //               -> data.qdot (nq), data.arms[i] status, data.estop
 //               then the plant: stepPlant (simulation.hpp) applies data.qdot and advances walking
 //               only on kOk (walkingMayAdvance) and only by steps checkWalkingStep accepts
-// Extending: a new criterion in the nullspace goes into the xi terms of computeArm() in controller.cpp.
+// Extending: a new criterion in the nullspace goes into the xi terms of blendControllers() in controller.cpp.
 #pragma once
 
 #include "reflex/control/distance.hpp"
@@ -158,10 +158,21 @@ struct ControllerModel {
   };
   ControllerParams params;
   std::array<Arm, 2> arms;
+  /// Which arm moves each link: kLeft, kRight or -1 (neither; the left arm wins if both configured
+  /// chains contain the link). Computed once here; a body-schema slot belongs to its link's arm.
+  std::vector<int> link_owner;
+  /// Which arm moves each robot segment (link_owner of its link), per index < num_robot_segments.
+  std::vector<int> segment_owner;
+  /// The distance broad phase (DistanceOptions::prune_distance): pairs whose bounding spheres are
+  /// farther apart than max(d_safe, d_a) (d_b for the predictive and walking guards) are not computed
+  /// exactly, as they take part in no term. The control output is the same either way (tested bit
+  /// for bit); false (only a program sets it: tests, benchmarks) computes every pair exactly.
+  bool broad_phase = true;
 };
 
 /// Resolves names against the model. Throws ConfigError for unknown joints/links, wrong rest size,
-/// an arm with more than kMaxArmDof joints, or joints shared between arms.
+/// an arm with more than kMaxArmDof joints, joints shared between arms, or a model with more than
+/// kMaxSegments segments (naming the count and the limit).
 ControllerModel makeControllerModel(const Model& model, const ControllerConfig& config);
 
 struct HandCommand {
@@ -201,6 +212,65 @@ struct Trajectory {
 
 enum class ControlResult { kOk, kFrozen, kRecovering, kBadInput };
 
+/// Sum of the virtual forces acting on one arm (Eq. 14-18), accumulated pair by pair.
+struct VirtualForceSum {
+  Eigen::Vector3d weighted_force = Eigen::Vector3d::Zero();  ///< sum |F_ij| F_ij
+  Eigen::Vector3d weighted_point = Eigen::Vector3d::Zero();  ///< sum |F_ij| P_cp1,ij
+  double weight = 0.0;                                        ///< sum |F_ij|
+
+  /// Adds the pair force F_ij = k (d_a - d_ij) e_ij (Eq. 14) applied at p_cp1 (nothing if d >= d_a).
+  /// e_ij is the unit direction from the other segment towards the arm (Eq. 16).
+  void add(double k, double d_a, double d, const Eigen::Vector3d& e, const Eigen::Vector3d& p_cp1);
+  /// F_virtual^all (Eq. 17); zero if no pair contributed.
+  Eigen::Vector3d force() const;
+  /// P_cp1^all (Eq. 18); zero if no pair contributed.
+  Eigen::Vector3d point() const;
+};
+
+/// The working state of one arm through the stages of one cycle (controller.cpp, computeArm):
+/// trajectory -> pair terms -> merged avoidance Jacobian -> WBM / CA / blend -> joint position
+/// limits -> safety filter -> velocity scaling -> step cap. Each stage reads what the earlier ones
+/// wrote. The pair lists hold one entry per candidate pair of the arm at most: ControllerData sizes
+/// them from ControllerModel::Arm::candidate_pairs at set-up, so no pair is ever dropped.
+/// Arm-joint quantities are in ControllerModel::Arm::q order (rad, rad/s); points in W (m).
+struct ArmWorkspace {
+  /// One pair inside the yellow zone: its share of the merged force (Eq. 14-18).
+  struct ForceTerm {
+    int pair = -1;        ///< index into Model::pairs
+    int side = 1;         ///< +1: the arm's point is p_W_a (force along +nhat_W); -1: p_W_b
+    double weight = 0.0;  ///< |F_ij| = k (d_a - d_ij) (m/s)
+  };
+  // trajectory stage
+  ArmVector q;                          ///< the arm's joint positions
+  Eigen::Vector3d hand_W = Eigen::Vector3d::Zero();            ///< reaching point
+  TaskJacobian J_hand;                  ///< 3 x n Jacobian of hand_W
+  Eigen::Vector3d hand_velocity_W = Eigen::Vector3d::Zero();   ///< task velocity of Eq. 2 (m/s)
+  bool target_given = false;            ///< the hand follows a target this cycle
+  // pair-term stage
+  std::vector<ForceTerm> force_terms;   ///< pairs inside the yellow zone; first num_force_terms valid
+  int num_force_terms = 0;
+  std::vector<int> guarded_pairs;       ///< pairs inside the orange zone with a row (safety filter)
+  int num_guarded = 0;
+  std::vector<double> other_rate;       ///< per guarded pair: rate of d from everything but this arm (m/s)
+  VirtualForceSum forces;
+  ArmRow avoidance_gradient;            ///< sum of row (d_safe - d) over pairs within d_safe (Eq. 5)
+  double d_other_arm = 0.0;             ///< closest contact with the other arm (m)
+  double d_static = 0.0;                ///< closest contact with what no arm moves (m)
+  // merged-Jacobian stage (Eq. 17-18)
+  TaskJacobian J_avoid;                 ///< weighted relative Jacobian of the force pairs (3 x n)
+  double force_magnitude = 0.0;         ///< |F^all| (m/s)
+  Eigen::Vector3d force_dir_W = Eigen::Vector3d::Zero();       ///< unit direction of F^all
+  // blend stage and after
+  ArmVector qdot;                       ///< the arm's joint velocities, refined stage by stage
+  ArmVector v_lo, v_hi;                 ///< velocity box that keeps the step inside the joint range
+};
+
+/// The closest active pair of one kind in this cycle's distances (computeControl fills it).
+struct ClosestPair {
+  double distance = std::numeric_limits<double>::infinity();  ///< m; +inf if none
+  int pair = -1;                                              ///< index into Model::pairs, -1 if none
+};
+
 /// Per-cycle state and scratch, sized from the model.
 struct ControllerData {
   ControllerData(const Model& model, const ControllerModel& cm);
@@ -213,6 +283,11 @@ struct ControllerData {
   EstopState estop = EstopState::kClear;
   int estop_pair = -1;                  ///< pair that triggered the last e-stop
   std::uint64_t estop_count = 0;
+  /// This cycle's closest physical pair (the red-zone test's; virtual slots never count), closest
+  /// pair with a virtual slot, and closest robot pair between a left-arm and a right-arm segment (the
+  /// paper's Fig. 13), from data.dist, exact also where the broad phase skipped pairs. Written
+  /// whenever the distances are computed (not on kBadInput): callers read them instead of rescanning.
+  ClosestPair closest_physical, closest_virtual, closest_between_arms;
   std::array<bool, kBodySchemaSlots> slot_virtual{};  ///< virtual slots never trigger the e-stop
   std::uint64_t bad_input_count = 0;
   /// Predictive guard: how many cycles shortened the commanded step.
@@ -234,23 +309,9 @@ struct ControllerData {
   DistanceData dist_next;
   DistanceData dist_hold;               ///< arms held still, only the uncontrolled joints moving
   // scratch
+  ArmWorkspace arm_ws;                  ///< one arm's cycle (reused by both arms)
   Eigen::MatrixXd J_full;               ///< 3 x nq
   Eigen::MatrixXd J_rel_full;           ///< 3 x nq
-};
-
-/// Sum of the virtual forces acting on one arm (Eq. 14-18), accumulated pair by pair.
-struct VirtualForceSum {
-  Eigen::Vector3d weighted_force = Eigen::Vector3d::Zero();  ///< sum |F_ij| F_ij
-  Eigen::Vector3d weighted_point = Eigen::Vector3d::Zero();  ///< sum |F_ij| P_cp1,ij
-  double weight = 0.0;                                        ///< sum |F_ij|
-
-  /// Adds the pair force F_ij = k (d_a - d_ij) e_ij (Eq. 14) applied at p_cp1 (nothing if d >= d_a).
-  /// e_ij is the unit direction from the other segment towards the arm (Eq. 16).
-  void add(double k, double d_a, double d, const Eigen::Vector3d& e, const Eigen::Vector3d& p_cp1);
-  /// F_virtual^all (Eq. 17); zero if no pair contributed.
-  Eigen::Vector3d force() const;
-  /// P_cp1^all (Eq. 18); zero if no pair contributed.
-  Eigen::Vector3d point() const;
 };
 
 /// The blending coefficient of Eq. 13.

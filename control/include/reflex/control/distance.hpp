@@ -37,6 +37,11 @@ struct PairDistance {
   bool well_defined = true;     ///< false when the core points coincided (fallback normal)
   bool active = false;          ///< false for pairs of disabled body-schema slots (distance = inf)
   bool has_row = false;         ///< rows.row(i) is valid for this cycle
+  /// false: skipped by the broad phase (DistanceOptions::prune_distance) this cycle. `distance` is
+  /// then a lower bound of the true distance, above prune_distance (the segments' bounding spheres'
+  /// gap); witness points and normal are not computed (left as they were), has_row is false.
+  /// refinePairDistance makes it exact. Always true without pruning.
+  bool exact = true;
 };
 
 /// A run-time body-schema segment: a capsule (or sphere if a_L == b_L) attached to a link.
@@ -49,9 +54,19 @@ struct BodySchemaSlot {
   std::uint64_t ignore_mask = 0;             ///< bit i set: never checked against segment i
 };
 
+/// The body-schema slots of a model (index = segment - Model::num_robot_segments).
+using BodySchemaSlots = std::array<BodySchemaSlot, kBodySchemaSlots>;
+
 struct DistanceOptions {
   /// Avoidance rows are computed for pairs with distance below this (m). +inf: every pair.
   double row_threshold = std::numeric_limits<double>::infinity();
+  /// Broad phase (issue 12, item 7): a robot-robot pair whose segments' bounding spheres (fixed in
+  /// the link frame, enclosing every primitive) are more than this apart (m) is not computed
+  /// exactly: PairDistance::exact = false, distance = that gap (a lower bound). Every pair whose
+  /// true distance is at most prune_distance is computed exactly, bit for bit as without pruning,
+  /// and so is the closest pair (`closest`, its distance identical to the unpruned sweep's).
+  /// +inf (default): no pruning, every pair exact. Pairs with a body-schema slot are always exact.
+  double prune_distance = std::numeric_limits<double>::infinity();
 };
 
 /// Per-cycle distance results and scratch, sized from the model.
@@ -60,7 +75,7 @@ struct DistanceData {
 
   std::vector<PairDistance> pairs;  ///< same order as Model::pairs
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows;  ///< npairs x nq
-  std::array<BodySchemaSlot, kBodySchemaSlots> slots;
+  BodySchemaSlots slots;            ///< the body schema computeSegmentDistances(model, kin, data) uses
   int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
   // Scratch of computeSegmentDistances (built from the model here; values valid only during the call).
   // Per primitive:
@@ -71,12 +86,30 @@ struct DistanceData {
   std::vector<int> pp_a, pp_b, pp_begin;
   std::vector<double> pp_s, pp_t, pp_core;  ///< segment parameters and core distance per entry
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
+  // Broad phase, per segment (robot segments only): bounding sphere centre in the link frame and in
+  // W, and its radius (m): every primitive of the segment lies inside it.
+  std::vector<Eigen::Vector3d> bound_center_L, bound_center_W;
+  std::vector<double> bound_radius;
+  std::vector<int> exact_pairs;              ///< robot pairs the broad phase kept this cycle (scratch)
+  int num_exact_pairs = 0;
+  int num_pruned_pairs = 0;                  ///< robot pairs the broad phase skipped this cycle
 };
 
 /// Computes every checked pair's distance, witness points, normal and (below the threshold) row.
 /// Call after computeForwardKinematics. Allocates nothing, never throws.
 void computeSegmentDistances(const Model& model, const KinematicsData& kin, DistanceData& data,
                              const DistanceOptions& options = {});
+
+/// The same with the body schema `slots` (read, never copied) instead of data.slots: a second
+/// DistanceData (a predicted configuration) computed with the body schema of the first.
+void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                             DistanceData& data, const DistanceOptions& options = {});
+
+/// Computes pair `pair` exactly (after computeSegmentDistances for the same kinematics and options):
+/// for a pair the broad phase skipped, the result computeSegmentDistances gives without pruning
+/// (row only below options.row_threshold). Other pairs: unchanged. Allocates nothing, never throws.
+void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceData& data, int pair,
+                        const DistanceOptions& options = {});
 
 /// Enables body-schema slot `slot` with a capsule [a_L, b_L] of `radius` on `link`, never checked
 /// against the segments in `ignore_mask` (the owner link's segment is always ignored).

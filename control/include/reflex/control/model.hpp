@@ -88,4 +88,10 @@ struct Model {
 /// Capacity of a body-schema slot (one capsule each) and the number of slots every model has.
 inline constexpr int kBodySchemaSlots = 4;
 
+/// Most segments a model may have, robot segments and body-schema slots together: segment sets are
+/// 64-bit masks (BodySchemaSlot::ignore_mask, ControllerModel::Arm::segment_mask). loadModel refuses
+/// a robot with more than kMaxSegments - kBodySchemaSlots collision segments, naming the count and
+/// the limit; makeControllerModel checks it again for models built by hand.
+inline constexpr int kMaxSegments = 64;
+
 }  // namespace reflex::control

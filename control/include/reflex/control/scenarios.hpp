@@ -206,7 +206,8 @@ Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm)
 const std::vector<Scenario>& builtinScenarios();
 const Scenario* findScenario(const std::string& name);
 
-/// The closest distance between a segment of the left arm and one of the right arm (m), +inf if none.
+/// The closest distance between a segment of the left arm and one of the right arm (m), +inf if none:
+/// data.closest_between_arms of the last computeControl (the pairs are not scanned again).
 double armToArmDistance(const Model& model, const ControllerModel& cm, const ControllerData& data);
 
 /// Writes the time series as CSV: header row, one row per cycle.
