@@ -6,6 +6,7 @@
 
 #include <reflex/bus/bus.hpp>
 
+#include "record_support.hpp"
 #include "samples.hpp"
 
 #include <gtest/gtest.h>
@@ -32,28 +33,11 @@ bus::BusConfig busConfig(const std::string& name) {
 // Independent decoding: the generated PubSubType directly, not the recorder's codec.
 template <class T>
 T decode(const RecordEntry& e) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  eprosima::fastrtps::rtps::SerializedPayload_t p(static_cast<std::uint32_t>(e.payload.size()));
-  std::copy(e.payload.begin(), e.payload.end(), p.data);
-  p.length = static_cast<std::uint32_t>(e.payload.size());
   T out;
-  EXPECT_TRUE(type.deserialize(&p, &out)) << e.topic;
-  EXPECT_EQ(e.type, type.getName());
+  EXPECT_TRUE(test::decodeEntry(e, out)) << e.topic << " (" << e.type << ")";
   return out;
 }
-template <class T>
-RecordEntry encode(const T& s, std::int64_t receive_ns) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  void* data = const_cast<T*>(&s);
-  eprosima::fastrtps::rtps::SerializedPayload_t p(type.getSerializedSizeProvider(data)());
-  EXPECT_TRUE(type.serialize(data, &p));
-  RecordEntry e;
-  e.receive_ns = receive_ns;
-  e.topic = bus::TopicTraits<T>::kTopicName;
-  e.type = type.getName();
-  e.payload.assign(p.data, p.data + p.length);
-  return e;
-}
+using test::encodeEntry;
 
 std::vector<std::vector<std::string>> readCsv(const std::string& path) {
   std::ifstream in(path);
@@ -202,6 +186,9 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     EXPECT_EQ(r[col(h, "right_estop")], "1");
     EXPECT_EQ(r[col(h, "left_closest_a")], "left_forearm");
     EXPECT_EQ(std::stoull(r[col(h, "overrun_count")]), 0xFFFF'FFFF'FFFF'FFF0ULL);
+    EXPECT_DOUBLE_EQ(std::stod(r[col(h, "arm_distance")]), 0.0375 + k);
+    EXPECT_EQ(std::stoull(r[col(h, "rejected_body_schema")]), 0xFFFF'FFFF'FFFF'FFFEULL);
+    EXPECT_EQ(r[col(h, "last_rejection")], "walk_goal_y_or_yaw_not_zero");
   }
   const std::string csv_obj = tempPath("objects.csv");
   EXPECT_EQ(exportCsv(file, "reflex/object_targets", csv_obj), 5u);
@@ -303,7 +290,7 @@ std::string syntheticRecording() {
   const std::int64_t t0 = 1'700'000'000'000'000'000LL;
   for (int k = 0; k <= 20; ++k) {
     msg::ControlStatus s = bus::test::controlStatus(k);
-    w.append(encode(s, t0 + k * 100'000'000LL));
+    w.append(encodeEntry(s, t0 + k * 100'000'000LL));
   }
   return file;
 }
