@@ -16,6 +16,7 @@
 //    segment first, then the left arm's.
 #include "../bad_input/controller_run.hpp"
 
+#include "reflex/control/controller.hpp"
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/urdf_loader.hpp"
@@ -66,8 +67,9 @@ TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecorded
   auto& targets = run.source->makeWriter<msg::HandTargets>();
   auto& hb = run.source->makeWriter<msg::Heartbeat>();
   ASSERT_TRUE(run.waitMatched(targets));
+  msg::HandTargets cross = bad_input::crossingTargets();
   run.pump(7s, 100ms, [&](int k) {
-    if (k == 0) targets.publish(bad_input::crossingTargets());
+    if (k == 0) targets.publish(cross);
     msg::Heartbeat h;
     h.module_name("bad_source");
     h.state(msg::STATE_RUNNING);

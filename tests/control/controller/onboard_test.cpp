@@ -518,6 +518,7 @@ TEST(OnboardRejections, OneCounterPerCauseAtTheBoundsAndTheLatestCauseNamed) {
   EXPECT_STREQ(rejectCauseName(RejectCause::kWalkUnsupportedGoal), "walk_goal_y_or_yaw_not_zero");
   EXPECT_FALSE(ctl.walkCommand(false, q0[heel] + 0.5, 0.0, 0.0, -0.2));
   EXPECT_EQ(count(RejectCause::kWalkBadValue), 1U);
+  ctl.setHandTargets(reachable(), 0.0);  // ordinary targets for the cycles below
   for (int k = 0; k < 20; ++k) ctl.step(kDt * k);
   EXPECT_EQ(port.positions()[heel], q0[heel]) << "a refused goal is not walked, not even along x";
   EXPECT_TRUE(ctl.walkCommand(true, 0.0, 5.0, 5.0, 0.0)) << "a stop ignores its goal";
@@ -537,6 +538,7 @@ TEST(OnboardRejections, OneCounterPerCauseAtTheBoundsAndTheLatestCauseNamed) {
   EXPECT_EQ(c.walk_rejected, 4U);
   EXPECT_EQ(c.schema_rejected, 1U);
   EXPECT_EQ(c.targets_rejected, 7U);
+  EXPECT_EQ(c.targets_received, 3U);
   std::uint64_t sum = 0;
   for (const std::uint64_t n : c.rejected) sum += n;
   EXPECT_EQ(sum, c.targets_rejected);
