@@ -6,6 +6,9 @@
 //    robot after the previous cycle: the JointState sample of seq - 1, kinematic plant) with the
 //    distance module (FK + computeSegmentDistances, the closest pair of a segment of the left arm and
 //    one of the right arm, by the arms' own segment masks), to 1e-9 m.
+//  - the --log CSV of the same run: min_pair is filled in every row and names the closest physical
+//    pair recomputed from the previous row's q_ columns (the positions the cycle computed from), whose
+//    distance is min_distance (to 1e-6 m: the CSV has 9 significant digits).
 //  - refusals: a hand target just beyond max_target_distance (2 m from the base origin) and a walk command with goal_y = 0.3 m
 //    (the robot walks along x only) are refused; control_status counts each on its topic and names
 //    the latest cause, the exit line lists them by cause, and the heel does not move.
@@ -24,6 +27,7 @@
 #include "record_support.hpp"
 
 #include <map>
+#include <sstream>
 
 namespace reflex::record {
 namespace {
@@ -62,7 +66,8 @@ TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecorded
                                   "--duration", "14", "-t", "reflex/joint_state", "-t", "reflex/control_status"},
                                  tempPath("recorder.log"));
   ASSERT_TRUE(recorder.started());
-  ControllerRun run(domain, 9.0, "fig13");
+  const std::string csv = tempPath("fig13_log.csv");
+  ControllerRun run(domain, 9.0, "fig13", {"--log", csv});
   ASSERT_TRUE(run.started());
   auto& targets = run.source->makeWriter<msg::HandTargets>();
   auto& hb = run.source->makeWriter<msg::Heartbeat>();
@@ -121,6 +126,53 @@ TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecorded
   EXPECT_GT(compared, 500);
   EXPECT_GT(close, 50) << "the arms came within d_a of each other: the comparison covers Fig. 13's interesting part";
   EXPECT_GT(min_recorded, 0.005) << "and never below d_r";
+
+  // The --log file: min_pair against the closest pair recomputed from the previous row's q.
+  std::istringstream text(readFile(csv));
+  std::string line;
+  auto split = [](const std::string& l) {
+    std::vector<std::string> f;
+    std::stringstream ss(l);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    return f;
+  };
+  ASSERT_TRUE(std::getline(text, line));
+  const std::vector<std::string> header = split(line);
+  auto col = [&](const std::string& name) {
+    return static_cast<std::size_t>(std::find(header.begin(), header.end(), name) - header.begin());
+  };
+  const std::size_t c_pair = col("min_pair"), c_dist = col("min_distance");
+  ASSERT_LT(c_pair, header.size());
+  std::vector<std::size_t> c_q;
+  for (int i = 0; i < model.nq; ++i) c_q.push_back(col("q_" + model.q_names[static_cast<std::size_t>(i)]));
+  control::KinematicsData kin(model);
+  control::DistanceData dist(model);
+  std::vector<std::string> prev;
+  int rows = 0;
+  while (std::getline(text, line)) {
+    const std::vector<std::string> row = split(line);
+    ASSERT_EQ(row.size(), header.size());
+    ASSERT_FALSE(row[c_pair].empty()) << "min_pair is filled in every row (row " << rows << ")";
+    if (!prev.empty()) {
+      Eigen::VectorXd q(model.nq);
+      for (int i = 0; i < model.nq; ++i) q[i] = std::stod(prev[c_q[static_cast<std::size_t>(i)]]);
+      ASSERT_TRUE(control::computeForwardKinematics(model, kin, q));
+      control::computeSegmentDistances(model, kin, dist);
+      double best = std::numeric_limits<double>::infinity(), named = best;
+      for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+        const control::PairDistance& pd = dist.pairs[i];
+        if (!pd.active) continue;
+        best = std::min(best, pd.distance);
+        if (model.segments[static_cast<std::size_t>(pd.seg_a)].name + "|" + model.segments[static_cast<std::size_t>(pd.seg_b)].name == row[c_pair])
+          named = pd.distance;
+      }
+      ASSERT_NEAR(std::stod(row[c_dist]), best, 1e-6) << "row " << rows;
+      ASSERT_NEAR(named, best, 1e-6) << "row " << rows << ": min_pair '" << row[c_pair] << "' is the closest pair";
+    }
+    prev = row;
+    ++rows;
+  }
+  EXPECT_GT(rows, 1000) << "about 9 s of rows";
 }
 
 TEST(ControlStatusOnTheBus, RefusedInputsAreCountedPerTopicAndNamedInTheStatusAndTheExitLine) {

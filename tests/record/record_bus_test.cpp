@@ -212,6 +212,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     PlayerOptions po;
     po.input = file;
     po.topics = {"reflex/control_status", "reflex/hand_targets"};
+    po.commands = true;  // hand targets are a command topic: played only when asked (issue 17, item 12)
     po.bus = busConfig("player");
     po.delay = 1.0;
     po.restamp = restamp;
@@ -243,17 +244,23 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
 
   // Play everything (no --topic): every recorded sample but the controller's protection state, a
   // live controller's claim that a replay must not make beside a live controller (issue 16, item 16);
-  // named with --topic it is played.
-  for (bool named : {false, true}) {
+  // named with --topic it is played. By default observations only: the four command topics of this
+  // recording (hand targets, priority, body schema, walk command; 5 samples each) only with
+  // `commands` (issue 17, item 12). 9 types x 5 samples were recorded.
+  enum class Mode { kDefault, kCommands, kProtectionNamed };
+  for (const Mode mode : {Mode::kDefault, Mode::kCommands, Mode::kProtectionNamed}) {
     PlayerOptions po;
     po.input = file;
-    if (named) po.topics = {"reflex/controller_protection"};
+    if (mode == Mode::kProtectionNamed) po.topics = {"reflex/controller_protection"};
+    po.commands = mode == Mode::kCommands;
     po.bus = busConfig("player");
     po.delay = 0.2;
     po.rate = 0.0;  // as fast as possible
     Player player(po);
     player.run();
-    EXPECT_EQ(player.stats().published, named ? 5u : 40u) << (named ? "named" : "everything");
+    const std::uint64_t expected = mode == Mode::kProtectionNamed ? 5u : mode == Mode::kCommands ? 40u : 20u;
+    EXPECT_EQ(player.stats().published, expected) << static_cast<int>(mode);
+    if (mode == Mode::kDefault) EXPECT_EQ(player.commandsSkipped().size(), 4u);
   }
 }
 

@@ -139,11 +139,12 @@ TEST_F(Replay, StartOffset) {
 
 TEST_F(Replay, ProgressWithAStartOffsetCountsTheSessionsFramesAndPrintsSessionTime) {
   // The independent answer: the session's own timestamps (timestamps.csv through loadSessionInfo).
-  const std::vector<double> stamps = loadSessionInfo(*dir_ / "s").stamps;
+  // The 1 s session (10 frames) from 0.5 s: 0.5 s passes, looped for 1.2 s (cheap: ~12 frames detected).
+  const std::vector<double> stamps = loadSessionInfo(*dir_ / "one").stamps;
   const int total = static_cast<int>(stamps.size());
-  const double start = 3.0;
-  const Run r = run(*dir_ / "s", 0.0, 5.0, true, start);  // 2 s passes, looped for 5 s: three passes
-  ASSERT_GT(r.progress.size(), static_cast<std::size_t>(total - 30));
+  const double start = 0.5;
+  const Run r = run(*dir_ / "one", 0.0, 1.2, true, start);
+  ASSERT_GE(r.progress.size(), 10u);
   int max_shown = 0, passes = 0;
   for (const RunProgress& p : r.progress) {
     ASSERT_GE(p.frame, 0);

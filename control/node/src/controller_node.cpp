@@ -504,10 +504,9 @@ void ControllerNode::run() {
       arms[a]->zone(toMsg(s.zone));
       arms[a]->estop_latched(rep.estop != EstopState::kClear);
       // Cleared when the arm has no pair this cycle (control.idl): never a previous cycle's names.
-      // The names are model strings assigned into strings that already held one: no allocation
-      // once every name was seen (as before).
-      arms[a]->closest_segment_a(s.segment_a != nullptr ? s.segment_a : "");
-      arms[a]->closest_segment_b(s.segment_b != nullptr ? s.segment_b : "");
+      // Assigned in place (no temporary string): no allocation once the longest name was held.
+      arms[a]->closest_segment_a().assign(s.segment_a != nullptr ? s.segment_a : "");
+      arms[a]->closest_segment_b().assign(s.segment_b != nullptr ? s.segment_b : "");
     }
     m.status_msg.arm_distance(std::isfinite(rep.arm_distance) ? rep.arm_distance : 1e9);
     m.status_msg.rejected_hand_targets(counts.hand_targets_rejected);
