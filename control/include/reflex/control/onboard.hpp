@@ -127,9 +127,10 @@ inline constexpr int kRejectCauses = 7;
 /// The cause's name as the exit line and reflex/control_status (last_rejection) print it, e.g.
 /// "hand_target_too_far".
 const char* rejectCauseName(RejectCause cause) noexcept;
-/// goal_y [m] and goal_yaw [rad] of a walk command up to this magnitude count as 0 (a relative goal
-/// computed on the behavior side may carry rounding); anything larger is kWalkUnsupportedGoal.
-inline constexpr double kWalkGoalTolerance = 1e-6;
+/// goal_y [m] and goal_yaw [rad] of a walk command up to this magnitude count as 0: 1 mm / 1 mrad, far
+/// below what walking achieves, so a relative goal computed on the behavior side from a measured heel_y
+/// (rounding, a physics robot's drift) still walks; anything larger is kWalkUnsupportedGoal.
+inline constexpr double kWalkGoalTolerance = 1e-3;
 
 /// Counters since construction (the node's exit line, tests).
 struct OnboardCounts {
