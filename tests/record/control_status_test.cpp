@@ -59,6 +59,22 @@ double armToArm(const control::Model& model, const control::ControllerModel& cm,
   return best;
 }
 
+/// Publishes `sample` once and watches the controller's outputs for 1.5 s.
+template <class W, class T>
+void sendAndWatch(ControllerRun& run, W& writer, T& sample) {
+  run.pump(1500ms, 100ms, [&](int k) {
+    if (k == 0) writer.publish(sample);
+  });
+}
+
+/// Waits for the controller's exit (expected 0) and takes what is left of its outputs.
+bad_input::ExitSummary finishAndDrain(ControllerRun& run) {
+  bad_input::ExitSummary summary;
+  EXPECT_EQ(run.finish(summary, 30s), 0) << run.output;
+  run.drain();
+  return summary;
+}
+
 TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecordedJointState) {
   const int domain = 210;
   const std::string file = tempPath("fig13.mcap");
@@ -187,21 +203,15 @@ TEST(ControlStatusOnTheBus, RefusedInputsAreCountedPerTopicAndNamedInTheStatusAn
   far.right().position_base().x(std::nextafter(2.0, 3.0));  // |t| > 2 m = max_target_distance
   far.right().position_base().y(0.0);
   far.right().position_base().z(0.0);
-  run.pump(1500ms, 100ms, [&](int k) {
-    if (k == 0) targets.publish(far);
-  });
+  sendAndWatch(run, targets, far);
   msg::WalkCommand sideways;
   sideways.goal_x(1.0);
   sideways.goal_y(0.3);  // the walking pattern walks along x only: refused whole
   sideways.goal_yaw(0.0);
   sideways.speed(0.2);
   sideways.stop(false);
-  run.pump(1500ms, 100ms, [&](int k) {
-    if (k == 0) walk.publish(sideways);
-  });
-  bad_input::ExitSummary summary;
-  EXPECT_EQ(run.finish(summary, 30s), 0) << run.output;
-  run.drain();
+  sendAndWatch(run, walk, sideways);
+  const bad_input::ExitSummary summary = finishAndDrain(run);
   ASSERT_FALSE(run.statuses.empty());
   const msg::ControlStatus& last = run.statuses.back();
   EXPECT_EQ(last.rejected_hand_targets(), 1u);
@@ -259,13 +269,9 @@ TEST(ControlStatusOnTheBus, ClosestNamesAreClearedExactlyWhenTheArmHasNoPair) {
   const msg::ArmPriority phases[3] = {msg::PRIORITY_RIGHT_HIGHER, msg::PRIORITY_EQUAL, msg::PRIORITY_RIGHT_HIGHER};
   for (const msg::ArmPriority phase : phases) {
     p.priority(phase);
-    run.pump(1500ms, 100ms, [&](int k) {
-      if (k == 0) priority.publish(p);
-    });
+    sendAndWatch(run, priority, p);
   }
-  bad_input::ExitSummary summary;
-  EXPECT_EQ(run.finish(summary, 30s), 0) << run.output;
-  run.drain();
+  finishAndDrain(run);
   // Phases seen in the stream, in order: named (a pair) and cleared (none).
   std::string phases_seen;
   for (const auto& s : run.statuses) {
