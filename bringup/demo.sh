@@ -33,5 +33,6 @@ if [ "$sim_only" -eq 0 ]; then
   port=${REFLEX_VIEW_PORT:-8765}
   echo "demo.sh: the flagship run's MCAP recording (Foxglove: File -> Open local file): out/flagship/avoidance/bus.mcap"
   echo "demo.sh: the live 3D view served the run at http://localhost:$port (Foxglove: ws://localhost:$port); to watch"
-  echo "         the recording there again: build/bin/reflex_view --port $port & build/bin/reflex_play out/flagship/avoidance/bus.mcap"
+  echo "         the recording there again: build/bin/reflex_view --port $port & build/bin/reflex_play --commands out/flagship/avoidance/bus.mcap"
+  echo "         (--commands: the hand targets too, for the view; only with no controller running on the domain)"
 fi

@@ -19,6 +19,35 @@ std::string rangeError(const char* key, double value, const char* range) {
 
 }  // namespace
 
+const char* rejectCauseName(RejectCause cause) noexcept {
+  switch (cause) {
+    case RejectCause::kHandTargetNotFinite: return "hand_target_not_finite";
+    case RejectCause::kHandTargetTooFar: return "hand_target_too_far";
+    case RejectCause::kSchemaBadSegment: return "body_schema_bad_segment";
+    case RejectCause::kSchemaNoSlot: return "body_schema_no_slot";
+    case RejectCause::kSchemaUnresolvable: return "body_schema_unresolvable";
+    case RejectCause::kWalkBadValue: return "walk_bad_value";
+    case RejectCause::kWalkUnsupportedGoal: return "walk_goal_y_or_yaw_not_zero";
+  }
+  return "?";
+}
+
+void OnboardController::reject(RejectCause cause) noexcept {
+  OnboardCounts& c = report_.counts;
+  ++c.rejected[static_cast<std::size_t>(cause)];
+  c.last_rejection = static_cast<int>(cause);
+  ++c.targets_rejected;
+  switch (cause) {
+    case RejectCause::kHandTargetNotFinite:
+    case RejectCause::kHandTargetTooFar: ++c.hand_targets_rejected; break;
+    case RejectCause::kSchemaBadSegment:
+    case RejectCause::kSchemaNoSlot:
+    case RejectCause::kSchemaUnresolvable: ++c.schema_rejected; break;
+    case RejectCause::kWalkBadValue:
+    case RejectCause::kWalkUnsupportedGoal: ++c.walk_rejected; break;
+  }
+}
+
 std::vector<int> drivenJoints(const Model& model, const ControllerModel& cm) {
   std::vector<int> driven;
   for (const auto& arm : cm.arms)
@@ -73,16 +102,20 @@ int OnboardController::setHandTargets(const std::array<HandCommand, 2>& hands, d
   for (int a = 0; a < 2; ++a) {
     const HandCommand& h = hands[a];
     const bool given = h.status == HandStatus::kGiven;
-    // !(norm <= max): a NaN norm is rejected too.
-    if (given && (!h.target_W.allFinite() || !(h.target_W.norm() <= options_.max_target_distance))) {
-      ++rejected;  // never followed; the hand keeps what it had
+    // Never followed; the hand keeps what it had. !(norm <= max): no NaN passes.
+    if (given && !h.target_W.allFinite()) {
+      ++rejected;
+      reject(RejectCause::kHandTargetNotFinite);
+      continue;
+    }
+    if (given && !(h.target_W.norm() <= options_.max_target_distance)) {
+      ++rejected;
+      reject(RejectCause::kHandTargetTooFar);
       continue;
     }
     input_.hands[a].status = h.status;
     if (given) input_.hands[a].target_W = h.target_W;
   }
-  report_.counts.hand_targets_rejected += static_cast<std::uint64_t>(rejected);
-  report_.counts.targets_rejected += static_cast<std::uint64_t>(rejected);
   return rejected;
 }
 
@@ -150,39 +183,45 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
     out.slot = slot;
     return out;
   }
-  ++report_.counts.schema_rejected;
-  ++report_.counts.targets_rejected;
   char* const line = out.text;
   const std::size_t size = sizeof(out.text);
   if (out.attach.refusing_pair >= 0) {  // control/README.md: a segment no arm can move away from
     out.kind = BodySchemaOutcome::Kind::kRejectedUnresolvable;
+    reject(RejectCause::kSchemaUnresolvable);
     std::snprintf(line, size, "body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')",
                   name.c_str(), out.attach.distance * 1e3, model_.segments[out.attach.other_segment].name.c_str(),
                   parent.c_str());
   } else if (out.check.ok()) {
     out.kind = BodySchemaOutcome::Kind::kRejectedNoSlot;
+    reject(RejectCause::kSchemaNoSlot);
     std::snprintf(line, size, "body-schema segment '%s' rejected: no free slot (link '%s')", name.c_str(), parent.c_str());
   } else if (*out.check.key != '\0') {
     out.kind = BodySchemaOutcome::Kind::kRejectedCheck;
+    reject(RejectCause::kSchemaBadSegment);
     std::snprintf(line, size, "body-schema segment '%s' rejected: %s: %g m > %s %g m (link '%s', %s)", name.c_str(),
                   describe(out.check.fault), out.check.value, out.check.key, out.check.limit, parent.c_str(),
                   rq.is_virtual ? "virtual" : "physical");
   } else {
     out.kind = BodySchemaOutcome::Kind::kRejectedCheck;
+    reject(RejectCause::kSchemaBadSegment);
     std::snprintf(line, size, "body-schema segment '%s' rejected: %s (value %g, link '%s')", name.c_str(),
                   describe(out.check.fault), out.check.value, parent.c_str());
   }
   return out;
 }
 
-bool OnboardController::walkCommand(bool stop, double goal_x, double speed) noexcept {
+bool OnboardController::walkCommand(bool stop, double goal_x, double goal_y, double goal_yaw, double speed) noexcept {
   if (stop) {
     walking_.stop();
     return true;
   }
   if (!(std::isfinite(goal_x) && std::isfinite(speed) && speed > 0.0)) {
-    ++report_.counts.walk_rejected;
-    ++report_.counts.targets_rejected;
+    reject(RejectCause::kWalkBadValue);
+    return false;
+  }
+  // !(|v| <= tol): a NaN goal_y / goal_yaw is refused too (the walking pattern cannot honour it).
+  if (!(std::abs(goal_y) <= kWalkGoalTolerance) || !(std::abs(goal_yaw) <= kWalkGoalTolerance)) {
+    reject(RejectCause::kWalkUnsupportedGoal);
     return false;
   }
   const int heel = model_.qIndex("heel_x");
@@ -252,6 +291,13 @@ const CycleReport& OnboardController::step(double now) noexcept {
   return r;
 }
 
+bool OnboardController::segmentMovesWithArm(int segment, int arm) const noexcept {
+  const Segment& seg = model_.segments[static_cast<std::size_t>(segment)];
+  const int link = seg.body_schema_slot ? data_.dist.slots[static_cast<std::size_t>(segment - model_.num_robot_segments)].link
+                                        : seg.link;
+  return link >= 0 && cm_.arms[static_cast<std::size_t>(arm)].link_in_arm[static_cast<std::size_t>(link)];
+}
+
 void OnboardController::fillReport(ControlResult result) noexcept {
   CycleReport& r = report_;
   r.result = result;
@@ -263,8 +309,15 @@ void OnboardController::fillReport(ControlResult result) noexcept {
     ar.distance = s.distance;
     ar.zone = s.zone;
     ar.closest_pair = s.closest_pair;
-    ar.segment_a = s.closest_pair >= 0 ? model_.segments[model_.pairs[s.closest_pair].a].name.c_str() : nullptr;
-    ar.segment_b = s.closest_pair >= 0 ? model_.segments[model_.pairs[s.closest_pair].b].name.c_str() : nullptr;
+    ar.segment_a = ar.segment_b = nullptr;
+    if (s.closest_pair >= 0) {
+      // The arm's own segment first (control.idl ArmStatus.closest_segment_a): the pair's second one
+      // when only that one moves with this arm (Model::pairs orders the left arm before the right).
+      const PairDistance& pd = data_.dist.pairs[static_cast<std::size_t>(s.closest_pair)];
+      const bool b_is_arms = segmentMovesWithArm(pd.seg_b, a) && !segmentMovesWithArm(pd.seg_a, a);
+      ar.segment_a = model_.segments[b_is_arms ? pd.seg_b : pd.seg_a].name.c_str();
+      ar.segment_b = model_.segments[b_is_arms ? pd.seg_a : pd.seg_b].name.c_str();
+    }
   }
   // Distances of this cycle (computed inside the controller for the measured q).
   r.min_distance = data_.closest_physical.distance;

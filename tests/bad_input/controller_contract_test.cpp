@@ -36,19 +36,6 @@ bool takeProtection(bus::Reader<msg::ControllerProtection>& reader, msg::Control
   return reader.takeNext(out);
 }
 
-msg::HandTargets crossing() {
-  msg::HandTargets t;  // reflex_sim's crossing_arms targets: without avoidance the forearms collide
-  t.left().status(msg::TARGET_GIVEN);
-  t.left().position_base().x(0.30);
-  t.left().position_base().y(-0.08);
-  t.left().position_base().z(0.90);
-  t.right().status(msg::TARGET_GIVEN);
-  t.right().position_base().x(0.30);
-  t.right().position_base().y(0.08);
-  t.right().position_base().z(0.90);
-  return t;
-}
-
 // Item 3: avoidance off in the file, the e-stop stays on and the run says it is not protected.
 TEST(ControllerContract, AvoidanceOffInTheYamlKeepsTheEstopAndEveryOutputSaysSo) {
   const std::string yaml = ::testing::TempDir() + "contract_avoidance_off.yaml";
@@ -66,7 +53,7 @@ TEST(ControllerContract, AvoidanceOffInTheYamlKeepsTheEstopAndEveryOutputSaysSo)
   EXPECT_NE(p.reason().find("'avoidance: off' in " + yaml), std::string::npos) << p.reason();
   EXPECT_DOUBLE_EQ(p.period(), 0.01);
   run.pump(3500ms, 50ms, [&](int) {
-    msg::HandTargets t = crossing();
+    msg::HandTargets t = crossingTargets();
     targets.publish(t);
     msg::Heartbeat h = heartbeat("bad_source");
     hb.publish(h);
@@ -101,7 +88,7 @@ TEST(ControllerContract, OnlyDisableEstopSwitchesTheEstopOffAndItIsLoud) {
   EXPECT_FALSE(p.estop());
   EXPECT_NE(p.reason().find("E-STOP OFF by --disable-estop"), std::string::npos) << p.reason();
   run.pump(3000ms, 50ms, [&](int) {
-    msg::HandTargets t = crossing();
+    msg::HandTargets t = crossingTargets();
     targets.publish(t);
     msg::Heartbeat h = heartbeat("bad_source");
     hb.publish(h);

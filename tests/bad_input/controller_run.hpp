@@ -61,6 +61,20 @@ inline ExitSummary parseSummary(const std::string& text) {
   return s;
 }
 
+/// reflex_sim's crossing_arms targets: without avoidance the forearms collide in front of the chest.
+inline msg::HandTargets crossingTargets() {
+  msg::HandTargets t;
+  t.left().status(msg::TARGET_GIVEN);
+  t.left().position_base().x(0.30);
+  t.left().position_base().y(-0.08);
+  t.left().position_base().z(0.90);
+  t.right().status(msg::TARGET_GIVEN);
+  t.right().position_base().x(0.30);
+  t.right().position_base().y(0.08);
+  t.right().position_base().z(0.90);
+  return t;
+}
+
 /// The controller process + a feeding participant ("bad_source") + a watching one.
 class ControllerRun {
  public:

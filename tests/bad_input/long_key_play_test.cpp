@@ -64,7 +64,9 @@ TEST(LongKeyReplay, ARecordingWithLongKeysIsReplayedWithThoseSamplesRefusedAndCo
   auto& heartbeats = watch.makeReader<msg::Heartbeat>("reflex/heartbeat", bus::kProfileRecord);
 
   const std::string log = ::testing::TempDir() + "long_key_play.log";
-  testing::ChildProcess player({std::string(REFLEX_BIN_DIR) + "/reflex_play", file, "--domain", "189", "--delay", "2"},
+  // --commands: the body schema is a command topic (issue 17, item 12), played only when asked.
+  testing::ChildProcess player({std::string(REFLEX_BIN_DIR) + "/reflex_play", file, "--commands", "--domain", "189",
+                                "--delay", "2"},
                                log);
   ASSERT_TRUE(player.started());
   const int rc = player.wait(30s);

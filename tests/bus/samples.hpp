@@ -134,6 +134,12 @@ inline void diff(const std::string& p, const msg::ControlStatus& e, const msg::C
   diffValue(p + ".compute_time_us", e.compute_time_us(), a.compute_time_us(), out);
   diffValue(p + ".lateness_us", e.lateness_us(), a.lateness_us(), out);
   diffValue(p + ".overrun_count", e.overrun_count(), a.overrun_count(), out);
+  diffValue(p + ".arm_distance", e.arm_distance(), a.arm_distance(), out);
+  diffValue(p + ".rejected_hand_targets", e.rejected_hand_targets(), a.rejected_hand_targets(), out);
+  diffValue(p + ".rejected_body_schema", e.rejected_body_schema(), a.rejected_body_schema(), out);
+  diffValue(p + ".rejected_walk_commands", e.rejected_walk_commands(), a.rejected_walk_commands(), out);
+  diffValue(p + ".rejected_robot_states", e.rejected_robot_states(), a.rejected_robot_states(), out);
+  diffValue(p + ".last_rejection", e.last_rejection(), a.last_rejection(), out);
 }
 inline void diff(const std::string& p, const msg::Heartbeat& e, const msg::Heartbeat& a, Diffs& out) {
   diff(p + ".header", e.header(), a.header(), out);
@@ -306,6 +312,12 @@ inline msg::ControlStatus controlStatus(int k) {
   m.compute_time_us(812.5 + k);
   m.lateness_us(-3.5);
   m.overrun_count(0xFFFF'FFFF'FFFF'FFF0ULL);
+  m.arm_distance(0.0375 + k);
+  m.rejected_hand_targets(7);
+  m.rejected_body_schema(0xFFFF'FFFF'FFFF'FFFEULL);
+  m.rejected_walk_commands(2);
+  m.rejected_robot_states(3);
+  m.last_rejection("walk_goal_y_or_yaw_not_zero");
   return m;
 }
 

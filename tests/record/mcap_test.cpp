@@ -28,7 +28,7 @@
 #include <reflex/bus/bus.hpp>
 
 #include "samples.hpp"
-#include "sample_entry.hpp"
+#include "record_support.hpp"
 
 #include <gtest/gtest.h>
 
@@ -386,9 +386,9 @@ TEST(Mcap, RobotTypesDecodeInTheReferenceReaderAsInTheCsvExport) {
       const std::int64_t t = 1'700'000'000'000'000'000LL + k * 1'000'000LL;
       msg::RobotContacts contacts = bus::test::robotContacts(k);
       if (k == 1) contacts.contacts().clear();  // a sample without pairs: one row of empty cells
-      w.append(test::entryOf(bus::test::robotState(k), t));
-      w.append(test::entryOf(bus::test::jointCommand(k), t + 1));
-      w.append(test::entryOf(contacts, t + 2));
+      w.append(test::encodeEntry(bus::test::robotState(k), t));
+      w.append(test::encodeEntry(bus::test::jointCommand(k), t + 1));
+      w.append(test::encodeEntry(contacts, t + 2));
     }
     w.close();
   }

@@ -9,6 +9,7 @@
 
 #include <reflex/bus/bus.hpp>
 
+#include "record_support.hpp"
 #include "samples.hpp"
 
 #include <gtest/gtest.h>
@@ -36,16 +37,7 @@ double secondsSince(SteadyClock::time_point t0) {
 
 // A ControlStatus sample as the recorder stores it (serialized by the generated type itself).
 RecordEntry encodeStatus(std::uint64_t k, std::int64_t receive_ns) {
-  msg::ControlStatus s = bus::test::controlStatus(static_cast<int>(k));
-  bus::TopicTraits<msg::ControlStatus>::PubSubType type;
-  eprosima::fastrtps::rtps::SerializedPayload_t p(type.getSerializedSizeProvider(&s)());
-  EXPECT_TRUE(type.serialize(&s, &p));
-  RecordEntry e;
-  e.receive_ns = receive_ns;
-  e.topic = bus::TopicTraits<msg::ControlStatus>::kTopicName;
-  e.type = type.getName();
-  e.payload.assign(p.data, p.data + p.length);
-  return e;
+  return test::encodeEntry(bus::test::controlStatus(static_cast<int>(k)), receive_ns);
 }
 
 // Three records: t0, t0 + 100 years, and 0.1 s after that (receive times stay within an int64).

@@ -6,8 +6,8 @@
 
 #include <reflex/bus/bus.hpp>
 
+#include "record_support.hpp"
 #include "samples.hpp"
-#include "sample_entry.hpp"
 
 #include <gtest/gtest.h>
 
@@ -33,15 +33,11 @@ bus::BusConfig busConfig(const std::string& name) {
 // Independent decoding: the generated PubSubType directly, not the recorder's codec.
 template <class T>
 T decode(const RecordEntry& e) {
-  typename bus::TopicTraits<T>::PubSubType type;
-  eprosima::fastrtps::rtps::SerializedPayload_t p(static_cast<std::uint32_t>(e.payload.size()));
-  std::copy(e.payload.begin(), e.payload.end(), p.data);
-  p.length = static_cast<std::uint32_t>(e.payload.size());
   T out;
-  EXPECT_TRUE(type.deserialize(&p, &out)) << e.topic;
-  EXPECT_EQ(e.type, type.getName());
+  EXPECT_TRUE(test::decodeEntry(e, out)) << e.topic << " (" << e.type << ")";
   return out;
 }
+using test::encodeEntry;
 
 std::vector<std::vector<std::string>> readCsv(const std::string& path) {
   std::ifstream in(path);
@@ -206,6 +202,9 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     EXPECT_EQ(r[col(h, "right_estop")], "1");
     EXPECT_EQ(r[col(h, "left_closest_a")], "left_forearm");
     EXPECT_EQ(std::stoull(r[col(h, "overrun_count")]), 0xFFFF'FFFF'FFFF'FFF0ULL);
+    EXPECT_DOUBLE_EQ(std::stod(r[col(h, "arm_distance")]), 0.0375 + k);
+    EXPECT_EQ(std::stoull(r[col(h, "rejected_body_schema")]), 0xFFFF'FFFF'FFFF'FFFEULL);
+    EXPECT_EQ(r[col(h, "last_rejection")], "walk_goal_y_or_yaw_not_zero");
   }
   const std::string csv_obj = tempPath("objects.csv");
   EXPECT_EQ(exportCsv(file, "reflex/object_targets", csv_obj), 5u);
@@ -254,6 +253,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     PlayerOptions po;
     po.input = file;
     po.topics = {"reflex/control_status", "reflex/hand_targets"};
+    po.commands = true;  // hand targets are a command topic: played only when asked (issue 17, item 12)
     po.bus = busConfig("player");
     po.delay = 1.0;
     po.restamp = restamp;
@@ -284,18 +284,25 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   }
 
   // Play everything (no --topic): every recorded sample but the controller's protection state, a
-  // live controller's claim that a replay must not make beside a live controller (issue 16, item 16),
-  // and the joint commands, which a live robot would obey (issue 13); named with --topic they are played.
-  for (bool named : {false, true}) {
+  // live controller's claim that a replay must not make beside a live controller (issue 16, item 16);
+  // named with --topic it is played. By default observations only: the five command topics of this
+  // recording (hand targets, priority, body schema, walk command, joint command; 5 samples each) only
+  // with `commands` (issue 17, item 12; a live robot would obey the joint commands, issue 13). 12 types x
+  // 5 samples were recorded.
+  enum class Mode { kDefault, kCommands, kProtectionNamed };
+  for (const Mode mode : {Mode::kDefault, Mode::kCommands, Mode::kProtectionNamed}) {
     PlayerOptions po;
     po.input = file;
-    if (named) po.topics = {"reflex/controller_protection", "reflex/joint_command"};
+    if (mode == Mode::kProtectionNamed) po.topics = {"reflex/controller_protection"};
+    po.commands = mode == Mode::kCommands;
     po.bus = busConfig("player");
     po.delay = 0.2;
     po.rate = 0.0;  // as fast as possible
     Player player(po);
     player.run();
-    EXPECT_EQ(player.stats().published, named ? 10u : 50u) << (named ? "named" : "everything");
+    const std::uint64_t expected = mode == Mode::kProtectionNamed ? 5u : mode == Mode::kCommands ? 55u : 30u;
+    EXPECT_EQ(player.stats().published, expected) << static_cast<int>(mode);
+    if (mode == Mode::kDefault) EXPECT_EQ(player.commandsSkipped().size(), 5u);
   }
 
   // A replayed command, restamped, keeps its age: its deadline and the answered state's stamp move
@@ -306,6 +313,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     PlayerOptions po;
     po.input = file;
     po.topics = {"reflex/joint_command"};
+    po.commands = true;  // a command topic: played only when asked for
     po.bus = busConfig("player");
     po.delay = 1.0;
     po.restamp = true;
@@ -359,7 +367,7 @@ std::string syntheticRecording() {
   const std::int64_t t0 = 1'700'000'000'000'000'000LL;
   for (int k = 0; k <= 20; ++k) {
     msg::ControlStatus s = bus::test::controlStatus(k);
-    w.append(test::entryOf(s, t0 + k * 100'000'000LL));
+    w.append(encodeEntry(s, t0 + k * 100'000'000LL));
   }
   return file;
 }

@@ -3,6 +3,7 @@
 // behavior identity, follows its hand targets at 200 Hz with every pair above d_r, and publishes
 // encrypted joint state / status that the recorder identity reads and an unauthenticated
 // participant never sees. Domain 100.
+#include "../bad_input/controller_run.hpp"
 #include "../system/process.hpp"
 #include "security_support.hpp"
 
@@ -20,18 +21,7 @@ namespace {
 using namespace std::chrono_literals;
 constexpr int kDomain = 100;
 
-msg::HandTargets crossing() {
-  msg::HandTargets t;
-  t.left().status(msg::TARGET_GIVEN);
-  t.left().position_base().x(0.30);
-  t.left().position_base().y(-0.08);
-  t.left().position_base().z(0.90);
-  t.right().status(msg::TARGET_GIVEN);
-  t.right().position_base().x(0.30);
-  t.right().position_base().y(0.08);
-  t.right().position_base().z(0.90);
-  return t;
-}
+using bad_input::crossingTargets;  // reflex_sim's crossing_arms targets
 
 TEST(SecureController, FollowsASecureSourceAt200HzAndHidesItsStateFromOutsiders) {
   const std::string dir = makeSecurityMaterial("proc");
@@ -63,13 +53,13 @@ TEST(SecureController, FollowsASecureSourceAt200HzAndHidesItsStateFromOutsiders)
   const auto t0 = std::chrono::steady_clock::now();
   repeatFor(4000ms, 50ms, [&] {
     if (k++ % 2 == 0) {
-      msg::HandTargets t = crossing();
+      msg::HandTargets t = crossingTargets();
       targets.publish(t);
       msg::Heartbeat hb;
       hb.module_name("behavior");
       hb.state(msg::STATE_RUNNING);
       heartbeat.publish(hb);
-      msg::HandTargets forged = crossing();
+      msg::HandTargets forged = crossingTargets();
       forged.left().position_base().y(0.4);  // would pull the left hand far to its right
       outsider_targets.publish(forged);
     }

@@ -3,8 +3,9 @@
 // observation topics (object targets, joint state, control status) encrypted; a secure subscriber
 // whose permissions grant them (the behavior identity) receives them with the recorded content, an
 // unauthenticated participant receives nothing. A recording that also holds a command topic
-// (hand targets) cannot be played whole: the player's permissions do not grant it, so reflex_play
-// stops at start with an error naming the topic. Domain 111.
+// (hand targets) is played without it by default (issue 17, item 12: observations only unless
+// --commands), which is exactly the player's grant; asked to play it whole (--commands), the player's
+// permissions do not grant it, so reflex_play stops at start with an error naming the topic. Domain 111.
 #include "../system/process.hpp"
 #include "security_support.hpp"
 
@@ -97,7 +98,7 @@ TEST(SecurePlay, AWholeRecordingWithACommandTopicIsRefusedAtStartNamingTheTopic)
   const std::string dir = makeSecurityMaterial("play_refused");
   const std::string rec = writeRecording(dir + "/with_commands.rfx", true);
   const std::string log = dir + "/play_refused.log";
-  testing::ChildProcess player({play(), rec, "--domain", std::to_string(kDomain), "--quiet", "--profiles",
+  testing::ChildProcess player({play(), rec, "--commands", "--domain", std::to_string(kDomain), "--quiet", "--profiles",
                                 dir + "/profiles/player.xml"},
                                log);
   ASSERT_TRUE(player.started());
@@ -112,7 +113,8 @@ TEST(SecurePlay, AWholeRecordingWithACommandTopicIsRefusedAtStartNamingTheTopic)
 TEST(SecurePlay, ObservationTopicsReachAPermittedSubscriberAndNoOutsider) {
   const std::string dir = makeSecurityMaterial("play");
   loadProfiles(dir);
-  // The same recording with the command topic, played without it (-x): exactly the player's grant.
+  // The same recording with the command topic, played by default (observations only, no -x needed):
+  // exactly the player's grant.
   const std::string rec = writeRecording(dir + "/run.rfx", true);
 
   auto behavior = secureParticipant(dir, "behavior", kDomain);
@@ -124,7 +126,7 @@ TEST(SecurePlay, ObservationTopicsReachAPermittedSubscriberAndNoOutsider) {
   auto& outsider_joints = outsider->makeReader<msg::JointState>("reflex/joint_state", bus::kProfileRecord);
 
   const std::string log = dir + "/play.log";
-  testing::ChildProcess player({play(), rec, "-x", "reflex/hand_targets", "--loop", "--domain",
+  testing::ChildProcess player({play(), rec, "--loop", "--domain",
                                 std::to_string(kDomain), "--quiet", "--profiles", dir + "/profiles/player.xml"},
                                log);
   ASSERT_TRUE(player.started());

@@ -1,6 +1,7 @@
 // reflex_controller as a real process over real DDS (issue 7, item 1): it runs at 200 Hz, follows
 // hand targets from another participant while keeping every pair above d_r, rejects NaN targets,
 // and retracts both hands on its own when the target source goes silent.
+#include "../bad_input/controller_run.hpp"
 #include "process.hpp"
 
 #include <reflex/bus/bus.hpp>
@@ -15,16 +16,10 @@ namespace {
 
 constexpr int kDomain = 71;
 
+/// reflex_sim's crossing_arms targets; nan_left: the left target's y is NaN.
 msg::HandTargets crossing(bool nan_left = false) {
-  msg::HandTargets t;
-  t.left().status(msg::TARGET_GIVEN);
-  t.left().position_base().x(0.30);
-  t.left().position_base().y(nan_left ? std::nan("") : -0.08);
-  t.left().position_base().z(0.90);
-  t.right().status(msg::TARGET_GIVEN);
-  t.right().position_base().x(0.30);
-  t.right().position_base().y(0.08);
-  t.right().position_base().z(0.90);
+  msg::HandTargets t = bad_input::crossingTargets();
+  if (nan_left) t.left().position_base().y(std::nan(""));
   return t;
 }
 

@@ -1,6 +1,9 @@
 // Replay and publication rate (issue 5, items 5 and 8/9): the publications that reflex_vision hands
 // to its DDS writer come from runVision's on_publish; here the same path hands them to a recorder of
 // call times. 10 Hz +- 2 % on the replay clock at real rate, 2x and 0.5x; loop, start offset.
+// The progress reports (issue 17, item 12: reflex_vision --progress prints them) with a start offset and
+// a loop: frame i/N against the session's own frame count and its timestamps file (loadSessionInfo),
+// the time against the frame's stamp minus the session's first stamp.
 #include "vision_test_util.hpp"
 
 #include <gtest/gtest.h>
@@ -27,6 +30,7 @@ class Replay : public ::testing::Test {
     std::vector<double> frame_stamps;
     std::vector<int> frame_index;
     int progress_calls = 0;
+    std::vector<RunProgress> progress;
     RunStats stats;
   };
   static Run run(const std::string& session, double rate, double duration, bool loop = false, double start = 0.0) {
@@ -43,7 +47,10 @@ class Replay : public ::testing::Test {
       r.frame_stamps.push_back(s);
       r.frame_index.push_back(f.index);
     };
-    cb.on_progress = [&](const RunProgress&) { ++r.progress_calls; };
+    cb.on_progress = [&](const RunProgress& p) {
+      ++r.progress_calls;
+      r.progress.push_back(p);
+    };
     ReplayOptions o;
     o.rate = rate;
     o.duration = duration;
@@ -129,3 +136,30 @@ TEST_F(Replay, StartOffset) {
   EXPECT_EQ(l.frame_index.front(), first);
   EXPECT_EQ(l.frame_index[static_cast<std::size_t>(50 - first)], first);
 }
+
+TEST_F(Replay, ProgressWithAStartOffsetCountsTheSessionsFramesAndPrintsSessionTime) {
+  // The independent answer: the session's own timestamps (timestamps.csv through loadSessionInfo).
+  // The 1 s session (10 frames) from 0.5 s: 0.5 s passes, looped for 1.2 s (cheap: ~12 frames detected).
+  const std::vector<double> stamps = loadSessionInfo(*dir_ / "one").stamps;
+  const int total = static_cast<int>(stamps.size());
+  const double start = 0.5;
+  const Run r = run(*dir_ / "one", 0.0, 1.2, true, start);
+  ASSERT_GE(r.progress.size(), 10u);
+  int max_shown = 0, passes = 0;
+  for (const RunProgress& p : r.progress) {
+    ASSERT_GE(p.frame, 0);
+    ASSERT_LT(p.frame, total);
+    EXPECT_EQ(p.frames, total) << "N is the session's frame count, with --start too";
+    EXPECT_LE(p.frame + 1, p.frames) << "the printed frame number i never passes N";
+    // Session time: the frame's stamp from the session's first frame (the offset included), in every pass.
+    EXPECT_DOUBLE_EQ(p.session_time, stamps[static_cast<std::size_t>(p.frame)] - stamps.front());
+    EXPECT_GE(p.session_time, start - 0.1 - 1e-9);  // frames start at the offset (10 fps)
+    max_shown = std::max(max_shown, p.frame + 1);
+    passes = std::max(passes, p.pass + 1);
+  }
+  EXPECT_EQ(max_shown, total) << "the last frame of a pass is shown as N/N";
+  EXPECT_GE(passes, 2);
+  EXPECT_GT(r.progress.back().run_time, r.progress.back().session_time - start)
+      << "run time (since the offset) keeps growing across passes; session time starts again";
+}
+

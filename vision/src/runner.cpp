@@ -182,9 +182,13 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
     if (cb.on_progress) {
       RunProgress p;
       p.frame = frame.index;
-      p.frames = source.frameCount();
+      // Frame and time in the recording's terms (issue 17, item 12): with --start the frame index
+      // counts from the recording's first frame, so the total is the recording's, and the time is
+      // the frame's own stamp from the recording's start (the offset included, every loop pass alike).
+      p.frames = source.recordingFrames();
       p.pass = stats.passes;
-      p.session_time = s - s0;
+      p.session_time = frame.stamp - source.recordingStart();
+      p.run_time = s - s0;
       p.lag = clock->lagAt(s);
       p.objects = static_cast<int>(result.objects.size());
       cb.on_progress(p);

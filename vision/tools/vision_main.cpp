@@ -84,7 +84,9 @@ int main(int argc, char** argv) {
   app.add_option("--rectify", rectify, "images (remap both images) or points (detect raw, rectify corners)")
       ->capture_default_str();
   app.add_flag("--no-refine", no_refine, "stereo-only triangulation (do not use the tag size)");
-  app.add_flag("--progress", progress_flag, "show progress even if stderr is not a terminal");
+  app.add_flag("--progress", progress_flag,
+               "show progress even if stderr is not a terminal: pass, frame i/N of the session (with --start too), "
+               "session time, objects, lag");
   app.add_flag("--quiet", quiet, "no progress display");
   app.add_option("--domain", domain_text, "DDS domain id (default: $REFLEX_DOMAIN_ID, else 0)");
   app.add_option("--profiles", profiles, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");

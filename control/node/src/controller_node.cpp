@@ -62,6 +62,26 @@ ParticipantId participantOf(const bus::dds::SampleInfo& info) {
 
 }  // namespace
 
+const char* robotStateCauseName(int cause) noexcept {
+  static const char* const kNames[] = {"robot_state_length", "robot_state_missing_joint", "robot_state_not_finite",
+                                       "robot_state_future_stamp", "robot_state_old_stamp"};
+  static_assert(sizeof(kNames) / sizeof(kNames[0]) == DdsRobotPort::kCauses, "one name per DdsRobotPort cause");
+  return cause >= 0 && cause < DdsRobotPort::kCauses ? kNames[cause] : "robot_state_?";
+}
+
+std::string describeRejections(const NodeStats& stats) {
+  std::string text;
+  auto add = [&](const char* name, std::uint64_t n) {
+    if (n == 0) return;
+    text += (text.empty() ? "" : ", ") + std::string(name) + " " + std::to_string(n);
+  };
+  for (int c = 0; c < kRejectCauses; ++c)
+    add(rejectCauseName(static_cast<RejectCause>(c)), stats.rejected[static_cast<std::size_t>(c)]);
+  for (int c = 0; c < DdsRobotPort::kCauses; ++c)
+    add(robotStateCauseName(c), stats.robot_states_rejected_by_cause[static_cast<std::size_t>(c)]);
+  return text;
+}
+
 std::string Protection::describe() const {
   return full() ? std::string("full (collision avoidance and e-stop on)") : "REDUCED: " + reason;
 }
@@ -117,6 +137,7 @@ struct ControllerNode::Impl {
   bus::LogLimiter robot_state_log{4};
   char schema_line[512] = {};
   SimSample log_row;  ///< q / qdot sized once: filling it does not allocate
+  std::uint64_t rejections_seen = 0;  ///< OnboardCounts::targets_rejected when last_rejection was last set
 };
 
 ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_unique<Impl>()) {
@@ -244,6 +265,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.walk_reader = &m.participant->makeReader<msg::WalkCommand>();
   m.heartbeat_reader = &m.participant->makeReader<msg::Heartbeat>();
 
+  m.status_msg.last_rejection().reserve(64);  // every cause name fits: assigning it never allocates
   m.joint_msg.names(m.model.q_names);
   m.joint_msg.positions().assign(m.model.nq, 0.0);
   m.joint_msg.velocities().assign(m.model.nq, 0.0);
@@ -400,11 +422,20 @@ void ControllerNode::run() {
       }
     }
     msg::WalkCommand walk;
-    if (m.walk_reader->takeLatest(walk)) ctl.walkCommand(walk.stop(), walk.goal_x(), walk.speed());
+    if (m.walk_reader->takeLatest(walk))
+      ctl.walkCommand(walk.stop(), walk.goal_x(), walk.goal_y(), walk.goal_yaw(), walk.speed());
     if (m.reset.exchange(false)) ctl.requestEstopReset();
+    // The latest refusal among this cycle's inputs (ControlStatus.last_rejection): robot states are
+    // taken after the behavior inputs above, so a refused one is the latest.
+    const char* last_rejection = nullptr;
+    if (const OnboardCounts& c = ctl.report().counts; c.targets_rejected != m.rejections_seen) {
+      m.rejections_seen = c.targets_rejected;
+      last_rejection = rejectCauseName(static_cast<RejectCause>(c.last_rejection));
+    }
     if (m.dds && m.dds->poll() > 0) {
       std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", m.dds->lastRejection());
       m.robot_log[static_cast<std::size_t>(m.dds->lastCause())].print(stderr, m.schema_line);
+      last_rejection = robotStateCauseName(m.dds->lastCause());
     }
 
     // 2.-3. Staleness, priority, control (allocation-free) and the robot port: one step.
@@ -441,6 +472,7 @@ void ControllerNode::run() {
     stats_.guard_count = counts.guard_count;
     stats_.targets_received = counts.targets_received;
     stats_.targets_rejected = counts.targets_rejected;
+    stats_.rejected = counts.rejected;
     stats_.stale_events = counts.stale_events;
     stats_.robot_stale_events = counts.robot_stale_events;
     stats_.robot_stale_cycles = counts.robot_stale_cycles;
@@ -449,6 +481,8 @@ void ControllerNode::run() {
       const DdsRobotPort::Counts& pc = m.dds->counts();
       stats_.robot_states_accepted = pc.accepted;
       stats_.robot_states_rejected = pc.rejected();
+      stats_.robot_states_rejected_by_cause = {pc.rejected_length, pc.rejected_missing, pc.rejected_non_finite,
+                                               pc.rejected_future, pc.rejected_old};
       stats_.robot_commands = pc.commands;
     }
 
@@ -469,10 +503,19 @@ void ControllerNode::run() {
       arms[a]->distance(std::isfinite(s.distance) ? s.distance : 1e9);
       arms[a]->zone(toMsg(s.zone));
       arms[a]->estop_latched(rep.estop != EstopState::kClear);
-      if (s.closest_pair >= 0) {
-        arms[a]->closest_segment_a(s.segment_a);
-        arms[a]->closest_segment_b(s.segment_b);
-      }
+      // Cleared when the arm has no pair this cycle (control.idl): never a previous cycle's names.
+      // Assigned in place (no temporary string): no allocation once the longest name was held.
+      arms[a]->closest_segment_a().assign(s.segment_a != nullptr ? s.segment_a : "");
+      arms[a]->closest_segment_b().assign(s.segment_b != nullptr ? s.segment_b : "");
+    }
+    m.status_msg.arm_distance(std::isfinite(rep.arm_distance) ? rep.arm_distance : 1e9);
+    m.status_msg.rejected_hand_targets(counts.hand_targets_rejected);
+    m.status_msg.rejected_body_schema(counts.schema_rejected);
+    m.status_msg.rejected_walk_commands(counts.walk_rejected);
+    m.status_msg.rejected_robot_states(stats_.robot_states_rejected);
+    if (last_rejection != nullptr) {
+      m.status_msg.last_rejection().assign(last_rejection);  // fits the reserved capacity
+      stats_.last_rejection = last_rejection;
     }
     const double compute_us = (nowSeconds(CLOCK_MONOTONIC) - t_now) * 1e6;
     if (compute_us > period * 1e6) ++stats_.overruns;
@@ -492,6 +535,7 @@ void ControllerNode::run() {
       s.commands = rep.commands;
       s.estop = data.estop;
       s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : 1e9;
+      s.min_pair = rep.min_pair;  // the --log min_pair column (it was left empty before issue 17)
       s.virtual_distance = rep.virtual_distance;
       s.arm_distance = rep.arm_distance;
       s.wall_time = nowSeconds(CLOCK_REALTIME);

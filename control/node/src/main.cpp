@@ -110,6 +110,8 @@ int main(int argc, char** argv) {
                std::to_string(s.robot_stale_cycles) + " cycles without state)";
       if (s.robot_stale_at_exit) extra += ", ROBOT STATE STALE at exit";
     }
+    if (s.targets_rejected + s.robot_states_rejected > 0)
+      extra += ", rejected by cause: " + reflex::control_node::describeRejections(s) + " (last " + s.last_rejection + ")";
     extra += ", protection " + protection.describe();
     std::fprintf(stderr,
                  "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "

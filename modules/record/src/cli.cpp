@@ -119,10 +119,14 @@ std::function<int()> addPlay(CLI::App& app) {
   app.add_option("-s,--start", o->start, "start offset, seconds after the first sample")->capture_default_str();
   app.add_option("--duration", o->duration, "play only this many seconds of recording time (0: to the end)");
   app.add_option("--delay", o->delay, "seconds to wait after creating the writers (discovery)")->capture_default_str();
-  app.add_option("-t,--topic", o->topics,
-                 "topic to play (repeatable; default: every topic in the file but reflex/controller_protection "
-                 "and reflex/joint_command, which a live controller / robot would take for real)");
-  app.add_option("-x,--exclude", o->exclude, "topic not to play (repeatable)");
+  app.add_option("-t,--topic", o->topics, "topic to play (repeatable; default: every topic in the file)");
+  app.add_option("-x,--exclude", o->exclude,
+                 "topic not to play (repeatable). Command topics are not played anyway without --commands: "
+                 "'-x reflex/hand_targets' is then accepted and changes nothing");
+  app.add_flag("--commands", o->commands,
+               "also play the command topics (reflex/hand_targets, reflex/motion_priority, reflex/body_schema, "
+               "reflex/walk_command, reflex/joint_command). Default: observations only, so a replay never steers "
+               "a live controller or robot; -t of a command topic needs this flag");
   app.add_flag("--restamp", o->restamp,
                "move sample time stamps (header.stamp_ns, capture_stamp_ns) to the playing time");
   app.add_option("--max-gap", o->max_gap,
@@ -140,6 +144,16 @@ std::function<int()> addPlay(CLI::App& app) {
       bus::StopOnSignal stop_on_signal(player.bus());
       std::fprintf(stderr, "reflex_play: %s, %.2f s window, rate %g%s, domain %d\n", o->input.c_str(),
                    player.windowSeconds(), o->rate, o->loop ? ", loop" : "", player.bus().domainId());
+      if (!player.commandsSkipped().empty()) {
+        std::string skipped;
+        for (const std::string& t : player.commandsSkipped()) skipped += (skipped.empty() ? "" : ", ") + t;
+        std::fprintf(stderr, "reflex_play: command topics not played (observations only; --commands plays them): %s\n",
+                     skipped.c_str());
+      }
+      for (const std::string& ex : o->exclude)
+        if (!o->commands && isCommandTopic(ex))
+          std::fprintf(stderr, "reflex_play: note: -x %s changes nothing: command topics are played only with "
+                       "--commands\n", ex.c_str());
       if (player.stats().gaps_shortened > 0)
         std::fprintf(stderr,
                      "reflex_play: %llu gap(s) between records longer than --max-gap %g s are played as %g s "

@@ -94,14 +94,17 @@ void csvColumns(std::ostream& o, const msg::ControlStatus&) {
   for (const char* a : {"left", "right"})
     o << ',' << a << "_f," << a << "_distance," << a << "_zone," << a << "_estop," << a << "_closest_a," << a
       << "_closest_b";
-  o << ",cycle_period_us,compute_time_us,lateness_us,overrun_count";
+  o << ",cycle_period_us,compute_time_us,lateness_us,overrun_count,arm_distance,rejected_hand_targets,"
+       "rejected_body_schema,rejected_walk_commands,rejected_robot_states,last_rejection";
 }
 void csvRows(std::ostream& o, const std::string& prefix, const msg::ControlStatus& s) {
   o << prefix;
   arm(o, s.left());
   arm(o, s.right());
   o << ',' << num(s.cycle_period_us()) << ',' << num(s.compute_time_us()) << ',' << num(s.lateness_us()) << ','
-    << s.overrun_count() << '\n';
+    << s.overrun_count() << ',' << num(s.arm_distance()) << ',' << s.rejected_hand_targets() << ','
+    << s.rejected_body_schema() << ',' << s.rejected_walk_commands() << ',' << s.rejected_robot_states() << ','
+    << csvField(s.last_rejection()) << '\n';
 }
 
 void csvColumns(std::ostream& o, const msg::Heartbeat&) { o << ",module_name,host,pid,state,period_ms,detail"; }

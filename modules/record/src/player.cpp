@@ -38,6 +38,19 @@ class PlayClock {
   double last_ = 0.0;
 };
 
+const std::vector<std::string>& commandTopics() {
+  static const std::vector<std::string> topics = {
+      bus::TopicTraits<msg::HandTargets>::kTopicName, bus::TopicTraits<msg::MotionPriority>::kTopicName,
+      bus::TopicTraits<msg::BodySchemaChange>::kTopicName, bus::TopicTraits<msg::WalkCommand>::kTopicName,
+      bus::TopicTraits<msg::JointCommand>::kTopicName};
+  return topics;
+}
+
+bool isCommandTopic(const std::string& topic) {
+  const auto& c = commandTopics();
+  return std::find(c.begin(), c.end(), topic) != c.end();
+}
+
 RecordingInfo scanRecording(const std::string& path) {
   const std::unique_ptr<SampleReader> source = openRecording(path);
   SampleReader& reader = *source;
@@ -95,29 +108,39 @@ Player::Player(const PlayerOptions& options) : options_(options) {
   // Played by default: every recorded topic but the controller's protection state. That sample is a
   // live controller's claim to be THE controller of this domain (reflex_controller refuses to start,
   // or leaves, when it sees an earlier one: issue 16, item 16); replayed beside a live controller it
-  // would be a phantom peer. Nor the joint commands (issue 13): a replayed command, restamped, is a
-  // valid command to a live robot on the domain. Both are played only when named with --topic. Nor are
-  // channels of a type that is no Reflex topic type (the scene channels /tf and /reflex/scene of an MCAP
-  // recording, JSON for viewers, not bus samples): naming one with --topic is an error (unknown type) below.
+  // would be a phantom peer. It is played only when named with --topic.
+  // Nor, by default, the command topics (issue 17, item 12; the joint commands, issue 13): a replay
+  // beside a live controller or robot would steer it. They are played only with
+  // PlayerOptions::commands (--commands). Nor are channels of a type that is no Reflex topic type (the
+  // scene channels /tf and /reflex/scene of an MCAP recording, JSON for viewers, not bus samples):
+  // naming one with --topic is an error (unknown type) below.
   const std::string protection_topic = bus::TopicTraits<msg::ControllerProtection>::kTopicName;
-  const std::string command_topic = bus::TopicTraits<msg::JointCommand>::kTopicName;
-  auto notByDefault = [&](const std::string& t) { return t == protection_topic || t == command_topic; };
   std::vector<std::string> topics = options.topics;
-  if (topics.empty())
-    for (const auto& kv : info.topics)
-      if (!notByDefault(kv.first) && findCodecByType(kv.second.type)) topics.push_back(kv.first);
+  if (topics.empty()) {
+    for (const auto& kv : info.topics) {
+      if (kv.first == protection_topic || !findCodecByType(kv.second.type)) continue;
+      if (options.commands || !isCommandTopic(kv.first))
+        topics.push_back(kv.first);
+      else
+        commands_skipped_.push_back(kv.first);
+    }
+  }
   for (const std::string& t : options.topics) {
     if (!info.topics.count(t)) {
       std::string have;
       for (const auto& kv : info.topics) have += " " + kv.first;
       throw RecordError("topic '" + t + "' is not in recording '" + options.input + "' (it has:" + have + ")");
     }
+    if (isCommandTopic(t) && !options.commands)
+      throw RecordError("topic '" + t + "' is a command topic: a replay publishes observations only unless "
+                        "--commands is given (it would steer a live controller or robot)");
   }
   for (const std::string& ex : options.exclude) {
     const auto it = std::find(topics.begin(), topics.end(), ex);
     const bool not_played =
-        notByDefault(ex) || (info.topics.count(ex) && !findCodecByType(info.topics.at(ex).type));
+        ex == protection_topic || (info.topics.count(ex) && !findCodecByType(info.topics.at(ex).type));
     if (it == topics.end() && not_played && options.topics.empty()) continue;  // not played anyway
+    if (it == topics.end() && isCommandTopic(ex) && !options.commands) continue;  // not played anyway (note: cli)
     if (it == topics.end()) throw RecordError("--exclude '" + ex + "' is not among the played topics");
     topics.erase(it);
   }

@@ -129,6 +129,12 @@ static int check_control_status(const reflex_msg_ControlStatus* m, const char* s
   n += check_dbl("compute_time_us", 812.5 + REFLEX_K, m->compute_time_us);
   n += check_dbl("lateness_us", -3.5, m->lateness_us);
   n += check_u64("overrun_count", 0xFFFFFFFFFFFFFFF0ULL, m->overrun_count);
+  n += check_dbl("arm_distance", 0.0375 + REFLEX_K, m->arm_distance);
+  n += check_u64("rejected_hand_targets", 7, m->rejected_hand_targets);
+  n += check_u64("rejected_body_schema", 0xFFFFFFFFFFFFFFFEULL, m->rejected_body_schema);
+  n += check_u64("rejected_walk_commands", 2, m->rejected_walk_commands);
+  n += check_u64("rejected_robot_states", 3, m->rejected_robot_states);
+  n += check_str("last_rejection", "walk_goal_y_or_yaw_not_zero", m->last_rejection);
   return n;
 }
 
@@ -199,6 +205,12 @@ static void fill_control_status(reflex_msg_ControlStatus* m) {
   m->compute_time_us = 812.5 + REFLEX_K;
   m->lateness_us = -3.5;
   m->overrun_count = 0xFFFFFFFFFFFFFFF0ULL;
+  m->arm_distance = 0.0375 + REFLEX_K;
+  m->rejected_hand_targets = 7;
+  m->rejected_body_schema = 0xFFFFFFFFFFFFFFFEULL;
+  m->rejected_walk_commands = 2;
+  m->rejected_robot_states = 3;
+  m->last_rejection = "walk_goal_y_or_yaw_not_zero";
 }
 
 static void fill_hand_targets(reflex_msg_HandTargets* m) {

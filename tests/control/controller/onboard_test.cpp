@@ -12,6 +12,10 @@
 // - the plant loop: the pre-issue-13 loop written out here (computeControl + stepPlant on a
 //   KinematicRobot) gives bit-identical joint positions over 1200 cycles with walking;
 // - the robot port: a port without state gets no command; the command is measured + qdot dt.
+// - rejections (issue 17, items 3 and 13): one counter per cause, each cause provoked by a value on its
+//   own side of the documented bound (max_target_distance, kWalkGoalTolerance), the latest cause named;
+// - the closest pair's names (issue 17, item 3): segment_a is the arm's own segment, checked against the
+//   robot's naming (l_* segments move with the left arm, r_* with the right) over a crossing-arms run.
 #include "fixture.hpp"
 
 #include "reflex/control/onboard.hpp"
@@ -480,4 +484,102 @@ TEST(OnboardSetup, BadOptionsAndInitialConfigurationsAreNamed) {
 }
 
 }  // namespace
+// ---------------------------------------------------------------- rejections and closest names
+
+TEST(OnboardRejections, OneCounterPerCauseAtTheBoundsAndTheLatestCauseNamed) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  auto count = [&](RejectCause c) { return ctl.report().counts.rejected[static_cast<std::size_t>(c)]; };
+  auto last = [&] { return ctl.report().counts.last_rejection; };
+  EXPECT_EQ(last(), -1) << "nothing refused yet";
+  // Hands: at exactly max_target_distance accepted, the next double beyond it refused; NaN refused.
+  std::array<HandCommand, 2> hands = reachable();
+  hands[kLeft].target_W = Eigen::Vector3d(2.0, 0.0, 0.0);  // |t| = 2 m = max_target_distance: followed
+  hands[kRight].target_W = Eigen::Vector3d(std::nextafter(2.0, 3.0), 0.0, 0.0);
+  EXPECT_EQ(ctl.setHandTargets(hands, 0.0), 1);
+  EXPECT_EQ(count(RejectCause::kHandTargetTooFar), 1U);
+  EXPECT_EQ(last(), static_cast<int>(RejectCause::kHandTargetTooFar));
+  hands[kRight].target_W.z() = std::nan("");
+  EXPECT_EQ(ctl.setHandTargets(hands, 0.0), 1);
+  EXPECT_EQ(count(RejectCause::kHandTargetNotFinite), 1U);
+  EXPECT_EQ(count(RejectCause::kHandTargetTooFar), 1U) << "a NaN target is its own cause";
+  EXPECT_EQ(last(), static_cast<int>(RejectCause::kHandTargetNotFinite));
+  // Walking: goal_y / goal_yaw within kWalkGoalTolerance are 0; beyond it (or NaN) the goal is refused whole.
+  const int heel = model.qIndex("heel_x");
+  ASSERT_GE(heel, 0);
+  EXPECT_FALSE(ctl.walkCommand(false, q0[heel] + 0.5, std::nextafter(kWalkGoalTolerance, 1.0), 0.0, 0.2));
+  EXPECT_FALSE(ctl.walkCommand(false, q0[heel] + 0.5, 0.0, -0.3, 0.2));
+  EXPECT_FALSE(ctl.walkCommand(false, q0[heel] + 0.5, 0.0, std::nan(""), 0.2));
+  EXPECT_EQ(count(RejectCause::kWalkUnsupportedGoal), 3U);
+  EXPECT_EQ(last(), static_cast<int>(RejectCause::kWalkUnsupportedGoal));
+  EXPECT_STREQ(rejectCauseName(RejectCause::kWalkUnsupportedGoal), "walk_goal_y_or_yaw_not_zero");
+  EXPECT_FALSE(ctl.walkCommand(false, q0[heel] + 0.5, 0.0, 0.0, -0.2));
+  EXPECT_EQ(count(RejectCause::kWalkBadValue), 1U);
+  ctl.setHandTargets(reachable(), 0.0);  // ordinary targets for the cycles below
+  for (int k = 0; k < 20; ++k) ctl.step(kDt * k);
+  EXPECT_EQ(port.positions()[heel], q0[heel]) << "a refused goal is not walked, not even along x";
+  EXPECT_TRUE(ctl.walkCommand(true, 0.0, 5.0, 5.0, 0.0)) << "a stop ignores its goal";
+  ASSERT_TRUE(ctl.walkCommand(false, q0[heel] + 0.5, -kWalkGoalTolerance, kWalkGoalTolerance, 0.2));
+  double t = 0.1;
+  for (int k = 0; k < 20; ++k, t += kDt) ctl.step(t);
+  EXPECT_GT(port.positions()[heel], q0[heel]) << "goal_y / goal_yaw at the tolerance walk along x";
+  // Body schema: a segment beyond BodySchemaLimits (radius 10 m) is its own cause.
+  const std::string big = "big";
+  const Eigen::Vector3d p(0.3, 0.0, 1.5);
+  EXPECT_EQ(ctl.changeBodySchema(attachRequest(big, "world", p, p, 10.0)).kind, BodySchemaOutcome::Kind::kRejectedCheck);
+  EXPECT_EQ(count(RejectCause::kSchemaBadSegment), 1U);
+  EXPECT_EQ(last(), static_cast<int>(RejectCause::kSchemaBadSegment));
+  // The groups are the causes summed; the total is every refusal.
+  const OnboardCounts& c = ctl.report().counts;
+  EXPECT_EQ(c.hand_targets_rejected, 2U);
+  EXPECT_EQ(c.walk_rejected, 4U);
+  EXPECT_EQ(c.schema_rejected, 1U);
+  EXPECT_EQ(c.targets_rejected, 7U);
+  EXPECT_EQ(c.targets_received, 3U);
+  std::uint64_t sum = 0;
+  for (const std::uint64_t n : c.rejected) sum += n;
+  EXPECT_EQ(sum, c.targets_rejected);
+}
+
+TEST(OnboardClosestPair, SegmentAIsTheArmsOwnSegment) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  ctl.setHandTargets(crossing(), 0.0);
+  // The shipped robot names its segments by side: l_* move with the left arm, r_* with the right one.
+  const char* own[2] = {"l_", "r_"};
+  int arm_pairs = 0, named = 0, reordered = 0;
+  double t = 0.0;
+  for (int k = 0; k < 800; ++k, t += kDt) {  // 4 s: the forearms meet in front of the chest
+    ctl.noteSourceHeartbeat(t);
+    const CycleReport& r = ctl.step(t);
+    for (int a = 0; a < 2; ++a) {
+      const ArmReport& ar = r.arms[static_cast<std::size_t>(a)];
+      ASSERT_EQ(ar.closest_pair < 0, ar.segment_a == nullptr);
+      ASSERT_EQ(ar.closest_pair < 0, ar.segment_b == nullptr);
+      if (ar.closest_pair < 0) continue;
+      ++named;
+      const std::string seg_a = ar.segment_a, seg_b = ar.segment_b;
+      ASSERT_EQ(seg_a.rfind(own[a], 0), 0U) << "arm " << a << " closest " << seg_a << " / " << seg_b;
+      // Against the model's pair: the same two segments, in either order.
+      const SegmentPair& pair = model.pairs[static_cast<std::size_t>(ar.closest_pair)];
+      const std::string pa = model.segments[pair.a].name, pb = model.segments[pair.b].name;
+      ASSERT_TRUE((seg_a == pa && seg_b == pb) || (seg_a == pb && seg_b == pa)) << seg_a << " / " << seg_b;
+      if (seg_b.rfind(own[1 - a], 0) == 0) ++arm_pairs;
+      if (pa.rfind(own[1 - a], 0) == 0) {  // the model lists the other arm's segment first
+        ++reordered;
+        EXPECT_EQ(seg_a, pb);
+      }
+    }
+  }
+  EXPECT_GT(named, 0);
+  EXPECT_GT(arm_pairs, 100) << "the arms were each other's closest pair for a while (crossing)";
+  EXPECT_GT(reordered, 0) << "a pair whose first segment is the other arm's was reported (the case the order fixes)";
+}
+
 }  // namespace reflex::control

@@ -112,15 +112,37 @@ struct BodySchemaOutcome {
   char text[400] = {};
 };
 
+/// Why an input was refused (issue 17, items 3 and 13): one counter per cause (OnboardCounts::rejected).
+enum class RejectCause : std::uint8_t {
+  kHandTargetNotFinite,   ///< a given hand target with a NaN / Inf coordinate (per hand)
+  kHandTargetTooFar,      ///< a given hand target farther than max_target_distance from the base origin (per hand)
+  kSchemaBadSegment,      ///< checkBodySchemaSegment refused the segment (BodySchemaOutcome::kRejectedCheck)
+  kSchemaNoSlot,          ///< every body-schema slot is taken by another name
+  kSchemaUnresolvable,    ///< the segment would touch one that no arm can move away from it
+  kWalkBadValue,          ///< a walk command with a non-finite goal_x or speed, or speed <= 0
+  kWalkUnsupportedGoal,   ///< a walk command whose goal_y or goal_yaw is not 0: the walking pattern walks
+                          ///< along the base x axis only (|goal_y| and |goal_yaw| <= kWalkGoalTolerance)
+};
+inline constexpr int kRejectCauses = 7;
+/// The cause's name as the exit line and reflex/control_status (last_rejection) print it, e.g.
+/// "hand_target_too_far".
+const char* rejectCauseName(RejectCause cause) noexcept;
+/// goal_y [m] and goal_yaw [rad] of a walk command up to this magnitude count as 0: 1 mm / 1 mrad, far
+/// below what walking achieves, so a relative goal computed on the behavior side from a measured heel_y
+/// (rounding, a physics robot's drift) still walks; anything larger is kWalkUnsupportedGoal.
+inline constexpr double kWalkGoalTolerance = 1e-3;
+
 /// Counters since construction (the node's exit line, tests).
 struct OnboardCounts {
   std::uint64_t cycles = 0;              ///< step() calls
   std::uint64_t computed_cycles = 0;     ///< cycles with a robot state (control computed, command sent)
   std::uint64_t targets_received = 0;    ///< setHandTargets calls
-  std::uint64_t targets_rejected = 0;    ///< every rejected input: the three causes below summed
+  std::uint64_t targets_rejected = 0;    ///< every rejected input: the three groups below summed
   std::uint64_t hand_targets_rejected = 0;  ///< non-finite or farther than max_target_distance (per hand)
   std::uint64_t schema_rejected = 0;     ///< body-schema changes refused
-  std::uint64_t walk_rejected = 0;       ///< walk commands with a non-finite goal or a non-positive speed
+  std::uint64_t walk_rejected = 0;       ///< walk commands refused (kWalkBadValue + kWalkUnsupportedGoal)
+  std::array<std::uint64_t, kRejectCauses> rejected{};  ///< per RejectCause (index = the enum's value)
+  int last_rejection = -1;               ///< the RejectCause of the latest refusal, -1 none yet
   std::uint64_t stale_events = 0;        ///< transitions to "inputs stale" (hands retract)
   std::uint64_t robot_stale_cycles = 0;  ///< cycles without a robot state
   std::uint64_t robot_stale_events = 0;  ///< transitions from "robot state ok" to "no robot state"
@@ -136,7 +158,10 @@ struct ArmReport {
   double distance = std::numeric_limits<double>::infinity();  ///< closest pair of this arm (m)
   Zone zone = Zone::kFree;
   int closest_pair = -1;                                       ///< index into Model::pairs, -1 none
-  const char* segment_a = nullptr;                             ///< its segment names (nullptr: none)
+  /// The closest pair's segments: segment_a is THIS arm's segment (whichever side of Model::pairs it
+  /// is on; for a pair of two segments of this arm, the pair's first), segment_b the other one.
+  /// Both nullptr exactly when closest_pair is -1 (no pair of the arm was considered this cycle).
+  const char* segment_a = nullptr;
   const char* segment_b = nullptr;
 };
 
@@ -196,8 +221,13 @@ class OnboardController {
   /// slot) or detach (frees the slot). A refusal is counted and named in the outcome's text.
   const BodySchemaOutcome& changeBodySchema(const BodySchemaRequest& request) noexcept;
   /// A walk command: stop, or walk to heel_x = goal_x (the base frame's x of the heel joint) at
-  /// min(speed, max_walk_speed). False (rejected, counted) for a non-finite goal or speed, or speed <= 0.
-  bool walkCommand(bool stop, double goal_x, double speed) noexcept;
+  /// min(speed, max_walk_speed). False (rejected, counted) for a non-finite goal or speed, or speed <= 0
+  /// (kWalkBadValue), and for a goal_y [m] or goal_yaw [rad] that is not 0 within kWalkGoalTolerance
+  /// (kWalkUnsupportedGoal: the walking pattern only walks along x; the goal is refused whole, never
+  /// walked in x alone). A stop is always accepted (its goal is ignored).
+  bool walkCommand(bool stop, double goal_x, double goal_y, double goal_yaw, double speed) noexcept;
+  /// The same with goal_y = goal_yaw = 0.
+  bool walkCommand(bool stop, double goal_x, double speed) noexcept { return walkCommand(stop, goal_x, 0.0, 0.0, speed); }
   /// Walks `distance` m forward from where the heel is at the next step (scenarios). See WalkingPattern::start.
   bool startWalking(double distance, double speed) noexcept;
   /// Asks the next step to leave a latched e-stop (only separating motion, Sec. 7.1).
@@ -229,6 +259,9 @@ class OnboardController {
 
  private:
   void fillReport(ControlResult result) noexcept;
+  void reject(RejectCause cause) noexcept;
+  /// True if `segment` (robot or body-schema slot) is on a link that arm `arm`'s joints move.
+  bool segmentMovesWithArm(int segment, int arm) const noexcept;
 
   const Model& model_;
   const ControllerModel& cm_;

@@ -50,10 +50,12 @@ struct Publication {
 };
 
 struct RunProgress {
-  int frame = 0;           ///< index in the source
-  int frames = -1;         ///< frames per pass, -1 for live
+  int frame = 0;           ///< index in the recording (StereoFrame::index), < frames
+  int frames = -1;         ///< frames of the whole recording (StereoSource::recordingFrames), -1 for live
   int pass = 0;
-  double session_time = 0; ///< since the start offset
+  double session_time = 0; ///< the frame's session time: its stamp minus the recording's first stamp (s;
+                           ///< with --start, the offset included; the same in every loop pass)
+  double run_time = 0;     ///< session-clock seconds since this run's first frame (the start offset)
   double lag = 0;          ///< how far processing is behind the replay clock, s (paced only)
   int objects = 0;
 };

@@ -28,6 +28,12 @@ class StereoSource {
   /// Stamp of the first frame of a pass and the nominal frame period, seconds (session clock).
   virtual double firstStamp() const = 0;
   virtual double framePeriod() const = 0;
+  /// Frames of the whole recording (a session: before the start offset too), -1 if unknown (live).
+  /// Frame indices (StereoFrame::index) count from the recording's first frame: always < this.
+  virtual int recordingFrames() const { return frameCount(); }
+  /// Stamp of the recording's first frame, seconds (session clock): "session time" is the stamp
+  /// minus this (a session: the start offset included).
+  virtual double recordingStart() const { return firstStamp(); }
   virtual const StereoCalibration& calibration() const = 0;
   /// The run's stop flag: loops inside the source (skipping to the start offset on a restart) end
   /// early once it is true. runVision sets it; `stop` must outlive the source's use.
@@ -45,6 +51,8 @@ class SessionSource : public StereoSource {
   int frameCount() const override { return reader_.info().frameCount() - first_; }
   double firstStamp() const override { return reader_.info().stamps[static_cast<std::size_t>(first_)]; }
   double framePeriod() const override { return 1.0 / reader_.info().fps; }
+  int recordingFrames() const override { return reader_.info().frameCount(); }
+  double recordingStart() const override { return reader_.info().stamps.front(); }
   const StereoCalibration& calibration() const override { return reader_.info().calibration; }
   const SessionInfo& info() const { return reader_.info(); }
   void watchStop(const std::atomic<bool>* stop) override { stop_ = stop; }

@@ -1,5 +1,11 @@
-// The onboard controller process (paper Sec. 7, Fig. 4): the reactive controller and the robot at
-// 200 Hz, fed by the behavior layer over DDS, publishing joint state and controller status.
+// The onboard controller process (paper Sec. 7, Fig. 4): the reactive controller and the robot, one
+// cycle per controller period (5 ms by default), fed by the behavior layer over DDS, publishing joint
+// state and controller status.
+//
+// Refused inputs (issue 17, items 3 and 13) are counted per cause (NodeStats::rejected, the causes of
+// control::RejectCause and of DdsRobotPort), listed by cause in the exit line, and published every
+// cycle in ControlStatus (rejected_* per topic, last_rejection the latest cause), so a module of any
+// vendor sees that its sample was refused.
 //
 // Safety never depends on another process (DESIGN.md): distances are computed here; if the module
 // that sends hand targets goes silent (no sample and no heartbeat for `input_timeout`), both hands
@@ -45,6 +51,7 @@
 #pragma once
 
 #include "reflex/control/controller.hpp"
+#include "reflex/control/onboard.hpp"
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control/simulation.hpp"
 
@@ -108,7 +115,8 @@ struct NodeStats {
   std::uint64_t estop_count = 0;
   std::uint64_t guard_count = 0;      ///< cycles whose step the predictive guard shortened
   std::uint64_t targets_received = 0;
-  std::uint64_t targets_rejected = 0;
+  std::uint64_t targets_rejected = 0;   ///< every refused hand target, body-schema change and walk command
+  std::array<std::uint64_t, control::kRejectCauses> rejected{};  ///< the same per control::RejectCause
   std::uint64_t stale_events = 0;     ///< transitions to "inputs stale"
   std::uint64_t state_write_errors = 0;  ///< failed writes of the robot state file
   std::vector<double> lateness_us;    ///< per cycle (for percentiles), reserved up front
@@ -121,8 +129,18 @@ struct NodeStats {
   bool robot_stale_at_exit = false;
   std::uint64_t robot_states_accepted = 0;
   std::uint64_t robot_states_rejected = 0;  ///< wrong lengths, a missing joint, NaN, a future or old stamp
+  std::array<std::uint64_t, 5> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
+  const char* last_rejection = "";          ///< the latest refusal's cause name ("" none), as in ControlStatus
   std::uint64_t robot_commands = 0;         ///< JointCommand samples published
 };
+
+/// The name of a DdsRobotPort rejection cause (0 lengths .. 4 old stamp) as ControlStatus.last_rejection
+/// and the exit line print it: "robot_state_length", ..._missing_joint, ..._not_finite, ..._future_stamp,
+/// ..._old_stamp.
+const char* robotStateCauseName(int cause) noexcept;
+
+/// "hand_target_too_far 3, walk_bad_value 1" for the non-zero counters of `stats` ("" if none).
+std::string describeRejections(const NodeStats& stats);
 
 /// What protects the robot in this run (published on reflex/controller_protection).
 struct Protection {

@@ -21,7 +21,7 @@
 // A kill -9 in the middle of a write can tear at most the slot being written; the other slot holds
 // the previous cycle. The loader takes the valid slot (magic, version, CRC) with the highest sequence.
 // The data survive the death of the process (page cache), not a power loss: nothing is fsync'ed from
-// the 200 Hz loop (an fsync can block for milliseconds).
+// the control loop (an fsync can block for milliseconds).
 //
 // Start-up policy: no file, or an empty one -> no saved state (the caller starts from rest and the
 // file is created). A file with content that is not a valid state of THIS robot (no valid slot,
@@ -74,7 +74,7 @@ class RobotStateFile {
   std::uint64_t loadedSequence() const { return loaded_seq_; }
   std::int64_t loadedWallNs() const { return loaded_wall_ns_; }
 
-  /// Writes q (size nq) as the next record. For the 200 Hz loop: allocation-free, never throws.
+  /// Writes q (size nq) as the next record. For the control loop: allocation-free, never throws.
   /// Returns false (and counts it) if the write failed or was short; the robot state then stays at
   /// the last complete record.
   bool save(const Eigen::Ref<const Eigen::VectorXd>& q) noexcept;

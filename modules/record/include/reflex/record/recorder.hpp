@@ -112,9 +112,13 @@ struct PlayerOptions {
   double duration = 0.0;              ///< seconds of recording time to play from the start (0: to the end)
   double delay = 0.5;                 ///< seconds between creating the writers and the first sample (discovery)
   std::vector<std::string> topics;    ///< topic names to play; empty = every topic in the file but
-                                      ///< reflex/controller_protection (a live controller's claim) and
-                                      ///< reflex/joint_command (a live robot would obey it); see player.cpp
-  std::vector<std::string> exclude;   ///< topic names not to play
+                                      ///< reflex/controller_protection (a live controller's claim; see player.cpp)
+                                      ///< and, without `commands`, the command topics (isCommandTopic)
+  std::vector<std::string> exclude;   ///< topic names not to play (a command topic without `commands`: a no-op)
+  /// Play the command topics too (issue 17, item 12; reflex_play --commands). Off by default: a replay
+  /// republishes observations only, so it never steers a live controller or robot. Without it a
+  /// command topic named in `topics` is a RecordError naming the topic and the option.
+  bool commands = false;
   bool restamp = false;               ///< move sample time stamps to the playing time (see SamplePublisher)
   bool progress = false;              ///< status line on stderr
   /// Longest wait between consecutive played records, seconds of recording time (> 0). A longer gap
@@ -123,6 +127,13 @@ struct PlayerOptions {
   double max_gap = 10.0;
   bus::BusConfig bus;
 };
+
+/// The topics that command the robot (isCommandTopic): the behavior layer's outputs to the controller
+/// (hand targets, motion priority, body schema, walk command) and the controller's joint command to
+/// a robot driver. Every other Reflex topic is an observation (what vision saw, what the controller
+/// and the robot did, heartbeats).
+const std::vector<std::string>& commandTopics();
+bool isCommandTopic(const std::string& topic);
 
 struct PlayerStats {
   std::uint64_t published = 0;        ///< samples written
@@ -153,6 +164,8 @@ class Player {
   double windowSeconds() const { return 1e-9 * static_cast<double>(end_ns_ - begin_ns_); }
   /// How long one pass takes at rate 1 once gaps are shortened to max_gap, seconds.
   double playedSeconds() const { return played_seconds_; }
+  /// Command topics in the file left out because PlayerOptions::commands was off (the start line says so).
+  const std::vector<std::string>& commandsSkipped() const { return commands_skipped_; }
 
  private:
   PlayerOptions options_;
@@ -161,6 +174,7 @@ class Player {
   std::int64_t first_ns_ = 0, begin_ns_ = 0, end_ns_ = 0;
   std::uint64_t window_records_ = 0;
   double played_seconds_ = 0.0;
+  std::vector<std::string> commands_skipped_;
   std::atomic<bool> stop_{false};
   PlayerStats stats_;
 };
