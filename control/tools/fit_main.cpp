@@ -50,14 +50,8 @@ int main(int argc, char** argv) {
     if (overlay.links.empty())
       std::cerr << urdf_path << ": no link has mesh or box collision elements; the overlay lists none" << std::endl;
     const std::string text = reflex::control::fitOverlayText(overlay, out_path);
-    const std::string tmp = out_path + ".tmp";
-    {
-      std::ofstream out(tmp, std::ios::binary);
-      out << text;
-      out.flush();
-      if (!out) throw std::runtime_error(reflex::common::writeError(tmp, errno));
-    }
-    if (std::rename(tmp.c_str(), out_path.c_str()) != 0) throw std::runtime_error(reflex::common::writeError(out_path, errno));
+    if (const std::string why = reflex::common::writeFileReplacing(out_path, text); !why.empty())
+      throw std::runtime_error(why);
     // Summary: one line per link.
     std::cout << "# link,primitives,vertices_enclosed,vertices,volume_ratio,worst_gap_m\n";
     for (const auto& l : overlay.links) {

@@ -38,14 +38,7 @@ std::string num(double v) {
 void writeFile(const std::string& path, const std::string& text) {
   if (const std::string why = reflex::common::outputFileProblem(path); !why.empty())
     throw std::runtime_error("output " + why);
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary);
-    out << text;
-    out.flush();
-    if (!out) throw std::runtime_error(reflex::common::writeError(tmp, errno));
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error(reflex::common::writeError(path, errno));
+  if (const std::string why = reflex::common::writeFileReplacing(path, text); !why.empty()) throw std::runtime_error(why);
 }
 
 // Whether any <collision> of the URDF holds a <mesh> (then the robot needs a fit overlay).

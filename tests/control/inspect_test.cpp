@@ -23,32 +23,11 @@ namespace {
 
 using ::testing::HasSubstr;
 
-struct ProcessResult {
-  int exit_code = -1;
-  std::string out, err;
-};
+using test::ProcessResult;
+using test::slurp;
 
-std::string slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-/// Runs reflex_inspect with `args` (already shell-quoted where needed).
 ProcessResult inspect(const std::string& args) {
-  const std::string err_path = ::testing::TempDir() + "reflex_inspect_stderr.txt";
-  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_inspect " + args + " 2>" + err_path;
-  ProcessResult r;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) r.out.append(buf, n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.err = slurp(err_path);
-  return r;
+  return test::runTool("reflex_inspect", args);
 }
 
 std::vector<std::string> split(const std::string& s, char sep) {

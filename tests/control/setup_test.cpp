@@ -38,31 +38,11 @@ using ::testing::HasSubstr;
 using ::testing::Not;
 namespace fs = std::filesystem;
 
-struct ProcessResult {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-std::string slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using test::ProcessResult;
+using test::slurp;
 
 ProcessResult setupRun(const std::string& args) {
-  const std::string err_path = ::testing::TempDir() + "reflex_setup_stderr.txt";
-  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_setup " + args + " 2>" + err_path;
-  ProcessResult r;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) r.out.append(buf, n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.err = slurp(err_path);
-  return r;
+  return test::runTool("reflex_setup", args);
 }
 
 std::string freshDir(const std::string& name) {

@@ -55,28 +55,19 @@ behavior=$prefix/bin/reflex_behavior
 "$behavior" --list-modules --plugin "$plugin" | grep -q '^wave ' || fail "--list-modules --plugin does not list 'wave'"
 config=$src/modules/examples/wave_module/wave.yaml
 
-# Refusals, each with its exact message.
-set +e
-msg=$("$behavior" --config "$config" --domain "$domain" --duration 1 2>&1); rc=$?
-set -e
-[[ $rc -eq 2 ]] || fail "without the plugin: exit $rc, expected 2"
-grep -q "unknown module type (known: grasped_bar, occlusion, pointing, scripted, walking): 'wave'" <<<"$msg" \
-  || fail "without the plugin, got: $msg"
+# Refusals: exit 2 and the exact message. refused WHAT EXPECTED_TEXT ARGS...
+refused() {
+  local what=$1 want=$2; shift 2
+  local msg rc=0
+  msg=$("$behavior" --config "$config" "$@" 2>&1) || rc=$?
+  [[ $rc -eq 2 ]] && grep -qF -- "$want" <<<"$msg" || fail "$what: exit $rc (2 expected), got: $msg"
+}
+refused "without the plugin" "unknown module type (known: grasped_bar, occlusion, pointing, scripted, walking): 'wave'" \
+  --domain "$domain" --duration 1
 notplugin=$(ls /usr/lib/x86_64-linux-gnu/libz.so.1 /lib/x86_64-linux-gnu/libz.so.1 2>/dev/null | head -1)
-set +e
-msg=$("$behavior" --config "$config" --plugin "$notplugin" 2>&1); rc=$?
-set -e
-[[ $rc -eq 2 ]] && grep -qF "module plugin '$notplugin': not a Reflex module plugin" <<<"$msg" \
-  || fail "a library that is no plugin: exit $rc, $msg"
-set +e
-msg=$("$behavior" --config "$config" --plugin "$work/missing.so" 2>&1); rc=$?
-set -e
-[[ $rc -eq 2 ]] && grep -qF "module plugin '$work/missing.so': no such file" <<<"$msg" || fail "missing plugin: exit $rc, $msg"
-set +e
-msg=$("$behavior" --config "$config" --plugin "$plugin" --plugin "$plugin" 2>&1); rc=$?
-set -e
-[[ $rc -eq 2 ]] && grep -qF "module type 'wave' is already registered" <<<"$msg" || fail "plugin twice: exit $rc, $msg"
-
+refused "a library that is no plugin" "module plugin '$notplugin': not a Reflex module plugin" --plugin "$notplugin"
+refused "a missing plugin" "module plugin '$work/missing.so': no such file" --plugin "$work/missing.so"
+refused "the plugin twice" "module type 'wave' is already registered" --plugin "$plugin" --plugin "$plugin"
 # Two hand-made libraries with the entry points: another API tag, and a plugin that registers nothing.
 for kind in old_api empty; do
   tag='"reflex-module-api/1"'; [[ $kind == old_api ]] && tag='"reflex-module-api/0"'
@@ -87,16 +78,11 @@ extern "C" void reflex_register_modules(reflex::modules::ModuleRegistry&) {}
 CPP
   g++ -shared -fPIC -o "$work/lib$kind.so" "$work/$kind.cpp" || fail "cannot build lib$kind.so"
 done
-set +e
-msg=$("$behavior" --config "$config" --plugin "$work/libold_api.so" 2>&1); rc=$?
-set -e
-[[ $rc -eq 2 ]] && grep -qF "module plugin '$work/libold_api.so': built for 'reflex-module-api/0', this reflex_behavior is 'reflex-module-api/1'" <<<"$msg" \
-  || fail "plugin of another API: exit $rc, $msg"
-set +e
-msg=$("$behavior" --config "$config" --plugin "$work/libempty.so" 2>&1); rc=$?
-set -e
-[[ $rc -eq 2 ]] && grep -qF "module plugin '$work/libempty.so': registers no module type" <<<"$msg" \
-  || fail "plugin registering nothing: exit $rc, $msg"
+refused "a plugin of another API" \
+  "module plugin '$work/libold_api.so': built for 'reflex-module-api/0', this reflex_behavior is 'reflex-module-api/1'" \
+  --plugin "$work/libold_api.so"
+refused "a plugin registering nothing" "module plugin '$work/libempty.so': registers no module type" \
+  --plugin "$work/libempty.so"
 
 step "the plugin's module in the installed reflex_behavior, on the bus (domain $domain)"
 "$behavior" --config "$config" --plugin "$plugin" --domain "$domain" --duration 120 > "$work/behavior.out" 2> "$work/behavior.err" &

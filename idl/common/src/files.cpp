@@ -3,6 +3,7 @@
 #include <cerrno>
 #include <cmath>
 #include <exception>
+#include <fstream>
 #include <cstdio>
 #include <cstring>
 #include <iostream>
@@ -47,6 +48,18 @@ std::string inputFileProblem(const std::string& path) {
 
 std::string writeError(const std::string& path, int err) {
   return "cannot write " + quoted(path) + ": " + std::strerror(err);
+}
+
+std::string writeFileReplacing(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary);
+    out << text;
+    out.flush();
+    if (!out) return writeError(tmp, errno);
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) return writeError(path, errno);
+  return {};
 }
 
 std::string flushStandardOutput() {

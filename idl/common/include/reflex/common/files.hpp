@@ -52,6 +52,10 @@ std::string outputFolderProblem(const std::string& dir);
 /// "cannot write '<path>': <strerror(err)>" -- the one wording of a failed write / flush / close.
 std::string writeError(const std::string& path, int err);
 
+/// Writes `text` to `path` through `path`.tmp renamed over it, so a reader never sees half a file;
+/// "" when done, else writeError's message for the file that failed (the .tmp or the rename).
+std::string writeFileReplacing(const std::string& path, const std::string& text);
+
 /// Flushes std::cout and stdout; "" if everything written to them reached the kernel, else
 /// "cannot write the standard output: <cause>" (e.g. `tool > /dev/full`: No space left on device).
 /// Tools call it last and exit non-zero with the message: output that was lost is not success.
