@@ -218,7 +218,7 @@ publish[controller]="reflex/joint_state reflex/control_status reflex/heartbeat r
 subscribe[controller]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat reflex/controller_protection"
 # The recorder only listens (every topic); it may announce itself with a heartbeat.
 publish[recorder]="reflex/heartbeat"
-subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection"
+subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection reflex/robot_state reflex/joint_command reflex/robot_contacts"
 # The player (reflex_play) republishes recorded OBSERVATIONS only: what vision saw and what the
 # robot did, so a recording can re-run behavior modules and feed monitoring. Not the four command
 # topics the controller obeys (a recording replayed in a secure system never commands the robot),

@@ -285,10 +285,10 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
 
   // Play everything (no --topic): every recorded sample but the controller's protection state, a
   // live controller's claim that a replay must not make beside a live controller (issue 16, item 16);
-  // named with --topic it is played. By default observations only: the five command topics of this
-  // recording (hand targets, priority, body schema, walk command, joint command; 5 samples each) only
-  // with `commands` (issue 17, item 12; a live robot would obey the joint commands, issue 13). 12 types x
-  // 5 samples were recorded.
+  // named with --topic it is played. By default observations only: the six command topics of this
+  // recording (hand targets, priority, body schema, walk command, joint command, and the robot state a
+  // controller over DDS computes from; 5 samples each) only with `commands` (issue 17, item 12; issue 13).
+  // 12 types x 5 samples were recorded.
   enum class Mode { kDefault, kCommands, kProtectionNamed };
   for (const Mode mode : {Mode::kDefault, Mode::kCommands, Mode::kProtectionNamed}) {
     PlayerOptions po;
@@ -300,9 +300,9 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     po.rate = 0.0;  // as fast as possible
     Player player(po);
     player.run();
-    const std::uint64_t expected = mode == Mode::kProtectionNamed ? 5u : mode == Mode::kCommands ? 55u : 30u;
+    const std::uint64_t expected = mode == Mode::kProtectionNamed ? 5u : mode == Mode::kCommands ? 55u : 25u;
     EXPECT_EQ(player.stats().published, expected) << static_cast<int>(mode);
-    if (mode == Mode::kDefault) EXPECT_EQ(player.commandsSkipped().size(), 5u);
+    if (mode == Mode::kDefault) EXPECT_EQ(player.commandsSkipped().size(), 6u);
   }
 
   // A replayed command, restamped, keeps its age: its deadline and the answered state's stamp move

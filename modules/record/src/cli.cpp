@@ -125,8 +125,9 @@ std::function<int()> addPlay(CLI::App& app) {
                  "'-x reflex/hand_targets' is then accepted and changes nothing");
   app.add_flag("--commands", o->commands,
                "also play the command topics (reflex/hand_targets, reflex/motion_priority, reflex/body_schema, "
-               "reflex/walk_command, reflex/joint_command). Default: observations only, so a replay never steers "
-               "a live controller or robot; -t of a command topic needs this flag");
+               "reflex/walk_command, reflex/joint_command, and reflex/robot_state: a controller over DDS computes "
+               "its commands from it). Default: observations only, so a replay never steers a live controller or "
+               "robot; -t of a command topic needs this flag");
   app.add_flag("--restamp", o->restamp,
                "move sample time stamps (header.stamp_ns, capture_stamp_ns) to the playing time");
   app.add_option("--max-gap", o->max_gap,

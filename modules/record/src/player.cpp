@@ -38,11 +38,13 @@ class PlayClock {
   double last_ = 0.0;
 };
 
+// The topics a live controller or robot acts on. The robot's measured state is one of them: replayed
+// beside `reflex_controller --robot dds`, recorded positions would be what a real robot is commanded from.
 const std::vector<std::string>& commandTopics() {
   static const std::vector<std::string> topics = {
       bus::TopicTraits<msg::HandTargets>::kTopicName, bus::TopicTraits<msg::MotionPriority>::kTopicName,
       bus::TopicTraits<msg::BodySchemaChange>::kTopicName, bus::TopicTraits<msg::WalkCommand>::kTopicName,
-      bus::TopicTraits<msg::JointCommand>::kTopicName};
+      bus::TopicTraits<msg::JointCommand>::kTopicName, bus::TopicTraits<msg::RobotState>::kTopicName};
   return topics;
 }
 

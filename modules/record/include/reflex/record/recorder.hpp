@@ -129,9 +129,10 @@ struct PlayerOptions {
 };
 
 /// The topics that command the robot (isCommandTopic): the behavior layer's outputs to the controller
-/// (hand targets, motion priority, body schema, walk command) and the controller's joint command to
-/// a robot driver. Every other Reflex topic is an observation (what vision saw, what the controller
-/// and the robot did, heartbeats).
+/// (hand targets, motion priority, body schema, walk command), the controller's joint command to
+/// a robot driver, and the robot's measured state (a controller over DDS computes its commands from
+/// it). Every other Reflex topic is an observation (what vision saw, what the controller did, the
+/// robot's contacts, heartbeats).
 const std::vector<std::string>& commandTopics();
 bool isCommandTopic(const std::string& topic);
 
