@@ -116,8 +116,25 @@ TEST(Heartbeat, PublishesModuleHostPidStateAndPeriod) {
   EXPECT_EQ(first.state(), msg::STATE_CONFIGURING);
   EXPECT_EQ(first.header().seq(), 1u);
   ASSERT_TRUE(record_reader.waitForWriters(1, 2s));
+  // The reader seeing the writer does not mean the writer has matched the reader yet (a reliable
+  // writer sends only to matched readers): wait until the periodic heartbeats (still CONFIGURING)
+  // arrive, so the sample written by setState below cannot be lost to discovery.
+  std::uint64_t last_seq = 0;
+  for (int i = 0; i < 20 && last_seq == 0; ++i) {
+    ASSERT_TRUE(module.runFor(100ms));
+    std::vector<msg::Heartbeat> before;
+    record_reader.takeAll(before);
+    if (!before.empty()) last_seq = before.back().header().seq();
+  }
+  ASSERT_GT(last_seq, 0u) << "no periodic heartbeat reached the record reader in 2 s";
+  std::this_thread::sleep_for(50ms);
+  {
+    std::vector<msg::Heartbeat> in_flight;
+    record_reader.takeAll(in_flight);
+    if (!in_flight.empty()) last_seq = in_flight.back().header().seq();
+  }
 
-  heartbeat.setState(msg::STATE_RUNNING, "all good");  // seq 2, at once
+  heartbeat.setState(msg::STATE_RUNNING, "all good");  // seq last_seq + 1, at once
   ASSERT_TRUE(module.runFor(300ms));                   // about 6 periodic heartbeats
   std::this_thread::sleep_for(50ms);
   std::vector<msg::Heartbeat> got;
@@ -125,7 +142,7 @@ TEST(Heartbeat, PublishesModuleHostPidStateAndPeriod) {
   ASSERT_GE(got.size(), 4u) << "1 immediate + about 6 periodic";
   char host[HOST_NAME_MAX + 1] = {};
   ::gethostname(host, sizeof host - 1);
-  EXPECT_EQ(got.front().header().seq(), 2u);
+  EXPECT_EQ(got.front().header().seq(), last_seq + 1u) << "the state change is published at once";
   for (std::size_t i = 0; i < got.size(); ++i) {
     EXPECT_EQ(got[i].module_name(), "hb_module");
     EXPECT_EQ(got[i].header().source(), "hb_module");
