@@ -162,7 +162,7 @@ TEST(SecurityHardening, MakeSecurityRefusesAPrivateKeyOthersCanRead) {
 
 TEST(SecurityHardening, BadMaterialStopsTheParticipantNamingTheFileAndTheCause) {
   const std::string& dir = material();
-  constexpr int kDomain = 120;
+  constexpr int kDomain = 217;  // its own (120 is record_mcap_process_test's)
   ASSERT_EQ(participantError(dir, "vision", kDomain), "") << "positive control: the material as made works";
 
   const std::string gov = dir + "/governance.p7s", perm = dir + "/vision/permissions.p7s";
@@ -241,7 +241,7 @@ TEST(SecurityHardening, BadMaterialStopsTheParticipantNamingTheFileAndTheCause) 
 
 TEST(SecurityHardening, AParticipantStopsItselfWhenItsCertificateExpires) {
   const std::string& dir = material();
-  constexpr int kDomain = 121;
+  constexpr int kDomain = 218;  // its own (121 is record_mcap_process_test's)
   const Restore restore(dir + "/vision/cert.pem");
   makeCertificate(dir, "vision", -60, 6);  // expires 6 s from now
   auto vision = secureParticipant(dir, "vision", kDomain);

@@ -21,7 +21,7 @@ namespace reflex::security_test {
 namespace {
 
 using namespace std::chrono_literals;
-constexpr int kDomain = 111;
+constexpr int kDomain = 216;  // its own (111 is faults_controller_restart_test's: a plain controller there reached the outsider)
 constexpr int kSamples = 20;  // per topic, 50 ms apart: a 1 s recording
 
 // Serialized by the type's own Fast DDS type support, as the recorder stores it.
