@@ -39,6 +39,11 @@ int main(int argc, char** argv) {
     bus::BusConfig bc;
     bc.module_name = "test_robot";
     bc.domain_id = domain;
+    // UDP only, no shared memory with the controller: with Fast DDS 2.9's shared-memory transport a
+    // writer whose reader process was killed (kill -9 of the controller, step 4 below) stalls for the
+    // port health check, about 1 s, and so would this loop (seen: holding reported after 0.98 s and no
+    // state published meanwhile). A robot driver keeps its loop off that path (idl/README.md).
+    bc.participant_profile = "reflex_participant_udp";
     bus::Participant participant(bc);
     bus::StopOnSignal stop_on_signal(participant, bus::stopSignals());
     auto& state_writer = participant.makeWriter<msg::RobotState>();
