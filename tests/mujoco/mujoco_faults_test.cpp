@@ -75,7 +75,10 @@ std::string readFile(const std::string& path) {
 double sec(std::int64_t ns) { return 1e-9 * static_cast<double>(ns); }
 
 std::vector<std::string> robotArgs() {
-  return {bin("reflex_mujoco"), "--domain", std::to_string(kDomain), "--name", "mujoco_faults"};
+  // UDP only (idl/README.md, Writing a robot driver): on Fast DDS 2.9's shared memory the controller's
+  // writers stall ~1 s for the port health check after the robot's kill -9 (seen: "stale" after 1.5 s).
+  return {bin("reflex_mujoco"), "--domain", std::to_string(kDomain), "--name", "mujoco_faults", "--participant-profile",
+          "reflex_participant_udp"};
 }
 std::vector<std::string> controllerArgs() {
   return {bin("reflex_controller"), "--domain", std::to_string(kDomain), "--robot", "dds", "--name", "ctl_faults"};

@@ -150,9 +150,14 @@ def main():
             profiles = (logdir["vision"] / "profiles_reflex_profiles_discovery.xml" if args.mode == "discovery"
                         else SOURCE / "bringup" / "dds" / "reflex_profiles_lan.xml")
             obs_host = "vision"
-        deadline = time.monotonic() + 5
+        # The vision host's launcher writes it after the robot's and behavior's have started: on a loaded
+        # 2-core machine that took more than 5 s once (the observer then failed on a missing file).
+        deadline = time.monotonic() + 30
         while not profiles.exists() and time.monotonic() < deadline:
             time.sleep(0.1)
+        if not profiles.exists():
+            raise Failure(f"the profiles file {profiles} was not written within 30 s")
+        time.sleep(0.2)  # written whole (the launcher writes it once, before starting its processes)
         env = dict(os.environ, FASTRTPS_DEFAULT_PROFILES_FILE=str(profiles), REFLEX_DOMAIN_ID=str(args.domain))
         procs.start(netns_exec(net.ns[obs_host] if obs_host else None)
                     + [f"{args.bin_dir}/reflex_record", "record", "-o", str(obs_rfx), "--name", "observer",
