@@ -3,6 +3,7 @@
 // See control/README.md, "Meshes".
 #include "reflex/common/files.hpp"
 #include "reflex/control/mesh_fit.hpp"
+#include "package_args.hpp"
 #include "reflex/control/urdf_loader.hpp"
 
 #include <CLI/CLI.hpp>
@@ -34,13 +35,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
-    reflex::control::PackagePaths paths;
-    for (const auto& arg : package_args) {
-      const auto eq = arg.find('=');
-      if (eq == std::string::npos || eq == 0 || eq + 1 == arg.size())
-        throw std::runtime_error("--package-path '" + arg + "' must be NAME=DIR");
-      paths.packages[arg.substr(0, eq)] = arg.substr(eq + 1);
-    }
+    const reflex::control::PackagePaths paths = reflex::control::parsePackagePathArgs(package_args);
     if (out_path.empty()) out_path = reflex::control::defaultFitOverlayPath(urdf_path);
     if (const std::string why = reflex::common::outputFileProblem(out_path); !why.empty())
       throw std::runtime_error("output " + why);

@@ -6,6 +6,7 @@
 #include "reflex/common/files.hpp"
 #include "reflex/control/controller.hpp"
 #include "reflex/control/mesh_fit.hpp"
+#include "package_args.hpp"
 #include "reflex/control/pair_sampling.hpp"
 #include "reflex/control/robot_setup.hpp"
 #include "reflex/control/urdf_loader.hpp"
@@ -130,13 +131,7 @@ int run(int argc, char** argv) {
       if (!fs::exists(path)) throw std::runtime_error(what + " '" + path + "' does not exist");
       if (const std::string why = reflex::common::inputFileProblem(path); !why.empty()) throw std::runtime_error(what + " " + why);
     }
-    reflex::control::PackagePaths paths;
-    for (const auto& arg : package_args) {
-      const auto eq = arg.find('=');
-      if (eq == std::string::npos || eq == 0 || eq + 1 == arg.size())
-        throw std::runtime_error("--package-path '" + arg + "' must be NAME=DIR");
-      paths.packages[arg.substr(0, eq)] = arg.substr(eq + 1);
-    }
+    const reflex::control::PackagePaths paths = reflex::control::parsePackagePathArgs(package_args);
     std::error_code ec;
     fs::create_directories(out_dir, ec);
     if (ec) throw std::runtime_error("--out '" + out_dir + "': cannot create the folder: " + ec.message());
