@@ -1,5 +1,5 @@
 #pragma once
-// The DDS side of reflex_vision (linked only into the executable, never into reflex::vision):
+// The DDS side of the vision node (reflex::vision_node, only in a build with reflex::bus; never in reflex::vision):
 // owns the bus participant, the ObjectTargets writer (topic reflex/object_targets, profile
 // reflex_object_targets from bringup/dds/reflex_profiles.xml) and the heartbeat, and turns a
 // runner Publication into an ObjectTargets sample.

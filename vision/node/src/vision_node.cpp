@@ -1,0 +1,216 @@
+#include "reflex/vision_node/vision_node.hpp"
+
+#include "reflex/vision/error.hpp"
+#include "reflex/vision/output_file.hpp"
+#include "reflex/vision/source.hpp"
+
+#ifdef REFLEX_VISION_WITH_BUS
+#include <reflex/bus/log_limit.hpp>
+
+#include "vision_publisher.hpp"
+#endif
+
+#include <chrono>
+#include <cstdio>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+namespace reflex::vision_node {
+
+using namespace reflex::vision;
+
+namespace {
+
+// No silent default mount (issue 15, item 2): what to pass instead.
+const char* const kMountHelp =
+    " (the left camera in the robot base frame; the shipped robot with its head at zero: "
+    "bringup/vision/camera_mount.yaml; your own robot: see \"Measure the mount\" in vision/README.md)";
+
+}  // namespace
+
+struct VisionNode::Impl {
+  ReplayOptions replay;
+  std::unique_ptr<StereoSource> source;
+  std::unique_ptr<StereoTagPipeline> pipeline;
+  std::unique_ptr<OutputFile> dump;  // every write and the close checked (a full disk is an error)
+#ifdef REFLEX_VISION_WITH_BUS
+  std::unique_ptr<VisionPublisher> publisher;
+  // One line per skipped frame, rate-limited (issue 16 item 8f): a long corrupt stretch of video
+  // is counted (stats.skipped, exit line) but cannot flood stderr.
+  reflex::bus::LogLimiter skip_log;
+#endif
+  bool show = false;
+  std::chrono::steady_clock::time_point last_shown;
+  std::ostringstream row;
+  RunCallbacks callbacks;
+};
+
+VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.replay = o.replay;
+  PipelineOptions popt = o.pipeline;
+  const int sources = (!o.session.empty()) + (!o.camera_left.empty() || !o.camera_right.empty()) +
+                      (!o.side_by_side.empty());
+  if (sources != 1)
+    throw VisionError("give exactly one source: --session DIR, --camera-left N --camera-right M, or --side-by-side N");
+  if (!o.camera_left.empty() != !o.camera_right.empty())
+    throw VisionError("--camera-left and --camera-right must be given together");
+  if (o.rectify != "images" && o.rectify != "points")
+    throw VisionError("--rectify '" + o.rectify + "' must be 'images' or 'points'");
+  popt.rectify = o.rectify == "images" ? RectifyMode::kImages : RectifyMode::kPoints;
+  if (!o.dump.empty() && !o.rate_given) m.replay.rate = 0.0;
+  validateReplayOptions(m.replay);
+
+  std::optional<CameraMount> mount;
+  ObjectMap objects;
+  if (!o.session.empty()) {
+    auto s = std::make_unique<SessionSource>(o.session, o.start);
+    objects = s->info().objects;
+    mount = s->info().mount;
+    m.source = std::move(s);
+    if (!o.calib_left.empty() || !o.calib_right.empty())
+      throw VisionError("--calib-left/--calib-right apply to cameras; a session carries its own calibration");
+  } else {
+    if (o.calib_left.empty() || o.calib_right.empty()) throw VisionError("live cameras need --calib-left and --calib-right");
+    if (o.objects.empty()) throw VisionError("live cameras need --objects");
+    if (o.mount.empty()) throw VisionError(std::string("live cameras need --mount FILE") + kMountHelp);
+    if (o.start != 0.0 || m.replay.loop) throw VisionError("--start and --loop apply to sessions only");
+    const StereoCalibration calib = loadStereoCalibration(o.calib_left, o.calib_right);
+    // A video file standing in for a camera is paced at its own frame rate.
+    const std::string& first_spec = o.side_by_side.empty() ? o.camera_left : o.side_by_side;
+    auto left = openCapture(first_spec);  // left first, so an error names the first bad device
+    const double pace = isDeviceSpec(first_spec) ? 0.0 : left->get(cv::CAP_PROP_FPS);
+    if (!o.side_by_side.empty())
+      m.source = std::make_unique<CameraSource>(std::move(left), nullptr, calib, pace);
+    else
+      m.source = std::make_unique<CameraSource>(std::move(left), openCapture(o.camera_right), calib, pace);
+    if (m.replay.rate != 1.0 && o.rate_given) throw VisionError("--rate applies to sessions only");
+    m.replay.rate = 1.0;
+  }
+  if (!o.objects.empty()) objects = loadObjectMap(o.objects);
+  if (!o.mount.empty()) mount = loadCameraMount(o.mount);
+  if (!mount) throw VisionError("the session " + o.session + " has no camera_mount.yaml: pass --mount FILE" + kMountHelp);
+  popt.detector.family = o.family.empty() ? objects.family() : o.family;
+  m.pipeline = std::make_unique<StereoTagPipeline>(m.source->calibration(), *mount, objects, popt);
+
+  if (!o.dump.empty()) {
+    m.dump = std::make_unique<OutputFile>(o.dump, "dump file");
+    m.dump->write("time,frame,object,tag_id,x,y,z,x_cam,y_cam,z_cam,confidence\n");
+  }
+#ifdef REFLEX_VISION_WITH_BUS
+  if (o.dump.empty()) {
+    reflex::bus::BusConfig config;
+    config.module_name = o.module_name;
+    config.domain_id = o.domain_id;
+    config.profiles_file = o.profiles_file;
+    m.publisher = std::make_unique<VisionPublisher>(config, o.frame_id);
+  }
+#else
+  if (o.dump.empty())
+    throw VisionError("this reflex_vision was built without the DDS bus (reflex::bus); use --dump FILE.csv");
+#endif
+
+  m.show = o.show_progress;
+  m.last_shown = std::chrono::steady_clock::now() - std::chrono::seconds(1);
+  m.row << std::fixed;
+  RunCallbacks& cb = m.callbacks;
+  cb.on_frame = [this](const StereoFrame& f, double stamp, const StereoResult& r) {
+    Impl& n = *impl_;
+    if (!n.dump) return;
+    for (const ObjectObservation& ob : r.objects) {
+      n.row.str("");
+      n.row << std::setprecision(6) << stamp << ',' << f.index << ',' << ob.name << ',' << ob.tag_id << ','
+            << ob.p_B[0] << ',' << ob.p_B[1] << ',' << ob.p_B[2] << ',' << ob.p_C[0] << ',' << ob.p_C[1] << ','
+            << ob.p_C[2] << ',' << std::setprecision(4) << ob.confidence << '\n';
+      n.dump->write(n.row.str());
+    }
+    if (n.dump->failed()) stop_.store(true);  // no point in going on: closeOutput() reports it
+  };
+  cb.on_skip = [this](int frame, const std::string& why) {
+    const std::string line = "\nreflex_vision: skipped frame " + std::to_string(frame) + ": " + why;
+#ifdef REFLEX_VISION_WITH_BUS
+    impl_->skip_log.print(stderr, line);
+#else
+    std::cerr << line << "\n";
+#endif
+  };
+#ifdef REFLEX_VISION_WITH_BUS
+  cb.on_publish = [this](const Publication& p) {
+    if (impl_->publisher) impl_->publisher->publish(p);
+  };
+#endif
+  cb.on_progress = [this](const RunProgress& p) {
+    Impl& n = *impl_;
+    const auto now = std::chrono::steady_clock::now();
+    if (!n.show || now - n.last_shown < std::chrono::milliseconds(200)) return;
+    n.last_shown = now;
+    if (p.frames > 0)
+      std::fprintf(stderr, "\r[pass %d] frame %d/%d  t=%.1f s  objects=%d  lag=%.2f s   ", p.pass + 1, p.frame + 1,
+                   p.frames, p.session_time, p.objects, p.lag);
+    else
+      std::fprintf(stderr, "\rframe %d  t=%.1f s  objects=%d   ", p.frame + 1, p.session_time, p.objects);
+  };
+}
+
+VisionNode::~VisionNode() = default;
+
+const RunStats& VisionNode::run() {
+  Impl& m = *impl_;
+#ifdef REFLEX_VISION_WITH_BUS
+  if (m.publisher) {
+    // The bus loop (heartbeat timer, stop) runs on this thread; vision on a worker.
+    std::string worker_error;
+    std::thread worker([&] {
+      try {
+        stats_ = runVision(*m.source, *m.pipeline, m.replay, m.callbacks, stop_);
+      } catch (const std::exception& e) {
+        worker_error = e.what();
+      }
+      m.publisher->bus().stop();
+    });
+    m.publisher->heartbeat().setState(reflex::msg::STATE_RUNNING);
+    try {
+      m.publisher->bus().run();
+    } catch (...) {  // the security material expired: end the worker before the error leaves
+      stop_.store(true);
+      worker.join();
+      throw;
+    }
+    stop_.store(true);
+    worker.join();
+    if (!worker_error.empty() || !stats_.end_message.empty())
+      m.publisher->heartbeat().setState(reflex::msg::STATE_ERROR,
+                                        worker_error.empty() ? stats_.end_message : worker_error);
+    else
+      m.publisher->heartbeat().setState(reflex::msg::STATE_STOPPING);
+    if (!worker_error.empty()) throw VisionError(worker_error);
+  } else
+#endif
+  {
+    stats_ = runVision(*m.source, *m.pipeline, m.replay, m.callbacks, stop_);
+  }
+  if (m.show) std::fprintf(stderr, "\n");
+  return stats_;
+}
+
+void VisionNode::stop() noexcept {
+  stop_.store(true);
+#ifdef REFLEX_VISION_WITH_BUS
+  if (impl_->publisher) impl_->publisher->bus().stop();
+#endif
+}
+
+reflex::bus::Participant* VisionNode::bus() noexcept {
+#ifdef REFLEX_VISION_WITH_BUS
+  if (impl_->publisher) return &impl_->publisher->bus();
+#endif
+  return nullptr;
+}
+
+void VisionNode::closeOutput() {
+  if (impl_->dump) impl_->dump->close();
+}
+
+}  // namespace reflex::vision_node
