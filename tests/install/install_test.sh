@@ -4,6 +4,8 @@
 #  2. a tiny outside project (tests/install/outside_project) finds it with find_package(reflex), links
 #     reflex::control and reflex::vision, and prints what the in-tree tools answer independently
 #     (reflex_inspect's segment/pair count; the baseline computed here from the calibration's numbers);
+#     its second program links reflex::vision_node and runs the vision node offline on the flagship
+#     session: its CSV must equal the in-tree reflex_vision --dump byte for byte;
 #  3. the out-of-tree module project modules/examples/wave_module builds as a plugin against the installed
 #     tree and runs in the INSTALLED stock reflex_behavior on the bus: `reflex_bus list` sees its module
 #     and `reflex_bus hz` counts its hand targets; without the plugin the configuration is refused, and a
@@ -20,12 +22,12 @@ step() { echo "install_test: [$(date +%T)] $*"; }
 step "cmake --install into $prefix"
 cmake --install "$build" --prefix "$prefix" > "$work/install.log" || { tail -20 "$work/install.log"; fail "cmake --install"; }
 for f in lib/cmake/reflex/reflexConfig.cmake lib/cmake/reflex/reflexTargets.cmake include/reflex/control/controller.hpp \
-         include/reflex/msg/control.h include/reflex/modules/plugin.hpp bin/reflex_controller bin/reflex_behavior \
+         include/reflex/msg/control.h include/reflex/modules/plugin.hpp include/reflex/vision_node/vision_node.hpp bin/reflex_controller bin/reflex_behavior \
          bin/reflex_bus; do
   [[ -e $prefix/$f ]] || fail "not installed: $f"
 done
 
-step "outside project: find_package(reflex), reflex::control + reflex::vision"
+step "outside project: find_package(reflex), reflex::control + reflex::vision (+ reflex::vision_node)"
 cmake -S "$src/tests/install/outside_project" -B "$work/outside" -DCMAKE_PREFIX_PATH="$prefix" \
       -DCMAKE_BUILD_TYPE=Release > "$work/outside.log" 2>&1 || { cat "$work/outside.log"; fail "configure outside project"; }
 cmake --build "$work/outside" -j2 >> "$work/outside.log" 2>&1 || { tail -30 "$work/outside.log"; fail "build outside project"; }
@@ -42,6 +44,15 @@ d=re.search(r'projection_matrix:.*?data:\s*\[([^\]]*)\]', open('$session/right.y
 p=[float(x) for x in d.split(',')]
 print('%.6f' % (-p[3]/p[0]))")
 [[ $(echo "$out" | sed -n 2p) == "baseline $baseline" ]] || fail "baseline: '$(echo "$out" | sed -n 2p)' != $baseline"
+
+step "outside project: reflex::vision_node offline on the flagship session vs the in-tree reflex_vision --dump"
+"$work/outside/outside_vision_node" "$session" "$work/node.csv" || fail "outside_vision_node"
+"$build/bin/reflex_vision" --session "$session" --dump "$work/exe.csv" --duration 2 --quiet 2> "$work/exe.err" \
+  || fail "reflex_vision --dump: $(cat "$work/exe.err")"
+rows=$(($(wc -l < "$work/exe.csv") - 1))
+[[ $rows -gt 10 ]] || fail "reflex_vision --dump wrote $rows detections (> 10 expected)"
+cmp -s "$work/node.csv" "$work/exe.csv" || fail "the installed reflex::vision_node's CSV differs from reflex_vision --dump: $(diff "$work/node.csv" "$work/exe.csv" | head -5)"
+echo "install_test: reflex::vision_node: $rows detections, identical to reflex_vision --dump"
 
 step "out-of-tree module plugin: modules/examples/wave_module"
 cmake -S "$src/modules/examples/wave_module" -B "$work/wave" -DCMAKE_PREFIX_PATH="$prefix" \
