@@ -67,22 +67,19 @@ TEST(VisionNode, TwoNodesInOneProcessMatchGroundTruthAndStopApart) {
   ASSERT_NE(b.bus(), nullptr);
   std::atomic<bool> a_done{false}, b_done{false};
   std::string a_error, b_error;
-  std::thread ta([&] {
-    try {
-      a.run();
-    } catch (const std::exception& e) {
-      a_error = e.what();
-    }
-    a_done.store(true);
-  });
-  std::thread tb([&] {
-    try {
-      b.run();
-    } catch (const std::exception& e) {
-      b_error = e.what();
-    }
-    b_done.store(true);
-  });
+  // Each node's run() on its own thread, as a program composing them would.
+  const auto runOn = [](vn::VisionNode& node, std::atomic<bool>& done, std::string& error) {
+    return std::thread([&node, &done, &error] {
+      try {
+        node.run();
+      } catch (const std::exception& e) {
+        error = e.what();
+      }
+      done.store(true);
+    });
+  };
+  std::thread ta = runOn(a, a_done, a_error);
+  std::thread tb = runOn(b, b_done, b_error);
   struct Join {  // a failed ASSERT below must not leave joinable threads behind (std::terminate)
     vn::VisionNode &a, &b;
     std::thread &ta, &tb;
@@ -95,7 +92,8 @@ TEST(VisionNode, TwoNodesInOneProcessMatchGroundTruthAndStopApart) {
   } join{a, b, ta, tb};
 
   // Both publish (discovery takes seconds on a loaded machine).
-  ASSERT_TRUE(readUntil([&] { return count("vision_a") >= 10 && count("vision_b") >= 10; }, 60.0))
+  // 20 samples = 2 s at 10 Hz, each with up to two objects (the session hides one for a while).
+  ASSERT_TRUE(readUntil([&] { return count("vision_a") >= 20 && count("vision_b") >= 20; }, 60.0))
       << "vision_a " << count("vision_a") << ", vision_b " << count("vision_b");
 
   // Stop b alone: its run() returns promptly; a keeps publishing.
@@ -149,6 +147,6 @@ TEST(VisionNode, TwoNodesInOneProcessMatchGroundTruthAndStopApart) {
       }
     }
     std::cout << source << ": " << samples.size() << " samples, " << compared << " objects compared\n";
-    EXPECT_GT(compared, 10) << source;
+    EXPECT_GE(compared, 15) << source;
   }
 }

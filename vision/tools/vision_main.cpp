@@ -15,7 +15,6 @@
 #include <atomic>
 #include <csignal>
 #include <iostream>
-#include <memory>
 #include <optional>
 #include <string>
 
