@@ -491,7 +491,7 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
 /// A pair between physical segments (a virtual occlusion slot never counts for safety).
 bool isPhysical(const Model& model, const ControllerData& data, const PairDistance& pd) {
   const int sb = pd.seg_b;
-  return !(model.segments[sb].body_schema_slot && data.slot_virtual[sb - model.num_robot_segments]);
+  return !(model.segments[sb].body_schema_slot && data.dist.slots[static_cast<std::size_t>(sb - model.num_robot_segments)].is_virtual);
 }
 
 /// This cycle's closest physical pair, closest virtual pair and closest pair between the two arms
@@ -679,7 +679,7 @@ SegmentAttach attachControllerSegment(const Model& model, const ControllerModel&
     result.distance = pd.distance;
     return result;
   }
-  data.slot_virtual[static_cast<std::size_t>(slot)] = is_virtual;
+  data.dist.slots[static_cast<std::size_t>(slot)].is_virtual = is_virtual;
   result.attached = true;
   return result;
 }

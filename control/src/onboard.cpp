@@ -86,12 +86,11 @@ OnboardController::OnboardController(const Model& model, const ControllerModel& 
   qdot_command_.setZero(model.nq);
   q_scratch_ = q0;
   driven_ = reflex::control::drivenJoints(model, cm);
-  for (auto& name : slot_names_) name.reserve(256);  // a bus key is at most 255 bytes: no allocation later
 }
 
 int OnboardController::slotOf(const std::string& name) const noexcept {
   for (int s = 0; s < kBodySchemaSlots; ++s)
-    if (!slot_names_[s].empty() && slot_names_[s] == name) return s;
+    if (data_.dist.slots[s].name[0] != '\0' && name.compare(data_.dist.slots[s].name.data()) == 0) return s;
   return -1;
 }
 
@@ -146,16 +145,17 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
   if (rq.operation == BodySchemaRequest::Operation::kDetach || !rq.enabled) {
     if (known < 0) return out;  // kUnknownName: nothing to take away
     detachBodySchemaSegment(data_.dist, known);
-    data_.slot_virtual[known] = false;
-    slot_priority_[known] = 0;
-    if (rq.operation == BodySchemaRequest::Operation::kDetach) slot_names_[known].clear();  // the slot is free
+    BodySchemaSlot& freed = data_.dist.slots[known];
+    freed.is_virtual = false;
+    freed.motion_priority = 0;
+    if (rq.operation == BodySchemaRequest::Operation::kDetach) freed.name[0] = '\0';  // the slot is free
     out.kind = BodySchemaOutcome::Kind::kDetached;
     out.slot = known;
     return out;
   }
   int slot = known;
   for (int s = 0; s < kBodySchemaSlots && slot < 0; ++s)
-    if (slot_names_[s].empty()) slot = s;
+    if (data_.dist.slots[s].name[0] == '\0') slot = s;
   const int link = model_.linkIndex(parent);
   const Eigen::Vector3d& a = rq.a_L;
   const Eigen::Vector3d& b = rq.b_L;
@@ -173,12 +173,18 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
   }
   // The boundary check (bounds: BodySchemaLimits), then the placement check at the expected configuration.
   out.check = checkBodySchemaSegment(model_, link, a, b, rq.radius, rq.is_virtual, BodySchemaLimits{});
-  if (out.check.ok())
+  // A name longer than a slot holds (the bus never carries one: bus::kMaxKeyStringBytes) is refused
+  // whole, never stored cut short (two names alike in their first 255 bytes would share a slot).
+  const bool name_fits = name.size() <= kBodySchemaNameBytes;
+  if (out.check.ok() && name_fits)
     out.attach = attachControllerSegment(model_, cm_, data_, slot, link, a, b, rq.radius, ignore, rq.is_virtual, q_expected_);
   if (out.attach.attached) {
-    data_.slot_virtual[slot] = rq.is_virtual;
-    slot_priority_[slot] = rq.motion_priority;
-    if (known < 0) slot_names_[slot] = name;
+    BodySchemaSlot& held = data_.dist.slots[slot];  // attachControllerSegment set is_virtual
+    held.motion_priority = rq.motion_priority;
+    if (known < 0) {  // fits: name_fits; copied into the slot's own array, no allocation
+      name.copy(held.name.data(), name.size());
+      held.name[name.size()] = '\0';
+    }
     out.kind = BodySchemaOutcome::Kind::kAttached;
     out.slot = slot;
     return out;
@@ -191,6 +197,11 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
     std::snprintf(line, size, "body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')",
                   name.c_str(), out.attach.distance * 1e3, model_.segments[out.attach.other_segment].name.c_str(),
                   parent.c_str());
+  } else if (out.check.ok() && !name_fits) {
+    out.kind = BodySchemaOutcome::Kind::kRejectedCheck;
+    reject(RejectCause::kSchemaBadSegment);
+    std::snprintf(line, size, "body-schema segment '%.40s...' rejected: its name has %zu bytes, more than %zu (link '%s')",
+                  name.c_str(), name.size(), kBodySchemaNameBytes, parent.c_str());
   } else if (out.check.ok()) {
     out.kind = BodySchemaOutcome::Kind::kRejectedNoSlot;
     reject(RejectCause::kSchemaNoSlot);
@@ -251,9 +262,10 @@ const CycleReport& OnboardController::step(double now) noexcept {
   in.priority = priority_;
   if (in.priority == MotionPriority::kEqual) {  // a grasped object with priority makes its arm higher
     for (int s = 0; s < kBodySchemaSlots; ++s) {
-      if (!data_.dist.slots[s].enabled || data_.slot_virtual[s] || slot_priority_[s] <= 0) continue;
+      const BodySchemaSlot& slot = data_.dist.slots[s];
+      if (!slot.enabled || slot.is_virtual || slot.motion_priority <= 0) continue;
       for (int a = 0; a < 2; ++a)
-        if (cm_.arms[a].link_in_arm[data_.dist.slots[s].link])
+        if (cm_.arms[a].link_in_arm[slot.link])
           in.priority = a == kLeft ? MotionPriority::kLeftHigher : MotionPriority::kRightHigher;
     }
   }

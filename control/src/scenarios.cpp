@@ -31,7 +31,7 @@ bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vec
 }
 
 void ScenarioContext::detach(int slot) {
-  if (detachBodySchemaSegment(data.dist, slot)) data.slot_virtual[slot] = false;
+  if (detachBodySchemaSegment(data.dist, slot)) data.dist.slots[static_cast<std::size_t>(slot)].is_virtual = false;
 }
 
 double armToArmDistance(const Model& /*model*/, const ControllerModel& /*cm*/, const ControllerData& data) {

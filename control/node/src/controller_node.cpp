@@ -29,6 +29,9 @@ namespace msg = reflex::msg;
 
 namespace {
 
+// A body-schema slot holds any name the bus can carry, and the onboard controller refuses the rest.
+static_assert(kBodySchemaNameBytes == bus::kMaxKeyStringBytes, "a slot name holds exactly a bus key string");
+
 double nowSeconds(clockid_t clock) {
   timespec ts{};
   clock_gettime(clock, &ts);

@@ -260,6 +260,61 @@ TEST(OnboardBodySchema, RefusalsAreNamedAndCounted) {
   EXPECT_EQ(ctl.report().counts.targets_rejected, 5U);
 }
 
+// Issue 17, item 2: a slot is one record (BodySchemaSlot in data().dist.slots): geometry, virtual,
+// motion priority and name, written by changeBodySchema and read from there by the controller. The
+// answers are the request's own values; a name of kBodySchemaNameBytes bytes fits exactly, one byte
+// more is refused whole (never stored cut short, where it would take the slot of its 255-byte prefix).
+TEST(OnboardBodySchema, ASlotIsOneRecordOfGeometryVirtualPriorityAndNameAndALongerNameIsRefused) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  KinematicPort port(q0);
+  OnboardController ctl(model, cm, port, q0);
+  const Eigen::Vector3d a(0.0, 0.0, -0.05), b(0.0, 0.0, -0.08);
+  const std::string longest(kBodySchemaNameBytes, 'n');
+  const BodySchemaOutcome& out = ctl.changeBodySchema(attachRequest(longest, "r_hand", a, b, 0.012, false, 2));
+  ASSERT_EQ(out.kind, BodySchemaOutcome::Kind::kAttached) << out.text;
+  const BodySchemaSlot& slot = ctl.data().dist.slots[static_cast<std::size_t>(out.slot)];
+  EXPECT_TRUE(slot.enabled);
+  EXPECT_EQ(slot.link, model.linkIndex("r_hand"));
+  EXPECT_EQ(slot.a_L, a);
+  EXPECT_EQ(slot.b_L, b);
+  EXPECT_EQ(slot.radius, 0.012);
+  EXPECT_FALSE(slot.is_virtual);
+  EXPECT_EQ(slot.motion_priority, 2);
+  EXPECT_EQ(std::string(slot.name.data()), longest);
+  EXPECT_EQ(ctl.slotOf(longest), out.slot);
+  const std::string gaze = "gaze";
+  const BodySchemaOutcome& v = ctl.changeBodySchema(attachRequest(gaze, "head", a, b, 0.01, true, 0));
+  ASSERT_EQ(v.kind, BodySchemaOutcome::Kind::kAttached) << v.text;
+  EXPECT_TRUE(ctl.data().dist.slots[static_cast<std::size_t>(v.slot)].is_virtual);
+  // One byte more than a slot holds (and than the bus carries): refused, counted, named; nothing changed.
+  const BodySchemaSlots before = ctl.data().dist.slots;
+  const std::string too_long = longest + "n";
+  const BodySchemaOutcome& r = ctl.changeBodySchema(attachRequest(too_long, "l_hand", a, b, 0.012));
+  EXPECT_EQ(r.kind, BodySchemaOutcome::Kind::kRejectedCheck);
+  EXPECT_NE(std::string(r.text).find("its name has 256 bytes, more than 255"), std::string::npos) << r.text;
+  EXPECT_EQ(ctl.report().counts.schema_rejected, 1U);
+  EXPECT_EQ(ctl.report().counts.last_rejection, static_cast<int>(RejectCause::kSchemaBadSegment));
+  EXPECT_EQ(ctl.slotOf(too_long), -1);
+  for (int s = 0; s < kBodySchemaSlots; ++s) {
+    EXPECT_EQ(ctl.data().dist.slots[s].enabled, before[s].enabled);
+    EXPECT_EQ(ctl.data().dist.slots[s].link, before[s].link);
+    EXPECT_EQ(std::string(ctl.data().dist.slots[s].name.data()), std::string(before[s].name.data()));
+  }
+  // Disabled (enabled = false): the name keeps its slot, priority and virtual are cleared; detached: free.
+  BodySchemaRequest off = attachRequest(longest, "r_hand", a, b, 0.012);
+  off.enabled = false;
+  EXPECT_EQ(ctl.changeBodySchema(off).kind, BodySchemaOutcome::Kind::kDetached);
+  EXPECT_FALSE(slot.enabled);
+  EXPECT_EQ(slot.motion_priority, 0);
+  EXPECT_EQ(ctl.slotOf(longest), out.slot);
+  off.operation = BodySchemaRequest::Operation::kDetach;
+  EXPECT_EQ(ctl.changeBodySchema(off).kind, BodySchemaOutcome::Kind::kDetached);
+  EXPECT_EQ(slot.name[0], '\0');
+  EXPECT_EQ(ctl.slotOf(longest), -1);
+}
+
 // ---------------------------------------------------------------- walking
 
 TEST(OnboardWalking, TheHeelTravelsSpeedTimesDtPerClearCycleAndHoldsInEstopAndRecovery) {
@@ -354,11 +409,9 @@ TEST(OnboardPriority, GivenPriorityOrAGraspedObjectsArmAndTheSameVelocitiesAsCom
   // A virtual segment with priority does not count; a grasped object in the right hand does.
   ASSERT_EQ(ctl.changeBodySchema(attachRequest(gaze, "l_hand", a, b, 0.01, true, 1)).kind, BodySchemaOutcome::Kind::kAttached);
   ref.dist.slots = ctl.data().dist.slots;  // the reference needs the same slots: mirror them
-  ref.slot_virtual = ctl.data().slot_virtual;
   for (int k = 0; k < 20; ++k) check(MotionPriority::kEqual, "virtual segment with priority");
   ASSERT_EQ(ctl.changeBodySchema(attachRequest(cup, "r_hand", a, b, 0.01, false, 1)).kind, BodySchemaOutcome::Kind::kAttached);
   ref.dist.slots = ctl.data().dist.slots;
-  ref.slot_virtual = ctl.data().slot_virtual;
   for (int k = 0; k < 50; ++k) check(MotionPriority::kRightHigher, "grasped object in the right hand");
   ctl.setPriority(MotionPriority::kLeftHigher);
   for (int k = 0; k < 20; ++k) check(MotionPriority::kLeftHigher, "a given priority wins over the object's");

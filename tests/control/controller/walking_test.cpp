@@ -261,7 +261,7 @@ TEST(BodySchema, APhysicalSegmentTouchingAPartNoArmCanMoveIsRefused) {
   // A virtual segment (a gaze line) through the chest is never refused: it never triggers the e-stop.
   a = attachControllerSegment(model, cm, data, 3, world, chest_W - z, chest_W + z, 0.05, 0, true, q);
   EXPECT_TRUE(a.attached);
-  EXPECT_TRUE(data.slot_virtual[3]);
+  EXPECT_TRUE(data.dist.slots[3].is_virtual);
   // Updating an attached slot into such an overlap leaves the old placement in place.
   const Eigen::Vector3d away = chest_W + Eigen::Vector3d(0.6, 0.0, 0.0);
   a = attachControllerSegment(model, cm, data, 1, world, away, away, 0.05, 0, false, q);

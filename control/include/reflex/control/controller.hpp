@@ -288,7 +288,6 @@ struct ControllerData {
   /// paper's Fig. 13), from data.dist, exact also where the broad phase skipped pairs. Written
   /// whenever the distances are computed (not on kBadInput): callers read them instead of rescanning.
   ClosestPair closest_physical, closest_virtual, closest_between_arms;
-  std::array<bool, kBodySchemaSlots> slot_virtual{};  ///< virtual slots never trigger the e-stop
   std::uint64_t bad_input_count = 0;
   /// Predictive guard: how many cycles shortened the commanded step.
   std::uint64_t guard_count = 0;
@@ -365,7 +364,7 @@ struct SegmentAttach {
 /// Attaches a body-schema segment for the controller (reflex_controller and the scenarios use it):
 /// attachBodySchemaSegment (endpoints in the link frame, m), then, for a physical segment,
 /// findUnresolvableContact at q. A refused segment leaves the slot exactly as it was; an attached
-/// one sets data.slot_virtual[slot]. Bad arguments (slot, link, non-finite values): not attached,
+/// one sets data.dist.slots[slot].is_virtual. Bad arguments (slot, link, non-finite values): not attached,
 /// refusing_pair -1. Allocation-free; never throws.
 SegmentAttach attachControllerSegment(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
                                       int link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,

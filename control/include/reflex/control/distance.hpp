@@ -20,6 +20,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -44,7 +45,14 @@ struct PairDistance {
   bool exact = true;
 };
 
-/// A run-time body-schema segment: a capsule (or sphere if a_L == b_L) attached to a link.
+/// Longest body-schema segment name (bytes, without the NUL): the bus's bound on a key string
+/// (bus::kMaxKeyStringBytes, which reflex_controller checks is the same); a longer name is refused.
+inline constexpr std::size_t kBodySchemaNameBytes = 255;
+
+/// A run-time body-schema segment (Sec. 8.5): a capsule (or sphere if a_L == b_L) attached to a link,
+/// and everything the controller knows about it. This is the one record of a slot: the distance
+/// computation reads the geometry (enabled .. ignore_mask), the controller `is_virtual`, the onboard
+/// controller `motion_priority` and `name`. Plain data of fixed size: copying a slot never allocates.
 struct BodySchemaSlot {
   bool enabled = false;
   int link = 0;                              ///< link the endpoints are expressed in
@@ -52,6 +60,14 @@ struct BodySchemaSlot {
   Eigen::Vector3d b_L = Eigen::Vector3d::Zero();
   double radius = 0.0;
   std::uint64_t ignore_mask = 0;             ///< bit i set: never checked against segment i
+  /// Virtual (occlusion, Sec. 8.5.2) segment: avoided like any other, never triggers the e-stop nor
+  /// counts as the closest physical pair. Set by attachControllerSegment.
+  bool is_virtual = false;
+  /// > 0 on a physical segment held by an arm: that arm gets priority (OnboardController::step).
+  int motion_priority = 0;
+  /// The bus name (BodySchemaChange.segment_name) that holds the slot, NUL-terminated; "" = the slot
+  /// is free. A slot may be named and disabled (a change with enabled = false keeps its slot).
+  std::array<char, kBodySchemaNameBytes + 1> name{};
 };
 
 /// The body-schema slots of a model (index = segment - Model::num_robot_segments).
@@ -75,7 +91,10 @@ struct DistanceData {
 
   std::vector<PairDistance> pairs;  ///< same order as Model::pairs
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows;  ///< npairs x nq
-  BodySchemaSlots slots;            ///< the body schema computeSegmentDistances(model, kin, data) uses
+  /// The body schema computeSegmentDistances(model, kin, data) uses. ControllerData::dist.slots is
+  /// the controller's body schema, its one owner; the scratch DistanceData of the predictive guards
+  /// leave theirs unused and are computed with data.dist.slots (passed const&, never copied).
+  BodySchemaSlots slots;
   int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
   // Scratch of computeSegmentDistances (built from the model here; values valid only during the call).
   // Per primitive:
@@ -118,7 +137,8 @@ bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, i
                              const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
                              std::uint64_t ignore_mask = 0);
 
-/// Disables a slot. Returns false for a bad slot index.
+/// Disables a slot (its name, is_virtual and motion_priority are the caller's). Returns false for a
+/// bad slot index.
 bool detachBodySchemaSegment(DistanceData& data, int slot);
 
 /// Bounds a body-schema segment from the bus must satisfy before it is attached (the boundary check

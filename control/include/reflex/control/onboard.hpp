@@ -254,7 +254,7 @@ class OnboardController {
   ControllerData& data() { return data_; }
   const ControllerData& data() const { return data_; }
   const OnboardOptions& options() const { return options_; }
-  /// The body-schema slot a name holds, -1 if none.
+  /// The body-schema slot a name holds (data().dist.slots[s].name), -1 if none (and for "").
   int slotOf(const std::string& name) const noexcept;
 
  private:
@@ -278,8 +278,6 @@ class OnboardController {
   double last_source_heartbeat_ = -1.0;
   bool stale_ = true;
   bool robot_ok_ = true;  ///< for robot_stale_events (the first missing state counts as an event)
-  std::array<std::string, kBodySchemaSlots> slot_names_;  ///< "" = slot free
-  std::array<int, kBodySchemaSlots> slot_priority_{};
   Eigen::VectorXd q_measured_, q_expected_, q_command_, qdot_command_, q_scratch_;
   std::vector<int> driven_;
   BodySchemaOutcome schema_outcome_;
