@@ -191,7 +191,7 @@ TEST(UrdfLoaderPrimitives, BoxIsFittedByCapsulesAlongItsEdgesWithItsNumbersInAWa
   EXPECT_THAT(warnings[0], AllOf(HasSubstr("boxrobot.urdf"), HasSubstr("arm"), HasSubstr("box 0.1 x 0.3 x 0.06 m fitted with " +
                                                                                        std::to_string(seg.num_primitives) + " primitives"),
                                  HasSubstr("(8/8 corners enclosed")));
-  // A flat box: several capsules (its one enclosing capsule would be 2.4 times the fit's volume).
+  // A flat box (6 cm thin): several capsules side by side.
   EXPECT_GE(seg.num_primitives, 2);
   // Every corner and every point of a 15 x 15 grid on each face is inside one primitive, each
   // primitive's core runs along one of the box's edges, and every radius 0.1 mm smaller leaves a
