@@ -5,7 +5,7 @@ Usage: make_small_humanoid.py [OUT.urdf]   (default: small_humanoid.urdf next to
 
 It differs from asimo_like.urdf on purpose: other link and joint names, a fixed pelvis root (no
 virtual heel/body chain), a waist joint, 6-DOF arms with a continuous wrist, boxes for pelvis,
-torso, hands and feet (Reflex replaces each by its enclosing capsule and warns), spheres and
+torso, hands and feet (Reflex fits each with a grid of capsules and reports it), spheres and
 cylinders elsewhere. Left and right are generated as mirror images; edit this script, not the URDF.
 """
 import math
@@ -27,8 +27,8 @@ HEADER = """<?xml version="1.0"?>
   elbow, wrist_yaw (continuous), wrist_pitch; per leg hip_yaw, hip_roll, hip_pitch, knee,
   ankle_pitch, ankle_roll.
 
-  Collision (17 segments): pelvis, torso, hands and feet are boxes (Reflex reads each as its enclosing
-  capsule along the box's longest axis, with a warning); the head and shoulders are spheres; upper
+  Collision (17 segments): pelvis, torso, hands and feet are boxes (Reflex fits each with capsules side
+  by side that enclose it, and says so in a warning); the head and shoulders are spheres; upper
   arms, forearms, thighs and shins are cylinders, read by Reflex as capsules of the same radius whose
   core is the cylinder axis.
 

@@ -5,6 +5,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cerrno>
+#include <cstring>
 #include <sys/stat.h>
 
 #include <cmath>
@@ -220,11 +222,31 @@ std::string defaultControllerConfigPath(const std::string& urdf_path) {
 }
 
 ControllerConfig loadControllerConfigFor(const std::string& urdf_path, const std::string& yaml_path) {
-  if (!yaml_path.empty()) return loadControllerConfig(yaml_path);
-  const std::string guess = defaultControllerConfigPath(urdf_path);
   struct stat st {};
+  if (!yaml_path.empty()) {
+    if (::stat(yaml_path.c_str(), &st) != 0)
+      throw ConfigError("--controller '" + yaml_path + "': no such controller configuration file (" +
+                        std::strerror(errno) + ")");
+    return loadControllerConfig(yaml_path);
+  }
+  const std::string guess = defaultControllerConfigPath(urdf_path);
   if (::stat(guess.c_str(), &st) != 0) return defaultControllerConfig();  // nothing there: the defaults
   return loadControllerConfig(guess);  // something there: read it (a FIFO or device is refused)
+}
+
+std::string describeControllerConfig(const ControllerConfig& config, const std::string& urdf_path) {
+  const std::string beside = defaultControllerConfigPath(urdf_path);
+  std::string out;
+  if (config.source == "<defaults>")
+    out = "controller configuration: built-in defaults (no " + beside + " beside the URDF)";
+  else
+    out = "controller configuration " + config.source + (config.source == beside ? " (beside the URDF)" : " (--controller)");
+  for (std::size_t a = 0; a < config.arms.size(); ++a) {
+    const ArmConfig& arm = config.arms[a];
+    out += std::string(a == 0 ? ": " : ", ") + "arm " + arm.name + " to hand '" + arm.hand_link + "' (" +
+           std::to_string(arm.joints.size()) + " joints)";
+  }
+  return out;
 }
 
 ControllerModel makeControllerModel(const Model& model, const ControllerConfig& config) {

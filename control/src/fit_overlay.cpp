@@ -59,16 +59,6 @@ std::string joinPath(const std::string& dir, const std::string& path) {
   return (fs::path(dir) / path).lexically_normal().string();
 }
 
-/// The 8 corners and 12 triangles of a box of size `size` centred on the origin.
-TriangleMesh boxMesh(const Eigen::Vector3d& size) {
-  TriangleMesh m;
-  for (int i = 0; i < 8; ++i)
-    m.vertices.emplace_back((i & 1 ? 0.5 : -0.5) * size.x(), (i & 2 ? 0.5 : -0.5) * size.y(), (i & 4 ? 0.5 : -0.5) * size.z());
-  m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                 {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  return m;
-}
-
 void append(TriangleMesh& to, const TriangleMesh& from, const Eigen::Isometry3d& X) {
   const int base = static_cast<int>(to.vertices.size());
   for (const auto& v : from.vertices) to.vertices.push_back(X * v);
@@ -139,8 +129,9 @@ FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, con
       const std::string rel = rest.substr(pkg.size() + 1);
       overlay.packages[pkg] = r.substr(0, r.size() - rel.size() - 1);
     }
-  // Read every mesh once; unreadable ones are problems too, all named in one message.
-  std::vector<TriangleMesh> meshes(jobs.size());
+  // Read every mesh once; unreadable ones are problems too, all named in one message. Boxes are
+  // fitted on their own (fitBox) and join the meshes only for the link's numbers.
+  std::vector<TriangleMesh> meshes(jobs.size()), with_boxes(jobs.size());
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     const Job& job = jobs[j];
     for (std::size_t i = 0, m = 0; i < job.elements.size(); ++i) {
@@ -149,13 +140,15 @@ FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, con
         if (!(e.size.minCoeff() > 0.0) || !e.size.allFinite())
           problems.push_back("link '" + job.link + "': box size must be positive");
         else
-          append(meshes[j], boxMesh(e.size), e.X_L_C);
+          append(with_boxes[j], boxMesh(e.size, e.X_L_C), Eigen::Isometry3d::Identity());
         continue;
       }
       const std::string& path = job.resolved[m++];
       if (path.empty()) continue;  // already a problem
       try {
-        append(meshes[j], loadMeshFile(path, e.scale), e.X_L_C);
+        const TriangleMesh mesh = loadMeshFile(path, e.scale);
+        append(meshes[j], mesh, e.X_L_C);
+        append(with_boxes[j], mesh, e.X_L_C);
       } catch (const ModelError& err) {
         problems.push_back("link '" + job.link + "': mesh '" + e.filename + "': " + err.what());
       }
@@ -172,7 +165,12 @@ FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, con
     fit.link = jobs[j].link;
     fit.inputs = jobs[j].hash;
     fit.elements = static_cast<int>(jobs[j].elements.size());
-    fit.primitives = fitPrimitives(meshes[j], options, &fit.stats);
+    // The meshes together (greedy cuts), each box by its own grid of cells (fitBox).
+    if (!meshes[j].vertices.empty()) fit.primitives = fitPrimitives(meshes[j], options, nullptr);
+    for (const auto& e : jobs[j].elements)
+      if (e.box)
+        for (const Primitive& p : fitBox(e.size, e.X_L_C, options)) fit.primitives.push_back(p);
+    fit.stats = measureFit(with_boxes[j], fit.primitives, options);
     if (progress) {
       std::ostringstream os;
       os << "fitted " << fit.link << ": " << fit.primitives.size() << " primitive(s), " << fit.stats.vertices_enclosed

@@ -495,31 +495,135 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
     prims.push_back(p);
   }
 
-  if (stats) {
-    FitStats& s = *stats;
-    s = FitStats{};
-    s.vertices = static_cast<int>(mesh.vertices.size());
-    s.triangles = static_cast<int>(mesh.triangles.size());
-    for (const auto& v : mesh.vertices) {
-      bool inside = false;
-      for (const auto& p : prims) inside = inside || signedDistanceToPrimitive(p, v) <= 0.0;
-      s.vertices_enclosed += inside ? 1 : 0;
+  if (stats) *stats = measureFit(mesh, prims, options, hull.volume);
+  return prims;
+}
+
+FitStats measureFit(const TriangleMesh& mesh, const std::vector<Primitive>& prims, const FitOptions& options,
+                    double hull_volume) {
+  FitStats s;
+  s.vertices = static_cast<int>(mesh.vertices.size());
+  s.triangles = static_cast<int>(mesh.triangles.size());
+  for (const auto& v : mesh.vertices) {
+    bool inside = false;
+    for (const auto& p : prims) inside = inside || signedDistanceToPrimitive(p, v) <= 0.0;
+    s.vertices_enclosed += inside ? 1 : 0;
+  }
+  s.hull_volume = hull_volume >= 0.0 ? hull_volume : convexHull(mesh.vertices).volume;
+  for (const auto& p : prims) s.fitted_volume += primitiveVolume(p);
+  s.volume_ratio = s.hull_volume > 0 ? s.fitted_volume / s.hull_volume : 0.0;
+  for (std::size_t i = 0; i < prims.size(); ++i)
+    for (const auto& x : surfaceSamples(prims[i], options.gap_samples_per_primitive)) {
+      bool covered = false;  // inside another primitive: not on the union's outer surface
+      for (std::size_t j = 0; j < prims.size() && !covered; ++j)
+        covered = j != i && signedDistanceToPrimitive(prims[j], x) < -1e-9;
+      if (covered) continue;
+      double d = std::numeric_limits<double>::infinity();
+      for (const auto& t : mesh.triangles)
+        d = std::min(d, pointTriangleDistance(x, mesh.vertices[t[0]], mesh.vertices[t[1]], mesh.vertices[t[2]]));
+      s.worst_gap = std::max(s.worst_gap, d);
     }
-    s.hull_volume = hull.volume;
-    for (const auto& p : prims) s.fitted_volume += primitiveVolume(p);
-    s.volume_ratio = hull.volume > 0 ? s.fitted_volume / hull.volume : 0.0;
-    for (std::size_t i = 0; i < prims.size(); ++i)
-      for (const auto& x : surfaceSamples(prims[i], options.gap_samples_per_primitive)) {
-        bool covered = false;  // inside another primitive: not on the union's outer surface
-        for (std::size_t j = 0; j < prims.size() && !covered; ++j)
-          covered = j != i && signedDistanceToPrimitive(prims[j], x) < -1e-9;
-        if (covered) continue;
-        double d = std::numeric_limits<double>::infinity();
-        for (const auto& t : mesh.triangles)
-          d = std::min(d, pointTriangleDistance(x, mesh.vertices[t[0]], mesh.vertices[t[1]], mesh.vertices[t[2]]));
-        s.worst_gap = std::max(s.worst_gap, d);
+  return s;
+}
+
+TriangleMesh boxMesh(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B) {
+  TriangleMesh m;
+  for (int i = 0; i < 8; ++i)
+    m.vertices.push_back(X_L_B * Eigen::Vector3d((i & 1 ? 0.5 : -0.5) * size.x(), (i & 2 ? 0.5 : -0.5) * size.y(),
+                                                 (i & 4 ? 0.5 : -0.5) * size.z()));
+  m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                 {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  return m;
+}
+
+std::vector<Primitive> fitBox(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B, const FitOptions& options) {
+  if (!(size.minCoeff() > 0.0) || !size.allFinite())
+    throw ModelError("fit: box size " + std::to_string(size.x()) + " " + std::to_string(size.y()) + " " +
+                     std::to_string(size.z()) + " must be positive");
+  // A grid of n1 x n2 equal cells across the box, one primitive per cell along `axis`. A cell's
+  // corners lie at radial distance rc (half its cross-section's diagonal) from its centre line, so a
+  // capsule of radius r >= rc along it encloses the cell when its core reaches within
+  // sqrt(r^2 - rc^2) of each end face: half-core h = max(0, L/2 - sqrt(r^2 - rc^2)) (a sphere at 0).
+  // r is searched over [rc, sqrt(rc^2 + L^2/4)] for the least volume (sampled, then bracketed).
+  struct Grid {
+    int axis = 0, n1 = 1, n2 = 1;
+    double r = 0.0, h = 0.0, volume = std::numeric_limits<double>::infinity();
+  };
+  const int max_prims = std::max(1, options.max_primitives);
+  std::vector<Grid> best_of(static_cast<std::size_t>(max_prims) + 1);  // [k]: the least volume with k cells
+  for (int axis = 0; axis < 3; ++axis) {
+    const int i1 = (axis + 1) % 3, i2 = (axis + 2) % 3;
+    const double L = size[axis];
+    for (int n1 = 1; n1 <= max_prims; ++n1)
+      for (int n2 = 1; n1 * n2 <= max_prims; ++n2) {
+        const double rc = 0.5 * std::hypot(size[i1] / n1, size[i2] / n2);
+        auto halfCore = [&](double r) { return std::max(0.0, 0.5 * L - std::sqrt(std::max(0.0, r * r - rc * rc))); };
+        auto volume = [&](double r) { return n1 * n2 * (kPi * r * r * 2.0 * halfCore(r) + 4.0 / 3.0 * kPi * r * r * r); };
+        const double r_hi = std::hypot(rc, 0.5 * L);
+        constexpr int kSteps = 200;
+        int best_step = 0;
+        for (int k = 1; k <= kSteps; ++k)
+          if (volume(rc + (r_hi - rc) * k / kSteps) < volume(rc + (r_hi - rc) * best_step / kSteps)) best_step = k;
+        double lo = rc + (r_hi - rc) * std::max(0, best_step - 1) / kSteps;
+        double hi = rc + (r_hi - rc) * std::min(kSteps, best_step + 1) / kSteps;
+        for (int it = 0; it < 60; ++it) {  // golden-section search inside the bracket
+          const double m1 = hi - 0.618033988749895 * (hi - lo), m2 = lo + 0.618033988749895 * (hi - lo);
+          if (volume(m1) <= volume(m2))
+            hi = m2;
+          else
+            lo = m1;
+        }
+        Grid g{axis, n1, n2, 0.5 * (lo + hi), halfCore(0.5 * (lo + hi)), volume(0.5 * (lo + hi))};
+        if (volume(rc + (r_hi - rc) * best_step / kSteps) < g.volume)
+          g.r = rc + (r_hi - rc) * best_step / kSteps, g.h = halfCore(g.r), g.volume = volume(g.r);
+        Grid& slot = best_of[static_cast<std::size_t>(n1 * n2)];
+        if (g.volume < slot.volume) slot = g;
       }
   }
+  // From one cell up, as the mesh fit splits: the step to more cells with the largest saving per
+  // added primitive, taken while it saves at least min_split_gain of the current volume, and none
+  // once the volume is within split_ratio of the box's.
+  const double box_volume = size.prod();
+  std::size_t k = 1;
+  for (;;) {
+    if (best_of[k].volume <= options.split_ratio * box_volume) break;
+    std::size_t next = 0;
+    double best_rate = 0.0;
+    for (std::size_t m = k + 1; m < best_of.size(); ++m) {
+      const double rate = (best_of[k].volume - best_of[m].volume) / static_cast<double>(m - k);
+      if (rate > best_rate) best_rate = rate, next = m;
+    }
+    if (next == 0 || !(best_of[k].volume - best_of[next].volume >= options.min_split_gain * best_of[k].volume)) break;
+    k = next;
+  }
+  const Grid* chosen = &best_of[k];
+  const int a = chosen->axis, i1 = (a + 1) % 3, i2 = (a + 2) % 3;
+  std::vector<Primitive> prims;
+  for (int c1 = 0; c1 < chosen->n1; ++c1)
+    for (int c2 = 0; c2 < chosen->n2; ++c2) {
+      // The cell (box frame): centre and half extents.
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero(), half = 0.5 * size;
+      centre[i1] = -0.5 * size[i1] + (c1 + 0.5) * size[i1] / chosen->n1;
+      centre[i2] = -0.5 * size[i2] + (c2 + 0.5) * size[i2] / chosen->n2;
+      half[i1] = 0.5 * size[i1] / chosen->n1;
+      half[i2] = 0.5 * size[i2] / chosen->n2;
+      Eigen::Vector3d core = Eigen::Vector3d::Zero();
+      core[a] = chosen->h;
+      Primitive p;
+      p.a_L = X_L_B * (centre - core);
+      p.b_L = X_L_B * (centre + core);
+      for (int k = 0; k < 3; ++k) p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
+      p.sphere = !((p.b_L - p.a_L).norm() >= options.quantum);
+      if (p.sphere) p.b_L = p.a_L;
+      // The radius from the cell's 8 corners after rounding, rounded up: the cell (convex) is inside.
+      double r = 0.0;
+      for (int k = 0; k < 8; ++k) {
+        const Eigen::Vector3d corner(k & 1 ? half.x() : -half.x(), k & 2 ? half.y() : -half.y(), k & 4 ? half.z() : -half.z());
+        r = std::max(r, distanceToSegment(p.a_L, p.b_L, X_L_B * (centre + corner)));
+      }
+      p.radius = std::max(options.quantum, std::ceil(r / options.quantum + 1e-6) * options.quantum);
+      prims.push_back(p);
+    }
   return prims;
 }
 

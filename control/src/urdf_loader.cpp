@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -89,20 +90,22 @@ void addCollision(const std::string& origin, const std::string& link_name,
       if (!(dim.minCoeff() > 0.0) || !dim.allFinite())
         fail(origin, where + ": box size " + fmt(dim.x()) + " " + fmt(dim.y()) + " " + fmt(dim.z()) +
                          " must be positive");
-      int axis = 0;
-      dim.maxCoeff(&axis);
-      // Enclosing capsule: core along the longest axis, radius = half diagonal of the cross-section.
-      const double r = 0.5 * std::sqrt(dim.squaredNorm() - dim[axis] * dim[axis]);
-      Eigen::Vector3d half = Eigen::Vector3d::Zero();
-      half[axis] = 0.5 * dim[axis];
-      prim.a_L = X_L_C.translation() - X_L_C.linear() * half;
-      prim.b_L = X_L_C.translation() + X_L_C.linear() * half;
-      prim.radius = r;
-      prim.sphere = false;
-      if (warnings)
-        warnings->push_back(origin + ": " + where + ": box replaced by its enclosing capsule (radius " +
-                            fmt(r) + " m, core length " + fmt(dim[axis]) + " m)");
-      break;
+      // The box fitted on its own (mesh_fit.hpp, fitBox): a grid of capsules that encloses it,
+      // the same primitives reflex_fit writes for it, so no overlay is needed for a box.
+      const FitOptions options;
+      const std::vector<Primitive> fitted = fitBox(dim, X_L_C, options);
+      if (warnings) {
+        const FitStats st = measureFit(boxMesh(dim, X_L_C), fitted, options, dim.prod());
+        char numbers[200];
+        std::snprintf(numbers, sizeof numbers,
+                      " fitted with %zu primitive%s (%d/%d corners enclosed, fitted volume / box volume %.2f, worst gap %.4f m)",
+                      fitted.size(), fitted.size() == 1 ? "" : "s", st.vertices_enclosed, st.vertices,
+                      st.volume_ratio, st.worst_gap);
+        warnings->push_back(origin + ": " + where + ": box " + fmt(dim.x()) + " x " + fmt(dim.y()) + " x " +
+                            fmt(dim.z()) + " m" + numbers);
+      }
+      out.insert(out.end(), fitted.begin(), fitted.end());
+      return;
     }
     case urdf::Geometry::MESH:
     default:

@@ -104,7 +104,7 @@ int run(int argc, char** argv) {
   std::string format = "csv";
   bool list_only = false;
   app.add_option("urdf", urdf_path, "URDF file (collision elements: spheres, cylinders and capsules; meshes and boxes through the fit "
-                 "overlay <urdf stem>.fit.yaml written by reflex_fit; boxes otherwise read as enclosing capsules)")
+                 "overlay <urdf stem>.fit.yaml written by reflex_fit; boxes without one fitted here the same way)")
       ->required();
   app.add_option("--config", config_path,
                  "collision configuration YAML (default: <urdf stem>.collision.yaml if it exists)");

@@ -343,6 +343,7 @@ int main(int argc, char** argv) {
     const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
     const ControllerConfig config = loadControllerConfigFor(urdf, controller_cfg);
     const ControllerModel cm = makeControllerModel(model, config);
+    std::cout << "reflex_sim: " << describeControllerConfig(config, urdf) << "\n";
     printScenarioFrame(std::cout, model, scenarioFrame(model, cm));
     int failures = 0;
     for (const Scenario* sc : chosen) {

@@ -263,7 +263,8 @@ TEST(Inspect, SecondHumanoidWithBoxWarnings) {
   const ProcessResult r = inspect(test::robotPath("small_humanoid.urdf") + " --q l_elbow=-1.4 --q waist_yaw=0.5");
   expectCsvMatchesLibrary(r, Expected(test::kSmall, {{"l_elbow", -1.4}, {"waist_yaw", 0.5}}));
   EXPECT_THAT(r.err, HasSubstr("warning:"));
-  EXPECT_THAT(r.err, HasSubstr("box replaced by its enclosing capsule"));
+  EXPECT_THAT(r.err, HasSubstr("m fitted with"));
+  EXPECT_THAT(r.err, HasSubstr("corners enclosed, fitted volume / box volume"));
   const ProcessResult j = inspect(test::robotPath("small_humanoid.urdf") + " --format json");
   ASSERT_EQ(j.exit_code, 0);
   EXPECT_TRUE(JsonChecker(j.out).valid());

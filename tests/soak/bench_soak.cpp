@@ -31,7 +31,7 @@ int main(int argc, char** argv) {
   double hours = 0.0, episode = 10.0, progress = 10.0, wall_limit = 0.0;
   std::uint64_t first_seed = 1;
   int threads = 1;
-  std::string urdf = REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.urdf", collision;
+  std::string urdf = REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.urdf", collision, controller;
   app.add_option("--hours", hours, "simulated hours to run")->required()->check(CLI::PositiveNumber);
   app.add_option("--episode", episode, "simulated seconds per episode")->capture_default_str()->check(CLI::Range(0.5, 3600.0));
   app.add_option("--seed", first_seed, "seed of the first episode (episode k uses seed + k)")->capture_default_str();
@@ -42,6 +42,8 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--urdf", urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", collision, "collision configuration (default: next to the URDF)");
+  app.add_option("--controller", controller,
+                 "controller configuration (default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
   CLI11_PARSE(app, argc, argv);
 
   using namespace reflex::control;
@@ -50,7 +52,9 @@ int main(int argc, char** argv) {
   try {
     const std::string coll = collision.empty() ? defaultCollisionConfigPath(urdf) : collision;
     model = loadModel(urdf, loadCollisionConfig(coll));
-    cm = makeControllerModel(model, defaultControllerConfig());
+    const ControllerConfig config = loadControllerConfigFor(urdf, controller);
+    cm = makeControllerModel(model, config);
+    std::fprintf(stderr, "bench_soak: %s\n", describeControllerConfig(config, urdf).c_str());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_soak: error: %s\n", e.what());
     return 2;

@@ -468,5 +468,31 @@ TEST(Scene, BadJointInputIsSkippedAndCounted) {
   EXPECT_THROW(loadSceneModel("/nonexistent/robot.urdf", "", ""), control::ModelError);
 }
 
+// Issue 12: the view reads the robot's own controller configuration beside the URDF, as the controller
+// does. Independent answer: the arms' segments are those of the links the test names (the small
+// humanoid's hands and forearms), and the note names the file; a named file that is missing is an
+// error naming it.
+TEST(Scene, FindsTheRobotsControllerYamlBesideTheUrdf) {
+  const SceneModel scene = loadSceneModel(robotPath("small_humanoid.urdf"), "", "");
+  EXPECT_EQ(scene.controller_note.rfind("controller configuration " + robotPath("small_humanoid.controller.yaml") +
+                                            " (beside the URDF): arm left to hand 'l_hand' (6 joints)",
+                                        0),
+            0u)
+      << scene.controller_note;
+  for (const char* link : {"l_hand", "l_forearm"})
+    EXPECT_TRUE((scene.arm_segments[0] >> scene.model.segmentIndex(link)) & 1U) << link;
+  for (const char* link : {"r_hand", "r_forearm"})
+    EXPECT_TRUE((scene.arm_segments[1] >> scene.model.segmentIndex(link)) & 1U) << link;
+  EXPECT_FALSE((scene.arm_segments[0] >> scene.model.segmentIndex("torso")) & 1U);
+  EXPECT_EQ(asimo().controller_note.rfind("controller configuration: built-in defaults (no ", 0), 0u);
+  try {
+    loadSceneModel(robotPath("small_humanoid.urdf"), "", "/nonexistent/ctl.yaml");
+    ADD_FAILURE() << "no error";
+  } catch (const control::ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "--controller '/nonexistent/ctl.yaml': no such controller configuration file (No such file or directory)");
+  }
+}
+
 }  // namespace
 }  // namespace reflex::view

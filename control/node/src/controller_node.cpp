@@ -99,6 +99,7 @@ struct ControllerNode::Impl {
   std::unique_ptr<OnboardController> ctl;    ///< everything per cycle but the bus (onboard.hpp)
   std::unique_ptr<RobotStateFile> state_file;  ///< null without --robot-state
   std::string state_note;
+  std::string config_note;  ///< describeControllerConfig
   Eigen::VectorXd q0;
   std::unique_ptr<bus::Participant> participant;
   bus::Writer<msg::JointState>* joint_writer = nullptr;
@@ -160,7 +161,9 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.model = loadModel(config.urdf, cc);
   if (!(config.peer_probe >= 0.0 && config.peer_probe <= 60.0))
     throw ConfigError("--peer-probe " + std::to_string(config.peer_probe) + " must be in [0, 60] s");
-  ControllerConfig ctl = config.controller.empty() ? defaultControllerConfig() : loadControllerConfig(config.controller);
+  // The same rule as every process with --urdf: --controller, else <stem>.controller.yaml beside the URDF.
+  ControllerConfig ctl = loadControllerConfigFor(config.urdf, config.controller);
+  m.config_note = describeControllerConfig(ctl, config.urdf);
   // Protection (issue 16, item 3): avoidance off by the option or the file; the e-stop only by the option.
   std::string reason;
   if (!config.avoidance) {
@@ -283,6 +286,7 @@ ControllerNode::~ControllerNode() = default;
 
 bus::Participant& ControllerNode::bus() { return *impl_->participant; }
 const std::string& ControllerNode::robotStateNote() const { return impl_->state_note; }
+const std::string& ControllerNode::controllerConfigNote() const { return impl_->config_note; }
 const Protection& ControllerNode::protection() const { return impl_->protection; }
 std::string ControllerNode::logFailure() const { return impl_->log_error; }
 const std::string& ControllerNode::peerRefusal() const { return impl_->peer_refusal; }

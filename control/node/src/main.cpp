@@ -32,8 +32,9 @@ int main(int argc, char** argv) {
   app.add_option("--urdf", config.urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", config.collision, "collision configuration (default: next to the URDF)");
   app.add_option("--controller", config.controller,
-                 "controller configuration YAML (default: built-in); 'avoidance: off' there switches avoidance "
-                 "off but never the e-stop");
+                 "controller configuration YAML (default: <URDF stem>.controller.yaml beside the URDF if it exists, "
+                 "else built-in, the asimo_like robot's arms; the banner names the one used); 'avoidance: off' there "
+                 "switches avoidance off but never the e-stop");
   app.add_option("--domain", config.domain_id, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
   app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
@@ -86,6 +87,7 @@ int main(int argc, char** argv) {
     stop_signals.erase(std::remove(stop_signals.begin(), stop_signals.end(), SIGUSR1), stop_signals.end());
     reflex::bus::StopOnSignal stop_on_signal(node.bus(), stop_signals);
     g_node = &node;
+    std::fprintf(stderr, "reflex_controller: %s\n", node.controllerConfigNote().c_str());
     if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
     const auto& protection = node.protection();
     std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",

@@ -66,7 +66,7 @@ struct OutputOptions {
 };
 
 /// The robot model of the scene channels (record, convert; scene_channels.hpp). Defaults as the
-/// controller's: the shipped URDF, its collision file, the built-in controller configuration.
+/// controller's: the shipped URDF, its collision file, its controller configuration (beside it, else built-in).
 struct SceneOptions {
   SceneChannelOptions scene;
   bool none = false;
@@ -75,7 +75,8 @@ struct SceneOptions {
     app.add_option("--urdf", scene.urdf, "scene channels: robot URDF (the controller's)")->capture_default_str();
     app.add_option("--collision", scene.collision, "scene channels: collision configuration (default: next to the URDF)");
     app.add_option("--controller", scene.controller,
-                   "scene channels: controller YAML, arms and zone thresholds (default: built-in)");
+                   "scene channels: controller YAML, arms and zone thresholds (default: <URDF stem>.controller.yaml "
+                   "beside the URDF if it exists, else built-in)");
     app.add_option("--scene-rate", scene.rate, "scene channels: messages per second of recording time at most, (0, 200]")
         ->capture_default_str();
     app.add_flag("--no-scene", none,

@@ -150,9 +150,11 @@ SceneModel makeSceneModel(control::Model model, const control::ControllerConfig&
 SceneModel loadSceneModel(const std::string& urdf, const std::string& collision, const std::string& controller) {
   const control::CollisionConfig cc = control::loadCollisionConfigFor(urdf, collision);
   control::Model model = control::loadModel(urdf, cc);
-  const control::ControllerConfig config =
-      controller.empty() ? control::defaultControllerConfig() : control::loadControllerConfig(controller);
-  return makeSceneModel(std::move(model), config);
+  // The controller's rule (control::loadControllerConfigFor): --controller, else beside the URDF.
+  const control::ControllerConfig config = control::loadControllerConfigFor(urdf, controller);
+  SceneModel scene = makeSceneModel(std::move(model), config);
+  scene.controller_note = control::describeControllerConfig(config, urdf);
+  return scene;
 }
 
 SceneData::SceneData(const SceneModel& scene)

@@ -79,7 +79,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--urdf", urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", collision, "collision YAML (default: next to the URDF)");
-  app.add_option("--controller", controller, "controller YAML (zone thresholds; default: built-in)");
+  app.add_option("--controller", controller, "controller YAML (zone thresholds; default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
          << "export default " << doc.dump() << ";\n";
     file.close();
     if (!file) throw std::invalid_argument(reflex::common::writeError(out, errno ? errno : EIO));
-    std::printf("reflex_scene: wrote %zu scenes to %s\n", rows.size(), out.c_str());
+    std::printf("reflex_scene: wrote %zu scenes to %s (%s)\n", rows.size(), out.c_str(), scene.controller_note.c_str());
     if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
       std::fprintf(stderr, "reflex_scene: error: %s\n", why.c_str());
       return 1;

@@ -135,9 +135,18 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path);
 /// like its collision configuration).
 std::string defaultControllerConfigPath(const std::string& urdf_path);
 
-/// `yaml_path` if given; else defaultControllerConfigPath(urdf_path) if anything exists there (read
-/// and checked like any other); else the defaults (the shipped asimo_like robot's arms).
+/// The one rule by which every process taking `--urdf URDF [--controller FILE]` finds its controller
+/// configuration (reflex_controller, reflex_sim, reflex_view, reflex_scene, reflex_record's scene
+/// channels, bench_soak): FILE if given (a FILE that does not exist is a ConfigError naming it and
+/// --controller); else defaultControllerConfigPath(URDF) if anything exists there (read and checked like
+/// any other); else the defaults (the shipped asimo_like robot's arms; source "<defaults>").
 ControllerConfig loadControllerConfigFor(const std::string& urdf_path, const std::string& yaml_path);
+
+/// For a process banner: which configuration loadControllerConfigFor used and the arms it names, e.g.
+/// "controller configuration bringup/robots/small_humanoid.controller.yaml (beside the URDF): arm left
+/// to hand 'l_hand' (6 joints), arm right to hand 'r_hand' (6 joints)", or "controller configuration:
+/// built-in defaults (no r.controller.yaml beside the URDF): ...".
+std::string describeControllerConfig(const ControllerConfig& config, const std::string& urdf_path);
 
 /// Checks every parameter against its range (controllerParamRanges, in table order). Throws
 /// ConfigError "<source>: <key> = <value> is outside its range <range> <unit>: <why>".

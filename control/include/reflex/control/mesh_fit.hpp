@@ -5,7 +5,8 @@
 // The guarantee: every vertex of every mesh and box element of a fitted link (in the link frame,
 // with the element's origin and scale) lies inside one of the link's fitted primitives, and every
 // triangle lies inside one primitive (a capsule is convex; triangles are assigned whole to a
-// cluster, long ones subdivided first). So a pair distance computed on the fitted primitives never
+// cluster, long ones subdivided first). A box element is fitted on its own (fitBox): a grid of
+// cells, each inside its own capsule, so the whole box is inside. So a pair distance computed on the fitted primitives never
 // exceeds the true mesh distance: the fit is conservative.
 //
 // Mesh files are read with assimp (STL, OBJ, DAE and whatever else assimp reads): triangulated, the
@@ -55,7 +56,7 @@ TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale)
 
 /// Fitting options. The defaults are what reflex_fit uses.
 struct FitOptions {
-  int max_primitives = 6;        ///< per link
+  int max_primitives = 6;        ///< per link's meshes (greedy cuts), and per box element (fitBox)
   /// Split a link's cluster while (sum of fitted volumes) / (convex-hull volume) is above this...
   double split_ratio = 1.3;
   /// ...and a split reduces the summed fitted volume by at least this fraction of it.
@@ -79,6 +80,28 @@ struct FitStats {
 /// Fits primitives (link frame) enclosing every vertex and triangle of `mesh`. Deterministic: the
 /// same mesh and options give the same primitives, bit for bit. Throws ModelError for an empty mesh.
 std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions& options, FitStats* stats);
+
+/// The numbers of FitStats for `prims` fitted to `mesh` (vertices enclosed, volumes, worst gap).
+/// `hull_volume` < 0: the convex hull of the mesh's vertices is computed (qhull).
+FitStats measureFit(const TriangleMesh& mesh, const std::vector<Primitive>& prims, const FitOptions& options,
+                    double hull_volume = -1.0);
+
+/// The 8 corners and 12 triangles of a box of edge lengths `size` (m) centred on the origin of frame
+/// B, in frame L.
+TriangleMesh boxMesh(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B);
+
+/// Fits a box (edge lengths `size` in m, centred on frame B, X_L_B its pose in the link frame L) with
+/// primitives in L that enclose it whole: the box is cut into a grid of n1 x n2 equal cells across one
+/// of its axes (all three tried, n1 * n2 <= options.max_primitives), one capsule (or sphere) per cell
+/// along that axis, its radius and core length chosen for the least volume (a larger radius shortens
+/// the core). From one cell up, the step to more cells that saves the most volume per added primitive
+/// is taken while it saves at least options.min_split_gain of the volume (none once the volume is
+/// within options.split_ratio of the box's). End points are rounded to
+/// options.quantum and each radius recomputed from its cell's 8 corners and rounded up, so every
+/// cell, and so the box, is inside. A flat box (a foot sole) gets several capsules side by side where
+/// its single enclosing capsule would be 3 to 4.5 times its volume. Deterministic. Throws ModelError
+/// for a size that is not positive and finite.
+std::vector<Primitive> fitBox(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B, const FitOptions& options);
 
 /// Distance from p to the primitive's surface (negative inside).
 double signedDistanceToPrimitive(const Primitive& prim, const Eigen::Vector3d& p);

@@ -6,8 +6,9 @@
 //                          centred on the collision origin (the capsule is L + 2r long overall)
 //   capsule (r, L)      -> URDF 1.1 <capsule radius length> (urdfdom 3 does not know it): the same
 //                          capsule, core length L along the element's z axis
-//   box (x, y, z)       -> the enclosing capsule along the box's longest axis, with a warning;
-//                          on a link of the fit overlay: fitted like a mesh (below)
+//   box (x, y, z)       -> a grid of capsules side by side enclosing it (mesh_fit.hpp, fitBox), with
+//                          a warning giving their count, volume ratio and worst gap; the same
+//                          primitives as a fit overlay holds for it (below)
 //   mesh                -> the primitives of the fit overlay (mesh_fit.hpp, `reflex_fit URDF`):
 //                          capsules and spheres enclosing every vertex of the link's mesh and box
 //                          elements. A mesh link without a fit, or whose fit is stale (a mesh file,
@@ -78,7 +79,7 @@ std::string defaultCollisionConfigPath(const std::string& urdf_path);
 /// other: a FIFO or device there is a ModelError, never a blocked open); else the defaults.
 CollisionConfig loadCollisionConfigFor(const std::string& urdf_path, const std::string& collision_path);
 
-/// Loads a URDF file. Warnings (e.g. boxes replaced by capsules) are appended to `warnings` if given.
+/// Loads a URDF file. Warnings (e.g. boxes fitted with capsules, and how tightly) are appended to `warnings` if given.
 /// Throws ModelError for a missing or malformed file, mesh-only collision, non-positive radius,
 /// zero-length cylinder, bad limits, and unknown link names in the configuration.
 Model loadModel(const std::string& urdf_path, const CollisionConfig& config,

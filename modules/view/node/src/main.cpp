@@ -32,7 +32,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--urdf", options.urdf, "robot URDF (the controller's)")->capture_default_str();
   app.add_option("--collision", options.collision, "collision configuration (default: next to the URDF)");
-  app.add_option("--controller", options.controller, "controller YAML: arms and zone thresholds (default: built-in)");
+  app.add_option("--controller", options.controller, "controller YAML: arms and zone thresholds (default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
   app.add_option("--rate", options.rate, "scene messages per second at most, (0, 200]")->capture_default_str();
   app.add_option("--web", options.server.web_dir, "folder of the web page (index.html)")->capture_default_str();
   app.add_option("--three", options.server.three_dir, "folder of three.module.js and three.core.js")->capture_default_str();

@@ -101,6 +101,7 @@ void ViewNode::run() {
               "domain %d\n",
               m.server->url().c_str(), ("ws" + m.server->url().substr(4)).c_str(), m.scene.model.name.c_str(),
               m.bus->domainId());
+  std::printf("reflex_view: %s\n", m.scene.controller_note.c_str());
   std::fflush(stdout);
 
   auto poll = [&m, this] {

@@ -73,7 +73,7 @@ namespace reflex::control_node {
 struct NodeConfig {
   std::string urdf;                  ///< robot description
   std::string collision;             ///< collision configuration ("" = next to the URDF)
-  std::string controller;            ///< controller YAML ("" = defaults)
+  std::string controller;            ///< controller YAML ("" = <stem>.controller.yaml beside the URDF, else defaults)
   std::string profiles_file;         ///< DDS profiles ("" = bus defaults)
   std::string participant_profile = "reflex_participant";
   int domain_id = -1;                ///< -1 = bus default
@@ -173,6 +173,8 @@ class ControllerNode {
   const NodeStats& stats() const { return stats_; }
   /// What the start-up did about the robot state ("" without a robot state file).
   const std::string& robotStateNote() const;
+  /// Which controller configuration it uses and the arms it names (describeControllerConfig).
+  const std::string& controllerConfigNote() const;
   const Protection& protection() const;
   /// After run(): "" if the --log file (if any) got every row and closed cleanly; else the error
   /// naming the file and the reason.

@@ -58,10 +58,12 @@ struct SceneModel {
   std::array<std::uint64_t, 2> arm_segments{0, 0};         ///< bit s: robot segment s moved by that arm
   double d_a = 0.040, d_b = 0.010, d_r = 0.005;            ///< zone thresholds [m] (controller params)
   std::string root_frame;                                  ///< name of the URDF root link (frame of every entity)
+  std::string controller_note;  ///< loadSceneModel: which controller configuration (describeControllerConfig)
 };
 
 /// Loads the robot as reflex_controller does (URDF, collision YAML next to it unless given, controller
-/// YAML or the defaults). Throws control::ModelError / control::ConfigError naming file and value.
+/// YAML by control::loadControllerConfigFor: the given one, else <stem>.controller.yaml beside the URDF,
+/// else the defaults). Throws control::ModelError / control::ConfigError naming file and value.
 SceneModel loadSceneModel(const std::string& urdf, const std::string& collision, const std::string& controller);
 /// From an already loaded model and controller configuration (throws like makeControllerModel).
 SceneModel makeSceneModel(control::Model model, const control::ControllerConfig& config);
