@@ -114,12 +114,20 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
       kin_next(model),
       dist_next(model),
       dist_hold(model),
-      J_full(Eigen::MatrixXd::Zero(3, model.nq)),
-      J_rel_full(Eigen::MatrixXd::Zero(3, model.nq)) {
+      J_full(Eigen::MatrixXd::Zero(3, model.nq)) {
   std::size_t most_pairs = 0;
   for (const auto& arm : cm.arms) {
     for (int i = 0; i < arm.n; ++i) arm_joint[static_cast<std::size_t>(arm.q[i])] = 1;
     most_pairs = std::max(most_pairs, arm.candidate_pairs.size());
+  }
+  for (int a = 0; a < 2; ++a) {
+    const ControllerModel::Arm& arm = cm.arms[static_cast<std::size_t>(a)];
+    std::vector<std::uint64_t>& masks = arm_columns_of_link[static_cast<std::size_t>(a)];
+    masks.assign(model.links.size(), 0);
+    for (std::size_t l = 0; l < model.links.size(); ++l)
+      for (const int qi : model.link_support[l])
+        for (int i = 0; i < arm.n; ++i)
+          if (arm.q[static_cast<std::size_t>(i)] == qi) masks[l] |= std::uint64_t{1} << i;
   }
   // One entry per candidate pair: the pair-term stage can never run out of room.
   arm_ws.force_terms.resize(most_pairs);
@@ -143,6 +151,7 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
     reach[static_cast<std::size_t>(parent)] =
         std::max(reach[static_cast<std::size_t>(parent)], model.links[l].X_P_J.translation().norm() + reach[l]);
   }
+  link_sweep.assign(nl, 0.0);
   lever = Eigen::VectorXd::Zero(model.nq);
   for (int j = 0; j < model.nq; ++j) {
     const Link& link = model.links[static_cast<std::size_t>(model.q_link[j])];
@@ -216,6 +225,9 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
   double d_min = kInf;
   double pruned_floor = kInf;  // smallest lower bound of the pairs the broad phase skipped
   int closest = -1;
+  // Eq. 5's gradient, summed into a local array (no reload of ws's Eigen storage per term for
+  // aliasing) in the same order as before, so the same sum.
+  std::array<double, kMaxArmDof> gradient{};
   for (const int p : arm.candidate_pairs) {
     const PairDistance& pd = data.dist.pairs[p];
     if (!pd.active) continue;
@@ -228,7 +240,6 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
     const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
     if (owner_a != a && owner_b != a) continue;
-    const int side = forceSide(model, data.dist, pd, owner_a, owner_b, a);
     const int other = owner_a == a ? owner_b : owner_a;
     const bool with_other_arm = other >= 0 && other != a;
     if (with_other_arm) ws.d_other_arm = std::min(ws.d_other_arm, pd.distance);
@@ -239,16 +250,20 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
       closest = p;
     }
     if (pd.has_row && pd.distance < params.d_safe && !recovery_only) {
-      for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] += data.dist.rows(p, arm.q[i]) * (params.d_safe - pd.distance);
+      const double* row = data.dist.rows.data() + static_cast<Eigen::Index>(p) * data.dist.rows.cols();
+      const double w = params.d_safe - pd.distance;
+      for (int i = 0; i < arm.n; ++i) gradient[static_cast<std::size_t>(i)] += row[arm.q[static_cast<std::size_t>(i)]] * w;
     }
     // Both lists hold one entry per candidate pair at most (sized at set-up): never full here.
     if (pd.distance < params.d_b && pd.has_row) ws.guarded_pairs[static_cast<std::size_t>(ws.num_guarded++)] = p;
     if (pd.distance < params.d_a) {
+      const int side = forceSide(model, data.dist, pd, owner_a, owner_b, a);
       // e_f,ij points from the other segment towards the arm's closest point (Eq. 16).
       ws.forces.add(params.k_virtual, params.d_a, pd.distance, side * pd.nhat_W, side > 0 ? pd.p_W_a : pd.p_W_b);
       ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, params.k_virtual * (params.d_a - pd.distance)};
     }
   }
+  for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] = gradient[static_cast<std::size_t>(i)];
   if (pruned_floor < d_min) {
     // The arm's closest pair may be one the broad phase skipped: compute those that could be exactly
     // (their lower bound is below the closest exact distance), so the status is what it is unpruned.
@@ -276,7 +291,7 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
 
 /// Stage 3, the merged avoidance task (Eq. 17-18): F^all, its direction and point, and J_avoid, the
 /// force-weighted relative Jacobians of the yellow-zone pairs (rate of p1 - p2, arm side first).
-void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm, ControllerData& data,
+void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm, ControllerData& data, int a,
                             ArmStatus& status, ArmWorkspace& ws) {
   ws.J_avoid = TaskJacobian::Zero(3, arm.n);
   ws.force_magnitude = 0.0;
@@ -286,15 +301,24 @@ void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm,
   if (weight_sum > 0.0) {
     ws.force_magnitude = F_all.norm();
     if (ws.force_magnitude > 1e-12) ws.force_dir_W = F_all / ws.force_magnitude;
-    TaskJacobian J_rel(3, arm.n);
+    // Each term's relative Jacobian (computeRelativeJacobian) on the arm's columns only: column i
+    // is (w x p_a + v) if joint i moves link_a, minus (w x p_b + v) if it moves link_b (twist (w, v)).
+    const std::vector<std::uint64_t>& columns = data.arm_columns_of_link[static_cast<std::size_t>(a)];
     for (int t = 0; t < ws.num_force_terms; ++t) {
       const ArmWorkspace::ForceTerm& term = ws.force_terms[static_cast<std::size_t>(t)];
       const PairDistance& pd = data.dist.pairs[term.pair];
-      const int link_a = segmentLink(model, data.dist, pd.seg_a);
-      const int link_b = segmentLink(model, data.dist, pd.seg_b);
-      computeRelativeJacobian(model, data.kin, link_a, pd.p_W_a, link_b, pd.p_W_b, data.J_rel_full);
-      gather(arm, data.J_rel_full, J_rel);
-      ws.J_avoid += (term.weight / weight_sum) * term.side * J_rel;
+      const std::uint64_t on_a = columns[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_a))];
+      const std::uint64_t on_b = columns[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_b))];
+      const double weight = (term.weight / weight_sum) * term.side;
+      for (int i = 0; i < arm.n; ++i) {
+        const bool moves_a = (on_a >> i) & 1U, moves_b = (on_b >> i) & 1U;
+        if (!moves_a && !moves_b) continue;
+        const auto twist = data.kin.twist_W.col(arm.q[static_cast<std::size_t>(i)]);
+        Eigen::Vector3d col = Eigen::Vector3d::Zero();
+        if (moves_a) col += twist.head<3>().cross(pd.p_W_a) + twist.tail<3>();
+        if (moves_b) col -= twist.head<3>().cross(pd.p_W_b) + twist.tail<3>();
+        ws.J_avoid.col(i) += weight * col;
+      }
     }
   }
   status.force = ws.force_magnitude;
@@ -478,7 +502,7 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
   ArmWorkspace& ws = data.arm_ws;
   followTrajectory(model, cm, data, a, input, recovery_only, ws);
   collectPairTerms(model, cm, data, a, input, recovery_only, ws);
-  mergeAvoidanceJacobian(model, arm, data, data.arms[a], ws);
+  mergeAvoidanceJacobian(model, arm, data, a, data.arms[a], ws);
   blendControllers(model, cm, data, a, recovery_only, ws);
   limitToJointRange(model, arm, cm.params.period, ws);
   const bool filter = cm.params.mode != AvoidanceMode::kOff && !recovery_only;
@@ -591,6 +615,29 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
   for (int j = 0; j < model.nq; ++j)
     sweep += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * params.period;
   if (d_phys - 2.0 * sweep > floor) return;
+  // The same bound per pair: a point of a segment moves at most the sum over the joints that move
+  // its link (data.link_sweep, accumulated down the tree), so a pair whose distance (or the broad
+  // phase's lower bound) minus both its segments' sweeps stays above the floor cannot end below it
+  // in any prediction (each scales the arms' steps by at most 1). Only if some pair can is the step
+  // predicted; the outcome is the one the full check gives.
+  for (std::size_t l = 0; l < model.links.size(); ++l) {
+    const int parent = model.links[l].parent;
+    double s = parent >= 0 ? data.link_sweep[static_cast<std::size_t>(parent)] : 0.0;
+    const int j = model.links[l].q_index;
+    if (j >= 0) s += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * params.period;
+    data.link_sweep[l] = s;
+  }
+  bool reachable = false;
+  for (const PairDistance& pd : data.dist.pairs) {
+    if (!pd.active) continue;
+    const double reach = data.link_sweep[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_a))] +
+                         data.link_sweep[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_b))];
+    if (!(pd.distance - reach > floor)) {
+      reachable = true;
+      break;
+    }
+  }
+  if (!reachable) return;
 
   bool have_hold = false;
   std::array<double, 2> scale{1.0, 1.0};

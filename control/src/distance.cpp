@@ -18,7 +18,8 @@ DistanceData::DistanceData(const Model& model)
     : pairs(model.pairs.size()),
       rows(Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(model.pairs.size()), model.nq)),
       prim_W(model.primitives.size()),
-      prim_r(model.primitives.size(), 0.0) {
+      prim_r(model.primitives.size(), 0.0),
+      pair_common(model.pairs.size(), -1) {
   for (std::size_t i = 0; i < model.pairs.size(); ++i) {
     const SegmentPair& p = model.pairs[i];
     pairs[i].seg_a = p.a;
@@ -31,6 +32,7 @@ DistanceData::DistanceData(const Model& model)
       continue;
     }
     robot_pairs.push_back(static_cast<int>(i));
+    pair_common[i] = static_cast<int>(commonSupport(model, sa.link, sb.link));
     for (int a = sa.first_primitive; a < sa.first_primitive + sa.num_primitives; ++a) {
       for (int b = sb.first_primitive; b < sb.first_primitive + sb.num_primitives; ++b) {
         pp_a.push_back(a);
@@ -130,8 +132,14 @@ REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const Kinematics
   out.p_W_a = c_a - data.prim_r[pa] * n;
   out.p_W_b = c_b + data.prim_r[pb] * n;
   out.has_row = best < options.row_threshold;
-  if (out.has_row)
+  if (!out.has_row) return;
+  const int common = data.pair_common[static_cast<std::size_t>(i)];
+  if (common >= 0) {  // a robot pair: always the same two links, whose other columns stay 0 (set-up)
+    computeDirectionalRowOnSupport(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n,
+                                   static_cast<std::size_t>(common), data.rows.row(i).data());
+  } else {  // a body-schema slot's link changes with what it holds
     computeDirectionalRow(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n, data.rows.row(i));
+  }
 }
 
 /// The closest primitive pair of segments sa and sb, computed directly (slot pairs, refinement);

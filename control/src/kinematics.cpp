@@ -44,7 +44,8 @@ void zeroColumns(Matrix&& M) {
 KinematicsData::KinematicsData(const Model& model)
     : X_W_L(model.links.size(), Eigen::Isometry3d::Identity()),
       axis_W(model.links.size(), Eigen::Vector3d::UnitZ()),
-      q(Eigen::VectorXd::Zero(model.nq)) {
+      q(Eigen::VectorXd::Zero(model.nq)),
+      twist_W(Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, model.nq)) {
   computeForwardKinematics(model, *this, q);
 }
 
@@ -77,6 +78,17 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data,
         break;
     }
   }
+  for (int j = 0; j < model.nq; ++j) {
+    const int l = model.q_link[j];
+    const Eigen::Vector3d& axis = data.axis_W[l];
+    if (model.links[l].type == JointType::kRevolute) {
+      data.twist_W.col(j).head<3>() = axis;
+      data.twist_W.col(j).tail<3>() = data.X_W_L[l].translation().cross(axis);
+    } else {
+      data.twist_W.col(j).head<3>().setZero();
+      data.twist_W.col(j).tail<3>() = axis;
+    }
+  }
   return true;
 }
 
@@ -85,11 +97,8 @@ void computePointJacobian(const Model& model, const KinematicsData& data, int li
   assert(J_W.rows() == 3 && J_W.cols() == model.nq);
   zeroColumns(J_W);
   for (const int qi : model.link_support[link]) {
-    const int l = model.q_link[qi];
-    if (model.links[l].type == JointType::kRevolute)
-      J_W.col(qi) = data.axis_W[l].cross(p_W - data.X_W_L[l].translation());
-    else
-      J_W.col(qi) = data.axis_W[l];
+    const auto t = data.twist_W.col(qi);
+    J_W.col(qi) = t.head<3>().cross(p_W) + t.tail<3>();
   }
 }
 
@@ -99,19 +108,39 @@ void computeRelativeJacobian(const Model& model, const KinematicsData& data, int
   assert(J_W.rows() == 3 && J_W.cols() == model.nq);
   zeroColumns(J_W);
   for (const int qi : model.link_support[link1]) {
-    const int l = model.q_link[qi];
-    if (model.links[l].type == JointType::kRevolute)
-      J_W.col(qi) += data.axis_W[l].cross(p1_W - data.X_W_L[l].translation());
-    else
-      J_W.col(qi) += data.axis_W[l];
+    const auto t = data.twist_W.col(qi);
+    J_W.col(qi) += t.head<3>().cross(p1_W) + t.tail<3>();
   }
   for (const int qi : model.link_support[link2]) {
-    const int l = model.q_link[qi];
-    if (model.links[l].type == JointType::kRevolute)
-      J_W.col(qi) -= data.axis_W[l].cross(p2_W - data.X_W_L[l].translation());
-    else
-      J_W.col(qi) -= data.axis_W[l];
+    const auto t = data.twist_W.col(qi);
+    J_W.col(qi) -= t.head<3>().cross(p2_W) + t.tail<3>();
   }
+}
+
+std::size_t commonSupport(const Model& model, int link1, int link2) {
+  const std::vector<int>& s1 = model.link_support[static_cast<std::size_t>(link1)];
+  const std::vector<int>& s2 = model.link_support[static_cast<std::size_t>(link2)];
+  std::size_t common = 0;
+  while (common < s1.size() && common < s2.size() && s1[common] == s2[common]) ++common;
+  return common;
+}
+
+void computeDirectionalRowOnSupport(const Model& model, const KinematicsData& data, int link1,
+                                    const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
+                                    const Eigen::Vector3d& n_W, std::size_t common, double* row) {
+  const std::vector<int>& s1 = model.link_support[static_cast<std::size_t>(link1)];
+  const std::vector<int>& s2 = model.link_support[static_cast<std::size_t>(link2)];
+  // n . (w x p + v) = w . (p x n) + v . n for a joint with twist (w, v). Joints on the common path
+  // from the root move p1 and p2 as one rigid body: their entry is w . ((p1 - p2) x n) (0 when n is
+  // along p1 - p2, as for a PairDistance; the v terms cancel). Below the common path the two paths
+  // share no joint (a tree), so every column is written once.
+  const Eigen::Vector3d w = (p1_W - p2_W).cross(n_W);
+  for (std::size_t k = 0; k < common; ++k) row[s1[k]] = data.twist_W.col(s1[k]).head<3>().dot(w);
+  Eigen::Matrix<double, 6, 1> x1, x2;
+  x1 << p1_W.cross(n_W), n_W;
+  x2 << p2_W.cross(n_W), n_W;
+  for (std::size_t k = common; k < s1.size(); ++k) row[s1[k]] = data.twist_W.col(s1[k]).dot(x1);
+  for (std::size_t k = common; k < s2.size(); ++k) row[s2[k]] = -data.twist_W.col(s2[k]).dot(x2);
 }
 
 void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1,
@@ -119,31 +148,8 @@ void computeDirectionalRow(const Model& model, const KinematicsData& data, int l
                            const Eigen::Vector3d& n_W, Eigen::Ref<Eigen::RowVectorXd> row) {
   assert(row.cols() == model.nq);
   zeroColumns(row);
-  const std::vector<int>& s1 = model.link_support[link1];
-  const std::vector<int>& s2 = model.link_support[link2];
-  // Joints on the common path from the root move p1 and p2 as one rigid body: their entry is
-  // n . (axis x (p1 - p2)) = axis . ((p1 - p2) x n) for a revolute joint (0 when n is along p1 - p2,
-  // as for a PairDistance), 0 for a prismatic one. The rest: n . (axis x (p - o)) = axis . ((p - o) x n).
-  std::size_t common = 0;
-  while (common < s1.size() && common < s2.size() && s1[common] == s2[common]) ++common;
-  const Eigen::Vector3d w = (p1_W - p2_W).cross(n_W);
-  for (std::size_t k = 0; k < common; ++k) {
-    const int l = model.q_link[s1[k]];
-    if (model.links[l].type == JointType::kRevolute) row[s1[k]] = data.axis_W[l].dot(w);
-  }
-  const Eigen::Vector3d p1xn = p1_W.cross(n_W), p2xn = p2_W.cross(n_W);
-  for (std::size_t k = common; k < s1.size(); ++k) {
-    const int l = model.q_link[s1[k]];
-    row[s1[k]] = model.links[l].type == JointType::kRevolute
-                     ? data.axis_W[l].dot(p1xn - data.X_W_L[l].translation().cross(n_W))
-                     : data.axis_W[l].dot(n_W);
-  }
-  for (std::size_t k = common; k < s2.size(); ++k) {
-    const int l = model.q_link[s2[k]];
-    row[s2[k]] -= model.links[l].type == JointType::kRevolute
-                      ? data.axis_W[l].dot(p2xn - data.X_W_L[l].translation().cross(n_W))
-                      : data.axis_W[l].dot(n_W);
-  }
+  computeDirectionalRowOnSupport(model, data, link1, p1_W, link2, p2_W, n_W, commonSupport(model, link1, link2),
+                                 row.data());
 }
 
 }  // namespace reflex::control

@@ -308,9 +308,15 @@ struct ControllerData {
   Eigen::VectorXd q_prev;
   bool have_prev = false;
   std::vector<char> arm_joint;          ///< per q index: commanded by one of the arms
+  /// Per arm, per link: bit i set if the arm's joint i (ControllerModel::Arm::q[i]) moves the link
+  /// (lies on its support path), so a point Jacobian restricted to the arm's columns needs no nq-wide
+  /// scratch.
+  std::array<std::vector<std::uint64_t>, 2> arm_columns_of_link;
   /// Per q index: how far a point of the robot moves at most per unit of that joint (m/rad, or 1 for
   /// a prismatic joint): the longest path from the joint to a segment surface below it.
   Eigen::VectorXd lever;
+  /// Predictive guard scratch, per link: the most any point of it moves in this cycle's step (m).
+  std::vector<double> link_sweep;
   // scratch of the predictive guard: the configuration one step ahead
   Eigen::VectorXd q_next;
   KinematicsData kin_next;
@@ -319,7 +325,6 @@ struct ControllerData {
   // scratch
   ArmWorkspace arm_ws;                  ///< one arm's cycle (reused by both arms)
   Eigen::MatrixXd J_full;               ///< 3 x nq
-  Eigen::MatrixXd J_rel_full;           ///< 3 x nq
 };
 
 /// The blending coefficient of Eq. 13.

@@ -100,6 +100,10 @@ struct DistanceData {
   // Per primitive:
   std::vector<SegmentW> prim_W;  ///< core segment in W (start, direction, squared length)
   std::vector<double> prim_r;    ///< radius (body-schema slots: the slot's)
+  // Per pair: commonSupport of its two links for a robot pair (its row then has nonzero entries only
+  // in those links' support columns, written each time, the rest zero from set-up); -1 for a pair
+  // with a body-schema slot (whose row is zeroed each time).
+  std::vector<int> pair_common;
   // The primitive pairs of all robot-robot pairs, flat, so that they are computed in one tight loop:
   // pair i owns entries [pp_begin[i], pp_begin[i + 1]) (none for pairs with a body-schema slot).
   std::vector<int> pp_a, pp_b, pp_begin;

@@ -21,6 +21,12 @@ struct KinematicsData {
   std::vector<Eigen::Isometry3d> X_W_L;  ///< pose of every link in W
   std::vector<Eigen::Vector3d> axis_W;   ///< joint axis of every link's parent joint, in W
   Eigen::VectorXd q;                     ///< the configuration the poses belong to
+  /// Per joint (column = q index), its unit twist in W: angular part w (rows 0-2; the axis for a
+  /// revolute joint, 0 for a prismatic one) and linear part v (rows 3-5; o x axis for a revolute
+  /// joint at origin o, the axis for a prismatic one). A point p_W moved by joint j moves at
+  /// (w x p_W + v) per unit qdot_j: the Jacobian and row functions use it, so the per-joint work
+  /// (o x axis) is done once per cycle instead of once per pair.
+  Eigen::Matrix<double, 6, Eigen::Dynamic> twist_W;
 };
 
 /// Forward kinematics. Returns false (and leaves `data` unchanged) if q has the wrong size or a
@@ -42,5 +48,15 @@ void computeRelativeJacobian(const Model& model, const KinematicsData& data, int
 void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1,
                            const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
                            const Eigen::Vector3d& n_W, Eigen::Ref<Eigen::RowVectorXd> row);
+
+/// How many joints the support paths of link1 and link2 share from the root (Model::link_support).
+std::size_t commonSupport(const Model& model, int link1, int link2);
+
+/// computeDirectionalRow writing only the columns of the joints that move link1 or link2 (the
+/// others keep their values: a caller whose rows always join the same two links zeroes them once).
+/// common = commonSupport(model, link1, link2); row points at nq doubles.
+void computeDirectionalRowOnSupport(const Model& model, const KinematicsData& data, int link1,
+                                    const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
+                                    const Eigen::Vector3d& n_W, std::size_t common, double* row);
 
 }  // namespace reflex::control
