@@ -4,7 +4,7 @@
 // is parsed into ExitSummary.
 #pragma once
 
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 

@@ -10,7 +10,7 @@
 //    refuses to create a writer of EVERY Reflex topic for a participant holding the view identity
 //    (create_datawriter returns null; reflex::bus throws BusError naming the topic), while the readers
 //    reflex_view needs are created.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 #include "security_support.hpp"
 
 #include <nlohmann/json.hpp>

@@ -82,7 +82,9 @@ class ChildProcess {
 };
 
 /// Path of an executable built into the project's bin folder (build/bin/`name`).
-inline std::string binPath(const std::string& name) { return std::string(REFLEX_BIN_DIR) + "/" + name; }
+inline std::string binPath(const std::string& name) {
+  return std::string(REFLEX_BIN_DIR) + "/" + name;
+}
 
 /// What a command printed and returned (run to completion).
 struct ProcessResult {

@@ -41,7 +41,8 @@ inline const control::Model& shippedModel() {
 
 /// shippedModel() under the default controller configuration, built once.
 inline const control::ControllerModel& defaultControllerModel() {
-  static const control::ControllerModel cm = control::makeControllerModel(shippedModel(), control::defaultControllerConfig());
+  static const control::ControllerModel cm =
+      control::makeControllerModel(shippedModel(), control::defaultControllerConfig());
   return cm;
 }
 
