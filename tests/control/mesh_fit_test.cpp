@@ -42,8 +42,8 @@ namespace {
 namespace fs = std::filesystem;
 using Eigen::Vector3d;
 
-const std::string kUrdf = test::robotPath("mesh_humanoid.urdf");
-const std::string kPackageDir = test::robotPath("mesh_humanoid_description");
+const std::string kUrdf = testing::robotPath("mesh_humanoid.urdf");
+const std::string kPackageDir = testing::robotPath("mesh_humanoid_description");
 
 std::string readFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -170,7 +170,7 @@ std::vector<Primitive> segmentPrimitives(const Model& m, const std::string& link
 }
 
 TEST(MeshFit, ShippedMeshHumanoidEnclosesEveryVertexOfEveryLink) {
-  const Model model = test::loadRobot("mesh_humanoid");
+  const Model model = testing::loadRobot("mesh_humanoid");
   const auto meshes = linkMeshes(kUrdf, kPackageDir);
   ASSERT_EQ(meshes.size(), 16u);  // 14 links with meshes (the torso also a box), 2 feet with boxes
   for (const auto& [link, mesh] : meshes) {
@@ -183,7 +183,7 @@ TEST(MeshFit, ShippedMeshHumanoidEnclosesEveryVertexOfEveryLink) {
 }
 
 TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
-  const Model model = test::loadRobot("mesh_humanoid");
+  const Model model = testing::loadRobot("mesh_humanoid");
   const auto meshes = linkMeshes(kUrdf, kPackageDir);
   std::map<int, std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> bvh;  // by segment
   for (const auto& [link, mesh] : meshes) {
@@ -236,9 +236,9 @@ TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
 /// The fit of a link built from one capsule or sphere is no larger than that primitive and close to
 /// it (its vertices lie on it); every link's numbers stay within the bounds README states.
 TEST(MeshFit, GroundTruthVolumesAndStatedBounds) {
-  const Model model = test::loadRobot("mesh_humanoid");
-  const YAML::Node truth = YAML::LoadFile(test::robotPath("mesh_humanoid.truth.yaml"))["links"];
-  const FitOverlay overlay = loadFitOverlay(test::robotPath("mesh_humanoid.fit.yaml"));
+  const Model model = testing::loadRobot("mesh_humanoid");
+  const YAML::Node truth = YAML::LoadFile(testing::robotPath("mesh_humanoid.truth.yaml"))["links"];
+  const FitOverlay overlay = loadFitOverlay(testing::robotPath("mesh_humanoid.fit.yaml"));
   int single = 0;
   for (const auto& l : overlay.links) {
     const YAML::Node t = truth[l.link];
@@ -318,13 +318,13 @@ TEST(MeshFit, RealWorldAssimpTestModelsFitWithEveryVertexEnclosed) {
 
 TEST(MeshFit, GeneratorAndReflexFitReproduceTheCommittedFilesByteForByte) {
   TempDir dir;
-  const std::string script = test::robotPath("make_mesh_humanoid.py");
+  const std::string script = testing::robotPath("make_mesh_humanoid.py");
   ASSERT_EQ(std::system((std::string(REFLEX_PYTHON) + " " + script + " " + dir.path.string() + " > /dev/null").c_str()), 0);
   int compared = 0;
   for (const auto& e : fs::recursive_directory_iterator(dir.path)) {
     if (!e.is_regular_file()) continue;
     const std::string rel = fs::relative(e.path(), dir.path).string();
-    EXPECT_EQ(readFile(e.path().string()), readFile(test::robotPath(rel))) << rel << " differs from the committed file";
+    EXPECT_EQ(readFile(e.path().string()), readFile(testing::robotPath(rel))) << rel << " differs from the committed file";
     ++compared;
   }
   EXPECT_EQ(compared, 5 + 16);  // urdf, srdf, collision, truth, package.xml; 16 meshes
@@ -332,7 +332,7 @@ TEST(MeshFit, GeneratorAndReflexFitReproduceTheCommittedFilesByteForByte) {
   const std::string cmd = std::string(REFLEX_FIT) + " " + dir / "mesh_humanoid.urdf" +
                           " --package-path mesh_humanoid_description=" + dir / "mesh_humanoid_description" + " -q > /dev/null";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
-  EXPECT_EQ(readFile(out), readFile(test::robotPath("mesh_humanoid.fit.yaml")));
+  EXPECT_EQ(readFile(out), readFile(testing::robotPath("mesh_humanoid.fit.yaml")));
 }
 
 /// A one-link robot with the given collision XML, in `dir`.
@@ -472,7 +472,7 @@ TEST(MeshFitResolve, PackageFileAndRelativePaths) {
 TEST(MeshFit, BoxesWithoutAnOverlayKeepTheirEnclosingCapsule) {
   // The shipped small humanoid has boxes and no overlay: unchanged (one enclosing capsule per box).
   std::vector<std::string> warnings;
-  const Model m = test::loadRobot(test::kSmall, &warnings);
+  const Model m = testing::loadRobot(testing::kSmall, &warnings);
   EXPECT_EQ(m.segments[m.segmentIndex("torso")].num_primitives, 1);
   EXPECT_FALSE(warnings.empty());
 }
