@@ -153,13 +153,31 @@ std::string ChildProcess::readUntil(const std::string& token, std::chrono::milli
 
 ProcessResult runShell(const std::string& command, const std::string& stderr_path, std::chrono::milliseconds timeout) {
   ProcessResult r;
-  ChildProcess child({"/bin/sh", "-c", "{ " + command + "\n} 2>" + stderr_path}, ChildOutput::pipe());
+  const std::string redirect = stderr_path.empty() ? std::string("2>&1") : "2>" + stderr_path;
+  ChildProcess child({"/bin/sh", "-c", "{ " + command + "\n} " + redirect}, ChildOutput::pipe());
   if (!child.started()) return r;
   const int code = child.wait(timeout);
   r.out = child.output();
-  r.err = readWholeFile(stderr_path);
+  if (!stderr_path.empty()) r.err = readWholeFile(stderr_path);
   r.exit_code = (code == ChildProcess::kStillRunning || child.signaled()) ? -1 : code;
   return r;
+}
+
+int runInChild(std::chrono::milliseconds timeout, const std::function<int()>& fn) {
+  const pid_t pid = ::fork();
+  if (pid < 0) return ChildProcess::kStillRunning;
+  if (pid == 0) ::_exit(fn());
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  int status = 0;
+  while (::waitpid(pid, &status, WNOHANG) == 0) {
+    if (std::chrono::steady_clock::now() > end) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+      return ChildProcess::kStillRunning;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
 }  // namespace reflex::testing

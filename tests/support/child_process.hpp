@@ -10,6 +10,7 @@
 #include <sys/types.h>
 
 #include <chrono>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -92,10 +93,17 @@ struct ProcessResult {
   std::string out, err;
 };
 
-/// Runs `command` through /bin/sh -c (so `command` may hold quoting and redirections), stdout read
-/// through a pipe, the whole command line's stderr to `stderr_path` (then read back into err); waits up to `timeout` (then
-/// kills it: exit_code -1).
-ProcessResult runShell(const std::string& command, const std::string& stderr_path,
+/// Runs `command` through /bin/sh -c (so `command` may hold quoting and redirections) to completion:
+/// stdout read through a pipe into out; the whole command line's stderr to `stderr_path` (then read
+/// back into err), or, if `stderr_path` is empty, into out as well (2>&1). Waits up to `timeout`,
+/// then kills it (exit_code -1).
+ProcessResult runShell(const std::string& command, const std::string& stderr_path = "",
                        std::chrono::milliseconds timeout = std::chrono::minutes(5));
+
+/// Runs `fn` in a forked copy of the test program (for code that may block or crash: a read of a
+/// FIFO, a loader fed a device) and returns its result as the exit code (0..255), 128 + N if signal
+/// N ended it, or ChildProcess::kStillRunning if it did not finish within `timeout` (it is then
+/// killed and reaped). The child leaves with _exit: no gtest output, no static destructors.
+int runInChild(std::chrono::milliseconds timeout, const std::function<int()>& fn);
 
 }  // namespace reflex::testing

@@ -1,9 +1,12 @@
 // ChildProcess and runShell against /bin/sh, whose behaviour POSIX fixes: `exit N` gives code N,
 // a shell that kills itself with signal N gives 128 + N, `echo` writes exactly its argument and a
-// newline, `sleep` outlives a short wait. A missing executable is reported, not thrown.
+// newline, `sleep` outlives a short wait. A missing executable is reported, not thrown. runInChild
+// returns a forked function's result, the signal that ended it, or kStillRunning for a blocked one.
 #include "support/child_process.hpp"
 
 #include <gtest/gtest.h>
+
+#include <unistd.h>
 
 #include <csignal>
 #include <fstream>
@@ -58,6 +61,16 @@ TEST(RunShell, SeparatesStdoutStderrAndExitCode) {
   EXPECT_EQ(r.out, "a b\n");
   EXPECT_EQ(r.err, "oops\n");
   EXPECT_EQ(runShell("sleep 30", err, 200ms).exit_code, -1) << "killed after the timeout";
+  const ProcessResult merged = runShell("echo out; echo err >&2; exit 0");
+  EXPECT_EQ(merged.exit_code, 0);
+  EXPECT_EQ(merged.out, "out\nerr\n") << "no stderr path: stderr joins stdout";
+  EXPECT_EQ(merged.err, "");
+}
+
+TEST(RunInChild, ResultSignalAndDeadline) {
+  EXPECT_EQ(runInChild(10s, [] { return 42; }), 42);
+  EXPECT_EQ(runInChild(10s, [] { return ::raise(SIGABRT); }), 128 + SIGABRT);
+  EXPECT_EQ(runInChild(200ms, [] { return ::pause(); }), ChildProcess::kStillRunning) << "blocked: killed";
 }
 
 }  // namespace
