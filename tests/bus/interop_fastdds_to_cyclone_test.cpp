@@ -11,9 +11,7 @@ namespace reflex::bus::test {
 namespace {
 
 using namespace std::chrono_literals;
-using reflex::testing::binPath;
-using reflex::testing::ChildOutput;
-using reflex::testing::ChildProcess;
+using namespace reflex::testing;  // ChildProcess, binPath (support/child_process.hpp)
 const ChildOutput kPipe = ChildOutput::pipe();  // stdout through a pipe (readUntil, output)
 constexpr const char* kTypes = "joint_state,control_status,hand_targets,body_schema";
 
