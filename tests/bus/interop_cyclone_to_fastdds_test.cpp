@@ -6,6 +6,8 @@
 
 #include "support/child_process.hpp"
 
+#include <csignal>
+
 namespace reflex::bus::test {
 namespace {
 

@@ -7,6 +7,8 @@
 
 #include "support/child_process.hpp"
 
+#include <csignal>
+
 namespace reflex::bus::test {
 namespace {
 

@@ -6,6 +6,9 @@
 
 #include "support/child_process.hpp"
 
+#include <csignal>
+#include <thread>
+
 namespace reflex::bus::test {
 namespace {
 

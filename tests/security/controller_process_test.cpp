@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <numeric>
 #include <regex>
+#include <thread>
 #include <vector>
 
 namespace reflex::security_test {

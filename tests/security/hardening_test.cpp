@@ -32,11 +32,13 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <csignal>
 #include <cstdio>
 #include <map>
 #include <mutex>
 #include <regex>
 #include <set>
+#include <thread>
 
 namespace reflex::security_test {
 namespace {

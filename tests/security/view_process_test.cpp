@@ -17,8 +17,10 @@
 
 #include <gtest/gtest.h>
 
+#include <csignal>
 #include <regex>
 #include <sstream>
+#include <thread>
 #include <sys/stat.h>
 
 namespace reflex::security_test {

@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <thread>
 
 namespace reflex {
 namespace {

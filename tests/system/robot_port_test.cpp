@@ -32,6 +32,7 @@
 #include <functional>
 #include <map>
 #include <sstream>
+#include <thread>
 
 namespace reflex {
 namespace {

@@ -36,6 +36,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <thread>
 
 namespace reflex {
 namespace {
