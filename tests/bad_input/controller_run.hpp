@@ -4,7 +4,7 @@
 // is parsed into ExitSummary.
 #pragma once
 
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -135,7 +135,7 @@ class ControllerRun {
   /// Waits for the process to exit and returns its exit code and summary.
   int finish(ExitSummary& summary, std::chrono::seconds timeout = 20s) {
     const int rc = process_->wait(timeout);
-    output = readFile(log_);
+    output = process_->output();  // the log file
     summary = parseSummary(output);
     return rc;
   }

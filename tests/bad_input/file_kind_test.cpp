@@ -25,27 +25,27 @@
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/object_map.hpp"
 #include "reflex/vision/session.hpp"
+#include "support/child_process.hpp"
 
 #include <gtest/gtest.h>
 
 #include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
-#include <array>
 #include <chrono>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <string>
-#include <thread>
 #include <vector>
 
 namespace {
 
 namespace fs = std::filesystem;
+using reflex::testing::ProcessResult;
+using reflex::testing::runInChild;
+using reflex::testing::runShell;
 
 /// A fresh folder holding a FIFO and a directory, plus /dev/zero: the three kinds of non-file.
 struct NonFiles {
@@ -83,23 +83,6 @@ int classify(const std::function<void()>& load, const std::string& path, const s
     std::fprintf(stderr, "other exception: %s\n", e.what());
     return 4;
   }
-}
-
-/// Runs `fn` (returning an exit status) in a child; -1 if it did not finish within `seconds`.
-int inChild(double seconds, const std::function<int()>& fn) {
-  const pid_t pid = fork();
-  if (pid == 0) _exit(fn());
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  int status = 0;
-  while (waitpid(pid, &status, WNOHANG) == 0) {
-    if (std::chrono::steady_clock::now() > deadline) {
-      kill(pid, SIGKILL);
-      waitpid(pid, &status, 0);
-      return -1;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 100 + WTERMSIG(status);
 }
 
 struct Loader {
@@ -145,7 +128,7 @@ TEST(FileKind, EveryLoaderRefusesAFifoADeviceAndAFolderWithinASecond) {
   };
   for (const Loader& l : loaders) {
     for (const auto& [path, kind] : nf.cases()) {
-      const int status = inChild(1.0, [&, p = path, k = kind] { return l.run(p, k); });
+      const int status = runInChild(std::chrono::seconds(1), [&, p = path, k = kind] { return l.run(p, k); });
       EXPECT_EQ(status, 0) << l.name << " given " << path << " (" << kind << "): "
                            << (status == -1 ? "still blocked after 1 s" : "status " + std::to_string(status));
     }
@@ -159,7 +142,7 @@ TEST(FileKind, TheCollisionFileNextToTheUrdfIsNotOpenedBlindly) {
   fs::copy_file(std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf", urdf);
   const std::string coll = nf.dir + "/robot.collision.yaml";
   ASSERT_EQ(mkfifo(coll.c_str(), 0600), 0);
-  const int status = inChild(1.0, [&] {
+  const int status = runInChild(std::chrono::seconds(1), [&] {
     return classify<reflex::control::ModelError>([&] { reflex::control::loadCollisionConfigFor(urdf, ""); }, coll,
                                                  "is a FIFO");
   });
@@ -171,13 +154,8 @@ TEST(FileKind, TheCollisionFileNextToTheUrdfIsNotOpenedBlindly) {
 
 /// Runs a shell command under `timeout 5`; returns its exit status and stderr.
 std::pair<int, std::string> runTool(const std::string& cmd) {
-  const std::string full = "timeout -s KILL 5 " + cmd + " 2>&1 >/dev/null";
-  FILE* p = popen(full.c_str(), "r");
-  std::string out;
-  std::array<char, 512> buf{};
-  while (p && fgets(buf.data(), buf.size(), p)) out += buf.data();
-  const int st = p ? pclose(p) : -1;
-  return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out};
+  const ProcessResult r = runShell("timeout -s KILL 5 " + cmd + " 2>&1 >/dev/null");
+  return {r.exit_code, r.out};
 }
 
 TEST(FileKind, ToolsExitWithAnErrorNamingThePathInsteadOfHanging) {
@@ -274,13 +252,9 @@ TEST(OutputFiles, ToolsExitNonZeroNamingTheOutputAndTheCause) {
   };
   for (const Case& c : cases) {
     // stderr only (the commands redirect their own stdout).
-    FILE* p = popen(("{ timeout -s KILL 20 " + c.cmd + "; } 2>&1").c_str(), "r");
-    ASSERT_NE(p, nullptr);
-    std::string err;
-    std::array<char, 512> buf{};
-    while (fgets(buf.data(), buf.size(), p)) err += buf.data();
-    const int st = pclose(p);
-    EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) != 0 && WEXITSTATUS(st) != 137) << c.cmd << "\n" << err;
+    const ProcessResult r = runShell("timeout -s KILL 20 " + c.cmd);
+    const std::string& err = r.out;
+    EXPECT_TRUE(r.exit_code != -1 && r.exit_code != 0 && r.exit_code != 137) << c.cmd << "\n" << err;
     EXPECT_NE(err.find(c.expected), std::string::npos) << c.cmd << "\n" << err;
   }
 }

@@ -4,7 +4,7 @@
 // Before the bound, the first such sample aborted the player (SIGABRT inside the key computation).
 // Now each is refused and counted: "published 4 samples (3 failed)", exit code 2 (not a signal),
 // and the samples with keys of 255 bytes and less reach a subscriber.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/record/record_file.hpp>

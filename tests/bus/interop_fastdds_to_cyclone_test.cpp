@@ -5,29 +5,33 @@
 // (control_status), a reliable transient-local stream (hand_targets) and a keyed one (body_schema).
 #include <gtest/gtest.h>
 
-#include "process.hpp"
+#include "support/child_process.hpp"
+
+#include <csignal>
 
 namespace reflex::bus::test {
 namespace {
 
 using namespace std::chrono_literals;
+using namespace reflex::testing;  // ChildProcess, binPath (support/child_process.hpp)
+const ChildOutput kPipe = ChildOutput::pipe();  // stdout through a pipe (readUntil, output)
 constexpr const char* kTypes = "joint_state,control_status,hand_targets,body_schema";
 
 TEST(Interop, CycloneReaderReceivesFastDdsTopics) {
-  Child reader({binPath("bus_cyclone_reader"), "--domain", "49", "--types", kTypes, "--expect-source",
-                "interop_fastdds", "--timeout-s", "20"});
-  Child writer({binPath("bus_pub_program"), "--domain", "49", "--types", kTypes, "--participant-profile",
-                "reflex_participant_udp", "--module", "interop_fastdds", "--max-seconds", "40"});
+  ChildProcess reader({binPath("bus_cyclone_reader"), "--domain", "49", "--types", kTypes, "--expect-source",
+                       "interop_fastdds", "--timeout-s", "20"}, kPipe);
+  ChildProcess writer({binPath("bus_pub_program"), "--domain", "49", "--types", kTypes, "--participant-profile",
+                       "reflex_participant_udp", "--module", "interop_fastdds", "--max-seconds", "40"}, kPipe);
   ASSERT_NE(writer.readUntil("running", 10s).find("running"), std::string::npos) << writer.output();
 
-  const auto code = reader.wait(30s);
-  ASSERT_TRUE(code.has_value()) << "Cyclone reader did not finish; output:\n" << reader.output();
-  EXPECT_EQ(*code, 0) << reader.output();
+  const int code = reader.wait(30s);
+  ASSERT_NE(code, ChildProcess::kStillRunning) << "Cyclone reader did not finish; output:\n" << reader.output();
+  EXPECT_EQ(code, 0) << reader.output();
   for (const char* type : {"joint_state", "control_status", "hand_targets", "body_schema"}) {
     EXPECT_NE(reader.output().find(std::string("verified ") + type), std::string::npos) << type;
   }
   writer.signal(SIGTERM);
-  EXPECT_EQ(writer.wait(10s).value_or(-1), 0);
+  EXPECT_EQ(writer.wait(10s), 0);
 }
 
 }  // namespace

@@ -122,7 +122,7 @@ TEST(DistanceAlloc, CounterSeesOperatorNewAndEigenAllocations) {
 }
 
 void runCycles(const char* robot) {
-  const Model model = test::loadRobot(robot);
+  const Model model = testing::loadRobot(robot);
   KinematicsData kin(model);
   DistanceData dist(model);
   std::mt19937_64 rng(17);
@@ -162,9 +162,9 @@ void runCycles(const char* robot) {
   EXPECT_GE(dist.closest, 0);
 }
 
-TEST(DistanceAlloc, PerCycleRoutinesDoNotAllocateOnTheShippedRobot) { runCycles(test::kAsimo); }
+TEST(DistanceAlloc, PerCycleRoutinesDoNotAllocateOnTheShippedRobot) { runCycles(testing::kAsimo); }
 
-TEST(DistanceAlloc, PerCycleRoutinesDoNotAllocateOnTheSecondHumanoid) { runCycles(test::kSmall); }
+TEST(DistanceAlloc, PerCycleRoutinesDoNotAllocateOnTheSecondHumanoid) { runCycles(testing::kSmall); }
 
 }  // namespace
 }  // namespace reflex::control

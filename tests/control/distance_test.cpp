@@ -57,12 +57,12 @@ int yamlExcludeEntries(const std::string& path) {
 
 // ---------------------------------------------------------------- pair list
 TEST(DistancePairs, ShippedRobotChecksEveryPairButNeighboursAndExclusions) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   ASSERT_EQ(m.num_robot_segments, 17);
   // 17 segments: 136 pairs. Neighbours in the segment tree (hand-listed from Fig. 1): body-chest,
   // chest-head, chest-shoulders (2), shoulder-upper arm, upper arm-forearm, forearm-hand (2 x 3),
   // body-thighs (2), thigh-shank, shank-foot (2 x 2) = 16.
-  const int excluded = yamlExcludeEntries(test::robotPath("asimo_like.collision.yaml"));
+  const int excluded = yamlExcludeEntries(testing::robotPath("asimo_like.collision.yaml"));
   EXPECT_EQ(excluded, 45);
   EXPECT_EQ(robotPairCount(m), 136 - 16 - excluded);
   for (const auto& [a, b] : {std::pair{"body", "chest"}, {"chest", "head"}, {"chest", "l_shoulder"},
@@ -85,16 +85,16 @@ TEST(DistancePairs, ShippedRobotChecksEveryPairButNeighboursAndExclusions) {
 }
 
 TEST(DistancePairs, AdjacencyExclusionCanBeTurnedOff) {
-  CollisionConfig config = loadCollisionConfig(test::robotPath("asimo_like.collision.yaml"));
+  CollisionConfig config = loadCollisionConfig(testing::robotPath("asimo_like.collision.yaml"));
   config.exclude_adjacent = false;
-  const Model m = loadModel(test::robotPath("asimo_like.urdf"), config);
+  const Model m = loadModel(testing::robotPath("asimo_like.urdf"), config);
   // Without the adjacency rule every pair but the 45 listed ones is checked, except chest-body: the
   // chest is fixed to the body (one rigid body, never checked whatever the configuration says).
   EXPECT_EQ(robotPairCount(m), 136 - 45 - 1);
   EXPECT_FALSE(hasPair(m, "body", "chest"));
   EXPECT_TRUE(hasPair(m, "l_forearm", "l_hand"));
   CollisionConfig none;
-  const Model all = loadModel(test::robotPath("asimo_like.urdf"), none);
+  const Model all = loadModel(testing::robotPath("asimo_like.urdf"), none);
   EXPECT_EQ(robotPairCount(all), 136 - 16);
 }
 
@@ -198,9 +198,9 @@ void checkRobotAgainstFcl(const Model& m, int configurations, std::uint64_t seed
               m.name.c_str(), compared, max_d, points, max_p);
 }
 
-TEST(DistanceFcl, ShippedRobotAgreesWithFcl) { checkRobotAgainstFcl(test::loadRobot(test::kAsimo), 60, 7); }
+TEST(DistanceFcl, ShippedRobotAgreesWithFcl) { checkRobotAgainstFcl(testing::loadRobot(testing::kAsimo), 60, 7); }
 
-TEST(DistanceFcl, SecondHumanoidAgreesWithFcl) { checkRobotAgainstFcl(test::loadRobot(test::kSmall), 60, 8); }
+TEST(DistanceFcl, SecondHumanoidAgreesWithFcl) { checkRobotAgainstFcl(testing::loadRobot(testing::kSmall), 60, 8); }
 
 // ---------------------------------------------------------------- avoidance rows
 double pairDistanceAt(const Model& m, KinematicsData& kin, DistanceData& dist, const Eigen::VectorXd& q, int i) {
@@ -264,15 +264,15 @@ void checkRowsAgainstFiniteDifferences(const Model& m, int configurations, std::
 }
 
 TEST(DistanceRows, ShippedRobotRowsAreDistanceGradients) {
-  checkRowsAgainstFiniteDifferences(test::loadRobot(test::kAsimo), 4, 11);
+  checkRowsAgainstFiniteDifferences(testing::loadRobot(testing::kAsimo), 4, 11);
 }
 
 TEST(DistanceRows, SecondHumanoidRowsAreDistanceGradients) {
-  checkRowsAgainstFiniteDifferences(test::loadRobot(test::kSmall), 3, 12);
+  checkRowsAgainstFiniteDifferences(testing::loadRobot(testing::kSmall), 3, 12);
 }
 
 TEST(DistanceRows, ThresholdSelectsRows) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   KinematicsData kin(m);
   DistanceData dist(m);
   std::mt19937_64 rng(3);
@@ -358,17 +358,17 @@ void checkBroadPhase(const Model& m, double prune_distance, int configurations, 
 }
 
 TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheShippedRobot) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   checkBroadPhase(m, 0.10, 400, 21);
   checkBroadPhase(m, 0.01, 200, 22);
 }
 
 TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheSecondHumanoid) {
-  checkBroadPhase(test::loadRobot(test::kSmall), 0.10, 400, 23);
+  checkBroadPhase(testing::loadRobot(testing::kSmall), 0.10, 400, 23);
 }
 
 TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheThousandPairRobot) {
-  const Model m = test::loadRobot("many_segment_humanoid");
+  const Model m = testing::loadRobot("many_segment_humanoid");
   // The benchmark robot of issue 12, item 7 (bringup/robots/make_many_segment_humanoid.py).
   EXPECT_GE(robotPairCount(m), 1000);
   checkBroadPhase(m, 0.10, 150, 24);
@@ -377,7 +377,7 @@ TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheThousandPairRobot) {
 TEST(DistanceBroadPhase, BoundingSpheresEncloseEveryPrimitive) {
   // Independent of the sweep: sample points on every primitive's surface and check the segment's
   // bounding sphere (in the link frame) contains them.
-  const Model m = test::loadRobot("many_segment_humanoid");
+  const Model m = testing::loadRobot("many_segment_humanoid");
   const DistanceData dist(m);
   std::mt19937_64 rng(25);
   std::normal_distribution<double> normal;
@@ -397,7 +397,7 @@ TEST(DistanceBroadPhase, BoundingSpheresEncloseEveryPrimitive) {
 
 // ---------------------------------------------------------------- body schema
 TEST(DistanceBodySchema, SlotCapsuleOnTheHandIsChecked) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   KinematicsData kin(m);
   DistanceData dist(m);
   std::mt19937_64 rng(5);
@@ -463,7 +463,7 @@ TEST(DistanceBodySchema, SlotCapsuleOnTheHandIsChecked) {
 }
 
 TEST(DistanceBodySchema, BadArgumentsAreRejectedAndChangeNothing) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   DistanceData dist(m);
   const Vector3d a(0, 0, 0), b(0.1, 0, 0);
   const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -491,7 +491,7 @@ TEST(DistanceBodySchema, BadArgumentsAreRejectedAndChangeNothing) {
 // documented default limits, each fault with its value, limit and field name; the segments the
 // shipped behaviors and scenarios attach pass.
 TEST(DistanceBodySchema, CheckRejectsAbsurdSegmentsAndNamesTheBadValue) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   const BodySchemaLimits lim;  // defaults: radius 0.5, physical length / reach 1.0, virtual 4.0
   const int hand = m.linkIndex("l_hand");
   const int head = m.linkIndex("head");
@@ -570,7 +570,7 @@ TEST(DistanceBodySchema, CheckRejectsAbsurdSegmentsAndNamesTheBadValue) {
 
 TEST(DistanceBodySchema, CoincidentCoresGetTheLinkFallbackNormal) {
   // A sphere on the world link centred exactly on the head sphere's centre at q = 0.
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   KinematicsData kin(m);
   DistanceData dist(m);
   const int head = m.linkIndex("head");
@@ -597,7 +597,7 @@ TEST(DistanceBodySchema, CoincidentCoresGetTheLinkFallbackNormal) {
 
 // ---------------------------------------------------------------- bad joint values at run time
 TEST(DistanceRuntime, NonFiniteJointValuesKeepTheLastValidResult) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   KinematicsData kin(m);
   DistanceData dist(m);
   std::mt19937_64 rng(9);

@@ -169,7 +169,7 @@ struct Expected {
   Model model;
   DistanceData dist;
   explicit Expected(const std::string& robot, const std::map<std::string, double>& joints = {})
-      : model(test::loadRobot(robot)), dist(model) {
+      : model(testing::loadRobot(robot)), dist(model) {
     Eigen::VectorXd q(model.nq);
     for (int i = 0; i < model.nq; ++i) q[i] = std::min(std::max(0.0, model.q_lower[i]), model.q_upper[i]);
     for (const auto& [name, v] : joints) q[model.qIndex(name)] = v;
@@ -211,8 +211,8 @@ TEST(Inspect, HelpExitsZero) {
 }
 
 TEST(Inspect, CsvOfTheShippedRobotAtZeroMatchesTheLibrary) {
-  const ProcessResult r = inspect(test::robotPath("asimo_like.urdf"));
-  expectCsvMatchesLibrary(r, Expected(test::kAsimo));
+  const ProcessResult r = inspect(testing::robotPath("asimo_like.urdf"));
+  expectCsvMatchesLibrary(r, Expected(testing::kAsimo));
   EXPECT_THAT(r.out, HasSubstr("# robot asimo_like: 17 segments"));
   EXPECT_TRUE(r.err.empty()) << r.err;
 }
@@ -220,26 +220,26 @@ TEST(Inspect, CsvOfTheShippedRobotAtZeroMatchesTheLibrary) {
 TEST(Inspect, JointValuesFromTheCommandLine) {
   const std::map<std::string, double> q = {{"l_shoulder_pitch", -1.2}, {"l_elbow", -1.9}, {"neck_yaw", 0.4},
                                            {"r_shoulder_roll", -0.6}};
-  const ProcessResult r = inspect(test::robotPath("asimo_like.urdf") +
+  const ProcessResult r = inspect(testing::robotPath("asimo_like.urdf") +
                         " --q l_shoulder_pitch=-1.2 l_elbow=-1.9 --q neck_yaw=0.4 --q r_shoulder_roll=-0.6");
-  expectCsvMatchesLibrary(r, Expected(test::kAsimo, q));
+  expectCsvMatchesLibrary(r, Expected(testing::kAsimo, q));
 }
 
 TEST(Inspect, JointValuesFromACsvRow) {
   const std::string csv = ::testing::TempDir() + "reflex_inspect_q.csv";
   std::ofstream(csv) << "time,l_elbow,r_elbow,body_pitch\n0.0,-0.5,-0.5,0.1\n0.1,-2.0,-1.0,0.2\n";
-  const ProcessResult r = inspect(test::robotPath("asimo_like.urdf") + " --csv " + csv + " --row 1");
-  expectCsvMatchesLibrary(r, Expected(test::kAsimo, {{"l_elbow", -2.0}, {"r_elbow", -1.0}, {"body_pitch", 0.2}}));
+  const ProcessResult r = inspect(testing::robotPath("asimo_like.urdf") + " --csv " + csv + " --row 1");
+  expectCsvMatchesLibrary(r, Expected(testing::kAsimo, {{"l_elbow", -2.0}, {"r_elbow", -1.0}, {"body_pitch", 0.2}}));
   // A --q after the CSV overrides it.
-  const ProcessResult r2 = inspect(test::robotPath("asimo_like.urdf") + " --csv " + csv + " --q l_elbow=-0.1");
-  expectCsvMatchesLibrary(r2, Expected(test::kAsimo, {{"l_elbow", -0.1}, {"r_elbow", -0.5}, {"body_pitch", 0.1}}));
+  const ProcessResult r2 = inspect(testing::robotPath("asimo_like.urdf") + " --csv " + csv + " --q l_elbow=-0.1");
+  expectCsvMatchesLibrary(r2, Expected(testing::kAsimo, {{"l_elbow", -0.1}, {"r_elbow", -0.5}, {"body_pitch", 0.1}}));
 }
 
 TEST(Inspect, JsonParsesAndMatches) {
-  const ProcessResult r = inspect(test::robotPath("asimo_like.urdf") + " --format json --q l_elbow=-1.0");
+  const ProcessResult r = inspect(testing::robotPath("asimo_like.urdf") + " --format json --q l_elbow=-1.0");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(JsonChecker(r.out).valid()) << r.out;
-  const Expected e(test::kAsimo, {{"l_elbow", -1.0}});
+  const Expected e(testing::kAsimo, {{"l_elbow", -1.0}});
   int active = 0;
   for (const PairDistance& pd : e.dist.pairs) active += pd.active;
   std::size_t pos = 0;
@@ -254,18 +254,18 @@ TEST(Inspect, JsonParsesAndMatches) {
   std::snprintf(closest, sizeof closest, "\"closest\": {\"a\": \"%s\", \"b\": \"%s\", \"distance\": %.6f}",
                 e.model.segments[c.seg_a].name.c_str(), e.model.segments[c.seg_b].name.c_str(), c.distance);
   EXPECT_THAT(r.out, HasSubstr(closest));
-  const ProcessResult segs = inspect(test::robotPath("asimo_like.urdf") + " --format json --segments");
+  const ProcessResult segs = inspect(testing::robotPath("asimo_like.urdf") + " --format json --segments");
   ASSERT_EQ(segs.exit_code, 0) << segs.err;
   EXPECT_TRUE(JsonChecker(segs.out).valid()) << segs.out;
 }
 
 TEST(Inspect, SecondHumanoidWithBoxWarnings) {
-  const ProcessResult r = inspect(test::robotPath("small_humanoid.urdf") + " --q l_elbow=-1.4 --q waist_yaw=0.5");
-  expectCsvMatchesLibrary(r, Expected(test::kSmall, {{"l_elbow", -1.4}, {"waist_yaw", 0.5}}));
+  const ProcessResult r = inspect(testing::robotPath("small_humanoid.urdf") + " --q l_elbow=-1.4 --q waist_yaw=0.5");
+  expectCsvMatchesLibrary(r, Expected(testing::kSmall, {{"l_elbow", -1.4}, {"waist_yaw", 0.5}}));
   EXPECT_THAT(r.err, HasSubstr("warning:"));
   EXPECT_THAT(r.err, HasSubstr("m fitted with"));
   EXPECT_THAT(r.err, HasSubstr("corners enclosed, fitted volume / box volume"));
-  const ProcessResult j = inspect(test::robotPath("small_humanoid.urdf") + " --format json");
+  const ProcessResult j = inspect(testing::robotPath("small_humanoid.urdf") + " --format json");
   ASSERT_EQ(j.exit_code, 0);
   EXPECT_TRUE(JsonChecker(j.out).valid());
 }
@@ -273,7 +273,7 @@ TEST(Inspect, SecondHumanoidWithBoxWarnings) {
 TEST(Inspect, ExplicitConfigFile) {
   const std::string yaml = ::testing::TempDir() + "reflex_inspect.collision.yaml";
   std::ofstream(yaml) << "exclude_adjacent: true\n";
-  const ProcessResult r = inspect(test::robotPath("asimo_like.urdf") + " --config " + yaml);
+  const ProcessResult r = inspect(testing::robotPath("asimo_like.urdf") + " --config " + yaml);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   std::string header;
   EXPECT_EQ(parseCsv(r.out, header).size(), 136u - 16u);
@@ -286,7 +286,7 @@ TEST(Inspect, BadInputGivesAClearMessageAndNonZeroExit) {
     std::string args;
     std::vector<std::string> message;
   };
-  const std::string asimo = test::robotPath("asimo_like.urdf");
+  const std::string asimo = testing::robotPath("asimo_like.urdf");
   const std::vector<Case> cases = {
       {bad_urdf, {bad_urdf, "malformed URDF"}},
       {"/nonexistent/robot.urdf", {"/nonexistent/robot.urdf", "cannot open"}},

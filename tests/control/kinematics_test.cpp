@@ -88,9 +88,9 @@ KdlChain kdlChain(const Model& m, const KDL::Tree& tree, const std::string& tip)
 
 void checkAgainstKdl(const std::string& robot, const std::vector<std::string>& tips, int configurations,
                      std::uint64_t seed) {
-  const Model m = test::loadRobot(robot);
+  const Model m = testing::loadRobot(robot);
   KDL::Tree tree;
-  ASSERT_TRUE(kdl_parser::treeFromFile(test::robotPath(robot + ".urdf"), tree));
+  ASSERT_TRUE(kdl_parser::treeFromFile(testing::robotPath(robot + ".urdf"), tree));
   std::vector<KdlChain> chains;
   for (const auto& tip : tips) chains.push_back(kdlChain(m, tree, tip));
 
@@ -139,12 +139,12 @@ void checkAgainstKdl(const std::string& robot, const std::vector<std::string>& t
 }
 
 TEST(KinematicsKdl, ShippedRobotTipsAgreeWithKdl) {
-  checkAgainstKdl(test::kAsimo, {"l_hand", "r_hand", "head_camera", "head_camera_right", "l_foot", "r_foot"}, 250,
+  checkAgainstKdl(testing::kAsimo, {"l_hand", "r_hand", "head_camera", "head_camera_right", "l_foot", "r_foot"}, 250,
                   1);
 }
 
 TEST(KinematicsKdl, SecondHumanoidTipsAgreeWithKdl) {
-  checkAgainstKdl(test::kSmall, {"l_hand", "r_hand", "camera", "l_foot", "r_foot"}, 250, 2);
+  checkAgainstKdl(testing::kSmall, {"l_hand", "r_hand", "camera", "l_foot", "r_foot"}, 250, 2);
 }
 
 // ---------------------------------------------------------------- against finite differences
@@ -154,8 +154,8 @@ Vector3d pointAt(const Model& m, KinematicsData& kin, const Eigen::VectorXd& q, 
 }
 
 TEST(KinematicsFiniteDifferences, JacobiansRelativeJacobianAndRowOfEveryLink) {
-  for (const char* robot : {test::kAsimo, test::kSmall}) {
-    const Model m = test::loadRobot(robot);
+  for (const char* robot : {testing::kAsimo, testing::kSmall}) {
+    const Model m = testing::loadRobot(robot);
     KinematicsData kin(m), kin_fd(m);
     std::mt19937_64 rng(21);
     const double h = 1e-6;
@@ -199,7 +199,7 @@ TEST(KinematicsFiniteDifferences, JacobiansRelativeJacobianAndRowOfEveryLink) {
 
 // ---------------------------------------------------------------- bad joint vectors
 TEST(KinematicsRuntime, NonFiniteOrWrongSizeJointVectorIsRejectedAndDataKept) {
-  const Model m = test::loadRobot(test::kAsimo);
+  const Model m = testing::loadRobot(testing::kAsimo);
   KinematicsData kin(m);
   std::mt19937_64 rng(4);
   const Eigen::VectorXd q = test::randomConfiguration(m, rng);

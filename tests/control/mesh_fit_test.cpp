@@ -51,8 +51,8 @@ namespace {
 namespace fs = std::filesystem;
 using Eigen::Vector3d;
 
-const std::string kUrdf = test::robotPath("mesh_humanoid.urdf");
-const std::string kPackageDir = test::robotPath("mesh_humanoid_description");
+const std::string kUrdf = testing::robotPath("mesh_humanoid.urdf");
+const std::string kPackageDir = testing::robotPath("mesh_humanoid_description");
 
 std::string readFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -179,7 +179,7 @@ std::vector<Primitive> segmentPrimitives(const Model& m, const std::string& link
 }
 
 TEST(MeshFit, ShippedMeshHumanoidEnclosesEveryVertexOfEveryLink) {
-  const Model model = test::loadRobot("mesh_humanoid");
+  const Model model = testing::loadRobot("mesh_humanoid");
   const auto meshes = linkMeshes(kUrdf, kPackageDir);
   ASSERT_EQ(meshes.size(), 16u);  // 14 links with meshes (the torso also a box), 2 feet with boxes
   for (const auto& [link, mesh] : meshes) {
@@ -192,7 +192,7 @@ TEST(MeshFit, ShippedMeshHumanoidEnclosesEveryVertexOfEveryLink) {
 }
 
 TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
-  const Model model = test::loadRobot("mesh_humanoid");
+  const Model model = testing::loadRobot("mesh_humanoid");
   const auto meshes = linkMeshes(kUrdf, kPackageDir);
   std::map<int, std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> bvh;  // by segment
   for (const auto& [link, mesh] : meshes) {
@@ -245,9 +245,9 @@ TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
 /// The fit of a link built from one capsule or sphere is no larger than that primitive and close to
 /// it (its vertices lie on it); every link's numbers stay within the bounds README states.
 TEST(MeshFit, GroundTruthVolumesAndStatedBounds) {
-  const Model model = test::loadRobot("mesh_humanoid");
-  const YAML::Node truth = YAML::LoadFile(test::robotPath("mesh_humanoid.truth.yaml"))["links"];
-  const FitOverlay overlay = loadFitOverlay(test::robotPath("mesh_humanoid.fit.yaml"));
+  const Model model = testing::loadRobot("mesh_humanoid");
+  const YAML::Node truth = YAML::LoadFile(testing::robotPath("mesh_humanoid.truth.yaml"))["links"];
+  const FitOverlay overlay = loadFitOverlay(testing::robotPath("mesh_humanoid.fit.yaml"));
   int single = 0;
   for (const auto& l : overlay.links) {
     const YAML::Node t = truth[l.link];
@@ -327,13 +327,13 @@ TEST(MeshFit, RealWorldAssimpTestModelsFitWithEveryVertexEnclosed) {
 
 TEST(MeshFit, GeneratorAndReflexFitReproduceTheCommittedFilesByteForByte) {
   TempDir dir;
-  const std::string script = test::robotPath("make_mesh_humanoid.py");
+  const std::string script = testing::robotPath("make_mesh_humanoid.py");
   ASSERT_EQ(std::system((std::string(REFLEX_PYTHON) + " " + script + " " + dir.path.string() + " > /dev/null").c_str()), 0);
   int compared = 0;
   for (const auto& e : fs::recursive_directory_iterator(dir.path)) {
     if (!e.is_regular_file()) continue;
     const std::string rel = fs::relative(e.path(), dir.path).string();
-    EXPECT_EQ(readFile(e.path().string()), readFile(test::robotPath(rel))) << rel << " differs from the committed file";
+    EXPECT_EQ(readFile(e.path().string()), readFile(testing::robotPath(rel))) << rel << " differs from the committed file";
     ++compared;
   }
   EXPECT_EQ(compared, 5 + 16);  // urdf, srdf, collision, truth, package.xml; 16 meshes
@@ -341,7 +341,7 @@ TEST(MeshFit, GeneratorAndReflexFitReproduceTheCommittedFilesByteForByte) {
   const std::string cmd = std::string(REFLEX_FIT) + " " + dir / "mesh_humanoid.urdf" +
                           " --package-path mesh_humanoid_description=" + dir / "mesh_humanoid_description" + " -q > /dev/null";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
-  EXPECT_EQ(readFile(out), readFile(test::robotPath("mesh_humanoid.fit.yaml")));
+  EXPECT_EQ(readFile(out), readFile(testing::robotPath("mesh_humanoid.fit.yaml")));
 }
 
 /// A one-link robot with the given collision XML, in `dir`.
@@ -593,7 +593,7 @@ TEST(MeshFitBox, SmallHumanoidBoxesFittedWithoutAnOverlayAndNeverCloserThanFclSa
   // The shipped small humanoid has six boxes (pelvis, torso, hands, feet) and no overlay: the loader
   // fits each with fitBox, reports the numbers, and a flat box gets several capsules.
   std::vector<std::string> warnings;
-  const Model model = test::loadRobot(test::kSmall, &warnings);
+  const Model model = testing::loadRobot(testing::kSmall, &warnings);
   EXPECT_EQ(warnings.size(), 6u);
   for (const auto& w : warnings) EXPECT_THAT(w, ::testing::MatchesRegex(".*box .* m fitted with [1-6] primitives? \\(8/8 corners enclosed.*"));
   EXPECT_GE(segmentPrimitives(model, "l_foot").size(), 2u);  // 0.16 x 0.08 x 0.02 m
@@ -603,7 +603,7 @@ TEST(MeshFitBox, SmallHumanoidBoxesFittedWithoutAnOverlayAndNeverCloserThanFclSa
   // distance Reflex computes on the fitted primitives, and where FCL finds the shapes touching,
   // Reflex's pair distance is <= 0.
   std::set<std::string> box_links;
-  const auto shapes = fclShapes(test::robotPath("small_humanoid.urdf"), &box_links);
+  const auto shapes = fclShapes(testing::robotPath("small_humanoid.urdf"), &box_links);
   ASSERT_EQ(box_links.size(), 6u);
   KinematicsData kin(model);
   DistanceData dist(model);

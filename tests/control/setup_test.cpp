@@ -90,7 +90,7 @@ class ShippedRobot : public ::testing::TestWithParam<Truth> {};
 
 TEST_P(ShippedRobot, FindsTheKnownArmsHeadAndARestClearOfTheBodyAndTheFilesWorkInClosedLoop) {
   const Truth& truth = GetParam();
-  const std::string urdf = test::robotPath(truth.robot + ".urdf");
+  const std::string urdf = testing::robotPath(truth.robot + ".urdf");
   const std::string dir = freshDir(truth.robot);
   const ProcessResult r = setupRun(urdf + " --out " + dir + " " + truth.extra_args);
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
@@ -206,8 +206,8 @@ TEST_P(ShippedRobot, FindsTheKnownArmsHeadAndARestClearOfTheBodyAndTheFilesWorkI
   }
 }
 
-const std::string kMeshArgs = "--srdf " + test::robotPath("mesh_humanoid.srdf") + " --package-path mesh_humanoid_description=" +
-                              test::robotPath("mesh_humanoid_description");
+const std::string kMeshArgs = "--srdf " + testing::robotPath("mesh_humanoid.srdf") + " --package-path mesh_humanoid_description=" +
+                              testing::robotPath("mesh_humanoid_description");
 
 INSTANTIATE_TEST_SUITE_P(
     Robots, ShippedRobot,
@@ -224,7 +224,7 @@ INSTANTIATE_TEST_SUITE_P(
 // The ASIMO-like robot with its left forearm capsule shortened: core z -0.02 .. -0.095 (radius 0.045),
 // so its surface ends at z = -0.14, 6 cm before the wrist at z = -0.2 (l_forearm frame).
 std::string gapRobot(const std::string& dir) {
-  std::string urdf = slurp(test::robotPath("asimo_like.urdf"));
+  std::string urdf = slurp(testing::robotPath("asimo_like.urdf"));
   const std::string old_el = "<collision name=\"l_forearm_0\">\n      <origin xyz=\"0 0 -0.1\" rpy=\"0 3.14159 0\"/>\n"
                              "      <geometry><cylinder radius=\"0.045\" length=\"0.16\"/>";
   const std::string new_el = "<collision name=\"l_forearm_0\">\n      <origin xyz=\"0 0 -0.0575\" rpy=\"0 3.14159 0\"/>\n"

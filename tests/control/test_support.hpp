@@ -1,17 +1,16 @@
-// Shared helpers of the control/ tests: where the shipped robots are, loading them, and
-// reproducible random configurations within the joint limits.
+// Shared helpers of the control/ tests: reproducible random configurations within the joint limits,
+// random points and directions, and running a tool of build/bin. The shipped robots (robotPath,
+// loadRobot, kAsimo, kSmall) are in tests/support/robot.hpp, included here.
 #pragma once
 
 #include "reflex/control/model.hpp"
-#include "reflex/control/urdf_loader.hpp"
+#include "support/child_process.hpp"
+#include "support/robot.hpp"
 
 #include <Eigen/Core>
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-
 #include <cmath>
-#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <random>
@@ -19,19 +18,6 @@
 #include <vector>
 
 namespace reflex::control::test {
-
-inline std::string robotPath(const std::string& file) {
-  return std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/" + file;
-}
-
-/// The shipped ASIMO-like robot and the second humanoid, with their collision configurations.
-inline constexpr const char* kAsimo = "asimo_like";
-inline constexpr const char* kSmall = "small_humanoid";
-
-inline Model loadRobot(const std::string& name, std::vector<std::string>* warnings = nullptr) {
-  return loadModel(robotPath(name + ".urdf"), loadCollisionConfig(robotPath(name + ".collision.yaml")),
-                   warnings);
-}
 
 /// Uniform within the position limits; joints without limits (continuous) in [-pi, pi].
 inline Eigen::VectorXd randomConfiguration(const Model& model, std::mt19937_64& rng) {
@@ -57,26 +43,13 @@ inline std::string slurp(const std::string& path) {
   return ss.str();
 }
 
-/// What a tool of build/bin printed and returned.
-struct ProcessResult {
-  int exit_code = -1;  ///< -1 if it could not be started or did not exit normally
-  std::string out, err;
-};
+using ProcessResult = reflex::testing::ProcessResult;
 
-/// Runs build/bin/`tool` with `args` (already shell-quoted where needed) through the shell.
+/// Runs build/bin/`tool` with `args` (already shell-quoted where needed) through the shell; its
+/// stderr goes through <TempDir>/<tool>_stderr.txt.
 inline ProcessResult runTool(const std::string& tool, const std::string& args) {
-  const std::string err_path = ::testing::TempDir() + tool + "_stderr.txt";
-  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/" + tool + " " + args + " 2>" + err_path;
-  ProcessResult r;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) r.out.append(buf, n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.err = slurp(err_path);
-  return r;
+  return reflex::testing::runShell(reflex::testing::binPath(tool) + " " + args,
+                                   ::testing::TempDir() + tool + "_stderr.txt");
 }
 
 inline Eigen::Vector3d randomUnit(std::mt19937_64& rng) {

@@ -61,7 +61,7 @@ std::string tempFile(const std::string& name, const std::string& text) {
 // ---------------------------------------------------------------- shipped robots
 TEST(UrdfLoaderShipped, AsimoLikeHasTheStructureOfSection81) {
   std::vector<std::string> warnings;
-  const Model m = test::loadRobot(test::kAsimo, &warnings);
+  const Model m = testing::loadRobot(testing::kAsimo, &warnings);
   EXPECT_TRUE(warnings.empty()) << warnings.front();
   EXPECT_EQ(m.name, "asimo_like");
   EXPECT_EQ(m.links[0].name, "world");
@@ -95,8 +95,8 @@ TEST(UrdfLoaderShipped, AsimoLikeHasTheStructureOfSection81) {
 }
 
 TEST(UrdfLoaderShipped, TreeInvariants) {
-  for (const char* robot : {test::kAsimo, test::kSmall}) {
-    const Model m = test::loadRobot(robot);
+  for (const char* robot : {testing::kAsimo, testing::kSmall}) {
+    const Model m = testing::loadRobot(robot);
     ASSERT_EQ(static_cast<int>(m.link_support.size()), static_cast<int>(m.links.size()));
     for (std::size_t i = 0; i < m.links.size(); ++i) {
       const Link& l = m.links[i];
@@ -122,7 +122,7 @@ TEST(UrdfLoaderShipped, TreeInvariants) {
 
 TEST(UrdfLoaderShipped, SecondHumanoidLoadsWithBoxWarnings) {
   std::vector<std::string> warnings;
-  const Model m = test::loadRobot(test::kSmall, &warnings);
+  const Model m = testing::loadRobot(testing::kSmall, &warnings);
   EXPECT_EQ(m.name, "small_humanoid");
   EXPECT_EQ(m.nq, 27);
   EXPECT_EQ(m.num_robot_segments, 17);
@@ -350,15 +350,15 @@ TEST(UrdfLoaderConfig, UnknownSegmentNamesAreReported) {
   CollisionConfig c;
   c.source = "my.collision.yaml";
   c.exclude = {{"l_hand", "l_tentacle"}};
-  expectModelError([&] { loadModel(test::robotPath("asimo_like.urdf"), c); },
+  expectModelError([&] { loadModel(testing::robotPath("asimo_like.urdf"), c); },
                    {"my.collision.yaml", "unknown segment 'l_tentacle'", "asimo_like.urdf"});
   c.exclude = {{"wing", "head"}};
-  expectModelError([&] { loadModel(test::robotPath("asimo_like.urdf"), c); }, {"unknown segment 'wing'"});
+  expectModelError([&] { loadModel(testing::robotPath("asimo_like.urdf"), c); }, {"unknown segment 'wing'"});
   // A link that exists but carries no segment is not a segment either.
   c.exclude = {{"head", "neck_link"}};
-  expectModelError([&] { loadModel(test::robotPath("asimo_like.urdf"), c); }, {"unknown segment 'neck_link'"});
+  expectModelError([&] { loadModel(testing::robotPath("asimo_like.urdf"), c); }, {"unknown segment 'neck_link'"});
   c.exclude = {{"head", "head"}};
-  expectModelError([&] { loadModel(test::robotPath("asimo_like.urdf"), c); }, {"[head, head]", "itself"});
+  expectModelError([&] { loadModel(testing::robotPath("asimo_like.urdf"), c); }, {"[head, head]", "itself"});
 }
 
 TEST(UrdfLoaderConfig, MalformedYaml) {
@@ -396,9 +396,9 @@ int countCollisionElements(std::string text) {
 }
 
 TEST(UrdfLoaderAccounting, ShippedRobotsKeepEveryCollisionElement) {
-  for (const char* robot : {test::kAsimo, test::kSmall}) {
-    const std::string text = readText(test::robotPath(std::string(robot) + ".urdf"));
-    const Model m = test::loadRobot(robot);
+  for (const char* robot : {testing::kAsimo, testing::kSmall}) {
+    const std::string text = readText(testing::robotPath(std::string(robot) + ".urdf"));
+    const Model m = testing::loadRobot(robot);
     const int primitives = static_cast<int>(m.primitives.size()) - kBodySchemaSlots;
     // One primitive per element, except a box: one or more (fitBox's cells).
     const std::regex box_tag("<box ");
@@ -485,8 +485,8 @@ TEST(UrdfLoaderAccounting, EveryBadValueInEveryCollisionAttributeFailsNamingTheL
   const std::vector<std::string> scalars = {"nan", "inf", "1e300", "1e999", "1 2", "", "0.001 "};
   const std::vector<std::string> vectors = {"nan 0 0", "0 inf 0", "0 0 1e300", "0 0 1e999", "1 2", "", "0.001 0 0.1x"};
   int checked = 0;
-  for (const char* robot : {test::kAsimo, test::kSmall}) {
-    const std::string text = readText(test::robotPath(std::string(robot) + ".urdf"));
+  for (const char* robot : {testing::kAsimo, testing::kSmall}) {
+    const std::string text = readText(testing::robotPath(std::string(robot) + ".urdf"));
     for (const Variant& v : collisionVariants(text, scalars, vectors)) {
       ++checked;
       try {
@@ -503,7 +503,7 @@ TEST(UrdfLoaderAccounting, EveryBadValueInEveryCollisionAttributeFailsNamingTheL
 
 TEST(UrdfLoaderAccounting, TheIssueCaseNamesTheLinkAndTheValue) {
   // issue 16: a NaN in one collision <origin> of the left hand dropped it; crossing_arms then went to -70.9 mm.
-  std::string text = readText(test::robotPath("asimo_like.urdf"));
+  std::string text = readText(testing::robotPath("asimo_like.urdf"));
   tinyxml2::XMLDocument d;
   ASSERT_EQ(d.Parse(text.c_str()), tinyxml2::XML_SUCCESS);
   for (auto* l = d.RootElement()->FirstChildElement("link"); l; l = l->NextSiblingElement("link"))

@@ -3,7 +3,7 @@
 // rate and median cycle period across the kill), the hands retract within --input-timeout plus a
 // margin, no pair goes below d_r, the system follows again within 3 s of a restart, and a recording
 // cut by kill -9 stays readable. Domains 108..109.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 #ifdef REFLEX_FAULTS_WITH_RECORDER
@@ -19,6 +19,7 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <thread>
 
 namespace reflex {
 namespace {

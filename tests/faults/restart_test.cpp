@@ -8,7 +8,7 @@
 // then hold until the source is heard (for at most --input-timeout), the hands follow the targets
 // again within 3 s of the first target, no pair below d_r, 200 Hz; and the start-up refusals
 // (damaged file, another robot's file, a file in use). Domain 111.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/control/controller.hpp>
@@ -27,6 +27,7 @@
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <thread>
 
 namespace reflex {
 namespace {

@@ -1,7 +1,7 @@
 // reflex_behavior as a real process over real DDS (domain 61): one configuration (pointing), then
 // another (scripted) with the same binary, fed by a separate synthetic object publisher; one module
 // of a multi-module file as its own process; heartbeats; clean stop; start-up errors.
-#include "child_process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/control/kinematics.hpp>
@@ -22,8 +22,14 @@ namespace reflex::modules {
 namespace {
 
 using namespace std::chrono_literals;
-using testing::Child;
-using testing::statValue;
+using Child = reflex::testing::ChildProcess;
+
+/// The integer after "<key>=" in `text` (the last occurrence), or -1.
+long statValue(const std::string& text, const std::string& key) {
+  const auto pos = text.rfind(" " + key + "=");
+  if (pos == std::string::npos) return -1;
+  return std::stol(text.substr(pos + key.size() + 2));
+}
 
 constexpr int kDomain = 61;
 const std::string kBin = REFLEX_BIN_DIR;
@@ -147,7 +153,7 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
     ASSERT_TRUE(proc.started());
     // Objects start once the behavior's hand-target writer is matched, so that the deep-history
     // reader (volatile) sees every sample from the first assignment on.
-    ASSERT_TRUE(bus.all_hands.waitForWriters(1, 10s)) << proc.log();
+    ASSERT_TRUE(bus.all_hands.waitForWriters(1, 10s)) << proc.output();
     publisher = std::make_unique<Child>(
         std::vector<std::string>{kBin + "/reflex_modules_object_publisher", "--domain", std::to_string(kDomain),
                                  "--duration", "14", "--object", "cup=0.46,-0.13,0.95", "--object",
@@ -157,11 +163,11 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
     const auto t0 = std::chrono::steady_clock::now();
     bus.collect(4000ms);
     const double window = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    ASSERT_TRUE(bus.have_hands) << proc.log();
+    ASSERT_TRUE(bus.have_hands) << proc.output();
     const msg::HandTargets& h = bus.last_hands;
     EXPECT_EQ(h.header().source(), "behavior");
-    ASSERT_EQ(h.right().status(), msg::TARGET_GIVEN) << proc.log();
-    ASSERT_EQ(h.left().status(), msg::TARGET_GIVEN) << proc.log();
+    ASSERT_EQ(h.right().status(), msg::TARGET_GIVEN) << proc.output();
+    ASSERT_EQ(h.left().status(), msg::TARGET_GIVEN) << proc.output();
     EXPECT_EQ(h.right().object_name(), "cup");
     EXPECT_EQ(h.left().object_name(), "can");
     // pointing.yaml: mode ray, ray_distance 0.40, from each shoulder towards its object.
@@ -194,12 +200,12 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
     EXPECT_LE(beats, static_cast<int>(window * 2.0) + 2);
     std::printf("pointing: %zu hand-target samples, %d heartbeats in %.2f s\n", bus.hand_log.size(), beats, window);
 
-    EXPECT_EQ(proc.terminate(), 0) << proc.log();
+    EXPECT_EQ(proc.terminate(), 0) << proc.output();
     bus.collect(500ms);
     EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.last_hands.right().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.priority_log.back().priority(), msg::PRIORITY_EQUAL);
-    const std::string log = proc.log();
+    const std::string log = proc.output();
     std::printf("%s", log.substr(log.rfind("reflex_behavior: stats")).c_str());
     EXPECT_GT(statValue(log, "rejected_future"), 0) << log;
     EXPECT_GT(statValue(log, "rejected_frame"), 0) << log;
@@ -215,7 +221,7 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
     Child proc(behavior(kBehaviorDir + "/scripted.yaml"), ::testing::TempDir() + "modules_behavior_scripted.log");
     ASSERT_TRUE(proc.started());
     bus.collect(2500ms);
-    ASSERT_TRUE(bus.have_hands) << proc.log();
+    ASSERT_TRUE(bus.have_hands) << proc.output();
     const auto expected = firstTargets(kBehaviorDir + "/scripted_timeline.csv");
     ASSERT_EQ(expected.size(), 2u);
     const msg::HandTargets& h = bus.last_hands;
@@ -225,7 +231,7 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
       EXPECT_NEAR((vec(t.position_base()) - e.p).norm(), 0.0, 1e-12) << e.hand;
       EXPECT_EQ(t.object_name(), "");  // scripted: nothing to do with the objects
     }
-    EXPECT_EQ(proc.terminate(), 0) << proc.log();
+    EXPECT_EQ(proc.terminate(), 0) << proc.output();
     bus.collect(500ms);
     EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.last_hands.right().status(), msg::TARGET_NONE);
@@ -244,12 +250,12 @@ TEST(BehaviorProcess, OneModuleOfAFileRunsAsItsOwnProcess) {
     EXPECT_EQ(s.segment_name(), "gaze_line");  // only this module: no grasped bar
     attached |= s.operation() == msg::SCHEMA_ATTACH && s.virtual_segment() && s.parent_link() == "head";
   }
-  EXPECT_TRUE(attached) << proc.log();
+  EXPECT_TRUE(attached) << proc.output();
   for (const auto& h : bus.hand_log) EXPECT_NE(h.header().source(), "occlusion");  // no hands claimed
   bool beat = false;
   for (const auto& b : bus.heartbeat_log) beat |= b.module_name() == "occlusion";
   EXPECT_TRUE(beat);
-  EXPECT_EQ(proc.terminate(), 0) << proc.log();
+  EXPECT_EQ(proc.terminate(), 0) << proc.output();
   bus.collect(500ms);
   ASSERT_FALSE(bus.schema_log.empty());
   EXPECT_EQ(bus.schema_log.back().operation(), msg::SCHEMA_DETACH);
@@ -263,15 +269,15 @@ TEST(BehaviorProcess, BarAndOcclusionTogetherAttachBothAndRemoveBothAtStop) {
   bus.collect(2000ms);
   std::map<std::string, msg::BodySchemaChange> last;
   for (const auto& s : bus.schema_log) last[s.segment_name()] = s;
-  ASSERT_EQ(last.count("grasped_bar"), 1u) << proc.log();
-  ASSERT_EQ(last.count("gaze_line"), 1u) << proc.log();
+  ASSERT_EQ(last.count("grasped_bar"), 1u) << proc.output();
+  ASSERT_EQ(last.count("gaze_line"), 1u) << proc.output();
   EXPECT_EQ(last["grasped_bar"].parent_link(), "l_hand");
   EXPECT_EQ(last["grasped_bar"].motion_priority(), 1);
   EXPECT_FALSE(last["grasped_bar"].virtual_segment());
   EXPECT_TRUE(last["gaze_line"].virtual_segment());
   ASSERT_TRUE(bus.have_hands);
   EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_GIVEN);
-  EXPECT_EQ(proc.terminate(), 0) << proc.log();
+  EXPECT_EQ(proc.terminate(), 0) << proc.output();
   bus.collect(500ms);
   for (const auto& s : bus.schema_log) last[s.segment_name()] = s;
   EXPECT_EQ(last["grasped_bar"].operation(), msg::SCHEMA_DETACH);
@@ -281,7 +287,7 @@ TEST(BehaviorProcess, BarAndOcclusionTogetherAttachBothAndRemoveBothAtStop) {
 int runToExit(const std::vector<std::string>& argv, const std::string& name, std::string& log) {
   Child c(argv, ::testing::TempDir() + name);
   const int rc = c.wait(20000ms);
-  log = c.log();
+  log = c.output();
   return rc;
 }
 
@@ -371,8 +377,8 @@ TEST(BehaviorProcess, JointStatesFromASecondWriterAreIgnoredAndCounted) {
     writer_b.publish(js);
     std::this_thread::sleep_for(10ms);
   }
-  ASSERT_EQ(proc.wait(15000ms), 0) << proc.log();
-  const std::string log = proc.log();
+  ASSERT_EQ(proc.wait(15000ms), 0) << proc.output();
+  const std::string log = proc.output();
   const long ignored = statValue(log, "joint_states_other_writer");
   EXPECT_GE(ignored, sent_b_while_a * 6 / 10) << log;  // best effort: most of b's samples arrive
   EXPECT_LE(ignored, sent_b_while_a + 50) << "only b's samples while a lived, plus a's last 0.5 s of silence" << log;

@@ -10,7 +10,7 @@
 // can (no swap while the objects cross); a lost object's hand gets "no target" lost_timeout (1 s)
 // after its last detection and points again at the first new detection; at the end the hands
 // point across each other, as the objects have crossed.
-#include "child_process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/control/kinematics.hpp>
@@ -30,7 +30,7 @@ namespace reflex::modules {
 namespace {
 
 using namespace std::chrono_literals;
-using testing::Child;
+using Child = reflex::testing::ChildProcess;
 using Clock = std::chrono::steady_clock;
 
 constexpr int kDomain = 62;
@@ -106,7 +106,7 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
                   "--domain", std::to_string(kDomain), "--progress", "0"},
                  ::testing::TempDir() + "modules_flagship_behavior.log");
   ASSERT_TRUE(behavior.started());
-  ASSERT_TRUE(hands_reader.waitForWriters(1, 10s)) << behavior.log();
+  ASSERT_TRUE(hands_reader.waitForWriters(1, 10s)) << behavior.output();
 
   struct Stretch {
     const char* start;
@@ -120,10 +120,10 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
                  ::testing::TempDir() + "modules_flagship_vision_" + s.start + ".log");
     ASSERT_TRUE(vision.started());
     collectWhile([&] { return vision.wait(0ms) == -1 && seconds(Clock::now(), t0) < 100.0; });
-    EXPECT_EQ(vision.wait(0ms), 0) << vision.log();
+    EXPECT_EQ(vision.wait(0ms), 0) << vision.output();
     collectWhile([&, end = seconds(Clock::now(), t0) + 1.5] { return seconds(Clock::now(), t0) < end; });
   }
-  EXPECT_EQ(behavior.terminate(), 0) << behavior.log();
+  EXPECT_EQ(behavior.terminate(), 0) << behavior.output();
   std::printf("flagship: %zu object frames, %zu hand-target samples received\n", seen.size(), hands.size());
   ASSERT_GT(seen.size(), 200u);
   ASSERT_GT(hands.size(), 100u);

@@ -9,7 +9,7 @@
 // measurement (reflex_mujoco's exit line: RobotState.stamp -> the answering JointCommand's arrival,
 // both on the robot's clock), p50 / p99. Run the robot against reflex_controller --robot dds instead
 // by starting both and reading reflex_mujoco's exit line.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 

@@ -30,8 +30,8 @@
 //   5. restart of reflex_controller: back to normal (commands answered by the new controller, the
 //      robot applying them, heartbeat detail empty) within 3 s of its first heartbeat (the time from
 //      the restart, which includes the process's start-up, is printed).
-#include "../control/test_support.hpp"
-#include "../system/process.hpp"
+#include "support/robot.hpp"
+#include "support/child_process.hpp"
 
 #include "reflex/mujoco/mjcf.hpp"
 #include "reflex/mujoco/mujoco_robot.hpp"
@@ -277,7 +277,7 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
 
   // 4. kill -9 of the controller while a shoulder holds the raised arm against gravity: MuJoCo on the
   // same URDF in this process (the "twin") gives the gravity torque at each measured configuration.
-  const reflex::control::Model model = reflex::control::test::loadRobot("asimo_like");
+  const reflex::control::Model model = reflex::testing::loadRobot("asimo_like");
   const reflex::mujoco::MjcfOptions options;
   reflex::mujoco::MujocoRobot twin(model, options);
   const mjModel& mm = twin.mjModelRef();

@@ -38,7 +38,7 @@ namespace reflex::mujoco {
 namespace {
 
 using control::Model;
-using control::test::loadRobot;
+using reflex::testing::loadRobot;
 
 constexpr std::int64_t kNow = 1'000'000'000'000;  // a wall-clock time for the command gate [ns]
 

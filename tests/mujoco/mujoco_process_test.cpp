@@ -19,8 +19,8 @@
 //   - set-up errors: the process exits with 1 and a message naming the bad value.
 // The command latency (RobotState.stamp -> the JointCommand answering it, measured by reflex_mujoco)
 // is printed from the exit summary, not asserted (control/README.md has the numbers).
-#include "../control/test_support.hpp"
-#include "../system/process.hpp"
+#include "support/robot.hpp"
+#include "support/child_process.hpp"
 
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
@@ -356,7 +356,7 @@ TEST(MujocoProcess, LateAndMalformedCommandsAreCountedAndNeverApplied) {
 // `distance` apart, by bisection on the project's distance module; also returns that pair's names.
 double rollAtClosestDistance(double distance, std::string* a, std::string* b) {
   namespace control = reflex::control;
-  const control::Model model = control::test::loadRobot("asimo_like");
+  const control::Model model = reflex::testing::loadRobot("asimo_like");
   control::KinematicsData kin(model);
   control::DistanceData dist(model);
   const int roll = model.qIndex("l_shoulder_roll");

@@ -19,7 +19,7 @@
 // All seven meet the Done-when since reflex_mujoco's servo stops its velocity feed-forward once the
 // reference reaches the commanded position (before, walking_target_behind and grasped_bar, whose pair
 // sits at the guard's floor of 6.0 mm on the kinematic plant, went 1-3 mm below d_r and fired the e-stop).
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <gtest/gtest.h>
 

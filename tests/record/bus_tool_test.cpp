@@ -3,7 +3,7 @@
 // list itself (it publishes nothing); `reflex_bus hz` measures the controller's streams at its
 // nominal rate (200 Hz: the period of the controller configuration; 2 Hz heartbeat) with one writer
 // each; an unknown topic is an error naming it.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <gtest/gtest.h>
 

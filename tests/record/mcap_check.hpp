@@ -3,7 +3,7 @@
 // project's CSV export, column by column.
 #pragma once
 
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <nlohmann/json.hpp>
 

@@ -6,7 +6,7 @@
 // accepted and changes nothing (a note says so); `-t reflex/hand_targets` without --commands is an
 // error naming the option. The independent answer is the topic list of the contract (the README's
 // "observations, never commands") and the recorded sample values.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include "reflex/record/recorder.hpp"
 

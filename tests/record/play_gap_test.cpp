@@ -3,7 +3,7 @@
 // gap is now played as --max-gap (default 10 s) with a message naming it, and SIGTERM ends the
 // player within a second in the middle of such a wait. Expected times come from the contract
 // (PlayerOptions::max_gap), not from a run.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include "reflex/record/recorder.hpp"
 
@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <csignal>
 #include <fstream>
 #include <thread>
 

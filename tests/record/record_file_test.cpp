@@ -6,16 +6,15 @@
 // valid file of the same size; crc32Combine against the CRC of the concatenated bytes); a FIFO or a
 // device named as a recording is refused at once, never read (item 11).
 #include "reflex/record/record_file.hpp"
+#include "support/child_process.hpp"
 
 #include <gtest/gtest.h>
 
 #include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
-#include <csignal>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -403,22 +402,11 @@ TEST(RecordFileLinearTime, LongCorruptHeadersBetweenValidRecordsCostNoMoreThanTh
 /// Runs `fn` in a child process; true if it finished within `seconds` (a blocked child is killed).
 template <class Fn>
 bool finishesWithin(double seconds, Fn fn) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    fn();
-    _exit(0);
-  }
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  int status = 0;
-  while (waitpid(pid, &status, WNOHANG) == 0) {
-    if (std::chrono::steady_clock::now() > deadline) {
-      kill(pid, SIGKILL);
-      waitpid(pid, &status, 0);
-      return false;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  const auto timeout = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::duration<double>(seconds));
+  return reflex::testing::runInChild(timeout, [&] {
+           fn();
+           return 0;
+         }) == 0;
 }
 
 TEST(RecordFile, AFifoOrADeviceIsRefusedAtOnceNeverRead) {

@@ -3,7 +3,7 @@
 // is there, sequence numbers without gaps beyond what best effort may drop, a torn last record is
 // reported, not returned); it exports to CSV; reflex_play replays it at twice the speed; bad command
 // lines fail with a message naming the bad value. Domain 81.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include "reflex/record/recorder.hpp"
 
@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <csignal>
 #include <fstream>
 #include <thread>
 

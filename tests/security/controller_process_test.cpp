@@ -4,7 +4,7 @@
 // encrypted joint state / status that the recorder identity reads and an unauthenticated
 // participant never sees. Domain 100.
 #include "../bad_input/controller_run.hpp"
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 #include "security_support.hpp"
 
 #include <gtest/gtest.h>
@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <numeric>
 #include <regex>
+#include <thread>
 #include <vector>
 
 namespace reflex::security_test {

@@ -66,15 +66,7 @@ long recordedCount(const std::string& info, const std::string& topic) {
   return std::stol(m[1]);
 }
 
-std::string commandOutput(const std::string& cmd) {
-  std::string text;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (p == nullptr) return text;
-  char buf[4096];
-  while (fgets(buf, sizeof buf, p)) text += buf;
-  pclose(p);
-  return text;
-}
+std::string commandOutput(const std::string& cmd) { return reflex::testing::runShell(cmd).out; }
 
 TEST(SecureFlagship, AvoidanceRunGivesThePlainOutcomeAndAnOutsiderReceivesNothing) {
   // The material is made by run_flagship.py itself (the folder does not exist yet): its --secure path.

@@ -18,7 +18,7 @@
 #include "security_support.hpp"
 
 #include "../bad_input/controller_run.hpp"
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
@@ -32,11 +32,13 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <csignal>
 #include <cstdio>
 #include <map>
 #include <mutex>
 #include <regex>
 #include <set>
+#include <thread>
 
 namespace reflex::security_test {
 namespace {

@@ -6,7 +6,7 @@
 // (hand targets) is played without it by default (issue 17, item 12: observations only unless
 // --commands), which is exactly the player's grant; asked to play it whole (--commands), the player's
 // permissions do not grant it, so reflex_play stops at start with an error naming the topic. Domain 111.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 #include "security_support.hpp"
 
 #include <reflex/record/record_file.hpp>

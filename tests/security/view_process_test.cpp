@@ -10,15 +10,17 @@
 //    refuses to create a writer of EVERY Reflex topic for a participant holding the view identity
 //    (create_datawriter returns null; reflex::bus throws BusError naming the topic), while the readers
 //    reflex_view needs are created.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 #include "security_support.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <gtest/gtest.h>
 
+#include <csignal>
 #include <regex>
 #include <sstream>
+#include <thread>
 #include <sys/stat.h>
 
 namespace reflex::security_test {

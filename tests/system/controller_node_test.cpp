@@ -2,7 +2,7 @@
 // hand targets from another participant while keeping every pair above d_r, rejects NaN targets,
 // and retracts both hands on its own when the target source goes silent.
 #include "../bad_input/controller_run.hpp"
-#include "process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 

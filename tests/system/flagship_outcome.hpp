@@ -3,6 +3,8 @@
 // that bringup/flagship/report.py writes, and check the criteria of the run with avoidance.
 #pragma once
 
+#include "support/child_process.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -12,7 +14,6 @@
 #include <regex>
 #include <sstream>
 #include <string>
-#include <sys/wait.h>
 
 namespace reflex::flagship {
 
@@ -51,14 +52,11 @@ struct Run {
 inline Run runFlagship(const std::string& out, const std::string& args) {
   std::filesystem::remove(out + "/summary.json");
   const std::string cmd = std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR + "/bringup/flagship/run_flagship.py --out " +
-                          out + " --build " + REFLEX_BIN_DIR + "/.. " + args + " 2>&1";
+                          out + " --build " + REFLEX_BIN_DIR + "/.. " + args;
   Run run;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (p == nullptr) return run;
-  char buf[4096];
-  while (fgets(buf, sizeof buf, p)) run.log += buf;
-  const int status = pclose(p);
-  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  const reflex::testing::ProcessResult r = reflex::testing::runShell(cmd, "", std::chrono::minutes(15));
+  run.log = r.out;
+  run.exit_code = r.exit_code;
   std::ifstream in(out + "/summary.json");
   std::stringstream ss;
   ss << in.rdbuf();

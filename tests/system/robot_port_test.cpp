@@ -15,7 +15,7 @@
 //   names in another order: every command answers one of them, within v_max * period of it;
 // - the controller dies (kill -9): the robot reports holding (RobotState.holding) within the command
 //   deadline plus a margin, and its measured positions do not change for 1 s.
-#include "process.hpp"
+#include "support/child_process.hpp"
 
 #include "reflex/control/onboard.hpp"
 #include "reflex/control/scenarios.hpp"
@@ -32,6 +32,7 @@
 #include <functional>
 #include <map>
 #include <sstream>
+#include <thread>
 
 namespace reflex {
 namespace {

@@ -11,7 +11,7 @@
 //   - what the page says it drew (state.tiles): as many capsules as the model has capsule primitives.
 // Failure paths: Chromium missing (exit 3 naming it), a log of another robot (exit 2 naming the column).
 // The PNG stays in build/artefacts/view/render/ (scene_0.png).
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/control/kinematics.hpp>
 #include <reflex/control/urdf_loader.hpp>

@@ -33,7 +33,7 @@ namespace {
 
 using nlohmann::json;
 
-std::string robotPath(const std::string& file) { return std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/" + file; }
+using reflex::testing::robotPath;
 
 SceneModel asimo() { return loadSceneModel(robotPath("asimo_like.urdf"), "", ""); }
 

@@ -12,7 +12,7 @@
 //     message naming the value; --help exits 0.
 // Node, Chromium or bringup/web/node_modules missing is a FAILURE (bringup/setup.sh installs them).
 // DDS domains 130..133.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
@@ -36,6 +36,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <thread>
 
 namespace reflex {
 namespace {

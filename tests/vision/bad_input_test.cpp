@@ -6,7 +6,7 @@
 // identical videos, impossible calibration, tag size, frame count, fps) refused at load; stamps no
 // replay clock can follow refused; SIGTERM/SIGINT end a paced replay within a second; outputs that
 // cannot be written (--dump /dev/full, a file-size limit) are errors naming the file and cause.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/output_file.hpp"
 #include "vision_test_util.hpp"

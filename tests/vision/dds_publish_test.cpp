@@ -2,7 +2,7 @@
 // publishes reflex/object_targets; this process reads them with reflex::bus and checks the rate
 // (10 Hz +- 2 % from the publisher's header stamps), the header, and the positions against the
 // session's ground truth.
-#include "../system/process.hpp"
+#include "support/child_process.hpp"
 #include "vision_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
@@ -12,6 +12,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <csignal>
 #include <cstdlib>
 #include <thread>
 

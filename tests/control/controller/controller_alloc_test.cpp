@@ -4,7 +4,7 @@
 // must the plant step (walking and its guard) and the controller's body-schema attach, and the
 // onboard controller (onboard.hpp: every input call and step(), with its refusals) that
 // reflex_controller and runScenario drive.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include "reflex/control/onboard.hpp"
 #include "reflex/control/simulation.hpp"

@@ -2,7 +2,7 @@
 // ConfigError that names the file, the key and the value. Every numeric key's documented range
 // (control/README.md; written out again here) is tested at both ends: at the end (accepted unless
 // the end is open), just beyond it (refused, naming file, key, value and range) and just inside.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // Unit tests of controller.hpp and redundancy.hpp against independent answers: Eq. 13 by hand,
 // Eq. 17-18 on hand-made forces, the sign convention by finite differences of the distance,
 // nullspace projection by J N = 0, the e-stop latch and its release, motion priority.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include "reflex/control/redundancy.hpp"
 #include "reflex/control/simulation.hpp"

@@ -2,7 +2,7 @@
 // avoidance on no pair ever comes below d_r and the e-stop never fires; with it off the segments
 // penetrate; f(d) and the joints are continuous and do not oscillate; the 1-DOF controller reaches
 // the target before the 3-DOF one; crossing arms end between d_r and d_a.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include <gtest/gtest.h>
 
@@ -17,7 +17,7 @@ namespace {
 
 using testing::defaultControllerModel;
 using testing::shippedModel;
-using testing::kUrdf;
+using testing::kAsimoUrdf;
 
 SimResult run(const std::string& name, AvoidanceMode mode) {
   const Scenario* s = findScenario(name);
@@ -113,7 +113,7 @@ TEST(Experiments, WithoutAvoidanceTheSegmentsPenetrate) {
 // link and the camera its camera_link; the forearm the bar ignores is found by structure (the next
 // segment up the arm), so a robot that names it otherwise runs the experiment.
 TEST(Experiments, AScenarioOnARobotWithoutItsLinksNamesThem) {
-  std::ifstream in(kUrdf);
+  std::ifstream in(kAsimoUrdf);
   const std::string urdf((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   auto renamed = [&](const std::string& from, const std::string& to) {
     std::string out = urdf;
@@ -132,7 +132,7 @@ TEST(Experiments, AScenarioOnARobotWithoutItsLinksNamesThem) {
       EXPECT_STREQ(e.what(), message);
     }
   };
-  const CollisionConfig collision = loadCollisionConfig(defaultCollisionConfigPath(kUrdf));
+  const CollisionConfig collision = loadCollisionConfig(defaultCollisionConfigPath(kAsimoUrdf));
   {  // no camera link of that name
     const Model m = loadModelFromString(renamed("head_camera", "eye"), collision, "no_camera.urdf");
     expectError(m, defaultControllerConfig(), "occlusion",

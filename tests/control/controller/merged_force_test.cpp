@@ -13,7 +13,7 @@
 //   closest pair, and never approaches a yellow pair that the merge of the arm's other yellow pairs
 //   would have separated (adding a pair's own force never turns it from separating into approaching).
 //   Both are measured over every state; what is asserted and why is said at the assertions.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include "reflex/control/redundancy.hpp"
 

@@ -16,7 +16,7 @@
 //   own side of the documented bound (max_target_distance, kWalkGoalTolerance), the latest cause named;
 // - the closest pair's names (issue 17, item 3): segment_a is the arm's own segment, checked against the
 //   robot's naming (l_* segments move with the left arm, r_* with the right) over a crossing-arms run.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include "reflex/control/onboard.hpp"
 

@@ -2,7 +2,7 @@
 // 100 ms — inside the body, crossing, behind, while walking — must never bring a pair below d_r,
 // fire the e-stop, emit a non-finite value or exceed a joint velocity limit.
 // REFLEX_SOAK_EPISODES=N runs a longer soak.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include <gtest/gtest.h>
 

@@ -8,7 +8,7 @@
 // grasped bar's distance to the right arm recomputed here from the recorded configurations with a
 // capsule distance written in this file; the arm-to-arm pair identified from the controller's arm
 // masks; the without-avoidance runs as the witness that each scenario asks for a collision.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"

@@ -1,13 +1,13 @@
 // reflex_sim as a real process: --list, a scenario run writing the documented CSV, the comparison
 // run, and clear errors for bad arguments.
+#include "support/child_process.hpp"
+
 #include <gtest/gtest.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
-#include <sys/wait.h>
 
 namespace {
 
@@ -17,13 +17,8 @@ struct ProcessResult {
 };
 
 ProcessResult sh(const std::string& args) {
-  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_sim " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  char buf[4096];
-  while (p && fgets(buf, sizeof buf, p)) out += buf;
-  const int st = p ? pclose(p) : -1;
-  return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out};
+  const reflex::testing::ProcessResult r = reflex::testing::runShell(reflex::testing::binPath("reflex_sim") + " " + args);
+  return {r.exit_code, r.out};
 }
 
 TEST(SimCli, ListsTheScenarios) {

@@ -12,7 +12,7 @@
 //   segment fixed to the root link stops in front of it (no pair below d_r + predict_margin, no
 //   e-stop) and completes once it is removed; a physical segment attached overlapping a part of the
 //   body that no arm moves is refused, one that an arm can move away from is accepted.
-#include "fixture.hpp"
+#include "support/robot.hpp"
 
 #include "reflex/control/simulation.hpp"
 

@@ -16,7 +16,7 @@
 //   capture -> hand target received here (transport [+ behavior]; this process sits on the source host)
 //   capture -> applied by the controller (includes waiting for the next 5 ms cycle: uniform 0..5 ms)
 // and, from `reflex_controller --duration` at exit, the cycle lateness p50 / p99 / max.
-#include "../process.hpp"
+#include "support/child_process.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/record/record_file.hpp>
