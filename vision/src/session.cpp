@@ -160,7 +160,8 @@ SessionInfo loadSessionInfo(const std::string& dir) {
     const ConfigNode root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
     if (root.has("format") && root.string("format", "") != "reflex_stereo_session")
       root.fail("format", "not a stereo session", "reflex_stereo_session");
-    if (root.has("version")) root.at("version", "1").asInteger(1, 1);
+    if (root.integer("version", 1, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()) != 1)
+      root.fail("version", "not supported", "1");
     info.name = root.string("name", info.name);
     if (root.has("fps")) {
       info.fps = root.number("fps", info.fps, -kAnyNumber, kAnyNumber, "Hz");
