@@ -1,9 +1,8 @@
 #include "reflex/control/controller.hpp"
 
-#include "reflex/common/files.hpp"
+#include "reflex/common/yaml_reader.hpp"
 #include "reflex/control/urdf_loader.hpp"
 
-#include <yaml-cpp/yaml.h>
 
 #include <cerrno>
 #include <cstring>
@@ -11,6 +10,7 @@
 
 #include <cmath>
 #include <iomanip>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -23,16 +23,7 @@ std::string str(double v) {
   return os.str();
 }
 
-double readNumber(const YAML::Node& node, const std::string& where) {
-  double v = 0.0;
-  try {
-    v = node.as<double>();
-  } catch (const YAML::Exception&) {
-    throw ConfigError(where + ": expected a number, got '" + YAML::Dump(node) + "'");
-  }
-  if (!std::isfinite(v)) throw ConfigError(where + ": value " + YAML::Dump(node) + " is not finite");
-  return v;
-}
+[[noreturn]] void raiseConfigError(const std::string& message) { throw ConfigError(message); }
 
 ArmConfig defaultArm(const std::string& side) {
   ArmConfig arm;
@@ -121,26 +112,17 @@ std::string ParamRange::describe() const {
 void validateControllerParams(const ControllerParams& p, const std::string& src) {
   for (const ParamRange& range : controllerParamRanges(p)) {
     if (range.contains(range.value)) continue;
-    throw ConfigError(src + ": " + range.key + " = " + str(range.value) + " is outside its range " +
-                      range.describe() + ": " + range.why);
+    throw ConfigError(src + ": " + range.key + ": outside its range (value '" + str(range.value) + "', expected " +
+                      range.describe() + ": " + range.why + ")");
   }
 }
 
 ControllerConfig loadControllerConfig(const std::string& yaml_path) {
   ControllerConfig config = defaultControllerConfig();
   config.source = yaml_path;
-  if (const std::string why = common::inputFileProblem(yaml_path); !why.empty())
-    throw ConfigError("controller configuration " + why);  // a FIFO or device would block or never end
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const YAML::BadFile&) {
-    throw ConfigError(yaml_path + ": cannot open controller configuration");
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(yaml_path + ": malformed YAML: " + e.what());
-  }
-  if (root.IsNull()) return config;
-  if (!root.IsMap()) throw ConfigError(yaml_path + ": top level must be a map");
+  // An empty file is the defaults; errors name FILE:LINE:COL: KEY.PATH (control/docs/configuration.md).
+  const common::ConfigNode root =
+      common::ConfigNode::loadFile(yaml_path, "controller configuration", &raiseConfigError, /*allow_empty=*/true);
   ControllerParams& p = config.params;
   const std::pair<const char*, double*> numbers[] = {
       {"d_a", &p.d_a}, {"d_b", &p.d_b}, {"d_r", &p.d_r}, {"period", &p.period},
@@ -150,68 +132,35 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
       {"trajectory_speed", &p.trajectory_speed}, {"estop_release_margin", &p.estop_release_margin},
       {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin},
       {"predict_margin", &p.predict_margin}};
-  for (const auto& kv : root) {
-    std::string key;
-    try {
-      key = kv.first.as<std::string>();
-    } catch (const YAML::Exception&) {
-      throw ConfigError(yaml_path + ": a key must be a name, got '" + YAML::Dump(kv.first) + "'");
-    }
-    const std::string where = yaml_path + ": " + key;
-    // A value of the wrong kind (a map where a name or list is expected) surfaces from yaml-cpp as a
-    // raw conversion error without the file name (fuzz finding): name the file and key instead.
-    try {
-    bool done = false;
-    for (const auto& [name, target] : numbers) {
-      if (key == name) {
-        *target = readNumber(kv.second, where);
-        done = true;
-      }
-    }
-    if (done) continue;
-    if (key == "avoidance") {
-      const std::string mode = kv.second.as<std::string>();
-      if (mode == "one_dof") p.mode = AvoidanceMode::kOneDof;
-      else if (mode == "three_dof") p.mode = AvoidanceMode::kThreeDof;
-      else if (mode == "off") p.mode = AvoidanceMode::kOff;
-      else throw ConfigError(where + ": unknown avoidance mode '" + mode + "' (one_dof, three_dof, off)");
-    } else if (key == "camera_link") {
-      config.camera_link = kv.second.as<std::string>();
-      if (config.camera_link.empty()) throw ConfigError(where + ": must name a link");
-    } else if (key == "arms") {
-      if (!kv.second.IsMap()) throw ConfigError(where + ": must be a map with 'left' and 'right'");
-      for (const auto& arm_kv : kv.second) {
-        const std::string side = arm_kv.first.as<std::string>();
-        if (side != "left" && side != "right")
-          throw ConfigError(where + ": unknown arm '" + side + "' (left, right)");
-        ArmConfig& arm = config.arms[side == "left" ? kLeft : kRight];
-        for (const auto& f : arm_kv.second) {
-          const std::string fk = f.first.as<std::string>();
-          const std::string fw = where + "." + side + "." + fk;
-          if (fk == "joints") {
-            arm.joints = f.second.as<std::vector<std::string>>();
-          } else if (fk == "hand_link") {
-            arm.hand_link = f.second.as<std::string>();
-          } else if (fk == "hand_point") {
-            if (!f.second.IsSequence() || f.second.size() != 3) throw ConfigError(fw + ": expected [x, y, z]");
-            for (int i = 0; i < 3; ++i) arm.hand_point_L[i] = readNumber(f.second[i], fw);
-          } else if (fk == "rest") {
-            if (!f.second.IsSequence()) throw ConfigError(fw + ": expected a list of joint angles");
-            arm.rest.clear();
-            for (const auto& v : f.second) arm.rest.push_back(readNumber(v, fw));
-          } else {
-            throw ConfigError(fw + ": unknown key (joints, hand_link, hand_point, rest)");
-          }
-        }
-      }
-    } else {
-      throw ConfigError(where + ": unknown key");
-    }
-    } catch (const YAML::Exception& e) {
-      throw ConfigError(where + ": value of the wrong kind (" + e.what() + "): '" + YAML::Dump(kv.second) + "'");
-    }
+  std::vector<std::string> known = {"avoidance", "camera_link", "arms"};
+  for (const auto& [name, target] : numbers) known.emplace_back(name);
+  root.rejectUnknown(known);
+  // Any finite number here; the ranges (which depend on each other) are checked below, all keys read.
+  constexpr double kAny = std::numeric_limits<double>::max();
+  for (const auto& [name, target] : numbers) *target = root.number(name, *target, -kAny, kAny);
+  const std::string mode = root.choice("avoidance", "three_dof", {"one_dof", "three_dof", "off"});
+  if (root.has("avoidance"))
+    p.mode = mode == "one_dof" ? AvoidanceMode::kOneDof : mode == "off" ? AvoidanceMode::kOff : AvoidanceMode::kThreeDof;
+  config.camera_link = root.string("camera_link", config.camera_link);
+  const common::ConfigNode arms = root.child("arms");
+  arms.rejectUnknown({"left", "right"});
+  for (const auto& [side, node] : arms.entries()) {
+    ArmConfig& arm = config.arms[side == "left" ? kLeft : kRight];
+    const common::ConfigNode f = arms.child(side);
+    f.rejectUnknown({"joints", "hand_link", "hand_point", "rest"});
+    arm.joints = f.strings("joints", arm.joints);
+    arm.hand_link = f.string("hand_link", arm.hand_link);
+    arm.hand_point_L = f.vec3("hand_point", arm.hand_point_L);
+    if (f.has("rest")) arm.rest = f.at("rest", "a list of joint angles (rad)").asNumbers();
   }
-  validateControllerParams(p, yaml_path);
+  for (const ParamRange& range : controllerParamRanges(p)) {
+    if (range.contains(range.value)) continue;
+    const std::string expected = range.describe() + ": " + range.why;
+    if (root.has(range.key)) root.fail(range.key, "outside its range", expected);
+    // A default that another key's value moved out of range (k_virtual with a longer period).
+    throw ConfigError(root.where(range.key) + ": outside its range (value '" + str(range.value) +
+                      "', the default, expected " + expected + ")");
+  }
   return config;
 }
 

@@ -1,18 +1,19 @@
 // The fit overlay: fitting a whole robot, writing `<stem>.fit.yaml`, reading it back.
 #include "fit_inputs.hpp"
 #include "reflex/common/files.hpp"
+#include "reflex/common/yaml_reader.hpp"
 #include "reflex/control/mesh_fit.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "urdf_audit.hpp"
 
 #include <urdf_model/model.h>
 #include <urdf_parser/urdf_parser.h>
-#include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -227,71 +228,60 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
 }
 
 FitOverlay loadFitOverlay(const std::string& path) {
-  if (const std::string why = common::inputFileProblem(path); !why.empty()) throw ModelError("fit overlay " + why);
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw ModelError(path + ": cannot open fit overlay");
-  } catch (const YAML::Exception& e) {
-    throw ModelError(path + ": malformed YAML: " + e.what());
-  }
-  auto bad = [&](const std::string& what) { return ModelError(path + ": " + what + " (rerun reflex_fit)"); };
-  if (!root.IsMap() || !root["format"] || root["format"].as<std::string>("") != "1")
-    throw bad("not a reflex_fit overlay of format 1");
+  // Every error names FILE:LINE:COL: KEY.PATH and ends with "(rerun reflex_fit)": the file is written by
+  // reflex_fit, so a bad one is stale or hand-edited.
+  const common::ConfigNode::Raise raise = [](const std::string& m) { throw ModelError(m + " (rerun reflex_fit)"); };
+  const common::ConfigNode root = common::ConfigNode::loadFile(path, "fit overlay", raise);
+  if (root.string("format", "") != "1") root.fail("format", "not a reflex_fit overlay of format 1", "1");
+  root.rejectUnknown({"format", "urdf", "packages", "options", "links"});
   const std::string dir = detail::folderOf(path);
   FitOverlay o;
   o.source = path;
-  try {
-    o.urdf = joinPath(dir, root["urdf"].as<std::string>());
-    o.urdf_dir = detail::folderOf(o.urdf);
-    if (root["packages"])
-      for (const auto& kv : root["packages"]) o.packages[kv.first.as<std::string>()] = joinPath(dir, kv.second.as<std::string>());
-    const YAML::Node links = root["links"];
-    if (!links || !links.IsMap()) throw bad("'links' must be a map");
-    auto point = [&](const YAML::Node& n, const std::string& where) {
-      if (!n.IsSequence() || n.size() != 3) throw bad(where + " must be [x, y, z]");
-      const Eigen::Vector3d v(n[0].as<double>(), n[1].as<double>(), n[2].as<double>());
-      if (!v.allFinite()) throw bad(where + " is not finite");
-      return v;
-    };
-    for (const auto& kv : links) {
-      LinkFit l;
-      l.link = kv.first.as<std::string>();
-      const YAML::Node& n = kv.second;
-      const std::string where = "link '" + l.link + "'";
-      if (!n.IsMap() || !n["inputs"] || !n["primitives"] || !n["primitives"].IsSequence() || n["primitives"].size() == 0)
-        throw bad(where + " needs inputs and a non-empty primitives list");
-      l.inputs = n["inputs"].as<std::string>();
-      l.elements = n["elements"].as<int>(0);
-      l.stats.vertices = n["vertices"].as<int>(0);
-      l.stats.vertices_enclosed = n["vertices_enclosed"].as<int>(0);
-      l.stats.triangles = n["triangles"].as<int>(0);
-      l.stats.hull_volume = n["hull_volume"].as<double>(0.0);
-      l.stats.fitted_volume = n["fitted_volume"].as<double>(0.0);
-      l.stats.volume_ratio = n["volume_ratio"].as<double>(0.0);
-      l.stats.worst_gap = n["worst_gap"].as<double>(0.0);
-      for (const auto& pn : n["primitives"]) {
-        Primitive p;
-        if (!pn.IsMap() || !pn["radius"]) throw bad(where + ": a primitive needs a radius");
-        p.radius = pn["radius"].as<double>();
-        if (!(p.radius > 0.0) || !std::isfinite(p.radius)) throw bad(where + ": radius " + pn["radius"].as<std::string>() + " must be positive");
-        if (pn["sphere"]) {
-          p.a_L = p.b_L = point(pn["sphere"], where + " sphere");
-          p.sphere = true;
-        } else {
-          if (!pn["a"] || !pn["b"]) throw bad(where + ": a capsule needs a and b");
-          p.a_L = point(pn["a"], where + " a");
-          p.b_L = point(pn["b"], where + " b");
-          p.sphere = false;
-          if (!((p.b_L - p.a_L).norm() > 0.0)) throw bad(where + ": a capsule needs a != b (write a sphere)");
-        }
-        l.primitives.push_back(p);
+  o.urdf = joinPath(dir, root.requiredString("urdf", "the URDF's path"));
+  o.urdf_dir = detail::folderOf(o.urdf);
+  for (const auto& [name, value] : root.child("packages").entries()) o.packages[name] = joinPath(dir, value.asString());
+  const common::ConfigNode links = root.at("links", "a map of links");
+  links.requireMap("a map of links");
+  constexpr double kAny = std::numeric_limits<double>::max();
+  for (const auto& [name, n] : links.entries()) {
+    LinkFit l;
+    l.link = name;
+    n.requireMap("a map with inputs and primitives");
+    n.rejectUnknown({"inputs", "elements", "vertices", "vertices_enclosed", "triangles", "hull_volume", "fitted_volume",
+                     "volume_ratio", "worst_gap", "primitives"});
+    l.inputs = n.requiredString("inputs", "the hash of the link's fit inputs");
+    l.elements = n.integer("elements", 0, 0, std::numeric_limits<int>::max());
+    l.stats.vertices = n.integer("vertices", 0, 0, std::numeric_limits<int>::max());
+    l.stats.vertices_enclosed = n.integer("vertices_enclosed", 0, 0, std::numeric_limits<int>::max());
+    l.stats.triangles = n.integer("triangles", 0, 0, std::numeric_limits<int>::max());
+    l.stats.hull_volume = n.number("hull_volume", 0.0, -kAny, kAny);
+    l.stats.fitted_volume = n.number("fitted_volume", 0.0, -kAny, kAny);
+    l.stats.volume_ratio = n.number("volume_ratio", 0.0, -kAny, kAny);
+    l.stats.worst_gap = n.number("worst_gap", 0.0, -kAny, kAny);
+    const std::vector<common::ConfigNode> primitives = n.at("primitives", "a non-empty list of primitives").elements();
+    if (primitives.empty()) n.fail("primitives", "empty", "a non-empty list of primitives");
+    for (const common::ConfigNode& pn : primitives) {
+      Primitive p;
+      pn.requireMap("{sphere: [x, y, z], radius: r} or {a: [x, y, z], b: [x, y, z], radius: r}");
+      pn.rejectUnknown({"sphere", "a", "b", "radius"});
+      p.radius = pn.requiredNumber("radius", -kAny, kAny, "m");
+      if (!(p.radius > 0.0)) pn.fail("radius", "not positive", "a radius > 0 m");
+      auto point = [&](const char* key, const char* what) {
+        const std::vector<double> v = pn.at(key, what).asNumbers(3);
+        return Eigen::Vector3d(v[0], v[1], v[2]);
+      };
+      if (pn.has("sphere")) {
+        p.a_L = p.b_L = point("sphere", "[x, y, z] (the sphere's centre)");
+        p.sphere = true;
+      } else {
+        p.a_L = point("a", "[x, y, z] (a capsule's first end; a sphere is written 'sphere')");
+        p.b_L = point("b", "[x, y, z] (a capsule's second end)");
+        p.sphere = false;
+        if (!((p.b_L - p.a_L).norm() > 0.0)) pn.fail("b", "equals a", "a != b (write a sphere)");
       }
-      o.links.push_back(std::move(l));
+      l.primitives.push_back(p);
     }
-  } catch (const YAML::Exception& e) {
-    throw bad(std::string("bad entry: ") + e.what());
+    o.links.push_back(std::move(l));
   }
   return o;
 }

@@ -1,13 +1,13 @@
 #include "reflex/control/urdf_loader.hpp"
 
 #include "reflex/common/files.hpp"
+#include "reflex/common/yaml_reader.hpp"
 #include "fit_inputs.hpp"
 #include "reflex/control/mesh_fit.hpp"
 #include "urdf_audit.hpp"
 
 #include <urdf_model/model.h>
 #include <urdf_parser/urdf_parser.h>
-#include <yaml-cpp/yaml.h>
 
 #include <tinyxml2.h>
 
@@ -182,67 +182,27 @@ std::string defaultCollisionConfigPath(const std::string& urdf_path) {
 CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
   CollisionConfig config;
   config.source = yaml_path;
-  if (const std::string why = common::inputFileProblem(yaml_path); !why.empty())
-    throw ModelError("collision configuration " + why);  // a FIFO or device would block or never end
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(yaml_path);
-  } catch (const YAML::BadFile&) {
-    throw ModelError(yaml_path + ": cannot open collision configuration");
-  } catch (const YAML::Exception& e) {
-    throw ModelError(yaml_path + ": malformed YAML: " + e.what());
-  }
-  if (!root.IsMap() && !root.IsNull()) throw ModelError(yaml_path + ": top level must be a map");
-  for (const auto& kv : root) {
-    if (!kv.first.IsScalar())
-      throw ModelError(yaml_path + ": key '" + YAML::Dump(kv.first) + "' must be a name (exclude_adjacent, exclude)");
-    const std::string key = kv.first.as<std::string>();
-    if (key == "exclude_adjacent") {
-      try {
-        config.exclude_adjacent = kv.second.as<bool>();
-      } catch (const YAML::Exception&) {
-        throw ModelError(yaml_path + ": exclude_adjacent must be true or false, got '" +
-                         YAML::Dump(kv.second) + "'");
-      }
-    } else if (key == "exclude") {
-      if (!kv.second.IsSequence()) throw ModelError(yaml_path + ": 'exclude' must be a list of pairs");
-      for (const auto& item : kv.second) {
-        if (!item.IsSequence() || item.size() != 2 || !item[0].IsScalar() || !item[1].IsScalar())
-          throw ModelError(yaml_path + ": exclude entry '" + YAML::Dump(item) +
-                           "' must be a pair [segment_a, segment_b]");
-        config.exclude.emplace_back(item[0].as<std::string>(), item[1].as<std::string>());
-      }
-    } else if (key == "cylinder_as") {
-      const std::string v = kv.second.IsScalar() ? kv.second.as<std::string>() : YAML::Dump(kv.second);
-      if (v != "capsule")
-        throw ModelError(yaml_path + ": cylinder_as '" + v +
-                         "' is not a cylinder policy; 'capsule' (the capsule around the cylinder's axis) is the "
-                         "only one until the mesh fitter reads cylinders as shapes to fit");
-      config.cylinder_as = v;
-    } else if (key == "fit") {
-      if (!kv.second.IsScalar() || kv.second.as<std::string>().empty())
-        throw ModelError(yaml_path + ": fit must be the path of a fit overlay (written by reflex_fit), got '" +
-                         YAML::Dump(kv.second) + "'");
-      std::string path = kv.second.as<std::string>();
-      if (path[0] != '/') {  // relative to the configuration's folder
-        const auto slash = yaml_path.rfind('/');
-        if (slash != std::string::npos) path = yaml_path.substr(0, slash + 1) + path;
-      }
-      config.fit = path;
-    } else if (key == "srdf") {
-      if (!kv.second.IsScalar() || kv.second.as<std::string>().empty())
-        throw ModelError(yaml_path + ": srdf must be the path of an SRDF file, got '" + YAML::Dump(kv.second) + "'");
-      std::string path = kv.second.as<std::string>();
-      if (path[0] != '/') {  // relative to the configuration's folder
-        const auto slash = yaml_path.rfind('/');
-        if (slash != std::string::npos) path = yaml_path.substr(0, slash + 1) + path;
-      }
-      config.srdf = path;
-      config.srdf_disabled = loadSrdfDisabledCollisions(path);
-    } else {
-      throw ModelError(yaml_path + ": unknown key '" + key +
-                       "' (expected exclude_adjacent, exclude, srdf, cylinder_as, fit)");
+  // An empty file is the defaults; errors name FILE:LINE:COL: KEY.PATH (control/docs/configuration.md).
+  const common::ConfigNode root = common::ConfigNode::loadFile(
+      yaml_path, "collision configuration", [](const std::string& m) { throw ModelError(m); }, /*allow_empty=*/true);
+  root.rejectUnknown({"exclude_adjacent", "exclude", "srdf", "cylinder_as", "fit"});
+  config.exclude_adjacent = root.boolean("exclude_adjacent", config.exclude_adjacent);
+  if (root.has("exclude")) {
+    for (const common::ConfigNode& item : root.at("exclude", "a list of pairs").elements()) {
+      if (!item.isList() || item.node().size() != 2 || !item.node()[0].IsScalar() || !item.node()[1].IsScalar())
+        item.failHere("not a pair", "a pair [segment_a, segment_b]");
+      config.exclude.emplace_back(item.node()[0].Scalar(), item.node()[1].Scalar());
     }
+  }
+  config.cylinder_as = root.string("cylinder_as", config.cylinder_as);
+  if (config.cylinder_as != "capsule")
+    root.fail("cylinder_as", "not a cylinder policy",
+              "capsule (the capsule around the cylinder's axis: the only one until the mesh fitter reads cylinders "
+              "as shapes to fit)");
+  if (root.has("fit")) config.fit = root.resolvePath(root.requiredString("fit", "the path of a fit overlay (written by reflex_fit)"));
+  if (root.has("srdf")) {
+    config.srdf = root.resolvePath(root.requiredString("srdf", "the path of an SRDF file"));
+    config.srdf_disabled = loadSrdfDisabledCollisions(config.srdf);
   }
   return config;
 }

@@ -16,18 +16,18 @@ void GraspedBarModule::configure(const ConfigNode& c, const RobotState& robot) {
   config_.segment = c.string("segment", config_.segment);
   config_.a_L = c.vec3("point_a", config_.a_L);
   config_.b_L = c.vec3("point_b", config_.b_L);
-  if ((config_.a_L - config_.b_L).norm() < 1e-6) c.fail("point_b", "must differ from point_a (a capsule), got");
+  if ((config_.a_L - config_.b_L).norm() < 1e-6) c.fail("point_b", "equals point_a", "a point different from point_a (a capsule)");
   config_.radius = c.number("radius", config_.radius, 0.001, 0.5);
   config_.motion_priority = c.integer("motion_priority", config_.motion_priority, 0, 1000);
   config_.spin_rate = c.number("spin_rate", config_.spin_rate, -20.0, 20.0);
   config_.spin_axis_L = c.vec3("spin_axis", config_.spin_axis_L);
-  if (config_.spin_axis_L.norm() < 1e-9) c.fail("spin_axis", "must not be zero, got");
+  if (config_.spin_axis_L.norm() < 1e-9) c.fail("spin_axis", "is zero", "a non-zero axis");
   config_.spin_axis_L.normalize();
   config_.spin_center_L = c.vec3("spin_center", robot.config().hand_point_L);
   config_.attach_after = c.number("attach_after", config_.attach_after, 0.0, 1e6);
   config_.detach_after = c.number("detach_after", config_.detach_after, 0.0, 1e6);
   if (config_.detach_after > 0.0 && config_.detach_after <= config_.attach_after)
-    c.fail("detach_after", "must be 0 (never) or later than attach_after:");
+    c.fail("detach_after", "not after attach_after", "0 (never) or later than attach_after");
   config_.update_period = c.number("update_period", config_.update_period, 0.005, 1.0);
   config_.arm_priority = c.boolean("arm_priority", config_.arm_priority);
   hand_link_ = robot.handLinkName(config_.hand);
@@ -96,7 +96,7 @@ void OcclusionModule::configure(const ConfigNode& c, const RobotState& /*robot*/
                    "lost_timeout", "update_period", "min_change"});
   config_.segment = c.string("segment", config_.segment);
   if (c.has("object") == c.has("point"))
-    throw ConfigError(c.where("object") + ": give exactly one of 'object' (a vision object's name) or 'point' ([x, y, z])");
+    c.failAt("object", "give exactly one of 'object' (a vision object's name) or 'point' ([x, y, z])");
   config_.object = c.string("object", "");
   config_.point_B = c.vec3("point", config_.point_B);
   config_.radius = c.number("radius", config_.radius, 0.001, 0.5);
@@ -107,7 +107,7 @@ void OcclusionModule::configure(const ConfigNode& c, const RobotState& /*robot*/
   for (const auto& h : hands) {
     if (h == "left") config_.cover_hands[0] = true;
     else if (h == "right") config_.cover_hands[1] = true;
-    else c.fail("cover_hands", "expected a list of left / right, got");
+    else c.fail("cover_hands", "not a list of hands", "a list of left / right");
   }
   config_.lost_timeout = c.number("lost_timeout", config_.lost_timeout, 0.05, 60.0);
   config_.update_period = c.number("update_period", config_.update_period, 0.005, 1.0);
@@ -198,7 +198,7 @@ std::string OcclusionModule::status() const {
 
 void WalkingModule::configure(const ConfigNode& c, const RobotState& robot) {
   c.rejectUnknown({"goal", "speed", "relative", "start_after", "x_joint", "y_joint"});
-  if (!c.has("goal")) throw ConfigError(c.where("goal") + ": required key missing ([x, y, yaw] in the world frame)");
+  if (!c.has("goal")) c.fail("goal", "missing", "[x, y, yaw] in the world frame");
   config_.goal = c.vec3("goal", config_.goal);
   config_.speed = c.number("speed", config_.speed, 0.01, 2.0);
   config_.relative = c.boolean("relative", config_.relative);
@@ -206,8 +206,8 @@ void WalkingModule::configure(const ConfigNode& c, const RobotState& robot) {
   config_.x_joint = c.string("x_joint", config_.x_joint);
   config_.y_joint = c.string("y_joint", config_.y_joint);
   if (config_.relative) {
-    if (robot.model().qIndex(config_.x_joint) < 0) c.fail("x_joint", "no such joint in the robot:");
-    if (robot.model().qIndex(config_.y_joint) < 0) c.fail("y_joint", "no such joint in the robot:");
+    if (robot.model().qIndex(config_.x_joint) < 0) c.fail("x_joint", "no such joint in the robot", "a joint of the robot");
+    if (robot.model().qIndex(config_.y_joint) < 0) c.fail("y_joint", "no such joint in the robot", "a joint of the robot");
   }
 }
 

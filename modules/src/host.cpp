@@ -35,30 +35,30 @@ HostConfig parseHostConfig(const ConfigNode& root, const ModuleRegistry& registr
   c.inputs.future_tolerance = in.number("future_tolerance", c.inputs.future_tolerance, 0.0, 60.0);
   c.inputs.max_range = in.number("max_range", c.inputs.max_range, 0.1, 100.0);
   c.inputs.frames = in.strings("frames", c.inputs.frames);
-  if (c.inputs.frames.empty()) in.fail("frames", "must name at least one base frame, got");
+  if (c.inputs.frames.empty()) in.fail("frames", "names no frame", "at least one base frame");
   // Writers whose samples are accepted (identities, never a name inside the message).
   for (auto [key, list, example] : {std::make_tuple("object_sources", &c.inputs.object_sources, "vision"),
                                     std::make_tuple("joint_state_sources", &c.inputs.joint_state_sources, "controller")}) {
     *list = in.strings(key, *list);
-    if (list->empty()) in.fail(key, std::string("must name at least one identity whose samples are accepted (e.g. ") + example + "), got");
+    if (list->empty()) in.fail(key, "names no identity", std::string("at least one identity whose samples are accepted (e.g. ") + example + ")");
     for (const auto& src : *list) {
-      if (src.empty()) in.fail(key, "holds an empty identity name:");
+      if (src.empty()) in.fail(key, "holds an empty identity name", "a list of non-empty identity names");
     }
   }
   c.tick_period = root.number("tick_period", c.tick_period, 0.001, 1.0);
   c.joint_state_period = root.number("joint_state_period", c.joint_state_period, 0.0, 10.0);
-  if (!root.has("modules")) throw ConfigError(root.where("modules") + ": required key missing (a list of modules)");
+  if (!root.has("modules")) root.fail("modules", "missing", "a list of modules");
   std::set<std::string> names;
   for (const ConfigNode& m : root.list("modules")) {
     m.rejectUnknown({"name", "type", "config"});
     ModuleEntry e{"", m.string("type", ""), m.child("config")};
-    if (e.type.empty()) throw ConfigError(m.where("type") + ": required key missing (one of: " + registry.typeList() + ")");
-    if (!registry.has(e.type)) m.fail("type", "unknown module type (known: " + registry.typeList() + "):");
+    if (e.type.empty()) m.fail("type", "missing", "one of " + registry.typeList());
+    if (!registry.has(e.type)) m.fail("type", "unknown module type", "one of " + registry.typeList());
     e.name = m.string("name", e.type);
-    if (!names.insert(e.name).second) m.fail("name", "duplicate module name");
+    if (!names.insert(e.name).second) m.fail("name", "duplicate module name", "a name no other module has");
     c.modules.push_back(std::move(e));
   }
-  if (c.modules.empty()) root.fail("modules", "the list of modules is empty:");
+  if (c.modules.empty()) root.fail("modules", "the list of modules is empty", "at least one module");
   return c;
 }
 

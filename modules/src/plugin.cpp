@@ -11,7 +11,7 @@ namespace reflex::modules {
 std::vector<std::string> pluginPaths(const ConfigNode& root) {
   std::vector<std::string> out;
   for (const std::string& p : root.strings("plugins", {})) {
-    if (p.empty()) root.fail("plugins", "holds an empty path:");
+    if (p.empty()) root.fail("plugins", "holds an empty path", "a list of shared-library paths");
     out.push_back(root.resolvePath(p));
   }
   return out;

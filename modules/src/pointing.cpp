@@ -30,10 +30,10 @@ void PointingModule::configure(const ConfigNode& c, const RobotState& robot) {
     } else if (h == "right") {
       config_.hands[1] = true;
     } else {
-      c.fail("hands", "expected a list of left / right, got");
+      c.fail("hands", "not a list of hands", "a list of left / right");
     }
   }
-  if (!config_.hands[0] && !config_.hands[1]) c.fail("hands", "expected at least one of left / right, got");
+  if (!config_.hands[0] && !config_.hands[1]) c.fail("hands", "names no hand", "at least one of left / right");
   config_.objects = c.strings("objects", {});
   config_.mode = c.choice("mode", "ray", {"ray", "object"}) == "ray" ? PointingMode::kRay : PointingMode::kObject;
   const double arm_reach = std::min(robot.armReach(Hand::kLeft), robot.armReach(Hand::kRight));

@@ -110,7 +110,7 @@ std::vector<TimelineEvent> readTimelineYaml(const ConfigNode& node, const std::s
     e.rejectUnknown({"t", "left", "right", "priority"});
     const double t = e.requiredNumber("t", 0.0, 1e6);
     if (!e.has("left") && !e.has("right") && !e.has("priority"))
-      throw ConfigError(e.where("t") + ": event without left, right or priority");
+      e.failAt("t", "event without left, right or priority");
     checkOrder(events, e.where("t"), t);
     for (Hand h : kBothHands) {
       const char* k = handName(h);
@@ -123,7 +123,7 @@ std::vector<TimelineEvent> readTimelineYaml(const ConfigNode& node, const std::s
         ev.target = HandTarget::none();
       } else {
         const Eigen::Vector3d p = e.vec3(k, Eigen::Vector3d::Zero());
-        if (p.norm() > kMaxTargetDistance) e.fail(k, "target farther than 2 m from the base origin:");
+        if (p.norm() > kMaxTargetDistance) e.fail(k, "target farther than 2 m from the base origin", "[x, y, z] within 2 m, or none");
         ev.target = HandTarget::at(p);
       }
       events.push_back(ev);
@@ -134,7 +134,7 @@ std::vector<TimelineEvent> readTimelineYaml(const ConfigNode& node, const std::s
       ev.kind = TimelineEvent::Kind::kPriority;
       bool ok = false;
       ev.priority = parsePriority(e.string("priority", ""), ok);
-      if (!ok) e.fail("priority", "expected left, right or equal, got");
+      if (!ok) e.fail("priority", "unknown value", "one of left, right, equal");
       events.push_back(ev);
     }
   }
@@ -144,7 +144,7 @@ std::vector<TimelineEvent> readTimelineYaml(const ConfigNode& node, const std::s
 void ScriptedModule::configure(const ConfigNode& c, const RobotState& /*robot*/) {
   c.rejectUnknown({"timeline", "file", "loop_period", "step_period"});
   if (c.has("timeline") == c.has("file"))
-    throw ConfigError(c.where("timeline") + ": give exactly one of 'timeline' (inline list) or 'file'");
+    c.failAt("timeline", "give exactly one of 'timeline' (inline list) or 'file'");
   if (c.has("timeline")) {
     events_ = readTimelineYaml(c, "timeline");
   } else {
@@ -155,10 +155,10 @@ void ScriptedModule::configure(const ConfigNode& c, const RobotState& /*robot*/)
       events_ = readTimelineYaml(ConfigNode::loadFile(path), "timeline");
     }
   }
-  if (events_.empty()) c.fail(c.has("timeline") ? "timeline" : "file", "the timeline has no events:");
+  if (events_.empty()) c.fail(c.has("timeline") ? "timeline" : "file", "the timeline has no events", "at least one event");
   loop_period_ = c.number("loop_period", 0.0, 0.0, 1e6);
   if (loop_period_ > 0.0 && loop_period_ <= events_.back().t)
-    c.fail("loop_period", "must be 0 (no loop) or longer than the last event's time:");
+    c.fail("loop_period", "not longer than the last event's time", "0 (no loop) or longer than the last event's time");
   step_period_ = c.number("step_period", step_period_, 0.001, 1.0);
   for (const auto& e : events_) {
     if (e.kind == TimelineEvent::Kind::kHand) hands_[handIndex(e.hand)] = true;

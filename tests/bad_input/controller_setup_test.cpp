@@ -72,7 +72,7 @@ std::vector<Case> cases() {
       {"unknown segment in collision YAML", {"--urdf", urdf, "--collision", tmp("collision_unknown.yaml")},
        "no_such_segment"},
       {"missing controller YAML", {"--controller", "/nonexistent/ctl.yaml"}, "/nonexistent/ctl.yaml"},
-      {"malformed controller YAML", {"--controller", tmp("malformed.controller.yaml")}, "malformed YAML"},
+      {"malformed controller YAML", {"--controller", tmp("malformed.controller.yaml")}, "YAML syntax error"},
       {"negative d_r", {"--controller", tmp("negative.controller.yaml")}, "d_r"},
       {"d_a < d_b", {"--controller", tmp("unordered.controller.yaml")}, "d_r < d_b < d_a"},
       {"NaN gain", {"--controller", tmp("nan.controller.yaml")}, "k_virtual"},

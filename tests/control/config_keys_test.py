@@ -4,13 +4,15 @@ up (found here by reading the readers' source, not by a list kept by hand) must 
 as `key` (in backticks). Fails naming each missing key and the reader it came from, and when a
 reader's patterns find fewer than 3 keys (a reader rewritten so that this test no longer sees it).
 
-Readers and how their keys are found (regular expressions over the source):
-  controller   control/src/controller_config.cpp   {"key", &p.x}, key == "x", fk == "x"
-  collision    control/src/urdf_loader.cpp         key == "x"
-  fit overlay  control/src/fit_overlay.cpp         ["x"], require...("x")
-  behavior     modules/src/*.cpp                   rejectUnknown({...}) lists, ConfigNode getters ("x")
+Readers and how their keys are found (regular expressions over the source). Every C++ reader reads
+through common::ConfigNode (idl/common/include/reflex/common/yaml_reader.hpp), so the same patterns
+find them all: its getters .string("x") .number("x") .at("x") ... and rejectUnknown({...}) lists.
+  controller   control/src/controller_config.cpp   {"key", &p.x}, getters, rejectUnknown
+  collision    control/src/urdf_loader.cpp         rejectUnknown, getters
+  fit overlay  control/src/fit_overlay.cpp         getters, point("x", ...)
+  behavior     modules/src/*.cpp                   rejectUnknown({...}) lists, getters
   vision       vision/src/{session,session_maker,calibration,calibration_images,object_map}.cpp
-               ["x"], require(node, "x", ...), file("x", ...)
+               getters, rejectUnknown, readRosMatrix(root, "x", ...), file("x", ...)
   launch       bringup/launch.py                   .get("x"), ["x"], the TOP_KEYS / PROCESS_KEYS sets
 Usage: config_keys_test.py SOURCE_DIR [--list]
 """
@@ -23,9 +25,10 @@ PATTERNS = [
     r'\b(?:key|fk)\s*==\s*"([a-z_][a-z0-9_]*)"',
     r'\[\s*"([a-z_][a-z0-9_]*)"\s*\]',
     r'\brequire\w*\([^,()]+,\s*"([a-z_][a-z0-9_]*)"',
-    r'\.(?:string|number|requiredNumber|integer|boolean|choice|vec3|strings|child|list|raw|has)\(\s*"([a-z_][a-z0-9_]*)"',
+    r'\.(?:string|requiredString|number|requiredNumber|integer|boolean|choice|vec3|strings|child|list|raw|has|at)\(\s*"([a-z_][a-z0-9_]*)"',
     r'\.get\(\s*"([a-z_][a-z0-9_]*)"',
-    r'\bfile\(\s*"([a-z_][a-z0-9_]*)"',
+    r'\b(?:file|point)\(\s*"([a-z_][a-z0-9_]*)"',
+    r'\breadRosMatrix\([^,()]+,\s*"([a-z_][a-z0-9_]*)"',
 ]
 # Dictionary look-ups in the readers that are not keys of a file (the launcher's own bookkeeping).
 NOT_FILE_KEYS = {"launch": {"why"}}

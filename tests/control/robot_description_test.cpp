@@ -131,8 +131,8 @@ TEST(UrdfCapsule, TheCylinderPolicyIsExplicit) {
   EXPECT_EQ(loadCollisionConfig(ok).cylinder_as, "capsule");
   const std::string bad = tempFile("cyl_bad.collision.yaml", "cylinder_as: fitted\n");
   EXPECT_EQ(modelErrorOf([&] { loadCollisionConfig(bad); }),
-            bad + ": cylinder_as 'fitted' is not a cylinder policy; 'capsule' (the capsule around the cylinder's "
-                  "axis) is the only one until the mesh fitter reads cylinders as shapes to fit");
+            bad + ":1:14: cylinder_as: not a cylinder policy (value 'fitted', expected capsule (the capsule around the "
+                  "cylinder's axis: the only one until the mesh fitter reads cylinders as shapes to fit))");
 }
 
 // ---- which pairs are checked ------------------------------------------------------------------
@@ -288,7 +288,7 @@ TEST(PairRules, SrdfErrorsNameTheFileLineAndLink) {
   EXPECT_THAT(modelErrorOf([&] { loadSrdfDisabledCollisions(::testing::TempDir() + "missing.srdf"); }),
               HasSubstr("missing.srdf"));
   const std::string yaml = tempFile("emptysrdf.collision.yaml", "srdf: \"\"\n");
-  EXPECT_THAT(modelErrorOf([&] { loadCollisionConfig(yaml); }), HasSubstr("srdf must be the path of an SRDF file"));
+  EXPECT_THAT(modelErrorOf([&] { loadCollisionConfig(yaml); }), HasSubstr(yaml + ":1:7: srdf: not a name (value '', expected a non-empty string)"));
 }
 
 // ---- the sampling tool ------------------------------------------------------------------------

@@ -31,13 +31,13 @@ TEST(ModulesConfig, UnknownModuleTypeNamesItAndTheKnownOnes) {
 
 TEST(ModulesConfig, BadValueNamesFileLineKeyAndValue) {
   expectAll(errorOf("modules:\n  - name: p\n    type: pointing\n    config:\n      ray_distance: abc\n"),
-            {"test.yaml:5", "modules[0].config.ray_distance", "expected a number", "'abc'"});
+            {"test.yaml:5:21: modules[0].config.ray_distance: not a finite number (value 'abc', expected a number in [0.05, "});
   expectAll(errorOf("modules:\n  - {name: p, type: pointing, config: {ray_distance: 0.9}}\n"),
             {"modules[0].config.ray_distance", "out of range", "'0.9'"});
   expectAll(errorOf("modules:\n  - {name: p, type: pointing, config: {ray_distance: .nan}}\n"),
             {"modules[0].config.ray_distance", "'.nan'"});
   expectAll(errorOf("modules:\n  - {name: p, type: pointing, config: {mode: laser}}\n"),
-            {"modules[0].config.mode", "one of {ray, object}", "'laser'"});
+            {"modules[0].config.mode: unknown value (value 'laser', expected one of ray, object)"});
   expectAll(errorOf("modules:\n  - {name: p, type: pointing, config: {hands: [left, foot]}}\n"),
             {"modules[0].config.hands", "'[left, foot]'"});
   expectAll(errorOf("modules:\n  - {name: g, type: grasped_bar, config: {point_a: [0, 1]}}\n"),
@@ -49,15 +49,15 @@ TEST(ModulesConfig, BadValueNamesFileLineKeyAndValue) {
 TEST(ModulesConfig, UnknownKeysAreErrors) {
   expectAll(errorOf("modules:\n  - {name: p, type: pointing, config: {ray_distanse: 0.3}}\n"),
             {"modules[0].config.ray_distanse", "unknown key", "ray_distance"});
-  expectAll(errorOf("modulez: []\n"), {"unknown key 'modulez'"});
+  expectAll(errorOf("modulez: []\n"), {"test.yaml:1:1: modulez: unknown key (expected one of "});
 }
 
 TEST(ModulesConfig, StructuralErrors) {
-  expectAll(errorOf("process: behavior\n"), {"modules", "required"});
+  expectAll(errorOf("process: behavior\n"), {"test.yaml:1:1: modules: missing (expected a list of modules)"});
   expectAll(errorOf("modules: []\n"), {"modules", "empty"});
   expectAll(errorOf("modules:\n  - {name: a, type: pointing}\n  - {name: a, type: walking, config: {goal: [1, 0, 0]}}\n"),
             {"modules[1].name", "duplicate", "'a'"});
-  expectAll(errorOf("modules:\n  - {name: w, type: walking}\n"), {"modules[0].config.goal", "required"});
+  expectAll(errorOf("modules:\n  - {name: w, type: walking}\n"), {"modules[0].config.goal: missing (expected [x, y, yaw] in the world frame)"});
   expectAll(errorOf("modules:\n  - {name: o, type: occlusion}\n"), {"exactly one of 'object'"});
   expectAll(errorOf("modules:\n  - name\n"), {"modules[0]", "expected a map"});
   expectAll(errorOf("robot: {left_hand: paw}\nmodules:\n  - {name: p, type: pointing}\n"),

@@ -14,30 +14,30 @@ namespace reflex::vision {
 namespace {
 using namespace detail;
 
-// A ROS matrix field: {rows, cols, data}; rows*cols must equal data length (and the expected shape).
-std::vector<double> readRosMatrix(const YAML::Node& root, const std::string& key, int rows, int cols,
-                                  const std::string& source) {
-  const std::string where = source + ": " + key;
-  const YAML::Node m = require(root, key, source);
-  if (!m.IsMap()) throw VisionError(where + ": expected a mapping with rows, cols, data");
-  const int r = asInt(require(m, "rows", where), where + ".rows");
-  const int c = asInt(require(m, "cols", where), where + ".cols");
-  const std::vector<double> data = asDoubles(require(m, "data", where), where + ".data");
-  if (r < 0 || c < 0 || static_cast<std::size_t>(r) * static_cast<std::size_t>(c) != data.size())
-    throw VisionError(where + ": rows*cols = " + std::to_string(r) + "*" + std::to_string(c) +
-                      " does not match data length " + std::to_string(data.size()));
+// A ROS matrix field: {rows, cols, data}; rows*cols must equal data length (and the expected shape,
+// rows > 0). Returns the matrix node (for messages about its values) and fills `data`.
+ConfigNode readRosMatrix(const ConfigNode& root, const std::string& key, int rows, int cols, std::vector<double>& data) {
+  const std::string shape = rows > 0 ? "a " + std::to_string(rows) + "x" + std::to_string(cols) + " matrix {rows, cols, data}"
+                                     : "a matrix {rows, cols, data}";
+  const ConfigNode m = root.at(key, shape);
+  m.requireMap(shape);
+  const int r = m.at("rows", "an integer").asInteger(0, 1000);
+  const int c = m.at("cols", "an integer").asInteger(0, 1000);
+  data = m.at("data", "a list of numbers").asNumbers();
+  if (static_cast<std::size_t>(r) * static_cast<std::size_t>(c) != data.size())
+    m.fail("data", "has " + std::to_string(data.size()) + " numbers",
+           "rows*cols = " + std::to_string(r) + "*" + std::to_string(c) + " numbers");
   if (rows > 0 && (r != rows || c != cols))
-    throw VisionError(where + ": expected a " + std::to_string(rows) + "x" + std::to_string(cols) +
-                      " matrix, got " + std::to_string(r) + "x" + std::to_string(c));
-  return data;
+    m.failHere("a " + std::to_string(r) + "x" + std::to_string(c) + " matrix", shape);
+  return m;
 }
 
-std::size_t expectedDistortionLength(const std::string& model, const std::string& where) {
+std::size_t expectedDistortionLength(const ConfigNode& root) {
+  const std::string model = root.requiredString("distortion_model", "plumb_bob, rational_polynomial or equidistant");
   if (model == "plumb_bob") return 5;
   if (model == "rational_polynomial") return 8;
   if (model == "equidistant") return 4;
-  throw VisionError(where + ": unknown distortion_model '" + model +
-                    "' (known: plumb_bob, rational_polynomial, equidistant)");
+  root.fail("distortion_model", "unknown distortion model", "one of plumb_bob, rational_polynomial, equidistant");
 }
 
 bool isRotation(const cv::Matx33d& R) {
@@ -49,22 +49,21 @@ bool isRotation(const cv::Matx33d& R) {
 
 // Focal lengths against the image width, pixel aspect, principal point inside the image
 // (CalibrationLimits). `prime` is "'" for the rectified P, "" for K.
-void checkIntrinsics(double fx, double fy, double cx, double cy, const cv::Size& size, const std::string& where,
+void checkIntrinsics(double fx, double fy, double cx, double cy, const cv::Size& size, const ConfigNode& matrix,
                      const std::string& prime) {
   using L = CalibrationLimits;
   const double w = size.width, h = size.height;
   if (fx < L::kMinFocalPerWidth * w || fx > L::kMaxFocalPerWidth * w)
-    throw VisionError(where + ": focal length fx" + prime + " = " + fmt(fx) + " px is outside [" +
-                      fmt(L::kMinFocalPerWidth * w) + ", " + fmt(L::kMaxFocalPerWidth * w) + "] for a " +
-                      std::to_string(size.width) + " px wide image (a field of view between ~1 and ~169 deg)");
+    matrix.fail("data", "focal length fx" + prime + " = " + fmt(fx) + " px is out of range",
+                "[" + fmt(L::kMinFocalPerWidth * w) + ", " + fmt(L::kMaxFocalPerWidth * w) + "] px for a " +
+                    std::to_string(size.width) + " px wide image (a field of view between ~1 and ~169 deg)");
   if (fy < L::kMinAspect * fx || fy > L::kMaxAspect * fx)
-    throw VisionError(where + ": focal length fy" + prime + " = " + fmt(fy) + " px is outside [" +
-                      fmt(L::kMinAspect * fx) + ", " + fmt(L::kMaxAspect * fx) + "] (fx" + prime + " = " + fmt(fx) +
-                      ": pixel aspect between " + fmt(L::kMinAspect) + " and " + fmt(L::kMaxAspect) + ")");
+    matrix.fail("data", "focal length fy" + prime + " = " + fmt(fy) + " px is out of range",
+                "[" + fmt(L::kMinAspect * fx) + ", " + fmt(L::kMaxAspect * fx) + "] px (fx" + prime + " = " + fmt(fx) +
+                    ": pixel aspect between " + fmt(L::kMinAspect) + " and " + fmt(L::kMaxAspect) + ")");
   if (!(cx >= 0.0 && cx <= w) || !(cy >= 0.0 && cy <= h))
-    throw VisionError(where + ": principal point (cx" + prime + ", cy" + prime + ") = (" + fmt(cx) + ", " + fmt(cy) +
-                      ") is outside the " + std::to_string(size.width) + "x" + std::to_string(size.height) +
-                      " image");
+    matrix.fail("data", "principal point (cx" + prime + ", cy" + prime + ") = (" + fmt(cx) + ", " + fmt(cy) + ") is outside the image",
+                "a point inside the " + std::to_string(size.width) + "x" + std::to_string(size.height) + " image");
 }
 
 // Fraction of the rectified image (a 32 x 24 grid of pixel centres) that sees the raw image: each
@@ -112,54 +111,43 @@ CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& sour
     throw VisionError(source + ": missing field 'camera_matrix': this is an OpenCV FileStorage calibration, not a ROS "
                       "camera_info file; convert it with `reflex_calibrate convert " + source +
                       " [EXTRINSICS_FILE] --out DIR` (writes DIR/left.yaml and DIR/right.yaml, see vision/README.md)");
-  const YAML::Node root = parseYaml(yaml_text, source);
+  const ConfigNode root = parseYaml(yaml_text, source);
   CameraInfo info;
-  const int w = asInt(require(root, "image_width", source), source + ": image_width");
-  const int h = asInt(require(root, "image_height", source), source + ": image_height");
   using L = CalibrationLimits;
-  const std::string side_range = " must be in [" + std::to_string(L::kMinImageSide) + ", " +
-                                 std::to_string(L::kMaxImageSide) + "] pixels";
-  if (w < L::kMinImageSide || w > L::kMaxImageSide)
-    throw VisionError(source + ": image_width = " + std::to_string(w) + side_range);
-  if (h < L::kMinImageSide || h > L::kMaxImageSide)
-    throw VisionError(source + ": image_height = " + std::to_string(h) + side_range);
+  const int w = root.at("image_width", "an integer").asInteger(L::kMinImageSide, L::kMaxImageSide);
+  const int h = root.at("image_height", "an integer").asInteger(L::kMinImageSide, L::kMaxImageSide);
   info.image_size = cv::Size(w, h);
-  if (root["camera_name"]) info.camera_name = asString(root["camera_name"], source + ": camera_name");
+  info.camera_name = root.string("camera_name", info.camera_name);
 
-  const std::vector<double> k = readRosMatrix(root, "camera_matrix", 3, 3, source);
+  std::vector<double> k;
+  const ConfigNode km = readRosMatrix(root, "camera_matrix", 3, 3, k);
   for (int i = 0; i < 9; ++i) info.K.val[i] = k[static_cast<std::size_t>(i)];
-  if (!(info.K(0, 0) > 0.0))
-    throw VisionError(source + ": camera_matrix: focal length fx = " + fmt(info.K(0, 0)) + " must be positive");
-  if (!(info.K(1, 1) > 0.0))
-    throw VisionError(source + ": camera_matrix: focal length fy = " + fmt(info.K(1, 1)) + " must be positive");
+  if (!(info.K(0, 0) > 0.0)) km.fail("data", "focal length fx = " + fmt(info.K(0, 0)) + " is not positive", "fx > 0");
+  if (!(info.K(1, 1) > 0.0)) km.fail("data", "focal length fy = " + fmt(info.K(1, 1)) + " is not positive", "fy > 0");
   if (info.K(2, 0) != 0.0 || info.K(2, 1) != 0.0 || info.K(2, 2) != 1.0)
-    throw VisionError(source + ": camera_matrix: last row must be [0, 0, 1]");
-  checkIntrinsics(info.K(0, 0), info.K(1, 1), info.K(0, 2), info.K(1, 2), info.image_size,
-                  source + ": camera_matrix", "");
+    km.fail("data", "last row is not [0, 0, 1]", "[fx, 0, cx, 0, fy, cy, 0, 0, 1]");
+  checkIntrinsics(info.K(0, 0), info.K(1, 1), info.K(0, 2), info.K(1, 2), info.image_size, km, "");
 
-  info.distortion_model =
-      asString(require(root, "distortion_model", source), source + ": distortion_model");
-  const std::size_t nd = expectedDistortionLength(info.distortion_model, source + ": distortion_model");
-  info.D = readRosMatrix(root, "distortion_coefficients", -1, -1, source);
+  const std::size_t nd = expectedDistortionLength(root);
+  info.distortion_model = root.requiredString("distortion_model");
+  const ConfigNode dm = readRosMatrix(root, "distortion_coefficients", -1, -1, info.D);
   if (info.D.size() != nd)
-    throw VisionError(source + ": distortion_coefficients: model '" + info.distortion_model + "' needs " +
-                      std::to_string(nd) + " coefficients, got " + std::to_string(info.D.size()));
+    dm.fail("data", "has " + std::to_string(info.D.size()) + " coefficients",
+            std::to_string(nd) + " for the distortion model '" + info.distortion_model + "'");
 
-  const std::vector<double> r = readRosMatrix(root, "rectification_matrix", 3, 3, source);
+  std::vector<double> r;
+  const ConfigNode rm = readRosMatrix(root, "rectification_matrix", 3, 3, r);
   for (int i = 0; i < 9; ++i) info.R.val[i] = r[static_cast<std::size_t>(i)];
-  if (!isRotation(info.R))
-    throw VisionError(source + ": rectification_matrix is not a rotation (R R^T != I or det <= 0)");
+  if (!isRotation(info.R)) rm.fail("data", "not a rotation", "R R^T = I and det > 0");
 
-  const std::vector<double> p = readRosMatrix(root, "projection_matrix", 3, 4, source);
+  std::vector<double> p;
+  const ConfigNode pm = readRosMatrix(root, "projection_matrix", 3, 4, p);
   for (int i = 0; i < 12; ++i) info.P.val[i] = p[static_cast<std::size_t>(i)];
-  if (!(info.P(0, 0) > 0.0))
-    throw VisionError(source + ": projection_matrix: focal length fx' = " + fmt(info.P(0, 0)) + " must be positive");
-  if (!(info.P(1, 1) > 0.0))
-    throw VisionError(source + ": projection_matrix: focal length fy' = " + fmt(info.P(1, 1)) + " must be positive");
+  if (!(info.P(0, 0) > 0.0)) pm.fail("data", "focal length fx' = " + fmt(info.P(0, 0)) + " is not positive", "fx' > 0");
+  if (!(info.P(1, 1) > 0.0)) pm.fail("data", "focal length fy' = " + fmt(info.P(1, 1)) + " is not positive", "fy' > 0");
   if (info.P(2, 0) != 0.0 || info.P(2, 1) != 0.0 || info.P(2, 2) != 1.0 || info.P(2, 3) != 0.0)
-    throw VisionError(source + ": projection_matrix: last row must be [0, 0, 1, 0]");
-  checkIntrinsics(info.P(0, 0), info.P(1, 1), info.P(0, 2), info.P(1, 2), info.image_size,
-                  source + ": projection_matrix", "'");
+    pm.fail("data", "last row is not [0, 0, 1, 0]", "[fx', 0, cx', Tx, 0, fy', cy', Ty, 0, 0, 1, 0]");
+  checkIntrinsics(info.P(0, 0), info.P(1, 1), info.P(0, 2), info.P(1, 2), info.image_size, pm, "'");
   return info;
 }
 
@@ -230,19 +218,23 @@ StereoCalibration loadStereoCalibration(const std::string& left_path, const std:
 }
 
 CameraMount parseCameraMount(const std::string& yaml_text, const std::string& source) {
-  const YAML::Node root = parseYaml(yaml_text, source);
+  return detail::readCameraMount(parseYaml(yaml_text, source));
+}
+
+CameraMount detail::readCameraMount(const ConfigNode& root) {
+  root.requireMap("{translation, rotation_matrix}");
+  root.rejectUnknown({"translation", "rotation_matrix"});
   CameraMount m;
-  const std::vector<double> t = asDoublesN(require(root, "translation", source), 3, source + ": translation");
+  const std::vector<double> t = root.at("translation", "[x, y, z] in m").asNumbers(3);
   m.p_B_C = cv::Vec3d(t[0], t[1], t[2]);
-  const std::vector<double> r =
-      asDoublesN(require(root, "rotation_matrix", source), 9, source + ": rotation_matrix");
+  const std::vector<double> r = root.at("rotation_matrix", "9 numbers, row-major").asNumbers(9);
   for (int i = 0; i < 9; ++i) m.R_B_C.val[i] = r[static_cast<std::size_t>(i)];
   for (int i = 0; i < 3; ++i)
     if (std::abs(t[static_cast<std::size_t>(i)]) > kMaxMountOffset)
-      throw VisionError(source + ": translation[" + std::to_string(i) + "] = " + fmt(t[static_cast<std::size_t>(i)]) +
-                        " m is more than " + fmt(kMaxMountOffset) + " m from the robot base frame");
-  if (!isRotation(m.R_B_C))
-    throw VisionError(source + ": rotation_matrix is not a rotation (R R^T != I within 1e-5, or det <= 0)");
+      root.fail("translation", "translation[" + std::to_string(i) + "] = " + fmt(t[static_cast<std::size_t>(i)]) +
+                                   " m is too far from the robot base frame",
+                "at most " + fmt(kMaxMountOffset) + " m on each axis");
+  if (!isRotation(m.R_B_C)) root.fail("rotation_matrix", "not a rotation", "R R^T = I within 1e-5 and det > 0");
   return m;
 }
 

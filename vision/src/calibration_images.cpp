@@ -87,9 +87,9 @@ CalibrationImages CalibrationImages::fromSession(const std::string& dir, int eve
   std::string lv = "left.mp4", rv = "right.mp4";
   const std::string manifest = dir + "/session.yaml";
   if (fs::exists(manifest, ec)) {
-    const YAML::Node root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
-    if (root["left_video"]) lv = asString(root["left_video"], manifest + ": left_video");
-    if (root["right_video"]) rv = asString(root["right_video"], manifest + ": right_video");
+    const ConfigNode root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
+    lv = root.string("left_video", lv);
+    rv = root.string("right_video", rv);
   }
   c.left_video_ = dir + "/" + lv;
   c.right_video_ = dir + "/" + rv;

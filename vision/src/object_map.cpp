@@ -40,19 +40,19 @@ const ObjectSpec* ObjectMap::findByName(const std::string& name) const {
 }
 
 ObjectMap parseObjectMap(const std::string& yaml_text, const std::string& source) {
-  const YAML::Node root = parseYaml(yaml_text, source);
-  std::string family = "tag36h11";
-  if (root["family"]) family = asString(root["family"], source + ": family");
-  const YAML::Node list = require(root, "objects", source);
-  if (!list.IsSequence()) throw VisionError(source + ": objects: expected a list");
-  if (list.size() == 0) throw VisionError(source + ": objects: the list is empty (no tag would ever be reported)");
+  const ConfigNode root = parseYaml(yaml_text, source);
+  root.rejectUnknown({"family", "objects"});
+  const std::string family = root.string("family", "tag36h11");
+  const std::vector<ConfigNode> list = root.at("objects", "a list of {id, name, size}").elements();
+  if (list.empty()) root.fail("objects", "the list is empty (no tag would ever be reported)", "at least one object");
   std::vector<ObjectSpec> objects;
-  for (std::size_t i = 0; i < list.size(); ++i) {
-    const std::string where = source + ": objects[" + std::to_string(i) + "]";
+  for (const ConfigNode& item : list) {
+    item.requireMap("{id, name, size}");
+    item.rejectUnknown({"id", "name", "size"});
     ObjectSpec o;
-    o.tag_id = asInt(require(list[i], "id", where), where + ".id");
-    o.name = asString(require(list[i], "name", where), where + ".name");
-    o.tag_size = asDouble(require(list[i], "size", where), where + ".size");
+    o.tag_id = item.at("id", "a tag id").asInteger(0, std::numeric_limits<int>::max());
+    o.name = item.requiredString("name", "the object's name");
+    o.tag_size = item.requiredNumber("size", ObjectMap::kMinTagSize, ObjectMap::kMaxTagSize, "m (edge of the black square)");
     objects.push_back(o);
   }
   return ObjectMap(family, objects, source);

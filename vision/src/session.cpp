@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <cmath>
+#include <limits>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -156,26 +157,19 @@ SessionInfo loadSessionInfo(const std::string& dir) {
   info.dir = dir;
   info.name = fs::path(dir).filename().string();
   if (fs::exists(manifest, ec)) {
-    const YAML::Node root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
-    if (root["format"] && asString(root["format"], manifest + ": format") != "reflex_stereo_session")
-      throw VisionError(manifest + ": format '" + root["format"].as<std::string>() +
-                        "' is not 'reflex_stereo_session'");
-    if (root["version"] && asInt(root["version"], manifest + ": version") != 1)
-      throw VisionError(manifest + ": version " + root["version"].as<std::string>() + " is not supported (1)");
-    if (root["name"]) info.name = asString(root["name"], manifest + ": name");
-    if (root["fps"]) {
-      info.fps = asDouble(root["fps"], manifest + ": fps");
+    const ConfigNode root = parseYaml(readTextFile(manifest, "session manifest"), manifest);
+    if (root.has("format") && root.string("format", "") != "reflex_stereo_session")
+      root.fail("format", "not a stereo session", "reflex_stereo_session");
+    if (root.integer("version", 1, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()) != 1)
+      root.fail("version", "not supported", "1");
+    info.name = root.string("name", info.name);
+    if (root.has("fps")) {
+      info.fps = root.number("fps", info.fps, -kAnyNumber, kAnyNumber, "Hz");
       if (!(info.fps > 0.0) || info.fps > kMaxSessionFps)
-        throw VisionError(manifest + ": fps = " + fmt(info.fps) + " must be in (0, " + fmt(kMaxSessionFps) + "]");
+        root.fail("fps", "out of range", "(0, " + fmt(kMaxSessionFps) + "] Hz");
     }
-    if (root["frames"]) {
-      manifest_frames = asInt(root["frames"], manifest + ": frames");
-      if (manifest_frames < 1)
-        throw VisionError(manifest + ": frames = " + std::to_string(manifest_frames) + " must be at least 1");
-    }
-    auto file = [&](const char* key, std::string& field) {
-      if (root[key]) field = asString(root[key], manifest + ": " + key);
-    };
+    if (root.has("frames")) manifest_frames = root.integer("frames", -1, 1, std::numeric_limits<int>::max());
+    auto file = [&](const char* key, std::string& field) { field = root.string(key, field); };
     file("left_video", info.files.left_video);
     file("right_video", info.files.right_video);
     file("timestamps", info.files.timestamps);

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 namespace reflex::vision {
 namespace {
@@ -36,46 +37,51 @@ bool inIntervals(const std::vector<std::pair<double, double>>& iv, double t) {
 }
 
 // ---------------------------------------------------------------- script parsing
-std::vector<Keyframe> parsePath(const YAML::Node& n, const std::string& where) {
-  if (!n.IsSequence() || n.size() == 0) throw VisionError(where + ": expected a non-empty list of keyframes");
+cv::Vec3d vec3Of(const ConfigNode& n) {
+  const std::vector<double> v = n.asNumbers(3);
+  return cv::Vec3d(v[0], v[1], v[2]);
+}
+
+std::vector<Keyframe> parsePath(const ConfigNode& n) {
+  const std::vector<ConfigNode> keys = n.elements();
+  if (keys.empty()) n.failHere("the list is empty", "a non-empty list of keyframes {t, p, rpy_deg}");
   std::vector<Keyframe> out;
-  for (std::size_t i = 0; i < n.size(); ++i) {
-    const std::string w = where + "[" + std::to_string(i) + "]";
+  for (const ConfigNode& e : keys) {
+    e.requireMap("a keyframe {t, p, rpy_deg}");
+    e.rejectUnknown({"t", "p", "rpy_deg"});
     Keyframe k;
-    k.t = asDouble(require(n[i], "t", w), w + ".t");
-    const std::vector<double> p = asDoublesN(require(n[i], "p", w), 3, w + ".p");
-    k.p_B = cv::Vec3d(p[0], p[1], p[2]);
-    if (n[i]["rpy_deg"]) {
-      const std::vector<double> r = asDoublesN(n[i]["rpy_deg"], 3, w + ".rpy_deg");
-      k.rpy_deg = cv::Vec3d(r[0], r[1], r[2]);
-    }
+    k.t = e.requiredNumber("t", -kAnyNumber, kAnyNumber, "s");
+    k.p_B = vec3Of(e.at("p", "[x, y, z] in m"));
+    if (e.has("rpy_deg")) k.rpy_deg = vec3Of(e.at("rpy_deg", "[roll, pitch, yaw] in degrees"));
     if (!out.empty() && !(k.t > out.back().t))
-      throw VisionError(w + ".t = " + fmt(k.t) + " must be after the previous keyframe's " + fmt(out.back().t));
+      e.fail("t", "not after the previous keyframe's t", "t > " + fmt(out.back().t) + " s");
     out.push_back(k);
   }
   return out;
 }
 
-std::vector<std::pair<double, double>> parseIntervals(const YAML::Node& n, const std::string& where) {
+std::vector<std::pair<double, double>> parseIntervals(const ConfigNode& parent, const std::string& key) {
   std::vector<std::pair<double, double>> out;
-  if (!n) return out;
-  if (!n.IsSequence()) throw VisionError(where + ": expected a list of [t0, t1] intervals");
-  for (std::size_t i = 0; i < n.size(); ++i) {
-    const std::vector<double> v = asDoublesN(n[i], 2, where + "[" + std::to_string(i) + "]");
-    if (!(v[1] > v[0])) throw VisionError(where + "[" + std::to_string(i) + "]: t1 must be after t0");
+  if (!parent.has(key)) return out;
+  for (const ConfigNode& e : parent.at(key, "a list of [t0, t1] intervals").elements()) {
+    const std::vector<double> v = e.asNumbers(2);
+    if (!(v[1] > v[0])) e.failHere("t1 is not after t0", "[t0, t1] with t1 > t0");
     out.emplace_back(v[0], v[1]);
   }
   return out;
 }
 
-cv::Matx33d parseIntrinsics(const YAML::Node& n, const std::string& where, std::vector<double>& D) {
-  const double fx = asDouble(require(n, "fx", where), where + ".fx");
-  const double fy = asDouble(require(n, "fy", where), where + ".fy");
-  const double cx = asDouble(require(n, "cx", where), where + ".cx");
-  const double cy = asDouble(require(n, "cy", where), where + ".cy");
-  if (!(fx > 0.0) || !(fy > 0.0)) throw VisionError(where + ": focal lengths must be positive");
+cv::Matx33d parseIntrinsics(const ConfigNode& n, std::vector<double>& D) {
+  n.requireMap("{fx, fy, cx, cy, distortion}");
+  n.rejectUnknown({"fx", "fy", "cx", "cy", "distortion"});
+  const double fx = n.requiredNumber("fx", -kAnyNumber, kAnyNumber, "px");
+  const double fy = n.requiredNumber("fy", -kAnyNumber, kAnyNumber, "px");
+  const double cx = n.requiredNumber("cx", -kAnyNumber, kAnyNumber, "px");
+  const double cy = n.requiredNumber("cy", -kAnyNumber, kAnyNumber, "px");
+  if (!(fx > 0.0)) n.fail("fx", "focal length not positive", "fx > 0 px");
+  if (!(fy > 0.0)) n.fail("fy", "focal length not positive", "fy > 0 px");
   D = std::vector<double>(5, 0.0);
-  if (n["distortion"]) D = asDoublesN(n["distortion"], 5, where + ".distortion");
+  if (n.has("distortion")) D = n.at("distortion", "5 plumb_bob coefficients").asNumbers(5);
   return {fx, 0, cx, 0, fy, cy, 0, 0, 1};
 }
 
@@ -292,94 +298,87 @@ QuadPose evaluateTrajectory(const std::vector<Keyframe>& path, double t) {
 }
 
 SceneScript parseSceneScript(const std::string& yaml_text, const std::string& source) {
-  const YAML::Node root = parseYaml(yaml_text, source);
+  const ConfigNode root = parseYaml(yaml_text, source);
+  root.rejectUnknown({"name", "duration", "fps", "seed", "family", "codecs", "rig", "render", "objects", "occluders"});
   SceneScript s;
-  if (root["name"]) s.name = asString(root["name"], source + ": name");
-  s.duration = asDouble(require(root, "duration", source), source + ": duration");
-  s.fps = asDouble(require(root, "fps", source), source + ": fps");
-  if (!(s.duration > 0.0)) throw VisionError(source + ": duration = " + fmt(s.duration) + " must be positive");
-  if (!(s.fps > 0.0) || s.fps > 120.0) throw VisionError(source + ": fps = " + fmt(s.fps) + " must be in (0, 120]");
-  if (root["seed"]) s.seed = root["seed"].as<std::uint64_t>();
-  if (root["family"]) s.family = asString(root["family"], source + ": family");
-  if (root["codecs"]) {
+  s.name = root.string("name", s.name);
+  s.duration = root.requiredNumber("duration", -kAnyNumber, kAnyNumber, "s");
+  s.fps = root.requiredNumber("fps", -kAnyNumber, kAnyNumber, "Hz");
+  if (!(s.duration > 0.0)) root.fail("duration", "not positive", "a duration > 0 s");
+  if (!(s.fps > 0.0) || s.fps > 120.0) root.fail("fps", "out of range", "(0, 120] Hz");
+  if (root.has("seed")) {
+    try {
+      s.seed = root.raw("seed").as<std::uint64_t>();
+    } catch (const YAML::Exception&) {
+      root.fail("seed", "not an unsigned integer", "an integer in [0, 2^64)");
+    }
+  }
+  s.family = root.string("family", s.family);
+  if (root.has("codecs")) {
     s.codecs.clear();
-    const YAML::Node c = root["codecs"];
-    for (std::size_t i = 0; i < c.size(); ++i) {
-      if (!c[i].IsSequence() || c[i].size() != 2)
-        throw VisionError(source + ": codecs[" + std::to_string(i) + "]: expected [fourcc, extension]");
-      s.codecs.emplace_back(c[i][0].as<std::string>(), c[i][1].as<std::string>());
+    for (const ConfigNode& c : root.at("codecs", "a list of [fourcc, extension]").elements()) {
+      if (!c.isList() || c.node().size() != 2 || !c.node()[0].IsScalar() || !c.node()[1].IsScalar())
+        c.failHere("not a codec", "[fourcc, extension]");
+      s.codecs.emplace_back(c.node()[0].Scalar(), c.node()[1].Scalar());
     }
   }
-  if (const YAML::Node rig = root["rig"]) {
-    const std::string w = source + ": rig";
-    if (rig["image_size"]) {
-      const std::vector<double> v = asDoublesN(rig["image_size"], 2, w + ".image_size");
-      s.rig.image_size = cv::Size(static_cast<int>(v[0]), static_cast<int>(v[1]));
-      if (s.rig.image_size.width < 64 || s.rig.image_size.height < 64)
-        throw VisionError(w + ".image_size must be at least 64x64");
-    }
-    if (rig["left"]) s.rig.K_left = parseIntrinsics(rig["left"], w + ".left", s.rig.D_left);
-    if (rig["right"]) s.rig.K_right = parseIntrinsics(rig["right"], w + ".right", s.rig.D_right);
-    if (rig["baseline"]) s.rig.baseline = asDouble(rig["baseline"], w + ".baseline");
-    if (!(s.rig.baseline > 0.0)) throw VisionError(w + ".baseline must be positive");
-    if (rig["right_rpy_deg"]) {
-      const std::vector<double> v = asDoublesN(rig["right_rpy_deg"], 3, w + ".right_rpy_deg");
-      s.rig.right_rpy_deg = cv::Vec3d(v[0], v[1], v[2]);
-    }
-    if (!rig["mount"])
-      throw VisionError(w + ": missing field 'mount' (the left camera in the robot base frame, the format of "
-                        "camera_mount.yaml; the shipped robot with its head at zero: bringup/vision/camera_mount.yaml)");
-    s.rig.mount = parseCameraMount(YAML::Dump(rig["mount"]), w + ".mount");
-  } else {
-    throw VisionError(source + ": missing field 'rig' (image size, cameras, baseline and mount)");
+  const ConfigNode rig = root.at("rig", "a map {image_size, left, right, baseline, right_rpy_deg, mount}");
+  rig.requireMap("a map {image_size, left, right, baseline, right_rpy_deg, mount}");
+  rig.rejectUnknown({"image_size", "left", "right", "baseline", "right_rpy_deg", "mount"});
+  if (rig.has("image_size")) {
+    const std::vector<double> v = rig.at("image_size", "[width, height] in px").asNumbers(2);
+    s.rig.image_size = cv::Size(static_cast<int>(v[0]), static_cast<int>(v[1]));
+    if (s.rig.image_size.width < 64 || s.rig.image_size.height < 64)
+      rig.fail("image_size", "smaller than 64x64", "at least [64, 64] px");
   }
-  if (const YAML::Node r = root["render"]) {
-    const std::string w = source + ": render";
-    if (r["supersample"]) s.render.supersample = asInt(r["supersample"], w + ".supersample");
-    if (s.render.supersample < 1 || s.render.supersample > 8) throw VisionError(w + ".supersample must be 1..8");
-    if (r["noise_sigma"]) s.render.noise_sigma = asDouble(r["noise_sigma"], w + ".noise_sigma");
-    if (r["blur_sigma"]) {
-      const std::vector<double> v = asDoublesN(r["blur_sigma"], 2, w + ".blur_sigma");
+  if (rig.has("left")) s.rig.K_left = parseIntrinsics(rig.at("left", "intrinsics"), s.rig.D_left);
+  if (rig.has("right")) s.rig.K_right = parseIntrinsics(rig.at("right", "intrinsics"), s.rig.D_right);
+  s.rig.baseline = rig.number("baseline", s.rig.baseline, -kAnyNumber, kAnyNumber, "m");
+  if (!(s.rig.baseline > 0.0)) rig.fail("baseline", "not positive", "a baseline > 0 m");
+  if (rig.has("right_rpy_deg")) s.rig.right_rpy_deg = vec3Of(rig.at("right_rpy_deg", "[roll, pitch, yaw] in degrees"));
+  s.rig.mount = readCameraMount(rig.at("mount",
+                                       "the left camera in the robot base frame, the format of camera_mount.yaml (the "
+                                       "shipped robot with its head at zero: bringup/vision/camera_mount.yaml)"));
+  if (root.has("render")) {
+    const ConfigNode r = root.child("render");
+    r.rejectUnknown({"supersample", "noise_sigma", "blur_sigma", "lighting", "dropout_probability", "timestamp_jitter",
+                     "person"});
+    s.render.supersample = r.integer("supersample", s.render.supersample, 1, 8);
+    s.render.noise_sigma = r.number("noise_sigma", s.render.noise_sigma, -kAnyNumber, kAnyNumber);
+    if (r.has("blur_sigma")) {
+      const std::vector<double> v = r.at("blur_sigma", "[sigma_min, sigma_max]").asNumbers(2);
       s.render.blur_sigma = cv::Vec2d(v[0], v[1]);
     }
-    if (r["lighting"]) {
-      const std::vector<double> v = asDoublesN(r["lighting"], 3, w + ".lighting");
-      s.render.lighting = cv::Vec3d(v[0], v[1], v[2]);
-    }
-    if (r["dropout_probability"]) s.render.dropout_probability = asDouble(r["dropout_probability"], w + ".dropout_probability");
-    if (r["timestamp_jitter"]) s.render.timestamp_jitter = asDouble(r["timestamp_jitter"], w + ".timestamp_jitter");
-    if (r["person"]) s.render.person = asBool(r["person"], w + ".person");
+    if (r.has("lighting")) s.render.lighting = vec3Of(r.at("lighting", "3 numbers"));
+    s.render.dropout_probability = r.number("dropout_probability", s.render.dropout_probability, -kAnyNumber, kAnyNumber);
+    s.render.timestamp_jitter = r.number("timestamp_jitter", s.render.timestamp_jitter, -kAnyNumber, kAnyNumber, "s");
+    s.render.person = r.boolean("person", s.render.person);
     if (s.render.timestamp_jitter < 0.0 || s.render.timestamp_jitter >= 0.5 / s.fps)
-      throw VisionError(w + ".timestamp_jitter must be in [0, half a frame period)");
+      r.fail("timestamp_jitter", "out of range", "[0, half a frame period = " + fmt(0.5 / s.fps) + ") s");
   }
-  const YAML::Node objs = require(root, "objects", source);
-  if (!objs.IsSequence()) throw VisionError(source + ": objects: expected a list");
-  for (std::size_t i = 0; i < objs.size(); ++i) {
-    const std::string w = source + ": objects[" + std::to_string(i) + "]";
+  for (const ConfigNode& o_node : root.list("objects")) {
+    o_node.rejectUnknown({"name", "id", "size", "path", "hidden", "hand"});
     ScriptedObject o;
-    o.name = asString(require(objs[i], "name", w), w + ".name");
-    o.tag_id = asInt(require(objs[i], "id", w), w + ".id");
-    o.tag_size = asDouble(require(objs[i], "size", w), w + ".size");
-    o.path = parsePath(require(objs[i], "path", w), w + ".path");
-    o.hidden = parseIntervals(objs[i]["hidden"], w + ".hidden");
-    if (objs[i]["hand"]) o.hand = asBool(objs[i]["hand"], w + ".hand");
+    o.name = o_node.requiredString("name", "the object's name");
+    o.tag_id = o_node.at("id", "a tag id").asInteger(std::numeric_limits<int>::min(), std::numeric_limits<int>::max());
+    o.tag_size = o_node.requiredNumber("size", -kAnyNumber, kAnyNumber, "m");
+    o.path = parsePath(o_node.at("path", "a non-empty list of keyframes"));
+    o.hidden = parseIntervals(o_node, "hidden");
+    o.hand = o_node.boolean("hand", o.hand);
     s.objects.push_back(o);
   }
-  if (const YAML::Node occ = root["occluders"]) {
-    for (std::size_t i = 0; i < occ.size(); ++i) {
-      const std::string w = source + ": occluders[" + std::to_string(i) + "]";
-      ScriptedOccluder o;
-      o.name = occ[i]["name"] ? asString(occ[i]["name"], w + ".name") : "occluder" + std::to_string(i);
-      const std::vector<double> sz = asDoublesN(require(occ[i], "size", w), 2, w + ".size");
-      o.size = cv::Vec2d(sz[0], sz[1]);
-      if (occ[i]["colour"]) {
-        const std::vector<double> c = asDoublesN(occ[i]["colour"], 3, w + ".colour");
-        o.colour_bgr = cv::Vec3d(c[0], c[1], c[2]);
-      }
-      o.path = parsePath(require(occ[i], "path", w), w + ".path");
-      o.active = parseIntervals(occ[i]["active"], w + ".active");
-      s.occluders.push_back(o);
-    }
+  if (!root.has("objects")) root.fail("objects", "missing", "a list of objects {name, id, size, path}");
+  int index = 0;
+  for (const ConfigNode& c : root.list("occluders")) {
+    c.rejectUnknown({"name", "size", "colour", "path", "active"});
+    ScriptedOccluder o;
+    o.name = c.string("name", "occluder" + std::to_string(index++));
+    const std::vector<double> sz = c.at("size", "[width, height] in m").asNumbers(2);
+    o.size = cv::Vec2d(sz[0], sz[1]);
+    if (c.has("colour")) o.colour_bgr = vec3Of(c.at("colour", "[b, g, r]"));
+    o.path = parsePath(c.at("path", "a non-empty list of keyframes"));
+    o.active = parseIntervals(c, "active");
+    s.occluders.push_back(o);
   }
   // Validates ids/names/sizes and the family the same way a session's objects.yaml is validated.
   std::vector<ObjectSpec> specs;

@@ -2,8 +2,8 @@
 // URDF) and the link poses of the latest joint state from the bus (reflex/joint_state), or of the
 // rest configuration (every joint at 0, clamped into its limits) until a joint state arrives.
 //
-// Modules ask for points in the base frame B (= the model's root frame W): shoulders, hand points,
-// head and head camera poses. All names come from RobotConfig (defaults fit
+// Modules ask for points in the base frame B (the model's root link frame, the controller's too):
+// shoulders, hand points, head and head camera poses. All names come from RobotConfig (defaults fit
 // bringup/robots/asimo_like.urdf) and are checked when the model is loaded.
 #pragma once
 

@@ -78,7 +78,7 @@ struct ArmState {
   bool estop_latched = false;
 };
 
-/// A hand target in W (HandTargets; position_base is W for the shipped robot, whose root is the base).
+/// A hand target in W (HandTargets.position_base: the robot base frame is the URDF root frame).
 struct HandTargetState {
   bool given = false;
   Eigen::Vector3d p_W = Eigen::Vector3d::Zero();
