@@ -38,7 +38,7 @@ bool descendsFrom(const Model& model, int link, int ancestor) {
 }
 
 /// The side of a pair on which arm `a`'s virtual force acts (Eq. 14-16): +1 for seg_a (the force
-/// acts at p_W_a along +nhat_W), -1 for seg_b. For a pair with another body part that is the arm's
+/// acts at p_B_a along +nhat_B), -1 for seg_b. For a pair with another body part that is the arm's
 /// own segment. For a pair of two segments that arm `a` both moves (shoulder-hand, upper arm-hand, a
 /// grasped object against the upper arm) it is the DISTAL one, whose link descends from the other's:
 /// the paper's S_i are the forearm and the hand, and the force must push the hand away from the
@@ -172,38 +172,38 @@ void followTrajectory(const Model& model, const ControllerModel& cm, ControllerD
   const double dt = params.period;
   ws.q.resize(arm.n);
   for (int i = 0; i < arm.n; ++i) ws.q[i] = data.kin.q[arm.q[i]];
-  ws.hand_W = data.kin.X_W_L[arm.hand_link] * arm.hand_point_L;
-  data.arms[a].hand_W = ws.hand_W;
-  computePointJacobian(model, data.kin, arm.hand_link, ws.hand_W, data.J_full);
+  ws.hand_B = data.kin.X_B_L[arm.hand_link] * arm.hand_point_L;
+  data.arms[a].hand_B = ws.hand_B;
+  computePointJacobian(model, data.kin, arm.hand_link, ws.hand_B, data.J_full);
   gather(arm, data.J_full, ws.J_hand);
 
   const HandCommand& cmd = input.hands[a];
   ws.target_given = cmd.status == HandStatus::kGiven && !recovery_only;
-  ws.hand_velocity_W.setZero();
+  ws.hand_velocity_B.setZero();
   if (ws.target_given) {
     if (!traj.active) {
       traj.active = true;
-      traj.ref_W = ws.hand_W;
+      traj.ref_B = ws.hand_B;
     }
-    traj.goal_W = cmd.target_W;
-    const Eigen::Vector3d to_goal = traj.goal_W - traj.ref_W;
+    traj.goal_B = cmd.target_B;
+    const Eigen::Vector3d to_goal = traj.goal_B - traj.ref_B;
     const double step = params.trajectory_speed * dt;
     const double remaining = to_goal.norm();
     Eigen::Vector3d v_ref = Eigen::Vector3d::Zero();
     if (remaining <= step) {
-      traj.ref_W = traj.goal_W;
+      traj.ref_B = traj.goal_B;
     } else {
       v_ref = to_goal * (params.trajectory_speed / remaining);
-      traj.ref_W += v_ref * dt;
+      traj.ref_B += v_ref * dt;
     }
-    ws.hand_velocity_W = v_ref + params.reach_gain * (traj.ref_W - ws.hand_W);
-    const double speed = ws.hand_velocity_W.norm();
-    if (speed > params.max_task_speed) ws.hand_velocity_W *= params.max_task_speed / speed;
+    ws.hand_velocity_B = v_ref + params.reach_gain * (traj.ref_B - ws.hand_B);
+    const double speed = ws.hand_velocity_B.norm();
+    if (speed > params.max_task_speed) ws.hand_velocity_B *= params.max_task_speed / speed;
   } else {
     traj.active = false;
-    traj.ref_W = ws.hand_W;
+    traj.ref_B = ws.hand_B;
   }
-  data.arms[a].reference_W = traj.ref_W;
+  data.arms[a].reference_B = traj.ref_B;
 }
 
 /// Stage 2, the arm's pair terms: for every candidate pair the arm moves, its share of the merged
@@ -259,7 +259,7 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     if (pd.distance < params.d_a) {
       const int side = forceSide(model, data.dist, pd, owner_a, owner_b, a);
       // e_f,ij points from the other segment towards the arm's closest point (Eq. 16).
-      ws.forces.add(params.k_virtual, params.d_a, pd.distance, side * pd.nhat_W, side > 0 ? pd.p_W_a : pd.p_W_b);
+      ws.forces.add(params.k_virtual, params.d_a, pd.distance, side * pd.nhat_B, side > 0 ? pd.p_B_a : pd.p_B_b);
       ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, params.k_virtual * (params.d_a - pd.distance)};
     }
   }
@@ -295,12 +295,12 @@ void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm,
                             ArmStatus& status, ArmWorkspace& ws) {
   ws.J_avoid = TaskJacobian::Zero(3, arm.n);
   ws.force_magnitude = 0.0;
-  ws.force_dir_W.setZero();
+  ws.force_dir_B.setZero();
   const double weight_sum = ws.forces.weight;
   const Eigen::Vector3d F_all = ws.forces.force();
   if (weight_sum > 0.0) {
     ws.force_magnitude = F_all.norm();
-    if (ws.force_magnitude > 1e-12) ws.force_dir_W = F_all / ws.force_magnitude;
+    if (ws.force_magnitude > 1e-12) ws.force_dir_B = F_all / ws.force_magnitude;
     // Each term's relative Jacobian (computeRelativeJacobian) on the arm's columns only: column i
     // is (w x p_a + v) if joint i moves link_a, minus (w x p_b + v) if it moves link_b (twist (w, v)).
     const std::vector<std::uint64_t>& columns = data.arm_columns_of_link[static_cast<std::size_t>(a)];
@@ -313,17 +313,17 @@ void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm,
       for (int i = 0; i < arm.n; ++i) {
         const bool moves_a = (on_a >> i) & 1U, moves_b = (on_b >> i) & 1U;
         if (!moves_a && !moves_b) continue;
-        const auto twist = data.kin.twist_W.col(arm.q[static_cast<std::size_t>(i)]);
+        const auto twist = data.kin.twist_B.col(arm.q[static_cast<std::size_t>(i)]);
         Eigen::Vector3d col = Eigen::Vector3d::Zero();
-        if (moves_a) col += twist.head<3>().cross(pd.p_W_a) + twist.tail<3>();
-        if (moves_b) col -= twist.head<3>().cross(pd.p_W_b) + twist.tail<3>();
+        if (moves_a) col += twist.head<3>().cross(pd.p_B_a) + twist.tail<3>();
+        if (moves_b) col -= twist.head<3>().cross(pd.p_B_b) + twist.tail<3>();
         ws.J_avoid.col(i) += weight * col;
       }
     }
   }
   status.force = ws.force_magnitude;
-  status.force_dir_W = ws.force_dir_W;
-  status.force_point_W = ws.forces.point();
+  status.force_dir_B = ws.force_dir_B;
+  status.force_point_B = ws.forces.point();
 }
 
 /// Stage 4, the two controllers and their blend: whole-body motion (Eq. 2-5, with joint-limit
@@ -347,7 +347,7 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   if (!ws.target_given) xi_rest = -params.alpha_rest * (ws.q - arm.rest.head(n));
 
   // The virtual-force term of Eq. 8 along the merged direction: row^+ |F^all|.
-  const RowA avoid_row = ws.force_dir_W.transpose() * ws.J_avoid;  // J_ca|row,y in the merged frame
+  const RowA avoid_row = ws.force_dir_B.transpose() * ws.J_avoid;  // J_ca|row,y in the merged frame
   VecA avoid_row_pinv;
   dampedPseudoInverse(avoid_row, params.damping, avoid_row_pinv);
   VecA qdot_force = VecA::Zero(n);
@@ -356,7 +356,7 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   MatA3 J_avoid_pinv;
   if (params.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(ws.J_avoid, params.damping, J_avoid_pinv);
   status.qdot_force = params.mode == AvoidanceMode::kThreeDof && !recovery_only
-                          ? VecA(J_avoid_pinv * (ws.force_magnitude * ws.force_dir_W)) : qdot_force;
+                          ? VecA(J_avoid_pinv * (ws.force_magnitude * ws.force_dir_B)) : qdot_force;
 
   ws.qdot.resize(n);
   if (recovery_only) {
@@ -371,7 +371,7 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   VecA xi_ca = VecA::Zero(n);
   if (params.mode != AvoidanceMode::kOff) xi_ca = params.alpha_ca * ws.avoidance_gradient.transpose();
   VecA qdot_wbm(n);
-  if (ws.target_given) qdot_wbm = J_hand_pinv * ws.hand_velocity_W + N_wbm * (xi_ca + xi_jla);
+  if (ws.target_given) qdot_wbm = J_hand_pinv * ws.hand_velocity_B + N_wbm * (xi_ca + xi_jla);
   else qdot_wbm = xi_ca + xi_jla + xi_rest;
 
   if (params.mode == AvoidanceMode::kOff || status.f <= 0.0) {
@@ -380,7 +380,7 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   }
   // Collision avoidance, Eq. 8-12: the virtual force along one direction, reaching in its nullspace.
   VecA xi_t(n);
-  if (ws.target_given) xi_t = -params.alpha_t * (ws.J_hand.transpose() * (ws.hand_W - data.trajectories[a].ref_W));  // Eq. 12, W_t = I
+  if (ws.target_given) xi_t = -params.alpha_t * (ws.J_hand.transpose() * (ws.hand_B - data.trajectories[a].ref_B));  // Eq. 12, W_t = I
   else xi_t = xi_rest;
   VecA qdot_ca(n);
   MatA N_ca;
@@ -486,7 +486,7 @@ void capStepInOrangeZone(const ControllerModel& cm, const ControllerData& data, 
   if (!(d_contact < params.d_b)) return;
   double sweep = 0.0;
   for (int i = 0; i < arm.n; ++i) {
-    const double lever = (ws.hand_W - data.kin.X_W_L[model.q_link[arm.q[i]]].translation()).norm() + 0.1;
+    const double lever = (ws.hand_B - data.kin.X_B_L[model.q_link[arm.q[i]]].translation()).norm() + 0.1;
     sweep += std::abs(ws.qdot[i]) * lever * params.period;
   }
   const double budget = 0.5 * std::max(0.0, d_contact - params.d_r);
@@ -748,7 +748,7 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
   data.have_prev = true;
   ControlInput in = input;
   for (auto& hand : in.hands) {
-    if (hand.status == HandStatus::kGiven && !hand.target_W.allFinite()) {
+    if (hand.status == HandStatus::kGiven && !hand.target_B.allFinite()) {
       hand.status = HandStatus::kNoTarget;  // a NaN target is never followed
       ++data.bad_input_count;
     }

@@ -17,7 +17,7 @@ namespace reflex::control {
 DistanceData::DistanceData(const Model& model)
     : pairs(model.pairs.size()),
       rows(Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(model.pairs.size()), model.nq)),
-      prim_W(model.primitives.size()),
+      prim_B(model.primitives.size()),
       prim_r(model.primitives.size(), 0.0),
       pair_common(model.pairs.size(), -1) {
   for (std::size_t i = 0; i < model.pairs.size(); ++i) {
@@ -46,7 +46,7 @@ DistanceData::DistanceData(const Model& model)
   // around its primitives' end points; the radius reaches the farthest end point plus its radius
   // (a capsule lies inside the spheres around its two ends' hull, so the sphere encloses it).
   bound_center_L.assign(model.segments.size(), Eigen::Vector3d::Zero());
-  bound_center_W.assign(model.segments.size(), Eigen::Vector3d::Zero());
+  bound_center_B.assign(model.segments.size(), Eigen::Vector3d::Zero());
   bound_radius.assign(model.segments.size(), 0.0);
   for (std::size_t s = 0; s < model.segments.size(); ++s) {
     const Segment& seg = model.segments[s];
@@ -76,7 +76,7 @@ namespace {
 
 /// Core closest points of two primitives: parameters s, t and the core distance (sqrt of the squared
 /// distance between A(s) and B(t)).
-inline double coreDistance(const SegmentW& A, const SegmentW& B, double& s, double& t) {
+inline double coreDistance(const SegmentB& A, const SegmentB& B, double& s, double& t) {
   closestParametersSegmentSegment(A, B, s, t);
   const double dx = (A.start.x() + s * A.d.x()) - (B.start.x() + t * B.d.x());
   const double dy = (A.start.y() + s * A.d.y()) - (B.start.y() + t * B.d.y());
@@ -111,8 +111,8 @@ REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const Kinematics
                                             const DistanceOptions& options, int i, int link_a, int link_b,
                                             double best, double core, int pa, int pb, double s, double t) {
   PairDistance& out = data.pairs[i];
-  const SegmentW& A = data.prim_W[pa];
-  const SegmentW& B = data.prim_W[pb];
+  const SegmentB& A = data.prim_B[pa];
+  const SegmentB& B = data.prim_B[pb];
   const Eigen::Vector3d c_a = A.start + s * A.d;
   const Eigen::Vector3d c_b = B.start + t * B.d;
   // Unit normal from b towards a; coincident cores: the direction between the link origins.
@@ -121,24 +121,24 @@ REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const Kinematics
   if (out.well_defined) {
     n = (c_a - c_b) * (1.0 / core);
   } else {
-    n = kin.X_W_L[link_a].translation() - kin.X_W_L[link_b].translation();
+    n = kin.X_B_L[link_a].translation() - kin.X_B_L[link_b].translation();
     const double norm = n.norm();
     n = norm > kCoincidentEps ? Eigen::Vector3d(n / norm) : Eigen::Vector3d::UnitZ();
   }
   out.active = true;
   out.exact = true;
   out.distance = best;
-  out.nhat_W = n;
-  out.p_W_a = c_a - data.prim_r[pa] * n;
-  out.p_W_b = c_b + data.prim_r[pb] * n;
+  out.nhat_B = n;
+  out.p_B_a = c_a - data.prim_r[pa] * n;
+  out.p_B_b = c_b + data.prim_r[pb] * n;
   out.has_row = best < options.row_threshold;
   if (!out.has_row) return;
   const int common = data.pair_common[static_cast<std::size_t>(i)];
   if (common >= 0) {  // a robot pair: always the same two links, whose other columns stay 0 (set-up)
-    computeDirectionalRowOnSupport(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n,
+    computeDirectionalRowOnSupport(model, kin, link_a, out.p_B_a, link_b, out.p_B_b, n,
                                    static_cast<std::size_t>(common), data.rows.row(i).data());
   } else {  // a body-schema slot's link changes with what it holds
-    computeDirectionalRow(model, kin, link_a, out.p_W_a, link_b, out.p_W_b, n, data.rows.row(i));
+    computeDirectionalRow(model, kin, link_a, out.p_B_a, link_b, out.p_B_b, n, data.rows.row(i));
   }
 }
 
@@ -147,7 +147,7 @@ REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const Kinematics
 void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceData& data,
                         const DistanceOptions& options, int i, const Segment& sa, const Segment& sb, int link_a,
                         int link_b) {
-  const SegmentW* prim = data.prim_W.data();
+  const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
   double best = std::numeric_limits<double>::infinity(), best_core = 0.0, best_s = 0.0, best_t = 0.0;
   int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
@@ -179,11 +179,11 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
 void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
                              DistanceData& data, const DistanceOptions& options) {
   assert(data.pairs.size() == model.pairs.size());
-  assert(data.prim_W.size() == model.primitives.size());
+  assert(data.prim_B.size() == model.primitives.size());
   constexpr double kInf = std::numeric_limits<double>::infinity();
   const bool prune = options.prune_distance < kInf;
 
-  // 1. Every enabled primitive's core into W, once (a primitive takes part in several pairs); with
+  // 1. Every enabled primitive's core into B, once (a primitive takes part in several pairs); with
   //    the broad phase, every robot segment's bounding sphere centre too.
   const int nseg = static_cast<int>(model.segments.size());
   for (int s = 0; s < nseg; ++s) {
@@ -191,16 +191,16 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
     if (seg.body_schema_slot) {
       const BodySchemaSlot& slot = slots[static_cast<std::size_t>(s - model.num_robot_segments)];
       if (!slot.enabled) continue;
-      const Eigen::Isometry3d& X = kin.X_W_L[slot.link];
-      data.prim_W[seg.first_primitive].set(X * slot.a_L, X * slot.b_L);
+      const Eigen::Isometry3d& X = kin.X_B_L[slot.link];
+      data.prim_B[seg.first_primitive].set(X * slot.a_L, X * slot.b_L);
       data.prim_r[seg.first_primitive] = slot.radius;
       continue;
     }
-    const Eigen::Isometry3d& X = kin.X_W_L[seg.link];
-    if (prune) data.bound_center_W[s] = X * data.bound_center_L[s];
+    const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
+    if (prune) data.bound_center_B[s] = X * data.bound_center_L[s];
     for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
       const Primitive& prim = model.primitives[p];
-      SegmentW& w = data.prim_W[p];
+      SegmentB& w = data.prim_B[p];
       w.start = X * prim.a_L;
       if (prim.sphere) {  // no second end point to transform
         w.d.setZero();
@@ -217,7 +217,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
 
   // 2. Broad phase: robot pairs whose bounding spheres are more than prune_distance apart get that
   //    gap as a lower bound; the others are computed exactly below.
-  const SegmentW* prim = data.prim_W.data();
+  const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
   const int* exact_pairs = data.robot_pairs.data();
   int nexact = static_cast<int>(data.robot_pairs.size());
@@ -227,7 +227,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
     nexact = 0;
     for (const int i : data.robot_pairs) {
       const SegmentPair& pair = model.pairs[i];
-      const double gap = (data.bound_center_W[pair.a] - data.bound_center_W[pair.b]).norm() -
+      const double gap = (data.bound_center_B[pair.a] - data.bound_center_B[pair.b]).norm() -
                          data.bound_radius[pair.a] - data.bound_radius[pair.b];
       if (gap > options.prune_distance) {
         PairDistance& out = data.pairs[i];

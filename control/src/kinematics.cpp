@@ -42,78 +42,78 @@ void zeroColumns(Matrix&& M) {
 }  // namespace
 
 KinematicsData::KinematicsData(const Model& model)
-    : X_W_L(model.links.size(), Eigen::Isometry3d::Identity()),
-      axis_W(model.links.size(), Eigen::Vector3d::UnitZ()),
+    : X_B_L(model.links.size(), Eigen::Isometry3d::Identity()),
+      axis_B(model.links.size(), Eigen::Vector3d::UnitZ()),
       q(Eigen::VectorXd::Zero(model.nq)),
-      twist_W(Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, model.nq)) {
+      twist_B(Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, model.nq)) {
   computeForwardKinematics(model, *this, q);
 }
 
 bool computeForwardKinematics(const Model& model, KinematicsData& data,
                               const Eigen::Ref<const Eigen::VectorXd>& q) {
   if (q.size() != model.nq || !q.allFinite()) return false;
-  assert(data.X_W_L.size() == model.links.size());
+  assert(data.X_B_L.size() == model.links.size());
   data.q = q;
   const std::size_t n = model.links.size();
   for (std::size_t i = 0; i < n; ++i) {
     const Link& link = model.links[i];
     if (link.parent < 0) {
-      data.X_W_L[i].setIdentity();
-      data.axis_W[i] = link.axis_J;
+      data.X_B_L[i].setIdentity();
+      data.axis_B[i] = link.axis_J;
       continue;
     }
-    const Eigen::Isometry3d X_W_J = data.X_W_L[link.parent] * link.X_P_J;
-    data.axis_W[i] = X_W_J.linear() * link.axis_J;
+    const Eigen::Isometry3d X_B_J = data.X_B_L[link.parent] * link.X_P_J;
+    data.axis_B[i] = X_B_J.linear() * link.axis_J;
     switch (link.type) {
       case JointType::kFixed:
-        data.X_W_L[i] = X_W_J;
+        data.X_B_L[i] = X_B_J;
         break;
       case JointType::kRevolute:
-        rotateAbout(X_W_J.linear(), link.axis_J, q[link.q_index], data.X_W_L[i].linear());
-        data.X_W_L[i].translation() = X_W_J.translation();
+        rotateAbout(X_B_J.linear(), link.axis_J, q[link.q_index], data.X_B_L[i].linear());
+        data.X_B_L[i].translation() = X_B_J.translation();
         break;
       case JointType::kPrismatic:
-        data.X_W_L[i].linear() = X_W_J.linear();
-        data.X_W_L[i].translation() = X_W_J.translation() + data.axis_W[i] * q[link.q_index];
+        data.X_B_L[i].linear() = X_B_J.linear();
+        data.X_B_L[i].translation() = X_B_J.translation() + data.axis_B[i] * q[link.q_index];
         break;
     }
   }
   for (int j = 0; j < model.nq; ++j) {
     const int l = model.q_link[j];
-    const Eigen::Vector3d& axis = data.axis_W[l];
+    const Eigen::Vector3d& axis = data.axis_B[l];
     if (model.links[l].type == JointType::kRevolute) {
-      data.twist_W.col(j).head<3>() = axis;
-      data.twist_W.col(j).tail<3>() = data.X_W_L[l].translation().cross(axis);
+      data.twist_B.col(j).head<3>() = axis;
+      data.twist_B.col(j).tail<3>() = data.X_B_L[l].translation().cross(axis);
     } else {
-      data.twist_W.col(j).head<3>().setZero();
-      data.twist_W.col(j).tail<3>() = axis;
+      data.twist_B.col(j).head<3>().setZero();
+      data.twist_B.col(j).tail<3>() = axis;
     }
   }
   return true;
 }
 
 void computePointJacobian(const Model& model, const KinematicsData& data, int link,
-                          const Eigen::Vector3d& p_W, Eigen::Ref<Eigen::MatrixXd> J_W) {
-  assert(J_W.rows() == 3 && J_W.cols() == model.nq);
-  zeroColumns(J_W);
+                          const Eigen::Vector3d& p_B, Eigen::Ref<Eigen::MatrixXd> J_B) {
+  assert(J_B.rows() == 3 && J_B.cols() == model.nq);
+  zeroColumns(J_B);
   for (const int qi : model.link_support[link]) {
-    const auto t = data.twist_W.col(qi);
-    J_W.col(qi) = t.head<3>().cross(p_W) + t.tail<3>();
+    const auto t = data.twist_B.col(qi);
+    J_B.col(qi) = t.head<3>().cross(p_B) + t.tail<3>();
   }
 }
 
 void computeRelativeJacobian(const Model& model, const KinematicsData& data, int link1,
-                             const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
-                             Eigen::Ref<Eigen::MatrixXd> J_W) {
-  assert(J_W.rows() == 3 && J_W.cols() == model.nq);
-  zeroColumns(J_W);
+                             const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
+                             Eigen::Ref<Eigen::MatrixXd> J_B) {
+  assert(J_B.rows() == 3 && J_B.cols() == model.nq);
+  zeroColumns(J_B);
   for (const int qi : model.link_support[link1]) {
-    const auto t = data.twist_W.col(qi);
-    J_W.col(qi) += t.head<3>().cross(p1_W) + t.tail<3>();
+    const auto t = data.twist_B.col(qi);
+    J_B.col(qi) += t.head<3>().cross(p1_B) + t.tail<3>();
   }
   for (const int qi : model.link_support[link2]) {
-    const auto t = data.twist_W.col(qi);
-    J_W.col(qi) -= t.head<3>().cross(p2_W) + t.tail<3>();
+    const auto t = data.twist_B.col(qi);
+    J_B.col(qi) -= t.head<3>().cross(p2_B) + t.tail<3>();
   }
 }
 
@@ -126,29 +126,29 @@ std::size_t commonSupport(const Model& model, int link1, int link2) {
 }
 
 void computeDirectionalRowOnSupport(const Model& model, const KinematicsData& data, int link1,
-                                    const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
-                                    const Eigen::Vector3d& n_W, std::size_t common, double* row) {
+                                    const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
+                                    const Eigen::Vector3d& n_B, std::size_t common, double* row) {
   const std::vector<int>& s1 = model.link_support[static_cast<std::size_t>(link1)];
   const std::vector<int>& s2 = model.link_support[static_cast<std::size_t>(link2)];
   // n . (w x p + v) = w . (p x n) + v . n for a joint with twist (w, v). Joints on the common path
   // from the root move p1 and p2 as one rigid body: their entry is w . ((p1 - p2) x n) (0 when n is
   // along p1 - p2, as for a PairDistance; the v terms cancel). Below the common path the two paths
   // share no joint (a tree), so every column is written once.
-  const Eigen::Vector3d w = (p1_W - p2_W).cross(n_W);
-  for (std::size_t k = 0; k < common; ++k) row[s1[k]] = data.twist_W.col(s1[k]).head<3>().dot(w);
+  const Eigen::Vector3d w = (p1_B - p2_B).cross(n_B);
+  for (std::size_t k = 0; k < common; ++k) row[s1[k]] = data.twist_B.col(s1[k]).head<3>().dot(w);
   Eigen::Matrix<double, 6, 1> x1, x2;
-  x1 << p1_W.cross(n_W), n_W;
-  x2 << p2_W.cross(n_W), n_W;
-  for (std::size_t k = common; k < s1.size(); ++k) row[s1[k]] = data.twist_W.col(s1[k]).dot(x1);
-  for (std::size_t k = common; k < s2.size(); ++k) row[s2[k]] = -data.twist_W.col(s2[k]).dot(x2);
+  x1 << p1_B.cross(n_B), n_B;
+  x2 << p2_B.cross(n_B), n_B;
+  for (std::size_t k = common; k < s1.size(); ++k) row[s1[k]] = data.twist_B.col(s1[k]).dot(x1);
+  for (std::size_t k = common; k < s2.size(); ++k) row[s2[k]] = -data.twist_B.col(s2[k]).dot(x2);
 }
 
 void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1,
-                           const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
-                           const Eigen::Vector3d& n_W, Eigen::Ref<Eigen::RowVectorXd> row) {
+                           const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
+                           const Eigen::Vector3d& n_B, Eigen::Ref<Eigen::RowVectorXd> row) {
   assert(row.cols() == model.nq);
   zeroColumns(row);
-  computeDirectionalRowOnSupport(model, data, link1, p1_W, link2, p2_W, n_W, commonSupport(model, link1, link2),
+  computeDirectionalRowOnSupport(model, data, link1, p1_B, link2, p2_B, n_B, commonSupport(model, link1, link2),
                                  row.data());
 }
 

@@ -102,18 +102,18 @@ int OnboardController::setHandTargets(const std::array<HandCommand, 2>& hands, d
     const HandCommand& h = hands[a];
     const bool given = h.status == HandStatus::kGiven;
     // Never followed; the hand keeps what it had. !(norm <= max): no NaN passes.
-    if (given && !h.target_W.allFinite()) {
+    if (given && !h.target_B.allFinite()) {
       ++rejected;
       reject(RejectCause::kHandTargetNotFinite);
       continue;
     }
-    if (given && !(h.target_W.norm() <= options_.max_target_distance)) {
+    if (given && !(h.target_B.norm() <= options_.max_target_distance)) {
       ++rejected;
       reject(RejectCause::kHandTargetTooFar);
       continue;
     }
     input_.hands[a].status = h.status;
-    if (given) input_.hands[a].target_W = h.target_W;
+    if (given) input_.hands[a].target_B = h.target_B;
   }
   return rejected;
 }
@@ -129,7 +129,7 @@ bool OnboardController::holdHandsHere(double now) noexcept {
   if (!computeForwardKinematics(model_, data_.kin, q_expected_)) return false;
   for (int a = 0; a < 2; ++a) {
     input_.hands[a].status = HandStatus::kGiven;
-    input_.hands[a].target_W = data_.kin.X_W_L[cm_.arms[a].hand_link] * cm_.arms[a].hand_point_L;
+    input_.hands[a].target_B = data_.kin.X_B_L[cm_.arms[a].hand_link] * cm_.arms[a].hand_point_L;
   }
   last_targets_rx_ = now;
   return true;

@@ -37,7 +37,7 @@ struct Chain {
   std::vector<int> joints;  // q indices of its joints, top first
   bool prismatic = false;
   int first_link = -1;      // link moved by the first joint
-  Eigen::Vector3d start_W = Eigen::Vector3d::Zero();  // first joint's origin at the neutral configuration
+  Eigen::Vector3d start_B = Eigen::Vector3d::Zero();  // first joint's origin at the neutral configuration
   std::string describe(const Model& m) const {
     std::string s = "[";
     for (std::size_t i = 0; i < joints.size(); ++i) s += (i ? " " : "") + m.q_names[joints[i]];
@@ -94,7 +94,7 @@ std::vector<Chain> allChains(const Model& m, const Tree& t, const KinematicsData
     for (int c : t.movableChildren(static_cast<int>(b))) {
       Chain ch = walkDown(m, t, static_cast<int>(b), c);
       if (ch.joints.empty()) continue;
-      ch.start_W = kin.X_W_L[ch.first_link].translation();
+      ch.start_B = kin.X_B_L[ch.first_link].translation();
       chains.push_back(ch);
     }
   }
@@ -119,15 +119,15 @@ Chain chainToHand(const Model& m, const Tree& t, const KinematicsData& kin, int 
     if (c.joints.empty()) c.first_link = *it;
     c.joints.push_back(L.q_index);
   }
-  if (!c.joints.empty()) c.start_W = kin.X_W_L[c.first_link].translation();
+  if (!c.joints.empty()) c.start_B = kin.X_B_L[c.first_link].translation();
   return c;
 }
 
 bool mirrored(const Chain& a, const Chain& b) {
   const double tol = 0.01;
-  return a.joints.size() == b.joints.size() && std::abs(a.start_W.x() - b.start_W.x()) < tol &&
-         std::abs(a.start_W.z() - b.start_W.z()) < tol && std::abs(a.start_W.y() + b.start_W.y()) < tol &&
-         std::abs(a.start_W.y()) > tol;
+  return a.joints.size() == b.joints.size() && std::abs(a.start_B.x() - b.start_B.x()) < tol &&
+         std::abs(a.start_B.z() - b.start_B.z()) < tol && std::abs(a.start_B.y() + b.start_B.y()) < tol &&
+         std::abs(a.start_B.y()) > tol;
 }
 
 int nameScore(const Model& m, const Chain& c) {
@@ -233,7 +233,7 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
     for (std::size_t i = 0; i < cands.size(); ++i)
       for (std::size_t j = i + 1; j < cands.size(); ++j)
         if (mirrored(*cands[i], *cands[j])) {
-          const bool i_left = cands[i]->start_W.y() > 0;
+          const bool i_left = cands[i]->start_B.y() > 0;
           pairs.push_back({i_left ? cands[i] : cands[j], i_left ? cands[j] : cands[i]});
         }
     if (pairs.empty()) {
@@ -241,20 +241,20 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
       for (const Chain& c : chains)
         found += " " + c.describe(m) + " (" + std::to_string(c.joints.size()) + " joints" +
                  (c.prismatic ? ", prismatic" : "") + ", from '" + m.links[c.branch].name + "' at y " +
-                 fmt("%.3f", c.start_W.y()) + ")";
+                 fmt("%.3f", c.start_B.y()) + ")";
       throw SetupError("no arms found in robot '" + m.name +
                        "': need two mirrored serial chains of >= 4 revolute joints branching from the trunk "
                        "(first joints at (x, y, z) and (x, -y, z)); chains found:" +
                        (found.empty() ? std::string(" none") : found) + "; give --left-hand and --right-hand");
     }
-    std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) { return a[0]->start_W.z() > b[0]->start_W.z(); });
+    std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) { return a[0]->start_B.z() > b[0]->start_B.z(); });
     std::size_t pick = 0;
     std::string why;
     if (pairs.size() == 1) {
       why = "the only mirrored pair of chains with >= 4 revolute joints";
-    } else if (pairs[0][0]->start_W.z() > pairs[1][0]->start_W.z() + 0.05) {
+    } else if (pairs[0][0]->start_B.z() > pairs[1][0]->start_B.z() + 0.05) {
       why = "of " + std::to_string(pairs.size()) + " mirrored pairs the one starting highest (z " +
-            fmt("%.3f", pairs[0][0]->start_W.z()) + " m, next " + fmt("%.3f", pairs[1][0]->start_W.z()) +
+            fmt("%.3f", pairs[0][0]->start_B.z()) + " m, next " + fmt("%.3f", pairs[1][0]->start_B.z()) +
             " m: legs hang below the arms)";
     } else {
       std::vector<int> score;
@@ -267,7 +267,7 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
       } else {
         std::string list;
         for (const auto& p : pairs) list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (z " +
-                                            fmt("%.3f", p[0]->start_W.z()) + ");";
+                                            fmt("%.3f", p[0]->start_B.z()) + ");";
         throw SetupError("ambiguous arms in robot '" + m.name + "': " + std::to_string(pairs.size()) +
                          " mirrored pairs of chains start within 5 cm of the same height and their names do not "
                          "tell which are arms:" + list + " give --left-hand and --right-hand");
@@ -277,7 +277,7 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
     arms[1] = *pairs[pick][1];
     setup.decisions.push_back("arms: left " + arms[0].describe(m) + ", right " + arms[1].describe(m) + " from '" +
                               m.links[arms[0].branch].name + "': " + why + "; left = y > 0 (" +
-                              fmt("%.3f", arms[0].start_W.y()) + " m)");
+                              fmt("%.3f", arms[0].start_B.y()) + " m)");
     for (int a = 0; a < 2; ++a) {
       if (static_cast<int>(arms[a].joints.size()) > 8)
         throw SetupError("arm " + arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
@@ -322,7 +322,7 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
       }
     if (head < 0) {
       for (int e : ends)
-        if (head < 0 || kin.X_W_L[e].translation().z() > kin.X_W_L[head].translation().z()) head = e;
+        if (head < 0 || kin.X_B_L[e].translation().z() > kin.X_B_L[head].translation().z()) head = e;
       head_why = "the highest end of a chain of at most 3 joints that is not an arm";
     }
     if (head < 0)
@@ -373,9 +373,9 @@ ArmIndex armIndex(const Model& m, const RobotSetup& s) {
     double sign = 0.0;
     if (i < ix.q[1].size()) {
       // A rotation about axis u mirrored through the x-z plane is a rotation by -angle about M u.
-      Eigen::Vector3d mu = kin.axis_W[m.q_link[ix.q[0][i]]];
+      Eigen::Vector3d mu = kin.axis_B[m.q_link[ix.q[0][i]]];
       mu.y() = -mu.y();
-      const Eigen::Vector3d ur = kin.axis_W[m.q_link[ix.q[1][i]]];
+      const Eigen::Vector3d ur = kin.axis_B[m.q_link[ix.q[1][i]]];
       if ((ur - mu).norm() < 1e-6) sign = -1.0;
       else if ((ur + mu).norm() < 1e-6) sign = 1.0;
     }
@@ -411,14 +411,14 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
   for (int a = 0; a < 2; ++a) {
     hand[a] = m.linkIndex(s.arms[a].hand_link);
     shoulder[a] = m.q_link[ix.q[a][0]];
-    S[a] = kin.X_W_L[shoulder[a]].translation();
+    S[a] = kin.X_B_L[shoulder[a]].translation();
   }
   {  // arm length: shoulder to hand point with every arm joint at 0 (stretched, as RobotState measures it)
     Eigen::VectorXd qz = q0;
     for (int a = 0; a < 2; ++a)
       for (int qi : ix.q[a]) qz[qi] = std::min(std::max(0.0, m.q_lower[qi]), m.q_upper[qi]);
     computeForwardKinematics(m, kin, qz);
-    reach = (kin.X_W_L[hand[0]] * s.arms[0].hand_point_L - S[0]).norm();
+    reach = (kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0]).norm();
   }
   // Hand below and in front of the shoulder, slightly out: elbow bent, arm not touching the body.
   for (int a = 0; a < 2; ++a)
@@ -511,7 +511,7 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
       }
     }
     double c = 0.0;
-    for (int a = 0; a < 2; ++a) c += (kin.X_W_L[hand[a]] * s.arms[a].hand_point_L - goal[a]).norm() / reach;
+    for (int a = 0; a < 2; ++a) c += (kin.X_B_L[hand[a]] * s.arms[a].hand_point_L - goal[a]).norm() / reach;
     double centre = 0.0;
     for (int a = 0; a < 2; ++a)
       for (int qi : ix.q[a]) {
@@ -579,7 +579,7 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
   const SegmentPair& p = m.pairs[e.pair];
   s.rest_distance = e.dmin + required[e.pair];
   s.rest_pair = m.segments[p.a].name + "-" + m.segments[p.b].name;
-  Eigen::Vector3d h = kin.X_W_L[hand[0]] * s.arms[0].hand_point_L - S[0];
+  Eigen::Vector3d h = kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0];
   std::ostringstream os;
   os << "rest: left hand " << fmt("%.2f", h.x()) << " m in front of, " << fmt("%.2f", h.y()) << " m beside and "
      << fmt("%.2f", -h.z()) << " m below the shoulder (arm reach " << fmt("%.2f", reach)
@@ -605,19 +605,19 @@ std::vector<std::vector<Primitive>> bodyPrimitivesInLink(const Model& m, const T
     std::vector<Primitive> prims;
     std::vector<std::pair<int, Eigen::Isometry3d>> stack = {{body, Eigen::Isometry3d::Identity()}};
     while (!stack.empty()) {
-      const auto [l, X_B_l] = stack.back();
+      const auto [l, X_body_l] = stack.back();
       stack.pop_back();
       if (const int sg = t.segment_of[l]; sg >= 0) {
         const Segment& seg = m.segments[sg];
         for (int pi = seg.first_primitive; pi < seg.first_primitive + seg.num_primitives; ++pi) {
           Primitive p = m.primitives[pi];
-          p.a_L = X_B_l * p.a_L;
-          p.b_L = X_B_l * p.b_L;
+          p.a_L = X_body_l * p.a_L;
+          p.b_L = X_body_l * p.b_L;
           prims.push_back(p);
         }
       }
       for (int ch : t.children[l])
-        if (m.links[ch].q_index < 0) stack.push_back({ch, X_B_l * m.links[ch].X_P_J});
+        if (m.links[ch].q_index < 0) stack.push_back({ch, X_body_l * m.links[ch].X_P_J});
     }
     return prims;
   };
@@ -663,10 +663,10 @@ std::vector<std::vector<Primitive>> bodyPrimitivesInLink(const Model& m, const T
 
 }  // namespace
 
-ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::array<Eigen::Vector3d, 2>& target_W,
+ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::array<Eigen::Vector3d, 2>& target_B,
                       double duration, double tolerance) {
   ReachCheck r;
-  r.target_W = target_W;
+  r.target_B = target_B;
   Eigen::VectorXd q0 = neutralConfiguration(model);
   for (const auto& arm : cm.arms)
     for (int i = 0; i < arm.n; ++i) q0[arm.q[i]] = arm.rest[i];
@@ -675,7 +675,7 @@ ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::
   options.input_timeout = duration + 1.0;
   OnboardController ctl(model, cm, port, q0, options);
   std::array<HandCommand, 2> hands;
-  for (int a = 0; a < 2; ++a) hands[a] = {HandStatus::kGiven, target_W[a]};
+  for (int a = 0; a < 2; ++a) hands[a] = {HandStatus::kGiven, target_B[a]};
   KinematicsData kin(model);
   r.min_distance = std::numeric_limits<double>::infinity();
   const double dt = cm.params.period;
@@ -687,7 +687,7 @@ ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::
     r.min_distance = std::min(r.min_distance, rep.min_distance);
     computeForwardKinematics(model, kin, port.positions());
     for (int a = 0; a < 2; ++a)
-      r.error[a] = (kin.X_W_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L - target_W[a]).norm();
+      r.error[a] = (kin.X_B_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L - target_B[a]).norm();
     if (r.reached_at < 0 && r.error[0] < tolerance && r.error[1] < tolerance) r.reached_at = now;
   }
   r.estops = ctl.report().counts.estop_count;

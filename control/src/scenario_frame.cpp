@@ -61,14 +61,14 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
     const ControllerModel::Arm& arm = cm.arms[a];
     // A link frame is its parent joint's frame (URDF): the arm's joints are the origins of the links
     // they move. Their distances are fixed by the links, so the sum is the straight arm's reach.
-    Eigen::Vector3d previous = kin.X_W_L[model.q_link[arm.q[0]]].translation();
+    Eigen::Vector3d previous = kin.X_B_L[model.q_link[arm.q[0]]].translation();
     f.shoulder[a] = previous;
     for (int i = 1; i < arm.n; ++i) {
-      const Eigen::Vector3d joint = kin.X_W_L[model.q_link[arm.q[i]]].translation();
+      const Eigen::Vector3d joint = kin.X_B_L[model.q_link[arm.q[i]]].translation();
       length[a] += (joint - previous).norm();
       previous = joint;
     }
-    f.hand_rest[a] = kin.X_W_L[arm.hand_link] * arm.hand_point_L;
+    f.hand_rest[a] = kin.X_B_L[arm.hand_link] * arm.hand_point_L;
     length[a] += (f.hand_rest[a] - previous).norm();
   }
   f.chest = 0.5 * (f.shoulder[kLeft] + f.shoulder[kRight]);
@@ -99,7 +99,7 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
   for (int p = trunk.first_primitive; p < trunk.first_primitive + trunk.num_primitives; ++p) {
     const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
     for (const Eigen::Vector3d& end : {prim.a_L, prim.b_L}) {
-      const double y = (kin.X_W_L[static_cast<std::size_t>(trunk.link)] * end).y();
+      const double y = (kin.X_B_L[static_cast<std::size_t>(trunk.link)] * end).y();
       y_lo = std::min(y_lo, y - prim.radius);
       y_hi = std::max(y_hi, y + prim.radius);
     }
@@ -121,9 +121,9 @@ const ScenarioFrame& ScenarioContext::frame() {
 
 namespace {
 
-/// How far the arm's hand point stays from p_W after damped least squares from the rest posture,
+/// How far the arm's hand point stays from p_B after damped least squares from the rest posture,
 /// joints clamped to their limits (m).
-double reachResidual(const Model& model, const ControllerModel& cm, int arm, const Eigen::Vector3d& p_W) {
+double reachResidual(const Model& model, const ControllerModel& cm, int arm, const Eigen::Vector3d& p_B) {
   const ControllerModel::Arm& a = cm.arms[static_cast<std::size_t>(arm)];
   KinematicsData kin(model);
   Eigen::VectorXd q = restConfiguration(model, cm);
@@ -131,8 +131,8 @@ double reachResidual(const Model& model, const ControllerModel& cm, int arm, con
   double residual = std::numeric_limits<double>::infinity();
   for (int it = 0; it < 400; ++it) {
     computeForwardKinematics(model, kin, q);
-    const Eigen::Vector3d hand = kin.X_W_L[static_cast<std::size_t>(a.hand_link)] * a.hand_point_L;
-    const Eigen::Vector3d e = p_W - hand;
+    const Eigen::Vector3d hand = kin.X_B_L[static_cast<std::size_t>(a.hand_link)] * a.hand_point_L;
+    const Eigen::Vector3d e = p_B - hand;
     residual = e.norm();
     if (residual < 1e-4) break;
     J.setZero();
@@ -151,22 +151,22 @@ double reachResidual(const Model& model, const ControllerModel& cm, int arm, con
 
 }  // namespace
 
-Eigen::Vector3d ScenarioContext::reachable(int arm, const Eigen::Vector3d& p_W) {
+Eigen::Vector3d ScenarioContext::reachable(int arm, const Eigen::Vector3d& p_B) {
   auto& cache = reach_cache[arm];
   for (const auto& entry : cache)
-    if (entry[0] == p_W) return entry[1];
+    if (entry[0] == p_B) return entry[1];
   constexpr double kReached = 0.002;
-  Eigen::Vector3d answer = p_W;
-  if (reachResidual(model, cm, arm, p_W) > kReached) {
+  Eigen::Vector3d answer = p_B;
+  if (reachResidual(model, cm, arm, p_B) > kReached) {
     const Eigen::Vector3d rest = frame().hand_rest[static_cast<std::size_t>(arm)];
-    double lo = 0.0, hi = 1.0;  // fractions of the way from the rest hand point to p_W
+    double lo = 0.0, hi = 1.0;  // fractions of the way from the rest hand point to p_B
     for (int i = 0; i < 14; ++i) {
       const double mid = 0.5 * (lo + hi);
-      (reachResidual(model, cm, arm, rest + mid * (p_W - rest)) <= kReached ? lo : hi) = mid;
+      (reachResidual(model, cm, arm, rest + mid * (p_B - rest)) <= kReached ? lo : hi) = mid;
     }
-    answer = rest + 0.9 * lo * (p_W - rest);
+    answer = rest + 0.9 * lo * (p_B - rest);
   }
-  cache.push_back({p_W, answer});
+  cache.push_back({p_B, answer});
   return answer;
 }
 

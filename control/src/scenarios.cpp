@@ -110,7 +110,7 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
     result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, result.max_command_speed_ratio);
     for (int a = 0; a < 2; ++a) {
       if (input.hands[a].status != HandStatus::kGiven) continue;
-      const double err = (data.arms[a].hand_W - input.hands[a].target_W).norm();
+      const double err = (data.arms[a].hand_B - input.hands[a].target_B).norm();
       result.final_error[a] = err;
       if (err < 0.01 && result.reach_time[a] < 0.0) result.reach_time[a] = t;
       if (err >= 0.01) result.reach_time[a] = -1.0;  // must stay reached
@@ -227,9 +227,9 @@ void writeTimeseriesCsvRow(const Model& model, const SimSample& s, std::ostream&
   for (int a = 0; a < 2; ++a) {
     const bool given = s.commands[a].status == HandStatus::kGiven;
     out << ',' << (given ? "given" : "no_target");
-    for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].hand_W[i];
-    for (int i = 0; i < 3; ++i) out << ',' << (given ? s.commands[a].target_W[i] : std::nan(""));
-    for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].reference_W[i];
+    for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].hand_B[i];
+    for (int i = 0; i < 3; ++i) out << ',' << (given ? s.commands[a].target_B[i] : std::nan(""));
+    for (int i = 0; i < 3; ++i) out << ',' << s.arms[a].reference_B[i];
   }
   for (int i = 0; i < model.nq; ++i) out << ',' << s.q[i];
   out << '\n';

@@ -14,14 +14,14 @@ namespace {
 /// Gives `arm` the target p_ref (reference robot coordinates) placed on this robot.
 void give(ControlInput& in, ScenarioContext& ctx, int arm, double x, double y, double z) {
   in.hands[arm].status = HandStatus::kGiven;
-  in.hands[arm].target_W = ctx.frame().place(Eigen::Vector3d(x, y, z));
+  in.hands[arm].target_B = ctx.frame().place(Eigen::Vector3d(x, y, z));
 }
 
 /// Gives `arm` the target p_ref (reference robot coordinates) placed on this robot, as a target the
 /// scenario means it to reach: moved within the arm's reach where this robot's arm cannot get there.
 void reach(ControlInput& in, ScenarioContext& ctx, int arm, double x, double y, double z) {
   in.hands[arm].status = HandStatus::kGiven;
-  in.hands[arm].target_W = ctx.reachable(arm, ctx.frame().place(Eigen::Vector3d(x, y, z)));
+  in.hands[arm].target_B = ctx.reachable(arm, ctx.frame().place(Eigen::Vector3d(x, y, z)));
 }
 
 /// The segment on `link` (or what it is fixed to) a scenario needs; a ConfigError naming the
@@ -108,7 +108,7 @@ std::vector<Scenario> makeScenarios() {
       // frame by the distance walked (1.5 m at 0.25 m/s from t = 0.5 s, as startWalking is asked),
       // in proportion to the arm like the target.
       if (ctx.model.qIndex("heel_x") < 0)
-        in.hands[kRight].target_W.x() -= ctx.frame().length(std::clamp(0.25 * (t - 0.5), 0.0, 1.5));
+        in.hands[kRight].target_B.x() -= ctx.frame().length(std::clamp(0.25 * (t - 0.5), 0.0, 1.5));
     };
     list.push_back(s);
   }
@@ -165,7 +165,7 @@ std::vector<Scenario> makeScenarios() {
                           ctx.model.name + "' does not have (camera_link in the controller configuration)");
       // The head the camera is fixed to: the gaze line starts inside it and is not checked against it.
       const int head = neededSegment(ctx, "occlusion", ctx.camera_link, "the camera link");
-      const Eigen::Vector3d camera = ctx.data.kin.X_W_L[cam].translation();
+      const Eigen::Vector3d camera = ctx.data.kin.X_B_L[cam].translation();
       // The gaze line, re-attached every cycle as the head and object move; in the world frame.
       ctx.attach(1, ctx.model.links[0].name, camera, object, ctx.frame().length(0.03), true,
                  {ctx.model.segments[static_cast<std::size_t>(head)].name});

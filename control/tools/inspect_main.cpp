@@ -238,11 +238,11 @@ int run(int argc, char** argv) {
         std::printf("%s    {\"a\": %s, \"b\": %s, \"distance\": %.6f, \"pa\": [%.6f, %.6f, %.6f], "
                     "\"pb\": [%.6f, %.6f, %.6f]}", first ? "" : ",\n",
                     jsonString(model.segments[pd.seg_a].name).c_str(),
-                    jsonString(model.segments[pd.seg_b].name).c_str(), pd.distance, pd.p_W_a.x(),
-                    pd.p_W_a.y(), pd.p_W_a.z(), pd.p_W_b.x(), pd.p_W_b.y(), pd.p_W_b.z());
+                    jsonString(model.segments[pd.seg_b].name).c_str(), pd.distance, pd.p_B_a.x(),
+                    pd.p_B_a.y(), pd.p_B_a.z(), pd.p_B_b.x(), pd.p_B_b.y(), pd.p_B_b.z());
       } else {
-        std::printf("%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", a, b, pd.distance, pd.p_W_a.x(), pd.p_W_a.y(),
-                    pd.p_W_a.z(), pd.p_W_b.x(), pd.p_W_b.y(), pd.p_W_b.z());
+        std::printf("%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", a, b, pd.distance, pd.p_B_a.x(), pd.p_B_a.y(),
+                    pd.p_B_a.z(), pd.p_B_b.x(), pd.p_B_b.y(), pd.p_B_b.z());
       }
       first = false;
     }

@@ -250,7 +250,7 @@ int run(int argc, char** argv) {
     for (double off : {0.08, 0.05, 0.03}) {
       std::array<Eigen::Vector3d, 2> t;
       for (int a = 0; a < 2; ++a)
-        t[a] = kin.X_W_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L + Eigen::Vector3d(off, 0.0, 0.6 * off);
+        t[a] = kin.X_B_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L + Eigen::Vector3d(off, 0.0, 0.6 * off);
       for (auto& v : t)
         for (int i = 0; i < 3; ++i) v[i] = std::round(v[i] * 1000.0) / 1000.0;  // as written (mm)
       reach = reflex::control::checkReach(model, cm, t, 4.0, 0.01);
@@ -260,7 +260,7 @@ int run(int argc, char** argv) {
     const bool reached = reach.reached_at >= 0 && reach.estops == 0 && reach.min_distance > cm.params.d_r;
     std::printf("behavior: both hands to %s / %s (rest + %.2f m forward, %.3f m up): %s; closest pair during the "
                 "run %.3f m (d_r %.3f m), %llu e-stops\n",
-                vec3(reach.target_W[0]).c_str(), vec3(reach.target_W[1]).c_str(), offset, 0.6 * offset,
+                vec3(reach.target_B[0]).c_str(), vec3(reach.target_B[1]).c_str(), offset, 0.6 * offset,
                 reached ? ("reached within 10 mm after " + num(reach.reached_at) + " s of a closed-loop run").c_str()
                         : ("NOT reached in 4 s (errors " + num(reach.error[0]) + " / " + num(reach.error[1]) + " m)").c_str(),
                 reach.min_distance, cm.params.d_r, static_cast<unsigned long long>(reach.estops));
@@ -276,7 +276,7 @@ int run(int argc, char** argv) {
     beh += "  hand_point: " + vec3(setup.arms[0].hand_point_L) + "   # m, in the hand link (the left hand's; "
            "the controller has one per arm)\n\n";
     beh += "modules:\n  - name: reach\n    type: scripted\n    config:\n      timeline:\n        - {t: 0.0, left: " +
-           vec3(reach.target_W[0]) + ", right: " + vec3(reach.target_W[1]) + "}\n";
+           vec3(reach.target_B[0]) + ", right: " + vec3(reach.target_B[1]) + "}\n";
     writeFile(behavior_path, beh);
     std::printf("wrote %s, %s, %s%s%s\n", controller_path.c_str(), collision_path.c_str(), behavior_path.c_str(),
                 meshes ? ", " : "", meshes ? fit_path.c_str() : "");

@@ -10,7 +10,7 @@
 //   Reflex/*        reflex::control (FK = computeForwardKinematics of every link; sweep = FK +
 //                   computeSegmentDistances over every checked pair)
 //   FCL/*           the same checked pairs through FCL 0.7: fcl::distance on fcl::Sphered /
-//                   fcl::Capsuled in W (dispatches to FCL's analytic sphere/capsule functions),
+//                   fcl::Capsuled in B (dispatches to FCL's analytic sphere/capsule functions),
 //                   minimum over each pair's primitive pairs, nearest points on
 //   FCL_Analytic/*  the same, calling FCL's analytic functions (fcl::detail::sphereSphereDistance,
 //                   sphereCapsuleDistance, capsuleCapsuleDistance) directly: FCL without its dispatch
@@ -82,7 +82,7 @@ struct Setup {
   std::vector<Eigen::VectorXd> qs;
   std::vector<KinematicsData> kin;  // FK of each configuration (for the distance-only benchmarks)
   std::vector<FclPrimitive> fcl_prims;
-  std::vector<std::vector<fcl::Transform3d>> fcl_X;  // per configuration, per primitive, in W
+  std::vector<std::vector<fcl::Transform3d>> fcl_X;  // per configuration, per primitive, in B
   std::vector<std::pair<int, int>> robot_pairs;      // checked robot segment pairs
   KDL::Tree tree;
 
@@ -115,7 +115,7 @@ struct Setup {
     }
     for (int c = 0; c < kConfigurations; ++c) {
       std::vector<fcl::Transform3d> X;
-      for (const FclPrimitive& f : fcl_prims) X.push_back(kin[c].X_W_L[f.link] * f.X_L_P);
+      for (const FclPrimitive& f : fcl_prims) X.push_back(kin[c].X_B_L[f.link] * f.X_L_P);
       fcl_X.push_back(X);
     }
     for (const SegmentPair& p : model.pairs)
@@ -153,7 +153,7 @@ void Reflex_FK(benchmark::State& state) {
   int c = 0;
   for (auto _ : state) {
     computeForwardKinematics(s.model, kin, s.qs[c]);
-    benchmark::DoNotOptimize(kin.X_W_L.data());
+    benchmark::DoNotOptimize(kin.X_B_L.data());
     c = (c + 1) % kConfigurations;
   }
 }
@@ -287,7 +287,7 @@ void FCL_Analytic_DistancesOnly(benchmark::State& state) {
 }
 
 void FCL_Sweep_ReflexFK(benchmark::State& state) {
-  // The FCL counterpart of Reflex_Sweep_RowsOff: Reflex FK, primitive poses into W, FCL pairs.
+  // The FCL counterpart of Reflex_Sweep_RowsOff: Reflex FK, primitive poses into B, FCL pairs.
   const Setup& s = setup();
   KinematicsData kin(s.model);
   std::vector<fcl::Transform3d> X(s.fcl_prims.size());
@@ -296,7 +296,7 @@ void FCL_Sweep_ReflexFK(benchmark::State& state) {
   int c = 0;
   for (auto _ : state) {
     computeForwardKinematics(s.model, kin, s.qs[c]);
-    for (std::size_t p = 0; p < X.size(); ++p) X[p] = kin.X_W_L[s.fcl_prims[p].link] * s.fcl_prims[p].X_L_P;
+    for (std::size_t p = 0; p < X.size(); ++p) X[p] = kin.X_B_L[s.fcl_prims[p].link] * s.fcl_prims[p].X_L_P;
     benchmark::DoNotOptimize(fclPairs(s, X, request));
     c = (c + 1) % kConfigurations;
   }
@@ -341,7 +341,7 @@ void reflexFkJac(benchmark::State& state, const std::vector<std::string>& tips) 
   for (auto _ : state) {
     computeForwardKinematics(s.model, kin, s.qs[c]);
     for (std::size_t i = 0; i < links.size(); ++i) {
-      computePointJacobian(s.model, kin, links[i], kin.X_W_L[links[i]].translation(), J[i]);
+      computePointJacobian(s.model, kin, links[i], kin.X_B_L[links[i]].translation(), J[i]);
       benchmark::DoNotOptimize(J[i].data());
     }
     c = (c + 1) % kConfigurations;

@@ -144,9 +144,9 @@ void runCycles(const char* robot) {
     computeSegmentDistances(model, kin, dist, rows_on);
     computeSegmentDistances(model, kin, dist, rows_off);
     computeSegmentDistances(model, kin, dist, rows_near);
-    computePointJacobian(model, kin, hand, kin.X_W_L[hand].translation(), J);
-    computeRelativeJacobian(model, kin, hand, kin.X_W_L[hand].translation(), head, kin.X_W_L[head].translation(), J);
-    computeDirectionalRow(model, kin, hand, kin.X_W_L[hand].translation(), head, kin.X_W_L[head].translation(),
+    computePointJacobian(model, kin, hand, kin.X_B_L[hand].translation(), J);
+    computeRelativeJacobian(model, kin, hand, kin.X_B_L[hand].translation(), head, kin.X_B_L[head].translation(), J);
+    computeDirectionalRow(model, kin, hand, kin.X_B_L[hand].translation(), head, kin.X_B_L[head].translation(),
                           Eigen::Vector3d::UnitX(), row);
     // Body schema at run time: attach, check, detach.
     if (i == 10) attachBodySchemaSegment(model, dist, 0, hand, Eigen::Vector3d(0, 0, -0.05), Eigen::Vector3d(0.2, 0, -0.05),

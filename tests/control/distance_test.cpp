@@ -100,12 +100,12 @@ TEST(DistancePairs, AdjacencyExclusionCanBeTurnedOff) {
 
 // ---------------------------------------------------------------- against FCL on the robot
 std::shared_ptr<fcl::CollisionGeometryd> fclShape(const Vector3d& a, const Vector3d& b, double r,
-                                                  fcl::Transform3d& X_W_S) {
-  X_W_S.setIdentity();
-  X_W_S.translation() = 0.5 * (a + b);
+                                                  fcl::Transform3d& X_B_S) {
+  X_B_S.setIdentity();
+  X_B_S.translation() = 0.5 * (a + b);
   const double length = (b - a).norm();
   if (length == 0.0) return std::make_shared<fcl::Sphered>(r);
-  X_W_S.linear() = Eigen::Quaterniond::FromTwoVectors(Vector3d::UnitZ(), b - a).toRotationMatrix();
+  X_B_S.linear() = Eigen::Quaterniond::FromTwoVectors(Vector3d::UnitZ(), b - a).toRotationMatrix();
   return std::make_shared<fcl::Capsuled>(r, length);
 }
 
@@ -117,7 +117,7 @@ struct FclPair {
 };
 
 // The segment distance from FCL: the minimum over the segments' primitive pairs, each primitive
-// placed in W with the link pose from FK and the local endpoints from the model.
+// placed in B with the link pose from FK and the local endpoints from the model.
 FclPair fclSegmentDistance(const Model& m, const KinematicsData& kin, int sa, int sb) {
   FclPair out;
   const Segment& A = m.segments[sa];
@@ -126,8 +126,8 @@ FclPair fclSegmentDistance(const Model& m, const KinematicsData& kin, int sa, in
     for (int pb = B.first_primitive; pb < B.first_primitive + B.num_primitives; ++pb) {
       const Primitive& P = m.primitives[pa];
       const Primitive& Q = m.primitives[pb];
-      const Eigen::Isometry3d& XA = kin.X_W_L[A.link];
-      const Eigen::Isometry3d& XB = kin.X_W_L[B.link];
+      const Eigen::Isometry3d& XA = kin.X_B_L[A.link];
+      const Eigen::Isometry3d& XB = kin.X_B_L[B.link];
       fcl::Transform3d Xa, Xb;
       const auto ga = fclShape(XA * P.a_L, P.sphere ? Vector3d(XA * P.a_L) : Vector3d(XA * P.b_L), P.radius, Xa);
       const auto gb = fclShape(XB * Q.a_L, Q.sphere ? Vector3d(XB * Q.a_L) : Vector3d(XB * Q.b_L), Q.radius, Xb);
@@ -172,8 +172,8 @@ void checkRobotAgainstFcl(const Model& m, int configurations, std::uint64_t seed
       ASSERT_TRUE(pd.active);
       // Invariants.
       ASSERT_TRUE(std::isfinite(pd.distance));
-      EXPECT_NEAR(pd.nhat_W.norm(), 1.0, 1e-12);
-      EXPECT_LT((pd.p_W_a - pd.p_W_b - pd.distance * pd.nhat_W).norm(), 1e-12);
+      EXPECT_NEAR(pd.nhat_B.norm(), 1.0, 1e-12);
+      EXPECT_LT((pd.p_B_a - pd.p_B_b - pd.distance * pd.nhat_B).norm(), 1e-12);
       if (closest < 0 || pd.distance < dist.pairs[closest].distance) closest = static_cast<int>(i);
       const FclPair f = fclSegmentDistance(m, kin, pd.seg_a, pd.seg_b);
       if (!(f.d > 1e-9)) continue;  // FCL reports no points for touching/penetrating spheres
@@ -184,7 +184,7 @@ void checkRobotAgainstFcl(const Model& m, int configurations, std::uint64_t seed
       // Witness points are unique unless the best primitive pair is (nearly) parallel or two
       // primitive pairs tie.
       if (!f.parallel && f.second - f.d > 1e-9) {
-        const double ep = std::max((f.p_a - pd.p_W_a).norm(), (f.p_b - pd.p_W_b).norm());
+        const double ep = std::max((f.p_a - pd.p_B_a).norm(), (f.p_b - pd.p_B_b).norm());
         max_p = std::max(max_p, ep);
         ASSERT_LT(ep, 1e-9) << m.segments[pd.seg_a].name << "-" << m.segments[pd.seg_b].name;
         ++points;
@@ -231,9 +231,9 @@ void checkRowsAgainstFiniteDifferences(const Model& m, int configurations, std::
       // The row is n^T (J_pa - J_pb) with the Jacobians of the witness points on their links.
       const int la = m.segments[pd.seg_a].link, lb = m.segments[pd.seg_b].link;
       Eigen::MatrixXd Ja(3, m.nq), Jb(3, m.nq);
-      computePointJacobian(m, kin, la, pd.p_W_a, Ja);
-      computePointJacobian(m, kin, lb, pd.p_W_b, Jb);
-      const Eigen::RowVectorXd expected = pd.nhat_W.transpose() * (Ja - Jb);
+      computePointJacobian(m, kin, la, pd.p_B_a, Ja);
+      computePointJacobian(m, kin, lb, pd.p_B_b, Jb);
+      const Eigen::RowVectorXd expected = pd.nhat_B.transpose() * (Ja - Jb);
       EXPECT_LT((dist.rows.row(static_cast<Eigen::Index>(i)) - expected).cwiseAbs().maxCoeff(), 1e-12);
       // ... and it is the gradient of the pair distance (closest points unique at random configs).
       if (!pd.well_defined) continue;
@@ -330,17 +330,17 @@ void checkBroadPhase(const Model& m, double prune_distance, int configurations, 
           refinePairDistance(m, kin, pruned, static_cast<int>(i), prune_options);
           EXPECT_TRUE(p.exact);
           EXPECT_EQ(p.distance, b.distance) << name;
-          EXPECT_EQ(p.p_W_a, b.p_W_a) << name;
-          EXPECT_EQ(p.nhat_W, b.nhat_W) << name;
+          EXPECT_EQ(p.p_B_a, b.p_B_a) << name;
+          EXPECT_EQ(p.nhat_B, b.nhat_B) << name;
           ++refined;
         }
         continue;
       }
       if (b.distance <= prune_distance) ++within;
       EXPECT_EQ(p.distance, b.distance) << name;
-      EXPECT_EQ(p.p_W_a, b.p_W_a) << name;
-      EXPECT_EQ(p.p_W_b, b.p_W_b) << name;
-      EXPECT_EQ(p.nhat_W, b.nhat_W) << name;
+      EXPECT_EQ(p.p_B_a, b.p_B_a) << name;
+      EXPECT_EQ(p.p_B_b, b.p_B_b) << name;
+      EXPECT_EQ(p.nhat_B, b.nhat_B) << name;
       EXPECT_EQ(p.well_defined, b.well_defined) << name;
       ASSERT_EQ(p.has_row, b.has_row) << name;
       if (p.has_row) {
@@ -423,12 +423,12 @@ TEST(DistanceBodySchema, SlotCapsuleOnTheHandIsChecked) {
     if (!pd.active) continue;
     ++active;
     // Against FCL with the stick placed by hand.
-    const Eigen::Isometry3d& X = kin.X_W_L[hand];
+    const Eigen::Isometry3d& X = kin.X_B_L[hand];
     const Segment& S = m.segments[pd.seg_a];
     double best = std::numeric_limits<double>::infinity();
     for (int p = S.first_primitive; p < S.first_primitive + S.num_primitives; ++p) {
       const Primitive& P = m.primitives[p];
-      const Eigen::Isometry3d& XA = kin.X_W_L[S.link];
+      const Eigen::Isometry3d& XA = kin.X_B_L[S.link];
       fcl::Transform3d Xa, Xb;
       const auto ga = fclShape(XA * P.a_L, P.sphere ? Vector3d(XA * P.a_L) : Vector3d(XA * P.b_L), P.radius, Xa);
       const auto gb = fclShape(X * a_L, X * b_L, 0.02, Xb);
@@ -441,13 +441,13 @@ TEST(DistanceBodySchema, SlotCapsuleOnTheHandIsChecked) {
       EXPECT_NEAR(pd.distance, best, 1e-9) << S.name;
       ++compared;
     }
-    EXPECT_LT((pd.p_W_a - pd.p_W_b - pd.distance * pd.nhat_W).norm(), 1e-12);
+    EXPECT_LT((pd.p_B_a - pd.p_B_b - pd.distance * pd.nhat_B).norm(), 1e-12);
     // The row of a slot pair uses the slot's link (the hand) for p_b.
     Eigen::MatrixXd Ja(3, m.nq), Jb(3, m.nq);
-    computePointJacobian(m, kin, S.link, pd.p_W_a, Ja);
-    computePointJacobian(m, kin, hand, pd.p_W_b, Jb);
+    computePointJacobian(m, kin, S.link, pd.p_B_a, Ja);
+    computePointJacobian(m, kin, hand, pd.p_B_b, Jb);
     const Eigen::Index i = &pd - dist.pairs.data();
-    EXPECT_LT((dist.rows.row(i) - pd.nhat_W.transpose() * (Ja - Jb)).cwiseAbs().maxCoeff(), 1e-12);
+    EXPECT_LT((dist.rows.row(i) - pd.nhat_B.transpose() * (Ja - Jb)).cwiseAbs().maxCoeff(), 1e-12);
   }
   EXPECT_EQ(active, m.num_robot_segments - 2);
   EXPECT_GE(compared, active - 3);
@@ -510,9 +510,9 @@ TEST(DistanceBodySchema, CheckRejectsAbsurdSegmentsAndNamesTheBadValue) {
   // A gaze line from the head camera to an object on the floor 3 m ahead (the behavior host's
   // default max_range), expressed in the head link frame at q = 0: a virtual segment, accepted.
   KinematicsData kin(m);
-  const Eigen::Isometry3d X_head_W = kin.X_W_L[head].inverse();
-  const Vector3d cam_W = kin.X_W_L[m.linkIndex("head_camera")].translation();
-  const Vector3d a_gaze = X_head_W * cam_W, b_gaze = X_head_W * Vector3d(3.0, 0.0, 0.0);
+  const Eigen::Isometry3d X_head_B = kin.X_B_L[head].inverse();
+  const Vector3d cam_B = kin.X_B_L[m.linkIndex("head_camera")].translation();
+  const Vector3d a_gaze = X_head_B * cam_B, b_gaze = X_head_B * Vector3d(3.0, 0.0, 0.0);
   ASSERT_GT((b_gaze - a_gaze).norm(), 3.0);
   EXPECT_TRUE(checkBodySchemaSegment(m, head, a_gaze, b_gaze, 0.03, true, lim).ok());
   // ... but the same line as a physical segment is too long for anything a link holds.
@@ -575,8 +575,8 @@ TEST(DistanceBodySchema, CoincidentCoresGetTheLinkFallbackNormal) {
   DistanceData dist(m);
   const int head = m.linkIndex("head");
   const Segment& hs = m.segments[m.segmentIndex("head")];
-  const Vector3d centre_W = kin.X_W_L[head] * m.primitives[hs.first_primitive].a_L;
-  ASSERT_TRUE(attachBodySchemaSegment(m, dist, 0, 0, centre_W, centre_W, 0.05));
+  const Vector3d centre_B = kin.X_B_L[head] * m.primitives[hs.first_primitive].a_L;
+  ASSERT_TRUE(attachBodySchemaSegment(m, dist, 0, 0, centre_B, centre_B, 0.05));
   computeSegmentDistances(m, kin, dist);
   bool found = false;
   for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
@@ -587,9 +587,9 @@ TEST(DistanceBodySchema, CoincidentCoresGetTheLinkFallbackNormal) {
     EXPECT_FALSE(pd.well_defined);
     EXPECT_NEAR(pd.distance, -(0.14 + 0.05), 1e-12);
     // Fallback: from the slot's link origin (world) towards the head link origin.
-    const Vector3d expected = kin.X_W_L[head].translation().normalized();
-    EXPECT_LT((pd.nhat_W - expected).norm(), 1e-12);
-    EXPECT_LT((pd.p_W_a - pd.p_W_b - pd.distance * pd.nhat_W).norm(), 1e-12);
+    const Vector3d expected = kin.X_B_L[head].translation().normalized();
+    EXPECT_LT((pd.nhat_B - expected).norm(), 1e-12);
+    EXPECT_LT((pd.p_B_a - pd.p_B_b - pd.distance * pd.nhat_B).norm(), 1e-12);
     EXPECT_TRUE(dist.rows.row(static_cast<Eigen::Index>(i)).allFinite());
   }
   EXPECT_TRUE(found);
@@ -615,8 +615,8 @@ TEST(DistanceRuntime, NonFiniteJointValuesKeepTheLastValidResult) {
     for (std::size_t i = 0; i < before.size(); ++i) {
       if (!before[i].active) continue;
       EXPECT_EQ(dist.pairs[i].distance, before[i].distance);
-      EXPECT_EQ(dist.pairs[i].p_W_a, before[i].p_W_a);
-      EXPECT_TRUE(dist.pairs[i].nhat_W.allFinite());
+      EXPECT_EQ(dist.pairs[i].p_B_a, before[i].p_B_a);
+      EXPECT_TRUE(dist.pairs[i].nhat_B.allFinite());
     }
   }
 }

@@ -306,12 +306,12 @@ TEST(GeometryCapsuleCapsule, NearlyParallelStaysFinite) {
 // A Capsule is centred on its frame origin, along its local z, with lz = core length.
 
 std::shared_ptr<fcl::CollisionGeometryd> fclShape(const Vector3d& a, const Vector3d& b, double r,
-                                                  fcl::Transform3d& X_W_S) {
-  X_W_S.setIdentity();
-  X_W_S.translation() = 0.5 * (a + b);
+                                                  fcl::Transform3d& X_B_S) {
+  X_B_S.setIdentity();
+  X_B_S.translation() = 0.5 * (a + b);
   const double length = (b - a).norm();
   if (length == 0.0) return std::make_shared<fcl::Sphered>(r);
-  X_W_S.linear() = Eigen::Quaterniond::FromTwoVectors(Vector3d::UnitZ(), b - a).toRotationMatrix();
+  X_B_S.linear() = Eigen::Quaterniond::FromTwoVectors(Vector3d::UnitZ(), b - a).toRotationMatrix();
   return std::make_shared<fcl::Capsuled>(r, length);
 }
 

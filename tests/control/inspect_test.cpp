@@ -194,8 +194,8 @@ void expectCsvMatchesLibrary(const ProcessResult& r, const Expected& e) {
     EXPECT_EQ(rows[i].b, e.model.segments[pd.seg_b].name);
     // Printed with 6 decimals.
     EXPECT_NEAR(rows[i].d, pd.distance, 5.1e-7);
-    EXPECT_LT((rows[i].pa - pd.p_W_a).cwiseAbs().maxCoeff(), 5.1e-7);
-    EXPECT_LT((rows[i].pb - pd.p_W_b).cwiseAbs().maxCoeff(), 5.1e-7);
+    EXPECT_LT((rows[i].pa - pd.p_B_a).cwiseAbs().maxCoeff(), 5.1e-7);
+    EXPECT_LT((rows[i].pb - pd.p_B_b).cwiseAbs().maxCoeff(), 5.1e-7);
   }
   const PairDistance& c = e.dist.pairs[e.dist.closest];
   EXPECT_THAT(r.out, HasSubstr("# closest: " + e.model.segments[c.seg_a].name + "," +

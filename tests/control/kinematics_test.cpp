@@ -49,9 +49,9 @@ TEST(KinematicsPlanar, HandComputedPositionAndJacobian) {
   const int tip = m.linkIndex("slider");
   const double L2 = 0.5 + q3;
   const Vector3d p(std::cos(q1) + L2 * std::cos(q1 + q2), std::sin(q1) + L2 * std::sin(q1 + q2), 0);
-  EXPECT_LT((kin.X_W_L[tip].translation() - p).norm(), 1e-15);
+  EXPECT_LT((kin.X_B_L[tip].translation() - p).norm(), 1e-15);
   Eigen::Matrix3d R_expected = Eigen::AngleAxisd(q1 + q2, Vector3d::UnitZ()).toRotationMatrix();
-  EXPECT_LT((kin.X_W_L[tip].linear() - R_expected).norm(), 1e-15);
+  EXPECT_LT((kin.X_B_L[tip].linear() - R_expected).norm(), 1e-15);
   Eigen::MatrixXd J(3, 3);
   computePointJacobian(m, kin, tip, p, J);
   Eigen::Matrix3d J_expected;
@@ -108,7 +108,7 @@ void checkAgainstKdl(const std::string& robot, const std::vector<std::string>& t
       KDL::ChainFkSolverPos_recursive fk(kc.chain);
       ASSERT_GE(fk.JntToCart(kq, F), 0);
       const int link = m.linkIndex(kc.tip);
-      const Eigen::Isometry3d& X = kin.X_W_L[link];
+      const Eigen::Isometry3d& X = kin.X_B_L[link];
       for (int r = 0; r < 3; ++r) {
         max_p = std::max(max_p, std::abs(X.translation()[r] - F.p(r)));
         for (int col = 0; col < 3; ++col) max_r = std::max(max_r, std::abs(X.linear()(r, col) - F.M(r, col)));
@@ -119,11 +119,11 @@ void checkAgainstKdl(const std::string& robot, const std::vector<std::string>& t
       ASSERT_GE(jac_solver.JntToJac(kq, kj), 0);
       for (const bool offset : {false, true}) {
         const Vector3d p_L = offset ? test::randomPoint(rng, 0.2) : Vector3d::Zero();
-        const Vector3d p_W = X * p_L;
+        const Vector3d p_B = X * p_L;
         KDL::Jacobian kjp(kc.chain.getNrOfJoints());
-        const Vector3d off_W = p_W - X.translation();
-        KDL::changeRefPoint(kj, KDL::Vector(off_W.x(), off_W.y(), off_W.z()), kjp);
-        computePointJacobian(m, kin, link, p_W, J);
+        const Vector3d off_B = p_B - X.translation();
+        KDL::changeRefPoint(kj, KDL::Vector(off_B.x(), off_B.y(), off_B.z()), kjp);
+        computePointJacobian(m, kin, link, p_B, J);
         Eigen::MatrixXd expected = Eigen::MatrixXd::Zero(3, m.nq);
         for (std::size_t k = 0; k < kc.q_of_joint.size(); ++k)
           for (int r = 0; r < 3; ++r) expected(r, kc.q_of_joint[k]) = kjp(r, k);
@@ -150,7 +150,7 @@ TEST(KinematicsKdl, SecondHumanoidTipsAgreeWithKdl) {
 // ---------------------------------------------------------------- against finite differences
 Vector3d pointAt(const Model& m, KinematicsData& kin, const Eigen::VectorXd& q, int link, const Vector3d& p_L) {
   EXPECT_TRUE(computeForwardKinematics(m, kin, q));
-  return kin.X_W_L[link] * p_L;
+  return kin.X_B_L[link] * p_L;
 }
 
 TEST(KinematicsFiniteDifferences, JacobiansRelativeJacobianAndRowOfEveryLink) {
@@ -177,15 +177,15 @@ TEST(KinematicsFiniteDifferences, JacobiansRelativeJacobianAndRowOfEveryLink) {
           Jfd2.col(j) = (pointAt(m, kin_fd, qp, link2, p2_L) - pointAt(m, kin_fd, qm, link2, p2_L)) / (2 * h);
         }
         ASSERT_TRUE(computeForwardKinematics(m, kin, q));
-        const Vector3d p_W = kin.X_W_L[link] * p_L, p2_W = kin.X_W_L[link2] * p2_L;
-        computePointJacobian(m, kin, link, p_W, J);
-        computePointJacobian(m, kin, link2, p2_W, J2);
+        const Vector3d p_B = kin.X_B_L[link] * p_L, p2_B = kin.X_B_L[link2] * p2_L;
+        computePointJacobian(m, kin, link, p_B, J);
+        computePointJacobian(m, kin, link2, p2_B, J2);
         max_j = std::max(max_j, (J - Jfd).cwiseAbs().maxCoeff());
-        computeRelativeJacobian(m, kin, link, p_W, link2, p2_W, Jrel);
+        computeRelativeJacobian(m, kin, link, p_B, link2, p2_B, Jrel);
         max_rel = std::max(max_rel, (Jrel - (Jfd - Jfd2)).cwiseAbs().maxCoeff());
         EXPECT_LT((Jrel - (J - J2)).cwiseAbs().maxCoeff(), 1e-14);
         const Vector3d n = test::randomUnit(rng);
-        computeDirectionalRow(m, kin, link, p_W, link2, p2_W, n, row);
+        computeDirectionalRow(m, kin, link, p_B, link2, p2_B, n, row);
         max_row = std::max(max_row, (row - n.transpose() * (Jfd - Jfd2)).cwiseAbs().maxCoeff());
       }
     }
@@ -204,12 +204,12 @@ TEST(KinematicsRuntime, NonFiniteOrWrongSizeJointVectorIsRejectedAndDataKept) {
   std::mt19937_64 rng(4);
   const Eigen::VectorXd q = test::randomConfiguration(m, rng);
   ASSERT_TRUE(computeForwardKinematics(m, kin, q));
-  const std::vector<Eigen::Isometry3d> X_before = kin.X_W_L;
-  const std::vector<Vector3d> axis_before = kin.axis_W;
+  const std::vector<Eigen::Isometry3d> X_before = kin.X_B_L;
+  const std::vector<Vector3d> axis_before = kin.axis_B;
   auto unchanged = [&] {
     for (std::size_t i = 0; i < X_before.size(); ++i) {
-      if (!(kin.X_W_L[i].matrix() == X_before[i].matrix())) return false;
-      if (!(kin.axis_W[i] == axis_before[i])) return false;
+      if (!(kin.X_B_L[i].matrix() == X_before[i].matrix())) return false;
+      if (!(kin.axis_B[i] == axis_before[i])) return false;
     }
     return kin.q == q && kin.q.allFinite();
   };
@@ -226,7 +226,7 @@ TEST(KinematicsRuntime, NonFiniteOrWrongSizeJointVectorIsRejectedAndDataKept) {
   EXPECT_FALSE(computeForwardKinematics(m, kin, Eigen::VectorXd::Zero(m.nq + 1)));
   EXPECT_TRUE(unchanged());
   Eigen::MatrixXd J(3, m.nq);
-  computePointJacobian(m, kin, m.linkIndex("l_hand"), kin.X_W_L[m.linkIndex("l_hand")].translation(), J);
+  computePointJacobian(m, kin, m.linkIndex("l_hand"), kin.X_B_L[m.linkIndex("l_hand")].translation(), J);
   EXPECT_TRUE(J.allFinite());
 }
 

@@ -215,8 +215,8 @@ TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
     for (std::size_t i = 0; i < model.pairs.size(); ++i) {
       const SegmentPair& p = model.pairs[i];
       if (model.segments[p.b].body_schema_slot) continue;
-      const fcl::Transform3d Xa(kin.X_W_L[model.segments[p.a].link].matrix());
-      const fcl::Transform3d Xb(kin.X_W_L[model.segments[p.b].link].matrix());
+      const fcl::Transform3d Xa(kin.X_B_L[model.segments[p.a].link].matrix());
+      const fcl::Transform3d Xb(kin.X_B_L[model.segments[p.b].link].matrix());
       fcl::CollisionRequestd creq;
       fcl::CollisionResultd cres;
       fcl::collide(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, creq, cres);
@@ -619,12 +619,12 @@ TEST(MeshFitBox, SmallHumanoidBoxesFittedWithoutAnOverlayAndNeverCloserThanFclSa
       const std::string& la = model.segments[p.a].name;
       const std::string& lb = model.segments[p.b].name;
       if (!box_links.count(la) && !box_links.count(lb)) continue;
-      const Eigen::Isometry3d X_W_A = kin.X_W_L[model.segments[p.a].link], X_W_B = kin.X_W_L[model.segments[p.b].link];
+      const Eigen::Isometry3d X_B_La = kin.X_B_L[model.segments[p.a].link], X_B_Lb = kin.X_B_L[model.segments[p.b].link];
       double true_distance = std::numeric_limits<double>::infinity();
       bool touching = false;
-      for (const auto& [ga, X_A] : shapes.at(la))
-        for (const auto& [gb, X_B] : shapes.at(lb)) {
-          const fcl::Transform3d Xa((X_W_A * X_A).matrix()), Xb((X_W_B * X_B).matrix());
+      for (const auto& [ga, X_La_shape] : shapes.at(la))
+        for (const auto& [gb, X_Lb_shape] : shapes.at(lb)) {
+          const fcl::Transform3d Xa((X_B_La * X_La_shape).matrix()), Xb((X_B_Lb * X_Lb_shape).matrix());
           fcl::CollisionRequestd creq;
           fcl::CollisionResultd cres;
           fcl::collide(ga.get(), Xa, gb.get(), Xb, creq, cres);

@@ -201,7 +201,7 @@ TEST_P(ShippedRobot, FindsTheKnownArmsHeadAndARestClearOfTheBodyAndTheFilesWorkI
   EXPECT_GT(min_seen, cm.params.d_r);
   EXPECT_EQ(ctl.report().counts.estop_count, 0u);
   for (int a = 0; a < 2; ++a) {
-    const Eigen::Vector3d hand = kin.X_W_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L;
+    const Eigen::Vector3d hand = kin.X_B_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L;
     EXPECT_LT((hand - target[a]).norm(), 0.01) << (a == 0 ? "left" : "right");
   }
 }

@@ -75,7 +75,7 @@ struct Robot {
   std::array<Eigen::Vector3d, 2> hands(const Eigen::VectorXd& q) {
     EXPECT_TRUE(control::computeForwardKinematics(model, kin, q));
     std::array<Eigen::Vector3d, 2> h;
-    for (int a = 0; a < 2; ++a) h[a] = kin.X_W_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L;
+    for (int a = 0; a < 2; ++a) h[a] = kin.X_B_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L;
     return h;
   }
 };

@@ -66,7 +66,7 @@ Eigen::Vector3d restShoulder(const std::string& link) {
   Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
   for (int i = 0; i < model.nq; ++i) q[i] = std::clamp(0.0, model.q_lower[i], model.q_upper[i]);
   control::computeForwardKinematics(model, data, q);
-  return data.X_W_L[static_cast<std::size_t>(model.linkIndex(link))].translation();
+  return data.X_B_L[static_cast<std::size_t>(model.linkIndex(link))].translation();
 }
 
 struct Seen {

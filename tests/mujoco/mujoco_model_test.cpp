@@ -69,8 +69,8 @@ TEST_P(ModelFidelity, BodyPosesAndGeomsEqualTheProjectsKinematics) {
       ASSERT_GE(b, 0) << model.links[l].name;
       const Eigen::Vector3d p(d.xpos[3 * b], d.xpos[3 * b + 1], d.xpos[3 * b + 2]);
       const Eigen::Quaterniond quat(d.xquat[4 * b], d.xquat[4 * b + 1], d.xquat[4 * b + 2], d.xquat[4 * b + 3]);
-      max_pos = std::max(max_pos, (p - kin.X_W_L[l].translation()).norm());
-      max_rot = std::max(max_rot, (quat.toRotationMatrix() - kin.X_W_L[l].linear()).cwiseAbs().maxCoeff());
+      max_pos = std::max(max_pos, (p - kin.X_B_L[l].translation()).norm());
+      max_rot = std::max(max_rot, (quat.toRotationMatrix() - kin.X_B_L[l].linear()).cwiseAbs().maxCoeff());
       ++poses;
     }
     for (int s = 0; s < model.num_robot_segments; ++s) {
@@ -80,7 +80,7 @@ TEST_P(ModelFidelity, BodyPosesAndGeomsEqualTheProjectsKinematics) {
         const int g = mj_name2id(&m, mjOBJ_GEOM, geomName(model, s, k).c_str());
         ASSERT_GE(g, 0);
         EXPECT_NEAR(m.geom_size[3 * g], prim.radius, 1e-12);
-        const Eigen::Vector3d a = kin.X_W_L[seg.link] * prim.a_L, b = kin.X_W_L[seg.link] * prim.b_L;
+        const Eigen::Vector3d a = kin.X_B_L[seg.link] * prim.a_L, b = kin.X_B_L[seg.link] * prim.b_L;
         const Eigen::Vector3d c(d.geom_xpos[3 * g], d.geom_xpos[3 * g + 1], d.geom_xpos[3 * g + 2]);
         if (prim.sphere) {
           ASSERT_EQ(m.geom_type[g], mjGEOM_SPHERE);

@@ -37,15 +37,15 @@ Scenario randomReactiveEpisode(std::uint64_t seed, double duration) {
       if (kind < 0.1) {
         h.status = HandStatus::kNoTarget;
       } else if (kind < 0.35) {  // inside the torso / head: unreachable without a collision
-        h.target_W = Eigen::Vector3d(0.08 * (u(rng) - 0.5), 0.16 * (u(rng) - 0.5), 0.6 + 0.6 * u(rng));
+        h.target_B = Eigen::Vector3d(0.08 * (u(rng) - 0.5), 0.16 * (u(rng) - 0.5), 0.6 + 0.6 * u(rng));
       } else if (kind < 0.6) {  // across the body: the arms meet
-        h.target_W = Eigen::Vector3d(0.1 + 0.35 * u(rng), -side * (0.02 + 0.35 * u(rng)), 0.6 + 0.5 * u(rng));
+        h.target_B = Eigen::Vector3d(0.1 + 0.35 * u(rng), -side * (0.02 + 0.35 * u(rng)), 0.6 + 0.5 * u(rng));
       } else if (kind < 0.7) {  // behind the back
-        h.target_W = Eigen::Vector3d(-0.1 - 0.3 * u(rng), 0.6 * (u(rng) - 0.5), 0.5 + 0.7 * u(rng));
+        h.target_B = Eigen::Vector3d(-0.1 - 0.3 * u(rng), 0.6 * (u(rng) - 0.5), 0.5 + 0.7 * u(rng));
       } else if (kind < 0.8) {  // out of reach (but inside the 2 m the node accepts)
-        h.target_W = Eigen::Vector3d(0.8 + 0.6 * u(rng), side * u(rng), 0.3 + 1.4 * u(rng));
+        h.target_B = Eigen::Vector3d(0.8 + 0.6 * u(rng), side * u(rng), 0.3 + 1.4 * u(rng));
       } else {  // ordinary reachable workspace on its own side
-        h.target_W = Eigen::Vector3d(0.15 + 0.4 * u(rng), side * (0.05 + 0.45 * u(rng)), 0.5 + 0.8 * u(rng));
+        h.target_B = Eigen::Vector3d(0.15 + 0.4 * u(rng), side * (0.05 + 0.45 * u(rng)), 0.5 + 0.8 * u(rng));
       }
     }
     const double p = u(rng);

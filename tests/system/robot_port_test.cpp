@@ -76,7 +76,7 @@ struct Fixture {
     control::KinematicsData kin(model);
     EXPECT_TRUE(control::computeForwardKinematics(model, kin, q));
     std::array<Eigen::Vector3d, 2> h;
-    for (int a = 0; a < 2; ++a) h[a] = kin.X_W_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L;
+    for (int a = 0; a < 2; ++a) h[a] = kin.X_B_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L;
     return h;
   }
 
@@ -93,7 +93,7 @@ struct Fixture {
       ctl.step(k * dt);
     }
     std::array<Eigen::Vector3d, 2> h;
-    for (int a = 0; a < 2; ++a) h[a] = ctl.data().arms[a].hand_W;
+    for (int a = 0; a < 2; ++a) h[a] = ctl.data().arms[a].hand_B;
     return h;
   }
 };

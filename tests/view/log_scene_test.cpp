@@ -70,7 +70,7 @@ TEST(LogScene, NearestRowsWithTheirJointsZonesAndTargets) {
   EXPECT_EQ(left.closest_b, "l_hand");
   EXPECT_TRUE(left.estop_latched);
   EXPECT_TRUE(s[0].input.targets[1].given);
-  EXPECT_DOUBLE_EQ(s[0].input.targets[1].p_W.y(), -0.1);
+  EXPECT_DOUBLE_EQ(s[0].input.targets[1].p_B.y(), -0.1);
   EXPECT_EQ(s[1].input.arms[0].zone, Zone::kFree);
   EXPECT_FALSE(s[1].input.targets[0].given) << "no_target: not drawn";
   EXPECT_TRUE(s[1].input.arms[0].closest_a.empty());

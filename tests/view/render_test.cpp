@@ -60,16 +60,16 @@ int runRender(const std::string& args, const std::string& out, std::string& log)
   return rc;
 }
 
-/// Pixel (u right, v down) [px] of the world point p_W in a kWidth x kHeight picture, as a pinhole camera
+/// Pixel (u right, v down) [px] of the world point p_B in a kWidth x kHeight picture, as a pinhole camera
 /// at target + radius (cos el cos az, cos el sin az, sin el) looking at the target, z up.
-Eigen::Vector2d project(const Eigen::Vector3d& p_W) {
-  const Eigen::Vector3d c_W = kTarget + kRadius * Eigen::Vector3d(std::cos(kElevation) * std::cos(kAzimuth),
+Eigen::Vector2d project(const Eigen::Vector3d& p_B) {
+  const Eigen::Vector3d c_B = kTarget + kRadius * Eigen::Vector3d(std::cos(kElevation) * std::cos(kAzimuth),
                                                                   std::cos(kElevation) * std::sin(kAzimuth),
                                                                   std::sin(kElevation));
-  const Eigen::Vector3d forward = (kTarget - c_W).normalized();
+  const Eigen::Vector3d forward = (kTarget - c_B).normalized();
   const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
   const Eigen::Vector3d up = right.cross(forward);
-  const Eigen::Vector3d d = p_W - c_W;
+  const Eigen::Vector3d d = p_B - c_B;
   const double depth = d.dot(forward), t = std::tan(kFovY / 2.0), aspect = double(kWidth) / kHeight;
   const double x_ndc = d.dot(right) / (depth * t * aspect), y_ndc = d.dot(up) / (depth * t);
   return {(x_ndc + 1.0) / 2.0 * kWidth, (1.0 - y_ndc) / 2.0 * kHeight};
@@ -153,7 +153,7 @@ TEST(ReportRender, AKnownPostureIsDrawnWhereForwardKinematicsPutsIt) {
   auto centre = [&](const char* segment) {
     const Segment& seg = model.segments[model.segmentIndex(segment)];
     const Primitive& prim = model.primitives[seg.first_primitive];
-    return Eigen::Vector3d(kin.X_W_L[seg.link] * (0.5 * (prim.a_L + prim.b_L)));
+    return Eigen::Vector3d(kin.X_B_L[seg.link] * (0.5 * (prim.a_L + prim.b_L)));
   };
   const Eigen::Vector3d left_hand = centre("l_hand"), right_hand = centre("r_hand");
   const Eigen::Vector2d uv_left = project(left_hand), uv_right = project(right_hand);

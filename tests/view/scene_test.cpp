@@ -4,7 +4,7 @@
 //     both shipped robots at 60 random configurations each (FK itself is checked against KDL in
 //     control_kinematics_test);
 //   - capsules: every cylinder's axis ends and every end sphere equal the distance module's core
-//     segments (DistanceData::prim_W after computeSegmentDistances), diameters = 2 radius; counts equal
+//     segments (DistanceData::prim_B after computeSegmentDistances), diameters = 2 radius; counts equal
 //     the model's primitives;
 //   - the closest-pair line: its ends equal the witness points of the named pair recomputed here by
 //     brute force over the two segments' primitive pairs with capsuleCapsuleDistance;
@@ -126,16 +126,16 @@ TEST(Scene, FrameTransformsComposeToForwardKinematicsOnBothRobots) {
       control::KinematicsData fk(model);
       ASSERT_TRUE(control::computeForwardKinematics(model, fk, in.q));
       for (std::size_t l = 0; l < model.links.size(); ++l) {
-        Eigen::Isometry3d X_W_L = Eigen::Isometry3d::Identity();
+        Eigen::Isometry3d X_B_L = Eigen::Isometry3d::Identity();
         std::string frame = model.links[l].name;
         for (int depth = 0; frame != scene->root_frame; ++depth) {
           ASSERT_LT(depth, 100) << "chain from " << model.links[l].name << " reaches the root";
           const auto& [parent, X_P_C] = parent_of.at(frame);
-          X_W_L = X_P_C * X_W_L;
+          X_B_L = X_P_C * X_B_L;
           frame = parent;
         }
-        worst_p = std::max(worst_p, (X_W_L.translation() - fk.X_W_L[l].translation()).norm());
-        worst_R = std::max(worst_R, (X_W_L.linear() - fk.X_W_L[l].linear()).norm());
+        worst_p = std::max(worst_p, (X_B_L.translation() - fk.X_B_L[l].translation()).norm());
+        worst_R = std::max(worst_R, (X_B_L.linear() - fk.X_B_L[l].linear()).norm());
       }
     }
     if (scene != &small) delete scene;
@@ -170,7 +170,7 @@ TEST(Scene, CapsulesAreTheDistanceModuleSegments) {
       std::size_t cyl = 0, sph = 0;
       for (int k = 0; k < seg.num_primitives; ++k) {
         const int p = seg.first_primitive + k;
-        const control::SegmentW& core = ref.prim_W[static_cast<std::size_t>(p)];
+        const control::SegmentB& core = ref.prim_B[static_cast<std::size_t>(p)];
         const Eigen::Vector3d a = core.start, b = core.start + core.d;
         const double r = model.primitives[static_cast<std::size_t>(p)].radius;
         const json& sa = (*entity)["spheres"].at(sph++);
@@ -234,8 +234,8 @@ TEST(Scene, ClosestLineToABodySchemaSegment) {
   control::KinematicsData kin(model);
   ASSERT_TRUE(control::computeForwardKinematics(model, kin, in.q));
   const int sa = model.segmentIndex("r_hand");
-  const Eigen::Isometry3d& XA = kin.X_W_L[model.segments[sa].link];
-  const Eigen::Isometry3d& XB = kin.X_W_L[model.linkIndex("l_hand")];
+  const Eigen::Isometry3d& XA = kin.X_B_L[model.segments[sa].link];
+  const Eigen::Isometry3d& XB = kin.X_B_L[model.linkIndex("l_hand")];
   double best = 1e9;
   Eigen::Vector3d pa = Eigen::Vector3d::Zero(), pb = Eigen::Vector3d::Zero();
   for (int i = 0; i < model.segments[sa].num_primitives; ++i) {
@@ -291,8 +291,8 @@ TEST(Scene, ClosestPairLineAndZoneColours) {
     for (int j = 0; j < model.segments[sb].num_primitives; ++j) {
       const auto& A = model.primitives[static_cast<std::size_t>(model.segments[sa].first_primitive + i)];
       const auto& B = model.primitives[static_cast<std::size_t>(model.segments[sb].first_primitive + j)];
-      const Eigen::Isometry3d& XA = kin.X_W_L[model.segments[sa].link];
-      const Eigen::Isometry3d& XB = kin.X_W_L[model.segments[sb].link];
+      const Eigen::Isometry3d& XA = kin.X_B_L[model.segments[sa].link];
+      const Eigen::Isometry3d& XB = kin.X_B_L[model.segments[sb].link];
       double d;
       Eigen::Vector3d a, b, n;
       control::capsuleCapsuleDistance(XA * A.a_L, XA * A.b_L, A.radius, XB * B.a_L, XB * B.b_L, B.radius,
@@ -345,10 +345,10 @@ TEST(Scene, MessagesValidateAgainstTheirSchemasAndSchemasNameTheFoxgloveFields) 
   in.arms[0].distance = 0.02;
   in.arms[0].zone = Zone::kYellow;
   in.targets[0].given = true;
-  in.targets[0].p_W = {0.3, 0.1, 1.0};
+  in.targets[0].p_B = {0.3, 0.1, 1.0};
   in.targets[0].object = "red_cup";
   in.targets[1].given = true;
-  in.targets[1].p_W = {std::nan(""), 0, 1};
+  in.targets[1].p_B = {std::nan(""), 0, 1};
   in.objects.push_back({"red_cup", {0.5, 0.1, 1.0}, 0.9});
   in.objects.push_back({"bad", {0.5, std::numeric_limits<double>::infinity(), 1.0}, 0.9});
   ASSERT_TRUE(updateScene(scene, data, in));
@@ -425,12 +425,12 @@ TEST(Scene, BodySchemaSegmentsAreDrawnInTheirParentLinkFrame) {
   for (const char* gone : {"schema/off", "schema/unknown", "schema/nan"}) EXPECT_EQ(by_id.count(gone), 0U) << gone;
   ASSERT_EQ(by_id.count("schema/grasped_bar"), 1U);
   ASSERT_EQ(by_id.count("schema/gaze_line"), 1U);
-  const Eigen::Isometry3d& X_W_hand = data.kin.X_W_L[scene.model.linkIndex("l_hand")];
+  const Eigen::Isometry3d& X_B_hand = data.kin.X_B_L[scene.model.linkIndex("l_hand")];
   const json& e = by_id["schema/grasped_bar"];
   ASSERT_EQ(e["cylinders"].size(), 1U);
   ASSERT_EQ(e["spheres"].size(), 2U);
-  EXPECT_LT((vec(e["spheres"][0]["pose"]["position"]) - X_W_hand * bar.a_L).norm(), 1e-12);
-  EXPECT_LT((vec(e["spheres"][1]["pose"]["position"]) - X_W_hand * bar.b_L).norm(), 1e-12);
+  EXPECT_LT((vec(e["spheres"][0]["pose"]["position"]) - X_B_hand * bar.a_L).norm(), 1e-12);
+  EXPECT_LT((vec(e["spheres"][1]["pose"]["position"]) - X_B_hand * bar.b_L).norm(), 1e-12);
   EXPECT_NEAR(e["cylinders"][0]["size"]["z"].get<double>(), 0.30, 1e-12);
   EXPECT_LT(by_id["schema/gaze_line"]["spheres"][0]["color"]["a"].get<double>(), 0.5) << "virtual: translucent";
   // One delete-all, stamped before the entities, so that a detached segment disappears.

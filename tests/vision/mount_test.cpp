@@ -72,8 +72,8 @@ struct TrueMount {
 TrueMount trueMount(const reflex::control::Model& m) {
   reflex::control::KinematicsData d(m);
   reflex::control::computeForwardKinematics(m, d, Eigen::VectorXd::Zero(m.nq));
-  const Eigen::Isometry3d X_H_Cu = d.X_W_L[static_cast<std::size_t>(m.linkIndex("head"))].inverse() *
-                                   d.X_W_L[static_cast<std::size_t>(m.linkIndex("head_camera"))];
+  const Eigen::Isometry3d X_H_Cu = d.X_B_L[static_cast<std::size_t>(m.linkIndex("head"))].inverse() *
+                                   d.X_B_L[static_cast<std::size_t>(m.linkIndex("head_camera"))];
   cv::Matx33d turn;
   cv::Rodrigues(cv::Vec3d(0.035, -0.026, 0.018), turn);  // ~2.7 deg
   return {rotCv(X_H_Cu.linear()) * turn, vecCv(X_H_Cu.translation()) + cv::Vec3d(0.005, -0.004, 0.003)};
@@ -100,8 +100,8 @@ std::string observationsCsv(const reflex::control::Model& m, const TrueMount& t,
                              rng.uniform(-0.8, 0.8)};
     for (std::size_t i = 0; i < v.size(); ++i) q[m.qIndex(kJoints[i])] = v[i];
     reflex::control::computeForwardKinematics(m, d, q);
-    const Eigen::Vector3d p_B = d.X_W_L[static_cast<std::size_t>(m.linkIndex("l_hand"))] * p_hand;
-    const cv::Vec3d p_H = vecCv(d.X_W_L[static_cast<std::size_t>(m.linkIndex("head"))].inverse() * p_B);
+    const Eigen::Vector3d p_B = d.X_B_L[static_cast<std::size_t>(m.linkIndex("l_hand"))] * p_hand;
+    const cv::Vec3d p_H = vecCv(d.X_B_L[static_cast<std::size_t>(m.linkIndex("head"))].inverse() * p_B);
     cv::Vec3d p_C = t.R_H_C.t() * (p_H - t.p_H_C);
     if (p_C[2] < 0.2 || p_C[2] > 1.2 || std::abs(p_C[0]) > 0.55 * p_C[2] || std::abs(p_C[1]) > 0.42 * p_C[2]) continue;
     if (exact) exact->push_back({"v" + std::to_string(rows), p_C, p_H});
@@ -123,7 +123,7 @@ TEST(Mount, ShippedMountFileIsTheUrdfHeadCamera) {
   const reflex::control::Model m = robot();
   reflex::control::KinematicsData d(m);
   reflex::control::computeForwardKinematics(m, d, Eigen::VectorXd::Zero(m.nq));
-  const Eigen::Isometry3d X_B_C = d.X_W_L[static_cast<std::size_t>(m.linkIndex("head_camera"))];
+  const Eigen::Isometry3d X_B_C = d.X_B_L[static_cast<std::size_t>(m.linkIndex("head_camera"))];
   const CameraMount shipped = test::shippedMount();
   EXPECT_LT(cv::norm(shipped.p_B_C - vecCv(X_B_C.translation())), 1e-6);
   EXPECT_LT(angleDeg(shipped.R_B_C, rotCv(X_B_C.linear())), 0.01);  // the URDF writes pi/2 as 1.5708
@@ -177,7 +177,7 @@ TEST(Mount, CliRecoversTheKnownMountAndDropsTheMovedTag) {
   const CameraMount got = loadCameraMount(d / "camera_mount.yaml");
   reflex::control::KinematicsData kd(m);
   reflex::control::computeForwardKinematics(m, kd, Eigen::VectorXd::Zero(m.nq));
-  const Eigen::Isometry3d X_B_H = kd.X_W_L[static_cast<std::size_t>(m.linkIndex("head"))];
+  const Eigen::Isometry3d X_B_H = kd.X_B_L[static_cast<std::size_t>(m.linkIndex("head"))];
   const cv::Matx33d R_B_C = rotCv(X_B_H.linear()) * t.R_H_C;
   const cv::Vec3d p_B_C = rotCv(X_B_H.linear()) * t.p_H_C + vecCv(X_B_H.translation());
   EXPECT_LT(cv::norm(got.p_B_C - p_B_C), 0.002);

@@ -38,7 +38,7 @@ Eigen::Isometry3d linkPoseAtZero(const control::Model& model, int link) {
   control::KinematicsData data(model);
   const Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
   control::computeForwardKinematics(model, data, q);
-  return data.X_W_L[static_cast<std::size_t>(link)];
+  return data.X_B_L[static_cast<std::size_t>(link)];
 }
 
 std::vector<MountObservation> readMountObservations(const std::string& path, const MountKinematics& k) {
@@ -83,8 +83,8 @@ std::vector<MountObservation> readMountObservations(const std::string& path, con
     q.setZero();
     for (const auto& [c, qi] : q_of_col) q[qi] = cell(c);
     if (!control::computeForwardKinematics(*k.model, data, q)) throw VisionError(where + ": joint values refused by the kinematics");
-    const Eigen::Vector3d p_B = data.X_W_L[static_cast<std::size_t>(k.hand_link)] * k.p_hand;
-    const Eigen::Vector3d p_H = data.X_W_L[static_cast<std::size_t>(k.head_link)].inverse() * p_B;
+    const Eigen::Vector3d p_B = data.X_B_L[static_cast<std::size_t>(k.hand_link)] * k.p_hand;
+    const Eigen::Vector3d p_H = data.X_B_L[static_cast<std::size_t>(k.head_link)].inverse() * p_B;
     m.p_H = cv::Vec3d(p_H.x(), p_H.y(), p_H.z());
     out.push_back(m);
   }

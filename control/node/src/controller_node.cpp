@@ -377,7 +377,7 @@ void ControllerNode::run() {
       for (int a = 0; a < 2; ++a) {
         const auto& p = hands[a]->position_base();
         commands[a].status = hands[a]->status() == msg::TARGET_GIVEN ? HandStatus::kGiven : HandStatus::kNoTarget;
-        commands[a].target_W = Eigen::Vector3d(p.x(), p.y(), p.z());
+        commands[a].target_B = Eigen::Vector3d(p.x(), p.y(), p.z());
       }
       ctl.setHandTargets(commands, t_now);
     }

@@ -129,8 +129,8 @@ LogScene parseRow(const SceneModel& scene, const LogColumns& c, const std::vecto
     }
     if (a.status >= 0 && at(a.status) == "given" && a.target[0] >= 0 && a.target[1] >= 0 && a.target[2] >= 0) {
       HandTargetState& target = s.input.targets[arm];
-      for (int k = 0; k < 3; ++k) target.p_W[k] = parseAnyNumber(at(a.target[k]), p + "target_" + "xyz"[k]);
-      target.given = target.p_W.allFinite();
+      for (int k = 0; k < 3; ++k) target.p_B[k] = parseAnyNumber(at(a.target[k]), p + "target_" + "xyz"[k]);
+      target.given = target.p_B.allFinite();
     }
   }
   return s;

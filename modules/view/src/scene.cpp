@@ -62,18 +62,18 @@ json entityJson(const SceneModel& scene, std::int64_t stamp_ns, const std::strin
 
 json keyValue(const std::string& key, const std::string& value) { return json{{"key", key}, {"value", value}}; }
 
-/// A capsule a_W -> b_W of `radius` (a sphere at a_W when `sphere`): one CylinderPrimitive along the
+/// A capsule a_B -> b_B of `radius` (a sphere at a_B when `sphere`): one CylinderPrimitive along the
 /// core and two SpherePrimitives at its ends (foxglove has no capsule).
-void appendCapsule(json& entity, const Eigen::Vector3d& a_W, const Eigen::Vector3d& b_W, double radius, bool sphere,
+void appendCapsule(json& entity, const Eigen::Vector3d& a_B, const Eigen::Vector3d& b_B, double radius, bool sphere,
                    const Rgba& colour) {
   const double diameter = 2.0 * radius;
-  entity["spheres"].push_back(sphereJson(a_W, diameter, colour));
+  entity["spheres"].push_back(sphereJson(a_B, diameter, colour));
   if (sphere) return;
-  entity["spheres"].push_back(sphereJson(b_W, diameter, colour));
-  const Eigen::Vector3d axis_W = b_W - a_W;
-  const Eigen::Quaterniond R_W_cyl = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), axis_W);
-  entity["cylinders"].push_back(json{{"pose", poseJson(0.5 * (a_W + b_W), R_W_cyl)},
-                                     {"size", vec3Json(Eigen::Vector3d(diameter, diameter, axis_W.norm()))},
+  entity["spheres"].push_back(sphereJson(b_B, diameter, colour));
+  const Eigen::Vector3d axis_B = b_B - a_B;
+  const Eigen::Quaterniond R_B_cyl = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), axis_B);
+  entity["cylinders"].push_back(json{{"pose", poseJson(0.5 * (a_B + b_B), R_B_cyl)},
+                                     {"size", vec3Json(Eigen::Vector3d(diameter, diameter, axis_B.norm()))},
                                      {"bottom_scale", 1.0},
                                      {"top_scale", 1.0},
                                      {"color", colourJson(colour)}});
@@ -83,13 +83,13 @@ void appendCapsule(json& entity, const Eigen::Vector3d& a_W, const Eigen::Vector
 void appendSegmentEntity(const SceneModel& scene, const SceneData& data, int s, json& entity) {
   const control::Model& model = scene.model;
   const control::Segment& seg = model.segments[static_cast<std::size_t>(s)];
-  const Eigen::Isometry3d& X_W_L = data.kin.X_W_L[static_cast<std::size_t>(seg.link)];
+  const Eigen::Isometry3d& X_B_L = data.kin.X_B_L[static_cast<std::size_t>(seg.link)];
   const Rgba colour = data.segment_in_arm[static_cast<std::size_t>(s)]
                           ? zoneColour(data.segment_zone[static_cast<std::size_t>(s)])
                           : neutralColour();
   for (int k = 0; k < seg.num_primitives; ++k) {
     const control::Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
-    appendCapsule(entity, X_W_L * prim.a_L, X_W_L * prim.b_L, prim.radius, prim.sphere, colour);
+    appendCapsule(entity, X_B_L * prim.a_L, X_B_L * prim.b_L, prim.radius, prim.sphere, colour);
   }
   const std::string zone = data.segment_in_arm[static_cast<std::size_t>(s)]
                                ? zoneName(data.segment_zone[static_cast<std::size_t>(s)])
@@ -223,9 +223,9 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
     const int p = data.closest_pair[arm];
     if (p >= 0) {
       const control::PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
-      data.closest_a_W[arm] = pd.p_W_a;
-      data.closest_b_W[arm] = pd.p_W_b;
-      data.closest_line[arm] = finite(pd.p_W_a) && finite(pd.p_W_b);
+      data.closest_a_B[arm] = pd.p_B_a;
+      data.closest_b_B[arm] = pd.p_B_b;
+      data.closest_line[arm] = finite(pd.p_B_a) && finite(pd.p_B_b);
       continue;
     }
     const ArmState& st = input.arms[arm];
@@ -233,25 +233,25 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
     const int b = model.segmentIndex(st.closest_b);
     if (!st.valid || a < 0 || a >= model.num_robot_segments || b < model.num_robot_segments) continue;
     const control::Segment& seg = model.segments[static_cast<std::size_t>(a)];
-    const Eigen::Isometry3d& X_W_A = data.kin.X_W_L[static_cast<std::size_t>(seg.link)];
+    const Eigen::Isometry3d& X_B_A = data.kin.X_B_L[static_cast<std::size_t>(seg.link)];
     double best = std::numeric_limits<double>::infinity();
     for (const SchemaSegmentState& sch : input.schema_segments) {
       const int link = model.linkIndex(sch.parent_link);
       if (!sch.enabled || link < 0 || !(sch.radius > 0.0) ||
           !std::isfinite(sch.radius) || !finite(sch.a_L) || !finite(sch.b_L))
         continue;
-      const Eigen::Isometry3d& X_W_S = data.kin.X_W_L[static_cast<std::size_t>(link)];
-      const Eigen::Vector3d s0 = X_W_S * sch.a_L, s1 = X_W_S * (sch.capsule ? sch.b_L : sch.a_L);
+      const Eigen::Isometry3d& X_B_S = data.kin.X_B_L[static_cast<std::size_t>(link)];
+      const Eigen::Vector3d s0 = X_B_S * sch.a_L, s1 = X_B_S * (sch.capsule ? sch.b_L : sch.a_L);
       for (int k = 0; k < seg.num_primitives; ++k) {
         const control::Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
         double d = 0.0;
         Eigen::Vector3d pa, pb, n;
-        control::capsuleCapsuleDistance(X_W_A * prim.a_L, X_W_A * prim.b_L, prim.radius, s0, s1, sch.radius,
+        control::capsuleCapsuleDistance(X_B_A * prim.a_L, X_B_A * prim.b_L, prim.radius, s0, s1, sch.radius,
                                         Eigen::Vector3d::UnitZ(), d, pa, pb, n);
         if (d < best && finite(pa) && finite(pb)) {
           best = d;
-          data.closest_a_W[arm] = pa;
-          data.closest_b_W[arm] = pb;
+          data.closest_a_B[arm] = pa;
+          data.closest_b_B[arm] = pb;
           data.closest_line[arm] = true;
         }
       }
@@ -267,7 +267,7 @@ nlohmann::json buildFrameTransforms(const SceneModel& scene, const SceneData& da
     const control::Link& link = model.links[l];
     if (link.parent < 0) continue;
     // parent -> child from the joint itself (X_P_J * motion(q)); composing these from the root gives
-    // X_W_L of computeForwardKinematics (tested), so a viewer's tree matches the controller's.
+    // X_B_L of computeForwardKinematics (tested), so a viewer's tree matches the controller's.
     const double q = link.q_index >= 0 ? data.kin.q[link.q_index] : 0.0;
     const Eigen::Isometry3d X_P_L = link.X_P_J * jointMotion(link, q);
     transforms.push_back(json{{"timestamp", stampJson(input.stamp_ns)},
@@ -296,7 +296,7 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
                                   {"pose", poseJson(Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity())},
                                   {"thickness", 3.0},
                                   {"scale_invariant", true},
-                                  {"points", json::array({vec3Json(data.closest_a_W[arm]), vec3Json(data.closest_b_W[arm])})},
+                                  {"points", json::array({vec3Json(data.closest_a_B[arm]), vec3Json(data.closest_b_B[arm])})},
                                   {"color", colourJson({c.r, c.g, c.b, 1.0})},
                                   {"colors", json::array()},
                                   {"indices", json::array()}});
@@ -309,9 +309,9 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
   for (std::size_t arm = 0; arm < 2; ++arm) {
     json e = entityJson(scene, input.stamp_ns, "target/" + scene.arm_names[arm]);
     const HandTargetState& t = input.targets[arm];
-    if (t.given && finite(t.p_W)) {
-      e["spheres"].push_back(sphereJson(t.p_W, 0.04, target_colour[arm]));
-      e["texts"].push_back(textJson(t.p_W + Eigen::Vector3d(0, 0, 0.04),
+    if (t.given && finite(t.p_B)) {
+      e["spheres"].push_back(sphereJson(t.p_B, 0.04, target_colour[arm]));
+      e["texts"].push_back(textJson(t.p_B + Eigen::Vector3d(0, 0, 0.04),
                                     scene.arm_names[arm] + " target" + (t.object.empty() ? "" : ": " + t.object),
                                     target_colour[arm]));
     }
@@ -319,9 +319,9 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
   }
   json objects = entityJson(scene, input.stamp_ns, "objects");
   for (const ObjectState& o : input.objects) {
-    if (!finite(o.p_W)) continue;
-    objects["spheres"].push_back(sphereJson(o.p_W, 0.06, Rgba{0.1, 0.8, 0.9, 0.9}));
-    objects["texts"].push_back(textJson(o.p_W + Eigen::Vector3d(0, 0, 0.05), o.name.empty() ? "?" : o.name,
+    if (!finite(o.p_B)) continue;
+    objects["spheres"].push_back(sphereJson(o.p_B, 0.06, Rgba{0.1, 0.8, 0.9, 0.9}));
+    objects["texts"].push_back(textJson(o.p_B + Eigen::Vector3d(0, 0, 0.05), o.name.empty() ? "?" : o.name,
                                         Rgba{0.1, 0.8, 0.9, 1.0}));
   }
   entities.push_back(std::move(objects));
@@ -329,10 +329,10 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
     const int link = model.linkIndex(b.parent_link);
     if (!b.enabled || link < 0 || !(b.radius > 0.0) || !std::isfinite(b.radius) || !finite(b.a_L) || !finite(b.b_L)) continue;
     json e = entityJson(scene, input.stamp_ns, "schema/" + b.name);
-    const Eigen::Isometry3d& X_W_L = data.kin.X_W_L[static_cast<std::size_t>(link)];
-    const Eigen::Vector3d a_W = X_W_L * b.a_L, b_W = X_W_L * b.b_L;
+    const Eigen::Isometry3d& X_B_L = data.kin.X_B_L[static_cast<std::size_t>(link)];
+    const Eigen::Vector3d a_B = X_B_L * b.a_L, b_B = X_B_L * b.b_L;
     const Rgba c = b.virtual_segment ? Rgba{0.45, 0.75, 1.0, 0.30} : Rgba{0.80, 0.60, 0.35, 0.85};
-    appendCapsule(e, a_W, b_W, b.radius, !b.capsule || !((b_W - a_W).norm() > 0.0), c);
+    appendCapsule(e, a_B, b_B, b.radius, !b.capsule || !((b_B - a_B).norm() > 0.0), c);
     e["metadata"].push_back(keyValue("body_schema", b.virtual_segment ? "virtual" : "physical"));
     e["metadata"].push_back(keyValue("parent_link", b.parent_link));
     entities.push_back(std::move(e));
@@ -358,7 +358,7 @@ nlohmann::json buildViewStatus(const SceneModel& scene, const SceneInput& input,
                         {"closest_a", a.closest_a},
                         {"closest_b", a.closest_b},
                         {"target_given", t.given},
-                        {"target", t.given && finite(t.p_W) ? vec3Json(t.p_W) : json(nullptr)},
+                        {"target", t.given && finite(t.p_B) ? vec3Json(t.p_B) : json(nullptr)},
                         {"target_object", t.object}});
   }
   return json{{"timestamp", stampJson(input.stamp_ns)},

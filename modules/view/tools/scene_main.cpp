@@ -7,7 +7,7 @@
 // Writes one ES module (`export default {...};`) that the page of reflex_view draws without a server or
 // a WebSocket: modules/view/web/index.html?render=render.js (view.js, static mode; README.md of
 // modules/view). It holds the tile size [CSS px], the camera of every tile (orbit around the target:
-// azimuth and elevation [rad], radius [m], target [m] in the robot's root frame W) and, per requested
+// azimuth and elevation [rad], radius [m], target [m] in the robot's base frame B) and, per requested
 // time, the foxglove.SceneUpdate that reflex::scene builds for the nearest row (as reflex_view does from
 // the bus). modules/view/tools/render_scenes.py runs this, then Chromium headless, and keeps the PNG.
 //

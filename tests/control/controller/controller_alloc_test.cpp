@@ -82,7 +82,7 @@ TEST(ControllerAllocation, ACycleAllocatesNothing) {
     const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
     const long before_guard = g_allocations.load();
     for (int k = 0; k < 1500; ++k) {
-      for (int a = 0; a < 2; ++a) gin.hands[a].target_W = phases[(k / 80) % 4][a];
+      for (int a = 0; a < 2; ++a) gin.hands[a].target_B = phases[(k / 80) % 4][a];
       gin.priority = static_cast<MotionPriority>((k / 120) % 3);
       computeControl(model, guarded, gdata, gq, gin);
       gq += gdata.qdot * guarded.params.period;
@@ -107,7 +107,7 @@ TEST(ControllerAllocation, ThePlantStepWalkingGuardAndSegmentCheckAllocateNothin
   WalkingPattern walking(model);
   Eigen::VectorXd scratch = robot.jointPositions();
   ControlResult cr = computeControl(model, cm, data, robot.jointPositions(), ControlInput{});
-  const Eigen::Vector3d chest = data.kin.X_W_L[model.linkIndex("chest")].translation();
+  const Eigen::Vector3d chest = data.kin.X_B_L[model.linkIndex("chest")].translation();
   const Eigen::Vector3d post = chest + Eigen::Vector3d(0.30, 0.0, 0.0);
   const int world = model.linkIndex("world");
   walking.start(0.6, 0.25);
@@ -137,12 +137,12 @@ TEST(ControllerAllocation, TheOnboardControllersInputsAndStepAllocateNothing) {
   crossing[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};
   crossing[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
   std::array<HandCommand, 2> bad = crossing;
-  bad[kLeft].target_W.x() = std::nan("");
+  bad[kLeft].target_B.x() = std::nan("");
   // Names and links as a DDS sample holds them (made before counting).
   const std::string cup = "a_cup_with_a_name_longer_than_the_small_string_buffer", hand = "l_hand";
   const std::string pack = "pack", world = "world", unknown = "no_such_link";
   ctl.step(0.0);  // warm-up
-  const Eigen::Vector3d chest = ctl.data().kin.X_W_L[model.linkIndex("chest")].translation();
+  const Eigen::Vector3d chest = ctl.data().kin.X_B_L[model.linkIndex("chest")].translation();
   BodySchemaRequest attach;
   attach.name = &cup;
   attach.parent_link = &hand;

@@ -226,14 +226,14 @@ TEST(Controller, NullspaceTermsLeaveTheReachingTaskUnchanged) {
     computeControl(model, plain, a, q, ControlInput{});  // where the hands are
     ControlInput in;
     for (int s = 0; s < 2; ++s)
-      in.hands[s] = {HandStatus::kGiven, a.arms[s].hand_W + 0.03 * Eigen::Vector3d(u(rng), u(rng), u(rng))};
+      in.hands[s] = {HandStatus::kGiven, a.arms[s].hand_B + 0.03 * Eigen::Vector3d(u(rng), u(rng), u(rng))};
     computeControl(model, plain, a, q, in);
     computeControl(model, with_null, b, q, in);
     for (int s = 0; s < 2; ++s) {
       if (a.arms[s].f != 0.0) continue;  // the comparison is about the whole-body controller alone
       const auto& arm = plain.arms[s];
       Eigen::MatrixXd J(3, model.nq);
-      computePointJacobian(model, a.kin, arm.hand_link, a.arms[s].hand_W, J);
+      computePointJacobian(model, a.kin, arm.hand_link, a.arms[s].hand_B, J);
       const Eigen::Vector3d va = J * a.qdot, vb = J * b.qdot;
       double speed_ratio = 0.0;
       for (int i = 0; i < model.nq; ++i)
@@ -436,7 +436,7 @@ TEST(PredictiveGuard, JointLeversBoundHowFarAnySegmentPointMoves) {
             // The surface point farthest out: the endpoint pushed outwards by the radius.
             const Eigen::Vector3d out = p_L.norm() > 0 ? Eigen::Vector3d(p_L + prim.radius * p_L.normalized())
                                                        : Eigen::Vector3d(prim.radius, 0, 0);
-            const double moved = (k1.X_W_L[seg.link] * out - k0.X_W_L[seg.link] * out).norm();
+            const double moved = (k1.X_B_L[seg.link] * out - k0.X_B_L[seg.link] * out).norm();
             EXPECT_LE(moved, data.lever[j] * dq + 1e-12) << model.q_names[j] << " moves " << seg.name;
             if (moved > 0) tightest = std::max(tightest, moved / (data.lever[j] * dq));
           }
@@ -469,7 +469,7 @@ void expectSameRuns(const SimResult& pruned, const SimResult& brute, const std::
       ASSERT_EQ(p.arms[a].distance, b.arms[a].distance) << what << " cycle " << k << " arm " << a;
       ASSERT_EQ(p.arms[a].closest_pair, b.arms[a].closest_pair) << what << " cycle " << k << " arm " << a;
       ASSERT_EQ(p.arms[a].f, b.arms[a].f) << what << " cycle " << k;
-      ASSERT_EQ(p.arms[a].force_dir_W, b.arms[a].force_dir_W) << what << " cycle " << k;
+      ASSERT_EQ(p.arms[a].force_dir_B, b.arms[a].force_dir_B) << what << " cycle " << k;
     }
   }
   EXPECT_EQ(pruned.guard_cycles, brute.guard_cycles) << what;

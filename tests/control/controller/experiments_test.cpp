@@ -185,8 +185,8 @@ TEST(Experiments, TargetInsideTheBodyStopsAtTheSide) {
   // target) and moves less than 5 mm in the last 0.5 s.
   const auto& half = on.samples[on.samples.size() - 101];
   const auto& one = on.samples[on.samples.size() - 201];
-  const double last_move = (last.arms[kRight].hand_W - half.arms[kRight].hand_W).norm();
-  const double previous_move = (half.arms[kRight].hand_W - one.arms[kRight].hand_W).norm();
+  const double last_move = (last.arms[kRight].hand_B - half.arms[kRight].hand_B).norm();
+  const double previous_move = (half.arms[kRight].hand_B - one.arms[kRight].hand_B).norm();
   EXPECT_LT(last_move, 0.005);
   EXPECT_LT(last_move, previous_move);
 }
@@ -226,7 +226,7 @@ TEST(Experiments, WalkingPastTheTargetKeepsTheArmOutOfTheBody) {
   const int heel = model.qIndex("heel_x");
   EXPECT_NEAR(r.samples.back().q[heel], 1.5, 1e-6) << "the robot walked 1.5 m";
   // At the end the target (0.8 m) is behind the robot, and the hand is not inside the body.
-  EXPECT_LT(r.samples.back().commands[kRight].target_W.x(), r.samples.back().q[heel]);
+  EXPECT_LT(r.samples.back().commands[kRight].target_B.x(), r.samples.back().q[heel]);
   EXPECT_GE(r.min_distance, defaultControllerModel().params.d_r);
 }
 

@@ -60,8 +60,8 @@ std::vector<Term> yellowTerms(const Model& model, const ControllerModel& cm, con
     Term t;
     t.pair = static_cast<int>(p);
     t.weight = P.k_virtual * (P.d_a - pd.distance);
-    t.e = arm_is_a ? pd.nhat_W : Eigen::Vector3d(-pd.nhat_W);
-    computeRelativeJacobian(model, data.kin, la, pd.p_W_a, lb, pd.p_W_b, J_full);
+    t.e = arm_is_a ? pd.nhat_B : Eigen::Vector3d(-pd.nhat_B);
+    computeRelativeJacobian(model, data.kin, la, pd.p_B_a, lb, pd.p_B_b, J_full);
     t.J_rel.resize(3, arm.n);
     for (int i = 0; i < arm.n; ++i) t.J_rel.col(i) = (arm_is_a ? 1.0 : -1.0) * J_full.col(arm.q[i]);
     terms.push_back(t);

@@ -51,7 +51,7 @@ std::array<HandCommand, 2> reachable() {
 Eigen::Vector3d handAt(const Model& model, const ControllerModel& cm, const Eigen::VectorXd& q, int arm) {
   KinematicsData kin(model);
   EXPECT_TRUE(computeForwardKinematics(model, kin, q));
-  return kin.X_W_L[cm.arms[arm].hand_link] * cm.arms[arm].hand_point_L;
+  return kin.X_B_L[cm.arms[arm].hand_link] * cm.arms[arm].hand_point_L;
 }
 
 // ---------------------------------------------------------------- staleness
@@ -116,8 +116,8 @@ TEST(OnboardStaleness, HeldTargetsAreReachedAndRejectedTargetsKeepThePreviousOne
   OnboardController ctl(model, cm, port, q0);
   ctl.setHandTargets(reachable(), 0.0);
   std::array<HandCommand, 2> bad = reachable();
-  bad[kLeft].target_W.x() = std::nan("");
-  bad[kRight].target_W = Eigen::Vector3d(2.0, 0.1, 0.0);  // 2.0025 m > max_target_distance 2 m
+  bad[kLeft].target_B.x() = std::nan("");
+  bad[kRight].target_B = Eigen::Vector3d(2.0, 0.1, 0.0);  // 2.0025 m > max_target_distance 2 m
   EXPECT_EQ(ctl.setHandTargets(bad, 0.0), 2);
   EXPECT_EQ(ctl.report().counts.hand_targets_rejected, 2U);
   EXPECT_EQ(ctl.report().counts.targets_rejected, 2U);
@@ -127,10 +127,10 @@ TEST(OnboardStaleness, HeldTargetsAreReachedAndRejectedTargetsKeepThePreviousOne
     if (i == 180) ctl.noteSourceHeartbeat(t);
     const CycleReport& r = ctl.step(t);
     ASSERT_FALSE(r.inputs_stale);
-    ASSERT_TRUE(r.commands[kLeft].target_W.isApprox(reachable()[kLeft].target_W));
+    ASSERT_TRUE(r.commands[kLeft].target_B.isApprox(reachable()[kLeft].target_B));
   }
   for (int a = 0; a < 2; ++a)
-    EXPECT_LT((handAt(model, cm, port.positions(), a) - reachable()[a].target_W).norm(), 0.01) << "arm " << a;
+    EXPECT_LT((handAt(model, cm, port.positions(), a) - reachable()[a].target_B).norm(), 0.01) << "arm " << a;
 }
 
 // ---------------------------------------------------------------- body schema by name
@@ -227,7 +227,7 @@ TEST(OnboardBodySchema, RefusalsAreNamedAndCounted) {
   // A physical segment on the root overlapping the chest: no arm can move it apart (README rule 2).
   KinematicsData kin(model);
   ASSERT_TRUE(computeForwardKinematics(model, kin, q0));
-  const Eigen::Vector3d chest = kin.X_W_L[model.linkIndex("chest")].translation();
+  const Eigen::Vector3d chest = kin.X_B_L[model.linkIndex("chest")].translation();
   const std::string pack = "pack";
   const BodySchemaOutcome& r4 = ctl.changeBodySchema(attachRequest(pack, "world", chest, chest, 0.05));
   ASSERT_EQ(r4.kind, BodySchemaOutcome::Kind::kRejectedUnresolvable) << r4.text;
@@ -337,7 +337,7 @@ TEST(OnboardWalking, TheHeelTravelsSpeedTimesDtPerClearCycleAndHoldsInEstopAndRe
   EXPECT_EQ(clear_cycles, 40);
   EXPECT_NEAR(port.positions()[heel] - q0[heel], 40 * speed * kDt, 1e-12);
   // A physical segment on the root where the right hand is: the e-stop latches.
-  const Eigen::Vector3d hand = ctl.data().arms[kRight].hand_W;
+  const Eigen::Vector3d hand = ctl.data().arms[kRight].hand_B;
   const std::string post = "post";
   ASSERT_EQ(ctl.changeBodySchema(attachRequest(post, "world", hand, hand + Eigen::Vector3d(0, 0, 0.02), 0.03)).kind,
             BodySchemaOutcome::Kind::kAttached);
@@ -550,12 +550,12 @@ TEST(OnboardRejections, OneCounterPerCauseAtTheBoundsAndTheLatestCauseNamed) {
   EXPECT_EQ(last(), -1) << "nothing refused yet";
   // Hands: at exactly max_target_distance accepted, the next double beyond it refused; NaN refused.
   std::array<HandCommand, 2> hands = reachable();
-  hands[kLeft].target_W = Eigen::Vector3d(2.0, 0.0, 0.0);  // |t| = 2 m = max_target_distance: followed
-  hands[kRight].target_W = Eigen::Vector3d(std::nextafter(2.0, 3.0), 0.0, 0.0);
+  hands[kLeft].target_B = Eigen::Vector3d(2.0, 0.0, 0.0);  // |t| = 2 m = max_target_distance: followed
+  hands[kRight].target_B = Eigen::Vector3d(std::nextafter(2.0, 3.0), 0.0, 0.0);
   EXPECT_EQ(ctl.setHandTargets(hands, 0.0), 1);
   EXPECT_EQ(count(RejectCause::kHandTargetTooFar), 1U);
   EXPECT_EQ(last(), static_cast<int>(RejectCause::kHandTargetTooFar));
-  hands[kRight].target_W.z() = std::nan("");
+  hands[kRight].target_B.z() = std::nan("");
   EXPECT_EQ(ctl.setHandTargets(hands, 0.0), 1);
   EXPECT_EQ(count(RejectCause::kHandTargetNotFinite), 1U);
   EXPECT_EQ(count(RejectCause::kHandTargetTooFar), 1U) << "a NaN target is its own cause";

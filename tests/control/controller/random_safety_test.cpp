@@ -36,12 +36,12 @@ Scenario randomEpisode(std::uint32_t seed, bool walk) {
       }
       in.hands[a].status = HandStatus::kGiven;
       if (u(*rng) < 0.3) {  // deliberately inside the torso
-        in.hands[a].target_W = Eigen::Vector3d(0.05 * (u(*rng) - 0.5), 0.12 * (u(*rng) - 0.5), 0.65 + 0.35 * u(*rng));
+        in.hands[a].target_B = Eigen::Vector3d(0.05 * (u(*rng) - 0.5), 0.12 * (u(*rng) - 0.5), 0.65 + 0.35 * u(*rng));
       } else if (u(*rng) < 0.4) {  // crossing: a target on the other side of the body
         const double side = a == kLeft ? -1.0 : 1.0;
-        in.hands[a].target_W = Eigen::Vector3d(0.15 + 0.25 * u(*rng), side * (0.05 + 0.3 * u(*rng)), 0.7 + 0.4 * u(*rng));
+        in.hands[a].target_B = Eigen::Vector3d(0.15 + 0.25 * u(*rng), side * (0.05 + 0.3 * u(*rng)), 0.7 + 0.4 * u(*rng));
       } else {
-        in.hands[a].target_W = Eigen::Vector3d(x(*rng), y(*rng), z(*rng));
+        in.hands[a].target_B = Eigen::Vector3d(x(*rng), y(*rng), z(*rng));
       }
     }
     const double p = u(*rng);

@@ -181,7 +181,7 @@ TEST_P(OnEveryRobot, TargetInsideTheBodyStopsAtTheSide) {
   EXPECT_GE(last.arms[kRight].distance, p.d_b * 0.5);
   EXPECT_LE(last.arms[kRight].distance, p.d_a);
   const auto& half = on.samples[on.samples.size() - 101];
-  EXPECT_LT((last.arms[kRight].hand_W - half.arms[kRight].hand_W).norm(), 0.005) << "not settled";
+  EXPECT_LT((last.arms[kRight].hand_B - half.arms[kRight].hand_B).norm(), 0.005) << "not settled";
 }
 
 // From beside the body to a target in front of it: the hand gets there with avoidance. Without it
@@ -211,7 +211,7 @@ TEST_P(OnEveryRobot, OneDofAvoidanceGetsThereNoLaterThanThreeDof) {
   EXPECT_LT(off.final_error[kRight], 0.01) << "the target is within the arm's reach";
   auto effort = [](const SimResult& r) {
     double sum = 0.0;
-    for (const auto& s : r.samples) sum += (s.arms[kRight].hand_W - s.commands[kRight].target_W).norm();
+    for (const auto& s : r.samples) sum += (s.arms[kRight].hand_B - s.commands[kRight].target_B).norm();
     return sum * 0.005;  // metre-seconds
   };
   EXPECT_LE(effort(one), effort(three) + 1e-6) << "1-DOF " << effort(one) << " 3-DOF " << effort(three);
@@ -229,7 +229,7 @@ TEST_P(OnEveryRobot, CrossingArmsStopArmAgainstArm) {
   const SimResult& on = run(GetParam(), "crossing_arms", AvoidanceMode::kOneDof);
   const SimResult& off = run(GetParam(), "crossing_arms", AvoidanceMode::kOff);
   const auto& last = on.samples.back();
-  EXPECT_LT(last.commands[kLeft].target_W.y(), last.commands[kRight].target_W.y()) << "the targets do not cross";
+  EXPECT_LT(last.commands[kLeft].target_B.y(), last.commands[kRight].target_B.y()) << "the targets do not cross";
   EXPECT_GE(last.arm_distance, r.cm.params.d_r);
   EXPECT_LE(last.arm_distance, r.cm.params.d_a);
   // The closest pair an arm takes part in, at the last configuration (computed here): on
@@ -270,11 +270,11 @@ TEST_P(OnEveryRobot, WalkingPastTheTargetKeepsTheArmOutOfTheBody) {
     double inside = std::numeric_limits<double>::infinity();
     for (const auto& s : on.samples) {
       computeForwardKinematics(r.model, kin, s.q);
-      const Eigen::Vector3d t = s.commands[kRight].target_W;
+      const Eigen::Vector3d t = s.commands[kRight].target_B;
       for (int seg = 0; seg < r.model.num_robot_segments; ++seg) {
         if ((r.cm.arms[kRight].segment_mask >> seg) & 1U) continue;
         const Segment& sg = r.model.segments[static_cast<std::size_t>(seg)];
-        const Eigen::Isometry3d& X = kin.X_W_L[static_cast<std::size_t>(sg.link)];
+        const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(sg.link)];
         for (int p = sg.first_primitive; p < sg.first_primitive + sg.num_primitives; ++p) {
           const Primitive& pr = r.model.primitives[static_cast<std::size_t>(p)];
           inside = std::min(inside, segmentDistance(t, t, X * pr.a_L, X * pr.b_L) - pr.radius);
@@ -293,7 +293,7 @@ TEST_P(OnEveryRobot, WalkingPastTheTargetKeepsTheArmOutOfTheBody) {
     EXPECT_NEAR(robot_x, 1.5, 1e-6) << "the robot walked 1.5 m";
   }
   const ScenarioFrame f = scenarioFrame(r.model, r.cm);
-  EXPECT_LT(last.commands[kRight].target_W.x() - robot_x, f.chest.x() - 0.5 * f.arm_length) << "not behind";
+  EXPECT_LT(last.commands[kRight].target_B.x() - robot_x, f.chest.x() - 0.5 * f.arm_length) << "not behind";
   EXPECT_GE(on.min_distance, r.cm.params.d_r);
   EXPECT_LT(off.min_distance, 0.0) << "without avoidance the arm enters the body";
 }
@@ -310,13 +310,13 @@ TEST_P(OnEveryRobot, GraspedBarIsAvoidedByTheRightArm) {
     double d = std::numeric_limits<double>::infinity();
     for (const auto& s : run_result.samples) {
       computeForwardKinematics(r.model, kin, s.q);
-      const Eigen::Isometry3d& X = kin.X_W_L[static_cast<std::size_t>(hand.hand_link)];
+      const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(hand.hand_link)];
       const Eigen::Vector3d a = X * (hand.hand_point_L - Eigen::Vector3d(half, 0, 0));
       const Eigen::Vector3d b = X * (hand.hand_point_L + Eigen::Vector3d(half, 0, 0));
       for (int seg = 0; seg < r.model.num_robot_segments; ++seg) {
         if (!((r.cm.arms[kRight].segment_mask >> seg) & 1U)) continue;
         const Segment& sg = r.model.segments[static_cast<std::size_t>(seg)];
-        const Eigen::Isometry3d& Y = kin.X_W_L[static_cast<std::size_t>(sg.link)];
+        const Eigen::Isometry3d& Y = kin.X_B_L[static_cast<std::size_t>(sg.link)];
         for (int p = sg.first_primitive; p < sg.first_primitive + sg.num_primitives; ++p) {
           const Primitive& pr = r.model.primitives[static_cast<std::size_t>(p)];
           d = std::min(d, segmentDistance(a, b, Y * pr.a_L, Y * pr.b_L) - radius - pr.radius);
@@ -356,11 +356,11 @@ TEST(ScenarioFrame, OnTheReferenceRobotTheTargetsAreTheWrittenNumbers) {
   EXPECT_EQ(r.model.segments[static_cast<std::size_t>(f.trunk_segment)].name, "chest");
   const Eigen::Vector3d p(0.02, -0.06, 0.66);
   EXPECT_EQ(f.place(p), p);
-  EXPECT_EQ(run("asimo_like", "target_inside_body", AvoidanceMode::kOneDof).samples[0].commands[kRight].target_W,
+  EXPECT_EQ(run("asimo_like", "target_inside_body", AvoidanceMode::kOneDof).samples[0].commands[kRight].target_B,
             Eigen::Vector3d(0.02, -0.06, 0.66));
-  EXPECT_EQ(run("asimo_like", "crossing_arms", AvoidanceMode::kOneDof).samples[0].commands[kLeft].target_W,
+  EXPECT_EQ(run("asimo_like", "crossing_arms", AvoidanceMode::kOneDof).samples[0].commands[kLeft].target_B,
             Eigen::Vector3d(0.30, -0.08, 0.90));
-  EXPECT_EQ(run("asimo_like", "one_vs_three_dof", AvoidanceMode::kOneDof).samples.back().commands[kRight].target_W,
+  EXPECT_EQ(run("asimo_like", "one_vs_three_dof", AvoidanceMode::kOneDof).samples.back().commands[kRight].target_B,
             Eigen::Vector3d(0.27, 0.03, 0.82));
 }
 

@@ -152,7 +152,7 @@ TEST(WalkingAndEstop, WalkingHoldsWhileTheEstopIsLatchedOrRecovering) {
   s.script = [&](double t, ControlInput& in, ScenarioContext& ctx) {
     in.reset_estop = false;
     if (t >= 0.5 && !attached) {
-      const Eigen::Vector3d hand = ctx.data.arms[kRight].hand_W;
+      const Eigen::Vector3d hand = ctx.data.arms[kRight].hand_B;
       attached = ctx.attach(0, "world", hand, hand + Eigen::Vector3d(0.0, 0.0, 0.02), 0.03, false);
     }
     if (std::abs(t - 0.8) < 1e-9) in.reset_estop = true;
@@ -190,7 +190,7 @@ TEST(WalkingAndEstop, WalkingStopsInFrontOfASegmentOnTheRootThatNoArmCanMoveAndR
   ControllerData probe(model, cm);
   const Eigen::VectorXd q0 = restConfiguration(model, cm);
   ASSERT_NE(computeControl(model, cm, probe, q0, ControlInput{}), ControlResult::kBadInput);
-  const Eigen::Vector3d chest = probe.kin.X_W_L[model.linkIndex("chest")].translation();
+  const Eigen::Vector3d chest = probe.kin.X_B_L[model.linkIndex("chest")].translation();
   const Eigen::Vector3d post = chest + Eigen::Vector3d(0.30, 0.0, 0.0);  // 30 cm in front of the chest
   Scenario s;
   s.duration = 6.0;
@@ -235,11 +235,11 @@ TEST(BodySchema, APhysicalSegmentTouchingAPartNoArmCanMoveIsRefused) {
   const Eigen::VectorXd q = restConfiguration(model, cm);
   ASSERT_EQ(computeControl(model, cm, data, q, ControlInput{}), ControlResult::kOk);
   const int world = model.linkIndex("world"), chest = model.linkIndex("chest");
-  const Eigen::Vector3d chest_W = data.kin.X_W_L[chest] * Eigen::Vector3d(0.0, 0.0, 0.06);
-  const Eigen::Vector3d hand_W = data.arms[kRight].hand_W;
+  const Eigen::Vector3d chest_B = data.kin.X_B_L[chest] * Eigen::Vector3d(0.0, 0.0, 0.06);
+  const Eigen::Vector3d hand_B = data.arms[kRight].hand_B;
   const Eigen::Vector3d z(0, 0, 0.05);
   // On the root, through the chest: no arm can take them apart.
-  SegmentAttach a = attachControllerSegment(model, cm, data, 1, world, chest_W - z, chest_W + z, 0.05, 0, false, q);
+  SegmentAttach a = attachControllerSegment(model, cm, data, 1, world, chest_B - z, chest_B + z, 0.05, 0, false, q);
   EXPECT_FALSE(a.attached);
   ASSERT_GE(a.refusing_pair, 0);
   const std::string trunk = model.segments[a.other_segment].name;
@@ -247,7 +247,7 @@ TEST(BodySchema, APhysicalSegmentTouchingAPartNoArmCanMoveIsRefused) {
   EXPECT_LT(a.distance, 0.0);
   EXPECT_FALSE(data.dist.slots[1].enabled) << "the slot stays as it was";
   // Carried by the chest (a backpack) but reaching into the head: refused too.
-  const Eigen::Vector3d head_L = data.kin.X_W_L[chest].inverse() * data.kin.X_W_L[model.linkIndex("head")].translation();
+  const Eigen::Vector3d head_L = data.kin.X_B_L[chest].inverse() * data.kin.X_B_L[model.linkIndex("head")].translation();
   const std::uint64_t own = std::uint64_t{1} << model.segmentIndex("chest");
   a = attachControllerSegment(model, cm, data, 1, chest, head_L, head_L + z, 0.03, own, false, q);
   EXPECT_FALSE(a.attached);
@@ -255,18 +255,18 @@ TEST(BodySchema, APhysicalSegmentTouchingAPartNoArmCanMoveIsRefused) {
   EXPECT_EQ(model.segments[a.other_segment].name, "head");
   // On the root, touching the right hand: an arm can move away, so it is accepted (it latches the
   // e-stop, and recovery moves the arm out).
-  a = attachControllerSegment(model, cm, data, 2, world, hand_W, hand_W, 0.03, 0, false, q);
+  a = attachControllerSegment(model, cm, data, 2, world, hand_B, hand_B, 0.03, 0, false, q);
   EXPECT_TRUE(a.attached);
   EXPECT_EQ(a.refusing_pair, -1);
   // A virtual segment (a gaze line) through the chest is never refused: it never triggers the e-stop.
-  a = attachControllerSegment(model, cm, data, 3, world, chest_W - z, chest_W + z, 0.05, 0, true, q);
+  a = attachControllerSegment(model, cm, data, 3, world, chest_B - z, chest_B + z, 0.05, 0, true, q);
   EXPECT_TRUE(a.attached);
   EXPECT_TRUE(data.dist.slots[3].is_virtual);
   // Updating an attached slot into such an overlap leaves the old placement in place.
-  const Eigen::Vector3d away = chest_W + Eigen::Vector3d(0.6, 0.0, 0.0);
+  const Eigen::Vector3d away = chest_B + Eigen::Vector3d(0.6, 0.0, 0.0);
   a = attachControllerSegment(model, cm, data, 1, world, away, away, 0.05, 0, false, q);
   ASSERT_TRUE(a.attached);
-  a = attachControllerSegment(model, cm, data, 1, world, chest_W, chest_W, 0.05, 0, false, q);
+  a = attachControllerSegment(model, cm, data, 1, world, chest_B, chest_B, 0.05, 0, false, q);
   EXPECT_FALSE(a.attached);
   EXPECT_TRUE(data.dist.slots[1].enabled);
   EXPECT_TRUE(data.dist.slots[1].a_L.isApprox(away));

@@ -186,7 +186,7 @@ ControllerModel makeControllerModel(const Model& model, const ControllerConfig& 
 
 struct HandCommand {
   HandStatus status = HandStatus::kNoTarget;
-  Eigen::Vector3d target_W = Eigen::Vector3d::Zero();  ///< hand target in the root frame (m)
+  Eigen::Vector3d target_B = Eigen::Vector3d::Zero();  ///< hand target in the root frame (m)
 };
 
 struct ControlInput {
@@ -201,10 +201,10 @@ struct ArmStatus {
   int closest_pair = -1;             ///< index into Model::pairs
   Zone zone = Zone::kFree;
   double force = 0.0;                ///< |F_virtual^all| (m/s), Eq. 17
-  Eigen::Vector3d force_dir_W = Eigen::Vector3d::Zero();  ///< unit direction of F^all
-  Eigen::Vector3d force_point_W = Eigen::Vector3d::Zero(); ///< P_cp1^all, Eq. 18
-  Eigen::Vector3d hand_W = Eigen::Vector3d::Zero();
-  Eigen::Vector3d reference_W = Eigen::Vector3d::Zero();  ///< point on the linear trajectory
+  Eigen::Vector3d force_dir_B = Eigen::Vector3d::Zero();  ///< unit direction of F^all
+  Eigen::Vector3d force_point_B = Eigen::Vector3d::Zero(); ///< P_cp1^all, Eq. 18
+  Eigen::Vector3d hand_B = Eigen::Vector3d::Zero();
+  Eigen::Vector3d reference_B = Eigen::Vector3d::Zero();  ///< point on the linear trajectory
   /// The virtual-force term of the collision controller alone (rad/s, the arm's joints in
   /// ControllerModel::Arm::q order): row^+ |F^all| (Eq. 8 with the merged force of Eq. 17-18; in
   /// three_dof mode J_ca^+ F^all), before blending (Eq. 1), the safety filter and the limits. Zero
@@ -215,8 +215,8 @@ struct ArmStatus {
 /// Per-arm linear trajectory state (Sec. 8).
 struct Trajectory {
   bool active = false;
-  Eigen::Vector3d goal_W = Eigen::Vector3d::Zero();
-  Eigen::Vector3d ref_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d goal_B = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ref_B = Eigen::Vector3d::Zero();
 };
 
 enum class ControlResult { kOk, kFrozen, kRecovering, kBadInput };
@@ -241,19 +241,19 @@ struct VirtualForceSum {
 /// limits -> safety filter -> velocity scaling -> step cap. Each stage reads what the earlier ones
 /// wrote. The pair lists hold one entry per candidate pair of the arm at most: ControllerData sizes
 /// them from ControllerModel::Arm::candidate_pairs at set-up, so no pair is ever dropped.
-/// Arm-joint quantities are in ControllerModel::Arm::q order (rad, rad/s); points in W (m).
+/// Arm-joint quantities are in ControllerModel::Arm::q order (rad, rad/s); points in B (m).
 struct ArmWorkspace {
   /// One pair inside the yellow zone: its share of the merged force (Eq. 14-18).
   struct ForceTerm {
     int pair = -1;        ///< index into Model::pairs
-    int side = 1;         ///< +1: the arm's point is p_W_a (force along +nhat_W); -1: p_W_b
+    int side = 1;         ///< +1: the arm's point is p_B_a (force along +nhat_B); -1: p_B_b
     double weight = 0.0;  ///< |F_ij| = k (d_a - d_ij) (m/s)
   };
   // trajectory stage
   ArmVector q;                          ///< the arm's joint positions
-  Eigen::Vector3d hand_W = Eigen::Vector3d::Zero();            ///< reaching point
-  TaskJacobian J_hand;                  ///< 3 x n Jacobian of hand_W
-  Eigen::Vector3d hand_velocity_W = Eigen::Vector3d::Zero();   ///< task velocity of Eq. 2 (m/s)
+  Eigen::Vector3d hand_B = Eigen::Vector3d::Zero();            ///< reaching point
+  TaskJacobian J_hand;                  ///< 3 x n Jacobian of hand_B
+  Eigen::Vector3d hand_velocity_B = Eigen::Vector3d::Zero();   ///< task velocity of Eq. 2 (m/s)
   bool target_given = false;            ///< the hand follows a target this cycle
   // pair-term stage
   std::vector<ForceTerm> force_terms;   ///< pairs inside the yellow zone; first num_force_terms valid
@@ -268,7 +268,7 @@ struct ArmWorkspace {
   // merged-Jacobian stage (Eq. 17-18)
   TaskJacobian J_avoid;                 ///< weighted relative Jacobian of the force pairs (3 x n)
   double force_magnitude = 0.0;         ///< |F^all| (m/s)
-  Eigen::Vector3d force_dir_W = Eigen::Vector3d::Zero();       ///< unit direction of F^all
+  Eigen::Vector3d force_dir_B = Eigen::Vector3d::Zero();       ///< unit direction of F^all
   // blend stage and after
   ArmVector qdot;                       ///< the arm's joint velocities, refined stage by stage
   ArmVector v_lo, v_hi;                 ///< velocity box that keeps the step inside the joint range

@@ -2,9 +2,9 @@
 //
 // Sign convention (the one every controller sign follows from):
 //   d      surface-to-surface distance between segments a and b (radii subtracted; < 0 if penetrating)
-//   p_W_a  witness point on a's surface, p_W_b on b's surface, both in the root frame W
-//   nhat_W = (p_W_a - p_W_b) / d, unit, pointing from b towards a
-//   row    = nhat_W^T (J_W_pa - J_W_pb)  (1 x nq): the rate of d, so a positive row velocity
+//   p_B_a  witness point on a's surface, p_B_b on b's surface, both in the base frame B
+//   nhat_B = (p_B_a - p_B_b) / d, unit, pointing from b towards a
+//   row    = nhat_B^T (J_B_pa - J_B_pb)  (1 x nq): the rate of d, so a positive row velocity
 //          row * qdot > 0 separates the pair.
 // Coincident core points: the normal falls back to the direction between the two links' origins
 // (else +z), `well_defined` is false, and everything stays finite.
@@ -28,13 +28,13 @@
 namespace reflex::control {
 
 /// Distance result of one checked segment pair. Invariants (checked by tests): when `active`,
-/// |nhat_W| = 1, p_W_a - p_W_b = distance * nhat_W, distance is finite.
+/// |nhat_B| = 1, p_B_a - p_B_b = distance * nhat_B, distance is finite.
 struct PairDistance {
   int seg_a = -1, seg_b = -1;   ///< segment indices (a < b)
   double distance = std::numeric_limits<double>::infinity();
-  Eigen::Vector3d p_W_a = Eigen::Vector3d::Zero();
-  Eigen::Vector3d p_W_b = Eigen::Vector3d::Zero();
-  Eigen::Vector3d nhat_W = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d p_B_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p_B_b = Eigen::Vector3d::Zero();
+  Eigen::Vector3d nhat_B = Eigen::Vector3d::UnitZ();
   bool well_defined = true;     ///< false when the core points coincided (fallback normal)
   bool active = false;          ///< false for pairs of disabled body-schema slots (distance = inf)
   bool has_row = false;         ///< rows.row(i) is valid for this cycle
@@ -98,7 +98,7 @@ struct DistanceData {
   int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
   // Scratch of computeSegmentDistances (built from the model here; values valid only during the call).
   // Per primitive:
-  std::vector<SegmentW> prim_W;  ///< core segment in W (start, direction, squared length)
+  std::vector<SegmentB> prim_B;  ///< core segment in B (start, direction, squared length)
   std::vector<double> prim_r;    ///< radius (body-schema slots: the slot's)
   // Per pair: commonSupport of its two links for a robot pair (its row then has nonzero entries only
   // in those links' support columns, written each time, the rest zero from set-up); -1 for a pair
@@ -111,7 +111,7 @@ struct DistanceData {
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
   // Broad phase, per segment (robot segments only): bounding sphere centre in the link frame and in
   // W, and its radius (m): every primitive of the segment lies inside it.
-  std::vector<Eigen::Vector3d> bound_center_L, bound_center_W;
+  std::vector<Eigen::Vector3d> bound_center_L, bound_center_B;
   std::vector<double> bound_radius;
   std::vector<int> exact_pairs;              ///< robot pairs the broad phase kept this cycle (scratch)
   int num_exact_pairs = 0;

@@ -22,14 +22,14 @@ inline constexpr double kPointSegmentSq = 1e-300;
 /// The per-segment quantities closestPointsSegmentSegment needs: direction d = end - start, its
 /// squared length dd and 1/dd (0 for a point). Computed once per primitive per cycle when one
 /// primitive takes part in several pairs.
-struct SegmentW {
+struct SegmentB {
   Eigen::Vector3d start = Eigen::Vector3d::Zero();
   Eigen::Vector3d d = Eigen::Vector3d::Zero();
   double dd = 0.0;
   double inv_dd = 0.0;
 
-  SegmentW() = default;
-  SegmentW(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) { set(p0, p1); }
+  SegmentB() = default;
+  SegmentB(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) { set(p0, p1); }
   void set(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1) {
     start = p0;
     d = p1 - p0;
@@ -57,7 +57,7 @@ inline double clamp01(double x) {
 /// parallel test: s on the line-line optimum (clamped), then t = the clamped foot of A(s) on B, then
 /// s = the clamped foot of B(t) on A (Ericson, Real-Time Collision Detection, 5.1.9; the last step
 /// is the identity when t was not clamped, so it is done unconditionally).
-inline void closestParametersSegmentSegment(const SegmentW& A, const SegmentW& B, double& s, double& t) {
+inline void closestParametersSegmentSegment(const SegmentB& A, const SegmentB& B, double& s, double& t) {
   // Written on scalars: Eigen's 2-wide SSE packets only add shuffles for 3-vectors here.
   const double rx = A.start.x() - B.start.x(), ry = A.start.y() - B.start.y(), rz = A.start.z() - B.start.z();
   const double f = B.d.x() * rx + B.d.y() * ry + B.d.z() * rz;
@@ -79,7 +79,7 @@ inline void closestPointsSegmentSegment(const Eigen::Vector3d& a0, const Eigen::
                                         const Eigen::Vector3d& b0, const Eigen::Vector3d& b1,
                                         Eigen::Vector3d& c1, Eigen::Vector3d& c2, double& s,
                                         double& t) {
-  const SegmentW A(a0, a1), B(b0, b1);
+  const SegmentB A(a0, a1), B(b0, b1);
   closestParametersSegmentSegment(A, B, s, t);
   c1 = A.start + s * A.d;
   c2 = B.start + t * B.d;

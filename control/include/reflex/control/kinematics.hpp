@@ -1,7 +1,7 @@
 // Forward kinematics and Jacobians (positions only) for a Model.
 //
-// Frames: W = root link frame. Jacobians are 3 x nq, in W, of a point fixed to a link, given by its
-// current position p_W. Columns of joints that do not move the link are zero.
+// Frames: B = root link frame. Jacobians are 3 x nq, in B, of a point fixed to a link, given by its
+// current position p_B. Columns of joints that do not move the link are zero.
 // Per-cycle functions allocate nothing and never throw; sizes are asserted.
 #pragma once
 
@@ -18,15 +18,15 @@ namespace reflex::control {
 struct KinematicsData {
   explicit KinematicsData(const Model& model);
 
-  std::vector<Eigen::Isometry3d> X_W_L;  ///< pose of every link in W
-  std::vector<Eigen::Vector3d> axis_W;   ///< joint axis of every link's parent joint, in W
+  std::vector<Eigen::Isometry3d> X_B_L;  ///< pose of every link in B
+  std::vector<Eigen::Vector3d> axis_B;   ///< joint axis of every link's parent joint, in B
   Eigen::VectorXd q;                     ///< the configuration the poses belong to
-  /// Per joint (column = q index), its unit twist in W: angular part w (rows 0-2; the axis for a
+  /// Per joint (column = q index), its unit twist in B: angular part w (rows 0-2; the axis for a
   /// revolute joint, 0 for a prismatic one) and linear part v (rows 3-5; o x axis for a revolute
-  /// joint at origin o, the axis for a prismatic one). A point p_W moved by joint j moves at
-  /// (w x p_W + v) per unit qdot_j: the Jacobian and row functions use it, so the per-joint work
+  /// joint at origin o, the axis for a prismatic one). A point p_B moved by joint j moves at
+  /// (w x p_B + v) per unit qdot_j: the Jacobian and row functions use it, so the per-joint work
   /// (o x axis) is done once per cycle instead of once per pair.
-  Eigen::Matrix<double, 6, Eigen::Dynamic> twist_W;
+  Eigen::Matrix<double, 6, Eigen::Dynamic> twist_B;
 };
 
 /// Forward kinematics. Returns false (and leaves `data` unchanged) if q has the wrong size or a
@@ -34,20 +34,20 @@ struct KinematicsData {
 bool computeForwardKinematics(const Model& model, KinematicsData& data,
                               const Eigen::Ref<const Eigen::VectorXd>& q);
 
-/// J_W (3 x nq) of the point p_W rigidly attached to `link` (after computeForwardKinematics).
+/// J_B (3 x nq) of the point p_B rigidly attached to `link` (after computeForwardKinematics).
 void computePointJacobian(const Model& model, const KinematicsData& data, int link,
-                          const Eigen::Vector3d& p_W, Eigen::Ref<Eigen::MatrixXd> J_W);
+                          const Eigen::Vector3d& p_B, Eigen::Ref<Eigen::MatrixXd> J_B);
 
-/// Relative Jacobian J_W_p1 - J_W_p2 (3 x nq) of two points on two links: the rate of p1 - p2.
+/// Relative Jacobian J_B_p1 - J_B_p2 (3 x nq) of two points on two links: the rate of p1 - p2.
 void computeRelativeJacobian(const Model& model, const KinematicsData& data, int link1,
-                             const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
-                             Eigen::Ref<Eigen::MatrixXd> J_W);
+                             const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
+                             Eigen::Ref<Eigen::MatrixXd> J_B);
 
-/// The directional row n^T (J_W_p1 - J_W_p2) (1 x nq): the rate of the distance along n_W.
-/// With n_W = (p1 - p2)/d this is the paper's J_ca|row,y (Eq. 8): positive row velocity separates.
+/// The directional row n^T (J_B_p1 - J_B_p2) (1 x nq): the rate of the distance along n_B.
+/// With n_B = (p1 - p2)/d this is the paper's J_ca|row,y (Eq. 8): positive row velocity separates.
 void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1,
-                           const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
-                           const Eigen::Vector3d& n_W, Eigen::Ref<Eigen::RowVectorXd> row);
+                           const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
+                           const Eigen::Vector3d& n_B, Eigen::Ref<Eigen::RowVectorXd> row);
 
 /// How many joints the support paths of link1 and link2 share from the root (Model::link_support).
 std::size_t commonSupport(const Model& model, int link1, int link2);
@@ -56,7 +56,7 @@ std::size_t commonSupport(const Model& model, int link1, int link2);
 /// others keep their values: a caller whose rows always join the same two links zeroes them once).
 /// common = commonSupport(model, link1, link2); row points at nq doubles.
 void computeDirectionalRowOnSupport(const Model& model, const KinematicsData& data, int link1,
-                                    const Eigen::Vector3d& p1_W, int link2, const Eigen::Vector3d& p2_W,
-                                    const Eigen::Vector3d& n_W, std::size_t common, double* row);
+                                    const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
+                                    const Eigen::Vector3d& n_B, std::size_t common, double* row);
 
 }  // namespace reflex::control

@@ -3,7 +3,7 @@
 // afterwards. Everything that changes per cycle lives in the Data structs of kinematics.hpp and
 // distance.hpp, sized from this model.
 //
-// Frames: W is the URDF root link frame ("base frame"; for the shipped robot: on the floor, x forward,
+// Frames: B is the URDF root link frame ("base frame"; for the shipped robot: on the floor, x forward,
 // y left, z up). L is a link frame (URDF convention: it coincides with the frame of its parent joint).
 // Units: metres, radians.
 #pragma once

@@ -106,15 +106,15 @@ void findRestPosture(const Model& model, const SetupOptions& options, RobotSetup
 int findArmGaps(const Model& model, const SetupOptions& options, RobotSetup& setup);
 
 /// A short closed-loop run of the OnboardController (KinematicPort) from the rest posture, both hands
-/// sent to target_W (root frame, m) at t = 0; `cm` from the written controller configuration.
+/// sent to target_B (root frame, m) at t = 0; `cm` from the written controller configuration.
 struct ReachCheck {
-  std::array<Eigen::Vector3d, 2> target_W{};
+  std::array<Eigen::Vector3d, 2> target_B{};
   std::array<double, 2> error{};     ///< m, hand point to target at the end
   double reached_at = -1.0;          ///< s, first time both hands were within `tolerance` (-1: never)
   double min_distance = 0.0;         ///< m, closest physical pair over the run
   std::uint64_t estops = 0;
 };
-ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::array<Eigen::Vector3d, 2>& target_W,
+ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::array<Eigen::Vector3d, 2>& target_B,
                       double duration, double tolerance);
 
 /// The <collision> element (URDF; cylinder = capsule for Reflex's loader) for a capsule in a link frame.

@@ -21,7 +21,7 @@
 namespace reflex::control {
 
 /// A robot's frame of reference for the scenarios (issue 12, item 6): landmarks measured on the
-/// model at the rest posture (restConfiguration), in the root frame W (metres). The seven scenarios
+/// model at the rest posture (restConfiguration), in the base frame B (metres). The seven scenarios
 /// are written in the coordinates of the reference robot (asimo_like: floor, x forward, y left, z up);
 /// place() carries a point from there to this robot through its landmarks, so a target at the
 /// reference robot's chest lands at this robot's chest, one arm length in front of the reference
@@ -77,12 +77,12 @@ struct ScenarioContext {
   /// The link with collision geometry that carries `link` (itself, or its nearest ancestor with a
   /// segment; fixed sensor frames are carried by what they are fixed to), -1 if none.
   int carrierSegment(int link) const;
-  /// A target the scenario means `arm` to reach (p_W, placed on this robot): p_W itself if the arm
+  /// A target the scenario means `arm` to reach (p_B, placed on this robot): p_B itself if the arm
   /// can put its hand point there within its joint limits (damped least squares from the rest
   /// posture, 2 mm); else the point 90 % of the way from the hand's rest point to the farthest point
-  /// towards p_W it can reach (a robot's joint limits differ from the reference robot's: the mesh
+  /// towards p_B it can reach (a robot's joint limits differ from the reference robot's: the mesh
   /// humanoid's shoulder rolls 0.2 rad inwards). Computed once per target (not on the control path).
-  Eigen::Vector3d reachable(int arm, const Eigen::Vector3d& p_W);
+  Eigen::Vector3d reachable(int arm, const Eigen::Vector3d& p_B);
   std::optional<ScenarioFrame> frame_cache{};  ///< filled by frame()
   std::vector<std::array<Eigen::Vector3d, 2>> reach_cache[2]{};  ///< filled by reachable(): {asked, answer}
 };

@@ -57,7 +57,7 @@ class RobotState {
   double jointPosition(const std::string& name, double def = 0.0) const;
 
   /// Pose of a link in B; link from model().linkIndex.
-  const Eigen::Isometry3d& X_B_L(int link) const { return kin_.X_W_L[static_cast<std::size_t>(link)]; }
+  const Eigen::Isometry3d& X_B_L(int link) const { return kin_.X_B_L[static_cast<std::size_t>(link)]; }
   Eigen::Vector3d shoulder_B(Hand h) const;
   /// The hand's reaching point in B.
   Eigen::Vector3d handPoint_B(Hand h) const;

@@ -20,7 +20,7 @@ view::ArmState armState(const msg::ArmStatus& a) {
 view::HandTargetState targetState(const msg::HandTarget& t) {
   view::HandTargetState s;
   s.given = t.status() == msg::TARGET_GIVEN;
-  s.p_W = Eigen::Vector3d(t.position_base().x(), t.position_base().y(), t.position_base().z());
+  s.p_B = Eigen::Vector3d(t.position_base().x(), t.position_base().y(), t.position_base().z());
   s.object = t.object_name();
   return s;
 }
@@ -63,7 +63,7 @@ void SceneFeed::add(const msg::ObjectTargets& s) {
   for (const msg::ObjectTarget& o : s.objects()) {
     view::ObjectState obj;
     obj.name = o.name();
-    obj.p_W = Eigen::Vector3d(o.position_base().x(), o.position_base().y(), o.position_base().z());
+    obj.p_B = Eigen::Vector3d(o.position_base().x(), o.position_base().y(), o.position_base().z());
     obj.confidence = o.confidence();
     input_.objects.push_back(std::move(obj));
   }

@@ -10,7 +10,7 @@
 //   <arm>_f, <arm>_distance [m], <arm>_pair ("segA|segB", or empty), <arm>_zone (free / yellow /
 //   orange / red), estop (EstopState number, non-zero = latched) -> SceneInput.arms: the arm's status
 //   as ControlStatus carried it (all optional: without <arm>_zone the arm is drawn neutral)
-//   <arm>_status ("given" or other), <arm>_target_x/_y/_z [m, in W] -> SceneInput.targets
+//   <arm>_status ("given" or other), <arm>_target_x/_y/_z [m, in B] -> SceneInput.targets
 // <arm> is SceneModel::arm_names ("left", "right").
 //
 // Bad input (setup-time, so it throws control::ConfigError naming the file, the row and the value):

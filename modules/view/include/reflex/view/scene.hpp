@@ -3,14 +3,14 @@
 // JSON-encoded, with their JSON schemas. No DDS here: reflex_view feeds it from the bus, and a recorder
 // can call the same functions on recorded samples (a JointState + ControlStatus at one instant).
 //
-// Frames: every scene entity is expressed in the URDF root frame W (`SceneModel::root_frame`, "world"
+// Frames: every scene entity is expressed in the URDF base frame B (`SceneModel::root_frame`, "world"
 // for the shipped robot; frame_locked false), so a viewer needs no transform tree to draw it; the
 // FrameTransforms give every link (parent -> child, one per non-root link) for viewers that show
 // frames. Units: metres, seconds; colours RGBA in [0, 1].
 //
 // How the collision model is drawn (Foxglove has no capsule primitive): a capsule primitive (core
-// segment a_W -> b_W, radius r; model.hpp) is one CylinderPrimitive (centre (a+b)/2, its z axis along
-// b - a, size 2r x 2r x |b - a|) plus two SpherePrimitives of diameter 2r at a_W and b_W; a sphere
+// segment a_B -> b_B, radius r; model.hpp) is one CylinderPrimitive (centre (a+b)/2, its z axis along
+// b - a, size 2r x 2r x |b - a|) plus two SpherePrimitives of diameter 2r at a_B and b_B; a sphere
 // primitive is one SpherePrimitive. One entity per segment, id "segment/<name>".
 //
 // Colour: a segment an arm moves takes the colour of that arm's zone (ControlStatus.zone of the arm,
@@ -78,17 +78,17 @@ struct ArmState {
   bool estop_latched = false;
 };
 
-/// A hand target in W (HandTargets.position_base: the robot base frame is the URDF root frame).
+/// A hand target in B (HandTargets.position_base: the robot base frame is the URDF root frame).
 struct HandTargetState {
   bool given = false;
-  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p_B = Eigen::Vector3d::Zero();
   std::string object;
 };
 
-/// A vision object in W (ObjectTargets.position_base).
+/// A vision object in B (ObjectTargets.position_base).
 struct ObjectState {
   std::string name;
-  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p_B = Eigen::Vector3d::Zero();
   double confidence = 0.0;
 };
 
@@ -128,7 +128,7 @@ struct SceneData {
   /// is the controller's own), the nearest enabled body-schema segment of the input to the arm's
   /// named segment. closest_line[arm] false: nothing to draw.
   std::array<bool, 2> closest_line{false, false};
-  std::array<Eigen::Vector3d, 2> closest_a_W, closest_b_W;
+  std::array<Eigen::Vector3d, 2> closest_a_B, closest_b_B;
   std::vector<Zone> segment_zone;           ///< per segment: the zone it is coloured with
   std::vector<bool> segment_in_arm;         ///< per segment: moved by an arm or named in a closest pair
 };
@@ -145,7 +145,7 @@ int jointPositionsToQ(const SceneModel& scene, const std::vector<std::string>& n
 bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& input);
 
 /// `foxglove.FrameTransforms`: one transform per non-root link, parent link -> link, at input.stamp_ns.
-/// Composing them from the root gives data.kin.X_W_L. Call after updateScene.
+/// Composing them from the root gives data.kin.X_B_L. Call after updateScene.
 nlohmann::json buildFrameTransforms(const SceneModel& scene, const SceneData& data, const SceneInput& input);
 
 /// `foxglove.SceneUpdate` with the entities described at the top of this file ("segment/<name>",

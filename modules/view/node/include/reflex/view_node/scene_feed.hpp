@@ -8,7 +8,7 @@
 //                     non-finite position is skipped and counted (joint_entries_skipped); stamp =
 //                     header.stamp_ns [ns, system clock]; marks the input fresh.
 //   ControlStatus     both arms' zone, distance, f(d), closest pair, e-stop (an unknown zone: red).
-//   HandTargets       both hands' target (given only when status is TARGET_GIVEN), position_base in W.
+//   HandTargets       both hands' target (given only when status is TARGET_GIVEN), position_base in B.
 //   ObjectTargets     replaces the object list, unless frame_id is neither "base_link" nor the URDF root
 //                     (then not drawn, counted in object_frames_other_frame): those are not base-frame
 //                     positions.
