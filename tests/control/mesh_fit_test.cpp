@@ -40,6 +40,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <memory>
 #include <regex>
 #include <set>
@@ -191,6 +192,48 @@ TEST(MeshFit, ShippedMeshHumanoidEnclosesEveryVertexOfEveryLink) {
   }
 }
 
+/// What an oracle says of one pair of links: whether the true shapes intersect, else how far apart they are.
+struct TrueDistance {
+  bool touching = false;
+  double distance = 0.0;
+};
+struct OracleTally {
+  int checked = 0, colliding = 0;
+  double closest_margin = std::numeric_limits<double>::infinity();  ///< min (true - fitted) over pairs apart
+};
+
+/// The loop of both FCL checks: at `samples` random configurations (seed `seed`), every robot pair
+/// (body-schema slots skipped) that `oracle(pair index, X_B_La, X_B_Lb)` answers (std::nullopt: not
+/// asked) must have Reflex's fitted distance <= the true one (+ tol), and <= 0 where the shapes touch.
+template <class Oracle>
+void expectFittedNeverFartherThanOracle(const Model& model, int samples, unsigned seed, double tol, Oracle oracle,
+                                        OracleTally& tally) {
+  KinematicsData kin(model);
+  DistanceData dist(model);
+  std::mt19937_64 rng(seed);
+  for (int sample = 0; sample < samples; ++sample) {
+    ASSERT_TRUE(computeForwardKinematics(model, kin, test::randomConfiguration(model, rng)));
+    computeSegmentDistances(model, kin, dist);
+    for (std::size_t i = 0; i < model.pairs.size(); ++i) {
+      const SegmentPair& p = model.pairs[i];
+      if (model.segments[p.b].body_schema_slot) continue;
+      const std::optional<TrueDistance> truth =
+          oracle(i, kin.X_B_L[model.segments[p.a].link], kin.X_B_L[model.segments[p.b].link]);
+      if (!truth) continue;
+      const double fitted = dist.pairs[i].distance;
+      const std::string what = model.segments[p.a].name + "-" + model.segments[p.b].name;
+      if (truth->touching) {
+        ++tally.colliding;
+        EXPECT_LE(fitted, 0.0) << what << ": the true shapes intersect, fitted primitives apart";
+        continue;
+      }
+      EXPECT_GE(truth->distance, fitted - tol) << what << " sample " << sample;
+      tally.closest_margin = std::min(tally.closest_margin, truth->distance - fitted);
+      ++tally.checked;
+    }
+  }
+}
+
 TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
   const Model model = testing::loadRobot("mesh_humanoid");
   const auto meshes = linkMeshes(kUrdf, kPackageDir);
@@ -204,39 +247,23 @@ TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
     m->endModel();
     bvh[model.segmentIndex(link)] = m;
   }
-  KinematicsData kin(model);
-  DistanceData dist(model);
-  std::mt19937_64 rng(7);
-  int checked = 0, colliding = 0;
-  double closest_margin = std::numeric_limits<double>::infinity();
-  for (int sample = 0; sample < 150; ++sample) {
-    ASSERT_TRUE(computeForwardKinematics(model, kin, test::randomConfiguration(model, rng)));
-    computeSegmentDistances(model, kin, dist);
-    for (std::size_t i = 0; i < model.pairs.size(); ++i) {
-      const SegmentPair& p = model.pairs[i];
-      if (model.segments[p.b].body_schema_slot) continue;
-      const fcl::Transform3d Xa(kin.X_B_L[model.segments[p.a].link].matrix());
-      const fcl::Transform3d Xb(kin.X_B_L[model.segments[p.b].link].matrix());
-      fcl::CollisionRequestd creq;
-      fcl::CollisionResultd cres;
-      fcl::collide(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, creq, cres);
-      const double fitted = dist.pairs[i].distance;
-      if (cres.isCollision()) {
-        ++colliding;
-        EXPECT_LE(fitted, 0.0) << model.segments[p.a].name << "-" << model.segments[p.b].name
-                               << ": meshes intersect, fitted primitives apart";
-        continue;
-      }
-      fcl::DistanceRequestd dreq;
-      dreq.enable_nearest_points = false;
-      fcl::DistanceResultd dres;
-      fcl::distance(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, dreq, dres);
-      EXPECT_GE(dres.min_distance, fitted - 1e-9)
-          << model.segments[p.a].name << "-" << model.segments[p.b].name << " sample " << sample;
-      closest_margin = std::min(closest_margin, dres.min_distance - fitted);
-      ++checked;
-    }
-  }
+  OracleTally t;
+  expectFittedNeverFartherThanOracle(model, 150, 7, 1e-9, [&](std::size_t i, const Eigen::Isometry3d& X_B_La,
+                                                              const Eigen::Isometry3d& X_B_Lb) {
+    const SegmentPair& p = model.pairs[i];
+    const fcl::Transform3d Xa(X_B_La.matrix()), Xb(X_B_Lb.matrix());
+    fcl::CollisionRequestd creq;
+    fcl::CollisionResultd cres;
+    fcl::collide(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, creq, cres);
+    if (cres.isCollision()) return std::optional<TrueDistance>(TrueDistance{true, 0.0});
+    fcl::DistanceRequestd dreq;
+    dreq.enable_nearest_points = false;
+    fcl::DistanceResultd dres;
+    fcl::distance(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, dreq, dres);
+    return std::optional<TrueDistance>(TrueDistance{false, dres.min_distance});
+  }, t);
+  const int checked = t.checked, colliding = t.colliding;
+  const double closest_margin = t.closest_margin;
   EXPECT_GT(checked, 10000);
   std::cout << "mesh pairs checked against FCL: " << checked << " apart, " << colliding
             << " intersecting; smallest (mesh - fitted) distance " << closest_margin << " m\n";
@@ -605,47 +632,30 @@ TEST(MeshFitBox, SmallHumanoidBoxesFittedWithoutAnOverlayAndNeverCloserThanFclSa
   std::set<std::string> box_links;
   const auto shapes = fclShapes(testing::robotPath("small_humanoid.urdf"), &box_links);
   ASSERT_EQ(box_links.size(), 6u);
-  KinematicsData kin(model);
-  DistanceData dist(model);
-  std::mt19937_64 rng(11);
-  int checked = 0, colliding = 0;
-  double closest_margin = std::numeric_limits<double>::infinity();
-  for (int sample = 0; sample < 300; ++sample) {
-    ASSERT_TRUE(computeForwardKinematics(model, kin, test::randomConfiguration(model, rng)));
-    computeSegmentDistances(model, kin, dist);
-    for (std::size_t i = 0; i < model.pairs.size(); ++i) {
-      const SegmentPair& p = model.pairs[i];
-      if (model.segments[p.b].body_schema_slot) continue;
-      const std::string& la = model.segments[p.a].name;
-      const std::string& lb = model.segments[p.b].name;
-      if (!box_links.count(la) && !box_links.count(lb)) continue;
-      const Eigen::Isometry3d X_B_La = kin.X_B_L[model.segments[p.a].link], X_B_Lb = kin.X_B_L[model.segments[p.b].link];
-      double true_distance = std::numeric_limits<double>::infinity();
-      bool touching = false;
-      for (const auto& [ga, X_La_shape] : shapes.at(la))
-        for (const auto& [gb, X_Lb_shape] : shapes.at(lb)) {
-          const fcl::Transform3d Xa((X_B_La * X_La_shape).matrix()), Xb((X_B_Lb * X_Lb_shape).matrix());
-          fcl::CollisionRequestd creq;
-          fcl::CollisionResultd cres;
-          fcl::collide(ga.get(), Xa, gb.get(), Xb, creq, cres);
-          touching = touching || cres.isCollision();
-          fcl::DistanceRequestd dreq;
-          dreq.gjk_solver_type = fcl::GST_INDEP;
-          fcl::DistanceResultd dres;
-          fcl::distance(ga.get(), Xa, gb.get(), Xb, dreq, dres);
-          true_distance = std::min(true_distance, dres.min_distance);
-        }
-      const double fitted = dist.pairs[i].distance;
-      if (touching) {
-        ++colliding;
-        EXPECT_LE(fitted, 0.0) << la << "-" << lb << ": shapes intersect, fitted primitives apart";
-        continue;
+  OracleTally t;
+  expectFittedNeverFartherThanOracle(model, 300, 11, 1e-6, [&](std::size_t i, const Eigen::Isometry3d& X_B_La,
+                                                               const Eigen::Isometry3d& X_B_Lb) {
+    const std::string& la = model.segments[model.pairs[i].a].name;
+    const std::string& lb = model.segments[model.pairs[i].b].name;
+    if (!box_links.count(la) && !box_links.count(lb)) return std::optional<TrueDistance>();
+    TrueDistance truth{false, std::numeric_limits<double>::infinity()};
+    for (const auto& [ga, X_La_shape] : shapes.at(la))
+      for (const auto& [gb, X_Lb_shape] : shapes.at(lb)) {
+        const fcl::Transform3d Xa((X_B_La * X_La_shape).matrix()), Xb((X_B_Lb * X_Lb_shape).matrix());
+        fcl::CollisionRequestd creq;
+        fcl::CollisionResultd cres;
+        fcl::collide(ga.get(), Xa, gb.get(), Xb, creq, cres);
+        truth.touching = truth.touching || cres.isCollision();
+        fcl::DistanceRequestd dreq;
+        dreq.gjk_solver_type = fcl::GST_INDEP;
+        fcl::DistanceResultd dres;
+        fcl::distance(ga.get(), Xa, gb.get(), Xb, dreq, dres);
+        truth.distance = std::min(truth.distance, dres.min_distance);
       }
-      EXPECT_GE(true_distance, fitted - 1e-6) << la << "-" << lb << " sample " << sample;
-      closest_margin = std::min(closest_margin, true_distance - fitted);
-      ++checked;
-    }
-  }
+    return std::optional<TrueDistance>(truth);
+  }, t);
+  const int checked = t.checked, colliding = t.colliding;
+  const double closest_margin = t.closest_margin;
   EXPECT_GT(checked, 5000);
   std::cout << "box pairs checked against FCL: " << checked << " apart, " << colliding
             << " intersecting; smallest (true - fitted) distance " << closest_margin << " m\n";

@@ -73,7 +73,7 @@ refused() {
   msg=$("$behavior" --config "$config" "$@" 2>&1) || rc=$?
   [[ $rc -eq 2 ]] && grep -qF -- "$want" <<<"$msg" || fail "$what: exit $rc (2 expected), got: $msg"
 }
-refused "without the plugin" "unknown module type (known: grasped_bar, occlusion, pointing, scripted, walking): 'wave'" \
+refused "without the plugin" "modules[0].type: unknown module type (value 'wave', expected one of grasped_bar, occlusion, pointing, scripted, walking)" \
   --domain "$domain" --duration 1
 notplugin=$(ls /usr/lib/x86_64-linux-gnu/libz.so.1 /lib/x86_64-linux-gnu/libz.so.1 2>/dev/null | head -1)
 refused "a library that is no plugin" "module plugin '$notplugin': not a Reflex module plugin" --plugin "$notplugin"

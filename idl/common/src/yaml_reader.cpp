@@ -335,7 +335,8 @@ void ConfigNode::rejectUnknown(std::initializer_list<const char*> allowed) const
 }
 
 void ConfigNode::rejectUnknown(const std::vector<std::string>& allowed) const {
-  for (const auto& [k, value] : entries()) {
+  for (const auto& entry : entries()) {
+    const std::string& k = entry.first;  // not a structured binding: clang (C++17) cannot capture one below
     bool ok = false;
     for (const auto& a : allowed) ok |= k == a;
     if (!ok) {

@@ -403,7 +403,7 @@ TEST(ScenarioFrame, TheControllerYamlNamesTheCamera) {
     loadControllerConfig(empty);
     ADD_FAILURE() << "no ConfigError";
   } catch (const ConfigError& e) {
-    EXPECT_EQ(std::string(e.what()), empty + ": camera_link: must name a link");
+    EXPECT_EQ(std::string(e.what()), empty + ":1:14: camera_link: not a name (value '', expected a non-empty string)");
   }
   EXPECT_EQ(defaultControllerConfigPath(dir + "/robot.urdf"), dir + "/robot.controller.yaml");
   EXPECT_EQ(loadControllerConfigFor(dir + "/robot.urdf", "").source, "<defaults>");
