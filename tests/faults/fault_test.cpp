@@ -224,9 +224,14 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
     return std::vector<std::string>{bin("reflex_vision"), "--session", src + "/bringup/sessions/flagship", "--loop",
                                     "--quiet", "--domain", d};
   };
+  // Behavior on UDP: with Fast DDS 2.9's shared memory, a kill -9 of a reader process stalls its
+  // peers' writers (the port health check), seen here once as the controller's status stream at
+  // 0.67 Hz for 3 s after behavior's kill -9 (session 6; the same stall robot_port_test and
+  // mujoco_faults_test avoid the same way). The stall is an open defect of the controller's bus
+  // writes on the control thread (control/README.md); this test checks the chain's restart.
   auto behaviorArgs = [&] {
     return std::vector<std::string>{bin("reflex_behavior"), "--config", src + "/bringup/behavior/pointing.yaml",
-                                    "--domain", d};
+                                    "--domain", d, "--participant-profile", "reflex_participant_udp"};
   };
   testing::ChildProcess controller({bin("reflex_controller"), "--domain", d, "--duration", "45", "--input-timeout", "0.5"},
                                    tmp + "chain_controller.log");
