@@ -50,13 +50,16 @@ int forceSide(const Model& model, const DistanceData& dist, const PairDistance& 
   return descendsFrom(model, segmentLink(model, dist, pd.seg_b), segmentLink(model, dist, pd.seg_a)) ? -1 : 1;
 }
 
-/// The distance options of the control cycle: rows for every pair that can feed a term (within
-/// d_safe, Eq. 5, or the yellow zone, Eq. 6); pairs beyond that take no part in any term, so the
-/// broad phase may skip them (their distance is then a lower bound above the threshold).
+/// The distance options of the control cycle: exact distances for every pair that can feed a term
+/// (within d_safe, Eq. 5, or the yellow zone, Eq. 6); pairs beyond that take no part in any term, so
+/// the broad phase may skip them (their distance is then a lower bound above the threshold).
 DistanceOptions cycleDistanceOptions(const ControllerModel& cm) {
   DistanceOptions options;
-  options.row_threshold = std::max(cm.params.d_safe, cm.params.d_a);
-  if (cm.broad_phase) options.prune_distance = options.row_threshold;
+  // Rows are read for the orange-zone pairs (safety filter), the red ones (recovery) and, by the
+  // tests, the yellow ones; Eq. 5's gradient is summed from witness points and normals
+  // (collectPairTerms), so the pairs between d_a and d_safe need none.
+  options.row_threshold = cm.params.d_a;
+  if (cm.broad_phase) options.prune_distance = std::max(cm.params.d_safe, cm.params.d_a);
   return options;
 }
 
@@ -152,6 +155,21 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
         std::max(reach[static_cast<std::size_t>(parent)], model.links[l].X_P_J.translation().norm() + reach[l]);
   }
   link_sweep.assign(nl, 0.0);
+  pair_arms.assign(model.pairs.size(), 0);
+  for (std::size_t i = 0; i < model.pairs.size(); ++i) {
+    const SegmentPair& pr = model.pairs[i];
+    if (pr.b >= model.num_robot_segments) continue;  // a body-schema slot's owner changes with its link
+    const int oa = cm.segment_owner[static_cast<std::size_t>(pr.a)];
+    const int ob = cm.segment_owner[static_cast<std::size_t>(pr.b)];
+    for (int a = 0; a < 2; ++a)
+      if (oa == a || ob == a) pair_arms[i] |= static_cast<std::uint8_t>(1U << a);
+    if (oa >= 0 && ob >= 0 && oa != ob) between_arm_pairs.push_back(static_cast<int>(i));
+  }
+  grad_link_index.assign(nl, -1);
+  arm_ws.grad_link.assign(nl, -1);
+  arm_ws.grad_M.assign(nl, Eigen::Vector3d::Zero());
+  arm_ws.grad_N.assign(nl, Eigen::Vector3d::Zero());
+  guard_pairs.assign(model.pairs.size(), -1);
   lever = Eigen::VectorXd::Zero(model.nq);
   for (int j = 0; j < model.nq; ++j) {
     const Link& link = model.links[static_cast<std::size_t>(model.q_link[j])];
@@ -223,36 +241,41 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
   ws.d_other_arm = kInf;
   ws.d_static = kInf;
   double d_min = kInf;
-  double pruned_floor = kInf;  // smallest lower bound of the pairs the broad phase skipped
   int closest = -1;
-  // Eq. 5's gradient, summed into a local array (no reload of ws's Eigen storage per term for
-  // aliasing) in the same order as before, so the same sum.
-  std::array<double, kMaxArmDof> gradient{};
-  for (const int p : arm.candidate_pairs) {
-    const PairDistance& pd = data.dist.pairs[p];
-    if (!pd.active) continue;
-    if (!pd.exact) {
-      // Skipped by the broad phase: beyond every zone, d_safe and d_b, so it feeds no term and no
-      // contact; it can only be the arm's closest pair (checked below with the filters that follow).
-      pruned_floor = std::min(pruned_floor, pd.distance);
-      continue;
+  // Eq. 5's gradient sum_p (d_safe - d_p) row_p on the arm's columns, without the rows: with the
+  // twist (w, v) of arm joint i, row_p[i] = [i moves link_a] (w . (p_a x n) + v . n)
+  // - [i moves link_b] (w . (p_b x n) + v . n). So the pairs' weighted (p x n, n) are summed per link
+  // (ws.grad_*), and each arm column takes w . M + v . N over the links its joint moves (below).
+  const std::vector<std::uint64_t>& columns = data.arm_columns_of_link[static_cast<std::size_t>(a)];
+  ws.num_grad_links = 0;
+  auto accumulate = [&](int link, const Eigen::Vector3d& p_B, const Eigen::Vector3d& n_B, double w) {
+    if (columns[static_cast<std::size_t>(link)] == 0) return;  // no joint of this arm moves it
+    int& k = data.grad_link_index[static_cast<std::size_t>(link)];
+    if (k < 0) {
+      k = ws.num_grad_links++;
+      ws.grad_link[static_cast<std::size_t>(k)] = link;
+      ws.grad_M[static_cast<std::size_t>(k)].setZero();
+      ws.grad_N[static_cast<std::size_t>(k)].setZero();
     }
-    const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
-    const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
-    if (owner_a != a && owner_b != a) continue;
+    ws.grad_M[static_cast<std::size_t>(k)] += w * p_B.cross(n_B);
+    ws.grad_N[static_cast<std::size_t>(k)] += w * n_B;
+  };
+  // One pair's terms; owner_a / owner_b: the arms that move its segments (-1: none).
+  auto take = [&](int p, const PairDistance& pd, int owner_a, int owner_b) {
+    if (owner_a != a && owner_b != a) return;
     const int other = owner_a == a ? owner_b : owner_a;
     const bool with_other_arm = other >= 0 && other != a;
     if (with_other_arm) ws.d_other_arm = std::min(ws.d_other_arm, pd.distance);
     else if (other < 0) ws.d_static = std::min(ws.d_static, pd.distance);
-    if (with_other_arm && higherPriority(input.priority, a) && !recovery_only) continue;
+    if (with_other_arm && higherPriority(input.priority, a) && !recovery_only) return;
     if (pd.distance < d_min) {
       d_min = pd.distance;
       closest = p;
     }
-    if (pd.has_row && pd.distance < params.d_safe && !recovery_only) {
-      const double* row = data.dist.rows.data() + static_cast<Eigen::Index>(p) * data.dist.rows.cols();
+    if (pd.distance < params.d_safe && !recovery_only) {
       const double w = params.d_safe - pd.distance;
-      for (int i = 0; i < arm.n; ++i) gradient[static_cast<std::size_t>(i)] += row[arm.q[static_cast<std::size_t>(i)]] * w;
+      accumulate(segmentLink(model, data.dist, pd.seg_a), pd.p_B_a, pd.nhat_B, w);
+      accumulate(segmentLink(model, data.dist, pd.seg_b), pd.p_B_b, pd.nhat_B, -w);
     }
     // Both lists hold one entry per candidate pair at most (sized at set-up): never full here.
     if (pd.distance < params.d_b && pd.has_row) ws.guarded_pairs[static_cast<std::size_t>(ws.num_guarded++)] = p;
@@ -262,15 +285,52 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
       ws.forces.add(params.k_virtual, params.d_a, pd.distance, side * pd.nhat_B, side > 0 ? pd.p_B_a : pd.p_B_b);
       ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, params.k_virtual * (params.d_a - pd.distance)};
     }
+  };
+  // The pairs the sweep computed exactly, in ascending pair order (the candidate pairs' order):
+  // the robot pairs of its exact list merged with the active body-schema slot pairs. A robot pair
+  // the broad phase skipped is beyond d_safe, d_a and d_b: it feeds no term and no contact and can
+  // only be the arm's closest pair (checked below).
+  const std::vector<int>& exact = data.dist.exactList();
+  const int nexact = data.dist.num_exact_pairs;
+  const std::vector<int>& slot_pairs = data.dist.slot_pairs;
+  bool any_slot = false;
+  for (const BodySchemaSlot& slot : data.dist.slots) any_slot = any_slot || slot.enabled;
+  const int nslot = any_slot ? static_cast<int>(slot_pairs.size()) : 0;
+  const std::uint8_t bit = static_cast<std::uint8_t>(1U << a);
+  for (int e = 0, s = 0; e < nexact || s < nslot;) {
+    const bool robot = s >= nslot || (e < nexact && exact[static_cast<std::size_t>(e)] < slot_pairs[static_cast<std::size_t>(s)]);
+    const int p = robot ? exact[static_cast<std::size_t>(e++)] : slot_pairs[static_cast<std::size_t>(s++)];
+    const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
+    if (robot) {
+      if (!(data.pair_arms[static_cast<std::size_t>(p)] & bit)) continue;
+      take(p, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
+    } else if (pd.active) {
+      take(p, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
+    }
+  }
+  std::array<double, kMaxArmDof> gradient{};
+  for (int k = 0; k < ws.num_grad_links; ++k) {
+    const int link = ws.grad_link[static_cast<std::size_t>(k)];
+    data.grad_link_index[static_cast<std::size_t>(link)] = -1;
+    const Eigen::Vector3d& M = ws.grad_M[static_cast<std::size_t>(k)];
+    const Eigen::Vector3d& N = ws.grad_N[static_cast<std::size_t>(k)];
+    const std::uint64_t mask = columns[static_cast<std::size_t>(link)];
+    for (int i = 0; i < arm.n; ++i) {
+      if (!((mask >> i) & 1U)) continue;
+      const auto twist = data.kin.twist_B.col(arm.q[static_cast<std::size_t>(i)]);
+      gradient[static_cast<std::size_t>(i)] += twist.head<3>().dot(M) + twist.tail<3>().dot(N);
+    }
   }
   for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] = gradient[static_cast<std::size_t>(i)];
-  if (pruned_floor < d_min) {
-    // The arm's closest pair may be one the broad phase skipped: compute those that could be exactly
-    // (their lower bound is below the closest exact distance), so the status is what it is unpruned.
+  if (data.dist.pruned_floor < d_min) {
+    // The arm's closest pair may be one the broad phase skipped (its lower bound is below the closest
+    // exact distance): compute those that could be exactly, so the status is what it is unpruned.
+    // (The sweep's smallest skipped bound is at most this arm's; a pair findClosestPairs already
+    // refined is exact but not in the sweep's list: it is taken here.)
     const DistanceOptions options = cycleDistanceOptions(cm);
     for (const int p : arm.candidate_pairs) {
-      const PairDistance& pd = data.dist.pairs[p];
-      if (!pd.active || pd.exact || !(pd.distance < d_min)) continue;
+      PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
+      if (!pd.active || !(pd.distance < d_min)) continue;
       const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
       const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
       if (owner_a != a && owner_b != a) continue;
@@ -536,32 +596,54 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
       best.pair = i;
     }
   };
-  bool skipped = false;
-  const int npairs = static_cast<int>(data.dist.pairs.size());
-  for (int i = 0; i < npairs; ++i) {
+  // The pairs the sweep computed exactly: its robot pairs (all physical), then the active slot pairs.
+  const std::vector<int>& exact = data.dist.exactList();
+  for (int e = 0; e < data.dist.num_exact_pairs; ++e) {
+    const int i = exact[static_cast<std::size_t>(e)];
+    const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+    take(physical, pd.distance, i);
+    if (data.pair_arms[static_cast<std::size_t>(i)] == 3U && betweenArms(pd)) take(between_arms, pd.distance, i);
+  }
+  for (const int i : data.dist.slot_pairs) {
     const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
     if (!pd.active) continue;
-    if (!pd.exact) {
-      skipped = true;
-      continue;
-    }
-    if (!isPhysical(model, data, pd)) {
-      take(virtual_slot, pd.distance, i);
-      continue;
-    }
-    take(physical, pd.distance, i);
-    if (betweenArms(pd)) take(between_arms, pd.distance, i);
+    if (!isPhysical(model, data, pd)) take(virtual_slot, pd.distance, i);
+    else take(physical, pd.distance, i);
   }
-  if (skipped) {  // robot pairs only (slot pairs are always exact): physical
-    const DistanceOptions options = cycleDistanceOptions(cm);
+  const DistanceOptions options = cycleDistanceOptions(cm);
+  // Skipped robot pairs (never slot pairs): one whose lower bound is below the closest exact distance
+  // of its kind is computed exactly. For the physical kind that is rare (the sweep's smallest
+  // skipped bound is its floor); between the arms it is every cycle the hands are apart, so the pair
+  // with the smallest bound goes first: its true distance then rules out nearly all the others.
+  if (data.dist.pruned_floor < physical.distance) {
+    const int npairs = static_cast<int>(data.dist.pairs.size());
     for (int i = 0; i < npairs; ++i) {
       const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-      if (!pd.active || pd.exact) continue;
-      const bool arms = betweenArms(pd);
-      if (!(pd.distance < physical.distance) && !(arms && pd.distance < between_arms.distance)) continue;
+      if (!pd.active || pd.exact || !(pd.distance < physical.distance)) continue;
       refinePairDistance(model, data.kin, data.dist, i, options);
       take(physical, pd.distance, i);
-      if (arms) take(between_arms, pd.distance, i);
+      if (betweenArms(pd)) take(between_arms, pd.distance, i);
+    }
+  }
+  if (data.dist.pruned_floor < between_arms.distance) {
+    int first = -1;
+    double first_bound = between_arms.distance;
+    for (const int i : data.between_arm_pairs) {
+      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+      if (!pd.exact && pd.distance < first_bound) {
+        first_bound = pd.distance;
+        first = i;
+      }
+    }
+    if (first >= 0) {
+      refinePairDistance(model, data.kin, data.dist, first, options);
+      take(between_arms, data.dist.pairs[static_cast<std::size_t>(first)].distance, first);
+      for (const int i : data.between_arm_pairs) {
+        const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+        if (pd.exact || !(pd.distance < between_arms.distance)) continue;
+        refinePairDistance(model, data.kin, data.dist, i, options);
+        take(between_arms, pd.distance, i);
+      }
     }
   }
   data.closest_physical = physical;
@@ -583,16 +665,19 @@ bool computeDistancesAt(const Model& model, const ControllerModel& cm, Controlle
   return true;
 }
 
-/// Predicts the configuration one period ahead: q + dt (scaled arm velocities + uncontrolled ones).
+/// Predicts the configuration one period ahead, q + dt (scaled arm velocities + uncontrolled ones),
+/// and computes there the guard's listed pairs (data.guard_pairs) into `out`, exactly.
 void predict(const Model& model, const ControllerModel& cm, ControllerData& data,
              const Eigen::Ref<const Eigen::VectorXd>& q, const std::array<double, 2>& scale, DistanceData& out) {
   const double dt = cm.params.period;
   for (int j = 0; j < model.nq; ++j) data.q_next[j] = q[j] + dt * data.qdot_uncontrolled[j];
   for (int a = 0; a < 2; ++a)
     for (int i = 0; i < cm.arms[a].n; ++i) data.q_next[cm.arms[a].q[i]] += dt * scale[a] * data.qdot[cm.arms[a].q[i]];
-  if (!computeDistancesAt(model, cm, data, data.q_next, out)) {
+  if (!computeForwardKinematics(model, data.kin_next, data.q_next)) {
     for (auto& pd : out.pairs) pd.distance = -kInf;  // cannot happen for finite q; counts as a hit
+    return;
   }
+  computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(), data.num_guard_pairs);
 }
 
 /// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's
@@ -606,6 +691,7 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
                      const Eigen::Ref<const Eigen::VectorXd>& q, double d_phys) {
   const ControllerParams& params = cm.params;
   const double floor = params.d_r + params.predict_margin;
+  data.num_guard_pairs = 0;
   // Cheap exit: in one period no point moves more than sum |qdot_j| lever_j dt (body-schema slots
   // add their own extent to every lever), so no distance changes by more than twice that.
   double slot_extent = 0.0;
@@ -627,24 +713,52 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     if (j >= 0) s += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * params.period;
     data.link_sweep[l] = s;
   }
-  bool reachable = false;
-  for (const PairDistance& pd : data.dist.pairs) {
-    if (!pd.active) continue;
+  // The pairs the step can bring below the floor, and only those, are predicted: a physical pair
+  // that an arm moves and whose bound does not clear the floor. Every other pair can never count
+  // as a hit below (it ends above the floor, or no arm's scale can change it). A pair the sweep
+  // skipped is at least pruned_floor away (refined ones too): if two of the largest link sweeps
+  // cannot close that, only the sweep's exact pairs and the slot pairs need a look.
+  data.num_guard_pairs = 0;
+  double most_sweep = 0.0;
+  for (const double s : data.link_sweep) most_sweep = std::max(most_sweep, s);
+  auto consider = [&](int i, const PairDistance& pd, int owner_a, int owner_b) {
+    if (owner_a < 0 && owner_b < 0) return;
     const double reach = data.link_sweep[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_a))] +
                          data.link_sweep[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_b))];
-    if (!(pd.distance - reach > floor)) {
-      reachable = true;
-      break;
+    // Without the broad phase (tests' brute-force reference): every such pair, whatever its bound.
+    if (!cm.broad_phase || !(pd.distance - reach > floor))
+      data.guard_pairs[static_cast<std::size_t>(data.num_guard_pairs++)] = i;
+  };
+  if (data.dist.pruned_floor - 2.0 * most_sweep > floor) {
+    const std::vector<int>& exact = data.dist.exactList();
+    for (int e = 0; e < data.dist.num_exact_pairs; ++e) {
+      const int i = exact[static_cast<std::size_t>(e)];
+      if (!data.pair_arms[static_cast<std::size_t>(i)]) continue;
+      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+      consider(i, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
+    }
+    for (const int i : data.dist.slot_pairs) {
+      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+      if (!pd.active || !isPhysical(model, data, pd)) continue;
+      consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
+    }
+  } else {
+    const int npairs = static_cast<int>(data.dist.pairs.size());
+    for (int i = 0; i < npairs; ++i) {
+      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+      if (!pd.active || !isPhysical(model, data, pd)) continue;
+      consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
     }
   }
-  if (!reachable) return;
+  if (data.num_guard_pairs == 0) return;
 
   bool have_hold = false;
   std::array<double, 2> scale{1.0, 1.0};
   for (int iter = 0; iter < 8; ++iter) {
     predict(model, cm, data, q, scale, data.dist_next);
     std::array<bool, 2> hit{false, false};
-    for (std::size_t i = 0; i < data.dist_next.pairs.size(); ++i) {
+    for (int k = 0; k < data.num_guard_pairs; ++k) {
+      const std::size_t i = static_cast<std::size_t>(data.guard_pairs[static_cast<std::size_t>(k)]);
       const PairDistance& pn = data.dist_next.pairs[i];
       const PairDistance& p0 = data.dist.pairs[i];
       if (!pn.active || !isPhysical(model, data, pn)) continue;

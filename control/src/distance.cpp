@@ -67,6 +67,7 @@ DistanceData::DistanceData(const Model& model)
     bound_center_L[s] = c;
     bound_radius[s] = r;
   }
+  segment_stamp.assign(model.segments.size(), 0U);
   pp_s.assign(pp_a.size(), 0.0);
   pp_t.assign(pp_a.size(), 0.0);
   pp_core.assign(pp_a.size(), 0.0);
@@ -169,6 +170,39 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
   finishPair(model, kin, data, options, i, link_a, link_b, best, best_core, best_pa, best_pb, best_s, best_t);
 }
 
+/// Segment s's primitives (core start, direction and radius) into B for this cycle's kinematics; a
+/// disabled body-schema slot is left as it was. With `bound`, a robot segment's bounding sphere
+/// centre too.
+void transformSegment(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots, DistanceData& data,
+                      int s, bool bound) {
+  const Segment& seg = model.segments[s];
+  if (seg.body_schema_slot) {
+    const BodySchemaSlot& slot = slots[static_cast<std::size_t>(s - model.num_robot_segments)];
+    if (!slot.enabled) return;
+    const Eigen::Isometry3d& X = kin.X_B_L[slot.link];
+    data.prim_B[seg.first_primitive].set(X * slot.a_L, X * slot.b_L);
+    data.prim_r[seg.first_primitive] = slot.radius;
+    return;
+  }
+  const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
+  if (bound) data.bound_center_B[s] = X * data.bound_center_L[s];
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    const Primitive& prim = model.primitives[p];
+    SegmentB& w = data.prim_B[p];
+    w.start = X * prim.a_L;
+    if (prim.sphere) {  // no second end point to transform
+      w.d.setZero();
+      w.dd = 0.0;
+      w.inv_dd = 0.0;
+    } else {
+      w.d = X.linear() * (prim.b_L - prim.a_L);
+      w.dd = w.d.squaredNorm();
+      w.inv_dd = w.dd > kPointSegmentSq ? 1.0 / w.dd : 0.0;
+    }
+    data.prim_r[p] = prim.radius;
+  }
+}
+
 }  // namespace
 
 void computeSegmentDistances(const Model& model, const KinematicsData& kin, DistanceData& data,
@@ -186,34 +220,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   // 1. Every enabled primitive's core into B, once (a primitive takes part in several pairs); with
   //    the broad phase, every robot segment's bounding sphere centre too.
   const int nseg = static_cast<int>(model.segments.size());
-  for (int s = 0; s < nseg; ++s) {
-    const Segment& seg = model.segments[s];
-    if (seg.body_schema_slot) {
-      const BodySchemaSlot& slot = slots[static_cast<std::size_t>(s - model.num_robot_segments)];
-      if (!slot.enabled) continue;
-      const Eigen::Isometry3d& X = kin.X_B_L[slot.link];
-      data.prim_B[seg.first_primitive].set(X * slot.a_L, X * slot.b_L);
-      data.prim_r[seg.first_primitive] = slot.radius;
-      continue;
-    }
-    const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
-    if (prune) data.bound_center_B[s] = X * data.bound_center_L[s];
-    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-      const Primitive& prim = model.primitives[p];
-      SegmentB& w = data.prim_B[p];
-      w.start = X * prim.a_L;
-      if (prim.sphere) {  // no second end point to transform
-        w.d.setZero();
-        w.dd = 0.0;
-        w.inv_dd = 0.0;
-      } else {
-        w.d = X.linear() * (prim.b_L - prim.a_L);
-        w.dd = w.d.squaredNorm();
-        w.inv_dd = w.dd > kPointSegmentSq ? 1.0 / w.dd : 0.0;
-      }
-      data.prim_r[p] = prim.radius;
-    }
-  }
+  for (int s = 0; s < nseg; ++s) transformSegment(model, kin, slots, data, s, prune);
 
   // 2. Broad phase: robot pairs whose bounding spheres are more than prune_distance apart get that
   //    gap as a lower bound; the others are computed exactly below.
@@ -244,6 +251,8 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
     exact_pairs = data.exact_pairs.data();
   }
   data.num_exact_pairs = nexact;
+  data.pruned_floor = pruned_floor;
+  data.last_pruned = prune;
 
   // 3. The core closest points of every primitive pair of those robot pairs, in one tight loop
   //    (independent iterations: the long sqrt / division latency chains of neighbouring pairs overlap).
@@ -324,6 +333,39 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
       refinePairDistance(model, kin, data, i, options);
       take(i);
     }
+  }
+}
+
+void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                                DistanceData& data, const int* pairs, int count) {
+  assert(data.pairs.size() == model.pairs.size());
+  // Each segment of the listed pairs into B once: a stamp per segment marks this call's.
+  if (++data.segment_stamp_now == 0) {  // wrapped: no stale stamp may equal the new one
+    std::fill(data.segment_stamp.begin(), data.segment_stamp.end(), 0U);
+    data.segment_stamp_now = 1;
+  }
+  const std::uint32_t now = data.segment_stamp_now;
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -std::numeric_limits<double>::infinity();
+  for (int k = 0; k < count; ++k) {
+    const int i = pairs[k];
+    const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
+    const Segment& sa = model.segments[pair.a];
+    const Segment& sb = model.segments[pair.b];
+    int link_a = sa.link, link_b = sb.link;
+    if ((sa.body_schema_slot || sb.body_schema_slot) && !slotPairActive(model, slots, pair, link_a, link_b)) {
+      PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
+      out.active = false;
+      out.has_row = false;
+      out.distance = std::numeric_limits<double>::infinity();
+      continue;
+    }
+    for (const int s : {pair.a, pair.b}) {
+      if (data.segment_stamp[static_cast<std::size_t>(s)] == now) continue;
+      data.segment_stamp[static_cast<std::size_t>(s)] = now;
+      transformSegment(model, kin, slots, data, s, false);
+    }
+    computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b);
   }
 }
 

@@ -374,6 +374,54 @@ TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheThousandPairRobot) {
   checkBroadPhase(m, 0.10, 150, 24);
 }
 
+/// computeListedPairDistances (the predictive guard's): the listed pairs come out as the full sweep
+/// computes them, bit for bit (with a slot, enabled and then disabled), and no other entry changes.
+TEST(DistanceListedPairs, ListedPairsEqualTheFullSweepAndNothingElseChanges) {
+  const Model m = testing::loadRobot("many_segment_humanoid");
+  KinematicsData kin(m);
+  DistanceData full(m), listed(m);
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -std::numeric_limits<double>::infinity();
+  ASSERT_TRUE(attachBodySchemaSegment(m, full, 1, m.linkIndex("r_hand"), Vector3d(0, 0, -0.08),
+                                      Vector3d(0.15, 0, -0.08), 0.02));
+  std::mt19937_64 rng(31);
+  std::vector<int> pairs;
+  long compared = 0, untouched = 0, inactive = 0;
+  for (int c = 0; c < 60; ++c) {
+    if (c == 30) full.slots[1].enabled = false;  // the slot's pairs must come out inactive
+    ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+    computeSegmentDistances(m, kin, full.slots, full, no_rows);
+    // A sentinel in every entry, then every third pair (a different third each time) listed.
+    for (PairDistance& pd : listed.pairs) pd.distance = -1234.5;
+    pairs.clear();
+    for (int i = c % 3; i < static_cast<int>(m.pairs.size()); i += 3) pairs.push_back(i);
+    computeListedPairDistances(m, kin, full.slots, listed, pairs.data(), static_cast<int>(pairs.size()));
+    for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+      const PairDistance& f = full.pairs[i];
+      const PairDistance& l = listed.pairs[i];
+      if (static_cast<int>(i) % 3 != c % 3) {
+        EXPECT_EQ(l.distance, -1234.5) << "pair " << i << " was not listed and must stay as it was";
+        ++untouched;
+        continue;
+      }
+      ASSERT_EQ(l.active, f.active) << "pair " << i;
+      if (!f.active) {
+        ++inactive;
+        continue;
+      }
+      EXPECT_EQ(l.distance, f.distance) << "pair " << i;
+      EXPECT_EQ(l.p_B_a, f.p_B_a) << "pair " << i;
+      EXPECT_EQ(l.p_B_b, f.p_B_b) << "pair " << i;
+      EXPECT_EQ(l.nhat_B, f.nhat_B) << "pair " << i;
+      EXPECT_FALSE(l.has_row);
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 60 * 300);
+  EXPECT_GT(untouched, 60 * 600);
+  EXPECT_GT(inactive, 30 * 50) << "the disabled slot's pairs (and the unused slots') come out inactive";
+}
+
 TEST(DistanceBroadPhase, BoundingSpheresEncloseEveryPrimitive) {
   // Independent of the sweep: sample points on every primitive's surface and check the segment's
   // bounding sphere (in the link frame) contains them.

@@ -494,7 +494,7 @@ void checkRobot(const Model& model) {
   const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
   const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
   const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
-  long skipped = 0;
+  long skipped = 0, predicted_pruned = 0, predicted_brute = 0;
   for (int k = 0; k < 1600; ++k) {
     ControlInput in;
     for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
@@ -506,12 +506,18 @@ void checkRobot(const Model& model) {
     ASSERT_EQ(dp.closest_between_arms.distance, db.closest_between_arms.distance) << k;
     EXPECT_EQ(db.dist.num_pruned_pairs, 0);
     skipped += dp.dist.num_pruned_pairs;
+    predicted_pruned += dp.num_guard_pairs;
+    predicted_brute += db.num_guard_pairs;
     qp += dp.qdot * pruned.params.period;
     qb += db.qdot * brute.params.period;
   }
   EXPECT_EQ(dp.guard_count, db.guard_count);
   EXPECT_GT(dp.guard_count, 0U) << "the loop must make the predictive guard act";
   EXPECT_GT(skipped, 1600) << "the broad phase must skip pairs, else this test compares nothing";
+  // The guard's per-pair bound: the brute force predicts every physical pair an arm moves; with the
+  // bound, the guard predicts far fewer pairs and decides the same (qdot and guard_count above).
+  EXPECT_GT(predicted_brute, 4 * predicted_pruned) << "the guard's per-pair bound must leave pairs out";
+  EXPECT_GT(predicted_pruned, 0) << "the guard must predict some pairs, else this test compares nothing";
 }
 
 }  // namespace broad_phase

@@ -173,9 +173,11 @@ struct ControllerModel {
   /// Which arm moves each robot segment (link_owner of its link), per index < num_robot_segments.
   std::vector<int> segment_owner;
   /// The distance broad phase (DistanceOptions::prune_distance): pairs whose bounding spheres are
-  /// farther apart than max(d_safe, d_a) (d_b for the predictive and walking guards) are not computed
-  /// exactly, as they take part in no term. The control output is the same either way (tested bit
-  /// for bit); false (only a program sets it: tests, benchmarks) computes every pair exactly.
+  /// farther apart than max(d_safe, d_a) (d_b for the walking guard) are not computed exactly, as
+  /// they take part in no term; and the predictive guard predicts only the pairs whose distance minus
+  /// the most their links can move in one step is below its floor. The control output is the same
+  /// either way (tested bit for bit); false (only a program sets it: tests, benchmarks) computes
+  /// every pair exactly and predicts every physical pair an arm moves.
   bool broad_phase = true;
 };
 
@@ -263,6 +265,11 @@ struct ArmWorkspace {
   std::vector<double> other_rate;       ///< per guarded pair: rate of d from everything but this arm (m/s)
   VirtualForceSum forces;
   ArmRow avoidance_gradient;            ///< sum of row (d_safe - d) over pairs within d_safe (Eq. 5)
+  /// Eq. 5 summed per link (collectPairTerms): the links touched this cycle (first num_grad_links),
+  /// and per touched link the sums of +-(d_safe - d) (p x n) and +-(d_safe - d) n over its pairs.
+  std::vector<int> grad_link;
+  std::vector<Eigen::Vector3d> grad_M, grad_N;
+  int num_grad_links = 0;
   double d_other_arm = 0.0;             ///< closest contact with the other arm (m)
   double d_static = 0.0;                ///< closest contact with what no arm moves (m)
   // merged-Jacobian stage (Eq. 17-18)
@@ -317,6 +324,17 @@ struct ControllerData {
   Eigen::VectorXd lever;
   /// Predictive guard scratch, per link: the most any point of it moves in this cycle's step (m).
   std::vector<double> link_sweep;
+  /// Per pair: bit a set if arm a moves one of its segments (robot pairs; 0 for a body-schema slot's
+  /// pair, whose owner follows its link).
+  std::vector<std::uint8_t> pair_arms;
+  /// The robot pairs between a left-arm and a right-arm segment, ascending.
+  std::vector<int> between_arm_pairs;
+  /// Per link: its index in ArmWorkspace::grad_link while collectPairTerms runs, else -1.
+  std::vector<int> grad_link_index;
+  /// Predictive guard scratch: the pairs its predictions compute (first num_guard_pairs valid; 0
+  /// when the guard did not predict this cycle).
+  std::vector<int> guard_pairs;
+  int num_guard_pairs = 0;
   // scratch of the predictive guard: the configuration one step ahead
   Eigen::VectorXd q_next;
   KinematicsData kin_next;

@@ -114,8 +114,19 @@ struct DistanceData {
   std::vector<Eigen::Vector3d> bound_center_L, bound_center_B;
   std::vector<double> bound_radius;
   std::vector<int> exact_pairs;              ///< robot pairs the broad phase kept this cycle (scratch)
+  /// The robot pairs the last computeSegmentDistances computed exactly, ascending: its first
+  /// num_exact_pairs entries (exact_pairs with the broad phase, robot_pairs without). A pair made
+  /// exact later by refinePairDistance is not in it.
+  const std::vector<int>& exactList() const { return last_pruned ? exact_pairs : robot_pairs; }
+  bool last_pruned = false;                  ///< the last computeSegmentDistances used the broad phase
   int num_exact_pairs = 0;
+  /// The smallest lower bound of a pair the broad phase skipped in the last computeSegmentDistances
+  /// (m); +inf when it skipped none.
+  double pruned_floor = std::numeric_limits<double>::infinity();
   int num_pruned_pairs = 0;                  ///< robot pairs the broad phase skipped this cycle
+  // computeListedPairDistances: per segment, the call that last put it into B (scratch).
+  std::vector<std::uint32_t> segment_stamp;
+  std::uint32_t segment_stamp_now = 0;
 };
 
 /// Computes every checked pair's distance, witness points, normal and (below the threshold) row.
@@ -127,6 +138,15 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
 /// DistanceData (a predicted configuration) computed with the body schema of the first.
 void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
                              DistanceData& data, const DistanceOptions& options = {});
+
+/// Computes exactly (no row, no broad phase) only the `count` pairs listed in `pairs` (indices into
+/// Model::pairs), with the body schema `slots`: each comes out as computeSegmentDistances gives it
+/// without pruning (the same arithmetic, so the same distance bit for bit), a pair of a disabled
+/// slot inactive. Every other entry of data.pairs, and `closest`, are left as they were. For a
+/// caller that needs a few pairs at many configurations (the predictive guard). Allocates nothing,
+/// never throws.
+void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                                DistanceData& data, const int* pairs, int count);
 
 /// Computes pair `pair` exactly (after computeSegmentDistances for the same kinematics and options):
 /// for a pair the broad phase skipped, the result computeSegmentDistances gives without pruning
