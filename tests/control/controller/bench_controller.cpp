@@ -216,6 +216,38 @@ void BM_ControllerCycleFastestPerState(benchmark::State& state) {
 }
 BENCHMARK(BM_ControllerCycleFastestPerState)->ArgName("set")->Arg(0)->Arg(1)->Iterations(1)->Unit(benchmark::kMillisecond);
 
+/// The machine's own interruptions, the peer of every p99 above: one second of reading the steady
+/// clock in a loop; a step of more than 3 us between two reads is time the thread did not run
+/// (interrupts, the hypervisor). A cycle of T us is hit by one with probability about
+/// T * gaps_per_s / 1e6, and then takes T + gap_median_us: once that exceeds 1 %, the cycle's p99 is
+/// about T + gap_median_us, whatever the code does.
+void BM_MachineInterruptions(benchmark::State& state) {
+  std::vector<double> gaps;
+  gaps.reserve(1 << 20);
+  double seconds = 0.0;
+  for (auto _ : state) {
+    gaps.clear();
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    auto previous = start;
+    while (previous - start < std::chrono::seconds(1)) {
+      const auto now = Clock::now();
+      const double gap_us = std::chrono::duration<double, std::micro>(now - previous).count();
+      if (gap_us > 3.0 && gaps.size() < gaps.capacity()) gaps.push_back(gap_us);
+      previous = now;
+    }
+    seconds = std::chrono::duration<double>(previous - start).count();
+  }
+  std::sort(gaps.begin(), gaps.end());
+  double stolen = 0.0;
+  for (const double g : gaps) stolen += g;
+  state.counters["gaps_per_s"] = static_cast<double>(gaps.size()) / seconds;
+  state.counters["gap_median_us"] = gaps.empty() ? 0.0 : percentile(gaps, 0.5);
+  state.counters["gap_p90_us"] = gaps.empty() ? 0.0 : percentile(gaps, 0.9);
+  state.counters["stolen_share"] = stolen * 1e-6 / seconds;
+}
+BENCHMARK(BM_MachineInterruptions)->Iterations(1)->Unit(benchmark::kMillisecond);
+
 /// Peer in the same process: forward kinematics + every checked pair with rows, nothing else, with
 /// the cycle's broad phase (prune:1, pairs beyond d_safe skipped) and without it (prune:0).
 void BM_KinematicsAndDistancesOnly(benchmark::State& state) {

@@ -516,7 +516,9 @@ void checkRobot(const Model& model) {
   EXPECT_GT(skipped, 1600) << "the broad phase must skip pairs, else this test compares nothing";
   // The guard's per-pair bound: the brute force predicts every physical pair an arm moves; with the
   // bound, the guard predicts far fewer pairs and decides the same (qdot and guard_count above).
-  EXPECT_GT(predicted_brute, 4 * predicted_pruned) << "the guard's per-pair bound must leave pairs out";
+  std::printf("%s: the guard predicted %ld pairs over the loop with its per-pair bound, %ld without\n",
+              model.name.c_str(), predicted_pruned, predicted_brute);
+  EXPECT_GT(predicted_brute, 20 * predicted_pruned) << "the guard's per-pair bound must leave pairs out";
   EXPECT_GT(predicted_pruned, 0) << "the guard must predict some pairs, else this test compares nothing";
 }
 
