@@ -484,6 +484,7 @@ void applySafetyFilter(const Model& model, const ControllerModel& cm, Controller
   // too (legs always win, Sec. 7.2); qdot_uncontrolled is zero on the arm joints.
   const ControllerModel::Arm& other_arm = cm.arms[1 - a];
   const bool other_arm_known = higherPriority(input.priority, 1 - a);
+  ws.other_approach = 0.0;
   for (int g = 0; g < ws.num_guarded; ++g) {
     const int p = ws.guarded_pairs[static_cast<std::size_t>(g)];
     double rate = 0.0;
@@ -492,6 +493,7 @@ void applySafetyFilter(const Model& model, const ControllerModel& cm, Controller
     }
     for (int j = 0; j < model.nq; ++j) rate += data.dist.rows(p, j) * data.qdot_uncontrolled[j];
     ws.other_rate[static_cast<std::size_t>(g)] = rate;
+    ws.other_approach = std::max(ws.other_approach, -rate);
   }
   for (int iter = 0; iter < 6; ++iter) {
     bool changed = false;
@@ -534,7 +536,11 @@ void scaleToVelocityLimits(const Model& model, const ControllerModel::Arm& arm, 
 /// approach to first order along each pair's current normal, but a large step can make another
 /// primitive of the same segment the closest one (the chest has three). So no point of the arm may
 /// move more than half the remaining gap above d_r in one cycle: sum |qdot_i| * lever_i * dt <=
-/// (d - d_r) / 2, with lever_i the distance from joint i to the hand plus 0.1 m. Scaling keeps every
+/// (d - d_r) / 2, with lever_i the distance from joint i to the hand plus 0.1 m, unless something
+/// else (the legs walking, a higher-priority arm) approaches one of the arm's orange pairs this
+/// cycle (ArmWorkspace::other_approach > 0): freezing the arm would let it be hit (a walking thigh
+/// into a hand hanging at its joint limits, bench_soak seed 1373 on many_segment_humanoid), so the
+/// filtered step stands and the predictive guard checks it. Scaling keeps every
 /// bound above. Against the other arm only with equal priority: a yielding arm must be free to get
 /// out of the way, and a higher-priority arm is untouched by the other arm (Sec. 7.2; the e-stop is
 /// the last resort).
@@ -549,6 +555,10 @@ void capStepInOrangeZone(const ControllerModel& cm, const ControllerData& data, 
     const double lever = (ws.hand_B - data.kin.X_B_L[model.q_link[arm.q[i]]].translation()).norm() + 0.1;
     sweep += std::abs(ws.qdot[i]) * lever * params.period;
   }
+  // Not while the rest of the robot brings one of the arm's orange pairs closer (walking, balance,
+  // a higher-priority arm): against a moving obstacle a frozen arm is hit, so the arm keeps the step
+  // the filter shaped to get away, and the predictive guard checks it one period ahead.
+  if (ws.other_approach > 0.0) return;
   const double budget = 0.5 * std::max(0.0, d_contact - params.d_r);
   if (sweep > budget) ws.qdot *= budget / sweep;
 }

@@ -42,6 +42,22 @@ TEST(Soak, EpisodesThatReachedTheRedZoneBeforeThePredictiveGuardStaySafe) {
   }
 }
 
+TEST(Soak, AWalkingThighIntoAHandAtItsJointLimitsDoesNotFreezeTheArm) {
+  // bench_soak --hours 8 on many_segment_humanoid (session 7): in seed 1373 the robot walks while
+  // the right arm hangs with elbow and wrist at their limits; the right thigh swings into the hand.
+  // The orange-zone step cap shrank the arm's escape to nothing as the gap closed, and the thigh
+  // took the pair below d_r (4.9996 mm, e-stop). The cap now stands aside while something else
+  // approaches the arm's orange pairs; the predictive guard still checks every step.
+  const std::string urdf = REFLEX_SOURCE_DIR "/bringup/robots/many_segment_humanoid.urdf";
+  const Model model = loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf)));
+  const ControllerModel cm = makeControllerModel(model, defaultControllerConfig());
+  const Scenario episode = randomReactiveEpisode(1373, 10.0);
+  ASSERT_GT(episode.walk_distance, 0.0) << "the episode walks";
+  const EpisodeOutcome o = runEpisode(model, cm, 1373, 10.0);
+  EXPECT_FALSE(o.violation) << o.why << " closest " << o.min_distance * 1000.0 << " mm, pair " << o.min_pair;
+  EXPECT_GE(o.min_distance, cm.params.d_r + cm.params.predict_margin - 1e-12);
+}
+
 TEST(Soak, EpisodesAreDeterministicPerSeed) {
   const std::string urdf = REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.urdf";
   const Model model = loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf)));

@@ -263,6 +263,7 @@ struct ArmWorkspace {
   std::vector<int> guarded_pairs;       ///< pairs inside the orange zone with a row (safety filter)
   int num_guarded = 0;
   std::vector<double> other_rate;       ///< per guarded pair: rate of d from everything but this arm (m/s)
+  double other_approach = 0.0;          ///< max over the guarded pairs of -other_rate, at least 0 (m/s)
   VirtualForceSum forces;
   ArmRow avoidance_gradient;            ///< sum of row (d_safe - d) over pairs within d_safe (Eq. 5)
   /// Eq. 5 summed per link (collectPairTerms): the links touched this cycle (first num_grad_links),
