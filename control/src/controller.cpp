@@ -538,7 +538,7 @@ void scaleToVelocityLimits(const Model& model, const ControllerModel::Arm& arm, 
 /// move more than half the remaining gap above d_r in one cycle: sum |qdot_i| * lever_i * dt <=
 /// (d - d_r) / 2, with lever_i the distance from joint i to the hand plus 0.1 m, unless something
 /// else (the legs walking, a higher-priority arm) approaches one of the arm's orange pairs this
-/// cycle (ArmWorkspace::other_approach > 0): freezing the arm would let it be hit (a walking thigh
+/// cycle faster than 1 mm/s (ArmWorkspace::other_approach): freezing the arm would let it be hit (a walking thigh
 /// into a hand hanging at its joint limits, bench_soak seed 1373 on many_segment_humanoid), so the
 /// filtered step stands and the predictive guard checks it. Scaling keeps every
 /// bound above. Against the other arm only with equal priority: a yielding arm must be free to get
@@ -556,9 +556,11 @@ void capStepInOrangeZone(const ControllerModel& cm, const ControllerData& data, 
     sweep += std::abs(ws.qdot[i]) * lever * params.period;
   }
   // Not while the rest of the robot brings one of the arm's orange pairs closer (walking, balance,
-  // a higher-priority arm): against a moving obstacle a frozen arm is hit, so the arm keeps the step
-  // the filter shaped to get away, and the predictive guard checks it one period ahead.
-  if (ws.other_approach > 0.0) return;
+  // a higher-priority arm) at a real speed: against a moving obstacle a frozen arm is hit, so the arm
+  // keeps the step the filter shaped to get away, and the predictive guard checks it one period
+  // ahead. (The speed floor keeps the cap against a still body whose measured joints only jitter.)
+  constexpr double kMovingObstacleSpeed = 0.001;  // m/s
+  if (ws.other_approach > kMovingObstacleSpeed) return;
   const double budget = 0.5 * std::max(0.0, d_contact - params.d_r);
   if (sweep > budget) ws.qdot *= budget / sweep;
 }
