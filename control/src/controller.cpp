@@ -538,12 +538,12 @@ void scaleToVelocityLimits(const Model& model, const ControllerModel::Arm& arm, 
 /// move more than half the remaining gap above d_r in one cycle: sum |qdot_i| * lever_i * dt <=
 /// (d - d_r) / 2, with lever_i the distance from joint i to the hand plus 0.1 m, unless something
 /// else (the legs walking, a higher-priority arm) approaches one of the arm's orange pairs this
-/// cycle faster than 1 mm/s (ArmWorkspace::other_approach): freezing the arm would let it be hit (a walking thigh
-/// into a hand hanging at its joint limits, bench_soak seed 1373 on many_segment_humanoid), so the
-/// filtered step stands and the predictive guard checks it. Scaling keeps every
-/// bound above. Against the other arm only with equal priority: a yielding arm must be free to get
-/// out of the way, and a higher-priority arm is untouched by the other arm (Sec. 7.2; the e-stop is
-/// the last resort).
+/// cycle faster than 1 mm/s (ArmWorkspace::other_approach): freezing the arm would let it be hit
+/// (a walking thigh into a hand hanging at its joint limits, bench_soak seed 1373 on
+/// many_segment_humanoid), so the filtered step stands and the predictive guard checks it. Scaling
+/// keeps every bound above. Against the other arm only with equal priority: a yielding arm must be
+/// free to get out of the way, and a higher-priority arm is untouched by the other arm (Sec. 7.2;
+/// the e-stop is the last resort).
 void capStepInOrangeZone(const ControllerModel& cm, const ControllerData& data, const ControllerModel::Arm& arm,
                          const Model& model, const ControlInput& input, ArmWorkspace& ws) {
   const ControllerParams& params = cm.params;
