@@ -232,7 +232,14 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     while (m.protection_reader->takeNext(other, &info)) {
       const ParticipantId them = participantOf(info);
       if (them == m.own_participant) continue;
-      if (notePeerController(other, them)) throw ConfigError(m.peer_refusal);
+      if (notePeerController(other, them)) {
+        // Before leaving, let this controller's own sample reach the running one (its reader may
+        // not have matched this writer yet), so it can say that a second controller showed up:
+        // this participant's reader and one other, then their acknowledgements, 1 s at most each.
+        m.protection_writer->waitForReaders(2, std::chrono::seconds(1));
+        m.protection_writer->native().wait_for_acknowledgments(eprosima::fastrtps::Duration_t(1, 0));
+        throw ConfigError(m.peer_refusal);
+      }
     }
     if (std::chrono::steady_clock::now() >= probe_end) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
