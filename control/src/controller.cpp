@@ -286,28 +286,18 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
       ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, params.k_virtual * (params.d_a - pd.distance)};
     }
   };
-  // The pairs the sweep computed exactly, in ascending pair order (the candidate pairs' order):
-  // the robot pairs of its exact list merged with the active body-schema slot pairs. A robot pair
-  // the broad phase skipped is beyond d_safe, d_a and d_b: it feeds no term and no contact and can
-  // only be the arm's closest pair (checked below).
-  const std::vector<int>& exact = data.dist.exactList();
-  const int nexact = data.dist.num_exact_pairs;
-  const std::vector<int>& slot_pairs = data.dist.slot_pairs;
-  bool any_slot = false;
-  for (const BodySchemaSlot& slot : data.dist.slots) any_slot = any_slot || slot.enabled;
-  const int nslot = any_slot ? static_cast<int>(slot_pairs.size()) : 0;
+  // The pairs the sweep computed exactly, in ascending pair order (the candidate pairs' order). A
+  // robot pair the broad phase skipped is beyond d_safe, d_a and d_b: it feeds no term and no
+  // contact and can only be the arm's closest pair (checked below).
   const std::uint8_t bit = static_cast<std::uint8_t>(1U << a);
-  for (int e = 0, s = 0; e < nexact || s < nslot;) {
-    const bool robot = s >= nslot || (e < nexact && exact[static_cast<std::size_t>(e)] < slot_pairs[static_cast<std::size_t>(s)]);
-    const int p = robot ? exact[static_cast<std::size_t>(e++)] : slot_pairs[static_cast<std::size_t>(s++)];
+  forEachExactPair(data.dist, [&](int p, bool robot) {
     const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
-    if (robot) {
-      if (!(data.pair_arms[static_cast<std::size_t>(p)] & bit)) continue;
-      take(p, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
-    } else if (pd.active) {
+    if (!robot) {
       take(p, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
+    } else if (data.pair_arms[static_cast<std::size_t>(p)] & bit) {
+      take(p, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
     }
-  }
+  });
   std::array<double, kMaxArmDof> gradient{};
   for (int k = 0; k < ws.num_grad_links; ++k) {
     const int link = ws.grad_link[static_cast<std::size_t>(k)];
@@ -596,32 +586,24 @@ bool isPhysical(const Model& model, const ControllerData& data, const PairDistan
 /// unpruned sweep gives.
 void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerData& data) {
   ClosestPair physical, virtual_slot, between_arms;
-  auto betweenArms = [&](const PairDistance& pd) {
-    if (pd.seg_b >= model.num_robot_segments) return false;
-    const int owner_a = cm.segment_owner[static_cast<std::size_t>(pd.seg_a)];
-    const int owner_b = cm.segment_owner[static_cast<std::size_t>(pd.seg_b)];
-    return owner_a >= 0 && owner_b >= 0 && owner_a != owner_b;
-  };
+  // A robot pair between a left-arm and a right-arm segment (a slot pair's pair_arms is 0).
+  auto betweenArms = [&](int i) { return data.pair_arms[static_cast<std::size_t>(i)] == 3U; };
   auto take = [](ClosestPair& best, double d, int i) {
     if (d < best.distance || (d == best.distance && i < best.pair)) {
       best.distance = d;
       best.pair = i;
     }
   };
-  // The pairs the sweep computed exactly: its robot pairs (all physical), then the active slot pairs.
-  const std::vector<int>& exact = data.dist.exactList();
-  for (int e = 0; e < data.dist.num_exact_pairs; ++e) {
-    const int i = exact[static_cast<std::size_t>(e)];
+  // The pairs the sweep computed exactly (robot pairs are all physical).
+  forEachExactPair(data.dist, [&](int i, bool robot) {
     const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+    if (!robot && !isPhysical(model, data, pd)) {
+      take(virtual_slot, pd.distance, i);
+      return;
+    }
     take(physical, pd.distance, i);
-    if (data.pair_arms[static_cast<std::size_t>(i)] == 3U && betweenArms(pd)) take(between_arms, pd.distance, i);
-  }
-  for (const int i : data.dist.slot_pairs) {
-    const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-    if (!pd.active) continue;
-    if (!isPhysical(model, data, pd)) take(virtual_slot, pd.distance, i);
-    else take(physical, pd.distance, i);
-  }
+    if (betweenArms(i)) take(between_arms, pd.distance, i);
+  });
   const DistanceOptions options = cycleDistanceOptions(cm);
   // Skipped robot pairs (never slot pairs): one whose lower bound is below the closest exact distance
   // of its kind is computed exactly. For the physical kind that is rare (the sweep's smallest
@@ -634,7 +616,7 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
       if (!pd.active || pd.exact || !(pd.distance < physical.distance)) continue;
       refinePairDistance(model, data.kin, data.dist, i, options);
       take(physical, pd.distance, i);
-      if (betweenArms(pd)) take(between_arms, pd.distance, i);
+      if (betweenArms(i)) take(between_arms, pd.distance, i);
     }
   }
   if (data.dist.pruned_floor < between_arms.distance) {
@@ -742,18 +724,15 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
       data.guard_pairs[static_cast<std::size_t>(data.num_guard_pairs++)] = i;
   };
   if (data.dist.pruned_floor - 2.0 * most_sweep > floor) {
-    const std::vector<int>& exact = data.dist.exactList();
-    for (int e = 0; e < data.dist.num_exact_pairs; ++e) {
-      const int i = exact[static_cast<std::size_t>(e)];
-      if (!data.pair_arms[static_cast<std::size_t>(i)]) continue;
+    forEachExactPair(data.dist, [&](int i, bool robot) {
       const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-      consider(i, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
-    }
-    for (const int i : data.dist.slot_pairs) {
-      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-      if (!pd.active || !isPhysical(model, data, pd)) continue;
-      consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
-    }
+      if (robot) {
+        if (data.pair_arms[static_cast<std::size_t>(i)])
+          consider(i, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
+      } else if (isPhysical(model, data, pd)) {
+        consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
+      }
+    });
   } else {
     const int npairs = static_cast<int>(data.dist.pairs.size());
     for (int i = 0; i < npairs; ++i) {

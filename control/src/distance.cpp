@@ -297,6 +297,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   // 5. Pairs with a body-schema slot: usually all disabled; each computed directly when active.
   bool any_slot = false;
   for (const BodySchemaSlot& slot : slots) any_slot = any_slot || slot.enabled;
+  data.any_slot_enabled = any_slot;
   for (const int i : data.slot_pairs) {
     const SegmentPair& pair = model.pairs[i];
     const Segment& sa = model.segments[pair.a];

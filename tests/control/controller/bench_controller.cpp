@@ -121,6 +121,18 @@ void BM_ControllerCycle(benchmark::State& state) {
 BENCHMARK(BM_ControllerCycle)->Arg(static_cast<int>(AvoidanceMode::kOneDof))->Arg(static_cast<int>(AvoidanceMode::kThreeDof))
     ->ArgName("mode");
 
+/// The guard-acting loop's input at cycle k: targets jump every 0.4 s between crossing, into the
+/// chest and low across; the priority flips every 0.6 s.
+ControlInput guardActingInput(std::uint64_t k) {
+  const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
+  const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
+  const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
+  ControlInput in;
+  for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
+  in.priority = static_cast<MotionPriority>((k / 120) % 3);
+  return in;
+}
+
 /// Cycles where the predictive guard acts: a closed loop (kinematic robot) whose targets jump every
 /// 0.4 s between crossing, into the chest and low across, with the priority flipping, and the
 /// first-order filter's floor at d_r (guard_margin 0) so the guard must shorten steps. Percentiles
@@ -131,15 +143,10 @@ void BM_ControllerCycleGuardActing(benchmark::State& state) {
   ControllerData data(model(), cm);
   const Eigen::VectorXd q0 = restConfiguration(model(), cm);
   Eigen::VectorXd q = q0;
-  const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
-  const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
-  const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
-  ControlInput in;
   CycleTimes acting;
   std::uint64_t k = 0, cycles = 0;
   for (auto _ : state) {
-    for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
-    in.priority = static_cast<MotionPriority>((k / 120) % 3);
+    const ControlInput in = guardActingInput(k);
     const std::uint64_t before = data.guard_count;
     // Keep only the cycles whose step the guard shortened.
     acting.time([&] { benchmark::DoNotOptimize(computeControl(model(), cm, data, q, in)); },
@@ -190,13 +197,8 @@ void BM_ControllerCycleFastestPerState(benchmark::State& state) {
       }
     } else {
       Eigen::VectorXd q = restConfiguration(model(), cm);
-      const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
-      const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
-      const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
-      for (int k = 0; k < 1600; ++k) {
-        ControlInput in;
-        for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
-        in.priority = static_cast<MotionPriority>((k / 120) % 3);
+      for (std::uint64_t k = 0; k < 1600; ++k) {
+        const ControlInput in = guardActingInput(k);
         const std::uint64_t before = data.guard_count;
         run = data;
         computeControl(model(), cm, run, q, in);

@@ -119,6 +119,7 @@ struct DistanceData {
   /// exact later by refinePairDistance is not in it.
   const std::vector<int>& exactList() const { return last_pruned ? exact_pairs : robot_pairs; }
   bool last_pruned = false;                  ///< the last computeSegmentDistances used the broad phase
+  bool any_slot_enabled = false;             ///< ... and was given an enabled body-schema slot
   int num_exact_pairs = 0;
   /// The smallest lower bound of a pair the broad phase skipped in the last computeSegmentDistances
   /// (m); +inf when it skipped none.
@@ -128,6 +129,23 @@ struct DistanceData {
   std::vector<std::uint32_t> segment_stamp;
   std::uint32_t segment_stamp_now = 0;
 };
+
+/// Calls f(pair_index, is_robot_pair) for every pair the last computeSegmentDistances computed
+/// exactly, in ascending pair order: the robot pairs of its exact list merged with the active
+/// body-schema slot pairs (none when every slot is disabled). Pairs made exact later by
+/// refinePairDistance are not visited. Allocation-free.
+template <class F>
+void forEachExactPair(const DistanceData& data, F&& f) {
+  const std::vector<int>& exact = data.exactList();
+  const int nexact = data.num_exact_pairs;
+  const int nslot = data.any_slot_enabled ? static_cast<int>(data.slot_pairs.size()) : 0;
+  for (int e = 0, s = 0; e < nexact || s < nslot;) {
+    const bool robot = s >= nslot || (e < nexact && exact[static_cast<std::size_t>(e)] <
+                                                        data.slot_pairs[static_cast<std::size_t>(s)]);
+    const int p = robot ? exact[static_cast<std::size_t>(e++)] : data.slot_pairs[static_cast<std::size_t>(s++)];
+    if (robot || data.pairs[static_cast<std::size_t>(p)].active) f(p, robot);
+  }
+}
 
 /// Computes every checked pair's distance, witness points, normal and (below the threshold) row.
 /// Call after computeForwardKinematics. Allocates nothing, never throws.
