@@ -1,6 +1,7 @@
 #include "reflex/control/distance.hpp"
 
 #include "reflex/control/geometry.hpp"
+#include "segment_kernels.hpp"
 
 #include <algorithm>
 #include <cassert>
@@ -46,7 +47,7 @@ DistanceData::DistanceData(const Model& model)
   // around its primitives' end points; the radius reaches the farthest end point plus its radius
   // (a capsule lies inside the spheres around its two ends' hull, so the sphere encloses it).
   bound_center_L.assign(model.segments.size(), Eigen::Vector3d::Zero());
-  bound_center_B.assign(model.segments.size(), Eigen::Vector3d::Zero());
+  bound_center4_B.assign(4 * model.segments.size(), 0.0);
   bound_radius.assign(model.segments.size(), 0.0);
   for (std::size_t s = 0; s < model.segments.size(); ++s) {
     const Segment& seg = model.segments[s];
@@ -67,23 +68,22 @@ DistanceData::DistanceData(const Model& model)
     bound_center_L[s] = c;
     bound_radius[s] = r;
   }
+  for (const int i : robot_pairs) {
+    const SegmentPair& p = model.pairs[static_cast<std::size_t>(i)];
+    rp_a.push_back(p.a);
+    rp_b.push_back(p.b);
+    rp_rsum.push_back(bound_radius[static_cast<std::size_t>(p.a)] + bound_radius[static_cast<std::size_t>(p.b)]);
+  }
+  rp_gap.assign(robot_pairs.size(), 0.0);
   segment_stamp.assign(model.segments.size(), 0U);
+  list_a.assign(pp_a.size(), 0);
+  list_b.assign(pp_a.size(), 0);
   pp_s.assign(pp_a.size(), 0.0);
   pp_t.assign(pp_a.size(), 0.0);
   pp_core.assign(pp_a.size(), 0.0);
 }
 
 namespace {
-
-/// Core closest points of two primitives: parameters s, t and the core distance (sqrt of the squared
-/// distance between A(s) and B(t)).
-inline double coreDistance(const SegmentB& A, const SegmentB& B, double& s, double& t) {
-  closestParametersSegmentSegment(A, B, s, t);
-  const double dx = (A.start.x() + s * A.d.x()) - (B.start.x() + t * B.d.x());
-  const double dy = (A.start.y() + s * A.d.y()) - (B.start.y() + t * B.d.y());
-  const double dz = (A.start.z() + s * A.d.z()) - (B.start.z() + t * B.d.z());
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
-}
 
 /// Whether a pair that involves a body-schema slot is checked this cycle; sets the links.
 bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const SegmentPair& pair, int& link_a,
@@ -155,7 +155,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
   for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
     for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
       double s, t;
-      const double core = coreDistance(prim[pa], prim[pb], s, t);
+      const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
       const double d = core - radius[pa] - radius[pb];
       if (d < best) {
         best = d;
@@ -185,7 +185,13 @@ void transformSegment(const Model& model, const KinematicsData& kin, const BodyS
     return;
   }
   const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
-  if (bound) data.bound_center_B[s] = X * data.bound_center_L[s];
+  if (bound) {
+    const Eigen::Vector3d c = X * data.bound_center_L[s];
+    double* c4 = data.bound_center4_B.data() + 4 * s;
+    c4[0] = c.x();
+    c4[1] = c.y();
+    c4[2] = c.z();
+  }
   for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
     const Primitive& prim = model.primitives[p];
     SegmentB& w = data.prim_B[p];
@@ -231,67 +237,79 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   data.num_pruned_pairs = 0;
   double pruned_floor = kInf;  // the smallest lower bound of a skipped pair
   if (prune) {
+    // Every robot pair's gap (a kernel: no branch), then, without a branch either (which way a pair
+    // goes is data-dependent and mispredicts), each pair's entry as skipped (the exact ones are
+    // overwritten in step 4) and the kept ones appended to the exact list.
+    const int nrobot = static_cast<int>(data.robot_pairs.size());
+    if (data.kernel == SweepKernel::kAvx2)
+      detail::boundGapsAvx2(data.bound_center4_B.data(), data.rp_a.data(), data.rp_b.data(), data.rp_rsum.data(),
+                            nrobot, data.rp_gap.data());
+    else
+      detail::boundGapsScalar(data.bound_center4_B.data(), data.rp_a.data(), data.rp_b.data(), data.rp_rsum.data(),
+                              nrobot, data.rp_gap.data());
     nexact = 0;
-    for (const int i : data.robot_pairs) {
-      const SegmentPair& pair = model.pairs[i];
-      const double gap = (data.bound_center_B[pair.a] - data.bound_center_B[pair.b]).norm() -
-                         data.bound_radius[pair.a] - data.bound_radius[pair.b];
-      if (gap > options.prune_distance) {
-        PairDistance& out = data.pairs[i];
-        out.active = true;
-        out.exact = false;
-        out.has_row = false;
-        out.distance = gap;
-        pruned_floor = std::min(pruned_floor, gap);
-        ++data.num_pruned_pairs;
-      } else {
-        data.exact_pairs[nexact++] = i;
-      }
+    const double prune_distance = options.prune_distance;
+    for (int r = 0; r < nrobot; ++r) {
+      const int i = data.robot_pairs[static_cast<std::size_t>(r)];
+      const double gap = data.rp_gap[static_cast<std::size_t>(r)];
+      PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
+      out.active = true;
+      out.exact = false;
+      out.has_row = false;
+      out.distance = gap;
+      const bool keep = !(gap > prune_distance);  // NaN: kept (computed, so the NaN shows)
+      data.exact_pairs[static_cast<std::size_t>(nexact)] = i;
+      nexact += keep ? 1 : 0;
+      pruned_floor = std::min(pruned_floor, keep ? kInf : gap);
     }
+    data.num_pruned_pairs = nrobot - nexact;
     exact_pairs = data.exact_pairs.data();
   }
   data.num_exact_pairs = nexact;
   data.pruned_floor = pruned_floor;
   data.last_pruned = prune;
 
-  // 3. The core closest points of every primitive pair of those robot pairs, in one tight loop
-  //    (independent iterations: the long sqrt / division latency chains of neighbouring pairs overlap).
-  if (!prune) {
-    const int npp = static_cast<int>(data.pp_a.size());
-    for (int k = 0; k < npp; ++k) {
-      double s, t;  // locals: writing through pp_s / pp_t directly would force reloads (aliasing)
-      data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], s, t);
-      data.pp_s[k] = s;
-      data.pp_t[k] = t;
-    }
-  } else {
+  // 3. The core closest points of those robot pairs' primitive pairs, in one tight loop over a flat
+  //    list (independent iterations: the long sqrt / division latency chains of neighbouring pairs
+  //    overlap; the AVX2 kernel runs four at a time).
+  const int* list_a = data.pp_a.data();
+  const int* list_b = data.pp_b.data();
+  int nlist = static_cast<int>(data.pp_a.size());
+  if (prune) {
+    nlist = 0;
     for (int e = 0; e < nexact; ++e) {
       const int i = exact_pairs[e];
-      for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k) {
-        double s, t;
-        data.pp_core[k] = coreDistance(prim[data.pp_a[k]], prim[data.pp_b[k]], s, t);
-        data.pp_s[k] = s;
-        data.pp_t[k] = t;
+      for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k, ++nlist) {
+        data.list_a[nlist] = data.pp_a[k];
+        data.list_b[nlist] = data.pp_b[k];
       }
     }
+    list_a = data.list_a.data();
+    list_b = data.list_b.data();
   }
+  if (data.kernel == SweepKernel::kAvx2)
+    detail::coreDistancesAvx2(prim, list_a, list_b, nlist, data.pp_core.data(), data.pp_s.data(), data.pp_t.data());
+  else
+    detail::coreDistancesScalar(prim, list_a, list_b, nlist, data.pp_core.data(), data.pp_s.data(), data.pp_t.data());
 
-  // 4. Every exactly computed robot pair: the best of its primitive pairs, then normal, witness
-  //    points and row.
-  for (int e = 0; e < nexact; ++e) {
+  // 4. Every exactly computed robot pair: the best of its primitive pairs (the next entries of the
+  //    list), then normal, witness points and row.
+  for (int e = 0, j = 0; e < nexact; ++e) {
     const int i = exact_pairs[e];
     const SegmentPair& pair = model.pairs[i];
-    int k_best = data.pp_begin[i];
-    double best = data.pp_core[k_best] - radius[data.pp_a[k_best]] - radius[data.pp_b[k_best]];
-    for (int k = k_best + 1; k < data.pp_begin[i + 1]; ++k) {
-      const double d = data.pp_core[k] - radius[data.pp_a[k]] - radius[data.pp_b[k]];
+    const int end = j + data.pp_begin[i + 1] - data.pp_begin[i];
+    assert(end > j);  // every robot segment has a primitive (Model)
+    int j_best = j;
+    double best = data.pp_core[j] - radius[list_a[j]] - radius[list_b[j]];
+    for (++j; j < end; ++j) {
+      const double d = data.pp_core[j] - radius[list_a[j]] - radius[list_b[j]];
       if (d < best) {
         best = d;
-        k_best = k;
+        j_best = j;
       }
     }
     finishPair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link, best,
-               data.pp_core[k_best], data.pp_a[k_best], data.pp_b[k_best], data.pp_s[k_best], data.pp_t[k_best]);
+               data.pp_core[j_best], list_a[j_best], list_b[j_best], data.pp_s[j_best], data.pp_t[j_best]);
   }
 
   // 5. Pairs with a body-schema slot: usually all disabled; each computed directly when active.
@@ -368,6 +386,10 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
     }
     computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b);
   }
+}
+
+SweepKernel fastestSweepKernel() {
+  return detail::avx2Available() ? SweepKernel::kAvx2 : SweepKernel::kScalar;
 }
 
 void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceData& data, int pair,

@@ -85,6 +85,13 @@ struct DistanceOptions {
   double prune_distance = std::numeric_limits<double>::infinity();
 };
 
+/// The sweep's primitive-pair kernel (computeSegmentDistances). Both give the same bits (the same
+/// IEEE operations in the same order); kAvx2 runs four pairs per instruction on a CPU that has AVX2.
+enum class SweepKernel : std::uint8_t { kScalar, kAvx2 };
+
+/// The fastest kernel this CPU runs (kAvx2 where it has AVX2, else kScalar): DistanceData's default.
+SweepKernel fastestSweepKernel();
+
 /// Per-cycle distance results and scratch, sized from the model.
 struct DistanceData {
   explicit DistanceData(const Model& model);
@@ -107,12 +114,23 @@ struct DistanceData {
   // The primitive pairs of all robot-robot pairs, flat, so that they are computed in one tight loop:
   // pair i owns entries [pp_begin[i], pp_begin[i + 1]) (none for pairs with a body-schema slot).
   std::vector<int> pp_a, pp_b, pp_begin;
-  std::vector<double> pp_s, pp_t, pp_core;  ///< segment parameters and core distance per entry
+  // The primitive pairs the sweep computes this cycle, in pair order (the broad phase's survivors';
+  // all of pp_a / pp_b without it), and their segment parameters and core distance (scratch).
+  std::vector<int> list_a, list_b;
+  std::vector<double> pp_s, pp_t, pp_core;
+  /// The kernel computeSegmentDistances runs (fastestSweepKernel() unless set: tests run both).
+  SweepKernel kernel = fastestSweepKernel();
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
-  // Broad phase, per segment (robot segments only): bounding sphere centre in the link frame and in
-  // W, and its radius (m): every primitive of the segment lies inside it.
-  std::vector<Eigen::Vector3d> bound_center_L, bound_center_B;
+  // Broad phase, per segment (robot segments only): bounding sphere centre in the link frame and its
+  // radius (m): every primitive of the segment lies inside it; the centre in B this cycle, 4 doubles
+  // per segment (x, y, z, 0).
+  std::vector<Eigen::Vector3d> bound_center_L;
   std::vector<double> bound_radius;
+  std::vector<double> bound_center4_B;
+  // Per robot pair (robot_pairs' order): its two segments, their bounding radii's sum, and this
+  // cycle's gap between the spheres (m, scratch).
+  std::vector<int> rp_a, rp_b;
+  std::vector<double> rp_rsum, rp_gap;
   std::vector<int> exact_pairs;              ///< robot pairs the broad phase kept this cycle (scratch)
   /// The robot pairs the last computeSegmentDistances computed exactly, ascending: its first
   /// num_exact_pairs entries (exact_pairs with the broad phase, robot_pairs without). A pair made
