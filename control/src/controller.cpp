@@ -37,17 +37,28 @@ bool descendsFrom(const Model& model, int link, int ancestor) {
   return false;
 }
 
-/// The side of a pair on which arm `a`'s virtual force acts (Eq. 14-16): +1 for seg_a (the force
+/// Pair facts for arm `a` (ArmPairFacts) from the owners and links of the pair's two segments.
+/// `side`: the side of a pair on which arm `a`'s virtual force acts (Eq. 14-16): +1 for seg_a (the force
 /// acts at p_B_a along +nhat_B), -1 for seg_b. For a pair with another body part that is the arm's
 /// own segment. For a pair of two segments that arm `a` both moves (shoulder-hand, upper arm-hand, a
 /// grasped object against the upper arm) it is the DISTAL one, whose link descends from the other's:
 /// the paper's S_i are the forearm and the hand, and the force must push the hand away from the
 /// shoulder, not the shoulder away from the hand (that flips its direction in the Eq. 17 merge and
 /// can drive the closest pair together; issue 16, item 7). Two segments on one link: seg_a.
-int forceSide(const Model& model, const DistanceData& dist, const PairDistance& pd, int owner_a, int owner_b, int a) {
-  if (owner_a != a) return -1;
-  if (owner_b != a) return 1;
-  return descendsFrom(model, segmentLink(model, dist, pd.seg_b), segmentLink(model, dist, pd.seg_a)) ? -1 : 1;
+ArmPairFacts makeArmPairFacts(const Model& model, const std::vector<std::uint64_t>& columns, int a, int owner_a,
+                              int owner_b, int link_a, int link_b) {
+  ArmPairFacts f;
+  f.link_a = link_a;
+  f.link_b = link_b;
+  if (owner_a != a && owner_b != a) return f;
+  const int other = owner_a == a ? owner_b : owner_a;
+  f.flags = ArmPairFacts::kInvolved;
+  if (other >= 0 && other != a) f.flags |= ArmPairFacts::kOtherArm;
+  else if (other < 0) f.flags |= ArmPairFacts::kStatic;
+  if (columns[static_cast<std::size_t>(link_a)] != 0) f.flags |= ArmPairFacts::kMovesA;
+  if (columns[static_cast<std::size_t>(link_b)] != 0) f.flags |= ArmPairFacts::kMovesB;
+  f.side = owner_a != a ? -1 : owner_b != a ? 1 : descendsFrom(model, link_b, link_a) ? -1 : 1;
+  return f;
 }
 
 /// The distance options of the control cycle: exact distances for every pair that can feed a term
@@ -165,6 +176,18 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
       if (oa == a || ob == a) pair_arms[i] |= static_cast<std::uint8_t>(1U << a);
     if (oa >= 0 && ob >= 0 && oa != ob) between_arm_pairs.push_back(static_cast<int>(i));
   }
+  for (int a = 0; a < 2; ++a) {
+    std::vector<ArmPairFacts>& facts = arm_pair_facts[static_cast<std::size_t>(a)];
+    facts.assign(model.pairs.size(), ArmPairFacts{});
+    for (std::size_t i = 0; i < model.pairs.size(); ++i) {
+      const SegmentPair& pr = model.pairs[i];
+      if (pr.b >= model.num_robot_segments) continue;
+      facts[i] = makeArmPairFacts(model, arm_columns_of_link[static_cast<std::size_t>(a)], a,
+                                  cm.segment_owner[static_cast<std::size_t>(pr.a)],
+                                  cm.segment_owner[static_cast<std::size_t>(pr.b)], model.segments[pr.a].link,
+                                  model.segments[pr.b].link);
+    }
+  }
   grad_link_index.assign(nl, -1);
   arm_ws.grad_link.assign(nl, -1);
   arm_ws.grad_M.assign(nl, Eigen::Vector3d::Zero());
@@ -249,7 +272,6 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
   const std::vector<std::uint64_t>& columns = data.arm_columns_of_link[static_cast<std::size_t>(a)];
   ws.num_grad_links = 0;
   auto accumulate = [&](int link, const Eigen::Vector3d& p_B, const Eigen::Vector3d& n_B, double w) {
-    if (columns[static_cast<std::size_t>(link)] == 0) return;  // no joint of this arm moves it
     int& k = data.grad_link_index[static_cast<std::size_t>(link)];
     if (k < 0) {
       k = ws.num_grad_links++;
@@ -260,42 +282,45 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     ws.grad_M[static_cast<std::size_t>(k)] += w * p_B.cross(n_B);
     ws.grad_N[static_cast<std::size_t>(k)] += w * n_B;
   };
-  // One pair's terms; owner_a / owner_b: the arms that move its segments (-1: none).
-  auto take = [&](int p, const PairDistance& pd, int owner_a, int owner_b) {
-    if (owner_a != a && owner_b != a) return;
-    const int other = owner_a == a ? owner_b : owner_a;
-    const bool with_other_arm = other >= 0 && other != a;
-    if (with_other_arm) ws.d_other_arm = std::min(ws.d_other_arm, pd.distance);
-    else if (other < 0) ws.d_static = std::min(ws.d_static, pd.distance);
-    if (with_other_arm && higherPriority(input.priority, a) && !recovery_only) return;
-    if (pd.distance < d_min) {
-      d_min = pd.distance;
+  // Motion priority (Sec. 7.2): the higher-priority arm ignores the other arm (not in recovery).
+  const bool skip_other_arm = higherPriority(input.priority, a) && !recovery_only;
+  // One pair's terms, from what the pair is to this arm (f).
+  auto take = [&](int p, const PairDistance& pd, const ArmPairFacts& f) {
+    if (!(f.flags & ArmPairFacts::kInvolved)) return;
+    const double d = pd.distance;
+    const bool with_other_arm = (f.flags & ArmPairFacts::kOtherArm) != 0;
+    if (with_other_arm) ws.d_other_arm = std::min(ws.d_other_arm, d);
+    else if (f.flags & ArmPairFacts::kStatic) ws.d_static = std::min(ws.d_static, d);
+    if (with_other_arm && skip_other_arm) return;
+    if (d < d_min) {
+      d_min = d;
       closest = p;
     }
-    if (pd.distance < params.d_safe && !recovery_only) {
-      const double w = params.d_safe - pd.distance;
-      accumulate(segmentLink(model, data.dist, pd.seg_a), pd.p_B_a, pd.nhat_B, w);
-      accumulate(segmentLink(model, data.dist, pd.seg_b), pd.p_B_b, pd.nhat_B, -w);
+    if (d < params.d_safe && !recovery_only) {
+      const double w = params.d_safe - d;
+      if (f.flags & ArmPairFacts::kMovesA) accumulate(f.link_a, pd.p_B_a, pd.nhat_B, w);
+      if (f.flags & ArmPairFacts::kMovesB) accumulate(f.link_b, pd.p_B_b, pd.nhat_B, -w);
     }
     // Both lists hold one entry per candidate pair at most (sized at set-up): never full here.
-    if (pd.distance < params.d_b && pd.has_row) ws.guarded_pairs[static_cast<std::size_t>(ws.num_guarded++)] = p;
-    if (pd.distance < params.d_a) {
-      const int side = forceSide(model, data.dist, pd, owner_a, owner_b, a);
+    if (d < params.d_b && pd.has_row) ws.guarded_pairs[static_cast<std::size_t>(ws.num_guarded++)] = p;
+    if (d < params.d_a) {
       // e_f,ij points from the other segment towards the arm's closest point (Eq. 16).
-      ws.forces.add(params.k_virtual, params.d_a, pd.distance, side * pd.nhat_B, side > 0 ? pd.p_B_a : pd.p_B_b);
-      ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, side, params.k_virtual * (params.d_a - pd.distance)};
+      ws.forces.add(params.k_virtual, params.d_a, d, f.side * pd.nhat_B, f.side > 0 ? pd.p_B_a : pd.p_B_b);
+      ws.force_terms[static_cast<std::size_t>(ws.num_force_terms++)] = {p, f.side, params.k_virtual * (params.d_a - d)};
     }
   };
   // The pairs the sweep computed exactly, in ascending pair order (the candidate pairs' order). A
   // robot pair the broad phase skipped is beyond d_safe, d_a and d_b: it feeds no term and no
   // contact and can only be the arm's closest pair (checked below).
-  const std::uint8_t bit = static_cast<std::uint8_t>(1U << a);
+  const ArmPairFacts* facts = data.arm_pair_facts[static_cast<std::size_t>(a)].data();
   forEachExactPair(data.dist, [&](int p, bool robot) {
     const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
-    if (!robot) {
-      take(p, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
-    } else if (data.pair_arms[static_cast<std::size_t>(p)] & bit) {
-      take(p, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
+    if (robot) {
+      take(p, pd, facts[p]);
+    } else {  // a body-schema slot's pair: its owner and link follow the slot's link
+      take(p, pd, makeArmPairFacts(model, columns, a, ownerArm(model, cm, data.dist, pd.seg_a),
+                                   ownerArm(model, cm, data.dist, pd.seg_b), segmentLink(model, data.dist, pd.seg_a),
+                                   segmentLink(model, data.dist, pd.seg_b)));
     }
   });
   std::array<double, kMaxArmDof> gradient{};

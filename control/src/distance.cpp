@@ -150,6 +150,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
                         int link_b) {
   const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
+  if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
   double best = std::numeric_limits<double>::infinity(), best_core = 0.0, best_s = 0.0, best_t = 0.0;
   int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
   for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
@@ -316,19 +317,24 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   bool any_slot = false;
   for (const BodySchemaSlot& slot : slots) any_slot = any_slot || slot.enabled;
   data.any_slot_enabled = any_slot;
-  for (const int i : data.slot_pairs) {
-    const SegmentPair& pair = model.pairs[i];
-    const Segment& sa = model.segments[pair.a];
-    const Segment& sb = model.segments[pair.b];
-    int link_a = sa.link, link_b = sb.link;
-    if (!any_slot || !slotPairActive(model, slots, pair, link_a, link_b)) {
-      PairDistance& out = data.pairs[i];
-      out.active = false;
-      out.has_row = false;
-      out.distance = kInf;
-      continue;
+  // Nothing to do when every slot is disabled and every slot pair is already inactive (the usual
+  // cycle: a robot holds nothing; a model has 4 slots x its segments of such pairs).
+  if (any_slot || !data.slot_pairs_inactive) {
+    for (const int i : data.slot_pairs) {
+      const SegmentPair& pair = model.pairs[i];
+      const Segment& sa = model.segments[pair.a];
+      const Segment& sb = model.segments[pair.b];
+      int link_a = sa.link, link_b = sb.link;
+      if (!any_slot || !slotPairActive(model, slots, pair, link_a, link_b)) {
+        PairDistance& out = data.pairs[i];
+        out.active = false;
+        out.has_row = false;
+        out.distance = kInf;
+        continue;
+      }
+      computeSegmentPair(model, kin, data, options, i, sa, sb, link_a, link_b);
     }
-    computeSegmentPair(model, kin, data, options, i, sa, sb, link_a, link_b);
+    data.slot_pairs_inactive = !any_slot;
   }
 
   // 6. The closest active pair (the lowest index among equals): over the exact pairs; then a skipped

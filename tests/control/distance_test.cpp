@@ -652,6 +652,50 @@ TEST(DistanceBodySchema, SlotCapsuleOnTheHandIsChecked) {
   EXPECT_FALSE(m.segments[dist.pairs[dist.closest].seg_b].body_schema_slot);
 }
 
+/// The sweep skips the slot pairs while every slot stays disabled and their entries are already
+/// inactive; whatever computed a slot pair in between (the sweep itself, computeListedPairDistances)
+/// makes the next sweep clear them again.
+TEST(DistanceBodySchema, SlotPairsComeOutInactiveAfterEveryWayOfComputingThem) {
+  const Model m = testing::loadRobot(testing::kAsimo);
+  KinematicsData kin(m);
+  DistanceData dist(m);
+  std::mt19937_64 rng(6);
+  ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+  BodySchemaSlots held{}, none{};
+  DistanceData holder(m);
+  ASSERT_TRUE(attachBodySchemaSegment(m, holder, 0, m.linkIndex("r_hand"), Vector3d(0, 0, -0.08),
+                                      Vector3d(0.2, 0, -0.08), 0.02));
+  held = holder.slots;
+  std::vector<int> slot_pairs;
+  for (std::size_t i = 0; i < m.pairs.size(); ++i)
+    if (m.segments[m.pairs[i].b].body_schema_slot) slot_pairs.push_back(static_cast<int>(i));
+  ASSERT_FALSE(slot_pairs.empty());
+  auto activeSlotPairs = [&] {
+    int n = 0;
+    for (const int i : slot_pairs) {
+      const PairDistance& pd = dist.pairs[static_cast<std::size_t>(i)];
+      if (pd.active) ++n;
+      else EXPECT_EQ(pd.distance, std::numeric_limits<double>::infinity());
+    }
+    return n;
+  };
+  computeSegmentDistances(m, kin, none, dist);
+  EXPECT_EQ(activeSlotPairs(), 0);
+  computeSegmentDistances(m, kin, held, dist);  // the sweep computes them
+  const int with_slot = activeSlotPairs();
+  EXPECT_GT(with_slot, 0);
+  computeSegmentDistances(m, kin, none, dist);
+  EXPECT_EQ(activeSlotPairs(), 0);
+  computeSegmentDistances(m, kin, none, dist);  // skipped: still inactive
+  EXPECT_EQ(activeSlotPairs(), 0);
+  // The predictive guard's listed pairs compute them on the same data with the slot held ...
+  computeListedPairDistances(m, kin, held, dist, slot_pairs.data(), static_cast<int>(slot_pairs.size()));
+  EXPECT_EQ(activeSlotPairs(), with_slot);
+  // ... and the next sweep without it clears them.
+  computeSegmentDistances(m, kin, none, dist);
+  EXPECT_EQ(activeSlotPairs(), 0);
+}
+
 TEST(DistanceBodySchema, BadArgumentsAreRejectedAndChangeNothing) {
   const Model m = testing::loadRobot(testing::kAsimo);
   DistanceData dist(m);

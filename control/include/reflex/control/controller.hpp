@@ -288,6 +288,23 @@ struct ClosestPair {
   int pair = -1;                                              ///< index into Model::pairs, -1 if none
 };
 
+/// What one pair is to one arm in the pair-term stage (collectPairTerms). For a robot pair it is
+/// fixed by the models, so ControllerData sets it up once and the per-pair pass reads this one
+/// small record instead of the segments, the owners and the column masks (a chain of dependent
+/// loads per pair); a body-schema slot's pair gets it each cycle (its link can change).
+struct ArmPairFacts {
+  enum Flag : std::uint8_t {
+    kInvolved = 1,   ///< the arm moves one of the pair's segments (else the pair is not the arm's)
+    kOtherArm = 2,   ///< the other segment is the other arm's
+    kStatic = 4,     ///< the other segment is moved by no arm
+    kMovesA = 8,     ///< an arm joint moves seg_a's link (Eq. 5's gradient has a term there)
+    kMovesB = 16,    ///< ... seg_b's link
+  };
+  std::int32_t link_a = -1, link_b = -1;  ///< the links of seg_a, seg_b
+  std::uint8_t flags = 0;
+  std::int8_t side = 1;  ///< the side of the arm's virtual force: +1 at p_B_a along +nhat_B, -1 at p_B_b
+};
+
 /// Per-cycle state and scratch, sized from the model.
 struct ControllerData {
   ControllerData(const Model& model, const ControllerModel& cm);
@@ -330,6 +347,8 @@ struct ControllerData {
   std::vector<std::uint8_t> pair_arms;
   /// The robot pairs between a left-arm and a right-arm segment, ascending.
   std::vector<int> between_arm_pairs;
+  /// Per arm, per robot pair (index into Model::pairs; a body-schema slot's pair's entry is unused).
+  std::array<std::vector<ArmPairFacts>, 2> arm_pair_facts;
   /// Per link: its index in ArmWorkspace::grad_link while collectPairTerms runs, else -1.
   std::vector<int> grad_link_index;
   /// Predictive guard scratch: the pairs its predictions compute (first num_guard_pairs valid; 0

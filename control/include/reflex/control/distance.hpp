@@ -30,11 +30,10 @@ namespace reflex::control {
 /// Distance result of one checked segment pair. Invariants (checked by tests): when `active`,
 /// |nhat_B| = 1, p_B_a - p_B_b = distance * nhat_B, distance is finite.
 struct PairDistance {
+  // The fields every cycle writes for every pair (also those the broad phase skips) first, so they
+  // share a cache line.
   int seg_a = -1, seg_b = -1;   ///< segment indices (a < b)
   double distance = std::numeric_limits<double>::infinity();
-  Eigen::Vector3d p_B_a = Eigen::Vector3d::Zero();
-  Eigen::Vector3d p_B_b = Eigen::Vector3d::Zero();
-  Eigen::Vector3d nhat_B = Eigen::Vector3d::UnitZ();
   bool well_defined = true;     ///< false when the core points coincided (fallback normal)
   bool active = false;          ///< false for pairs of disabled body-schema slots (distance = inf)
   bool has_row = false;         ///< rows.row(i) is valid for this cycle
@@ -43,6 +42,9 @@ struct PairDistance {
   /// gap); witness points and normal are not computed (left as they were), has_row is false.
   /// refinePairDistance makes it exact. Always true without pruning.
   bool exact = true;
+  Eigen::Vector3d p_B_a = Eigen::Vector3d::Zero();
+  Eigen::Vector3d p_B_b = Eigen::Vector3d::Zero();
+  Eigen::Vector3d nhat_B = Eigen::Vector3d::UnitZ();
 };
 
 /// Longest body-schema segment name (bytes, without the NUL): the bus's bound on a key string
@@ -138,6 +140,9 @@ struct DistanceData {
   const std::vector<int>& exactList() const { return last_pruned ? exact_pairs : robot_pairs; }
   bool last_pruned = false;                  ///< the last computeSegmentDistances used the broad phase
   bool any_slot_enabled = false;             ///< ... and was given an enabled body-schema slot
+  /// Every body-schema slot pair's entry is inactive (distance +inf, no row): nothing has computed one
+  /// since computeSegmentDistances last cleared them (or since construction).
+  bool slot_pairs_inactive = true;
   int num_exact_pairs = 0;
   /// The smallest lower bound of a pair the broad phase skipped in the last computeSegmentDistances
   /// (m); +inf when it skipped none.
