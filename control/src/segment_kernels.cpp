@@ -40,7 +40,20 @@ struct Four {
   __m256d sx, sy, sz, dx, dy, dz, dd, inv_dd;
 };
 
-/// Loads primitives p0..p3 and transposes them (two 4 x 4 transposes).
+/// Transposes the 4 x 4 block whose rows are r0..r3 into its columns c0..c3.
+__attribute__((target("avx2"))) inline void transpose4(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d& c0,
+                                                       __m256d& c1, __m256d& c2, __m256d& c3) {
+  const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // r0[0] r1[0] r0[2] r1[2]
+  const __m256d t1 = _mm256_unpackhi_pd(r0, r1);  // r0[1] r1[1] r0[3] r1[3]
+  const __m256d t2 = _mm256_unpacklo_pd(r2, r3);
+  const __m256d t3 = _mm256_unpackhi_pd(r2, r3);
+  c0 = _mm256_permute2f128_pd(t0, t2, 0x20);
+  c2 = _mm256_permute2f128_pd(t0, t2, 0x31);
+  c1 = _mm256_permute2f128_pd(t1, t3, 0x20);
+  c3 = _mm256_permute2f128_pd(t1, t3, 0x31);
+}
+
+/// Loads primitives p0..p3 (8 doubles each) and transposes them: two 4 x 4 blocks.
 __attribute__((target("avx2"))) inline Four loadFour(const SegmentB& p0, const SegmentB& p1, const SegmentB& p2,
                                                      const SegmentB& p3) {
   const double* q0 = p0.start.data();
@@ -48,30 +61,10 @@ __attribute__((target("avx2"))) inline Four loadFour(const SegmentB& p0, const S
   const double* q2 = p2.start.data();
   const double* q3 = p3.start.data();
   Four f;
-  {  // lanes 0..3 of each: start x y z, d x
-    const __m256d r0 = _mm256_loadu_pd(q0), r1 = _mm256_loadu_pd(q1);
-    const __m256d r2 = _mm256_loadu_pd(q2), r3 = _mm256_loadu_pd(q3);
-    const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // sx0 sx1 sz0 sz1
-    const __m256d t1 = _mm256_unpackhi_pd(r0, r1);  // sy0 sy1 dx0 dx1
-    const __m256d t2 = _mm256_unpacklo_pd(r2, r3);
-    const __m256d t3 = _mm256_unpackhi_pd(r2, r3);
-    f.sx = _mm256_permute2f128_pd(t0, t2, 0x20);
-    f.sz = _mm256_permute2f128_pd(t0, t2, 0x31);
-    f.sy = _mm256_permute2f128_pd(t1, t3, 0x20);
-    f.dx = _mm256_permute2f128_pd(t1, t3, 0x31);
-  }
-  {  // d y z, dd, inv_dd
-    const __m256d r0 = _mm256_loadu_pd(q0 + 4), r1 = _mm256_loadu_pd(q1 + 4);
-    const __m256d r2 = _mm256_loadu_pd(q2 + 4), r3 = _mm256_loadu_pd(q3 + 4);
-    const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // dy0 dy1 dd0 dd1
-    const __m256d t1 = _mm256_unpackhi_pd(r0, r1);  // dz0 dz1 inv0 inv1
-    const __m256d t2 = _mm256_unpacklo_pd(r2, r3);
-    const __m256d t3 = _mm256_unpackhi_pd(r2, r3);
-    f.dy = _mm256_permute2f128_pd(t0, t2, 0x20);
-    f.dd = _mm256_permute2f128_pd(t0, t2, 0x31);
-    f.dz = _mm256_permute2f128_pd(t1, t3, 0x20);
-    f.inv_dd = _mm256_permute2f128_pd(t1, t3, 0x31);
-  }
+  transpose4(_mm256_loadu_pd(q0), _mm256_loadu_pd(q1), _mm256_loadu_pd(q2), _mm256_loadu_pd(q3), f.sx, f.sy, f.sz,
+             f.dx);
+  transpose4(_mm256_loadu_pd(q0 + 4), _mm256_loadu_pd(q1 + 4), _mm256_loadu_pd(q2 + 4), _mm256_loadu_pd(q3 + 4),
+             f.dy, f.dz, f.dd, f.inv_dd);
   return f;
 }
 

@@ -392,5 +392,8 @@ int main(int argc, char** argv) {
       "  --robot  a robot of bringup/robots by name (default asimo_like; many_segment_humanoid:\n"
       "           the >= 1,000-pair robot) or a URDF path; collision configuration next to it\n",
       &g_urdf, nullptr,
-      [] { std::printf("robot: %s, %zu checked robot pairs\n", g_urdf.c_str(), setup().robot_pairs.size()); });
+      [] {
+        std::printf("robot: %s, %zu checked robot pairs, %s sweep kernel\n", g_urdf.c_str(), setup().robot_pairs.size(),
+                    fastestSweepKernel() == SweepKernel::kAvx2 ? "AVX2" : "scalar");
+      });
 }

@@ -296,6 +296,20 @@ TEST(DistanceRows, ThresholdSelectsRows) {
 // identical bit for bit (distance, witness points, normal, row), every skipped pair reports a lower
 // bound above the prune distance and at most its true distance, the closest pair and its distance
 // are identical, and refinePairDistance turns a skipped pair into the brute-force result.
+/// Pair i of y is pair i of x bit for bit: witness points, normal, flag, row (both computed exactly).
+void expectSamePair(const DistanceData& x, const DistanceData& y, std::size_t i, const std::string& name) {
+  const PairDistance& a = x.pairs[i];
+  const PairDistance& b = y.pairs[i];
+  EXPECT_EQ(b.p_B_a, a.p_B_a) << name;
+  EXPECT_EQ(b.p_B_b, a.p_B_b) << name;
+  EXPECT_EQ(b.nhat_B, a.nhat_B) << name;
+  EXPECT_EQ(b.well_defined, a.well_defined) << name;
+  ASSERT_EQ(b.has_row, a.has_row) << name;
+  if (a.has_row) {
+    EXPECT_EQ(y.rows.row(static_cast<Eigen::Index>(i)), x.rows.row(static_cast<Eigen::Index>(i))) << name;
+  }
+}
+
 void checkBroadPhase(const Model& m, double prune_distance, int configurations, unsigned seed) {
   KinematicsData kin(m);
   DistanceData brute(m), pruned(m);
@@ -340,14 +354,7 @@ void checkBroadPhase(const Model& m, double prune_distance, int configurations, 
       }
       if (b.distance <= prune_distance) ++within;
       EXPECT_EQ(p.distance, b.distance) << name;
-      EXPECT_EQ(p.p_B_a, b.p_B_a) << name;
-      EXPECT_EQ(p.p_B_b, b.p_B_b) << name;
-      EXPECT_EQ(p.nhat_B, b.nhat_B) << name;
-      EXPECT_EQ(p.well_defined, b.well_defined) << name;
-      ASSERT_EQ(p.has_row, b.has_row) << name;
-      if (p.has_row) {
-        EXPECT_EQ(pruned.rows.row(static_cast<Eigen::Index>(i)), brute.rows.row(static_cast<Eigen::Index>(i))) << name;
-      }
+      expectSamePair(brute, pruned, i, name);
     }
   }
   // Not vacuous: pairs inside the distance were compared, and pairs were skipped and refined.
@@ -475,13 +482,7 @@ void checkKernelsAgree(const Model& m, int configurations, unsigned seed) {
       ASSERT_EQ(b.has_row, a.has_row) << name;
       ASSERT_TRUE(sameBits(b.distance, a.distance)) << name << ": " << b.distance << " vs " << a.distance;
       if (!a.active || !a.exact) continue;
-      EXPECT_EQ(b.p_B_a, a.p_B_a) << name;
-      EXPECT_EQ(b.p_B_b, a.p_B_b) << name;
-      EXPECT_EQ(b.nhat_B, a.nhat_B) << name;
-      EXPECT_EQ(b.well_defined, a.well_defined) << name;
-      if (a.has_row) {
-        EXPECT_EQ(fast.rows.row(static_cast<Eigen::Index>(i)), scalar.rows.row(static_cast<Eigen::Index>(i))) << name;
-      }
+      expectSamePair(scalar, fast, i, name);
       ++compared;
     }
   }

@@ -296,6 +296,7 @@ int main(int argc, char** argv) {
       "            the >= 1,000-pair robot) or a URDF path; collision configuration next to it\n"
       "  --config  controller YAML for that robot (default: the built-in asimo_like arms)\n",
       &g_urdf, &g_config, [] {
-        std::printf("robot: %s, %zu checked pairs, %zu states\n", g_urdf.c_str(), model().pairs.size(), states().size());
+        std::printf("robot: %s, %zu checked pairs, %zu states, %s sweep kernel\n", g_urdf.c_str(), model().pairs.size(),
+                    states().size(), fastestSweepKernel() == SweepKernel::kAvx2 ? "AVX2" : "scalar");
       });
 }
