@@ -166,28 +166,20 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
         std::max(reach[static_cast<std::size_t>(parent)], model.links[l].X_P_J.translation().norm() + reach[l]);
   }
   link_sweep.assign(nl, 0.0);
-  pair_arms.assign(model.pairs.size(), 0);
-  for (std::size_t i = 0; i < model.pairs.size(); ++i) {
-    const SegmentPair& pr = model.pairs[i];
-    if (pr.b >= model.num_robot_segments) continue;  // a body-schema slot's owner changes with its link
-    const int oa = cm.segment_owner[static_cast<std::size_t>(pr.a)];
-    const int ob = cm.segment_owner[static_cast<std::size_t>(pr.b)];
-    for (int a = 0; a < 2; ++a)
-      if (oa == a || ob == a) pair_arms[i] |= static_cast<std::uint8_t>(1U << a);
-    if (oa >= 0 && ob >= 0 && oa != ob) between_arm_pairs.push_back(static_cast<int>(i));
-  }
   for (int a = 0; a < 2; ++a) {
     std::vector<ArmPairFacts>& facts = arm_pair_facts[static_cast<std::size_t>(a)];
     facts.assign(model.pairs.size(), ArmPairFacts{});
     for (std::size_t i = 0; i < model.pairs.size(); ++i) {
       const SegmentPair& pr = model.pairs[i];
-      if (pr.b >= model.num_robot_segments) continue;
+      if (pr.b >= model.num_robot_segments) continue;  // a body-schema slot's owner changes with its link
       facts[i] = makeArmPairFacts(model, arm_columns_of_link[static_cast<std::size_t>(a)], a,
                                   cm.segment_owner[static_cast<std::size_t>(pr.a)],
                                   cm.segment_owner[static_cast<std::size_t>(pr.b)], model.segments[pr.a].link,
                                   model.segments[pr.b].link);
     }
   }
+  for (std::size_t i = 0; i < model.pairs.size(); ++i)  // the left arm's pairs with the right arm
+    if (arm_pair_facts[kLeft][i].flags & ArmPairFacts::kOtherArm) between_arm_pairs.push_back(static_cast<int>(i));
   grad_link_index.assign(nl, -1);
   arm_ws.grad_link.assign(nl, -1);
   arm_ws.grad_M.assign(nl, Eigen::Vector3d::Zero());
@@ -611,8 +603,10 @@ bool isPhysical(const Model& model, const ControllerData& data, const PairDistan
 /// unpruned sweep gives.
 void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerData& data) {
   ClosestPair physical, virtual_slot, between_arms;
-  // A robot pair between a left-arm and a right-arm segment (a slot pair's pair_arms is 0).
-  auto betweenArms = [&](int i) { return data.pair_arms[static_cast<std::size_t>(i)] == 3U; };
+  // A robot pair between a left-arm and a right-arm segment (a slot pair's facts are empty).
+  auto betweenArms = [&](int i) {
+    return (data.arm_pair_facts[kLeft][static_cast<std::size_t>(i)].flags & ArmPairFacts::kOtherArm) != 0;
+  };
   auto take = [](ClosestPair& best, double d, int i) {
     if (d < best.distance || (d == best.distance && i < best.pair)) {
       best.distance = d;
@@ -752,7 +746,8 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     forEachExactPair(data.dist, [&](int i, bool robot) {
       const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
       if (robot) {
-        if (data.pair_arms[static_cast<std::size_t>(i)])
+        if ((data.arm_pair_facts[kLeft][static_cast<std::size_t>(i)].flags |
+             data.arm_pair_facts[kRight][static_cast<std::size_t>(i)].flags) & ArmPairFacts::kInvolved)
           consider(i, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
       } else if (isPhysical(model, data, pd)) {
         consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));

@@ -342,9 +342,6 @@ struct ControllerData {
   Eigen::VectorXd lever;
   /// Predictive guard scratch, per link: the most any point of it moves in this cycle's step (m).
   std::vector<double> link_sweep;
-  /// Per pair: bit a set if arm a moves one of its segments (robot pairs; 0 for a body-schema slot's
-  /// pair, whose owner follows its link).
-  std::vector<std::uint8_t> pair_arms;
   /// The robot pairs between a left-arm and a right-arm segment, ascending.
   std::vector<int> between_arm_pairs;
   /// Per arm, per robot pair (index into Model::pairs; a body-schema slot's pair's entry is unused).
