@@ -187,7 +187,13 @@ class Writer final : public detail::WriterBase {
   /// it (its key computation would abort the process), counted in stats().refused_key_too_long, and
   /// takes no sequence number. Does not allocate once the source string has been assigned once (the
   /// header's string keeps its capacity). Never throws.
-  bool publish(T& sample) noexcept {
+  bool publish(T& sample) noexcept { return stamp(sample) && writeRaw(&sample); }
+  /// publish() in two steps, for a caller that writes from another thread (a real-time loop hands its
+  /// samples to a writer thread): stamps sample.header() as publish() does — the time and sequence
+  /// number are those of this call — and returns true; write(sample) then sends it unchanged. A
+  /// sample with a @key string above kMaxKeyStringBytes is refused and counted as in publish(), and
+  /// takes no sequence number. Does not allocate once the source string was assigned once. Never throws.
+  bool stamp(T& sample) noexcept {
     if (keyStringBytes(sample) > kMaxKeyStringBytes) {
       refused_key_.fetch_add(1, std::memory_order_relaxed);
       return false;
@@ -196,7 +202,7 @@ class Writer final : public detail::WriterBase {
     header.stamp_ns(nowNs());
     header.seq(seq_.fetch_add(1, std::memory_order_relaxed) + 1);
     if (header.source() != source_) header.source(source_);
-    return writeRaw(&sample);
+    return true;
   }
   /// Writes the sample as is, header untouched (replay, tests). Returns false on refusal (also a key
   /// string above kMaxKeyStringBytes: refused and counted as in publish()).
