@@ -3,6 +3,7 @@
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/onboard.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "reflex/control_node/bus_outbox.hpp"
 #include "reflex/control_node/dds_robot_port.hpp"
 #include "reflex/control_node/robot_state_file.hpp"
 #include "reflex/control_node/timeseries_log.hpp"
@@ -112,6 +113,14 @@ struct ControllerNode::Impl {
   bus::Reader<msg::Heartbeat>* heartbeat_reader = nullptr;
   bus::Writer<msg::ControllerProtection>* protection_writer = nullptr;
   bus::Reader<msg::ControllerProtection>* protection_reader = nullptr;
+  // The loop's joint state, status and heartbeats go through the outbox: a writer thread does the DDS
+  // writes, so a write that blocks (a dead reader on shared memory) never stops the loop
+  // (bus_outbox.hpp). Declared after the participant: closed before its writers go.
+  std::unique_ptr<BusOutbox> outbox;
+  OutboxQueue<msg::JointState>* joint_out = nullptr;
+  OutboxQueue<msg::ControlStatus>* status_out = nullptr;
+  OutboxQueue<msg::Heartbeat>* heartbeat_out = nullptr;
+  msg::Heartbeat heartbeat_out_msg;  // filled in place: no allocation per heartbeat
   ParticipantId own_participant{};
   std::int64_t protection_stamp_ns = 0;  ///< when this controller claimed the domain (its protection sample)
   std::string peer_refusal;              ///< why this controller yielded to an earlier one ("" if it did not)
@@ -258,11 +267,13 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   oo.input_timeout = config.input_timeout;
   oo.max_target_distance = config.max_target_distance;
   RobotPort* port = nullptr;
+  m.outbox = std::make_unique<BusOutbox>("reflex_controller");
   if (config.robot == "dds") {
     DdsRobotPort::Options po;
     po.timeout = config.robot_timeout;
     po.deadline = deadline;
     m.dds = std::make_unique<DdsRobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, po);
+    m.dds->sendThrough(*m.outbox);  // the commands too: a blocked write must not stop the loop
     port = m.dds.get();
   } else {
     m.kinematic = std::make_unique<KinematicPort>(q0);
@@ -283,6 +294,35 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.joint_msg.positions().assign(m.model.nq, 0.0);
   m.joint_msg.velocities().assign(m.model.nq, 0.0);
   m.schema_scratch.reserve(64);
+  // The outbox's slots are copies of these prototypes with every string reserved for the longest
+  // value it can take (a segment name: the model's longest, or an attached segment's, a DDS key
+  // string of at most bus::kMaxKeyStringBytes; the rejection is a cause name; the heartbeat's detail
+  // one of run()'s texts, < 200 bytes), so copying a sample into a slot never allocates.
+  std::size_t longest_name = bus::kMaxKeyStringBytes;
+  for (const auto& seg : m.model.segments) longest_name = std::max(longest_name, seg.name.size());
+  const auto reserveStatus = [longest_name](msg::ControlStatus& st) {
+    for (msg::ArmStatus* arm : {&st.left(), &st.right()}) {
+      arm->closest_segment_a().reserve(longest_name);
+      arm->closest_segment_b().reserve(longest_name);
+    }
+    st.last_rejection().reserve(64);
+    st.header().source().reserve(bus::kMaxKeyStringBytes);
+  };
+  reserveStatus(m.status_msg);
+  m.heartbeat_out_msg.module_name(m.config.module_name);
+  m.heartbeat_out_msg.host(hostName());
+  m.heartbeat_out_msg.pid(static_cast<std::int32_t>(getpid()));
+  m.heartbeat_out_msg.period_ms(500);
+  const auto reserveHeartbeat = [](msg::Heartbeat& hb) { hb.detail().reserve(256); };
+  reserveHeartbeat(m.heartbeat_out_msg);
+  for (auto* h : {&m.joint_msg.header(), &m.status_msg.header(), &m.heartbeat_out_msg.header()})
+    h->source(m.config.module_name);
+  // Written in this order each pass (the robot's commands, added by the port, first; then the
+  // heartbeat, so that the STOPPING one goes out even if a stuck status writer uses up close()'s time).
+  m.heartbeat_out = &m.outbox->add<msg::Heartbeat>(*m.heartbeat_writer, m.heartbeat_out_msg, 16, reserveHeartbeat);
+  m.joint_out = &m.outbox->add(*m.joint_writer, m.joint_msg);
+  m.status_out = &m.outbox->add<msg::ControlStatus>(*m.status_writer, m.status_msg, 64, reserveStatus);
+  m.outbox->start();
   // Lateness percentiles: at most the first 10 minutes (or the whole run) are kept.
   const double expected_cycles =
       (config.duration > 0.0 ? std::min(config.duration, 600.0) : 600.0) / m.cm.params.period + 10.0;
@@ -344,15 +384,13 @@ void ControllerNode::run() {
   // The heartbeat's detail says what the controller cannot do: "" when it runs normally; with
   // --robot dds "robot state stale ..." while it has no fresh robot state (it commands nothing).
   std::string detail;
+  detail.reserve(256);
   auto publishHeartbeat = [&](msg::ModuleState state) {
-    msg::Heartbeat hb;
-    hb.module_name(m.config.module_name);
-    hb.host(hostName());
-    hb.pid(static_cast<std::int32_t>(getpid()));
+    msg::Heartbeat& hb = m.heartbeat_out_msg;
     hb.state(state);
-    hb.period_ms(500);
-    hb.detail(detail);
-    m.heartbeat_writer->publish(hb);
+    hb.detail().assign(detail);  // within the reserved capacity
+    m.heartbeat_out->push(hb);
+    m.outbox->notify();
   };
   publishHeartbeat(msg::STATE_RUNNING);
   bool robot_ok = true;  // as last said (log, heartbeat)
@@ -508,7 +546,7 @@ void ControllerNode::run() {
         m.joint_msg.positions()[i] = q[i];
         m.joint_msg.velocities()[i] = cr == ControlResult::kFrozen ? 0.0 : data.qdot[i];
       }
-      m.joint_writer->publish(m.joint_msg);
+      m.joint_out->push(m.joint_msg);
     }
     msg::ArmStatus* arms[2] = {&m.status_msg.left(), &m.status_msg.right()};
     for (int a = 0; a < 2; ++a) {
@@ -537,7 +575,8 @@ void ControllerNode::run() {
     m.status_msg.compute_time_us(compute_us);
     m.status_msg.lateness_us(lateness_us);
     m.status_msg.overrun_count(stats_.overruns);
-    m.status_writer->publish(m.status_msg);
+    m.status_out->push(m.status_msg);
+    m.outbox->notify();
     last_start = t_now;
     ++stats_.cycles;
     stats_.max_lateness_us = std::max(stats_.max_lateness_us, lateness_us);
@@ -565,6 +604,14 @@ void ControllerNode::run() {
     if (lateness_us > period * 1e6) clock_gettime(CLOCK_MONOTONIC, &next);
   }
   publishHeartbeat(msg::STATE_STOPPING);
+  m.outbox->close();  // writes what is queued (heartbeats first: the STOPPING one goes out), 1 s at most
+  const OutboxStats ob = m.outbox->stats();
+  stats_.bus_written = ob.written;
+  stats_.bus_write_failures = ob.write_failures;
+  stats_.bus_dropped = ob.dropped;
+  stats_.bus_stalls = ob.stalls;
+  stats_.bus_longest_write_s = ob.longest_write_s;
+  stats_.bus_longest_topic = ob.longest_topic;
   if (m.log) {
     m.log->close();
     m.log_error = m.log->error();

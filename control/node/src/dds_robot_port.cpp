@@ -110,7 +110,17 @@ void DdsRobotPort::command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& 
   cmd_.valid_until_ns(bus::nowNs() + static_cast<std::int64_t>(std::llround(options_.deadline * 1e9)));
   cmd_.state_seq(state_seq_);
   cmd_.state_stamp_ns(state_stamp_ns_);
-  if (writer_->publish(cmd_)) ++counts_.commands;
+  if (queue_ != nullptr) {
+    if (queue_->push(cmd_)) ++counts_.commands;
+    outbox_->notify();
+  } else if (writer_->publish(cmd_)) {
+    ++counts_.commands;
+  }
+}
+
+void DdsRobotPort::sendThrough(BusOutbox& outbox) {
+  queue_ = &outbox.add(*writer_, cmd_, 16);
+  outbox_ = &outbox;
 }
 
 }  // namespace reflex::control_node

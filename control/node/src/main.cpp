@@ -114,6 +114,14 @@ int main(int argc, char** argv) {
     }
     if (s.targets_rejected + s.robot_states_rejected > 0)
       extra += ", rejected by cause: " + reflex::control_node::describeRejections(s) + " (last " + s.last_rejection + ")";
+    {  // the loop's bus outputs (bus_outbox.hpp): a blocked write never stopped the loop; it is named here
+      char bus_line[256];
+      std::snprintf(bus_line, sizeof(bus_line), ", bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %.1f ms%s%s)",
+                    static_cast<unsigned long long>(s.bus_written), static_cast<unsigned long long>(s.bus_dropped),
+                    static_cast<unsigned long long>(s.bus_write_failures), static_cast<unsigned long long>(s.bus_stalls),
+                    1e3 * s.bus_longest_write_s, s.bus_longest_topic.empty() ? "" : " ", s.bus_longest_topic.c_str());
+      extra += bus_line;
+    }
     extra += ", protection " + protection.describe();
     std::fprintf(stderr,
                  "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "

@@ -37,6 +37,11 @@
 // The --log file is streamed by a writer thread from a preallocated ring (timeseries_log.hpp): opened
 // before the loop, every write checked; it survives any stop but SIGKILL.
 //
+// The bus writes of the loop (joint state, status, heartbeats, and with --robot dds the joint
+// commands) are made by another thread too (BusOutbox, bus_outbox.hpp): a DDS write can block for a
+// second (a dead reader on shared memory) and the loop never waits for one. Samples are stamped in
+// the cycle; what a stuck writer cannot take is dropped, counted and named in the exit line.
+//
 // The cycle itself (staleness, priority, body schema by name, walking, computeControl, the plant) is
 // reflex::control::OnboardController (control/include/reflex/control/onboard.hpp): this node is the
 // thin adapter between DDS samples and that object.
@@ -132,6 +137,15 @@ struct NodeStats {
   std::array<std::uint64_t, 5> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
   const char* last_rejection = "";          ///< the latest refusal's cause name ("" none), as in ControlStatus
   std::uint64_t robot_commands = 0;         ///< JointCommand samples published
+  // The loop's bus outputs (joint state, status, heartbeat, joint commands), written by the outbox's thread
+  // (bus_outbox.hpp): what reached the middleware, what it refused, what a full ring dropped, and
+  // the writes that blocked (longer than 50 ms; the loop never waits for them).
+  std::uint64_t bus_written = 0;
+  std::uint64_t bus_write_failures = 0;
+  std::uint64_t bus_dropped = 0;
+  std::uint64_t bus_stalls = 0;
+  double bus_longest_write_s = 0.0;
+  std::string bus_longest_topic;
 };
 
 /// The name of a DdsRobotPort rejection cause (0 lengths .. 4 old stamp) as ControlStatus.last_rejection
