@@ -2,8 +2,11 @@
 // in push order, with the sequence numbers and stamps of the push (the control cycle), not of the
 // later write; a full ring drops the newest, counts it and leaves a gap in the sequence numbers a
 // reader can see; a push never allocates (counted by replacing operator new) and never waits for
-// the writer thread. Real DDS entities (one participant, domain 223); the blocked write itself, with
-// a real killed reader process, is faults_process_test's KillNineOfAReaderNeverStopsTheControlLoop.
+// the writer thread, also while every write blocks for 200 ms. Real DDS entities (one participant,
+// domain 223); the real controller with blocked writes is faults_process_test's
+// ABusWriteThatBlocksNeverStopsTheControlLoop.
+#include "support/count_allocations.hpp"
+
 #include <reflex/bus/bus.hpp>
 #include <reflex/control_node/bus_outbox.hpp>
 
@@ -19,22 +22,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace reflex::control_node {
 namespace {
@@ -171,7 +158,7 @@ TEST(BusOutbox, APushAndANotifyNeverAllocate) {
   // thread's push and notify, into empty slots (the first copy into each) and into a full ring.
   const std::string longest(bus::kMaxKeyStringBytes, 'x');
   auto pushAll = [&](BusOutbox& outbox, OutboxQueue<msg::JointState>& qj, OutboxQueue<msg::ControlStatus>& qs) {
-    const long before = g_allocations.load();
+    const long before = testing::allocations();
     for (int k = 0; k < 100; ++k) {  // 64 queued per ring, 36 dropped
       js.positions()[1] = 0.001 * k;
       st.left().closest_segment_a().assign(k % 2 ? longest.c_str() : "l_forearm");
@@ -181,7 +168,7 @@ TEST(BusOutbox, APushAndANotifyNeverAllocate) {
       qs.push(st);
       outbox.notify();
     }
-    return g_allocations.load() - before;
+    return testing::allocations() - before;
   };
   BusOutbox outbox("outbox_test");
   auto& qj = outbox.add(bus.writer, js, 64);

@@ -3,6 +3,8 @@
 // every length loads exactly what the format says or is refused), the refusals (garbage, another
 // robot, a position outside the limits, a second user of the file), the CRC against its published
 // check value, and that save() allocates nothing (counted by replacing operator new) and what it costs.
+#include "support/count_allocations.hpp"
+
 #include <reflex/control_node/robot_state_file.hpp>
 
 #include <gtest/gtest.h>
@@ -18,23 +20,6 @@
 #include <new>
 #include <sys/resource.h>
 
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-// The replaced global operator new / delete pair on malloc / free; GCC cannot see that they are a
-// pair once inlined and warns about every new/delete.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace reflex::control_node {
 namespace {
@@ -232,7 +217,7 @@ TEST(RobotStateFile, SaveAllocatesNothingAndItsCostIsPrinted) {
   constexpr int kN = 20000;
   std::vector<double> us;
   us.reserve(kN);
-  const long before = g_allocations.load();
+  const long before = testing::allocations();
   rusage ru0{}, ru1{};
   getrusage(RUSAGE_THREAD, &ru0);
   for (int k = 0; k < kN; ++k) {
@@ -243,7 +228,7 @@ TEST(RobotStateFile, SaveAllocatesNothingAndItsCostIsPrinted) {
     ASSERT_TRUE(ok);
   }
   getrusage(RUSAGE_THREAD, &ru1);
-  EXPECT_EQ(g_allocations.load() - before, 0) << "save() must not allocate (200 Hz loop)";
+  EXPECT_EQ(testing::allocations() - before, 0) << "save() must not allocate (200 Hz loop)";
   std::sort(us.begin(), us.end());
   // Voluntary context switches = the thread blocked (in pwrite); involuntary = it was preempted
   // (on a loaded machine the rare long samples are preemptions, multiples of the 4 ms tick).
