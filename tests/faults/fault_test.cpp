@@ -163,14 +163,15 @@ TEST(Faults, KillNineOfTheTargetSourceKeeps200HzRetractsAndRecoversAfterRestart)
   EXPECT_EQ(out.find("stale events 0"), std::string::npos) << "the kill was noticed: " << out;
 }
 
-// A bus write that blocks never stops the control loop (the controller's outbox, bus_outbox.hpp).
+// A bus write that blocks never stops the control loop (the controller's outbox, reflex/bus/outbox.hpp).
 // What blocks a write in the field — Fast DDS 2.9's shared-memory port check after a reader's kill -9
 // (about 1 s; idl/README.md) — does not come on demand, so the block is made for certain: the
 // controller's state writers (joint state, status) are RELIABLE, KEEP_ALL with 4 samples and a
 // 200 ms max_blocking_time, and a reader here never takes: after a few samples every write waits
 // 200 ms. Written from the loop (two such writes a cycle), that would be about 2.5 cycles a second;
-// asserted from the controller's own --log (its rows come from the loop, not the bus): 200 Hz and no
-// gap over 50 ms; the exit line names the blocked writes and the dropped samples. Domain 224.
+// asserted from the controller's own --log (its rows come from the loop, not the bus): over 180 Hz
+// and no gap as long as one blocked write (bound 150 ms); the exit line names the blocked writes and
+// the dropped samples. Domain 224.
 TEST(Faults, ABusWriteThatBlocksNeverStopsTheControlLoop) {
   constexpr int kDomain = 224;
   const std::string tmp = ::testing::TempDir();
@@ -254,8 +255,10 @@ TEST(Faults, ABusWriteThatBlocksNeverStopsTheControlLoop) {
   EXPECT_GT(blocked, 3U) << "the writes did block (the test can fail)";
   EXPECT_GT(longest_ms, 150.0);
   EXPECT_GT(dropped, 100U) << "what the blocked writer could not take is counted";
-  EXPECT_NEAR(rate, 200.0, 10.0) << "the loop's rate while its writes block";
-  EXPECT_LT(gap, 0.05) << "no cycle waited for a write";
+  // A cycle that waited for one write would leave a gap of 200 ms; scheduling on a loaded 2-core
+  // machine leaves up to ~30 ms (measured 5.8-26.6 ms).
+  EXPECT_GT(rate, 180.0) << "the loop's rate while its writes block (2.5 Hz if it waited for them)";
+  EXPECT_LT(gap, 0.15) << "no cycle waited for a write";
   EXPECT_GT(wall.size(), 700U) << "4 s at 200 Hz";
 }
 

@@ -3,12 +3,12 @@
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/onboard.hpp"
 #include "reflex/control/urdf_loader.hpp"
-#include "reflex/control_node/bus_outbox.hpp"
 #include "reflex/control_node/dds_robot_port.hpp"
 #include "reflex/control_node/robot_state_file.hpp"
 #include "reflex/control_node/timeseries_log.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/outbox.hpp>
 
 #include <algorithm>
 #include <array>
@@ -115,11 +115,11 @@ struct ControllerNode::Impl {
   bus::Reader<msg::ControllerProtection>* protection_reader = nullptr;
   // The loop's joint state, status and heartbeats go through the outbox: a writer thread does the DDS
   // writes, so a write that blocks (a dead reader on shared memory) never stops the loop
-  // (bus_outbox.hpp). Declared after the participant: closed before its writers go.
-  std::unique_ptr<BusOutbox> outbox;
-  OutboxQueue<msg::JointState>* joint_out = nullptr;
-  OutboxQueue<msg::ControlStatus>* status_out = nullptr;
-  OutboxQueue<msg::Heartbeat>* heartbeat_out = nullptr;
+  // (reflex/bus/outbox.hpp). Declared after the participant: closed before its writers go.
+  std::unique_ptr<bus::Outbox> outbox;
+  bus::OutboxQueue<msg::JointState>* joint_out = nullptr;
+  bus::OutboxQueue<msg::ControlStatus>* status_out = nullptr;
+  bus::OutboxQueue<msg::Heartbeat>* heartbeat_out = nullptr;
   msg::Heartbeat heartbeat_out_msg;  // filled in place: no allocation per heartbeat
   ParticipantId own_participant{};
   std::int64_t protection_stamp_ns = 0;  ///< when this controller claimed the domain (its protection sample)
@@ -267,7 +267,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   oo.input_timeout = config.input_timeout;
   oo.max_target_distance = config.max_target_distance;
   RobotPort* port = nullptr;
-  m.outbox = std::make_unique<BusOutbox>("reflex_controller");
+  m.outbox = std::make_unique<bus::Outbox>("reflex_controller");
   if (config.robot == "dds") {
     DdsRobotPort::Options po;
     po.timeout = config.robot_timeout;
@@ -605,7 +605,7 @@ void ControllerNode::run() {
   }
   publishHeartbeat(msg::STATE_STOPPING);
   m.outbox->close();  // writes what is queued (heartbeats first: the STOPPING one goes out), 1 s at most
-  const OutboxStats ob = m.outbox->stats();
+  const bus::OutboxStats ob = m.outbox->stats();
   stats_.bus_written = ob.written;
   stats_.bus_write_failures = ob.write_failures;
   stats_.bus_dropped = ob.dropped;

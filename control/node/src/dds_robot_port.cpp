@@ -118,7 +118,7 @@ void DdsRobotPort::command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& 
   }
 }
 
-void DdsRobotPort::sendThrough(BusOutbox& outbox) {
+void DdsRobotPort::sendThrough(bus::Outbox& outbox) {
   queue_ = &outbox.add(*writer_, cmd_, 16);
   outbox_ = &outbox;
 }

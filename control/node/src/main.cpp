@@ -114,7 +114,7 @@ int main(int argc, char** argv) {
     }
     if (s.targets_rejected + s.robot_states_rejected > 0)
       extra += ", rejected by cause: " + reflex::control_node::describeRejections(s) + " (last " + s.last_rejection + ")";
-    {  // the loop's bus outputs (bus_outbox.hpp): a blocked write never stopped the loop; it is named here
+    {  // the loop's bus outputs (reflex/bus/outbox.hpp): a blocked write never stopped the loop; it is named here
       char bus_line[256];
       std::snprintf(bus_line, sizeof(bus_line), ", bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %.1f ms%s%s)",
                     static_cast<unsigned long long>(s.bus_written), static_cast<unsigned long long>(s.bus_dropped),

@@ -38,7 +38,7 @@
 // before the loop, every write checked; it survives any stop but SIGKILL.
 //
 // The bus writes of the loop (joint state, status, heartbeats, and with --robot dds the joint
-// commands) are made by another thread too (BusOutbox, bus_outbox.hpp): a DDS write can block for a
+// commands) are made by another thread too (bus::Outbox, reflex/bus/outbox.hpp): a DDS write can block for a
 // second (a dead reader on shared memory) and the loop never waits for one. Samples are stamped in
 // the cycle; what a stuck writer cannot take is dropped, counted and named in the exit line.
 //
@@ -138,7 +138,7 @@ struct NodeStats {
   const char* last_rejection = "";          ///< the latest refusal's cause name ("" none), as in ControlStatus
   std::uint64_t robot_commands = 0;         ///< JointCommand samples published
   // The loop's bus outputs (joint state, status, heartbeat, joint commands), written by the outbox's thread
-  // (bus_outbox.hpp): what reached the middleware, what it refused, what a full ring dropped, and
+  // (reflex/bus/outbox.hpp): what reached the middleware, what it refused, what a full ring dropped, and
   // the writes that blocked (longer than 50 ms; the loop never waits for them).
   std::uint64_t bus_written = 0;
   std::uint64_t bus_write_failures = 0;

@@ -23,7 +23,7 @@
 
 #include "reflex/control/model.hpp"
 #include "reflex/control/onboard.hpp"
-#include "reflex/control_node/bus_outbox.hpp"
+#include <reflex/bus/outbox.hpp>
 
 #include <reflex/bus/bus.hpp>
 
@@ -66,8 +66,8 @@ class DdsRobotPort final : public control::RobotPort {
   void command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double dt) noexcept override;
   /// From now on command() queues each JointCommand (stamped at once: its time and sequence number
   /// are the cycle's) for `outbox`'s writer thread instead of writing it on the control thread
-  /// (bus_outbox.hpp: a DDS write can block for a second). Call before outbox.start().
-  void sendThrough(BusOutbox& outbox);
+  /// (reflex/bus/outbox.hpp: a DDS write can block for a second). Call before outbox.start().
+  void sendThrough(bus::Outbox& outbox);
 
   const Counts& counts() const { return counts_; }
   const char* lastRejection() const { return rejection_; }
@@ -88,8 +88,8 @@ class DdsRobotPort final : public control::RobotPort {
   Options options_;
   bus::Reader<msg::RobotState>* reader_ = nullptr;
   bus::Writer<msg::JointCommand>* writer_ = nullptr;
-  OutboxQueue<msg::JointCommand>* queue_ = nullptr;  ///< set by sendThrough
-  BusOutbox* outbox_ = nullptr;
+  bus::OutboxQueue<msg::JointCommand>* queue_ = nullptr;  ///< set by sendThrough
+  bus::Outbox* outbox_ = nullptr;
   msg::RobotState sample_;
   msg::JointCommand cmd_;
   std::vector<int> driven_;

@@ -1,27 +1,27 @@
-#include "reflex/control_node/bus_outbox.hpp"
+#include "reflex/bus/outbox.hpp"
 
 #include <cerrno>
 #include <cstdio>
 #include <ctime>
 
-namespace reflex::control_node {
+namespace reflex::bus {
 
-BusOutbox::BusOutbox(std::string name, std::chrono::milliseconds stall_report, std::chrono::milliseconds close_budget)
+Outbox::Outbox(std::string name, std::chrono::milliseconds stall_report, std::chrono::milliseconds close_budget)
     : name_(std::move(name)), stall_s_(std::chrono::duration<double>(stall_report).count()), close_budget_(close_budget) {
   sem_init(&wake_, 0, 0);
 }
 
-BusOutbox::~BusOutbox() {
+Outbox::~Outbox() {
   close();
   sem_destroy(&wake_);
 }
 
-void BusOutbox::start() {
+void Outbox::start() {
   if (thread_.joinable() || stop_.load()) return;
   thread_ = std::thread([this] { loop(); });
 }
 
-void BusOutbox::drainAll() {
+void Outbox::drainAll() {
   OutboxStats pass;
   std::string stall_topic;
   double stall_time = 0.0;
@@ -56,7 +56,7 @@ void BusOutbox::drainAll() {
   }
 }
 
-void BusOutbox::loop() {
+void Outbox::loop() {
   while (!stop_.load()) {
     timespec until{};
     clock_gettime(CLOCK_REALTIME, &until);
@@ -74,13 +74,13 @@ void BusOutbox::loop() {
   drainAll();  // what was queued before close()
 }
 
-std::chrono::steady_clock::time_point BusOutbox::deadline() const {
+std::chrono::steady_clock::time_point Outbox::deadline() const {
   const std::int64_t ns = deadline_ns_.load();
   if (ns == std::numeric_limits<std::int64_t>::max()) return std::chrono::steady_clock::time_point::max();
   return std::chrono::steady_clock::time_point(std::chrono::nanoseconds(ns));
 }
 
-void BusOutbox::close() {
+void Outbox::close() {
   if (deadline_ns_.load() == std::numeric_limits<std::int64_t>::max()) {
     deadline_ns_.store(std::chrono::duration_cast<std::chrono::nanoseconds>(
                            (std::chrono::steady_clock::now() + close_budget_).time_since_epoch())
@@ -98,7 +98,7 @@ void BusOutbox::close() {
   }
 }
 
-OutboxStats BusOutbox::stats() const {
+OutboxStats Outbox::stats() const {
   OutboxStats s;
   {
     std::lock_guard<std::mutex> lock(stats_mu_);
@@ -113,4 +113,4 @@ OutboxStats BusOutbox::stats() const {
   return s;
 }
 
-}  // namespace reflex::control_node
+}  // namespace reflex::bus

@@ -1,16 +1,17 @@
-// The controller's bus writes, off the control thread. A DDS write can block: on Fast DDS 2.9's
-// shared-memory transport, a writer whose reader process was killed (kill -9 of a recorder, a
-// behavior module, a viewer) waits for that port's health check, about 1 s, in the write call
-// (idl/README.md). Written from the 5 ms loop, that froze the controller: no distance computed, no
-// e-stop possible, for a second, because some OTHER process died.
+// A real-time loop's DDS writes, off the loop's thread (reflex_controller's 5 ms loop; a robot
+// driver's servo loop). A DDS write can block: on Fast DDS 2.9's shared-memory transport a writer
+// whose reader process was killed waits for that port's health check, about 1 s, in the write call
+// (idl/README.md), and a reliable writer with a full history waits max_blocking_time. Written from
+// the controller's loop, that froze it — no distance computed, no e-stop possible — because some
+// OTHER process died or lagged.
 //
 // Contract:
-//  - queue (OutboxQueue<T>, made by BusOutbox::add before start): a preallocated ring of `capacity`
+//  - queue (OutboxQueue<T>, made by Outbox::add before start): a preallocated ring of `capacity`
 //    samples of one topic, every slot a copy of a prototype and then given `reserve` (a copy of a
 //    string does not keep its capacity: `reserve` reserves every string a sample may carry to its
 //    longest value). Then same-size vectors and strings within those capacities copy into a slot
 //    without allocating.
-//  - push (the control thread): stamps the sample's header (bus::Writer::stamp: the time and the
+//  - push (the loop's thread): stamps the sample's header (Writer::stamp: the time and the
 //    sequence number are the control cycle's) and copies it into the ring. No allocation (see
 //    above), no I/O, no lock, no system call, never throws. A full ring (the writer thread is stuck
 //    in a write) drops the sample and counts it; its sequence number is used, so every reader sees
@@ -26,7 +27,7 @@
 // Single producer (push, notify), single consumer (the writer thread), per queue.
 #pragma once
 
-#include <reflex/bus/participant.hpp>
+#include "reflex/bus/participant.hpp"
 
 #include <semaphore.h>
 
@@ -42,7 +43,7 @@
 #include <thread>
 #include <vector>
 
-namespace reflex::control_node {
+namespace reflex::bus {
 
 /// What the outbox did, over its life (totals).
 struct OutboxStats {
@@ -68,11 +69,11 @@ class OutboxQueueBase {
 };
 }  // namespace detail
 
-/// One topic's ring. Made by BusOutbox::add; owned by the outbox.
+/// One topic's ring. Made by Outbox::add; owned by the outbox.
 template <class T>
 class OutboxQueue final : public detail::OutboxQueueBase {
  public:
-  OutboxQueue(bus::Writer<T>& writer, std::size_t capacity, const T& prototype,
+  OutboxQueue(Writer<T>& writer, std::size_t capacity, const T& prototype,
               const std::function<void(T&)>& reserve)
       : writer_(writer), ring_(capacity, prototype) {
     if (reserve)
@@ -125,29 +126,29 @@ class OutboxQueue final : public detail::OutboxQueueBase {
   }
 
  private:
-  bus::Writer<T>& writer_;
+  Writer<T>& writer_;
   std::vector<T> ring_;
   std::atomic<std::uint64_t> head_{0};  // next slot push writes (producer)
   std::atomic<std::uint64_t> tail_{0};  // next slot the writer thread writes (consumer)
   std::atomic<std::uint64_t> dropped_{0};
 };
 
-class BusOutbox {
+class Outbox {
  public:
   /// `name` prefixes the stall lines on stderr ("reflex_controller"). `stall_report`: a write longer
   /// than this is a stall (counted, reported).
-  explicit BusOutbox(std::string name, std::chrono::milliseconds stall_report = std::chrono::milliseconds(50),
+  explicit Outbox(std::string name, std::chrono::milliseconds stall_report = std::chrono::milliseconds(50),
                      std::chrono::milliseconds close_budget = std::chrono::milliseconds(1000));
-  ~BusOutbox();
-  BusOutbox(const BusOutbox&) = delete;
-  BusOutbox& operator=(const BusOutbox&) = delete;
+  ~Outbox();
+  Outbox(const Outbox&) = delete;
+  Outbox& operator=(const Outbox&) = delete;
 
   /// Before start(): a ring of `capacity` samples for `writer`, each slot a copy of `prototype` given
   /// `reserve` (may be empty: a type without strings that grow).
   template <class T>
-  OutboxQueue<T>& add(bus::Writer<T>& writer, const T& prototype, std::size_t capacity = 64,
+  OutboxQueue<T>& add(Writer<T>& writer, const T& prototype, std::size_t capacity = 64,
                       const std::function<void(T&)>& reserve = {}) {
-    if (capacity == 0) throw std::invalid_argument("BusOutbox::add: capacity must be positive");
+    if (capacity == 0) throw std::invalid_argument("Outbox::add: capacity must be positive");
     auto q = std::make_unique<OutboxQueue<T>>(writer, capacity, prototype, reserve);
     OutboxQueue<T>& ref = *q;
     queues_.push_back(std::move(q));
@@ -181,4 +182,4 @@ class BusOutbox {
   std::chrono::steady_clock::time_point last_report_{};
 };
 
-}  // namespace reflex::control_node
+}  // namespace reflex::bus

@@ -1,14 +1,14 @@
-// The controller's bus outbox (control/node/.../bus_outbox.hpp): the loop's samples reach a reader
-// in push order, with the sequence numbers and stamps of the push (the control cycle), not of the
-// later write; a full ring drops the newest, counts it and leaves a gap in the sequence numbers a
-// reader can see; a push never allocates (counted by replacing operator new) and never waits for
-// the writer thread, also while every write blocks for 200 ms. Real DDS entities (one participant,
-// domain 223); the real controller with blocked writes is faults_process_test's
-// ABusWriteThatBlocksNeverStopsTheControlLoop.
+// The bus outbox (idl/bus/include/reflex/bus/outbox.hpp; reflex_controller's loop writes through
+// it): the loop's samples reach a reader in push order, with the sequence numbers and stamps of the
+// push (the control cycle), not of the later write; a full ring drops the newest, counts it and
+// leaves a gap in the sequence numbers a reader can see; a push never allocates (counted by
+// replacing operator new) and never waits for the writer thread, also while every write blocks for
+// 200 ms. Real DDS entities (one participant, domain 223); the real controller with blocked writes
+// is faults_process_test's ABusWriteThatBlocksNeverStopsTheControlLoop.
 #include "support/count_allocations.hpp"
 
 #include <reflex/bus/bus.hpp>
-#include <reflex/control_node/bus_outbox.hpp>
+#include <reflex/bus/outbox.hpp>
 
 #include <gtest/gtest.h>
 
@@ -23,7 +23,7 @@
 #include <thread>
 #include <vector>
 
-namespace reflex::control_node {
+namespace reflex::bus {
 namespace {
 
 using namespace std::chrono_literals;
@@ -35,18 +35,18 @@ std::int64_t nowNs() {
 }
 
 struct Bus {
-  bus::Participant p;
-  bus::Writer<msg::JointState>& writer;
-  bus::Reader<msg::JointState>& reader;
+  Participant p;
+  Writer<msg::JointState>& writer;
+  Reader<msg::JointState>& reader;
   explicit Bus(const std::string& topic)
       : p([] {
-          bus::BusConfig c;
+          BusConfig c;
           c.module_name = "outbox_test";
           c.domain_id = kDomain;
           return c;
         }()),
-        writer(p.makeWriter<msg::JointState>(topic, bus::kProfileState)),
-        reader(p.makeReader<msg::JointState>(topic, bus::kProfileRecord)) {
+        writer(p.makeWriter<msg::JointState>(topic, kProfileState)),
+        reader(p.makeReader<msg::JointState>(topic, kProfileRecord)) {
     EXPECT_TRUE(reader.waitForWriters(1, 10s));
   }
   // Every sample that arrives within `timeout`, until `n` did.
@@ -72,7 +72,7 @@ msg::JointState prototype() {
 
 TEST(BusOutbox, SamplesArriveInPushOrderWithTheStampAndSequenceNumberOfThePush) {
   Bus bus("test/outbox_order");
-  BusOutbox outbox("outbox_test");
+  Outbox outbox("outbox_test");
   msg::JointState js = prototype();
   auto& q = outbox.add(bus.writer, js, 64);
   outbox.start();
@@ -114,7 +114,7 @@ TEST(BusOutbox, SamplesArriveInPushOrderWithTheStampAndSequenceNumberOfThePush) 
 
 TEST(BusOutbox, AFullRingDropsTheNewestCountsItAndReadersSeeTheGap) {
   Bus bus("test/outbox_full");
-  BusOutbox outbox("outbox_test");
+  Outbox outbox("outbox_test");
   msg::JointState js = prototype();
   auto& q = outbox.add(bus.writer, js, 8);
   // The writer thread not started yet: the ring fills. 8 queued, 3 dropped (their numbers used).
@@ -144,20 +144,20 @@ TEST(BusOutbox, AFullRingDropsTheNewestCountsItAndReadersSeeTheGap) {
 
 TEST(BusOutbox, APushAndANotifyNeverAllocate) {
   Bus bus("test/outbox_alloc");
-  auto& status_writer = bus.p.makeWriter<msg::ControlStatus>("test/outbox_alloc_status", bus::kProfileState);
+  auto& status_writer = bus.p.makeWriter<msg::ControlStatus>("test/outbox_alloc_status", kProfileState);
   msg::JointState js = prototype();
   msg::ControlStatus st;
   st.header().source("outbox_test");
   const auto reserve = [](msg::ControlStatus& s) {
-    s.left().closest_segment_a().reserve(bus::kMaxKeyStringBytes);
-    s.left().closest_segment_b().reserve(bus::kMaxKeyStringBytes);
+    s.left().closest_segment_a().reserve(kMaxKeyStringBytes);
+    s.left().closest_segment_b().reserve(kMaxKeyStringBytes);
   };
   reserve(st);
   // Every value a cycle can put in: the longest segment name, a shorter one, new numbers. The writer
   // thread is not started (it allocates inside DDS, allowed there): counted here is the control
   // thread's push and notify, into empty slots (the first copy into each) and into a full ring.
-  const std::string longest(bus::kMaxKeyStringBytes, 'x');
-  auto pushAll = [&](BusOutbox& outbox, OutboxQueue<msg::JointState>& qj, OutboxQueue<msg::ControlStatus>& qs) {
+  const std::string longest(kMaxKeyStringBytes, 'x');
+  auto pushAll = [&](Outbox& outbox, OutboxQueue<msg::JointState>& qj, OutboxQueue<msg::ControlStatus>& qs) {
     const long before = testing::allocations();
     for (int k = 0; k < 100; ++k) {  // 64 queued per ring, 36 dropped
       js.positions()[1] = 0.001 * k;
@@ -170,7 +170,7 @@ TEST(BusOutbox, APushAndANotifyNeverAllocate) {
     }
     return testing::allocations() - before;
   };
-  BusOutbox outbox("outbox_test");
+  Outbox outbox("outbox_test");
   auto& qj = outbox.add(bus.writer, js, 64);
   auto& qs = outbox.add<msg::ControlStatus>(status_writer, st, 64, reserve);
   EXPECT_EQ(pushAll(outbox, qj, qs), 0) << "push and notify on the control thread";
@@ -181,7 +181,7 @@ TEST(BusOutbox, APushAndANotifyNeverAllocate) {
   EXPECT_EQ(outbox.stats().written, 128U);
   // The same without `reserve`: a slot's string is a copy of the prototype's, whose capacity a copy
   // does not keep, so the long names allocate: the count sees it (the test can fail).
-  BusOutbox unreserved("outbox_test");
+  Outbox unreserved("outbox_test");
   auto& qj2 = unreserved.add(bus.writer, js, 64);
   msg::ControlStatus fresh;  // short strings, as a controller's status before its first cycle
   fresh.header().source("outbox_test");
@@ -222,12 +222,12 @@ TEST(BusOutbox, AWriteThatBlocksNeverHoldsUpThePush) {
 </dds>
 )";
   }
-  bus::BusConfig c;
+  BusConfig c;
   c.module_name = "outbox_test";
   c.domain_id = kDomain;
   c.profiles_file = xml;
   c.participant_profile = "outbox_blocking_participant";
-  bus::Participant p(c);
+  Participant p(c);
   auto& writer = p.makeWriter<msg::JointState>("test/outbox_blocking", "outbox_blocking_writer");
   auto& reader = p.makeReader<msg::JointState>("test/outbox_blocking", "outbox_blocking_reader");
   ASSERT_TRUE(reader.waitForWriters(1, 10s));
@@ -243,7 +243,7 @@ TEST(BusOutbox, AWriteThatBlocksNeverHoldsUpThePush) {
   EXPECT_GT(longest_direct, 0.15) << "the direct write blocks (the test can fail)";
 
   // 2. Behind the outbox, at the control loop's 200 Hz for 1 s.
-  BusOutbox outbox("outbox_test", std::chrono::milliseconds(50));
+  Outbox outbox("outbox_test", std::chrono::milliseconds(50));
   auto& q = outbox.add(writer, js, 16);
   outbox.start();
   double longest_push = 0.0;
@@ -272,4 +272,4 @@ TEST(BusOutbox, AWriteThatBlocksNeverHoldsUpThePush) {
 }
 
 }  // namespace
-}  // namespace reflex::control_node
+}  // namespace reflex::bus
