@@ -19,6 +19,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <new>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -124,6 +125,7 @@ TEST(BusOutbox, AFullRingDropsTheNewestCountsItAndReadersSeeTheGap) {
   }
   EXPECT_EQ(q.dropped(), 3U);
   outbox.start();
+  EXPECT_THROW(outbox.add(bus.writer, js, 8), std::logic_error) << "the writer thread reads the queue list";
   outbox.notify();
   auto got = bus.receive(8, 5000ms);
   ASSERT_EQ(got.size(), 8U);

@@ -16,7 +16,7 @@
 //    above), no I/O, no lock, no system call, never throws. A full ring (the writer thread is stuck
 //    in a write) drops the sample and counts it; its sequence number is used, so every reader sees
 //    the gap. Nothing is lost silently.
-//  - notify (the control thread, once per cycle): wakes the writer thread (sem_post: one futex wake
+//  - notify (the loop's thread, once per cycle): wakes the writer thread (sem_post: one futex wake
 //    at most, no allocation).
 //  - the writer thread writes every queued sample in order, each topic's in push order; it times
 //    every write and, when one takes longer than `stall_report` (50 ms), says so on stderr (rate
@@ -50,7 +50,7 @@ struct OutboxStats {
   std::uint64_t queued = 0;          ///< samples pushed and queued
   std::uint64_t written = 0;         ///< samples the middleware accepted
   std::uint64_t write_failures = 0;  ///< samples the middleware refused (write() false)
-  std::uint64_t dropped = 0;         ///< samples dropped because their ring was full
+  std::uint64_t dropped = 0;         ///< samples dropped: their ring was full, or close() ran out of time
   std::uint64_t stalls = 0;          ///< writes that took longer than the stall threshold
   double longest_write_s = 0.0;      ///< the longest single write
   std::string longest_topic;         ///< its topic ("" if nothing was written)
@@ -80,7 +80,7 @@ class OutboxQueue final : public detail::OutboxQueueBase {
       for (T& slot : ring_) reserve(slot);
   }
 
-  /// Control thread: stamps `sample`'s header and queues a copy. False if the sample was refused
+  /// The loop's thread: stamps `sample`'s header and queues a copy. False if the sample was refused
   /// (a @key string too long: counted by the writer) or the ring was full (dropped, counted).
   bool push(T& sample) noexcept {
     if (!writer_.stamp(sample)) return false;
@@ -136,9 +136,9 @@ class OutboxQueue final : public detail::OutboxQueueBase {
 class Outbox {
  public:
   /// `name` prefixes the stall lines on stderr ("reflex_controller"). `stall_report`: a write longer
-  /// than this is a stall (counted, reported).
+  /// than this is a stall (counted, reported). `close_budget`: how long close() keeps writing.
   explicit Outbox(std::string name, std::chrono::milliseconds stall_report = std::chrono::milliseconds(50),
-                     std::chrono::milliseconds close_budget = std::chrono::milliseconds(1000));
+                  std::chrono::milliseconds close_budget = std::chrono::milliseconds(1000));
   ~Outbox();
   Outbox(const Outbox&) = delete;
   Outbox& operator=(const Outbox&) = delete;
@@ -149,6 +149,8 @@ class Outbox {
   OutboxQueue<T>& add(Writer<T>& writer, const T& prototype, std::size_t capacity = 64,
                       const std::function<void(T&)>& reserve = {}) {
     if (capacity == 0) throw std::invalid_argument("Outbox::add: capacity must be positive");
+    if (thread_.joinable() || stop_.load())
+      throw std::logic_error("Outbox::add after start() or close(): the writer thread reads the queue list");
     auto q = std::make_unique<OutboxQueue<T>>(writer, capacity, prototype, reserve);
     OutboxQueue<T>& ref = *q;
     queues_.push_back(std::move(q));
@@ -156,7 +158,7 @@ class Outbox {
   }
   /// Starts the writer thread (once).
   void start();
-  /// Control thread: wake the writer thread. No allocation, never throws.
+  /// The loop's thread: wakes the writer thread. No allocation, never throws.
   void notify() noexcept { sem_post(&wake_); }
   /// Writes what is queued, stops and joins the writer thread. Idempotent.
   void close();
