@@ -207,16 +207,18 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
 
   // 3. The same command again, now with a log and a duration.
   std::vector<std::string> args_b = args;
-  for (const char* s : {"--log", log_b.c_str(), "--duration", "12"}) args_b.emplace_back(s);
+  for (const char* s : {"--log", log_b.c_str(), "--duration", "20"}) args_b.emplace_back(s);
   const double t_restart = wallNow();
   testing::ChildProcess b(args_b, tmp + "restart_controller_b.log");
   ASSERT_TRUE(b.started());
   // The watch here knew the killed controller: it finds the new one only after the new one's peer
-  // probe (1 s) and, at worst, one discovery announcement period (3 s by default; 2.3-3.1 s after the
-  // restart measured on a quiet machine, over 4.5 s once in CI under load). Wait for its first
-  // JointState for up to 10 s, then 1.5 s more for the 200 Hz check.
-  for (int i = 0; i < 100 && states.size() == n_before; ++i) pumpFor(0.1);
-  ASSERT_GT(states.size(), n_before) << "the restarted controller publishes within 10 s; its output:\n"
+  // probe (1 s) and Fast DDS's rediscovery of a restarted participant over shared memory (it takes
+  // the dead one's participant id): 2.3-3.1 s after the restart on a quiet machine, over 4.5 s once
+  // in CI, once over 29 s in mujoco_faults_test (bringup/README.md, "A controller restart"). The
+  // default transport is kept on purpose (what users run; the discovery delay is also what lets the
+  // hold below be seen). Wait for the first JointState for up to 15 s, then 1.5 s more for 200 Hz.
+  for (int i = 0; i < 150 && states.size() == n_before; ++i) pumpFor(0.1);
+  ASSERT_GT(states.size(), n_before) << "the restarted controller publishes within 15 s; its output:\n"
                                      << readFile(tmp + "restart_controller_b.log");
   pumpFor(1.5);
   const Rx first_seen = states[n_before];
@@ -308,12 +310,11 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   ASSERT_GE(t_given, 0.0) << "the restarted controller receives targets";
   EXPECT_GE(t_follow, 0.0) << "the restarted controller follows the targets";
   EXPECT_LT(t_follow - t_given, 3.0) << "within 3 s of its first target";
-  // Rediscovery: a participant that knew the killed controller finds the new one only at one of its
-  // periodic announcements (Fast DDS 2.9 default: every 3 s; 0.1 s for a source started after the
-  // kill), after the new controller's 1 s peer probe: 2.4-3.3 s measured. Bound: the probe and two
-  // announcement periods (one may be lost on a loaded machine) + 1 s; --duration 12 leaves the 3 s
-  // for following after it.
-  EXPECT_LT(t_given, 8.0) << "the restarted controller gets the targets within 8 s of its start";
+  // Rediscovery: a participant that knew the killed controller finds the new one late (see the wait
+  // above; 0.1 s for a source started after the kill), after the new controller's 1 s peer probe:
+  // 2.4-3.3 s measured, typically. Bound 15 s, as the wait
+  // above (Fast DDS's rediscovery, not this controller); --duration 20 leaves the 3 s for following.
+  EXPECT_LT(t_given, 15.0) << "the restarted controller gets the targets within 15 s of its start";
   EXPECT_GE(d_min_b, kDr) << "restarted controller's closest pair";
 
   // No pair below d_r anywhere (both controllers, as published); 200 Hz after the restart.
