@@ -83,6 +83,18 @@ struct Observer {
       std::this_thread::sleep_for(5ms);
     }
   }
+  /// Collects until `done()` holds (checked every 100 ms) or `limit` has passed; what done() said.
+  /// For what a process publishes once: on a loaded two-core machine discovery alone can take
+  /// seconds (a fixed 2 s window once missed the grasped bar in CI).
+  template <class Pred>
+  bool collectUntil(Pred done, std::chrono::milliseconds limit) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    do {
+      collect(100ms);
+      if (done()) return true;
+    } while (std::chrono::steady_clock::now() < end);
+    return false;
+  }
   void clear() {
     collect(200ms);
     hand_log.clear();
@@ -266,9 +278,14 @@ TEST(BehaviorProcess, BarAndOcclusionTogetherAttachBothAndRemoveBothAtStop) {
   Observer bus;
   Child proc(behavior(kBehaviorDir + "/bar_occlusion.yaml"), ::testing::TempDir() + "modules_behavior_bar.log");
   ASSERT_TRUE(proc.started());
-  bus.collect(2000ms);
   std::map<std::string, msg::BodySchemaChange> last;
-  for (const auto& s : bus.schema_log) last[s.segment_name()] = s;
+  bus.collectUntil(
+      [&] {
+        for (const auto& s : bus.schema_log) last[s.segment_name()] = s;
+        return last.count("grasped_bar") == 1 && last.count("gaze_line") == 1 && bus.have_hands &&
+               bus.last_hands.left().status() == msg::TARGET_GIVEN;
+      },
+      10000ms);
   ASSERT_EQ(last.count("grasped_bar"), 1u) << proc.output();
   ASSERT_EQ(last.count("gaze_line"), 1u) << proc.output();
   EXPECT_EQ(last["grasped_bar"].parent_link(), "l_hand");
