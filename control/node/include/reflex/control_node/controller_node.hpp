@@ -136,7 +136,7 @@ struct NodeStats {
   std::uint64_t robot_states_rejected = 0;  ///< wrong lengths, a missing joint, NaN, a future or old stamp
   std::array<std::uint64_t, 5> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
   const char* last_rejection = "";          ///< the latest refusal's cause name ("" none), as in ControlStatus
-  std::uint64_t robot_commands = 0;         ///< JointCommand samples published
+  std::uint64_t robot_commands = 0;         ///< JointCommand samples handed to the bus (queued for the outbox's writer thread; its drops are in bus_dropped)
   // The loop's bus outputs (joint state, status, heartbeat, joint commands), written by the outbox's thread
   // (reflex/bus/outbox.hpp): what reached the middleware, what it refused, what a full ring dropped, and
   // the writes that blocked (longer than 50 ms; the loop never waits for them).

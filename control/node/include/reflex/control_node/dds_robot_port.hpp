@@ -49,7 +49,7 @@ class DdsRobotPort final : public control::RobotPort {
     std::uint64_t rejected_non_finite = 0;   ///< NaN / Inf position or velocity of a model joint
     std::uint64_t rejected_future = 0;       ///< stamp ahead of this host's clock by more than kFutureTolerance
     std::uint64_t rejected_old = 0;          ///< not newer than the state held (reordered or repeated)
-    std::uint64_t commands = 0;              ///< JointCommand samples published
+    std::uint64_t commands = 0;              ///< JointCommand samples published (with sendThrough: queued)
     std::uint64_t rejected() const {
       return rejected_length + rejected_missing + rejected_non_finite + rejected_future + rejected_old;
     }
