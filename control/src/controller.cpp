@@ -734,10 +734,10 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
   data.num_guard_pairs = 0;
   double most_sweep = 0.0;
   for (const double s : data.link_sweep) most_sweep = std::max(most_sweep, s);
-  auto consider = [&](int i, const PairDistance& pd, int owner_a, int owner_b) {
+  auto consider = [&](int i, const PairDistance& pd, int owner_a, int owner_b, int link_a, int link_b) {
     if (owner_a < 0 && owner_b < 0) return;
-    const double reach = data.link_sweep[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_a))] +
-                         data.link_sweep[static_cast<std::size_t>(segmentLink(model, data.dist, pd.seg_b))];
+    const double reach = data.link_sweep[static_cast<std::size_t>(link_a)] +
+                         data.link_sweep[static_cast<std::size_t>(link_b)];
     // Without the broad phase (tests' brute-force reference): every such pair, whatever its bound.
     if (!cm.broad_phase || !(pd.distance - reach > floor))
       data.guard_pairs[static_cast<std::size_t>(data.num_guard_pairs++)] = i;
@@ -746,11 +746,13 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     forEachExactPair(data.dist, [&](int i, bool robot) {
       const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
       if (robot) {
-        if ((data.arm_pair_facts[kLeft][static_cast<std::size_t>(i)].flags |
-             data.arm_pair_facts[kRight][static_cast<std::size_t>(i)].flags) & ArmPairFacts::kInvolved)
-          consider(i, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)], cm.segment_owner[static_cast<std::size_t>(pd.seg_b)]);
+        const ArmPairFacts& left = data.arm_pair_facts[kLeft][static_cast<std::size_t>(i)];
+        if ((left.flags | data.arm_pair_facts[kRight][static_cast<std::size_t>(i)].flags) & ArmPairFacts::kInvolved)
+          consider(i, pd, cm.segment_owner[static_cast<std::size_t>(pd.seg_a)],
+                   cm.segment_owner[static_cast<std::size_t>(pd.seg_b)], left.link_a, left.link_b);
       } else if (isPhysical(model, data, pd)) {
-        consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
+        consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b),
+                 segmentLink(model, data.dist, pd.seg_a), segmentLink(model, data.dist, pd.seg_b));
       }
     });
   } else {
@@ -758,7 +760,8 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     for (int i = 0; i < npairs; ++i) {
       const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
       if (!pd.active || !isPhysical(model, data, pd)) continue;
-      consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b));
+      consider(i, pd, ownerArm(model, cm, data.dist, pd.seg_a), ownerArm(model, cm, data.dist, pd.seg_b),
+               segmentLink(model, data.dist, pd.seg_a), segmentLink(model, data.dist, pd.seg_b));
     }
   }
   if (data.num_guard_pairs == 0) return;

@@ -162,6 +162,10 @@ void forEachExactPair(const DistanceData& data, F&& f) {
   const std::vector<int>& exact = data.exactList();
   const int nexact = data.num_exact_pairs;
   const int nslot = data.any_slot_enabled ? static_cast<int>(data.slot_pairs.size()) : 0;
+  if (nslot == 0) {  // the usual cycle, no slot enabled: the exact list alone, without the merge
+    for (int e = 0; e < nexact; ++e) f(exact[static_cast<std::size_t>(e)], true);
+    return;
+  }
   for (int e = 0, s = 0; e < nexact || s < nslot;) {
     const bool robot = s >= nslot || (e < nexact && exact[static_cast<std::size_t>(e)] <
                                                         data.slot_pairs[static_cast<std::size_t>(s)]);
