@@ -334,6 +334,17 @@ def main():
             return "mujoco (reflex_mujoco over DDS, the controller with --robot dds; distances from the measured state)"
         return "kinematic (the controller's in-process plant)"
     lines.append("| robot | %s | %s |" % (robot("avoidance"), robot("no_avoidance")))
+    def startup(label):
+        if label not in plant:
+            return "-"
+        failures = plant[label].get("startup_failures", [])
+        waited = plant[label].get("startup_s")
+        text = ("connected after %.1f s" % waited) if isinstance(waited, (int, float)) else "-"
+        if failures:
+            text += ", at attempt %d (the chain was started again after: %s)" % (
+                len(failures) + 1, "; ".join(f.replace("|", "/") for f in failures))
+        return text
+    lines.append("| start-up | %s | %s |" % (startup("avoidance"), startup("no_avoidance")))
     on, off = summary.get("avoidance", {}), summary.get("no_avoidance", {})
     def cell(d, key, scale=1.0, fmt="%.1f"):
         return (fmt % (d[key] * scale)) if key in d else "-"

@@ -14,8 +14,14 @@ reflex_behavior: behavior, reflex_controller: controller, reflex_record: recorde
 authenticates, every topic is access-controlled and encrypted. DIR is made with
 bringup/security/make_security.sh when it does not exist or is empty; a folder that exists is used as it
 is (it may hold deployed credentials without the CA key) and must hold those four profiles with every
-file they name. Authentication takes seconds: vision starts 2 s after the recorder records the first
-samples (it authenticated the controller). run.json, summary.json and report.md say which mode ran.
+file they name. run.json, summary.json and report.md say which mode ran.
+
+Start-up, either mode: vision starts when reflex_behavior hears the controller's joint states and the
+recorder records (under DDS-Security each pair of participants authenticates first, seconds on a loaded
+machine), and holds its replay until behavior and recorder matched its writer (reflex_vision
+--wait-readers). A link that does not connect in time (--ready-timeout, VISION_WAIT_S) stops the chain
+and starts it again, up to STARTUP_ATTEMPTS times; the failed attempt's logs stay as
+<name>.attempt<N>.log, and run.json (startup_failures) and report.md name each failure.
 
 With --robot mujoco the robot is the physics-simulated humanoid (issue 13): reflex_mujoco is started on
 the run's domain before the controller, which then runs with --robot dds (it reads the measured state
@@ -23,7 +29,7 @@ from reflex/robot_state and commands reflex/joint_command); MuJoCo's contact cou
 d_r, from reflex_mujoco's exit line) goes into run.json and the report, which names the plant.
 
 Usage: run_flagship.py [--out DIR] [--build DIR] [--domain N] [--rate R] [--only on|off] [--secure DIR]
-                       [--robot kinematic|mujoco] [--no-report]
+                       [--robot kinematic|mujoco] [--ready-timeout S] [--no-report]
 """
 import argparse
 import json
@@ -46,6 +52,9 @@ def log(msg):
 SECURE_IDENTITIES = {"controller": "controller", "behavior": "behavior", "recorder": "recorder", "vision": "vision",
                      "view": "view"}  # view: reflex_view's read-only identity (subscribe rules only)
 SECURE_READY_TIMEOUT_S = 45.0  # authentication of controller, behavior and recorder (1-5 s per pair, loaded)
+READY_TIMEOUT_S = 20.0  # plain discovery (about 1 s)
+VISION_WAIT_S = 45.0  # vision holds its replay until behavior (and recorder) matched its writer
+STARTUP_ATTEMPTS = 3  # a chain whose link did not connect is stopped and started again, said in log and run.json
 
 
 class Proc:
@@ -111,24 +120,50 @@ def last_count(path, pattern):
     return int(found[-1]) if found else 0
 
 
-def wait_secure_ready(procs, out):
-    """Secure mode: blocks until the recorder records samples (it authenticated the controller; the
-    other pairs authenticate in parallel), then 2 s more as a plain run waits for discovery; without a
-    recorder 5 s. Raises if a process exits or nothing is recorded within SECURE_READY_TIMEOUT_S."""
+class StartupFailed(RuntimeError):
+    """A link of the chain did not connect in time; run_once starts the chain again (STARTUP_ATTEMPTS)."""
+
+
+def wait_chain_ready(procs, out, secure, timeout):
+    """Blocks until the chain before vision is connected: reflex_behavior receives the controller's joint
+    states (joint_states=N in its status line, every second) and, when recording, the recorder records
+    samples (it matched the controller); then 1 s more for the other pairs (view). Under DDS-Security every
+    pair of participants authenticates first: seconds each on a loaded machine. Returns the seconds waited.
+    Raises RuntimeError if a process exits, StartupFailed naming the link that did not connect within
+    `timeout` seconds."""
     t0 = time.time()
-    recorder = next((p for p in procs if p.name == "recorder"), None)
-    recorder_log = os.path.join(out, "recorder.log")
-    while recorder is not None and last_count(recorder_log, r"(\d+) samples") == 0:
+    links = [("behavior", os.path.join(out, "behavior.log"), r"joint_states=(\d+)",
+              "reflex_behavior received no joint state from reflex_controller")]
+    if any(p.name == "recorder" for p in procs):
+        links.append(("recorder", os.path.join(out, "recorder.log"), r"(\d+) samples",
+                      "reflex_record recorded nothing (it did not match reflex_controller)"))
+    while True:
+        missing = [(name, what) for name, path, pattern, what in links if last_count(path, pattern) == 0]
+        if not missing:
+            break
         for p in procs:
             if not p.alive():
-                raise RuntimeError("%s exited during secure start-up (see %s)" % (p.name, p.log.name))
-        if time.time() - t0 > SECURE_READY_TIMEOUT_S:
-            raise RuntimeError("secure start-up: the recorder received nothing in %.0f s (authentication failed? "
-                               "see %s and the other logs in %s)" % (SECURE_READY_TIMEOUT_S, recorder_log, out))
+                raise RuntimeError("%s exited during start-up (see %s)" % (p.name, p.log.name))
+        if time.time() - t0 > timeout:
+            raise StartupFailed("start-up: %s in %.0f s%s (see %s)" % (
+                "; ".join(what for _, what in missing), timeout,
+                " (authentication failed?)" if secure else "",
+                ", ".join(os.path.join(out, name + ".log") for name, _ in missing)))
         time.sleep(0.2)
-    time.sleep(2.0 if recorder is not None else 5.0)
-    log("secure start-up: participants authenticated, %.1f s" % (time.time() - t0))
+    time.sleep(1.0)
+    log("start-up: %s connected, %.1f s" % ("behavior and recorder" if len(links) > 1 else "behavior",
+                                            time.time() - t0))
     return time.time() - t0
+
+
+def last_line(path, prefix):
+    """The last line of the log file that starts with `prefix`, or ''."""
+    try:
+        with open(path, errors="replace") as fh:
+            lines = [line.strip() for line in fh if line.startswith(prefix)]
+    except OSError:
+        return ""
+    return lines[-1] if lines else ""
 
 
 def session_length(session):
@@ -159,12 +194,16 @@ def run_once(args, label, avoidance):
                 os.path.join(args.secure, "profiles", SECURE_IDENTITIES[name] + ".xml")]
 
     procs = []
-    try:
+    ready_timeout = args.ready_timeout or (SECURE_READY_TIMEOUT_S if args.secure else READY_TIMEOUT_S)
+
+    def start_and_run(attempt):
+        """Starts the chain (procs), waits until it is connected, replays the session through it.
+        Raises StartupFailed when a link did not connect (the caller starts again)."""
         # The controller is stopped by SIGTERM when vision has finished; its --duration is only a safety
         # net should this runner die. Generous: on a loaded machine the vision replay falls behind real
         # time (seen: a 36 s session took 41 s with seven builds running), and a controller that ended on
         # its own duration first was reported as "died during the run".
-        ctl_duration = 2.0 * length + 60.0 + (SECURE_READY_TIMEOUT_S if args.secure else 0.0)
+        ctl_duration = 2.0 * length + 60.0 + VISION_WAIT_S + ready_timeout
         ctl = [os.path.join(bindir, "reflex_controller")] + dds("controller") + [
             "--duration", "%.1f" % ctl_duration, "--log", os.path.join(out, "controller.csv")]
         if not avoidance:
@@ -177,15 +216,16 @@ def run_once(args, label, avoidance):
                                         "--name", "reflex_mujoco"], os.path.join(out, "robot.log"), env))
             ctl += ["--robot", "dds"]
         procs.append(Proc("controller", ctl, os.path.join(out, "controller.log"), env))
-        beh = [os.path.join(bindir, "reflex_behavior"), "--config", args.behavior] + dds("behavior")
+        # --progress 1: its status line (joint_states=N) tells wait_chain_ready that it hears the controller.
+        beh = [os.path.join(bindir, "reflex_behavior"), "--config", args.behavior, "--progress", "1"] + dds("behavior")
         procs.append(Proc("behavior", beh, os.path.join(out, "behavior.log"), env))
         recorder = os.path.join(bindir, "reflex_record")
+        readers = 1  # of vision's reflex/object_targets: behavior, and the recorder when there is one
         if os.path.exists(recorder):
             # MCAP (issue 14): the recording opens in Foxglove (File -> Open local file).
-            rec = [recorder, "record"] + dds("recorder") + ["--output", os.path.join(out, "bus.mcap")]
-            if args.secure:
-                rec.append("--progress")
+            rec = [recorder, "record"] + dds("recorder") + ["--output", os.path.join(out, "bus.mcap"), "--progress"]
             procs.append(Proc("recorder", rec, os.path.join(out, "recorder.log"), env))
+            readers += 1
         # The live 3D view (reflex_view, reads only) during the run with avoidance, if asked for. With
         # DDS-Security: under its own identity `view`, which may only read. A view that cannot start (port in use)
         # is reported and the experiment goes on: it is a window onto the run, not part of it.
@@ -194,16 +234,16 @@ def run_once(args, label, avoidance):
             procs.append(Proc("view", [view, "--port", str(args.view)] + dds("view"),
                               os.path.join(out, "view.log"), env))
             log("live 3D view of this run: http://localhost:%d (Foxglove: ws://localhost:%d)" % (args.view, args.view))
-        if args.secure:
-            env_note["secure_startup_s"] = wait_secure_ready(procs, out)
-        else:
-            time.sleep(2.0)  # discovery
+        env_note["startup_s"] = wait_chain_ready(procs, out, args.secure, ready_timeout)
         for p in procs:
             if not p.alive():
                 raise RuntimeError("%s exited early (see %s)" % (p.name, p.log.name))
         env_note["vision_start_wall"] = time.time()
+        # --wait-readers: vision holds its replay until behavior (and the recorder) matched its writer, so
+        # the first frames are not lost to a pair still authenticating; exit 5 if they do not in time.
         vision = Proc("vision", [os.path.join(bindir, "reflex_vision"), "--session", args.session] + dds("vision") +
-                      ["--rate", str(args.rate), "--quiet"], os.path.join(out, "vision.log"), env)
+                      ["--rate", str(args.rate), "--quiet", "--wait-readers", str(readers),
+                       "--wait-timeout", "%g" % VISION_WAIT_S], os.path.join(out, "vision.log"), env)
         procs.append(vision)
         t0 = time.time()
         tty = sys.stdout.isatty()
@@ -222,9 +262,35 @@ def run_once(args, label, avoidance):
                     raise RuntimeError("%s died during the run (see %s)" % (p.name, p.log.name))
         if tty:
             print("", flush=True)
+        if vision.p.returncode == 5:
+            raise StartupFailed("vision's readers did not match: %s (see %s)" % (
+                last_line(vision.log.name, "reflex_vision: error:"), vision.log.name))
         if vision.p.returncode != 0:
             raise RuntimeError("vision failed with exit code %d (see %s)" % (vision.p.returncode, vision.log.name))
         time.sleep(1.0)
+
+    try:
+        failures = []
+        for attempt in range(1, STARTUP_ATTEMPTS + 1):
+            try:
+                start_and_run(attempt)
+                break
+            except StartupFailed as e:
+                # Stop this chain, keep its logs as <name>.attempt<N>.log, start a fresh one: new participants
+                # authenticate anew. Said in the log and in run.json (startup_failures), never silent.
+                message = str(e)
+                for p in reversed(procs):
+                    p.stop()
+                    kept = p.log.name[:-len(".log")] + ".attempt%d.log" % attempt
+                    os.replace(p.log.name, kept)
+                    message = message.replace(p.log.name, kept)
+                failures.append(message)
+                procs.clear()
+                env_note["startup_failures"] = failures
+                if attempt == STARTUP_ATTEMPTS:
+                    raise RuntimeError("the chain did not connect in %d attempts: %s" % (attempt, " | ".join(failures)))
+                log("%s; stopping the chain and starting it again (attempt %d of %d)" % (message, attempt + 1,
+                                                                                          STARTUP_ATTEMPTS))
     finally:
         codes = {}
         for p in reversed(procs):
@@ -264,6 +330,10 @@ def main():
     ap.add_argument("--robot", choices=["kinematic", "mujoco"], default="kinematic",
                     help="the plant: the controller's in-process kinematic robot, or reflex_mujoco over DDS "
                          "(the controller with --robot dds)")
+    ap.add_argument("--ready-timeout", type=float, metavar="S", default=0.0,
+                    help="seconds the chain may take to connect (behavior hears the controller, the recorder "
+                         "records) before it is stopped and started again, at most %d attempts (default %g, "
+                         "with --secure %g)" % (STARTUP_ATTEMPTS, READY_TIMEOUT_S, SECURE_READY_TIMEOUT_S))
     ap.add_argument("--no-report", action="store_true")
     ap.add_argument("--view", type=int, metavar="PORT", default=0,
                     help="serve the live 3D view (reflex_view) on this port during the run with avoidance")
@@ -272,6 +342,8 @@ def main():
         ap.error("--domain %d: must be in 0..231 (two consecutive ids are used)" % args.domain)
     if args.view and not 1 <= args.view <= 65535:
         ap.error("--view %d: a TCP port is 1..65535" % args.view)
+    if args.ready_timeout < 0 or args.ready_timeout != args.ready_timeout:
+        ap.error("--ready-timeout %g: must be a number of seconds >= 0 (0: the default)" % args.ready_timeout)
     if not args.rate > 0:
         ap.error("--rate %g: must be positive" % args.rate)
     for path, what in ((args.session, "session folder"), (args.behavior, "behavior configuration")):

@@ -407,7 +407,8 @@ std::string BehaviorHost::status() const {
   }
   m << "frames=" << stats_.frames_received << " objects=" << stats_.objects_accepted
     << " rejected=" << stats_.rejectedObjects() + stats_.frames_rejected_future + stats_.frames_rejected_frame +
-                           stats_.frames_rejected_source;
+                           stats_.frames_rejected_source
+    << " joint_states=" << stats_.joint_states;
   return m.str();
 }
 

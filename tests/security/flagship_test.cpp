@@ -124,7 +124,7 @@ TEST(SecureFlagship, AvoidanceRunGivesThePlainOutcomeAndAnOutsiderReceivesNothin
   EXPECT_NE(report.find("| DDS | secure (DDS-Security, identities from `" + dir + "`)"), std::string::npos) << report;
 
   // The same outcome as the plain run with avoidance.
-  flagship::expectAvoidanceOutcome(run.summary);
+  flagship::expectAvoidanceOutcome(run.summary, out + "/avoidance");
 
   // The recorder (its own identity) recorded the chain: vision's objects (10 Hz for 60 s), behavior's
   // hand targets, the controller's status (200 Hz); best effort on a loaded machine, hence the margins.

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -14,6 +15,7 @@
 #include <regex>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace reflex::flagship {
 
@@ -64,11 +66,32 @@ inline Run runFlagship(const std::string& out, const std::string& args) {
   return run;
 }
 
+/// run.json and the last `lines` lines of every *.log in `dir` (a run's folder), for a failure's output:
+/// which link of the chain did not connect, what each process said when it ended.
+inline std::string logTails(const std::string& dir, std::size_t lines = 12) {
+  std::string text;
+  std::error_code ec;
+  std::vector<std::filesystem::path> files;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec))
+    if (e.path().extension() == ".log" || e.path().filename() == "run.json") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  for (const auto& f : files) {
+    std::ifstream in(f);
+    std::vector<std::string> all;
+    for (std::string line; std::getline(in, line);) all.push_back(line);
+    text += "--- " + f.string() + " (last " + std::to_string(std::min(lines, all.size())) + " of " +
+            std::to_string(all.size()) + " lines)\n";
+    for (std::size_t i = all.size() > lines ? all.size() - lines : 0; i < all.size(); ++i) text += all[i] + "\n";
+  }
+  return text;
+}
+
 /// The run with avoidance (summary section "avoidance"): the arms come within the orange-zone bound of
 /// 15 mm while the objects cross, no pair ever below d_r = 5 mm, no e-stop, the collision controller
 /// took over (f > 0.5), both hands had a target most of the time and tracked reachable targets within
-/// 20 mm (median), and the left target was lost at least once (the session hides the can).
-inline void expectAvoidanceOutcome(const std::string& json) {
+/// 20 mm (median), and the left target was lost at least once (the session hides the can). On a failure
+/// (this or an earlier one of the test) prints logTails(run_dir).
+inline void expectAvoidanceOutcome(const std::string& json, const std::string& run_dir) {
   SCOPED_TRACE("summary.json:\n" + json);
   const double d_on = field(json, "avoidance", "min_arm_distance_m");
   EXPECT_LT(d_on, 0.015) << "the arms come within the orange zone while the objects cross";
@@ -82,6 +105,7 @@ inline void expectAvoidanceOutcome(const std::string& json) {
     EXPECT_GT(field(json, "avoidance", s + "_given_fraction"), 0.6) << side << " hand had a target most of the time";
   }
   EXPECT_GE(field(json, "avoidance", "left_lost_events"), 1.0) << "the session hides the can for a while";
+  if (::testing::Test::HasFailure()) std::printf("the run's logs:\n%s", logTails(run_dir).c_str());
 }
 
 }  // namespace reflex::flagship

@@ -8,7 +8,12 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -22,7 +27,7 @@ TEST(Flagship, AvoidanceKeepsTheCrossingArmsApartAndWithoutItTheyPenetrate) {
   const std::string& json = run.summary;
 
   EXPECT_EQ(reflex::flagship::flag(json, "avoidance", "secure"), 0) << "a plain run\n" << json;
-  reflex::flagship::expectAvoidanceOutcome(json);
+  reflex::flagship::expectAvoidanceOutcome(json, out + "/avoidance");
   EXPECT_LT(field(json, "no_avoidance", "min_arm_distance_m"), 0.0) << "without avoidance the arms penetrate\n"
                                                                     << json;
   // The report's strip draws the robot with the live view's renderer (headless Chromium), not 2D sticks.
@@ -30,3 +35,105 @@ TEST(Flagship, AvoidanceKeepsTheCrossingArmsApartAndWithoutItTheyPenetrate) {
 }
 
 }  // namespace
+
+namespace {
+
+std::string readAll(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+/// A build folder whose bin/ holds the real executables (symbolic links) except reflex_behavior: a
+/// script that, while `deaf_starts` > 0 (counted in a file beside it), runs without ever hearing the
+/// controller (no status line; a link that does not connect), then execs the real reflex_behavior.
+std::string buildWithDeafBehavior(const std::string& dir, int deaf_starts) {
+  namespace fs = std::filesystem;
+  fs::remove_all(dir);
+  fs::create_directories(dir + "/bin");
+  for (const auto& e : fs::directory_iterator(REFLEX_BIN_DIR))
+    if (e.path().filename() != "reflex_behavior") fs::create_symlink(e.path(), dir + "/bin/" + e.path().filename().string());
+  {
+    std::ofstream(dir + "/deaf_starts_left") << deaf_starts << "\n";
+    std::ofstream script(dir + "/bin/reflex_behavior");
+    script << "#!/bin/sh\n"
+           << "left=$(cat " << dir << "/deaf_starts_left)\n"
+           << "if [ \"$left\" -gt 0 ]; then echo $((left - 1)) > " << dir << "/deaf_starts_left; exec sleep 600; fi\n"
+           << "exec " << REFLEX_BIN_DIR << "/reflex_behavior \"$@\"\n";
+  }
+  fs::permissions(dir + "/bin/reflex_behavior", fs::perms::owner_all);
+  return dir;
+}
+
+}  // namespace
+
+// run_flagship.py's start-up (the CI failure of session 10: a secure run went 64 s with no object
+// reaching the controller): a chain whose behavior does not hear the controller within --ready-timeout
+// is stopped and started again, the failure named in the log and run.json, the failed attempt's logs
+// kept; the second chain runs the session. The session at 4x speed, avoidance only, domain 76.
+TEST(FlagshipStartup, ALinkThatDoesNotConnectRestartsTheChainAndTheRunGoesOn) {
+  const std::string base = ::testing::TempDir() + "reflex_flagship_startup_test";
+  const std::string build = buildWithDeafBehavior(base + "/build", 1), out = base + "/out";
+  const std::string cmd = std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR +
+                          "/bringup/flagship/run_flagship.py --out " + out + " --build " + build +
+                          " --domain 76 --only on --rate 4 --ready-timeout 4 --no-report";
+  const reflex::testing::ProcessResult r = reflex::testing::runShell(cmd, "", std::chrono::minutes(5));
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const std::string dir = out + "/avoidance";
+  const std::string failure = "start-up: reflex_behavior received no joint state from reflex_controller in 4 s (see " +
+                              dir + "/behavior.attempt1.log)";
+  EXPECT_NE(r.out.find("flagship: " + failure + "; stopping the chain and starting it again (attempt 2 of 3)"),
+            std::string::npos)
+      << r.out;
+  const std::string note = readAll(dir + "/run.json");
+  EXPECT_NE(note.find("\"startup_failures\": [\n    \"" + failure + "\"\n  ]"), std::string::npos) << note;
+  for (const char* kept : {"behavior.attempt1.log", "controller.attempt1.log", "recorder.attempt1.log"})
+    EXPECT_TRUE(std::filesystem::exists(dir + "/" + kept)) << kept;
+  // The second chain connected and ran: behavior heard the controller, the controller got targets.
+  std::smatch m;
+  const std::string behavior = readAll(dir + "/behavior.log"), controller = readAll(dir + "/controller.log");
+  ASSERT_TRUE(std::regex_search(behavior, m, std::regex(R"(joint_states=(\d+))"))) << behavior;
+  EXPECT_GT(std::stol(m[1]), 0) << behavior;
+  ASSERT_TRUE(std::regex_search(controller, m, std::regex(R"(targets (\d+) \(rejected 0\))"))) << controller;
+  EXPECT_GT(std::stol(m[1]), 50) << controller;
+  EXPECT_NE(readAll(dir + "/vision.log").find("reflex_vision: 2 reader(s) matched after"), std::string::npos)
+      << readAll(dir + "/vision.log");
+  if (::testing::Test::HasFailure()) std::printf("the run's logs:\n%s", reflex::flagship::logTails(dir).c_str());
+}
+
+// Three chains in a row that do not connect: the run ends with exit 1 naming each failure, never a run
+// without targets. Domain 76.
+TEST(FlagshipStartup, AChainThatNeverConnectsEndsTheRunNamingEachAttempt) {
+  const std::string base = ::testing::TempDir() + "reflex_flagship_startup_never_test";
+  const std::string build = buildWithDeafBehavior(base + "/build", 3), out = base + "/out";
+  const std::string cmd = std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR +
+                          "/bringup/flagship/run_flagship.py --out " + out + " --build " + build +
+                          " --domain 76 --only on --ready-timeout 2 --no-report";
+  const reflex::testing::ProcessResult r = reflex::testing::runShell(cmd, "", std::chrono::minutes(3));
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  const std::string dir = out + "/avoidance";
+  // One line naming the three attempts; each names the behavior (and, if it had not recorded within the
+  // 2 s either, the recorder) and the attempt's kept log.
+  const std::string head = "flagship: error: the chain did not connect in 3 attempts: ";
+  const auto at = r.out.find(head);
+  ASSERT_NE(at, std::string::npos) << r.out;
+  std::string line = r.out.substr(at + head.size());
+  line = line.substr(0, line.find('\n'));
+  std::vector<std::string> attempts;
+  for (std::size_t from = 0;;) {
+    const auto bar = line.find(" | ", from);
+    attempts.push_back(line.substr(from, bar == std::string::npos ? std::string::npos : bar - from));
+    if (bar == std::string::npos) break;
+    from = bar + 3;
+  }
+  ASSERT_EQ(attempts.size(), 3u) << line;
+  for (std::size_t a = 0; a < 3; ++a) {
+    EXPECT_EQ(attempts[a].rfind("start-up: reflex_behavior received no joint state from reflex_controller", 0), 0u)
+        << attempts[a];
+    EXPECT_NE(attempts[a].find(" in 2 s (see " + dir + "/behavior.attempt" + std::to_string(a + 1) + ".log"),
+              std::string::npos)
+        << attempts[a];
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir + "/vision.log")) << "vision started on a chain that was not connected";
+}

@@ -111,3 +111,78 @@ TEST(VisionDds, SigtermEndsTheProcessWithinASecondDuringAWait) {
   EXPECT_EQ(p.wait(std::chrono::milliseconds(1500)), 0) << readText(dir / "log.txt");
   EXPECT_LT(since(t_signal), 1.5);
 }
+
+// --wait-readers: reflex_vision holds the replay until that many readers of reflex/object_targets have
+// matched, so the first frames reach a consumer that starts late (under DDS-Security, one still
+// authenticating). The real executable on domain 85: 3 s with no reader (it must not start), then a
+// reader; it must receive the session from its first publication on. Without a reader within
+// --wait-timeout: exit 5 naming how many matched. Bad values: exit 2 naming them.
+TEST(VisionDds, WaitReadersHoldsTheReplayUntilAReaderMatchedAndTheFirstFramesArrive) {
+  TempDir dir("dds_wait");
+  makeSession(parseSceneScript(nearScript(2.0), "near"), dir / "s");
+  reflex::testing::ChildProcess p({std::string(REFLEX_BIN_DIR) + "/reflex_vision", "--session", dir / "s", "--domain",
+                                   "85", "--quiet", "--wait-readers", "1", "--wait-timeout", "60"},
+                                  dir / "log.txt");
+  ASSERT_TRUE(p.started());
+  std::this_thread::sleep_for(std::chrono::seconds(3));
+  const std::string held = readText(dir / "log.txt");
+  EXPECT_NE(held.find("reflex_vision: holding the start until 1 reader(s) of reflex/object_targets matched (at most "
+                      "60 s)"),
+            std::string::npos)
+      << held;
+  EXPECT_EQ(held.find("starting"), std::string::npos) << "started without a reader:\n" << held;
+
+  reflex::bus::BusConfig config;
+  config.module_name = "vision_wait_test";
+  config.domain_id = 85;
+  reflex::bus::Participant bus(config);
+  auto& reader = bus.makeReader<reflex::msg::ObjectTargets>();
+  std::vector<reflex::msg::ObjectTargets> got;
+  reader.onData([&](const reflex::msg::ObjectTargets& s) { got.push_back(s); });
+  int rc = 1;
+  for (int i = 0; i < 600; ++i) {  // at most 60 s: the 2 s session once, after discovery
+    bus.runFor(std::chrono::milliseconds(100));
+    if ((rc = p.wait(std::chrono::milliseconds(0))) != reflex::testing::ChildProcess::kStillRunning) break;
+  }
+  bus.runFor(std::chrono::milliseconds(200));
+  const std::string log = readText(dir / "log.txt");
+  ASSERT_EQ(rc, 0) << log;
+  EXPECT_NE(log.find("reflex_vision: 1 reader(s) matched after "), std::string::npos) << log;
+  // The writer's sequence numbers start at 1: every publication of the 2 s session (20 at 10 Hz) reached
+  // the reader, the first ones included (best effort may lose one on a loaded machine).
+  ASSERT_FALSE(got.empty()) << log;
+  EXPECT_LE(got.front().header().seq(), 2u) << "the first publications were lost\n" << log;
+  EXPECT_GE(got.size() + 2, got.back().header().seq()) << log;
+  EXPECT_GE(got.back().header().seq(), 18u) << log;
+  std::printf("--wait-readers 1: %zu samples received, seq %llu..%llu\n", got.size(),
+              static_cast<unsigned long long>(got.front().header().seq()),
+              static_cast<unsigned long long>(got.back().header().seq()));
+}
+
+TEST(VisionDds, WaitReadersGivesUpAfterTheTimeoutWithExit5AndRefusesBadValues) {
+  TempDir dir("dds_wait_timeout");
+  makeSession(parseSceneScript(nearScript(1.0), "near"), dir / "s");
+  const std::string vision = std::string(REFLEX_BIN_DIR) + "/reflex_vision --session " + (dir / "s") +
+                             " --domain 85 --quiet ";
+  // Nobody reads reflex/object_targets on domain 85 now (the other tests' readers are gone).
+  reflex::testing::ProcessResult r = reflex::testing::runShell(vision + "--wait-readers 2 --wait-timeout 1.5");
+  EXPECT_EQ(r.exit_code, 5) << r.out;
+  EXPECT_NE(r.out.find("reflex_vision: error: --wait-readers 2: 0 reader(s) of reflex/object_targets matched in 1.5 s "
+                       "(--wait-timeout); is every consumer running on this domain (and, under DDS-Security, "
+                       "authenticated and allowed to read the topic)?"),
+            std::string::npos)
+      << r.out;
+  r = reflex::testing::runShell(vision + "--wait-readers -1");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("reflex_vision: error: --wait-readers -1 must be >= 0"), std::string::npos) << r.out;
+  r = reflex::testing::runShell(vision + "--wait-readers 1 --wait-timeout 0");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("reflex_vision: error: --wait-timeout 0 must be a positive, finite number of seconds"),
+            std::string::npos)
+      << r.out;
+  r = reflex::testing::runShell(vision + "--wait-readers 1 --dump " + (dir / "d.csv"));
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("reflex_vision: error: --wait-readers applies to publishing on the bus, not to --dump"),
+            std::string::npos)
+      << r.out;
+}

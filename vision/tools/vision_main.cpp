@@ -51,7 +51,8 @@ int main(int argc, char** argv) {
       "Sources: a recorded session (--session) or live cameras (--camera-left/--camera-right or\n"
       "--side-by-side). --dump writes every detection to CSV and runs offline, without DDS.\n"
       "Exit: 0 done (also after SIGINT/SIGTERM), 2 bad option or input (named), 3 the video ended early,\n"
-      "4 the --dump file could not be written (named, with the cause)."};
+      "4 the --dump file could not be written (named, with the cause), 5 --wait-readers: the readers did\n"
+      "not match within --wait-timeout (how many did is named)."};
   vn::NodeOptions o;
   bool quiet = false, progress_flag = false, no_refine = false;
   std::string domain_text;
@@ -89,6 +90,12 @@ int main(int argc, char** argv) {
   app.add_option("--profiles", o.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
   app.add_option("--frame-id", o.frame_id, "name of the robot base frame written into ObjectTargets")
       ->capture_default_str();
+  app.add_option("--wait-readers", o.wait_readers,
+                 "hold the start until this many readers of reflex/object_targets have matched (e.g. 2: "
+                 "reflex_behavior and reflex_record), so the first frames reach them; under DDS-Security "
+                 "matching waits for authentication, seconds on a loaded machine (default 0: start at once)");
+  app.add_option("--wait-timeout", o.wait_timeout, "seconds --wait-readers holds at most before exit 5")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   o.rate_given = rate_opt->count() > 0;
   o.pipeline.refine_with_tag_size = !no_refine;
@@ -124,6 +131,9 @@ int main(int argc, char** argv) {
       std::cerr << "reflex_vision: error: " << stats.end_message << "\n";
       return 3;
     }
+  } catch (const vn::ReadersMissing& e) {
+    std::cerr << "reflex_vision: error: " << e.what() << "\n";
+    return 5;
   } catch (const std::exception& e) {
     std::cerr << "reflex_vision: error: " << e.what() << "\n";
     return 2;

@@ -11,6 +11,7 @@
 #endif
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <iomanip>
 #include <iostream>
@@ -41,16 +42,67 @@ struct VisionNode::Impl {
   // is counted (stats.skipped, exit line) but cannot flood stderr.
   reflex::bus::LogLimiter skip_log;
 #endif
+  int wait_readers = 0;
+  double wait_timeout = 0.0;
   bool show = false;
   std::chrono::steady_clock::time_point last_shown;
   std::ostringstream row;
   RunCallbacks callbacks;
 };
 
+namespace {
+
+std::string seconds(double s) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", s);
+  return text;
+}
+
+}  // namespace
+
+#ifdef REFLEX_VISION_WITH_BUS
+namespace {
+
+/// Holds until `readers` readers of reflex/object_targets matched: true. false when the node was
+/// stopped (why stays empty) or `timeout` seconds passed (why says how many matched). One line on stderr
+/// when holding starts and when it ends.
+bool waitForReaders(VisionPublisher& publisher, int readers, double timeout, const std::atomic<bool>& stop,
+                    std::string& why) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto deadline = t0 + std::chrono::duration<double>(timeout);
+  std::fprintf(stderr, "reflex_vision: holding the start until %d reader(s) of reflex/object_targets matched "
+               "(at most %.0f s)\n", readers, timeout);
+  int matched = publisher.matchedReaders();
+  while (matched < readers) {
+    if (stop.load()) return false;
+    if (std::chrono::steady_clock::now() >= deadline) {
+      why = "--wait-readers " + std::to_string(readers) + ": " + std::to_string(matched) +
+            " reader(s) of reflex/object_targets matched in " + seconds(timeout) + " s (--wait-timeout); is every consumer running on this domain (and, under DDS-Security, "
+            "authenticated and allowed to read the topic)?";
+      return false;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    matched = publisher.matchedReaders();
+  }
+  std::fprintf(stderr, "reflex_vision: %d reader(s) matched after %.2f s, starting\n", matched,
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  return true;
+}
+
+}  // namespace
+#endif
+
 VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.replay = o.replay;
   PipelineOptions popt = o.pipeline;
+  if (o.wait_readers < 0) throw VisionError("--wait-readers " + std::to_string(o.wait_readers) + " must be >= 0");
+  if (!(o.wait_timeout > 0.0) || !std::isfinite(o.wait_timeout))
+    throw VisionError("--wait-timeout " + seconds(o.wait_timeout) + " must be a positive, finite number of seconds");
+  if (o.wait_readers > 0 && !o.dump.empty())
+    throw VisionError("--wait-readers applies to publishing on the bus, not to --dump");
+  m.wait_readers = o.wait_readers;
+  m.wait_timeout = o.wait_timeout;
   const int sources = (!o.session.empty()) + (!o.camera_left.empty() || !o.camera_right.empty()) +
                       (!o.side_by_side.empty());
   if (sources != 1)
@@ -161,9 +213,13 @@ const RunStats& VisionNode::run() {
 #ifdef REFLEX_VISION_WITH_BUS
   if (m.publisher) {
     // The bus loop (heartbeat timer, stop) runs on this thread; vision on a worker.
-    std::string worker_error;
+    std::string worker_error, readers_missing;
     std::thread worker([&] {
       try {
+        if (m.wait_readers > 0 && !waitForReaders(*m.publisher, m.wait_readers, m.wait_timeout, stop_, readers_missing)) {
+          m.publisher->bus().stop();
+          return;
+        }
         stats_ = runVision(*m.source, *m.pipeline, m.replay, m.callbacks, stop_);
       } catch (const std::exception& e) {
         worker_error = e.what();
@@ -186,6 +242,7 @@ const RunStats& VisionNode::run() {
     else
       m.publisher->heartbeat().setState(reflex::msg::STATE_STOPPING);
     if (!worker_error.empty()) throw VisionError(worker_error);
+    if (!readers_missing.empty()) throw ReadersMissing(readers_missing);
   } else
 #endif
   {

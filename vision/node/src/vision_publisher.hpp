@@ -26,6 +26,8 @@ class VisionPublisher {
   reflex::bus::Participant& bus() { return bus_; }
   reflex::bus::HeartbeatPublisher& heartbeat() { return heartbeat_; }
   std::uint64_t published() const { return writer_.lastSeq(); }
+  /// Readers of reflex/object_targets matched now (under DDS-Security: authenticated and keyed).
+  int matchedReaders() const { return writer_.stats().matched_readers; }
 
  private:
   reflex::bus::Participant bus_;

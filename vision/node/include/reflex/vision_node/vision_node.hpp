@@ -12,6 +12,7 @@
 // others running. reflex_vision (vision/tools/vision_main.cpp) is the thin main.
 #pragma once
 
+#include "reflex/vision/error.hpp"
 #include "reflex/vision/runner.hpp"
 #include "reflex/vision/stereo_pipeline.hpp"
 
@@ -57,6 +58,18 @@ struct NodeOptions {
   std::optional<int> domain_id;        ///< DDS domain (empty: $REFLEX_DOMAIN_ID, else 0)
   std::string profiles_file;           ///< QoS profiles ("" = bus default)
   std::string frame_id = "base_link";  ///< robot base frame name written into ObjectTargets
+  /// Hold the replay (or the cameras' first publication) until this many readers of
+  /// reflex/object_targets have matched (0: start at once). A replay started before its consumers are
+  /// there loses its first frames: under DDS-Security each pair of participants authenticates first
+  /// (seconds on a loaded machine).
+  int wait_readers = 0;
+  double wait_timeout = 60.0;  ///< [s] how long to hold for wait_readers; then run() throws ReadersMissing
+};
+
+/// run() gave up waiting for NodeOptions::wait_readers readers (reflex_vision exits 5).
+class ReadersMissing : public reflex::vision::VisionError {
+ public:
+  using reflex::vision::VisionError::VisionError;
 };
 
 class VisionNode {
@@ -70,7 +83,9 @@ class VisionNode {
   VisionNode(const VisionNode&) = delete;
   VisionNode& operator=(const VisionNode&) = delete;
 
-  /// Runs once, until the source ends, the duration is over, or stop(). With the bus: heartbeat
+  /// Runs once, until the source ends, the duration is over, or stop(). With wait_readers, first holds
+  /// until that many readers matched (throws ReadersMissing naming how many did after wait_timeout; a
+  /// stop() while holding ends run() with nothing processed). With the bus: heartbeat
   /// RUNNING while it runs, then STOPPING, or ERROR with the reason if the video ended early or the
   /// replay loop threw. Throws VisionError if the replay loop threw (the message), BusError if the bus
   /// loop stopped because the security material expired. The video ending early is not an exception:
