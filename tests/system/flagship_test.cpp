@@ -93,7 +93,7 @@ TEST(FlagshipStartup, ALinkThatDoesNotConnectRestartsTheChainAndTheRunGoesOn) {
   // The second chain connected and ran: behavior heard the controller, the controller got targets.
   std::smatch m;
   const std::string behavior = readAll(dir + "/behavior.log"), controller = readAll(dir + "/controller.log");
-  ASSERT_TRUE(std::regex_search(behavior, m, std::regex(R"(joint_states=(\d+))"))) << behavior;
+  ASSERT_TRUE(std::regex_search(behavior, m, std::regex(R"(reflex_behavior: stats .* joint_states=(\d+) )"))) << behavior;
   EXPECT_GT(std::stol(m[1]), 0) << behavior;
   ASSERT_TRUE(std::regex_search(controller, m, std::regex(R"(targets (\d+) \(rejected 0\))"))) << controller;
   EXPECT_GT(std::stol(m[1]), 50) << controller;
