@@ -66,6 +66,18 @@ std::string buildWithDeafBehavior(const std::string& dir, int deaf_starts) {
   return dir;
 }
 
+/// run_flagship.py --only on on domain 76 with TempDir()/`name`/build (buildWithDeafBehavior,
+/// `deaf_starts`) and `args`, its output into TempDir()/`name`/out.
+reflex::testing::ProcessResult runWithDeafBehavior(const std::string& name, int deaf_starts, const std::string& args,
+                                                   std::chrono::milliseconds timeout) {
+  const std::string base = ::testing::TempDir() + name;
+  const std::string build = buildWithDeafBehavior(base + "/build", deaf_starts);
+  return reflex::testing::runShell(std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR +
+                                       "/bringup/flagship/run_flagship.py --out " + base + "/out --build " + build +
+                                       " --domain 76 --only on --no-report " + args,
+                                   "", timeout);
+}
+
 }  // namespace
 
 // run_flagship.py's start-up (the CI failure of session 10: a secure run went 64 s with no object
@@ -73,14 +85,10 @@ std::string buildWithDeafBehavior(const std::string& dir, int deaf_starts) {
 // is stopped and started again, the failure named in the log and run.json, the failed attempt's logs
 // kept; the second chain runs the session. The session at 4x speed, avoidance only, domain 76.
 TEST(FlagshipStartup, ALinkThatDoesNotConnectRestartsTheChainAndTheRunGoesOn) {
-  const std::string base = ::testing::TempDir() + "reflex_flagship_startup_test";
-  const std::string build = buildWithDeafBehavior(base + "/build", 1), out = base + "/out";
-  const std::string cmd = std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR +
-                          "/bringup/flagship/run_flagship.py --out " + out + " --build " + build +
-                          " --domain 76 --only on --rate 4 --ready-timeout 4 --no-report";
-  const reflex::testing::ProcessResult r = reflex::testing::runShell(cmd, "", std::chrono::minutes(5));
+  const std::string dir = ::testing::TempDir() + "reflex_flagship_startup_test/out/avoidance";
+  const reflex::testing::ProcessResult r =
+      runWithDeafBehavior("reflex_flagship_startup_test", 1, "--rate 4 --ready-timeout 4", std::chrono::minutes(5));
   ASSERT_EQ(r.exit_code, 0) << r.out;
-  const std::string dir = out + "/avoidance";
   const std::string failure = "start-up: reflex_behavior received no joint state from reflex_controller in 4 s (see " +
                               dir + "/behavior.attempt1.log)";
   EXPECT_NE(r.out.find("flagship: " + failure + "; stopping the chain and starting it again (attempt 2 of 3)"),
@@ -105,14 +113,10 @@ TEST(FlagshipStartup, ALinkThatDoesNotConnectRestartsTheChainAndTheRunGoesOn) {
 // Three chains in a row that do not connect: the run ends with exit 1 naming each failure, never a run
 // without targets. Domain 76.
 TEST(FlagshipStartup, AChainThatNeverConnectsEndsTheRunNamingEachAttempt) {
-  const std::string base = ::testing::TempDir() + "reflex_flagship_startup_never_test";
-  const std::string build = buildWithDeafBehavior(base + "/build", 3), out = base + "/out";
-  const std::string cmd = std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR +
-                          "/bringup/flagship/run_flagship.py --out " + out + " --build " + build +
-                          " --domain 76 --only on --ready-timeout 2 --no-report";
-  const reflex::testing::ProcessResult r = reflex::testing::runShell(cmd, "", std::chrono::minutes(3));
+  const std::string dir = ::testing::TempDir() + "reflex_flagship_startup_never_test/out/avoidance";
+  const reflex::testing::ProcessResult r =
+      runWithDeafBehavior("reflex_flagship_startup_never_test", 3, "--ready-timeout 2", std::chrono::minutes(3));
   EXPECT_EQ(r.exit_code, 1) << r.out;
-  const std::string dir = out + "/avoidance";
   // One line naming the three attempts; each names the behavior (and, if it had not recorded within the
   // 2 s either, the recorder) and the attempt's kept log.
   const std::string head = "flagship: error: the chain did not connect in 3 attempts: ";

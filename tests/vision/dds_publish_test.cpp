@@ -13,24 +13,42 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <thread>
+#include <vector>
 
 using namespace reflex::vision;
 using namespace reflex::vision::test;
+
+namespace {
+
+/// A participant on domain 85 that collects every reflex/object_targets sample it reads (in bus.run*).
+struct ObjectTargetsCollector {
+  explicit ObjectTargetsCollector(const std::string& name) : bus(config(name)) {
+    bus.makeReader<reflex::msg::ObjectTargets>().onData([this](const reflex::msg::ObjectTargets& s) { got.push_back(s); });
+  }
+  static reflex::bus::BusConfig config(const std::string& name) {
+    reflex::bus::BusConfig c;
+    c.module_name = name;
+    c.domain_id = 85;
+    return c;
+  }
+  reflex::bus::Participant bus;
+  std::vector<reflex::msg::ObjectTargets> got;
+};
+
+}  // namespace
 
 TEST(VisionDds, PublishesObjectTargetsAt10HzMatchingGroundTruth) {
   TempDir dir("dds");
   makeSession(parseSceneScript(nearScript(5.0), "near"), dir / "s");
   const std::vector<GroundTruthRow> truth = loadGroundTruth(dir / "s/ground_truth.csv");
 
-  reflex::bus::BusConfig config;
-  config.module_name = "vision_dds_test";
-  config.domain_id = 85;
-  reflex::bus::Participant bus(config);
-  auto& reader = bus.makeReader<reflex::msg::ObjectTargets>();
-  std::vector<reflex::msg::ObjectTargets> got;
-  reader.onData([&](const reflex::msg::ObjectTargets& s) { got.push_back(s); });
+  ObjectTargetsCollector collector("vision_dds_test");
+  reflex::bus::Participant& bus = collector.bus;
+  const std::vector<reflex::msg::ObjectTargets>& got = collector.got;
 
   const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_vision --session " + (dir / "s") +
                           " --domain 85 --loop --duration 8 --quiet > " + (dir / "log.txt") + " 2>&1";
@@ -132,13 +150,9 @@ TEST(VisionDds, WaitReadersHoldsTheReplayUntilAReaderMatchedAndTheFirstFramesArr
       << held;
   EXPECT_EQ(held.find("starting"), std::string::npos) << "started without a reader:\n" << held;
 
-  reflex::bus::BusConfig config;
-  config.module_name = "vision_wait_test";
-  config.domain_id = 85;
-  reflex::bus::Participant bus(config);
-  auto& reader = bus.makeReader<reflex::msg::ObjectTargets>();
-  std::vector<reflex::msg::ObjectTargets> got;
-  reader.onData([&](const reflex::msg::ObjectTargets& s) { got.push_back(s); });
+  ObjectTargetsCollector collector("vision_wait_test");
+  reflex::bus::Participant& bus = collector.bus;
+  const std::vector<reflex::msg::ObjectTargets>& got = collector.got;
   int rc = 1;
   for (int i = 0; i < 600; ++i) {  // at most 60 s: the 2 s session once, after discovery
     bus.runFor(std::chrono::milliseconds(100));
