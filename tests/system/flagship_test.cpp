@@ -140,4 +140,11 @@ TEST(FlagshipStartup, AChainThatNeverConnectsEndsTheRunNamingEachAttempt) {
         << attempts[a];
   }
   EXPECT_FALSE(std::filesystem::exists(dir + "/vision.log")) << "vision started on a chain that was not connected";
+
+  const reflex::testing::ProcessResult bad =
+      runWithDeafBehavior("reflex_flagship_startup_bad_test", 0, "--ready-timeout -1", std::chrono::minutes(1));
+  EXPECT_EQ(bad.exit_code, 2) << bad.out;
+  EXPECT_NE(bad.out.find("run_flagship.py: error: --ready-timeout -1: must be a number of seconds >= 0 (0: the default)"),
+            std::string::npos)
+      << bad.out;
 }
