@@ -196,7 +196,7 @@ def run_once(args, label, avoidance):
     procs = []
     ready_timeout = args.ready_timeout or (SECURE_READY_TIMEOUT_S if args.secure else READY_TIMEOUT_S)
 
-    def start_and_run(attempt):
+    def start_and_run():
         """Starts the chain (procs), waits until it is connected, replays the session through it.
         Raises StartupFailed when a link did not connect (the caller starts again)."""
         # The controller is stopped by SIGTERM when vision has finished; its --duration is only a safety
@@ -273,7 +273,7 @@ def run_once(args, label, avoidance):
         failures = []
         for attempt in range(1, STARTUP_ATTEMPTS + 1):
             try:
-                start_and_run(attempt)
+                start_and_run()
                 break
             except StartupFailed as e:
                 # Stop this chain, keep its logs as <name>.attempt<N>.log, start a fresh one: new participants

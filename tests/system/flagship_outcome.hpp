@@ -49,6 +49,14 @@ struct Run {
   std::string summary;  ///< OUT/summary.json, "" if not written
 };
 
+/// The whole text of the file at `path` ("" if it cannot be read).
+inline std::string fileText(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
 /// Runs run_flagship.py --out `out` --build <build dir> `args` and reads its summary.json (any old one
 /// is removed first, so a summary is always this run's).
 inline Run runFlagship(const std::string& out, const std::string& args) {
@@ -59,10 +67,7 @@ inline Run runFlagship(const std::string& out, const std::string& args) {
   const reflex::testing::ProcessResult r = reflex::testing::runShell(cmd, "", std::chrono::minutes(15));
   run.log = r.out;
   run.exit_code = r.exit_code;
-  std::ifstream in(out + "/summary.json");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  run.summary = ss.str();
+  run.summary = fileText(out + "/summary.json");
   return run;
 }
 

@@ -11,13 +11,13 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
-#include <sstream>
 #include <string>
 #include <vector>
 
 namespace {
 
 using reflex::flagship::field;
+using reflex::flagship::fileText;
 
 TEST(Flagship, AvoidanceKeepsTheCrossingArmsApartAndWithoutItTheyPenetrate) {
   const std::string out = ::testing::TempDir() + "reflex_flagship_test";
@@ -38,13 +38,6 @@ TEST(Flagship, AvoidanceKeepsTheCrossingArmsApartAndWithoutItTheyPenetrate) {
 
 namespace {
 
-std::string readAll(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 /// A build folder whose bin/ holds the real executables (symbolic links) except reflex_behavior: a
 /// script that, while `deaf_starts` > 0 (counted in a file beside it), runs without ever hearing the
 /// controller (no status line; a link that does not connect), then execs the real reflex_behavior.
@@ -53,7 +46,8 @@ std::string buildWithDeafBehavior(const std::string& dir, int deaf_starts) {
   fs::remove_all(dir);
   fs::create_directories(dir + "/bin");
   for (const auto& e : fs::directory_iterator(REFLEX_BIN_DIR))
-    if (e.path().filename() != "reflex_behavior") fs::create_symlink(e.path(), dir + "/bin/" + e.path().filename().string());
+    if (e.path().filename() != "reflex_behavior")
+      fs::create_symlink(e.path(), dir + "/bin/" + e.path().filename().string());
   {
     std::ofstream(dir + "/deaf_starts_left") << deaf_starts << "\n";
     std::ofstream script(dir + "/bin/reflex_behavior");
@@ -94,19 +88,20 @@ TEST(FlagshipStartup, ALinkThatDoesNotConnectRestartsTheChainAndTheRunGoesOn) {
   EXPECT_NE(r.out.find("flagship: " + failure + "; stopping the chain and starting it again (attempt 2 of 3)"),
             std::string::npos)
       << r.out;
-  const std::string note = readAll(dir + "/run.json");
+  const std::string note = fileText(dir + "/run.json");
   EXPECT_NE(note.find("\"startup_failures\": [\n    \"" + failure + "\"\n  ]"), std::string::npos) << note;
   for (const char* kept : {"behavior.attempt1.log", "controller.attempt1.log", "recorder.attempt1.log"})
     EXPECT_TRUE(std::filesystem::exists(dir + "/" + kept)) << kept;
   // The second chain connected and ran: behavior heard the controller, the controller got targets.
   std::smatch m;
-  const std::string behavior = readAll(dir + "/behavior.log"), controller = readAll(dir + "/controller.log");
-  ASSERT_TRUE(std::regex_search(behavior, m, std::regex(R"(reflex_behavior: stats .* joint_states=(\d+) )"))) << behavior;
+  const std::string behavior = fileText(dir + "/behavior.log"), controller = fileText(dir + "/controller.log");
+  ASSERT_TRUE(std::regex_search(behavior, m, std::regex(R"(reflex_behavior: stats .* joint_states=(\d+) )")))
+      << behavior;
   EXPECT_GT(std::stol(m[1]), 0) << behavior;
   ASSERT_TRUE(std::regex_search(controller, m, std::regex(R"(targets (\d+) \(rejected 0\))"))) << controller;
   EXPECT_GT(std::stol(m[1]), 50) << controller;
-  EXPECT_NE(readAll(dir + "/vision.log").find("reflex_vision: 2 reader(s) matched after"), std::string::npos)
-      << readAll(dir + "/vision.log");
+  EXPECT_NE(fileText(dir + "/vision.log").find("reflex_vision: 2 reader(s) matched after"), std::string::npos)
+      << fileText(dir + "/vision.log");
   if (::testing::Test::HasFailure()) std::printf("the run's logs:\n%s", reflex::flagship::logTails(dir).c_str());
 }
 
@@ -144,7 +139,8 @@ TEST(FlagshipStartup, AChainThatNeverConnectsEndsTheRunNamingEachAttempt) {
   const reflex::testing::ProcessResult bad =
       runWithDeafBehavior("reflex_flagship_startup_bad_test", 0, "--ready-timeout -1", std::chrono::minutes(1));
   EXPECT_EQ(bad.exit_code, 2) << bad.out;
-  EXPECT_NE(bad.out.find("run_flagship.py: error: --ready-timeout -1: must be a number of seconds >= 0 (0: the default)"),
+  EXPECT_NE(bad.out.find("run_flagship.py: error: --ready-timeout -1: must be a number of seconds >= 0 "
+                         "(0: the default)"),
             std::string::npos)
       << bad.out;
 }

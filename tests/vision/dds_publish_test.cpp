@@ -27,7 +27,8 @@ namespace {
 /// A participant on domain 85 that collects every reflex/object_targets sample it reads (in bus.run*).
 struct ObjectTargetsCollector {
   explicit ObjectTargetsCollector(const std::string& name) : bus(config(name)) {
-    bus.makeReader<reflex::msg::ObjectTargets>().onData([this](const reflex::msg::ObjectTargets& s) { got.push_back(s); });
+    bus.makeReader<reflex::msg::ObjectTargets>().onData(
+        [this](const reflex::msg::ObjectTargets& s) { got.push_back(s); });
   }
   static reflex::bus::BusConfig config(const std::string& name) {
     reflex::bus::BusConfig c;

@@ -58,39 +58,34 @@ std::string seconds(double s) {
   return text;
 }
 
-}  // namespace
-
 #ifdef REFLEX_VISION_WITH_BUS
-namespace {
-
 /// Holds until `readers` readers of reflex/object_targets matched: true. false when the node was
 /// stopped (why stays empty) or `timeout` seconds passed (why says how many matched). One line on stderr
 /// when holding starts and when it ends.
-bool waitForReaders(VisionPublisher& publisher, int readers, double timeout, const std::atomic<bool>& stop,
+bool waitForReaders(const VisionPublisher& publisher, int readers, double timeout, const std::atomic<bool>& stop,
                     std::string& why) {
   const auto t0 = std::chrono::steady_clock::now();
   const auto deadline = t0 + std::chrono::duration<double>(timeout);
   std::fprintf(stderr, "reflex_vision: holding the start until %d reader(s) of reflex/object_targets matched "
                "(at most %.0f s)\n", readers, timeout);
-  int matched = publisher.matchedReaders();
-  while (matched < readers) {
+  // In slices, so that a stop() (SIGTERM) while holding ends the wait at once.
+  while (!publisher.waitForReaders(readers, std::chrono::milliseconds(100))) {
     if (stop.load()) return false;
     if (std::chrono::steady_clock::now() >= deadline) {
-      why = "--wait-readers " + std::to_string(readers) + ": " + std::to_string(matched) +
-            " reader(s) of reflex/object_targets matched in " + seconds(timeout) + " s (--wait-timeout); is every consumer running on this domain (and, under DDS-Security, "
+      why = "--wait-readers " + std::to_string(readers) + ": " + std::to_string(publisher.matchedReaders()) +
+            " reader(s) of reflex/object_targets matched in " + seconds(timeout) +
+            " s (--wait-timeout); is every consumer running on this domain (and, under DDS-Security, "
             "authenticated and allowed to read the topic)?";
       return false;
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    matched = publisher.matchedReaders();
   }
-  std::fprintf(stderr, "reflex_vision: %d reader(s) matched after %.2f s, starting\n", matched,
+  std::fprintf(stderr, "reflex_vision: %d reader(s) matched after %.2f s, starting\n", publisher.matchedReaders(),
                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   return true;
 }
+#endif
 
 }  // namespace
-#endif
 
 VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
@@ -216,7 +211,8 @@ const RunStats& VisionNode::run() {
     std::string worker_error, readers_missing;
     std::thread worker([&] {
       try {
-        if (m.wait_readers > 0 && !waitForReaders(*m.publisher, m.wait_readers, m.wait_timeout, stop_, readers_missing)) {
+        if (m.wait_readers > 0 &&
+            !waitForReaders(*m.publisher, m.wait_readers, m.wait_timeout, stop_, readers_missing)) {
           m.publisher->bus().stop();
           return;
         }
@@ -236,9 +232,11 @@ const RunStats& VisionNode::run() {
     }
     stop_.store(true);
     worker.join();
-    if (!worker_error.empty() || !stats_.end_message.empty())
-      m.publisher->heartbeat().setState(reflex::msg::STATE_ERROR,
-                                        worker_error.empty() ? stats_.end_message : worker_error);
+    const std::string& error = !worker_error.empty() ? worker_error
+                               : !readers_missing.empty() ? readers_missing
+                                                          : stats_.end_message;
+    if (!error.empty())
+      m.publisher->heartbeat().setState(reflex::msg::STATE_ERROR, error);
     else
       m.publisher->heartbeat().setState(reflex::msg::STATE_STOPPING);
     if (!worker_error.empty()) throw VisionError(worker_error);

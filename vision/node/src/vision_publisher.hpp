@@ -8,6 +8,7 @@
 #include <reflex/bus/bus.hpp>
 #include <reflex/msg/vision.h>
 
+#include <chrono>
 #include <string>
 
 namespace reflex::vision {
@@ -28,6 +29,8 @@ class VisionPublisher {
   std::uint64_t published() const { return writer_.lastSeq(); }
   /// Readers of reflex/object_targets matched now (under DDS-Security: authenticated and keyed).
   int matchedReaders() const { return writer_.stats().matched_readers; }
+  /// Blocks until `count` readers matched (true) or `timeout` passes (false).
+  bool waitForReaders(int count, std::chrono::nanoseconds timeout) const { return writer_.waitForReaders(count, timeout); }
 
  private:
   reflex::bus::Participant bus_;
