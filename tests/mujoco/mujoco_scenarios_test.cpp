@@ -11,7 +11,8 @@
 //     commanded): no cycle has a physical pair below d_r, and no e-stop fired;
 //   - without avoidance (target_inside_body drives the right hand into the body) MuJoCo reports
 //     contacts and the measured state goes below d_r: the judge can fail; MuJoCo's smallest distance
-//     and ours on the measured state name the same pair and agree within 1 mm (MuJoCo's <= ours);
+//     (the robot's exit summary, over every state it published) and ours on the measured state name
+//     the same pair and agree within 1 mm (MuJoCo's <= ours);
 //   - --robot dds attaches to a reflex_mujoco this test started itself (no spawn by reflex_sim);
 //   - bad values are named: an unknown --robot, a domain out of range, no robot on the bus.
 // The tracking error and servo lag are printed (the summaries), bounded loosely (the machine is loaded).
@@ -124,6 +125,24 @@ std::vector<Figures> parseSummary(const fs::path& path) {
   return out;
 }
 
+/// The smallest distance reflex_mujoco's exit summary names (lines "contact A,B min distance X mm": per
+/// pair, over every state it published) and its pair as "A-B".
+struct RobotMinimum {
+  bool found = false;
+  double mm = 1e9;
+  std::string pair;
+};
+
+RobotMinimum robotMinimum(const std::string& log) {
+  RobotMinimum out;
+  const std::regex line(R"(contact (\S+),(\S+) min distance (-?[0-9.]+) mm)");
+  for (std::sregex_iterator it(log.begin(), log.end(), line), end; it != end; ++it) {
+    const double mm = std::stod((*it)[3]);
+    if (mm < out.mm) out = {true, mm, (*it)[1].str() + "-" + (*it)[2].str()};
+  }
+  return out;
+}
+
 TEST(MujocoScenarios, AllSevenAvoidOnThePhysicsRobot) {
   const fs::path dir = outDir("all");
   const int rc = runSim({"all", "--robot", "mujoco", "--domain", "190", "--no-plots", "--out", dir.string()}, dir, 240s);
@@ -171,12 +190,21 @@ TEST(MujocoScenarios, WithoutAvoidanceMujocoReportsContacts) {
   EXPECT_GT(f.below_d_r, 10);
   EXPECT_LT(f.min_distance_mm, 5.0);
   // Two independent distance measurements of the same contact: MuJoCo's collision detection on every
-  // 1 ms state and our distance module on the measured state of each 5 ms cycle. MuJoCo sees every
-  // state, so its smallest is at most ours; the pushed-back hand rests, so they meet (seen: equal to
-  // 1e-5 mm).
-  EXPECT_EQ(f.mujoco_pair, f.min_pair);
-  EXPECT_LE(f.mujoco_min_mm, f.min_distance_mm + 1e-3);
-  EXPECT_LT(f.min_distance_mm - f.mujoco_min_mm, 1.0);
+  // state the robot published (1 kHz; its exit summary keeps the smallest per pair) and our distance
+  // module on the measured state of each 5 ms cycle, one of those published states. So MuJoCo's
+  // smallest is at most ours; the pushed-back hand rests, so they meet (seen: equal to 1e-3 mm, the
+  // robot's printed precision). The summary's "smallest" cannot serve here: it is over the
+  // RobotContacts samples reflex_sim took (KEEP_LAST 1, one per cycle), and the sample of the state a
+  // cycle measured may still be in flight when the cycle polls (CI, stop 24: ours 1.3 um below it).
+  const RobotMinimum robot = robotMinimum(readFile(dir / "reflex_mujoco.log"));
+  ASSERT_TRUE(robot.found) << readFile(dir / "reflex_mujoco.log");
+  std::printf("robot's own smallest: %.3f mm (%s); ours %.4f mm (%s)\n", robot.mm, robot.pair.c_str(), f.min_distance_mm,
+              f.min_pair.c_str());
+  EXPECT_EQ(robot.pair, f.min_pair);
+  EXPECT_LE(robot.mm, f.min_distance_mm + 1e-3);
+  EXPECT_LT(f.min_distance_mm - robot.mm, 1.0);
+  // The summary's sampled smallest is never below the robot's own (it is over a subset of its states).
+  EXPECT_GE(f.mujoco_min_mm, robot.mm - 1e-3);
 }
 
 TEST(MujocoScenarios, AttachesToARobotAlreadyOnTheBus) {
