@@ -46,7 +46,8 @@ int main(int argc, char** argv) {
   std::string profiles;
   std::vector<std::string> topics;
   auto* list = app.add_subcommand("list", "live processes and their modules (from reflex/heartbeat)");
-  auto* hz = app.add_subcommand("hz", "samples per second and matched writers of each topic");
+  auto* hz = app.add_subcommand(
+      "hz", "samples per second (over the span from the first to the last sample, as ros2 topic hz) and matched writers of each topic");
   hz->add_option("topic", topics, "topics to measure (default: every Reflex topic); NAME or NAME:TYPE");
   for (CLI::App* sub : {list, hz}) {
     sub->add_option("-w,--window", window, "seconds to listen")->check(CLI::Range(0.1, 3600.0))->capture_default_str();

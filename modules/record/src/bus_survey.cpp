@@ -58,11 +58,19 @@ BusSurvey surveyBus(const bus::BusConfig& config, double window_s, const std::ve
   // Topics: the recorder's best-effort volatile reader matches every writer and counts only what
   // arrives in the window (no late-joiner history).
   std::vector<std::pair<TopicSeen, bus::detail::ReaderBase*>> seen;
+  std::vector<std::pair<std::int64_t, std::int64_t>> first_last(specs.size(), {0, 0});  // steady ns
   seen.reserve(specs.size());
   for (const TopicSpec& s : specs) {
     seen.push_back({TopicSeen{s.topic, s.codec->typeName()}, nullptr});
     TopicSeen* t = &seen.back().first;
-    seen.back().second = &s.codec->subscribe(bus, s.topic, bus::kProfileRecord, [t](RecordEntry&&) { ++t->samples; });
+    auto* span = &first_last[seen.size() - 1];
+    seen.back().second = &s.codec->subscribe(bus, s.topic, bus::kProfileRecord, [t, span](RecordEntry&&) {
+      const std::int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                   std::chrono::steady_clock::now().time_since_epoch())
+                                   .count();
+      if (t->samples++ == 0) span->first = now;
+      span->second = now;
+    });
   }
   bus.runFor(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(window_s)));
 
@@ -76,8 +84,11 @@ BusSurvey surveyBus(const bus::BusConfig& config, double window_s, const std::ve
     p.modules.push_back(m);
   }
   for (auto& [key, p] : processes) survey.processes.push_back(std::move(p));
-  for (auto& [t, reader] : seen) {
-    t.hz = static_cast<double>(t.samples) / window_s;
+  for (std::size_t k = 0; k < seen.size(); ++k) {
+    auto& [t, reader] = seen[k];
+    const double span_s = 1e-9 * static_cast<double>(first_last[k].second - first_last[k].first);
+    t.hz = t.samples >= 2 && span_s > 0.0 ? static_cast<double>(t.samples - 1) / span_s
+                                          : static_cast<double>(t.samples) / window_s;
     t.writers = static_cast<int>(reader->stats().matched_writers);
     survey.topics.push_back(t);
   }

@@ -34,7 +34,10 @@ struct ProcessSeen {
 struct TopicSeen {
   std::string topic, type;
   std::uint64_t samples = 0;
-  double hz = 0.0;        ///< samples / window
+  /// (samples - 1) / the time from the first to the last sample received (as `ros2 topic hz`: the
+  /// time discovery takes at the window's start is not counted as silence); samples / window when
+  /// fewer than two arrived.
+  double hz = 0.0;
   int writers = 0;        ///< matched writers when the window ended
 };
 
