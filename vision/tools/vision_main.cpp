@@ -92,7 +92,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--wait-readers", o.wait_readers,
                  "hold the start until this many readers of reflex/object_targets have matched (e.g. 2: "
-                 "reflex_behavior and reflex_record), so the first frames reach them; under DDS-Security "
+                 "reflex_behavior and reflex_record), then 0.3 s for their side of the match, so the first frames reach "
+                 "them; under DDS-Security "
                  "matching waits for authentication, seconds on a loaded machine (default 0: start at once)");
   app.add_option("--wait-timeout", o.wait_timeout, "seconds --wait-readers holds at most before exit 5")
       ->capture_default_str();
