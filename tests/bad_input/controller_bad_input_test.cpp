@@ -42,8 +42,9 @@ TEST(ControllerBadInput, NonFiniteHugeAndFarHandTargetsAreRejectedAndCounted) {
       samples.push_back(t);
     }
   }
-  // 1 s of valid targets, then one bad sample every 70 ms (the controller takes the newest each
-  // 5 ms cycle; 70 ms apart none is overwritten unread), then valid ones again.
+  // 1 s of valid targets, then the bad samples one at a time (the controller takes the newest each
+  // 5 ms cycle; the next is sent once it counted the last), then valid ones again (70 ms apart:
+  // none is overwritten unread).
   int sent = 0;
   run.pump(1000ms, 70ms, [&](int) {
     msg::HandTargets t = reachable();
@@ -52,14 +53,17 @@ TEST(ControllerBadInput, NonFiniteHugeAndFarHandTargetsAreRejectedAndCounted) {
     hb.publish(h);
     ++sent;
   });
-  run.pumpCount(static_cast<int>(samples.size()), 70ms, [&](int k) {
-    targets.publish(samples[static_cast<std::size_t>(k)]);
+  // The bad ones in lockstep: each once the controller has counted the one before (its status).
+  const auto rejected = [](const msg::ControlStatus& st) { return st.rejected_hand_targets(); };
+  for (std::size_t k = 0; k < samples.size(); ++k) {
+    targets.publish(samples[k]);
     ++sent;
     if (k % 5 == 0) {
       msg::Heartbeat h = heartbeat("bad_source");
       hb.publish(h);
     }
-  });
+    ASSERT_TRUE(run.waitStatusCount(rejected, k + 1)) << "bad sample " << k << " was not counted within 3 s";
+  }
   run.pump(1500ms, 70ms, [&](int) {
     msg::HandTargets t = reachable();
     targets.publish(t);

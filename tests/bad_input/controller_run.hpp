@@ -117,16 +117,29 @@ class ControllerRun {
       drain();
     }
   }
-  /// Calls `tick(k)` exactly `n` times, `period` apart, draining the watch readers in between.
+  /// Calls `tick(k)` exactly `n` times, at least `period` apart, draining the watch readers in
+  /// between. Never faster: after a stall of this process the next ticks do not catch up back to
+  /// back (the controller's keep-last-1 readers would replace a sample it had not read yet).
   template <class Fn>
   void pumpCount(int n, std::chrono::milliseconds period, Fn tick) {
-    auto next = std::chrono::steady_clock::now();
     for (int k = 0; k < n; ++k) {
       tick(k);
-      next += period;
-      std::this_thread::sleep_until(next);
+      std::this_thread::sleep_for(period);
       drain();
     }
+  }
+  /// Drains the watch readers until the latest status's `counter` (e.g. rejected_hand_targets) is at
+  /// least `value`, at most `limit`; whether it got there. For lockstep: the next bad sample is
+  /// sent only once the controller has counted the last one, so none is replaced unread.
+  template <class Counter>
+  bool waitStatusCount(Counter counter, std::uint64_t value, std::chrono::milliseconds limit = std::chrono::seconds(3)) {
+    const auto end = std::chrono::steady_clock::now() + limit;
+    do {
+      drain();
+      if (!statuses.empty() && counter(statuses.back()) >= value) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    } while (std::chrono::steady_clock::now() < end);
+    return false;
   }
   void drain() {
     status->takeAll(statuses);

@@ -12,7 +12,7 @@
 // (every write fails with ENOSPC) as a recording, a CSV export, a time series (through a symbolic
 // link in the output folder) and as standard output; a missing or impossible output folder is an
 // error at start, before any work. /dev/null stays a valid output. reflex_record record uses DDS
-// domain 111 (it fails before it records anything).
+// domain 205 (it fails before it records anything, but its participant joins first: a domain no other test uses).
 #include "reflex/bus/error.hpp"
 #include "reflex/bus/participant.hpp"
 #include "reflex/control/controller.hpp"
@@ -240,8 +240,8 @@ TEST(OutputFiles, ToolsExitNonZeroNamingTheOutputAndTheCause) {
       {bin + "/reflex_record export " + seed + " --topic reflex/joint_state --csv /dev/full",
        "cannot write '/dev/full': No space left on device"},
       {bin + "/reflex_record export " + seed + " --dir /dev/null/csv", "'/dev/null/csv'"},
-      {bin + "/reflex_record record --domain 111 -o /dev/full --duration 1", "'/dev/full': No space left on device"},
-      {bin + "/reflex_record record --domain 111 -o " + nf.dir + "/no/such/run.rfx --duration 1",
+      {bin + "/reflex_record record --domain 205 -o /dev/full --duration 1", "'/dev/full': No space left on device"},
+      {bin + "/reflex_record record --domain 205 -o " + nf.dir + "/no/such/run.rfx --duration 1",
        "'" + nf.dir + "/no/such' of output file"},
       {bin + "/reflex_sim target_inside_body --no-plots --out " + nf.dir + "/sim_stdout > /dev/full",
        "cannot write the standard output: No space left on device"},

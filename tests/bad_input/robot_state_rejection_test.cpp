@@ -5,7 +5,7 @@
 //   robot_state_length         velocities one short; efforts given but one short; one position too many
 //   robot_state_missing_joint  l_elbow left out (lengths agree); l_elbow misspelt
 //   robot_state_not_finite     a NaN position; a +Inf velocity; a -Inf position
-//   robot_state_future_stamp   stamped 1 s ahead; 50 ms ahead (tolerance 2 ms)
+//   robot_state_future_stamp   stamped 1 s ahead; 0.5 s ahead (tolerance 2 ms)
 //   robot_state_old_stamp      a good state the controller already answered, sent again as is
 //                              (repeated); a new seq stamped 1 s before it (reordered)
 // Independent answer: what this test sent. After each bad state the test waits for the controller's
@@ -185,9 +185,11 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     st.header().seq(++own_seq);
     st.header().stamp_ns(bus::nowNs() + 1'000'000'000);
   }, true);
-  sendBad(future, "stamped 50 ms ahead", [&](msg::RobotState& st) {
+  // 0.5 s: far past the 2 ms tolerance even when the test or the controller stalls between the stamp
+  // and the check (at 50 ms a 48 ms stall let it through, and every later count was off).
+  sendBad(future, "stamped 0.5 s ahead", [&](msg::RobotState& st) {
     st.header().seq(++own_seq);
-    st.header().stamp_ns(bus::nowNs() + 50'000'000);
+    st.header().stamp_ns(bus::nowNs() + 500'000'000);
   }, true);
   // Old: a state the controller has answered (so it holds that one or a newer one), sent again.
   const std::uint64_t repeat_seq = answered_seq;

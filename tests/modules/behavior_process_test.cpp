@@ -213,7 +213,10 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
     std::printf("pointing: %zu hand-target samples, %d heartbeats in %.2f s\n", bus.hand_log.size(), beats, window);
 
     EXPECT_EQ(proc.terminate(), 0) << proc.output();
-    bus.collect(500ms);
+    bus.collectUntil([&] { return bus.last_hands.left().status() == msg::TARGET_NONE &&
+                                  bus.last_hands.right().status() == msg::TARGET_NONE &&
+                                  bus.priority_log.back().priority() == msg::PRIORITY_EQUAL; },
+                     5000ms);
     EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.last_hands.right().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.priority_log.back().priority(), msg::PRIORITY_EQUAL);
@@ -232,7 +235,9 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
   {
     Child proc(behavior(kBehaviorDir + "/scripted.yaml"), ::testing::TempDir() + "modules_behavior_scripted.log");
     ASSERT_TRUE(proc.started());
-    bus.collect(2500ms);
+    bus.collectUntil([&] { return bus.have_hands && bus.last_hands.left().status() == msg::TARGET_GIVEN &&
+                                  bus.last_hands.right().status() == msg::TARGET_GIVEN; },
+                     15000ms);
     ASSERT_TRUE(bus.have_hands) << proc.output();
     const auto expected = firstTargets(kBehaviorDir + "/scripted_timeline.csv");
     ASSERT_EQ(expected.size(), 2u);
@@ -244,7 +249,9 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
       EXPECT_EQ(t.object_name(), "");  // scripted: nothing to do with the objects
     }
     EXPECT_EQ(proc.terminate(), 0) << proc.output();
-    bus.collect(500ms);
+    bus.collectUntil([&] { return bus.last_hands.left().status() == msg::TARGET_NONE &&
+                                  bus.last_hands.right().status() == msg::TARGET_NONE; },
+                     5000ms);
     EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.last_hands.right().status(), msg::TARGET_NONE);
   }
@@ -255,7 +262,15 @@ TEST(BehaviorProcess, OneModuleOfAFileRunsAsItsOwnProcess) {
   Child proc(behavior(kBehaviorDir + "/bar_occlusion.yaml", {"--module", "occlusion"}),
              ::testing::TempDir() + "modules_behavior_occlusion.log");
   ASSERT_TRUE(proc.started());
-  bus.collect(2500ms);
+  // Until the attach and a heartbeat have arrived (process start and discovery can take seconds).
+  bus.collectUntil(
+      [&] {
+        bool a = false, b = false;
+        for (const auto& s : bus.schema_log) a |= s.operation() == msg::SCHEMA_ATTACH;
+        for (const auto& h : bus.heartbeat_log) b |= h.module_name() == "occlusion";
+        return a && b;
+      },
+      15000ms);
   bool attached = false;
   for (const auto& s : bus.schema_log) {
     EXPECT_EQ(s.header().source(), "occlusion");
@@ -268,7 +283,8 @@ TEST(BehaviorProcess, OneModuleOfAFileRunsAsItsOwnProcess) {
   for (const auto& b : bus.heartbeat_log) beat |= b.module_name() == "occlusion";
   EXPECT_TRUE(beat);
   EXPECT_EQ(proc.terminate(), 0) << proc.output();
-  bus.collect(500ms);
+  bus.collectUntil([&] { return !bus.schema_log.empty() && bus.schema_log.back().operation() == msg::SCHEMA_DETACH; },
+                   5000ms);
   ASSERT_FALSE(bus.schema_log.empty());
   EXPECT_EQ(bus.schema_log.back().operation(), msg::SCHEMA_DETACH);
   EXPECT_EQ(bus.schema_log.back().segment_name(), "gaze_line");
@@ -295,8 +311,12 @@ TEST(BehaviorProcess, BarAndOcclusionTogetherAttachBothAndRemoveBothAtStop) {
   ASSERT_TRUE(bus.have_hands);
   EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_GIVEN);
   EXPECT_EQ(proc.terminate(), 0) << proc.output();
-  bus.collect(500ms);
-  for (const auto& s : bus.schema_log) last[s.segment_name()] = s;
+  bus.collectUntil(
+      [&] {
+        for (const auto& s : bus.schema_log) last[s.segment_name()] = s;
+        return last["grasped_bar"].operation() == msg::SCHEMA_DETACH && last["gaze_line"].operation() == msg::SCHEMA_DETACH;
+      },
+      5000ms);
   EXPECT_EQ(last["grasped_bar"].operation(), msg::SCHEMA_DETACH);
   EXPECT_EQ(last["gaze_line"].operation(), msg::SCHEMA_DETACH);
 }

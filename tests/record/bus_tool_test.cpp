@@ -42,24 +42,26 @@ std::vector<std::string> row(const std::string& text, const std::string& first) 
 }
 
 TEST(BusTool, ListsTheControllerAndMeasuresItsRates) {
-  testing::ChildProcess controller({bin("reflex_controller"), "--domain", kDomain, "--duration", "20"},
+  testing::ChildProcess controller({bin("reflex_controller"), "--domain", kDomain, "--duration", "40"},
                                    tempPath("controller.log"));
   ASSERT_TRUE(controller.started());
-  std::this_thread::sleep_for(3s);  // start-up: model, peer probe (1 s), first cycles
-
+  // `list` again until the controller is there and RUNNING (start-up: model, peer probe 1 s, first
+  // cycles; discovery on a loaded machine can take seconds more), at most 10 windows of the 40 s.
   const std::string list_log = tempPath("list.log");
-  ASSERT_EQ(runTool({bin("reflex_bus"), "list", "--domain", kDomain, "--window", "2"}, list_log), 0) << slurp(list_log);
-  const std::string list = slurp(list_log);
-  std::istringstream lines(list);
+  std::string list;
   bool found = false;
-  for (std::string line; std::getline(lines, line);) {
-    std::istringstream f(line);
-    std::string host, pid, state, module;
-    f >> host >> pid >> state >> module;
-    if (module == "controller") {
-      found = true;
-      EXPECT_EQ(pid, std::to_string(controller.pid())) << line;
-      EXPECT_EQ(state, "RUNNING") << line;
+  for (int attempt = 0; attempt < 10 && !found; ++attempt) {
+    ASSERT_EQ(runTool({bin("reflex_bus"), "list", "--domain", kDomain, "--window", "2"}, list_log), 0) << slurp(list_log);
+    list = slurp(list_log);
+    std::istringstream lines(list);
+    for (std::string line; std::getline(lines, line);) {
+      std::istringstream f(line);
+      std::string host, pid, state, module;
+      f >> host >> pid >> state >> module;
+      if (module == "controller" && state == "RUNNING") {
+        found = true;
+        EXPECT_EQ(pid, std::to_string(controller.pid())) << line;
+      }
     }
   }
   EXPECT_TRUE(found) << list;

@@ -48,7 +48,17 @@ TEST(RecordProcess, RecordingSurvivesKill9AndReplaysAtTwiceTheSpeed) {
   bus::Participant watch(cfg);
   auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   ASSERT_TRUE(status.waitForWriters(1, 15s));
-  std::this_thread::sleep_for(3s);
+  // Until the recorder itself has written over 400 status samples (its own discovery can lag this
+  // watcher's; a fixed 3 s was the pattern of the flagship's CI failure), then kill it.
+  const auto t0 = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - t0 < 20s) {
+    std::this_thread::sleep_for(200ms);
+    try {
+      const RecordingInfo now = scanRecording(file);
+      if (now.topics.count("reflex/control_status") && now.topics.at("reflex/control_status").samples > 450) break;
+    } catch (const std::exception&) {  // not created yet, or its header not yet written
+    }
+  }
   recorder.signal(SIGKILL);
   EXPECT_EQ(recorder.wait(5s), 128 + SIGKILL);
 

@@ -118,9 +118,11 @@ TEST(SecureController, VisionBehaviorControllerChainRunsSecurely) {
   testing::ChildProcess behavior({bin + "/reflex_behavior", "--config", src + "/bringup/behavior/pointing.yaml",
                                   "--domain", d, "--duration", "23", "--profiles", dir + "/profiles/behavior.xml"},
                                  dir + "/behavior.log");
-  std::this_thread::sleep_for(3s);  // authentication of controller and behavior
+  // Vision holds its replay until behavior (the one reader it can authenticate with) has matched, so
+  // the session is not spent on the handshake (a fixed 3 s wait was not always enough under load).
   testing::ChildProcess vision({bin + "/reflex_vision", "--session", src + "/bringup/sessions/flagship", "--domain", d,
-                                "--duration", "18", "--quiet", "--profiles", dir + "/profiles/vision.xml"},
+                                "--duration", "18", "--quiet", "--wait-readers", "1", "--wait-timeout", "20",
+                                "--profiles", dir + "/profiles/vision.xml"},
                                dir + "/vision.log");
   ASSERT_TRUE(controller.started() && behavior.started() && vision.started());
   auto outsider = plainParticipant("outsider", kDomain);

@@ -95,9 +95,15 @@ TEST(SecureView, ReceivesTheSceneUnderAReadOnlyIdentityThatCannotWrite) {
   ASSERT_GT(plain_port, 0) << readFile(plain_log);
   std::this_thread::sleep_for(4s);  // secure discovery (authentication handshakes) and the first samples
 
-  const nlohmann::json r = wsClient(port, dir + "/ws_secure.log");
-  ASSERT_TRUE(r.contains("counts")) << r.dump();
-  const int scenes = r["counts"].value("/reflex/scene", 0);
+  // A client of 3 s, again (at most 3 times) while the handshakes have not let the scenes flow yet
+  // (1-5 s per pair on a loaded machine).
+  nlohmann::json r;
+  int scenes = 0;
+  for (int attempt = 0; attempt < 3 && scenes < 30; ++attempt) {
+    r = wsClient(port, dir + "/ws_secure.log");
+    ASSERT_TRUE(r.contains("counts")) << r.dump();
+    scenes = r["counts"].value("/reflex/scene", 0);
+  }
   EXPECT_GE(scenes, 30) << "about 3 s of scenes from the secure view\n" << readFile(view_log);
   EXPECT_EQ(r["expectedCapsules"], 17);
   for (const auto& n : r["capsules"]) ASSERT_EQ(n, r["expectedCapsules"]);

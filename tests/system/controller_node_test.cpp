@@ -152,7 +152,7 @@ TEST(ControllerNode, FindsTheRobotsControllerYamlBesideTheUrdf) {
     }
   ASSERT_FALSE(rest_line.empty());
   double rest_roll = 0.0;  // the second value: l_shoulder_roll
-  ASSERT_EQ(std::sscanf(rest_line.c_str() + rest_line.find('[') + 1, "%*lf , %lf", &rest_roll), 1) << rest_line;
+  ASSERT_EQ(std::sscanf(rest_line.c_str() + rest_line.find('[') + 1, "%*f , %lf", &rest_roll), 1) << rest_line;
   ASSERT_EQ(js.names().size(), js.positions().size());
   std::size_t roll = 0;
   for (; roll < js.names().size() && js.names()[roll] != "l_shoulder_roll"; ++roll) {}
