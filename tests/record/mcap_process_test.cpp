@@ -129,7 +129,7 @@ TEST(McapProcess, LiveBusRecordingReadsInTheReferenceReaderAsInTheCsvExport) {
   bus::Participant sink(cfg2);
   auto& replayed = sink.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   testing::ChildProcess player({bin("reflex_play"), finished, "--domain", std::to_string(kDomain + 1), "--rate", "2",
-                                "--topic", "reflex/control_status", "--delay", "1"},
+                                "--topic", "reflex/control_status", "--wait-readers", "1", "--delay", "0"},
                                tempPath("play.log"));
   std::uint64_t got = 0;
   const auto start = std::chrono::steady_clock::now();

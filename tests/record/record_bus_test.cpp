@@ -302,7 +302,9 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     player.run();
     const std::uint64_t expected = mode == Mode::kProtectionNamed ? 5u : mode == Mode::kCommands ? 55u : 25u;
     EXPECT_EQ(player.stats().published, expected) << static_cast<int>(mode);
-    if (mode == Mode::kDefault) EXPECT_EQ(player.commandsSkipped().size(), 6u);
+    if (mode == Mode::kDefault) {
+      EXPECT_EQ(player.commandsSkipped().size(), 6u);
+    }
   }
 
   // A replayed command, restamped, keeps its age: its deadline and the answered state's stamp move

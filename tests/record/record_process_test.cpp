@@ -101,7 +101,7 @@ TEST(RecordProcess, RecordingSurvivesKill9AndReplaysAtTwiceTheSpeed) {
   bus::Participant sink(cfg2);
   auto& replayed = sink.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   testing::ChildProcess player({bin("reflex_play"), file, "--domain", dom2, "--rate", "2", "--topic",
-                                "reflex/control_status", "--delay", "1", "--progress"},
+                                "reflex/control_status", "--wait-readers", "1", "--delay", "0", "--progress"},
                                tempPath("play.log"));
   std::vector<double> t;
   std::vector<std::uint64_t> got;
@@ -123,7 +123,20 @@ TEST(RecordProcess, RecordingSurvivesKill9AndReplaysAtTwiceTheSpeed) {
   EXPECT_EQ(got.front(), seqs.front());
   const double recorded_span = 1e-9 * static_cast<double>(info.last_ns - info.first_ns);
   EXPECT_NEAR(t.back() - t.front(), recorded_span / 2.0, 0.25);
-  EXPECT_NE(slurp(tempPath("play.log")).find("reflex_play:"), std::string::npos);
+  EXPECT_NE(slurp(tempPath("play.log")).find("reflex_play: readers matched after "), std::string::npos)
+      << slurp(tempPath("play.log"));
+
+  // --wait-readers with nobody reading the topic (the sink reads only the status): exit 1 after
+  // --wait-timeout, naming the topic and how many readers it had.
+  const std::string lonely = tempPath("play_lonely.log");
+  EXPECT_EQ(runTool({bin("reflex_play"), file, "--domain", dom2, "--topic", "reflex/heartbeat", "--wait-readers", "1",
+                     "--wait-timeout", "1"},
+                    lonely),
+            1);
+  EXPECT_NE(slurp(lonely).find("--wait-readers 1: after 1 s (--wait-timeout) these topics had fewer matched readers "
+                               "(matched): reflex/heartbeat (0)"),
+            std::string::npos)
+      << slurp(lonely);
 }
 
 TEST(RecordProcess, BadCommandLinesNameTheBadValue) {
@@ -141,6 +154,8 @@ TEST(RecordProcess, BadCommandLinesNameTheBadValue) {
       {{bin("reflex_record"), "export", missing, "--topic", "a"}, "--csv"},
       {{bin("reflex_record"), "info", "/etc/hostname"}, "not a Reflex recording"},
       {{bin("reflex_record"), "frobnicate"}, "frobnicate"},
+      {{bin("reflex_play"), missing, "--wait-readers", "-1"}, "--wait-readers -1 must not be negative"},
+      {{bin("reflex_play"), missing, "--wait-timeout", "0"}, "--wait-timeout 0.000000 s must be positive"},
   };
   for (const Case& c : cases) {
     const std::string log = tempPath("bad.log");

@@ -120,6 +120,13 @@ std::function<int()> addPlay(CLI::App& app) {
   app.add_option("-s,--start", o->start, "start offset, seconds after the first sample")->capture_default_str();
   app.add_option("--duration", o->duration, "play only this many seconds of recording time (0: to the end)");
   app.add_option("--delay", o->delay, "seconds to wait after creating the writers (discovery)")->capture_default_str();
+  app.add_option("--wait-readers", o->wait_readers,
+                 "hold the start until every played topic has this many matched readers (then 0.3 s for their "
+                 "side of the match, then --delay), so the first samples reach them; 0: --delay alone")
+      ->capture_default_str();
+  app.add_option("--wait-timeout", o->wait_timeout,
+                 "seconds --wait-readers waits; then exit 1 naming each topic short of readers")
+      ->capture_default_str();
   app.add_option("-t,--topic", o->topics, "topic to play (repeatable; default: every topic in the file)");
   app.add_option("-x,--exclude", o->exclude,
                  "topic not to play (repeatable). Command topics are not played anyway without --commands: "

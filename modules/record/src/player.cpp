@@ -85,6 +85,10 @@ Player::Player(const PlayerOptions& options) : options_(options) {
     throw RecordError("--duration " + std::to_string(options.duration) + " s must not be negative");
   if (!std::isfinite(options.delay) || options.delay < 0.0)
     throw RecordError("--delay " + std::to_string(options.delay) + " s must not be negative");
+  if (options.wait_readers < 0)
+    throw RecordError("--wait-readers " + std::to_string(options.wait_readers) + " must not be negative");
+  if (!std::isfinite(options.wait_timeout) || !(options.wait_timeout > 0.0))
+    throw RecordError("--wait-timeout " + std::to_string(options.wait_timeout) + " s must be positive");
   if (!std::isfinite(options.max_gap) || !(options.max_gap > 0.0))
     throw RecordError("--max-gap " + std::to_string(options.max_gap) + " s must be positive");
   const RecordingInfo info = scanRecording(options.input);
@@ -190,6 +194,37 @@ void Player::run() {
     while (!stop_ && !bus_->stopRequested() && Clock::now() < until)
       std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(50)));
   };
+  if (options_.wait_readers > 0) {
+    // Every played topic's writer has matched that many readers, so the first samples reach them.
+    const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                             std::chrono::duration<double>(options_.wait_timeout));
+    auto short_of_readers = [&] {
+      std::string missing;
+      for (const auto& [topic, publisher] : publishers_)
+        if (publisher->matchedReaders() < options_.wait_readers)
+          missing += (missing.empty() ? "" : ", ") + topic + " (" + std::to_string(publisher->matchedReaders()) + ")";
+      return missing;
+    };
+    std::fprintf(stderr, "reflex_play: holding the start until every played topic has %d matched reader(s) (at most "
+                 "%g s)\n", options_.wait_readers, options_.wait_timeout);
+    const auto t0 = Clock::now();
+    std::string missing = short_of_readers();
+    while (!missing.empty() && !stop_ && !bus_->stopRequested() && Clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      missing = short_of_readers();
+    }
+    if (stop_ || bus_->stopRequested()) return;
+    if (!missing.empty()) {
+      char timeout[32];
+      std::snprintf(timeout, sizeof timeout, "%g", options_.wait_timeout);
+      throw RecordError("--wait-readers " + std::to_string(options_.wait_readers) + ": after " + timeout +
+                        " s (--wait-timeout) these topics had fewer matched readers (matched): " + missing +
+                        "; is every consumer running on this domain?");
+    }
+    std::fprintf(stderr, "reflex_play: readers matched after %.2f s, starting\n",
+                 std::chrono::duration<double>(Clock::now() - t0).count());
+    sleepFor(0.3);  // each reader's own side of the match (it drops best-effort samples of an unknown writer)
+  }
   sleepFor(options_.delay);
   const double window = windowSeconds();
   auto last_print = Clock::now() - std::chrono::seconds(1);

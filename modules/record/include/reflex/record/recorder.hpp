@@ -111,6 +111,11 @@ struct PlayerOptions {
   double start = 0.0;                 ///< seconds after the first record to start from
   double duration = 0.0;              ///< seconds of recording time to play from the start (0: to the end)
   double delay = 0.5;                 ///< seconds between creating the writers and the first sample (discovery)
+  /// Hold the start until every played topic has this many matched readers (then 0.3 s for their side
+  /// of the match, then `delay`), at most wait_timeout seconds; else a RecordError naming each topic
+  /// short of readers and how many it had. 0: start after `delay` alone.
+  int wait_readers = 0;
+  double wait_timeout = 60.0;         ///< seconds (> 0)
   std::vector<std::string> topics;    ///< topic names to play; empty = every topic in the file but
                                       ///< reflex/controller_protection (a live controller's claim; see player.cpp)
                                       ///< and, without `commands`, the command topics (isCommandTopic)
