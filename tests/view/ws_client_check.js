@@ -1,7 +1,7 @@
 // Foxglove WebSocket client check of reflex_view (issue 14, tests): the protocol's reference client
 // (@foxglove/ws-protocol FoxgloveClient, over the `ws` package: Node has no global WebSocket before 22)
 // connects to a running reflex_view, subscribes to every channel and measures, over --seconds:
-//   - messages per second per channel;
+//   - messages per second per channel (from its first message on);
 //   - the capsules and spheres of the robot in each /reflex/scene message, against counts taken from
 //     the URDF text here (each <collision> element: <cylinder> or <box> = one capsule = 1 cylinder and 2
 //     spheres, <sphere> = 1 sphere), independent of the C++ scene builder;
@@ -40,7 +40,7 @@ const result = {
 };
 const ws = new WebSocket(args.url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
 const client = new FoxgloveClient({ ws });
-const channelsById = new Map(), subs = new Map();
+const channelsById = new Map(), subs = new Map(), firstAt = {};
 let measuring = false, tfSubscription = null, unsubscribedAt = null;
 const decoder = new TextDecoder();
 
@@ -60,7 +60,11 @@ client.on("advertise", (channels) => {
   setTimeout(() => { measuring = true; result.start = Date.now(); }, 500);
   setTimeout(() => {
     result.seconds = (Date.now() - result.start) / 1000;
-    for (const [topic, n] of Object.entries(result.counts)) result.rates[topic] = n / result.seconds;
+    // Each topic's rate over the span from its first message on (as `ros2 topic hz`): a view that is
+    // still discovering the controller when the window opens is not a slow view.
+    const now = Date.now();
+    for (const [topic, n] of Object.entries(result.counts))
+      result.rates[topic] = n >= 2 && now > firstAt[topic] ? (n - 1) / ((now - firstAt[topic]) / 1000) : n / result.seconds;
     client.unsubscribe(tfSubscription);
     unsubscribedAt = Date.now();
     result.afterUnsubscribe = 0;
@@ -81,7 +85,7 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   }
   if (!measuring) return;
   const msg = JSON.parse(decoder.decode(data));
-  result.counts[sub.channel.topic] += 1;
+  if (result.counts[sub.channel.topic]++ === 0) firstAt[sub.channel.topic] = Date.now();
   if (result.schemaErrors.length < 20) validate(msg, sub.schema, sub.channel.topic, result.schemaErrors);
   if (typeof timestamp !== "bigint" || timestamp <= 0n) result.schemaErrors.push("messageData timestamp " + timestamp);
   if (sub.channel.topic === "/reflex/scene") {
