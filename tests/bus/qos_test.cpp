@@ -180,14 +180,15 @@ TEST(Qos, SilentHeartbeatWriterIsDeclaredNotAlive) {
   auto& writer = module.makeWriter<msg::Heartbeat>();
   ASSERT_TRUE(writer.waitForReaders(1, 5s));
   msg::Heartbeat hb = heartbeat(0);
+  auto hang = std::chrono::steady_clock::now();
   for (int i = 0; i < 3; ++i) {
     ASSERT_TRUE(writer.publish(hb));
+    hang = std::chrono::steady_clock::now();  // the last assertion of liveliness: the lease runs from here
     std::this_thread::sleep_for(100ms);
   }
   ASSERT_TRUE(eventually([&] { return reader.stats().alive_writers == 1; }, 2000ms));
   EXPECT_EQ(reader.stats().liveliness_lost, 0u);
-  // The module hangs (its writer still exists but publishes nothing): lease 1.5 s.
-  const auto hang = std::chrono::steady_clock::now();
+  // The module hangs (its writer still exists but publishes nothing): lease 1.5 s from its last sample.
   ASSERT_TRUE(eventually([&] { return reader.stats().liveliness_lost >= 1; }, 4000ms));
   const auto noticed = std::chrono::steady_clock::now() - hang;
   EXPECT_EQ(reader.stats().alive_writers, 0);

@@ -24,6 +24,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -77,6 +78,8 @@ struct Figures {
   double rms_mrad[2] = {-1, -1}, max_mrad[2] = {-1, -1}, lag_ms[2] = {-1, -1};
   double mujoco_min_mm = 1e9;  ///< MuJoCo's smallest contact distance (1e9: none reported)
   std::string mujoco_pair, min_pair;
+  long cycles = -1, late_cycles = -1;  ///< the controller's cycles, and those that began a period late or more
+  double lateFraction() const { return cycles > 0 ? static_cast<double>(late_cycles) / static_cast<double>(cycles) : 1.0; }
 };
 
 Figures parse(const std::string& block) {
@@ -101,6 +104,8 @@ Figures parse(const std::string& block) {
     f.contact_steps = std::stol(m[3]);
     f.found = true;
   }
+  if (std::regex_search(block, m, std::regex(R"(\n\s*cycles (\d+), )"))) f.cycles = std::stol(m[1]);
+  if (std::regex_search(block, m, std::regex(R"(late cycles (\d+))"))) f.late_cycles = std::stol(m[1]);
   const char* side[2] = {"left", "right"};
   for (int a = 0; a < 2; ++a)
     if (std::regex_search(block, m, std::regex(std::string(side[a]) +
@@ -143,32 +148,81 @@ RobotMinimum robotMinimum(const std::string& log) {
   return out;
 }
 
+/// What in a run is not the avoidance outcome asserted on the physics robot ("" when all is).
+std::string avoidanceFailure(const Figures& f) {
+  std::ostringstream o;
+  if (f.robot != "mujoco") o << "robot '" << f.robot << "'; ";
+  if (f.contacts_received <= 500) o << "the judge was not heard (" << f.contacts_received << " samples); ";
+  if (f.non_finite) o << "non-finite output; ";
+  if (f.contact_samples != 0) o << "MuJoCo reported a pair closer than d_r in " << f.contact_samples << " samples; ";
+  if (f.contact_steps != 0) o << f.contact_steps << " MuJoCo contact steps; ";
+  if (f.below_d_r != 0) o << f.below_d_r << " measured cycles below d_r; ";
+  if (!(f.min_distance_mm >= 5.0)) o << "min distance " << f.min_distance_mm << " mm; ";
+  if (f.estop) o << "e-stop fired; ";
+  for (int a = 0; a < 2; ++a) {
+    // loose: a loaded machine makes the robot hold now and then
+    if (!(f.rms_mrad[a] >= 0.0 && f.rms_mrad[a] < 30.0)) o << "tracking RMS " << f.rms_mrad[a] << " mrad; ";
+    if (!(f.lag_ms[a] <= 100.0)) o << "servo lag " << f.lag_ms[a] << " ms; ";
+  }
+  std::string out = o.str();
+  if (!out.empty()) out.resize(out.size() - 2);  // the last "; "
+  return out;
+}
+
+// The controller runs in real time beside the robot: a machine that stalls the controller process
+// (not the robot) lets the robot go on with the last command while no new one comes. Reproduced by
+// hand (SIGSTOP of reflex_sim for 25 ms every 100 ms, the robot left running): grasped_bar, whose
+// hands sit 1 mm above d_r by design (the guard's floor, 6.0 mm on the kinematic plant), went to
+// 4.5 mm and the e-stop fired; that is what a fresh-clone .ci/run of session 12 met (robot loop
+// overruns in the same minute). So a run whose controller began more than kDisturbedLate of its cycles a period late or
+// more is not judged: it is run again (at most 3 runs), each retry named. A failure in a run the
+// machine did not disturb fails at once.
+constexpr double kDisturbedLate = 0.02;
+
 TEST(MujocoScenarios, AllSevenAvoidOnThePhysicsRobot) {
   const fs::path dir = outDir("all");
   const int rc = runSim({"all", "--robot", "mujoco", "--domain", "190", "--no-plots", "--out", dir.string()}, dir, 240s);
   ASSERT_EQ(rc, 0) << readFile(dir / "reflex_sim.log");
   for (const auto& name : kScenarios) {
-    const auto runs = parseSummary(dir / name / "summary.txt");
-    ASSERT_EQ(runs.size(), name == "one_vs_three_dof" ? 2U : 1U) << name;
-    for (const Figures& f : runs) {
-      ASSERT_TRUE(f.found) << name << ": no MuJoCo contact line\n" << readFile(dir / name / "summary.txt");
-      std::printf("%-22s robot %s: min distance %.2f mm, MuJoCo contacts %ld of %ld samples, below d_r %ld, "
-                  "tracking L max %.2f RMS %.3f mrad lag %.1f ms, R max %.2f RMS %.3f mrad lag %.1f ms\n",
-                  name.c_str(), f.robot.c_str(), f.min_distance_mm, f.contact_samples, f.contacts_received, f.below_d_r,
-                  f.max_mrad[0], f.rms_mrad[0], f.lag_ms[0], f.max_mrad[1], f.rms_mrad[1], f.lag_ms[1]);
-      EXPECT_EQ(f.robot, "mujoco") << name;
-      EXPECT_GT(f.contacts_received, 500) << name << ": the judge was not heard";
-      EXPECT_FALSE(f.non_finite) << name;
-      EXPECT_EQ(f.contact_samples, 0) << name << ": MuJoCo reported a pair closer than d_r";
-      EXPECT_EQ(f.contact_steps, 0) << name;
-      EXPECT_EQ(f.below_d_r, 0) << name << ": a measured state had a pair below d_r";
-      EXPECT_GE(f.min_distance_mm, 5.0) << name;
-      EXPECT_FALSE(f.estop) << name;
-      for (int a = 0; a < 2; ++a) {
-        EXPECT_GE(f.rms_mrad[a], 0.0) << name;
-        EXPECT_LT(f.rms_mrad[a], 30.0) << name;  // loose: a loaded machine makes the robot hold now and then
-        EXPECT_LE(f.lag_ms[a], 100.0) << name;
+    fs::path summary = dir / name / "summary.txt";
+    std::string disturbed_failures;
+    for (int attempt = 1;; ++attempt) {
+      const auto runs = parseSummary(summary);
+      ASSERT_EQ(runs.size(), name == "one_vs_three_dof" ? 2U : 1U) << name << "\n" << readFile(summary);
+      std::string failure;
+      double late = 0.0;
+      for (const Figures& f : runs) {
+        ASSERT_TRUE(f.found) << name << ": no MuJoCo contact line\n" << readFile(summary);
+        std::printf("%-22s robot %s: min distance %.2f mm, MuJoCo contacts %ld of %ld samples, below d_r %ld, "
+                    "tracking L max %.2f RMS %.3f mrad lag %.1f ms, R max %.2f RMS %.3f mrad lag %.1f ms, late cycles "
+                    "%ld of %ld\n",
+                    name.c_str(), f.robot.c_str(), f.min_distance_mm, f.contact_samples, f.contacts_received,
+                    f.below_d_r, f.max_mrad[0], f.rms_mrad[0], f.lag_ms[0], f.max_mrad[1], f.rms_mrad[1], f.lag_ms[1],
+                    f.late_cycles, f.cycles);
+        const std::string run_failure = avoidanceFailure(f);
+        failure += (failure.empty() || run_failure.empty() ? "" : "; ") + run_failure;
+        late = std::max(late, f.lateFraction());
       }
+      if (failure.empty()) break;
+      char why[160];
+      std::snprintf(why, sizeof why, "the controller began %.1f %% of its cycles a period late or more", 100.0 * late);
+      if (!(late > kDisturbedLate)) {
+        ADD_FAILURE() << name << ": " << failure << " in a run the machine did not disturb (" << why << ")\n"
+                      << disturbed_failures << readFile(summary);
+        break;
+      }
+      disturbed_failures += "  attempt " + std::to_string(attempt) + ": " + failure + "; " + why + "\n";
+      if (attempt == 3) {
+        ADD_FAILURE() << name << ": every run was disturbed by the machine and failed:\n" << disturbed_failures;
+        break;
+      }
+      std::printf("%s: %s and the outcome failed (%s); running it again (attempt %d of 3)\n", name.c_str(), why,
+                  failure.c_str(), attempt + 1);
+      const fs::path again = dir / (name + "_again" + std::to_string(attempt));
+      ASSERT_EQ(runSim({name, "--robot", "mujoco", "--domain", "190", "--no-plots", "--out", again.string()}, again, 90s),
+                0)
+          << readFile(again / "reflex_sim.log");
+      summary = again / "summary.txt";
     }
   }
 }

