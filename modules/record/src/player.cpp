@@ -223,7 +223,7 @@ void Player::run() {
     }
     std::fprintf(stderr, "reflex_play: readers matched after %.2f s, starting\n",
                  std::chrono::duration<double>(Clock::now() - t0).count());
-    sleepFor(0.3);  // each reader's own side of the match (it drops best-effort samples of an unknown writer)
+    sleepFor(std::chrono::duration<double>(bus::kReaderSideMatchGrace).count());  // the readers' side of the match
   }
   sleepFor(options_.delay);
   const double window = windowSeconds();

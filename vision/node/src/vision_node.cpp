@@ -59,13 +59,9 @@ std::string seconds(double s) {
 }
 
 #ifdef REFLEX_VISION_WITH_BUS
-/// After the readers matched our writer: time for their side of the match (0.3 s; one host matches
-/// both sides within milliseconds when idle, the first frames were lost once on a loaded machine).
-constexpr std::chrono::milliseconds kReaderSideGrace{300};
-
 /// Holds until `readers` readers of reflex/object_targets matched: true. false when the node was
 /// stopped (why stays empty) or `timeout` seconds passed (why says how many matched), then
-/// kReaderSideGrace more. One line on stderr when holding starts and when it ends.
+/// bus::kReaderSideMatchGrace more. One line on stderr when holding starts and when it ends.
 bool waitForReaders(const VisionPublisher& publisher, int readers, double timeout, const std::atomic<bool>& stop,
                     std::string& why) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -84,9 +80,8 @@ bool waitForReaders(const VisionPublisher& publisher, int readers, double timeou
     }
   }
   const double matched_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  // Our writer has matched the readers; each reader matches our writer on its own, a moment later,
-  // and drops best-effort samples of a writer it does not know yet. kReaderSideGrace for that.
-  const auto grace_end = std::chrono::steady_clock::now() + kReaderSideGrace;
+  // Our writer has matched the readers; now their side of the match.
+  const auto grace_end = std::chrono::steady_clock::now() + reflex::bus::kReaderSideMatchGrace;
   while (!stop.load() && std::chrono::steady_clock::now() < grace_end)
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   if (stop.load()) return false;

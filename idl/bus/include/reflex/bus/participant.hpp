@@ -55,6 +55,12 @@ class Participant;
 /// Nanoseconds since the Unix epoch on the system clock (the Header::stamp_ns clock).
 std::int64_t nowNs() noexcept;
 
+/// How long a publisher that held its start until its writer matched N readers (reflex_vision and
+/// reflex_play --wait-readers) waits more: each reader matches the writer on its own, a moment later,
+/// and drops best-effort samples of a writer it does not know yet. One host matches both sides
+/// within milliseconds when idle; the first frames were lost once on a loaded machine.
+inline constexpr std::chrono::milliseconds kReaderSideMatchGrace{300};
+
 /// Status counters of a reader since it was created (totals, never reset).
 struct ReaderStats {
   std::uint64_t deadline_missed = 0;    ///< requested deadline missed (no sample within the deadline)
