@@ -12,6 +12,7 @@
 
 #include <chrono>
 #include <cstdlib>
+#include <fstream>
 #include <thread>
 
 #include "bus_test_util.hpp"
@@ -85,6 +86,32 @@ TEST(Participant, ReportsItsConfiguration) {
   EXPECT_EQ(bus.profilesFile(), kProfilesFile);
   EXPECT_EQ(bus.native().get_domain_id(), kDomain);
   EXPECT_EQ(bus.native().get_qos().name().to_string(), "configured");
+}
+
+// The participant id (bus::nextParticipantId; bringup/README.md "A controller restart"): two
+// participants of one process get different ids in [0, kParticipantIdRange), the second the next
+// value of the host's counter (other processes may take values in between); a profile's own id is
+// kept. bus_two_process_test checks what it is for: a replaced process is heard again at once.
+TEST(Participant, GetsTheNextIdOfTheHostsCounterUnlessItsProfileSetsOne) {
+  Participant a(testConfig("id_a", kDomain));
+  Participant b(testConfig("id_b", kDomain));
+  EXPECT_GE(a.participantId(), 0);
+  EXPECT_LT(a.participantId(), kParticipantIdRange);
+  EXPECT_GE(b.participantId(), 0);
+  EXPECT_LT(b.participantId(), kParticipantIdRange);
+  EXPECT_NE(a.participantId(), b.participantId());
+
+  const std::string path = ::testing::TempDir() + "reflex_profiles_fixed_id.xml";
+  {
+    std::ofstream f(path);
+    f << "<?xml version=\"1.0\"?>\n<dds xmlns=\"http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles\"><profiles>"
+         "<participant profile_name=\"fixed_id\"><rtps><participantID>97</participantID></rtps></participant>"
+         "</profiles></dds>\n";
+  }
+  BusConfig c = testConfig("id_fixed", kDomain, "fixed_id");
+  c.profiles_file = path;
+  Participant fixed(c);
+  EXPECT_EQ(fixed.participantId(), 97);
 }
 
 TEST(Participant, EveryCannotBeCalledFromInsideTheLoop) {

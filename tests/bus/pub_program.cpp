@@ -1,6 +1,7 @@
 // bus_pub_program: publishes the distinctive test sample (samples.hpp, variant 7) of the selected
 // topic types on their default topics and profiles, every --period-ms, until SIGINT / SIGTERM (exit
-// 0, prints "stopped by signal N") or --max-seconds (exit 2). Prints "running" once set up.
+// 0, prints "stopped by signal N") or --max-seconds (exit 2). Prints "running (participant id N)" once
+// set up.
 // Used by bus_two_process_test and the Cyclone DDS interoperability tests.
 #include <CLI/CLI.hpp>
 
@@ -54,7 +55,7 @@ int main(int argc, char** argv) {
                 bus.stop();
               });
     StopOnSignal stop_on_signal(bus);
-    std::cout << "running" << std::endl;
+    std::cout << "running (participant id " << bus.participantId() << ")" << std::endl;
     bus.run();
     if (timed_out) {
       std::cerr << "bus_pub_program: not stopped by a signal within --max-seconds " << max_seconds << "\n";

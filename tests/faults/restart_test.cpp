@@ -211,12 +211,12 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   const double t_restart = wallNow();
   testing::ChildProcess b(args_b, tmp + "restart_controller_b.log");
   ASSERT_TRUE(b.started());
-  // The watch here knew the killed controller: it finds the new one only after the new one's peer
-  // probe (1 s) and Fast DDS's rediscovery of a restarted participant over shared memory (it takes
-  // the dead one's participant id): 2.3-3.1 s after the restart on a quiet machine, over 4.5 s once
-  // in CI, once over 29 s in mujoco_faults_test (bringup/README.md, "A controller restart"). The
-  // default transport is kept on purpose (what users run; the discovery delay is also what lets the
-  // hold below be seen). Wait for the first JointState for up to 15 s, then 1.5 s more for 200 Hz.
+  // The watch here knew the killed controller: it finds the new one after the new one's peer probe
+  // (1 s) and discovery: 1.04-1.82 s after the restart (6 runs). Before the bus gave a restarted
+  // process another participant id (bus::nextParticipantId) it took the dead one's, and the watch
+  // found it 2.3-3.1 s after the restart, over 4.5 s once in CI, once over 29 s in mujoco_faults_test
+  // (bringup/README.md, "A controller restart"). The default transport is kept on purpose (what users
+  // run). Wait for the first JointState for up to 15 s, then 1.5 s more for 200 Hz.
   for (int i = 0; i < 150 && states.size() == n_before; ++i) pumpFor(0.1);
   ASSERT_GT(states.size(), n_before) << "the restarted controller publishes within 15 s; its output:\n"
                                      << readFile(tmp + "restart_controller_b.log");
@@ -310,10 +310,10 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   ASSERT_GE(t_given, 0.0) << "the restarted controller receives targets";
   EXPECT_GE(t_follow, 0.0) << "the restarted controller follows the targets";
   EXPECT_LT(t_follow - t_given, 3.0) << "within 3 s of its first target";
-  // Rediscovery: a participant that knew the killed controller finds the new one late (see the wait
-  // above; 0.1 s for a source started after the kill), after the new controller's 1 s peer probe:
-  // 2.4-3.3 s measured, typically. Bound 15 s, as the wait
-  // above (Fast DDS's rediscovery, not this controller); --duration 20 leaves the 3 s for following.
+  // Rediscovery: the source, which knew the killed controller, finds the new one after its 1 s peer
+  // probe: the first target 1.05-1.87 s after the restart (6 runs; 2.4-3.3 s before the bus gave a
+  // restarted process another participant id). Bound 15 s, as the wait above (discovery, not this
+  // controller); --duration 20 leaves the 3 s for following.
   EXPECT_LT(t_given, 15.0) << "the restarted controller gets the targets within 15 s of its start";
   EXPECT_GE(d_min_b, kDr) << "restarted controller's closest pair";
 

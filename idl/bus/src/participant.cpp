@@ -14,6 +14,10 @@
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
 #include <fastrtps/rtps/participant/ParticipantDiscoveryInfo.h>
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <condition_variable>
 #include <cstdio>
@@ -57,6 +61,28 @@ bool pollUntil(Pred ok, std::chrono::nanoseconds timeout) {
 }
 
 }  // namespace
+
+int nextParticipantId() noexcept {
+  static std::atomic<unsigned> in_process{0};  // without the file: the pid's, then the next ones
+  unsigned n = static_cast<unsigned>(::getpid()) + in_process.fetch_add(1);
+  // O_NOFOLLOW: /dev/shm is shared by every user; a link planted there is not followed.
+  const std::string path = "/dev/shm/reflex_bus_participant_ids_" + std::to_string(::getuid());
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0600);
+  if (fd >= 0) {
+    if (::flock(fd, LOCK_EX) == 0) {
+      std::uint32_t counter = 0;
+      if (::pread(fd, &counter, sizeof counter, 0) == static_cast<ssize_t>(sizeof counter)) n = counter;
+      counter = n + 1;
+      if (::pwrite(fd, &counter, sizeof counter, 0) != static_cast<ssize_t>(sizeof counter)) {
+        // Not advanced: the pid's id this time (the next process reads the old value).
+        n = static_cast<unsigned>(::getpid());
+      }
+      ::flock(fd, LOCK_UN);
+    }
+    ::close(fd);
+  }
+  return static_cast<int>(n % static_cast<unsigned>(kParticipantIdRange));
+}
 
 std::int64_t nowNs() noexcept {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -255,9 +281,17 @@ Participant::Participant(const BusConfig& config)
                              }),
               props.end());
   qos.name(material.enabled ? std::string() : module_name_);
-  // The listener gets participant discovery only (it is not in the status mask for anything else).
-  participant_ = factory->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, extras_.get(),
-                                             dds::StatusMask::none());
+  // Not the lowest free id (a restarted process would take its predecessor's; see nextParticipantId).
+  // An id this process already holds (the counter came round while it lived) is refused by Fast DDS:
+  // then the next one.
+  const bool choose_id = qos.wire_protocol().participant_id < 0;
+  for (int attempt = 0; attempt < 3 && participant_ == nullptr; ++attempt) {
+    if (choose_id) qos.wire_protocol().participant_id = nextParticipantId();
+    // The listener gets participant discovery only (it is not in the status mask for anything else).
+    participant_ = factory->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, extras_.get(),
+                                               dds::StatusMask::none());
+    if (!choose_id) break;
+  }
   if (participant_ == nullptr) {
     throw BusError("could not create the DDS participant '" + module_name_ + "' on domain " +
                    std::to_string(domain_id_) + " with profile '" + config.participant_profile + "'" +
@@ -301,6 +335,8 @@ Participant::~Participant() {
   dds::DomainParticipantFactory::get_instance()->delete_participant(participant_);
   participant_ = nullptr;
 }
+
+int Participant::participantId() const { return participant_->get_qos().wire_protocol().participant_id; }
 
 std::string Participant::where() const { return " (profiles file '" + profiles_file_ + "')"; }
 

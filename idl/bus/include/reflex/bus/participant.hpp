@@ -61,6 +61,19 @@ std::int64_t nowNs() noexcept;
 /// within milliseconds when idle; the first frames were lost once on a loaded machine.
 inline constexpr std::chrono::milliseconds kReaderSideMatchGrace{300};
 
+/// Participant ids Participant hands out when its profile leaves the id to Fast DDS (ids 0-99: the
+/// RTPS unicast ports 7410 + 250 domain + 2 id (+1) stay inside the domain's 250 ports).
+inline constexpr int kParticipantIdRange = 100;
+
+/// The participant id for a profile that sets none: the next of a per-user counter that every
+/// process of the host shares (a 4-byte file in /dev/shm, locked while it is read and advanced),
+/// modulo kParticipantIdRange; without that file, the process id's. WHY: left to itself, Fast DDS 2.9
+/// gives a new participant the lowest free id, so a restarted process takes the id, ports and
+/// shared-memory port of the process it replaces, and its peers found it 2-29 s late (bringup/README,
+/// "A controller restart"). Consecutive participants on a host get different ids; a busy port is
+/// still skipped by Fast DDS (it moves to the next id's ports). Never throws.
+int nextParticipantId() noexcept;
+
 /// Status counters of a reader since it was created (totals, never reset).
 struct ReaderStats {
   std::uint64_t deadline_missed = 0;    ///< requested deadline missed (no sample within the deadline)
@@ -300,6 +313,9 @@ class Participant {
   Participant& operator=(const Participant&) = delete;
   Participant(Participant&&) = delete;
   Participant& operator=(Participant&&) = delete;
+
+  /// The RTPS participant id (the profile's, else nextParticipantId()'s).
+  int participantId() const;
 
   /// Makes a writer of T on `topic_name` with the data_writer profile `profile`. Throws BusError if
   /// the profile is unknown, the topic name is already used here with another type, or creation fails.
