@@ -2,6 +2,7 @@
 // whole reaction to its inputs, without processes. Checked against independent answers:
 // - staleness: the timeout from the options (hold at exactly input_timeout after the last sign of
 //   life, retract strictly after it), and the rest posture from restConfiguration + forward kinematics;
+//   a resumed controller's hold (holdHandsHere): the hands' own positions by forward kinematics;
 // - body schema by name: the distance module called directly (attachBodySchemaSegment +
 //   computeSegmentDistances on a DistanceData of its own) for the attached segment and for a refusal's
 //   distance; the refusal causes from BodySchemaLimits and kBodySchemaSlots;
@@ -22,6 +23,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -55,6 +57,65 @@ Eigen::Vector3d handAt(const Model& model, const ControllerModel& cm, const Eige
 }
 
 // ---------------------------------------------------------------- staleness
+
+// holdHandsHere (a controller resumed from a saved robot state, reflex_controller --robot-state): the
+// hands hold where they are, targets at their own positions (forward kinematics here), until the
+// source is heard or input_timeout passes, then retract like after any silence. Deterministic here:
+// the system test (faults_controller_restart_test) sees the hold only while discovery is slower
+// than the resumed controller's first cycle.
+TEST(OnboardStaleness, AResumedControllerHoldsTheHandsWhereTheyAreUntilTheSourceOrTheTimeout) {
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  // A configuration away from rest: the arms after reaching apart for 2 s.
+  Eigen::VectorXd q_start;
+  {
+    const Eigen::VectorXd q0 = restConfiguration(model, cm);
+    KinematicPort port(q0);
+    OnboardController reach(model, cm, port, q0, OnboardOptions{});
+    for (int k = 0; k < 400; ++k) {
+      reach.setHandTargets(reachable(), k * kDt);
+      reach.step(k * kDt);
+    }
+    q_start = port.positions();
+  }
+  const std::array<Eigen::Vector3d, 2> h0 = {handAt(model, cm, q_start, kLeft), handAt(model, cm, q_start, kRight)};
+  ASSERT_GT((h0[kLeft] - handAt(model, cm, restConfiguration(model, cm), kLeft)).norm(), 0.05)
+      << "the start is away from rest (a retract would show)";
+
+  for (const bool source_comes : {false, true}) {
+    SCOPED_TRACE(source_comes ? "the source is heard at 0.25 s" : "the source stays silent");
+    KinematicPort port(q_start);
+    OnboardOptions options;
+    options.input_timeout = 0.5;
+    OnboardController ctl(model, cm, port, q_start, options);
+    ASSERT_TRUE(ctl.holdHandsHere(0.0));
+    double held = 0.0;
+    for (int k = 1; k < 50; ++k) {  // t < 0.25 s: holding
+      const CycleReport& r = ctl.step(k * kDt);
+      ASSERT_FALSE(r.inputs_stale) << "t = " << k * kDt;
+      for (int a = 0; a < 2; ++a) {
+        ASSERT_EQ(r.commands[a].status, HandStatus::kGiven);
+        EXPECT_LT((r.commands[a].target_B - h0[a]).norm(), 1e-12) << "the hold's target is the hand itself";
+        held = std::max(held, (handAt(model, cm, port.positions(), a) - h0[a]).norm());
+      }
+    }
+    EXPECT_LT(held, 1e-3) << "the hands hold within 1 mm";
+    if (source_comes) {
+      ctl.setHandTargets(crossing(), 0.25);
+      const CycleReport& r = ctl.step(0.25);
+      EXPECT_FALSE(r.inputs_stale);
+      EXPECT_EQ(r.commands[kLeft].target_B, crossing()[kLeft].target_B) << "the source's targets replace the hold";
+      for (int k = 51; k <= 140; ++k) EXPECT_FALSE(ctl.step(k * kDt).inputs_stale) << "0.5 s after the source's sample";
+      continue;
+    }
+    for (int k = 50; k <= 99; ++k) ASSERT_FALSE(ctl.step(k * kDt).inputs_stale) << "held until input_timeout";
+    const CycleReport& late = ctl.step(0.5 + kDt);
+    EXPECT_TRUE(late.inputs_stale) << "then stale";
+    EXPECT_EQ(late.commands[kLeft].status, HandStatus::kNoTarget);
+    for (int k = 0; k < 200; ++k) ctl.step(0.5 + (k + 2) * kDt);
+    EXPECT_GT((handAt(model, cm, port.positions(), kLeft) - h0[kLeft]).norm(), 0.02) << "and the arms retract";
+  }
+}
 
 TEST(OnboardStaleness, HoldsUntilExactlyTheTimeoutThenRetractsToRest) {
   const Model& model = shippedModel();
