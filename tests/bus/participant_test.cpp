@@ -101,17 +101,20 @@ TEST(Participant, GetsTheNextIdOfTheHostsCounterUnlessItsProfileSetsOne) {
   EXPECT_LT(b.participantId(), kParticipantIdRange);
   EXPECT_NE(a.participantId(), b.participantId());
 
+  // An id neither of them holds (Fast DDS refuses a second participant of one process with the same id).
+  int fixed_id = (a.participantId() + 50) % kParticipantIdRange;
+  while (fixed_id == a.participantId() || fixed_id == b.participantId()) fixed_id = (fixed_id + 1) % kParticipantIdRange;
   const std::string path = ::testing::TempDir() + "reflex_profiles_fixed_id.xml";
   {
     std::ofstream f(path);
     f << "<?xml version=\"1.0\"?>\n<dds xmlns=\"http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles\"><profiles>"
-         "<participant profile_name=\"fixed_id\"><rtps><participantID>97</participantID></rtps></participant>"
-         "</profiles></dds>\n";
+         "<participant profile_name=\"fixed_id\"><rtps><participantID>"
+      << fixed_id << "</participantID></rtps></participant></profiles></dds>\n";
   }
   BusConfig c = testConfig("id_fixed", kDomain, "fixed_id");
   c.profiles_file = path;
   Participant fixed(c);
-  EXPECT_EQ(fixed.participantId(), 97);
+  EXPECT_EQ(fixed.participantId(), fixed_id);
 }
 
 TEST(Participant, EveryCannotBeCalledFromInsideTheLoop) {

@@ -63,24 +63,21 @@ bool pollUntil(Pred ok, std::chrono::nanoseconds timeout) {
 }  // namespace
 
 int nextParticipantId() noexcept {
-  static std::atomic<unsigned> in_process{0};  // without the file: the pid's, then the next ones
+  // Without the file (or when it cannot be advanced): the pid's value, then the next ones.
+  static std::atomic<unsigned> in_process{0};
   unsigned n = static_cast<unsigned>(::getpid()) + in_process.fetch_add(1);
   // O_NOFOLLOW: /dev/shm is shared by every user; a link planted there is not followed.
   const std::string path = "/dev/shm/reflex_bus_participant_ids_" + std::to_string(::getuid());
   const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0600);
-  if (fd >= 0) {
-    if (::flock(fd, LOCK_EX) == 0) {
-      std::uint32_t counter = 0;
-      if (::pread(fd, &counter, sizeof counter, 0) == static_cast<ssize_t>(sizeof counter)) n = counter;
-      counter = n + 1;
-      if (::pwrite(fd, &counter, sizeof counter, 0) != static_cast<ssize_t>(sizeof counter)) {
-        // Not advanced: the pid's id this time (the next process reads the old value).
-        n = static_cast<unsigned>(::getpid());
-      }
-      ::flock(fd, LOCK_UN);
-    }
-    ::close(fd);
+  if (fd < 0) return static_cast<int>(n % static_cast<unsigned>(kParticipantIdRange));
+  if (::flock(fd, LOCK_EX) == 0) {
+    std::uint32_t stored = n;  // a new (empty) file starts from the fallback
+    (void)::pread(fd, &stored, sizeof stored, 0);
+    const std::uint32_t advanced = stored + 1;
+    if (::pwrite(fd, &advanced, sizeof advanced, 0) == static_cast<ssize_t>(sizeof advanced)) n = stored;
+    ::flock(fd, LOCK_UN);
   }
+  ::close(fd);
   return static_cast<int>(n % static_cast<unsigned>(kParticipantIdRange));
 }
 
