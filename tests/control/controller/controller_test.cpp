@@ -571,5 +571,91 @@ TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem) {
   EXPECT_GT(refined_by_sweep, 100) << "the configurations must reach the case, else this test compares nothing";
 }
 
+// The same comparison as an attack: random zones (d_r < d_b < d_a <= d_safe, half of them with
+// d_safe = d_a), zero to two body-schema slots on random links (one virtual), a closed loop towards
+// random targets with the priority flipping, or independent random configurations; every output the
+// broad phase may change must be the brute force's. (Before session 14 it found the case above in 2
+// of 40 trials on the 1,343-pair robot.)
+void attackBroadPhase(const Model& model, unsigned seed, int* sweep_refined) {
+  std::mt19937 rng(seed);
+  auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  for (int trial = 0; trial < 40; ++trial) {
+    ControllerConfig config = defaultControllerConfig();
+    ControllerParams& params = config.params;
+    params.d_r = uniform(0.002, 0.01);
+    params.d_b = params.d_r + uniform(0.002, 0.03);
+    params.d_a = params.d_b + uniform(0.002, 0.05);
+    params.d_safe = trial % 4 < 2 ? params.d_a : params.d_a + uniform(0.0, 0.2);
+    params.estop_release_margin = std::min(params.estop_release_margin, params.d_b - params.d_r);
+    if (trial % 3 == 0) params.guard_margin = 0.0;
+    const ControllerModel pruned = makeControllerModel(model, config);
+    ControllerModel brute = pruned;
+    brute.broad_phase = false;
+    ControllerData dp(model, pruned), db(model, brute);
+    for (int slot = 0; slot < trial % 3; ++slot) {
+      const int link = std::uniform_int_distribution<int>(1, static_cast<int>(model.links.size()) - 1)(rng);
+      const Eigen::Vector3d a(uniform(-0.1, 0.1), uniform(-0.1, 0.1), uniform(-0.1, 0.1));
+      const Eigen::Vector3d b(uniform(-0.2, 0.2), uniform(-0.2, 0.2), uniform(-0.2, 0.2));
+      const double radius = uniform(0.01, 0.05);
+      ASSERT_TRUE(attachBodySchemaSegment(model, dp.dist, slot, link, a, b, radius));
+      ASSERT_TRUE(attachBodySchemaSegment(model, db.dist, slot, link, a, b, radius));
+      dp.dist.slots[slot].is_virtual = db.dist.slots[slot].is_virtual = slot == 1;
+    }
+    const Eigen::VectorXd rest = restConfiguration(model, pruned);
+    auto randomConfiguration = [&] {
+      Eigen::VectorXd q = rest;
+      for (int j = 0; j < model.nq; ++j) q[j] += uniform(-0.5, 0.5);
+      return q;
+    };
+    Eigen::VectorXd q = randomConfiguration();
+    const std::string what = model.name + " seed " + std::to_string(seed) + " trial " + std::to_string(trial);
+    for (int k = 0; k < 300; ++k) {
+      ControlInput in;
+      for (int h = 0; h < 2; ++h)
+        in.hands[h] = {HandStatus::kGiven, Eigen::Vector3d(uniform(0.0, 0.4), uniform(-0.3, 0.3), uniform(0.7, 1.1))};
+      in.priority = static_cast<MotionPriority>(k / 50 % 3);
+      ASSERT_EQ(computeControl(model, pruned, dp, q, in), computeControl(model, brute, db, q, in)) << what << " cycle " << k;
+      const int c = dp.dist.closest;
+      const std::vector<int>& exact = dp.dist.exactList();
+      if (c >= 0 && dp.dist.pair_common[static_cast<std::size_t>(c)] >= 0 &&
+          !std::binary_search(exact.begin(), exact.begin() + dp.dist.num_exact_pairs, c))
+        ++*sweep_refined;
+      ASSERT_EQ(dp.qdot, db.qdot) << what << " cycle " << k;
+      ASSERT_EQ(dp.closest_physical.distance, db.closest_physical.distance) << what << " cycle " << k;
+      ASSERT_EQ(dp.closest_physical.pair, db.closest_physical.pair) << what << " cycle " << k;
+      ASSERT_EQ(dp.closest_virtual.distance, db.closest_virtual.distance) << what << " cycle " << k;
+      ASSERT_EQ(dp.closest_between_arms.distance, db.closest_between_arms.distance) << what << " cycle " << k;
+      ASSERT_EQ(dp.closest_between_arms.pair, db.closest_between_arms.pair) << what << " cycle " << k;
+      ASSERT_EQ(dp.guard_count, db.guard_count) << what << " cycle " << k;
+      ASSERT_EQ(dp.estop, db.estop) << what << " cycle " << k;
+      for (int a = 0; a < 2; ++a) {
+        ASSERT_EQ(dp.arms[a].distance, db.arms[a].distance) << what << " cycle " << k << " arm " << a;
+        ASSERT_EQ(dp.arms[a].closest_pair, db.arms[a].closest_pair) << what << " cycle " << k << " arm " << a;
+        ASSERT_EQ(dp.arms[a].f, db.arms[a].f) << what << " cycle " << k << " arm " << a;
+      }
+      // Odd trials: independent random configurations; even ones: the closed loop, a jump every 100.
+      if (trial % 2 == 1) {
+        q = randomConfiguration();
+      } else {
+        q += dp.qdot * pruned.params.period;
+        if (k % 100 == 99)
+          for (int j = 0; j < model.nq; ++j) q[j] += uniform(-0.2, 0.2);
+      }
+    }
+  }
+}
+
+TEST(BroadPhase, ControlOutputIsTheBruteForcesForRandomZonesSlotsAndConfigurations) {
+  const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/many_segment_humanoid.urdf";
+  const Model many = loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf)));
+  int sweep_refined = 0;
+  for (const unsigned seed : {1U, 2U}) {
+    attackBroadPhase(shippedModel(), seed, &sweep_refined);
+    attackBroadPhase(many, seed, &sweep_refined);
+  }
+  std::printf("cycles whose closest pair the sweep refined: %d\n", sweep_refined);
+  EXPECT_GT(sweep_refined, 0) << "the attack must reach a sweep-refined closest pair";
+}
+
 }  // namespace
 }  // namespace reflex::control
