@@ -1,8 +1,10 @@
 #include "reflex/control/controller.hpp"
 
 #include "reflex/common/yaml_reader.hpp"
+#include "reflex/control/distance.hpp"
+#include "reflex/control/kinematics.hpp"
+#include "reflex/control/scenarios.hpp"
 #include "reflex/control/urdf_loader.hpp"
-
 
 #include <cerrno>
 #include <cstring>
@@ -259,7 +261,37 @@ ControllerModel makeControllerModel(const Model& model, const ControllerConfig& 
   cm.segment_owner.assign(static_cast<std::size_t>(model.num_robot_segments), -1);
   for (int s = 0; s < model.num_robot_segments; ++s)
     cm.segment_owner[static_cast<std::size_t>(s)] = cm.link_owner[static_cast<std::size_t>(model.segments[s].link)];
+  checkRestPostureClearOfRedZone(model, cm, config.source);
   return cm;
+}
+
+void checkRestPostureClearOfRedZone(const Model& model, const ControllerModel& cm, const std::string& source) {
+  if (!cm.params.estop) return;
+  KinematicsData kin(model);
+  DistanceData dist(model);  // no body-schema slot enabled: robot pairs only
+  if (!computeForwardKinematics(model, kin, restConfiguration(model, cm))) return;  // rest is inside the limits
+  computeSegmentDistances(model, kin, dist);
+  if (dist.closest < 0) return;
+  const PairDistance& pd = dist.pairs[static_cast<std::size_t>(dist.closest)];
+  const double floor = cm.params.d_r + cm.params.estop_release_margin;
+  if (!(pd.distance < floor)) return;
+  const Segment& a = model.segments[static_cast<std::size_t>(pd.seg_a)];
+  const Segment& b = model.segments[static_cast<std::size_t>(pd.seg_b)];
+  const bool arm_moves = cm.segment_owner[static_cast<std::size_t>(pd.seg_a)] >= 0 ||
+                         cm.segment_owner[static_cast<std::size_t>(pd.seg_b)] >= 0;
+  auto mm = [](double m) {
+    std::ostringstream out;
+    out << std::fixed << std::setprecision(2) << m * 1000.0 << " mm";
+    return out.str();
+  };
+  throw ConfigError(source + ": d_r " + mm(cm.params.d_r) + " + estop_release_margin " +
+                    mm(cm.params.estop_release_margin) + " = " + mm(floor) + " is above the distance of '" + a.name +
+                    "' and '" + b.name + "' at the rest posture, " + mm(pd.distance) +
+                    ": the red-zone e-stop would latch there" +
+                    (arm_moves ? " whenever the arms rest" : " and never release (no arm moves either segment)") +
+                    "; make d_r + estop_release_margin at most " + mm(pd.distance) +
+                    (arm_moves ? " or move the arms' rest posture"
+                               : " or, if the two can never come closer, exclude the pair (collision configuration)"));
 }
 
 }  // namespace reflex::control

@@ -48,6 +48,8 @@ std::vector<Case> cases() {
   writeFile(tmp("nan.controller.yaml"), "k_virtual: .nan\n");
   writeFile(tmp("unknown_key.controller.yaml"), "d_z: 0.01\n");
   writeFile(tmp("unknown_joint.controller.yaml"), "arms:\n  left:\n    joints: [l_no_such_joint]\n");
+  // small_humanoid's own configuration with d_r 20 mm: its feet are 11.63 mm apart at rest (session 14).
+  writeFile(tmp("red_rest.controller.yaml"), readFile(robots + "small_humanoid.controller.yaml") + "d_r: 0.02\nd_b: 0.03\n");
   writeFile(tmp("truncated.xml"), base_profiles.substr(0, base_profiles.size() / 2));
   writeFile(tmp("not_xml.xml"), "this is not XML at all {\n");
   writeFile(tmp("bad_qos.xml"),
@@ -78,6 +80,9 @@ std::vector<Case> cases() {
       {"NaN gain", {"--controller", tmp("nan.controller.yaml")}, "k_virtual"},
       {"unknown controller key", {"--controller", tmp("unknown_key.controller.yaml")}, "d_z"},
       {"unknown joint in controller YAML", {"--controller", tmp("unknown_joint.controller.yaml")}, "l_no_such_joint"},
+      {"rest posture inside the red zone",
+       {"--urdf", robots + "small_humanoid.urdf", "--controller", tmp("red_rest.controller.yaml")},
+       "is above the distance of 'l_foot' and 'r_foot' at the rest posture, 11.63 mm"},
       {"missing profiles XML", {"--domain", d, "--profiles", "/nonexistent/p.xml"}, "/nonexistent/p.xml"},
       {"truncated profiles XML", {"--domain", d, "--profiles", tmp("truncated.xml")}, tmp("truncated.xml")},
       {"profiles file not XML", {"--domain", d, "--profiles", tmp("not_xml.xml")}, tmp("not_xml.xml")},

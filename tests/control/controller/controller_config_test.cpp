@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <iomanip>
@@ -241,13 +242,81 @@ TEST(ControllerConfig, ConfigurationsThatValidateButCannotWorkAreRefused) {
   expectError("k_virtual: 1000\n", "k_virtual: outside its range (value '1000'");
 }
 
+// Session 14's attack (random parameters inside every range, 300 trials on each shipped robot): the
+// only configurations that validated and could not work put the rest posture inside the red zone.
+// small_humanoid's feet are 11.63 mm apart at rest: with d_r 20 mm the e-stop latched at the first
+// cycle and no arm could release it. Such a configuration is refused at set-up, naming the pair.
+std::string restPostureError(const std::string& robot, ControllerConfig config) {
+  const Model model = testing::loadRobot(robot);
+  try {
+    makeControllerModel(model, config);
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+ControllerConfig robotConfig(const std::string& robot, double d_r, double d_b, double release) {
+  const std::string yaml = testing::robotPath(robot + ".controller.yaml");
+  std::ifstream in(yaml);
+  ControllerConfig config = in ? loadControllerConfig(yaml) : defaultControllerConfig();
+  config.source = robot + ".yaml";
+  config.params.d_r = d_r;
+  config.params.d_b = d_b;
+  config.params.estop_release_margin = release;
+  config.params.guard_margin = config.params.predict_margin = 0.0;
+  config.params.d_a = std::max(config.params.d_a, d_b + 0.02);
+  config.params.d_safe = std::max(config.params.d_safe, config.params.d_a);
+  return config;
+}
+
+TEST(ControllerConfig, ARestPostureInsideTheRedZoneIsRefusedNamingThePairItsDistanceAndTheLimit) {
+  // A pair no arm moves: the e-stop would never release.
+  EXPECT_EQ(restPostureError(testing::kSmall, robotConfig(testing::kSmall, 0.020, 0.030, 0.001)),
+            "small_humanoid.yaml: d_r 20.00 mm + estop_release_margin 1.00 mm = 21.00 mm is above the distance of "
+            "'l_foot' and 'r_foot' at the rest posture, 11.63 mm: the red-zone e-stop would latch there and never "
+            "release (no arm moves either segment); make d_r + estop_release_margin at most 11.63 mm or, if the two "
+            "can never come closer, exclude the pair (collision configuration)");
+  // A pair an arm moves (the 1,343-pair robot's left forearm and finger at rest, 38.00 mm).
+  EXPECT_EQ(restPostureError("many_segment_humanoid", robotConfig("many_segment_humanoid", 0.040, 0.050, 0.0)),
+            "many_segment_humanoid.yaml: d_r 40.00 mm + estop_release_margin 0.00 mm = 40.00 mm is above the distance "
+            "of 'l_forearm' and 'l_finger2_0' at the rest posture, 38.00 mm: the red-zone e-stop would latch there "
+            "whenever the arms rest; make d_r + estop_release_margin at most 38.00 mm or move the arms' rest posture");
+  // The limit itself: d_r + estop_release_margin 0.1 um below and above the feet's distance at rest
+  // (the sweep's value, the message's 11.63 mm).
+  const Model small = testing::loadRobot(testing::kSmall);
+  const ControllerModel cm = makeControllerModel(small, robotConfig(testing::kSmall, 0.005, 0.010, 0.001));
+  KinematicsData kin(small);
+  DistanceData dist(small);
+  ASSERT_TRUE(computeForwardKinematics(small, kin, restConfiguration(small, cm)));
+  computeSegmentDistances(small, kin, dist);
+  const double feet = dist.pairs[static_cast<std::size_t>(dist.closest)].distance;
+  EXPECT_NEAR(feet, 0.01163, 0.000005);
+  EXPECT_EQ(restPostureError(testing::kSmall, robotConfig(testing::kSmall, feet - 0.001 - 1e-7, 0.02, 0.001)), "");
+  EXPECT_NE(restPostureError(testing::kSmall, robotConfig(testing::kSmall, feet - 0.001 + 1e-7, 0.02, 0.001)), "");
+  // Without the e-stop (reflex_sim --no-avoidance's comparison runs) there is nothing to latch.
+  ControllerConfig no_estop = robotConfig(testing::kSmall, 0.020, 0.030, 0.001);
+  no_estop.params.estop = false;
+  EXPECT_EQ(restPostureError(testing::kSmall, no_estop), "");
+  // The shipped configurations all pass (their rest postures are 11.6-57.8 mm clear).
+  for (const std::string robot : {"asimo_like", "small_humanoid", "mesh_humanoid", "many_segment_humanoid"}) {
+    const std::string yaml = testing::robotPath(robot + ".controller.yaml");
+    std::ifstream in(yaml);
+    EXPECT_EQ(restPostureError(robot, in ? loadControllerConfig(yaml) : defaultControllerConfig()), "") << robot;
+  }
+}
+
 TEST(ControllerConfig, AModelWithMoreSegmentsThanTheMasksHoldIsRefusedNamingCountAndLimit) {
   // Segment sets are 64-bit masks (kMaxSegments): a model built by hand past the loader's check is
   // refused at set-up, never truncated. 64 passes, 65 fails.
   Model model = testing::shippedModel();
   ASSERT_LE(model.segments.size(), static_cast<std::size_t>(kMaxSegments));
   while (model.segments.size() < static_cast<std::size_t>(kMaxSegments)) model.segments.push_back(model.segments.back());
-  EXPECT_NO_THROW(makeControllerModel(model, defaultControllerConfig()));
+  // The copies are of a body-schema slot past the model's slots: a model no distance sweep can run
+  // on, so the set-up's rest-posture check (which needs the e-stop) is off for the passing case.
+  ControllerConfig no_estop = defaultControllerConfig();
+  no_estop.params.estop = false;
+  EXPECT_NO_THROW(makeControllerModel(model, no_estop));
   model.segments.push_back(model.segments.back());
   try {
     makeControllerModel(model, defaultControllerConfig());

@@ -6,8 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
+#include <fstream>
 #include <random>
+#include <string>
 
 namespace reflex::control {
 namespace {
@@ -75,6 +78,83 @@ TEST(RandomSafety, ThousandEpisodesNeverReachTheRedZone) {
   }
   std::printf("%d episodes, %llu cycles, closest approach %.2f mm (seed %u)\n", episodes,
               static_cast<unsigned long long>(cycles), worst * 1000.0, worst_seed);
+}
+
+// Session 14's attack on "a configuration that validates can work" (controller.hpp): parameter sets
+// drawn inside every range of controllerParamRanges (each key redrawn with probability 1/2, log-uniform
+// over a wide range; keys whose range the others moved are redrawn until all validate), on every
+// shipped robot with its own arms, each run through random episodes. A set is either refused at
+// set-up (only for a rest posture inside the red zone, naming it) or keeps every pair at or above
+// its d_r with no e-stop, no NaN and no joint above its limit.
+double* paramField(ControllerParams& p, const std::string& key) {
+  const std::pair<const char*, double*> fields[] = {
+      {"d_a", &p.d_a}, {"d_b", &p.d_b}, {"d_r", &p.d_r}, {"period", &p.period}, {"k_virtual", &p.k_virtual},
+      {"alpha_ca", &p.alpha_ca}, {"d_safe", &p.d_safe}, {"alpha_t", &p.alpha_t}, {"alpha_jla", &p.alpha_jla},
+      {"alpha_rest", &p.alpha_rest}, {"damping", &p.damping}, {"reach_gain", &p.reach_gain},
+      {"max_task_speed", &p.max_task_speed}, {"trajectory_speed", &p.trajectory_speed},
+      {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin},
+      {"estop_release_margin", &p.estop_release_margin}, {"predict_margin", &p.predict_margin}};
+  for (const auto& [name, field] : fields)
+    if (key == name) return field;
+  return nullptr;
+}
+
+ControllerParams randomValidParams(ControllerParams p, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto draw = [&](const ParamRange& r) {
+    double v = r.lo > 0.0 && r.hi / r.lo > 20.0 ? r.lo * std::pow(r.hi / r.lo, u(rng)) : r.lo + (r.hi - r.lo) * u(rng);
+    if (r.lo_open && v <= r.lo) v = std::nextafter(r.lo, r.hi);
+    if (r.hi_open && v >= r.hi) v = std::nextafter(r.hi, r.lo);
+    return v;
+  };
+  for (const ParamRange& r : controllerParamRanges(p)) {
+    double* field = paramField(p, r.key);
+    if (field == nullptr) ADD_FAILURE() << "a range for an unknown key " << r.key;
+    else if (u(rng) < 0.5 && r.hi > r.lo) *field = draw(r);
+  }
+  for (int pass = 0; pass < 4; ++pass)  // the ends that depend on other keys moved with them
+    for (const ParamRange& r : controllerParamRanges(p))
+      if (double* field = paramField(p, r.key); field != nullptr && !r.contains(*field) && r.hi > r.lo) *field = draw(r);
+  return p;
+}
+
+TEST(RandomSafety, EveryParameterSetThatValidatesKeepsEveryShippedRobotOutOfTheRedZone) {
+  std::mt19937 rng(14);
+  int refused = 0, runs = 0;
+  for (const std::string robot : {"asimo_like", "small_humanoid", "mesh_humanoid", "many_segment_humanoid"}) {
+    const Model model = testing::loadRobot(robot);
+    const std::string yaml = testing::robotPath(robot + ".controller.yaml");
+    const ControllerConfig base = std::ifstream(yaml) ? loadControllerConfig(yaml) : defaultControllerConfig();
+    SimOptions options;
+    options.record = false;
+    for (int set = 0; set < 40; ++set) {
+      ControllerConfig config = base;
+      config.params = randomValidParams(base.params, rng);
+      config.source = robot + " set " + std::to_string(set);
+      ASSERT_NO_THROW(validateControllerParams(config.params, config.source)) << config.source;
+      ControllerModel cm;
+      try {
+        cm = makeControllerModel(model, config);
+      } catch (const ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find("at the rest posture"), std::string::npos) << e.what();
+        ++refused;
+        continue;
+      }
+      for (int episode = 0; episode < 2; ++episode) {
+        const auto seed = static_cast<std::uint32_t>(1000 * set + episode + 1);
+        const SimResult r = runScenario(model, cm, randomEpisode(seed, episode == 0), options);
+        ++runs;
+        ASSERT_GE(r.min_distance, cm.params.d_r) << config.source << " episode " << seed << " pair " << r.min_pair;
+        ASSERT_FALSE(r.estop_fired) << config.source << " episode " << seed;
+        ASSERT_FALSE(r.non_finite) << config.source << " episode " << seed;
+        ASSERT_LE(r.max_joint_speed_ratio, 1.0 + 1e-9) << config.source << " episode " << seed;
+      }
+    }
+  }
+  std::printf("%d episodes with random valid parameters, %d parameter sets refused (rest posture in the red zone)\n",
+              runs, refused);
+  EXPECT_GT(refused, 0) << "the draw must reach the refused case";
+  EXPECT_GT(runs, 200);
 }
 
 }  // namespace

@@ -186,6 +186,13 @@ struct ControllerModel {
 /// kMaxSegments segments (naming the count and the limit).
 ControllerModel makeControllerModel(const Model& model, const ControllerConfig& config);
 
+/// Throws ConfigError (prefixed with `source`) when the rest posture (restConfiguration: the arms'
+/// rest, every other joint at 0 clamped to its limits) has a pair closer than d_r +
+/// estop_release_margin: the e-stop would latch whenever the arms rest, and for a pair no arm moves
+/// (the feet, the thighs) never release. makeControllerModel calls it; a configuration with
+/// params.estop false is not checked (no e-stop to latch).
+void checkRestPostureClearOfRedZone(const Model& model, const ControllerModel& cm, const std::string& source);
+
 struct HandCommand {
   HandStatus status = HandStatus::kNoTarget;
   Eigen::Vector3d target_B = Eigen::Vector3d::Zero();  ///< hand target in the root frame (m)
