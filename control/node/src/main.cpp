@@ -38,7 +38,7 @@ int main(int argc, char** argv) {
   app.add_option("--domain", config.domain_id, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
   app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
-  app.add_option("--participant-profile", config.participant_profile, "participant profile in the XML")->capture_default_str();
+  app.add_option("--participant-profile", config.participant_profile, "participant profile in the XML (default UDP only: a killed shared-memory reader cannot stall the controller's writes)")->capture_default_str();
   app.add_option("--duration", config.duration, "seconds to run (0: until Ctrl-C)")->check(CLI::NonNegativeNumber);
   app.add_option("--input-timeout", config.input_timeout, "seconds of silence from the target source before the hands retract")
       ->capture_default_str()->check(CLI::PositiveNumber);

@@ -32,7 +32,9 @@ struct NodeConfig {
   MjcfOptions mjcf;                      ///< timestep (period must be a whole multiple), margin (d_r), gains
   double duration = 0.0;                 ///< [s] wall time to run; 0: until stopped
   std::optional<int> domain_id;
-  std::string profiles_file, participant_profile = "reflex_participant";
+  /// UDP only by default, like reflex_controller and as idl/README.md asks of every robot driver: a
+  /// dead shared-memory reader stalls a Fast DDS 2.9 writer for the port health check (about 1 s).
+  std::string profiles_file, participant_profile = "reflex_participant_udp";
   std::string module_name = "reflex_mujoco";
 };
 

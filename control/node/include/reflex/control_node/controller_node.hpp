@@ -80,7 +80,11 @@ struct NodeConfig {
   std::string collision;             ///< collision configuration ("" = next to the URDF)
   std::string controller;            ///< controller YAML ("" = <stem>.controller.yaml beside the URDF, else defaults)
   std::string profiles_file;         ///< DDS profiles ("" = bus defaults)
-  std::string participant_profile = "reflex_participant";
+  /// UDP only by default (session 14): on Fast DDS 2.9's shared memory, a reader process killed at
+  /// the wrong moment (a recorder, a view) stalls every write of this participant for 1-3 s (the
+  /// port health check), so the robot and every module lost the controller's outputs meanwhile.
+  /// Over UDP a dead reader costs nothing; the latency is the same (control/README.md).
+  std::string participant_profile = "reflex_participant_udp";
   int domain_id = -1;                ///< -1 = bus default
   double duration = 0.0;             ///< seconds to run (0 = until SIGINT/SIGTERM)
   double input_timeout = 1.0;        ///< s without targets and heartbeat from their source -> retract
