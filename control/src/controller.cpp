@@ -636,7 +636,7 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
   if (data.dist.pruned_floor < physical.distance) {
     for (const int i : data.dist.robot_pairs) {
       const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-      if (!(pd.distance < physical.distance)) continue;  // every pair of the exact list among them
+      if (!(pd.distance < physical.distance)) continue;  // the exact list's pairs are never below it
       if (!pd.exact) refinePairDistance(model, data.kin, data.dist, i, options);
       take(physical, pd.distance, i);
       if (betweenArms(i)) take(between_arms, pd.distance, i);

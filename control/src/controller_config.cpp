@@ -15,9 +15,23 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <utility>
 
 namespace reflex::control {
 namespace {
+
+/// Every numeric key of the controller YAML and the ControllerParams field it sets.
+constexpr std::pair<const char*, double ControllerParams::*> kParamFields[] = {
+    {"d_a", &ControllerParams::d_a}, {"d_b", &ControllerParams::d_b}, {"d_r", &ControllerParams::d_r},
+    {"period", &ControllerParams::period}, {"k_virtual", &ControllerParams::k_virtual},
+    {"alpha_ca", &ControllerParams::alpha_ca}, {"d_safe", &ControllerParams::d_safe},
+    {"alpha_t", &ControllerParams::alpha_t}, {"alpha_jla", &ControllerParams::alpha_jla},
+    {"alpha_rest", &ControllerParams::alpha_rest}, {"damping", &ControllerParams::damping},
+    {"reach_gain", &ControllerParams::reach_gain}, {"max_task_speed", &ControllerParams::max_task_speed},
+    {"trajectory_speed", &ControllerParams::trajectory_speed},
+    {"estop_release_margin", &ControllerParams::estop_release_margin},
+    {"guard_rate", &ControllerParams::guard_rate}, {"guard_margin", &ControllerParams::guard_margin},
+    {"predict_margin", &ControllerParams::predict_margin}};
 
 std::string str(double v) {
   std::ostringstream os;
@@ -119,6 +133,12 @@ void validateControllerParams(const ControllerParams& p, const std::string& src)
   }
 }
 
+double* controllerParamField(ControllerParams& params, const std::string& key) {
+  for (const auto& [name, field] : kParamFields)
+    if (key == name) return &(params.*field);
+  return nullptr;
+}
+
 ControllerConfig loadControllerConfig(const std::string& yaml_path) {
   ControllerConfig config = defaultControllerConfig();
   config.source = yaml_path;
@@ -126,20 +146,12 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
   const common::ConfigNode root =
       common::ConfigNode::loadFile(yaml_path, "controller configuration", &raiseConfigError, /*allow_empty=*/true);
   ControllerParams& p = config.params;
-  const std::pair<const char*, double*> numbers[] = {
-      {"d_a", &p.d_a}, {"d_b", &p.d_b}, {"d_r", &p.d_r}, {"period", &p.period},
-      {"k_virtual", &p.k_virtual}, {"alpha_ca", &p.alpha_ca}, {"d_safe", &p.d_safe},
-      {"alpha_t", &p.alpha_t}, {"alpha_jla", &p.alpha_jla}, {"alpha_rest", &p.alpha_rest},
-      {"damping", &p.damping}, {"reach_gain", &p.reach_gain}, {"max_task_speed", &p.max_task_speed},
-      {"trajectory_speed", &p.trajectory_speed}, {"estop_release_margin", &p.estop_release_margin},
-      {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin},
-      {"predict_margin", &p.predict_margin}};
   std::vector<std::string> known = {"avoidance", "camera_link", "arms"};
-  for (const auto& [name, target] : numbers) known.emplace_back(name);
+  for (const auto& [name, field] : kParamFields) known.emplace_back(name);
   root.rejectUnknown(known);
   // Any finite number here; the ranges (which depend on each other) are checked below, all keys read.
   constexpr double kAny = std::numeric_limits<double>::max();
-  for (const auto& [name, target] : numbers) *target = root.number(name, *target, -kAny, kAny);
+  for (const auto& [name, field] : kParamFields) p.*field = root.number(name, p.*field, -kAny, kAny);
   const std::string mode = root.choice("avoidance", "three_dof", {"one_dof", "three_dof", "off"});
   if (root.has("avoidance"))
     p.mode = mode == "one_dof" ? AvoidanceMode::kOneDof : mode == "off" ? AvoidanceMode::kOff : AvoidanceMode::kThreeDof;
@@ -270,7 +282,9 @@ void checkRestPostureClearOfRedZone(const Model& model, const ControllerModel& c
   KinematicsData kin(model);
   DistanceData dist(model);  // no body-schema slot enabled: robot pairs only
   if (!computeForwardKinematics(model, kin, restConfiguration(model, cm))) return;  // rest is inside the limits
-  computeSegmentDistances(model, kin, dist);
+  DistanceOptions no_rows;  // only the distances are read
+  no_rows.row_threshold = -std::numeric_limits<double>::infinity();
+  computeSegmentDistances(model, kin, dist, no_rows);
   if (dist.closest < 0) return;
   const PairDistance& pd = dist.pairs[static_cast<std::size_t>(dist.closest)];
   const double floor = cm.params.d_r + cm.params.estop_release_margin;

@@ -257,9 +257,7 @@ std::string restPostureError(const std::string& robot, ControllerConfig config) 
 }
 
 ControllerConfig robotConfig(const std::string& robot, double d_r, double d_b, double release) {
-  const std::string yaml = testing::robotPath(robot + ".controller.yaml");
-  std::ifstream in(yaml);
-  ControllerConfig config = in ? loadControllerConfig(yaml) : defaultControllerConfig();
+  ControllerConfig config = loadControllerConfigFor(testing::robotPath(robot + ".urdf"), "");
   config.source = robot + ".yaml";
   config.params.d_r = d_r;
   config.params.d_b = d_b;
@@ -299,11 +297,8 @@ TEST(ControllerConfig, ARestPostureInsideTheRedZoneIsRefusedNamingThePairItsDist
   no_estop.params.estop = false;
   EXPECT_EQ(restPostureError(testing::kSmall, no_estop), "");
   // The shipped configurations all pass (their rest postures are 11.6-57.8 mm clear).
-  for (const std::string robot : {"asimo_like", "small_humanoid", "mesh_humanoid", "many_segment_humanoid"}) {
-    const std::string yaml = testing::robotPath(robot + ".controller.yaml");
-    std::ifstream in(yaml);
-    EXPECT_EQ(restPostureError(robot, in ? loadControllerConfig(yaml) : defaultControllerConfig()), "") << robot;
-  }
+  for (const std::string robot : {"asimo_like", "small_humanoid", "mesh_humanoid", "many_segment_humanoid"})
+    EXPECT_EQ(restPostureError(robot, loadControllerConfigFor(testing::robotPath(robot + ".urdf"), "")), "") << robot;
 }
 
 TEST(ControllerConfig, AModelWithMoreSegmentsThanTheMasksHoldIsRefusedNamingCountAndLimit) {

@@ -479,6 +479,31 @@ void expectSameRuns(const SimResult& pruned, const SimResult& brute, const std::
   EXPECT_EQ(pruned.min_distance, brute.min_distance) << what;
 }
 
+// One cycle of the pruned controller against the brute force's: everything the broad phase may change.
+void expectSameCycle(const ControllerData& dp, const ControllerData& db, const std::string& what) {
+  ASSERT_EQ(dp.qdot, db.qdot) << what;
+  ASSERT_EQ(dp.closest_physical.distance, db.closest_physical.distance) << what;
+  ASSERT_EQ(dp.closest_physical.pair, db.closest_physical.pair) << what;
+  ASSERT_EQ(dp.closest_virtual.distance, db.closest_virtual.distance) << what;
+  ASSERT_EQ(dp.closest_between_arms.distance, db.closest_between_arms.distance) << what;
+  ASSERT_EQ(dp.closest_between_arms.pair, db.closest_between_arms.pair) << what;
+  ASSERT_EQ(dp.guard_count, db.guard_count) << what;
+  ASSERT_EQ(dp.estop, db.estop) << what;
+  for (int a = 0; a < 2; ++a) {
+    ASSERT_EQ(dp.arms[a].distance, db.arms[a].distance) << what << " arm " << a;
+    ASSERT_EQ(dp.arms[a].closest_pair, db.arms[a].closest_pair) << what << " arm " << a;
+    ASSERT_EQ(dp.arms[a].f, db.arms[a].f) << what << " arm " << a;
+  }
+}
+
+// Whether the sweep's closest pair is a robot pair it refined itself: exact, but not in its exact list.
+bool sweepRefinedItsClosest(const DistanceData& dist) {
+  const int c = dist.closest;
+  const std::vector<int>& exact = dist.exactList();
+  return c >= 0 && dist.pair_common[static_cast<std::size_t>(c)] >= 0 &&
+         !std::binary_search(exact.begin(), exact.begin() + dist.num_exact_pairs, c);
+}
+
 void checkRobot(const Model& model) {
   ControllerModel pruned = makeControllerModel(model, defaultControllerConfig());
   ControllerModel brute = pruned;
@@ -501,10 +526,7 @@ void checkRobot(const Model& model) {
     for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
     in.priority = static_cast<MotionPriority>((k / 120) % 3);
     ASSERT_EQ(computeControl(model, pruned, dp, qp, in), computeControl(model, brute, db, qb, in)) << k;
-    ASSERT_EQ(dp.qdot, db.qdot) << model.name << " cycle " << k;
-    ASSERT_EQ(dp.closest_physical.distance, db.closest_physical.distance) << k;
-    ASSERT_EQ(dp.closest_physical.pair, db.closest_physical.pair) << k;
-    ASSERT_EQ(dp.closest_between_arms.distance, db.closest_between_arms.distance) << k;
+    ASSERT_NO_FATAL_FAILURE(expectSameCycle(dp, db, model.name + " cycle " + std::to_string(k)));
     EXPECT_EQ(db.dist.num_pruned_pairs, 0);
     skipped += dp.dist.num_pruned_pairs;
     predicted_pruned += dp.num_guard_pairs;
@@ -557,16 +579,8 @@ TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem) {
     Eigen::VectorXd q = rest;
     for (int j = 0; j < model.nq; ++j) q[j] += offset(rng);
     ASSERT_EQ(computeControl(model, pruned, dp, q, no_targets), computeControl(model, brute, db, q, no_targets)) << k;
-    // The case under test: the sweep's closest pair is a robot pair outside its exact list.
-    const std::vector<int>& exact = dp.dist.exactList();
-    const int c = dp.dist.closest;
-    if (c >= 0 && !std::binary_search(exact.begin(), exact.begin() + dp.dist.num_exact_pairs, c)) ++refined_by_sweep;
-    ASSERT_EQ(dp.closest_physical.distance, db.closest_physical.distance) << k;
-    ASSERT_EQ(dp.closest_physical.pair, db.closest_physical.pair) << k;
-    ASSERT_EQ(dp.closest_between_arms.distance, db.closest_between_arms.distance) << k;
-    ASSERT_EQ(dp.closest_between_arms.pair, db.closest_between_arms.pair) << k;
-    for (int a = 0; a < 2; ++a) ASSERT_EQ(dp.arms[a].distance, db.arms[a].distance) << k << " arm " << a;
-    ASSERT_EQ(dp.qdot, db.qdot) << k;
+    if (broad_phase::sweepRefinedItsClosest(dp.dist)) ++refined_by_sweep;  // the case under test
+    ASSERT_NO_FATAL_FAILURE(broad_phase::expectSameCycle(dp, db, "configuration " + std::to_string(k)));
   }
   EXPECT_GT(refined_by_sweep, 100) << "the configurations must reach the case, else this test compares nothing";
 }
@@ -615,24 +629,8 @@ void attackBroadPhase(const Model& model, unsigned seed, int* sweep_refined) {
         in.hands[h] = {HandStatus::kGiven, Eigen::Vector3d(uniform(0.0, 0.4), uniform(-0.3, 0.3), uniform(0.7, 1.1))};
       in.priority = static_cast<MotionPriority>(k / 50 % 3);
       ASSERT_EQ(computeControl(model, pruned, dp, q, in), computeControl(model, brute, db, q, in)) << what << " cycle " << k;
-      const int c = dp.dist.closest;
-      const std::vector<int>& exact = dp.dist.exactList();
-      if (c >= 0 && dp.dist.pair_common[static_cast<std::size_t>(c)] >= 0 &&
-          !std::binary_search(exact.begin(), exact.begin() + dp.dist.num_exact_pairs, c))
-        ++*sweep_refined;
-      ASSERT_EQ(dp.qdot, db.qdot) << what << " cycle " << k;
-      ASSERT_EQ(dp.closest_physical.distance, db.closest_physical.distance) << what << " cycle " << k;
-      ASSERT_EQ(dp.closest_physical.pair, db.closest_physical.pair) << what << " cycle " << k;
-      ASSERT_EQ(dp.closest_virtual.distance, db.closest_virtual.distance) << what << " cycle " << k;
-      ASSERT_EQ(dp.closest_between_arms.distance, db.closest_between_arms.distance) << what << " cycle " << k;
-      ASSERT_EQ(dp.closest_between_arms.pair, db.closest_between_arms.pair) << what << " cycle " << k;
-      ASSERT_EQ(dp.guard_count, db.guard_count) << what << " cycle " << k;
-      ASSERT_EQ(dp.estop, db.estop) << what << " cycle " << k;
-      for (int a = 0; a < 2; ++a) {
-        ASSERT_EQ(dp.arms[a].distance, db.arms[a].distance) << what << " cycle " << k << " arm " << a;
-        ASSERT_EQ(dp.arms[a].closest_pair, db.arms[a].closest_pair) << what << " cycle " << k << " arm " << a;
-        ASSERT_EQ(dp.arms[a].f, db.arms[a].f) << what << " cycle " << k << " arm " << a;
-      }
+      if (broad_phase::sweepRefinedItsClosest(dp.dist)) ++*sweep_refined;
+      ASSERT_NO_FATAL_FAILURE(broad_phase::expectSameCycle(dp, db, what + " cycle " + std::to_string(k)));
       // Odd trials: independent random configurations; even ones: the closed loop, a jump every 100.
       if (trial % 2 == 1) {
         q = randomConfiguration();

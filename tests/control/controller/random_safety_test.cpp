@@ -8,7 +8,6 @@
 
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
 #include <random>
 #include <string>
 
@@ -86,19 +85,6 @@ TEST(RandomSafety, ThousandEpisodesNeverReachTheRedZone) {
 // shipped robot with its own arms, each run through random episodes. A set is either refused at
 // set-up (only for a rest posture inside the red zone, naming it) or keeps every pair at or above
 // its d_r with no e-stop, no NaN and no joint above its limit.
-double* paramField(ControllerParams& p, const std::string& key) {
-  const std::pair<const char*, double*> fields[] = {
-      {"d_a", &p.d_a}, {"d_b", &p.d_b}, {"d_r", &p.d_r}, {"period", &p.period}, {"k_virtual", &p.k_virtual},
-      {"alpha_ca", &p.alpha_ca}, {"d_safe", &p.d_safe}, {"alpha_t", &p.alpha_t}, {"alpha_jla", &p.alpha_jla},
-      {"alpha_rest", &p.alpha_rest}, {"damping", &p.damping}, {"reach_gain", &p.reach_gain},
-      {"max_task_speed", &p.max_task_speed}, {"trajectory_speed", &p.trajectory_speed},
-      {"guard_rate", &p.guard_rate}, {"guard_margin", &p.guard_margin},
-      {"estop_release_margin", &p.estop_release_margin}, {"predict_margin", &p.predict_margin}};
-  for (const auto& [name, field] : fields)
-    if (key == name) return field;
-  return nullptr;
-}
-
 ControllerParams randomValidParams(ControllerParams p, std::mt19937& rng) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   auto draw = [&](const ParamRange& r) {
@@ -108,13 +94,13 @@ ControllerParams randomValidParams(ControllerParams p, std::mt19937& rng) {
     return v;
   };
   for (const ParamRange& r : controllerParamRanges(p)) {
-    double* field = paramField(p, r.key);
+    double* field = controllerParamField(p, r.key);
     if (field == nullptr) ADD_FAILURE() << "a range for an unknown key " << r.key;
     else if (u(rng) < 0.5 && r.hi > r.lo) *field = draw(r);
   }
   for (int pass = 0; pass < 4; ++pass)  // the ends that depend on other keys moved with them
     for (const ParamRange& r : controllerParamRanges(p))
-      if (double* field = paramField(p, r.key); field != nullptr && !r.contains(*field) && r.hi > r.lo) *field = draw(r);
+      if (double* field = controllerParamField(p, r.key); field != nullptr && !r.contains(*field) && r.hi > r.lo) *field = draw(r);
   return p;
 }
 
@@ -123,8 +109,7 @@ TEST(RandomSafety, EveryParameterSetThatValidatesKeepsEveryShippedRobotOutOfTheR
   int refused = 0, runs = 0;
   for (const std::string robot : {"asimo_like", "small_humanoid", "mesh_humanoid", "many_segment_humanoid"}) {
     const Model model = testing::loadRobot(robot);
-    const std::string yaml = testing::robotPath(robot + ".controller.yaml");
-    const ControllerConfig base = std::ifstream(yaml) ? loadControllerConfig(yaml) : defaultControllerConfig();
+    const ControllerConfig base = loadControllerConfigFor(testing::robotPath(robot + ".urdf"), "");
     SimOptions options;
     options.record = false;
     for (int set = 0; set < 40; ++set) {

@@ -107,6 +107,10 @@ struct ParamRange {
 /// Every numeric ControllerParams field with its range, in the order validateControllerParams checks them.
 std::vector<ParamRange> controllerParamRanges(const ControllerParams& params);
 
+/// The field of `params` that the numeric YAML key `key` sets (the names of controllerParamRanges),
+/// nullptr for any other key. The one key-to-field table: loadControllerConfig reads through it.
+double* controllerParamField(ControllerParams& params, const std::string& key);
+
 /// One arm as the configuration names it.
 struct ArmConfig {
   std::string name;
