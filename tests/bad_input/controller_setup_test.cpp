@@ -60,6 +60,16 @@ std::vector<Case> cases() {
   writeFile(tmp("no_profiles.xml"),
             "<?xml version='1.0'?><dds xmlns='http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'><profiles>"
             "</profiles></dds>");
+  // A user's own profiles file written before session 14, without the controller's default (UDP-only)
+  // participant profile: refused at start naming it, never a silent fall-back to shared memory.
+  {
+    std::string without_udp = base_profiles;
+    const auto a = without_udp.find("<participant profile_name=\"reflex_participant_udp\">");
+    const auto b = without_udp.find("</participant>", a);
+    if (a == std::string::npos || b == std::string::npos) throw std::runtime_error("no reflex_participant_udp in " + profiles);
+    without_udp.erase(a, b + std::string("</participant>").size() - a);
+    writeFile(tmp("no_udp_profile.xml"), without_udp);
+  }
   const std::string d = "106";
   return {
       {"missing URDF", {"--urdf", "/nonexistent/robot.urdf"}, "/nonexistent/robot.urdf"},
@@ -90,6 +100,8 @@ std::vector<Case> cases() {
       {"profiles XML without any profile", {"--domain", d, "--profiles", tmp("no_profiles.xml")},
        tmp("no_profiles.xml")},
       {"unknown participant profile", {"--domain", d, "--participant-profile", "no_such_profile"}, "no_such_profile"},
+      {"profiles XML without the default participant profile", {"--domain", d, "--profiles", tmp("no_udp_profile.xml")},
+       "unknown participant QoS profile 'reflex_participant_udp'"},
       {"domain id out of range", {"--domain", "999"}, "999"},
       {"domain id not a number", {"--domain", "abc"}, "abc"},
       {"negative duration", {"--duration", "-1"}, "-1"},
