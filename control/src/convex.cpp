@@ -1,0 +1,413 @@
+// GJK distance between two convex polytopes (convex.hpp): the support queries, the signed-volume
+// sub-distance (Montanari, Petrinic, Barbieri 2017, "Improving the GJK algorithm for faster and more
+// reliable distance queries between convex objects", ACM TOG 36(3), Sec. 3 and Alg. 2-4) and the
+// GJK loop (Gilbert, Johnson, Keerthi 1988; termination as in Montanari Alg. 1).
+//
+// Points w of the simplex are points of the Minkowski difference A - B in the base frame B. The
+// sub-distance returns the simplex's smallest support set that holds its point closest to the origin,
+// with that point's barycentric coordinates; everything lives on the stack (4 points at most).
+#include "reflex/control/convex.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace reflex::control {
+
+ConvexPiece makeConvexPiece(const std::vector<Eigen::Vector3d>& vertices,
+                            const std::vector<std::array<int, 3>>& triangles) {
+  if (vertices.empty()) throw std::invalid_argument("makeConvexPiece: no vertex");
+  const int n = static_cast<int>(vertices.size());
+  for (int i = 0; i < n; ++i)
+    if (!vertices[i].allFinite())
+      throw std::invalid_argument("makeConvexPiece: vertex " + std::to_string(i) + " is not finite (" +
+                                  std::to_string(vertices[i].x()) + ", " + std::to_string(vertices[i].y()) + ", " +
+                                  std::to_string(vertices[i].z()) + ")");
+  for (std::size_t t = 0; t < triangles.size(); ++t)
+    for (int k = 0; k < 3; ++k)
+      if (triangles[t][k] < 0 || triangles[t][k] >= n)
+        throw std::invalid_argument("makeConvexPiece: triangle " + std::to_string(t) + " has vertex index " +
+                                    std::to_string(triangles[t][k]) + ", outside [0, " + std::to_string(n) + ")");
+
+  ConvexPiece piece;
+  piece.vertices_L = vertices;
+  Eigen::Vector3d lo = vertices[0], hi = vertices[0];
+  for (const Eigen::Vector3d& v : vertices) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  piece.bound_center_L = 0.5 * (lo + hi);
+  for (const Eigen::Vector3d& v : vertices)
+    piece.bound_radius = std::max(piece.bound_radius, (v - piece.bound_center_L).norm());
+
+  if (triangles.empty()) return piece;
+  // Undirected edges of the triangles, both directions, sorted and unique: the CSR edge graph.
+  std::vector<std::pair<int, int>> edges;
+  edges.reserve(6 * triangles.size());
+  for (const std::array<int, 3>& t : triangles)
+    for (int k = 0; k < 3; ++k) {
+      const int i = t[k], j = t[(k + 1) % 3];
+      if (i == j) continue;
+      edges.emplace_back(i, j);
+      edges.emplace_back(j, i);
+    }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  piece.neighbor_begin.assign(n + 1, 0);
+  for (const std::pair<int, int>& e : edges) ++piece.neighbor_begin[e.first + 1];
+  for (int i = 0; i < n; ++i) piece.neighbor_begin[i + 1] += piece.neighbor_begin[i];
+  piece.neighbors.reserve(edges.size());
+  for (const std::pair<int, int>& e : edges) piece.neighbors.push_back(e.second);
+  // A vertex on no edge (a vertex the triangles leave out) could never be reached by hill-climbing
+  // while it may be the support point: such a piece gets no graph and is scanned linearly. A single
+  // vertex needs no graph either way.
+  for (int i = 0; i < n; ++i)
+    if (n > 1 && piece.neighbor_begin[i + 1] == piece.neighbor_begin[i]) {
+      piece.neighbor_begin.clear();
+      piece.neighbors.clear();
+      break;
+    }
+  return piece;
+}
+
+int supportVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L, int start) noexcept {
+  const int n = static_cast<int>(piece.vertices_L.size());
+  if (n <= 0) return 0;
+  int best = std::clamp(start, 0, n - 1);
+  double best_dot = d_L.dot(piece.vertices_L[best]);
+  if (piece.neighbor_begin.size() != piece.vertices_L.size() + 1) {
+    for (int i = 0; i < n; ++i) {
+      const double dot = d_L.dot(piece.vertices_L[i]);
+      if (dot > best_dot) {
+        best_dot = dot;
+        best = i;
+      }
+    }
+    return best;
+  }
+  // Steepest ascent over the hull's edge graph. On a convex polytope a vertex that no neighbour beats
+  // is a global maximum; every step strictly increases the (computed) dot product, so no vertex is
+  // visited twice and the climb ends after at most n steps even with rounding or a NaN direction.
+  for (;;) {
+    int next = best;
+    for (int k = piece.neighbor_begin[best]; k < piece.neighbor_begin[best + 1]; ++k) {
+      const int j = piece.neighbors[k];
+      const double dot = d_L.dot(piece.vertices_L[j]);
+      if (dot > best_dot) {
+        best_dot = dot;
+        next = j;
+      }
+    }
+    if (next == best) return best;
+    best = next;
+  }
+}
+
+namespace {
+
+/// The GJK simplex: up to 4 points w = p_a - p_b of A - B (frame B), with the vertex indices and the
+/// points of each piece they came from.
+struct Simplex {
+  Eigen::Vector3d w[4];
+  Eigen::Vector3d p_a[4];
+  Eigen::Vector3d p_b[4];
+  int ia[4];
+  int ib[4];
+  int size = 0;
+};
+
+/// A sub-distance result: the support set (indices into the simplex, at most 4), the barycentric
+/// coordinates of the closest point on it, that point v and |v|^2.
+struct SubResult {
+  int n = 0;
+  int idx[4] = {0, 0, 0, 0};
+  double lambda[4] = {0, 0, 0, 0};
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();
+  double vv = 0.0;
+};
+
+/// True when a and b are both strictly positive or both strictly negative (Montanari's compareSigns).
+inline bool sameSign(double a, double b) { return (a > 0 && b > 0) || (a < 0 && b < 0); }
+
+void point(const Eigen::Vector3d* w, int i, SubResult& r) {
+  r.n = 1;
+  r.idx[0] = i;
+  r.lambda[0] = 1.0;
+  r.v = w[i];
+  r.vv = r.v.squaredNorm();
+}
+
+/// Closest point to the origin on segment w[i] w[j] (Montanari S1D, written with the segment's own
+/// parameter: relative coordinates keep the precision when the segment is far from the origin).
+void s1d(const Eigen::Vector3d* w, int i, int j, SubResult& r) {
+  const Eigen::Vector3d t = w[j] - w[i];
+  const double tt = t.squaredNorm();
+  const double u = tt > 0 ? -w[i].dot(t) / tt : 0.0;  // origin's projection: w[i] + u t
+  if (!(u > 0)) return point(w, i, r);                  // also a zero-length segment
+  if (!(u < 1)) return point(w, j, r);
+  r.n = 2;
+  r.idx[0] = i;
+  r.idx[1] = j;
+  r.lambda[0] = 1.0 - u;
+  r.lambda[1] = u;
+  r.v = r.lambda[0] * w[i] + r.lambda[1] * w[j];
+  r.vv = r.v.squaredNorm();
+}
+
+/// Keeps `cand` in `best` when it is closer to the origin.
+inline void keepCloser(const SubResult& cand, SubResult& best) {
+  if (cand.vv < best.vv) best = cand;
+}
+
+/// Closest point to the origin on triangle w[i] w[j] w[k] (Montanari S2D, Alg. 3): the origin's
+/// projection on the plane, its signed areas in the axis plane where the triangle's projection is
+/// largest; inside: barycentric coordinates; else the closest of the edges it lies beyond. A
+/// (nearly) collinear triangle is taken as its three edges.
+void s2d(const Eigen::Vector3d* w, int i, int j, int k, SubResult& r) {
+  const Eigen::Vector3d e1 = w[j] - w[i];
+  const Eigen::Vector3d e2 = w[k] - w[i];
+  const Eigen::Vector3d n = e1.cross(e2);
+  const double nn = n.squaredNorm();
+  SubResult cand;
+  r.vv = std::numeric_limits<double>::infinity();
+  // sin^2 of the angle at w[i] below 1e-20: the triangle is within 1e-10 of its edges (relative).
+  if (!(nn > 1e-20 * e1.squaredNorm() * e2.squaredNorm())) {
+    s1d(w, i, j, cand);
+    keepCloser(cand, r);
+    s1d(w, j, k, cand);
+    keepCloser(cand, r);
+    s1d(w, k, i, cand);
+    keepCloser(cand, r);
+    return;
+  }
+  // q: the origin's projection on the plane, relative to w[i].
+  const Eigen::Vector3d o = -w[i];
+  const Eigen::Vector3d q = o - (o.dot(n) / nn) * n;
+  int axis = 0;
+  n.cwiseAbs().maxCoeff(&axis);
+  const int a = (axis + 1) % 3, b = (axis + 2) % 3;  // n[axis] = e1[a] e2[b] - e1[b] e2[a]
+  const double mu = n[axis];
+  // Twice the signed areas of the sub-triangles with one vertex replaced by q (projected on a, b).
+  const double cj = q[a] * e2[b] - q[b] * e2[a];  // (w_i, q, w_k)
+  const double ck = e1[a] * q[b] - e1[b] * q[a];  // (w_i, w_j, q)
+  const double ci = mu - cj - ck;                 // (q, w_j, w_k)
+  if (sameSign(mu, ci) && sameSign(mu, cj) && sameSign(mu, ck)) {
+    r.n = 3;
+    r.idx[0] = i;
+    r.idx[1] = j;
+    r.idx[2] = k;
+    r.lambda[1] = cj / mu;
+    r.lambda[2] = ck / mu;
+    r.lambda[0] = 1.0 - r.lambda[1] - r.lambda[2];
+    r.v = r.lambda[0] * w[i] + r.lambda[1] * w[j] + r.lambda[2] * w[k];
+    r.vv = r.v.squaredNorm();
+    return;
+  }
+  // Outside (or on an edge): the edges opposite a vertex whose coordinate is not of mu's sign.
+  if (!sameSign(mu, ci)) {
+    s1d(w, j, k, cand);
+    keepCloser(cand, r);
+  }
+  if (!sameSign(mu, cj)) {
+    s1d(w, k, i, cand);
+    keepCloser(cand, r);
+  }
+  if (!sameSign(mu, ck)) {
+    s1d(w, i, j, cand);
+    keepCloser(cand, r);
+  }
+}
+
+/// Closest point to the origin on tetrahedron w[0..3] (Montanari S3D, Alg. 4): signed volumes of the
+/// sub-tetrahedra with one vertex replaced by the origin, relative to w[0]; all of the sign of the
+/// whole: the origin is inside (n = 4, v = 0); else the closest of the faces it lies beyond. A
+/// (nearly) flat tetrahedron is taken as its four faces.
+void s3d(const Eigen::Vector3d* w, SubResult& r) {
+  const Eigen::Vector3d e1 = w[1] - w[0];
+  const Eigen::Vector3d e2 = w[2] - w[0];
+  const Eigen::Vector3d e3 = w[3] - w[0];
+  const Eigen::Vector3d o = -w[0];
+  const Eigen::Vector3d e2xe3 = e2.cross(e3);
+  const double mu = e1.dot(e2xe3);  // 6 x signed volume
+  const double scale = e1.norm() * e2.norm() * e3.norm();
+  SubResult cand;
+  r.vv = std::numeric_limits<double>::infinity();
+  if (!(std::abs(mu) > 1e-12 * scale)) {
+    s2d(w, 1, 2, 3, cand);
+    keepCloser(cand, r);
+    s2d(w, 0, 2, 3, cand);
+    keepCloser(cand, r);
+    s2d(w, 0, 1, 3, cand);
+    keepCloser(cand, r);
+    s2d(w, 0, 1, 2, cand);
+    keepCloser(cand, r);
+    return;
+  }
+  // Cramer on [e1 e2 e3] mu_123 = o: the origin's coordinates (times mu) on w1, w2, w3.
+  const double c1 = o.dot(e2xe3);
+  const double c2 = e1.dot(o.cross(e3));
+  const double c3 = e1.dot(e2.cross(o));
+  const double c0 = mu - c1 - c2 - c3;
+  if (sameSign(mu, c0) && sameSign(mu, c1) && sameSign(mu, c2) && sameSign(mu, c3)) {
+    r.n = 4;
+    for (int m = 0; m < 4; ++m) r.idx[m] = m;
+    r.lambda[1] = c1 / mu;
+    r.lambda[2] = c2 / mu;
+    r.lambda[3] = c3 / mu;
+    r.lambda[0] = 1.0 - r.lambda[1] - r.lambda[2] - r.lambda[3];
+    r.v.setZero();
+    r.vv = 0.0;
+    return;
+  }
+  if (!sameSign(mu, c0)) {
+    s2d(w, 1, 2, 3, cand);
+    keepCloser(cand, r);
+  }
+  if (!sameSign(mu, c1)) {
+    s2d(w, 0, 2, 3, cand);
+    keepCloser(cand, r);
+  }
+  if (!sameSign(mu, c2)) {
+    s2d(w, 0, 1, 3, cand);
+    keepCloser(cand, r);
+  }
+  if (!sameSign(mu, c3)) {
+    s2d(w, 0, 1, 2, cand);
+    keepCloser(cand, r);
+  }
+}
+
+/// The sub-distance of the whole simplex (1 to 4 points).
+void subDistance(const Simplex& s, SubResult& r) {
+  switch (s.size) {
+    case 1: point(s.w, 0, r); break;
+    case 2: s1d(s.w, 0, 1, r); break;
+    case 3: s2d(s.w, 0, 1, 2, r); break;
+    default: s3d(s.w, r); break;
+  }
+}
+
+/// The simplex reduced to the support set of r (r's indices become 0 .. n-1).
+void reduce(Simplex& s, SubResult& r) {
+  Simplex t;
+  for (int m = 0; m < r.n; ++m) {
+    const int k = r.idx[m];
+    t.w[m] = s.w[k];
+    t.p_a[m] = s.p_a[k];
+    t.p_b[m] = s.p_b[k];
+    t.ia[m] = s.ia[k];
+    t.ib[m] = s.ib[k];
+    r.idx[m] = m;
+  }
+  t.size = r.n;
+  s = t;
+}
+
+}  // namespace
+
+ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
+                                     const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm) noexcept {
+  constexpr int kMaxIterations = 64;
+  ConvexDistance out;
+  if (a.vertices_L.empty() || b.vertices_L.empty()) {  // broken invariant: answer "far", never NaN
+    out.distance = std::numeric_limits<double>::infinity();
+    return out;
+  }
+  const Eigen::Matrix3d R_B_A = X_B_A.linear();
+  const Eigen::Matrix3d R_B_B = X_B_B.linear();
+  const Eigen::Vector3d p_B_A = X_B_A.translation();
+  const Eigen::Vector3d p_B_B = X_B_B.translation();
+
+  // Support point of A - B in direction d (frame B): s_A(d) - s_B(-d), directions taken into each
+  // link frame (R^T d) so that only the two chosen vertices are transformed.
+  int ia = 0, ib = 0;
+  Simplex s;
+  auto support = [&](const Eigen::Vector3d& d_B, int m) {
+    ia = supportVertex(a, R_B_A.transpose() * d_B, ia);
+    ib = supportVertex(b, -(R_B_B.transpose() * d_B), ib);
+    s.p_a[m] = R_B_A * a.vertices_L[ia] + p_B_A;
+    s.p_b[m] = R_B_B * b.vertices_L[ib] + p_B_B;
+    s.w[m] = s.p_a[m] - s.p_b[m];
+    s.ia[m] = ia;
+    s.ib[m] = ib;
+  };
+
+  if (warm != nullptr) {
+    ia = std::clamp(warm->vertex_a, 0, static_cast<int>(a.vertices_L.size()) - 1);
+    ib = std::clamp(warm->vertex_b, 0, static_cast<int>(b.vertices_L.size()) - 1);
+    s.p_a[0] = R_B_A * a.vertices_L[ia] + p_B_A;
+    s.p_b[0] = R_B_B * b.vertices_L[ib] + p_B_B;
+    s.w[0] = s.p_a[0] - s.p_b[0];
+    s.ia[0] = ia;
+    s.ib[0] = ib;
+  } else {
+    // Cold: the support point towards B's bounding centre from A's.
+    Eigen::Vector3d d = (R_B_B * b.bound_center_L + p_B_B) - (R_B_A * a.bound_center_L + p_B_A);
+    if (!(d.squaredNorm() > 0)) d = Eigen::Vector3d::UnitX();
+    support(d, 0);
+  }
+  s.size = 1;
+  SubResult sub;
+  point(s.w, 0, sub);
+  double w_max = s.w[0].norm();  // the largest |w| seen: the problem's size for the tolerance
+
+  bool contact = false;
+  for (int it = 0; it < kMaxIterations; ++it) {
+    // Tolerance on the distance: absolute, or relative to the size where rounding would dominate.
+    const double tol = std::max(kConvexTolerance, 1e-9 * w_max);
+    if (!(sub.vv > tol * tol)) {  // origin inside (v = 0) or within the tolerance of A - B
+      contact = true;
+      break;
+    }
+    const Eigen::Vector3d v = sub.v;
+    const int m = s.size;  // the slot of the new point
+    support(-v, m);
+    ++out.iterations;
+    w_max = std::max(w_max, s.w[m].norm());
+    // Montanari Alg. 1's relative test as a bound on the error: |v| - d <= (|v|^2 - v.w) / |v|.
+    if (!(sub.vv - v.dot(s.w[m]) > tol * std::sqrt(sub.vv))) break;
+    bool repeated = false;  // a vertex pair already in the simplex: no progress possible
+    for (int k = 0; k < m; ++k) repeated = repeated || (s.ia[k] == ia && s.ib[k] == ib);
+    if (repeated) break;
+    s.size = m + 1;
+    SubResult next;
+    subDistance(s, next);
+    // GJK decreases |v| strictly in exact arithmetic; a step that does not (rounding, or a simplex
+    // too flat to resolve) ends the search with the best point found so far.
+    if (!(next.vv < sub.vv)) {
+      s.size = m;
+      break;
+    }
+    reduce(s, next);
+    sub = next;
+  }
+
+  // Witness points from the barycentric coordinates on each piece's support points.
+  Eigen::Vector3d p_a = Eigen::Vector3d::Zero(), p_b = Eigen::Vector3d::Zero();
+  int heaviest = 0;
+  for (int m = 0; m < sub.n; ++m) {
+    const int k = sub.idx[m];
+    p_a += sub.lambda[m] * s.p_a[k];
+    p_b += sub.lambda[m] * s.p_b[k];
+    if (sub.lambda[m] > sub.lambda[heaviest]) heaviest = m;
+  }
+  if (contact) {
+    out.distance = 0.0;
+    out.penetrating = true;
+    out.p_B_a = out.p_B_b = 0.5 * (p_a + p_b);
+  } else {
+    out.distance = (p_a - p_b).norm();
+    out.p_B_a = p_a;
+    out.p_B_b = p_b;
+  }
+  if (warm != nullptr) {
+    warm->vertex_a = s.ia[sub.idx[heaviest]];
+    warm->vertex_b = s.ib[sub.idx[heaviest]];
+  }
+  return out;
+}
+
+}  // namespace reflex::control
