@@ -9,6 +9,7 @@
 #include "reflex/control/convex.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -312,8 +313,10 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
                                      const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm) noexcept {
   constexpr int kMaxIterations = 64;
   ConvexDistance out;
-  if (a.vertices_L.empty() || b.vertices_L.empty()) {  // broken invariant: answer "far", never NaN
-    out.distance = std::numeric_limits<double>::infinity();
+  assert(!a.vertices_L.empty() && !b.vertices_L.empty());
+  if (a.vertices_L.empty() || b.vertices_L.empty()) {  // broken invariant: the conservative answer
+    out.penetrating = true;
+    out.p_B_a = out.p_B_b = X_B_A.translation();
     return out;
   }
   const Eigen::Matrix3d R_B_A = X_B_A.linear();
@@ -363,7 +366,8 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
       break;
     }
     const Eigen::Vector3d v = sub.v;
-    const int m = s.size;  // the slot of the new point
+    const int m = s.size;  // the slot of the new point (a full simplex has v = 0: contact above)
+    assert(m < 4);
     support(-v, m);
     ++out.iterations;
     w_max = std::max(w_max, s.w[m].norm());

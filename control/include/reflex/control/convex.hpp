@@ -9,15 +9,18 @@
 //
 // computeConvexDistance is the GJK distance algorithm (Gilbert, Johnson, Keerthi 1988) with the
 // signed-volume / Johnson sub-distance on the Minkowski difference A - B:
-//   distance  the Euclidean distance between the two solids (0 when they touch or overlap; then
-//             `penetrating` is true and the witness points are one common point, distance 0)
+//   distance  the Euclidean distance between the two solids (0 when they touch or overlap, or are
+//             closer than the tolerance below; then `penetrating` is true and the witness points are
+//             one common point, distance 0)
 //   p_B_a     the point of A closest to B, p_B_b the point of B closest to A, both in the base frame B,
 //             so p_B_a - p_B_b has length `distance` and points from B towards A (distance.hpp's sign
 //             convention: nhat = (p_a - p_b) / d).
 // Allocation-free and noexcept: fixed-size simplex, hill-climbing support over the edge graph
 // (falls back to a linear scan of the vertices when a piece has no graph); never returns NaN for
 // finite inputs. Accuracy: |distance - exact| <= max(kConvexTolerance, 1e-9 * size) for pieces of
-// finite size.
+// finite size, where size is the largest |p_a - p_b| over the vertex pairs the search met (the pair's
+// extent in B); the reported distance is never below the exact one by more than rounding, since the
+// witness points are points of the pieces.
 #pragma once
 
 #include <Eigen/Core>
