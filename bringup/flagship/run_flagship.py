@@ -50,7 +50,8 @@ def log(msg):
 
 # The identity (bringup/security/make_security.sh) of each process of the experiment.
 SECURE_IDENTITIES = {"controller": "controller", "behavior": "behavior", "recorder": "recorder", "vision": "vision",
-                     "view": "view"}  # view: reflex_view's read-only identity (subscribe rules only)
+                     "view": "view",  # view: reflex_view's read-only identity (subscribe rules only)
+                     "robot": "robot"}  # reflex_mujoco: the robot's driver, the one writer of reflex/robot_state
 SECURE_READY_TIMEOUT_S = 45.0  # authentication of controller, behavior and recorder (1-5 s per pair, loaded)
 READY_TIMEOUT_S = 20.0  # plain discovery (about 1 s)
 VISION_WAIT_S = 45.0  # vision holds its replay until behavior (and recorder) matched its writer
@@ -212,8 +213,8 @@ def run_once(args, label, avoidance):
             ctl += ["--no-avoidance", "--disable-estop"]
         if args.robot == "mujoco":
             # The physics robot first, so that the controller finds its state; stopped last (reverse order).
-            procs.append(Proc("robot", [os.path.join(bindir, "reflex_mujoco"), "--domain", domain,
-                                        "--name", "reflex_mujoco"], os.path.join(out, "robot.log"), env))
+            procs.append(Proc("robot", [os.path.join(bindir, "reflex_mujoco")] + dds("robot") +
+                              ["--name", "reflex_mujoco"], os.path.join(out, "robot.log"), env))
             ctl += ["--robot", "dds"]
         procs.append(Proc("controller", ctl, os.path.join(out, "controller.log"), env))
         # --progress 1: its status line (joint_states=N) tells wait_chain_ready that it hears the controller.
@@ -349,8 +350,6 @@ def main():
     for path, what in ((args.session, "session folder"), (args.behavior, "behavior configuration")):
         if not os.path.exists(path):
             ap.error("%s %s does not exist" % (what, path))
-    if args.robot == "mujoco" and args.secure is not None:
-        ap.error("--robot mujoco with --secure: reflex_mujoco has no DDS-Security identity yet")
     exes = ("reflex_controller", "reflex_behavior", "reflex_vision") + (("reflex_mujoco",) if args.robot == "mujoco" else ())
     for exe in exes:
         if not os.path.exists(os.path.join(args.build, "bin", exe)):

@@ -84,7 +84,7 @@ mkdir -p "$out" || die "cannot create the output folder '$out'"
 out="$(cd "$out" && pwd)"
 umask 077   # private keys are readable by the owner only
 
-modules=(vision behavior controller recorder player view)
+modules=(vision behavior controller recorder player view robot)
 identities=("${modules[@]}" intruder)
 
 # ---- private keys found with loose permissions -----------------------------------------------
@@ -214,8 +214,14 @@ publish[behavior]="reflex/hand_targets reflex/motion_priority reflex/body_schema
 subscribe[behavior]="reflex/object_targets reflex/joint_state reflex/control_status reflex/heartbeat"
 # reflex/controller_protection: what protects the robot; each controller also reads it to find a
 # second controller on the domain (issue 16, items 3 and 16).
-publish[controller]="reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection"
-subscribe[controller]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat reflex/controller_protection"
+# With a robot over DDS (--robot dds) the controller commands the robot and reads its state.
+publish[controller]="reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection reflex/joint_command"
+subscribe[controller]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat reflex/controller_protection reflex/robot_state"
+# The robot's driver (reflex_mujoco, or a real robot's): the only identity that may write the robot
+# state the controller computes from, and read the commands. The controller binds only a writer
+# authenticated as this identity.
+publish[robot]="reflex/robot_state reflex/robot_contacts reflex/heartbeat"
+subscribe[robot]="reflex/joint_command reflex/heartbeat"
 # The recorder only listens (every topic); it may announce itself with a heartbeat.
 publish[recorder]="reflex/heartbeat"
 subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection reflex/robot_state reflex/joint_command reflex/robot_contacts"

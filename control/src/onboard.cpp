@@ -277,6 +277,7 @@ const CycleReport& OnboardController::step(double now) noexcept {
   if (q == nullptr || q->size() != model_.nq) {
     if (robot_ok_) ++r.counts.robot_stale_events;
     robot_ok_ = false;
+    anchor_ = true;
     ++r.counts.robot_stale_cycles;
     r.robot_state_ok = false;
     r.walking_advanced = false;
@@ -287,15 +288,33 @@ const CycleReport& OnboardController::step(double now) noexcept {
   q_measured_ = *q;
   in.reset_estop = reset_;
   reset_ = false;
+  if (anchor_) {  // first state, or the first after none: the robot held itself where it is measured
+    for (int i = 0; i < model_.nq; ++i) q_command_[i] = std::clamp(q_measured_[i], model_.q_lower[i], model_.q_upper[i]);
+    anchor_ = false;
+  }
 
-  // Control (allocation-free), then the plant step on a one-cycle integrator from the measured state.
+  // Control (allocation-free), then the plant step on a one-cycle integrator: the arm joints from the
+  // measured state, the walking joints from the last command (walking owns them; a state never moves
+  // them).
   const ControlResult cr = computeControl(model_, cm_, data_, q_measured_, in);
-  integrator_.reset(q_measured_);
+  q_scratch_ = q_measured_;
+  for (const int j : walking_.joints())
+    if (data_.arm_joint[static_cast<std::size_t>(j)] == 0) q_scratch_[j] = q_command_[j];
+  integrator_.reset(q_scratch_);
   r.walking_advanced = stepPlant(model_, cm_, data_, cr, integrator_, walk_active_ ? &walking_ : nullptr,
                                  cm_.params.period, q_scratch_);
-  q_command_ = integrator_.jointPositions();
   const double dt = cm_.params.period;
-  for (int i = 0; i < model_.nq; ++i) qdot_command_[i] = (q_command_[i] - q_measured_[i]) / dt;
+  if (cr == ControlResult::kFrozen) {
+    // e-stop latched: hold what was last commanded (q_command_ as it is), not what the state says.
+  } else {
+    q_command_ = integrator_.jointPositions();
+  }
+  // The command's bounds, whatever the state said: positions inside the limits, velocities within
+  // v_max (the port rejects states further than stateLimitTolerance past a limit, so the two agree).
+  for (int i = 0; i < model_.nq; ++i) {
+    q_command_[i] = std::clamp(q_command_[i], model_.q_lower[i], model_.q_upper[i]);
+    qdot_command_[i] = std::clamp((q_command_[i] - q_measured_[i]) / dt, -model_.v_max[i], model_.v_max[i]);
+  }
   port_.command(q_command_, qdot_command_, dt);
   q_expected_ = q_command_;
   ++r.counts.computed_cycles;

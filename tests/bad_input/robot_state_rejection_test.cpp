@@ -8,6 +8,11 @@
 //   robot_state_future_stamp   stamped 1 s ahead; 0.5 s ahead (tolerance 2 ms)
 //   robot_state_old_stamp      a good state the controller already answered, sent again as is
 //                              (repeated); a new seq stamped 1 s before it (reordered)
+//   robot_state_duplicate_name l_elbow listed a second time (same value; another value)
+//   robot_state_outside_limits l_elbow 0.05 rad past its upper limit; 1e300; r_elbow below its lower
+//                              limit by twice the tolerance (v_max * period)
+//   robot_state_other_writer   a good state from a second participant's writer while this one is bound
+// A state with l_elbow past its upper limit by half the tolerance is a GOOD state (taken).
 // Independent answer: what this test sent. After each bad state the test waits for the controller's
 // status (reflex/control_status) and asserts that rejected_robot_states rose by exactly 1 and that
 // last_rejection names that cause; then, while good states keep coming for 150 ms, that the count
@@ -15,9 +20,9 @@
 // bad one (good states are still taken). No command ever answers a bad state (state_seq /
 // state_stamp_ns). At the end the exit line counts each cause exactly as often as it was sent.
 // Good states carrying one joint the model lacks (a robot with a gripper) are taken on purpose.
-// The robot-state topic is best effort, keep-last 1: after a bad state the test sends no good one
-// until the bad one is counted (else the good one could replace it unread), and a bad state lost on
-// the way would fail the "rose by exactly 1" wait (3 s) instead of passing silently.
+// The robot-state topic is best effort: after a bad state the test sends no good one until the bad
+// one is counted, and a bad state lost on the way would fail the "rose by exactly 1" wait (3 s)
+// instead of passing silently.
 #include "controller_run.hpp"
 
 #include "reflex/control/controller.hpp"
@@ -70,11 +75,12 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   ASSERT_TRUE(status.waitForWriters(1, 15s)) << readFile(log);
 
   bool extra_joint = false;  // good states with one joint the model lacks (taken on purpose)
+  double q0_override = std::nan("");  // l_elbow's position in good states, if not NaN
   auto good = [&] {
     msg::RobotState st;
     for (int i = 0; i < model.nq; ++i) {
       st.names().push_back(model.q_names[i]);
-      st.positions().push_back(q0[i]);
+      st.positions().push_back(i == elbow && !std::isnan(q0_override) ? q0_override : q0[i]);
       st.velocities().push_back(0.0);
     }
     if (extra_joint) {
@@ -136,15 +142,16 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   // Sends one bad state (spoil edits a good one; `stamped`: spoil set the header, written as is),
   // then asserts the count and the cause from the bus, and that good states are taken again.
   auto sendBad = [&](Cause& cause, const char* what, const std::function<void(msg::RobotState&)>& spoil,
-                     bool stamped) {
+                     bool stamped, bus::Writer<msg::RobotState>* via = nullptr) {
     SCOPED_TRACE(what);
     if (::testing::Test::HasFatalFailure()) return;
     msg::RobotState st = good();
     spoil(st);
+    bus::Writer<msg::RobotState>& w = via != nullptr ? *via : states;
     if (stamped) {
-      ASSERT_TRUE(states.write(st));
+      ASSERT_TRUE(w.write(st));
     } else {
-      ASSERT_TRUE(states.publish(st));
+      ASSERT_TRUE(w.publish(st));
     }
     // A written state of the test's own seq range is bad through and through; the repeated state
     // carries a good state's seq and stamp, which commands may answer (they answer the original).
@@ -154,8 +161,7 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     }
     ++cause.sent;
     ++expected;
-    // The controller's reader keeps only the newest state (profile reflex_robot: KEEP_LAST 1): no good
-    // state until the bad one is counted, else one could replace it unread.
+    // No good state until the bad one is counted: each count is then the bad state's alone.
     const bool counted = ticksUntil(3s, [&] { return latest.rejected_robot_states() >= expected; }, true);
     ASSERT_TRUE(counted) << "rejected_robot_states stayed " << latest.rejected_robot_states() << "\n" << readFile(log);
     EXPECT_EQ(latest.rejected_robot_states(), expected);
@@ -214,6 +220,44 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     st.header().stamp_ns(repeated.header().stamp_ns() - 1'000'000'000);
   }, true);
 
+  Cause duplicate{"robot_state_duplicate_name"}, limits{"robot_state_outside_limits"}, other{"robot_state_other_writer"};
+  sendBad(duplicate, "l_elbow twice, same value", [&](msg::RobotState& st) {
+    st.names().push_back("l_elbow");
+    st.positions().push_back(q0[elbow]);
+    st.velocities().push_back(0.0);
+  }, false);
+  sendBad(duplicate, "l_elbow twice, another value", [&](msg::RobotState& st) {
+    st.names().insert(st.names().begin(), "l_elbow");
+    st.positions().insert(st.positions().begin(), q0[elbow] + 0.05);
+    st.velocities().insert(st.velocities().begin(), 0.0);
+  }, false);
+  const int r_elbow = model.qIndex("r_elbow");
+  const double period = control::defaultControllerConfig().params.period;
+  sendBad(limits, "l_elbow 0.05 rad past its upper limit",
+          [&](msg::RobotState& st) { st.positions()[static_cast<std::size_t>(elbow)] = model.q_upper[elbow] + 0.05; }, false);
+  sendBad(limits, "l_elbow 1e300", [&](msg::RobotState& st) { st.positions()[static_cast<std::size_t>(elbow)] = 1e300; }, false);
+  sendBad(limits, "r_elbow below its lower limit by twice the tolerance", [&](msg::RobotState& st) {
+    st.positions()[static_cast<std::size_t>(r_elbow)] =
+        model.q_lower[r_elbow] - 2.0 * control::stateLimitTolerance(model, r_elbow, period);
+  }, false);
+  // Within the tolerance: a good state, taken and answered.
+  {
+    double& e = q0_override;
+    e = model.q_upper[elbow] + 0.5 * control::stateLimitTolerance(model, elbow, period);
+    const std::uint64_t before = last_good_seq;
+    ASSERT_TRUE(ticksUntil(3s, [&] { return answered_seq > before; })) << "a state within the tolerance is taken";
+    EXPECT_EQ(latest.rejected_robot_states(), expected);
+    e = std::nan("");
+  }
+  {
+    bus::BusConfig second = config;
+    second.module_name = "second_robot";
+    bus::Participant intruder(second);
+    auto& intruder_states = intruder.makeWriter<msg::RobotState>();
+    ASSERT_TRUE(intruder_states.waitForReaders(1, 15s));
+    sendBad(other, "a good state from a second writer", [](msg::RobotState&) {}, false, &intruder_states);
+  }
+
   // A robot with one joint more than the model: its states are taken, never counted.
   extra_joint = true;
   const std::uint64_t before_extra = last_good_seq;
@@ -222,9 +266,11 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   EXPECT_EQ(latest.rejected_robot_states(), expected);
   EXPECT_EQ(latest.rejected_hand_targets() + latest.rejected_body_schema() + latest.rejected_walk_commands(), 0u);
   EXPECT_EQ(bad_answers, 0) << "a command answered a bad state";
-  std::printf("sent %llu bad states (length %d, missing %d, non-finite %d, future %d, old %d), %zu good; status counted %llu\n",
+  std::printf("sent %llu bad states (length %d, missing %d, non-finite %d, future %d, old %d, duplicate %d, limits %d, "
+              "other writer %d), %zu good; status counted %llu\n",
               static_cast<unsigned long long>(expected), length.sent, missing.sent, non_finite.sent, future.sent, old.sent,
-              good_seqs.size(), static_cast<unsigned long long>(latest.rejected_robot_states()));
+              duplicate.sent, limits.sent, other.sent, good_seqs.size(),
+              static_cast<unsigned long long>(latest.rejected_robot_states()));
 
   controller.signal(SIGTERM);
   EXPECT_EQ(controller.wait(20s), 0);
@@ -235,14 +281,16 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   ASSERT_EQ(std::sscanf(text.c_str() + at, "robot dds: states %llu (rejected %llu)", &accepted, &rejected), 2) << text;
   EXPECT_EQ(rejected, expected);
   EXPECT_GT(accepted, 100u);
-  char by_cause[300];
-  std::snprintf(by_cause, sizeof(by_cause), "rejected by cause: %s %d, %s %d, %s %d, %s %d, %s %d (last %s)", length.name,
-                length.sent, missing.name, missing.sent, non_finite.name, non_finite.sent, future.name, future.sent,
-                old.name, old.sent, old.name);
+  char by_cause[500];
+  std::snprintf(by_cause, sizeof(by_cause), "rejected by cause: %s %d, %s %d, %s %d, %s %d, %s %d, %s %d, %s %d, %s %d (last %s)",
+                length.name, length.sent, missing.name, missing.sent, non_finite.name, non_finite.sent, future.name,
+                future.sent, old.name, old.sent, duplicate.name, duplicate.sent, limits.name, limits.sent, other.name,
+                other.sent, other.name);
   EXPECT_NE(text.find(by_cause), std::string::npos) << "expected '" << by_cause << "' in\n" << text;
   // Each refusal is named on stderr with the bad value.
   for (const char* line : {"names but", "joint 'l_elbow' is missing", "position nan", "velocity inf", "position -inf",
-                           "in the future", "not newer than"})
+                           "in the future", "not newer than", "joint 'l_elbow' is listed twice",
+                           "joint 'l_elbow' position 1e+300 outside its limits", "not the robot writer"})
     EXPECT_NE(text.find(line), std::string::npos) << line << "\n" << text;
 }
 

@@ -2,14 +2,21 @@
 // generated profiles file (--profiles <dir>/profiles/controller.xml), it authenticates a secure
 // behavior identity, follows its hand targets at 200 Hz with every pair above d_r, and publishes
 // encrypted joint state / status that the recorder identity reads and an unauthenticated
-// participant never sees. Domain 100.
+// participant never sees. Domain 100. With a robot over DDS (--robot dds), domain 228: the controller
+// commands a robot of the identity "robot" and takes no state from anyone else (an unauthenticated
+// writer, a module without the grant).
 #include "../bad_input/controller_run.hpp"
 #include "support/child_process.hpp"
 #include "security_support.hpp"
 
+#include "reflex/control/controller.hpp"
+#include "reflex/control/scenarios.hpp"
+#include "reflex/control/urdf_loader.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <csignal>
 #include <cstdio>
 #include <numeric>
 #include <regex>
@@ -100,6 +107,73 @@ TEST(SecureController, FollowsASecureSourceAt200HzAndHidesItsStateFromOutsiders)
   const std::string text = readFile(log);
   EXPECT_NE(text.find("(rejected 0)"), std::string::npos) << text;
   EXPECT_NE(text.find("e-stops 0"), std::string::npos) << text;
+}
+
+TEST(SecureController, DrivesARobotOfTheRobotIdentityAndNoOtherWriter) {
+  constexpr int kRobotDomain = 228;
+  const std::string dir = makeSecurityMaterial("robot");
+  loadProfiles(dir);
+  const std::string log = dir + "/controller_robot.log";
+  testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain",
+                                    std::to_string(kRobotDomain), "--duration", "20", "--robot", "dds", "--peer-probe",
+                                    "0", "--profiles", dir + "/profiles/controller.xml"},
+                                   log);
+  ASSERT_TRUE(controller.started());
+  const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
+  const control::Model model = control::loadModel(urdf, control::loadCollisionConfigFor(urdf, ""));
+  const control::ControllerModel cm = control::makeControllerModel(model, control::defaultControllerConfig());
+  const Eigen::VectorXd q0 = control::restConfiguration(model, cm);
+  auto state = [&](double lift) {
+    msg::RobotState s;
+    s.names(model.q_names);
+    s.positions().assign(q0.data(), q0.data() + model.nq);
+    s.velocities().assign(static_cast<std::size_t>(model.nq), 0.0);
+    for (const char* knee : {"l_knee", "r_knee"}) s.positions()[static_cast<std::size_t>(model.qIndex(knee))] += lift;
+    return s;
+  };
+
+  auto robot = secureParticipant(dir, "robot", kRobotDomain);
+  auto& states = robot->makeWriter<msg::RobotState>();
+  auto& commands = robot->makeReader<msg::JointCommand>();
+  ASSERT_TRUE(states.waitForReaders(1, 30s)) << readFile(log);
+  ASSERT_TRUE(commands.waitForWriters(1, 30s)) << readFile(log);
+  // A module without the grant cannot even make the writer; an outsider's states never arrive.
+  auto behavior = secureParticipant(dir, "behavior", kRobotDomain);
+  try {
+    behavior->makeWriter<msg::RobotState>();
+    ADD_FAILURE() << "behavior created a robot-state writer";
+  } catch (const bus::BusError& e) {
+    EXPECT_NE(std::string(e.what()).find("DDS-Security refused the DataWriter of topic 'reflex/robot_state'"),
+              std::string::npos)
+        << e.what();
+  }
+  auto outsider = plainParticipant("outsider", kRobotDomain);
+  auto& forged = outsider->makeWriter<msg::RobotState>();
+  std::vector<msg::JointCommand> got;
+  std::uint64_t answered = 0, foreign = 0;
+  std::vector<std::uint64_t> own;
+  repeatFor(3000ms, 5ms, [&] {
+    msg::RobotState s = state(0.0);
+    states.publish(s);
+    own.push_back(s.header().seq());
+    msg::RobotState f = state(0.5);
+    f.header().seq(1'000'000'000 + own.size());
+    f.header().stamp_ns(bus::nowNs());
+    forged.write(f);
+    got.clear();
+    commands.takeAll(got);
+    for (const auto& c : got) {
+      if (std::find(own.begin(), own.end(), c.state_seq()) != own.end()) ++answered;
+      if (c.state_seq() >= 1'000'000'000) ++foreign;
+    }
+  });
+  EXPECT_GT(answered, 100u) << "the controller commands the robot identity's states\n" << readFile(log);
+  EXPECT_EQ(foreign, 0u) << "a command answered an unauthenticated state";
+  controller.signal(SIGTERM);
+  EXPECT_EQ(controller.wait(20s), 0);
+  const std::string text = readFile(log);
+  EXPECT_NE(text.find("(rejected 0)"), std::string::npos) << "nothing but the robot's states arrived: " << text;
+  std::printf("secure robot: %llu commands answered the robot's states\n", static_cast<unsigned long long>(answered));
 }
 
 #ifdef REFLEX_SECURITY_CHAIN

@@ -235,6 +235,16 @@ TEST(SecurityHardening, BadMaterialStopsTheParticipantNamingTheFileAndTheCause) 
     EXPECT_NE(error, "") << "the participant was created";
     for (const auto& e : c.expected) EXPECT_NE(error.find(e), std::string::npos) << "expected '" << e << "' in: " << error;
   }
+  // A private key others can read: refused at run time too, as make_security.sh refuses it.
+  for (const char* mode : {"644", "640", "604"}) {
+    SCOPED_TRACE(mode);
+    ASSERT_EQ(runShell(std::string("chmod ") + mode + " '" + key + "'"), 0);
+    const std::string error = participantError(dir, "vision", kDomain);
+    EXPECT_NE(error.find("private_key file '" + key + "': readable by group or others (mode 0" + mode + ")"),
+              std::string::npos)
+        << error;
+    ASSERT_EQ(runShell("chmod 600 '" + key + "'"), 0);
+  }
   // Everything restored: the positive control again.
   EXPECT_EQ(participantError(dir, "vision", kDomain), "");
 }

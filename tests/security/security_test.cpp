@@ -32,7 +32,7 @@ class Security : public ::testing::Test {
 std::string Security::dir_;
 
 TEST_F(Security, ScriptMakesEveryFileAndTheSignaturesVerify) {
-  for (const char* id : {"vision", "behavior", "controller", "recorder", "player", "intruder"}) {
+  for (const char* id : {"vision", "behavior", "controller", "recorder", "player", "robot", "intruder"}) {
     for (const char* f : {"cert.pem", "key.pem", "permissions.xml", "permissions.p7s"}) {
       EXPECT_FALSE(readFile(dir_ + "/" + id + "/" + f).empty()) << id << "/" << f;
     }
@@ -200,7 +200,19 @@ TEST_F(Security, ModuleCannotCreateEndpointsItsPermissionsDoNotGrant) {
     vision->makeWriter<msg::HandTargets>();
     ADD_FAILURE() << "vision created a hand-targets writer";
   } catch (const bus::BusError& e) {
-    EXPECT_NE(std::string(e.what()).find("reflex/hand_targets"), std::string::npos) << e.what();
+    // Named as what it is: a permission refusal, not a QoS problem.
+    EXPECT_NE(std::string(e.what()).find("DDS-Security refused the DataWriter of topic 'reflex/hand_targets'"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("grant no publish rule"), std::string::npos) << e.what();
+  }
+  try {
+    vision->makeReader<msg::RobotState>();
+    ADD_FAILURE() << "vision created a robot-state reader";
+  } catch (const bus::BusError& e) {
+    EXPECT_NE(std::string(e.what()).find("DDS-Security refused the DataReader of topic 'reflex/robot_state'"),
+              std::string::npos)
+        << e.what();
   }
   EXPECT_THROW(vision->makeWriter<msg::JointState>(), bus::BusError);
   EXPECT_THROW(vision->makeReader<msg::JointState>(), bus::BusError) << "vision may not read joint state";
@@ -212,7 +224,20 @@ TEST_F(Security, ModuleCannotCreateEndpointsItsPermissionsDoNotGrant) {
   EXPECT_THROW(controller->makeWriter<msg::HandTargets>(), bus::BusError);
   EXPECT_THROW(controller->makeWriter<msg::ObjectTargets>(), bus::BusError);
 
+  // With a robot over DDS: the controller commands it and reads its state; only the robot identity
+  // writes the state (and reads the commands).
+  EXPECT_NO_THROW(controller->makeWriter<msg::JointCommand>());
+  EXPECT_NO_THROW(controller->makeReader<msg::RobotState>());
+  EXPECT_THROW(controller->makeWriter<msg::RobotState>(), bus::BusError);
+  auto robot = secureParticipant(dir_, "robot", kDomain);
+  EXPECT_NO_THROW(robot->makeWriter<msg::RobotState>());
+  EXPECT_NO_THROW(robot->makeWriter<msg::RobotContacts>());
+  EXPECT_NO_THROW(robot->makeReader<msg::JointCommand>());
+  EXPECT_THROW(robot->makeWriter<msg::JointCommand>(), bus::BusError);
+  EXPECT_THROW(robot->makeWriter<msg::HandTargets>(), bus::BusError);
+
   auto behavior = secureParticipant(dir_, "behavior", kDomain);
+  EXPECT_THROW(behavior->makeWriter<msg::RobotState>(), bus::BusError) << "only the robot writes its state";
   EXPECT_NO_THROW(behavior->makeWriter<msg::HandTargets>());
   EXPECT_NO_THROW(behavior->makeWriter<msg::MotionPriority>());
   EXPECT_NO_THROW(behavior->makeWriter<msg::BodySchemaChange>());

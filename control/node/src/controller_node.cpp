@@ -66,9 +66,15 @@ ParticipantId participantOf(const bus::dds::SampleInfo& info) {
 
 }  // namespace
 
+namespace {
+constexpr std::size_t kDetailBytes = 640;     ///< the heartbeat's detail text, at most (reserved once)
+constexpr double kRobotProblemWindow = 2.0;   ///< s a rejected robot state / ignored writer stays in the detail
+}  // namespace
+
 const char* robotStateCauseName(int cause) noexcept {
   static const char* const kNames[] = {"robot_state_length", "robot_state_missing_joint", "robot_state_not_finite",
-                                       "robot_state_future_stamp", "robot_state_old_stamp"};
+                                       "robot_state_future_stamp", "robot_state_old_stamp", "robot_state_duplicate_name",
+                                       "robot_state_outside_limits", "robot_state_other_writer"};
   static_assert(sizeof(kNames) / sizeof(kNames[0]) == DdsRobotPort::kCauses, "one name per DdsRobotPort cause");
   return cause >= 0 && cause < DdsRobotPort::kCauses ? kNames[cause] : "robot_state_?";
 }
@@ -97,6 +103,7 @@ struct ControllerNode::Impl {
   // The robot port (issue 13, item 2): the in-process kinematic plant or the robot over DDS.
   std::unique_ptr<KinematicPort> kinematic;  ///< --robot kinematic
   std::unique_ptr<DdsRobotPort> dds;         ///< --robot dds
+  std::unique_ptr<bus::WriterIdentities> robot_identities;  ///< --robot dds: who wrote a robot state
   std::unique_ptr<OnboardController> ctl;    ///< everything per cycle but the bus (onboard.hpp)
   std::unique_ptr<RobotStateFile> state_file;  ///< null without --robot-state
   std::string state_note;
@@ -272,6 +279,10 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     DdsRobotPort::Options po;
     po.timeout = config.robot_timeout;
     po.deadline = deadline;
+    po.period = m.cm.params.period;
+    // Under DDS-Security only the identity "robot" can be bound (plain DDS: the first writer).
+    m.robot_identities = std::make_unique<bus::WriterIdentities>(*m.participant, std::vector<std::string>{"robot"});
+    if (m.robot_identities->authenticated()) po.identities = m.robot_identities.get();
     m.dds = std::make_unique<DdsRobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, po);
     m.dds->sendThrough(*m.outbox);  // the commands too: a blocked write must not stop the loop
     port = m.dds.get();
@@ -313,7 +324,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.heartbeat_out_msg.host(hostName());
   m.heartbeat_out_msg.pid(static_cast<std::int32_t>(getpid()));
   m.heartbeat_out_msg.period_ms(500);
-  const auto reserveHeartbeat = [](msg::Heartbeat& hb) { hb.detail().reserve(256); };
+  const auto reserveHeartbeat = [](msg::Heartbeat& hb) { hb.detail().reserve(kDetailBytes); };
   reserveHeartbeat(m.heartbeat_out_msg);
   for (auto* h : {&m.joint_msg.header(), &m.status_msg.header(), &m.heartbeat_out_msg.header()})
     h->source(m.config.module_name);
@@ -381,11 +392,33 @@ void ControllerNode::run() {
     ctl.holdHandsHere(t_start);
   }
 
-  // The heartbeat's detail says what the controller cannot do: "" when it runs normally; with
-  // --robot dds "robot state stale ..." while it has no fresh robot state (it commands nothing).
+  // The heartbeat's detail says what the controller cannot do or refuses: "" when it runs normally;
+  // with --robot dds "robot state stale ..." while it has no fresh robot state (it commands nothing),
+  // then, for kRobotProblemWindow after each, the latest robot state it rejected and the latest
+  // robot_state writer it ignored (another driver, a replay, a man in the middle).
   std::string detail;
-  detail.reserve(256);
+  detail.reserve(kDetailBytes);
+  char robot_stale_text[200] = {};
+  double last_robot_reject_t = -1e9, last_other_writer_t = -1e9;
+  std::uint64_t other_writer_seen = 0, bad_seen = 0;
+  char detail_buf[kDetailBytes] = {};
   auto publishHeartbeat = [&](msg::ModuleState state) {
+    const double t = nowSeconds(CLOCK_MONOTONIC);
+    int used = std::snprintf(detail_buf, sizeof(detail_buf), "%s", robot_stale_text);
+    auto append = [&](const char* fmt, auto... args) {
+      if (used < 0 || static_cast<std::size_t>(used) >= sizeof(detail_buf)) return;
+      const int k = std::snprintf(detail_buf + used, sizeof(detail_buf) - static_cast<std::size_t>(used), fmt,
+                                  used > 0 ? "; " : "", args...);
+      if (k > 0) used += k;
+    };
+    if (m.dds && t - last_other_writer_t <= kRobotProblemWindow)
+      append("%sIGNORING a second reflex/robot_state writer %s (%llu samples; the robot writer is %s)",
+             m.dds->otherWriter(), static_cast<unsigned long long>(m.dds->counts().rejected_other_writer),
+             m.dds->boundWriter());
+    if (m.dds && t - last_robot_reject_t <= kRobotProblemWindow)
+      append("%s%llu robot states rejected, the latest: %s", static_cast<unsigned long long>(bad_seen),
+             m.dds->lastBadRejection());
+    detail.assign(detail_buf);  // within the reserved capacity
     msg::Heartbeat& hb = m.heartbeat_out_msg;
     hb.state(state);
     hb.detail().assign(detail);  // within the reserved capacity
@@ -488,6 +521,19 @@ void ControllerNode::run() {
       std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", m.dds->lastRejection());
       m.robot_log[static_cast<std::size_t>(m.dds->lastCause())].print(stderr, m.schema_line);
       last_rejection = robotStateCauseName(m.dds->lastCause());
+      const std::uint64_t other = m.dds->counts().rejected_other_writer;
+      const std::uint64_t bad = m.dds->counts().rejected() - other;
+      if (bad != bad_seen) last_robot_reject_t = t_now;
+      bad_seen = bad;
+      if (other != other_writer_seen) {
+        last_other_writer_t = t_now;
+        const bool first = other_writer_seen == 0;
+        other_writer_seen = other;
+        if (first) {  // a second writer is said at once (stderr above, heartbeat now), not at 2 Hz
+          publishHeartbeat(msg::STATE_RUNNING);
+          last_heartbeat = t_now;
+        }
+      }
     }
 
     // 2.-3. Staleness, priority, control (allocation-free) and the robot port: one step.
@@ -498,7 +544,7 @@ void ControllerNode::run() {
       robot_ok = rep.robot_state_ok;
       said_robot = true;
       if (robot_ok) {
-        detail.clear();
+        robot_stale_text[0] = '\0';
         if (m.dds) {
           std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: robot state fresh (seq %llu): commanding the robot",
                         static_cast<unsigned long long>(m.dds->stateSeq()));
@@ -509,7 +555,7 @@ void ControllerNode::run() {
         std::snprintf(text, sizeof(text), "robot state stale: %s (timeout %.0f ms); command frozen, the robot holds",
                       m.dds && m.dds->haveState() ? "no fresh reflex/robot_state" : "no reflex/robot_state yet",
                       m.config.robot_timeout * 1e3);
-        detail = text;
+        std::snprintf(robot_stale_text, sizeof(robot_stale_text), "%s", text);
         std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: %s", text);
         m.robot_state_log.print(stderr, m.schema_line);
       }
@@ -534,7 +580,9 @@ void ControllerNode::run() {
       stats_.robot_states_accepted = pc.accepted;
       stats_.robot_states_rejected = pc.rejected();
       stats_.robot_states_rejected_by_cause = {pc.rejected_length, pc.rejected_missing, pc.rejected_non_finite,
-                                               pc.rejected_future, pc.rejected_old};
+                                               pc.rejected_future, pc.rejected_old, pc.rejected_duplicate,
+                                               pc.rejected_limits, pc.rejected_other_writer};
+      stats_.robot_writer_changes = pc.writer_changes;
       stats_.robot_commands = pc.commands;
     }
 

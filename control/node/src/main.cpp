@@ -111,6 +111,9 @@ int main(int argc, char** argv) {
                ", robot stale events " + std::to_string(s.robot_stale_events) + " (" +
                std::to_string(s.robot_stale_cycles) + " cycles without state)";
       if (s.robot_stale_at_exit) extra += ", ROBOT STATE STALE at exit";
+      if (s.robot_writer_changes > 0) extra += ", robot writer replaced " + std::to_string(s.robot_writer_changes) + " times";
+      if (s.robot_states_rejected_by_cause[7] > 0)
+        extra += ", SECOND ROBOT WRITER ignored (" + std::to_string(s.robot_states_rejected_by_cause[7]) + " samples)";
     }
     if (s.targets_rejected + s.robot_states_rejected > 0)
       extra += ", rejected by cause: " + reflex::control_node::describeRejections(s) + " (last " + s.last_rejection + ")";

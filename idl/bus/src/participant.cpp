@@ -371,6 +371,14 @@ void Participant::createWriter(detail::WriterBase& w, dds::TypeSupport type) {
        << dds::StatusMask::offered_incompatible_qos() << dds::StatusMask::publication_matched();
   w.writer_ = publisher_->create_datawriter(&topic, qos, &w.counters_, mask);
   if (w.writer_ == nullptr) {
+    // Under DDS-Security the usual cause is access control: the identity's signed permissions grant
+    // no publish rule for this topic (Fast DDS refuses the writer without saying why).
+    if (secure()) {
+      throw BusError("DDS-Security refused the DataWriter of topic '" + w.topic_name_ +
+                     "': the permissions of this participant's identity grant no publish rule for it "
+                     "(bringup/security/make_security.sh, publish[...]; or the QoS of profile '" +
+                     w.profile_name_ + "' is inconsistent)" + where());
+    }
     throw BusError("could not create the DataWriter of topic '" + w.topic_name_ + "' with profile '" +
                    w.profile_name_ + "' (inconsistent QoS in the profile?)" + where());
   }
@@ -390,6 +398,12 @@ void Participant::createReader(detail::ReaderBase& r, dds::TypeSupport type) {
        << dds::StatusMask::liveliness_changed() << dds::StatusMask::subscription_matched();
   r.reader_ = subscriber_->create_datareader(&topic, qos, &r.counters_, mask);
   if (r.reader_ == nullptr) {
+    if (secure()) {
+      throw BusError("DDS-Security refused the DataReader of topic '" + r.topic_name_ +
+                     "': the permissions of this participant's identity grant no subscribe rule for it "
+                     "(bringup/security/make_security.sh, subscribe[...]; or the QoS of profile '" +
+                     r.profile_name_ + "' is inconsistent)" + where());
+    }
     throw BusError("could not create the DataReader of topic '" + r.topic_name_ + "' with profile '" +
                    r.profile_name_ + "' (inconsistent QoS in the profile?)" + where());
   }

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <ctime>
 #include <fstream>
@@ -274,6 +275,19 @@ SecurityCheck checkSecurityMaterial(const SecurityMaterial& m, Clock::time_point
     }
   }
   const File key_file = readMaterial(auth + "private_key", m.private_key);
+  {
+    // The same rule as make_security.sh: a private key that group or others can read may have been
+    // copied; it is refused, not used.
+    struct stat st{};
+    if (::stat(key_file.path.c_str(), &st) == 0 && (st.st_mode & 077) != 0) {
+      char mode[8];
+      std::snprintf(mode, sizeof(mode), "%04o", static_cast<unsigned>(st.st_mode & 07777));
+      throw BusError("DDS-Security: " + key_file.where() + ": readable by group or others (mode " + mode +
+                     "): refused, as bringup/security/make_security.sh refuses it; a key others could read may "
+                     "have been copied: make new material (make_security.sh --force), or, knowing nobody else "
+                     "read it, chmod 600 it");
+    }
+  }
   {
     Bio b = memBio(key_file.text);
     Key key(PEM_read_bio_PrivateKey(b.get(), nullptr, nullptr, nullptr));

@@ -9,8 +9,13 @@
 // The robot port (issue 13, item 2): the controller computes from the positions the port says were
 // MEASURED this cycle and hands the port one command: the positions the driven joints should reach
 // at the end of the cycle (measured + qdot dt for the arm joints, rate-limited to v_max and clamped to
-// the position limits; the walking positions for the walking joints; the measured value elsewhere)
-// and the velocities over the cycle ((q_end - q_measured) / dt). KinematicPort is today's in-process
+// the position limits; for the walking joints the walking pattern's positions, which continue the
+// controller's OWN last command, never the measured value: a state cannot move the legs; the measured
+// value elsewhere) and the velocities over the cycle ((q_end - q_measured) / dt, clamped to +-v_max).
+// While the e-stop is latched (kFrozen) every driven joint is commanded where the last command put it,
+// whatever the state says. The hold is anchored at the measured state at the first computed cycle and
+// again at the first one after a cycle without a state (the robot held itself meanwhile). Whatever the
+// state, a command never lies outside the position limits and never has a velocity above v_max. KinematicPort is today's in-process
 // plant: the command's end positions become the next measured state exactly. The robot over DDS
 // (control/node, reflex_controller --robot dds) implements the same port. A port without a usable
 // state (missing, stale) returns nullptr: the cycle computes nothing and commands nothing (the robot
@@ -185,6 +190,19 @@ struct CycleReport {
   OnboardCounts counts;
 };
 
+/// How far a MEASURED position may lie past joint i's limit and still be accepted (rad or m): what the
+/// joint covers in one control cycle at its velocity limit, v_max_i * period. An encoder reading a hair
+/// past a soft limit (a servo overshooting a command at the limit) is accepted, and the next command,
+/// clamped to the limits, brings it back within one cycle at no more than v_max; a reading further out
+/// is not a state the controller can answer within v_max and the limits, and is refused (the robot
+/// port rejects the whole state).
+inline double stateLimitTolerance(const Model& model, int i, double period) noexcept {
+  return model.v_max[i] * period;
+}
+/// A joint without position limits (continuous) accepts a measured |position| up to this (rad or m):
+/// larger finite values are absurd (and lose the precision the kinematics needs).
+inline constexpr double kMaxUnlimitedPosition = 1e4;
+
 /// The joints the onboard controller drives, as q indices: every arm's joints (left, then right, in
 /// the configuration's order), then the walking pattern's joints (WalkingPattern::joints()).
 std::vector<int> drivenJoints(const Model& model, const ControllerModel& cm);
@@ -278,6 +296,7 @@ class OnboardController {
   double last_source_heartbeat_ = -1.0;
   bool stale_ = true;
   bool robot_ok_ = true;  ///< for robot_stale_events (the first missing state counts as an event)
+  bool anchor_ = true;    ///< the next computed cycle anchors the last command at the measured state
   Eigen::VectorXd q_measured_, q_expected_, q_command_, qdot_command_, q_scratch_;
   std::vector<int> driven_;
   BodySchemaOutcome schema_outcome_;

@@ -137,8 +137,10 @@ struct NodeStats {
   std::uint64_t robot_stale_cycles = 0;    ///< cycles that computed and commanded nothing for lack of state
   bool robot_stale_at_exit = false;
   std::uint64_t robot_states_accepted = 0;
-  std::uint64_t robot_states_rejected = 0;  ///< wrong lengths, a missing joint, NaN, a future or old stamp
-  std::array<std::uint64_t, 5> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
+  std::uint64_t robot_states_rejected = 0;  ///< wrong lengths, a missing joint, NaN, a future or old stamp,
+                                            ///< a name twice, outside the limits, another writer's
+  std::array<std::uint64_t, 8> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
+  std::uint64_t robot_writer_changes = 0;   ///< a silent robot writer replaced by a new one
   const char* last_rejection = "";          ///< the latest refusal's cause name ("" none), as in ControlStatus
   std::uint64_t robot_commands = 0;         ///< JointCommand samples handed to the bus (queued for the outbox's writer thread; its drops are in bus_dropped)
   // The loop's bus outputs (joint state, status, heartbeat, joint commands), written by the outbox's thread
@@ -152,9 +154,10 @@ struct NodeStats {
   std::string bus_longest_topic;
 };
 
-/// The name of a DdsRobotPort rejection cause (0 lengths .. 4 old stamp) as ControlStatus.last_rejection
-/// and the exit line print it: "robot_state_length", ..._missing_joint, ..._not_finite, ..._future_stamp,
-/// ..._old_stamp.
+/// The name of a DdsRobotPort rejection cause (0 lengths .. 7 another writer) as
+/// ControlStatus.last_rejection and the exit line print it: "robot_state_length", ..._missing_joint,
+/// ..._not_finite, ..._future_stamp, ..._old_stamp, ..._duplicate_name, ..._outside_limits,
+/// ..._other_writer.
 const char* robotStateCauseName(int cause) noexcept;
 
 /// "hand_target_too_far 3, walk_bad_value 1" for the non-zero counters of `stats` ("" if none).

@@ -6,10 +6,23 @@
 // State in: poll() takes every RobotState that arrived. A sample is REJECTED and counted (by cause,
 // the last one named in lastRejection()) when its names, positions, velocities (and efforts, if not
 // empty) differ in length; when it lacks a joint of the model (the controller computes every
-// distance from every joint); when a position or velocity of a model joint is not finite; when its
-// Header.stamp_ns lies more than kFutureTolerance ahead of this host's system clock; or when it is
-// not newer (stamp) than the state already held. The robot's joint names are mapped to the model's
-// joint order once, and again only when the robot's name list changes.
+// distance from every joint); when a name is listed twice (which value is true?); when a position or
+// velocity of a model joint is not finite; when a position lies outside the joint's limits by more
+// than stateLimitTolerance() (control/onboard.hpp: v_max * period, what one cycle at the velocity
+// limit covers; an unlimited joint beyond +-kMaxUnlimitedPosition) — an absurd finite value included;
+// when its Header.stamp_ns lies more than kFutureTolerance ahead of this host's system clock; or when
+// it is not newer (stamp) than the state already held. The robot's joint names are mapped to the
+// model's joint order once, and again only when the robot's name list changes.
+//
+// One robot writer: the port BINDS to the DataWriter of the first state it accepts (its GUID). A
+// sample of any other writer is ignored and counted (cause 7, robot_state_other_writer; the newest
+// such writer is named by otherWriter()), whatever it says, while the bound writer may still be alive
+// (a sample from it within `rebind_silence`, 1 s: a driver stalled by its host for a few hundred ms
+// is not replaced by whoever writes meanwhile; seen: a 166 ms stall under test load). A bound writer
+// silent for longer (a driver that died and restarted gets a new GUID) is replaced by the next writer
+// whose state is accepted, counted in writer_changes. Under DDS-Security (Options::identities set) only a writer authenticated as the
+// identity "robot" is ever bound. Plain DDS authenticates nobody: the binding guards against a second
+// driver or a stray replay, not against a writer that starts before the robot (see idl/README.md).
 //
 // Staleness: measuredPositions() returns nullptr (the controller computes nothing and commands
 // nothing) when no state was accepted yet or the newest is older than `timeout` (its stamp against
@@ -26,7 +39,9 @@
 #include <reflex/bus/outbox.hpp>
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/identity.hpp>
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -40,6 +55,11 @@ class DdsRobotPort final : public control::RobotPort {
   struct Options {
     double timeout = 0.050;   ///< s: a newest state older than this is stale (--robot-timeout; NodeConfig says why 50 ms)
     double deadline = 0.015;  ///< s: valid_until_ns = now + this (--command-deadline)
+    double period = 0.005;    ///< s: the control period (the limit tolerance is v_max * period)
+    double rebind_silence = 1.0;  ///< s the bound robot writer must be silent before another may replace it
+    /// Under DDS-Security: the identities of the bus (the port binds only a writer authenticated as
+    /// "robot"); nullptr on plain DDS (the first writer is bound).
+    const bus::WriterIdentities* identities = nullptr;
   };
 
   struct Counts {
@@ -49,9 +69,14 @@ class DdsRobotPort final : public control::RobotPort {
     std::uint64_t rejected_non_finite = 0;   ///< NaN / Inf position or velocity of a model joint
     std::uint64_t rejected_future = 0;       ///< stamp ahead of this host's clock by more than kFutureTolerance
     std::uint64_t rejected_old = 0;          ///< not newer than the state held (reordered or repeated)
+    std::uint64_t rejected_duplicate = 0;    ///< a joint name listed twice
+    std::uint64_t rejected_limits = 0;       ///< a model joint's position outside its limits (+ tolerance)
+    std::uint64_t rejected_other_writer = 0; ///< from a writer other than the bound robot writer (ignored)
+    std::uint64_t writer_changes = 0;        ///< a silent bound writer replaced by a new one
     std::uint64_t commands = 0;              ///< JointCommand samples published (with sendThrough: queued)
     std::uint64_t rejected() const {
-      return rejected_length + rejected_missing + rejected_non_finite + rejected_future + rejected_old;
+      return rejected_length + rejected_missing + rejected_non_finite + rejected_future + rejected_old +
+             rejected_duplicate + rejected_limits + rejected_other_writer;
     }
   };
 
@@ -71,8 +96,12 @@ class DdsRobotPort final : public control::RobotPort {
 
   const Counts& counts() const { return counts_; }
   const char* lastRejection() const { return rejection_; }
-  /// The cause of the last rejection: 0 lengths, 1 missing joint, 2 non-finite, 3 future stamp, 4 old.
-  static constexpr int kCauses = 5;
+  /// The latest rejection that was not another writer's sample ("" none).
+  const char* lastBadRejection() const { return bad_rejection_; }
+  /// The cause of the last rejection: 0 lengths, 1 missing joint, 2 non-finite, 3 future stamp, 4 old,
+  /// 5 duplicate name, 6 outside the limits, 7 another writer.
+  static constexpr int kCauses = 8;
+  static constexpr int kCauseOtherWriter = 7;
   int lastCause() const { return cause_; }
   bool haveState() const { return have_state_; }
   /// Age (s) of the newest accepted state now, +inf without one.
@@ -80,9 +109,15 @@ class DdsRobotPort final : public control::RobotPort {
   std::uint64_t stateSeq() const { return state_seq_; }
   /// Header.stamp_ns of the newest accepted state (system clock, ns), 0 without one.
   std::int64_t stateStampNs() const { return state_stamp_ns_; }
+  /// The bound writer ("" before the first accepted state) and the newest writer ignored ("" none),
+  /// each as its participant's GUID prefix and writer entity id, "01.0f.…|0.0.3.3" (log lines, heartbeat).
+  const char* boundWriter() const { return bound_text_; }
+  const char* otherWriter() const { return other_text_; }
 
  private:
-  bool accept(const msg::RobotState& s) noexcept;
+  using Guid = std::array<unsigned char, 16>;
+  bool accept(const msg::RobotState& s, const Guid& writer, std::int64_t now_ns) noexcept;
+  bool reject(int cause, std::uint64_t& counter) noexcept;
 
   const control::Model& model_;
   Options options_;
@@ -95,12 +130,24 @@ class DdsRobotPort final : public control::RobotPort {
   std::vector<int> driven_;
   std::vector<std::string> robot_names_;  ///< the robot's name list the map was built for
   std::vector<int> index_;                ///< per model joint: its index in the robot's lists, -1 if absent
+  int duplicate_ = -1;                    ///< index in robot_names_ of a name listed twice, -1 none
+  Eigen::VectorXd lower_, upper_;         ///< the accepted position range per model joint (limits + tolerance)
+  bool bound_ = false;                    ///< a robot writer is bound
+  Guid robot_writer_{};                   ///< the bound writer
+  std::int64_t writer_last_ns_ = 0;       ///< when the bound writer's last sample arrived (this host's clock)
+  Guid other_{};                          ///< the newest writer ignored
+  bool identity_checked_ = false;         ///< candidate_ was checked against the "robot" identity
+  Guid candidate_{};                      ///< the last writer checked (secure mode)
+  bool candidate_ok_ = false;
+  char bound_text_[64] = {};
+  char other_text_[64] = {};
   Eigen::VectorXd q_;                     ///< the newest accepted measured positions (model order)
   bool have_state_ = false;
   std::uint64_t state_seq_ = 0;
   std::int64_t state_stamp_ns_ = 0;
   Counts counts_;
   char rejection_[300] = {};
+  char bad_rejection_[300] = {};
   int cause_ = 0;
 };
 
