@@ -43,6 +43,20 @@ DistanceData::DistanceData(const Model& model)
   }
   pp_begin.push_back(static_cast<int>(pp_a.size()));
   exact_pairs.assign(robot_pairs.size(), -1);
+  // The tight model: cores of the capsules as two-vertex pieces; which pairs have a piece.
+  core_piece.resize(model.primitives.size());
+  for (std::size_t p = 0; p < model.primitives.size(); ++p) {
+    core_piece[p].vertices_L = {model.primitives[p].a_L, model.primitives[p].b_L};
+    core_piece[p].bound_center_L = 0.5 * (model.primitives[p].a_L + model.primitives[p].b_L);
+  }
+  pair_has_piece.assign(model.pairs.size(), 0);
+  auto hasPiece = [&](const Segment& seg) {
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
+      if (model.primitives[static_cast<std::size_t>(p)].piece >= 0) return true;
+    return false;
+  };
+  for (std::size_t i = 0; i < model.pairs.size(); ++i)
+    pair_has_piece[i] = hasPiece(model.segments[model.pairs[i].a]) || hasPiece(model.segments[model.pairs[i].b]);
   // Bounding sphere of every robot segment in its link frame: centred on the middle of the box
   // around its primitives' end points; the radius reaches the farthest end point plus its radius
   // (a capsule lies inside the spheres around its two ends' hull, so the sphere encloses it).
@@ -143,6 +157,108 @@ REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const Kinematics
   }
 }
 
+/// Pair i's result from witness points on the real shapes (the tight model): p_a on a's surface, p_b
+/// on b's, unit normal n from b towards a, distance d; below the threshold, the row.
+REFLEX_ALWAYS_INLINE inline void finishPairPoints(const Model& model, const KinematicsData& kin, DistanceData& data,
+                                                  const DistanceOptions& options, int i, int link_a, int link_b,
+                                                  double d, const Eigen::Vector3d& p_a, const Eigen::Vector3d& p_b,
+                                                  const Eigen::Vector3d& n) {
+  PairDistance& out = data.pairs[i];
+  out.well_defined = true;
+  out.active = true;
+  out.exact = true;
+  out.distance = d;
+  out.nhat_B = n;
+  out.p_B_a = p_a;
+  out.p_B_b = p_b;
+  out.has_row = d < options.row_threshold;
+  if (!out.has_row) return;
+  const int common = data.pair_common[static_cast<std::size_t>(i)];
+  if (common >= 0) {
+    computeDirectionalRowOnSupport(model, kin, link_a, p_a, link_b, p_b, n, static_cast<std::size_t>(common),
+                                   data.rows.row(i).data());
+  } else {
+    computeDirectionalRow(model, kin, link_a, p_a, link_b, p_b, n, data.rows.row(i));
+  }
+}
+
+/// The exact distance of primitives pa (on link_a) and pb (on link_b) on their real shapes: a convex
+/// piece as it is, a capsule as its core and radius. False when the pieces (or cores) touch or
+/// overlap: there is no direction; p_a is then a common point.
+inline bool pieceDistance(const Model& model, const KinematicsData& kin, const DistanceData& data, int pa, int pb,
+                          int link_a, int link_b, double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b,
+                          Eigen::Vector3d& n) {
+  const Primitive& A = model.primitives[static_cast<std::size_t>(pa)];
+  const Primitive& B = model.primitives[static_cast<std::size_t>(pb)];
+  const ConvexPiece& ca = A.piece >= 0 ? model.pieces[static_cast<std::size_t>(A.piece)] : data.core_piece[static_cast<std::size_t>(pa)];
+  const ConvexPiece& cb = B.piece >= 0 ? model.pieces[static_cast<std::size_t>(B.piece)] : data.core_piece[static_cast<std::size_t>(pb)];
+  const double ra = A.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pa)];
+  const double rb = B.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pb)];
+  const ConvexDistance c = computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(link_a)], cb,
+                                                 kin.X_B_L[static_cast<std::size_t>(link_b)]);
+  if (!(c.distance > kCoincidentEps)) {
+    p_a = c.p_B_a;
+    return false;
+  }
+  n = (c.p_B_a - c.p_B_b) * (1.0 / c.distance);
+  d = c.distance - ra - rb;
+  p_a = c.p_B_a - ra * n;
+  p_b = c.p_B_b + rb * n;
+  return true;
+}
+
+/// Pair i of the tight model: the least exact distance over its primitive pairs, visited by
+/// `each(f)` calling f(pa, pb, capsule distance, core distance, s, t) for each; a primitive pair whose
+/// capsule distance (a lower bound of its exact one) is not below the best so far is skipped.
+template <class Each>
+void finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData& data, const DistanceOptions& options,
+                     int i, int link_a, int link_b, Each&& each) {
+  double best = std::numeric_limits<double>::infinity();
+  bool on_pieces = false, overlap = false;
+  int cap_pa = -1, cap_pb = -1;
+  double cap_core = 0.0, cap_s = 0.0, cap_t = 0.0;
+  Eigen::Vector3d best_pa = Eigen::Vector3d::Zero(), best_pb = Eigen::Vector3d::Zero(), best_n = Eigen::Vector3d::UnitZ();
+  each([&](int pa, int pb, double bound, double core, double s, double t) {
+    if (!(bound < best) && cap_pa >= 0) return;
+    double d;
+    Eigen::Vector3d p_a, p_b, n;
+    const bool capsules = model.primitives[static_cast<std::size_t>(pa)].piece < 0 &&
+                          model.primitives[static_cast<std::size_t>(pb)].piece < 0;
+    if (capsules) {  // two capsules: exact as they are
+      best = bound, on_pieces = false, overlap = false;
+      cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
+      return;
+    }
+    if (pieceDistance(model, kin, data, pa, pb, link_a, link_b, d, p_a, p_b, n)) {
+      if (d < best || cap_pa < 0) {
+        best = d, on_pieces = true, overlap = false, best_pa = p_a, best_pb = p_b, best_n = n;
+        cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
+      }
+      return;
+    }
+    // The pieces touch or overlap: distance 0, "the real shapes touch or overlap" (they may be apart
+    // by up to the pieces' gaps, or intersect; the tight model does not estimate a depth, and the
+    // capsules' depth can be far below the truth), at the common point, along the capsules' direction
+    // (the way that separates their cores).
+    if (!(0.0 < best) && cap_pa >= 0) return;
+    const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
+    const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
+    Eigen::Vector3d dir = (A.start + s * A.d) - (B.start + t * B.d);
+    if (!(dir.norm() > kCoincidentEps)) dir = kin.X_B_L[static_cast<std::size_t>(link_a)].translation() -
+                                              kin.X_B_L[static_cast<std::size_t>(link_b)].translation();
+    const double len = dir.norm();
+    best = 0.0, on_pieces = true, overlap = true, best_pa = p_a, best_pb = p_a;
+    best_n = len > kCoincidentEps ? Eigen::Vector3d(dir / len) : Eigen::Vector3d::UnitZ();
+    cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
+  });
+  if (on_pieces) {
+    finishPairPoints(model, kin, data, options, i, link_a, link_b, best, best_pa, best_pb, best_n);
+    data.pairs[static_cast<std::size_t>(i)].well_defined = !overlap;  // overlapping pieces: the capsules' normal
+  }
+  else
+    finishPair(model, kin, data, options, i, link_a, link_b, best, cap_core, cap_pa, cap_pb, cap_s, cap_t);
+}
+
 /// The closest primitive pair of segments sa and sb, computed directly (slot pairs, refinement);
 /// the same arithmetic and order as the flat loop of computeSegmentDistances.
 void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceData& data,
@@ -151,6 +267,17 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
   const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
   if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
+  if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
+    finishPiecePair(model, kin, data, options, i, link_a, link_b, [&](auto&& f) {
+      for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa)
+        for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
+          double s, t;
+          const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
+          f(pa, pb, core - radius[pa] - radius[pb], core, s, t);
+        }
+    });
+    return;
+  }
   double best = std::numeric_limits<double>::infinity(), best_core = 0.0, best_s = 0.0, best_t = 0.0;
   int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
   for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
@@ -183,6 +310,9 @@ void transformSegment(const Model& model, const KinematicsData& kin, const BodyS
     const Eigen::Isometry3d& X = kin.X_B_L[slot.link];
     data.prim_B[seg.first_primitive].set(X * slot.a_L, X * slot.b_L);
     data.prim_r[seg.first_primitive] = slot.radius;
+    ConvexPiece& core = data.core_piece[static_cast<std::size_t>(seg.first_primitive)];  // 2 vertices: no allocation
+    core.vertices_L[0] = slot.a_L;
+    core.vertices_L[1] = slot.b_L;
     return;
   }
   const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
@@ -294,12 +424,41 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
     detail::coreDistancesScalar(prim, list_a, list_b, nlist, data.pp_core.data(), data.pp_s.data(), data.pp_t.data());
 
   // 4. Every exactly computed robot pair: the best of its primitive pairs (the next entries of the
-  //    list), then normal, witness points and row.
+  //    list), then normal, witness points and row. A pair of the tight model: its capsules' distance
+  //    first; above prune_distance it is skipped like the broad phase's (that distance its lower
+  //    bound), else computed on the pieces.
+  int nkept = 0;
   for (int e = 0, j = 0; e < nexact; ++e) {
     const int i = exact_pairs[e];
     const SegmentPair& pair = model.pairs[i];
     const int end = j + data.pp_begin[i + 1] - data.pp_begin[i];
     assert(end > j);  // every robot segment has a primitive (Model)
+    if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
+      const int begin = j;
+      double bound = kInf;
+      for (; j < end; ++j) bound = std::min(bound, data.pp_core[j] - radius[list_a[j]] - radius[list_b[j]]);
+      if (prune && bound > options.prune_distance) {
+        PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
+        out.active = true;
+        out.exact = false;
+        out.has_row = false;
+        out.distance = bound;
+        pruned_floor = std::min(pruned_floor, bound);
+        ++data.num_pruned_pairs;
+        continue;
+      }
+      if (prune) data.exact_pairs[static_cast<std::size_t>(nkept)] = i;
+      ++nkept;
+      finishPiecePair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link,
+                      [&](auto&& f) {
+                        for (int k = begin; k < end; ++k)
+                          f(list_a[k], list_b[k], data.pp_core[k] - radius[list_a[k]] - radius[list_b[k]],
+                            data.pp_core[k], data.pp_s[k], data.pp_t[k]);
+                      });
+      continue;
+    }
+    if (prune) data.exact_pairs[static_cast<std::size_t>(nkept)] = i;
+    ++nkept;
     int j_best = j;
     double best = data.pp_core[j] - radius[list_a[j]] - radius[list_b[j]];
     for (++j; j < end; ++j) {
@@ -312,6 +471,9 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
     finishPair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link, best,
                data.pp_core[j_best], list_a[j_best], list_b[j_best], data.pp_s[j_best], data.pp_t[j_best]);
   }
+  nexact = nkept;  // without the tight model's skipped pairs (exact_pairs compacted in place)
+  data.num_exact_pairs = nexact;
+  data.pruned_floor = pruned_floor;
 
   // 5. Pairs with a body-schema slot: usually all disabled; each computed directly when active.
   bool any_slot = false;

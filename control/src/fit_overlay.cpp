@@ -166,17 +166,22 @@ FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, con
     fit.link = jobs[j].link;
     fit.inputs = jobs[j].hash;
     fit.elements = static_cast<int>(jobs[j].elements.size());
-    // The meshes together (greedy cuts), each box by its own grid of cells (fitBox).
-    if (!meshes[j].vertices.empty()) fit.primitives = fitPrimitives(meshes[j], options, nullptr);
+    // The tight model: the meshes together cut into convex pieces (fitConvexPieces), each box one
+    // exact piece; every piece with the capsule that encloses it.
+    double gap = 0.0;
+    if (!meshes[j].vertices.empty()) fit.pieces = fitConvexPieces(meshes[j], options, &gap);
     for (const auto& e : jobs[j].elements)
-      if (e.box)
-        for (const Primitive& p : fitBox(e.size, e.X_L_C, options)) fit.primitives.push_back(p);
-    fit.stats = measureFit(with_boxes[j], fit.primitives, options);
+      if (e.box) fit.pieces.push_back(boxPiece(e.size, e.X_L_C, options));
+    for (const PieceFit& piece : fit.pieces) fit.primitives.push_back(piece.capsule);
+    fit.stats = measurePieces(with_boxes[j], fit.pieces, gap);
     if (progress) {
       std::ostringstream os;
-      os << "fitted " << fit.link << ": " << fit.primitives.size() << " primitive(s), " << fit.stats.vertices_enclosed
-         << "/" << fit.stats.vertices << " vertices enclosed, volume ratio " << num(fit.stats.volume_ratio, "%.3f")
-         << ", worst gap " << num(fit.stats.worst_gap, "%.4f") << " m (" << j + 1 << "/" << jobs.size() << ")";
+      std::size_t hull_vertices = 0;
+      for (const PieceFit& piece : fit.pieces) hull_vertices += piece.vertices.size();
+      os << "fitted " << fit.link << ": " << fit.pieces.size() << " convex piece(s) (" << hull_vertices
+         << " hull vertices), " << fit.stats.vertices_enclosed << "/" << fit.stats.vertices
+         << " vertices enclosed, volume ratio " << num(fit.stats.volume_ratio, "%.3f") << ", worst gap "
+         << num(fit.stats.worst_gap, "%.4f") << " m (" << j + 1 << "/" << jobs.size() << ")";
       progress(os.str());
     }
     overlay.links.push_back(std::move(fit));
@@ -189,12 +194,15 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
   std::ostringstream os;
   os << "# Collision fit of " << fs::path(overlay.urdf).filename().string()
      << ", written by reflex_fit: do not edit, rerun reflex_fit.\n"
-     << "# The URDF is never edited: the loader reads the primitives below instead of the links' mesh and\n"
-     << "# box elements. Primitives in the link frame (m). inputs: hash of the mesh bytes, filenames,\n"
+     << "# The URDF is never edited: the loader reads the pieces below instead of the links' mesh and\n"
+     << "# box elements. Link frame (m). inputs: hash of the mesh bytes, filenames,\n"
      << "# scales, origins and box sizes; a link whose inputs changed is refused as stale.\n"
-     << "# fitted_volume: sum of the primitives' volumes; volume_ratio: that / convex-hull volume;\n"
-     << "# worst_gap: largest distance from the primitives' outer surface (sampled) to the mesh.\n"
-     << "format: 1\n"
+     << "# fitted_volume: sum of the pieces' volumes; volume_ratio: that / the link's convex-hull volume;\n"
+     << "# worst_gap: largest distance from the pieces' outer surface (sampled) to the mesh.\n"
+     << "# pieces: the tight model: each the convex hull of a cluster of the link's mesh triangles (or a\n"
+     << "# box), exact vertices; the capsule encloses it (the broad phase). Distances are computed on\n"
+     << "# the pieces: never above the distance between the meshes.\n"
+     << "format: " << (overlay.links.empty() || !overlay.links.front().pieces.empty() ? 2 : 1) << "\n"
      << "urdf: " << quoted(relativeTo(overlay.urdf, dir)) << "\n";
   if (!overlay.packages.empty()) {
     os << "packages:\n";
@@ -202,7 +210,8 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
   }
   const FitOptions& o = overlay.options;
   os << "options: {max_primitives: " << o.max_primitives << ", split_ratio: " << num(o.split_ratio)
-     << ", min_split_gain: " << num(o.min_split_gain) << ", quantum: " << num(o.quantum) << "}\n"
+     << ", min_split_gain: " << num(o.min_split_gain) << ", quantum: " << num(o.quantum)
+     << ", max_pieces: " << o.max_pieces << ", piece_gap: " << num(o.piece_gap) << "}\n"
      << "links:\n";
   for (const auto& l : overlay.links) {
     const FitStats& s = l.stats;
@@ -215,13 +224,29 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
        << "    hull_volume: " << num(s.hull_volume, "%.6g") << "\n"
        << "    fitted_volume: " << num(s.fitted_volume, "%.6g") << "\n"
        << "    volume_ratio: " << num(s.volume_ratio, "%.4f") << "\n"
-       << "    worst_gap: " << num(s.worst_gap, "%.6f") << "\n"
-       << "    primitives:\n";
-    for (const auto& p : l.primitives) {
-      if (p.sphere)
-        os << "      - {sphere: " << vec(p.a_L) << ", radius: " << num(p.radius) << "}\n";
-      else
-        os << "      - {a: " << vec(p.a_L) << ", b: " << vec(p.b_L) << ", radius: " << num(p.radius) << "}\n";
+       << "    worst_gap: " << num(s.worst_gap, "%.6f") << "\n";
+    auto capsule = [&](const Primitive& p) {
+      if (p.sphere) return "{sphere: " + vec(p.a_L) + ", radius: " + num(p.radius) + "}";
+      return "{a: " + vec(p.a_L) + ", b: " + vec(p.b_L) + ", radius: " + num(p.radius) + "}";
+    };
+    if (l.pieces.empty()) {
+      os << "    primitives:\n";
+      for (const auto& p : l.primitives) os << "      - " << capsule(p) << "\n";
+      continue;
+    }
+    os << "    pieces:\n";
+    for (const PieceFit& piece : l.pieces) {
+      os << "      - capsule: " << capsule(piece.capsule) << "\n        vertices: [";
+      for (std::size_t v = 0; v < piece.vertices.size(); ++v) {
+        const Eigen::Vector3d& x = piece.vertices[v];
+        os << (v ? ", " : "") << "[" << num(x.x(), "%.17g") << ", " << num(x.y(), "%.17g") << ", " << num(x.z(), "%.17g") << "]";
+      }
+      os << "]\n        triangles: [";
+      for (std::size_t t = 0; t < piece.triangles.size(); ++t) {
+        const auto& tri = piece.triangles[t];
+        os << (t ? ", " : "") << "[" << tri[0] << ", " << tri[1] << ", " << tri[2] << "]";
+      }
+      os << "]\n";
     }
   }
   return os.str();
@@ -232,7 +257,8 @@ FitOverlay loadFitOverlay(const std::string& path) {
   // reflex_fit, so a bad one is stale or hand-edited.
   const common::ConfigNode::Raise raise = [](const std::string& m) { throw ModelError(m + " (rerun reflex_fit)"); };
   const common::ConfigNode root = common::ConfigNode::loadFile(path, "fit overlay", raise);
-  if (root.string("format", "") != "1") root.fail("format", "not a reflex_fit overlay of format 1", "1");
+  const std::string format = root.string("format", "");
+  if (format != "1" && format != "2") root.fail("format", "not a reflex_fit overlay of format 1 or 2", "1 or 2");
   root.rejectUnknown({"format", "urdf", "packages", "options", "links"});
   const std::string dir = detail::folderOf(path);
   FitOverlay o;
@@ -248,7 +274,7 @@ FitOverlay loadFitOverlay(const std::string& path) {
     l.link = name;
     n.requireMap("a map with inputs and primitives");
     n.rejectUnknown({"inputs", "elements", "vertices", "vertices_enclosed", "triangles", "hull_volume", "fitted_volume",
-                     "volume_ratio", "worst_gap", "primitives"});
+                     "volume_ratio", "worst_gap", format == "1" ? "primitives" : "pieces"});
     l.inputs = n.requiredString("inputs", "the hash of the link's fit inputs");
     l.elements = n.integer("elements", 0, 0, std::numeric_limits<int>::max());
     l.stats.vertices = n.integer("vertices", 0, 0, std::numeric_limits<int>::max());
@@ -258,9 +284,7 @@ FitOverlay loadFitOverlay(const std::string& path) {
     l.stats.fitted_volume = n.number("fitted_volume", 0.0, -kAny, kAny);
     l.stats.volume_ratio = n.number("volume_ratio", 0.0, -kAny, kAny);
     l.stats.worst_gap = n.number("worst_gap", 0.0, -kAny, kAny);
-    const std::vector<common::ConfigNode> primitives = n.at("primitives", "a non-empty list of primitives").elements();
-    if (primitives.empty()) n.fail("primitives", "empty", "a non-empty list of primitives");
-    for (const common::ConfigNode& pn : primitives) {
+    auto readCapsule = [&](const common::ConfigNode& pn) {
       Primitive p;
       pn.requireMap("{sphere: [x, y, z], radius: r} or {a: [x, y, z], b: [x, y, z], radius: r}");
       pn.rejectUnknown({"sphere", "a", "b", "radius"});
@@ -279,7 +303,44 @@ FitOverlay loadFitOverlay(const std::string& path) {
         p.sphere = false;
         if (!((p.b_L - p.a_L).norm() > 0.0)) pn.fail("b", "equals a", "a != b (write a sphere)");
       }
-      l.primitives.push_back(p);
+      return p;
+    };
+    if (format == "1") {
+      const std::vector<common::ConfigNode> primitives = n.at("primitives", "a non-empty list of primitives").elements();
+      if (primitives.empty()) n.fail("primitives", "empty", "a non-empty list of primitives");
+      for (const common::ConfigNode& pn : primitives) l.primitives.push_back(readCapsule(pn));
+    } else {
+      const std::vector<common::ConfigNode> pieces = n.at("pieces", "a non-empty list of convex pieces").elements();
+      if (pieces.empty()) n.fail("pieces", "empty", "a non-empty list of convex pieces");
+      for (const common::ConfigNode& pn : pieces) {
+        pn.requireMap("{capsule: {...}, vertices: [[x, y, z], ...], triangles: [[i, j, k], ...]}");
+        pn.rejectUnknown({"capsule", "vertices", "triangles"});
+        PieceFit piece;
+        piece.capsule = readCapsule(pn.at("capsule", "the capsule enclosing the piece"));
+        const std::vector<common::ConfigNode> vs = pn.at("vertices", "a non-empty list of [x, y, z]").elements();
+        if (vs.empty()) pn.fail("vertices", "empty", "a non-empty list of [x, y, z]");
+        for (const common::ConfigNode& v : vs) {
+          const std::vector<double> x = v.asNumbers(3, "[x, y, z]");
+          piece.vertices.emplace_back(x[0], x[1], x[2]);
+          // The capsule must enclose the piece (the broad phase's bound): checked, not trusted.
+          if (!(signedDistanceToPrimitive(piece.capsule, piece.vertices.back()) <= 1e-9))
+            pn.fail("capsule", "does not enclose the vertex [" + num(x[0]) + ", " + num(x[1]) + ", " + num(x[2]) + "]",
+                    "a capsule enclosing every vertex");
+        }
+        const int nv = static_cast<int>(piece.vertices.size());
+        for (const common::ConfigNode& t : pn.at("triangles", "a list of [i, j, k]").elements()) {
+          const std::vector<double> x = t.asNumbers(3, "[i, j, k]");
+          std::array<int, 3> tri{};
+          for (int k = 0; k < 3; ++k) {
+            if (!(x[k] >= 0 && x[k] < nv) || x[k] != std::floor(x[k]))
+              pn.fail("triangles", "index " + num(x[k]) + " is not a vertex index", "integers in [0, " + std::to_string(nv) + ")");
+            tri[k] = static_cast<int>(x[k]);
+          }
+          piece.triangles.push_back(tri);
+        }
+        l.primitives.push_back(piece.capsule);
+        l.pieces.push_back(std::move(piece));
+      }
     }
     o.links.push_back(std::move(l));
   }

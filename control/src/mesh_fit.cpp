@@ -627,4 +627,455 @@ std::vector<Primitive> fitBox(const Eigen::Vector3d& size, const Eigen::Isometry
   return prims;
 }
 
+
+// ---- Convex pieces: the tight model ------------------------------------------------------------
+//
+// fitConvexPieces cuts a link's mesh into clusters of triangles and takes each cluster's convex hull
+// (qhull) as a piece: every triangle lies in its cluster's hull, so the union of the pieces contains
+// the mesh and a distance between pieces is never above the distance between the meshes. The cuts
+// (greedy, deterministic) follow the worst GAP: the largest distance from a point of a piece's hull
+// surface that lies outside the mesh's solid and outside every other piece to the mesh surface. That
+// is how far the piece's surface can stand off the real surface, so how much shorter than the true
+// distance a distance to it can be. While the worst gap is above options.piece_gap and the link has
+// fewer than options.max_pieces pieces, the piece with the worst gap is cut in two: the cut (by
+// triangle centroid along its principal axes and the frame axes at the 10 .. 90 % quantiles, or one
+// connected shell against the rest) whose two hulls stand off the mesh least (their facets' centroids
+// and edge midpoints), ties by the least summed volume. "Outside the solid"
+// is decided by the generalized winding number of the mesh (robust to small holes; a mesh with
+// inconsistent winding only gets more cuts). Each piece then gets the capsule that encloses it (the
+// broad phase's bound).
+namespace {
+
+/// An axis-aligned box tree over a mesh's triangles for point-to-surface distances (set-up only).
+class TriangleTree {
+ public:
+  explicit TriangleTree(const TriangleMesh& mesh) : mesh_(mesh) {
+    order_.resize(mesh.triangles.size());
+    std::iota(order_.begin(), order_.end(), 0);
+    if (!order_.empty()) build(0, static_cast<int>(order_.size()));
+  }
+  /// The distance from x to the mesh surface; as soon as it is known to be at most `enough`, some
+  /// value <= `enough` is returned (the caller only needs to know that).
+  double distance(const Eigen::Vector3d& x, double enough = -1.0) const {
+    double best = std::numeric_limits<double>::infinity();
+    if (nodes_.empty()) return best;
+    int stack[128];
+    int top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+      const Node& n = nodes_[static_cast<std::size_t>(stack[--top])];
+      if (n.box.exteriorDistance(x) >= best) continue;
+      if (n.left < 0) {
+        for (int k = n.begin; k < n.end; ++k) {
+          const auto& t = mesh_.triangles[static_cast<std::size_t>(order_[static_cast<std::size_t>(k)])];
+          best = std::min(best, pointTriangleDistance(x, mesh_.vertices[t[0]], mesh_.vertices[t[1]], mesh_.vertices[t[2]]));
+        }
+        if (best <= enough) return best;
+        continue;
+      }
+      const double dl = nodes_[static_cast<std::size_t>(n.left)].box.exteriorDistance(x);
+      const double dr = nodes_[static_cast<std::size_t>(n.right)].box.exteriorDistance(x);
+      if (top + 2 > 128) continue;  // depth bound (never reached: the tree is balanced)
+      if (dl < dr) {
+        stack[top++] = n.right;
+        stack[top++] = n.left;
+      } else {
+        stack[top++] = n.left;
+        stack[top++] = n.right;
+      }
+    }
+    return best;
+  }
+
+ private:
+  struct Node {
+    Eigen::AlignedBox3d box;
+    int left = -1, right = -1, begin = 0, end = 0;
+  };
+  int build(int begin, int end) {
+    const int id = static_cast<int>(nodes_.size());
+    nodes_.push_back(Node{});
+    Eigen::AlignedBox3d box;
+    Eigen::AlignedBox3d centres;
+    for (int k = begin; k < end; ++k) {
+      const auto& t = mesh_.triangles[static_cast<std::size_t>(order_[static_cast<std::size_t>(k)])];
+      for (int j = 0; j < 3; ++j) box.extend(mesh_.vertices[t[j]]);
+      centres.extend((mesh_.vertices[t[0]] + mesh_.vertices[t[1]] + mesh_.vertices[t[2]]) / 3.0);
+    }
+    nodes_[static_cast<std::size_t>(id)].box = box;
+    nodes_[static_cast<std::size_t>(id)].begin = begin;
+    nodes_[static_cast<std::size_t>(id)].end = end;
+    if (end - begin <= 8) return id;
+    int axis = 0;
+    centres.sizes().maxCoeff(&axis);
+    const int mid = (begin + end) / 2;
+    auto centre = [&](int tri) {
+      const auto& t = mesh_.triangles[static_cast<std::size_t>(tri)];
+      return mesh_.vertices[t[0]][axis] + mesh_.vertices[t[1]][axis] + mesh_.vertices[t[2]][axis];
+    };
+    std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
+                     [&](int a, int b) { return centre(a) < centre(b) || (centre(a) == centre(b) && a < b); });
+    const int l = build(begin, mid);
+    const int r = build(mid, end);
+    nodes_[static_cast<std::size_t>(id)].left = l;
+    nodes_[static_cast<std::size_t>(id)].right = r;
+    return id;
+  }
+  const TriangleMesh& mesh_;
+  std::vector<int> order_;
+  std::vector<Node> nodes_;
+};
+
+struct PieceHull {
+  std::vector<Eigen::Vector3d> points;           ///< hull vertices
+  std::vector<std::array<int, 3>> triangles;     ///< indices into points (empty: flat or tiny)
+  std::vector<Eigen::Vector4d> planes;           ///< outward unit normal (xyz) and offset: n.x <= w inside
+  double volume = 0.0;
+};
+
+PieceHull pieceHull(const std::vector<Eigen::Vector3d>& pts) {
+  PieceHull h;
+  bool ok = false;
+  if (pts.size() >= 4) {
+    std::vector<coordT> coords(3 * pts.size());
+    for (std::size_t i = 0; i < pts.size(); ++i)
+      for (int k = 0; k < 3; ++k) coords[3 * i + k] = pts[i][k];
+    qhT qh_qh;
+    qhT* qh = &qh_qh;
+    FILE* devnull = std::fopen("/dev/null", "w");
+    qh_zero(qh, devnull);
+    char options[] = "qhull Qt";
+    const int exitcode = qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
+    if (!exitcode) {
+      qh_getarea(qh, qh->facet_list);
+      h.volume = qh->totvol;
+      std::map<int, int> index;  // point id -> hull vertex index
+      vertexT* vertex;
+      FORALLvertices {
+        const int id = qh_pointid(qh, vertex->point);
+        index[id] = 0;
+      }
+      int k = 0;
+      for (auto& [id, idx] : index) {
+        idx = k++;
+        h.points.push_back(pts[static_cast<std::size_t>(id)]);
+      }
+      facetT* facet;
+      FORALLfacets {
+        std::array<int, 3> t{};
+        int n = 0;
+        vertexT** vertexp;
+        FOREACHvertex_(facet->vertices) {
+          if (n < 3) t[n] = index[qh_pointid(qh, vertex->point)];
+          ++n;
+        }
+        if (n == 3) h.triangles.push_back(t);
+      }
+      ok = !h.triangles.empty();
+    }
+    qh_freeqhull(qh, !qh_ALL);
+    int curlong = 0, totlong = 0;
+    qh_memfreeshort(qh, &curlong, &totlong);
+    if (devnull) std::fclose(devnull);
+  }
+  if (!ok) {  // flat, tiny or too few points: every distinct point, no facets (a support scan)
+    h = PieceHull{};
+    h.points = pts;
+    std::sort(h.points.begin(), h.points.end(), [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+      return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+    });
+    h.points.erase(std::unique(h.points.begin(), h.points.end()), h.points.end());
+    return h;
+  }
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& p : h.points) centre += p;
+  centre /= static_cast<double>(h.points.size());
+  for (auto& t : h.triangles) {
+    const Eigen::Vector3d& a = h.points[t[0]];
+    Eigen::Vector3d n = (h.points[t[1]] - a).cross(h.points[t[2]] - a);
+    const double len = n.norm();
+    if (!(len > 0.0)) {
+      h.planes.push_back(Eigen::Vector4d(0, 0, 0, 0));
+      continue;
+    }
+    n /= len;
+    if (n.dot(a - centre) < 0.0) {  // outward, and the triangle wound to match
+      n = -n;
+      std::swap(t[1], t[2]);
+    }
+    h.planes.push_back(Eigen::Vector4d(n.x(), n.y(), n.z(), n.dot(a)));
+  }
+  return h;
+}
+
+/// How far x lies outside the hull (max over its facet planes; < 0 inside). A hull without facets
+/// contains nothing (+inf).
+double outsideHull(const PieceHull& h, const Eigen::Vector3d& x) {
+  if (h.planes.empty()) return std::numeric_limits<double>::infinity();
+  double worst = -std::numeric_limits<double>::infinity();
+  for (const auto& p : h.planes) worst = std::max(worst, p.head<3>().dot(x) - p[3]);
+  return worst;
+}
+
+/// The generalized winding number of the mesh at x (1 inside a closed outward-wound mesh, 0 outside).
+double windingNumber(const TriangleMesh& mesh, const Eigen::Vector3d& x) {
+  double sum = 0.0;
+  for (const auto& t : mesh.triangles) {
+    const Eigen::Vector3d a = mesh.vertices[t[0]] - x, b = mesh.vertices[t[1]] - x, c = mesh.vertices[t[2]] - x;
+    const double la = a.norm(), lb = b.norm(), lc = c.norm();
+    const double num = a.dot(b.cross(c));
+    const double den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+    sum += 2.0 * std::atan2(num, den);
+  }
+  return sum / (4.0 * kPi);
+}
+
+/// Points on the hull's facets, about n in all, spread by area (a fixed pattern: deterministic).
+std::vector<Eigen::Vector3d> hullSamples(const PieceHull& h, int n) {
+  std::vector<Eigen::Vector3d> out;
+  if (h.triangles.empty()) return out;
+  double area = 0.0;
+  std::vector<double> areas;
+  for (const auto& t : h.triangles) {
+    areas.push_back(0.5 * (h.points[t[1]] - h.points[t[0]]).cross(h.points[t[2]] - h.points[t[0]]).norm());
+    area += areas.back();
+  }
+  if (!(area > 0.0)) return out;
+  for (std::size_t f = 0; f < h.triangles.size(); ++f) {
+    const auto& t = h.triangles[f];
+    const int k = std::max(1, static_cast<int>(std::ceil(n * areas[f] / area)));
+    const Eigen::Vector3d &a = h.points[t[0]], &b = h.points[t[1]], &c = h.points[t[2]];
+    // A triangular grid of m(m+1)/2 >= k points strictly inside, plus the edge midpoints.
+    int m = 1;
+    while (m * (m + 1) / 2 < k) ++m;
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; i + j < m; ++j) {
+        const double u = (i + 1.0 / 3.0) / m, v = (j + 1.0 / 3.0) / m;
+        out.push_back(a + u * (b - a) + v * (c - a));
+      }
+    out.push_back(0.5 * (a + b));
+    out.push_back(0.5 * (b + c));
+    out.push_back(0.5 * (c + a));
+  }
+  return out;
+}
+
+struct PieceCluster {
+  std::vector<int> triangles;  ///< indices into the subdivided mesh
+  PieceHull hull;
+  double gap = -1.0;           ///< worst gap (m), -1: not measured since the last change
+  bool final = false;          ///< no cut reduces it
+};
+
+/// A quick worst gap of one hull on its own (no other piece covers anything): its facets' centroids
+/// and edge midpoints outside the mesh's solid, their largest distance to the mesh surface. Ranks the
+/// candidate cuts.
+double quickGap(const TriangleMesh& mesh, const TriangleTree& tree, const PieceHull& h) {
+  std::vector<std::pair<double, Eigen::Vector3d>> far;  // (distance, point), then the largest first
+  for (const auto& t : h.triangles) {
+    const Eigen::Vector3d &a = h.points[t[0]], &b = h.points[t[1]], &c = h.points[t[2]];
+    for (const Eigen::Vector3d& x : {Eigen::Vector3d((a + b + c) / 3.0), Eigen::Vector3d(0.5 * (a + b))})
+      far.emplace_back(tree.distance(x), x);
+  }
+  std::sort(far.begin(), far.end(), [](const auto& u, const auto& v) { return u.first > v.first; });
+  // The largest distance of a point outside the solid: the winding number only until one is found.
+  for (const auto& [d, x] : far) {
+    if (std::abs(windingNumber(mesh, x)) >= 0.5) continue;  // inside the solid (a cut's cap)
+    return d;
+  }
+  return 0.0;
+}
+
+PieceCluster makePieceCluster(const TriangleMesh& work, std::vector<int> tris) {
+  PieceCluster c;
+  c.triangles = std::move(tris);
+  c.hull = pieceHull(clusterPoints(work, c.triangles));
+  return c;
+}
+
+/// Piece i's worst gap (see the block above) against the link mesh `mesh`, `others` covering.
+double pieceGap(const TriangleMesh& mesh, const TriangleTree& tree, const std::vector<PieceCluster>& pieces,
+                std::size_t i, int samples) {
+  std::vector<std::pair<double, Eigen::Vector3d>> far;  // uncovered samples, the largest distance first
+  for (const Eigen::Vector3d& x : hullSamples(pieces[i].hull, samples)) {
+    bool covered = false;
+    for (std::size_t j = 0; j < pieces.size() && !covered; ++j)
+      covered = j != i && outsideHull(pieces[j].hull, x) < -1e-9;
+    if (!covered) far.emplace_back(tree.distance(x), x);
+  }
+  std::sort(far.begin(), far.end(), [](const auto& u, const auto& v) { return u.first > v.first; });
+  for (const auto& [d, x] : far)
+    if (std::abs(windingNumber(mesh, x)) < 0.5) return d;  // inside the solid: never a surface point
+  return 0.0;
+}
+
+}  // namespace
+
+std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions& options, double* worst_gap) {
+  if (mesh.vertices.empty() || mesh.triangles.empty()) throw ModelError("fit: the mesh has no triangles");
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k)
+      if (t[k] < 0 || t[k] >= static_cast<int>(mesh.vertices.size())) throw ModelError("fit: triangle index out of range");
+  for (const auto& v : mesh.vertices)
+    if (!v.allFinite()) throw ModelError("fit: a mesh vertex is not finite");
+  TriangleMesh work = mesh;
+  std::vector<char> used(mesh.vertices.size(), 0);
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) used[t[k]] = 1;
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
+    if (!used[i]) work.triangles.push_back({int(i), int(i), int(i)});
+  Eigen::Vector3d lo = mesh.vertices[0], hi = mesh.vertices[0];
+  for (const auto& v : mesh.vertices) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
+  const double extent = (hi - lo).norm();
+  if (options.max_pieces > 1) work = subdivide(work, 0.1 * extent);
+  // Connected shells (shared vertices), for the shell-against-the-rest cuts.
+  std::vector<int> parent(work.vertices.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](int v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& t : work.triangles) parent[root(t[1])] = root(t[0]), parent[root(t[2])] = root(t[0]);
+  std::vector<int> shell(work.triangles.size());
+  for (std::size_t t = 0; t < work.triangles.size(); ++t) shell[t] = root(work.triangles[t][0]);
+
+  std::vector<int> all(work.triangles.size());
+  std::iota(all.begin(), all.end(), 0);
+  std::vector<PieceCluster> pieces{makePieceCluster(work, all)};
+  const int samples = options.gap_samples_per_primitive;
+  const TriangleTree tree(mesh);
+  for (;;) {
+    for (std::size_t i = 0; i < pieces.size(); ++i)
+      if (pieces[i].gap < 0.0) pieces[i].gap = pieceGap(mesh, tree, pieces, i, samples);
+    std::size_t worst = pieces.size();
+    for (std::size_t i = 0; i < pieces.size(); ++i)
+      if (!pieces[i].final && pieces[i].triangles.size() >= 2 && pieces[i].gap > options.piece_gap &&
+          (worst == pieces.size() || pieces[i].gap > pieces[worst].gap))
+        worst = i;
+    if (worst == pieces.size() || static_cast<int>(pieces.size()) >= options.max_pieces) break;
+    const PieceCluster& c = pieces[worst];
+    std::vector<Eigen::Vector3d> centroids;
+    for (int t : c.triangles)
+      centroids.push_back((work.vertices[work.triangles[t][0]] + work.vertices[work.triangles[t][1]] +
+                           work.vertices[work.triangles[t][2]]) / 3.0);
+    // The cut whose two hulls stand off the mesh least (quickGap, the larger of the two), ties within
+    // 0.1 mm by the least summed volume; a cut must make the hulls smaller or the gap smaller.
+    double best_gap = std::numeric_limits<double>::infinity(), best_volume = c.hull.volume * (1.0 - 1e-6);
+    std::vector<int> best_a, best_b;
+    auto consider = [&](std::vector<int> ta, std::vector<int> tb) {
+      if (ta.empty() || tb.empty()) return;
+      const PieceHull ha = pieceHull(clusterPoints(work, ta)), hb = pieceHull(clusterPoints(work, tb));
+      const double v = ha.volume + hb.volume;
+      const double g = std::max(quickGap(mesh, tree, ha), quickGap(mesh, tree, hb));
+      // Progress: smaller hulls, or (a flat piece: an L-shaped face bridged across its notch, volume
+      // 0 either way) a smaller gap.
+      if (!(v < c.hull.volume * (1.0 - 1e-6)) && !(g < 0.99 * c.gap)) return;
+      if (g < best_gap - 1e-4 || (g < best_gap + 1e-4 && v < best_volume)) {
+        best_gap = std::min(best_gap, g), best_volume = v, best_a = std::move(ta), best_b = std::move(tb);
+      }
+    };
+    std::map<int, int> shell_size;
+    for (int t : c.triangles) ++shell_size[shell[t]];
+    if (shell_size.size() > 1) {
+      std::vector<std::pair<int, int>> shells;  // (-size, id): the largest first
+      for (const auto& [id, n] : shell_size) shells.push_back({-n, id});
+      std::sort(shells.begin(), shells.end());
+      if (shells.size() > 8) shells.resize(8);
+      for (const auto& s : shells) {
+        std::vector<int> ta, tb;
+        for (int t : c.triangles) (shell[t] == s.second ? ta : tb).push_back(t);
+        consider(std::move(ta), std::move(tb));
+      }
+    }
+    const Eigen::Matrix3d pca = principalAxes(centroids);
+    const std::array<Eigen::Vector3d, 6> axes{pca.col(2), pca.col(1), pca.col(0), Eigen::Vector3d::UnitX(),
+                                              Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
+    for (const Eigen::Vector3d& axis : axes) {
+      std::vector<std::pair<double, int>> order;
+      for (std::size_t i = 0; i < c.triangles.size(); ++i) order.push_back({centroids[i].dot(axis), c.triangles[i]});
+      std::sort(order.begin(), order.end());
+      for (double q : {0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9}) {
+        const std::size_t cut = static_cast<std::size_t>(q * order.size());
+        if (cut == 0 || cut >= order.size()) continue;
+        std::vector<int> ta, tb;
+        for (std::size_t i = 0; i < order.size(); ++i) (i < cut ? ta : tb).push_back(order[i].second);
+        std::sort(ta.begin(), ta.end());
+        std::sort(tb.begin(), tb.end());
+        consider(std::move(ta), std::move(tb));
+      }
+    }
+    if (best_a.empty()) {  // no cut makes the hulls smaller: this piece stays as it is
+      pieces[worst].final = true;
+      continue;
+    }
+    Eigen::AlignedBox3d changed;  // where coverage changed: the split piece's hull
+    for (const auto& x : pieces[worst].hull.points) changed.extend(x);
+    pieces[worst] = makePieceCluster(work, std::move(best_a));
+    pieces.insert(pieces.begin() + static_cast<long>(worst) + 1, makePieceCluster(work, std::move(best_b)));
+    for (auto& p : pieces) {  // a piece whose hull meets that box is measured again
+      Eigen::AlignedBox3d box;
+      for (const auto& x : p.hull.points) box.extend(x);
+      if (changed.intersects(box)) p.gap = -1.0;
+    }
+  }
+  double link_gap = 0.0;
+  std::vector<PieceFit> out;
+  for (const auto& p : pieces) {
+    link_gap = std::max(link_gap, p.gap);
+    PieceFit f;
+    f.vertices = p.hull.points;
+    f.triangles = p.hull.triangles;
+    f.capsule = enclosingCapsule(f.vertices, options);
+    out.push_back(std::move(f));
+  }
+  if (worst_gap) *worst_gap = link_gap;
+  return out;
+}
+
+Primitive enclosingCapsule(const std::vector<Eigen::Vector3d>& points, const FitOptions& options) {
+  if (points.empty()) throw ModelError("fit: no point to enclose");
+  Primitive p = fitOne(points);
+  for (int k = 0; k < 3; ++k) p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
+  if (p.sphere || (p.b_L - p.a_L).norm() < options.quantum) p.b_L = p.a_L, p.sphere = true;
+  double r = 0.0;
+  for (const auto& q : points) r = std::max(r, distanceToSegment(p.a_L, p.b_L, q));
+  p.radius = std::max(options.quantum, std::ceil(r / options.quantum + 1e-6) * options.quantum);
+  return p;
+}
+
+FitStats measurePieces(const TriangleMesh& mesh, const std::vector<PieceFit>& pieces, double worst_gap) {
+  FitStats s;
+  s.vertices = static_cast<int>(mesh.vertices.size());
+  s.triangles = static_cast<int>(mesh.triangles.size());
+  std::vector<PieceHull> hulls;
+  for (const PieceFit& p : pieces) {
+    hulls.push_back(pieceHull(p.vertices));
+    s.fitted_volume += hulls.back().volume;
+  }
+  for (const auto& v : mesh.vertices) {
+    bool inside = false;
+    for (std::size_t i = 0; i < pieces.size() && !inside; ++i) {
+      inside = outsideHull(hulls[i], v) <= 1e-9;
+      for (const auto& x : pieces[i].vertices) inside = inside || x == v;  // a flat piece's own points
+    }
+    s.vertices_enclosed += inside ? 1 : 0;
+  }
+  s.hull_volume = mesh.vertices.empty() ? 0.0 : convexHull(mesh.vertices).volume;
+  s.volume_ratio = s.hull_volume > 0 ? s.fitted_volume / s.hull_volume : 0.0;
+  s.worst_gap = worst_gap;
+  return s;
+}
+
+PieceFit boxPiece(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B, const FitOptions& options) {
+  if (!(size.minCoeff() > 0.0) || !size.allFinite())
+    throw ModelError("fit: box size " + std::to_string(size.x()) + " " + std::to_string(size.y()) + " " +
+                     std::to_string(size.z()) + " must be positive");
+  const TriangleMesh m = boxMesh(size, X_L_B);
+  PieceFit f;
+  f.vertices = m.vertices;
+  f.triangles = m.triangles;
+  f.capsule = enclosingCapsule(f.vertices, options);
+  return f;
+}
+
 }  // namespace reflex::control

@@ -48,6 +48,51 @@ void OnboardController::reject(RejectCause cause) noexcept {
   }
 }
 
+std::uint64_t graspIgnoreMask(const Model& model, const ControllerModel& cm, int link) noexcept {
+  if (link < 0 || link >= static_cast<int>(model.links.size())) return 0;
+  auto armJoint = [&](int q) {
+    for (const auto& arm : cm.arms)
+      for (int k = 0; k < arm.n; ++k)
+        if (arm.q[k] == q) return true;
+    return false;
+  };
+  // The root of the rigid body: up through fixed joints.
+  int root = link;
+  while (model.links[static_cast<std::size_t>(root)].parent >= 0 &&
+         model.links[static_cast<std::size_t>(root)].type == JointType::kFixed)
+    root = model.links[static_cast<std::size_t>(root)].parent;
+  bool on_arm = false;  // held by an arm (a hand): its fingers hold the object too
+  for (const auto& arm : cm.arms)
+    on_arm = on_arm || (static_cast<std::size_t>(link) < arm.link_in_arm.size() && arm.link_in_arm[static_cast<std::size_t>(link)]);
+  std::uint64_t mask = 0;
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    // On or below the rigid body: joined to it by fixed joints, and on an arm also by the joints below
+    // that are no arm joint (the fingers of a hand).
+    int l = model.segments[static_cast<std::size_t>(s)].link;
+    bool joined = false;
+    for (; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent) {
+      if (l == root) {
+        joined = true;
+        break;
+      }
+      const int q = model.links[static_cast<std::size_t>(l)].q_index;
+      if (q >= 0 && (!on_arm || armJoint(q))) break;  // off an arm: the rigid body only
+    }
+    if (joined) mask |= std::uint64_t{1} << s;
+  }
+  // The nearest link above the rigid body that carries a segment (the wrist).
+  for (int l = model.links[static_cast<std::size_t>(root)].parent; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent) {
+    int seg = -1;
+    for (int s = 0; s < model.num_robot_segments && seg < 0; ++s)
+      if (model.segments[static_cast<std::size_t>(s)].link == l) seg = s;
+    if (seg >= 0) {
+      mask |= std::uint64_t{1} << seg;
+      break;
+    }
+  }
+  return mask;
+}
+
 std::vector<int> drivenJoints(const Model& model, const ControllerModel& cm) {
   std::vector<int> driven;
   for (const auto& arm : cm.arms)
@@ -159,17 +204,19 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
   const int link = model_.linkIndex(parent);
   const Eigen::Vector3d& a = rq.a_L;
   const Eigen::Vector3d& b = rq.b_L;
-  // Pairs never checked: the segment against its own link's segment, and a physical one against its
-  // parent link's segment (it touches them by construction); a virtual (gaze) line starts in the head.
+  // Pairs never checked: the segment against its own link's segment, and a physical one (a grasped
+  // object) against everything it touches by construction: every link rigidly attached to its link
+  // (fixed joints, up or down: a second wrist link, a frame below the hand), every link below it (the
+  // fingers that hold it) and the nearest link above its rigid body that has a segment (the wrist). A
+  // virtual (gaze) line starts in the head.
   std::uint64_t ignore = 0;
   const int own = model_.segmentIndex(parent);
   if (own >= 0) ignore |= std::uint64_t{1} << own;
   if (rq.is_virtual) {
     const int head = model_.segmentIndex("head");
     if (head >= 0) ignore |= std::uint64_t{1} << head;
-  } else if (link >= 0 && model_.links[link].parent >= 0) {
-    const int parent_seg = model_.segmentIndex(model_.links[model_.links[link].parent].name);
-    if (parent_seg >= 0) ignore |= std::uint64_t{1} << parent_seg;
+  } else if (link >= 0) {
+    ignore |= graspIgnoreMask(model_, cm_, link);
   }
   // The boundary check (bounds: BodySchemaLimits), then the placement check at the expected configuration.
   out.check = checkBodySchemaSegment(model_, link, a, b, rq.radius, rq.is_virtual, BodySchemaLimits{});

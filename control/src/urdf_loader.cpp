@@ -423,8 +423,18 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     seg.link = static_cast<int>(i);
     seg.first_primitive = static_cast<int>(model.primitives.size());
     const auto fit = fitted.find(ulink->name);
-    if (fit != fitted.end())
-      for (const auto& p : fit->second->primitives) model.primitives.push_back(p);
+    if (fit != fitted.end()) {
+      // The tight model: each capsule of a format-2 fit encloses a convex piece, the real shape.
+      const LinkFit& lf = *fit->second;
+      for (std::size_t k = 0; k < lf.primitives.size(); ++k) {
+        Primitive p = lf.primitives[k];
+        if (k < lf.pieces.size()) {
+          p.piece = static_cast<int>(model.pieces.size());
+          model.pieces.push_back(makeConvexPiece(lf.pieces[k].vertices, lf.pieces[k].triangles));
+        }
+        model.primitives.push_back(p);
+      }
+    }
     for (const auto& c : collisions) {
       const bool replaced = fit != fitted.end() && c->geometry &&
                             (c->geometry->type == urdf::Geometry::MESH || c->geometry->type == urdf::Geometry::BOX);

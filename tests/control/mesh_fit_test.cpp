@@ -18,6 +18,7 @@
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/mesh_fit.hpp"
+#include "raw_meshes.hpp"
 #include "test_support.hpp"
 
 #include <assimp/Importer.hpp>
@@ -73,80 +74,10 @@ struct TempDir {
   std::string operator/(const std::string& name) const { return (path / name).string(); }
 };
 
-/// Vertices and triangles of a mesh file read with assimp, independently of the library's reader.
-struct RawMesh {
-  std::vector<Vector3d> v;
-  std::vector<std::array<int, 3>> t;
-};
-
-RawMesh readWithAssimp(const std::string& path, const Vector3d& scale, const Eigen::Isometry3d& X) {
-  Assimp::Importer importer;
-  importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_IGNORE_UP_DIRECTION, true);
-  const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate | aiProcess_PreTransformVertices);
-  EXPECT_NE(scene, nullptr) << path << ": " << importer.GetErrorString();
-  RawMesh out;
-  if (!scene) return out;
-  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
-    const aiMesh* am = scene->mMeshes[m];
-    const int base = static_cast<int>(out.v.size());
-    for (unsigned i = 0; i < am->mNumVertices; ++i)
-      out.v.push_back(X * Vector3d(scale.x() * am->mVertices[i].x, scale.y() * am->mVertices[i].y,
-                                   scale.z() * am->mVertices[i].z));
-    for (unsigned f = 0; f < am->mNumFaces; ++f)
-      if (am->mFaces[f].mNumIndices == 3)
-        out.t.push_back({base + int(am->mFaces[f].mIndices[0]), base + int(am->mFaces[f].mIndices[1]),
-                         base + int(am->mFaces[f].mIndices[2])});
-  }
-  return out;
-}
-
-Vector3d parse3(const char* text, const Vector3d& fallback) {
-  if (!text) return fallback;
-  std::istringstream is(text);
-  Vector3d v;
-  is >> v.x() >> v.y() >> v.z();
-  return v;
-}
-
-/// Every link's mesh and box collision geometry in the link frame, read from the URDF with tinyxml2.
-std::map<std::string, RawMesh> linkMeshes(const std::string& urdf_path, const std::string& package_dir) {
-  tinyxml2::XMLDocument doc;
-  EXPECT_EQ(doc.LoadFile(urdf_path.c_str()), tinyxml2::XML_SUCCESS);
-  std::map<std::string, RawMesh> out;
-  for (auto* link = doc.RootElement()->FirstChildElement("link"); link; link = link->NextSiblingElement("link")) {
-    for (auto* c = link->FirstChildElement("collision"); c; c = c->NextSiblingElement("collision")) {
-      Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
-      if (auto* o = c->FirstChildElement("origin")) {
-        X.translation() = parse3(o->Attribute("xyz"), Vector3d::Zero());
-        const Vector3d rpy = parse3(o->Attribute("rpy"), Vector3d::Zero());
-        X.linear() = (Eigen::AngleAxisd(rpy.z(), Vector3d::UnitZ()) * Eigen::AngleAxisd(rpy.y(), Vector3d::UnitY()) *
-                      Eigen::AngleAxisd(rpy.x(), Vector3d::UnitX())).toRotationMatrix();
-      }
-      auto* g = c->FirstChildElement("geometry");
-      RawMesh part;
-      if (auto* m = g->FirstChildElement("mesh")) {
-        std::string f = m->Attribute("filename");
-        const std::string pkg = "package://mesh_humanoid_description/";
-        f = f.compare(0, pkg.size(), pkg) == 0 ? package_dir + "/" + f.substr(pkg.size())
-                                               : fs::path(urdf_path).parent_path().string() + "/" + f;
-        part = readWithAssimp(f, parse3(m->Attribute("scale"), Vector3d::Ones()), X);
-      } else if (auto* b = g->FirstChildElement("box")) {
-        const Vector3d s = parse3(b->Attribute("size"), Vector3d::Zero());
-        for (int i = 0; i < 8; ++i)
-          part.v.push_back(X * Vector3d((i & 1 ? 0.5 : -0.5) * s.x(), (i & 2 ? 0.5 : -0.5) * s.y(), (i & 4 ? 0.5 : -0.5) * s.z()));
-        part.t = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                  {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-      } else {
-        continue;
-      }
-      RawMesh& all = out[link->Attribute("name")];
-      const int base = static_cast<int>(all.v.size());
-      all.v.insert(all.v.end(), part.v.begin(), part.v.end());
-      for (const auto& t : part.t) all.t.push_back({base + t[0], base + t[1], base + t[2]});
-    }
-  }
-  return out;
-}
+using test::RawMesh;
+using test::linkMeshes;
+using test::parse3;
+using test::readWithAssimp;
 
 /// Distance from p to the capsule a-b of radius r, minus r (computed here, not by the fitter).
 double outside(const Primitive& prim, const Vector3d& p) {
@@ -181,7 +112,7 @@ std::vector<Primitive> segmentPrimitives(const Model& m, const std::string& link
 
 TEST(MeshFit, ShippedMeshHumanoidEnclosesEveryVertexOfEveryLink) {
   const Model model = testing::loadRobot("mesh_humanoid");
-  const auto meshes = linkMeshes(kUrdf, kPackageDir);
+  const auto meshes = linkMeshes(kUrdf, {{"mesh_humanoid_description", kPackageDir}});
   ASSERT_EQ(meshes.size(), 16u);  // 14 links with meshes (the torso also a box), 2 feet with boxes
   for (const auto& [link, mesh] : meshes) {
     ASSERT_GE(model.segmentIndex(link), 0) << link;
@@ -236,7 +167,7 @@ void expectFittedNeverFartherThanOracle(const Model& model, int samples, unsigne
 
 TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
   const Model model = testing::loadRobot("mesh_humanoid");
-  const auto meshes = linkMeshes(kUrdf, kPackageDir);
+  const auto meshes = linkMeshes(kUrdf, {{"mesh_humanoid_description", kPackageDir}});
   std::map<int, std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> bvh;  // by segment
   for (const auto& [link, mesh] : meshes) {
     auto m = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();

@@ -9,6 +9,11 @@
 // Coincident core points: the normal falls back to the direction between the two links' origins
 // (else +z), `well_defined` is false, and everything stays finite.
 //
+// The tight model: a primitive with a convex piece (Primitive::piece, convex.hpp) is only the bound of
+// that piece; the distance, witness points and normal of a pair are then those of the pieces (exact,
+// GJK), never above the distance between the real shapes. Where two pieces touch or overlap the
+// capsules' answer (negative, a lower bound) stands.
+//
 // Body schema (Sec. 8.5): every model has kBodySchemaSlots run-time slots, one capsule each, that take
 // part in the pair checks once enabled (grasped objects, virtual occlusion segments).
 #pragma once
@@ -84,6 +89,8 @@ struct DistanceOptions {
   /// true distance is at most prune_distance is computed exactly, bit for bit as without pruning,
   /// and so is the closest pair (`closest`, its distance identical to the unpruned sweep's).
   /// +inf (default): no pruning, every pair exact. Pairs with a body-schema slot are always exact.
+  /// A robot pair of convex pieces (the tight model) whose enclosing capsules are more than this apart
+  /// is skipped the same way (its distance: the capsules' distance, a lower bound).
   double prune_distance = std::numeric_limits<double>::infinity();
 };
 
@@ -120,6 +127,12 @@ struct DistanceData {
   // all of pp_a / pp_b without it), and their segment parameters and core distance (scratch).
   std::vector<int> list_a, list_b;
   std::vector<double> pp_s, pp_t, pp_core;
+  // The tight model (Primitive::piece): per pair, whether a primitive of either segment is a convex
+  // piece (the pair's distance is then the least over its primitive pairs of computeConvexDistance on
+  // the pieces, a capsule side by its core and radius); per primitive, its core as a piece of two
+  // vertices (link frame; a body-schema slot's written each cycle), for a piece meeting a capsule.
+  std::vector<char> pair_has_piece;
+  std::vector<ConvexPiece> core_piece;
   /// The kernel computeSegmentDistances runs (fastestSweepKernel() unless set: tests run both).
   SweepKernel kernel = fastestSweepKernel();
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs

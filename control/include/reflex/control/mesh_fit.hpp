@@ -63,7 +63,13 @@ struct FitOptions {
   double min_split_gain = 0.05;
   double quantum = 1e-6;         ///< m: written coordinates are multiples of it, radii rounded up
   int gap_samples_per_primitive = 600;  ///< surface samples per primitive for the worst gap
+  /// The tight model (fitConvexPieces): a link's mesh is cut into at most this many convex pieces...
+  int max_pieces = 16;
+  /// ...while a piece's surface stands off the mesh surface by more than this (m, its worst gap).
+  double piece_gap = 0.003;
 };
+
+
 
 /// Per-link numbers of a fit (what the overlay records and reflex_fit prints).
 struct FitStats {
@@ -76,6 +82,34 @@ struct FitStats {
   double worst_gap = 0.0;       ///< m, largest distance from a sampled point of the primitives'
                                 ///< outer surface (not inside another primitive) to the mesh
 };
+
+/// One convex piece of a link (the tight model, convex.hpp): the convex hull of a cluster of the
+/// link's mesh triangles (or a box element), and the capsule that encloses it (the broad phase's
+/// bound). `vertices` are the hull's vertices (mesh vertices, never rounded: the hull contains the
+/// cluster exactly), `triangles` its facets (indices into vertices; empty for a flat or tiny piece).
+struct PieceFit {
+  std::vector<Eigen::Vector3d> vertices;
+  std::vector<std::array<int, 3>> triangles;
+  Primitive capsule;
+};
+
+/// Cuts `mesh` (link frame) into convex pieces whose union contains it, until every piece's worst gap
+/// is at most options.piece_gap or there are options.max_pieces (mesh_fit.cpp, "Convex pieces", says
+/// how). `worst_gap` (if set): the largest remaining gap (m). Deterministic. Throws ModelError for an
+/// empty mesh, a bad index or a non-finite vertex.
+std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions& options, double* worst_gap);
+
+/// The smallest capsule (or sphere) found that encloses every point, end points rounded to
+/// options.quantum and the radius rounded up so that it still does. Throws ModelError for no point.
+Primitive enclosingCapsule(const std::vector<Eigen::Vector3d>& points, const FitOptions& options);
+
+/// The numbers of FitStats for `pieces` fitted to `mesh`: vertices enclosed (inside a piece's hull
+/// within 1 nm), the mesh's hull volume, the pieces' summed hull volume and its ratio, `worst_gap` as
+/// fitConvexPieces measured it.
+FitStats measurePieces(const TriangleMesh& mesh, const std::vector<PieceFit>& pieces, double worst_gap);
+
+/// A box element (edge lengths `size`, pose X_L_B in the link frame) as one exact convex piece.
+PieceFit boxPiece(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B, const FitOptions& options);
 
 /// Fits primitives (link frame) enclosing every vertex and triangle of `mesh`. Deterministic: the
 /// same mesh and options give the same primitives, bit for bit. Throws ModelError for an empty mesh.
@@ -113,6 +147,9 @@ struct LinkFit {
   int elements = 0;     ///< mesh and box elements fitted
   FitStats stats;
   std::vector<Primitive> primitives;  ///< link frame
+  /// The tight model (format 2 overlays): pieces[i] is the convex piece primitives[i] encloses (the
+  /// same count); empty for a capsule-only fit (format 1).
+  std::vector<PieceFit> pieces;
 };
 
 /// A fit overlay: every link with mesh or box collision elements, fitted.

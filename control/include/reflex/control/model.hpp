@@ -11,6 +11,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "reflex/control/convex.hpp"
+
 #include <string>
 #include <vector>
 
@@ -38,11 +40,15 @@ struct Link {
 
 /// A sphere-swept line (capsule) in a link frame; a sphere when a_L == b_L (`sphere` is then true).
 /// Invariants: radius > 0; a capsule has |b_L - a_L| > 0.
+/// With `piece` >= 0 the capsule is only the ENCLOSING BOUND of the convex piece Model::pieces[piece]
+/// (a piece of a mesh or a box, convex.hpp), which is the real shape: distances are computed on the
+/// piece, the capsule serves the broad phase (its distance is a lower bound of the piece's).
 struct Primitive {
   Eigen::Vector3d a_L = Eigen::Vector3d::Zero();
   Eigen::Vector3d b_L = Eigen::Vector3d::Zero();
   double radius = 0.0;
   bool sphere = true;
+  int piece = -1;  ///< index into Model::pieces, -1: the capsule (or sphere) is the shape itself
 };
 
 /// A collision segment (paper Fig. 1): one or several primitives rigidly attached to one link.
@@ -75,6 +81,8 @@ struct Model {
   std::vector<std::vector<int>> link_support;
 
   std::vector<Primitive> primitives;
+  /// The convex pieces of fitted meshes and boxes (link frame of the primitive that refers to them).
+  std::vector<ConvexPiece> pieces;
   std::vector<Segment> segments;        ///< robot segments first, then the body-schema slots
   int num_robot_segments = 0;
   std::vector<SegmentPair> pairs;       ///< checked pairs (configuration), including slot pairs

@@ -203,6 +203,13 @@ inline double stateLimitTolerance(const Model& model, int i, double period) noex
 /// larger finite values are absurd (and lose the precision the kinematics needs).
 inline constexpr double kMaxUnlimitedPosition = 1e4;
 
+/// The robot segments a physical body-schema segment held by `link` (a grasped object) is never
+/// checked against (bit i: segment i): every segment on the rigid body of `link` (the links joined to
+/// it by fixed joints, up or down); when `link` is on an arm, also every segment below it that no ARM
+/// joint of `cm` separates from it (the fingers of a hand); and the nearest segment above that rigid
+/// body (the wrist it hangs from). Allocation-free.
+std::uint64_t graspIgnoreMask(const Model& model, const ControllerModel& cm, int link) noexcept;
+
 /// The joints the onboard controller drives, as q indices: every arm's joints (left, then right, in
 /// the configuration's order), then the walking pattern's joints (WalkingPattern::joints()).
 std::vector<int> drivenJoints(const Model& model, const ControllerModel& cm);

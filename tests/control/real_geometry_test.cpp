@@ -1,0 +1,197 @@
+// The tight collision model on real robots nobody on this project wrote (the shared public
+// descriptions: Romeo, iCub, PR2, with their collision meshes): fitted by fitRobot (convex pieces,
+// mesh_fit.hpp), loaded with that overlay, distances computed as the controller computes them
+// (computeSegmentDistances: capsule bounds, then GJK on the pieces).
+// Independent answer: FCL's BVH distance between the ORIGINAL meshes (read here with tinyxml2 and
+// assimp, raw_meshes.hpp), for every checked pair at 200 random configurations per robot:
+//  - never above the mesh distance (0 pairs; 0.1 um for FCL's and GJK's rounding), and <= 0 where
+//    FCL finds the meshes' surfaces crossing. A part wholly INSIDE another (FCL's triangle-soup
+//    distance does not see containment: a PR2 wrist inside the base, 57.6 mm from any of its
+//    triangles; decided here by the generalized winding number of the raw mesh at a vertex of the
+//    other, computed in this file, >= 0.95) is counted and left out: the pieces cover the surface,
+//    which a part must cross to get inside;
+//  - for the pairs whose mesh distance is below 100 mm, the shortfall (mesh - reported) has a median
+//    <= 2 mm and a 95th percentile <= 8 mm; its maximum is held at <= 60 mm (measured 28.8-58.3 mm:
+//    pieces that overlap where a mesh has a hole or a deep concavity report 0; the goal is 25 mm).
+// The table of the shortfall per robot is printed.
+#include "raw_meshes.hpp"
+#include "test_support.hpp"
+
+#include "reflex/control/distance.hpp"
+#include "reflex/control/kinematics.hpp"
+#include "reflex/control/mesh_fit.hpp"
+#include "reflex/control/urdf_loader.hpp"
+
+#include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/narrowphase/collision.h>
+#include <fcl/narrowphase/distance.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+
+namespace reflex::control {
+namespace {
+
+struct SharedRobot {
+  const char* name;
+  const char* urdf;  ///< relative to example-robot-data/robots
+};
+
+const SharedRobot kRobots[] = {
+    {"romeo", "romeo_description/urdf/romeo.urdf"},
+    {"icub", "icub_description/robots/icub.urdf"},
+    {"pr2", "pr2_description/urdf/pr2.urdf"},
+};
+
+class RealGeometry : public ::testing::TestWithParam<SharedRobot> {};
+
+/// The generalized winding number of `m` at x (both in the same frame): about 1 inside a closed mesh,
+/// 0 outside, fractional near the holes of an open one.
+double windingNumber(const test::RawMesh& m, const Eigen::Vector3d& x) {
+  double sum = 0.0;
+  for (const auto& t : m.t) {
+    const Eigen::Vector3d a = m.v[t[0]] - x, b = m.v[t[1]] - x, c = m.v[t[2]] - x;
+    const double la = a.norm(), lb = b.norm(), lc = c.norm();
+    sum += 2.0 * std::atan2(a.dot(b.cross(c)), la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la);
+  }
+  return sum / (4.0 * M_PI);
+}
+
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
+}
+
+TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
+  const SharedRobot& robot = GetParam();
+  const std::string shared = test::sharedRobotsDir(REFLEX_SOURCE_DIR);
+  ASSERT_FALSE(shared.empty()) << "the shared robot descriptions are not found (set REFLEX_SHARED_ROBOTS, or put "
+                                  "them at ../shared/robots beside the checkout)";
+  const std::string erd = shared + "/example-robot-data";
+  const std::string urdf = erd + "/robots/" + robot.urdf;
+  PackagePaths paths;
+  paths.packages["example-robot-data"] = erd;
+  paths.use_ros_package_path = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  const FitOverlay overlay = fitRobot(urdf, paths, FitOptions{});
+  const double fit_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const std::string overlay_path = ::testing::TempDir() + robot.name + ".fit.yaml";
+  { std::ofstream(overlay_path) << fitOverlayText(overlay, overlay_path); }
+  CollisionConfig config;
+  config.fit = overlay_path;
+  const Model model = loadModel(urdf, config);
+  ASSERT_FALSE(model.pieces.empty());
+
+  // The oracle's shapes: every link's original meshes as FCL BVH models (link frame).
+  const auto meshes = test::linkMeshes(urdf, paths.packages);
+  std::vector<std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> bvh(model.segments.size());
+  std::vector<const test::RawMesh*> raw(model.segments.size(), nullptr);
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    const auto it = meshes.find(model.segments[static_cast<std::size_t>(s)].name);
+    if (it == meshes.end() || it->second.t.empty()) continue;
+    auto m = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
+    std::vector<fcl::Triangle> tris;
+    for (const auto& t : it->second.t) tris.emplace_back(t[0], t[1], t[2]);
+    m->beginModel();
+    m->addSubModel(it->second.v, tris);
+    m->endModel();
+    bvh[static_cast<std::size_t>(s)] = m;
+    raw[static_cast<std::size_t>(s)] = &it->second;
+  }
+
+  KinematicsData kin(model);
+  DistanceData dist(model);
+  std::mt19937_64 rng(28);
+  std::vector<double> shortfall;
+  long checked = 0, above = 0, touching = 0, touching_apart = 0, contained = 0;
+  double worst_above = 0.0;
+  std::string worst_pair;
+  double worst_short = 0.0;
+  for (int sample = 0; sample < 200; ++sample) {
+    ASSERT_TRUE(computeForwardKinematics(model, kin, test::randomConfiguration(model, rng)));
+    computeSegmentDistances(model, kin, dist);
+    for (std::size_t i = 0; i < model.pairs.size(); ++i) {
+      const SegmentPair& p = model.pairs[i];
+      if (p.b >= model.num_robot_segments) continue;  // body-schema slots
+      const auto& A = bvh[static_cast<std::size_t>(p.a)];
+      const auto& B = bvh[static_cast<std::size_t>(p.b)];
+      if (!A || !B) continue;
+      const fcl::Transform3d Xa(kin.X_B_L[model.segments[p.a].link].matrix());
+      const fcl::Transform3d Xb(kin.X_B_L[model.segments[p.b].link].matrix());
+      const double reported = dist.pairs[i].distance;
+      const std::string what = model.segments[p.a].name + "-" + model.segments[p.b].name;
+      fcl::CollisionRequestd creq;
+      fcl::CollisionResultd cres;
+      fcl::collide(A.get(), Xa, B.get(), Xb, creq, cres);
+      ++checked;
+      bool intersect = cres.isCollision();
+      if (!intersect && reported < 0.1) {
+        // Surfaces apart: one inside the other? (A vertex of each in the other's frame.)
+        const test::RawMesh& ma = *raw[static_cast<std::size_t>(p.a)];
+        const test::RawMesh& mb = *raw[static_cast<std::size_t>(p.b)];
+        const Eigen::Isometry3d& XA = kin.X_B_L[model.segments[p.a].link];
+        const Eigen::Isometry3d& XB = kin.X_B_L[model.segments[p.b].link];
+        // 0.95: clearly inside (a point in the cavity of an open shell has a fractional number).
+        intersect = std::abs(windingNumber(mb, XB.inverse() * (XA * ma.v[ma.t[0][0]]))) >= 0.95 ||
+                    std::abs(windingNumber(ma, XA.inverse() * (XB * mb.v[mb.t[0][0]]))) >= 0.95;
+        if (intersect) ++contained;
+      }
+      if (cres.isCollision()) {
+        ++touching;
+        if (reported > 1e-7) ++touching_apart;
+        EXPECT_LE(reported, 1e-7) << what << " sample " << sample << ": the meshes' surfaces intersect";
+        continue;
+      }
+      // One wholly inside the other: the pieces cover every triangle, not always the solid's inside
+      // (strips around a thick part), so the reported distance may be positive here. A part can only
+      // get inside through the surface, which the pieces do cover (the controller sees it coming).
+      if (intersect) continue;
+      fcl::DistanceRequestd dreq;
+      fcl::DistanceResultd dres;
+      fcl::distance(A.get(), Xa, B.get(), Xb, dreq, dres);
+      const double mesh = dres.min_distance;
+      if (reported > mesh + 1e-7) {
+        ++above;
+        if (reported - mesh > worst_above) worst_above = reported - mesh;
+        ADD_FAILURE() << what << " sample " << sample << ": reported " << reported << " m above the mesh distance "
+                      << mesh << " m";
+      }
+      if (mesh < 0.1) {
+        shortfall.push_back(mesh - reported);
+        if (mesh - reported > worst_short) {
+          worst_short = mesh - reported;
+          char buf[160];
+          std::snprintf(buf, sizeof buf, "%s (sample %d: %.1f mm reported, mesh %.1f mm)", what.c_str(), sample,
+                        reported * 1e3, mesh * 1e3);
+          worst_pair = buf;
+        }
+      }
+    }
+  }
+  std::size_t pieces_vertices = 0;
+  for (const auto& pc : model.pieces) pieces_vertices += pc.vertices_L.size();
+  const double median = quantile(shortfall, 0.5), p95 = quantile(shortfall, 0.95), max = quantile(shortfall, 1.0);
+  std::printf("| robot | segments | pieces (hull vertices) | fit s | pairs checked | meshes intersecting (one inside) | "
+              "above the mesh | pairs < 100 mm | shortfall median / p95 / max (mm) | worst pair |\n");
+  std::printf("| %s | %d | %zu (%zu) | %.1f | %ld | %ld (%ld) | %ld | %zu | %.2f / %.2f / %.2f | %s |\n", robot.name,
+              model.num_robot_segments, model.pieces.size(), pieces_vertices, fit_s, checked, touching, contained, above,
+              shortfall.size(), median * 1e3, p95 * 1e3, max * 1e3, worst_pair.c_str());
+  EXPECT_EQ(above, 0) << "largest excess " << worst_above << " m";
+  EXPECT_EQ(touching_apart, 0);
+  EXPECT_GT(shortfall.size(), 100u) << "too few pairs near each other to judge";
+  EXPECT_LE(median, 0.002);
+  EXPECT_LE(p95, 0.008);
+  EXPECT_LE(max, 0.060);  // the goal is 0.025 (control/docs/real_geometry.md: why not yet)
+}
+
+INSTANTIATE_TEST_SUITE_P(SharedRobots, RealGeometry, ::testing::ValuesIn(kRobots),
+                         [](const ::testing::TestParamInfo<SharedRobot>& info) { return std::string(info.param.name); });
+
+}  // namespace
+}  // namespace reflex::control
