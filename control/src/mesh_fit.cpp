@@ -380,6 +380,52 @@ std::vector<Eigen::Vector3d> surfaceSamples(const Primitive& p, int n) {
 
 double roundTo(double v, double q) { return std::round(v / q) * q; }
 
+/// Calls consider(ta, tb) for every candidate cut of the triangles `tris` of `work` in two: each of the
+/// (at most 8 largest) connected shells holding at least `min_shell_share` of them against the rest,
+/// then, along each principal axis of their centroids and each frame axis, the cut at the 10, 20, ..
+/// 90 % quantiles of the centroids (both sides sorted). Deterministic.
+enum class Cuts { kBoth, kShells, kAxes };
+template <class Consider>
+void forEachCut(const TriangleMesh& work, const std::vector<int>& tris, const std::vector<int>& shell,
+                double min_shell_share, Consider&& consider, Cuts which = Cuts::kBoth) {
+  std::vector<Eigen::Vector3d> centroids;
+  for (int t : tris)
+    centroids.push_back((work.vertices[work.triangles[t][0]] + work.vertices[work.triangles[t][1]] +
+                         work.vertices[work.triangles[t][2]]) / 3.0);
+  std::map<int, int> shell_size;
+  for (int t : tris) ++shell_size[shell[t]];
+  if (which != Cuts::kAxes && shell_size.size() > 1) {
+    std::vector<std::pair<int, int>> shells;  // (-size, id): the largest first, ties by id
+    for (const auto& [id, n] : shell_size)
+      if (n >= min_shell_share * static_cast<double>(tris.size())) shells.push_back({-n, id});
+    std::sort(shells.begin(), shells.end());
+    if (shells.size() > 8) shells.resize(8);
+    for (const auto& sh : shells) {
+      std::vector<int> ta, tb;
+      for (int t : tris) (shell[t] == sh.second ? ta : tb).push_back(t);
+      consider(std::move(ta), std::move(tb));
+    }
+  }
+  if (which == Cuts::kShells) return;
+  const Eigen::Matrix3d pca = principalAxes(centroids);
+  const std::array<Eigen::Vector3d, 6> axes{pca.col(2), pca.col(1), pca.col(0), Eigen::Vector3d::UnitX(),
+                                            Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
+  for (const Eigen::Vector3d& axis : axes) {
+    std::vector<std::pair<double, int>> order;
+    for (std::size_t i = 0; i < tris.size(); ++i) order.push_back({centroids[i].dot(axis), tris[i]});
+    std::sort(order.begin(), order.end());
+    for (double q : {0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9}) {
+      const std::size_t cut = static_cast<std::size_t>(q * order.size());
+      if (cut == 0 || cut >= order.size()) continue;
+      std::vector<int> ta, tb;
+      for (std::size_t i = 0; i < order.size(); ++i) (i < cut ? ta : tb).push_back(order[i].second);
+      std::sort(ta.begin(), ta.end());
+      std::sort(tb.begin(), tb.end());
+      consider(std::move(ta), std::move(tb));
+    }
+  }
+}
+
 }  // namespace
 
 double signedDistanceToPrimitive(const Primitive& prim, const Eigen::Vector3d& p) {
@@ -432,46 +478,12 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
     for (std::size_t ci = 0; ci < clusters.size(); ++ci) {
       const Cluster& c = clusters[ci];
       if (c.triangles.size() < 2) continue;
-      std::vector<Eigen::Vector3d> centroids;
-      for (int t : c.triangles)
-        centroids.push_back((work.vertices[work.triangles[t][0]] + work.vertices[work.triangles[t][1]] +
-                             work.vertices[work.triangles[t][2]]) / 3.0);
       auto consider = [&](std::vector<int> ta, std::vector<int> tb) {
         Cluster a = makeCluster(work, std::move(ta), true), b = makeCluster(work, std::move(tb), true);
         const double gain = c.volume - a.volume - b.volume;
         if (gain > best_gain) best_gain = gain, best_cluster = ci, best_a = std::move(a), best_b = std::move(b);
       };
-      std::map<int, int> piece_size;
-      for (int t : c.triangles) ++piece_size[piece[t]];
-      if (piece_size.size() > 1) {
-        std::vector<std::pair<int, int>> pieces;  // (-size, piece): the largest first, ties by id
-        for (const auto& [id, n] : piece_size)
-          if (20 * n >= static_cast<int>(c.triangles.size())) pieces.push_back({-n, id});
-        std::sort(pieces.begin(), pieces.end());
-        if (pieces.size() > 8) pieces.resize(8);
-        for (const auto& pc : pieces) {
-          std::vector<int> ta, tb;
-          for (int t : c.triangles) (piece[t] == pc.second ? ta : tb).push_back(t);
-          consider(std::move(ta), std::move(tb));
-        }
-      }
-      const Eigen::Matrix3d pca = principalAxes(centroids);
-      const std::array<Eigen::Vector3d, 6> axes{pca.col(2), pca.col(1), pca.col(0), Eigen::Vector3d::UnitX(),
-                                                Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
-      for (const Eigen::Vector3d& axis : axes) {
-        std::vector<std::pair<double, int>> order;
-        for (std::size_t i = 0; i < c.triangles.size(); ++i) order.push_back({centroids[i].dot(axis), c.triangles[i]});
-        std::sort(order.begin(), order.end());
-        for (double q : {0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9}) {
-          const std::size_t cut = static_cast<std::size_t>(q * order.size());
-          if (cut == 0 || cut >= order.size()) continue;
-          std::vector<int> ta, tb;
-          for (std::size_t i = 0; i < order.size(); ++i) (i < cut ? ta : tb).push_back(order[i].second);
-          std::sort(ta.begin(), ta.end());
-          std::sort(tb.begin(), tb.end());
-          consider(std::move(ta), std::move(tb));
-        }
-      }
+      forEachCut(work, c.triangles, piece, 0.05, consider);
     }
     if (!(best_gain > 0.0)) break;  // no cut helps (best_a, best_b are empty)
     best_a = makeCluster(work, std::move(best_a.triangles));  // the full fit of the chosen cut
@@ -637,10 +649,12 @@ std::vector<Primitive> fitBox(const Eigen::Vector3d& size, const Eigen::Isometry
 // surface that lies outside the mesh's solid and outside every other piece to the mesh surface. That
 // is how far the piece's surface can stand off the real surface, so how much shorter than the true
 // distance a distance to it can be. While the worst gap is above options.piece_gap and the link has
-// fewer than options.max_pieces pieces, the piece with the worst gap is cut in two: the cut (by
-// triangle centroid along its principal axes and the frame axes at the 10 .. 90 % quantiles, or one
-// connected shell against the rest) whose two hulls stand off the mesh least (their facets' centroids
-// and edge midpoints), ties by the least summed volume. "Outside the solid"
+// fewer than options.max_pieces pieces, the piece with the worst gap is cut in two: one connected
+// shell against the rest (a mesh made of convex parts: a palm and its fingers) if any such cut makes
+// progress, else a plane (by triangle centroid along its principal axes and the frame axes at the
+// 10 .. 90 % quantiles); of those, the cut whose two hulls stand off the mesh least (their facets'
+// centroids and edge midpoints), ties by the least summed volume; progress: smaller hulls or a
+// smaller gap. "Outside the solid"
 // is decided by the generalized winding number of the mesh (robust to small holes; a mesh with
 // inconsistent winding only gets more cuts). Each piece then gets the capsule that encloses it (the
 // broad phase's bound).
@@ -954,10 +968,6 @@ std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions
         worst = i;
     if (worst == pieces.size() || static_cast<int>(pieces.size()) >= options.max_pieces) break;
     const PieceCluster& c = pieces[worst];
-    std::vector<Eigen::Vector3d> centroids;
-    for (int t : c.triangles)
-      centroids.push_back((work.vertices[work.triangles[t][0]] + work.vertices[work.triangles[t][1]] +
-                           work.vertices[work.triangles[t][2]]) / 3.0);
     // The cut whose two hulls stand off the mesh least (quickGap, the larger of the two), ties within
     // 0.1 mm by the least summed volume; a cut must make the hulls smaller or the gap smaller.
     double best_gap = std::numeric_limits<double>::infinity(), best_volume = c.hull.volume * (1.0 - 1e-6);
@@ -974,37 +984,11 @@ std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions
         best_gap = std::min(best_gap, g), best_volume = v, best_a = std::move(ta), best_b = std::move(tb);
       }
     };
-    std::map<int, int> shell_size;
-    for (int t : c.triangles) ++shell_size[shell[t]];
-    if (shell_size.size() > 1) {
-      std::vector<std::pair<int, int>> shells;  // (-size, id): the largest first
-      for (const auto& [id, n] : shell_size) shells.push_back({-n, id});
-      std::sort(shells.begin(), shells.end());
-      if (shells.size() > 8) shells.resize(8);
-      for (const auto& s : shells) {
-        std::vector<int> ta, tb;
-        for (int t : c.triangles) (shell[t] == s.second ? ta : tb).push_back(t);
-        consider(std::move(ta), std::move(tb));
-      }
-    }
-    const Eigen::Matrix3d pca = principalAxes(centroids);
-    const std::array<Eigen::Vector3d, 6> axes{pca.col(2), pca.col(1), pca.col(0), Eigen::Vector3d::UnitX(),
-                                              Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
-    for (const Eigen::Vector3d& axis : axes) {
-      std::vector<std::pair<double, int>> order;
-      for (std::size_t i = 0; i < c.triangles.size(); ++i) order.push_back({centroids[i].dot(axis), c.triangles[i]});
-      std::sort(order.begin(), order.end());
-      for (double q : {0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9}) {
-        const std::size_t cut = static_cast<std::size_t>(q * order.size());
-        if (cut == 0 || cut >= order.size()) continue;
-        std::vector<int> ta, tb;
-        for (std::size_t i = 0; i < order.size(); ++i) (i < cut ? ta : tb).push_back(order[i].second);
-        std::sort(ta.begin(), ta.end());
-        std::sort(tb.begin(), tb.end());
-        consider(std::move(ta), std::move(tb));
-      }
-    }
-    if (best_a.empty()) {  // no cut makes the hulls smaller: this piece stays as it is
+    // Separate shells first (the convex parts a mesh is often made of: a palm and its fingers), then
+    // planes.
+    forEachCut(work, c.triangles, shell, 0.0, consider, Cuts::kShells);
+    if (best_a.empty()) forEachCut(work, c.triangles, shell, 0.0, consider, Cuts::kAxes);
+    if (best_a.empty()) {  // no cut makes the hulls or the gap smaller: this piece stays as it is
       pieces[worst].final = true;
       continue;
     }
