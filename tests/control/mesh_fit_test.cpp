@@ -418,6 +418,49 @@ TEST(MeshFit, OverlayTextRoundTripsNamesAndNumbers) {
   }
 }
 
+// Format 2 (the tight model): a box piece round-trips bit for bit (vertices at %.17g); a piece whose
+// capsule does not enclose a vertex, or a triangle naming no vertex, is refused naming the entry.
+TEST(MeshFitOverlay, PiecesRoundTripAndABadPieceIsRefused) {
+  TempDir dir;
+  FitOverlay o;
+  o.urdf = dir / "r.urdf";
+  LinkFit l;
+  l.link = "box_link";
+  l.inputs = "0123456789abcdef";
+  const Eigen::Isometry3d X(Eigen::Translation3d(0.1, -0.2, 0.3) * Eigen::AngleAxisd(0.3, Vector3d(1, 2, 3).normalized()));
+  l.pieces = {boxPiece(Vector3d(0.1, 0.2, 0.3), X, FitOptions{})};
+  l.primitives = {l.pieces[0].capsule};
+  o.links.push_back(l);
+  const std::string path = dir / "o.fit.yaml";
+  std::ofstream(path) << fitOverlayText(o, path);
+  const FitOverlay back = loadFitOverlay(path);
+  ASSERT_EQ(back.links.size(), 1u);
+  ASSERT_EQ(back.links[0].pieces.size(), 1u);
+  EXPECT_EQ(back.links[0].pieces[0].vertices, l.pieces[0].vertices);
+  EXPECT_EQ(back.links[0].pieces[0].triangles, l.pieces[0].triangles);
+  EXPECT_EQ(back.links[0].primitives[0].radius, l.pieces[0].capsule.radius);
+  const std::string text = readFile(path);
+  auto refused = [&](const std::string& edited, const std::string& expected) {
+    std::ofstream(path) << edited;
+    try {
+      loadFitOverlay(path);
+      ADD_FAILURE() << "accepted: " << expected;
+    } catch (const ModelError& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  };
+  std::string small = text;
+  const std::size_t r = small.find("radius: ");
+  ASSERT_NE(r, std::string::npos);
+  small.replace(r, small.find('}', r) - r, "radius: 0.001");
+  refused(small, "does not enclose the vertex");
+  std::string bad_index = text;
+  const std::size_t t = bad_index.find("triangles: [[");
+  ASSERT_NE(t, std::string::npos);
+  bad_index.replace(t + 13, 1, "9");
+  refused(bad_index, "is not a vertex index");
+}
+
 TEST(MeshFitResolve, PackageFileAndRelativePaths) {
   TempDir dir;
   fs::create_directories(dir.path / "src" / "folder_name");
