@@ -181,35 +181,61 @@ struct Hull {
   double volume = 0.0;
 };
 
-Hull convexHull(const std::vector<Eigen::Vector3d>& pts) {
-  Hull hull;
-  if (pts.size() >= 4) {
-    std::vector<coordT> coords(3 * pts.size());
-    for (std::size_t i = 0; i < pts.size(); ++i)
-      for (int k = 0; k < 3; ++k) coords[3 * i + k] = pts[i][k];
-    qhT qh_qh;
-    qhT* qh = &qh_qh;
-    FILE* devnull = std::fopen("/dev/null", "w");
-    qh_zero(qh, devnull);
-    char options[] = "qhull Qt";
-    const int exitcode = qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
-    if (!exitcode) {
-      qh_getarea(qh, qh->facet_list);
-      hull.volume = qh->totvol;
-      vertexT* vertex;
-      FORALLvertices hull.vertices.push_back(qh_pointid(qh, vertex->point));
+/// qhull ("Qt": triangulated facets) on pts: the hull's vertex ids (ascending), its facets (ids) and
+/// volume; no vertex when qhull refuses the set (flat, tiny, fewer than 4 points).
+struct QhullResult {
+  std::vector<int> vertices;
+  std::vector<std::array<int, 3>> facets;
+  double volume = 0.0;
+};
+
+QhullResult runQhull(const std::vector<Eigen::Vector3d>& pts) {
+  QhullResult r;
+  if (pts.size() < 4) return r;
+  std::vector<coordT> coords(3 * pts.size());
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    for (int k = 0; k < 3; ++k) coords[3 * i + k] = pts[i][k];
+  qhT qh_qh;
+  qhT* qh = &qh_qh;
+  FILE* devnull = std::fopen("/dev/null", "w");
+  qh_zero(qh, devnull);
+  char options[] = "qhull Qt";
+  const int exitcode = qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
+  if (!exitcode) {
+    qh_getarea(qh, qh->facet_list);
+    r.volume = qh->totvol;
+    vertexT* vertex;
+    FORALLvertices r.vertices.push_back(qh_pointid(qh, vertex->point));
+    facetT* facet;
+    FORALLfacets {
+      std::array<int, 3> t{};
+      int n = 0;
+      vertexT** vertexp;
+      FOREACHvertex_(facet->vertices) {
+        if (n < 3) t[n] = qh_pointid(qh, vertex->point);
+        ++n;
+      }
+      if (n == 3) r.facets.push_back(t);
     }
-    qh_freeqhull(qh, !qh_ALL);
-    int curlong = 0, totlong = 0;
-    qh_memfreeshort(qh, &curlong, &totlong);
-    if (devnull) std::fclose(devnull);
   }
+  qh_freeqhull(qh, !qh_ALL);
+  int curlong = 0, totlong = 0;
+  qh_memfreeshort(qh, &curlong, &totlong);
+  if (devnull) std::fclose(devnull);
+  std::sort(r.vertices.begin(), r.vertices.end());
+  return r;
+}
+
+Hull convexHull(const std::vector<Eigen::Vector3d>& pts) {
+  const QhullResult q = runQhull(pts);
+  Hull hull;
+  hull.vertices = q.vertices;
+  hull.volume = q.volume;
   if (hull.vertices.empty()) {
     hull.vertices.resize(pts.size());
     std::iota(hull.vertices.begin(), hull.vertices.end(), 0);
     hull.volume = 0.0;
   }
-  std::sort(hull.vertices.begin(), hull.vertices.end());
   return hull;
 }
 
@@ -749,49 +775,15 @@ struct PieceHull {
 
 PieceHull pieceHull(const std::vector<Eigen::Vector3d>& pts) {
   PieceHull h;
-  bool ok = false;
-  if (pts.size() >= 4) {
-    std::vector<coordT> coords(3 * pts.size());
-    for (std::size_t i = 0; i < pts.size(); ++i)
-      for (int k = 0; k < 3; ++k) coords[3 * i + k] = pts[i][k];
-    qhT qh_qh;
-    qhT* qh = &qh_qh;
-    FILE* devnull = std::fopen("/dev/null", "w");
-    qh_zero(qh, devnull);
-    char options[] = "qhull Qt";
-    const int exitcode = qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
-    if (!exitcode) {
-      qh_getarea(qh, qh->facet_list);
-      h.volume = qh->totvol;
-      std::map<int, int> index;  // point id -> hull vertex index
-      vertexT* vertex;
-      FORALLvertices {
-        const int id = qh_pointid(qh, vertex->point);
-        index[id] = 0;
-      }
-      int k = 0;
-      for (auto& [id, idx] : index) {
-        idx = k++;
-        h.points.push_back(pts[static_cast<std::size_t>(id)]);
-      }
-      facetT* facet;
-      FORALLfacets {
-        std::array<int, 3> t{};
-        int n = 0;
-        vertexT** vertexp;
-        FOREACHvertex_(facet->vertices) {
-          if (n < 3) t[n] = index[qh_pointid(qh, vertex->point)];
-          ++n;
-        }
-        if (n == 3) h.triangles.push_back(t);
-      }
-      ok = !h.triangles.empty();
-    }
-    qh_freeqhull(qh, !qh_ALL);
-    int curlong = 0, totlong = 0;
-    qh_memfreeshort(qh, &curlong, &totlong);
-    if (devnull) std::fclose(devnull);
+  const QhullResult q = runQhull(pts);
+  std::map<int, int> index;  // point id -> hull vertex index (ascending ids)
+  for (const int id : q.vertices) {
+    index[id] = static_cast<int>(h.points.size());
+    h.points.push_back(pts[static_cast<std::size_t>(id)]);
   }
+  for (const auto& f : q.facets) h.triangles.push_back({index[f[0]], index[f[1]], index[f[2]]});
+  h.volume = q.volume;
+  const bool ok = !h.triangles.empty();
   if (!ok) {  // flat, tiny or too few points: every distinct point, no facets (a support scan)
     h = PieceHull{};
     h.points = pts;
