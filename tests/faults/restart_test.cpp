@@ -205,7 +205,12 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
                 1e3 * (t_kill - 1e-9 * f.loadedWallNs()));
   }
 
-  // 3. The same command again, now with a log and a duration.
+  // 3. The same command again, now with a log and a duration. The target source is stopped across
+  // the restart (SIGSTOP) and continued once the new controller runs: its participant cannot be
+  // discovered meanwhile, so the new controller's first cycles are the hold, never a late-joiner target
+  // (with the source running, discovery during the 1 s peer probe can deliver the source's last
+  // target before the first cycle, which the controller then rightly follows at once).
+  source.signal(SIGSTOP);
   std::vector<std::string> args_b = args;
   for (const char* s : {"--log", log_b.c_str(), "--duration", "20"}) args_b.emplace_back(s);
   const double t_restart = wallNow();
@@ -220,6 +225,8 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   for (int i = 0; i < 150 && states.size() == n_before; ++i) pumpFor(0.1);
   ASSERT_GT(states.size(), n_before) << "the restarted controller publishes within 15 s; its output:\n"
                                      << readFile(tmp + "restart_controller_b.log");
+  pumpFor(0.3);
+  source.signal(SIGCONT);
   pumpFor(1.5);
   const Rx first_seen = states[n_before];
   ASSERT_GE(first_seen.t, t_restart);
@@ -310,10 +317,9 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   ASSERT_GE(t_given, 0.0) << "the restarted controller receives targets";
   EXPECT_GE(t_follow, 0.0) << "the restarted controller follows the targets";
   EXPECT_LT(t_follow - t_given, 3.0) << "within 3 s of its first target";
-  // Rediscovery: the source, which knew the killed controller, finds the new one after its 1 s peer
-  // probe: the first target 1.05-1.87 s after the restart (6 runs; 2.4-3.3 s before the bus gave a
-  // restarted process another participant id). Bound 15 s, as the wait above (discovery, not this
-  // controller); --duration 20 leaves the 3 s for following.
+  // Rediscovery: the source, continued once the new controller runs, finds it and its first target
+  // arrives. Bound 15 s, as the wait above (discovery, not this controller); --duration 20 leaves the
+  // 3 s for following.
   EXPECT_LT(t_given, 15.0) << "the restarted controller gets the targets within 15 s of its start";
   EXPECT_GE(d_min_b, kDr) << "restarted controller's closest pair";
 

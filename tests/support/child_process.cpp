@@ -98,6 +98,7 @@ int ChildProcess::wait(std::chrono::milliseconds timeout) {
 int ChildProcess::terminate(std::chrono::milliseconds grace) {
   if (pid_ <= 0) return code_;
   ::kill(pid_, SIGTERM);
+  ::kill(pid_, SIGCONT);  // a stopped child (SIGSTOP) acts on the SIGTERM only once continued
   if (wait(grace) != kStillRunning) return code_;
   ::kill(pid_, SIGKILL);
   reap(true);
