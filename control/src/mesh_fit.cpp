@@ -966,9 +966,12 @@ std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions
     std::vector<int> best_a, best_b;
     auto consider = [&](std::vector<int> ta, std::vector<int> tb) {
       if (ta.empty() || tb.empty()) return;
-      const PieceHull ha = pieceHull(clusterPoints(work, ta)), hb = pieceHull(clusterPoints(work, tb));
+      const PieceHull ha = pieceHull(clusterPoints(work, ta));
+      const double ga = quickGap(mesh, tree, ha);
+      if (ga > best_gap + 1e-4) return;  // the larger of the two gaps cannot beat the best cut any more
+      const PieceHull hb = pieceHull(clusterPoints(work, tb));
       const double v = ha.volume + hb.volume;
-      const double g = std::max(quickGap(mesh, tree, ha), quickGap(mesh, tree, hb));
+      const double g = std::max(ga, quickGap(mesh, tree, hb));
       // Progress: smaller hulls, or (a flat piece: an L-shaped face bridged across its notch, volume
       // 0 either way) a smaller gap.
       if (!(v < c.hull.volume * (1.0 - 1e-6)) && !(g < 0.99 * c.gap)) return;

@@ -143,6 +143,29 @@ int nameScore(const Model& m, const Chain& c) {
   return score;
 }
 
+// What a chain's names say of its side: +1 left, -1 right, 0 nothing or both. A name says left when it
+// starts with "l_", "left" or "L" followed by a capital ("LShoulderPitch"), or holds "_l_" / "left";
+// right alike.
+int sideHint(const Model& m, const Chain& c) {
+  int left = 0, right = 0;
+  auto says = [](const std::string& n, char side, const char* word) {
+    const std::string lo = [&] {
+      std::string x = n;
+      std::transform(x.begin(), x.end(), x.begin(), [](unsigned char ch) { return std::tolower(ch); });
+      return x;
+    }();
+    const std::string pre = std::string(1, side) + "_";
+    return lo.rfind(pre, 0) == 0 || lo.find("_" + pre) != std::string::npos || lo.find(word) != std::string::npos ||
+           (n.size() > 1 && n[0] == std::toupper(side) && std::isupper(static_cast<unsigned char>(n[1])));
+  };
+  for (int l : c.links)
+    for (const std::string* n : {&m.links[l].name, &m.links[l].joint_name}) {
+      left += says(*n, 'l', "left");
+      right += says(*n, 'r', "right");
+    }
+  return left > right ? 1 : right > left ? -1 : 0;
+}
+
 std::string lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char ch) { return std::tolower(ch); });
   return s;
@@ -275,9 +298,18 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
     }
     arms[0] = *pairs[pick][0];
     arms[1] = *pairs[pick][1];
+    // REP 103 (x forward, y left) unless both arms' names say the opposite: a root frame that faces -x
+    // (iCub's: x backward, y right) names its y < 0 arm left.
+    std::string side_why = "left = y > 0 (" + fmt("%.3f", arms[0].start_B.y()) + " m)";
+    if (sideHint(m, arms[0]) < 0 && sideHint(m, arms[1]) > 0) {
+      std::swap(arms[0], arms[1]);
+      setup.forward = -Eigen::Vector3d::UnitX();
+      side_why = "the arm named left is at y " + fmt("%.3f", arms[0].start_B.y()) +
+                 " m: this URDF's root frame faces -x (x backward, y right), so forward is -x for the rest "
+                 "posture and the behavior's targets";
+    }
     setup.decisions.push_back("arms: left " + arms[0].describe(m) + ", right " + arms[1].describe(m) + " from '" +
-                              m.links[arms[0].branch].name + "': " + why + "; left = y > 0 (" +
-                              fmt("%.3f", arms[0].start_B.y()) + " m)");
+                              m.links[arms[0].branch].name + "': " + why + "; " + side_why);
     for (int a = 0; a < 2; ++a) {
       if (static_cast<int>(arms[a].joints.size()) > 8)
         throw SetupError("arm " + arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
@@ -325,10 +357,12 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
         if (head < 0 || kin.X_B_L[e].translation().z() > kin.X_B_L[head].translation().z()) head = e;
       head_why = "the highest end of a chain of at most 3 joints that is not an arm";
     }
-    if (head < 0)
-      throw SetupError("no head found in robot '" + m.name +
-                       "': no chain of 1 to 3 joints other than the arms ends in a link with collision geometry; "
-                       "give --head and --camera");
+    if (head < 0) {  // a robot without a head (an upper body, a two-arm manipulator): the arms' trunk
+      head = arms[0].branch;
+      head_why = "NO HEAD: no chain of 1 to 3 joints other than the arms ends in a link with collision geometry, so "
+                 "the arms' branching link stands in for the head (and the head camera, unless --camera); give "
+                 "--head and --camera for a camera elsewhere";
+    }
   }
   setup.head_link = m.links[head].name;
   setup.decisions.push_back("head: link '" + setup.head_link + "', " + head_why);
@@ -404,6 +438,8 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
   DistanceData dist(m);
   DistanceOptions dopt;
   dopt.row_threshold = -std::numeric_limits<double>::infinity();
+  // Exact up to 0.1 m (above every requirement, d_a + margin); farther pairs get a lower bound.
+  dopt.prune_distance = std::max(0.1, o.d_a + o.rest_margin + 0.01);
   computeForwardKinematics(m, kin, q0);
   std::array<int, 2> hand{}, shoulder{};
   std::array<Eigen::Vector3d, 2> S, goal;
@@ -421,8 +457,9 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
     reach = (kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0]).norm();
   }
   // Hand below and in front of the shoulder, slightly out: elbow bent, arm not touching the body.
+  const Eigen::Vector3d fwd = s.forward, lft = Eigen::Vector3d::UnitZ().cross(s.forward);
   for (int a = 0; a < 2; ++a)
-    goal[a] = S[a] + reach * Eigen::Vector3d(0.35, a == 0 ? 0.2 : -0.2, -0.7);
+    goal[a] = S[a] + reach * (0.35 * fwd + (a == 0 ? 0.2 : -0.2) * lft - 0.7 * Eigen::Vector3d::UnitZ());
   auto place = [&](const std::vector<double>& left, const std::vector<double>& right, Eigen::VectorXd& q) {
     q = q0;
     for (std::size_t i = 0; i < ix.q[0].size(); ++i) q[ix.q[0][i]] = left[i];
@@ -438,6 +475,7 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
     bool clear = false;
     double cost = std::numeric_limits<double>::infinity();
     double dmin = -std::numeric_limits<double>::infinity();
+    double ratio = -std::numeric_limits<double>::infinity();  // smallest distance / requirement
     int pair = -1;
   };
   // Only pairs with an arm segment: the rest posture cannot change the others (legs, head, trunk).
@@ -450,22 +488,25 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
     arm_pair[i] = !m.segments[m.pairs[i].b].body_schema_slot &&
                   (moved[m.segments[m.pairs[i].a].link] || moved[m.segments[m.pairs[i].b].link]);
   Eigen::VectorXd q(m.nq);
-  // What each arm pair can reach: its distance range over random arm postures (full limits). A pair the
-  // arms cannot move (a shoulder sphere turning about its centre) is not asked to clear anything; a pair
-  // never farther apart than d_a + margin (a short arm's upper arm and hand) is asked for 90 % of its maximum.
+  // What each arm pair can reach: its distance range over random arm postures drawn as the search draws
+  // them (the middle 80 % of the limits, the right arm mirrored). A pair the arms cannot move (a shoulder
+  // sphere turning about its centre) is not asked to clear anything; a pair never farther apart than
+  // d_a + margin there (a short arm's upper arm and hand, a shoulder link and the upper arm) is asked for
+  // 90 % of its maximum.
   std::vector<double> required(m.pairs.size(), o.d_a + o.rest_margin);
+  const ControllerParams defaults;
+  const double latch_floor = defaults.d_r + defaults.estop_release_margin + 0.001;
   {
     std::vector<double> lo_d(m.pairs.size(), std::numeric_limits<double>::infinity());
     std::vector<double> hi_d(m.pairs.size(), -std::numeric_limits<double>::infinity());
     std::mt19937_64 pre(o.seed + 5);
+    std::vector<double> pl(ix.q[0].size()), pr(ix.q[1].size());
     for (int k = 0; k < std::max(200, o.rest_samples / 2); ++k) {
-      q = q0;
-      for (int a = 0; a < 2; ++a)
-        for (int qi : ix.q[a]) {
-          const double lo = std::isfinite(m.q_lower[qi]) ? m.q_lower[qi] : -M_PI;
-          const double hi = std::isfinite(m.q_upper[qi]) ? m.q_upper[qi] : M_PI;
-          q[qi] = std::uniform_real_distribution<double>(lo, hi)(pre);
-        }
+      for (std::size_t i = 0; i < pl.size(); ++i)
+        pl[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[0][i]), hi80(m, ix.q[0][i]))(pre);
+      for (std::size_t i = 0; i < pr.size(); ++i)
+        pr[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[1][i]), hi80(m, ix.q[1][i]))(pre);
+      place(pl, mirrorOf(pl, pr), q);
       computeForwardKinematics(m, kin, q);
       computeSegmentDistances(m, kin, dist, dopt);
       for (std::size_t i = 0; i < m.pairs.size(); ++i) {
@@ -484,9 +525,10 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
         ++fixed_pairs;
         if (fixed_example.empty()) fixed_example = name + " " + fmt("%.3f", hi_d[i]) + " m";
       } else if (hi_d[i] < required[i]) {
-        required[i] = 0.9 * hi_d[i];
+        // Never below the e-stop's release (+ 1 mm): resting there would latch the red zone.
+        required[i] = std::max(0.9 * hi_d[i], std::min(required[i], latch_floor));
         s.decisions.push_back("rest: pair " + name + " is never farther apart than " + fmt("%.3f", hi_d[i]) +
-                              " m (sampled): rest keeps it at >= " + fmt("%.3f", required[i]) +
+                              " m (sampled in the rest search's range): rest keeps it at >= " + fmt("%.3f", required[i]) +
                               " m, inside the avoidance zone d_a " + fmt("%.3f", o.d_a) + " m");
       }
     }
@@ -501,10 +543,12 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
     computeForwardKinematics(m, kin, q);
     computeSegmentDistances(m, kin, dist, dopt);
     e.dmin = std::numeric_limits<double>::infinity();  // the smallest clearance beyond what is required
+    e.ratio = std::numeric_limits<double>::infinity();
     e.clear = true;
     for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
       if (!dist.pairs[i].active || !arm_pair[i]) continue;
       if (dist.pairs[i].distance <= required[i]) e.clear = false;
+      e.ratio = std::min(e.ratio, dist.pairs[i].distance / required[i]);
       if (dist.pairs[i].distance - required[i] < e.dmin) {
         e.dmin = dist.pairs[i].distance - required[i];
         e.pair = static_cast<int>(i);
@@ -522,32 +566,77 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
     e.cost = c + 0.05 * centre / static_cast<double>(ix.q[0].size() + ix.q[1].size());
     return e;
   };
-  std::mt19937_64 rng(o.seed);
   std::vector<double> best_l, best_r, l(ix.q[0].size()), r(ix.q[1].size());
   Eval best;
   Eval closest;  // the clearest posture, for the error message
-  for (int k = 0; k < o.rest_samples; ++k) {
-    for (std::size_t i = 0; i < l.size(); ++i)
-      l[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[0][i]), hi80(m, ix.q[0][i]))(rng);
-    for (std::size_t i = 0; i < r.size(); ++i)
-      r[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[1][i]), hi80(m, ix.q[1][i]))(rng);
-    r = mirrorOf(l, r);
-    const Eval e = evaluate(l, r);
-    if (e.dmin > closest.dmin) closest = e;
-    if (e.clear && e.cost < best.cost) {
-      best = e;
-      best_l = l;
-      best_r = r;
+  std::vector<double> closest_l, closest_r;
+  auto search = [&] {
+    std::mt19937_64 rng(o.seed);
+    best = Eval{};
+    closest = Eval{};
+    for (int k = 0; k < o.rest_samples; ++k) {
+      for (std::size_t i = 0; i < l.size(); ++i)
+        l[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[0][i]), hi80(m, ix.q[0][i]))(rng);
+      for (std::size_t i = 0; i < r.size(); ++i)
+        r[i] = std::uniform_real_distribution<double>(lo80(m, ix.q[1][i]), hi80(m, ix.q[1][i]))(rng);
+      r = mirrorOf(l, r);
+      const Eval e = evaluate(l, r);
+      if (e.ratio > closest.ratio) {
+        closest = e;
+        closest_l = l;
+        closest_r = r;
+      }
+      if (e.clear && e.cost < best.cost) {
+        best = e;
+        best_l = l;
+        best_r = r;
+      }
     }
+  };
+  search();
+  // A crowded shoulder (small shoulder links beside the chest, the neck and the head: iCub) can leave
+  // no posture that clears every pair at once. Then every requirement is scaled to 95 % of what the
+  // clearest posture keeps of it, never below the e-stop floor (d_r + estop_release_margin + 5 mm, or
+  // the pair's own requirement if smaller), and the search runs again: the arms rest with those pairs
+  // inside the avoidance zone, said here.
+  if (!best.clear && closest.ratio > 0.0) {
+    const double floor = latch_floor + 0.004;
+    const double first_ratio = closest.ratio;
+    const double scale = 0.95 * first_ratio;
+    int lowered = 0;
+    for (std::size_t i = 0; i < required.size(); ++i) {
+      if (!arm_pair[i]) continue;
+      const double r_new = std::max(scale * required[i], std::min(required[i], floor));
+      if (r_new < required[i]) ++lowered;
+      required[i] = r_new;
+    }
+    search();
+    if (best.clear)
+      s.decisions.push_back("rest: WARNING: no posture clears every arm pair by d_a + margin (or 90 % of its reach); "
+                            "the clearest keeps " + fmt("%.0f", 100.0 * first_ratio) + " % of it: " +
+                            std::to_string(lowered) + " requirements scaled to " + fmt("%.0f", 100.0 * scale) +
+                            " % (never below " + fmt("%.3f", floor) + " m): avoidance acts at rest on the pairs "
+                            "listed below d_a");
   }
   if (!best.clear) {
-    const SegmentPair& p = m.pairs[closest.pair];
+    // Every pair short of what it must keep in the clearest posture.
+    place(closest_l, closest_r, q);
+    computeForwardKinematics(m, kin, q);
+    computeSegmentDistances(m, kin, dist, dopt);
+    std::string short_pairs;
+    int n_short = 0;
+    for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
+      if (!dist.pairs[i].active || !arm_pair[i] || dist.pairs[i].distance > required[i]) continue;
+      ++n_short;
+      short_pairs += std::string(short_pairs.empty() ? "" : ", ") + "'" + m.segments[m.pairs[i].a].name + "'-'" +
+                     m.segments[m.pairs[i].b].name + "' " + fmt("%.1f", 1e3 * dist.pairs[i].distance) + " mm (needs > " +
+                     fmt("%.1f", 1e3 * required[i]) + ")";
+    }
     throw SetupError("no rest posture found for robot '" + m.name + "': of " + std::to_string(o.rest_samples) +
-                     " postures within the middle 80 % of the arm joints' limits none clears every checked pair of an arm segment by " +
-                     fmt("%.3f", o.d_a + o.rest_margin) + " m (d_a + margin); the clearest has '" +
-                     m.segments[p.a].name + "'-'" + m.segments[p.b].name + "' at " +
-                     fmt("%.3f", closest.dmin + required[closest.pair]) +
-                     " m: exclude pairs that cannot collide (collision YAML) or give a smaller --rest-margin");
+                     " postures within the middle 80 % of the arm joints' limits none keeps every checked pair of an "
+                     "arm segment clear (d_a + margin, 90 % of what the pair reaches there, at least d_r + "
+                     "estop_release_margin + 1 mm); the clearest leaves " + std::to_string(n_short) + " short: " +
+                     short_pairs + ": exclude the pairs that cannot collide (collision YAML exclude:), or lower d_r");
   }
   // Coordinate descent: each left joint by +-step (the right one mirrored), then unmirrored right joints.
   for (double step : {0.2, 0.1, 0.05, 0.02, 0.01}) {
@@ -581,7 +670,7 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
   s.rest_pair = m.segments[p.a].name + "-" + m.segments[p.b].name;
   Eigen::Vector3d h = kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0];
   std::ostringstream os;
-  os << "rest: left hand " << fmt("%.2f", h.x()) << " m in front of, " << fmt("%.2f", h.y()) << " m beside and "
+  os << "rest: left hand " << fmt("%.2f", h.dot(fwd)) << " m in front of, " << fmt("%.2f", h.dot(lft)) << " m beside and "
      << fmt("%.2f", -h.z()) << " m below the shoulder (arm reach " << fmt("%.2f", reach)
      << " m): the posture nearest to 'hand below and in front of the shoulder, arm slightly out' of " << o.rest_samples
      << " random ones in the middle 80 % of the limits (then refined) with every checked pair of an arm above d_a + "

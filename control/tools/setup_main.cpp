@@ -9,12 +9,15 @@
 #include "package_args.hpp"
 #include "reflex/control/pair_sampling.hpp"
 #include "reflex/control/robot_setup.hpp"
+#include "reflex/control/simulation.hpp"
 #include "reflex/control/urdf_loader.hpp"
 
 #include <CLI/CLI.hpp>
 #include <tinyxml2.h>
 
 #include <cerrno>
+#include <cstdlib>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -89,6 +92,23 @@ std::string relativeTo(const std::string& path, const std::string& dir) {
   return rel.empty() || up > 2 ? abs.string() : rel.string();
 }
 
+// A private folder inside DIR for the files being made; removed with everything in it when set-up ends.
+struct Staging {
+  std::string dir;
+  explicit Staging(const std::string& parent) {
+    std::string tmpl = (fs::path(parent) / ".reflex_setup.XXXXXX").string();
+    if (!mkdtemp(tmpl.data()))
+      throw std::runtime_error("--out '" + parent + "': cannot make a staging folder in it: " + std::strerror(errno));
+    dir = tmpl;
+  }
+  ~Staging() {
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+  Staging(const Staging&) = delete;
+  Staging& operator=(const Staging&) = delete;
+};
+
 std::string vec3(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
 
 }  // namespace
@@ -125,6 +145,7 @@ int run(int argc, char** argv) {
   o.d_a = reflex::control::ControllerParams{}.d_a;
   sampling.near_distance = o.d_a;
 
+  std::pair<std::string, std::string> staged_as;  // (staging folder, DIR)
   try {
     for (const auto& [what, path] : {std::pair<std::string, std::string>{"URDF", urdf}, {"--srdf", srdf}}) {
       if (path.empty()) continue;
@@ -138,24 +159,83 @@ int run(int argc, char** argv) {
     if (const std::string why = reflex::common::outputFolderProblem(out_dir); !why.empty())
       throw std::runtime_error("--out " + why);
     const std::string stem = fs::path(urdf).stem().string();
+    const std::string final_dir = out_dir;
+    const auto finalPath = [&](const std::string& name) { return (fs::path(final_dir) / name).string(); };
+    // Every file set-up may write, checked before any work: only a regular file is ever replaced (a
+    // directory, a device or a FIFO in its place is an error), and only with --force.
+    std::vector<std::string> outputs = {finalPath("controller.yaml"), finalPath("collision.yaml"), finalPath("behavior.yaml")};
+    if (hasMeshCollision(urdf)) outputs.push_back(finalPath(stem + ".fit.yaml"));
+    if (close_gaps) outputs.push_back(finalPath(stem + ".urdf"));
+    for (const std::string& p : outputs) {
+      std::error_code ec;
+      const fs::file_status st = fs::symlink_status(p, ec);
+      if (!fs::exists(st)) continue;
+      if (!fs::is_regular_file(st))
+        throw std::runtime_error("'" + p + "' exists and is " +
+                                 (fs::is_directory(st) ? std::string("a directory")
+                                  : fs::is_symlink(st) ? std::string("a symbolic link")
+                                  : fs::is_character_file(st) || fs::is_block_file(st) ? std::string("a device")
+                                  : fs::is_fifo(st) ? std::string("a FIFO") : std::string("not a regular file")) +
+                                 ": reflex_setup replaces only regular files; remove it or choose another --out");
+      if (!force && p != finalPath(stem + ".fit.yaml"))
+        throw std::runtime_error("'" + p + "' exists; give --force to replace it");
+    }
+    if (close_gaps && fs::exists(finalPath(stem + ".urdf")) && fs::equivalent(finalPath(stem + ".urdf"), urdf))
+      throw std::runtime_error("--close-gaps would overwrite the URDF '" + urdf + "' itself; choose another --out");
+    // Everything is written into a staging folder inside DIR first and read back from there; only a
+    // set-up that gets to the end replaces the files in DIR. A failure leaves DIR as it was.
+    const Staging staging(final_dir);
+    out_dir = staging.dir;
+    staged_as = {staging.dir, final_dir};
     const std::string controller_path = (fs::path(out_dir) / "controller.yaml").string();
     const std::string collision_path = (fs::path(out_dir) / "collision.yaml").string();
     const std::string behavior_path = (fs::path(out_dir) / "behavior.yaml").string();
     const std::string fit_path = (fs::path(out_dir) / (stem + ".fit.yaml")).string();
     const std::string closed_urdf = (fs::path(out_dir) / (stem + ".urdf")).string();
-    if (!force)
-      for (const std::string& p : {controller_path, collision_path, behavior_path})
-        if (fs::exists(p)) throw std::runtime_error("'" + p + "' exists; give --force to replace it");
-    if (close_gaps && fs::exists(closed_urdf) && fs::equivalent(closed_urdf, urdf))
-      throw std::runtime_error("--close-gaps would overwrite the URDF '" + urdf + "' itself; choose another --out");
 
     // 1. The mesh fit, when the robot has meshes.
     const bool meshes = hasMeshCollision(urdf);
+    std::string fit_final_text;
     auto fit = [&](const std::string& robot_urdf) {
+      // A fit already in DIR for this URDF, with the default options, that the loader takes (every mesh
+      // link there, no input changed since: same hashes) is reused; anything else is fitted anew.
+      const std::string existing = finalPath(stem + ".fit.yaml");
+      if (robot_urdf == urdf && fs::exists(existing)) {
+        std::string why_not;
+        try {
+          const auto old = reflex::control::loadFitOverlay(existing);
+          const reflex::control::FitOptions d;
+          const auto& f = old.options;
+          std::error_code ec;
+          if (!fs::equivalent(old.urdf, urdf, ec)) why_not = "it is the fit of '" + old.urdf + "'";
+          else if (f.max_primitives != d.max_primitives || f.split_ratio != d.split_ratio ||
+                   f.min_split_gain != d.min_split_gain || f.quantum != d.quantum ||
+                   f.gap_samples_per_primitive != d.gap_samples_per_primitive || f.max_pieces != d.max_pieces ||
+                   f.piece_gap != d.piece_gap)
+            why_not = "it was made with other options";
+          else {
+            reflex::control::CollisionConfig c;
+            c.exclude_adjacent = false;
+            c.fit = existing;
+            (void)reflex::control::loadModel(urdf, c);  // throws for a stale or incomplete fit
+            writeFile(fit_path, reflex::control::fitOverlayText(old, fit_path));
+            fit_final_text = reflex::control::fitOverlayText(old, existing);
+            std::printf("fit: reusing %s (the fit of this URDF with the default options; every mesh unchanged)\n",
+                        existing.c_str());
+            return;
+          }
+        } catch (const std::exception& e) {
+          why_not = e.what();
+        }
+        std::printf("fit: not reusing %s: %s\n", existing.c_str(), why_not.c_str());
+      }
       std::printf("fit: the URDF has mesh collision geometry: fitting capsules and spheres (reflex_fit) into %s\n",
                   fit_path.c_str());
       const auto overlay = reflex::control::fitRobot(robot_urdf, paths, reflex::control::FitOptions{});
       writeFile(fit_path, reflex::control::fitOverlayText(overlay, fit_path));
+      auto as_final = overlay;  // as read from DIR: the URDF given, or the gap-closed copy in DIR
+      if (robot_urdf != urdf) as_final.urdf = finalPath(stem + ".urdf");
+      fit_final_text = reflex::control::fitOverlayText(as_final, finalPath(stem + ".fit.yaml"));
       for (const auto& l : overlay.links)
         std::printf("fit: %s: %zu primitives, %d/%d vertices enclosed, volume ratio %.3f, worst gap %.4f m\n",
                     l.link.c_str(), l.primitives.size(), l.stats.vertices_enclosed, l.stats.vertices,
@@ -176,22 +256,63 @@ int run(int argc, char** argv) {
     const Model all = reflex::control::loadModel(urdf, every);
     const Model nonadj = reflex::control::loadModel(urdf, nonadj_config);
     // The structure first (it does not depend on the pair list): a robot without clear arms writes nothing.
-    (void)reflex::control::findRobotStructure(nonadj, o);
+    // The joints Reflex drives (both arms, the walking joints): a pair no driven joint moves is not checked.
+    {
+      const reflex::control::RobotSetup structure = reflex::control::findRobotStructure(nonadj, o);
+      for (const auto& arm : structure.arms) {
+        sampling.driven_joints.insert(sampling.driven_joints.end(), arm.joints.begin(), arm.joints.end());
+        sampling.arm_joints.insert(sampling.arm_joints.end(), arm.joints.begin(), arm.joints.end());
+      }
+      sampling.standing = reflex::control::neutralConfiguration(all);
+      const reflex::control::ControllerParams defaults;
+      sampling.touch_distance = defaults.d_r + defaults.estop_release_margin;
+      sampling.exclude_always_near = true;
+      const reflex::control::WalkingPattern walking(nonadj);
+      for (const int qi : walking.joints())
+        sampling.driven_joints.push_back(nonadj.q_names[static_cast<std::size_t>(qi)]);
+    }
     std::fprintf(stderr, "reflex_setup: sampling %d configurations for the pair list\n", sampling.samples);
     const auto report = reflex::control::samplePairs(all, nonadj, sampling);
-    int always = 0, never = 0;
+    int always = 0, never = 0, undriven = 0, near = 0, standing = 0;
     for (const auto& p : report.pairs) {
       always += p.verdict == reflex::control::PairVerdict::kAlwaysInCollision;
       never += p.verdict == reflex::control::PairVerdict::kNeverClose;
+      near += p.verdict == reflex::control::PairVerdict::kAlwaysNear;
+      standing += p.verdict == reflex::control::PairVerdict::kTouchingStanding;
+      if (p.verdict == reflex::control::PairVerdict::kAlwaysNear && p.min_distance <= sampling.touch_distance)
+        std::printf("WARNING: pair '%s'-'%s' is never farther apart than %.1f mm (inside d_a at every posture) and comes "
+                    "%.1f mm close: NOT checked (the avoidance would hold the arm off every target); the joint limits "
+                    "and the robot's own controller must keep it apart\n",
+                    p.a.c_str(), p.b.c_str(), 1e3 * std::min(p.max_distance, p.driven_max_distance),
+                    1e3 * p.min_distance);
+      if (p.verdict == reflex::control::PairVerdict::kTouchingStanding)
+        std::printf("WARNING: pair '%s'-'%s' is %.1f mm apart in the standing posture and no arm joint moves it: NOT "
+                    "checked (the red zone would latch at start); the robot's own controller must keep it apart\n",
+                    p.a.c_str(), p.b.c_str(), 1e3 * p.standing_distance);
+      if (p.verdict != reflex::control::PairVerdict::kNotDriven) continue;
+      ++undriven;
+      if (p.min_distance < sampling.near_distance)
+        std::printf("WARNING: pair '%s'-'%s' is moved by no joint Reflex drives and comes %.1f mm close (sampled over "
+                    "the joints that move it): NOT checked; the robot's own controller must keep it apart\n",
+                    p.a.c_str(), p.b.c_str(), 1e3 * p.min_distance);
     }
     std::string collision = "# Written by reflex_setup for " + urdf + " (keys: control/docs/configuration.md).\n" +
                             reflex::control::exclusionYaml(report);
-    if (!srdf.empty()) collision += "srdf: " + relativeTo(srdf, out_dir) + "   # its <disable_collisions> pairs are excluded too\n";
-    if (meshes) collision += "fit: " + fs::path(fit_path).filename().string() + "   # the mesh fit (reflex_fit)\n";
+    std::string collision_final = collision;
+    if (!srdf.empty()) {
+      collision += "srdf: " + relativeTo(srdf, out_dir) + "   # its <disable_collisions> pairs are excluded too\n";
+      collision_final += "srdf: " + relativeTo(srdf, final_dir) + "   # its <disable_collisions> pairs are excluded too\n";
+    }
+    if (meshes) {
+      collision += "fit: " + fs::path(fit_path).filename().string() + "   # the mesh fit (reflex_fit)\n";
+      collision_final += "fit: " + fs::path(fit_path).filename().string() + "   # the mesh fit (reflex_fit)\n";
+    }
     writeFile(collision_path, collision);
     std::printf("pairs: %d sampled configurations%s: %d pairs always in collision (excluded), %d never closer than "
-                "d_a (listed, commented out: still checked), %zu adjacent (not checked)\n",
-                sampling.samples, srdf.empty() ? "" : " after the SRDF's exclusions", always, never, report.adjacent.size());
+                "d_a (listed, commented out: still checked), %zu adjacent (not checked), %d moved by no joint Reflex "
+                "drives, %d never out of d_a, %d touching standing (these three not checked: listed in %s)\n",
+                sampling.samples, srdf.empty() ? "" : " after the SRDF's exclusions", always, never,
+                report.adjacent.size(), undriven, near, standing, finalPath("collision.yaml").c_str());
 
     // 3. The robot as the controller will load it, and what the setup finds on it.
     std::string robot_urdf = urdf;
@@ -204,9 +325,12 @@ int run(int argc, char** argv) {
       std::printf("  paste into <link name=\"%s\"> of the URDF (Reflex reads a cylinder as that capsule), or rerun "
                   "with --close-gaps:\n  %s\n", g.link.c_str(), g.urdf_snippet.c_str());
     }
+    std::vector<reflex::control::ArmGap> closing_gaps;
     if (close_gaps && !setup.gaps.empty()) {
       writeClosedUrdf(urdf, closed_urdf, setup.gaps);
-      std::printf("gaps: wrote %s with %zu closing capsules; configuring that robot\n", closed_urdf.c_str(), setup.gaps.size());
+      closing_gaps = setup.gaps;
+      std::printf("gaps: wrote %s with %zu closing capsules; configuring that robot\n", finalPath(stem + ".urdf").c_str(),
+                  setup.gaps.size());
       robot_urdf = closed_urdf;
       if (meshes) fit(robot_urdf);
       model = reflex::control::loadModel(robot_urdf, reflex::control::loadCollisionConfig(collision_path));
@@ -247,28 +371,43 @@ int run(int argc, char** argv) {
     reflex::control::computeForwardKinematics(model, kin, q);
     reflex::control::ReachCheck reach;
     double offset = 0.0;
-    for (double off : {0.08, 0.05, 0.03}) {
-      std::array<Eigen::Vector3d, 2> t;
-      for (int a = 0; a < 2; ++a)
-        t[a] = kin.X_B_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L + Eigen::Vector3d(off, 0.0, 0.6 * off);
-      for (auto& v : t)
-        for (int i = 0; i < 3; ++i) v[i] = std::round(v[i] * 1000.0) / 1000.0;  // as written (mm)
-      reach = reflex::control::checkReach(model, cm, t, 4.0, 0.01);
-      offset = off;
-      if (reach.reached_at >= 0 && reach.estops == 0 && reach.min_distance > cm.params.d_r) break;
+    std::string towards;
+    // Forward and up first; where the arms rest inside the avoidance zone (a crowded shoulder) a move
+    // that opens it (up, out, down) may be what the robot can do: the first one reached is written.
+    const Eigen::Vector3d up = Eigen::Vector3d::UnitZ(), left = up.cross(setup.forward);
+    const std::vector<std::pair<std::string, Eigen::Vector3d>> directions = {
+        {"forward, 0.6 x up", setup.forward + 0.6 * up}, {"up", up}, {"out", left}, {"down", -up}};
+    bool reached = false;
+    for (const auto& [name, dir] : directions) {
+      for (double off : {0.08, 0.05, 0.03}) {
+        std::array<Eigen::Vector3d, 2> t;
+        for (int a = 0; a < 2; ++a) {
+          Eigen::Vector3d d = dir;
+          if (a == 1) d = d - 2.0 * d.dot(left) * left;  // mirrored: out is to the right for the right hand
+          t[a] = kin.X_B_L[cm.arms[a].hand_link] * cm.arms[a].hand_point_L + off * d;
+        }
+        for (auto& v : t)
+          for (int i = 0; i < 3; ++i) v[i] = std::round(v[i] * 1000.0) / 1000.0;  // as written (mm)
+        reach = reflex::control::checkReach(model, cm, t, 4.0, 0.01);
+        offset = off;
+        towards = name;
+        reached = reach.reached_at >= 0 && reach.estops == 0 && reach.min_distance > cm.params.d_r;
+        if (reached) break;
+      }
+      if (reached) break;
     }
-    const bool reached = reach.reached_at >= 0 && reach.estops == 0 && reach.min_distance > cm.params.d_r;
-    std::printf("behavior: both hands to %s / %s (rest + %.2f m forward, %.3f m up): %s; closest pair during the "
+    std::printf("behavior: both hands to %s / %s (rest + %.2f m %s): %s; closest pair during the "
                 "run %.3f m (d_r %.3f m), %llu e-stops\n",
-                vec3(reach.target_B[0]).c_str(), vec3(reach.target_B[1]).c_str(), offset, 0.6 * offset,
+                vec3(reach.target_B[0]).c_str(), vec3(reach.target_B[1]).c_str(), offset, towards.c_str(),
                 reached ? ("reached within 10 mm after " + num(reach.reached_at) + " s of a closed-loop run").c_str()
                         : ("NOT reached in 4 s (errors " + num(reach.error[0]) + " / " + num(reach.error[1]) + " m)").c_str(),
                 reach.min_distance, cm.params.d_r, static_cast<unsigned long long>(reach.estops));
     std::string beh = "# Behavior configuration for " + model.name + ", written by reflex_setup: both hands reach to a\n"
-                      "# point in front of their rest positions and stay (checked by a closed-loop run at set-up).\n"
+                      "# point near their rest positions and stay (checked by a closed-loop run at set-up).\n"
                       "#   reflex_behavior --config " + behavior_path + "\n# Keys: modules/README.md, control/docs/configuration.md.\n"
                       "process: behavior\n\nrobot:\n";
-    beh += "  urdf: " + relativeTo(robot_urdf, out_dir) + "   # relative to this file\n";
+    const std::string robot_urdf_final = robot_urdf == urdf ? urdf : finalPath(stem + ".urdf");
+    beh += "  urdf: " + relativeTo(robot_urdf_final, final_dir) + "   # relative to this file\n";
     beh += "  collision: collision.yaml\n";
     beh += "  left_shoulder: " + setup.arms[0].shoulder_link + "\n  right_shoulder: " + setup.arms[1].shoulder_link + "\n";
     beh += "  left_hand: " + setup.arms[0].hand_link + "\n  right_hand: " + setup.arms[1].hand_link + "\n";
@@ -278,15 +417,27 @@ int run(int argc, char** argv) {
     beh += "modules:\n  - name: reach\n    type: scripted\n    config:\n      timeline:\n        - {t: 0.0, left: " +
            vec3(reach.target_B[0]) + ", right: " + vec3(reach.target_B[1]) + "}\n";
     writeFile(behavior_path, beh);
-    std::printf("wrote %s, %s, %s%s%s\n", controller_path.c_str(), collision_path.c_str(), behavior_path.c_str(),
-                meshes ? ", " : "", meshes ? fit_path.c_str() : "");
-    std::printf("next: reflex_sim SCENARIO --urdf %s --collision %s --controller %s --out RUN\n", robot_urdf.c_str(),
-                collision_path.c_str(), controller_path.c_str());
+    // Into DIR: the texts as they read from there (the fit's and the SRDF's relative paths).
+    if (meshes) writeFile(finalPath(stem + ".fit.yaml"), fit_final_text);
+    writeFile(finalPath("collision.yaml"), collision_final);
+    writeFile(finalPath("controller.yaml"), ctl);
+    if (robot_urdf != urdf) writeClosedUrdf(urdf, robot_urdf_final, closing_gaps);
+    writeFile(finalPath("behavior.yaml"), beh);
+    std::printf("wrote %s, %s, %s%s%s\n", finalPath("controller.yaml").c_str(), finalPath("collision.yaml").c_str(),
+                finalPath("behavior.yaml").c_str(), meshes ? ", " : "", meshes ? finalPath(stem + ".fit.yaml").c_str() : "");
+    std::printf("next: reflex_sim SCENARIO --urdf %s --collision %s --controller %s --out RUN\n",
+                robot_urdf_final.c_str(), finalPath("collision.yaml").c_str(), finalPath("controller.yaml").c_str());
     std::printf("next: reflex_controller --urdf %s --collision %s --controller %s; reflex_behavior --config %s\n",
-                robot_urdf.c_str(), collision_path.c_str(), controller_path.c_str(), behavior_path.c_str());
+                robot_urdf_final.c_str(), finalPath("collision.yaml").c_str(), finalPath("controller.yaml").c_str(),
+                finalPath("behavior.yaml").c_str());
     return reached ? 0 : 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "reflex_setup: error: %s\n", e.what());
+    // Errors name the files as they would be in DIR, never the staging folder (removed by now).
+    std::string what = e.what();
+    if (!staged_as.first.empty())
+      for (std::size_t at = what.find(staged_as.first); at != std::string::npos; at = what.find(staged_as.first, at))
+        what.replace(at, staged_as.first.size(), staged_as.second);
+    std::fprintf(stderr, "reflex_setup: error: %s\n", what.c_str());
     return 1;
   }
 }

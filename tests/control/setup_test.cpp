@@ -269,6 +269,71 @@ TEST(Setup, WarnsAboutAForearmGapWithTheClosingCapsuleAndClosesIt) {
   EXPECT_THAT(slurp(dir + "/closed/behavior.yaml"), HasSubstr("urdf: gap_robot.urdf"));
 }
 
+// Two 4-joint arms (joints within +-0.6 rad) on a trunk sphere, no head, and two thin rods fixed to
+// the trunk, lying along y at x = +-rod_x beside the left arm's second link.
+std::string shieldRobot(const std::string& dir, double rod_x) {
+  std::ostringstream os;
+  os << "<robot name=\"shield\"><link name=\"trunk\"><collision><geometry><sphere radius=\"0.05\"/></geometry>"
+        "</collision></link>\n";
+  for (const char* p : {"l", "r"}) {
+    std::string parent = "trunk";
+    for (int j = 1; j <= 4; ++j) {
+      const std::string link = std::string(p) + "_l" + std::to_string(j);
+      os << "<link name=\"" << link << "\"><collision><origin xyz=\"0 0 -0.06\"/><geometry><cylinder radius=\"0.02\" "
+         << "length=\"0.06\"/></geometry></collision></link>\n<joint name=\"" << p << "_j" << j
+         << "\" type=\"revolute\"><parent link=\"" << parent << "\"/><child link=\"" << link << "\"/><origin xyz=\""
+         << (j == 1 ? (p[0] == 'l' ? "0 0.2 0" : "0 -0.2 0") : "0 0 -0.12") << "\"/><axis xyz=\""
+         << (j % 2 ? "0 1 0" : "1 0 0") << "\"/><limit lower=\"-0.6\" upper=\"0.6\" velocity=\"2\" effort=\"10\"/>"
+         << "</joint>\n";
+      parent = link;
+    }
+  }
+  for (int k = 0; k < 2; ++k)
+    os << "<link name=\"rod" << k << "\"><collision><origin rpy=\"1.5707963267948966 0 0\"/><geometry><cylinder "
+       << "radius=\"0.001\" length=\"0.2\"/></geometry></collision></link>\n<joint name=\"rod" << k
+       << "_fix\" type=\"fixed\"><parent link=\"trunk\"/><child link=\"rod" << k << "\"/><origin xyz=\""
+       << (k == 0 ? rod_x : -rod_x) << " 0.2 -0.18\"/></joint>\n";
+  os << "</robot>\n";
+  const std::string path = dir + "/shield.urdf";
+  std::ofstream(path) << os.str();
+  return path;
+}
+
+// What set-up may replace in DIR: only regular files, only with --force, and only once it succeeded
+// (the files are made in a staging folder inside DIR, then moved). A directory where behavior.yaml
+// goes is refused before any work: nothing in DIR changes, no staging folder is left.
+TEST(Setup, OnlySuccessReplacesFilesAndNeverAnythingButARegularFile) {
+  const std::string dir = freshDir("shield");
+  const std::string urdf = shieldRobot(dir, 0.15);
+  const std::string out = dir + "/out";
+  fs::create_directories(out + "/behavior.yaml");
+  std::ofstream(out + "/controller.yaml") << "keep\n";
+  auto listing = [&] {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(out)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  const ProcessResult r = setupRun(urdf + " --out " + out + " --force");
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_EQ(r.err, "reflex_setup: error: '" + out + "/behavior.yaml' exists and is a directory: reflex_setup replaces "
+                   "only regular files; remove it or choose another --out\n");
+  EXPECT_EQ(listing(), (std::vector<std::string>{"behavior.yaml", "controller.yaml"}));
+  EXPECT_EQ(slurp(out + "/controller.yaml"), "keep\n");
+  EXPECT_TRUE(fs::is_directory(out + "/behavior.yaml"));
+
+  // The directory gone: set-up succeeds (--force replaces controller.yaml), and the robot without a
+  // head is said to have none.
+  fs::remove(out + "/behavior.yaml");
+  const ProcessResult r2 = setupRun(urdf + " --out " + out + " --force");
+  ASSERT_EQ(r2.exit_code, 0) << r2.out << r2.err;
+  EXPECT_THAT(r2.out, HasSubstr("head: link 'trunk', NO HEAD: no chain of 1 to 3 joints other than the arms ends in a "
+                                "link with collision geometry"));
+  EXPECT_THAT(slurp(out + "/behavior.yaml"), HasSubstr("  head: trunk\n"));
+  EXPECT_THAT(slurp(out + "/controller.yaml"), HasSubstr("arms:"));
+  EXPECT_EQ(listing(), (std::vector<std::string>{"behavior.yaml", "collision.yaml", "controller.yaml"}));
+}
+
 // A trunk sphere and chains of revolute joints (capsule links hanging along -z) at given start points.
 std::string chainXml(const std::string& p, int joints, double x, double y, double z) {
   std::ostringstream os;

@@ -6,7 +6,9 @@
 //               link with two or more child subtrees that hold movable joints) down to a leaf or the
 //               next branching; an arm candidate is a chain of >= 4 revolute joints (no prismatic)
 //               with a mirrored partner (first joints at (x, y, z) and (x, -y, z) within 1 cm, same
-//               joint count); left is the one with y > 0 at q = 0 (REP 103: x forward, y left, z up).
+//               joint count); left is the one with y > 0 at q = 0 (REP 103: x forward, y left, z up),
+//               unless both chains' names say the opposite (l_/left/L... on the y < 0 one): then the
+//               root frame faces -x (iCub's) and forward is -x.
 //               Of several mirrored pairs the one starting highest is the arms (legs hang below the
 //               arms) when it is 5 cm above the next; else joint and link names are hints (shoulder,
 //               arm, elbow, wrist, hand against hip, leg, knee, ankle, foot); else SetupError naming
@@ -86,6 +88,9 @@ struct ArmGap {
 struct RobotSetup {
   std::array<ArmSetup, 2> arms;     ///< [0] left, [1] right
   std::string head_link, camera_link;
+  /// The robot's forward direction in the root frame: +x (REP 103), or -x when both arms' names say
+  /// the root frame faces backward (left arm at y < 0).
+  Eigen::Vector3d forward = Eigen::Vector3d::UnitX();
   std::vector<ArmGap> gaps;
   double rest_distance = 0.0;       ///< m, closest checked pair at rest
   std::string rest_pair;            ///< "a-b"
