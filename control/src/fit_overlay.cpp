@@ -76,8 +76,25 @@ std::string defaultFitOverlayPath(const std::string& urdf_path) {
   return stem + ".fit.yaml";
 }
 
-FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, const FitOptions& options,
-                    const std::function<void(const std::string&)>& progress) {
+namespace {
+
+struct Job {
+  std::string link;
+  std::vector<detail::FitElement> elements;
+  std::vector<std::string> resolved;
+  std::string hash;
+};
+
+/// The URDF's links with mesh or box collision elements, their input hashes, and their meshes (link
+/// frame; with_boxes: the boxes' meshes too), every mesh read once. Throws ModelError naming every
+/// unresolved or unreadable mesh in one message.
+struct RobotMeshes {
+  FitOverlay overlay;  // urdf, urdf_dir, packages
+  std::vector<Job> jobs;
+  std::vector<TriangleMesh> meshes, with_boxes;
+};
+
+RobotMeshes readRobotMeshes(const std::string& urdf_path, const PackagePaths& paths) {
   if (const std::string why = common::inputFileProblem(urdf_path); !why.empty()) throw ModelError("URDF file " + why);
   std::ifstream in(urdf_path);
   if (!in) throw ModelError(urdf_path + ": cannot open URDF file");
@@ -100,18 +117,12 @@ FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, con
     }
   } release{model};
 
-  FitOverlay overlay;
+  RobotMeshes out;
+  FitOverlay& overlay = out.overlay;
   overlay.urdf = urdf_path;
   overlay.urdf_dir = detail::folderOf(urdf_path);
-  overlay.options = options;
   std::vector<std::string> problems;
-  struct Job {
-    std::string link;
-    std::vector<detail::FitElement> elements;
-    std::vector<std::string> resolved;
-    std::string hash;
-  };
-  std::vector<Job> jobs;
+  std::vector<Job>& jobs = out.jobs;
   for (const auto& [name, link] : model->links_) {  // std::map: sorted by name
     Job job{name, detail::fitElementsOf(*link), {}, {}};
     if (job.elements.empty()) continue;
@@ -132,7 +143,10 @@ FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, con
     }
   // Read every mesh once; unreadable ones are problems too, all named in one message. Boxes are
   // fitted on their own (fitBox) and join the meshes only for the link's numbers.
-  std::vector<TriangleMesh> meshes(jobs.size()), with_boxes(jobs.size());
+  std::vector<TriangleMesh>& meshes = out.meshes;
+  std::vector<TriangleMesh>& with_boxes = out.with_boxes;
+  meshes.resize(jobs.size());
+  with_boxes.resize(jobs.size());
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     const Job& job = jobs[j];
     for (std::size_t i = 0, m = 0; i < job.elements.size(); ++i) {
@@ -161,6 +175,26 @@ FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, con
     for (const auto& p : problems) msg += "\n  " + p;
     throw ModelError(msg);
   }
+  return out;
+}
+
+}  // namespace
+
+std::map<std::string, TriangleMesh> linkCollisionMeshes(const std::string& urdf_path, const PackagePaths& paths) {
+  RobotMeshes r = readRobotMeshes(urdf_path, paths);
+  std::map<std::string, TriangleMesh> out;
+  for (std::size_t j = 0; j < r.jobs.size(); ++j) out[r.jobs[j].link] = std::move(r.with_boxes[j]);
+  return out;
+}
+
+FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, const FitOptions& options,
+                    const std::function<void(const std::string&)>& progress) {
+  RobotMeshes r = readRobotMeshes(urdf_path, paths);
+  FitOverlay overlay = std::move(r.overlay);
+  overlay.options = options;
+  const std::vector<Job>& jobs = r.jobs;
+  const std::vector<TriangleMesh>& meshes = r.meshes;
+  const std::vector<TriangleMesh>& with_boxes = r.with_boxes;
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     LinkFit fit;
     fit.link = jobs[j].link;

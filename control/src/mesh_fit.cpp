@@ -1057,4 +1057,76 @@ PieceFit boxPiece(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B, c
   return f;
 }
 
+
+namespace {
+
+/// Whether segment p-q crosses triangle (a, b, c) (Moller-Trumbore; a segment in the triangle's plane
+/// is not seen).
+bool segmentCrossesTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a,
+                            const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d d = q - p, e1 = b - a, e2 = c - a;
+  const Eigen::Vector3d h = d.cross(e2);
+  const double det = e1.dot(h);
+  if (std::abs(det) < 1e-18) return false;
+  const double inv = 1.0 / det;
+  const Eigen::Vector3d s = p - a;
+  const double u = inv * s.dot(h);
+  if (u < 0.0 || u > 1.0) return false;
+  const Eigen::Vector3d qv = s.cross(e1);
+  const double v = inv * d.dot(qv);
+  if (v < 0.0 || u + v > 1.0) return false;
+  const double t = inv * e2.dot(qv);
+  return t >= 0.0 && t <= 1.0;
+}
+
+/// An edge of one triangle crosses the other.
+bool trianglesCross(const std::array<Eigen::Vector3d, 3>& t, const std::array<Eigen::Vector3d, 3>& u) {
+  for (int k = 0; k < 3; ++k) {
+    if (segmentCrossesTriangle(t[k], t[(k + 1) % 3], u[0], u[1], u[2])) return true;
+    if (segmentCrossesTriangle(u[k], u[(k + 1) % 3], t[0], t[1], t[2])) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+bool meshesIntersect(const TriangleMesh& a, const Eigen::Isometry3d& X_B_A, const TriangleMesh& b,
+                     const Eigen::Isometry3d& X_B_B) {
+  if (a.triangles.empty() || b.triangles.empty()) return false;
+  // b in a's frame; only the triangles inside the other mesh's box can cross.
+  const Eigen::Isometry3d X_A_B = X_B_A.inverse() * X_B_B;
+  std::vector<Eigen::Vector3d> vb(b.vertices.size());
+  for (std::size_t i = 0; i < vb.size(); ++i) vb[i] = X_A_B * b.vertices[i];
+  Eigen::AlignedBox3d box_a, box_b;
+  for (const auto& v : a.vertices) box_a.extend(v);
+  for (const auto& v : vb) box_b.extend(v);
+  if (!box_a.intersects(box_b)) return false;
+  auto corners = [](const std::vector<Eigen::Vector3d>& v, const std::array<int, 3>& t) {
+    return std::array<Eigen::Vector3d, 3>{v[t[0]], v[t[1]], v[t[2]]};
+  };
+  auto boxOf = [](const std::array<Eigen::Vector3d, 3>& t) {
+    Eigen::AlignedBox3d x;
+    for (const auto& p : t) x.extend(p);
+    return x;
+  };
+  std::vector<std::pair<std::array<Eigen::Vector3d, 3>, Eigen::AlignedBox3d>> ta, tb;
+  for (const auto& t : a.triangles) {
+    const auto c = corners(a.vertices, t);
+    const auto x = boxOf(c);
+    if (x.intersects(box_b)) ta.emplace_back(c, x);
+  }
+  for (const auto& t : b.triangles) {
+    const auto c = corners(vb, t);
+    const auto x = boxOf(c);
+    if (x.intersects(box_a)) tb.emplace_back(c, x);
+  }
+  for (const auto& [t, x] : ta)
+    for (const auto& [u, y] : tb)
+      if (x.intersects(y) && trianglesCross(t, u)) return true;
+  // No surfaces crossing: one inside the other?
+  TriangleMesh b_in_a{vb, b.triangles};
+  return std::abs(windingNumber(b_in_a, a.vertices[a.triangles[0][0]])) >= 0.95 ||
+         std::abs(windingNumber(a, vb[b.triangles[0][0]])) >= 0.95;
+}
+
 }  // namespace reflex::control

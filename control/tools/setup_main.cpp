@@ -22,6 +22,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -256,6 +257,7 @@ int run(int argc, char** argv) {
     const Model all = reflex::control::loadModel(urdf, every);
     const Model nonadj = reflex::control::loadModel(urdf, nonadj_config);
     // The structure first (it does not depend on the pair list): a robot without clear arms writes nothing.
+    std::map<std::string, reflex::control::TriangleMesh> link_meshes;
     // The joints Reflex drives (both arms, the walking joints): a pair no driven joint moves is not checked.
     {
       const reflex::control::RobotSetup structure = reflex::control::findRobotStructure(nonadj, o);
@@ -267,6 +269,18 @@ int run(int argc, char** argv) {
       const reflex::control::ControllerParams defaults;
       sampling.touch_distance = defaults.d_r + defaults.estop_release_margin;
       sampling.exclude_always_near = true;
+      if (meshes) {  // "always in collision" only where the original meshes intersect
+        link_meshes = reflex::control::linkCollisionMeshes(urdf, paths);
+        sampling.confirm_collision = [&](int sa, int sb, const reflex::control::KinematicsData& kin) {
+          const int la = nonadj.segments[static_cast<std::size_t>(sa)].link;
+          const int lb = nonadj.segments[static_cast<std::size_t>(sb)].link;
+          const auto ma = link_meshes.find(nonadj.links[static_cast<std::size_t>(la)].name);
+          const auto mb = link_meshes.find(nonadj.links[static_cast<std::size_t>(lb)].name);
+          if (ma == link_meshes.end() || mb == link_meshes.end()) return true;  // primitives: the model is exact
+          return reflex::control::meshesIntersect(ma->second, kin.X_B_L[static_cast<std::size_t>(la)], mb->second,
+                                                  kin.X_B_L[static_cast<std::size_t>(lb)]);
+        };
+      }
       const reflex::control::WalkingPattern walking(nonadj);
       for (const int qi : walking.joints())
         sampling.driven_joints.push_back(nonadj.q_names[static_cast<std::size_t>(qi)]);

@@ -637,3 +637,46 @@ TEST(MeshFitBox, SmallHumanoidBoxesFittedWithoutAnOverlayAndNeverCloserThanFclSa
 
 }  // namespace
 }  // namespace reflex::control
+
+namespace reflex::control {
+namespace {
+
+// meshesIntersect against analytic placements of two boxes (boxMesh): crossing surfaces, apart by
+// 1 mm along each axis, one wholly inside the other (no surface crossing: the winding number), and a
+// rotated box whose corner pokes 1 mm into the other.
+TEST(MeshesIntersect, CrossingApartContainedAndACornerPokingIn) {
+  const TriangleMesh a = boxMesh(Eigen::Vector3d(0.2, 0.2, 0.2), Eigen::Isometry3d::Identity());
+  const TriangleMesh small = boxMesh(Eigen::Vector3d(0.05, 0.05, 0.05), Eigen::Isometry3d::Identity());
+  const Eigen::Isometry3d I = Eigen::Isometry3d::Identity();
+  auto at = [](double x, double y, double z) {
+    Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+    X.translation() = Eigen::Vector3d(x, y, z);
+    return X;
+  };
+  EXPECT_TRUE(meshesIntersect(a, I, a, at(0.15, 0.0, 0.0)));   // overlap 0.05 m
+  for (int k = 0; k < 3; ++k) {
+    Eigen::Vector3d d = Eigen::Vector3d::Zero();
+    d[k] = 0.2 + 0.001;
+    EXPECT_FALSE(meshesIntersect(a, I, a, at(d.x(), d.y(), d.z()))) << "apart by 1 mm along axis " << k;
+    d[k] = 0.2 - 0.001;
+    EXPECT_TRUE(meshesIntersect(a, I, a, at(d.x(), d.y(), d.z()))) << "1 mm deep along axis " << k;
+  }
+  EXPECT_TRUE(meshesIntersect(a, I, small, at(0.01, -0.02, 0.03)));   // inside: no triangle crosses
+  EXPECT_TRUE(meshesIntersect(small, at(0.01, -0.02, 0.03), a, I));   // the same, the other way round
+  EXPECT_FALSE(meshesIntersect(a, I, small, at(0.5, 0.0, 0.0)));
+  // A box turned 45 degrees about z and about x: its lowest corner 1 mm below the top face of a.
+  Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
+  X.linear() = (Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitX()) *
+                Eigen::AngleAxisd(std::atan(1.0 / std::sqrt(2.0)), Eigen::Vector3d::UnitY()))
+                   .toRotationMatrix();
+  // Lowest point of the turned small box, below its centre:
+  double low = 0.0;
+  for (const auto& v : small.vertices) low = std::min(low, (X.linear() * v).z());
+  X.translation() = Eigen::Vector3d(0.0, 0.0, 0.1 - low - 0.001);
+  EXPECT_TRUE(meshesIntersect(a, I, small, X)) << "a corner 1 mm in";
+  X.translation().z() += 0.002;
+  EXPECT_FALSE(meshesIntersect(a, I, small, X)) << "a corner 1 mm above";
+}
+
+}  // namespace
+}  // namespace reflex::control

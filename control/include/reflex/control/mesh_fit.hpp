@@ -170,6 +170,16 @@ std::string defaultFitOverlayPath(const std::string& urdf_path);
 FitOverlay fitRobot(const std::string& urdf_path, const PackagePaths& paths, const FitOptions& options,
                     const std::function<void(const std::string&)>& progress = {});
 
+/// Every link's mesh and box collision elements as one triangle mesh in the link frame (the input
+/// fitRobot fits), read the same way. Throws ModelError as fitRobot does.
+std::map<std::string, TriangleMesh> linkCollisionMeshes(const std::string& urdf_path, const PackagePaths& paths);
+
+/// Whether two meshes (placed by X_B_A and X_B_B) intersect: a triangle of one crosses a triangle of
+/// the other, or a vertex of one lies inside the other (generalized winding number >= 0.95, as for a
+/// closed mesh). Errs towards "apart" (coplanar overlaps are not seen), never towards "intersecting".
+bool meshesIntersect(const TriangleMesh& a, const Eigen::Isometry3d& X_B_A, const TriangleMesh& b,
+                     const Eigen::Isometry3d& X_B_B);
+
 /// The overlay's text (YAML). Reproducible: same overlay, same bytes. Paths are written relative to
 /// the folder of `overlay_path`.
 std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay_path);

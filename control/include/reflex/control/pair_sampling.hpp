@@ -43,6 +43,8 @@
 
 namespace reflex::control {
 
+struct KinematicsData;
+
 struct PairSamplingOptions {
   int samples = 10000;            ///< random configurations (> 0)
   std::uint64_t seed = 1;         ///< the same seed gives the same report
@@ -57,6 +59,12 @@ struct PairSamplingOptions {
   double touch_distance = 0.0;  ///< m: reflex_setup gives d_r + estop_release_margin
   /// kAlwaysNear: a pair never farther apart than near_distance in any sample (reflex_setup: true).
   bool exclude_always_near = false;
+  /// If set, a pair found in collision in always_fraction of the samples is always in collision only
+  /// if this says the real parts intersect in each of `confirm_samples` more random configurations
+  /// (segment indices of the non-adjacent model, its kinematics at that configuration). reflex_setup:
+  /// the original meshes (meshesIntersect), as the tight model may overlap where they do not.
+  std::function<bool(int seg_a, int seg_b, const KinematicsData& kin)> confirm_collision;
+  int confirm_samples = 1000;
 };
 
 enum class PairVerdict { kChecked, kAlwaysInCollision, kNeverClose, kNotDriven, kTouchingStanding, kAlwaysNear };
@@ -69,6 +77,7 @@ struct SampledPair {
   double standing_distance = std::numeric_limits<double>::infinity();  ///< m, in options.standing
   /// m: the largest with only the driven joints moving (the others standing); +inf: not sampled
   double driven_max_distance = std::numeric_limits<double>::infinity();
+  int confirm_apart = 0;  ///< samples of the confirmation where confirm_collision said apart (0: not asked or none)
   PairVerdict verdict = PairVerdict::kChecked;
 };
 
