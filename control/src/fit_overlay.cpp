@@ -108,6 +108,19 @@ RobotMeshes readRobotMeshes(const std::string& urdf_path, const PackagePaths& pa
   } catch (const std::exception& e) {
     throw ModelError(urdf_path + ": urdfdom: " + e.what());
   }
+  // The loader's accounting (every collision element of the file read, or the link named with why):
+  // a link urdfdom emptied would otherwise be left out of the fit without a word.
+  std::vector<std::string> lost = audit.problems;
+  for (auto& p : detail::collisionAccounting(audit, model.get())) lost.push_back(std::move(p));
+  if (!lost.empty()) {
+    if (model)
+      for (auto& e : model->links_)
+        if (e.second) e.second->child_links.clear();
+    std::string msg = urdf_path + ": cannot fit: collision geometry would be left out or is out of range (" +
+                      std::to_string(lost.size()) + " problem" + (lost.size() == 1 ? "" : "s") + "):";
+    for (const auto& p : lost) msg += "\n  " + p;
+    throw ModelError(msg);
+  }
   if (!model) throw ModelError(urdf_path + ": malformed URDF (urdfdom could not parse it; reflex_inspect says why)");
   struct Release {  // urdfdom's parent/child shared_ptr cycle
     urdf::ModelInterfaceSharedPtr& m;

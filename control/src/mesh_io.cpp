@@ -10,6 +10,7 @@
 #include <urdf_model/model.h>
 
 #include <algorithm>
+#include <cmath>
 #include <array>
 #include <cinttypes>
 #include <map>
@@ -137,6 +138,32 @@ std::string resolveMeshFilename(const std::string& filename, const std::string& 
   return filename[0] == '/' ? filename : urdf_dir + "/" + filename;
 }
 
+namespace {
+
+// The file as read, before any post-processing: at most kMaxMeshTriangles faces (a 1 M-triangle STL
+// took 358 s and 8.1 GB to fit; collision meshes are a few thousand), every vertex finite.
+void checkRawMesh(const aiScene& scene, const std::string& path) {
+  std::size_t faces = 0;
+  for (unsigned m = 0; m < scene.mNumMeshes; ++m) faces += scene.mMeshes[m]->mNumFaces;
+  if (faces > kMaxMeshTriangles)
+    throw ModelError(path + ": mesh has " + std::to_string(faces) + " triangles, more than the " +
+                     std::to_string(kMaxMeshTriangles) + " a collision mesh may have: decimate it (a collision "
+                     "mesh needs the shape, not the detail)");
+  for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
+    const aiMesh& am = *scene.mMeshes[m];
+    for (unsigned v = 0; v < am.mNumVertices; ++v) {
+      const aiVector3D& p = am.mVertices[v];
+      if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)) continue;
+      char buf[160];
+      std::snprintf(buf, sizeof buf, "(%g, %g, %g)", p.x, p.y, p.z);
+      throw ModelError(path + ": mesh vertex " + std::to_string(v) + " of mesh " + std::to_string(m) + " at " + buf +
+                       " is not finite");
+    }
+  }
+}
+
+}  // namespace
+
 TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) throw ModelError(path + ": mesh file does not exist");
@@ -146,10 +173,16 @@ TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale)
   // frame is the mesh's frame), its <unit meter> is applied by assimp. Lines and points are dropped.
   importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_IGNORE_UP_DIRECTION, true);
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_LINE | aiPrimitiveType_POINT);
-  const aiScene* scene = importer.ReadFile(
-      path, aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_JoinIdenticalVertices |
-                aiProcess_SortByPType);
+  // Read as the file has it first: its size and every vertex are checked before any post-processing
+  // (assimp's vertex joining merged a NaN vertex into another; the scene graph's transforms cannot
+  // make a finite vertex of a NaN one, so the raw values are what counts).
+  const aiScene* raw = importer.ReadFile(path, 0);
+  if (!raw) throw ModelError(path + ": cannot read mesh: " + importer.GetErrorString());
+  checkRawMesh(*raw, path);
+  const aiScene* scene = importer.ApplyPostProcessing(aiProcess_Triangulate | aiProcess_PreTransformVertices |
+                                                     aiProcess_JoinIdenticalVertices | aiProcess_SortByPType);
   if (!scene) throw ModelError(path + ": cannot read mesh: " + importer.GetErrorString());
+
   // Vertices with the same position are one vertex (an STL repeats them per face; assimp keeps
   // copies that differ only in their normals).
   TriangleMesh mesh;
@@ -160,6 +193,17 @@ TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale)
     for (unsigned v = 0; v < am->mNumVertices; ++v) {
       const aiVector3D& p = am->mVertices[v];
       const std::array<double, 3> key{scale.x() * p.x, scale.y() * p.y, scale.z() * p.z};
+      // After the scene's transforms and the scale: the range of URDF lengths (a vertex at 1e30 m
+      // became a 1e30 m capsule).
+      for (const double c : key)
+        if (!std::isfinite(c) || std::abs(c) > kMaxMeshCoordinate) {
+          char buf[160];
+          std::snprintf(buf, sizeof buf, "(%g, %g, %g) m", key[0], key[1], key[2]);
+          throw ModelError(path + ": mesh vertex " + std::to_string(v) + " of mesh " + std::to_string(m) + " at " +
+                           buf + (std::isfinite(c) ? " is out of range (|coordinate| <= " +
+                                                         std::to_string(static_cast<int>(kMaxMeshCoordinate)) + " m after scale)"
+                                                   : " is not finite"));
+        }
       const auto [it, inserted] = index_of.emplace(key, static_cast<int>(mesh.vertices.size()));
       if (inserted) mesh.vertices.emplace_back(key[0], key[1], key[2]);
       id[v] = it->second;

@@ -270,6 +270,43 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
                        "(first joints at (x, y, z) and (x, -y, z)); chains found:" +
                        (found.empty() ? std::string(" none") : found) + "; give --left-hand and --right-hand");
     }
+    // Arms end in hands, not feet: a pair whose names read like legs (hip/leg/knee/ankle/foot over
+    // shoulder/arm/elbow/wrist/hand), or whose ends reach down to the robot's lowest link, is legs (a
+    // locomotion variant with its arm joints fixed has only those).
+    // "Reach down to the lowest link" counts only with a body above the chains (at least half their
+    // drop): a trunk with chains hanging from it and nothing else is no standing robot.
+    double lowest = std::numeric_limits<double>::infinity(), highest = -lowest;
+    for (std::size_t l = 0; l < m.links.size(); ++l) {
+      lowest = std::min(lowest, kin.X_B_L[l].translation().z());
+      highest = std::max(highest, kin.X_B_L[l].translation().z());
+    }
+    std::vector<std::array<const Chain*, 2>> legs;
+    for (auto it = pairs.begin(); it != pairs.end();) {
+      const double end_z = std::min(kin.X_B_L[(*it)[0]->links.back()].translation().z(),
+                                    kin.X_B_L[(*it)[1]->links.back()].translation().z());
+      const double start_z = (*it)[0]->start_B.z();
+      const bool to_the_ground = end_z < lowest + 0.05 && highest - start_z > 0.5 * (start_z - end_z);
+      if (nameScore(m, *(*it)[0]) + nameScore(m, *(*it)[1]) < 0 || to_the_ground) {
+        legs.push_back(*it);
+        it = pairs.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    if (pairs.empty()) {
+      std::string list;
+      for (const auto& p : legs)
+        list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (ending at z " +
+                fmt("%.3f", kin.X_B_L[p[0]->links.back()].translation().z()) + " m; the lowest link is at " +
+                fmt("%.3f", lowest) + " m);";
+      throw SetupError("no arms found in robot '" + m.name + "': the only mirrored chains of >= 4 revolute joints are "
+                       "legs (named like legs, or ending at the robot's lowest link):" + list +
+                       " arms need movable joints and end in hands; give --left-hand and --right-hand if these are arms");
+    }
+    if (!legs.empty())
+      setup.decisions.push_back("arms: " + std::to_string(legs.size()) + " mirrored pair(s) of chains left out as legs "
+                                "(named like legs, or ending at the robot's lowest link), e.g. " +
+                                legs[0][0]->describe(m));
     std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) { return a[0]->start_B.z() > b[0]->start_B.z(); });
     std::size_t pick = 0;
     std::string why;

@@ -1,6 +1,7 @@
 #include "urdf_audit.hpp"
 
 #include <tinyxml2.h>
+#include <urdf_model/model.h>
 
 #include <cerrno>
 #include <cmath>
@@ -264,6 +265,29 @@ UrdfAudit auditUrdf(const std::string& xml) {
     audit.urdfdom_xml.assign(printer.CStr(), static_cast<std::size_t>(printer.CStrSize() > 0 ? printer.CStrSize() - 1 : 0));
   }
   return audit;
+}
+
+std::vector<std::string> collisionAccounting(const UrdfAudit& audit, const urdf::ModelInterface* model) {
+  std::vector<std::string> problems;
+  for (const auto& [link, expected] : audit.collisions) {
+    int read = expected;
+    if (model) {
+      const auto ulink = model->getLink(link);
+      read = !ulink ? 0
+                    : !ulink->collision_array.empty() ? static_cast<int>(ulink->collision_array.size())
+                                                      : (ulink->collision ? 1 : 0);
+    }
+    const bool dropped = read != expected;
+    std::string line;
+    if (dropped)
+      line = "; urdfdom read " + std::to_string(read) + " of its " + std::to_string(expected) + " collision elements";
+    for (const auto& p : audit.collision_problems.at(link)) line += "; " + p;
+    if (dropped || !model)
+      for (const auto& p : audit.other_problems.at(link)) line += "; " + p;
+    if (dropped && line.find("; ", 2) == std::string::npos) line += "; no reason found here (urdfdom's message above says why)";
+    if (!line.empty()) problems.push_back("link '" + link + "'" + line.replace(0, 1, ":"));
+  }
+  return problems;
 }
 
 }  // namespace reflex::control::detail

@@ -14,6 +14,10 @@
 #include <string>
 #include <vector>
 
+namespace urdf {
+class ModelInterface;
+}
+
 namespace reflex::control::detail {
 
 /// Ranges a humanoid's URDF must respect (checked for every collision element and every joint).
@@ -44,5 +48,12 @@ struct UrdfAudit {
 
 /// Reads `xml` and fills the audit. Never throws for bad input (only std::bad_alloc).
 UrdfAudit auditUrdf(const std::string& xml);
+
+/// Every collision element of the file accounted for against what urdfdom read (`model`, null if it
+/// refused the file): one line per affected link, how many elements urdfdom kept (if not all) and
+/// every reason found. Visual / inertial problems are reasons only where urdfdom dropped something
+/// (or refused the file): they cost urdfdom the whole link's collision elements. The loader and the
+/// fit (fitRobot) refuse a file with any.
+std::vector<std::string> collisionAccounting(const UrdfAudit& audit, const urdf::ModelInterface* model);
 
 }  // namespace reflex::control::detail

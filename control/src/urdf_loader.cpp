@@ -270,27 +270,7 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
   } catch (const std::exception& e) {
     problems.push_back(std::string("urdfdom: ") + e.what());
   }
-  // One line per affected link: how many collision elements urdfdom kept (if not all), and every
-  // reason found. Visual / inertial problems are reasons only where urdfdom dropped something (or
-  // refused the file): they cost urdfdom the whole link's collision elements.
-  for (const auto& [link, expected] : audit.collisions) {
-    int read = expected;
-    if (urdf_model) {
-      const auto ulink = urdf_model->getLink(link);
-      read = !ulink ? 0
-                    : !ulink->collision_array.empty() ? static_cast<int>(ulink->collision_array.size())
-                                                      : (ulink->collision ? 1 : 0);
-    }
-    const bool dropped = read != expected;
-    std::string line;
-    if (dropped)
-      line = "; urdfdom read " + std::to_string(read) + " of its " + std::to_string(expected) + " collision elements";
-    for (const auto& p : audit.collision_problems.at(link)) line += "; " + p;
-    if (dropped || !urdf_model)
-      for (const auto& p : audit.other_problems.at(link)) line += "; " + p;
-    if (dropped && line.find("; ", 2) == std::string::npos) line += "; no reason found here (urdfdom's message above says why)";
-    if (!line.empty()) problems.push_back("link '" + link + "'" + line.replace(0, 1, ":"));
-  }
+  for (auto& p : detail::collisionAccounting(audit, urdf_model.get())) problems.push_back(std::move(p));
   if (!urdf_model) {
     if (problems.empty()) fail(origin, "malformed URDF (urdfdom could not parse it; see the message above)");
     failWithProblems(origin, "malformed URDF", problems);
@@ -351,8 +331,11 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
                                 "of prismatic and revolute joints");
       }
       if (link.type != JointType::kFixed) {
-        if (!(axis.norm() > 1e-9) || !axis.allFinite()) fail(origin, jwhere + ": zero or invalid axis");
-        link.axis_J = axis.normalized();
+        // Normalised from its largest component: |axis| of "1e308 1e308 0" overflows to inf and
+        // axis / inf is (0, 0, 0); axis / 1e308 is (1, 1, 0), whose direction is the axis'.
+        const double big = axis.cwiseAbs().maxCoeff();
+        if (!axis.allFinite() || !(big > 1e-9)) fail(origin, jwhere + ": zero or invalid axis");
+        link.axis_J = (axis / big).normalized();
         link.q_index = model.nq++;
         model.q_names.push_back(joint->name);
         model.q_link.push_back(static_cast<int>(model.links.size()));

@@ -36,7 +36,9 @@
 #include <tinyxml2.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cstdint>
 #include <cstdio>
+#include <functional>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -266,12 +268,15 @@ TEST(MeshFit, RealWorldAssimpTestModelsFitWithEveryVertexEnclosed) {
       ADD_FAILURE() << base + f << " is missing: install assimp-testmodels (bringup/setup.sh)";
       continue;
     }
-    const TriangleMesh mesh = loadMeshFile(base + f, Vector3d::Ones());
+    // At 1/100 (a URDF <mesh scale>): the duck and the spider are ~100 units across, beyond the 10 m
+    // any mesh vertex may be (kMaxMeshCoordinate); at scale 1 they are refused.
+    const Vector3d scale = Vector3d::Constant(0.01);
+    const TriangleMesh mesh = loadMeshFile(base + f, scale);
     FitStats stats;
     FitOptions options;
     options.gap_samples_per_primitive = 100;
     const auto prims = fitPrimitives(mesh, options, &stats);
-    const RawMesh raw = readWithAssimp(base + f, Vector3d::Ones(), Eigen::Isometry3d::Identity());
+    const RawMesh raw = readWithAssimp(base + f, scale, Eigen::Isometry3d::Identity());
     double worst = 0.0;
     EXPECT_EQ(countOutside(prims, raw.v, &worst), 0) << f << ": worst " << worst;
     EXPECT_EQ(stats.vertices_enclosed, stats.vertices) << f;
@@ -676,6 +681,101 @@ TEST(MeshesIntersect, CrossingApartContainedAndACornerPokingIn) {
   EXPECT_TRUE(meshesIntersect(a, I, small, X)) << "a corner 1 mm in";
   X.translation().z() += 0.002;
   EXPECT_FALSE(meshesIntersect(a, I, small, X)) << "a corner 1 mm above";
+}
+
+}  // namespace
+}  // namespace reflex::control
+
+namespace reflex::control {
+namespace {
+
+// The fit accounts for every collision element as the loader does: a value urdfdom cannot read (it
+// then drops every collision element of the link) is an error naming the link and the value, not a
+// link silently left out of the fit.
+TEST(MeshFit, ACollisionElementUrdfdomDropsIsAnErrorNamingTheLink) {
+  std::ifstream in(kUrdf);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string xml = ss.str();
+  const std::string good = "<collision name=\"torso_0\">\n      <origin xyz=\"0 0 0\"";
+  const auto at = xml.find(good);
+  ASSERT_NE(at, std::string::npos);
+  xml.replace(at, good.size(), "<collision name=\"torso_0\">\n      <origin xyz=\"nan 0 0\"");
+  const std::string path = ::testing::TempDir() + "mesh_humanoid_nan.urdf";
+  std::ofstream(path) << xml;
+  PackagePaths paths;
+  paths.packages["mesh_humanoid_description"] = kPackageDir;
+  paths.use_ros_package_path = false;
+  try {
+    (void)fitRobot(path, paths, FitOptions{});
+    FAIL() << "fitted a URDF whose torso urdfdom cannot read";
+  } catch (const ModelError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(path + ": cannot fit: collision geometry would be left out or is out of range (1 problem):\n"
+                               "  link 'torso': urdfdom read 0 of its 2 collision elements"),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("'nan' is not a finite number"), std::string::npos) << what;
+  }
+}
+
+}  // namespace
+}  // namespace reflex::control
+
+namespace reflex::control {
+namespace {
+
+// A binary STL of `n` triangles (each a small triangle at x = i mm), `patch` changing any vertex.
+void writeBinaryStl(const std::string& path, std::uint32_t n,
+                    const std::function<void(std::uint32_t, int, float*)>& patch = {}) {
+  std::ofstream out(path, std::ios::binary);
+  const std::string header(80, ' ');
+  out.write(header.data(), 80);
+  out.write(reinterpret_cast<const char*>(&n), 4);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    float f[12] = {0, 0, 1, 0.001f * (i % 1000), 0, 0, 0.001f * (i % 1000) + 0.01f, 0, 0, 0.001f * (i % 1000), 0.01f, 0};
+    for (int k = 0; k < 3 && patch; ++k) patch(i, k, f + 3 + 3 * k);
+    out.write(reinterpret_cast<const char*>(f), sizeof f);
+    const std::uint16_t attr = 0;
+    out.write(reinterpret_cast<const char*>(&attr), 2);
+  }
+}
+
+// Mesh values obey the ranges of URDF values, and a mesh beyond the stated size is refused before any
+// work: a NaN in the second triangle (it used to be merged away: a NaN map key), a vertex at 1e30 m (it
+// became a 1e30 m capsule), one 10 m out only at scale 2, and 200,001 triangles (1 M took 358 s and
+// 8.1 GB to fit).
+TEST(MeshFit, MeshValuesBeyondTheRangesAndMeshesBeyondTheSizeAreRefused) {
+  const std::string dir = ::testing::TempDir();
+  auto message = [](const std::string& path, const Vector3d& scale) {
+    try {
+      (void)loadMeshFile(path, scale);
+    } catch (const ModelError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(loaded)");
+  };
+  writeBinaryStl(dir + "nan.stl", 2, [](std::uint32_t i, int k, float* v) {
+    if (i == 1 && k == 2) v[1] = std::nanf("");
+  });
+  EXPECT_THAT(message(dir + "nan.stl", Vector3d::Ones()), ::testing::HasSubstr("nan.stl: mesh vertex "));
+  EXPECT_THAT(message(dir + "nan.stl", Vector3d::Ones()), ::testing::HasSubstr(" is not finite"));
+  writeBinaryStl(dir + "far.stl", 2, [](std::uint32_t i, int k, float* v) {
+    if (i == 1 && k == 1) v[0] = 1e30f;
+  });
+  EXPECT_THAT(message(dir + "far.stl", Vector3d::Ones()),
+              ::testing::HasSubstr("is out of range (|coordinate| <= 10 m after scale)"));
+  writeBinaryStl(dir + "six.stl", 2, [](std::uint32_t i, int k, float* v) {
+    if (i == 1 && k == 1) v[2] = 6.0f;
+  });
+  EXPECT_EQ(message(dir + "six.stl", Vector3d::Ones()), "(loaded)");
+  EXPECT_THAT(message(dir + "six.stl", Vector3d::Constant(2.0)), ::testing::HasSubstr(", 0, 12) m is out of range"));
+  writeBinaryStl(dir + "big.stl", 200001);
+  EXPECT_EQ(message(dir + "big.stl", Vector3d::Ones()),
+            dir + "big.stl: mesh has 200001 triangles, more than the 200000 a collision mesh may have: decimate it (a "
+                  "collision mesh needs the shape, not the detail)");
+  writeBinaryStl(dir + "ok.stl", 200000);
+  EXPECT_EQ(message(dir + "ok.stl", Vector3d::Ones()), "(loaded)");
 }
 
 }  // namespace

@@ -334,6 +334,31 @@ TEST(Setup, OnlySuccessReplacesFilesAndNeverAnythingButARegularFile) {
   EXPECT_EQ(listing(), (std::vector<std::string>{"behavior.yaml", "collision.yaml", "controller.yaml"}));
 }
 
+// A locomotion variant: asimo_like with every arm joint fixed. Its only mirrored chains of >= 4
+// revolute joints are the legs, which are never taken for arms (before: legs configured as arms, feet
+// as hands, exit 0).
+TEST(Setup, ALegsOnlyRobotIsRefusedNeverConfiguredWithLegsAsArms) {
+  const std::string dir = freshDir("legs_only");
+  std::string urdf = slurp(testing::robotPath("asimo_like.urdf"));
+  int fixed = 0;
+  for (const char* side : {"l_", "r_"})
+    for (const char* j : {"shoulder_pitch", "shoulder_roll", "shoulder_yaw", "elbow", "wrist"}) {
+      const std::string from = "<joint name=\"" + std::string(side) + j + "\" type=\"revolute\">";
+      const auto at = urdf.find(from);
+      ASSERT_NE(at, std::string::npos) << from;
+      urdf.replace(at, from.size(), "<joint name=\"" + std::string(side) + j + "\" type=\"fixed\">");
+      ++fixed;
+    }
+  ASSERT_EQ(fixed, 10);
+  std::ofstream(dir + "/legs_only.urdf") << urdf;
+  const ProcessResult r = setupRun(dir + "/legs_only.urdf --out " + dir + "/out");
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: no arms found in robot '"));
+  EXPECT_THAT(r.err, HasSubstr("the only mirrored chains of >= 4 revolute joints are legs (named like legs, or ending "
+                               "at the robot's lowest link): [l_hip_yaw"));
+  EXPECT_FALSE(fs::exists(dir + "/out/controller.yaml"));
+}
+
 // A trunk sphere and chains of revolute joints (capsule links hanging along -z) at given start points.
 std::string chainXml(const std::string& p, int joints, double x, double y, double z) {
   std::ostringstream os;

@@ -501,6 +501,27 @@ TEST(UrdfLoaderAccounting, EveryBadValueInEveryCollisionAttributeFailsNamingTheL
   EXPECT_GT(checked, 800);  // 38 collision elements x 3-4 attributes x 7 values
 }
 
+// An axis of huge finite components: its norm overflows to inf, and normalising by it gave (0, 0, 0)
+// (a joint that moves nothing). Normalised from its largest component it keeps its direction; a zero
+// axis is still refused.
+TEST(UrdfLoaderAccounting, AnAxisOfHugeComponentsKeepsItsDirection) {
+  std::string xml = oneLink(R"(<collision><geometry><sphere radius="0.04"/></geometry></collision>)");
+  const std::string axis = R"(<axis xyz="0 1 0"/>)";
+  xml.replace(xml.find(axis), axis.size(), R"(<axis xyz="1e308 1e308 0"/>)");
+  const Model m = loadModelFromString(xml, CollisionConfig{}, "inline");
+  const Vector3d a = m.links[static_cast<std::size_t>(m.linkIndex("arm"))].axis_J;
+  EXPECT_NEAR(a.x(), std::sqrt(0.5), 1e-15);
+  EXPECT_NEAR(a.y(), std::sqrt(0.5), 1e-15);
+  EXPECT_EQ(a.z(), 0.0);
+  xml.replace(xml.find("1e308 1e308 0"), 13, "0 0 0");
+  try {
+    (void)loadModelFromString(xml, CollisionConfig{}, "inline");
+    FAIL() << "a zero axis loaded";
+  } catch (const ModelError& e) {
+    EXPECT_NE(std::string(e.what()).find("joint 'j': zero or invalid axis"), std::string::npos) << e.what();
+  }
+}
+
 TEST(UrdfLoaderAccounting, TheIssueCaseNamesTheLinkAndTheValue) {
   // issue 16: a NaN in one collision <origin> of the left hand dropped it; crossing_arms then went to -70.9 mm.
   std::string text = readText(testing::robotPath("asimo_like.urdf"));

@@ -225,6 +225,44 @@ TEST(Judge, UrdfInertialIsUsedWithItsRotatedFrame) {
   EXPECT_NEAR(m.body_ipos[3 * b + 2], 0.01, 1e-12);
 }
 
+// A sensor link of zero mass and inertia on a movable joint, and a link whose inertia breaks MuJoCo's
+// triangle inequality: MuJoCo refuses both as written; the MJCF carries the repaired values (MuJoCo
+// compiles it and reports them), and inertialRepairs names each link with what it changed.
+TEST(Judge, DegenerateUrdfInertialsAreRepairedAndSaid) {
+  std::string urdf = kTwoCapsules;
+  const std::string b_inertial = R"(<mass value="1.5"/>
+      <inertia ixx="0.011" ixy="-0.001" ixz="0.0005" iyy="0.012" iyz="0.001" izz="0.013"/>)";
+  const auto at = urdf.find(b_inertial);
+  ASSERT_NE(at, std::string::npos);
+  urdf.replace(at, b_inertial.size(), R"(<mass value="0"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>)");
+  control::CollisionConfig config;
+  config.exclude_adjacent = false;
+  const Model model = control::loadModelFromString(urdf, config, "degenerate");
+  const MjcfOptions options;
+  const auto repairs = inertialRepairs(model, options);
+  ASSERT_EQ(repairs.size(), 1u);
+  EXPECT_EQ(repairs[0].rfind("link 'b': URDF <inertial> mass 0 -> 0.01 kg, principal inertia [0 0 0] -> [1e-05 1e-05 1e-05] kg m^2", 0), 0u)
+      << repairs[0];
+  // A tensor breaking A + B >= C (principal 0.001, 0.001, 0.01, turned): the two smaller raised to 0.005,
+  // the axes kept; a valid tensor and mass left exactly as they are.
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  Eigen::Matrix3d I = R * Eigen::Vector3d(0.001, 0.001, 0.01).asDiagonal() * R.transpose();
+  double mass = 2.0;
+  std::string what;
+  EXPECT_TRUE(repairInertial(options, mass, I, &what));
+  EXPECT_LT((I - R * Eigen::Vector3d(0.005, 0.005, 0.01).asDiagonal() * R.transpose()).cwiseAbs().maxCoeff(), 1e-12) << what;
+  EXPECT_EQ(mass, 2.0);
+  Eigen::Matrix3d good = R * Eigen::Vector3d(0.02, 0.03, 0.04).asDiagonal() * R.transpose();
+  const Eigen::Matrix3d good0 = good;
+  EXPECT_FALSE(repairInertial(options, mass, good, &what)) << what;
+  EXPECT_EQ(good, good0);
+  MujocoRobot robot(model, options);  // throws if MuJoCo refuses the MJCF
+  const mjModel& m = robot.mjModelRef();
+  const int b = mj_name2id(&m, mjOBJ_BODY, "b");
+  EXPECT_NEAR(m.body_mass[b], 0.01, 1e-12);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(m.body_inertia[3 * b + k], 1e-5, 1e-12);
+}
+
 TEST(Judge, AgreesWithTheProjectsDistancesOnTheRobotAtRandomConfigurations) {
   const Model model = loadRobot("asimo_like");
   MjcfOptions options;

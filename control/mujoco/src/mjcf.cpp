@@ -1,6 +1,8 @@
 // MJCF generation from the project's Model (see mjcf.hpp for what it contains and why).
 #include "reflex/mujoco/mjcf.hpp"
 
+#include <Eigen/Eigenvalues>
+
 #include "reflex/mujoco/mujoco_robot.hpp"
 
 #include <mujoco/mujoco.h>
@@ -74,6 +76,57 @@ std::vector<std::vector<int>> childrenOf(const Model& model) {
   return children;
 }
 
+}  // namespace
+
+bool repairInertial(const MjcfOptions& o, double& mass, Eigen::Matrix3d& I, std::string* what) {
+  std::ostringstream why;  // 6 significant digits: the values as a person reads them
+  why.precision(6);
+  const auto num = [](double v) {
+    std::ostringstream os;
+    os.precision(6);
+    os << v;
+    return os.str();
+  };
+  bool repaired = false;
+  if (!(mass >= o.min_mass)) {
+    why << "mass " << num(mass) << " -> " << num(o.min_mass) << " kg";
+    mass = o.min_mass;
+    repaired = true;
+  }
+  const Eigen::Matrix3d sym = 0.5 * (I + I.transpose());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sym.allFinite() ? sym : Eigen::Matrix3d::Zero());
+  Eigen::Vector3d l = eig.eigenvalues();  // ascending
+  const Eigen::Vector3d before = l;
+  for (int k = 0; k < 3; ++k) l[k] = std::max(l[k], o.min_inertia);
+  // MuJoCo's triangle inequality (A + B >= C): the two smaller raised to half the largest.
+  if (l[0] + l[1] < l[2]) l[0] = l[1] = std::max(l[1], 0.5 * l[2]);
+  if (!sym.allFinite() || (l - before).cwiseAbs().maxCoeff() > 0.0) {
+    if (repaired) why << ", ";
+    why << "principal inertia [" << num(before[0]) << " " << num(before[1]) << " " << num(before[2]) << "] -> ["
+        << num(l[0]) << " " << num(l[1]) << " " << num(l[2]) << "] kg m^2";
+    I = eig.eigenvectors() * l.asDiagonal() * eig.eigenvectors().transpose();
+    repaired = true;
+  }
+  if (what) *what = why.str();
+  return repaired;
+}
+
+std::vector<std::string> inertialRepairs(const control::Model& model, const MjcfOptions& options) {
+  std::vector<std::string> out;
+  for (const auto& link : model.links) {
+    if (!link.has_inertial || link.parent < 0) continue;  // the root link is MuJoCo's world body
+    double mass = link.mass;
+    Eigen::Matrix3d I = link.inertia_L;
+    std::string what;
+    if (repairInertial(options, mass, I, &what))
+      out.push_back("link '" + link.name + "': URDF <inertial> " + what +
+                    " (MuJoCo refuses a body without mass or with an impossible inertia)");
+  }
+  return out;
+}
+
+namespace {
+
 class MjcfWriter {
  public:
   MjcfWriter(const Model& model, const MjcfOptions& options, const std::vector<ServoGains>& gains)
@@ -116,8 +169,10 @@ class MjcfWriter {
          << "\">\n";
     const std::string in2 = in + "  ";
     if (link.has_inertial) {
-      const Eigen::Matrix3d& I = link.inertia_L;
-      out_ << in2 << "<inertial pos=\"" << vec(link.com_L) << "\" mass=\"" << num(link.mass) << "\" fullinertia=\""
+      double mass = link.mass;
+      Eigen::Matrix3d I = link.inertia_L;
+      repairInertial(options_, mass, I, nullptr);
+      out_ << in2 << "<inertial pos=\"" << vec(link.com_L) << "\" mass=\"" << num(mass) << "\" fullinertia=\""
            << num(I(0, 0)) << " " << num(I(1, 1)) << " " << num(I(2, 2)) << " " << num(I(0, 1)) << " "
            << num(I(0, 2)) << " " << num(I(1, 2)) << "\"/>\n";
     } else if (segment_of_link_[l] < 0) {

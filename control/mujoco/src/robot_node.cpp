@@ -106,6 +106,7 @@ std::string RobotNode::summary() const {
      << " checked segment pairs), " << m.nu << " actuators, mass " << fixed(mass, 2) << " kg, timestep "
      << fixed(m.opt.timestep * 1e3, 3) << " ms x " << substeps_ << " per period " << fixed(config_.period * 1e3, 3)
      << " ms, margin = gap = " << fixed(config_.mjcf.margin * 1e3, 2) << " mm\n";
+  for (const auto& r : inertialRepairs(model_, config_.mjcf)) os << "REPAIRED " << r << "\n";
   os << "servos (PD + bias feed-forward): joint class kp kd effort armature damping\n";
   const auto& gains = robot_->gains();
   for (int qi = 0; qi < model_.nq; ++qi) {

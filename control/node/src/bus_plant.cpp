@@ -8,6 +8,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <string>
+#include <vector>
 #include <stdexcept>
 #include <thread>
 
@@ -34,6 +37,19 @@ int waitExit(pid_t pid, std::chrono::milliseconds timeout) {
     if (std::chrono::steady_clock::now() >= end) return -1;
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
+}
+
+// The last `n` non-empty lines of a text file, joined by " | " (at most 800 characters, the end kept).
+std::string lastLines(const std::string& path, int n) {
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty()) lines.push_back(line);
+  std::string out;
+  for (std::size_t i = lines.size() > static_cast<std::size_t>(n) ? lines.size() - n : 0; i < lines.size(); ++i)
+    out += (out.empty() ? "" : " | ") + lines[i];
+  if (out.size() > 800) out = "..." + out.substr(out.size() - 800);
+  return out.empty() ? "(nothing)" : out;
 }
 
 }  // namespace
@@ -81,6 +97,18 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
     const auto t0 = std::chrono::steady_clock::now();
     const auto limit = std::chrono::duration<double>(options_.first_state_timeout);
     while (!port_->haveState()) {
+      // A spawned robot that exits (MuJoCo refused the model, a bad option) is said at once, with the
+      // end of its output, not after the whole wait.
+      if (child_ > 0) {
+        if (const int code = waitExit(child_, std::chrono::milliseconds(0)); code >= 0) {
+          child_ = -1;
+          throw std::runtime_error("robot plant: the spawned robot (" + options_.robot_binary + ") exited with status " +
+                                   std::to_string(code) + " before its first state" +
+                                   (options_.robot_log.empty() ? std::string()
+                                                               : "; the end of its output (" + options_.robot_log +
+                                                                     "): " + lastLines(options_.robot_log, 3)));
+        }
+      }
       if (std::chrono::steady_clock::now() - t0 > limit) {
         std::string where = options_.robot_binary.empty()
                                 ? "no robot on the bus"

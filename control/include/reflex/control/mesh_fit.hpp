@@ -54,6 +54,11 @@ std::string resolveMeshFilename(const std::string& filename, const std::string& 
 /// Throws ModelError naming the file and assimp's reason (unreadable, not a mesh, no triangles).
 TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale);
 
+/// loadMeshFile's limits: more triangles in one file, or a vertex coordinate (after scale) beyond this
+/// or not finite, is a ModelError naming the file (and the vertex).
+inline constexpr std::size_t kMaxMeshTriangles = 200000;
+inline constexpr double kMaxMeshCoordinate = 10.0;  ///< m, as every URDF length (kMaxUrdfLength)
+
 /// Fitting options. The defaults are what reflex_fit uses.
 struct FitOptions {
   int max_primitives = 6;        ///< per link's meshes (greedy cuts), and per box element (fitBox)

@@ -5,7 +5,9 @@
 // What the MJCF holds (control/README.md, "The physics robot: reflex_mujoco"):
 //   - a body per link (the root link is MuJoCo's world body), placed by the link's joint origin;
 //     a hinge (revolute) or slide (prismatic) joint per movable joint, with the URDF limits;
-//   - mass and inertia: the URDF <inertial> when the Model carries one (Link::has_inertial); else
+//   - mass and inertia: the URDF <inertial> when the Model carries one (Link::has_inertial; a mass
+//     below `min_mass` or principal inertias below `min_inertia` or breaking A + B >= C repaired,
+//     inertialRepairs says how); else
 //     MuJoCo's own inertia of the link's collision geoms at `density`; a link with neither gets
 //     `min_mass` / `min_inertia` (virtual links, camera frames);
 //   - every collision primitive as a MuJoCo capsule (fromto = the Model's core a_L..b_L in the link
@@ -24,6 +26,8 @@
 #pragma once
 
 #include "reflex/control/model.hpp"
+
+#include <Eigen/Core>
 
 #include <string>
 #include <vector>
@@ -73,6 +77,15 @@ std::string makeMjcf(const control::Model& model, const MjcfOptions& options,
 /// Servo gains per q index, from the joint inertias MuJoCo computes for the gain-less MJCF at q = 0
 /// (mjModel::dof_M0, armature included) and the bandwidths of `options`.
 std::vector<ServoGains> servoGains(const control::Model& model, const MjcfOptions& options);
+
+/// A URDF <inertial> MuJoCo would refuse, made one it takes: mass raised to `min_mass`, principal
+/// inertias to `min_inertia`, the two smaller to half the largest where they break A + B >= C (a
+/// sensor link of zero mass and inertia on a movable joint). Returns whether anything changed; `what`
+/// says from which values to which.
+bool repairInertial(const MjcfOptions& options, double& mass, Eigen::Matrix3d& I, std::string* what);
+
+/// One line per link whose URDF <inertial> makeMjcf repairs (repairInertial), for reflex_mujoco to say.
+std::vector<std::string> inertialRepairs(const control::Model& model, const MjcfOptions& options);
 
 /// Name of the MuJoCo geom of primitive k of segment s ("<segment>/<k>").
 std::string geomName(const control::Model& model, int segment, int k);
