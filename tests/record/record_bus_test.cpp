@@ -336,6 +336,35 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   }
 }
 
+// The controller's protection state is published once, before most recorders start: it is recorded
+// by default (before: only with --late-joiner-state, so no recording said whether avoidance was on).
+TEST(RecordBus, TheControllerProtectionPublishedBeforeTheRecorderStartedIsRecordedByDefault) {
+  bus::Participant src(busConfig("controller"));
+  auto& w = src.makeWriter<msg::ControllerProtection>();
+  msg::ControllerProtection p;
+  p.avoidance(false);
+  p.estop(true);
+  p.reason("--no-avoidance");
+  p.period(0.005);
+  p.robot("asimo_like");
+  w.write(p);  // nobody listens yet; the writer keeps it (transient local)
+  RecorderOptions ro;
+  ro.output = tempPath("protection.rfx");
+  ro.topics = {"reflex/controller_protection"};
+  ro.duration = 4.0;
+  ro.bus = busConfig("recorder");
+  Recorder recorder(ro);
+  recorder.run();
+  RecordReader r(ro.output);
+  RecordEntry e;
+  ASSERT_TRUE(r.next(e)) << "the protection state is in the recording";
+  const auto got = decode<msg::ControllerProtection>(e);
+  EXPECT_FALSE(got.avoidance());
+  EXPECT_TRUE(got.estop());
+  EXPECT_EQ(got.reason(), "--no-avoidance");
+  EXPECT_EQ(got.robot(), "asimo_like");
+}
+
 TEST(RecordBus, LateJoinerStateRecordsTheStatePublishedBeforeTheRecorderStarted) {
   bus::Participant src(busConfig("source"));
   auto& w = src.makeWriter<msg::HandTargets>();

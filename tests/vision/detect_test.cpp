@@ -277,6 +277,28 @@ TEST(Detect, BadInputsAreNamed) {
     EXPECT_EQ(runTool(c.args, out, err, fx.dir), c.rc) << c.args << "\n" << err;
     EXPECT_THAT(err, HasSubstr(c.expected)) << c.args;
   }
+  // Sizes libapriltag cannot take (1 px high: it crashed, SIGSEGV; 40000 px wide: it aborted) and a
+  // PNG whose header says 20000 x 20000 (a 431 KB file of that size decoded to 5 GB): refused with the
+  // size, the last before decoding.
+  cv::imwrite(fx.dir / "thin.png", cv::Mat(1, 100, CV_8UC1, cv::Scalar(128)));
+  cv::imwrite(fx.dir / "wide.png", cv::Mat(16, 40000, CV_8UC1, cv::Scalar(128)));
+  {
+    std::string png = readText(fx.dir / "thin.png");
+    const unsigned char wh[8] = {0, 0, 0x4e, 0x20, 0, 0, 0x4e, 0x20};  // 20000, 20000 (big-endian)
+    png.replace(16, 8, reinterpret_cast<const char*>(wh), 8);
+    writeText(fx.dir / "huge.png", png);
+  }
+  const std::vector<Case> sizes = {
+      {fx.dir / "thin.png", "image '" + (fx.dir / "thin.png") + "' is 100x1 px: smaller than 16 px a side", 2},
+      {fx.dir / "wide.png", "image '" + (fx.dir / "wide.png") + "' is 40000x16 px: more than 16384 px a side", 2},
+      {fx.dir / "huge.png", "image '" + (fx.dir / "huge.png") + "' is 20000x20000 px: more than 16384 px a side or 50 "
+                            "megapixels, refused before decoding", 2},
+  };
+  for (const Case& c : sizes) {
+    std::string out, err;
+    EXPECT_EQ(runTool(c.args, out, err, fx.dir), c.rc) << c.args << "\n" << err;
+    EXPECT_THAT(err, HasSubstr(c.expected)) << c.args;
+  }
   std::string out, err;
   EXPECT_EQ(runTool("--help", out, err, fx.dir), 0);
   EXPECT_THAT(out, AllOf(HasSubstr("--calibration"), HasSubstr("--tag-size"), HasSubstr("--draw")));

@@ -1,5 +1,6 @@
 // The image pairs reflex_calibrate reads: a folder of left/right image pairs or a session's videos.
 #include "reflex/vision/error.hpp"
+#include "reflex/vision/image_file.hpp"
 #include "reflex/vision/stereo_calibrate.hpp"
 #include "yaml_util.hpp"
 
@@ -29,12 +30,7 @@ std::vector<std::string> imageNames(const fs::path& dir) {
   return out;
 }
 
-cv::Mat readImage(const std::string& path) {
-  if (const std::string why = common::inputFileProblem(path); !why.empty()) throw VisionError("image file " + why);
-  cv::Mat m = cv::imread(path, cv::IMREAD_GRAYSCALE);
-  if (m.empty()) throw VisionError("cannot read image '" + path + "' (not an image OpenCV can decode)");
-  return m;
-}
+cv::Mat readImage(const std::string& path) { return readImageWithinBudget(path, cv::IMREAD_GRAYSCALE); }
 
 }  // namespace
 

@@ -1,5 +1,7 @@
 #include "reflex/vision/tag_detector.hpp"
 
+#include "reflex/vision/image_file.hpp"
+
 #include "reflex/vision/error.hpp"
 
 #include <apriltag/apriltag.h>
@@ -130,6 +132,10 @@ std::vector<TagDetection> TagDetector::detect(const cv::Mat& gray) {
   if (gray.type() != CV_8UC1)
     throw VisionError("TagDetector::detect needs an 8-bit single-channel image, got type " +
                       std::to_string(gray.type()));
+  // libapriltag crashes on images 1-2 px high and aborts at a width of 32768: refused here whatever
+  // the caller checked.
+  if (const std::string why = imageSizeProblem("the image", gray.size()); !why.empty())
+    throw VisionError("TagDetector::detect: " + why);
   image_u8_t im{gray.cols, gray.rows, static_cast<int32_t>(gray.step[0]), const_cast<std::uint8_t*>(gray.data)};
   zarray_t* dets = apriltag_detector_detect(detector_, &im);
   out.reserve(static_cast<std::size_t>(zarray_size(dets)));

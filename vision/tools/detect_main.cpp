@@ -3,6 +3,7 @@
 // drawTags: parse the options, detect in each image, print text / CSV / JSON, write annotated copies.
 #include "reflex/common/files.hpp"
 #include "reflex/vision/error.hpp"
+#include "reflex/vision/image_file.hpp"
 #include "reflex/vision/single_view.hpp"
 #include "reflex/vision/tag_detector.hpp"
 
@@ -173,10 +174,7 @@ int main(int argc, char** argv) {
     nlohmann::json all = nlohmann::json::array();
     if (format == "csv") std::printf("%s\n", kCsvHeader);
     for (const std::string& path : images) {
-      if (const std::string why = reflex::common::inputFileProblem(path); !why.empty())
-        throw VisionError("image " + why);
-      const cv::Mat bgr = cv::imread(path, cv::IMREAD_COLOR);
-      if (bgr.empty()) throw VisionError("cannot read image '" + path + "' (missing, or not an image OpenCV reads)");
+      const cv::Mat bgr = reflex::vision::readImageWithinBudget(path, cv::IMREAD_COLOR);
       if (camera && bgr.size() != camera->image_size)
         throw VisionError("image '" + path + "' is " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows) +
                           " but the calibration '" + calibration_path + "' is for " +

@@ -224,6 +224,13 @@ std::string Participant::discoveredName(const GuidPrefix& prefix) const {
   return it == extras_->names.end() ? std::string() : it->second;
 }
 
+std::vector<GuidPrefix> Participant::discoveredParticipants() const {
+  const std::lock_guard<std::mutex> lock(extras_->names_mutex);
+  std::vector<GuidPrefix> out;
+  for (const auto& [prefix, name] : extras_->names) out.push_back(prefix);
+  return out;
+}
+
 Participant::Participant(const BusConfig& config)
     : module_name_(config.module_name),
       domain_id_(resolveDomainId(config.domain_id)),

@@ -1,5 +1,6 @@
 // reflex_bus: what runs on the Reflex bus, like `ros2 node list` / `ros2 topic hz` (issue 17, item 10).
 //   reflex_bus list [--window S]            processes from their heartbeats: host, pid, modules, state
+//                                           (listens up to 5 s more while discovery still goes on)
 //   reflex_bus hz [TOPIC...] [--window S]    samples per second of every topic (or the ones named)
 // Reads only: it publishes nothing (not even a heartbeat of its own).
 #include "reflex/record/bus_survey.hpp"
@@ -18,7 +19,12 @@
 namespace {
 
 void printProcesses(const reflex::record::BusSurvey& s) {
-  std::printf("# domain %d, %zu process(es) seen in %.1f s\n", s.domain, s.processes.size(), s.window_s);
+  std::printf("# domain %d, %zu process(es) seen in %.1f s%s\n", s.domain, s.processes.size(), s.window_s,
+              s.settled ? ""
+                        : (" (INCOMPLETE? " + std::to_string(s.silent_participants) +
+                           " participant(s) discovered sent no heartbeat: tools that publish none, or processes "
+                           "not heard yet; list again)")
+                              .c_str());
   std::printf("%-16s %8s  %-12s %-24s %8s %6s  %s\n", "HOST", "PID", "STATE", "MODULE", "AGE_S", "BEATS", "DETAIL");
   for (const auto& p : s.processes)
     for (const auto& m : p.modules)
@@ -50,7 +56,8 @@ int main(int argc, char** argv) {
       "hz", "samples per second (over the span from the first to the last sample, as ros2 topic hz) and matched writers of each topic");
   hz->add_option("topic", topics, "topics to measure (default: every Reflex topic); NAME or NAME:TYPE");
   for (CLI::App* sub : {list, hz}) {
-    sub->add_option("-w,--window", window, "seconds to listen")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
+    sub->add_option("-w,--window", window, "seconds to listen (at least 2: discovery takes up to that; list then "
+                    "listens up to 5 s more while a process it found has not been heard)")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
     sub->add_option("--domain", domain, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
         ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
     sub->add_option("--profiles", profiles, "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped one)");

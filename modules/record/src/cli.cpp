@@ -205,7 +205,8 @@ std::function<int()> addRecord(CLI::App& app) {
   app.add_flag("--late-joiner-state", *late_joiner,
                "read state topics (hand targets, priority, body schema, walk, heartbeat) with their own "
                "reliable transient-local profile: the recording starts with the state published before it "
-               "started, but keeps only the newest of a burst (default: every topic with reflex_record)");
+               "started, but keeps only the newest of a burst (default: every topic with reflex_record; the "
+               "controller's protection state, published once, is always read with its own profile)");
   app.add_flag("--progress", o->progress, "print a status line every second");
   app.add_option("--name", *name, "module name on the bus")->capture_default_str();
   scene->add(app);

@@ -44,10 +44,13 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
   for (const TopicSpec& s : specs) {
     if (counts_.count(s.topic)) throw RecordError("topic '" + s.topic + "' given twice");
     counts_[s.topic].type = s.codec->typeName();
-    // isState(): the writers are reliable (behavior decisions, heartbeats); read them reliably.
-    const std::string profile = !s.codec->isState()        ? bus::kProfileRecord
-                                : options.late_joiner_state ? s.codec->defaultProfile()
-                                                            : bus::kProfileRecordReliable;
+    // isState(): the writers are reliable (behavior decisions, heartbeats); read them reliably. A
+    // state published once (the controller's protection: avoidance on or off, e-stop) is always read
+    // with its own transient-local profile, so every recording says how the robot was protected.
+    const bool once = std::string(s.codec->defaultProfile()) == bus::kProfileControllerInfo;
+    const std::string profile = !s.codec->isState()                ? bus::kProfileRecord
+                                : options.late_joiner_state || once ? s.codec->defaultProfile()
+                                                                    : bus::kProfileRecordReliable;
     TopicCount* count = &counts_[s.topic];
     readers_.push_back(&s.codec->subscribe(*bus_, s.topic, profile, [this, count](RecordEntry&& e) {
       writer_->append(e);

@@ -386,6 +386,9 @@ class Participant {
   /// announced). NOT authenticated: any participant can announce any name; see security.hpp for what
   /// a writer's GUID prefix does authenticate.
   std::string discoveredName(const GuidPrefix& prefix) const;
+  /// The GUID prefixes of the remote participants discovered and not gone (Fast DDS's own
+  /// get_discovered_participants is not implemented in 2.9).
+  std::vector<GuidPrefix> discoveredParticipants() const;
 
   const std::string& moduleName() const { return module_name_; }
   int domainId() const { return domain_id_; }

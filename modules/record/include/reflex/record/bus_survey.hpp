@@ -42,7 +42,13 @@ struct TopicSeen {
 };
 
 struct BusSurvey {
-  double window_s = 0.0;
+  double window_s = 0.0;  ///< how long it listened: the window (at least 2 s), plus up to 5 s while discovery went on
+  /// False if, after the extra 5 s, a participant was discovered or a heartbeat writer matched whose
+  /// beat never arrived (a process may be missing from the list: said, never silent).
+  bool settled = true;
+  /// Remote participants discovered that sent no heartbeat (tools that publish none, such as another
+  /// reflex_bus, or processes whose beat had not arrived after the extra 5 s).
+  int silent_participants = 0;
   int domain = 0;
   std::vector<ProcessSeen> processes;  ///< sorted by host, pid
   std::vector<TopicSeen> topics;       ///< every known topic (or the ones asked for), sorted by name
