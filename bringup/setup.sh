@@ -24,7 +24,7 @@ done
 # One list, grouped by who needs it. Keep it in step with find_package() calls in CMakeLists.txt.
 packages=(
   # toolchain
-  build-essential cmake pkg-config git
+  build-essential cmake pkg-config git ccache
   # bus: Fast DDS 2.9 + code generator (needs a JRE) + discovery server CLI
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools default-jre-headless
   # bus: checks the DDS-Security material itself (OpenSSL libcrypto, idl/bus/src/security.cpp)
