@@ -37,6 +37,8 @@ int main(int argc, char** argv) {
   try {
     const reflex::control::PackagePaths paths = reflex::control::parsePackagePathArgs(package_args);
     if (out_path.empty()) out_path = reflex::control::defaultFitOverlayPath(urdf_path);
+    if (const std::string why = reflex::common::replaceableFileProblem(out_path); !why.empty())
+      throw std::runtime_error(why);
     if (const std::string why = reflex::common::outputFileProblem(out_path); !why.empty())
       throw std::runtime_error("output " + why);
     const auto overlay = reflex::control::fitRobot(urdf_path, paths, options, [&](const std::string& line) {

@@ -14,6 +14,7 @@
 // error at start, before any work. /dev/null stays a valid output. reflex_record record uses DDS
 // domain 205 (it fails before it records anything, but its participant joins first: a domain no other test uses).
 #include "reflex/bus/error.hpp"
+#include "reflex/common/files.hpp"
 #include "reflex/bus/participant.hpp"
 #include "reflex/control/controller.hpp"
 #include "reflex/control/urdf_loader.hpp"
@@ -30,10 +31,12 @@
 #include <gtest/gtest.h>
 
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -257,6 +260,55 @@ TEST(OutputFiles, ToolsExitNonZeroNamingTheOutputAndTheCause) {
     EXPECT_TRUE(r.exit_code != -1 && r.exit_code != 0 && r.exit_code != 137) << c.cmd << "\n" << err;
     EXPECT_NE(err.find(c.expected), std::string::npos) << c.cmd << "\n" << err;
   }
+}
+
+// The atomic replace behind reflex_fit -o, reflex_setup and reflex_inspect --write (writeFileReplacing)
+// never replaces a node that is not a regular file. In a private folder: a character device of our own
+// (1, 7: the kernel's "full"), a FIFO, a directory and a link to that device are refused naming the
+// path and the kind, and each is still what it was; a link to a regular file is written through (the
+// target replaced, the link kept); no temporary file is left. Then reflex_fit -o that device, the
+// case that turned /dev/full into a regular file. Needs root (mknod), as the suite runs.
+TEST(OutputFiles, AnAtomicReplaceNeverReplacesADeviceAFifoOrAFolder) {
+  const NonFiles nf;
+  const std::string dev = nf.dir + "/full";
+  ASSERT_EQ(::mknod(dev.c_str(), S_IFCHR | 0666, makedev(1, 7)), 0) << "mknod needs root: " << std::strerror(errno);
+  const std::string link_dev = nf.dir + "/link_to_full", regular = nf.dir + "/regular.yaml",
+                    link_reg = nf.dir + "/link_to_regular.yaml";
+  fs::create_symlink(dev, link_dev);
+  { std::ofstream(regular) << "old\n"; }
+  fs::create_symlink(regular, link_reg);
+  auto kind = [](const std::string& p) {
+    struct stat st {};
+    if (::lstat(p.c_str(), &st) != 0) return std::string("missing");
+    return std::string(S_ISCHR(st.st_mode) ? "chr" : S_ISFIFO(st.st_mode) ? "fifo" : S_ISDIR(st.st_mode) ? "dir"
+                       : S_ISLNK(st.st_mode) ? "link" : S_ISREG(st.st_mode) ? "reg" : "other");
+  };
+  const std::vector<std::pair<std::string, std::string>> refused = {
+      {dev, "is a character device"}, {nf.fifo, "is a FIFO (named pipe)"}, {nf.folder, "is a directory"},
+      {link_dev, "(a link to '" + dev + "') is a character device"}};
+  for (const auto& [path, what] : refused) {
+    const std::string before = kind(path);
+    const std::string why = reflex::common::writeFileReplacing(path, "text\n");
+    EXPECT_NE(why.find("output file '" + path + "'"), std::string::npos) << why;
+    EXPECT_NE(why.find(what + ": only a regular file is ever replaced"), std::string::npos) << why;
+    EXPECT_EQ(kind(path), before) << path;
+  }
+  EXPECT_EQ(kind(dev), "chr");
+  EXPECT_EQ(reflex::common::writeFileReplacing(link_reg, "new\n"), "");
+  EXPECT_EQ(kind(link_reg), "link");
+  std::ifstream in(regular);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text, "new\n");
+  for (const auto& e : fs::directory_iterator(nf.dir))
+    EXPECT_EQ(e.path().string().find(".tmp"), std::string::npos) << "left behind: " << e.path();
+
+  const std::string mesh_urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/mesh_humanoid.urdf";
+  const std::string pkg = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/mesh_humanoid_description";
+  const ProcessResult r = runShell("timeout -s KILL 120 " + std::string(REFLEX_BIN_DIR) + "/reflex_fit " + mesh_urdf +
+                                   " --package-path mesh_humanoid_description=" + pkg + " -o " + dev + " 2>&1");
+  EXPECT_TRUE(r.exit_code != 0 && r.exit_code != -1) << r.out;
+  EXPECT_NE(r.out.find("output file '" + dev + "' is a character device"), std::string::npos) << r.out;
+  EXPECT_EQ(kind(dev), "chr") << "reflex_fit replaced the device node";
 }
 
 }  // namespace

@@ -1,6 +1,9 @@
 #include "reflex/common/files.hpp"
 
+#include <atomic>
 #include <cerrno>
+#include <cstdlib>
+#include <fcntl.h>
 #include <cmath>
 #include <exception>
 #include <fstream>
@@ -50,15 +53,58 @@ std::string writeError(const std::string& path, int err) {
   return "cannot write " + quoted(path) + ": " + std::strerror(err);
 }
 
+std::string replaceableFileProblem(const std::string& path, std::string* target_out) {
+  // Only a regular file is ever replaced: renaming over a device, a FIFO or a directory replaces the
+  // node itself (`-o /dev/null` run as root deleted the machine's /dev/null). A symbolic link is
+  // written through: its target is replaced, the link stays.
+  std::string target = path;
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) == 0) {
+    if (S_ISLNK(st.st_mode)) {
+      char* resolved = ::realpath(path.c_str(), nullptr);
+      if (resolved == nullptr) return writeError(path, errno);
+      target = resolved;
+      std::free(resolved);
+      if (::stat(target.c_str(), &st) != 0) return writeError(path, errno);
+    }
+    if (!S_ISREG(st.st_mode))
+      return "output file " + quoted(path) + (target == path ? "" : " (a link to " + quoted(target) + ")") + " is " +
+             fileKind(st.st_mode) + ": only a regular file is ever replaced";
+  }
+  if (target_out) *target_out = target;
+  return "";
+}
+
 std::string writeFileReplacing(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
+  std::string target;
+  if (std::string why = replaceableFileProblem(path, &target); !why.empty()) return why;
+  // The temporary file: a fresh one beside the target (O_EXCL: never an existing node; mode 0666 less
+  // the umask, as the file itself would get), removed on every failure.
+  static std::atomic<unsigned> counter{0};
+  std::string tmp;
+  int fd = -1;
+  for (int attempt = 0; attempt < 100 && fd < 0; ++attempt) {
+    tmp = target + "." + std::to_string(::getpid()) + "." + std::to_string(counter++) + ".tmp";
+    fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd < 0 && errno != EEXIST) return writeError(tmp, errno);
+  }
+  if (fd < 0) return writeError(tmp, EEXIST);
+  ::close(fd);
   {
-    std::ofstream out(tmp, std::ios::binary);
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     out << text;
     out.flush();
-    if (!out) return writeError(tmp, errno);
+    if (!out) {
+      const int err = errno;
+      std::remove(tmp.c_str());
+      return writeError(tmp, err);
+    }
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) return writeError(path, errno);
+  if (std::rename(tmp.c_str(), target.c_str()) != 0) {
+    const int err = errno;
+    std::remove(tmp.c_str());
+    return writeError(target, err);
+  }
   return {};
 }
 

@@ -52,9 +52,17 @@ std::string outputFolderProblem(const std::string& dir);
 /// "cannot write '<path>': <strerror(err)>" -- the one wording of a failed write / flush / close.
 std::string writeError(const std::string& path, int err);
 
-/// Writes `text` to `path` through `path`.tmp renamed over it, so a reader never sees half a file;
-/// "" when done, else writeError's message for the file that failed (the .tmp or the rename).
+/// Writes `text` to `path` through a fresh temporary file beside it (mkstemp) renamed over it, so a
+/// reader never sees half a file; "" when done, else the reason. Only a regular file is replaced: a
+/// path that is a directory, a device, a FIFO (or a link to one) is refused, never replaced; a link
+/// to a regular file is written through (the target replaced, the link kept). The temporary file is
+/// removed on every failure.
 std::string writeFileReplacing(const std::string& path, const std::string& text);
+
+/// "" if writeFileReplacing may replace `path` (missing, a regular file, or a link to one: then
+/// `target`, if given, is the file the link resolves to), else why not (naming the path and its kind).
+/// For a tool to check its output before any work.
+std::string replaceableFileProblem(const std::string& path, std::string* target = nullptr);
 
 /// Flushes std::cout and stdout; "" if everything written to them reached the kernel, else
 /// "cannot write the standard output: <cause>" (e.g. `tool > /dev/full`: No space left on device).
