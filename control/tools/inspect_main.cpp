@@ -142,8 +142,12 @@ int run(int argc, char** argv) {
       non_adjacent.exclude_adjacent = true;
       const Model all = reflex::control::loadModel(urdf_path, every);
       const Model nonadj = reflex::control::loadModel(urdf_path, non_adjacent);
-      if (!write_path.empty() && !force && ::access(write_path.c_str(), F_OK) == 0)
-        throw std::runtime_error("--write '" + write_path + "' exists; give --force to replace it");
+      if (!write_path.empty()) {  // before the sampling: only a regular file is ever replaced
+        if (const std::string why = reflex::common::replaceableFileProblem(write_path); !why.empty())
+          throw std::runtime_error("--write: " + why);
+        if (!force && ::access(write_path.c_str(), F_OK) == 0)
+          throw std::runtime_error("--write '" + write_path + "' exists; give --force to replace it");
+      }
       int shown = -1;  // progress every 10 %
       const auto report = reflex::control::samplePairs(all, nonadj, sampling, [&shown](double f) {
         const int tenth = static_cast<int>(f * 10.0 + 1e-9);
@@ -155,10 +159,8 @@ int run(int argc, char** argv) {
       if (write_path.empty()) {
         std::fputs(yaml.c_str(), stdout);
       } else {
-        std::ofstream out(write_path);
-        out << yaml;
-        out.flush();
-        if (!out) throw std::runtime_error("cannot write '" + write_path + "'");
+        if (const std::string why = reflex::common::writeFileReplacing(write_path, yaml); !why.empty())
+          throw std::runtime_error(why);
       }
       int always = 0, never = 0;
       for (const auto& p : report.pairs) {

@@ -309,6 +309,17 @@ TEST(OutputFiles, AnAtomicReplaceNeverReplacesADeviceAFifoOrAFolder) {
   EXPECT_TRUE(r.exit_code != 0 && r.exit_code != -1) << r.out;
   EXPECT_NE(r.out.find("output file '" + dev + "' is a character device"), std::string::npos) << r.out;
   EXPECT_EQ(kind(dev), "chr") << "reflex_fit replaced the device node";
+
+  // reflex_inspect --sample-pairs --write: the same rule, before the sampling.
+  const ProcessResult ri = runShell("timeout -s KILL 60 " + std::string(REFLEX_BIN_DIR) + "/reflex_inspect " +
+                                    std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf --sample-pairs 100 "
+                                    "--write " + link_dev + " --force 2>&1");
+  EXPECT_TRUE(ri.exit_code != 0 && ri.exit_code != -1) << ri.out;
+  EXPECT_NE(ri.out.find("--write: output file '" + link_dev + "' (a link to '" + dev + "') is a character device"),
+            std::string::npos)
+      << ri.out;
+  EXPECT_EQ(kind(dev), "chr");
+  EXPECT_EQ(kind(link_dev), "link");
 }
 
 }  // namespace
