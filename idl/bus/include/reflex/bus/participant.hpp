@@ -387,7 +387,7 @@ class Participant {
   /// a writer's GUID prefix does authenticate.
   std::string discoveredName(const GuidPrefix& prefix) const;
   /// The GUID prefixes of the remote participants discovered and not gone (Fast DDS's own
-  /// get_discovered_participants is not implemented in 2.9).
+  /// get_discovered_participants returns RETCODE_UNSUPPORTED in 2.9).
   std::vector<GuidPrefix> discoveredParticipants() const;
 
   const std::string& moduleName() const { return module_name_; }
