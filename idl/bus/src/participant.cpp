@@ -81,6 +81,21 @@ int nextParticipantId() noexcept {
   return static_cast<int>(n % static_cast<unsigned>(kParticipantIdRange));
 }
 
+std::vector<int> participantIdsOfThisProcess() {
+  std::vector<int> ids;
+  auto* factory = dds::DomainParticipantFactory::get_instance();
+  // Every domain id RTPS allows (port 7400 + 250 d stays below 65536 for d <= 232).
+  for (dds::DomainId_t d = 0; d <= 232; ++d) {
+    for (const dds::DomainParticipant* p : factory->lookup_participants(d)) {
+      const auto& v = p->guid().guidPrefix.value;
+      ids.push_back(static_cast<int>(static_cast<std::uint32_t>(v[8]) | (static_cast<std::uint32_t>(v[9]) << 8) |
+                                     (static_cast<std::uint32_t>(v[10]) << 16) |
+                                     (static_cast<std::uint32_t>(v[11]) << 24)));
+    }
+  }
+  return ids;
+}
+
 std::int64_t nowNs() noexcept {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::system_clock::now().time_since_epoch())
@@ -286,11 +301,20 @@ Participant::Participant(const BusConfig& config)
               props.end());
   qos.name(material.enabled ? std::string() : module_name_);
   // Not the lowest free id (a restarted process would take its predecessor's; see nextParticipantId).
-  // An id this process already holds (the counter came round while it lived) is refused by Fast DDS:
-  // then the next one.
+  // Never an id a participant of this process already holds (the counter came round while it lived,
+  // or Fast DDS numbered a raw participant itself): Fast DDS refuses it, and the refused attempt
+  // leaves the holder deaf to participants discovered later (measured: never heard in 10 s). The
+  // retry covers a participant another thread creates meanwhile.
   const bool choose_id = qos.wire_protocol().participant_id < 0;
+  const std::vector<int> held = choose_id ? participantIdsOfThisProcess() : std::vector<int>{};
   for (int attempt = 0; attempt < 3 && participant_ == nullptr; ++attempt) {
-    if (choose_id) qos.wire_protocol().participant_id = nextParticipantId();
+    if (choose_id) {
+      int id = nextParticipantId();
+      for (int skip = 0; skip < kParticipantIdRange && std::count(held.begin(), held.end(), id) > 0; ++skip) {
+        id = nextParticipantId();
+      }
+      qos.wire_protocol().participant_id = id;
+    }
     // The listener gets participant discovery only (it is not in the status mask for anything else).
     participant_ = factory->create_participant(static_cast<dds::DomainId_t>(domain_id_), qos, extras_.get(),
                                                dds::StatusMask::none());

@@ -74,6 +74,12 @@ inline constexpr int kParticipantIdRange = 100;
 /// still skipped by Fast DDS (it moves to the next id's ports). Never throws.
 int nextParticipantId() noexcept;
 
+/// The participant ids of every DDS participant of this process, on every domain (Reflex's and any a
+/// plugin or tool created with Fast DDS itself): bytes 8-11 of each GUID prefix, where RTPS puts the
+/// id. Participant never hands out one of them (a refused attempt on a held id leaves the holder deaf
+/// to later participants).
+std::vector<int> participantIdsOfThisProcess();
+
 /// Status counters of a reader since it was created (totals, never reset).
 struct ReaderStats {
   std::uint64_t deadline_missed = 0;    ///< requested deadline missed (no sample within the deadline)
