@@ -1,6 +1,9 @@
 #include "reflex/modules/host.hpp"
 
+#include "reflex/modules/module_call.hpp"
+
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <set>
@@ -66,6 +69,17 @@ HostConfig loadHostConfig(const std::string& path, const ModuleRegistry& registr
   return parseHostConfig(ConfigNode::loadFile(path), registry);
 }
 
+namespace {
+
+// The calls the host makes into a module.
+enum ModuleCall { kFactory, kConfigure, kClaims, kStepPeriod, kStart, kOnObjects, kOnJointState, kStep, kStop,
+                  kStatus, kDestructor, kCallCount };
+constexpr std::array<const char*, kCallCount> kCallNames = {
+    "the factory", "configure()", "claims()", "stepPeriod()", "start()", "onObjects()", "onJointState()",
+    "step()", "stop()", "status()", "the destructor"};
+
+}  // namespace
+
 // One module with its claims, step timer and context.
 struct BehaviorHost::Slot {
   std::unique_ptr<Module> module;
@@ -73,7 +87,31 @@ struct BehaviorHost::Slot {
   Claims claims;
   double next_step = 0.0;
   std::unique_ptr<Context> ctx;
+  // "step() of module 'x' (type t, plugin /abs/lib.so)", one per call, written before the first call:
+  // the call mark points at them, and a signal handler or a watchdog cannot format a string.
+  std::array<std::string, kCallCount> what;
 };
+
+namespace {
+
+// Runs `fn` (one call into the module of `slot`) marked and guarded: see host.hpp's opening block.
+template <class Slot, class Fn>
+auto callModule(const Slot& slot, ModuleCall call, Fn&& fn) -> decltype(fn()) {
+  const std::string& what = slot.what[call];
+  const ModuleCallMark mark(what.c_str());
+  try {
+    return fn();
+  } catch (const ConfigError& e) {
+    if (call == kFactory || call == kConfigure) throw;
+    throw ModuleError(what + " threw: " + e.what());
+  } catch (const std::exception& e) {
+    throw ModuleError(what + " threw: " + e.what());
+  } catch (...) {
+    throw ModuleError(what + " threw something that is not a std::exception (an int, a string literal, ...)");
+  }
+}
+
+}  // namespace
 
 class BehaviorHost::Context final : public ModuleContext {
  public:
@@ -166,10 +204,15 @@ BehaviorHost::BehaviorHost(const HostConfig& config, const ModuleRegistry& regis
     names += (names.empty() ? "" : ", ") + e.name;
     if (!only_module.empty() && e.name != only_module) continue;
     auto slot = std::make_unique<Slot>();
-    slot->module = registry.create(e.type, e.name);
     slot->type = e.type;
-    slot->module->configure(e.config, *robot_);
-    slot->claims = slot->module->claims();
+    const auto plugin = config.type_plugins.find(e.type);
+    const std::string origin =
+        plugin == config.type_plugins.end() ? std::string("built in") : "plugin " + plugin->second;
+    for (int c = 0; c < kCallCount; ++c)
+      slot->what[c] = std::string(kCallNames[c]) + " of module '" + e.name + "' (type " + e.type + ", " + origin + ")";
+    slot->module = callModule(*slot, kFactory, [&] { return registry.create(e.type, e.name); });
+    callModule(*slot, kConfigure, [&] { slot->module->configure(e.config, *robot_); });
+    slot->claims = callModule(*slot, kClaims, [&] { return slot->module->claims(); });
     slot->ctx = std::make_unique<Context>(*this, *slot);
     slots_.push_back(std::move(slot));
   }
@@ -206,7 +249,13 @@ BehaviorHost::BehaviorHost(const HostConfig& config, const ModuleRegistry& regis
   }
 }
 
-BehaviorHost::~BehaviorHost() = default;
+BehaviorHost::~BehaviorHost() {
+  // Last built, first destroyed (as stop()); each destructor marked, since it is the module's code too.
+  for (auto it = slots_.rbegin(); it != slots_.rend(); ++it) {
+    const ModuleCallMark mark((*it)->what[kDestructor].c_str());
+    (*it)->module.reset();
+  }
+}
 
 std::vector<std::string> BehaviorHost::moduleNames() const {
   std::vector<std::string> out;
@@ -242,8 +291,8 @@ void BehaviorHost::start(const Now& now) {
   priority_dirty_ = claims_.priority;
   for (auto& s : slots_) {
     s->ctx->current = now;
-    s->module->start(*s->ctx);
-    s->next_step = now.t + s->module->stepPeriod();
+    callModule(*s, kStart, [&] { s->module->start(*s->ctx); });
+    s->next_step = now.t + callModule(*s, kStepPeriod, [&] { return s->module->stepPeriod(); });
   }
   flush();
 }
@@ -316,7 +365,7 @@ void BehaviorHost::onObjects(const ObjectsFrame& frame, const Now& now) {
   for (auto& s : slots_) {
     if (!s->claims.objects) continue;
     s->ctx->current = now;
-    s->module->onObjects(scratch_, *s->ctx);
+    callModule(*s, kOnObjects, [&] { s->module->onObjects(scratch_, *s->ctx); });
   }
   flush();
 }
@@ -342,7 +391,7 @@ void BehaviorHost::onJointState(const JointStateSample& js, const Now& now) {
   last_joint_dispatch_ = now.t;
   for (auto& s : slots_) {
     s->ctx->current = now;
-    s->module->onJointState(*s->ctx);
+    callModule(*s, kOnJointState, [&] { s->module->onJointState(*s->ctx); });
   }
   flush();
 }
@@ -350,10 +399,10 @@ void BehaviorHost::onJointState(const JointStateSample& js, const Now& now) {
 void BehaviorHost::tick(const Now& now) {
   if (!running_) return;
   for (auto& s : slots_) {
-    const double period = s->module->stepPeriod();
+    const double period = callModule(*s, kStepPeriod, [&] { return s->module->stepPeriod(); });
     if (period <= 0.0 || now.t < s->next_step) continue;
     s->ctx->current = now;
-    s->module->step(*s->ctx);
+    callModule(*s, kStep, [&] { s->module->step(*s->ctx); });
     s->next_step += period;
     if (s->next_step <= now.t) s->next_step = now.t + period;  // missed steps are skipped, not queued
   }
@@ -365,7 +414,7 @@ void BehaviorHost::stop(const Now& now) {
   for (auto it = slots_.rbegin(); it != slots_.rend(); ++it) {
     Slot& s = **it;
     s.ctx->current = now;
-    s.module->stop(*s.ctx);
+    callModule(s, kStop, [&] { s.module->stop(*s.ctx); });
     // Whatever the module left behind is removed here, and reported.
     for (Hand h : kBothHands) {
       if (s.claims.hands[handIndex(h)] && hands_[handIndex(h)].given) {
@@ -402,7 +451,7 @@ void BehaviorHost::stop(const Now& now) {
 std::string BehaviorHost::status() const {
   std::ostringstream m;
   for (const auto& s : slots_) {
-    const std::string st = s->module->status();
+    const std::string st = callModule(*s, kStatus, [&] { return s->module->status(); });
     m << s->module->name() << (st.empty() ? "" : "[" + st + "]") << " ";
   }
   m << "frames=" << stats_.frames_received << " objects=" << stats_.objects_accepted

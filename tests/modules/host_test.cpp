@@ -1,8 +1,10 @@
 // BehaviorHost with fake inputs: input validation (writer not a configured object source, NaN, future
 // stamps, unknown frame_id, unknown objects, range, duplicates: rejected, counted, never forwarded), joint states, output ownership, merging of
-// several modules, --module selection, and the clean-up guarantee at stop.
+// several modules, --module selection, the clean-up guarantee at stop, and the guard around every call
+// into a module (marked while it runs; whatever it throws becomes a ModuleError naming the call).
 #include "modules_test_support.hpp"
 
+#include <reflex/modules/module_call.hpp>
 #include <reflex/modules/pointing.hpp>
 
 #include <cmath>
@@ -21,10 +23,11 @@ class ProbeModule final : public Module {
  public:
   static std::vector<ObjectsFrame>* frames;
   static int joint_callbacks;
+  static std::string call_mark;  // moduleCallInProgress().what seen inside the last onObjects
   explicit ProbeModule(std::string name) : Module(std::move(name)) {}
   void configure(const ConfigNode& c, const RobotState&) override {
     c.rejectUnknown({"misbehave"});
-    misbehave_ = c.choice("misbehave", "no", {"no", "unclaimed_hand", "leave_segment", "nan_target"});
+    misbehave_ = c.choice("misbehave", "no", {"no", "unclaimed_hand", "leave_segment", "nan_target", "throw_int"});
   }
   Claims claims() const override {
     Claims c;
@@ -45,6 +48,9 @@ class ProbeModule final : public Module {
   }
   void onObjects(const ObjectsFrame& f, ModuleContext& ctx) override {
     frames->push_back(f);
+    const ModuleCallInProgress call = moduleCallInProgress();
+    call_mark = call.what ? call.what : "";
+    if (misbehave_ == "throw_int") throw 42;
     if (misbehave_ == "unclaimed_hand") ctx.setHand(Hand::kLeft, HandTarget::at({0.3, 0.0, 1.0}));
     if (misbehave_ == "nan_target")
       ctx.setHand(Hand::kRight, HandTarget::at({std::numeric_limits<double>::quiet_NaN(), 0.0, 1.0}));
@@ -57,6 +63,7 @@ class ProbeModule final : public Module {
 };
 std::vector<ObjectsFrame>* ProbeModule::frames = nullptr;
 int ProbeModule::joint_callbacks = 0;
+std::string ProbeModule::call_mark;
 
 ModuleRegistry probeRegistry() {
   ModuleRegistry r = builtinRegistry();
@@ -316,7 +323,37 @@ TEST_F(HostTest, ModulesOfOneProcessMergeIntoOneHandTargets) {
 TEST_F(HostTest, WritingAnUnclaimedOutputIsAProgrammingError) {
   TestHost h("modules:\n  - {name: probe, type: probe, config: {misbehave: unclaimed_hand}}\n", probeRegistry());
   h->start(at(0.0));
-  EXPECT_THROW(h->onObjects(frameAt(0.0, {object("cup", {0.4, 0.0, 1.0})}), at(0.0)), std::logic_error);
+  // The context's std::logic_error, named by the host's guard around the module's call.
+  try {
+    h->onObjects(frameAt(0.0, {object("cup", {0.4, 0.0, 1.0})}), at(0.0));
+    FAIL() << "expected ModuleError";
+  } catch (const ModuleError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "onObjects() of module 'probe' (type probe, built in) threw: module 'probe' wrote the left hand "
+              "without claiming it");
+  }
+}
+
+TEST_F(HostTest, EveryCallIsMarkedAndWhateverItThrowsIsAModuleErrorNamingCallModuleAndPlugin) {
+  const ModuleRegistry registry = probeRegistry();
+  HostConfig config = parseHostConfig(
+      ConfigNode::loadString("modules:\n  - {name: p1, type: probe, config: {misbehave: throw_int}}\n", "test.yaml"),
+      registry);
+  config.type_plugins["probe"] = "/plugins/libprobe.so";
+  testing::RecordingSink sink;
+  BehaviorHost host(config, registry, sink, [](const std::string&) {});
+  EXPECT_EQ(moduleCallInProgress().what, nullptr);
+  host.start(at(0.0));
+  try {
+    host.onObjects(frameAt(0.0, {object("cup", {0.4, 0.0, 1.0})}), at(0.0));
+    FAIL() << "expected ModuleError";
+  } catch (const ModuleError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "onObjects() of module 'p1' (type probe, plugin /plugins/libprobe.so) threw something that is not a "
+              "std::exception (an int, a string literal, ...)");
+  }
+  EXPECT_EQ(ProbeModule::call_mark, "onObjects() of module 'p1' (type probe, plugin /plugins/libprobe.so)");
+  EXPECT_EQ(moduleCallInProgress().what, nullptr) << "the mark outlived the call that threw";
 }
 
 TEST_F(HostTest, NonFiniteHandTargetFromAModuleBecomesNoTarget) {

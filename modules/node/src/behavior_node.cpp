@@ -144,6 +144,7 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
   m.config = loadHostConfig(options.config, registry);
   if (!options.object_sources.empty()) m.config.inputs.object_sources = options.object_sources;
   if (!options.joint_state_sources.empty()) m.config.inputs.joint_state_sources = options.joint_state_sources;
+  m.config.type_plugins = options.type_plugins;
   // Every host line goes through one rate limiter (issue 16 item 8f): a flood of bad samples is
   // counted in the host's stats but prints at most LogLimiter's rate.
   BehaviorHost::LogFn log = [&m](const std::string& line) { m.host_log.print(stderr, line); };

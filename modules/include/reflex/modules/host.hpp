@@ -31,6 +31,13 @@
 //   joint_state_period: 0.1    # s, modules hear of joint states at most this often
 //   modules:
 //     - {name: pointing, type: pointing, config: {...}}
+//
+// Every call into a module (its factory, configure, claims, stepPeriod, start, onObjects,
+// onJointState, step, stop, status, its destructor) is marked (module_call.hpp), so a crash or a call
+// that never returns can be named by the process, and guarded: whatever a module throws, a
+// std::exception or not, leaves the host as a ModuleError naming the call, the module, its type and
+// the plugin file that registered the type. A ConfigError from the factory or configure() passes
+// unchanged (it names file, line, key and value).
 #pragma once
 
 #include "reflex/modules/config.hpp"
@@ -44,10 +51,19 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 namespace reflex::modules {
+
+/// A module failed in a call at run time (threw, whatever it threw). The message names the call, the
+/// module, its type and where the type came from: "step() of module 'x' (type t, plugin /abs/lib.so)
+/// threw: ...".
+class ModuleError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
 
 /// Where the host's merged outputs go. Called only on change, from the host's thread.
 class OutputSink {
@@ -89,6 +105,9 @@ struct HostConfig {
   /// [s] modules' onJointState runs at most this often (the robot state itself follows every sample)
   double joint_state_period = 0.1;
   std::vector<ModuleEntry> modules;
+  /// Module type -> the plugin file that registered it (PluginInfo::path); a type not here is built
+  /// in. Not read from the file: the program that loaded the plugins fills it, for messages.
+  std::map<std::string, std::string> type_plugins;
 };
 
 /// Reads a behavior configuration file; throws ConfigError naming file, line, key and value.

@@ -13,15 +13,17 @@
 //                              known names, not from the future); onJointState(ctx) after every
 //                              accepted joint state (ctx.robot() is updated); step(ctx) every
 //                              stepPeriod() seconds if > 0. Never throw here: a bad situation gives a
-//                              safe output (no target) and a log line.
+//                              safe output (no target) and a log line. What a module throws anyway
+//                              (a std::exception or not) ends the run as a ModuleError naming the
+//                              call, the module and its plugin (host.hpp).
 //   5. stop(ctx)              remove everything the module added: detach its segments, its hands to
 //                              "no target", the priority back to equal, walking stopped. The host
 //                              checks afterwards and removes (and reports) whatever is left.
 //
 // Outputs go through ctx and only to what claims() declared: a module writing an output it did not
-// claim is a programming error (std::logic_error). Two modules of one process may not claim the same
-// output (the host refuses the configuration), so one HandTargets sample merges the hands of
-// several modules.
+// claim is a programming error (std::logic_error, reported by the host as a ModuleError). Two modules
+// of one process may not claim the same output (the host refuses the configuration), so one
+// HandTargets sample merges the hands of several modules.
 //
 // To write a module: derive from Module, implement the five calls, and register a factory
 // (registry.hpp, ModuleRegistry::add). modules/README.md has the walk-through.

@@ -12,7 +12,11 @@
 //
 // Contract: the plugin is built against the same Reflex version (the API tag below is compared and a
 // mismatch is refused, naming both); a plugin is never unloaded (its factories live as long as the
-// process); loading runs the plugin's code in the behavior process — load only files you trust.
+// process). Loading a plugin is running its code: dlopen runs the library's static constructors
+// before any check, so a file that turns out to be "not a Reflex module plugin" (or built for another
+// API) has already executed in the behavior process when it is refused — load only files you trust.
+// Once loaded, what its modules throw, a crash inside them and a call that never returns are named
+// (host.hpp, modules/README.md), not prevented.
 #pragma once
 
 #include "reflex/modules/config.hpp"

@@ -12,6 +12,7 @@
 #include "reflex/modules/host.hpp"
 #include "reflex/modules/registry.hpp"
 
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -36,6 +37,8 @@ struct NodeOptions {
   double duration = 0.0;         ///< [s] stop after this long (0 = until SIGINT / SIGTERM)
   double progress_period = 5.0;  ///< [s] status line on stderr (0 = none)
   bool quiet = false;            ///< no log lines on stderr
+  /// Module type -> plugin file that registered it (HostConfig::type_plugins: named in errors).
+  std::map<std::string, std::string> type_plugins;
 };
 
 class BehaviorNode {
