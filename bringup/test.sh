@@ -44,6 +44,14 @@ if [[ $release -eq 1 ]]; then
   "$here/bringup/setup.sh"
   built=$(date +%s)
   (cd "$build_dir" && ctest --output-on-failure -j"$(nproc)" "$@") || status=$?
+  # No test may leave the machine's null and full devices replaced (tests that need a full device
+  # make their own; a tool that replaced one would break every later run on this machine).
+  for node in /dev/null /dev/full; do
+    if [ ! -c "$node" ]; then
+      echo "test.sh: $node is no longer a character device after the tests" >&2
+      status=1
+    fi
+  done
   tested=$(date +%s)
   summary+=("set-up+build $((built - start)) s" "tests $((tested - built)) s (exit $status)")
 else

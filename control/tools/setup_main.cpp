@@ -19,6 +19,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <cstdio>
+#include <sys/stat.h>
+
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -154,11 +156,11 @@ int run(int argc, char** argv) {
       if (const std::string why = reflex::common::inputFileProblem(path); !why.empty()) throw std::runtime_error(what + " " + why);
     }
     const reflex::control::PackagePaths paths = reflex::control::parsePackagePathArgs(package_args);
+    if (const std::string why = reflex::common::outputFolderProblem(out_dir); !why.empty())
+      throw std::runtime_error("--out: " + why);
     std::error_code ec;
     fs::create_directories(out_dir, ec);
     if (ec) throw std::runtime_error("--out '" + out_dir + "': cannot create the folder: " + ec.message());
-    if (const std::string why = reflex::common::outputFolderProblem(out_dir); !why.empty())
-      throw std::runtime_error("--out " + why);
     const std::string stem = fs::path(urdf).stem().string();
     const std::string final_dir = out_dir;
     const auto finalPath = [&](const std::string& name) { return (fs::path(final_dir) / name).string(); };
@@ -168,15 +170,10 @@ int run(int argc, char** argv) {
     if (hasMeshCollision(urdf)) outputs.push_back(finalPath(stem + ".fit.yaml"));
     if (close_gaps) outputs.push_back(finalPath(stem + ".urdf"));
     for (const std::string& p : outputs) {
-      std::error_code ec;
-      const fs::file_status st = fs::symlink_status(p, ec);
-      if (!fs::exists(st)) continue;
-      if (!fs::is_regular_file(st))
-        throw std::runtime_error("'" + p + "' exists and is " +
-                                 (fs::is_directory(st) ? std::string("a directory")
-                                  : fs::is_symlink(st) ? std::string("a symbolic link")
-                                  : fs::is_character_file(st) || fs::is_block_file(st) ? std::string("a device")
-                                  : fs::is_fifo(st) ? std::string("a FIFO") : std::string("not a regular file")) +
+      struct stat st {};
+      if (::lstat(p.c_str(), &st) != 0) continue;
+      if (!S_ISREG(st.st_mode))
+        throw std::runtime_error("'" + p + "' exists and is " + reflex::common::fileKind(st.st_mode) +
                                  ": reflex_setup replaces only regular files; remove it or choose another --out");
       if (!force && p != finalPath(stem + ".fit.yaml"))
         throw std::runtime_error("'" + p + "' exists; give --force to replace it");

@@ -3,6 +3,7 @@
 // — never a crash (a signal) and never a running controller. Domain 106 (only reached by the
 // profile cases).
 #include "controller_run.hpp"
+#include "support/child_process.hpp"
 
 #include <cstdio>
 #include <cstdlib>
@@ -109,10 +110,11 @@ std::vector<Case> cases() {
       {"NaN input timeout", {"--input-timeout", "nan"}, "nan"},
       {"unknown option", {"--no-such-option"}, "--no-such-option"},
       // Issue 16, item 14: a --log that cannot be written is an error before the loop.
-      {"--log on a full device", {"--domain", d, "--log", "/dev/full"}, "'/dev/full': No space left on device"},
+      {"--log on a full device", {"--domain", d, "--log", reflex::testing::fullDevice()},
+       "'" + reflex::testing::fullDevice() + "': No space left on device"},
       {"--log in a missing folder", {"--domain", d, "--log", tmp("no_such_folder/run.csv")},
        tmp("no_such_folder/run.csv")},
-      {"--log is a folder", {"--domain", d, "--log", tmp("")}, "Is a directory"},
+      {"--log is a folder", {"--domain", d, "--log", tmp("")}, "is a directory"},
       // Issue 16, item 9: the module name is the key of the heartbeat (at most 255 bytes).
       {"--name of 256 bytes", {"--domain", d, "--name", std::string(256, 'n')}, "at most 255 bytes"},
       {"--name of 100000 bytes", {"--domain", d, "--name", std::string(100000, 'n')}, "100000 bytes long"},

@@ -188,6 +188,8 @@ TEST(FileKind, ToolsExitWithAnErrorNamingThePathInsteadOfHanging) {
 
 // ---------------------------------------------------------------- item 14: outputs
 TEST(OutputFiles, TheRecordingWriterAndTheExporterNameTheFileAndTheCause) {
+  // A full device of the test's own (support/child_process.hpp), not the machine's.
+  const std::string& full = reflex::testing::fullDevice();
   using reflex::record::RecordError;
   auto message = [](const std::function<void()>& fn) -> std::string {
     try {
@@ -197,9 +199,9 @@ TEST(OutputFiles, TheRecordingWriterAndTheExporterNameTheFileAndTheCause) {
     }
     return "(no error)";
   };
-  // /dev/full: the file header cannot be written -- at construction, not at the end.
-  EXPECT_EQ(message([] { reflex::record::RecordWriter w("/dev/full"); }),
-            "cannot write recording '/dev/full': No space left on device");
+  // A full device: the file header cannot be written -- at construction, not at the end.
+  EXPECT_EQ(message([&] { reflex::record::RecordWriter w(full); }),
+            "cannot write recording '" + full + "': No space left on device");
   // A folder that does not exist, and a folder in the file's place.
   const std::string missing = message([] { reflex::record::RecordWriter w("/nonexistent_reflex_dir/run.rfx"); });
   EXPECT_NE(missing.find("folder '/nonexistent_reflex_dir' of output file '/nonexistent_reflex_dir/run.rfx' does not exist"),
@@ -220,33 +222,34 @@ TEST(OutputFiles, TheRecordingWriterAndTheExporterNameTheFileAndTheCause) {
   EXPECT_NE(early.find("/nonexistent_reflex_dir"), std::string::npos) << early;
   EXPECT_NE(early.find("does not exist"), std::string::npos) << early;
   const std::string seed = std::string(REFLEX_SOURCE_DIR) + "/tests/fuzz/seeds/recording.rfx";
-  EXPECT_EQ(message([&] { reflex::record::exportCsv(seed, "reflex/joint_state", "/dev/full"); }),
-            "cannot write '/dev/full': No space left on device");
+  EXPECT_EQ(message([&] { reflex::record::exportCsv(seed, "reflex/joint_state", full); }),
+            "cannot write '" + full + "': No space left on device");
 }
 
 TEST(OutputFiles, ToolsExitNonZeroNamingTheOutputAndTheCause) {
+  const std::string& full = reflex::testing::fullDevice();
   const NonFiles nf;
   const std::string bin = REFLEX_BIN_DIR;
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
   const std::string seed = std::string(REFLEX_SOURCE_DIR) + "/tests/fuzz/seeds/recording.rfx";
-  // A time series that cannot be written: its name in the output folder links to /dev/full.
+  // A time series that cannot be written: its name in the output folder links to a full device.
   const std::string sim_out = nf.dir + "/sim";
   fs::create_directories(sim_out);
-  fs::create_symlink("/dev/full", sim_out + "/timeseries.csv");
+  fs::create_symlink(full, sim_out + "/timeseries.csv");
   struct Case {
     std::string cmd, expected;
   };
   const std::vector<Case> cases = {
-      {bin + "/reflex_inspect " + urdf + " > /dev/full", "cannot write the standard output: No space left on device"},
-      {bin + "/reflex_record info " + seed + " > /dev/full",
+      {bin + "/reflex_inspect " + urdf + " > " + full, "cannot write the standard output: No space left on device"},
+      {bin + "/reflex_record info " + seed + " > " + full,
        "cannot write the standard output: No space left on device"},
-      {bin + "/reflex_record export " + seed + " --topic reflex/joint_state --csv /dev/full",
-       "cannot write '/dev/full': No space left on device"},
+      {bin + "/reflex_record export " + seed + " --topic reflex/joint_state --csv " + full,
+       "cannot write '" + full + "': No space left on device"},
       {bin + "/reflex_record export " + seed + " --dir /dev/null/csv", "'/dev/null/csv'"},
-      {bin + "/reflex_record record --domain 205 -o /dev/full --duration 1", "'/dev/full': No space left on device"},
+      {bin + "/reflex_record record --domain 205 -o " + full + " --duration 1", "'" + full + "': No space left on device"},
       {bin + "/reflex_record record --domain 205 -o " + nf.dir + "/no/such/run.rfx --duration 1",
        "'" + nf.dir + "/no/such' of output file"},
-      {bin + "/reflex_sim target_inside_body --no-plots --out " + nf.dir + "/sim_stdout > /dev/full",
+      {bin + "/reflex_sim target_inside_body --no-plots --out " + nf.dir + "/sim_stdout > " + full,
        "cannot write the standard output: No space left on device"},
       {bin + "/reflex_sim target_inside_body --no-plots --out " + sim_out + " > /dev/null",
        "cannot write '" + sim_out + "/timeseries.csv': No space left on device"},

@@ -3,6 +3,8 @@
 // rows where the old in-memory log stopped without a word; a ring the writer cannot empty in time
 // drops rows and SAYS so (count, error text, close() false); a full device is a LogError at open
 // naming the file and the reason; the rows are byte-identical to reflex_sim's writeTimeseriesCsv.
+#include "support/child_process.hpp"
+
 #include <reflex/control/controller.hpp>
 #include <reflex/control/scenarios.hpp>
 #include <reflex/control/urdf_loader.hpp>
@@ -100,17 +102,21 @@ TEST(TimeseriesLog, AFullRingDropsCountsAndSaysSo) {
 
 TEST(TimeseriesLog, UnwritablePathsAreErrorsAtOpenNamingFileAndReason) {
   try {
-    TimeseriesLog log(model(), "/dev/full");
-    ADD_FAILURE() << "/dev/full accepted";
+    TimeseriesLog log(model(), reflex::testing::fullDevice());
+    ADD_FAILURE() << reflex::testing::fullDevice() << " accepted";
   } catch (const LogError& e) {
-    EXPECT_NE(std::string(e.what()).find("'/dev/full': No space left on device"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("'" + reflex::testing::fullDevice() + "': No space left on device"),
+              std::string::npos)
+        << e.what();
   }
   const std::string missing = ::testing::TempDir() + "no_such_folder_h2/x.csv";
   try {
     TimeseriesLog log(model(), missing);
     ADD_FAILURE() << "a missing folder accepted";
   } catch (const LogError& e) {
-    EXPECT_NE(std::string(e.what()).find("'" + missing + "' for writing: No such file or directory"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("folder '" + ::testing::TempDir() + "no_such_folder_h2' of output file '" +
+                                         missing + "' does not exist"),
+              std::string::npos)
         << e.what();
   }
 }

@@ -420,7 +420,8 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   r = setupRun(dir + "/one.urdf --out " + dir + "/x --package-path foo");
   EXPECT_EQ(r.err, "reflex_setup: error: --package-path 'foo' must be NAME=DIR\n");
   r = setupRun(dir + "/one.urdf --out /dev/null/x");
-  EXPECT_EQ(r.err, "reflex_setup: error: --out '/dev/null/x': cannot create the folder: Not a directory\n");
+  EXPECT_EQ(r.err, "reflex_setup: error: --out: output folder '/dev/null/x' cannot be created: '/dev/null' is a "
+                   "character device\n");
   r = setupRun("--help");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_THAT(r.out, HasSubstr("--close-gaps"));

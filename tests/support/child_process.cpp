@@ -4,10 +4,13 @@
 #include <poll.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -180,6 +183,26 @@ int runInChild(std::chrono::milliseconds timeout, const std::function<int()>& fn
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+const std::string& fullDevice() {
+  struct Node {
+    std::string dir, path = "/dev/full";
+    Node() {
+      const char* tmp = std::getenv("TMPDIR");
+      std::string templ = std::string(tmp != nullptr && *tmp != '\0' ? tmp : "/tmp") + "/reflex_full_device_XXXXXX";
+      if (::mkdtemp(templ.data()) == nullptr) return;
+      dir = templ;
+      const std::string node = dir + "/full";
+      if (::mknod(node.c_str(), S_IFCHR | 0666, makedev(1, 7)) == 0) path = node;
+    }
+    ~Node() {
+      if (path != "/dev/full") ::unlink(path.c_str());
+      if (!dir.empty()) ::rmdir(dir.c_str());
+    }
+  };
+  static const Node node;
+  return node.path;
 }
 
 }  // namespace reflex::testing

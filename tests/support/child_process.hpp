@@ -87,6 +87,12 @@ inline std::string binPath(const std::string& name) {
   return std::string(REFLEX_BIN_DIR) + "/" + name;
 }
 
+/// A "full" character device of this test program's own (1, 7: every write fails with ENOSPC), in a
+/// private folder made at the first call and removed at exit: a test that needs a full device never
+/// depends on the machine's /dev/full being intact after other tests ran. Without the right to make
+/// device nodes (not root): "/dev/full".
+const std::string& fullDevice();
+
 /// What a command printed and returned (run to completion).
 struct ProcessResult {
   int exit_code = -1;  ///< -1 if it could not be started or did not exit normally

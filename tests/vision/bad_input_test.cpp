@@ -435,8 +435,9 @@ TEST_F(BadInput, SignalsEndAPacedReplayDuringALongWait) {
 // (was exit 0); a missing output folder is an error before any work, naming the folder.
 TEST_F(BadInput, DumpThatCannotBeWrittenIsAnError) {
   std::string err;
-  EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump /dev/full --quiet", err), 4);
-  EXPECT_THAT(err, AllOf(HasSubstr("'/dev/full'"), HasSubstr("No space left on device")));
+  const std::string& full = reflex::testing::fullDevice();
+  EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + full + " --quiet", err), 4);
+  EXPECT_THAT(err, AllOf(HasSubstr("'" + full + "'"), HasSubstr("No space left on device")));
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "no_such_dir/x.csv"), err), 2);
   EXPECT_THAT(err, HasSubstr("folder '" + (dir_ / "no_such_dir") + "' does not exist"));
 }

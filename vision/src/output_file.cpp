@@ -1,5 +1,6 @@
 #include "reflex/vision/output_file.hpp"
 
+#include "reflex/common/files.hpp"
 #include "reflex/vision/error.hpp"
 
 #include <fcntl.h>
@@ -21,8 +22,13 @@ void requireParentFolder(const std::string& path, const std::string& what) {
 
 OutputFile::OutputFile(const std::string& path, const std::string& what) : path_(path), what_(what) {
   requireParentFolder(path, what);
-  fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd_ < 0) throw VisionError("cannot write " + what + " '" + path + "': " + std::strerror(errno));
+  // A directory or a block device in its place is refused; a device or a FIFO with a reader is
+  // written through.
+  if (const std::string why = common::outputFileProblem(path); !why.empty()) throw VisionError(what + ": " + why);
+  fd_ = common::openOutputStream(path);
+  if (fd_ < 0)
+    throw VisionError("cannot write " + what + " '" + path + "': " +
+                      (errno == ENXIO ? std::string("a FIFO with no reader") : std::string(std::strerror(errno))));
   buffer_.reserve(kBufferBytes);
 }
 

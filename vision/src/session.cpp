@@ -1,5 +1,6 @@
 #include "reflex/vision/session.hpp"
 
+#include "reflex/common/files.hpp"
 #include "reflex/vision/output_file.hpp"
 #include "reflex/vision/stereo_pipeline.hpp"
 #include "yaml_util.hpp"
@@ -347,9 +348,26 @@ ReadStatus SessionReader::read(StereoFrame& frame, std::string& message) {
   return ReadStatus::kOk;
 }
 
+std::string sessionFolderProblem(const std::string& dir) {
+  if (std::string why = common::outputFolderProblem(dir); !why.empty()) return why;
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return "";  // made by the writer: nothing in it yet
+  std::vector<std::string> names = {"timestamps.csv", "session.yaml", "left.yaml",        "right.yaml",
+                                    "objects.yaml",   "camera_mount.yaml", "ground_truth.csv"};
+  for (const auto& codec : SessionWriterOptions{}.codecs) {
+    names.push_back("left." + codec.second);
+    names.push_back("right." + codec.second);
+  }
+  for (const std::string& name : names) {
+    if (std::string why = common::regularOutputProblem(dir + "/" + name); !why.empty()) return why;
+  }
+  return "";
+}
+
 SessionWriter::SessionWriter(const std::string& dir, const StereoCalibration& calibration, const ObjectMap& objects,
                              const std::optional<CameraMount>& mount, const SessionWriterOptions& options)
     : dir_(dir), options_(options), size_(calibration.left.image_size) {
+  if (const std::string why = sessionFolderProblem(dir); !why.empty()) throw VisionError("session: " + why);
   if (!(options_.fps > 0.0)) throw VisionError("session writer: fps = " + fmt(options_.fps) + " must be positive");
   std::error_code ec;
   // The session folder itself is created; its parent must exist (a mistyped path is an error now,

@@ -1,6 +1,7 @@
 // reflex_calibrate: stereo calibration of the user's own rig -> the ROS camera_info pair that
 // reflex_vision reads (calibrate), conversion of an OpenCV stereoCalibrate file (convert), and a
 // printable calibration board (board). Thin wrapper over reflex/vision/stereo_calibrate.hpp.
+#include "reflex/common/files.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/stereo_calibrate.hpp"
 #include "mount_kinematics.hpp"
@@ -54,8 +55,21 @@ BoardSpec boardFrom(const BoardArgs& b) {
   return s;
 }
 
+// Throws naming `out` when it cannot be the output folder (a device, a FIFO, a file in its place; its
+// parent missing) or when left.yaml / right.yaml in it are not regular files: before any work.
+void checkOutputFolder(const std::string& out) {
+  if (const std::string why = reflex::common::outputFolderProblem(out); !why.empty()) throw VisionError("--out: " + why);
+  std::error_code ec;
+  if (!fs::is_directory(out, ec)) return;  // made later: nothing in it yet
+  for (const char* name : {"left.yaml", "right.yaml"}) {
+    if (const std::string why = reflex::common::regularOutputProblem((fs::path(out) / name).string()); !why.empty())
+      throw VisionError("--out: " + why);
+  }
+}
+
 // Creates the output folder (its parent must exist) and returns the two camera_info paths.
 std::pair<std::string, std::string> outputPaths(const std::string& out) {
+  checkOutputFolder(out);
   const fs::path dir(out);
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) {
@@ -333,6 +347,17 @@ int main(int argc, char** argv) {
 
   CLI11_PARSE(app, argc, argv);
   try {
+    // Outputs first, before any image is read.
+    if (mnt->parsed()) {
+      if (const std::string why = reflex::common::regularOutputProblem(mount_args.out); !why.empty())
+        throw VisionError("--out: " + why);
+    }
+    if (cal->parsed()) checkOutputFolder(cal_out);
+    if (conv->parsed()) checkOutputFolder(conv_out);
+    if (draw->parsed()) {
+      if (const std::string why = reflex::common::regularOutputProblem(board_out); !why.empty())
+        throw VisionError("--out: " + why);
+    }
     if (mnt->parsed()) return runMount(mount_args);
     if (cal->parsed()) return runCalibrate(cal_board, pairs, session, every, cal_out, opt, quiet);
     if (conv->parsed()) {

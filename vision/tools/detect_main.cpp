@@ -168,7 +168,21 @@ int main(int argc, char** argv) {
       if (images.size() != 1)
         throw VisionError("--draw '" + draw + "' is not a folder: with " + std::to_string(images.size()) +
                           " images, give an existing folder");
-      if (const std::string why = reflex::common::outputFileProblem(draw); !why.empty()) throw VisionError(why);
+      if (const std::string why = reflex::common::regularOutputProblem(draw); !why.empty())
+        throw VisionError("--draw: " + why);
+    }
+    // Every annotated file is a regular file or a new one (a device, a FIFO or a folder in its place
+    // is refused), checked before any image is read.
+    const auto drawPath = [&](const std::string& image) {
+      return draw_folder
+                 ? (std::filesystem::path(draw) / (std::filesystem::path(image).stem().string() + "_tags.png")).string()
+                 : draw;
+    };
+    if (draw_folder) {
+      for (const std::string& path : images) {
+        if (const std::string why = reflex::common::regularOutputProblem(drawPath(path)); !why.empty())
+          throw VisionError("--draw: " + why);
+      }
     }
 
     nlohmann::json all = nlohmann::json::array();
@@ -193,9 +207,7 @@ int main(int argc, char** argv) {
       if (!draw.empty()) {
         cv::Mat annotated = bgr.clone();
         drawTags(annotated, r.tags, r.poses, camera ? &*camera : nullptr, tag_size);
-        const std::string out =
-            draw_folder ? (std::filesystem::path(draw) / (std::filesystem::path(path).stem().string() + "_tags.png")).string()
-                        : draw;
+        const std::string out = drawPath(path);
         bool ok = false;
         try {
           ok = cv::imwrite(out, annotated);

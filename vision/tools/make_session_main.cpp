@@ -1,6 +1,7 @@
 // reflex_make_session: renders a synthetic stereo session (videos, timestamps, calibration, object
 // map, ground truth) from a scene script. Thin wrapper over reflex::vision::makeSession.
 #include "reflex/vision/error.hpp"
+#include "reflex/vision/session.hpp"
 #include "reflex/vision/session_maker.hpp"
 
 #include <CLI/CLI.hpp>
@@ -20,6 +21,8 @@ int main(int argc, char** argv) {
   app.add_flag("--quiet", quiet, "no progress display");
   CLI11_PARSE(app, argc, argv);
   try {
+    if (const std::string why = reflex::vision::sessionFolderProblem(out_dir); !why.empty())
+      throw reflex::vision::VisionError("--out: " + why);
     const reflex::vision::SceneScript script = reflex::vision::loadSceneScript(script_path);
     const auto summary = reflex::vision::makeSession(script, out_dir, [&](int k, int n) {
       if (!quiet && (k % 10 == 0 || k == n)) {

@@ -116,6 +116,7 @@ int main(int argc, char** argv) {
   app.add_flag("--progress", progress, "show progress even if stderr is not a terminal");
   CLI11_PARSE(app, argc, argv);
   try {
+    if (const std::string why = sessionFolderProblem(out); !why.empty()) throw VisionError("--out: " + why);
     const bool offline = !from_files.empty() || !from_sbs.empty();
     const int sources = (!cam_left.empty() || !cam_right.empty()) + (!sbs.empty()) + (!from_files.empty()) +
                         (!from_sbs.empty());

@@ -117,6 +117,8 @@ RobotStateFile::RobotStateFile(const std::string& path, const std::vector<std::s
   const std::string where = "robot state file '" + path + "'";
   if (nq_ <= 0 || q_lower.size() != nq_ || q_upper.size() != nq_)
     throw RobotStateError(where + ": the robot model has no joints or inconsistent limits");
+  // Read back and rewritten in place: only a regular file (a device, a FIFO, a folder refused by name).
+  if (const std::string why = common::inputFileProblem(path); !why.empty()) throw RobotStateError("robot state file " + why);
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) throw RobotStateError("cannot open " + where + ": " + errnoText());
   try {

@@ -1,5 +1,9 @@
 #include "reflex/control_node/timeseries_log.hpp"
 
+#include "reflex/common/files.hpp"
+
+#include <unistd.h>
+
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -14,9 +18,16 @@ std::string reasonOf(int err) { return std::strerror(err); }
 TimeseriesLog::TimeseriesLog(const control::Model& model, const std::string& path, std::size_t capacity)
     : model_(model), path_(path) {
   if (capacity == 0) throw LogError("--log ring capacity must be positive");
-  file_ = std::fopen(path.c_str(), "w");
+  // A directory or a block device in its place is refused; a device or a FIFO with a reader is
+  // written through (--log /dev/null, a pipe into a plotter).
+  if (const std::string why = reflex::common::outputFileProblem(path); !why.empty()) throw LogError("--log: " + why);
+  const int fd = reflex::common::openOutputStream(path);
+  file_ = fd < 0 ? nullptr : ::fdopen(fd, "w");
   if (file_ == nullptr) {
-    throw LogError("cannot open the --log file '" + path + "' for writing: " + reasonOf(errno));
+    const int err = errno;
+    if (fd >= 0) ::close(fd);
+    throw LogError("cannot open the --log file '" + path + "' for writing: " +
+                   (err == ENXIO ? std::string("a FIFO with no reader") : reasonOf(err)));
   }
   std::ostringstream header;
   control::writeTimeseriesCsvHeader(model, header);

@@ -143,6 +143,35 @@ std::string outputFileProblem(const std::string& path) {
   return "";
 }
 
+int openOutputStream(const std::string& path) noexcept {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NONBLOCK, 0644);
+  if (fd < 0) return -1;
+  if (::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK) != 0) {
+    const int err = errno;
+    ::close(fd);
+    errno = err;
+    return -1;
+  }
+  return fd;
+}
+
+std::string regularOutputProblem(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    struct stat lst {};
+    std::string via;
+    if (::lstat(path.c_str(), &lst) == 0 && S_ISLNK(lst.st_mode)) {
+      char* resolved = ::realpath(path.c_str(), nullptr);
+      if (resolved != nullptr) {
+        via = " (a link to " + quoted(resolved) + ")";
+        std::free(resolved);
+      }
+    }
+    return "output file " + quoted(path) + via + " is " + fileKind(st.st_mode) + ": only a regular file is written";
+  }
+  return outputFileProblem(path);
+}
+
 std::string outputFolderProblem(const std::string& dir) {
   if (dir.empty()) return "empty output folder name";
   std::string probe = dir;
@@ -161,7 +190,8 @@ std::string outputFolderProblem(const std::string& dir) {
       }
       return "";
     }
-    if (errno != ENOENT)
+    // ENOTDIR: a file on the way ("/dev/null/x"); the walk up names it.
+    if (errno != ENOENT && errno != ENOTDIR)
       return "output folder " + quoted(dir) + " cannot be used: " + quoted(probe) + ": " + std::strerror(errno);
     const std::string up = parentOf(probe);
     if (up == probe) return "output folder " + quoted(dir) + ": no existing ancestor folder";

@@ -86,7 +86,7 @@ int main(int argc, char** argv) {
     int width = 0, height = 0;
     parseTile(tile, width, height);
     const std::vector<double> cam = parseCamera(camera_text);
-    if (const std::string why = reflex::common::outputFileProblem(out); !why.empty()) throw std::invalid_argument(why);
+    if (const std::string why = reflex::common::regularOutputProblem(out); !why.empty()) throw std::invalid_argument(why);
     const reflex::view::SceneModel scene = reflex::view::loadSceneModel(urdf, collision, controller);
     const std::vector<reflex::view::LogScene> rows = reflex::view::readLogScenes(scene, log, at);
 

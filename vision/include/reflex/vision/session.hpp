@@ -136,6 +136,13 @@ struct SessionWriterOptions {
   std::vector<std::pair<std::string, std::string>> codecs = {{"avc1", "mp4"}, {"mp4v", "mp4"}, {"MJPG", "avi"}};
 };
 
+/// Why `dir` cannot be written as a session folder, or "" if it can: the folder is missing (its parent
+/// exists) or a folder, and every file a session writer or generator may write in it (videos in each
+/// container of SessionWriterOptions, timestamps.csv, session.yaml, calibrations, object map, mount,
+/// ground truth) is missing or a regular file: a device, a FIFO or a folder in its place is refused,
+/// naming it. The tools call it before any work; the writer again.
+std::string sessionFolderProblem(const std::string& dir);
+
 /// Writes a session folder. The constructor creates the folder (its parent folder must exist: a
 /// missing one is an error at the start, naming it) and writes the calibration, object map and
 /// mount; write() appends one pair; finish() writes timestamps.csv and session.yaml and checks the

@@ -64,6 +64,20 @@ std::string writeFileReplacing(const std::string& path, const std::string& text)
 /// For a tool to check its output before any work.
 std::string replaceableFileProblem(const std::string& path, std::string* target = nullptr);
 
+/// Why `path` cannot be written as an output that is read back as a whole (a configuration, a
+/// calibration, an image, a scene module), or "" if it can: outputFileProblem()'s checks, and only a
+/// regular file (or a link to one) or a new file: a device, a FIFO or a directory (or a link to one)
+/// is refused, "output file '<path>' [(a link to '<target>')] is <kind>: only a regular file is
+/// written". Streams (a time series, a dump, a recording, a CSV export) use outputFileProblem() and
+/// may go to a device or a FIFO.
+std::string regularOutputProblem(const std::string& path);
+
+/// Opens `path` to stream into it (created or truncated, mode 0644 less the umask, close-on-exec):
+/// the file descriptor, or -1 with errno set. A FIFO without a reader fails at once (ENXIO) instead of
+/// blocking the tool until one comes; the descriptor is blocking once open. Callers check the path
+/// with outputFileProblem() first.
+int openOutputStream(const std::string& path) noexcept;
+
 /// Flushes std::cout and stdout; "" if everything written to them reached the kernel, else
 /// "cannot write the standard output: <cause>" (e.g. `tool > /dev/full`: No space left on device).
 /// Tools call it last and exit non-zero with the message: output that was lost is not success.
