@@ -8,6 +8,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 
@@ -250,38 +251,56 @@ std::function<int()> addExport(CLI::App& app) {
   app.add_option("file", *input, "recording")->required();
   app.add_option("-t,--topic", *topics, "topic to export (repeatable with --dir; default with --dir: all)");
   app.add_option("--csv", *csv, "CSV file to write (one --topic)");
-  app.add_option("--dir", *dir, "folder to write one CSV per topic into (<topic with / as _>.csv)");
+  app.add_option("--dir", *dir,
+                 "folder to write one CSV per topic into (<topic with / : and space as _, other bytes but letters, "
+                 "digits, _ - . as %XX>.csv; topics that would share a name are refused, naming them)");
   return [input, topics, csv, dir] {
     return guarded("reflex_record export", [&] {
       if (csv->empty() == dir->empty()) throw RecordError("give exactly one of --csv FILE (with one --topic) or --dir DIR");
+      std::vector<CsvExport> targets;
+      bool refused = false;
+      RecordingInfo info;
       if (!csv->empty()) {
         if (topics->size() != 1)
           throw RecordError("--csv needs exactly one --topic (got " + std::to_string(topics->size()) + ")");
-        const auto n = exportCsv(*input, topics->front(), *csv);
-        std::fprintf(stderr, "reflex_record: %llu samples of %s -> %s\n", static_cast<unsigned long long>(n),
-                     topics->front().c_str(), csv->c_str());
-        return 0;
-      }
-      if (const std::string why = common::outputFolderProblem(*dir); !why.empty()) throw RecordError(why);
-      std::error_code ec;
-      std::filesystem::create_directories(*dir, ec);
-      if (ec) throw RecordError("cannot create folder '" + *dir + "': " + ec.message());
-      std::vector<std::string> list = *topics;
-      if (list.empty()) {
-        for (const auto& kv : scanRecording(*input).topics) {
-          if (findCodecByType(kv.second.type)) list.push_back(kv.first);
-          else  // the scene channels (/tf, /reflex/scene: JSON for viewers) have no CSV form
-            std::fprintf(stderr, "reflex_record: %s (%s) is not a Reflex topic type: no CSV\n", kv.first.c_str(),
-                         kv.second.type.c_str());
+        targets.push_back({topics->front(), *csv, 0});
+      } else {
+        if (const std::string why = common::outputFolderProblem(*dir); !why.empty()) throw RecordError(why);
+        std::error_code ec;
+        std::filesystem::create_directories(*dir, ec);
+        if (ec) throw RecordError("cannot create folder '" + *dir + "': " + ec.message());
+        info = scanRecording(*input);
+        std::vector<std::string> list = *topics;
+        if (list.empty()) {
+          for (const auto& kv : info.topics) {
+            if (findCodecByType(kv.second.type)) list.push_back(kv.first);
+            else  // the scene channels (/tf, /reflex/scene: JSON for viewers) have no CSV form
+              std::fprintf(stderr, "reflex_record: %s (%s) is not a Reflex topic type: no CSV\n",
+                           printableName(kv.first).c_str(), printableName(kv.second.type).c_str());
+          }
+        }
+        // Topics that would share a file: none of them is written (one would overwrite the other).
+        const auto collisions = csvFileNameCollisions(list);
+        for (const auto& kv : collisions) {
+          std::string names;
+          for (const std::string& t : kv.second) names += (names.empty() ? "'" : ", '") + printableName(t) + "'";
+          std::fprintf(stderr, "reflex_record: error: topics %s would all be written to %s: none of them exported "
+                       "(export each with --csv)\n", names.c_str(), printableName(kv.first).c_str());
+          refused = true;
+        }
+        for (const std::string& t : list) {
+          if (collisions.count(csvFileNameForTopic(t))) continue;
+          if (std::any_of(targets.begin(), targets.end(), [&](const CsvExport& x) { return x.topic == t; })) continue;
+          targets.push_back({t, (std::filesystem::path(*dir) / csvFileNameForTopic(t)).string(), 0});
         }
       }
-      for (const std::string& t : list) {
-        const std::string path = (std::filesystem::path(*dir) / csvFileNameForTopic(t)).string();
-        const auto n = exportCsv(*input, t, path);
-        std::fprintf(stderr, "reflex_record: %llu samples of %s -> %s\n", static_cast<unsigned long long>(n), t.c_str(),
-                     path.c_str());
-      }
-      return 0;
+      const CsvExportReport report = exportCsvFiles(*input, targets, csv->empty() ? &info : nullptr);
+      for (const CsvExport& f : report.files)
+        std::fprintf(stderr, "reflex_record: %llu samples of %s -> %s\n", static_cast<unsigned long long>(f.samples),
+                     printableName(f.topic).c_str(), printableName(f.path).c_str());
+      if (report.undecodable > 0)
+        std::fprintf(stderr, "reflex_record: error: %s\n", report.undecodableMessage().c_str());
+      return report.undecodable > 0 || refused ? 1 : 0;
     });
   };
 }
@@ -305,15 +324,20 @@ std::function<int()> addInfo(CLI::App& app) {
       std::printf("samples:   %llu\n", static_cast<unsigned long long>(info.records));
       std::printf("duration:  %.3f s\n", 1e-9 * static_cast<double>(info.last_ns - info.first_ns));
       for (const auto& kv : info.topics)
-        std::printf("  %-28s %-30s %8llu\n", kv.first.c_str(), kv.second.type.c_str(),
+        std::printf("  %-28s %-30s %8llu\n", printableName(kv.first).c_str(), printableName(kv.second.type).c_str(),
                     static_cast<unsigned long long>(kv.second.samples));
       if (*print > 0) {
         const std::unique_ptr<SampleReader> reader = openRecording(*input);
         RecordEntry e;
         for (int i = 0; i < *print && reader->next(e); ++i) {
           const TopicCodec* c = findCodecByType(e.type);
-          std::printf("%.6f %s\n", 1e-9 * static_cast<double>(e.receive_ns - info.first_ns),
-                      c ? c->summary(e).c_str() : (e.topic + " (unknown type " + e.type + ")").c_str());
+          std::string line;
+          try {
+            line = c ? c->summary(e) : printableName(e.topic) + " (unknown type " + printableName(e.type) + ")";
+          } catch (const RecordError& err) {  // one undecodable sample is a line, not the end of the listing
+            line = printableName(e.topic) + " (does not decode: " + err.what() + ")";
+          }
+          std::printf("%.6f %s\n", 1e-9 * static_cast<double>(e.receive_ns - info.first_ns), line.c_str());
         }
       }
       return 0;

@@ -238,8 +238,9 @@ class Codec final : public TopicCodec {
   }
 
   void writeCsvHeader(std::ostream& out, const RecordEntry& first) const override {
+    const T s = decode(first);  // before writing: an undecodable sample leaves the file as it was
     out << "t,receive_ns,source_ns,stamp_ns,seq,source";
-    csvColumns(out, decode(first));
+    csvColumns(out, s);
     out << '\n';
   }
   void writeCsvRows(std::ostream& out, const RecordEntry& e, const CsvContext& ctx) const override {
@@ -254,7 +255,8 @@ class Codec final : public TopicCodec {
   std::string summary(const RecordEntry& e) const override {
     const T s = decode(e);
     std::ostringstream o;
-    o << e.topic << " seq " << s.header().seq() << " from '" << s.header().source() << "' stamp "
+    o << printableName(e.topic) << " seq " << s.header().seq() << " from '" << printableName(s.header().source())
+      << "' stamp "
       << s.header().stamp_ns() << ":";
     std::ostringstream row;
     csvRows(row, "", s);
@@ -268,9 +270,10 @@ class Codec final : public TopicCodec {
  private:
   T decode(const RecordEntry& e) const {
     T s;
-    if (!deserializeSample(e.payload, s))
-      throw RecordError("record of topic '" + e.topic + "' does not deserialize as " + name_ + " (" +
-                        std::to_string(e.payload.size()) + " bytes)");
+    std::string why;
+    if (!deserializeSample(e.payload, s, &why))
+      throw RecordError("record of topic '" + printableName(e.topic) + "' does not deserialize as " + name_ + " (" +
+                        std::to_string(e.payload.size()) + " bytes: " + why + ")");
     return s;
   }
   std::string name_;
@@ -342,6 +345,22 @@ std::string csvField(const std::string& s) {
     out += c;
   }
   return out + "\"";
+}
+
+std::string printableName(const std::string& name) {
+  std::string out;
+  out.reserve(name.size());
+  for (char c : name) {
+    const auto b = static_cast<unsigned char>(c);
+    if (b < 0x20 || b == 0x7F || c == '\\') {
+      char buf[8];
+      std::snprintf(buf, sizeof(buf), "\\x%02X", b);
+      out += buf;
+    } else {
+      out += c;
+    }
+  }
+  return out;
 }
 
 }  // namespace reflex::record

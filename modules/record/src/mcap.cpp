@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <functional>
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -24,7 +25,11 @@ enum Op : std::uint8_t {
 constexpr std::size_t kRecordPrefix = 1 + 8;             // opcode + content length
 constexpr std::size_t kFooterSize = kRecordPrefix + 20;  // summary_start, summary_offset_start, crc
 /// Largest record or uncompressed chunk the reader accepts: a bigger length is corruption, not allocated.
+/// (The writer's --chunk-size goes up to 1 GiB too.)
 constexpr std::uint64_t kMaxRecord = 1ull << 30;
+/// Largest uncompressed / compressed size ratio a compressed chunk may declare. Reflex chunks compress
+/// 3-20 x (timestamps and doubles); zstd reaches ~30,000 x on zeros only, which is what a bomb holds.
+constexpr std::uint64_t kMaxChunkRatio = 1000;
 
 // ---- little-endian serialisation -----------------------------------------------------------------
 
@@ -133,47 +138,86 @@ std::vector<std::uint8_t> compress(McapCompression c, const std::vector<std::uin
 }
 
 /// Decompresses a chunk's records into `out` (exactly `size` bytes); "" on success, else the reason.
+/// Memory is budgeted against the bytes present, never taken from the declared size alone: an
+/// uncompressed chunk must hold exactly `size` bytes; a compressed one may declare at most
+/// kMaxChunkRatio times its compressed bytes (and kMaxRecord), and `out` grows only as the decoder
+/// actually produces bytes, stopping with an error at the first byte beyond the declared size. A
+/// 600-byte file declaring a 1 GiB chunk, or a 265 KB zstd bomb that really expands to 1 GiB, is
+/// refused before any large allocation.
 std::string decompress(const std::string& compression, const std::uint8_t* in, std::size_t n, std::uint64_t size,
                        std::vector<std::uint8_t>& out) {
-  if (size > kMaxRecord) return "uncompressed size " + std::to_string(size) + " is implausible";
-  out.resize(static_cast<std::size_t>(size));
+  out.clear();
   if (compression.empty()) {
     if (n != size) return "uncompressed chunk of " + std::to_string(n) + " bytes claims " + std::to_string(size);
-    std::copy(in, in + n, out.begin());
+    out.assign(in, in + n);
     return "";
   }
+  if (compression != "zstd" && compression != "lz4") return "unknown compression '" + compression + "'";
+  if (size > kMaxRecord)
+    return "uncompressed size " + std::to_string(size) + " is above the " + std::to_string(kMaxRecord) + "-byte cap";
+  if (size > kMaxChunkRatio * n)
+    return "uncompressed size " + std::to_string(size) + " claimed for " + std::to_string(n) +
+           " compressed bytes (more than " + std::to_string(kMaxChunkRatio) + " x)";
+  // One decoder step: reads from src (advancing src_pos), writes into dst (advancing dst_pos);
+  // returns false with `why` set on a decoder error; `ended` turns true when the last frame is complete.
+  std::string why;
+  bool ended = false;
+  std::function<bool(std::uint8_t*, std::size_t, std::size_t&, std::size_t&)> step;
+  ZSTD_DCtx* zctx = nullptr;
+  LZ4F_dctx* lctx = nullptr;
   if (compression == "zstd") {
-    const std::size_t got = ZSTD_decompress(out.data(), out.size(), in, n);
-    if (ZSTD_isError(got)) return std::string("zstd: ") + ZSTD_getErrorName(got);
-    if (got != size) return "zstd chunk gave " + std::to_string(got) + " bytes, not " + std::to_string(size);
-    return "";
-  }
-  if (compression == "lz4") {
-    LZ4F_dctx* dctx = nullptr;
-    if (LZ4F_isError(LZ4F_createDecompressionContext(&dctx, LZ4F_VERSION))) return "lz4: no decompression context";
-    std::size_t done_in = 0, done_out = 0;
-    std::string why;
-    while (done_in < n) {
-      std::size_t src = n - done_in, dst = out.size() - done_out;
-      const std::size_t r = LZ4F_decompress(dctx, out.data() + done_out, &dst, in + done_in, &src, nullptr);
+    zctx = ZSTD_createDCtx();
+    if (!zctx) return "zstd: no decompression context";
+    step = [&](std::uint8_t* dst, std::size_t cap, std::size_t& dst_pos, std::size_t& src_pos) {
+      ZSTD_outBuffer o{dst, cap, dst_pos};
+      ZSTD_inBuffer i{in, n, src_pos};
+      const std::size_t r = ZSTD_decompressStream(zctx, &o, &i);
+      if (ZSTD_isError(r)) {
+        why = std::string("zstd: ") + ZSTD_getErrorName(r);
+        return false;
+      }
+      dst_pos = o.pos;
+      src_pos = i.pos;
+      ended = r == 0;  // a frame completely decoded and flushed (another may follow in the input)
+      return true;
+    };
+  } else {
+    if (LZ4F_isError(LZ4F_createDecompressionContext(&lctx, LZ4F_VERSION))) return "lz4: no decompression context";
+    step = [&](std::uint8_t* dst, std::size_t cap, std::size_t& dst_pos, std::size_t& src_pos) {
+      std::size_t d = cap - dst_pos, s = n - src_pos;
+      const std::size_t r = LZ4F_decompress(lctx, dst + dst_pos, &d, in + src_pos, &s, nullptr);
       if (LZ4F_isError(r)) {
         why = std::string("lz4: ") + LZ4F_getErrorName(r);
-        break;
+        return false;
       }
-      done_in += src;
-      done_out += dst;
-      if (r == 0) break;  // frame complete
-      if (src == 0 && dst == 0) {
-        why = "lz4: frame does not end";
-        break;
-      }
-    }
-    LZ4F_freeDecompressionContext(dctx);
-    if (why.empty() && done_out != size)
-      why = "lz4 chunk gave " + std::to_string(done_out) + " bytes, not " + std::to_string(size);
-    return why;
+      dst_pos += d;
+      src_pos += s;
+      ended = r == 0;
+      return true;
+    };
   }
-  return "unknown compression '" + compression + "'";
+  constexpr std::size_t kFirstGrowth = 1u << 20;
+  std::size_t done = 0, src_pos = 0;
+  while (why.empty() && (src_pos < n || !ended)) {
+    const std::size_t before_src = src_pos, before_dst = done;
+    if (done == out.size() && out.size() < size)  // grow with what was produced: at most twice it
+      out.resize(static_cast<std::size_t>(std::min<std::uint64_t>(size, std::max(kFirstGrowth, 2 * out.size()))));
+    if (done < out.size()) {
+      if (!step(out.data(), out.size(), done, src_pos)) break;
+    } else {  // the declared size is reached: the frame must end without another byte
+      std::uint8_t extra = 0;
+      std::size_t probe = 0;
+      if (!step(&extra, 1, probe, src_pos)) break;
+      if (probe != 0) why = compression + " chunk gives more than the declared " + std::to_string(size) + " bytes";
+    }
+    if (why.empty() && src_pos == before_src && done == before_dst)
+      why = compression + ": the compressed data ends inside a frame";
+  }
+  if (zctx) ZSTD_freeDCtx(zctx);
+  if (lctx) LZ4F_freeDecompressionContext(lctx);
+  if (why.empty() && done != size)
+    why = compression + " chunk gave " + std::to_string(done) + " bytes, not " + std::to_string(size);
+  return why;
 }
 
 }  // namespace

@@ -66,10 +66,11 @@ class TopicCodec {
                                                          const std::string& profile) const = 0;
 
   /// Writes the CSV header line for this type (columns may depend on the first sample, e.g. joint
-  /// names). Throws RecordError if `first` does not deserialize.
+  /// names). Throws RecordError if `first` does not deserialize (then nothing is written).
   virtual void writeCsvHeader(std::ostream& out, const RecordEntry& first) const = 0;
   /// Writes the CSV row(s) of one record (object targets: one row per object). Throws RecordError
-  /// naming the topic if the payload does not deserialize as this type.
+  /// naming the topic and the reason if the payload does not deserialize as this type (then nothing is
+  /// written). A sample's lengths are checked against its bytes before anything is allocated.
   virtual void writeCsvRows(std::ostream& out, const RecordEntry& entry, const CsvContext& ctx) const = 0;
   /// One-line human-readable summary of a sample (for `reflex_record info --print`).
   virtual std::string summary(const RecordEntry& entry) const = 0;
@@ -94,5 +95,10 @@ TopicSpec parseTopicSpec(const std::string& text);
 
 /// Quotes a CSV field if needed (comma, quote, newline).
 std::string csvField(const std::string& s);
+
+/// A topic (or type) name from a file as the tools print it: every control byte (below 0x20, 0x7F) and
+/// the backslash written as \xNN, so a name cannot move the cursor, clear the terminal or pass for
+/// two lines, and two different names never print alike. "reflex/a\tb" -> "reflex/a\x09b".
+std::string printableName(const std::string& name);
 
 }  // namespace reflex::record

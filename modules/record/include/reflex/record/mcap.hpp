@@ -156,7 +156,11 @@ struct McapMessageRecord {
 /// Reads an MCAP file in file order, record by record (it does not need the summary, so a file cut
 /// anywhere reads up to its last complete chunk). Checks every CRC the file carries (chunk, data
 /// section, summary); a chunk whose CRC or decompression fails is skipped and reported with its byte
-/// offset (TailState::kCorrupt), the following chunks are still read. Memory: one chunk.
+/// offset (TailState::kCorrupt), the following chunks are still read. Memory: one chunk, budgeted
+/// against the bytes in the file: a record must fit in the file and be <= 1 GiB; an uncompressed chunk
+/// must hold exactly its declared size; a compressed one may declare <= 1 GiB and <= 1000 x its
+/// compressed bytes, and is decoded into a buffer that grows with the output and stops at the first
+/// byte beyond the declared size (a zstd bomb is refused before it is expanded).
 class McapReader {
  public:
   /// Opens `path`. Throws RecordError naming the path: missing, not a regular file, shorter than the

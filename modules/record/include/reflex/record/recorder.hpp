@@ -201,8 +201,30 @@ RecordingInfo scanRecording(const std::string& path);
 /// Writes the samples of `topic` in `input` as CSV to `csv_path` (header from the first sample,
 /// t = seconds since the first record of the file). Returns the number of samples written. Throws
 /// RecordError if the topic is not in the recording (naming the topics that are), its type is
-/// unknown, or the output cannot be written.
+/// unknown, or the output cannot be written; and, after writing every other sample, if some did not
+/// decode (CsvExportReport::undecodableMessage).
 std::uint64_t exportCsv(const std::string& input, const std::string& topic, const std::string& csv_path);
+
+/// One topic's CSV file of an export.
+struct CsvExport {
+  std::string topic;
+  std::string path;
+  std::uint64_t samples = 0;  ///< rows written (set by exportCsvFiles)
+};
+struct CsvExportReport {
+  std::vector<CsvExport> files;     ///< the targets, with their sample counts
+  std::uint64_t undecodable = 0;    ///< samples of those topics that did not decode: skipped
+  std::string first_undecodable;    ///< where the first was and why ("sample 12 of the file (t = ...): ...")
+  /// "3 samples could not be decoded, first at sample 12 of the file (t = 0.500000 s): ..."; "" if none.
+  std::string undecodableMessage() const;
+};
+/// Writes the CSV file of every target topic in two passes over `input` whatever their number (one
+/// scan for the topics' types and t = 0, skipped if `scanned` is given, and one that writes every
+/// file; at most 64 files open at once). A sample that does not decode is skipped and counted, the
+/// others are written. Throws RecordError as exportCsv before writing anything (a topic not in the
+/// recording, an unknown type, an output that cannot be written) and if an output fails.
+CsvExportReport exportCsvFiles(const std::string& input, std::vector<CsvExport> targets,
+                               const RecordingInfo* scanned = nullptr);
 
 /// Copies every sample of `input` (either format) into a new recording `output` (options.format),
 /// e.g. an .rfx log into MCAP (a torn or damaged input gives every sample its reader yields). Returns
@@ -213,7 +235,14 @@ std::uint64_t exportCsv(const std::string& input, const std::string& topic, cons
 std::uint64_t convertRecording(const std::string& input, const std::string& output, const RecordingOptions& options,
                                const SceneChannelOptions& scene = {}, std::string* scene_note = nullptr);
 
-/// A file name for a topic's CSV: "reflex/control_status" -> "reflex_control_status.csv".
+/// A file name for a topic's CSV: "reflex/control_status" -> "reflex_control_status.csv". '/', ':' and
+/// ' ' become '_'; letters, digits, '_', '-' and '.' stay; every other byte (control bytes, '%', '\',
+/// non-ASCII) becomes %XX. So two topics share a name only if they differ in '/', ':', ' ' against
+/// '_' ("reflex/heartbeat", "reflex_heartbeat", "reflex:heartbeat"): csvFileNameCollisions finds
+/// them, and `export --dir` refuses every topic of such a group, naming them, instead of writing them
+/// into one file.
 std::string csvFileNameForTopic(const std::string& topic);
+/// The file names (csvFileNameForTopic) that more than one of `topics` would get, with those topics.
+std::map<std::string, std::vector<std::string>> csvFileNameCollisions(const std::vector<std::string>& topics);
 
 }  // namespace reflex::record
