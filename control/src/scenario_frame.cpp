@@ -35,7 +35,7 @@ std::string mm(double v) {
 
 Eigen::Vector3d ScenarioFrame::place(const Eigen::Vector3d& p_ref) const {
   if (reference) return p_ref;  // bit for bit: the scenarios' numbers on the robot they were written for
-  return chest + scale.cwiseProduct(p_ref - kRefChest);
+  return chest + axes * scale.cwiseProduct(p_ref - kRefChest);
 }
 
 double ScenarioFrame::length(double l_ref) const { return reference ? l_ref : l_ref * scale.x(); }
@@ -74,14 +74,20 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
   f.chest = 0.5 * (f.shoulder[kLeft] + f.shoulder[kRight]);
   f.half_width = 0.5 * (f.shoulder[kLeft] - f.shoulder[kRight]).norm();
   f.arm_length = 0.5 * (length[kLeft] + length[kRight]);
-  // The scenarios are written in x forward, y left, z up (REP 103, the shipped robots' root frame): a
-  // robot whose left shoulder is not on the left of its right one cannot be placed in them.
+  // The scenarios are written in x forward, y left, z up (REP 103, the shipped robots' root frame).
+  // Another robot's forward is found from its arms: left is from the right shoulder to the left one,
+  // level, up is the root's z, forward = left x up. The shoulders must be side by side (level within
+  // 30 degrees): a robot lying on its side cannot be placed in them.
   const Eigen::Vector3d across = f.shoulder[kLeft] - f.shoulder[kRight];
-  if (!(across.y() > 0.5 * across.norm()))
-    throw ConfigError("the scenarios need the root frame x forward, y left, z up: robot '" + model.name +
-                      "' has its left arm's shoulder at y = " + mm(f.shoulder[kLeft].y()) +
-                      " mm and its right arm's at y = " + mm(f.shoulder[kRight].y()) +
-                      " mm (the left one must be the larger)");
+  const Eigen::Vector3d level(across.x(), across.y(), 0.0);
+  if (!(level.norm() > 0.5 * across.norm()))
+    throw ConfigError("the scenarios need the root frame's z up: robot '" + model.name +
+                      "' has its shoulders one above the other (left at z = " + mm(f.shoulder[kLeft].z()) +
+                      " mm, right at z = " + mm(f.shoulder[kRight].z()) + " mm)");
+  const Eigen::Vector3d left = level.normalized();
+  f.axes.col(0) = left.cross(Eigen::Vector3d::UnitZ());
+  f.axes.col(1) = left;
+  f.axes.col(2) = Eigen::Vector3d::UnitZ();
   if (!(f.arm_length > 0.0))
     throw ConfigError("robot '" + model.name + "': the arms' joints and hand points coincide (arm length 0)");
   // The trunk: the segment on the link the left arm's first joint hangs from (or what that link is
@@ -99,13 +105,13 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
   for (int p = trunk.first_primitive; p < trunk.first_primitive + trunk.num_primitives; ++p) {
     const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
     for (const Eigen::Vector3d& end : {prim.a_L, prim.b_L}) {
-      const double y = (kin.X_B_L[static_cast<std::size_t>(trunk.link)] * end).y();
+      const double y = left.dot(kin.X_B_L[static_cast<std::size_t>(trunk.link)] * end);
       y_lo = std::min(y_lo, y - prim.radius);
       y_hi = std::max(y_hi, y + prim.radius);
     }
   }
   f.trunk_half_width = 0.5 * (y_hi - y_lo);
-  f.reference = (f.chest - kRefChest).norm() < kSameLandmark && std::abs(f.half_width - kRefHalfWidth) < kSameLandmark &&
+  f.reference = (f.axes - Eigen::Matrix3d::Identity()).norm() < kSameLandmark && (f.chest - kRefChest).norm() < kSameLandmark && std::abs(f.half_width - kRefHalfWidth) < kSameLandmark &&
                 std::abs(f.arm_length - kRefArmLength) < kSameLandmark &&
                 std::abs(f.trunk_half_width - kRefTrunkHalfWidth) < kSameLandmark;
   if (!f.reference)

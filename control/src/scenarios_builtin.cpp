@@ -3,6 +3,7 @@
 // robot starts at the origin) and placed on the robot that runs them through its own landmarks
 // (ScenarioFrame::place: shoulders, chest, arm length at the rest posture); on the reference robot
 // they are these numbers exactly.
+#include "reflex/control/onboard.hpp"
 #include "reflex/control/scenarios.hpp"
 
 #include <algorithm>
@@ -108,7 +109,7 @@ std::vector<Scenario> makeScenarios() {
       // frame by the distance walked (1.5 m at 0.25 m/s from t = 0.5 s, as startWalking is asked),
       // in proportion to the arm like the target.
       if (ctx.model.qIndex("heel_x") < 0)
-        in.hands[kRight].target_B.x() -= ctx.frame().length(std::clamp(0.25 * (t - 0.5), 0.0, 1.5));
+        in.hands[kRight].target_B -= ctx.frame().axes.col(0) * ctx.frame().length(std::clamp(0.25 * (t - 0.5), 0.0, 1.5));
     };
     list.push_back(s);
   }
@@ -123,23 +124,29 @@ std::vector<Scenario> makeScenarios() {
       if (t == 0.0) {
         // The bar lies across the left hand (the controller configuration's hand link) through its
         // hand point, along the hand frame's x axis: 0.32 m long and 15 mm thick on the reference robot,
-        // both in proportion to the arm on another. It is not checked against the hand holding it nor
-        // the next segment up the arm (the forearm).
+        // both in proportion to the arm on another. It is not checked against what holds it: the hand,
+        // every link fixed to it, its fingers, and the wrist it hangs from (graspIgnoreMask, the rule a
+        // grasped object sent over the bus gets too).
         const ControllerModel::Arm& arm = ctx.cm.arms[kLeft];
         const std::string& hand = ctx.model.links[static_cast<std::size_t>(arm.hand_link)].name;
-        const int hand_segment = neededSegment(ctx, "grasped_bar", hand, "the left hand link");
-        std::vector<std::string> ignore = {ctx.model.segments[static_cast<std::size_t>(hand_segment)].name};
-        for (int l = ctx.model.links[static_cast<std::size_t>(ctx.model.segments[static_cast<std::size_t>(hand_segment)].link)].parent;
-             l >= 0 && arm.link_in_arm[static_cast<std::size_t>(l)]; l = ctx.model.links[static_cast<std::size_t>(l)].parent) {
-          const int s = ctx.carrierSegment(l);
-          if (s >= 0 && s != hand_segment) {
-            ignore.push_back(ctx.model.segments[static_cast<std::size_t>(s)].name);
-            break;
-          }
+        (void)neededSegment(ctx, "grasped_bar", hand, "the left hand link");
+        const std::uint64_t mask = graspIgnoreMask(ctx.model, ctx.cm, arm.hand_link);
+        std::vector<std::string> ignore;
+        for (int seg = 0; seg < ctx.model.num_robot_segments; ++seg)
+          if ((mask >> seg) & 1U) ignore.push_back(ctx.model.segments[static_cast<std::size_t>(seg)].name);
+        // Across the hand, not along the forearm: the hand frame's axis most perpendicular to the
+        // direction from the wrist to the hand point (x on the reference robot, whose hand points down
+        // its z; z on a robot whose hand frame points along x).
+        Eigen::Vector3d across = Eigen::Vector3d::UnitX();
+        if (const double n = arm.hand_point_L.norm(); n > 1e-9) {
+          int best = 0;
+          for (int k = 1; k < 3; ++k)
+            if (std::abs(arm.hand_point_L[k]) < std::abs(arm.hand_point_L[best]) - 1e-9 * n) best = k;
+          across = Eigen::Vector3d::Unit(best);
         }
         const double half = ctx.frame().length(0.16);
-        ctx.attach(0, hand, arm.hand_point_L + Eigen::Vector3d(-half, 0.0, 0.0),
-                   arm.hand_point_L + Eigen::Vector3d(half, 0.0, 0.0), ctx.frame().length(0.015), false, ignore);
+        ctx.attach(0, hand, arm.hand_point_L - half * across, arm.hand_point_L + half * across,
+                   ctx.frame().length(0.015), false, ignore);
       }
       in.priority = MotionPriority::kLeftHigher;
       // The left hand sweeps the bar in a circle in front of the chest; the right hand holds a target

@@ -142,6 +142,15 @@ std::string pairName(const Model& model, int pair) {
 }
 
 /// The robot's landmarks the scenarios are placed by (ScenarioFrame), one line.
+// "-x", "+y", or the direction's components when it is along no axis.
+std::string direction(const Eigen::Vector3d& d) {
+  for (int k = 0; k < 3; ++k)
+    if (std::abs(std::abs(d[k]) - 1.0) < 1e-6) return std::string(d[k] > 0 ? "+" : "-") + "xyz"[k];
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(3) << '(' << d.x() << ", " << d.y() << ", " << d.z() << ')';
+  return s.str();
+}
+
 void printScenarioFrame(std::ostream& os, const Model& model, const ScenarioFrame& f) {
   auto mm = [](const Eigen::Vector3d& p) {
     std::ostringstream s;
@@ -153,6 +162,7 @@ void printScenarioFrame(std::ostream& os, const Model& model, const ScenarioFram
      << (f.reference ? std::string("as written (the reference robot)")
                      : "scaled x " + std::to_string(f.scale.x()).substr(0, 5) + ", y " + std::to_string(f.scale.y()).substr(0, 5) +
                            ", z " + std::to_string(f.scale.z()).substr(0, 5) + " about the chest")
+     << (f.axes.isIdentity(1e-9) ? std::string() : "; forward is " + direction(f.axes.col(0)) + " in its root frame")
      << '\n' << std::defaultfloat << std::setprecision(6);
 }
 

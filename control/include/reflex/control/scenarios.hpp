@@ -31,17 +31,21 @@ struct ScenarioFrame {
   Eigen::Vector3d chest = Eigen::Vector3d::Zero();  ///< midpoint of the two shoulders
   double half_width = 0.0;                   ///< half the shoulder-to-shoulder distance
   int trunk_segment = -1;                    ///< the segment the arms hang from (asimo_like: chest)
-  double trunk_half_width = 0.0;             ///< half its width (y extent of its primitives)
+  double trunk_half_width = 0.0;             ///< half its width (extent of its primitives to the left)
   double arm_length = 0.0;                   ///< shoulder -> hand point along the chain (joint origins,
                                              ///< then the hand point): the straight arm's reach
   std::array<Eigen::Vector3d, 2> hand_rest;  ///< hand points at the rest posture
   /// The scales of place(): forward and up by arm_length, sideways by trunk_half_width, each over
   /// the reference robot's. Exactly 1 (and place() the identity, bit for bit) on the reference robot.
   Eigen::Vector3d scale = Eigen::Vector3d::Ones();
+  /// The robot's forward, left and up in its root frame (the columns; identity on a robot whose root
+  /// is x forward, y left, z up, REP 103): left is the direction from the right shoulder to the left
+  /// one, level; up is the root's z. A robot facing its -x (iCub) gets a half turn about z.
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
   bool reference = false;                    ///< this robot's landmarks are the reference robot's (1 nm)
 
   /// A point of the reference robot's scenario coordinates on this robot, about the chest:
-  /// chest + scale * (p - chest_ref). For what is about the body: inside it, across its midline.
+  /// chest + axes * (scale * (p - chest_ref)). For what is about the body: inside it, across its midline.
   Eigen::Vector3d place(const Eigen::Vector3d& p_ref) const;
   /// A length of the reference robot (a bar, a reach) on this robot: times scale.x() (arm lengths).
   double length(double l_ref) const;
