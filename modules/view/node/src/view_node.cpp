@@ -89,7 +89,9 @@ std::string ViewNode::report() const {
       << " schema_changes=" << stats_.schema_changes << " scenes=" << stats_.scenes
       << " connections=" << s.connections.load() << " subscriptions=" << s.subscriptions.load()
       << " messages_sent=" << s.messages_sent.load() << " dropped_slow_client=" << s.dropped.load()
-      << " bad_client_messages=" << s.bad_client_messages.load() << " http_requests=" << s.http_requests.load()
+      << " bad_client_messages=" << s.bad_client_messages.load() << " replies_not_sent=" << s.replies_not_sent.load()
+      << " clients_disconnected=" << s.clients_disconnected.load() << " clients_refused=" << s.clients_refused.load()
+      << " http_requests=" << s.http_requests.load()
       << " http_not_found=" << s.http_not_found.load();
   return out.str();
 }

@@ -6,6 +6,7 @@
 #include <websocketpp/server.hpp>
 
 #include <chrono>
+#include <cstdio>
 #include <fstream>
 #include <map>
 #include <set>
@@ -61,6 +62,41 @@ void putLE(std::string& out, std::uint64_t v, int bytes) {
   for (int i = 0; i < bytes; ++i) out.push_back(static_cast<char>((v >> (8 * i)) & 0xFF));
 }
 
+/// The first `n` bytes of a client's text, to quote it in a reply (a cut multi-byte character is
+/// replaced when the reply is dumped, never thrown on).
+std::string excerpt(const std::string& text, std::size_t n = 80) {
+  return text.size() <= n ? text : text.substr(0, n) + "...";
+}
+
+/// `text` for a log line: control bytes as \xNN, so a client's quoted bytes cannot drive the terminal.
+std::string printable(const std::string& text) {
+  std::string out;
+  for (const char ch : text) {
+    const auto b = static_cast<unsigned char>(ch);
+    if (b < 0x20 || b == 0x7F) {
+      static const char* const kHex = "0123456789ABCDEF";
+      out += std::string("\\x") + kHex[b >> 4] + kHex[b & 0xF];
+    } else {
+      out.push_back(ch);
+    }
+  }
+  return out;
+}
+
+/// JSON text of a reply; invalid UTF-8 from a client's quoted bytes becomes U+FFFD.
+std::string dumpReply(const json& j) { return j.dump(-1, ' ', false, json::error_handler_t::replace); }
+
+/// One client's state, held only while it is connected (erased on close).
+struct ClientState {
+  std::map<std::uint32_t, std::size_t> subs;  ///< subscription id -> channel index
+  std::string address;                        ///< "127.0.0.1:45678": names the client in the log
+  std::chrono::steady_clock::time_point window_start;  ///< start of the current one-second window
+  std::size_t bad_in_window = 0;                       ///< bad messages in that window
+  bool closing = false;                                ///< disconnected by us: nothing more queued or read
+  bool full = false;                                   ///< a data frame was skipped, and the queue stayed above half the budget
+  std::chrono::steady_clock::time_point full_since;    ///< since then
+};
+
 }  // namespace
 
 struct ViewServer::Impl {
@@ -72,9 +108,8 @@ struct ViewServer::Impl {
   bool started = false;
   ServerStats* stats = nullptr;
   std::string server_info, advertise;
-  /// Per connection (I/O thread only): subscription id -> channel index.
-  std::map<websocketpp::connection_hdl, std::map<std::uint32_t, std::size_t>, std::owner_less<websocketpp::connection_hdl>>
-      clients;
+  /// Per connection (I/O thread only).
+  std::map<websocketpp::connection_hdl, ClientState, std::owner_less<websocketpp::connection_hdl>> clients;
 
   int channelIndex(std::uint32_t id) const {
     for (std::size_t i = 0; i < channels.size(); ++i)
@@ -82,53 +117,129 @@ struct ViewServer::Impl {
     return -1;
   }
 
-  void sendText(websocketpp::connection_hdl hdl, const std::string& text) {
+  /// Ends a client's connection and writes one line naming it and why. `drop_queue`: at once, with
+  /// what is queued to it (it does not read, so a close frame behind the queue would never arrive);
+  /// otherwise a close frame (policy violation) carrying `reason`, so a client that reads learns why.
+  void disconnect(const Server::connection_ptr& con, ClientState& c, bool drop_queue, const std::string& reason) {
+    if (c.closing) return;
+    c.closing = true;
+    stats->clients_disconnected++;
+    std::fprintf(stderr, "reflex_view: client %s disconnected: %s\n", c.address.c_str(), printable(reason).c_str());
     websocketpp::lib::error_code ec;
-    server.send(hdl, text, websocketpp::frame::opcode::text, ec);
+    if (!drop_queue) con->close(websocketpp::close::status::policy_violation, excerpt(reason, 100), ec);
+    if (drop_queue || ec) {
+      // Posted: terminating runs the close handler, which erases `c` while the caller may still use it.
+      websocketpp::lib::asio::post(server.get_io_service(), [con] { con->terminate(websocketpp::lib::error_code()); });
+    }
+  }
+
+  /// True if `bytes` more fit the client's budget (kMaxBufferedBytes queued, all messages together).
+  /// A data frame (`droppable`) that does not fit is skipped and counted: a newer scene follows. A
+  /// reply that does not fit cannot be skipped without breaking the protocol: the client is
+  /// disconnected, as is one whose data has not fitted for kMaxStall.
+  bool fits(const Server::connection_ptr& con, ClientState& c, std::size_t bytes, bool droppable) {
+    if (c.closing) return false;
+    const std::size_t queued = con->get_buffered_amount();
+    // A client that reads at all empties the counted queue now and then (websocketpp takes all of it
+    // into each write); one that does not keeps it near the budget, small frames still fitting.
+    if (queued < ViewServer::kMaxBufferedBytes / 2) c.full = false;
+    if (queued + bytes <= ViewServer::kMaxBufferedBytes) return true;
+    if (!droppable) {
+      disconnect(con, c, true,
+                 std::to_string(queued) + " bytes queued to it and a reply of " + std::to_string(bytes) +
+                     " would pass its budget of " + std::to_string(ViewServer::kMaxBufferedBytes) +
+                     " bytes (it does not read what it asks for)");
+      return false;
+    }
+    stats->dropped++;
+    const auto now = std::chrono::steady_clock::now();
+    if (!c.full) {
+      c.full = true;
+      c.full_since = now;
+    } else if (now - c.full_since > ViewServer::kMaxStall) {
+      disconnect(con, c, true,
+                 "its queue has stayed at the budget of " + std::to_string(ViewServer::kMaxBufferedBytes) + " bytes for " +
+                     std::to_string(ViewServer::kMaxStall.count()) + " s (it does not read)");
+    }
+    return false;
+  }
+
+  /// Queues a reply (serverInfo, advertise, status) to one client within its budget (fits()).
+  bool queueReply(websocketpp::connection_hdl hdl, ClientState& c, const std::string& text) {
+    websocketpp::lib::error_code ec;
+    Server::connection_ptr con = server.get_con_from_hdl(hdl, ec);
+    if (ec || !con || !fits(con, c, text.size(), false)) return false;
+    return !con->send(text, websocketpp::frame::opcode::text);
   }
 
   /// A `status` message (level 0 info, 1 warning, 2 error) to one client.
-  void status(websocketpp::connection_hdl hdl, int level, const std::string& message) {
-    sendText(hdl, json{{"op", "status"}, {"level", level}, {"message", message}}.dump());
+  void status(websocketpp::connection_hdl hdl, ClientState& c, int level, const std::string& message) {
+    queueReply(hdl, c, dumpReply(json{{"op", "status"}, {"level", level}, {"message", message}}));
   }
 
-  void badMessage(websocketpp::connection_hdl hdl, const std::string& message) {
+  /// Counts a bad message; answers the first kMaxRepliesPerSecond of each second with a status error
+  /// naming it, and disconnects a client past kMaxBadMessagesPerSecond (it ignores the answers).
+  void badMessage(websocketpp::connection_hdl hdl, ClientState& c, const std::string& message) {
     stats->bad_client_messages++;
-    status(hdl, 2, message);
+    const auto now = std::chrono::steady_clock::now();
+    if (now - c.window_start >= std::chrono::seconds(1)) {
+      c.window_start = now;
+      c.bad_in_window = 0;
+    }
+    if (++c.bad_in_window > ViewServer::kMaxBadMessagesPerSecond) {
+      websocketpp::lib::error_code ec;
+      Server::connection_ptr con = server.get_con_from_hdl(hdl, ec);
+      if (!ec && con)
+        disconnect(con, c, false,
+                   "more than " + std::to_string(ViewServer::kMaxBadMessagesPerSecond) +
+                       " bad messages in one second (last: " + excerpt(message, 60) + ")");
+      return;
+    }
+    if (c.bad_in_window > ViewServer::kMaxRepliesPerSecond) {
+      stats->replies_not_sent++;
+      return;
+    }
+    status(hdl, c, 2, message);
   }
 
   void onMessage(websocketpp::connection_hdl hdl, Server::message_ptr msg) {
     auto it = clients.find(hdl);
-    if (it == clients.end()) return;
+    if (it == clients.end() || it->second.closing) return;
+    ClientState& c = it->second;
     if (msg->get_opcode() != websocketpp::frame::opcode::text) {
-      badMessage(hdl, "binary client messages are not supported (no clientPublish / services capability)");
+      badMessage(hdl, c, "binary client messages are not supported (no clientPublish / services capability)");
       return;
     }
     json m = json::parse(msg->get_payload(), nullptr, false);
     if (m.is_discarded() || !m.is_object() || !m.contains("op") || !m["op"].is_string()) {
-      badMessage(hdl, "client message is not a JSON object with an \"op\": '" + msg->get_payload().substr(0, 80) + "'");
+      badMessage(hdl, c, "client message is not a JSON object with an \"op\": '" + excerpt(msg->get_payload()) + "'");
       return;
     }
     const std::string op = m["op"].get<std::string>();
-    auto& subs = it->second;
+    auto& subs = c.subs;
     if (op == "subscribe") {
       if (!m.contains("subscriptions") || !m["subscriptions"].is_array()) {
-        badMessage(hdl, "subscribe without a \"subscriptions\" array");
+        badMessage(hdl, c, "subscribe without a \"subscriptions\" array");
         return;
       }
       for (const json& s : m["subscriptions"]) {
+        if (c.closing) return;
         if (!s.is_object() || !s.contains("id") || !s["id"].is_number_unsigned() || !s.contains("channelId") ||
             !s["channelId"].is_number_unsigned() || s["id"].get<std::uint64_t>() > 0xFFFFFFFFull ||
             s["channelId"].get<std::uint64_t>() > 0xFFFFFFFFull) {
-          badMessage(hdl, "subscribe: bad subscription " + s.dump() + " (needs unsigned 32-bit id and channelId)");
+          badMessage(hdl, c, "subscribe: bad subscription " + excerpt(dumpReply(s)) + " (needs unsigned 32-bit id and channelId)");
           continue;
         }
         const auto id = s["id"].get<std::uint32_t>();
         const int ch = channelIndex(s["channelId"].get<std::uint32_t>());
         if (ch < 0) {
-          badMessage(hdl, "subscribe: unknown channel id " + s["channelId"].dump());
+          badMessage(hdl, c, "subscribe: unknown channel id " + s["channelId"].dump());
         } else if (subs.count(id)) {
-          badMessage(hdl, "subscribe: subscription id " + std::to_string(id) + " is already in use");
+          badMessage(hdl, c, "subscribe: subscription id " + std::to_string(id) + " is already in use");
+        } else if (subs.size() >= ViewServer::kMaxSubscriptionsPerClient) {
+          badMessage(hdl, c, "subscribe: subscription id " + std::to_string(id) + " refused: at most " +
+                                 std::to_string(ViewServer::kMaxSubscriptionsPerClient) +
+                                 " subscriptions per client (unsubscribe one first)");
         } else {
           subs[id] = static_cast<std::size_t>(ch);
           channel_subscribers[static_cast<std::size_t>(ch)]++;
@@ -137,28 +248,52 @@ struct ViewServer::Impl {
       }
     } else if (op == "unsubscribe") {
       if (!m.contains("subscriptionIds") || !m["subscriptionIds"].is_array()) {
-        badMessage(hdl, "unsubscribe without a \"subscriptionIds\" array");
+        badMessage(hdl, c, "unsubscribe without a \"subscriptionIds\" array");
         return;
       }
       for (const json& s : m["subscriptionIds"]) {
+        if (c.closing) return;
         const bool ok = s.is_number_unsigned() && s.get<std::uint64_t>() <= 0xFFFFFFFFull;
         auto sub = ok ? subs.find(s.get<std::uint32_t>()) : subs.end();
         if (sub == subs.end()) {
-          badMessage(hdl, "unsubscribe: unknown subscription id " + s.dump());
+          badMessage(hdl, c, "unsubscribe: unknown subscription id " + excerpt(dumpReply(s)));
           continue;
         }
         channel_subscribers[sub->second]--;
         subs.erase(sub);
       }
     } else {
-      badMessage(hdl, "unsupported op '" + op + "' (this server offers subscribe and unsubscribe only)");
+      badMessage(hdl, c, "unsupported op '" + excerpt(op) + "' (this server offers subscribe and unsubscribe only)");
+    }
+  }
+
+  /// The handlers run on the one I/O thread, and an exception out of one would end it for every
+  /// client: whatever a client's message makes throw disconnects that client, naming the exception.
+  void onMessageGuarded(websocketpp::connection_hdl hdl, Server::message_ptr msg) {
+    try {
+      onMessage(hdl, msg);
+    } catch (const std::exception& e) {
+      stats->bad_client_messages++;
+      auto it = clients.find(hdl);
+      websocketpp::lib::error_code ec;
+      Server::connection_ptr con = server.get_con_from_hdl(hdl, ec);
+      if (it != clients.end() && !ec && con)
+        disconnect(con, it->second, true, std::string("its message could not be handled: ") + e.what());
     }
   }
 
   void onClose(websocketpp::connection_hdl hdl) {
     auto it = clients.find(hdl);
     if (it == clients.end()) return;
-    for (const auto& [id, ch] : it->second) channel_subscribers[ch]--;
+    websocketpp::lib::error_code ec;
+    Server::connection_ptr con = server.get_con_from_hdl(hdl, ec);
+    if (!ec && con && !it->second.closing && con->get_local_close_code() == websocketpp::close::status::message_too_big) {
+      // websocketpp refused the message itself (set_max_message_size): say so like our own limits.
+      stats->clients_disconnected++;
+      std::fprintf(stderr, "reflex_view: client %s disconnected: a message of more than %zu bytes\n",
+                   it->second.address.c_str(), ViewServer::kMaxClientMessageBytes);
+    }
+    for (const auto& [id, ch] : it->second.subs) channel_subscribers[ch]--;
     clients.erase(it);
     stats->open--;
   }
@@ -223,6 +358,10 @@ ViewServer::ViewServer(const ServerOptions& options, std::vector<Channel> channe
   m.server.clear_error_channels(websocketpp::log::elevel::all);
   m.server.init_asio(ec);
   if (ec) throw ViewError("cannot start the WebSocket server: " + ec.message());
+  // Inbound limits (view_server.hpp, "Limits per client"): websocketpp's defaults are 32 MB.
+  m.server.set_max_message_size(kMaxClientMessageBytes);
+  m.server.set_max_http_body_size(kMaxClientMessageBytes);
+  m.server.set_close_handshake_timeout(1000);
   m.server.set_reuse_addr(true);
   const websocketpp::lib::asio::ip::tcp::endpoint endpoint(address, static_cast<unsigned short>(options.port));
   const std::string where = (address.is_v6() ? "[" + options.bind + "]" : options.bind) + ":" + std::to_string(options.port);
@@ -261,6 +400,12 @@ ViewServer::ViewServer(const ServerOptions& options, std::vector<Channel> channe
 
   m.server.set_validate_handler([&m](websocketpp::connection_hdl hdl) {
     Server::connection_ptr con = m.server.get_con_from_hdl(hdl);
+    if (m.clients.size() >= kMaxClients) {
+      m.stats->clients_refused++;
+      con->set_status(websocketpp::http::status_code::service_unavailable);
+      con->set_body("reflex_view serves at most " + std::to_string(kMaxClients) + " WebSocket clients at once\n");
+      return false;
+    }
     for (const std::string& p : con->get_requested_subprotocols()) {
       if (p == kSubprotocol) {
         con->select_subprotocol(kSubprotocol);
@@ -272,15 +417,19 @@ ViewServer::ViewServer(const ServerOptions& options, std::vector<Channel> channe
     return false;
   });
   m.server.set_open_handler([&m](websocketpp::connection_hdl hdl) {
-    m.clients[hdl];
+    ClientState& c = m.clients[hdl];
+    websocketpp::lib::error_code ec;
+    Server::connection_ptr con = m.server.get_con_from_hdl(hdl, ec);
+    if (!ec && con) c.address = con->get_remote_endpoint();
     m.stats->connections++;
     m.stats->open++;
-    m.sendText(hdl, m.server_info);
-    m.sendText(hdl, m.advertise);
+    m.queueReply(hdl, c, m.server_info);
+    m.queueReply(hdl, c, m.advertise);
   });
   m.server.set_close_handler([&m](websocketpp::connection_hdl hdl) { m.onClose(hdl); });
   m.server.set_fail_handler([](websocketpp::connection_hdl) {});
-  m.server.set_message_handler([&m](websocketpp::connection_hdl hdl, Server::message_ptr msg) { m.onMessage(hdl, msg); });
+  m.server.set_message_handler(
+      [&m](websocketpp::connection_hdl hdl, Server::message_ptr msg) { m.onMessageGuarded(hdl, msg); });
   m.server.set_http_handler([&m](websocketpp::connection_hdl hdl) { m.onHttp(hdl); });
 }
 
@@ -315,7 +464,7 @@ void ViewServer::stop() noexcept {
     websocketpp::lib::asio::post(m.server.get_io_service(), [&m] {
       websocketpp::lib::error_code ec;
       m.server.stop_listening(ec);
-      for (auto& [hdl, subs] : m.clients) m.server.close(hdl, websocketpp::close::status::going_away, "reflex_view stopping", ec);
+      for (auto& [hdl, c] : m.clients) m.server.close(hdl, websocketpp::close::status::going_away, "reflex_view stopping", ec);
     });
     const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(500);
     while (stats_.open.load() > 0 && std::chrono::steady_clock::now() < end)
@@ -331,25 +480,20 @@ void ViewServer::publish(std::uint32_t channel, std::uint64_t stamp_ns, std::sha
   const int ch = m.channelIndex(channel);
   if (ch < 0 || !payload || !m.started) return;
   websocketpp::lib::asio::post(m.server.get_io_service(), [&m, this, ch, stamp_ns, payload] {
-    for (auto& [hdl, subs] : m.clients) {
+    for (auto& [hdl, c] : m.clients) {
       websocketpp::lib::error_code hdl_ec;
       Server::connection_ptr con = m.server.get_con_from_hdl(hdl, hdl_ec);
       if (hdl_ec || !con) continue;
-      for (const auto& [id, sub_ch] : subs) {
+      for (const auto& [id, sub_ch] : c.subs) {
         if (sub_ch != static_cast<std::size_t>(ch)) continue;
-        if (con->get_buffered_amount() > kMaxBufferedBytes) {
-          stats_.dropped++;
-          continue;
-        }
+        if (!m.fits(con, c, 13 + payload->size(), true)) continue;  // checked before the frame is built
         std::string frame;
         frame.reserve(13 + payload->size());
         frame.push_back(static_cast<char>(0x01));  // messageData
         putLE(frame, id, 4);
         putLE(frame, stamp_ns, 8);
         frame += *payload;
-        websocketpp::lib::error_code ec;
-        m.server.send(hdl, frame, websocketpp::frame::opcode::binary, ec);
-        if (!ec) stats_.messages_sent++;
+        if (!con->send(frame, websocketpp::frame::opcode::binary)) stats_.messages_sent++;
       }
     }
   });

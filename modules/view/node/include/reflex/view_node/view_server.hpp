@@ -7,10 +7,26 @@
 // services or set parameters) and `advertise` of every channel (encoding "json", schemaEncoding
 // "jsonschema"); the client's `subscribe` / `unsubscribe`; binary `messageData` frames (opcode 0x01,
 // uint32 subscription id, uint64 timestamp [ns], payload; little-endian). A bad client message (not
-// JSON, unknown op, unknown channel, a subscription id already in use or unknown, any binary frame)
-// gets a `status` message of level error naming it, is counted, and changes nothing. A client whose
-// send buffer exceeds kMaxBufferedBytes (it reads slower than the scene is produced) gets no new
-// messages until it drains (counted in `dropped`), so a slow viewer never grows the process.
+// JSON, unknown op, unknown channel, a subscription id already in use or unknown, a subscription past
+// kMaxSubscriptionsPerClient, any binary frame) is counted, changes nothing, and gets a `status`
+// message of level error naming it (the first kMaxRepliesPerSecond of each second; later ones only
+// counted in `replies_not_sent`).
+//
+// Limits per client, so that no client, however it behaves, grows the process (a client's state
+// lives only while it is connected):
+//   - Every byte queued to a client (messageData, status, serverInfo, advertise) counts against one
+//     budget, kMaxBufferedBytes. A data frame that does not fit is skipped (`dropped`: a viewer that
+//     reads slower than the scene is produced catches up with a newer one); when the queue has not
+//     gone below half the budget for kMaxStall since a frame was skipped, the client is disconnected
+//     at once, its queue dropped (a frozen tab: the page reconnects by itself when it runs again). A reply that does not fit disconnects the client the
+//     same way: it asks and never reads. Memory held for a client is at most twice the budget (the
+//     batch being written and the queue behind it).
+//   - More than kMaxBadMessagesPerSecond bad messages within one second: disconnected (close 1008,
+//     the reason in the close frame).
+//   - A message of more than kMaxClientMessageBytes: disconnected by websocketpp (close 1009).
+//   - At most kMaxClients WebSocket clients at once; the next gets HTTP 503.
+// Every disconnect writes one line on stderr naming the client's address and why, and is counted in
+// `clients_disconnected`.
 //
 // HTTP: "/" serves index.html of the web folder; "/<name>" a file of the web folder (names of
 // letters, digits, '.', '_', '-' only; no sub-folders); "/three/three.module.js" and
@@ -19,6 +35,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
@@ -59,12 +76,29 @@ struct ServerStats {
   std::atomic<std::uint64_t> messages_sent{0};    ///< messageData frames sent
   std::atomic<std::uint64_t> dropped{0};          ///< messageData frames not sent to a slow client
   std::atomic<std::uint64_t> bad_client_messages{0};
+  std::atomic<std::uint64_t> replies_not_sent{0};      ///< bad messages past kMaxRepliesPerSecond: not answered
+  std::atomic<std::uint64_t> clients_disconnected{0};  ///< clients over a limit, disconnected by the server
+  std::atomic<std::uint64_t> clients_refused{0};       ///< handshakes refused past kMaxClients
   std::atomic<std::uint64_t> subscriptions{0};    ///< subscribe requests accepted, since start
 };
 
 class ViewServer {
  public:
-  static constexpr std::size_t kMaxBufferedBytes = 2u << 20;  ///< ~3 s of scene at 30 Hz: older is useless to a viewer
+  /// Bytes queued to one client, all messages together: ~3 s of scene at 30 Hz (older is useless to a viewer).
+  static constexpr std::size_t kMaxBufferedBytes = 2u << 20;
+  /// How long a client's data frames may be skipped in a row before it is disconnected.
+  static constexpr std::chrono::seconds kMaxStall{10};
+  /// Subscriptions one client may hold: the page and Foxglove take one per channel (3).
+  static constexpr std::size_t kMaxSubscriptionsPerClient = 64;
+  /// Bad messages answered with a status per client and second; more are counted only.
+  static constexpr std::size_t kMaxRepliesPerSecond = 10;
+  /// Bad messages per client and second past which it is disconnected.
+  static constexpr std::size_t kMaxBadMessagesPerSecond = 100;
+  /// Largest message a client may send [bytes] (a subscribe of 64 subscriptions is ~2 kB); also the
+  /// largest HTTP request body.
+  static constexpr std::size_t kMaxClientMessageBytes = 64u << 10;
+  /// WebSocket clients served at once.
+  static constexpr std::size_t kMaxClients = 32;
 
   /// Checks the folders and the address, binds and listens (not yet serving: see start()).
   /// Throws ViewError: "--bind 'x' is not an IP address", "cannot listen on 127.0.0.1:8765: Address
