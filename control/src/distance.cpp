@@ -55,8 +55,15 @@ DistanceData::DistanceData(const Model& model)
       if (model.primitives[static_cast<std::size_t>(p)].piece >= 0) return true;
     return false;
   };
-  for (std::size_t i = 0; i < model.pairs.size(); ++i)
-    pair_has_piece[i] = hasPiece(model.segments[model.pairs[i].a]) || hasPiece(model.segments[model.pairs[i].b]);
+  std::size_t most_candidates = 1;
+  for (std::size_t i = 0; i < model.pairs.size(); ++i) {
+    const Segment& sa = model.segments[model.pairs[i].a];
+    const Segment& sb = model.segments[model.pairs[i].b];
+    pair_has_piece[i] = hasPiece(sa) || hasPiece(sb);
+    most_candidates = std::max(most_candidates, static_cast<std::size_t>(std::max(sa.num_primitives, 1)) *
+                                                    static_cast<std::size_t>(std::max(sb.num_primitives, 1)));
+  }
+  piece_candidates.resize(most_candidates);
   // Bounding sphere of every robot segment in its link frame: centred on the middle of the box
   // around its primitives' end points; the radius reaches the farthest end point plus its radius
   // (a capsule lies inside the spheres around its two ends' hull, so the sphere encloses it).
@@ -208,18 +215,30 @@ inline bool pieceDistance(const Model& model, const KinematicsData& kin, const D
 }
 
 /// Pair i of the tight model: the least exact distance over its primitive pairs, visited by
-/// `each(f)` calling f(pa, pb, capsule distance, core distance, s, t) for each; a primitive pair whose
-/// capsule distance (a lower bound of its exact one) is not below the best so far is skipped.
+/// `each(f)` calling f(pa, pb, capsule distance, core distance, s, t) for each. They are taken nearest
+/// capsule distance first (a lower bound of the exact one): once a bound is not below the best exact
+/// distance found, neither is any after it, and they are skipped. Allocation-free (sorted in place in
+/// DistanceData::piece_candidates).
 template <class Each>
 void finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData& data, const DistanceOptions& options,
                      int i, int link_a, int link_b, Each&& each) {
+  DistanceData::PieceCandidate* cand = data.piece_candidates.data();
+  std::size_t count = 0;
+  each([&](int pa, int pb, double bound, double core, double s, double t) {
+    // A bound that is not a number is taken first (never skipped on its account).
+    cand[count++] = {bound == bound ? bound : -std::numeric_limits<double>::infinity(), core, s, t, pa, pb};
+  });
+  std::sort(cand, cand + count,
+            [](const DistanceData::PieceCandidate& x, const DistanceData::PieceCandidate& y) { return x.bound < y.bound; });
   double best = std::numeric_limits<double>::infinity();
   bool on_pieces = false, overlap = false;
   int cap_pa = -1, cap_pb = -1;
   double cap_core = 0.0, cap_s = 0.0, cap_t = 0.0;
   Eigen::Vector3d best_pa = Eigen::Vector3d::Zero(), best_pb = Eigen::Vector3d::Zero(), best_n = Eigen::Vector3d::UnitZ();
-  each([&](int pa, int pb, double bound, double core, double s, double t) {
-    if (!(bound < best) && cap_pa >= 0) return;
+  for (std::size_t k = 0; k < count; ++k) {
+    const int pa = cand[k].pa, pb = cand[k].pb;
+    const double bound = cand[k].bound, core = cand[k].core, s = cand[k].s, t = cand[k].t;
+    if (!(bound < best) && cap_pa >= 0) break;
     double d;
     Eigen::Vector3d p_a, p_b, n;
     const bool capsules = model.primitives[static_cast<std::size_t>(pa)].piece < 0 &&
@@ -227,20 +246,20 @@ void finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     if (capsules) {  // two capsules: exact as they are
       best = bound, on_pieces = false, overlap = false;
       cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
-      return;
+      continue;
     }
     if (pieceDistance(model, kin, data, pa, pb, link_a, link_b, d, p_a, p_b, n)) {
       if (d < best || cap_pa < 0) {
         best = d, on_pieces = true, overlap = false, best_pa = p_a, best_pb = p_b, best_n = n;
         cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
       }
-      return;
+      continue;
     }
     // The pieces touch or overlap: distance 0, "the real shapes touch or overlap" (they may be apart
     // by up to the pieces' gaps, or intersect; the tight model does not estimate a depth, and the
     // capsules' depth can be far below the truth), at the common point, along the capsules' direction
     // (the way that separates their cores).
-    if (!(0.0 < best) && cap_pa >= 0) return;
+    if (!(0.0 < best) && cap_pa >= 0) continue;
     const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
     const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
     Eigen::Vector3d dir = (A.start + s * A.d) - (B.start + t * B.d);
@@ -250,7 +269,7 @@ void finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     best = 0.0, on_pieces = true, overlap = true, best_pa = p_a, best_pb = p_a;
     best_n = len > kCoincidentEps ? Eigen::Vector3d(dir / len) : Eigen::Vector3d::UnitZ();
     cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
-  });
+  }
   if (on_pieces) {
     finishPairPoints(model, kin, data, options, i, link_a, link_b, best, best_pa, best_pb, best_n);
     data.pairs[static_cast<std::size_t>(i)].well_defined = !overlap;  // overlapping pieces: the capsules' normal

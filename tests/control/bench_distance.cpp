@@ -100,7 +100,7 @@ struct Setup {
   std::vector<std::pair<int, int>> robot_pairs;      // checked robot segment pairs
   KDL::Tree tree;
 
-  Setup() : model(loadModel(g_urdf, loadCollisionConfig(defaultCollisionConfigPath(g_urdf)))) {
+  Setup() : model(loadModel(g_urdf, loadCollisionConfig(bench::collisionPathFor(g_urdf)))) {
     std::mt19937_64 rng(42);
     for (int c = 0; c < kConfigurations; ++c) {
       Eigen::VectorXd q(model.nq);

@@ -2,6 +2,8 @@
 // Google Benchmark. Not a test; the benchmarks are run by hand (control/README.md, "Speed").
 #pragma once
 
+#include "reflex/control/urdf_loader.hpp"
+
 #include <benchmark/benchmark.h>
 
 #include <cstdio>
@@ -17,7 +19,19 @@ inline std::string robotUrdf(const std::string& name_or_path) {
   return std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/" + name_or_path + ".urdf";
 }
 
-/// Takes --robot=NAME|PATH.urdf into *urdf and, if config is not null, --config=YAML into *config;
+/// The collision configuration a benchmark loads its robot with: --collision=YAML, else the one next
+/// to the URDF (defaultCollisionConfigPath), so a robot set up by reflex_setup into another folder
+/// (with its fit) is measured as the controller runs it.
+inline std::string& collisionOption() {
+  static std::string path;
+  return path;
+}
+inline std::string collisionPathFor(const std::string& urdf) {
+  return collisionOption().empty() ? reflex::control::defaultCollisionConfigPath(urdf) : collisionOption();
+}
+
+/// Takes --robot=NAME|PATH.urdf into *urdf, --collision=YAML (collisionOption()) and, if config is
+/// not null, --config=YAML into *config;
 /// --help prints `usage` and Google Benchmark's options. Then `announce` (loads the robot, prints what
 /// is measured; an exception there is a clear error, exit 2) and every benchmark. Returns the exit code.
 inline int benchMain(int argc, char** argv, const char* program, const char* usage, std::string* urdf,
@@ -32,16 +46,19 @@ inline int benchMain(int argc, char** argv, const char* program, const char* usa
     }
     const bool robot = arg.rfind("--robot=", 0) == 0;
     const bool yaml = config != nullptr && arg.rfind("--config=", 0) == 0;
-    if (!robot && !yaml) {
+    const bool collision = arg.rfind("--collision=", 0) == 0;
+    if (!robot && !yaml && !collision) {
       argv[kept++] = argv[i];
       continue;
     }
     const std::string value = arg.substr(arg.find('=') + 1);
     if (value.empty()) {
-      std::fprintf(stderr, "%s: %s needs a value (see --help)\n", program, robot ? "--robot" : "--config");
+      std::fprintf(stderr, "%s: %s needs a value (see --help)\n", program,
+                   robot ? "--robot" : collision ? "--collision" : "--config");
       return 2;
     }
     if (robot) *urdf = robotUrdf(value);
+    else if (collision) collisionOption() = value;
     else *config = value;
   }
   argc = kept;

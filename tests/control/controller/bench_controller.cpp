@@ -32,7 +32,7 @@ std::string g_urdf = bench::robotUrdf("asimo_like");
 std::string g_config;  // controller YAML; empty: defaultControllerConfig()
 
 const Model& model() {
-  static const Model m = loadModel(g_urdf, loadCollisionConfig(defaultCollisionConfigPath(g_urdf)));
+  static const Model m = loadModel(g_urdf, loadCollisionConfig(bench::collisionPathFor(g_urdf)));
   return m;
 }
 
@@ -319,6 +319,7 @@ int main(int argc, char** argv) {
       "bench_controller [--robot=NAME|PATH.urdf] [--config=YAML] [benchmark options]\n"
       "  --robot   a robot of bringup/robots by name (default asimo_like; many_segment_humanoid:\n"
       "            the >= 1,000-pair robot) or a URDF path; collision configuration next to it\n"
+      "  --collision  its collision YAML instead (e.g. what reflex_setup wrote, with the fit)\n"
       "  --config  controller YAML for that robot (default: the built-in asimo_like arms)\n",
       &g_urdf, &g_config, [] {
         std::printf("robot: %s, %zu checked pairs, %zu states, %s sweep kernel\n", g_urdf.c_str(), model().pairs.size(),

@@ -133,6 +133,14 @@ struct DistanceData {
   // vertices (link frame; a body-schema slot's written each cycle), for a piece meeting a capsule.
   std::vector<char> pair_has_piece;
   std::vector<ConvexPiece> core_piece;
+  // One tight-model pair's primitive pairs with their capsule distance (a lower bound of the exact
+  // one), sorted so the exact distances are computed nearest first and the rest skipped as soon as a
+  // bound reaches the best found (scratch, sized at set-up to the largest pair).
+  struct PieceCandidate {
+    double bound, core, s, t;
+    int pa, pb;
+  };
+  std::vector<PieceCandidate> piece_candidates;
   /// The kernel computeSegmentDistances runs (fastestSweepKernel() unless set: tests run both).
   SweepKernel kernel = fastestSweepKernel();
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
