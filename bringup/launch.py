@@ -43,7 +43,7 @@ SOURCE = HERE.parent                                    # the checkout
 PROCESS_KEYS = {"name", "cmd", "args", "host", "env", "prefix", "on_exit", "delay", "stop_signal", "enabled", "robot"}
 TOP_KEYS = {"name", "description", "domain", "profiles", "log_dir", "bin_dir", "env", "vars", "hosts",
             "discovery_server", "processes", "stop_timeout", "robot"}
-# The robot side (issue 13): "kinematic" = the controller's in-process plant; "mujoco" = reflex_mujoco
+# The robot side: "kinematic" = the controller's in-process plant; "mujoco" = reflex_mujoco
 # on the bus, the controller with --robot dds. A process with `robot: X` starts only on side X;
 # ${ROBOT} is the side, ${ROBOT_PORT} the controller's --robot value (kinematic | dds).
 ROBOT_SIDES = {"kinematic": "kinematic", "mujoco": "dds"}

@@ -44,11 +44,11 @@ packages=(
   openssl clang-14 libclang-rt-14-dev ninja-build
   # leak reproducers fail in every build, not only under LeakSanitizer (tests/fuzz/CMakeLists.txt)
   valgrind
-  # the robot boundary: the physics-simulated robot (control/mujoco, issue 13)
+  # the robot boundary: the physics-simulated robot (control/mujoco)
   libmujoco-dev
-  # your own robot description: meshes, convex hulls (issue 12)
+  # your own robot description: meshes, convex hulls
   libassimp-dev assimp-testmodels libqhull-dev
-  # recordings and the live view (issue 14): MCAP chunk compression, WebSocket, JSON, a real browser
+  # recordings and the live view: MCAP chunk compression, WebSocket, JSON, a real browser
   libzstd-dev liblz4-dev libwebsocketpp-dev libboost-dev nlohmann-json3-dev
   chromium chromium-headless-shell
 )

@@ -3,7 +3,7 @@
 # failure (a test, a sanitizer report, a fuzz finding).
 # Usage: bringup/test.sh [--no-hygiene | --hygiene-only] [extra ctest arguments, e.g. -R bus -L unit]
 #   1. bringup/setup.sh: packages + Release build in build/; ctest there (with the extra arguments).
-#   2. Hygiene (issue 8, item 4), in ONE clang build folder (build-fuzz/, -fsanitize=fuzzer-no-link,
+#   2. Hygiene, in ONE clang build folder (build-fuzz/, -fsanitize=fuzzer-no-link,
 #      address,undefined): the non-DDS unit tests below under ASan + UBSan (bringup/sanitize.sh
 #      --clang-fuzz --tests ...), then every libFuzzer target for REFLEX_FUZZ_SECONDS s each
 #      (bringup/fuzz.sh). The DDS tests under sanitizers (sanitize.sh --dds) and longer fuzzing

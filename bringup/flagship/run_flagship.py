@@ -23,7 +23,7 @@ machine), and holds its replay until behavior and recorder matched its writer (r
 and starts it again, up to STARTUP_ATTEMPTS times; the failed attempt's logs stay as
 <name>.attempt<N>.log, and run.json (startup_failures) and report.md name each failure.
 
-With --robot mujoco the robot is the physics-simulated humanoid (issue 13): reflex_mujoco is started on
+With --robot mujoco the robot is the physics-simulated humanoid: reflex_mujoco is started on
 the run's domain before the controller, which then runs with --robot dds (it reads the measured state
 from reflex/robot_state and commands reflex/joint_command); MuJoCo's contact count (pairs closer than
 d_r, from reflex_mujoco's exit line) goes into run.json and the report, which names the plant.
@@ -223,7 +223,7 @@ def run_once(args, label, avoidance):
         recorder = os.path.join(bindir, "reflex_record")
         readers = 1  # of vision's reflex/object_targets: behavior, and the recorder when there is one
         if os.path.exists(recorder):
-            # MCAP (issue 14): the recording opens in Foxglove (File -> Open local file).
+            # MCAP: the recording opens in Foxglove (File -> Open local file).
             rec = [recorder, "record"] + dds("recorder") + ["--output", os.path.join(out, "bus.mcap"), "--progress"]
             procs.append(Proc("recorder", rec, os.path.join(out, "recorder.log"), env))
             readers += 1

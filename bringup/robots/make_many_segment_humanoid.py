@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Writes many_segment_humanoid.urdf (+ .collision.yaml): the ASIMO-like humanoid with fingers, the
-">= 1,000-pair robot" of the distance and controller benchmarks (issue 12, item 7).
+">= 1,000-pair robot" of the distance and controller benchmarks.
 
 Usage: make_many_segment_humanoid.py [OUT_DIR]   (default: the folder of this script)
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes mesh_humanoid, the humanoid whose collision geometry is meshes (issue 12, item 1).
+"""Writes mesh_humanoid, the humanoid whose collision geometry is meshes.
 
 Usage: make_mesh_humanoid.py [OUTDIR]   (default: the folder of this script)
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes small_humanoid.urdf, the second humanoid Reflex is tested with (issue 3, item 3).
+"""Writes small_humanoid.urdf, the second humanoid Reflex is tested with.
 
 Usage: make_small_humanoid.py [OUT.urdf]   (default: small_humanoid.urdf next to this script)
 

@@ -213,7 +213,7 @@ subscribe[vision]="reflex/heartbeat"
 publish[behavior]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat"
 subscribe[behavior]="reflex/object_targets reflex/joint_state reflex/control_status reflex/heartbeat"
 # reflex/controller_protection: what protects the robot; each controller also reads it to find a
-# second controller on the domain (issue 16, items 3 and 16).
+# second controller on the domain.
 # With a robot over DDS (--robot dds) the controller commands the robot and reads its state.
 publish[controller]="reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection reflex/joint_command"
 subscribe[controller]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat reflex/controller_protection reflex/robot_state"

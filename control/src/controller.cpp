@@ -44,7 +44,7 @@ bool descendsFrom(const Model& model, int link, int ancestor) {
 /// grasped object against the upper arm) it is the DISTAL one, whose link descends from the other's:
 /// the paper's S_i are the forearm and the hand, and the force must push the hand away from the
 /// shoulder, not the shoulder away from the hand (that flips its direction in the Eq. 17 merge and
-/// can drive the closest pair together; issue 16, item 7). Two segments on one link: seg_a.
+/// can drive the closest pair together). Two segments on one link: seg_a.
 ArmPairFacts makeArmPairFacts(const Model& model, const std::vector<std::uint64_t>& columns, int a, int owner_a,
                               int owner_b, int link_a, int link_b) {
   ArmPairFacts f;
@@ -630,7 +630,7 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
   // with the smallest bound goes first: its true distance then rules out nearly all the others.
   // The sweep itself refines a skipped pair whose bound is below its closest exact distance (its own
   // `closest`): that pair is exact but not in the exact list, so it is taken here too, whether exact
-  // or not (until session 14 it was passed over as exact, and the closest physical pair was wrong
+  // or not (an earlier version passed it over as exact, and the closest physical pair was wrong
   // whenever that pair was the closest: d_safe = d_a = 0.02 on the 1,343-pair robot, 79 % of
   // random configurations; BroadPhase.ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem).
   if (data.dist.pruned_floor < physical.distance) {

@@ -1,4 +1,4 @@
-// The fit (issue 12, item 1): primitives enclosing every vertex and triangle of a link's meshes.
+// The fit: primitives enclosing every vertex and triangle of a link's meshes.
 //
 // One primitive for a point set P and a direction u (unit): the radius R is that of the minimal
 // enclosing circle of P projected on the plane normal to u (Welzl); the core segment along u runs

@@ -1,4 +1,4 @@
-// The scenarios' frame of reference (issue 12, item 6): landmarks of a robot at its rest posture, and
+// The scenarios' frame of reference: landmarks of a robot at its rest posture, and
 // the map that carries the seven scenarios from the reference robot's coordinates to any robot.
 #include "reflex/control/scenarios.hpp"
 

@@ -16,7 +16,7 @@ bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vec
                              const Eigen::Vector3d& b_L, double radius, bool is_virtual,
                              const std::vector<std::string>& ignore) {
   // A scenario that needs a link or segment this robot lacks is an error naming it, never a silent
-  // skip (issue 12, item 6: a missing l_hand used to drop the bar without a word).
+  // skip (a missing l_hand used to drop the bar without a word).
   const int l = model.linkIndex(link);
   if (l < 0) throw ConfigError("the scenario attaches a segment to link '" + link + "', which robot '" + model.name + "' does not have");
   std::uint64_t mask = 0;

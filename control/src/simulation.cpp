@@ -49,7 +49,7 @@ bool WalkingPattern::start(double distance, double speed, double step_period) {
     return false;
   }
   // A new goal while walking (or while the legs fade out) continues the step cycle: phase and
-  // amplitude are kept, so no leg joint jumps (issue 16, item 5: a restart from phase 0 moved the
+  // amplitude are kept, so no leg joint jumps (a restart from phase 0 moved the
   // ankle 0.39 rad in one 5 ms cycle). The heel re-anchors where it is at the next step.
   walking_ = true;
   distance_ = distance;

@@ -1,9 +1,9 @@
 // An independent reading of a URDF's XML (tinyxml2), made to account for every collision element
-// (issue 16, item 2). urdfdom drops a link's collision elements without failing when anything in the
+//. urdfdom drops a link's collision elements without failing when anything in the
 // link does not parse (a NaN, "1e999", "0.001 " with a space, "1 2" for a 3-vector, an unnamed
 // <material>, an unknown geometry such as <capsule>, a bad mass), and it accepts finite absurd values
 // (an origin at 1e300 m) that move geometry out of reach just as surely. It also reads URDF 1.1
-// <capsule> (issue 12, item 2), handing urdfdom the same document with capsules as cylinders. loadModelFromString compares
+// <capsule>, handing urdfdom the same document with capsules as cylinders. loadModelFromString compares
 // the counts found here with what urdfdom returned and refuses the model, naming every affected link
 // and the reason found, in one message.
 //

@@ -481,7 +481,7 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     const Link& link = model.links[l];
     body_of_link[l] = (link.parent >= 0 && link.type == JointType::kFixed) ? body_of_link[link.parent] : static_cast<int>(l);
   }
-  // Adjacency (issue 12, item 4), looking through links without collision geometry as the field
+  // Adjacency, looking through links without collision geometry as the field
   // does: a segment and the nearest segment up its chain (joined by one joint, or through links
   // without geometry), and two segments whose links are children of the same link without
   // geometry (siblings, e.g. two hip links under a bare pelvis). Deliberately no further: cousins

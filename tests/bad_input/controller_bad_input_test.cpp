@@ -1,4 +1,4 @@
-// Bad input at run time against the real reflex_controller process (issue 8, item 3): NaN / Inf /
+// Bad input at run time against the real reflex_controller process: NaN / Inf /
 // huge values in every numeric field of every message it reads, unknown links and enumerators,
 // old / future / duplicate stamps and sequence numbers, and floods. Asserted: the sample is rejected
 // and counted in the exit summary ("targets N (rejected M)") where the controller rejects it, the

@@ -1,4 +1,4 @@
-// The controller process's contract under the second-round attack (issue 16), with the real
+// The controller process's contract under the second-round attack, with the real
 // reflex_controller over real DDS. Domains 182..188.
 //  item 3:  protection. `avoidance: off` in the controller YAML switches avoidance off but never the
 //           e-stop: crossing targets latch it (the exit line counts e-stops), and the banner, the exit

@@ -1,4 +1,4 @@
-// Bad files and values given to the real reflex_controller at start (issue 8, item 3): every one is
+// Bad files and values given to the real reflex_controller at start: every one is
 // a clear error before the loop starts — exit code != 0 and a message quoting the bad file or value
 // — never a crash (a signal) and never a running controller. Domain 106 (only reached by the
 // profile cases).
@@ -49,7 +49,7 @@ std::vector<Case> cases() {
   writeFile(tmp("nan.controller.yaml"), "k_virtual: .nan\n");
   writeFile(tmp("unknown_key.controller.yaml"), "d_z: 0.01\n");
   writeFile(tmp("unknown_joint.controller.yaml"), "arms:\n  left:\n    joints: [l_no_such_joint]\n");
-  // small_humanoid's own configuration with d_r 20 mm: its feet are 11.63 mm apart at rest (session 14).
+  // small_humanoid's own configuration with d_r 20 mm: its feet are 11.63 mm apart at rest.
   writeFile(tmp("red_rest.controller.yaml"), readFile(robots + "small_humanoid.controller.yaml") + "d_r: 0.02\nd_b: 0.03\n");
   writeFile(tmp("truncated.xml"), base_profiles.substr(0, base_profiles.size() / 2));
   writeFile(tmp("not_xml.xml"), "this is not XML at all {\n");
@@ -61,7 +61,7 @@ std::vector<Case> cases() {
   writeFile(tmp("no_profiles.xml"),
             "<?xml version='1.0'?><dds xmlns='http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'><profiles>"
             "</profiles></dds>");
-  // A user's own profiles file written before session 14, without the controller's default (UDP-only)
+  // A user's own profiles file written for an older Reflex, without the controller's default (UDP-only)
   // participant profile: refused at start naming it, never a silent fall-back to shared memory.
   {
     std::string without_udp = base_profiles;
@@ -109,13 +109,13 @@ std::vector<Case> cases() {
       {"zero input timeout", {"--input-timeout", "0"}, "0"},
       {"NaN input timeout", {"--input-timeout", "nan"}, "nan"},
       {"unknown option", {"--no-such-option"}, "--no-such-option"},
-      // Issue 16, item 14: a --log that cannot be written is an error before the loop.
+      // A --log that cannot be written is an error before the loop.
       {"--log on a full device", {"--domain", d, "--log", reflex::testing::fullDevice()},
        "'" + reflex::testing::fullDevice() + "': No space left on device"},
       {"--log in a missing folder", {"--domain", d, "--log", tmp("no_such_folder/run.csv")},
        tmp("no_such_folder/run.csv")},
       {"--log is a folder", {"--domain", d, "--log", tmp("")}, "is a directory"},
-      // Issue 16, item 9: the module name is the key of the heartbeat (at most 255 bytes).
+      // The module name is the key of the heartbeat (at most 255 bytes).
       {"--name of 256 bytes", {"--domain", d, "--name", std::string(256, 'n')}, "at most 255 bytes"},
       {"--name of 100000 bytes", {"--domain", d, "--name", std::string(100000, 'n')}, "100000 bytes long"},
       {"negative --peer-probe", {"--peer-probe", "-1"}, "--peer-probe"},

@@ -1,4 +1,4 @@
-// Issue 16, item 11: a file argument that is not a regular file -- a FIFO (mkfifo), a character
+// A file argument that is not a regular file -- a FIFO (mkfifo), a character
 // device (/dev/zero), a directory -- is refused at once, with an error that names the path and what it
 // is, by every loader of a file a user names (and by the tools that take such files). The old loaders
 // blocked forever on a FIFO (open(2) waits for a writer) and read /dev/zero without end.
@@ -8,7 +8,7 @@
 // (named pipe)", "is a character device", "is a directory") in the message. A blocked child is killed
 // and the case fails. Tools: the real executables under `timeout`, exit status and stderr checked.
 //
-// Issue 16, item 14 (recorder and tools): output that cannot be written is not success. /dev/full
+// Recorder and tools: output that cannot be written is not success. /dev/full
 // (every write fails with ENOSPC) as a recording, a CSV export, a time series (through a symbolic
 // link in the output folder) and as standard output; a missing or impossible output folder is an
 // error at start, before any work. /dev/null stays a valid output. reflex_record record uses DDS

@@ -1,4 +1,4 @@
-// Issue 16, item 9, the replay path: a recording whose Heartbeat and BodySchemaChange samples carry
+// The replay path: a recording whose Heartbeat and BodySchemaChange samples carry
 // key strings longer than the DDS bound (256 bytes, 4 KB) — crafted here, as another vendor's
 // writer or an edited file could produce them — is replayed by the real reflex_play (domain 189).
 // Before the bound, the first such sample aborted the player (SIGABRT inside the key computation).
@@ -64,7 +64,7 @@ TEST(LongKeyReplay, ARecordingWithLongKeysIsReplayedWithThoseSamplesRefusedAndCo
   auto& heartbeats = watch.makeReader<msg::Heartbeat>("reflex/heartbeat", bus::kProfileRecord);
 
   const std::string log = ::testing::TempDir() + "long_key_play.log";
-  // --commands: the body schema is a command topic (issue 17, item 12), played only when asked.
+  // --commands: the body schema is a command topic, played only when asked.
   testing::ChildProcess player({std::string(REFLEX_BIN_DIR) + "/reflex_play", file, "--commands", "--domain", "189",
                                 "--delay", "2"},
                                log);

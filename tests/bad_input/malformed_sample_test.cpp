@@ -1,4 +1,4 @@
-// A malformed sample on the wire (issue 8, item 3): a rogue participant registers the type name
+// A malformed sample on the wire: a rogue participant registers the type name
 // "reflex::msg::HandTargets" with its own type support and writes raw bytes to reflex/hand_targets —
 // a bad CDR encapsulation header, a truncated body, a string length far beyond the payload, and
 // random bytes. The real reflex_controller must not crash (its takes run inside the 5 ms loop) and

@@ -1,4 +1,4 @@
-// Robot states the controller must refuse (issue 17, item 13), with the real reflex_controller
+// Robot states the controller must refuse, with the real reflex_controller
 // --robot dds over real DDS (domain 219). This test is the robot: a participant on UDP only
 // (reflex_participant_udp, like robot_port_test's driver) that publishes good states at 200 Hz and,
 // one at a time, a bad one of every DdsRobotPort cause, in two or three variants each:

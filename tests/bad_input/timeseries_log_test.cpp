@@ -1,4 +1,4 @@
-// The controller's streamed --log writer (control/node timeseries_log.hpp; issue 16, item 14),
+// The controller's streamed --log writer (control/node timeseries_log.hpp),
 // checked against the file it wrote: every pushed row is in the file, in order, beyond the 120,000
 // rows where the old in-memory log stopped without a word; a ring the writer cannot empty in time
 // drops rows and SAYS so (count, error text, close() false); a full device is a LogError at open

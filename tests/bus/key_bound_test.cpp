@@ -1,4 +1,4 @@
-// DDS key strings are bounded at the bus (issue 16, item 9). Checked against the generated code
+// DDS key strings are bounded at the bus. Checked against the generated code
 // itself (not against our constant): fastddsgen's getKey of Heartbeat (key module_name) and of
 // BodySchemaChange (key segment_name) throws for a 256-byte key and not for 255 — inside
 // DataWriter::write that exception ended the publishing process (SIGABRT). Then, over real DDS

@@ -1,4 +1,4 @@
-// bus::LogLimiter (issue 16 item 8f) against hand-counted answers on a fake clock: at most N lines
+// bus::LogLimiter against hand-counted answers on a fake clock: at most N lines
 // per one-second window, the refused ones counted and reported with the next admitted line, a quiet
 // call site printing at once again; print() writes the suppressed count into the line.
 #include <reflex/bus/log_limit.hpp>

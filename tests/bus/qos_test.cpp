@@ -194,7 +194,7 @@ TEST(Qos, SilentHeartbeatWriterIsDeclaredNotAlive) {
   EXPECT_EQ(reader.stats().alive_writers, 0);
   EXPECT_GE(noticed, 1000ms) << "not before (most of) the 1.5 s lease";
   // The writer's own lease event runs on its participant's timer thread, independent of the reader's:
-  // on a loaded machine it was seen to fire after the reader had noticed (session 11, a fresh CI clone).
+  // on a loaded machine it was seen to fire after the reader had noticed (a fresh CI clone).
   EXPECT_TRUE(eventually([&] { return writer.stats().liveliness_lost >= 1; }, 2000ms))
       << "the writer was told it lost its liveliness: " << writer.stats().liveliness_lost;
 }

@@ -57,7 +57,7 @@ TEST(TwoProcess, SigintStopsTheRunLoopCleanly) {
       << pub.output();
 }
 
-// Issue 16, item 10: StopOnSignal (shared by every DDS process) stops the loop cleanly on every
+// StopOnSignal (shared by every DDS process) stops the loop cleanly on every
 // catchable terminating signal, not only SIGINT / SIGTERM (each of these killed the process before).
 TEST(TwoProcess, EveryCatchableTerminatingSignalStopsTheRunLoopCleanly) {
   for (const int sig : {SIGHUP, SIGUSR1, SIGUSR2, SIGQUIT, SIGALRM, SIGVTALRM, SIGPROF, SIGPWR, SIGRTMIN, SIGRTMAX}) {

@@ -1,5 +1,4 @@
-// bench_distance: the self-distance sweep of a robot, side by side with FCL and KDL (issue 3,
-// item 8), and the broad phase against the brute force (issue 12, item 7). Not a CTest test; run by hand:
+// bench_distance: the self-distance sweep of a robot, side by side with FCL and KDL, and the broad phase against the brute force. Not a CTest test; run by hand:
 //   build-*/bin/bench_distance [--robot=NAME] --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 // --robot: a robot of bringup/robots by name (asimo_like, the default; many_segment_humanoid, the
 // >= 1,000-pair robot; small_humanoid; mesh_humanoid) or a URDF path; its collision configuration

@@ -257,7 +257,7 @@ void checkRowsAgainstFiniteDifferences(const Model& m, int configurations, std::
   std::printf("%s: %d avoidance rows vs central differences (h = 1e-6; %d of them non-zero, of %d active "
               "pairs): max error %.3g\n",
               m.name.c_str(), rows_checked, rows_nonzero, active_pairs, max_err);
-  // A check of no rows, or of zero rows only, would pass whatever the rows were (issue 17, item 6):
+  // A check of no rows, or of zero rows only, would pass whatever the rows were:
   // nearly every active pair is well defined at random configurations, and every checked pair has a
   // segment that some joint moves (pairs no joint moves are excluded in the shipped configurations).
   EXPECT_GE(rows_checked, active_pairs * 9 / 10);
@@ -290,7 +290,7 @@ TEST(DistanceRows, ThresholdSelectsRows) {
   for (const PairDistance& pd : dist.pairs) EXPECT_FALSE(pd.has_row);
 }
 
-// ---------------------------------------------------------------- broad phase (issue 12, item 7)
+// ---------------------------------------------------------------- broad phase
 // The pruned sweep against the brute force (the unpruned sweep, itself checked against FCL above):
 // over random configurations, every pair whose true distance is within the prune distance is
 // identical bit for bit (distance, witness points, normal, row), every skipped pair reports a lower
@@ -378,7 +378,7 @@ TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheSecondHumanoid) {
 
 TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheThousandPairRobot) {
   const Model m = testing::loadRobot("many_segment_humanoid");
-  // The benchmark robot of issue 12, item 7 (bringup/robots/make_many_segment_humanoid.py).
+  // The benchmark robot (bringup/robots/make_many_segment_humanoid.py).
   EXPECT_GE(robotPairCount(m), 1000);
   checkBroadPhase(m, 0.10, 150, 24);
 }
@@ -431,7 +431,7 @@ TEST(DistanceListedPairs, ListedPairsEqualTheFullSweepAndNothingElseChanges) {
   EXPECT_GT(inactive, 30 * 50) << "the disabled slot's pairs (and the unused slots') come out inactive";
 }
 
-// ---------------------------------------------------------------- sweep kernels (issue 12, item 7)
+// ---------------------------------------------------------------- sweep kernels
 // The AVX2 kernels (four primitive pairs, four bounding-sphere gaps per instruction) against the
 // scalar ones, which the tests above check against FCL and the brute force: the same bits, on
 // whole robots (every field of every pair, pruned and unpruned, with a body-schema slot) and on

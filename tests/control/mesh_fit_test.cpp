@@ -1,4 +1,4 @@
-// Tests of control/include/reflex/control/mesh_fit.hpp (issue 12, item 1): collision meshes to
+// Tests of control/include/reflex/control/mesh_fit.hpp: collision meshes to
 // capsules and the fit overlay. Independent answers:
 //  - the mesh vertices are read HERE (tinyxml2 for the URDF's origins, scales and filenames, assimp
 //    directly for the files, the transforms applied here) and each one's distance to the fitted

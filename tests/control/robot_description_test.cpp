@@ -1,4 +1,4 @@
-// Issue 12, items 2 and 4: robot descriptions as their makers publish them.
+// Robot descriptions as their makers publish them.
 //  - URDF 1.1 <capsule radius length> is read as that capsule (urdfdom 3 does not know it and drops
 //    the element): endpoints and a surface distance against hand computation, and the same model as
 //    the equivalent cylinder; a capsule in a <visual> no longer costs the link its collision elements;

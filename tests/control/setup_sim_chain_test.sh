@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# setup_sim_chain_test (issue 12, Done when 1): on each shipped robot, `reflex_setup` writes the robot's
+# setup_sim_chain_test: on each shipped robot, `reflex_setup` writes the robot's
 # configuration and `reflex_sim all` runs the paper's seven scenarios with exactly those files. Asserted
 # from every scenario's summary.txt: the closest pair never below d_r (read back from the written
 # controller.yaml, else the controller's default 5 mm), no e-stop, no non-finite output, no joint faster

@@ -1,7 +1,7 @@
 // Tests of control/include/reflex/control/urdf_loader.hpp (and the Model of model.hpp): the shipped
 // robots load with the structure the issue asks for; collision elements become the documented
 // primitives (hand-computed endpoints; boxes enclosed by their capsules); every bad input throws a
-// ModelError whose message names the source and the bad value. Issue 16 item 2: every collision
+// ModelError whose message names the source and the bad value. Every collision
 // element of the file is accounted for -- generated variants of the shipped URDFs (every collision
 // element, every attribute, each bad value: NaN, inf, 1e300, 1e999, "1 2", "", "0.001 ") must fail
 // naming the link, and the shipped files' primitive counts match an independent count of their
@@ -380,7 +380,7 @@ TEST(UrdfLoaderConfig, MalformedYaml) {
                    {"/nonexistent/x.collision.yaml", "cannot open"});
 }
 
-// ---------------------------------------------------------------- issue 16 item 2: nothing dropped silently
+// ---------------------------------------------------------------- Nothing dropped silently
 std::string readText(const std::string& path) {
   std::ifstream in(path);
   std::stringstream ss;
@@ -523,7 +523,7 @@ TEST(UrdfLoaderAccounting, AnAxisOfHugeComponentsKeepsItsDirection) {
 }
 
 TEST(UrdfLoaderAccounting, TheIssueCaseNamesTheLinkAndTheValue) {
-  // issue 16: a NaN in one collision <origin> of the left hand dropped it; crossing_arms then went to -70.9 mm.
+  // A NaN in one collision <origin> of the left hand dropped it; crossing_arms then went to -70.9 mm.
   std::string text = readText(testing::robotPath("asimo_like.urdf"));
   tinyxml2::XMLDocument d;
   ASSERT_EQ(d.Parse(text.c_str()), tinyxml2::XML_SUCCESS);

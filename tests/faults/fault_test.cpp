@@ -1,4 +1,4 @@
-// Faults with real processes (issue 8, item 2): kill -9 of the process that feeds the controller,
+// Faults with real processes: kill -9 of the process that feeds the controller,
 // and of the recorder, in the middle of a run. Asserted: the controller keeps its 200 Hz (status
 // rate and median cycle period across the kill), the hands retract within --input-timeout plus a
 // margin, no pair goes below d_r, the system follows again within 3 s of a restart, and a recording
@@ -43,7 +43,7 @@ struct Stamped {
 // The controller's own status rate over the received samples stamped in [from_ns, to_ns]: published
 // samples (Header.seq difference, +1 per published sample) per second of the publisher's clock. A
 // watcher that loses best-effort samples on a loaded host does not lower it; a controller that
-// skips cycles does (issue 16, item 17: counting received samples made the test fail at random).
+// skips cycles does (counting received samples made the test fail at random).
 double publishedRate(const std::vector<msg::ControlStatus>& statuses, std::int64_t from_ns, std::int64_t to_ns) {
   const msg::ControlStatus* first = nullptr;
   const msg::ControlStatus* last = nullptr;
@@ -279,9 +279,9 @@ TEST(Faults, KillNineOfTheRecorderLeavesTheControllerAndAReadableRecording) {
   bus::Participant watch(config);
   auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   ASSERT_TRUE(status.waitForWriters(1, 15s));
-  // The controller writes over UDP only (session 14): no Fast DDS shared-memory segment is mapped in
-  // it, so the recorder's kill cannot stall its writes in the port health check (in a ctest run of
-  // session 14 they stalled 1.0 s and 2.0 s after this kill, and this test saw 1 status in 2 s).
+  // The controller writes over UDP only: no Fast DDS shared-memory segment is mapped in
+  // it, so the recorder's kill cannot stall its writes in the port health check (with shared memory
+  // they stalled 1.0 s and 2.0 s after this kill in a ctest run, and this test saw 1 status in 2 s).
   // The recorder, on the default profile, maps them: the check can fail.
   const auto shmMappings = [](pid_t pid) {
     std::ifstream maps("/proc/" + std::to_string(pid) + "/maps");
@@ -339,7 +339,7 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   };
   // Behavior on UDP: with Fast DDS 2.9's shared memory, a kill -9 of a reader process stalls its
   // peers' writers (the port health check), seen here once as the controller's status stream at
-  // 0.67 Hz for 3 s after behavior's kill -9 (session 6; the same stall robot_port_test and
+  // 0.67 Hz for 3 s after behavior's kill -9 (the same stall robot_port_test and
   // mujoco_faults_test avoid the same way). The controller's loop no longer waits for its writes
   // (its bus outbox, ABusWriteThatBlocksNeverStopsTheControlLoop above), but its published stream
   // would still pause for the check; this test checks the chain's restart.
@@ -367,7 +367,7 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   const auto t0 = Clock::now();
   // Recovery is measured on the publishers' own stamps (Header.stamp_ns, CLOCK_REALTIME, one host):
   // DDS orders samples per writer only, so this watcher may take a restarted process's first frame
-  // after the hand targets it caused; arrival order across topics proves nothing (issue 16, item 17).
+  // after the hand targets it caused; arrival order across topics proves nothing.
   std::vector<std::int64_t> object_stamps;        // every vision frame's stamp
   std::vector<std::int64_t> behavior_beat_stamps; // every heartbeat of the behavior process
   std::vector<msg::ObjectTargets> obj_batch;

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Faults with real processes (issue 8, item 2): the link between two hosts down for less and for
+"""Faults with real processes: the link between two hosts down for less and for
 more than the liveliness lease.
 
 Two "hosts", network namespaces made by this test and joined by ONE veth pair (10.<domain>.0.1 robot,

@@ -1,4 +1,4 @@
-// Faults with real processes (issue 8, item 2): "a controller restart resumes without a jump".
+// Faults with real processes: "a controller restart resumes without a jump".
 // kill -9 of reflex_controller while the arms follow swaying targets, then the same command again.
 // The simulated robot lives inside the controller, so --robot-state FILE emulates the hardware (the
 // joints stay where they are; the new controller starts from them). Asserted against independent

@@ -14,7 +14,7 @@
 // complete valid record after the point where reading stopped, i.e. a damaged length field in the
 // middle of a file is not mistaken for the torn tail of a kill -9 (which would silently drop every
 // later record).
-// Time (issue 16, item 12): the reader's work -- every byte it reads, CRCs included
+// Time: the reader's work -- every byte it reads, CRCs included
 // (RecordReader::bytesExamined) -- stays below kWorkPerByte times the file size plus a constant, on
 // every input. The old resynchronisation was quadratic (a crafted 2 MB file: > 60 s); a regression
 // to it breaks this bound on any input of more than a few kilobytes with many sync words. Work is

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# install_test: Reflex as a library for outside projects (issue 17, items 8 and 9).
+# install_test: Reflex as a library for outside projects.
 #  1. `cmake --install` of the build tree into a fresh prefix;
 #  2. a tiny outside project (tests/install/outside_project) finds it with find_package(reflex), links
 #     reflex::control and reflex::vision, and prints what the in-tree tools answer independently

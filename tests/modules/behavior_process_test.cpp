@@ -356,7 +356,7 @@ TEST(BehaviorProcess, StartUpErrorsNameTheBadValue) {
   EXPECT_EQ(runToExit({kBin + "/reflex_behavior"}, "noconfig.log", log), 2);
   EXPECT_NE(log.find("--config"), std::string::npos) << log;
 
-  // Issue 16, item 9: the process name and a body-schema segment name are DDS keys (heartbeat,
+  // The process name and a body-schema segment name are DDS keys (heartbeat,
   // body schema): above 255 bytes a clear error at start, not an abort in the first publish.
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
   const std::string long_name(256, 'p');
@@ -377,7 +377,7 @@ TEST(BehaviorProcess, StartUpErrorsNameTheBadValue) {
       << log;
 }
 
-// Issue 16, item 16: two writers of reflex/joint_state (two controllers) — the behavior process
+// Two writers of reflex/joint_state (two controllers) — the behavior process
 // follows the one it heard first, ignores the other (counted, said on stderr), and takes the second
 // one only after the first has been silent for 0.5 s (a restarted controller).
 TEST(BehaviorProcess, JointStatesFromASecondWriterAreIgnoredAndCounted) {

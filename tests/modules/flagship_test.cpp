@@ -1,4 +1,4 @@
-// issue 6 "Done when": reflex_behavior runs the pointing module (bringup/behavior/pointing.yaml)
+// reflex_behavior runs the pointing module (bringup/behavior/pointing.yaml)
 // against reflex_vision replaying the flagship session (bringup/sessions/flagship) over real DDS
 // (domain 62), and publishes sensible hand targets. Two stretches of the session are replayed at
 // real time into one behavior process: 8-21 s (the can is lost 13-19 s) and 40-54 s (the person
@@ -214,7 +214,7 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
     std::printf("flagship: object frame -> hand targets, publishers' stamps: median %.1f ms, 95%% %.1f ms\n",
                 1e3 * latency[latency.size() / 2], 1e3 * latency[latency.size() * 95 / 100]);
 
-  // 2. Lost can (session 13-19 s, first stretch): the left hand turns to "no target" lost_timeout after
+  // 2. Lost can (13-19 s into the recording, first stretch): the left hand turns to "no target" lost_timeout after
   //    the last can detection and points again at the first new one; the right hand keeps the cup.
   //    Times are the publishers' stamps (vision's frame, behavior's targets), as in 1: when this
   //    observer took two samples from two readers says nothing about their order if it stalled.
@@ -266,7 +266,7 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
   }
   ASSERT_LT(last_both, hands.size()) << "no sample with both hands given in the crossing stretch";
   const msg::HandTargets& end = hands[last_both].hands;
-  // Within the last 3 s of the stretch (session 51-54 s: held crossed).
+  // Within the last 3 s of the stretch (51-54 s into the recording: held crossed).
   EXPECT_GT(hands[last_both].t, seen.back().t - 3.0);
   EXPECT_GT(end.right().position_base().y(), end.left().position_base().y());
   EXPECT_GT(end.right().position_base().y(), 0.0);

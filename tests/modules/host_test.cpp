@@ -160,7 +160,7 @@ TEST_F(HostTest, FramesInAnUnknownFrameAreRejectedWhole) {
   }
 }
 
-// Issue 16 item 8a: object targets are accepted only from the identities inputs.object_sources names
+// Object targets are accepted only from the identities inputs.object_sources names
 // (default: vision), judged by ObjectsFrame::source — the identity of the participant that WROTE the
 // frame (filled by the DDS adapter from the writer's GUID, authenticated under DDS-Security), never
 // by a name inside the message. Every other writer ("player": a replayed recording; another module;
@@ -281,7 +281,7 @@ TEST_F(HostTest, JointStatesMoveTheRobotAndBadOnesAreRejected) {
   h->onJointState(mismatch, at(0.02));
   EXPECT_EQ(h->stats().joint_states_rejected, 2u);
   EXPECT_NEAR(h->robot().shoulder_B(Hand::kRight).x(), s0.x() + 0.5, 1e-12);  // kept
-  // Issue 16 item 8a: joint states only from the configured writers (default: the controller).
+  // Joint states only from the configured writers (default: the controller).
   for (const char* bad_writer : {"player", "", "behavior", "Controller"}) {
     JointStateSample forged = js;
     forged.source = bad_writer;

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """bench_mujoco_controller_latency: the latency from the robot's measured-state stamp to the command
-that answers it (issue 13), with the REAL controller: reflex_mujoco (the robot) and
+that answers it, with the REAL controller: reflex_mujoco (the robot) and
 reflex_controller --robot dds, with reflex_behavior (bringup/behavior/scripted.yaml) moving the arms,
 as separate processes. Run by hand (not a CTest test); the figures go into control/README.md.
 

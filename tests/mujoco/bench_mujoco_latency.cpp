@@ -1,5 +1,5 @@
-// bench_mujoco_latency: the latency from a robot's measured state to the command that answers it
-// (issue 13), with this program as the stand-in controller (not a CTest test; numbers go into
+// bench_mujoco_latency: the latency from a robot's measured state to the command that answers it,
+// with this program as the stand-in controller (not a CTest test; numbers go into
 // control/README.md). It starts reflex_mujoco (or uses one already running: --no-spawn), reads
 // reflex/robot_state and answers with reflex/joint_command (hold the measured positions, state_seq and
 // state_stamp_ns of the state answered):

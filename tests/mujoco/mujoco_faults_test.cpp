@@ -1,4 +1,4 @@
-// Faults with the physics robot (issue 13, "Done when": faults), DDS domain 195: reflex_mujoco (the
+// Faults with the physics robot, DDS domain 195: reflex_mujoco (the
 // robot), reflex_controller --robot dds and reflex_behavior (bringup/behavior/scripted.yaml: the
 // hands reach across, so the arms move) as three separate processes; this test process only watches
 // the bus (reflex/robot_state, reflex/joint_command, reflex/heartbeat) and sends the signals.

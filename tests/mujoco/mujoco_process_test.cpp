@@ -207,7 +207,7 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
   // Bounds: the servo (10 Hz, critically damped) follows its reference with a lag of about 25 ms: its
   // velocity feed-forward acts only while the reference travels to a commanded position, never past
   // it (measured on a loaded run: median 15.5 mrad, RMS 15.9, lag 24 ms, residual after the lag 2.5
-  // mrad). Until issue 13's scenarios on this robot the feed-forward stayed on after the reference
+  // mrad). An earlier servo kept the feed-forward on after the reference
   // arrived, which held the joint 2 qdot / omega PAST the command (a lead that hid the lag here:
   // median 1.3 mrad, lag 0-1 ms) and carried arms below d_r when a command was late. The tail is this
   // loaded machine: a commander stalled beyond the 20 ms deadline makes the robot hold, a robot
@@ -288,7 +288,7 @@ TEST(MujocoProcess, LateAndMalformedCommandsAreCountedAndNeverApplied) {
   for (int k = 0; std::chrono::steady_clock::now() < end; ++k) {
     const std::int64_t now = bus::nowNs();
     // The other bad commands' deadlines far ahead: the robot checks the deadline before the values,
-    // so one that arrived 20 ms late (a loaded machine; a fresh-clone .ci/run of session 12) was
+    // so one that arrived 20 ms late (a loaded machine; a fresh-clone .ci/run) was
     // counted as expired.
     const std::int64_t later = now + 2'000'000'000;
     switch (k % 5) {

@@ -1,4 +1,4 @@
-// The paper's seven scenarios on the physics robot (issue 13, item 4 and the first Done-when bullet):
+// The paper's seven scenarios on the physics robot:
 // `reflex_sim all --robot mujoco` spawns reflex_mujoco (a separate process, MuJoCo) per run on its own
 // DDS domain (190..194 here) and drives it over DDS through OnboardController + DdsRobotPort in real
 // time, with the same scenario scripts as the kinematic plant.
@@ -17,7 +17,7 @@
 //   - bad values are named: an unknown --robot, a domain out of range, no robot on the bus.
 // The tracking error and servo lag are printed (the summaries), bounded loosely (the machine is loaded).
 //
-// All seven meet the Done-when since reflex_mujoco's servo stops its velocity feed-forward once the
+// All seven pass since reflex_mujoco's servo stops its velocity feed-forward once the
 // reference reaches the commanded position (before, walking_target_behind and grasped_bar, whose pair
 // sits at the guard's floor of 6.0 mm on the kinematic plant, went 1-3 mm below d_r and fired the e-stop).
 #include "support/child_process.hpp"
@@ -173,7 +173,7 @@ std::string avoidanceFailure(const Figures& f) {
 // (not the robot) lets the robot go on with the last command while no new one comes. Reproduced by
 // hand (SIGSTOP of reflex_sim for 25 ms every 100 ms, the robot left running): grasped_bar, whose
 // hands sit 1 mm above d_r by design (the guard's floor, 6.0 mm on the kinematic plant), went to
-// 4.5 mm and the e-stop fired; that is what a fresh-clone .ci/run of session 12 met (robot loop
+// 4.5 mm and the e-stop fired; that is what a fresh-clone .ci/run on a loaded VM met (robot loop
 // overruns in the same minute). So a run whose controller began more than kDisturbedLate of its cycles a period late or
 // more is not judged: it is run again (at most 3 runs), each retry named. A failure in a run the
 // machine did not disturb fails at once.

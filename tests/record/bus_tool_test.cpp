@@ -1,4 +1,4 @@
-// reflex_bus (issue 17, item 10), real processes on DDS domain 84: with a reflex_controller running,
+// reflex_bus, real processes on DDS domain 84: with a reflex_controller running,
 // `reflex_bus list` names it with the pid the test started it with and state RUNNING, and does not
 // list itself (it publishes nothing); `reflex_bus hz` measures the controller's streams at its
 // nominal rate (200 Hz: the period of the controller configuration; 2 Hz heartbeat) with one writer

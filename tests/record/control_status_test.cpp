@@ -1,4 +1,4 @@
-// What reflex/control_status tells a reader (issue 17, items 3, 11 and 13), with the real
+// What reflex/control_status tells a reader, with the real
 // reflex_controller and reflex_record processes over real DDS. Domains 210, 211, 213.
 //  - Fig. 13 from a recording alone: reflex_record records joint state and control status while the
 //    arms cross; every recorded ControlStatus.arm_distance equals the left-arm/right-arm distance
@@ -15,7 +15,7 @@
 //  - closest segment names: with a collision configuration where the right arm's only pairs are with
 //    the left arm, right-arm priority leaves the right arm without any pair: its names are "" exactly
 //    when its distance is 1e9, in every status sample, also after they were set under equal priority
-//    (before issue 17 the previous names stayed); under equal priority the names are the right arm's
+//    (the previous names must not stay); under equal priority the names are the right arm's
 //    segment first, then the left arm's.
 #include "../bad_input/controller_run.hpp"
 

@@ -1,4 +1,4 @@
-// The independent reader of Reflex MCAP files for the tests (issue 14, item 1): the reference MCAP
+// The independent reader of Reflex MCAP files for the tests: the reference MCAP
 // implementation (@mcap/core) and the OMG IDL parser and CDR decoder of Foxglove
 // (@foxglove/omgidl-parser, @foxglove/omgidl-serialization), installed in bringup/web/node_modules
 // by bringup/setup.sh (npm ci). Nothing of Reflex's own reader is used here.

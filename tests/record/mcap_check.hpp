@@ -1,4 +1,4 @@
-// Helpers of the MCAP tests (issue 14, item 1): run the reference reader (mcap_check.cjs: @mcap/core +
+// Helpers of the MCAP tests: run the reference reader (mcap_check.cjs: @mcap/core +
 // Foxglove's OMG IDL CDR decoder under node) and compare what it decoded with the rows of the
 // project's CSV export, column by column.
 #pragma once

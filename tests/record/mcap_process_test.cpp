@@ -1,4 +1,4 @@
-// MCAP recording of a live bus (issue 14, item 1), real processes on domain 120: reflex_controller
+// MCAP recording of a live bus, real processes on domain 120: reflex_controller
 // (joint state, status, heartbeat), reflex_fault_source (hand targets, heartbeat) and
 // reflex_modules_object_publisher (object targets) publish; two reflex_record processes record them,
 // one stopped with SIGINT (a finished file), one killed with SIGKILL (a torn file). Independent

@@ -1,4 +1,4 @@
-// MCAP recordings (issue 14, item 1), checked against the reference implementation: @mcap/core
+// MCAP recordings, checked against the reference implementation: @mcap/core
 // (McapIndexedReader: footer, summary, chunk index, statistics; McapStreamReader) and Foxglove's OMG
 // IDL CDR decoder, run by node (mcap_check.cjs). No DDS here (record_mcap_process_test records a live
 // bus). Independent answers:
@@ -376,7 +376,7 @@ TEST(Mcap, WriterTakesChannelsOfAnyEncoding) {
   EXPECT_EQ(readAll(empty).size(), 0u);
 }
 
-// The robot types (issue 13): their MCAP schemas (from robot.idl) decode in Foxglove's OMG IDL reader
+// The robot types: their MCAP schemas (from robot.idl) decode in Foxglove's OMG IDL reader
 // to the values of the project's CSV export.
 TEST(Mcap, RobotTypesDecodeInTheReferenceReaderAsInTheCsvExport) {
   const std::string file = tempPath("robot.mcap");

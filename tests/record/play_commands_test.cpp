@@ -1,4 +1,4 @@
-// reflex_play publishes observations only unless --commands is given (issue 17, item 12), as a real
+// reflex_play publishes observations only unless --commands is given, as a real
 // process on domain 212. A recording with hand targets, a walk command and the control status,
 // written here with the generated types: played by default, a subscriber on the domain receives the
 // status and no hand target and no walk command (no writer for them is ever matched); with

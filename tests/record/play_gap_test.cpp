@@ -1,4 +1,4 @@
-// reflex_play on recordings whose receive times jump (issue 16, item 13), as a real process on
+// reflex_play on recordings whose receive times jump, as a real process on
 // domain 83: two records 100 years apart used to make the player wait 100 years in silence. The
 // gap is now played as --max-gap (default 10 s) with a message naming it, and SIGTERM ends the
 // player within a second in the middle of such a wait. Expected times come from the contract

@@ -70,7 +70,7 @@ struct Sent {
   std::vector<msg::ControlStatus> status;
   std::vector<msg::Heartbeat> beats;
   std::vector<msg::ControllerProtection> protection;
-  std::vector<msg::RobotState> robot;  // the robot boundary (issue 13)
+  std::vector<msg::RobotState> robot;  // the robot boundary
   std::vector<msg::JointCommand> command;
   std::vector<msg::RobotContacts> contacts;
 };
@@ -117,7 +117,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
       ASSERT_TRUE(w->waitForReaders(1, 10s)) << w->topicName();
     // Both sides: a writer that matched the recorder may still be unknown to the recorder's reader,
     // which then drops a best-effort sample (on a loaded host that window lasted long enough to lose
-    // 24 of 40 samples: issue 16, item 17). Once both sides matched, every sample here is delivered:
+    // 24 of 40 samples). Once both sides matched, every sample here is delivered:
     // the reliable topics are read reliably (repaired if dropped), and 45 samples in 150 ms never
     // fill a best-effort transport queue on one host.
     ASSERT_TRUE(recorder.waitForWriters(10s)) << "the recorder matched every writer";
@@ -253,7 +253,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     PlayerOptions po;
     po.input = file;
     po.topics = {"reflex/control_status", "reflex/hand_targets"};
-    po.commands = true;  // hand targets are a command topic: played only when asked (issue 17, item 12)
+    po.commands = true;  // hand targets are a command topic: played only when asked
     po.bus = busConfig("player");
     po.delay = 1.0;
     po.restamp = restamp;
@@ -284,10 +284,10 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   }
 
   // Play everything (no --topic): every recorded sample but the controller's protection state, a
-  // live controller's claim that a replay must not make beside a live controller (issue 16, item 16);
+  // live controller's claim that a replay must not make beside a live controller;
   // named with --topic it is played. By default observations only: the six command topics of this
   // recording (hand targets, priority, body schema, walk command, joint command, and the robot state a
-  // controller over DDS computes from; 5 samples each) only with `commands` (issue 17, item 12; issue 13).
+  // controller over DDS computes from; 5 samples each) only with `commands`.
   // 12 types x 5 samples were recorded.
   enum class Mode { kDefault, kCommands, kProtectionNamed };
   for (const Mode mode : {Mode::kDefault, Mode::kCommands, Mode::kProtectionNamed}) {

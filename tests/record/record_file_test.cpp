@@ -1,7 +1,7 @@
 // The recording file format (modules/record/include/reflex/record/record_file.hpp): records read back
 // byte for byte; a file cut anywhere inside its last record reads as the records before it (torn
 // tail), never as garbage; a corrupted record in the middle is reported and skipped; bad files and
-// options are clear errors. Issue 16: reading is linear in the file size on crafted input (item 12:
+// options are clear errors. Reading is linear in the file size on crafted input (item 12:
 // the work counter and the wall time of crafted files of 2 and 8 MB against each other and against a
 // valid file of the same size; crc32Combine against the CRC of the concatenated bytes); a FIFO or a
 // device named as a recording is refused at once, never read (item 11).
@@ -263,7 +263,7 @@ TEST(RecordFile, BadFilesAndValuesAreClearErrors) {
   EXPECT_THROW(RecordWriter(tempPath("neg.rfx"), neg), RecordError);
 }
 
-// ---------------------------------------------------------------- issue 16 item 12: linear time
+// ---------------------------------------------------------------- Linear time
 TEST(Crc32, CombineEqualsTheCrcOfTheConcatenation) {
   std::mt19937 rng(7);
   for (int trial = 0; trial < 200; ++trial) {
@@ -430,7 +430,7 @@ TEST(RecordFileLinearTime, DamagedHeadersClaimingMidSizeBodiesCostNoMoreThanAVal
   EXPECT_LT(s.seconds / v.seconds, 100.0) << "damaged " << s.seconds << " s, valid " << v.seconds << " s";
 }
 
-// ---------------------------------------------------------------- issue 16 item 11: not a regular file
+// ---------------------------------------------------------------- Not a regular file
 /// Runs `fn` in a child process; true if it finished within `seconds` (a blocked child is killed).
 template <class Fn>
 bool finishesWithin(double seconds, Fn fn) {

@@ -1,4 +1,4 @@
-// reflex_record / reflex_play as real processes (issue 7, item 2): a recording of the running
+// reflex_record / reflex_play as real processes: a recording of the running
 // reflex_controller stays readable after the recorder is killed with SIGKILL (every complete record
 // is there, sequence numbers without gaps beyond what best effort may drop, a torn last record is
 // reported, not returned); it exports to CSV; reflex_play replays it at twice the speed; bad command

@@ -1,4 +1,4 @@
-// The scene channels of a Reflex MCAP recording (issue 14, item 2) read by the reference MCAP reader
+// The scene channels of a Reflex MCAP recording read by the reference MCAP reader
 // (@mcap/core through mcap_check.cjs: index, CRCs, the JSON messages, the CDR joint states decoded by
 // Foxglove's OMG IDL decoder) and checked against answers that do not come from Reflex's scene code:
 //   - the channels /tf and /reflex/scene: message encoding json, schema encoding jsonschema, schema

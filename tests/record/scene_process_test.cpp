@@ -1,4 +1,4 @@
-// Scene channels of MCAP recordings (issue 14, item 2), real processes on domain 200:
+// Scene channels of MCAP recordings, real processes on domain 200:
 // reflex_controller (joint state, status), reflex_fault_source (hand targets) and
 // reflex_modules_object_publisher (objects) publish; reflex_record records them three times: MCAP
 // (scene channels made live), .rfx (no scene channels; converted to MCAP afterwards, which adds them),

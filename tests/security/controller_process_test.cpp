@@ -1,4 +1,4 @@
-// The real reflex_controller process in secure mode (issue 8, item 1): started with the controller's
+// The real reflex_controller process in secure mode: started with the controller's
 // generated profiles file (--profiles <dir>/profiles/controller.xml), it authenticates a secure
 // behavior identity, follows its hand targets at 200 Hz with every pair above d_r, and publishes
 // encrypted joint state / status that the recorder identity reads and an unauthenticated

@@ -1,4 +1,4 @@
-// The flagship experiment in secure mode (issue 8, item 1): the shipped 60 s session replayed through
+// The flagship experiment in secure mode: the shipped 60 s session replayed through
 // reflex_vision -> reflex_behavior (pointing) -> reflex_controller with avoidance, recorded by
 // reflex_record, every process with its own DDS-Security identity (run_flagship.py --only on --secure).
 // The outcome must be the one the plain run gives: the criteria are flagship_outcome.hpp's, shared with

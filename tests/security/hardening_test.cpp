@@ -1,4 +1,4 @@
-// DDS-Security hardening (issue 16 item 8, second round), checked against independent answers:
+// DDS-Security hardening, checked against independent answers:
 //   - make_security.sh refuses a private key others can read (mode from stat, not from the script);
 //   - tampered, foreign, missing, expired or mismatched material stops a participant with an error
 //     naming the file and the cause (each case made here with OpenSSL / openssl smime, the good

@@ -1,9 +1,9 @@
-// reflex_play in secure mode (issue 8): the real reflex_play process, started with the player's
+// reflex_play in secure mode: the real reflex_play process, started with the player's
 // generated profiles file (--profiles <dir>/profiles/player.xml), republishes a recording's
 // observation topics (object targets, joint state, control status) encrypted; a secure subscriber
 // whose permissions grant them (the behavior identity) receives them with the recorded content, an
 // unauthenticated participant receives nothing. A recording that also holds a command topic
-// (hand targets) is played without it by default (issue 17, item 12: observations only unless
+// (hand targets) is played without it by default (observations only unless
 // --commands), which is exactly the player's grant; asked to play it whole (--commands), the player's
 // permissions do not grant it, so reflex_play stops at start with an error naming the topic. Domain 111.
 #include "support/child_process.hpp"

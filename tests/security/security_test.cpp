@@ -1,4 +1,4 @@
-// DDS-Security (issue 8, item 1): the material made by bringup/security/make_security.sh, used by
+// DDS-Security: the material made by bringup/security/make_security.sh, used by
 // real Fast DDS participants. Authentication (PKI-DH), access control per topic (signed governance
 // and permissions) and encryption (AES-GCM-GMAC):
 //  - secure modules exchange samples (the positive control every negative test needs);
@@ -8,7 +8,7 @@
 //  - a module cannot create a writer (or reader) its permissions do not grant;
 //  - tampered or mismatched permissions stop the participant from being created;
 //  - the script is idempotent.
-// Domains 96..99 (issue 8 tests use 96..110).
+// Domains 96..99 (the security tests use 96..110).
 #include "security_support.hpp"
 
 #include <gtest/gtest.h>

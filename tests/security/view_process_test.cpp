@@ -1,4 +1,4 @@
-// reflex_view in secure mode (issue 14, item 3): the live view runs under its own identity `view`
+// reflex_view in secure mode: the live view runs under its own identity `view`
 // (bringup/security/make_security.sh), whose permissions grant subscriptions only. Real processes on
 // domain 203: reflex_controller with the controller's profiles file publishes joint state and status
 // encrypted; reflex_view with --profiles <dir>/profiles/view.xml reads them. Independent answers:

@@ -1,4 +1,4 @@
-// Soak of the reactive controller (issue 8, item 4): many random reactive episodes run back to back
+// Soak of the reactive controller: many random reactive episodes run back to back
 // in simulation (reflex::control::runScenario), each one a fresh robot at rest whose hand targets
 // jump every 50 ms .. 1 s to random places — reachable, inside the torso, across the body, behind,
 // out of reach, or none — with random motion priority, some of them while walking. Every episode

@@ -1,4 +1,4 @@
-// A short soak in CI (issue 8, item 4): 200 simulated seconds of random reactive episodes (20
+// A short soak in CI: 200 simulated seconds of random reactive episodes (20
 // episodes of 10 s) keep every pair above d_r with no e-stop, NaN or velocity breach; the episode
 // generator is deterministic per seed (so a failing seed reported by bench_soak can be rerun).
 #include "soak.hpp"
@@ -43,7 +43,7 @@ TEST(Soak, EpisodesThatReachedTheRedZoneBeforeThePredictiveGuardStaySafe) {
 }
 
 TEST(Soak, AWalkingThighIntoAHandAtItsJointLimitsDoesNotFreezeTheArm) {
-  // bench_soak --hours 8 on many_segment_humanoid (session 7): in seed 1373 the robot walks while
+  // bench_soak --hours 8 on many_segment_humanoid: in seed 1373 the robot walks while
   // the right arm hangs with elbow and wrist at their limits; the right thigh swings into the hand.
   // The orange-zone step cap shrank the arm's escape to nothing as the gap closed, and the thigh
   // took the pair below d_r (4.9996 mm, e-stop). The cap now stands aside while something else

@@ -1,4 +1,4 @@
-// reflex_controller as a real process over real DDS (issue 7, item 1): it runs at 200 Hz, follows
+// reflex_controller as a real process over real DDS: it runs at 200 Hz, follows
 // hand targets from another participant while keeping every pair above d_r, rejects NaN targets,
 // and retracts both hands on its own when the target source goes silent.
 #include "../bad_input/controller_run.hpp"
@@ -119,7 +119,7 @@ TEST(ControllerNode, BadSetupIsAClearErrorAndNonZeroExit) {
   EXPECT_NE(text.find("/nonexistent/robot.urdf"), std::string::npos) << text;
 }
 
-// Issue 12: the robot's own controller configuration, <stem>.controller.yaml beside the URDF, is found
+// The robot's own controller configuration, <stem>.controller.yaml beside the URDF, is found
 // by reflex_controller as by reflex_sim (control::loadControllerConfigFor). Independent answers: the
 // banner names the file and its hand links; the joint state on the bus holds the small humanoid's
 // joints at the rest posture written in that file (read here as text), not the built-in arms'.

@@ -1,4 +1,4 @@
-// The flagship experiment's outcome (issue 7, item 4), shared by flagship_test (plain DDS) and
+// The flagship experiment's outcome, shared by flagship_test (plain DDS) and
 // security_flagship_test (DDS-Security): run bringup/flagship/run_flagship.py, read the summary.json
 // that bringup/flagship/report.py writes, and check the criteria of the run with avoidance.
 #pragma once

@@ -1,4 +1,4 @@
-// The flagship experiment's outcome (issue 7, item 4), asserted on real processes: the shipped session
+// The flagship experiment's outcome, asserted on real processes: the shipped session
 // replayed through reflex_vision -> reflex_behavior -> reflex_controller over DDS (run_flagship.py),
 // with and without avoidance. With avoidance the arms come within 15 mm while the objects cross, never
 // below d_r, the e-stop never fires and the hands track reachable targets; without it they penetrate.
@@ -74,7 +74,7 @@ reflex::testing::ProcessResult runWithDeafBehavior(const std::string& name, int 
 
 }  // namespace
 
-// run_flagship.py's start-up (the CI failure of session 10: a secure run went 64 s with no object
+// run_flagship.py's start-up (a CI failure: a secure run went 64 s with no object
 // reaching the controller): a chain whose behavior does not hear the controller within --ready-timeout
 // is stopped and started again, the failure named in the log and run.json, the failed attempt's logs
 // kept; the second chain runs the session. The session at 4x speed, avoidance only, domain 76.

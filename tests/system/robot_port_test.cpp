@@ -1,4 +1,4 @@
-// The robot over DDS (issue 13, item 2) with real processes: reflex_controller --robot dds against
+// The robot over DDS with real processes: reflex_controller --robot dds against
 // reflex_test_robot (test_robot_driver.cpp: a kinematic integrator of reflex/joint_command publishing
 // reflex/robot_state at 1 kHz), a target source and a watcher in this process. Domains 140..142.
 //

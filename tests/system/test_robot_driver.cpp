@@ -1,4 +1,4 @@
-// reflex_test_robot: a TEST robot driver (issue 13, item 2), the smallest thing that implements the
+// reflex_test_robot: a TEST robot driver, the smallest thing that implements the
 // robot side of idl/README.md "Writing a robot driver": a kinematic integrator of
 // reflex/joint_command that publishes reflex/robot_state at 1 kHz (or --period). Used by
 // robot_port_test against the real reflex_controller --robot dds; not a simulator (no dynamics).

@@ -1,4 +1,4 @@
-// The live view's page in a real browser (issue 14, tests): starts Debian's Chromium headless with
+// The live view's page in a real browser: starts Debian's Chromium headless with
 // software WebGL (SwiftShader), opens reflex_view's page, and drives it through the Chrome DevTools
 // protocol over the `ws` package (Runtime.evaluate reads window.reflexView; Page.captureScreenshot
 // keeps a PNG). Independent answers, counted here:

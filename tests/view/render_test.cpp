@@ -1,4 +1,4 @@
-// The flagship report's 3D robot (issue 14, item 4): modules/view/tools/render_scenes.py turns a row of
+// The flagship report's 3D robot: modules/view/tools/render_scenes.py turns a row of
 // a controller time series into the live view's SceneUpdate (reflex_scene) and draws it with the live
 // view's own page (view.js, static mode) in Debian's Chromium, headless. A known posture is drawn and
 // the PNG is checked against independent answers:

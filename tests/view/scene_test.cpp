@@ -468,7 +468,7 @@ TEST(Scene, BadJointInputIsSkippedAndCounted) {
   EXPECT_THROW(loadSceneModel("/nonexistent/robot.urdf", "", ""), control::ModelError);
 }
 
-// Issue 12: the view reads the robot's own controller configuration beside the URDF, as the controller
+// The view reads the robot's own controller configuration beside the URDF, as the controller
 // does. Independent answer: the arms' segments are those of the links the test names (the small
 // humanoid's hands and forearms), and the note names the file; a named file that is missing is an
 // error naming it.

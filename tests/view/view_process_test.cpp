@@ -1,4 +1,4 @@
-// reflex_view as a real process (issue 14, items 3 and 4 of its tests): fed by a running
+// reflex_view as a real process: fed by a running
 // reflex_controller and reflex_behavior (scripted crossing arms; for the page also the grasped bar, the
 // gaze line and synthetic vision objects: separate processes, real DDS), checked by independent clients:
 //   - the Foxglove protocol's reference client (@foxglove/ws-protocol in Node, ws_client_check.js):

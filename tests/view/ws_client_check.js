@@ -1,4 +1,4 @@
-// Foxglove WebSocket client check of reflex_view (issue 14, tests): the protocol's reference client
+// Foxglove WebSocket client check of reflex_view: the protocol's reference client
 // (@foxglove/ws-protocol FoxgloveClient, over the `ws` package: Node has no global WebSocket before 22)
 // connects to a running reflex_view, subscribes to every channel and measures, over --seconds:
 //   - messages per second per channel (from its first message on);

@@ -1,8 +1,8 @@
-// Bad input (issue 5, item 10): corrupt or truncated video, left and right of different length or
+// Bad input: corrupt or truncated video, left and right of different length or
 // size, missing or inconsistent calibration, unknown tag family, a session folder missing a file,
 // bad timestamps, bad command lines. Each gives a clear error (naming the file/value) or a
 // reported, skipped frame -- never a crash.
-// Second round (issue 16, items 13-15, at the end): sessions no rig can produce (swapped or
+// Second round (at the end): sessions no rig can produce (swapped or
 // identical videos, impossible calibration, tag size, frame count, fps) refused at load; stamps no
 // replay clock can follow refused; SIGTERM/SIGINT end a paced replay within a second; outputs that
 // cannot be written (--dump /dev/full, a file-size limit) are errors naming the file and cause.
@@ -218,7 +218,7 @@ TEST_F(BadInput, BadTimestamps) {
   writeText(d + "/timestamps.csv", std::regex_replace(ts, std::regex("\n3,[0-9.]+\n"), "\n3,0.05\n"));
   EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("timestamps.csv: line 5"), HasSubstr("not after")));
   writeText(d + "/timestamps.csv", std::regex_replace(ts, std::regex("\n14,[0-9.]+\n"), "\n"));
-  // (the manifest's frame count is compared first since issue 16; without it, the video's)
+  // (the manifest's frame count is compared first; without it, the video's)
   EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("frames = 15"), HasSubstr("lists 14")));
   fs::remove(d + "/session.yaml");
   EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("15 frames"), HasSubstr("lists 14")));
@@ -244,7 +244,7 @@ TEST_F(BadInput, CommandLineErrorsNameTheBadValue) {
                    err),
             2);
   EXPECT_THAT(err, HasSubstr("cannot open camera '7'"));
-  // No silent default mount (issue 15, item 2): live cameras without --mount, and a session without
+  // No silent default mount: live cameras without --mount, and a session without
   // camera_mount.yaml, are errors naming what to pass.
   EXPECT_EQ(runCli("--camera-left 7 --camera-right 8 --calib-left " + (*base_ / "mp4/left.yaml") + " --calib-right " +
                        (*base_ / "mp4/right.yaml") + " --objects " + (*base_ / "mp4/objects.yaml") + " --dump " +
@@ -270,7 +270,7 @@ TEST_F(BadInput, CommandLineErrorsNameTheBadValue) {
   EXPECT_EQ(runCli("--help", err), 0);
 }
 
-// ---- Second round (issue 16, items 13-15). Each case below was accepted before (exit 0, zero
+// ---- Second round. Each case below was accepted before (exit 0, zero
 // detections, a spin or a silent wait); the expected error text is written from the contract in
 // vision/README.md, not copied from the output.
 namespace {

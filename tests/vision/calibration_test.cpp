@@ -132,7 +132,7 @@ TEST(Calibration, RigCalibrationMatchesStereoRectifyConventions) {
   EXPECT_DOUBLE_EQ(c.left.P(0, 3), 0.0);
 }
 
-// The shipped robot's mount is a file (no built-in default, issue 15 item 2); it says what the
+// The shipped robot's mount is a file (no built-in default); it says what the
 // README says. (That it is the URDF's head_camera frame at q = 0 is checked in mount_test.cpp.)
 TEST(CameraMount, ShippedFileIsTheHeadLookingAhead) {
   const CameraMount m = reflex::vision::test::shippedMount();
@@ -143,7 +143,7 @@ TEST(CameraMount, ShippedFileIsTheHeadLookingAhead) {
   EXPECT_EQ(m.p_B_C, cv::Vec3d(0.08, 0.03, 1.15));
 }
 
-// A scene script must name its mount (no default; issue 15, item 2).
+// A scene script must name its mount (no default).
 TEST(CameraMount, SceneScriptWithoutMountIsRefused) {
   const std::string script = reflex::vision::test::nearScript(1.0);
   EXPECT_NO_THROW(parseSceneScript(script, "s.yaml"));
@@ -183,7 +183,7 @@ TEST(ObjectMap, ParseAndErrors) {
   EXPECT_THAT(errorOf([] { parseObjectMap("family: tag36h11\n", "o.yaml"); }), HasSubstr("o.yaml:1:1: objects: missing (expected a list of {id, name, size})"));
 }
 
-// Issue 16, item 15: values no physical camera has, each refused with the file, field, value and
+// Values no physical camera has, each refused with the file, field, value and
 // range (the ranges are CalibrationLimits / ObjectMap::kMin/kMaxTagSize, documented in
 // vision/README.md). Each of these parsed without error before.
 TEST(Calibration, PhysicallyImpossibleValuesAreRefused) {
@@ -238,7 +238,7 @@ TEST(ObjectMap, ImpossibleTagSizesAndEmptyMapsAreRefused) {
                         "at least one object)"));
 }
 
-// Issue 16, item 15: a distortion no lens has leaves the rectified image black (zero detections).
+// A distortion no lens has leaves the rectified image black (zero detections).
 // Independent answer: with k1 = +-1e6 a ray 0.1 rad off-axis lands ~1e3 * f px away, so nearly no
 // rectified pixel sees the raw image; a real plumb_bob lens (kLeft) keeps the whole image.
 TEST(Calibration, DistortionNoLensHasIsRefused) {

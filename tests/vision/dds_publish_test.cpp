@@ -103,7 +103,7 @@ TEST(VisionDds, PublishesObjectTargetsAt10HzMatchingGroundTruth) {
   EXPECT_GT(compared, 50);
 }
 
-// Issue 16, item 13: the publishing reflex_vision (DDS path: the bus loop on the main thread, vision
+// The publishing reflex_vision (DDS path: the bus loop on the main thread, vision
 // on a worker) ends within a second of SIGTERM while the replay waits 9.5 s for the next frame (a
 // valid gap). Before, the worker slept through the whole wait after the bus had stopped (on stamps
 // near 1e17 s it spun for 14 minutes). Domain 85.

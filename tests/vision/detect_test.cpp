@@ -1,4 +1,4 @@
-// reflex_detect (issue 15, item 4) on an image the test renders: three tag36h11 tags at known poses
+// reflex_detect on an image the test renders: three tag36h11 tags at known poses
 // in front of a pinhole camera, each warped by the exact homography of its pose (4x4 supersampled).
 // Independent answers: libapriltag's own detections, computed here with its C API on the same grey
 // image with the same settings (ids, hamming, margin exactly; corners and centres to 1e-9 px after

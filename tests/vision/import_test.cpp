@@ -1,4 +1,4 @@
-// Offline import of real video files (issue 15, item 3) and a video file standing in for a camera
+// Offline import of real video files and a video file standing in for a camera
 // ending at its end. The videos are real files written here by cv::VideoWriter (FFmpeg backend,
 // FFV1 in AVI: lossless) from the frames of a session rendered at test time. Independent answer:
 // that session itself -- the session imported from the files (left/right pair, or one side-by-side

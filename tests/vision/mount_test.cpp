@@ -1,4 +1,4 @@
-// Tests of the camera mount (issue 15, item 2): estimateCameraInHead (stereo_calibrate.hpp) and
+// Tests of the camera mount: estimateCameraInHead (stereo_calibrate.hpp) and
 // `reflex_calibrate mount` against a KNOWN camera-in-head transform, and the shipped robot's
 // mount file against the shipped URDF.
 //

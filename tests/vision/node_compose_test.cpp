@@ -1,4 +1,4 @@
-// reflex::vision_node composed in one process (issue 17, item 5; domain 222): two VisionNodes replay
+// reflex::vision_node composed in one process (domain 222): two VisionNodes replay
 // the same generated session under two module names, and a reader in the same process checks every
 // published object against the session's ground truth (the renderer's tag positions). Stopping one
 // node (stop()) ends its run() alone: the other keeps publishing. Then the program, not the library,

@@ -1,4 +1,4 @@
-// The recorder (issue 5, item 4) fed by fake cameras: video files opened through the same
+// The recorder fed by fake cameras: video files opened through the same
 // VideoCapture path as a device. The recorded session must read back with the same frames and
 // give the same detections; a side-by-side camera is split into left/right halves.
 #include "reflex/vision/error.hpp"

@@ -1,7 +1,7 @@
-// Replay and publication rate (issue 5, items 5 and 8/9): the publications that reflex_vision hands
+// Replay and publication rate: the publications that reflex_vision hands
 // to its DDS writer come from runVision's on_publish; here the same path hands them to a recorder of
 // call times. 10 Hz +- 2 % on the replay clock at real rate, 2x and 0.5x; loop, start offset.
-// The progress reports (issue 17, item 12: reflex_vision --progress prints them) with a start offset and
+// The progress reports (reflex_vision --progress prints them) with a start offset and
 // a loop: frame i/N against the session's own frame count and its timestamps file (loadSessionInfo),
 // the time against the frame's stamp minus the session's first stamp.
 #include "vision_test_util.hpp"

@@ -1,4 +1,4 @@
-// Data-driven accuracy tests (issue 5, item 9): sessions are rendered at test time by the session
+// Data-driven accuracy tests: sessions are rendered at test time by the session
 // maker and the pipeline (the same path as reflex_vision --dump) is checked against their ground
 // truth: >= 99 % of fully visible frames detected, 3-D RMS <= 5 mm between 0.5 and 1.5 m, no
 // invented objects. The flagship test runs the real executable on the shipped session.

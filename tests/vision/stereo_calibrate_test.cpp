@@ -1,5 +1,5 @@
 // Tests of vision/include/reflex/vision/stereo_calibrate.hpp and the reflex_calibrate executable
-// (issue 15, item 1) against a synthetic stereo rig with KNOWN intrinsics, distortion and extrinsics.
+// against a synthetic stereo rig with KNOWN intrinsics, distortion and extrinsics.
 //
 // Independent answers:
 //  - board views are rendered here by ray casting: each (3x3 supersampled) pixel of each camera is

@@ -169,7 +169,7 @@ TEST(TagDetector, BadFamilyOptionsAndImagesAreErrors) {
   EXPECT_THROW(TagFamily("tag36h11").bitmap(100000), VisionError);
 }
 
-// Issue 15, the vision_benchmark crash: libapriltag before 3.4.3 starts its worker pool racily
+// The vision_benchmark crash: libapriltag before 3.4.3 starts its worker pool racily
 // (tag_detector.hpp; tests/vision/apriltag_pool_race.cpp crashed libapriltag 3.3.0 alone in 5 of 6
 // runs of up to 30000 pool starts). Built against such a library, a detector with worker threads is refused,
 // naming the option, the version and the fix; with a fixed library it detects what one thread does.

@@ -1,4 +1,4 @@
-// Benchmark (issue 5, item 11; run by hand, not a CTest): stereo 640x480 detect + triangulate pairs/s
+// Benchmark (run by hand, not a CTest): stereo 640x480 detect + triangulate pairs/s
 // of the full pipeline, against libapriltag's bare detector (C API, no wrapper) on the same frames in
 // the same process, and the ratio. Frames: a generated session with two tags, a textured background
 // and a person (decoded to memory first, so video decoding is not measured).
@@ -74,7 +74,7 @@ void pipelineBench(benchmark::State& state, RectifyMode mode, bool parallel, dou
 // libapriltag alone: both gray images of the pair, one detector per image, each with one thread;
 // `parallel` detects the right image on a second thread (the pipeline's own parallelism). Not
 // libapriltag's worker pool (nthreads > 1): before libapriltag 3.4.3 it can crash when its threads
-// start (tag_detector.hpp, apriltag_pool_race.cpp) -- the crash of issue 15 came from here, where
+// start (tag_detector.hpp, apriltag_pool_race.cpp) -- this benchmark once crashed here, where
 // every benchmark call started a new two-thread pool.
 void bareBench(benchmark::State& state, bool parallel, double decimate) {
   const Frames& f = frames();

@@ -50,7 +50,7 @@ class TempDir {
 
 #ifdef REFLEX_SOURCE_DIR
 /// The shipped robot's camera mount (head joints at zero), from its configuration file: there is no
-/// built-in default mount (issue 15, item 2).
+/// built-in default mount.
 inline CameraMount shippedMount() {
   return loadCameraMount(std::string(REFLEX_SOURCE_DIR) + "/bringup/vision/camera_mount.yaml");
 }

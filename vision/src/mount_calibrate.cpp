@@ -1,5 +1,5 @@
 // The camera in the head frame from tag points seen by the camera and known from the kinematics
-// (reflex_calibrate mount; issue 15, item 2). See stereo_calibrate.hpp.
+// (reflex_calibrate mount). See stereo_calibrate.hpp.
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/stereo_calibrate.hpp"
 #include "yaml_util.hpp"

@@ -112,7 +112,7 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
 
   source.watchStop(&stop);
   // Paced waits sleep in slices and look at `stop` between them, so SIGINT/SIGTERM end a run within
-  // a slice whatever the stamps say (issue 16, item 13).
+  // a slice whatever the stamps say.
   constexpr auto kWaitSlice = std::chrono::milliseconds(50);
   const auto sleepUntil = [&](SteadyClock::time_point until) {
     while (!stop.load()) {
@@ -182,7 +182,7 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
     if (cb.on_progress) {
       RunProgress p;
       p.frame = frame.index;
-      // Frame and time in the recording's terms (issue 17, item 12): with --start the frame index
+      // Frame and time in the recording's terms: with --start the frame index
       // counts from the recording's first frame, so the total is the recording's, and the time is
       // the frame's own stamp from the recording's start (the offset included, every loop pass alike).
       p.frames = source.recordingFrames();

@@ -100,7 +100,7 @@ struct ControllerNode::Impl {
   NodeConfig config;
   Model model;
   ControllerModel cm;
-  // The robot port (issue 13, item 2): the in-process kinematic plant or the robot over DDS.
+  // The robot port: the in-process kinematic plant or the robot over DDS.
   std::unique_ptr<KinematicPort> kinematic;  ///< --robot kinematic
   std::unique_ptr<DdsRobotPort> dds;         ///< --robot dds
   std::unique_ptr<bus::WriterIdentities> robot_identities;  ///< --robot dds: who wrote a robot state
@@ -138,7 +138,7 @@ struct ControllerNode::Impl {
   std::atomic<bool> reset{false};
 
   // The target source is the DDS participant that wrote the last hand targets; only ITS heartbeats
-  // (state RUNNING) count as a sign of life (issue 16, item 4), never a module name in a message.
+  // (state RUNNING) count as a sign of life, never a module name in a message.
   bool have_target_writer = false;
   ParticipantId target_writer{};
   // Preallocated messages.
@@ -148,7 +148,7 @@ struct ControllerNode::Impl {
   msg::Heartbeat heartbeat_msg;
   msg::ControllerProtection peer_msg;
   std::vector<msg::BodySchemaChange> schema_scratch;
-  // One per-sample log line (a rejected body-schema segment): rate-limited, issue 16 item 8f.
+  // One per-sample log line (a rejected body-schema segment): rate-limited.
   bus::LogLimiter schema_log;
   /// Rejected robot states (--robot dds), one limiter per cause: a flood of one kind never hides another.
   std::array<bus::LogLimiter, DdsRobotPort::kCauses> robot_log;
@@ -180,7 +180,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   // The same rule as every process with --urdf: --controller, else <stem>.controller.yaml beside the URDF.
   ControllerConfig ctl = loadControllerConfigFor(config.urdf, config.controller);
   m.config_note = describeControllerConfig(ctl, config.urdf);
-  // Protection (issue 16, item 3): avoidance off by the option or the file; the e-stop only by the option.
+  // Protection: avoidance off by the option or the file; the e-stop only by the option.
   std::string reason;
   if (!config.avoidance) {
     reason = "collision avoidance OFF by --no-avoidance";
@@ -227,7 +227,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   const auto& prefix = m.participant->native().guid().guidPrefix;
   std::copy(prefix.value, prefix.value + 12, m.own_participant.begin());
 
-  // Who protects the robot, for late joiners; then one controller per domain (issue 16, item 16).
+  // Who protects the robot, for late joiners; then one controller per domain.
   // Every controller publishes this sample first and then looks for others' for peer_probe seconds;
   // the one that published EARLIER (Header.stamp_ns; equal stamps: the smaller participant id) keeps
   // the domain and every later one refuses to start, so two controllers started at the same instant
@@ -269,7 +269,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   }
   // The robot port and the onboard controller, after the probe too (a refused controller never
   // commands the robot), and before the readers: the first cycle follows their creation at once, as
-  // before issue 13 (a late-joiner sample is not yet there when a resumed controller starts holding).
+  // it always did (a late-joiner sample is not yet there when a resumed controller starts holding).
   OnboardOptions oo;
   oo.input_timeout = config.input_timeout;
   oo.max_target_distance = config.max_target_distance;
@@ -636,7 +636,7 @@ void ControllerNode::run() {
       s.commands = rep.commands;
       s.estop = data.estop;
       s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : 1e9;
-      s.min_pair = rep.min_pair;  // the --log min_pair column (it was left empty before issue 17)
+      s.min_pair = rep.min_pair;  // the --log min_pair column (empty in older logs)
       s.virtual_distance = rep.virtual_distance;
       s.arm_distance = rep.arm_distance;
       s.wall_time = nowSeconds(CLOCK_REALTIME);

@@ -253,7 +253,7 @@ Participant::Participant(const BusConfig& config)
       extras_(std::make_unique<Extras>()) {
   if (module_name_.empty()) throw BusError("empty module name in the bus configuration");
   // The module name is the key of this process's heartbeat: a longer one would abort the process in
-  // its first heartbeat (issue 16, item 9).
+  // its first heartbeat.
   if (module_name_.size() > kMaxKeyStringBytes) {
     throw BusError("module name '" + module_name_ + "' is " + std::to_string(module_name_.size()) +
                    " bytes long; at most " + std::to_string(kMaxKeyStringBytes) +

@@ -121,7 +121,7 @@ struct BehaviorNode::Impl {
   std::chrono::steady_clock::time_point t_start = std::chrono::steady_clock::now();
   ObjectsFrame frame;
   JointStateSample joints;
-  // Joint states come from ONE controller (issue 16, item 16): the writer heard first is followed;
+  // Joint states come from ONE controller: the writer heard first is followed;
   // samples of any other writer are ignored, counted and said on stderr. The followed writer is
   // replaced only after kJointWriterSilence without a sample from it (a restarted controller).
   static constexpr double kJointWriterSilence = 0.5;  // s (the controller publishes every 5 ms)
@@ -145,12 +145,12 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
   if (!options.object_sources.empty()) m.config.inputs.object_sources = options.object_sources;
   if (!options.joint_state_sources.empty()) m.config.inputs.joint_state_sources = options.joint_state_sources;
   m.config.type_plugins = options.type_plugins;
-  // Every host line goes through one rate limiter (issue 16 item 8f): a flood of bad samples is
+  // Every host line goes through one rate limiter: a flood of bad samples is
   // counted in the host's stats but prints at most LogLimiter's rate.
   BehaviorHost::LogFn log = [&m](const std::string& line) { m.host_log.print(stderr, line); };
   if (options.quiet) log = [](const std::string&) {};
   m.host = std::make_unique<BehaviorHost>(m.config, registry, m.sink, log, options.module);
-  // A body-schema segment name is the DDS key of its samples (issue 16, item 9): bounded here, at start.
+  // A body-schema segment name is the DDS key of its samples: bounded here, at start.
   for (const std::string& segment : m.host->claims().segments) {
     if (segment.size() > bus::kMaxKeyStringBytes) {
       throw ConfigError(options.config + ": body-schema segment name '" + segment + "' is " +

@@ -1,4 +1,4 @@
-// reflex_bus: what runs on the Reflex bus, like `ros2 node list` / `ros2 topic hz` (issue 17, item 10).
+// reflex_bus: what runs on the Reflex bus, like `ros2 node list` / `ros2 topic hz`.
 //   reflex_bus list [--window S]            processes from their heartbeats: host, pid, modules, state
 //                                           (listens up to 5 s more while discovery still goes on)
 //   reflex_bus hz [TOPIC...] [--window S]    samples per second of every topic (or the ones named)

@@ -119,7 +119,7 @@ void csvRows(std::ostream& o, const std::string& prefix, const msg::ControllerPr
     << num(s.period()) << ',' << csvField(s.robot()) << '\n';
 }
 
-// The robot boundary (idl/robot.idl, issue 13): one row per sample; the joints named by the first
+// The robot boundary (idl/robot.idl): one row per sample; the joints named by the first
 // sample give the columns (like JointState).
 void csvColumns(std::ostream& o, const msg::RobotState& first) {
   for (const auto& n : first.names()) o << ",q_" << n;
@@ -290,8 +290,8 @@ const std::vector<const TopicCodec*>& allCodecs() {
   static const Codec<msg::JointState> joint_state;
   static const Codec<msg::ControlStatus> control_status;
   static const Codec<msg::Heartbeat> heartbeat;
-  static const Codec<msg::ControllerProtection> controller_protection;  // issue 16, item 3
-  static const Codec<msg::RobotState> robot_state;                      // issue 13: the robot boundary
+  static const Codec<msg::ControllerProtection> controller_protection;  // who protects the robot
+  static const Codec<msg::RobotState> robot_state;                      // the robot boundary
   static const Codec<msg::JointCommand> joint_command;
   static const Codec<msg::RobotContacts> robot_contacts;
   static const std::vector<const TopicCodec*> all = {

@@ -113,9 +113,9 @@ Player::Player(const PlayerOptions& options) : options_(options) {
   }
   // Played by default: every recorded topic but the controller's protection state. That sample is a
   // live controller's claim to be THE controller of this domain (reflex_controller refuses to start,
-  // or leaves, when it sees an earlier one: issue 16, item 16); replayed beside a live controller it
+  // or leaves, when it sees an earlier one); replayed beside a live controller it
   // would be a phantom peer. It is played only when named with --topic.
-  // Nor, by default, the command topics (issue 17, item 12; the joint commands, issue 13): a replay
+  // Nor, by default, the command topics (the joint commands among them): a replay
   // beside a live controller or robot would steer it. They are played only with
   // PlayerOptions::commands (--commands). Nor are channels of a type that is no Reflex topic type (the
   // scene channels /tf and /reflex/scene of an MCAP recording, JSON for viewers, not bus samples):

@@ -1,5 +1,5 @@
 // reflex_scene: the live view's scenes from a recorded controller time series, for drawing the robot
-// afterwards with the SAME renderer as the live view (issue 14, item 4).
+// afterwards with the SAME renderer as the live view.
 //
 //   reflex_scene --log controller.csv --at 5.4,17.3 --out render.js [--tile 360x420]
 //                [--camera AZ,EL,RADIUS,TX,TY,TZ] [--urdf F] [--collision F] [--controller F]

@@ -10,7 +10,7 @@
 //   "#rrggbb"} of the robot segments in the last scene), zonesSeen ({zone: count of scenes}),
 //   lastStatus, cameraImage (false: no image topic on the bus), errors (status messages of the server).
 //
-// Static mode (issue 14, item 4: the flagship report and tests draw recorded postures with this same
+// Static mode (the flagship report and tests draw recorded postures with this same
 // renderer): index.html?render=FILE.js, FILE a plain name in the page's folder (no "/", no ":") of an ES
 // module made by reflex_scene: `export default {tile: {width, height} [CSS px], camera: {azimuth,
 // elevation [rad], radius [m], target: [x, y, z] [m, root frame]}, scenes: [{time, row, update:

@@ -1,4 +1,4 @@
-// Controller benchmark (issue 4, item 15): one full cycle on the 21-DOF model (kinematics, every
+// Controller benchmark: one full cycle on the 21-DOF model (kinematics, every
 // pair, both controllers, blend, safety filter, predictive guard) with p50/p99 from per-iteration
 // timing, the same for cycles whose step the predictive guard shortens, both again as the fastest of
 // 15 runs per state (the code's cost without the machine's jitter), the distance sweep alone as the

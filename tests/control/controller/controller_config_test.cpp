@@ -232,7 +232,7 @@ TEST(ControllerConfig, ErrorsHaveTheOneFormatFileLineColumnKeyValueExpected) {
 }
 
 TEST(ControllerConfig, ConfigurationsThatValidateButCannotWorkAreRefused) {
-  // Issue 16, item 6: each validated before and gave a robot that cannot work.
+  // Each validated before and gave a robot that cannot work.
   expectError("estop_release_margin: 100\n", "estop_release_margin: outside its range (value '100', expected [0, d_b - d_r = 0.005] m");
   expectError("alpha_t: 0\n", "alpha_t: outside its range (value '0', expected [1, 1 / period = 200] 1/s");
   expectError("reach_gain: 0\n", "reach_gain: outside its range (value '0'");
@@ -242,7 +242,7 @@ TEST(ControllerConfig, ConfigurationsThatValidateButCannotWorkAreRefused) {
   expectError("k_virtual: 1000\n", "k_virtual: outside its range (value '1000'");
 }
 
-// Session 14's attack (random parameters inside every range, 300 trials on each shipped robot): the
+// A randomized attack (random parameters inside every range, 300 trials on each shipped robot): the
 // only configurations that validated and could not work put the rest posture inside the red zone.
 // small_humanoid's feet are 11.63 mm apart at rest: with d_r 20 mm the e-stop latched at the first
 // cycle and no arm could release it. Such a configuration is refused at set-up, naming the pair.

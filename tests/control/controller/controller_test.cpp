@@ -58,7 +58,7 @@ TEST(Zones, Boundaries) {
   EXPECT_EQ(zoneOf(std::nan(""), p), Zone::kRed);
 }
 
-// Issue 17, item 3: the exact boundary values, as the paper puts them (Sec. 7.1: the red zone is a
+// The exact boundary values, as the paper puts them (Sec. 7.1: the red zone is a
 // distance LESS than d_r; Eq. 13: f(d) = 1 for d <= d_b, so d_b itself is orange; f(d_a) = 0, so d_a
 // is free), and control.idl's documentation of the Zone enumerators says the same.
 TEST(Zones, ExactBoundariesFollowThePaperAndTheIdl) {
@@ -448,7 +448,7 @@ TEST(PredictiveGuard, JointLeversBoundHowFarAnySegmentPointMoves) {
   EXPECT_GT(tightest, 0.5) << "the levers are bounds, but not absurdly loose ones";
 }
 
-// ---------------------------------------------------------------- broad phase (issue 12, item 7)
+// ---------------------------------------------------------------- broad phase
 // The control cycle skips pairs whose bounding spheres are beyond max(d_safe, d_a) (d_b in the
 // guards). Its output must be the brute force's bit for bit: every built-in scenario and a closed
 // loop where the predictive guard acts, run with ControllerModel::broad_phase on and off, on the
@@ -559,7 +559,7 @@ TEST(BroadPhase, ControlOutputIsTheBruteForcesBitForBitOnTheThousandPairRobot) {
 // between the arms must still be the brute force's. With the defaults no shipped robot reaches that
 // case (some pair is always within the 0.10 m broad-phase distance); with d_safe = d_a = 0.02 the
 // 1,343-pair robot does in most configurations (the closest physical pair was wrong in 79 % of them
-// before session 14: 37.98 mm reported, 37.92 mm true).
+// before the fix: 37.98 mm reported, 37.92 mm true).
 TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem) {
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/many_segment_humanoid.urdf";
   const Model model = loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf)));
@@ -588,7 +588,7 @@ TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem) {
 // The same comparison as an attack: random zones (d_r < d_b < d_a <= d_safe, half of them with
 // d_safe = d_a), zero to two body-schema slots on random links (one virtual), a closed loop towards
 // random targets with the priority flipping, or independent random configurations; every output the
-// broad phase may change must be the brute force's. (Before session 14 it found the case above in 2
+// broad phase may change must be the brute force's. (Before the fix it found the case above in 2
 // of 40 trials on the 1,343-pair robot.)
 void attackBroadPhase(const Model& model, unsigned seed, int* sweep_refined) {
   std::mt19937 rng(seed);

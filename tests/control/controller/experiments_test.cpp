@@ -1,4 +1,4 @@
-// The paper's experiments (Sec. 8) on the kinematic robot, asserted (issue 4, item 12): with
+// The paper's experiments (Sec. 8) on the kinematic robot, asserted: with
 // avoidance on no pair ever comes below d_r and the e-stop never fires; with it off the segments
 // penetrate; f(d) and the joints are continuous and do not oscillate; the 1-DOF controller reaches
 // the target before the 3-DOF one; crossing arms end between d_r and d_a.
@@ -75,7 +75,7 @@ void expectSafeAndSmooth(const std::string& name) {
 }
 
 // The paper's seven experiments (Sec. 8.2.1 to 8.5.2), by name: the loops below would pass on an
-// empty or shortened list (issue 17, item 6).
+// empty or shortened list.
 TEST(Experiments, TheListHoldsThePapersSevenExperiments) {
   std::vector<std::string> names;
   for (const auto& s : builtinScenarios()) names.push_back(s.name);
@@ -107,7 +107,7 @@ TEST(Experiments, WithoutAvoidanceTheSegmentsPenetrate) {
   }
 }
 
-// Issue 12, item 6: a scenario that needs a link the robot lacks is an error naming it, never a
+// A scenario that needs a link the robot lacks is an error naming it, never a
 // silent skip (the occlusion scenario used to put the camera at a fixed guess; a missing forearm
 // silently dropped the grasped bar). The bar's hand is the controller configuration's left hand
 // link and the camera its camera_link; the forearm the bar ignores is found by structure (the next

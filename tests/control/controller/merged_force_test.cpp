@@ -1,4 +1,4 @@
-// The merged virtual force of Eq. 14-18 (issue 16, item 7) against an independent re-implementation
+// The merged virtual force of Eq. 14-18 against an independent re-implementation
 // written here from the paper, on random yellow-zone states of the shipped robot.
 //
 // What is checked against what:

@@ -1,4 +1,4 @@
-// OnboardController (control/include/reflex/control/onboard.hpp, issue 13 item 1): the controller's
+// OnboardController (control/include/reflex/control/onboard.hpp): the controller's
 // whole reaction to its inputs, without processes. Checked against independent answers:
 // - staleness: the timeout from the options (hold at exactly input_timeout after the last sign of
 //   life, retract strictly after it), and the rest posture from restConfiguration + forward kinematics;
@@ -13,9 +13,9 @@
 // - the plant loop: the pre-issue-13 loop written out here (computeControl + stepPlant on a
 //   KinematicRobot) gives bit-identical joint positions over 1200 cycles with walking;
 // - the robot port: a port without state gets no command; the command is measured + qdot dt.
-// - rejections (issue 17, items 3 and 13): one counter per cause, each cause provoked by a value on its
+// - rejections: one counter per cause, each cause provoked by a value on its
 //   own side of the documented bound (max_target_distance, kWalkGoalTolerance), the latest cause named;
-// - the closest pair's names (issue 17, item 3): segment_a is the arm's own segment, checked against the
+// - the closest pair's names: segment_a is the arm's own segment, checked against the
 //   robot's naming (l_* segments move with the left arm, r_* with the right) over a crossing-arms run.
 #include "support/robot.hpp"
 
@@ -321,7 +321,7 @@ TEST(OnboardBodySchema, RefusalsAreNamedAndCounted) {
   EXPECT_EQ(ctl.report().counts.targets_rejected, 5U);
 }
 
-// Issue 17, item 2: a slot is one record (BodySchemaSlot in data().dist.slots): geometry, virtual,
+// A slot is one record (BodySchemaSlot in data().dist.slots): geometry, virtual,
 // motion priority and name, written by changeBodySchema and read from there by the controller. The
 // answers are the request's own values; a name of kBodySchemaNameBytes bytes fits exactly, one byte
 // more is refused whole (never stored cut short, where it would take the slot of its 255-byte prefix).
@@ -486,7 +486,7 @@ TEST(OnboardPlant, TheSameJointPositionsAsThePreIssue13LoopWithWalking) {
   const Eigen::VectorXd q0 = restConfiguration(model, cm);
   KinematicPort port(q0);
   OnboardController ctl(model, cm, port, q0);
-  // The loop reflex_controller ran before issue 13, written out.
+  // The loop reflex_controller ran before the robot port existed, written out.
   ControllerData data(model, cm);
   KinematicRobot robot(model, q0);
   WalkingPattern walking(model);

@@ -1,4 +1,4 @@
-// Randomized safety (issue 4, item 14): episodes with random targets for both hands changing every
+// Randomized safety: episodes with random targets for both hands changing every
 // 100 ms — inside the body, crossing, behind, while walking — must never bring a pair below d_r,
 // fire the e-stop, emit a non-finite value or exceed a joint velocity limit.
 // REFLEX_SOAK_EPISODES=N runs a longer soak.
@@ -79,7 +79,7 @@ TEST(RandomSafety, ThousandEpisodesNeverReachTheRedZone) {
               static_cast<unsigned long long>(cycles), worst * 1000.0, worst_seed);
 }
 
-// Session 14's attack on "a configuration that validates can work" (controller.hpp): parameter sets
+// A randomized attack on "a configuration that validates can work" (controller.hpp): parameter sets
 // drawn inside every range of controllerParamRanges (each key redrawn with probability 1/2, log-uniform
 // over a wide range; keys whose range the others moved are redrawn until all validate), on every
 // shipped robot with its own arms, each run through random episodes. A set is either refused at

@@ -1,4 +1,4 @@
-// The paper's seven experiments on every shipped robot (issue 12, item 6 and its first Done-when):
+// The paper's seven experiments on every shipped robot:
 // asimo_like (the robot the scenarios were written for), small_humanoid (a 0.4 m robot, arms of six
 // joints) and mesh_humanoid (meshes fitted with capsules, an SRDF, arms of five joints), each with
 // the controller configuration found next to its URDF. Every scenario runs in-process with and

@@ -1,4 +1,4 @@
-// Walking and the plant step (simulation.hpp) with the controller (issue 16, items 1 and 5).
+// Walking and the plant step (simulation.hpp) with the controller.
 //
 // What is checked against what:
 // - Velocity (item 5): over random sequences of walk start / stop / restart commands (any time, any

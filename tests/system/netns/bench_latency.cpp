@@ -1,4 +1,4 @@
-// reflex_latency_bench (issue 7, item 6): frame capture time -> the controller applying the new target,
+// reflex_latency_bench: frame capture time -> the controller applying the new target,
 // over real DDS with the real reflex_controller process, on one host or across network namespaces;
 // then the controller's cycle lateness over a long run. Not a ctest: run by hand, figures go into
 // bringup/README.md.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""bringup/launch.py (issue 7, item 3): the launcher starts what a configuration names, with its
+"""bringup/launch.py: the launcher starts what a configuration names, with its
 environment and arguments, prefixes and collects the logs, stops everything on SIGTERM / SIGINT
 (SIGKILL after stop_timeout), reports a process that dies, starts only one host's part with --host,
 writes the discovery-server address into the profiles copy, and rejects bad configurations with a
@@ -185,7 +185,7 @@ class LaunchTest(unittest.TestCase):
         self.assertNotIn("<address>127.0.0.1</address>", copy)
 
     def test_several_roles_on_one_host_and_a_dry_run_that_writes_nothing(self):
-        # issue 17, item 14: --host takes several roles (repeated or comma-separated); the dry run
+        # --host takes several roles (repeated or comma-separated); the dry run
         # says what it WOULD write and writes nothing (no log folder, no profiles copy).
         cfg = self.config(f"""
             log_dir: {self.dir}/logs_${{HOST}}
@@ -215,7 +215,7 @@ class LaunchTest(unittest.TestCase):
         self.assertIn("empty host name", out)
 
     def test_the_final_line_says_stopped_for_what_the_launcher_stopped(self):
-        # issue 17, item 14: a process the launcher stopped (SIGTERM) showed as "-15".
+        # A process the launcher stopped (SIGTERM) showed as "-15".
         cfg = self.config(f"""
             log_dir: {self.dir}/logs
             processes:
@@ -229,7 +229,7 @@ class LaunchTest(unittest.TestCase):
         self.assertNotIn("-15", out)
 
     def test_logs_default_outside_the_checkout(self):
-        # issue 17, item 14: without log_dir the logs go to $REFLEX_LOG_DIR/launch/<name> (else
+        # Without log_dir the logs go to $REFLEX_LOG_DIR/launch/<name> (else
         # ~/.reflex/log/...), never into the source tree; every shipped configuration follows it.
         cfg = self.config("""
             name: nolog
@@ -249,7 +249,7 @@ class LaunchTest(unittest.TestCase):
             self.assertNotIn(str(SOURCE / "out"), r.stdout, shipped)
 
     def test_the_session_loop_is_a_launch_variable(self):
-        # issue 17, item 14: --loop for the session replay without editing the configuration.
+        # --loop for the session replay without editing the configuration.
         for shipped in sorted((SOURCE / "bringup" / "launch").glob("*.yaml")):
             rc, out = self.run_launch(shipped, "--dry-run")
             vision = [line for line in out.splitlines() if line.startswith("[vision")]
@@ -261,7 +261,7 @@ class LaunchTest(unittest.TestCase):
             self.assertIn(" --loop ", vision[0], shipped)
 
     def test_the_robot_side_starts_reflex_mujoco_and_the_controller_over_dds(self):
-        # issue 13, item 4: --robot mujoco starts the processes marked robot: mujoco (reflex_mujoco)
+        # --robot mujoco starts the processes marked robot: mujoco (reflex_mujoco)
         # before the controller, which then runs with --robot dds; kinematic (the default) neither.
         for shipped in sorted((SOURCE / "bringup" / "launch").glob("*.yaml")):
             for side, port in (("kinematic", "kinematic"), ("mujoco", "dds")):

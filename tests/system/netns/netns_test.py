@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Multi-host system test in network namespaces (issue 7, item 5).
+"""Multi-host system test in network namespaces.
 
 Three "hosts" -- vision, behavior, robot -- each a Linux network namespace made by this test (veth
 pairs, private 10.x addresses, nothing on the machine's real interfaces), each starting ITS part of

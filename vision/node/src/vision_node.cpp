@@ -24,7 +24,7 @@ using namespace reflex::vision;
 
 namespace {
 
-// No silent default mount (issue 15, item 2): what to pass instead.
+// No silent default mount: what to pass instead.
 const char* const kMountHelp =
     " (the left camera in the robot base frame; the shipped robot with its head at zero: "
     "bringup/vision/camera_mount.yaml; your own robot: see \"Measure the mount\" in vision/README.md)";
@@ -38,7 +38,7 @@ struct VisionNode::Impl {
   std::unique_ptr<OutputFile> dump;  // every write and the close checked (a full disk is an error)
 #ifdef REFLEX_VISION_WITH_BUS
   std::unique_ptr<VisionPublisher> publisher;
-  // One line per skipped frame, rate-limited (issue 16 item 8f): a long corrupt stretch of video
+  // One line per skipped frame, rate-limited: a long corrupt stretch of video
   // is counted (stats.skipped, exit line) but cannot flood stderr.
   reflex::bus::LogLimiter skip_log;
 #endif

@@ -394,7 +394,7 @@ inline bool walkingMayAdvance(ControlResult result) { return result == ControlRe
 /// a pair of two such segments cannot be changed by any arm motion.
 bool isArmIndependent(const Model& model, const ControllerModel& cm, const ControllerData& data, int s);
 
-/// Walking guard (issue 16, item 1). q_next: the robot's configuration after this cycle's arm step
+/// Walking guard. q_next: the robot's configuration after this cycle's arm step
 /// with the walking joints moved by the walking step under test. Returns false if, at q_next, some
 /// physical pair that no arm can move (both segments arm-independent: a body-schema segment on the
 /// root, body, chest, head or legs against the trunk or the legs) would end below
@@ -404,7 +404,7 @@ bool isArmIndependent(const Model& model, const ControllerModel& cm, const Contr
 bool checkWalkingStep(const Model& model, const ControllerModel& cm, ControllerData& data,
                       const Eigen::Ref<const Eigen::VectorXd>& q_next);
 
-/// Body-schema placement check for a PHYSICAL segment just attached to `slot` (issue 16, item 1):
+/// Body-schema placement check for a PHYSICAL segment just attached to `slot`:
 /// the index of a pair between it and a segment such that no arm can move either of them, whose
 /// distance at configuration q is below d_r + estop_release_margin; -1 if none (or the slot is
 /// disabled or on a link an arm moves). Such a segment would latch the e-stop at once and no arm

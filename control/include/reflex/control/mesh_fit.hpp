@@ -1,4 +1,4 @@
-// Collision meshes to capsules (issue 12, item 1): loading a link's collision meshes, fitting
+// Collision meshes to capsules: loading a link's collision meshes, fitting
 // sphere-swept lines (capsules) and spheres that ENCLOSE every vertex, and the fit overlay
 // (`<urdf stem>.fit.yaml`) that caches the result next to the robot. README: "Meshes".
 //

@@ -1,4 +1,4 @@
-// The onboard controller without the bus (issue 13, item 1): everything reflex_controller does per
+// The onboard controller without the bus: everything reflex_controller does per
 // 5 ms cycle, as one object. Inputs arrive by value between cycles (hand targets with the time they
 // arrived, motion priority, body-schema changes by name, walk commands, an e-stop reset); step(now)
 // runs input staleness (hold, then retract), motion priority, computeControl, the plant through a
@@ -6,7 +6,7 @@
 // this object; runScenario (and so reflex_sim, the experiments and the soak) drives the same object,
 // so the plant loop exists once (stepPlant inside step()).
 //
-// The robot port (issue 13, item 2): the controller computes from the positions the port says were
+// The robot port: the controller computes from the positions the port says were
 // MEASURED this cycle and hands the port one command: the positions the driven joints should reach
 // at the end of the cycle (measured + qdot dt for the arm joints, rate-limited to v_max and clamped to
 // the position limits; for the walking joints the walking pattern's positions, which continue the
@@ -21,7 +21,7 @@
 // state (missing, stale) returns nullptr: the cycle computes nothing and commands nothing (the robot
 // holds on its own); CycleReport::robot_state_ok says so and the counts say how often.
 //
-// Input staleness (the same rule as reflex_controller before issue 13): the target source's last sign
+// Input staleness (the same rule as reflex_controller with its in-process robot): the target source's last sign
 // of life is the later of its last hand-target sample and its last heartbeat (noteSourceHeartbeat).
 // Until input_timeout has passed since then the last targets are HELD (followed as they are);
 // strictly later than input_timeout both hands get "no target" and retract to rest. Before any sign
@@ -117,7 +117,7 @@ struct BodySchemaOutcome {
   char text[400] = {};
 };
 
-/// Why an input was refused (issue 17, items 3 and 13): one counter per cause (OnboardCounts::rejected).
+/// Why an input was refused: one counter per cause (OnboardCounts::rejected).
 enum class RejectCause : std::uint8_t {
   kHandTargetNotFinite,   ///< a given hand target with a NaN / Inf coordinate (per hand)
   kHandTargetTooFar,      ///< a given hand target farther than max_target_distance from the base origin (per hand)

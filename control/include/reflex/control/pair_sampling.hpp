@@ -1,4 +1,4 @@
-// Which pairs to check, found by sampling (issue 12, item 4), as MoveIt's setup assistant does it:
+// Which pairs to check, found by sampling, as MoveIt's setup assistant does it:
 // N random configurations within the joint limits; every pair of robot segments that the adjacency
 // rule does not already drop is classified by the distances it takes over the samples:
 //   always in collision  penetrating (distance <= 0) in at least `always_fraction` of the samples;

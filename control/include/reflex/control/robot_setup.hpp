@@ -1,4 +1,4 @@
-// Setting up a new humanoid (issue 12, item 5; the library behind `reflex_setup`): from a loaded Model,
+// Setting up a new humanoid (the library behind `reflex_setup`): from a loaded Model,
 // find what the controller and the behavior layer need to know about the robot, each choice with the
 // reason it was made.
 //

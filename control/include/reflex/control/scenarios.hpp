@@ -20,7 +20,7 @@
 
 namespace reflex::control {
 
-/// A robot's frame of reference for the scenarios (issue 12, item 6): landmarks measured on the
+/// A robot's frame of reference for the scenarios: landmarks measured on the
 /// model at the rest posture (restConfiguration), in the base frame B (metres). The seven scenarios
 /// are written in the coordinates of the reference robot (asimo_like: floor, x forward, y left, z up);
 /// place() carries a point from there to this robot through its landmarks, so a target at the
@@ -188,7 +188,7 @@ SimResult runScenario(const Model& model, const ControllerModel& cm, const Scena
 SimResult runScenario(const Model& model, const ControllerModel& cm, const Scenario& scenario,
                       const SimOptions& options, ScenarioPlant& plant);
 
-/// How closely one arm's measured joints followed the commands (issue 13, item 4). The command of
+/// How closely one arm's measured joints followed the commands. The command of
 /// cycle k names the positions for the start of cycle k+1; the error of cycle k+1 is measured(k+1) -
 /// command(k), over the arm's joints, over cycle pairs that both had a robot state.
 struct ArmTracking {

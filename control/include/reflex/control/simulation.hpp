@@ -55,7 +55,7 @@ class KinematicRobot final : public RobotInterface {
 /// fades in and out over half a step. Joints are found by name (heel_x, {l,r}_hip_pitch, {l,r}_knee,
 /// {l,r}_ankle_pitch, body_z); missing ones are skipped.
 ///
-/// Velocity contract (issue 16, item 5): whatever sequence of start / stop / restart calls arrives,
+/// Velocity contract: whatever sequence of start / stop / restart calls arrives,
 /// at any time and with any arguments, step() moves no joint by more than its v_max * dt from the q
 /// it is given. A start() while walking continues the step cycle where it is (phase and leg
 /// amplitude are kept; only the goal and the speed change); the heel speed is at most heel_x's

@@ -20,7 +20,7 @@
 namespace reflex::vision {
 
 /// Physically possible ranges, checked at load (VisionError naming the file, field and value and
-/// the range); a calibration outside them cannot produce any detection (issue 16, item 15).
+/// the range); a calibration outside them cannot produce any detection.
 struct CalibrationLimits {
   static constexpr int kMinImageSide = 16;       ///< pixels, width and height
   static constexpr int kMaxImageSide = 16384;    ///< pixels (beyond: the rectification maps alone take GBs)
@@ -93,7 +93,7 @@ struct CameraMount {
   cv::Vec3d toBase(const cv::Vec3d& p_C) const { return R_B_C * p_C + p_B_C; }
 };
 
-// There is deliberately no built-in mount (issue 15, item 2): a mount is always a file the user
+// There is deliberately no built-in mount: a mount is always a file the user
 // names (the shipped robot's, head joints at zero: bringup/vision/camera_mount.yaml), so a missing
 // one is an error, never the shipped robot's head taken silently for another rig.
 /// Parses a mount YAML node text:  translation: [x, y, z]  (metres) and

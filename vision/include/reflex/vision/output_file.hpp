@@ -2,7 +2,7 @@
 // Output files of the vision tools (the --dump CSV, session folders, calibration / object map /
 // mount / ground truth files) with every write and the close checked: a file that could not be
 // written completely is an error naming the file and the cause (the system's errno text), never a
-// silent success (issue 16, item 14: `--dump /dev/full` used to exit 0).
+// silent success (`--dump /dev/full` used to exit 0).
 //
 // Contract: the constructor opens (creates or truncates) the file; a missing parent folder is an
 // error at that moment, before any work is done. write() never throws (it is called from the

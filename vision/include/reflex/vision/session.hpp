@@ -28,7 +28,7 @@ namespace reflex::vision {
 /// one is written (SessionWriter::write). A replay clock subtracts stamps and steps by fractions of
 /// a frame period, which needs a double that still resolves microseconds: |stamp| <= 1e10 s (UNIX
 /// time up to the year 2286) resolves 2 us, while near 1e17 s a double moves in steps of 16 s and a
-/// schedule that adds 0.1 s never advances (issue 16, item 13: `--dump` spun forever).
+/// schedule that adds 0.1 s never advances (`--dump` spun forever).
 inline constexpr double kMaxSessionStamp = 1e10;
 /// Largest gap between consecutive stamps of a session, seconds. A longer gap is not one recording
 /// (a paced replay would wait through it in silence); such a session is refused at load, naming the

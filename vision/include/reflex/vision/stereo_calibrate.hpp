@@ -1,5 +1,5 @@
 #pragma once
-// Stereo calibration of the user's own rig (issue 15, item 1; the library behind `reflex_calibrate`):
+// Stereo calibration of the user's own rig (the library behind `reflex_calibrate`):
 // calibration boards (checkerboard, ChArUco, AprilTag grid), their detection in image pairs, OpenCV
 // calib3d stereo calibration with per-view reprojection errors and named outlier views, the
 // rectified epipolar error, and the conversion of an OpenCV `stereoCalibrate` FileStorage file.
@@ -191,7 +191,7 @@ class CalibrationImages {
 
 namespace reflex::vision {
 
-// ---- Camera mount (issue 15, item 2) ------------------------------------------------------------
+// ---- Camera mount ------------------------------------------------------------
 // A tag fixed on a hand at a known point; per view the robot's joint angles (so the point is known in
 // the head frame H by the robot's kinematics) and the point measured by the camera in its left optical
 // frame C. Then p_H = R_H_C p_C + p_H_C for every view: the camera in the head frame is the rigid

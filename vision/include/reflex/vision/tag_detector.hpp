@@ -7,7 +7,7 @@
 // filling, without a lock, and when the list grows (realloc) a worker calls a function pointer read
 // from freed memory -- SIGSEGV: 5 of 6 runs of up to 30000 pool starts crashed, after 3000-22000,
 // on this 2-core machine at load ~15 (tests/vision/apriltag_pool_race.cpp, libapriltag alone;
-// upstream issue #70, fixed by PR #339). It was the vision_benchmark crash of issue 15. Built against such a library,
+// upstream issue #70, fixed by PR #339). It once crashed vision_benchmark. Built against such a library,
 // threads > 1 is refused (VisionError naming the version); the stereo pipeline's parallelism
 // (left and right image on two threads, one detector each) does not use the pool.
 #include <opencv2/core.hpp>

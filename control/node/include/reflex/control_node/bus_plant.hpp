@@ -1,4 +1,4 @@
-// The scenarios on a robot over DDS (issue 13, item 4): a control::ScenarioPlant whose robot is on the
+// The scenarios on a robot over DDS: a control::ScenarioPlant whose robot is on the
 // bus, for reflex_sim --robot mujoco|dds. The controller reaches the robot through DdsRobotPort
 // (reflex/robot_state in, reflex/joint_command out), exactly as reflex_controller --robot dds does.
 //

@@ -2,7 +2,7 @@
 // cycle per controller period (5 ms by default), fed by the behavior layer over DDS, publishing joint
 // state and controller status.
 //
-// Refused inputs (issue 17, items 3 and 13) are counted per cause (NodeStats::rejected, the causes of
+// Refused inputs are counted per cause (NodeStats::rejected, the causes of
 // control::RejectCause and of DdsRobotPort), listed by cause in the exit line, and published every
 // cycle in ControlStatus (rejected_* per topic, last_rejection the latest cause), so a module of any
 // vendor sees that its sample was refused.
@@ -17,17 +17,17 @@
 // them (robot_state_file.hpp). Resumed that way, the hands hold where they are until the target
 // source speaks, for at most input_timeout (the grace any silence gets), then retract as usual.
 //
-// Protection (issue 16, item 3): collision avoidance and the red-zone e-stop are separate switches.
+// Protection: collision avoidance and the red-zone e-stop are separate switches.
 // Avoidance may be switched off by --no-avoidance or by `avoidance: off` in the controller YAML
 // (comparison runs); the e-stop only by NodeConfig::estop = false, i.e. the loudly named
 // --disable-estop option, never by a file. What is on is published on reflex/controller_protection
 // (late joiners get it), printed in the banner and in the exit line.
 //
-// Liveliness of the target source (issue 16, item 4) is tied to the DDS participant that wrote the
+// Liveliness of the target source is tied to the DDS participant that wrote the
 // last hand targets: only a heartbeat from that same participant counts as a sign of life, whatever
 // module name it or any other participant claims.
 //
-// One controller per domain (issue 16, item 16): the constructor publishes this controller's
+// One controller per domain: the constructor publishes this controller's
 // protection sample and then looks, for NodeConfig::peer_probe seconds, for the sample of another
 // controller (a different participant). The one that published first keeps the domain: a later one
 // throws (refuses to start), naming the first; if discovery was slower than the probe (measured here:
@@ -46,7 +46,7 @@
 // reflex::control::OnboardController (control/include/reflex/control/onboard.hpp): this node is the
 // thin adapter between DDS samples and that object.
 //
-// The robot side (issue 13, item 2; NodeConfig::robot): "kinematic" (default) is the in-process
+// The robot side (NodeConfig::robot): "kinematic" (default) is the in-process
 // kinematic plant; "dds" is a robot driver on the bus (DdsRobotPort, dds_robot_port.hpp): the
 // controller computes from the measured reflex/robot_state and answers each cycle with one
 // reflex/joint_command. Without a state newer than robot_timeout it computes and commands nothing
@@ -80,7 +80,7 @@ struct NodeConfig {
   std::string collision;             ///< collision configuration ("" = next to the URDF)
   std::string controller;            ///< controller YAML ("" = <stem>.controller.yaml beside the URDF, else defaults)
   std::string profiles_file;         ///< DDS profiles ("" = bus defaults)
-  /// UDP only by default (session 14): on Fast DDS 2.9's shared memory, a reader process killed at
+  /// UDP only by default: on Fast DDS 2.9's shared memory, a reader process killed at
   /// the wrong moment (a recorder, a view) stalls every write of this participant for 1-3 s (the
   /// port health check), so the robot and every module lost the controller's outputs meanwhile.
   /// Over UDP a dead reader costs nothing; the latency is the same (control/README.md).

@@ -1,4 +1,4 @@
-// The robot over DDS (issue 13, item 2): reflex_controller --robot dds. A control::RobotPort that
+// The robot over DDS: reflex_controller --robot dds. A control::RobotPort that
 // reads the robot's measured state from reflex/robot_state and answers each control cycle with one
 // reflex/joint_command (idl/robot.idl; the contract for driver authors: idl/README.md "Writing a
 // robot driver").

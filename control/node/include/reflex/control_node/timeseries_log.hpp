@@ -1,4 +1,4 @@
-// The controller's --log file (issue 16, items 10 and 14): the per-cycle time series in reflex_sim's
+// The controller's --log file: the per-cycle time series in reflex_sim's
 // CSV format, STREAMED to disk while the controller runs, so that output that cannot be written is
 // never reported as success and the rows survive any stop but SIGKILL.
 //

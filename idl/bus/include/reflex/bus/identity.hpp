@@ -1,4 +1,4 @@
-// reflex::bus identity of a sample's writer: which Reflex participant wrote it (issue 16 item 8a).
+// reflex::bus identity of a sample's writer: which Reflex participant wrote it.
 //
 // A name inside a message (Header.source) is not an identity: any permitted writer can claim it.
 // What a reader can tie a sample to is its WRITER: SampleInfo::publication_handle is the writer's

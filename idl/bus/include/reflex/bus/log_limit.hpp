@@ -1,7 +1,7 @@
 // reflex::bus::LogLimiter — a rate limit for log lines printed once per received sample.
 //
 // A line printed for every bad sample lets any permitted writer flood stderr (an authenticated
-// flooder made the controller print 4.8 MB in 8 s, issue 16 item 8f). Every per-sample log line of
+// flooder made the controller print 4.8 MB in 8 s). Every per-sample log line of
 // the Reflex processes (controller, behavior, vision) goes through one LogLimiter per call site:
 // at most `lines_per_second` lines are printed in each one-second window; the others are counted,
 // and the next line printed says how many were suppressed since the previous one

@@ -371,7 +371,7 @@ class Participant {
   void stop() noexcept;
   bool stopRequested() const noexcept { return stop_.load(); }
 
-  // ---- security and identity (issue 16 item 8) ----
+  // ---- security and identity ----
   // A participant whose profile enables DDS-Security has its material checked before Fast DDS sees
   // it (checkSecurityMaterial: a bad file is a BusError naming the file and the cause), announces no
   // participant name in discovery (its certificate subject identifies it to authenticated peers),

@@ -1,5 +1,5 @@
 // reflex::bus security checks — the DDS-Security material of a participant, checked by Reflex
-// before Fast DDS sees it, and the participant's identity as peers see it (issue 16 item 8).
+// before Fast DDS sees it, and the participant's identity as peers see it.
 //
 // Fast DDS 2.9 refuses bad material with one line, "could not create the DDS participant". Before a
 // secure participant is created, checkSecurityMaterial() reads every file the participant QoS names

@@ -1,4 +1,4 @@
-// Clean shutdown on any catchable terminating signal for a Reflex DDS process (issue 16, item 10).
+// Clean shutdown on any catchable terminating signal for a Reflex DDS process.
 //
 //   reflex::bus::Participant bus(config);
 //   reflex::bus::StopOnSignal stop_on_signal(bus);   // installs the handlers

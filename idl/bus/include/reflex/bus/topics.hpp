@@ -22,8 +22,8 @@ namespace reflex::bus {
 
 /// Longest string (bytes, without the terminating NUL) that may be a DDS key: fastddsgen 2.3 sizes
 /// the key buffer of an unbounded `@key string` as 4 (length) + 255 + 1 (NUL) bytes, and a longer
-/// key makes getKey throw inside DataWriter::write, which ends the process (SIGABRT; issue 16,
-/// item 9). Measured: 255 bytes publish, 256 abort (tests/bus/key_bound_test.cpp).
+/// key makes getKey throw inside DataWriter::write, which ends the process (SIGABRT).
+/// Measured: 255 bytes publish, 256 abort (tests/bus/key_bound_test.cpp).
 inline constexpr std::size_t kMaxKeyStringBytes = 255;
 
 /// Length in bytes of the longest @key string of a sample (0 for a type without a key). Every keyed
@@ -150,7 +150,7 @@ struct TopicTraits<reflex::msg::ControllerProtection> {
   static constexpr const char* kProfile = kProfileControllerInfo;
 };
 
-// The robot boundary (idl/robot.idl, issue 13): the robot's measured state and the controller's command.
+// The robot boundary (idl/robot.idl): the robot's measured state and the controller's command.
 template <>
 struct TopicTraits<reflex::msg::RobotState> {
   using PubSubType = SafePubSubType<reflex::msg::RobotStatePubSubType>;

@@ -1,4 +1,4 @@
-// Checks on the files a user names to a Reflex tool (issue 16, items 11 and 14).
+// Checks on the files a user names to a Reflex tool.
 //
 // Inputs: every loader of a file given by a user (URDF, collision / controller / behavior YAML,
 // timeline CSV, DDS profiles XML, recordings, robot-state file, vision calibration / session / mount /

@@ -1,4 +1,4 @@
-// What runs on the bus (issue 17, item 10), like `ros2 node list` / `ros2 topic hz`: the live
+// What runs on the bus, like `ros2 node list` / `ros2 topic hz`: the live
 // processes from their heartbeats, and the rate of every Reflex topic, measured by listening for a
 // while. Used by `reflex_bus`; reads only (no writer is made, no heartbeat is published).
 #pragma once

@@ -1,4 +1,4 @@
-// MCAP recordings (issue 14, item 1): a writer and a reader of the MCAP container format (the
+// MCAP recordings: a writer and a reader of the MCAP container format (the
 // recording format of ROS 2 and Foxglove), written from its specification (mcap.dev/spec, major
 // version 0); no third-party MCAP library.
 //

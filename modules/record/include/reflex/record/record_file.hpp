@@ -15,7 +15,7 @@
 // of returning it. A record that is corrupt in the middle (bad CRC, bad sync) is reported, and the
 // reader can resynchronise on the next sync word whose CRC checks.
 //
-// Reading time is linear in the file size, whatever the bytes (issue 16, item 12): a candidate
+// Reading time is linear in the file size, whatever the bytes: a candidate
 // record found while resynchronising is checked in O(1) reads plus O(kCrcMarkStride) bytes of CRC,
 // not by reading its body (a crafted file with a sync word every 12 bytes, each claiming a body that
 // runs to the end of the file, made the old reader quadratic: 2 MB took > 60 s). The CRC of a byte

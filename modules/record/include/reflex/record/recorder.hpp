@@ -1,4 +1,4 @@
-// reflex::record — the bus recorder, player and exporter (issue 7, item 2).
+// reflex::record — the bus recorder, player and exporter.
 //
 //   Recorder  subscribes chosen (or all) Reflex topics and appends every received sample to a
 //             recording file: MCAP (mcap.hpp, the default) or .rfx (record_file.hpp); both survive
@@ -41,7 +41,7 @@ struct RecorderOptions {
   /// sample of a burst: best-effort topics (200 Hz state, vision) with reflex_record (best effort,
   /// keep last 256), reliable topics (behavior decisions, heartbeats) with reflex_record_reliable
   /// (reliable, volatile, keep last 256), so a sample dropped on a loaded host is repaired as the
-  /// writer promised instead of lost (issue 16, item 17). true: state topics (behavior decisions,
+  /// writer promised instead of lost. true: state topics (behavior decisions,
   /// heartbeats: reliable + transient local) are read with their own reader profile instead, so the
   /// recording starts with the state published BEFORE the recorder started, but that profile keeps
   /// only the newest sample per instance (a burst of changes between two takes keeps its last one).
@@ -120,7 +120,7 @@ struct PlayerOptions {
                                       ///< reflex/controller_protection (a live controller's claim; see player.cpp)
                                       ///< and, without `commands`, the command topics (isCommandTopic)
   std::vector<std::string> exclude;   ///< topic names not to play (a command topic without `commands`: a no-op)
-  /// Play the command topics too (issue 17, item 12; reflex_play --commands). Off by default: a replay
+  /// Play the command topics too (reflex_play --commands). Off by default: a replay
   /// republishes observations only, so it never steers a live controller or robot. Without it a
   /// command topic named in `topics` is a RecordError naming the topic and the option.
   bool commands = false;

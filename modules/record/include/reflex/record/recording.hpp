@@ -1,4 +1,4 @@
-// Opening recordings whatever their format (issue 14): MCAP (.mcap, mcap.hpp; the default) or the
+// Opening recordings whatever their format: MCAP (.mcap, mcap.hpp; the default) or the
 // Reflex log format (.rfx, record_file.hpp; what older recordings are). Readers detect the format
 // by the file's magic bytes, not its name.
 #pragma once

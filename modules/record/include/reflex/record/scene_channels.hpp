@@ -1,4 +1,4 @@
-// Scene channels of an MCAP recording (issue 14, item 2): `/tf` (foxglove.FrameTransforms) and
+// Scene channels of an MCAP recording: `/tf` (foxglove.FrameTransforms) and
 // `/reflex/scene` (foxglove.SceneUpdate), JSON-encoded with their JSON schemas, made from the recorded
 // samples with the same builder and the same sample translation as reflex_view (reflex::scene,
 // view_node::SceneFeed), so a recording opened in Foxglove shows the robot in 3D with no set-up.

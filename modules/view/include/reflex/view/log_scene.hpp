@@ -1,4 +1,4 @@
-// Scenes from a recorded controller time series (issue 14, item 4): the rows of a
+// Scenes from a recorded controller time series: the rows of a
 // `reflex_controller --log` CSV (or reflex_sim's timeseries.csv, the same format) at chosen times,
 // turned into SceneInputs, so that the flagship report draws the robot with the live view's renderer
 // (modules/view/web/view.js, static mode) from the same foxglove.SceneUpdate the live view gets.

@@ -1,4 +1,4 @@
-// Scene channels for viewers (issue 14, item 2): the robot's links as `foxglove.FrameTransforms` and
+// Scene channels for viewers: the robot's links as `foxglove.FrameTransforms` and
 // its collision model, closest pairs, hand targets and vision objects as `foxglove.SceneUpdate`,
 // JSON-encoded, with their JSON schemas. No DDS here: reflex_view feeds it from the bus, and a recorder
 // can call the same functions on recorded samples (a JointState + ControlStatus at one instant).

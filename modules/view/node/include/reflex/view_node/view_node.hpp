@@ -1,4 +1,4 @@
-// reflex_view (issue 14, item 3): a read-only process on the bus that serves the live scene to
+// reflex_view: a read-only process on the bus that serves the live scene to
 // Foxglove (Foxglove WebSocket protocol) and to the bundled three.js page, on one port.
 //
 // Reads (never writes: it creates no DDS writer and publishes no heartbeat; tested):

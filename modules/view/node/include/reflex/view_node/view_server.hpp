@@ -1,4 +1,4 @@
-// The live view's server (issue 14, item 3): one TCP port that speaks the Foxglove WebSocket protocol
+// The live view's server: one TCP port that speaks the Foxglove WebSocket protocol
 // (`foxglove.websocket.v1`, https://github.com/foxglove/ws-protocol docs/spec.md) to any WebSocket
 // client that asks for that subprotocol, and plain HTTP GET of the bundled web page to anything else.
 // websocketpp (Debian) on Boost.Asio, one I/O thread; no DDS here (ViewNode feeds it).
