@@ -2,7 +2,7 @@
 // size, missing or inconsistent calibration, unknown tag family, a session folder missing a file,
 // bad timestamps, bad command lines. Each gives a clear error (naming the file/value) or a
 // reported, skipped frame -- never a crash.
-// Second round (at the end): sessions no rig can produce (swapped or
+// At the end: sessions no rig can produce (swapped or
 // identical videos, impossible calibration, tag size, frame count, fps) refused at load; stamps no
 // replay clock can follow refused; SIGTERM/SIGINT end a paced replay within a second; outputs that
 // cannot be written (--dump /dev/full, a file-size limit) are errors naming the file and cause.
@@ -270,7 +270,7 @@ TEST_F(BadInput, CommandLineErrorsNameTheBadValue) {
   EXPECT_EQ(runCli("--help", err), 0);
 }
 
-// ---- Second round. Each case below was accepted before (exit 0, zero
+// ---- Sessions no rig can produce. Each case below was accepted before (exit 0, zero
 // detections, a spin or a silent wait); the expected error text is written from the contract in
 // vision/README.md, not copied from the output.
 namespace {
