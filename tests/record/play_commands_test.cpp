@@ -4,7 +4,7 @@
 // status and no hand target and no walk command (no writer for them is ever matched); with
 // --commands it receives the hand targets too, with the recorded values. `-x reflex/hand_targets` is
 // accepted and changes nothing (a note says so); `-t reflex/hand_targets` without --commands is an
-// error naming the option. The independent answer is the topic list of the contract (the README's
+// error naming the option. The independent answer is the topic list of the contract (bringup/security/README.md:
 // "observations, never commands") and the recorded sample values.
 #include "support/child_process.hpp"
 

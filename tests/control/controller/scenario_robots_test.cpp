@@ -3,7 +3,7 @@
 // joints) and mesh_humanoid (meshes fitted with capsules, an SRDF, arms of five joints), each with
 // the controller configuration found next to its URDF. Every scenario runs in-process with and
 // without avoidance; asserted per robot: no pair below d_r, no e-stop, no NaN, no joint faster than
-// its limit, and the outcome each scenario is there to show (what the README table lists).
+// its limit, and the outcome each scenario is there to show (what the tables of docs/results.md list).
 // Independent answers: the rest posture against the URDF's limits and every checked pair; the
 // grasped bar's distance to the right arm recomputed here from the recorded configurations with a
 // capsule distance written in this file; the arm-to-arm pair identified from the controller's arm
@@ -189,7 +189,7 @@ TEST_P(OnEveryRobot, TargetInsideTheBodyStopsAtTheSide) {
 
 // From beside the body to a target in front of it: the hand gets there with avoidance. Without it
 // the arm goes through the body on asimo_like and small_humanoid; mesh_humanoid's trunk is a narrow
-// column under a wide shoulder bar, and its arm passes beside it (README: "The paper's other
+// column under a wide shoulder bar, and its arm passes beside it (docs/results.md: "The paper's other
 // experiments", per robot) — there the run shows only that avoidance costs the reach nothing.
 TEST_P(OnEveryRobot, ThroughTheBodyReachesTheTargetInFront) {
   const SimResult& on = run(GetParam(), "through_body", AvoidanceMode::kOneDof);
@@ -264,7 +264,7 @@ TEST_P(OnEveryRobot, CrossingArmsStopArmAgainstArm) {
 // does not walk sees it come towards it and pass): with avoidance the arm never enters the body.
 // Without avoidance the hand follows it into the body on every robot (on small_humanoid since its
 // boxes are fitted with capsules side by side: before, the arm stopped short of the torso's one
-// enclosing capsule; README, per robot).
+// enclosing capsule; docs/results.md, per robot).
 TEST_P(OnEveryRobot, WalkingPastTheTargetKeepsTheArmOutOfTheBody) {
   const Robot& r = robot(GetParam());
   const SimResult& on = run(GetParam(), "walking_target_behind", AvoidanceMode::kOneDof);
@@ -349,7 +349,7 @@ TEST_P(OnEveryRobot, TheHandGoesAroundTheGazeLine) {
 INSTANTIATE_TEST_SUITE_P(ShippedRobots, OnEveryRobot,
                          ::testing::Values("asimo_like", "small_humanoid", "mesh_humanoid"));
 
-// On the robot they were written for the scenarios are their numbers exactly (the README's
+// On the robot they were written for the scenarios are their numbers exactly (docs/results.md's
 // asimo_like rows and the experiments test stay as they were): the landmarks are the reference ones,
 // and the first command of each scenario is the literal target, bit for bit.
 TEST(ScenarioFrame, OnTheReferenceRobotTheTargetsAreTheWrittenNumbers) {
