@@ -1,4 +1,5 @@
-// bench_distance: the self-distance sweep of a robot, side by side with FCL and KDL, and the broad phase against the brute force. Not a CTest test; run by hand:
+// bench_distance: the self-distance sweep of a robot, side by side with FCL and KDL, and the broad
+// phase against the brute force. Not a CTest test; run by hand:
 //   build-*/bin/bench_distance [--robot=NAME] --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 // --robot: a robot of bringup/robots by name (asimo_like, the default; many_segment_humanoid, the
 // >= 1,000-pair robot; small_humanoid; mesh_humanoid) or a URDF path; its collision configuration
