@@ -19,7 +19,8 @@
 // e-stop and no pair below d_r with avoidance; a scenario whose run without avoidance ends with every
 // hand on its target and every checked pair at least d_a apart (FCL on the meshes) ends with
 // avoidance within 10 mm of it; one that never brings two segments within d_a without avoidance is
-// "not challenging on this robot". The table per robot is printed.
+// "not challenging on this robot". The table per robot is printed. Romeo's crossing_arms also runs on
+// the physics robot (reflex_mujoco, DDS domain 227): no MuJoCo contact.
 #include "raw_meshes.hpp"
 #include "test_support.hpp"
 
@@ -378,6 +379,22 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
   }
   std::printf("%s: %d of %d judged scenarios end within 10 mm of the run without avoidance\n", robot.name, judged_pass,
               judged);
+
+  // Romeo on the physics robot (reflex_mujoco in its own process over DDS, domain 227, the pieces as
+  // MuJoCo meshes): crossing_arms with no MuJoCo contact, no measured cycle below d_r, no e-stop.
+  if (std::string(robot.name) == "romeo") {
+    const test::ProcessResult mj =
+        test::runTool("reflex_sim", "crossing_arms --robot mujoco --domain 227 --urdf " + urdf + " --collision " + out +
+                                        "/collision.yaml --controller " + out + "/controller.yaml --no-plots --out " +
+                                        out + "/sim_mujoco");
+    ASSERT_EQ(mj.exit_code, 0) << mj.out << mj.err;
+    EXPECT_NE(mj.out.find("e-stop fired          no"), std::string::npos) << mj.out;
+    EXPECT_NE(mj.out.find("measured below d_r    0 cycles"), std::string::npos) << mj.out;
+    EXPECT_NE(mj.out.find("MuJoCo contacts       0 of"), std::string::npos) << mj.out;
+    EXPECT_NE(mj.out.find("robot's contact steps 0"), std::string::npos) << mj.out;
+    const std::size_t at = mj.out.find("MuJoCo contacts");
+    std::printf("romeo on MuJoCo, crossing_arms: %s\n", mj.out.substr(at, mj.out.find('\n', at) - at).c_str());
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedRobots, RealGeometry, ::testing::ValuesIn(kRobots),

@@ -243,14 +243,25 @@ TEST(Judge, DegenerateUrdfInertialsAreRepairedAndSaid) {
   ASSERT_EQ(repairs.size(), 1u);
   EXPECT_EQ(repairs[0].rfind("link 'b': URDF <inertial> mass 0 -> 0.01 kg, principal inertia [0 0 0] -> [1e-05 1e-05 1e-05] kg m^2", 0), 0u)
       << repairs[0];
-  // A tensor breaking A + B >= C (principal 0.001, 0.001, 0.01, turned): the two smaller raised to 0.005,
-  // the axes kept; a valid tensor and mass left exactly as they are.
+  // A tensor breaking A + B >= C (principal 0.001, 0.001, 0.01, turned): the two smaller raised to 0.005
+  // and 2e-6 of it (a margin MuJoCo's own rounding cannot undo), the axes kept; a valid tensor and mass
+  // left exactly as they are.
   const Eigen::Matrix3d R = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
   Eigen::Matrix3d I = R * Eigen::Vector3d(0.001, 0.001, 0.01).asDiagonal() * R.transpose();
   double mass = 2.0;
   std::string what;
   EXPECT_TRUE(repairInertial(options, mass, I, &what));
-  EXPECT_LT((I - R * Eigen::Vector3d(0.005, 0.005, 0.01).asDiagonal() * R.transpose()).cwiseAbs().maxCoeff(), 1e-12) << what;
+  EXPECT_LT((I - R * Eigen::Vector3d(0.005 * (1 + 2e-6), 0.005 * (1 + 2e-6), 0.01).asDiagonal() * R.transpose())
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-12)
+      << what;
+  // Exactly on the inequality (A + B = C): raised by the margin too (Romeo's RElbowYawLink: MuJoCo
+  // refused the model when the repair stopped at equality).
+  Eigen::Matrix3d edge = R * Eigen::Vector3d(0.004, 0.006, 0.01).asDiagonal() * R.transpose();
+  EXPECT_TRUE(repairInertial(options, mass, edge, &what));
+  const Eigen::Vector3d l = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(edge).eigenvalues();
+  EXPECT_GT(l[0] + l[1], l[2] * (1 + 1e-6)) << what;
   EXPECT_EQ(mass, 2.0);
   Eigen::Matrix3d good = R * Eigen::Vector3d(0.02, 0.03, 0.04).asDiagonal() * R.transpose();
   const Eigen::Matrix3d good0 = good;

@@ -7,6 +7,7 @@
 
 #include <mujoco/mujoco.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -98,8 +99,12 @@ bool repairInertial(const MjcfOptions& o, double& mass, Eigen::Matrix3d& I, std:
   Eigen::Vector3d l = eig.eigenvalues();  // ascending
   const Eigen::Vector3d before = l;
   for (int k = 0; k < 3; ++k) l[k] = std::max(l[k], o.min_inertia);
-  // MuJoCo's triangle inequality (A + B >= C): the two smaller raised to half the largest.
-  if (l[0] + l[1] < l[2]) l[0] = l[1] = std::max(l[1], 0.5 * l[2]);
+  // MuJoCo's triangle inequality (A + B >= C): the two smaller raised to half the largest, with a
+  // margin of 1e-6 of it. At exact equality MuJoCo's own eigen-decomposition of the written full
+  // inertia can round A + B below C and refuse the model (Romeo's RElbowYawLink did).
+  constexpr double kTriangleMargin = 1e-6;
+  if (l[0] + l[1] < l[2] * (1.0 + kTriangleMargin))
+    l[0] = l[1] = std::max(l[1], 0.5 * l[2] * (1.0 + 2.0 * kTriangleMargin));
   if (!sym.allFinite() || (l - before).cwiseAbs().maxCoeff() > 0.0) {
     if (repaired) why << ", ";
     why << "principal inertia [" << num(before[0]) << " " << num(before[1]) << " " << num(before[2]) << "] -> ["
@@ -127,6 +132,9 @@ std::vector<std::string> inertialRepairs(const control::Model& model, const Mjcf
 
 namespace {
 
+// At most this many contacts at once (nconmax) and four constraint rows each (njmax).
+constexpr int kMaxContacts = 400;
+
 class MjcfWriter {
  public:
   MjcfWriter(const Model& model, const MjcfOptions& options, const std::vector<ServoGains>& gains)
@@ -146,11 +154,14 @@ class MjcfWriter {
          << "\" integrator=\"Euler\"/>\n"
          // Up to 2 contacts per primitive pair (parallel capsules), constraint rows for contacts
          // (pyramidal, condim 3: 4 rows) and joint limits.
-         << "  <size nconmax=\"" << 2 * primitive_pairs + 16 << "\" njmax=\"" << 8 * primitive_pairs + 2 * model_.nq + 64
-         << "\"/>\n"
+         // Capped: a robot of convex pieces has tens of thousands of primitive pairs, of which a few
+         // touch at once, and MuJoCo 2.2 sizes mjData by njmax squared.
+         << "  <size nconmax=\"" << std::min(2 * primitive_pairs + 16, kMaxContacts) << "\" njmax=\""
+         << std::min(8 * primitive_pairs, 4 * kMaxContacts) + 2 * model_.nq + 64 << "\"/>\n"
          << "  <default><geom contype=\"0\" conaffinity=\"0\" density=\"" << num(options_.density)
-         << "\"/></default>\n"
-         << "  <worldbody>\n";
+         << "\"/></default>\n";
+    writeMeshes();
+    out_ << "  <worldbody>\n";
     writeGeoms(0, "    ");
     for (int child : children_[0]) writeBody(child, "    ");
     out_ << "  </worldbody>\n";
@@ -201,6 +212,47 @@ class MjcfWriter {
     out_ << " armature=\"" << num(g.armature) << "\" damping=\"" << num(g.damping + g.kd) << "\"/>\n";
   }
 
+  // A convex piece of the tight model (mesh_fit.hpp) as a MuJoCo mesh (MuJoCo collides its convex hull):
+  // the judge measures the shape the controller measures, not the capsule around it. A piece thinner
+  // than 0.2 mm along an axis (a flat patch) gets its vertices copied 0.1 mm to either side: MuJoCo
+  // refuses a mesh without volume, and the judge's shape only grows.
+  void writeMeshes() {
+    bool any = false;
+    for (int s = 0; s < model_.num_robot_segments; ++s) {
+      const auto& seg = model_.segments[s];
+      for (int k = 0; k < seg.num_primitives; ++k) {
+        const int piece = model_.primitives[seg.first_primitive + k].piece;
+        if (piece < 0) continue;
+        if (!any) out_ << "  <asset>\n";
+        any = true;
+        std::vector<Eigen::Vector3d> v = model_.pieces[static_cast<std::size_t>(piece)].vertices_L;
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+        for (const auto& x : v) mean += x;
+        mean /= static_cast<double>(v.size());
+        Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+        for (const auto& x : v) cov += (x - mean) * (x - mean).transpose();
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+        for (int axis = 0; axis < 3; ++axis) {
+          const Eigen::Vector3d u = eig.eigenvectors().col(axis);
+          double lo = 1e30, hi = -1e30;
+          for (const auto& x : v) lo = std::min(lo, u.dot(x)), hi = std::max(hi, u.dot(x));
+          if (hi - lo >= 2e-4) continue;
+          const std::size_t n = v.size();
+          for (std::size_t i = 0; i < n; ++i) {
+            v.push_back(v[i] + 1e-4 * u);
+            v[i] -= 1e-4 * u;
+          }
+        }
+        out_ << "    <mesh name=\"" << esc(meshName(s, k)) << "\" vertex=\"";
+        for (std::size_t i = 0; i < v.size(); ++i) out_ << (i ? " " : "") << vec(v[i]);
+        out_ << "\"/>\n";
+      }
+    }
+    if (any) out_ << "  </asset>\n";
+  }
+
+  std::string meshName(int s, int k) const { return geomName(model_, s, k) + "_piece"; }
+
   void writeGeoms(int l, const std::string& in) {
     const int s = segment_of_link_[l];
     if (s < 0) return;
@@ -208,7 +260,9 @@ class MjcfWriter {
     for (int k = 0; k < seg.num_primitives; ++k) {
       const auto& p = model_.primitives[seg.first_primitive + k];
       out_ << in << "<geom name=\"" << esc(geomName(model_, s, k)) << "\" ";
-      if (p.sphere)
+      if (p.piece >= 0)
+        out_ << "type=\"mesh\" mesh=\"" << esc(meshName(s, k)) << "\"/>\n";
+      else if (p.sphere)
         out_ << "type=\"sphere\" pos=\"" << vec(p.a_L) << "\" size=\"" << num(p.radius) << "\"/>\n";
       else
         out_ << "type=\"capsule\" fromto=\"" << vec(p.a_L) << " " << vec(p.b_L) << "\" size=\"" << num(p.radius)

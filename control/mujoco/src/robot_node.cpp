@@ -102,7 +102,7 @@ std::string RobotNode::summary() const {
   for (int b = 0; b < m.nbody; ++b) mass += m.body_mass[b];
   std::ostringstream os;
   os << "robot '" << model_.name << "': " << m.nbody << " bodies, " << m.njnt << " joints, " << m.ngeom
-     << " geoms (collision capsules / spheres), " << m.npair << " contact pairs (from " << robotPairCount(model_)
+     << " geoms (collision capsules / spheres / convex pieces), " << m.npair << " contact pairs (from " << robotPairCount(model_)
      << " checked segment pairs), " << m.nu << " actuators, mass " << fixed(mass, 2) << " kg, timestep "
      << fixed(m.opt.timestep * 1e3, 3) << " ms x " << substeps_ << " per period " << fixed(config_.period * 1e3, 3)
      << " ms, margin = gap = " << fixed(config_.mjcf.margin * 1e3, 2) << " mm\n";

@@ -83,7 +83,7 @@ using BodySchemaSlots = std::array<BodySchemaSlot, kBodySchemaSlots>;
 struct DistanceOptions {
   /// Avoidance rows are computed for pairs with distance below this (m). +inf: every pair.
   double row_threshold = std::numeric_limits<double>::infinity();
-  /// Broad phase (issue 12, item 7): a robot-robot pair whose segments' bounding spheres (fixed in
+  /// Broad phase: a robot-robot pair whose segments' bounding spheres (fixed in
   /// the link frame, enclosing every primitive) are more than this apart (m) is not computed
   /// exactly: PairDistance::exact = false, distance = that gap (a lower bound). Every pair whose
   /// true distance is at most prune_distance is computed exactly, bit for bit as without pruning,

@@ -1,4 +1,4 @@
-// MJCF for MuJoCo 2.2 from the project's robot Model (issue 13, item 3): the physics-simulated
+// MJCF for MuJoCo 2.2 from the project's robot Model: the physics-simulated
 // robot is built from the SAME Model the controller uses (control::loadModel on the same URDF and
 // collision YAML), never from a second reading of the URDF.
 //
@@ -11,7 +11,9 @@
 //     MuJoCo's own inertia of the link's collision geoms at `density`; a link with neither gets
 //     `min_mass` / `min_inertia` (virtual links, camera frames);
 //   - every collision primitive as a MuJoCo capsule (fromto = the Model's core a_L..b_L in the link
-//     frame, size = radius) or sphere, named "<segment>/<k>"; no geom collides by default
+//     frame, size = radius) or sphere, and every convex piece of the tight model (Primitive::piece)
+//     as a MuJoCo mesh of its hull vertices (a flat piece thickened by 0.1 mm to either side: MuJoCo
+//     needs a volume), named "<segment>/<k>"; no geom collides by default
 //     (contype = conaffinity = 0), and one explicit <contact><pair> per primitive pair of every pair
 //     of robot segments the controller checks (Model::pairs), with margin = gap = `margin` (d_r): a
 //     pair closer than d_r is REPORTED in mjData.contact with MuJoCo's own distance, but produces a

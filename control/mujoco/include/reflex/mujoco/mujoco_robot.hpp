@@ -1,4 +1,4 @@
-// The physics-simulated humanoid (issue 13, item 3): MuJoCo 2.2 running the robot built by makeMjcf
+// The physics-simulated humanoid: MuJoCo 2.2 running the robot built by makeMjcf
 // from the project's Model, with a PD servo per joint, the hold rule of idl/robot.idl, and MuJoCo's
 // collision detection as the independent judge of the collision model. No DDS here: the process
 // wrapper (robot_node.hpp) moves samples in and out; everything below is testable in one process.
