@@ -44,10 +44,10 @@ void printTopics(const reflex::record::BusSurvey& s) {
 
 int main(int argc, char** argv) {
   CLI::App app{"reflex_bus: what runs on the Reflex bus (reads only).\n"
-               "  reflex_bus list [--window 2]                   processes and modules from their heartbeats\n"
-               "  reflex_bus hz [reflex/joint_state ...] [--window 2]   samples per second of every topic"};
+               "  reflex_bus list [--window 3.5]                 processes and modules from their heartbeats\n"
+               "  reflex_bus hz [reflex/joint_state ...] [--window 3.5]   samples per second of every topic"};
   app.require_subcommand(1);
-  double window = 2.0;
+  double window = 3.5;
   int domain = -1;
   std::string profiles;
   std::vector<std::string> topics;
@@ -56,8 +56,8 @@ int main(int argc, char** argv) {
       "hz", "samples per second (over the span from the first to the last sample, as ros2 topic hz) and matched writers of each topic");
   hz->add_option("topic", topics, "topics to measure (default: every Reflex topic); NAME or NAME:TYPE");
   for (CLI::App* sub : {list, hz}) {
-    sub->add_option("-w,--window", window, "seconds to listen (at least 2: discovery takes up to that; list then "
-                    "listens up to 5 s more while a process it found has not been heard)")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
+    sub->add_option("-w,--window", window, "seconds to listen (at least 3.5: every process announces itself at least every 3 s; "
+                    "list then listens up to 5 s more while a process it found has not been heard)")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
     sub->add_option("--domain", domain, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
         ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
     sub->add_option("--profiles", profiles, "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped one)");
