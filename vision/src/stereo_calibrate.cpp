@@ -55,8 +55,8 @@ double aprilGridSpacing(const BoardSpec& b, const TagFamily& family) {
 }
 
 // A checkerboard's corners come back in one of two orders (the board looks the same turned by 180
-// degrees). Both cameras of a rig see the board nearly the same way, so "first corner nearer the
-// image's top-left than the last" gives both the same order.
+// degrees): "first corner nearer the image's top-left than the last" in each image. Near the
+// diagonal the two cameras can disagree; alignStereoPair makes the pair agree.
 void orderCheckerboard(std::vector<cv::Point2f>& corners) {
   if (corners.empty()) return;
   const cv::Point2f& a = corners.front();
@@ -109,6 +109,14 @@ CameraInfo cameraInfo(const std::string& name, const cv::Size& size, const cv::M
 }
 
 }  // namespace
+
+void alignStereoPair(const BoardSpec& board, const BoardObservation& left, BoardObservation& right) {
+  if (board.kind != BoardKind::kCheckerboard) return;
+  if (left.pixels.size() < 2 || left.pixels.size() != right.pixels.size()) return;
+  const cv::Point2f dl = left.pixels.back() - left.pixels.front();
+  const cv::Point2f dr = right.pixels.back() - right.pixels.front();
+  if (dl.dot(dr) < 0.0f) std::reverse(right.pixels.begin(), right.pixels.end());
+}
 
 BoardKind parseBoardKind(const std::string& name) {
   if (name == "checkerboard") return BoardKind::kCheckerboard;

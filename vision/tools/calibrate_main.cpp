@@ -133,6 +133,7 @@ int runCalibrate(const BoardArgs& ba, const std::string& pairs, const std::strin
     v.name = name;
     v.left = detectBoard(board, l);
     v.right = detectBoard(board, r);
+    alignStereoPair(board, v.left, v.right);
     with_board += !v.left.ids.empty() && !v.right.ids.empty();
     if (!quiet)
       std::fprintf(stderr, "view %zu/%d %s: left %zu points, right %zu points\n", views.size() + 1, images.count(),

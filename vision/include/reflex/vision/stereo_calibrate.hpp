@@ -80,6 +80,15 @@ struct BoardObservation {
 /// image contents; throws VisionError for an empty image).
 BoardObservation detectBoard(const BoardSpec& board, const cv::Mat& image);
 
+/// A checkerboard looks the same turned by 180 degrees, so each image's corner order is a guess
+/// (detectBoard: first corner nearer the image's top-left). For a board seen diagonally, or turned
+/// about 45 degrees in the image, the two cameras of a rig can guess differently, and every corner
+/// would be matched with the opposite one. The two cameras see the board nearly the same way: when
+/// the first-to-last corner directions of the two images point apart (negative dot product), the
+/// right list is reversed. Other boards (ids from the board itself) and partial views are left as
+/// they are.
+void alignStereoPair(const BoardSpec& board, const BoardObservation& left, BoardObservation& right);
+
 /// One stereo view: the same board seen by both cameras at the same time.
 struct StereoView {
   std::string name;  ///< shown in reports ("pair_012.png", "frame 340")
