@@ -14,6 +14,8 @@
 using namespace reflex::vision;
 using reflex::vision::test::errorOf;
 using ::testing::HasSubstr;
+using ::testing::AllOf;
+using ::testing::Not;
 
 namespace {
 
@@ -121,6 +123,17 @@ TEST(Calibration, StereoInconsistenciesAreErrors) {
   StereoCalibration vertical{l, r};
   vertical.right.P(1, 3) = -10.0;
   EXPECT_THAT(errorOf([&] { validateStereoCalibration(vertical, "L.yaml", "R.yaml"); }), HasSubstr("horizontal"));
+  // A mirrored solution (rectified focal lengths negative, P[0][3] = 0 on the left): named as what it
+  // is, not as "P[0][3] = 0 must be 0" (the tolerance scaled by a negative focal length).
+  StereoCalibration mirrored{l, r};
+  for (CameraInfo* c : {&mirrored.left, &mirrored.right}) {
+    c->P(0, 0) = -c->P(0, 0);
+    c->P(1, 1) = -c->P(1, 1);
+  }
+  mirrored.right.P(0, 3) = -mirrored.right.P(0, 3);
+  const std::string why = errorOf([&] { validateStereoCalibration(mirrored, "L.yaml", "R.yaml"); });
+  EXPECT_THAT(why, AllOf(HasSubstr("L.yaml"), HasSubstr("rectified focal lengths fx' = -"), HasSubstr("must be positive")));
+  EXPECT_THAT(why, Not(HasSubstr("must be 0")));
 }
 
 TEST(Calibration, RigCalibrationMatchesStereoRectifyConventions) {

@@ -176,6 +176,14 @@ void validateStereoCalibration(const StereoCalibration& calib, const std::string
     throw VisionError("image sizes differ: " + left_source + " has " + std::to_string(l.image_size.width) + "x" +
                       std::to_string(l.image_size.height) + " but " + right_source + " has " +
                       std::to_string(r.image_size.width) + "x" + std::to_string(r.image_size.height));
+  // A rectified focal length that is not positive (a calibration that converged to a mirrored
+  // solution, e.g. k3 running away) makes every check below meaningless: said first, as what it is.
+  for (const auto& [camera, source] : {std::pair<const CameraInfo*, const std::string*>{&l, &left_source},
+                                      std::pair<const CameraInfo*, const std::string*>{&r, &right_source}}) {
+    if (!(camera->P(0, 0) > 0.0) || !(camera->P(1, 1) > 0.0))
+      throw VisionError(*source + ": projection_matrix has the rectified focal lengths fx' = " + fmt(camera->P(0, 0)) +
+                        ", fy' = " + fmt(camera->P(1, 1)) + "; both must be positive");
+  }
   const double tol = 1e-6 * l.P(0, 0);
   if (std::abs(l.P(0, 3)) > tol)
     throw VisionError(left_source + ": projection_matrix P[0][3] = " + fmt(l.P(0, 3)) +

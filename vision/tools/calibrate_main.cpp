@@ -81,9 +81,19 @@ std::pair<std::string, std::string> outputPaths(const std::string& out) {
   return {(dir / "left.yaml").string(), (dir / "right.yaml").string()};
 }
 
-// Writes the pair and loads it back with the reader reflex_vision uses (every field checked); a pair
-// vision would refuse is removed and the error raised.
-void writePair(const StereoCalibration& c, const std::string& out) {
+// Checks the pair as reflex_vision will (nothing is written if it would refuse it: the error says so,
+// exit 3 for a calibration this tool computed, with what to try), writes it and loads it back with
+// the reader reflex_vision uses; a pair that does not read back is removed and the error raised.
+void writePair(const StereoCalibration& c, const std::string& out, bool computed) {
+  try {
+    validateStereoCalibration(c, "left camera", "right camera");
+  } catch (const VisionError& e) {
+    throw VisionError(std::string(computed ? "calibration rejected" : "conversion rejected") +
+                      ": reflex_vision would refuse it, so nothing was written to '" + out + "': " + e.what() +
+                      (computed ? " (try --fix-k3, more views that reach the image corners, or a lower "
+                                  "--outlier-factor)"
+                                : ""));
+  }
   const auto [left, right] = outputPaths(out);
   saveCameraInfo(left, c.left);
   saveCameraInfo(right, c.right);
@@ -173,7 +183,7 @@ int runCalibrate(const BoardArgs& ba, const std::string& pairs, const std::strin
               res.calibration.baseline(), res.T[0], res.T[1], res.T[2], degrees(cv::norm(rvec)));
   std::printf("  rectified: fx' %.2f  cx'_L %.2f  cx'_R %.2f  cy' %.2f\n", res.calibration.left.P(0, 0),
               res.calibration.left.P(0, 2), res.calibration.right.P(0, 2), res.calibration.left.P(1, 2));
-  writePair(res.calibration, out);
+  writePair(res.calibration, out, true);
   return 0;
 }
 
@@ -280,7 +290,8 @@ int main(int argc, char** argv) {
       "  board      a printable board image (PNG) for the board options given\n"
       "  mount      the camera in the head frame and camera_mount.yaml, from a tag on a hand seen in several robot\n"
       "             poses (joint values + the tag centre measured by reflex_vision --dump) and the robot's URDF\n"
-      "Exit: 0 done, 2 bad option or input (named), 3 calibration failed (too few views, ...)."};
+      "Exit: 0 done, 2 bad option or input (named), 3 calibration failed (too few views, stereoCalibrate "
+      "failed, or a result reflex_vision would refuse: nothing is written then)."};
   app.require_subcommand(1);
 
   BoardArgs cal_board, draw_board;
@@ -366,7 +377,7 @@ int main(int argc, char** argv) {
       std::string notes;
       const StereoCalibration c = convertOpenCvStereo(conv_files, copt, notes);
       std::cout << notes;
-      writePair(c, conv_out);
+      writePair(c, conv_out, false);
       return 0;
     }
     if (draw->parsed()) {
@@ -390,7 +401,10 @@ int main(int argc, char** argv) {
   } catch (const VisionError& e) {
     const std::string what = e.what();
     std::cerr << "reflex_calibrate: error: " << what << "\n";
-    return what.rfind("too few usable views", 0) == 0 || what.rfind("OpenCV stereoCalibrate", 0) == 0 ? 3 : 2;
+    return what.rfind("too few usable views", 0) == 0 || what.rfind("OpenCV stereoCalibrate", 0) == 0 ||
+                   what.rfind("calibration rejected", 0) == 0
+               ? 3
+               : 2;
   } catch (const std::exception& e) {
     std::cerr << "reflex_calibrate: error: " << e.what() << "\n";
     return 2;
