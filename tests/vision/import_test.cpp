@@ -182,6 +182,7 @@ TEST(Import, BadInputsAreNamedAndLeaveNoSession) {
       {" --from-files " + (dir / "left.avi") + " " + (dir / "short.avi"), "has 10 frames but right video"},
       {" --from-files " + (dir / "left.avi") + " " + (dir / "small.avi"), "is 640x480 but right video"},
       {" --from-side-by-side " + (dir / "odd.avi"), "is 1279 pixels wide"},
+      {" --from-files " + (dir / "left.avi") + " " + (dir / "left.avi"), "the left and the right video are the same file"},
       {" --from-side-by-side " + (dir / "left.avi"), "has 320x480 halves but the calibration says 640x480"},
       {lr + " --timestamps " + (dir / "short.csv"), "lists 9 frames but video"},
       {lr + " --timestamps " + (dir / "long.csv"), "lists 12 frames but video"},

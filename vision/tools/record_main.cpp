@@ -7,6 +7,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include <filesystem>
+
 #include <unistd.h>
 
 #include <chrono>
@@ -146,6 +148,12 @@ int main(int argc, char** argv) {
     }
     const bool show = !quiet && (progress || isatty(STDERR_FILENO));
     if (offline) {
+      // One video twice (a path typed twice, or a link to the other) gives a "stereo" session with no
+      // disparity: every tag at infinity.
+      std::error_code same_ec;
+      if (!from_files.empty() && std::filesystem::equivalent(from_files[0], from_files[1], same_ec))
+        throw VisionError("--from-files: the left and the right video are the same file ('" + from_files[0] + "' and '" +
+                          from_files[1] + "'): a stereo session needs each camera's own video");
       VideoFilesSpec spec;
       spec.left = from_sbs.empty() ? from_files[0] : from_sbs;
       spec.right = from_sbs.empty() ? from_files[1] : std::string();
