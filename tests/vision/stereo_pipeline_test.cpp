@@ -13,6 +13,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 using namespace reflex::vision;
 using ::testing::HasSubstr;
 
@@ -112,7 +114,14 @@ TEST(StereoTagPoseFit, RecoversAKnownPoseFromExactCorners) {
 
 TEST(Confidence, RangeAndMonotonicity) {
   EXPECT_NEAR(computeConfidence(150, 0, 1.0), 1.0, 1e-12);
-  EXPECT_GE(computeConfidence(0, 10, 3.0), 0.0);
+  // The documented formula (stereo_pipeline.hpp): clamp(margin / 100) * exp(-e^2 / 2) *
+  // exp(-((ratio - 1) / 0.05)^2 / 2), each factor checked on its own.
+  EXPECT_NEAR(computeConfidence(50, 0, 1.0), 0.5, 1e-12);
+  EXPECT_NEAR(computeConfidence(100, 1.0, 1.0), std::exp(-0.5), 1e-12);
+  EXPECT_NEAR(computeConfidence(100, 0, 1.05), std::exp(-0.5), 1e-12);
+  EXPECT_NEAR(computeConfidence(80, 2.0, 0.9), 0.8 * std::exp(-2.0) * std::exp(-2.0), 1e-12);
+  EXPECT_EQ(computeConfidence(0, 10, 3.0), 0.0);  // no decision margin: no confidence
+  EXPECT_EQ(computeConfidence(-20, 0, 1.0), 0.0);  // a margin below 0 clamps to 0, not negative
   EXPECT_LT(computeConfidence(50, 0, 1.0), computeConfidence(90, 0, 1.0));
   EXPECT_LT(computeConfidence(90, 1.5, 1.0), computeConfidence(90, 0.2, 1.0));
   EXPECT_LT(computeConfidence(90, 0, 1.1), computeConfidence(90, 0, 1.01));
