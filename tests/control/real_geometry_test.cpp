@@ -82,6 +82,25 @@ std::vector<std::pair<std::string, std::string>> alwaysInCollision(const std::st
   return out;
 }
 
+/// The oracle's shapes: each robot segment's original meshes (link frame) as an FCL BVH model; null
+/// for a segment without mesh triangles.
+template <class Meshes>
+std::vector<std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> segmentBvhs(const Model& model, const Meshes& meshes) {
+  std::vector<std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> bvh(model.segments.size());
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    const auto it = meshes.find(model.segments[static_cast<std::size_t>(s)].name);
+    if (it == meshes.end() || it->second.t.empty()) continue;
+    auto m = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
+    std::vector<fcl::Triangle> tris;
+    for (const auto& t : it->second.t) tris.emplace_back(t[0], t[1], t[2]);
+    m->beginModel();
+    m->addSubModel(it->second.v, tris);
+    m->endModel();
+    bvh[static_cast<std::size_t>(s)] = m;
+  }
+  return bvh;
+}
+
 /// One CSV file: the header's column names and the last row's fields.
 struct LastRow {
   std::map<std::string, std::string> field;
@@ -160,19 +179,11 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
 
   // The oracle's shapes: every link's original meshes as FCL BVH models (link frame).
   const auto meshes = test::linkMeshes(urdf, paths.packages);
-  std::vector<std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> bvh(model.segments.size());
+  const auto bvh = segmentBvhs(model, meshes);
   std::vector<const test::RawMesh*> raw(model.segments.size(), nullptr);
   for (int s = 0; s < model.num_robot_segments; ++s) {
     const auto it = meshes.find(model.segments[static_cast<std::size_t>(s)].name);
-    if (it == meshes.end() || it->second.t.empty()) continue;
-    auto m = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
-    std::vector<fcl::Triangle> tris;
-    for (const auto& t : it->second.t) tris.emplace_back(t[0], t[1], t[2]);
-    m->beginModel();
-    m->addSubModel(it->second.v, tris);
-    m->endModel();
-    bvh[static_cast<std::size_t>(s)] = m;
-    raw[static_cast<std::size_t>(s)] = &it->second;
+    if (bvh[static_cast<std::size_t>(s)]) raw[static_cast<std::size_t>(s)] = &it->second;
   }
 
   KinematicsData kin(model);
@@ -293,18 +304,7 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
   // of where they end without.
   const ControllerConfig cc = loadControllerConfig(out + "/controller.yaml");
   const Model setup_model = loadModel(urdf, loadCollisionConfig(out + "/collision.yaml"));
-  std::vector<std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>> setup_bvh(setup_model.segments.size());
-  for (int s = 0; s < setup_model.num_robot_segments; ++s) {
-    const auto it = meshes.find(setup_model.segments[static_cast<std::size_t>(s)].name);
-    if (it == meshes.end() || it->second.t.empty()) continue;
-    auto m = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
-    std::vector<fcl::Triangle> tris;
-    for (const auto& t : it->second.t) tris.emplace_back(t[0], t[1], t[2]);
-    m->beginModel();
-    m->addSubModel(it->second.v, tris);
-    m->endModel();
-    setup_bvh[static_cast<std::size_t>(s)] = m;
-  }
+  const auto setup_bvh = segmentBvhs(setup_model, meshes);
   const std::string sim_args = " all --urdf " + urdf + " --collision " + out + "/collision.yaml --controller " + out +
                                "/controller.yaml --no-plots --out ";
   const test::ProcessResult on = test::runTool("reflex_sim", sim_args + out + "/sim_on");

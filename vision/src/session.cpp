@@ -352,8 +352,9 @@ std::string sessionFolderProblem(const std::string& dir) {
   if (std::string why = common::outputFolderProblem(dir); !why.empty()) return why;
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return "";  // made by the writer: nothing in it yet
-  std::vector<std::string> names = {"timestamps.csv", "session.yaml", "left.yaml",        "right.yaml",
-                                    "objects.yaml",   "camera_mount.yaml", "ground_truth.csv"};
+  const SessionFiles files;  // the writer's own names; the optional ones as it writes them
+  std::vector<std::string> names = {files.timestamps, files.left_calibration, files.right_calibration, files.objects,
+                                    "session.yaml",   "camera_mount.yaml",    "ground_truth.csv"};
   for (const auto& codec : SessionWriterOptions{}.codecs) {
     names.push_back("left." + codec.second);
     names.push_back("right." + codec.second);

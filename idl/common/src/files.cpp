@@ -53,10 +53,11 @@ std::string writeError(const std::string& path, int err) {
   return "cannot write " + quoted(path) + ": " + std::strerror(err);
 }
 
-std::string replaceableFileProblem(const std::string& path, std::string* target_out) {
-  // Only a regular file is ever replaced: renaming over a device, a FIFO or a directory replaces the
-  // node itself (`-o /dev/null` run as root deleted the machine's /dev/null). A symbolic link is
-  // written through: its target is replaced, the link stays.
+namespace {
+
+// "" when `path` is missing, a regular file or a link to one (then *target_out, if given, is the file
+// the link resolves to); else "output file '<path>' [(a link to '<target>')] is <kind>: <rule>".
+std::string nonRegularOutput(const std::string& path, std::string* target_out, const char* rule) {
   std::string target = path;
   struct stat st {};
   if (::lstat(path.c_str(), &st) == 0) {
@@ -69,10 +70,19 @@ std::string replaceableFileProblem(const std::string& path, std::string* target_
     }
     if (!S_ISREG(st.st_mode))
       return "output file " + quoted(path) + (target == path ? "" : " (a link to " + quoted(target) + ")") + " is " +
-             fileKind(st.st_mode) + ": only a regular file is ever replaced";
+             fileKind(st.st_mode) + ": " + rule;
   }
   if (target_out) *target_out = target;
   return "";
+}
+
+}  // namespace
+
+std::string replaceableFileProblem(const std::string& path, std::string* target_out) {
+  // Only a regular file is ever replaced: renaming over a device, a FIFO or a directory replaces the
+  // node itself (`-o /dev/null` run as root deleted the machine's /dev/null). A symbolic link is
+  // written through: its target is replaced, the link stays.
+  return nonRegularOutput(path, target_out, "only a regular file is ever replaced");
 }
 
 std::string writeFileReplacing(const std::string& path, const std::string& text) {
@@ -157,18 +167,8 @@ int openOutputStream(const std::string& path) noexcept {
 
 std::string regularOutputProblem(const std::string& path) {
   struct stat st {};
-  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
-    struct stat lst {};
-    std::string via;
-    if (::lstat(path.c_str(), &lst) == 0 && S_ISLNK(lst.st_mode)) {
-      char* resolved = ::realpath(path.c_str(), nullptr);
-      if (resolved != nullptr) {
-        via = " (a link to " + quoted(resolved) + ")";
-        std::free(resolved);
-      }
-    }
-    return "output file " + quoted(path) + via + " is " + fileKind(st.st_mode) + ": only a regular file is written";
-  }
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+    return nonRegularOutput(path, nullptr, "only a regular file is written");
   return outputFileProblem(path);
 }
 
