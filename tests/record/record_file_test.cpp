@@ -374,13 +374,11 @@ TEST(RecordFileLinearTime, CraftedResyncInputReadsInLinearTime) {
   EXPECT_LT(s2.seconds / sv.seconds, 100.0) << "crafted " << s2.seconds << " s, valid " << sv.seconds << " s";
 }
 
-TEST(RecordFileLinearTime, LongCorruptHeadersBetweenValidRecordsCostNoMoreThanTheirHeader) {
-  // A valid record, then a header claiming a body to the end of the file with a wrong CRC, and so
-  // on: each damaged header was read and CRC-checked to the end of the file (quadratic).
-  const std::string path = tempPath("longheaders.rfx");
+/// A file of `records` valid records, each followed by a damaged header (sync word, a claimed body of
+/// at most `claim` bytes reaching at most the end of the file, a CRC of 0).
+std::vector<std::uint8_t> validRecordsWithDamagedHeaders(std::size_t records, std::size_t claim) {
   std::vector<std::uint8_t> b(kFileMagic, kFileMagic + 8);
   b.insert(b.end(), {1, 0, 0, 0, 0, 0, 0, 0});
-  const std::size_t records = 20000;
   const std::vector<std::uint8_t> rec = encodeRecord(RecordEntry{5, 6, "a", "B", {9, 9}});
   const std::size_t total = b.size() + records * (rec.size() + 12);
   for (std::size_t i = 0; i < records; ++i) {
@@ -388,9 +386,18 @@ TEST(RecordFileLinearTime, LongCorruptHeadersBetweenValidRecordsCostNoMoreThanTh
     const std::size_t at = b.size();
     b.resize(at + 12);
     putU32(b, at, kRecordSync);
-    putU32(b, at + 4, static_cast<std::uint32_t>(total - at - 12));
+    putU32(b, at + 4, static_cast<std::uint32_t>(std::min(claim, total - at - 12)));
     putU32(b, at + 8, 0);
   }
+  return b;
+}
+
+TEST(RecordFileLinearTime, LongCorruptHeadersBetweenValidRecordsCostNoMoreThanTheirHeader) {
+  // A valid record, then a header claiming a body to the end of the file with a wrong CRC, and so
+  // on: each damaged header was read and CRC-checked to the end of the file (quadratic).
+  const std::string path = tempPath("longheaders.rfx");
+  const std::size_t records = 20000;
+  const std::vector<std::uint8_t> b = validRecordsWithDamagedHeaders(records, ~std::size_t{0});
   writeBytes(path, b, b.size());
   const ReadStats s = readAll(path, 1);
   EXPECT_EQ(s.records, records);
@@ -402,19 +409,8 @@ TEST(RecordFileLinearTime, DamagedHeadersClaimingMidSizeBodiesCostNoMoreThanAVal
   // As above, but each damaged header claims a 64 KiB body (or the rest of the file): below the size
   // that was checked before reading, so each was read and CRC-checked in full (1,000 x its own bytes).
   const std::string path = tempPath("midheaders.rfx"), valid = tempPath("midheaders_valid.rfx");
-  std::vector<std::uint8_t> b(kFileMagic, kFileMagic + 8);
-  b.insert(b.end(), {1, 0, 0, 0, 0, 0, 0, 0});
   const std::size_t records = 20000;
-  const std::vector<std::uint8_t> rec = encodeRecord(RecordEntry{5, 6, "a", "B", {9, 9}});
-  const std::size_t total = b.size() + records * (rec.size() + 12);
-  for (std::size_t i = 0; i < records; ++i) {
-    b.insert(b.end(), rec.begin(), rec.end());
-    const std::size_t at = b.size();
-    b.resize(at + 12);
-    putU32(b, at, kRecordSync);
-    putU32(b, at + 4, static_cast<std::uint32_t>(std::min<std::size_t>(64 * 1024, total - at - 12)));
-    putU32(b, at + 8, 0);
-  }
+  const std::vector<std::uint8_t> b = validRecordsWithDamagedHeaders(records, 64 * 1024);
   writeBytes(path, b, b.size());
   validRecording(valid, b.size());
   const ReadStats s = readAll(path), v = readAll(valid);
