@@ -44,6 +44,13 @@ ConvexPiece makeConvexPiece(const std::vector<Eigen::Vector3d>& vertices,
   for (const Eigen::Vector3d& v : vertices)
     piece.bound_radius = std::max(piece.bound_radius, (v - piece.bound_center_L).norm());
 
+  for (std::size_t k = 0; k < kStartDirections.size(); ++k) {
+    const Eigen::Vector3d d(kStartDirections[k][0], kStartDirections[k][1], kStartDirections[k][2]);
+    int best = 0;
+    for (int i = 1; i < n; ++i)
+      if (d.dot(vertices[i]) > d.dot(vertices[best])) best = i;
+    piece.start_vertex[k] = best;
+  }
   if (triangles.empty()) return piece;
   // Undirected edges of the triangles, both directions, sorted and unique: the CSR edge graph.
   std::vector<std::pair<int, int>> edges;
@@ -72,6 +79,18 @@ ConvexPiece makeConvexPiece(const std::vector<Eigen::Vector3d>& vertices,
       break;
     }
   return piece;
+}
+
+int startVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L) noexcept {
+  // The axes' cosines are |d_i| / |d|, the diagonals' (|d_x| + |d_y| + |d_z|) / (sqrt(3) |d|): the
+  // largest component against the sum over sqrt(3) picks between the two kinds, the signs the one.
+  const Eigen::Vector3d m = d_L.cwiseAbs();
+  int axis = 0;
+  const double largest = m.maxCoeff(&axis);
+  if (largest * 1.7320508075688772 >= m.sum())
+    return piece.start_vertex[static_cast<std::size_t>(2 * axis + (d_L[axis] < 0 ? 1 : 0))];
+  const int octant = (d_L.x() < 0 ? 4 : 0) + (d_L.y() < 0 ? 2 : 0) + (d_L.z() < 0 ? 1 : 0);
+  return piece.start_vertex[static_cast<std::size_t>(6 + octant)];
 }
 
 int supportVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L, int start) noexcept {
@@ -310,7 +329,8 @@ void reduce(Simplex& s, SubResult& r) {
 }  // namespace
 
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
-                                     const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm) noexcept {
+                                     const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm,
+                                     double stop_above) noexcept {
   constexpr int kMaxIterations = 64;
   ConvexDistance out;
   assert(!a.vertices_L.empty() && !b.vertices_L.empty());
@@ -347,9 +367,12 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     s.ia[0] = ia;
     s.ib[0] = ib;
   } else {
-    // Cold: the support point towards B's bounding centre from A's.
+    // Cold: the support point towards B's bounding centre from A's, each climb from its piece's
+    // start vertex for that direction.
     Eigen::Vector3d d = (R_B_B * b.bound_center_L + p_B_B) - (R_B_A * a.bound_center_L + p_B_A);
     if (!(d.squaredNorm() > 0)) d = Eigen::Vector3d::UnitX();
+    ia = startVertex(a, R_B_A.transpose() * d);
+    ib = startVertex(b, -(R_B_B.transpose() * d));
     support(d, 0);
   }
   s.size = 1;
@@ -371,8 +394,18 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     support(-v, m);
     ++out.iterations;
     w_max = std::max(w_max, s.w[m].norm());
+    // Every point x of A - B has v.x >= v.w (w is the support in -v): the distance is at least
+    // v.w / |v|; less the tolerance, at most the distance this search would report (within tol of
+    // the exact one), so the bound is below the answer too. Above stop_above the caller needs no more.
+    const double vw = v.dot(s.w[m]);
+    const double lower = vw / std::sqrt(sub.vv) - tol;
+    if (lower > stop_above) {
+      out.above = true;
+      out.distance = lower;
+      return out;
+    }
     // Montanari Alg. 1's relative test as a bound on the error: |v| - d <= (|v|^2 - v.w) / |v|.
-    if (!(sub.vv - v.dot(s.w[m]) > tol * std::sqrt(sub.vv))) break;
+    if (!(sub.vv - vw > tol * std::sqrt(sub.vv))) break;
     bool repeated = false;  // a vertex pair already in the simplex: no progress possible
     for (int k = 0; k < m; ++k) repeated = repeated || (s.ia[k] == ia && s.ib[k] == ib);
     if (repeated) break;

@@ -50,6 +50,7 @@ DistanceData::DistanceData(const Model& model)
     core_piece[p].bound_center_L = 0.5 * (model.primitives[p].a_L + model.primitives[p].b_L);
   }
   pair_has_piece.assign(model.pairs.size(), 0);
+  piece_winner.assign(model.pairs.size(), -1);
   auto hasPiece = [&](const Segment& seg) {
     for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
       if (model.primitives[static_cast<std::size_t>(p)].piece >= 0) return true;
@@ -189,12 +190,16 @@ REFLEX_ALWAYS_INLINE inline void finishPairPoints(const Model& model, const Kine
   }
 }
 
+/// What pieceDistance found.
+enum class PieceOutcome : std::uint8_t { kApart, kTouching, kAbove };
+
 /// The exact distance of primitives pa (on link_a) and pb (on link_b) on their real shapes: a convex
-/// piece as it is, a capsule as its core and radius. False when the pieces (or cores) touch or
-/// overlap: there is no direction; p_a is then a common point.
-inline bool pieceDistance(const Model& model, const KinematicsData& kin, const DistanceData& data, int pa, int pb,
-                          int link_a, int link_b, double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b,
-                          Eigen::Vector3d& n) {
+/// piece as it is, a capsule as its core and radius. kApart: d, p_a, p_b, n. kTouching: the pieces (or
+/// cores) touch or overlap, there is no direction; p_a is a common point. kAbove: the distance is
+/// proven above `stop_above` (d: a lower bound of it, > stop_above), nothing else computed.
+inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin, const DistanceData& data, int pa,
+                                  int pb, int link_a, int link_b, double stop_above, double& d, Eigen::Vector3d& p_a,
+                                  Eigen::Vector3d& p_b, Eigen::Vector3d& n) {
   const Primitive& A = model.primitives[static_cast<std::size_t>(pa)];
   const Primitive& B = model.primitives[static_cast<std::size_t>(pb)];
   const ConvexPiece& ca = A.piece >= 0 ? model.pieces[static_cast<std::size_t>(A.piece)] : data.core_piece[static_cast<std::size_t>(pa)];
@@ -202,80 +207,130 @@ inline bool pieceDistance(const Model& model, const KinematicsData& kin, const D
   const double ra = A.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pa)];
   const double rb = B.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pb)];
   const ConvexDistance c = computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(link_a)], cb,
-                                                 kin.X_B_L[static_cast<std::size_t>(link_b)]);
+                                                 kin.X_B_L[static_cast<std::size_t>(link_b)], nullptr,
+                                                 stop_above + ra + rb);
+  if (c.above) {
+    d = c.distance - ra - rb;
+    return PieceOutcome::kAbove;
+  }
   if (!(c.distance > kCoincidentEps)) {
     p_a = c.p_B_a;
-    return false;
+    return PieceOutcome::kTouching;
   }
   n = (c.p_B_a - c.p_B_b) * (1.0 / c.distance);
   d = c.distance - ra - rb;
   p_a = c.p_B_a - ra * n;
   p_b = c.p_B_b + rb * n;
-  return true;
+  return PieceOutcome::kApart;
 }
 
 /// Pair i of the tight model: the least exact distance over its primitive pairs, visited by
-/// `each(f)` calling f(pa, pb, capsule distance, core distance, s, t) for each. They are taken nearest
-/// capsule distance first (a lower bound of the exact one): once a bound is not below the best exact
-/// distance found, neither is any after it, and they are skipped. Allocation-free (sorted in place in
-/// DistanceData::piece_candidates).
+/// `each(f)` calling f(pa, pb, capsule distance, core distance, s, t) for each. The primitive pair of
+/// the smallest capsule distance (a lower bound of the exact one) goes first; of the rest only those
+/// whose bound is below the best exact distance found, nearest first, and each search stops as soon
+/// as it proves its pair not closer than the best (computeConvexDistance's stop_above). Among equal
+/// distances the lowest (pa, pb) wins, so the order does not change the result.
+/// With a finite `give_up` (the broad phase's distance) a pair proven farther than it is left
+/// inexact: returns false with `floor`, a lower bound of its distance (> give_up), and writes nothing.
+/// Allocation-free (sorted in place in DistanceData::piece_candidates).
 template <class Each>
-void finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData& data, const DistanceOptions& options,
-                     int i, int link_a, int link_b, Each&& each) {
+bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData& data, const DistanceOptions& options,
+                     int i, int link_a, int link_b, double give_up, double& floor, Each&& each) {
   DistanceData::PieceCandidate* cand = data.piece_candidates.data();
-  std::size_t count = 0;
+  std::size_t count = 0, first = 0;
   each([&](int pa, int pb, double bound, double core, double s, double t) {
     // A bound that is not a number is taken first (never skipped on its account).
-    cand[count++] = {bound == bound ? bound : -std::numeric_limits<double>::infinity(), core, s, t, pa, pb};
+    const double key = bound == bound ? bound : -std::numeric_limits<double>::infinity();
+    if (count == 0 || key < cand[first].bound) first = count;
+    cand[count] = {key, core, s, t, pa, pb, static_cast<int>(count)};
+    ++count;
   });
-  std::sort(cand, cand + count,
-            [](const DistanceData::PieceCandidate& x, const DistanceData::PieceCandidate& y) { return x.bound < y.bound; });
+  // The pair that won last time goes first when it can still win (it usually does again: its
+  // distance then rules out nearly every other), else the one of the smallest bound.
+  int& last = data.piece_winner[static_cast<std::size_t>(i)];
+  if (last >= 0 && static_cast<std::size_t>(last) < count && !(cand[last].bound > give_up)) first = static_cast<std::size_t>(last);
+  std::swap(cand[0], cand[first]);
   double best = std::numeric_limits<double>::infinity();
+  floor = std::numeric_limits<double>::infinity();
   bool on_pieces = false, overlap = false;
-  int cap_pa = -1, cap_pb = -1;
+  int cap_pa = -1, cap_pb = -1, cap_index = -1;
   double cap_core = 0.0, cap_s = 0.0, cap_t = 0.0;
   Eigen::Vector3d best_pa = Eigen::Vector3d::Zero(), best_pb = Eigen::Vector3d::Zero(), best_n = Eigen::Vector3d::UnitZ();
-  for (std::size_t k = 0; k < count; ++k) {
-    const int pa = cand[k].pa, pb = cand[k].pb;
-    const double bound = cand[k].bound, core = cand[k].core, s = cand[k].s, t = cand[k].t;
-    if (!(bound < best) && cap_pa >= 0) break;
-    double d;
-    Eigen::Vector3d p_a, p_b, n;
+  // Whether (pa, pb) at distance d replaces the best so far.
+  auto better = [&](double d, int pa, int pb) {
+    return cap_pa < 0 || d < best || (d == best && (pa < cap_pa || (pa == cap_pa && pb < cap_pb)));
+  };
+  auto evaluate = [&](const DistanceData::PieceCandidate& c) {
+    const int pa = c.pa, pb = c.pb;
     const bool capsules = model.primitives[static_cast<std::size_t>(pa)].piece < 0 &&
                           model.primitives[static_cast<std::size_t>(pb)].piece < 0;
     if (capsules) {  // two capsules: exact as they are
-      best = bound, on_pieces = false, overlap = false;
-      cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
-      continue;
-    }
-    if (pieceDistance(model, kin, data, pa, pb, link_a, link_b, d, p_a, p_b, n)) {
-      if (d < best || cap_pa < 0) {
-        best = d, on_pieces = true, overlap = false, best_pa = p_a, best_pb = p_b, best_n = n;
-        cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
+      if (better(c.bound, pa, pb)) {
+        best = c.bound, on_pieces = false, overlap = false;
+        cap_pa = pa, cap_pb = pb, cap_index = c.index, cap_core = c.core, cap_s = c.s, cap_t = c.t;
       }
-      continue;
+      return;
+    }
+    double d;
+    Eigen::Vector3d p_a, p_b, n;
+    const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b, cap_pa >= 0 ? best : give_up,
+                                         d, p_a, p_b, n);
+    if (o == PieceOutcome::kAbove) {
+      floor = std::min(floor, d);
+      return;
+    }
+    if (o == PieceOutcome::kApart) {
+      if (better(d, pa, pb)) {
+        best = d, on_pieces = true, overlap = false, best_pa = p_a, best_pb = p_b, best_n = n;
+        cap_pa = pa, cap_pb = pb, cap_index = c.index, cap_core = c.core, cap_s = c.s, cap_t = c.t;
+      }
+      return;
     }
     // The pieces touch or overlap: distance 0, "the real shapes touch or overlap" (they may be apart
     // by up to the pieces' gaps, or intersect; the tight model does not estimate a depth, and the
     // capsules' depth can be far below the truth), at the common point, along the capsules' direction
     // (the way that separates their cores).
-    if (!(0.0 < best) && cap_pa >= 0) continue;
+    if (!better(0.0, pa, pb)) return;
     const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
     const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
-    Eigen::Vector3d dir = (A.start + s * A.d) - (B.start + t * B.d);
+    Eigen::Vector3d dir = (A.start + c.s * A.d) - (B.start + c.t * B.d);
     if (!(dir.norm() > kCoincidentEps)) dir = kin.X_B_L[static_cast<std::size_t>(link_a)].translation() -
                                               kin.X_B_L[static_cast<std::size_t>(link_b)].translation();
     const double len = dir.norm();
     best = 0.0, on_pieces = true, overlap = true, best_pa = p_a, best_pb = p_a;
     best_n = len > kCoincidentEps ? Eigen::Vector3d(dir / len) : Eigen::Vector3d::UnitZ();
-    cap_pa = pa, cap_pb = pb, cap_core = core, cap_s = s, cap_t = t;
+    cap_pa = pa, cap_pb = pb, cap_index = c.index, cap_core = c.core, cap_s = c.s, cap_t = c.t;
+  };
+  // Only a primitive pair whose bound is not above `cut` (the best exact distance, give_up while
+  // there is none) can matter; every one after the first above it is farther still.
+  auto cut = [&] { return cap_pa >= 0 ? best : give_up; };
+  if (count > 0 && !(cand[0].bound > give_up)) evaluate(cand[0]);
+  std::size_t live = 1;
+  for (std::size_t k = 1; k < count; ++k) {
+    if (!(cand[k].bound > cut())) std::swap(cand[live++], cand[k]);
+    else floor = std::min(floor, cand[k].bound);
   }
+  std::sort(cand + 1, cand + live,
+            [](const DistanceData::PieceCandidate& x, const DistanceData::PieceCandidate& y) { return x.bound < y.bound; });
+  for (std::size_t k = 1; k < live; ++k) {
+    if (cand[k].bound > cut()) {
+      floor = std::min(floor, cand[k].bound);
+      break;
+    }
+    evaluate(cand[k]);
+  }
+  if (cap_pa < 0) {  // every primitive pair proven farther than give_up
+    if (count > 0 && cand[0].bound > give_up) floor = std::min(floor, cand[0].bound);
+    return false;
+  }
+  last = cap_index;
   if (on_pieces) {
     finishPairPoints(model, kin, data, options, i, link_a, link_b, best, best_pa, best_pb, best_n);
     data.pairs[static_cast<std::size_t>(i)].well_defined = !overlap;  // overlapping pieces: the capsules' normal
-  }
-  else
+  } else {
     finishPair(model, kin, data, options, i, link_a, link_b, best, cap_core, cap_pa, cap_pb, cap_s, cap_t);
+  }
+  return true;
 }
 
 /// The closest primitive pair of segments sa and sb, computed directly (slot pairs, refinement);
@@ -287,7 +342,9 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
   const double* radius = data.prim_r.data();
   if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
   if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
-    finishPiecePair(model, kin, data, options, i, link_a, link_b, [&](auto&& f) {
+    double floor;  // never used: without a give_up distance the pair is always finished
+    finishPiecePair(model, kin, data, options, i, link_a, link_b, std::numeric_limits<double>::infinity(), floor,
+                    [&](auto&& f) {
       for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa)
         for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
           double s, t;
@@ -466,14 +523,24 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
         ++data.num_pruned_pairs;
         continue;
       }
+      double floor;
+      if (!finishPiecePair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link,
+                           prune ? options.prune_distance : kInf, floor, [&](auto&& f) {
+                             for (int k = begin; k < end; ++k)
+                               f(list_a[k], list_b[k], data.pp_core[k] - radius[list_a[k]] - radius[list_b[k]],
+                                 data.pp_core[k], data.pp_s[k], data.pp_t[k]);
+                           })) {  // its pieces are all farther than prune_distance: skipped
+        PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
+        out.active = true;
+        out.exact = false;
+        out.has_row = false;
+        out.distance = floor;
+        pruned_floor = std::min(pruned_floor, floor);
+        ++data.num_pruned_pairs;
+        continue;
+      }
       if (prune) data.exact_pairs[static_cast<std::size_t>(nkept)] = i;
       ++nkept;
-      finishPiecePair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link,
-                      [&](auto&& f) {
-                        for (int k = begin; k < end; ++k)
-                          f(list_a[k], list_b[k], data.pp_core[k] - radius[list_a[k]] - radius[list_b[k]],
-                            data.pp_core[k], data.pp_s[k], data.pp_t[k]);
-                      });
       continue;
     }
     if (prune) data.exact_pairs[static_cast<std::size_t>(nkept)] = i;

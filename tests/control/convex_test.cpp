@@ -244,6 +244,18 @@ TEST(ConvexPiece, BuildsTheEdgeGraphAndTheBoundingSphere) {
   }
   EXPECT_NEAR(p.bound_center_L.norm(), 0.0, 1e-15);
   EXPECT_NEAR(p.bound_radius, std::sqrt(3.0), 1e-15);
+  // The start vertex of each of the 14 directions is a support vertex of that direction (a scan).
+  for (std::size_t k = 0; k < kStartDirections.size(); ++k) {
+    const Vec3 d(kStartDirections[k][0], kStartDirections[k][1], kStartDirections[k][2]);
+    double most = -1e300;
+    for (const Vec3& v : p.vertices_L) most = std::max(most, d.dot(v));
+    EXPECT_EQ(d.dot(p.vertices_L[static_cast<std::size_t>(p.start_vertex[k])]), most) << "direction " << k;
+  }
+  // startVertex picks the nearest of the 14 directions: an axis, or a diagonal's octant.
+  EXPECT_EQ(startVertex(p, Vec3(-2, 0.1, 0.3)), p.start_vertex[1]);
+  EXPECT_EQ(startVertex(p, Vec3(0.1, 0.2, 5)), p.start_vertex[4]);
+  EXPECT_EQ(startVertex(p, Vec3(1, -1, 1.1)), p.start_vertex[8]);
+  EXPECT_EQ(startVertex(p, Vec3(-1, -0.9, -1)), p.start_vertex[13]);
 
   const ConvexPiece no_graph = makeConvexPiece(c.vertices, {});
   EXPECT_TRUE(no_graph.neighbor_begin.empty());
@@ -475,6 +487,41 @@ TEST(ConvexDistance, MatchesBruteForceAndFclOnRandomPieces) {
               kCases, separated, overlapping, worst, worst_inside, worst_fcl, fcl_checked, max_iterations);
   EXPECT_GE(separated, kCases / 4);  // both kinds well represented
   EXPECT_GE(overlapping, kCases / 10);
+}
+
+/// stop_above: a pair farther than it is reported above with a lower bound of the brute-force
+/// distance that is itself above stop_above; a pair not farther comes out exactly as without it (the
+/// same bits). stop_above is set just below, just above and far from the brute-force distance.
+TEST(ConvexDistance, StopAboveGivesALowerBoundOrTheSameAnswer) {
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> centre(0.05, 0.3);
+  int above = 0, same = 0;
+  for (int k = 0; k < 300; ++k) {
+    const Hull ha = randomHull(rng), hb = randomHull(rng);
+    const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
+    const Eigen::Isometry3d X_B_A = pose(randomRotation(rng), centre(rng) * (randomRotation(rng) * Vec3::UnitX()));
+    const Eigen::Isometry3d X_B_B = pose(randomRotation(rng), Vec3::Zero());
+    const ConvexDistance full = computeConvexDistance(a, X_B_A, b, X_B_B);
+    const double brute = bruteDistance(ha, X_B_A, hb, X_B_B);
+    for (const double stop : {brute * 0.5, brute - 1e-4, brute + 1e-4, brute * 2.0 + 0.01}) {
+      const ConvexDistance r = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, stop);
+      if (r.above) {
+        ++above;
+        EXPECT_GT(r.distance, stop) << "case " << k;
+        EXPECT_LE(r.distance, brute + 1e-9) << "case " << k << ": the bound must be below the distance";
+        EXPECT_LT(stop, brute) << "case " << k << ": stopped although the distance is not above " << stop;
+      } else {
+        ++same;
+        EXPECT_EQ(r.distance, full.distance) << "case " << k;
+        EXPECT_EQ(r.p_B_a, full.p_B_a) << "case " << k;
+        EXPECT_EQ(r.p_B_b, full.p_B_b) << "case " << k;
+        EXPECT_EQ(r.penetrating, full.penetrating) << "case " << k;
+      }
+    }
+  }
+  std::printf("[ convex ] stop_above: %d stopped early with a bound, %d computed in full\n", above, same);
+  EXPECT_GT(above, 200);
+  EXPECT_GT(same, 400);
 }
 
 TEST(ConvexDistance, NearlyTouchingRandomPiecesMatchBruteForce) {

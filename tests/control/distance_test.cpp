@@ -383,6 +383,43 @@ TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheThousandPairRobot) {
   checkBroadPhase(m, 0.10, 150, 24);
 }
 
+/// The tight model (convex pieces, the mesh robot's fit): pairs inside the prune distance identical
+/// to the brute force, skipped ones lower bounds; each pair's narrow phase stops its searches early
+/// and starts from the primitive pair that won last time, which must change the work only.
+TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheTightModel) {
+  const Model m = testing::loadRobot("mesh_humanoid");
+  ASSERT_GT(m.pieces.size(), 20u) << "the mesh robot is loaded with its fit's convex pieces";
+  checkBroadPhase(m, 0.10, 300, 25);
+  checkBroadPhase(m, 0.02, 300, 26);
+}
+
+TEST(DistanceTightModel, ResultsDoNotDependOnEarlierCycles) {
+  const Model m = testing::loadRobot("mesh_humanoid");
+  KinematicsData kin(m);
+  DistanceData reused(m);
+  std::mt19937_64 rng(41);
+  Eigen::VectorXd q = test::randomConfiguration(m, rng);
+  long compared = 0;
+  for (int c = 0; c < 200; ++c) {
+    // A trajectory (small steps: the last cycle's winners mostly win again) with a jump every 20.
+    const Eigen::VectorXd target = test::randomConfiguration(m, rng);
+    q = c % 20 == 0 ? target : Eigen::VectorXd(q + 0.05 * (target - q));
+    ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+    DistanceData fresh(m);
+    computeSegmentDistances(m, kin, reused);
+    computeSegmentDistances(m, kin, fresh);
+    ASSERT_EQ(reused.closest, fresh.closest) << "cycle " << c;
+    for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+      if (!fresh.pairs[i].active) continue;
+      const std::string name = m.segments[fresh.pairs[i].seg_a].name + "-" + m.segments[fresh.pairs[i].seg_b].name;
+      ASSERT_EQ(reused.pairs[i].distance, fresh.pairs[i].distance) << name << " cycle " << c;
+      expectSamePair(fresh, reused, i, name);
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 200 * 100);
+}
+
 /// computeListedPairDistances (the predictive guard's): the listed pairs come out as the full sweep
 /// computes them, bit for bit (with a slot, enabled and then disabled), and no other entry changes.
 TEST(DistanceListedPairs, ListedPairsEqualTheFullSweepAndNothingElseChanges) {

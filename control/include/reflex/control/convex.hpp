@@ -27,6 +27,7 @@
 #include <Eigen/Geometry>
 
 #include <array>
+#include <limits>
 #include <vector>
 
 namespace reflex::control {
@@ -44,7 +45,20 @@ struct ConvexPiece {
   std::vector<int> neighbors;
   Eigen::Vector3d bound_center_L = Eigen::Vector3d::Zero();
   double bound_radius = 0.0;
+  /// Where a support query without a better start begins: the support vertex in each of the 14
+  /// directions of kStartDirections (the six axes, the eight diagonals), so the climb is short. Any
+  /// entry is correct (the climb finds the maximum from any vertex); these only make it fast.
+  std::array<int, 14> start_vertex{};
 };
+
+/// The 14 directions of ConvexPiece::start_vertex (unnormalized: the axes and the cube's diagonals).
+inline constexpr std::array<std::array<double, 3>, 14> kStartDirections = {{
+    {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1},
+    {1, 1, 1}, {1, 1, -1}, {1, -1, 1}, {1, -1, -1}, {-1, 1, 1}, {-1, 1, -1}, {-1, -1, 1}, {-1, -1, -1}}};
+
+/// The vertex a support query of `piece` in direction d_L starts from: the start vertex of the
+/// direction of kStartDirections nearest d_L (largest cosine). Allocation-free.
+int startVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L) noexcept;
 
 /// Builds a ConvexPiece from its hull vertices and the hull's triangles (indices into `vertices`):
 /// the edge graph from the triangles' edges, the bounding sphere (centre: the vertices' box centre).
@@ -59,6 +73,10 @@ struct ConvexDistance {
   Eigen::Vector3d p_B_a = Eigen::Vector3d::Zero();
   Eigen::Vector3d p_B_b = Eigen::Vector3d::Zero();
   bool penetrating = false;
+  /// The search stopped once it proved the distance above `stop_above`: `distance` is then a lower
+  /// bound of it (a separating plane's gap less the tolerance, > stop_above), the witness points are
+  /// not computed.
+  bool above = false;
   int iterations = 0;  ///< GJK iterations: support queries after the initial point (at most 64)
 };
 
@@ -71,9 +89,15 @@ struct ConvexWarmStart {
 };
 
 /// The distance between piece A placed by X_B_A (L_A -> B) and piece B placed by X_B_B. See the
-/// opening block. `warm` may be nullptr. Allocation-free; never throws.
+/// opening block. `warm` may be nullptr (each piece's climb then starts at its start_vertex towards
+/// the other's bounding centre). With a finite `stop_above` the search ends as soon as a separating
+/// plane proves the distance above it (ConvexDistance::above): a caller that only needs the pieces
+/// closer than a bound (the closest of several, a pruning distance) skips most of the work on the
+/// others. A distance at most stop_above is computed exactly as without it (the same operations).
+/// Allocation-free; never throws.
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
-                                     const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm = nullptr) noexcept;
+                                     const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm = nullptr,
+                                     double stop_above = std::numeric_limits<double>::infinity()) noexcept;
 
 /// The support point of `piece` in direction d_L (link frame): the vertex maximising d_L . v. `start`
 /// is the vertex index to hill-climb from (clamped); returns the index found.

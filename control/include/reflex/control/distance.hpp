@@ -139,8 +139,12 @@ struct DistanceData {
   struct PieceCandidate {
     double bound, core, s, t;
     int pa, pb;
+    int index;  ///< its place among the pair's primitive pairs
   };
   std::vector<PieceCandidate> piece_candidates;
+  /// Per pair of the tight model: the index of the primitive pair that gave its distance last time
+  /// (-1: none yet), tried first next time. Only the work depends on it, never the result.
+  std::vector<int> piece_winner;
   /// The kernel computeSegmentDistances runs (fastestSweepKernel() unless set: tests run both).
   SweepKernel kernel = fastestSweepKernel();
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
