@@ -330,7 +330,7 @@ void reduce(Simplex& s, SubResult& r) {
 
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
                                      const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm,
-                                     double stop_above) noexcept {
+                                     double stop_above, const Eigen::Vector3d& towards_b) noexcept {
   constexpr int kMaxIterations = 64;
   ConvexDistance out;
   assert(!a.vertices_L.empty() && !b.vertices_L.empty());
@@ -367,9 +367,10 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     s.ia[0] = ia;
     s.ib[0] = ib;
   } else {
-    // Cold: the support point towards B's bounding centre from A's, each climb from its piece's
-    // start vertex for that direction.
-    Eigen::Vector3d d = (R_B_B * b.bound_center_L + p_B_B) - (R_B_A * a.bound_center_L + p_B_A);
+    // Cold: the support point towards B (the caller's direction, else B's bounding centre from A's),
+    // each climb from its piece's start vertex for that direction.
+    Eigen::Vector3d d = towards_b;
+    if (!(d.squaredNorm() > 0)) d = (R_B_B * b.bound_center_L + p_B_B) - (R_B_A * a.bound_center_L + p_B_A);
     if (!(d.squaredNorm() > 0)) d = Eigen::Vector3d::UnitX();
     ia = startVertex(a, R_B_A.transpose() * d);
     ib = startVertex(b, -(R_B_B.transpose() * d));

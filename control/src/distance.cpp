@@ -198,8 +198,8 @@ enum class PieceOutcome : std::uint8_t { kApart, kTouching, kAbove };
 /// cores) touch or overlap, there is no direction; p_a is a common point. kAbove: the distance is
 /// proven above `stop_above` (d: a lower bound of it, > stop_above), nothing else computed.
 inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin, const DistanceData& data, int pa,
-                                  int pb, int link_a, int link_b, double stop_above, double& d, Eigen::Vector3d& p_a,
-                                  Eigen::Vector3d& p_b, Eigen::Vector3d& n) {
+                                  int pb, int link_a, int link_b, double stop_above, const Eigen::Vector3d& towards_b,
+                                  double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b, Eigen::Vector3d& n) {
   const Primitive& A = model.primitives[static_cast<std::size_t>(pa)];
   const Primitive& B = model.primitives[static_cast<std::size_t>(pb)];
   const ConvexPiece& ca = A.piece >= 0 ? model.pieces[static_cast<std::size_t>(A.piece)] : data.core_piece[static_cast<std::size_t>(pa)];
@@ -208,7 +208,7 @@ inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin,
   const double rb = B.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pb)];
   const ConvexDistance c = computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(link_a)], cb,
                                                  kin.X_B_L[static_cast<std::size_t>(link_b)], nullptr,
-                                                 stop_above + ra + rb);
+                                                 stop_above + ra + rb, towards_b);
   if (c.above) {
     d = c.distance - ra - rb;
     return PieceOutcome::kAbove;
@@ -273,8 +273,12 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     }
     double d;
     Eigen::Vector3d p_a, p_b, n;
+    // The first search direction: between the closest points of the two capsules' cores.
+    const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
+    const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
+    const Eigen::Vector3d towards_b = (B.start + c.t * B.d) - (A.start + c.s * A.d);
     const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b, cap_pa >= 0 ? best : give_up,
-                                         d, p_a, p_b, n);
+                                         towards_b, d, p_a, p_b, n);
     if (o == PieceOutcome::kAbove) {
       floor = std::min(floor, d);
       return;
@@ -291,9 +295,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     // capsules' depth can be far below the truth), at the common point, along the capsules' direction
     // (the way that separates their cores).
     if (!better(0.0, pa, pb)) return;
-    const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
-    const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
-    Eigen::Vector3d dir = (A.start + c.s * A.d) - (B.start + c.t * B.d);
+    Eigen::Vector3d dir = -towards_b;
     if (!(dir.norm() > kCoincidentEps)) dir = kin.X_B_L[static_cast<std::size_t>(link_a)].translation() -
                                               kin.X_B_L[static_cast<std::size_t>(link_b)].translation();
     const double len = dir.norm();

@@ -89,15 +89,17 @@ struct ConvexWarmStart {
 };
 
 /// The distance between piece A placed by X_B_A (L_A -> B) and piece B placed by X_B_B. See the
-/// opening block. `warm` may be nullptr (each piece's climb then starts at its start_vertex towards
-/// the other's bounding centre). With a finite `stop_above` the search ends as soon as a separating
+/// opening block. `warm` may be nullptr (each piece's climb then starts at its start_vertex, in the
+/// direction `towards_b` (frame B, from A towards B; zero: from A's bounding centre to B's), a good
+/// guess of the separating direction shortening the search). With a finite `stop_above` the search ends as soon as a separating
 /// plane proves the distance above it (ConvexDistance::above): a caller that only needs the pieces
 /// closer than a bound (the closest of several, a pruning distance) skips most of the work on the
 /// others. A distance at most stop_above is computed exactly as without it (the same operations).
 /// Allocation-free; never throws.
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
                                      const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm = nullptr,
-                                     double stop_above = std::numeric_limits<double>::infinity()) noexcept;
+                                     double stop_above = std::numeric_limits<double>::infinity(),
+                                     const Eigen::Vector3d& towards_b = Eigen::Vector3d::Zero()) noexcept;
 
 /// The support point of `piece` in direction d_L (link frame): the vertex maximising d_L . v. `start`
 /// is the vertex index to hill-climb from (clamped); returns the index found.
