@@ -202,7 +202,7 @@ void followTrajectory(const Model& model, const ControllerModel& cm, ControllerD
   const ControllerParams& params = cm.params;
   const ControllerModel::Arm& arm = cm.arms[a];
   Trajectory& traj = data.trajectories[a];
-  const double dt = params.period;
+  const double dt = input.dt > 0.0 && input.dt < params.period ? input.dt : params.period;  // ControlInput::dt
   ws.q.resize(arm.n);
   for (int i = 0; i < arm.n; ++i) ws.q[i] = data.kin.q[arm.q[i]];
   ws.hand_B = data.kin.X_B_L[arm.hand_link] * arm.hand_point_L;
@@ -695,7 +695,10 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
     for (auto& pd : out.pairs) pd.distance = -kInf;  // cannot happen for finite q; counts as a hit
     return;
   }
-  computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(), data.num_guard_pairs);
+  // Only whether a pair ends below d_r + predict_margin matters (predictiveGuard): a pair of the tight
+  // model proven above it is left a lower bound (above it too: never a hit, the same outcome).
+  computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(), data.num_guard_pairs,
+                             cm.params.d_r + cm.params.predict_margin);
 }
 
 /// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's
@@ -872,9 +875,10 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
     return ControlResult::kBadInput;
   }
   // Velocity of the joints the controller does not command, from the previous measured q.
+  const double cycle_dt = input.dt > 0.0 && input.dt < cm.params.period ? input.dt : cm.params.period;  // ControlInput::dt
   for (int j = 0; j < model.nq; ++j) {
     const double v = data.have_prev && !data.arm_joint[static_cast<std::size_t>(j)]
-                         ? (q[j] - data.q_prev[j]) / cm.params.period : 0.0;
+                         ? (q[j] - data.q_prev[j]) / cycle_dt : 0.0;
     data.qdot_uncontrolled[j] = std::isfinite(v) ? v : 0.0;
   }
   data.q_prev = q;

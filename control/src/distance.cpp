@@ -337,23 +337,30 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
 
 /// The closest primitive pair of segments sa and sb, computed directly (slot pairs, refinement);
 /// the same arithmetic and order as the flat loop of computeSegmentDistances.
+/// `give_up` (a pair of the tight model only): a pair proven farther than it comes out inexact, its
+/// distance a lower bound above give_up (finishPiecePair); +inf: always exact.
 void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceData& data,
                         const DistanceOptions& options, int i, const Segment& sa, const Segment& sb, int link_a,
-                        int link_b) {
+                        int link_b, double give_up = std::numeric_limits<double>::infinity()) {
   const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
   if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
   if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
-    double floor;  // never used: without a give_up distance the pair is always finished
-    finishPiecePair(model, kin, data, options, i, link_a, link_b, std::numeric_limits<double>::infinity(), floor,
-                    [&](auto&& f) {
-      for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa)
-        for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
-          double s, t;
-          const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
-          f(pa, pb, core - radius[pa] - radius[pb], core, s, t);
-        }
-    });
+    double floor;
+    if (!finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
+          for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa)
+            for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
+              double s, t;
+              const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
+              f(pa, pb, core - radius[pa] - radius[pb], core, s, t);
+            }
+        })) {
+      PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
+      out.active = true;
+      out.exact = false;
+      out.has_row = false;
+      out.distance = floor;
+    }
     return;
   }
   double best = std::numeric_limits<double>::infinity(), best_core = 0.0, best_s = 0.0, best_t = 0.0;
@@ -612,7 +619,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
 }
 
 void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                                DistanceData& data, const int* pairs, int count) {
+                                DistanceData& data, const int* pairs, int count, double give_up) {
   assert(data.pairs.size() == model.pairs.size());
   // Each segment of the listed pairs into B once: a stamp per segment marks this call's.
   if (++data.segment_stamp_now == 0) {  // wrapped: no stale stamp may equal the new one
@@ -640,7 +647,7 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
       data.segment_stamp[static_cast<std::size_t>(s)] = now;
       transformSegment(model, kin, slots, data, s, false);
     }
-    computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b);
+    computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up);
   }
 }
 

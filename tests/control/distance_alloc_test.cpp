@@ -137,6 +137,10 @@ void runCycles(const char* robot) {
   const DistanceOptions rows_on{};
   const DistanceOptions rows_off{-std::numeric_limits<double>::infinity()};
   const DistanceOptions rows_near{0.04};
+  const DistanceOptions pruned{0.04, 0.04};  // the controller's: rows and broad phase at d_a
+  std::vector<int> listed;
+  for (int p = 0; p < static_cast<int>(model.pairs.size()); p += 2) listed.push_back(p);
+  DistanceData scratch(model);
 
   AllocationCounter counter;
   for (int i = 0; i < 50; ++i) {
@@ -144,6 +148,9 @@ void runCycles(const char* robot) {
     computeSegmentDistances(model, kin, dist, rows_on);
     computeSegmentDistances(model, kin, dist, rows_off);
     computeSegmentDistances(model, kin, dist, rows_near);
+    computeSegmentDistances(model, kin, dist, pruned);
+    computeListedPairDistances(model, kin, dist.slots, scratch, listed.data(), static_cast<int>(listed.size()));
+    computeListedPairDistances(model, kin, dist.slots, scratch, listed.data(), static_cast<int>(listed.size()), 0.02);
     computePointJacobian(model, kin, hand, kin.X_B_L[hand].translation(), J);
     computeRelativeJacobian(model, kin, hand, kin.X_B_L[hand].translation(), head, kin.X_B_L[head].translation(), J);
     computeDirectionalRow(model, kin, hand, kin.X_B_L[hand].translation(), head, kin.X_B_L[head].translation(),
@@ -165,6 +172,9 @@ void runCycles(const char* robot) {
 TEST(DistanceAlloc, PerCycleRoutinesDoNotAllocateOnTheShippedRobot) { runCycles(testing::kAsimo); }
 
 TEST(DistanceAlloc, PerCycleRoutinesDoNotAllocateOnTheSecondHumanoid) { runCycles(testing::kSmall); }
+
+// The tight model: convex pieces, the narrow phase's candidate lists and early stops.
+TEST(DistanceAlloc, PerCycleRoutinesDoNotAllocateOnTheTightModel) { runCycles("mesh_humanoid"); }
 
 }  // namespace
 }  // namespace reflex::control

@@ -420,6 +420,49 @@ TEST(DistanceTightModel, ResultsDoNotDependOnEarlierCycles) {
   EXPECT_GT(compared, 200 * 100);
 }
 
+/// computeListedPairDistances with a give-up distance on the tight model (the predictive guard asks
+/// only whether a pair is below d_r + predict_margin): a listed pair within it is the full sweep's bit
+/// for bit; one beyond is either that too or inexact with a lower bound above give_up and at most the
+/// full sweep's distance.
+TEST(DistanceListedPairs, TightPairsBeyondTheGiveUpDistanceComeOutAsLowerBounds) {
+  const Model m = testing::loadRobot("mesh_humanoid");
+  KinematicsData kin(m);
+  DistanceData full(m), listed(m);
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -std::numeric_limits<double>::infinity();
+  std::mt19937_64 rng(32);
+  std::vector<int> pairs;
+  for (int i = 0; i < static_cast<int>(m.pairs.size()); ++i) pairs.push_back(i);
+  constexpr double kGiveUp = 0.06;
+  long within = 0, bounded = 0, exact_beyond = 0;
+  for (int c = 0; c < 150; ++c) {
+    ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+    computeSegmentDistances(m, kin, full.slots, full, no_rows);
+    computeListedPairDistances(m, kin, full.slots, listed, pairs.data(), static_cast<int>(pairs.size()), kGiveUp);
+    for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+      const PairDistance& f = full.pairs[i];
+      const PairDistance& l = listed.pairs[i];
+      ASSERT_EQ(l.active, f.active) << "pair " << i;
+      if (!f.active) continue;
+      if (!l.exact) {
+        ++bounded;
+        EXPECT_GT(f.distance, kGiveUp) << "pair " << i << ": a pair within the give-up distance must be exact";
+        EXPECT_GT(l.distance, kGiveUp) << "pair " << i;
+        EXPECT_LE(l.distance, f.distance) << "pair " << i << ": not a lower bound";
+        continue;
+      }
+      (f.distance <= kGiveUp ? within : exact_beyond) += 1;
+      EXPECT_EQ(l.distance, f.distance) << "pair " << i;
+      EXPECT_EQ(l.p_B_a, f.p_B_a) << "pair " << i;
+      EXPECT_EQ(l.nhat_B, f.nhat_B) << "pair " << i;
+    }
+  }
+  std::printf("tight model, give-up %.3f m: %ld pairs within it identical, %ld beyond it left as lower bounds, "
+              "%ld beyond it exact (capsule pairs)\n", kGiveUp, within, bounded, exact_beyond);
+  EXPECT_GT(within, 150);
+  EXPECT_GT(bounded, 150 * 20);
+}
+
 /// computeListedPairDistances (the predictive guard's): the listed pairs come out as the full sweep
 /// computes them, bit for bit (with a slot, enabled and then disabled), and no other entry changes.
 TEST(DistanceListedPairs, ListedPairsEqualTheFullSweepAndNothingElseChanges) {

@@ -213,10 +213,13 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
 /// Model::pairs), with the body schema `slots`: each comes out as computeSegmentDistances gives it
 /// without pruning (the same arithmetic, so the same distance bit for bit), a pair of a disabled
 /// slot inactive. Every other entry of data.pairs, and `closest`, are left as they were. For a
-/// caller that needs a few pairs at many configurations (the predictive guard). Allocates nothing,
-/// never throws.
+/// caller that needs a few pairs at many configurations (the predictive guard). With a finite
+/// `give_up`, a listed pair of the tight model (convex pieces) whose pieces are proven farther apart
+/// than give_up may come out inexact instead (exact = false, distance a lower bound above give_up):
+/// for a caller that only asks whether a pair is below give_up. Allocates nothing, never throws.
 void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                                DistanceData& data, const int* pairs, int count);
+                                DistanceData& data, const int* pairs, int count,
+                                double give_up = std::numeric_limits<double>::infinity());
 
 /// Computes pair `pair` exactly (after computeSegmentDistances for the same kinematics and options):
 /// for a pair the broad phase skipped, the result computeSegmentDistances gives without pruning
