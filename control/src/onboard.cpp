@@ -294,7 +294,9 @@ bool OnboardController::startWalking(double distance, double speed) noexcept {
   return walking_.start(distance, speed);
 }
 
-const CycleReport& OnboardController::step(double now) noexcept {
+const CycleReport& OnboardController::step(double now, double cycle_dt) noexcept {
+  // !(0 < dt <= period), NaN included: one period (the timer's cycle).
+  const double dt = cycle_dt > 0.0 && cycle_dt <= cm_.params.period ? cycle_dt : cm_.params.period;
   CycleReport& r = report_;
   ++r.counts.cycles;
   r.now = now;
@@ -334,6 +336,7 @@ const CycleReport& OnboardController::step(double now) noexcept {
   r.robot_state_ok = true;
   q_measured_ = *q;
   in.reset_estop = reset_;
+  in.dt = dt;
   reset_ = false;
   if (anchor_) {  // first state, or the first after none: the robot held itself where it is measured
     for (int i = 0; i < model_.nq; ++i) q_command_[i] = std::clamp(q_measured_[i], model_.q_lower[i], model_.q_upper[i]);
@@ -349,8 +352,7 @@ const CycleReport& OnboardController::step(double now) noexcept {
     if (data_.arm_joint[static_cast<std::size_t>(j)] == 0) q_scratch_[j] = q_command_[j];
   integrator_.reset(q_scratch_);
   r.walking_advanced = stepPlant(model_, cm_, data_, cr, integrator_, walk_active_ ? &walking_ : nullptr,
-                                 cm_.params.period, q_scratch_);
-  const double dt = cm_.params.period;
+                                 dt, q_scratch_);
   if (cr == ControlResult::kFrozen) {
     // e-stop latched: hold what was last commanded (q_command_ as it is), not what the state says.
   } else {

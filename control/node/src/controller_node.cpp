@@ -168,6 +168,12 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   if (config.robot != "kinematic" && config.robot != "dds")
     throw ConfigError("--robot '" + config.robot + "' is not a robot side: use 'kinematic' (the in-process plant) or 'dds' "
                       "(a robot driver on reflex/robot_state and reflex/joint_command)");
+  if (config.trigger != "timer" && config.trigger != "state")
+    throw ConfigError("--trigger '" + config.trigger + "' is not a cycle trigger: use 'timer' (a cycle every period) or "
+                      "'state' (a cycle per arriving robot state, with --robot dds)");
+  if (config.trigger == "state" && config.robot != "dds")
+    throw ConfigError("--trigger state runs a cycle per arriving robot state, but --robot '" + config.robot +
+                      "' sends none: use --robot dds, or --trigger timer");
   if (!(config.robot_timeout > 0.0 && config.robot_timeout <= 1.0))
     throw ConfigError("--robot-timeout " + std::to_string(config.robot_timeout) + " must be in (0, 1] s");
   if (config.robot == "dds" && !config.robot_state.empty())
@@ -429,16 +435,33 @@ void ControllerNode::run() {
   bool robot_ok = true;  // as last said (log, heartbeat)
   bool said_robot = false;
 
+  const bool on_state = m.config.trigger == "state";  // one cycle per arriving robot state (run()'s contract)
   while (!m.stop && !m.participant->stopRequested()) {
     next.tv_nsec += period_ns;
     while (next.tv_nsec >= 1000000000L) {
       next.tv_nsec -= 1000000000L;
       ++next.tv_sec;
     }
-    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
+    bool state_woke = false;
+    if (on_state) {
+      // The next robot state, or the period's end (the deadline `next`): whichever comes first.
+      for (;;) {
+        timespec ts{};
+        clock_gettime(CLOCK_MONOTONIC, &ts);
+        const long long left_ns = (static_cast<long long>(next.tv_sec) - ts.tv_sec) * 1000000000LL + (next.tv_nsec - ts.tv_nsec);
+        if (left_ns <= 0) break;
+        if (m.dds->waitForState(std::chrono::nanoseconds(left_ns))) {
+          state_woke = true;
+          break;
+        }
+      }
+    } else {
+      clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
+    }
     const double t_now = nowSeconds(CLOCK_MONOTONIC);
     const double scheduled = static_cast<double>(next.tv_sec) + 1e-9 * static_cast<double>(next.tv_nsec);
-    const double lateness_us = std::max(0.0, (t_now - scheduled) * 1e6);
+    const double lateness_us = state_woke ? 0.0 : std::max(0.0, (t_now - scheduled) * 1e6);
+    if (on_state) clock_gettime(CLOCK_MONOTONIC, &next);  // the longest wait counts from this cycle's start
     const double t = t_now - t_start;
     if (m.config.duration > 0.0 && t >= m.config.duration) break;
 
@@ -537,7 +560,9 @@ void ControllerNode::run() {
     }
 
     // 2.-3. Staleness, priority, control (allocation-free) and the robot port: one step.
-    const CycleReport& rep = ctl.step(t_now);
+    // A cycle started by a state spans the robot's state interval (0 while unknown: one period); one
+    // started by the period's end spans the period, as the timer's.
+    const CycleReport& rep = ctl.step(t_now, state_woke ? m.dds->stateInterval() : period);
     const ControlResult cr = rep.result;
     if (rep.robot_state_ok != robot_ok || !said_robot) {
       // Said at once (stderr, heartbeat), not at the next 2 Hz heartbeat.

@@ -160,11 +160,21 @@ bool DdsRobotPort::accept(const msg::RobotState& s, const Guid& writer, std::int
     formatGuid(writer, bound_text_);
   }
   for (int i = 0; i < model_.nq; ++i) q_[i] = s.positions()[static_cast<std::size_t>(index_[static_cast<std::size_t>(i)])];
+  // The robot's interval: two consecutive accepted states of one writer (a new writer starts unknown).
+  state_interval_ns_ = have_state_ && from_bound ? s.header().stamp_ns() - state_stamp_ns_ : 0;
   have_state_ = true;
   state_seq_ = s.header().seq();
   state_stamp_ns_ = s.header().stamp_ns();
   ++counts_.accepted;
   return true;
+}
+
+bool DdsRobotPort::waitForState(std::chrono::nanoseconds timeout) noexcept {
+  try {
+    return reader_->waitForData(timeout);
+  } catch (...) {
+    return false;  // the caller's cycle runs as on a timeout
+  }
 }
 
 double DdsRobotPort::stateAge() const noexcept {

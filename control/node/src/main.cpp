@@ -1,5 +1,6 @@
 // reflex_controller: the onboard controller process over DDS. See controller_node.hpp.
 #include "reflex/control_node/controller_node.hpp"
+#include "reflex/control_node/realtime.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -70,6 +71,21 @@ int main(int argc, char** argv) {
                  "seconds each joint command stays valid (--robot dds; JointCommand.valid_until_ns = now + this); "
                  "0: three controller periods; else [period, 1]")
       ->capture_default_str();
+  app.add_option("--trigger", config.trigger,
+                 "what starts a control cycle: 'timer' (one every controller period, 5 ms by default) or 'state' (with "
+                 "--robot dds: one per arriving reflex/robot_state, so each command answers its state at once; the "
+                 "driver sets the rate, e.g. 500 Hz). With 'state' a cycle spans the robot's state interval (at most "
+                 "one period: no joint is commanded more than v_max times it), and the period is the longest wait: "
+                 "when no state arrives within it the cycle runs as the timer's (stale after --robot-timeout: "
+                 "nothing commanded). Cycles started by a state report lateness 0")
+      ->capture_default_str();
+  std::string realtime;
+  app.add_option("--realtime", realtime,
+                 "PRIORITY[,CPU]: run real-time: pin the process to CPU (if given), SCHED_FIFO at PRIORITY (1..99), "
+                 "lock all memory (mlockall) and pre-fault the stack, before any thread starts (the DDS threads "
+                 "inherit it). Refused with exit 1, naming the value and the reason, where not permitted (needs "
+                 "root, or CAP_SYS_NICE and CAP_IPC_LOCK, or rtprio/memlock limits) or not possible (a CPU this "
+                 "process may not use): it never runs without what was asked. E.g. --realtime 80,1");
   app.add_option("--name", config.module_name,
                  "module name on the bus (1.." + std::to_string(reflex::bus::kMaxKeyStringBytes) + " bytes)")
       ->capture_default_str();
@@ -80,6 +96,11 @@ int main(int argc, char** argv) {
   std::signal(SIGXFSZ, SIG_IGN);  // nor a file size limit (the failed write is reported instead)
   std::signal(SIGUSR1, onUsr1);   // ignored until the node exists (g_node)
   try {
+    if (!realtime.empty()) {  // before the node: every thread it starts inherits the policy and the CPU
+      const std::string applied =
+          reflex::control_node::applyRealtime(reflex::control_node::parseRealtime(realtime), realtime);
+      std::fprintf(stderr, "reflex_controller: real-time: %s\n", applied.c_str());
+    }
     reflex::control_node::ControllerNode node(config);
     // Every catchable terminating signal stops the loop (the log is closed, the summary printed);
     // SIGUSR1 is the e-stop reset, handled here.
@@ -90,9 +111,14 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "reflex_controller: %s\n", node.controllerConfigNote().c_str());
     if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
     const auto& protection = node.protection();
-    std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
-                 1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
-                 config.robot == "dds" ? "robot over DDS" : "kinematic plant", protection.describe().c_str());
+    if (config.trigger == "state")
+      std::fprintf(stderr, "reflex_controller: a cycle per arriving robot state, at least every %.3f ms (--trigger state) "
+                   "on domain %d, robot '%s' (robot over DDS); protection %s\n",
+                   protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(), protection.describe().c_str());
+    else
+      std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
+                   1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
+                   config.robot == "dds" ? "robot over DDS" : "kinematic plant", protection.describe().c_str());
     if (!protection.full())
       std::fprintf(stderr, "reflex_controller: WARNING: THIS RUN IS NOT PROTECTED: %s\n", protection.reason.c_str());
     node.run();

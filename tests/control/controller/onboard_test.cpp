@@ -25,7 +25,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <limits>
 #include <string>
 
 namespace reflex::control {
@@ -571,6 +573,69 @@ TEST(OnboardPort, NoStateNoCommandAndTheCommandIsMeasuredPlusQdotDt) {
   EXPECT_FALSE(ctl.step(1.0).robot_state_ok);
   EXPECT_EQ(ctl.report().counts.robot_stale_events, 2U);
   EXPECT_EQ(port.commands_, 55) << "no command without state";
+}
+
+TEST(OnboardPort, AShorterCycleCommandsMeasuredPlusQdotTimesItsOwnDtAndWalksAndTracksOverIt) {
+  // step(now, dt), a cycle per arriving robot state (reflex_controller --trigger state): with dt = 2 ms
+  // the command is measured + qdot dt (qdot within v_max), its velocities (q_end - measured) / dt, so no
+  // joint is asked to cover more than v_max dt; the heel walks speed x dt per cycle (the analytic travel)
+  // and the trajectory's reference advances trajectory_speed x dt (ControllerParams). A dt outside
+  // (0, period] is one period, bit-identical to step(now).
+  const Model& model = shippedModel();
+  const ControllerModel& cm = defaultControllerModel();
+  const double period = cm.params.period;
+  const double dt = 0.002;
+  const Eigen::VectorXd q0 = restConfiguration(model, cm);
+  ScriptedPort port(q0);
+  port.have_ = true;
+  OnboardController ctl(model, cm, port, q0);
+  ctl.setHandTargets(crossing(), 0.0);
+  const int heel = model.qIndex("heel_x");
+  ASSERT_GE(heel, 0);
+  const double speed = 0.2;
+  ASSERT_TRUE(ctl.walkCommand(false, q0[heel] + 0.5, speed));
+  double worst_ratio = 0.0;  // max |q_end - measured| / (v_max dt) over the arm joints
+  Eigen::Vector3d ref_before = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 200; ++k) {
+    const Eigen::VectorXd measured = port.q_;
+    const double heel_before = ctl.commandedPositions()[heel];
+    const CycleReport& r = ctl.step(k * dt, dt);
+    ASSERT_TRUE(r.robot_state_ok);
+    ASSERT_EQ(port.dt_, dt);
+    for (const int i : ctl.drivenJoints()) {
+      ASSERT_LE(std::abs(port.qdot_[i]), model.v_max[i] * (1.0 + 1e-12)) << model.q_names[i];
+      if (model.q_names[i] == "heel_x" || !ctl.data().arm_joint[static_cast<std::size_t>(i)]) continue;
+      ASSERT_NEAR(port.qdot_[i], (port.q_end_[i] - measured[i]) / dt, 1e-9) << model.q_names[i];
+      ASSERT_LE(std::abs(port.q_end_[i] - measured[i]), model.v_max[i] * dt * (1.0 + 1e-12)) << model.q_names[i];
+      worst_ratio = std::max(worst_ratio, std::abs(port.q_end_[i] - measured[i]) / (model.v_max[i] * dt));
+    }
+    if (r.result == ControlResult::kOk && r.walking_advanced)
+      ASSERT_NEAR(port.q_end_[heel] - heel_before, speed * dt, 1e-12) << "cycle " << k;
+    // The reference of the left arm, while far from its goal, advances trajectory_speed x dt.
+    const Eigen::Vector3d ref = ctl.data().arms[kLeft].reference_B;
+    if (k >= 1 && k <= 10)
+      ASSERT_NEAR((ref - ref_before).norm(), cm.params.trajectory_speed * dt, 1e-12) << "cycle " << k;
+    ref_before = ref;
+    port.q_ = port.q_end_;  // the robot is where it was sent at the next state
+  }
+  std::printf("2 ms cycles: the largest arm step is %.3f of v_max x dt\n", worst_ratio);
+  EXPECT_GT(worst_ratio, 0.5) << "the arms moved fast enough for the bound to matter";
+  // Out of range: one period, exactly as step(now).
+  for (const double bad : {0.0, -0.001, std::nan(""), 2.0 * period, std::numeric_limits<double>::infinity()}) {
+    ScriptedPort pa(q0), pb(q0);
+    pa.have_ = pb.have_ = true;
+    OnboardController a(model, cm, pa, q0), b(model, cm, pb, q0);
+    a.setHandTargets(crossing(), 0.0);
+    b.setHandTargets(crossing(), 0.0);
+    for (int k = 0; k < 20; ++k) {
+      a.step(k * period, bad);
+      b.step(k * period);
+      pa.q_ = pa.q_end_;
+      pb.q_ = pb.q_end_;
+    }
+    EXPECT_EQ(pa.dt_, period) << "dt " << bad;
+    for (int i = 0; i < model.nq; ++i) ASSERT_EQ(pa.q_end_[i], pb.q_end_[i]) << "dt " << bad << " " << model.q_names[i];
+  }
 }
 
 TEST(OnboardSetup, BadOptionsAndInitialConfigurationsAreNamed) {

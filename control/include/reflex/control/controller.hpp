@@ -206,6 +206,12 @@ struct ControlInput {
   std::array<HandCommand, 2> hands;
   MotionPriority priority = MotionPriority::kEqual;
   bool reset_estop = false;   ///< request to leave a latched e-stop (only separating motion allowed)
+  /// s the cycle spans when it is shorter than ControllerParams::period (a cycle per arriving robot
+  /// state, e.g. 2 ms at 500 Hz): the trajectory advances and the velocity of the joints the
+  /// controller does not command is estimated over it. Anything not in (0, period] (0 by default,
+  /// NaN) means one period. Every other use of the period (the guard's look-ahead, the joint-range
+  /// limit) keeps the full period: with a shorter cycle they only look further ahead than needed.
+  double dt = 0.0;
 };
 
 struct ArmStatus {

@@ -261,7 +261,13 @@ class OnboardController {
   // ---- the cycle ----
   /// One control cycle at `now` (s, monotonic): staleness, priority, computeControl, stepPlant on a
   /// one-cycle integrator started from the measured state, the port's command. Allocation-free; never throws.
-  const CycleReport& step(double now) noexcept;
+  const CycleReport& step(double now) noexcept { return step(now, 0.0); }
+  /// The same for a cycle that spans `dt` s (0 < dt <= period; anything else is one period): a cycle
+  /// per arriving robot state (reflex_controller --trigger state) spans the robot's state interval. The
+  /// command then ends dt after the measured state: q_end = measured + qdot dt, velocities
+  /// (q_end - measured) / dt within +-v_max, walking advances dt, the trajectory dt (ControlInput::dt):
+  /// no joint is asked to cover more than v_max dt, however short the cycle.
+  const CycleReport& step(double now, double dt) noexcept;
 
   const CycleReport& report() const { return report_; }
   /// The configuration the robot is expected at after the last command (the measured state advanced

@@ -113,6 +113,10 @@ struct NodeConfig {
   double robot_timeout = 0.050;
   /// s: with "dds", JointCommand.valid_until_ns = now + this. 0 = three controller periods; else [period, 1].
   double command_deadline = 0.0;
+  /// What starts a cycle: "timer" (one every period, the default) or "state" (one per arriving robot
+  /// state, the period as the longest wait; needs a robot that sends states, --robot dds). Anything
+  /// else: ConfigError. See ControllerNode::run().
+  std::string trigger = "timer";
 };
 
 /// Counters reported at exit and in tests.
@@ -184,8 +188,18 @@ class ControllerNode {
   ControllerNode(const ControllerNode&) = delete;
   ControllerNode& operator=(const ControllerNode&) = delete;
 
-  /// Runs the control loop (every ControllerParams::period) until stop(), a signal, or the
-  /// configured duration. Closes the --log file at the end (see logFailure()).
+  /// Runs the control loop until stop(), a signal, or the configured duration. Closes the --log file
+  /// at the end (see logFailure()).
+  ///
+  /// trigger "timer": a cycle every ControllerParams::period on absolute deadlines.
+  /// trigger "state": the loop waits for the next robot state (DdsRobotPort::waitForState) and runs a
+  /// cycle as soon as one arrives, spanning the robot's state interval (DdsRobotPort::stateInterval(),
+  /// at most one period: OnboardController::step(now, dt)), so a command answers its state at once and
+  /// no joint is asked to move more than v_max times that interval. The period stays the longest wait:
+  /// when no state arrives within it, the cycle runs exactly as the timer's would (from the newest
+  /// state while it is fresh, spanning one period; nothing computed or commanded once it is stale), so
+  /// staleness, the e-stop and the command deadline are those of the timer. A cycle started by a state
+  /// is never late (lateness 0); one started by the wait's end is late by its wake-up delay.
   void run();
   void stop() noexcept;
   /// Asks the controller to leave a latched e-stop (only separating motion, Sec. 7.1).

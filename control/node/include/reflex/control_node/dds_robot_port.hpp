@@ -42,6 +42,7 @@
 #include <reflex/bus/identity.hpp>
 
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -109,6 +110,13 @@ class DdsRobotPort final : public control::RobotPort {
   std::uint64_t stateSeq() const { return state_seq_; }
   /// Header.stamp_ns of the newest accepted state (system clock, ns), 0 without one.
   std::int64_t stateStampNs() const { return state_stamp_ns_; }
+  /// The robot's state interval (s): the stamps of the newest accepted state and the one accepted
+  /// before it, of the same writer; 0 while unknown (fewer than two states of the bound writer).
+  /// reflex_controller --trigger state takes it as the span of a cycle (OnboardController::step(now, dt)).
+  double stateInterval() const noexcept { return 1e-9 * static_cast<double>(state_interval_ns_); }
+  /// Blocks until a robot state (any sample on reflex/robot_state, not yet taken) is there or `timeout`
+  /// passes; true if one is. Allocation-free; for --trigger state, between cycles.
+  bool waitForState(std::chrono::nanoseconds timeout) noexcept;
   /// The bound writer ("" before the first accepted state) and the newest writer ignored ("" none),
   /// each as its participant's GUID prefix and writer entity id, "01.0f.…|0.0.3.3" (log lines, heartbeat).
   const char* boundWriter() const { return bound_text_; }
@@ -145,6 +153,7 @@ class DdsRobotPort final : public control::RobotPort {
   bool have_state_ = false;
   std::uint64_t state_seq_ = 0;
   std::int64_t state_stamp_ns_ = 0;
+  std::int64_t state_interval_ns_ = 0;    ///< stateInterval(), ns
   Counts counts_;
   char rejection_[300] = {};
   char bad_rejection_[300] = {};
