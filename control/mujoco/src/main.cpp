@@ -43,6 +43,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--name", config.module_name, "module name on the bus")->capture_default_str();
   app.add_flag("--print-mjcf", print_mjcf, "print the generated MJCF to stdout and exit");
+  app.add_option("--interface", config.interface,
+                 "'reflex' (reflex/robot_state out, reflex/joint_command in) or 'unitree_hg' (Unitree's rt/lowstate "
+                 "out with tick and crc, rt/arm_sdk in blended by its weight with the robot's own controller, which "
+                 "holds the start configuration; needs --joint-map)")
+      ->capture_default_str();
+  app.add_option("--joint-map", config.joint_map,
+                 "--interface unitree_hg: the joint map YAML (motor index <-> URDF joint), e.g. "
+                 "bringup/robots/asimo_like.hg.yaml");
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGPIPE, SIG_IGN);
   try {

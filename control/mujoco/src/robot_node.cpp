@@ -81,17 +81,30 @@ RobotNode::RobotNode(const NodeConfig& config) : config_(config) {
   if (!(config.mjcf.timestep > 0.0) || substeps_ < 1 || std::abs(ratio - substeps_) > 1e-6)
     throw std::invalid_argument("--timestep " + std::to_string(config.mjcf.timestep) + " s: the period " +
                                 std::to_string(config.period) + " s must be a whole multiple of it");
+  if (config.interface != "reflex" && config.interface != "unitree_hg")
+    throw std::invalid_argument("--interface '" + config.interface + "': use 'reflex' or 'unitree_hg'");
+  if (config.interface == "unitree_hg" && config.period < 0.001)
+    throw std::invalid_argument("--period " + std::to_string(config.period) +
+                                " s: with --interface unitree_hg at least 1 ms (the tick counts milliseconds)");
+  if ((config.interface == "unitree_hg") != !config.joint_map.empty())
+    throw std::invalid_argument(config.joint_map.empty() ? std::string("--interface unitree_hg needs --joint-map FILE")
+                                                         : "--joint-map '" + config.joint_map + "' is for --interface unitree_hg");
   model_ = control::loadModel(config.urdf, control::loadCollisionConfigFor(config.urdf, config.collision));
-  robot_ = std::make_unique<MujocoRobot>(model_, config.mjcf, parseInitialConfiguration(model_, config.initial));
+  const Eigen::VectorXd q0 = parseInitialConfiguration(model_, config.initial);
+  robot_ = std::make_unique<MujocoRobot>(model_, config.mjcf, q0);
   bus::BusConfig bc;
   bc.module_name = config.module_name;
   bc.domain_id = config.domain_id;
   bc.profiles_file = config.profiles_file;
   bc.participant_profile = config.participant_profile;
   bus_ = std::make_unique<bus::Participant>(bc);
-  state_writer_ = &bus_->makeWriter<msg::RobotState>();
+  if (config.interface == "unitree_hg") {
+    hg_ = std::make_unique<HgDouble>(model_, config.joint_map, q0, *bus_);
+  } else {
+    state_writer_ = &bus_->makeWriter<msg::RobotState>();
+    command_reader_ = &bus_->makeReader<msg::JointCommand>();
+  }
   contacts_writer_ = &bus_->makeWriter<msg::RobotContacts>();
-  command_reader_ = &bus_->makeReader<msg::JointCommand>();
   heartbeat_ = std::make_unique<bus::HeartbeatPublisher>(*bus_);
   stats_.command_latency_us.reserve(4096);
 }
@@ -160,7 +173,8 @@ void RobotNode::run() {
 
     // 1. Commands: every sample that arrived, oldest first (each counted); the last accepted one rules.
     std::int64_t now_ns = bus::nowNs();
-    while (command_reader_->takeNext(command)) {
+    if (hg_) hg_->takeCommands(*robot_, now_ns);
+    while (command_reader_ != nullptr && command_reader_->takeNext(command)) {
       CommandInput in;
       in.names = &command.names();
       in.positions = &command.positions();
@@ -183,11 +197,16 @@ void RobotNode::run() {
       state.velocities()[qi] = meas.qdot[qi];
       state.efforts()[qi] = meas.effort[qi];
     }
-    state.applied_command_seq(meas.applied_command_seq);
-    state.holding(meas.holding);
-    state_writer_->publish(state);
+    if (hg_) {
+      hg_->publishState(meas, static_cast<std::int64_t>(std::llround(static_cast<double>(simulated_periods) * config_.period * 1e3)));
+      contacts.state_seq(hg_->tick());
+    } else {
+      state.applied_command_seq(meas.applied_command_seq);
+      state.holding(meas.holding);
+      state_writer_->publish(state);
+      contacts.state_seq(state_writer_->lastSeq());
+    }
     ++stats_.states_published;
-    contacts.state_seq(state_writer_->lastSeq());
     contacts.contacts().clear();
     for (const auto& c : meas.contacts) {
       msg::SegmentContact sc;
@@ -230,6 +249,7 @@ std::string RobotNode::exitSummary() const {
   os << ", command latency p50 " << fixed(percentile(stats_.command_latency_us, 0.5), 0) << " us p99 "
      << fixed(percentile(stats_.command_latency_us, 0.99), 0) << " us over " << stats_.command_latency_us.size()
      << " commands";
+  if (hg_) os << ", " << hg_->summary();
   for (const auto& w : stats_.worst_contacts)
     os << "\ncontact " << model_.segments[w.seg_a].name << "," << model_.segments[w.seg_b].name << " min distance "
        << fixed(w.distance * 1e3, 3) << " mm";

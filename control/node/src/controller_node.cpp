@@ -4,6 +4,7 @@
 #include "reflex/control/onboard.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "reflex/control_node/dds_robot_port.hpp"
+#include "reflex/control_node/unitree_hg_port.hpp"
 #include "reflex/control_node/robot_state_file.hpp"
 #include "reflex/control_node/timeseries_log.hpp"
 
@@ -74,9 +75,10 @@ constexpr double kRobotProblemWindow = 2.0;   ///< s a rejected robot state / ig
 const char* robotStateCauseName(int cause) noexcept {
   static const char* const kNames[] = {"robot_state_length", "robot_state_missing_joint", "robot_state_not_finite",
                                        "robot_state_future_stamp", "robot_state_old_stamp", "robot_state_duplicate_name",
-                                       "robot_state_outside_limits", "robot_state_other_writer"};
-  static_assert(sizeof(kNames) / sizeof(kNames[0]) == DdsRobotPort::kCauses, "one name per DdsRobotPort cause");
-  return cause >= 0 && cause < DdsRobotPort::kCauses ? kNames[cause] : "robot_state_?";
+                                       "robot_state_outside_limits", "robot_state_other_writer",
+                                       "robot_state_bad_crc", "robot_state_motor_count", "robot_state_old_tick"};
+  static_assert(sizeof(kNames) / sizeof(kNames[0]) == kRobotStateCauses, "one name per robot port cause");
+  return cause >= 0 && cause < kRobotStateCauses ? kNames[cause] : "robot_state_?";
 }
 
 std::string describeRejections(const NodeStats& stats) {
@@ -87,7 +89,7 @@ std::string describeRejections(const NodeStats& stats) {
   };
   for (int c = 0; c < kRejectCauses; ++c)
     add(rejectCauseName(static_cast<RejectCause>(c)), stats.rejected[static_cast<std::size_t>(c)]);
-  for (int c = 0; c < DdsRobotPort::kCauses; ++c)
+  for (int c = 0; c < kRobotStateCauses; ++c)
     add(robotStateCauseName(c), stats.robot_states_rejected_by_cause[static_cast<std::size_t>(c)]);
   return text;
 }
@@ -102,7 +104,7 @@ struct ControllerNode::Impl {
   ControllerModel cm;
   // The robot port: the in-process kinematic plant or the robot over DDS.
   std::unique_ptr<KinematicPort> kinematic;  ///< --robot kinematic
-  std::unique_ptr<DdsRobotPort> dds;         ///< --robot dds
+  std::unique_ptr<BusRobotPort> dds;         ///< --robot dds (DdsRobotPort) or unitree_hg (UnitreeHgPort)
   std::unique_ptr<bus::WriterIdentities> robot_identities;  ///< --robot dds: who wrote a robot state
   std::unique_ptr<OnboardController> ctl;    ///< everything per cycle but the bus (onboard.hpp)
   std::unique_ptr<RobotStateFile> state_file;  ///< null without --robot-state
@@ -151,7 +153,7 @@ struct ControllerNode::Impl {
   // One per-sample log line (a rejected body-schema segment): rate-limited.
   bus::LogLimiter schema_log;
   /// Rejected robot states (--robot dds), one limiter per cause: a flood of one kind never hides another.
-  std::array<bus::LogLimiter, DdsRobotPort::kCauses> robot_log;
+  std::array<bus::LogLimiter, kRobotStateCauses> robot_log;
   /// Robot state stale / fresh lines: a robot (or a loaded host) that flaps around --robot-timeout
   /// is counted (exit line) but cannot flood stderr.
   bus::LogLimiter robot_state_log{4};
@@ -165,9 +167,14 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.config = config;
   if (!(config.input_timeout > 0.0))
     throw ConfigError("--input-timeout " + std::to_string(config.input_timeout) + " must be positive");
-  if (config.robot != "kinematic" && config.robot != "dds")
-    throw ConfigError("--robot '" + config.robot + "' is not a robot side: use 'kinematic' (the in-process plant) or 'dds' "
-                      "(a robot driver on reflex/robot_state and reflex/joint_command)");
+  if (config.robot != "kinematic" && config.robot != "dds" && config.robot != "unitree_hg")
+    throw ConfigError("--robot '" + config.robot + "' is not a robot side: use 'kinematic' (the in-process plant), 'dds' "
+                      "(a robot driver on reflex/robot_state and reflex/joint_command) or 'unitree_hg' (Unitree's "
+                      "rt/lowstate and rt/arm_sdk, with --joint-map)");
+  if ((config.robot == "unitree_hg") != !config.joint_map.empty())
+    throw ConfigError(config.joint_map.empty() ? std::string("--robot unitree_hg needs --joint-map FILE (motor index <-> URDF joint)")
+                                               : "--joint-map '" + config.joint_map + "' is for --robot unitree_hg, not '" +
+                                                     config.robot + "'");
   if (config.trigger != "timer" && config.trigger != "state")
     throw ConfigError("--trigger '" + config.trigger + "' is not a cycle trigger: use 'timer' (a cycle every period) or "
                       "'state' (a cycle per arriving robot state, with --robot dds)");
@@ -176,9 +183,9 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
                       "' sends none: use --robot dds, or --trigger timer");
   if (!(config.robot_timeout > 0.0 && config.robot_timeout <= 1.0))
     throw ConfigError("--robot-timeout " + std::to_string(config.robot_timeout) + " must be in (0, 1] s");
-  if (config.robot == "dds" && !config.robot_state.empty())
+  if (config.robot != "kinematic" && !config.robot_state.empty())
     throw ConfigError("--robot-state '" + config.robot_state + "' keeps the simulated robot's joints across restarts; "
-                      "with --robot dds the robot measures its own: drop one of the two options");
+                      "with --robot " + config.robot + " the robot measures its own: drop one of the two options");
   const CollisionConfig cc = loadCollisionConfigFor(config.urdf, config.collision);
   m.model = loadModel(config.urdf, cc);
   if (!(config.peer_probe >= 0.0 && config.peer_probe <= 60.0))
@@ -291,6 +298,14 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     if (m.robot_identities->authenticated()) po.identities = m.robot_identities.get();
     m.dds = std::make_unique<DdsRobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, po);
     m.dds->sendThrough(*m.outbox);  // the commands too: a blocked write must not stop the loop
+    port = m.dds.get();
+  } else if (config.robot == "unitree_hg") {
+    UnitreeHgPort::Options ho;
+    ho.timeout = config.robot_timeout;
+    ho.period = m.cm.params.period;
+    ho.ramp_time = config.ramp_time;
+    m.dds = std::make_unique<UnitreeHgPort>(m.model, drivenJoints(m.model, m.cm), unitree_hg::loadHgJointMap(config.joint_map),
+                                            *m.participant, ho);
     port = m.dds.get();
   } else {
     m.kinematic = std::make_unique<KinematicPort>(q0);
@@ -419,7 +434,7 @@ void ControllerNode::run() {
     };
     if (m.dds && t - last_other_writer_t <= kRobotProblemWindow)
       append("%sIGNORING a second reflex/robot_state writer %s (%llu samples; the robot writer is %s)",
-             m.dds->otherWriter(), static_cast<unsigned long long>(m.dds->counts().rejected_other_writer),
+             m.dds->otherWriter(), static_cast<unsigned long long>(m.dds->rejectedByCause()[kRobotCauseOtherWriter]),
              m.dds->boundWriter());
     if (m.dds && t - last_robot_reject_t <= kRobotProblemWindow)
       append("%s%llu robot states rejected, the latest: %s", static_cast<unsigned long long>(bad_seen),
@@ -544,8 +559,8 @@ void ControllerNode::run() {
       std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", m.dds->lastRejection());
       m.robot_log[static_cast<std::size_t>(m.dds->lastCause())].print(stderr, m.schema_line);
       last_rejection = robotStateCauseName(m.dds->lastCause());
-      const std::uint64_t other = m.dds->counts().rejected_other_writer;
-      const std::uint64_t bad = m.dds->counts().rejected() - other;
+      const std::uint64_t other = m.dds->rejectedByCause()[kRobotCauseOtherWriter];
+      const std::uint64_t bad = m.dds->rejectedTotal() - other;
       if (bad != bad_seen) last_robot_reject_t = t_now;
       bad_seen = bad;
       if (other != other_writer_seen) {
@@ -577,8 +592,8 @@ void ControllerNode::run() {
         }
       } else {
         char text[200];
-        std::snprintf(text, sizeof(text), "robot state stale: %s (timeout %.0f ms); command frozen, the robot holds",
-                      m.dds && m.dds->haveState() ? "no fresh reflex/robot_state" : "no reflex/robot_state yet",
+        std::snprintf(text, sizeof(text), "robot state stale: %s on %s (timeout %.0f ms); command frozen, the robot holds",
+                      m.dds && m.dds->haveState() ? "no fresh state" : "no state yet", m.dds ? m.dds->stateTopic() : "",
                       m.config.robot_timeout * 1e3);
         std::snprintf(robot_stale_text, sizeof(robot_stale_text), "%s", text);
         std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: %s", text);
@@ -601,14 +616,11 @@ void ControllerNode::run() {
     stats_.robot_stale_cycles = counts.robot_stale_cycles;
     stats_.robot_stale_at_exit = !rep.robot_state_ok;
     if (m.dds) {
-      const DdsRobotPort::Counts& pc = m.dds->counts();
-      stats_.robot_states_accepted = pc.accepted;
-      stats_.robot_states_rejected = pc.rejected();
-      stats_.robot_states_rejected_by_cause = {pc.rejected_length, pc.rejected_missing, pc.rejected_non_finite,
-                                               pc.rejected_future, pc.rejected_old, pc.rejected_duplicate,
-                                               pc.rejected_limits, pc.rejected_other_writer};
-      stats_.robot_writer_changes = pc.writer_changes;
-      stats_.robot_commands = pc.commands;
+      stats_.robot_states_accepted = m.dds->acceptedStates();
+      stats_.robot_states_rejected_by_cause = m.dds->rejectedByCause();
+      stats_.robot_states_rejected = m.dds->rejectedTotal();
+      stats_.robot_writer_changes = m.dds->writerChanges();
+      stats_.robot_commands = m.dds->commandsSent();
     }
 
     // 4. Outputs. Joint state: the kinematic robot after the step, or the robot's measured state
@@ -675,6 +687,18 @@ void ControllerNode::run() {
     }
     // Fell behind by more than a period: re-anchor the schedule instead of bursting.
     if (lateness_us > period * 1e6) clock_gettime(CLOCK_MONOTONIC, &next);
+  }
+  // Leaving the robot: with unitree_hg the arm_sdk weight ramps out (finish() blocks for the ramp time).
+  if (m.dds) {
+    m.dds->finish(period);
+    if (const auto* hg = dynamic_cast<const UnitreeHgPort*>(m.dds.get())) {
+      stats_.arm_sdk_weight = hg->weight();
+      stats_.arm_sdk_max_weight_step = hg->maxWeightStep();
+    }
+    stats_.robot_commands = m.dds->commandsSent();
+    stats_.robot_states_accepted = m.dds->acceptedStates();
+    stats_.robot_states_rejected_by_cause = m.dds->rejectedByCause();
+    stats_.robot_states_rejected = m.dds->rejectedTotal();
   }
   publishHeartbeat(msg::STATE_STOPPING);
   m.outbox->close();  // writes what is queued (heartbeats first: the STOPPING one goes out), 1 s at most

@@ -58,9 +58,19 @@ int main(int argc, char** argv) {
                  "keep the simulated robot's joint positions in this file across restarts (loaded at start, "
                  "written every cycle; refused if it holds another robot or is damaged)");
   app.add_option("--robot", config.robot,
-                 "the robot side: 'kinematic' (the in-process plant) or 'dds' (a robot driver on reflex/robot_state "
-                 "and reflex/joint_command)")
+                 "the robot side: 'kinematic' (the in-process plant), 'dds' (a robot driver on reflex/robot_state "
+                 "and reflex/joint_command) or 'unitree_hg' (Unitree's low-level interface: every joint read from "
+                 "rt/lowstate, the arms commanded on rt/arm_sdk beside the robot's walking controller; needs "
+                 "--joint-map; idl/README.md 'Robots that already have an interface')")
       ->capture_default_str();
+  app.add_option("--joint-map", config.joint_map,
+                 "--robot unitree_hg: the joint map YAML (motor index <-> URDF joint, kp / kd of the commanded "
+                 "motors, joints held fixed), e.g. bringup/robots/unitree_g1_29dof.hg.yaml");
+  app.add_option("--ramp-time", config.ramp_time,
+                 "--robot unitree_hg: seconds for the arm_sdk weight to rise from 0 to 1 after the first command "
+                 "and to fall back to 0 after the last cycle (the exit waits for it); (0, 60]")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-3, 60.0));
   app.add_option("--robot-timeout", config.robot_timeout,
                  "seconds (system clock, against the state's stamp) after which the newest robot state is stale "
                  "(--robot dds): the controller then commands nothing until fresh state returns; (0, 1]. Commands "
@@ -118,7 +128,10 @@ int main(int argc, char** argv) {
     else
       std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
                    1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
-                   config.robot == "dds" ? "robot over DDS" : "kinematic plant", protection.describe().c_str());
+                   config.robot == "dds"          ? "robot over DDS"
+                   : config.robot == "unitree_hg" ? "Unitree hg: rt/lowstate in, rt/arm_sdk out"
+                                                  : "kinematic plant",
+                   protection.describe().c_str());
     if (!protection.full())
       std::fprintf(stderr, "reflex_controller: WARNING: THIS RUN IS NOT PROTECTED: %s\n", protection.reason.c_str());
     node.run();
@@ -131,12 +144,18 @@ int main(int argc, char** argv) {
     if (s.state_write_errors > 0) extra += ", robot-state writes FAILED " + std::to_string(s.state_write_errors);
     if (!config.log_csv.empty()) extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
     if (s.peer_controller_samples > 0) extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
-    if (config.robot == "dds") {
-      extra += ", robot dds: states " + std::to_string(s.robot_states_accepted) + " (rejected " +
+    if (config.robot != "kinematic") {
+      extra += ", robot " + config.robot + ": states " + std::to_string(s.robot_states_accepted) + " (rejected " +
                std::to_string(s.robot_states_rejected) + "), commands " + std::to_string(s.robot_commands) +
                ", robot stale events " + std::to_string(s.robot_stale_events) + " (" +
                std::to_string(s.robot_stale_cycles) + " cycles without state)";
       if (s.robot_stale_at_exit) extra += ", ROBOT STATE STALE at exit";
+      if (s.arm_sdk_weight >= 0.0) {
+        char w[128];
+        std::snprintf(w, sizeof(w), ", arm_sdk weight at exit %.3f (largest step %.5f)", s.arm_sdk_weight,
+                      s.arm_sdk_max_weight_step);
+        extra += w;
+      }
       if (s.robot_writer_changes > 0) extra += ", robot writer replaced " + std::to_string(s.robot_writer_changes) + " times";
       if (s.robot_states_rejected_by_cause[7] > 0)
         extra += ", SECOND ROBOT WRITER ignored (" + std::to_string(s.robot_states_rejected_by_cause[7]) + " samples)";

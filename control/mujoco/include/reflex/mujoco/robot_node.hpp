@@ -11,6 +11,7 @@
 #pragma once
 
 #include "reflex/control/model.hpp"
+#include "reflex/mujoco/hg_double.hpp"
 #include "reflex/mujoco/mjcf.hpp"
 #include "reflex/mujoco/mujoco_robot.hpp"
 
@@ -36,6 +37,10 @@ struct NodeConfig {
   /// dead shared-memory reader stalls a Fast DDS 2.9 writer for the port health check (about 1 s).
   std::string profiles_file, participant_profile = "reflex_participant_udp";
   std::string module_name = "reflex_mujoco";
+  /// "reflex" (reflex/robot_state, reflex/joint_command) or "unitree_hg" (rt/lowstate, rt/arm_sdk:
+  /// hg_double.hpp, with joint_map). reflex/robot_contacts and the heartbeat either way.
+  std::string interface = "reflex";
+  std::string joint_map;
 };
 
 struct NodeStats {
@@ -72,6 +77,7 @@ class RobotNode {
   bus::Writer<msg::RobotContacts>* contacts_writer_ = nullptr;
   bus::Reader<msg::JointCommand>* command_reader_ = nullptr;
   std::unique_ptr<bus::HeartbeatPublisher> heartbeat_;
+  std::unique_ptr<HgDouble> hg_;  ///< interface "unitree_hg"
   int substeps_ = 1;
   NodeStats stats_;
 };

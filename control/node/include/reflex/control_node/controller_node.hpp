@@ -59,6 +59,7 @@
 #include "reflex/control/onboard.hpp"
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control/simulation.hpp"
+#include "reflex/control_node/bus_robot_port.hpp"
 
 #include <array>
 #include <cstdint>
@@ -113,6 +114,10 @@ struct NodeConfig {
   double robot_timeout = 0.050;
   /// s: with "dds", JointCommand.valid_until_ns = now + this. 0 = three controller periods; else [period, 1].
   double command_deadline = 0.0;
+  /// With "unitree_hg": the joint map (unitree_hg.hpp, loadHgJointMap), required; "" otherwise.
+  std::string joint_map;
+  /// s: with "unitree_hg", the arm_sdk weight's ramp from 0 to 1 at start and back at stop; (0, 60].
+  double ramp_time = 3.0;
   /// What starts a cycle: "timer" (one every period, the default) or "state" (one per arriving robot
   /// state, the period as the longest wait; needs a robot that sends states, --robot dds). Anything
   /// else: ConfigError. See ControllerNode::run().
@@ -143,8 +148,10 @@ struct NodeStats {
   std::uint64_t robot_states_accepted = 0;
   std::uint64_t robot_states_rejected = 0;  ///< wrong lengths, a missing joint, NaN, a future or old stamp,
                                             ///< a name twice, outside the limits, another writer's
-  std::array<std::uint64_t, 8> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
+  std::array<std::uint64_t, kRobotStateCauses> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
   std::uint64_t robot_writer_changes = 0;   ///< a silent robot writer replaced by a new one
+  double arm_sdk_weight = -1.0;             ///< --robot unitree_hg: the arm_sdk weight last sent (-1: other robots)
+  double arm_sdk_max_weight_step = 0.0;     ///< --robot unitree_hg: its largest change between two commands
   const char* last_rejection = "";          ///< the latest refusal's cause name ("" none), as in ControlStatus
   std::uint64_t robot_commands = 0;         ///< JointCommand samples handed to the bus (queued for the outbox's writer thread; its drops are in bus_dropped)
   // The loop's bus outputs (joint state, status, heartbeat, joint commands), written by the outbox's thread
@@ -158,10 +165,10 @@ struct NodeStats {
   std::string bus_longest_topic;
 };
 
-/// The name of a DdsRobotPort rejection cause (0 lengths .. 7 another writer) as
-/// ControlStatus.last_rejection and the exit line print it: "robot_state_length", ..._missing_joint,
-/// ..._not_finite, ..._future_stamp, ..._old_stamp, ..._duplicate_name, ..._outside_limits,
-/// ..._other_writer.
+/// The name of a robot port's rejection cause (bus_robot_port.hpp: 0 lengths .. 7 another writer, 8..10
+/// Unitree hg) as ControlStatus.last_rejection and the exit line print it: "robot_state_length",
+/// ..._missing_joint, ..._not_finite, ..._future_stamp, ..._old_stamp, ..._duplicate_name,
+/// ..._outside_limits, ..._other_writer, ..._bad_crc, ..._motor_count, ..._old_tick.
 const char* robotStateCauseName(int cause) noexcept;
 
 /// "hand_target_too_far 3, walk_bad_value 1" for the non-zero counters of `stats` ("" if none).

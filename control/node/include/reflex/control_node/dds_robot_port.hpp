@@ -36,6 +36,7 @@
 
 #include "reflex/control/model.hpp"
 #include "reflex/control/onboard.hpp"
+#include "reflex/control_node/bus_robot_port.hpp"
 #include <reflex/bus/outbox.hpp>
 
 #include <reflex/bus/bus.hpp>
@@ -49,7 +50,7 @@
 
 namespace reflex::control_node {
 
-class DdsRobotPort final : public control::RobotPort {
+class DdsRobotPort final : public BusRobotPort {
  public:
   static constexpr double kFutureTolerance = 0.002;  ///< s a state's stamp may lie ahead of this host's clock
 
@@ -87,29 +88,29 @@ class DdsRobotPort final : public control::RobotPort {
 
   /// Takes every state that arrived since the last call (once per cycle, before step()). Returns the
   /// number of samples rejected by this call; lastRejection() names the last one.
-  int poll() noexcept;
+  int poll() noexcept override;
   const Eigen::VectorXd* measuredPositions(double now) noexcept override;
   void command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double dt) noexcept override;
   /// From now on command() queues each JointCommand (stamped at once: its time and sequence number
   /// are the cycle's) for `outbox`'s writer thread instead of writing it on the control thread
   /// (reflex/bus/outbox.hpp: a DDS write can block for a second). Call before outbox.start().
-  void sendThrough(bus::Outbox& outbox);
+  void sendThrough(bus::Outbox& outbox) override;
 
   const Counts& counts() const { return counts_; }
-  const char* lastRejection() const { return rejection_; }
+  const char* lastRejection() const override { return rejection_; }
   /// The latest rejection that was not another writer's sample ("" none).
-  const char* lastBadRejection() const { return bad_rejection_; }
+  const char* lastBadRejection() const override { return bad_rejection_; }
   /// The cause of the last rejection: 0 lengths, 1 missing joint, 2 non-finite, 3 future stamp, 4 old,
   /// 5 duplicate name, 6 outside the limits, 7 another writer.
   static constexpr int kCauses = 8;
   static constexpr int kCauseOtherWriter = 7;
-  int lastCause() const { return cause_; }
-  bool haveState() const { return have_state_; }
+  int lastCause() const override { return cause_; }
+  bool haveState() const override { return have_state_; }
   /// Age (s) of the newest accepted state now, +inf without one.
   double stateAge() const noexcept;
-  std::uint64_t stateSeq() const { return state_seq_; }
+  std::uint64_t stateSeq() const override { return state_seq_; }
   /// Header.stamp_ns of the newest accepted state (system clock, ns), 0 without one.
-  std::int64_t stateStampNs() const { return state_stamp_ns_; }
+  std::int64_t stateStampNs() const override { return state_stamp_ns_; }
   /// The robot's state interval (s): the stamps of the newest accepted state and the one accepted
   /// before it, of the same writer; 0 while unknown (fewer than two states of the bound writer).
   /// reflex_controller --trigger state takes it as the span of a cycle (OnboardController::step(now, dt)).
@@ -119,8 +120,17 @@ class DdsRobotPort final : public control::RobotPort {
   bool waitForState(std::chrono::nanoseconds timeout) noexcept;
   /// The bound writer ("" before the first accepted state) and the newest writer ignored ("" none),
   /// each as its participant's GUID prefix and writer entity id, "01.0f.…|0.0.3.3" (log lines, heartbeat).
-  const char* boundWriter() const { return bound_text_; }
-  const char* otherWriter() const { return other_text_; }
+  const char* boundWriter() const override { return bound_text_; }
+  const char* otherWriter() const override { return other_text_; }
+  const char* stateTopic() const override { return "reflex/robot_state"; }
+  std::uint64_t acceptedStates() const override { return counts_.accepted; }
+  CauseCounts rejectedByCause() const override {
+    return {counts_.rejected_length, counts_.rejected_missing, counts_.rejected_non_finite, counts_.rejected_future,
+            counts_.rejected_old, counts_.rejected_duplicate, counts_.rejected_limits, counts_.rejected_other_writer,
+            0, 0, 0};
+  }
+  std::uint64_t writerChanges() const override { return counts_.writer_changes; }
+  std::uint64_t commandsSent() const override { return counts_.commands; }
 
  private:
   using Guid = std::array<unsigned char, 16>;
