@@ -14,7 +14,7 @@
 // its next state without it) or never; also counted: answers later than the control period (5 ms).
 // The controller's own exit line (cycles, overruns, lateness) is printed after each run.
 //
-// --stress N starts `stress-ng --cpu N` for each run (N workers at 100 % CPU, normal priority) and stops
+// --stress N starts `stress-ng --cpu N` for each run (N workers at 100 % CPU, SCHED_OTHER) and stops
 // it after; --realtime passes the option to reflex_controller; --driver-rt runs this process's robot
 // threads SCHED_FIFO (a real robot's driver is real-time; without it the load delays the robot, not the
 // controller).
@@ -83,7 +83,8 @@ int runOne(const Options& o, const control::Model& model, const control::Control
   std::unique_ptr<testing::ChildProcess> stress;
   if (o.stress > 0) {
     stress = std::make_unique<testing::ChildProcess>(
-        std::vector<std::string>{"/usr/bin/stress-ng", "--cpu", std::to_string(o.stress), "--quiet"},
+        // Normal scheduling, whatever this process runs at (chrt --other 0).
+        std::vector<std::string>{"/usr/bin/chrt", "--other", "0", "/usr/bin/stress-ng", "--cpu", std::to_string(o.stress), "--quiet"},
         o.work + "/reflex_trigger_bench.stress.log");
     if (!stress->started()) {
       std::fprintf(stderr, "reflex_trigger_bench: cannot start stress-ng: %s\n", stress->error().c_str());

@@ -46,11 +46,19 @@ class StateDriver {
     std::int64_t arrived_ns = 0;  ///< system clock when taken here
   };
 
-  /// `rt_priority` > 0: both threads run SCHED_FIFO at it (the bench's real-time runs; throws if refused).
+  /// `rt_priority` > 0: the participant's threads (made here) and the state and command threads run
+  /// SCHED_FIFO at it (realtimeFailed() if refused); the calling thread keeps its own policy.
   StateDriver(const control::Model& model, const control::ControllerModel& cm, int domain, double period,
               const Eigen::VectorXd& q0, int rt_priority = 0)
       : model_(model), cm_(cm), q_(q0), rt_priority_(rt_priority) {
     period_ns_ = static_cast<long>(std::llround(period * 1e9));
+    // Real-time while the participant and its entities are made: its receive threads (which take the
+    // commands) inherit it; the calling thread gets its own policy back after (what it starts later,
+    // e.g. a load generator, must not inherit SCHED_FIFO).
+    int old_policy = SCHED_OTHER;
+    sched_param old_param{};
+    pthread_getschedparam(pthread_self(), &old_policy, &old_param);
+    makeRealtime();
     bus::BusConfig bc;
     bc.module_name = "test_state_driver";
     bc.domain_id = domain;
@@ -58,6 +66,7 @@ class StateDriver {
     participant_ = std::make_unique<bus::Participant>(bc);
     state_writer_ = &participant_->makeWriter<msg::RobotState>();
     command_reader_ = &participant_->makeReader<msg::JointCommand>("reflex/joint_command", bus::kProfileRecord);
+    pthread_setschedparam(pthread_self(), old_policy, &old_param);
     state_.names(model.q_names);
     state_.positions().assign(static_cast<std::size_t>(model.nq), 0.0);
     state_.velocities().assign(static_cast<std::size_t>(model.nq), 0.0);
