@@ -172,7 +172,7 @@ void summarize(std::ostream& os, const Model& model, const Scenario& sc, const S
   if (robot == "kinematic")
     os << "  robot                 kinematic (in-process plant, OnboardController + KinematicPort)\n";
   else
-    os << "  robot                 " << robot << " (a robot over DDS, OnboardController + DdsRobotPort)\n";
+    os << "  robot                 " << robot << " (a robot over DDS, OnboardController + " << (robot == "unitree_hg" ? "UnitreeHgPort" : "DdsRobotPort") << ")\n";
   os << "  min distance          " << r.min_distance * 1000.0 << " mm at t = " << r.min_time << " s ("
      << pairName(model, r.min_pair) << ")\n";
   if (std::isfinite(r.min_virtual_distance))
@@ -211,6 +211,10 @@ struct PlantFigures {
   std::string min_contact_pair;
   int robot_exit = 0;
   std::string log;
+  double ramp_out_ratio = -1.0;          ///< unitree_hg: max |dq| / (v_max dt) while the arm_sdk weight ramped out
+  double measured_ratio = 0.0;           ///< max |dq| / (v_max dt) between consecutive states, the whole run
+  double max_weight_step = 0.0;          ///< unitree_hg: the weight's largest step between two commands
+  double ramp_time = 0.0;
   // The same scenario on the kinematic plant, for comparison.
   double kin_min_distance = 0.0;
   std::array<ArmTracking, 2> kin_tracking;
@@ -220,7 +224,7 @@ struct PlantFigures {
 /// The lines a run over DDS adds to the summary (after summarize's). Every figure in mm / mrad / ms.
 void summarizePlant(std::ostream& os, const SimResult& r, const PlantFigures& p, double d_r) {
   os << "  plant                 " << p.robot << " over DDS on domain " << p.domain
-     << " (OnboardController + DdsRobotPort, real time; the distances above are our distance module on the MEASURED "
+     << " (OnboardController + " << (p.robot == "unitree_hg" ? "UnitreeHgPort" : "DdsRobotPort") << ", real time; the distances above are our distance module on the MEASURED "
         "joint positions)\n";
   os << "  measured below d_r    " << p.below_d_r << " cycles (d_r = " << d_r * 1000.0 << " mm)\n";
   os << "  MuJoCo contacts       " << p.contact_samples << " of " << p.contacts_received
@@ -238,6 +242,12 @@ void summarizePlant(std::ostream& os, const SimResult& r, const PlantFigures& p,
      << (p.kin_estop ? "yes" : "no") << " (the same scenario in process, for comparison)\n";
   os << "  robot state stale     " << r.robot_stale_cycles << " cycles (nothing commanded), late cycles "
      << r.late_cycles << "\n";
+  if (p.ramp_out_ratio >= 0.0)
+    os << "  arm_sdk weight        ramped in and out over " << p.ramp_time << " s, largest step " << p.max_weight_step
+       << " per command; max |qdot|/v_max while ramping out " << p.ramp_out_ratio << " (measured, between ticks)\n";
+  os << "  measured joint steps  max |dq|/(v_max dt) " << p.measured_ratio
+     << " between consecutive states of the whole run (warm-up, scenario, ramp out; dt from the "
+     << (p.ramp_out_ratio >= 0.0 ? "ticks" : "stamps") << ")\n";
   if (!p.log.empty()) os << "  robot log             " << p.log << " (exit status " << p.robot_exit << ")\n";
 }
 
@@ -271,9 +281,18 @@ int main(int argc, char** argv) {
   double robot_timeout = 0.020, command_deadline = 0.015, robot_wait = 30.0;
   app.add_option("--robot", robot_side,
                  "the robot side: 'kinematic' (the in-process plant, simulated time), 'mujoco' (spawns reflex_mujoco "
-                 "on --domain and drives it over DDS in real time) or 'dds' (a robot already on the bus, real time)")
+                 "on --domain and drives it over DDS in real time), 'dds' (a robot already on the bus, real time) or "
+                 "'unitree_hg' (spawns reflex_mujoco --interface unitree_hg and drives it as reflex_controller --robot "
+                 "unitree_hg does: rt/lowstate in, rt/arm_sdk out, the weight ramped in and out; judged like mujoco)")
       ->capture_default_str()
-      ->check(CLI::IsMember({"kinematic", "mujoco", "dds"}));
+      ->check(CLI::IsMember({"kinematic", "mujoco", "dds", "unitree_hg"}));
+  std::string joint_map;
+  double ramp_time = 3.0;
+  app.add_option("--joint-map", joint_map,
+                 "--robot unitree_hg: the joint map YAML (default: <URDF stem>.hg.yaml beside the URDF)");
+  app.add_option("--ramp-time", ramp_time, "--robot unitree_hg: seconds of the arm_sdk weight's ramp in and out")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-3, 60.0));
   app.add_option("--domain", domain,
                  "DDS domain id of the robot (--robot mujoco: default 197; dds: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
@@ -293,7 +312,7 @@ int main(int argc, char** argv) {
   int robot_domain = 0;
   if (over_bus) {
     try {
-      robot_domain = robot_side == "mujoco" ? domain.value_or(197) : reflex::bus::resolveDomainId(domain);
+      robot_domain = robot_side != "dds" ? domain.value_or(197) : reflex::bus::resolveDomainId(domain);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
       return 1;
@@ -388,7 +407,14 @@ int main(int argc, char** argv) {
         PlantFigures fig;
         fig.robot = robot_side;
         fig.domain = robot_domain;
-        if (robot_side == "mujoco") {
+        if (robot_side == "unitree_hg") {
+          po.interface = "unitree_hg";
+          po.joint_map = !joint_map.empty() ? joint_map
+                                            : (fs::path(urdf).parent_path() / (fs::path(urdf).stem().string() + ".hg.yaml")).string();
+          po.ramp_time = ramp_time;
+          fig.ramp_time = ramp_time;
+        }
+        if (robot_side == "mujoco" || robot_side == "unitree_hg") {
           po.robot_binary = exeDir() + "/reflex_mujoco";
           po.robot_args = {"--urdf", urdf};
           if (!collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", collision});
@@ -397,7 +423,7 @@ int main(int argc, char** argv) {
           po.robot_log = fig.log;
         }
         ++run_index;
-        std::cout << "  " << sc->name << " (" << label << "): " << (robot_side == "mujoco" ? "starting reflex_mujoco" : "joining")
+        std::cout << "  " << sc->name << " (" << label << "): " << (robot_side != "dds" ? "starting reflex_mujoco" : "joining")
                   << " on domain " << robot_domain << ", then " << sc->duration << " s in real time ..." << std::endl;
         SimResult r;
         double wall = 0.0;
@@ -406,6 +432,13 @@ int main(int argc, char** argv) {
           const auto t0 = std::chrono::steady_clock::now();
           r = runScenario(model, cm, *sc, opt, plant);
           wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          // unitree_hg: the arm_sdk weight back to 0, watched like the scenario (contacts, joint steps).
+          if (robot_side == "unitree_hg") {
+            plant.rampOut(cm.params.period);
+            fig.ramp_out_ratio = plant.rampOutSpeedRatio();
+            fig.max_weight_step = plant.maxWeightStep();
+          }
+          fig.measured_ratio = plant.measuredSpeedRatio();
           // The judge's last words: contacts published after the last cycle.
           plant.awaitCycle(static_cast<double>(r.cycles) * cm.params.period, cm.params.period);
           fig.robot_exit = plant.stop();

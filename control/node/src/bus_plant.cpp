@@ -68,6 +68,8 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
         argv.push_back("--q");
         argv.push_back(model.q_names[i] + "=" + number(options_.q_start[i]));
       }
+    if (options_.interface == "unitree_hg")
+      argv.insert(argv.end(), {"--interface", "unitree_hg", "--joint-map", options_.joint_map});
     argv.insert(argv.end(), options_.robot_args.begin(), options_.robot_args.end());
     std::vector<char*> args;
     for (auto& a : argv) args.push_back(a.data());
@@ -90,7 +92,17 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
     config.module_name = "reflex_sim";
     config.domain_id = options_.domain;
     bus_ = std::make_unique<bus::Participant>(config);
-    port_ = std::make_unique<DdsRobotPort>(model, driven, *bus_, options_.port);
+    if (options_.interface == "unitree_hg") {
+      UnitreeHgPort::Options ho;
+      ho.timeout = options_.port.timeout;
+      ho.period = options_.port.period;
+      ho.ramp_time = options_.ramp_time;
+      auto hg = std::make_unique<UnitreeHgPort>(model, driven, unitree_hg::loadHgJointMap(options_.joint_map), *bus_, ho);
+      hg_ = hg.get();
+      port_ = std::move(hg);
+    } else {
+      port_ = std::make_unique<DdsRobotPort>(model, driven, *bus_, options_.port);
+    }
     contacts_ = &bus_->makeReader<msg::RobotContacts>();
     q_ = options_.q_start.size() == model.nq ? options_.q_start : Eigen::VectorXd::Zero(model.nq);
     // The first state: the robot is up and its writer matched our reader.
@@ -159,7 +171,15 @@ void BusScenarioPlant::poll() noexcept {
   if (const Eigen::VectorXd* q = port_->measuredPositions(0.0)) {
     q_ = *q;
     previous_stamp_ = stamp_;
-    stamp_ = port_->stateStampNs();
+    // unitree_hg: the tick, in ms (see BusPlantOptions::interface); the receive time would carry the
+    // network's jitter into every measured speed.
+    stamp_ = hg_ ? static_cast<std::int64_t>(port_->stateSeq()) * 1000000 : port_->stateStampNs();
+    if (q_previous_.size() == q_.size() && previous_stamp_ > 0 && stamp_ > previous_stamp_) {
+      const double dt = 1e-9 * static_cast<double>(stamp_ - previous_stamp_);
+      for (int i = 0; i < model_.nq; ++i)
+        measured_ratio_ = std::max(measured_ratio_, std::abs(q_[i] - q_previous_[i]) / (model_.v_max[i] * dt));
+    }
+    if (stamp_ != previous_stamp_) q_previous_ = q_;
   }
   while (contacts_->takeNext(contact_sample_)) {
     ++contacts_received_;
@@ -186,6 +206,30 @@ bool BusScenarioPlant::awaitCycle(double t, double period) {
   poll();
   return late;
 }
+
+void BusScenarioPlant::rampOut(double period) {
+  if (hg_ == nullptr) return;
+  Eigen::VectorXd q_before = q_;
+  std::int64_t stamp_before = stamp_;
+  auto next = std::chrono::steady_clock::now();
+  const auto step = std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period));
+  bool more = true;
+  while (more) {
+    more = hg_->rampOutStep(period);
+    next += step;
+    std::this_thread::sleep_until(next);
+    poll();
+    if (stamp_ > stamp_before) {
+      const double dt = 1e-9 * static_cast<double>(stamp_ - stamp_before);
+      for (int i = 0; i < model_.nq; ++i)
+        ramp_out_ratio_ = std::max(ramp_out_ratio_, std::abs(q_[i] - q_before[i]) / (model_.v_max[i] * dt));
+      q_before = q_;
+      stamp_before = stamp_;
+    }
+  }
+}
+
+double BusScenarioPlant::maxWeightStep() const { return hg_ ? hg_->maxWeightStep() : 0.0; }
 
 double BusScenarioPlant::stateInterval(double period) const {
   if (previous_stamp_ <= 0 || stamp_ <= previous_stamp_) return period;

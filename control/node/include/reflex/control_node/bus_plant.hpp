@@ -21,6 +21,7 @@
 #include "reflex/control/model.hpp"
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control_node/dds_robot_port.hpp"
+#include "reflex/control_node/unitree_hg_port.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -45,6 +46,13 @@ struct BusPlantOptions {
   double first_state_timeout = 30.0;  ///< s to wait for the robot's first state
   double warmup = 0.5;            ///< s of holding the first measured configuration before the scenario
   DdsRobotPort::Options port;     ///< robot-state timeout, command deadline
+  /// The robot's interface: "dds" (reflex/robot_state, reflex/joint_command) or "unitree_hg"
+  /// (rt/lowstate, rt/arm_sdk through UnitreeHgPort with `joint_map`; a spawned reflex_mujoco gets
+  /// --interface unitree_hg --joint-map too). With unitree_hg the time between two states is the
+  /// difference of their ticks, taken as milliseconds (reflex_mujoco's tick; LowState_ has no stamp).
+  std::string interface = "dds";
+  std::string joint_map;
+  double ramp_time = 3.0;         ///< s, the arm_sdk weight's ramp (unitree_hg)
 };
 
 class BusScenarioPlant final : public control::ScenarioPlant {
@@ -66,13 +74,25 @@ class BusScenarioPlant final : public control::ScenarioPlant {
   /// its exit line is then in the log.
   int stop();
 
-  const DdsRobotPort& robotPort() const { return *port_; }
+  const BusRobotPort& robotPort() const { return *port_; }
+  /// After the scenario: with unitree_hg, the arm_sdk weight ramped to 0 (a command every `period`,
+  /// the last positions held), watching the robot: the judge's contacts keep being counted and the
+  /// largest measured joint step is rampOutSpeedRatio(). Nothing with dds.
+  void rampOut(double period);
+  /// max |dq_i| / (v_max_i dt) between consecutive states during rampOut() (dt from the ticks).
+  double rampOutSpeedRatio() const { return ramp_out_ratio_; }
+  /// max |dq_i| / (v_max_i dt) between the newest states of consecutive polls, from the first state
+  /// to the last (warm-up, scenario, ramp out), dt from the states' stamps (unitree_hg: ticks): what
+  /// the robot did, whatever was commanded.
+  double measuredSpeedRatio() const { return measured_ratio_; }
+  /// The arm_sdk weight's largest step between two commands (unitree_hg; 0 with dds).
+  double maxWeightStep() const;
   std::uint64_t contactSamples() const { return contact_samples_; }
   std::uint64_t contactsReceived() const { return contacts_received_; }
   double minContact() const { return min_contact_; }
   const std::string& minContactPair() const { return min_contact_pair_; }
   std::uint64_t totalContactSteps() const { return total_contact_steps_; }
-  const char* description() const { return options_.robot_binary.empty() ? "dds" : "mujoco"; }
+  const char* description() const { return options_.robot_binary.empty() ? "dds" : hg_ ? "mujoco (unitree_hg)" : "mujoco"; }
 
  private:
   void poll() noexcept;
@@ -81,7 +101,11 @@ class BusScenarioPlant final : public control::ScenarioPlant {
   BusPlantOptions options_;
   pid_t child_ = -1;
   std::unique_ptr<bus::Participant> bus_;
-  std::unique_ptr<DdsRobotPort> port_;
+  std::unique_ptr<BusRobotPort> port_;
+  UnitreeHgPort* hg_ = nullptr;  ///< port_ when the interface is unitree_hg
+  double ramp_out_ratio_ = 0.0;
+  double measured_ratio_ = 0.0;
+  Eigen::VectorXd q_previous_;
   bus::Reader<msg::RobotContacts>* contacts_ = nullptr;
   msg::RobotContacts contact_sample_;
   Eigen::VectorXd q_;
