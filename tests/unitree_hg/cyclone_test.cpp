@@ -11,8 +11,8 @@
 //    name) and 3 + S with a tick that does not advance are each rejected, counted by cause in the
 //    exit line (exactly as many as sent) and named on stderr; while the tick stands still the
 //    controller goes stale and sends nothing (the robot sees the gap);
-//  - a joint map naming a joint the model does not have, or a motor the message lacks (35), is
-//    refused at start (exit 1) naming the joint / the key.
+//  - a joint map naming a joint the model does not have, or a motor the message lacks (35), no map,
+//    or a map with --robot dds is refused at start (exit 1) naming the joint / the key / the option.
 #include "reflex/control_node/unitree_hg.hpp"
 
 #include "reflex/control/controller.hpp"
@@ -167,6 +167,17 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
   const std::string e2 = readFile(testing::TempDir() + "/beyond.log");
   EXPECT_NE(e2.find("motor"), std::string::npos) << e2;
   EXPECT_NE(e2.find("value '35'"), std::string::npos) << e2;
+  // No map at all, and a map for another robot side.
+  ChildProcess c3({binPath("reflex_controller"), "--robot", "unitree_hg", "--domain", "13", "--peer-probe", "0"},
+                  testing::TempDir() + "/nomap.log");
+  EXPECT_EQ(c3.wait(std::chrono::seconds(20)), 1);
+  const std::string e3 = readFile(testing::TempDir() + "/nomap.log");
+  EXPECT_NE(e3.find("--robot unitree_hg needs --joint-map FILE"), std::string::npos) << e3;
+  ChildProcess c4({binPath("reflex_controller"), "--robot", "dds", "--joint-map", kMap, "--domain", "13", "--peer-probe", "0"},
+                  testing::TempDir() + "/ddsmap.log");
+  EXPECT_EQ(c4.wait(std::chrono::seconds(20)), 1);
+  const std::string e4 = readFile(testing::TempDir() + "/ddsmap.log");
+  EXPECT_NE(e4.find("is for --robot unitree_hg, not 'dds'"), std::string::npos) << e4;
 }
 
 }  // namespace
