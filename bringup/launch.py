@@ -7,6 +7,7 @@
     bringup/launch.py bringup/launch/multi_host.yaml --dry-run          # show what would start where
     bringup/launch.py CONFIG --set session=/data/my_session --duration 70
     bringup/launch.py bringup/launch/one_host.yaml --robot mujoco       # the physics robot (reflex_mujoco)
+    bringup/launch.py bringup/launch/one_host.yaml --robot unitree_hg   # the same on Unitree's hg interface
 
 Every process gets the configuration's DDS domain (REFLEX_DOMAIN_ID) and profiles file
 (FASTRTPS_DEFAULT_PROFILES_FILE), both read by reflex::bus in every Reflex process; its output is
@@ -44,9 +45,11 @@ PROCESS_KEYS = {"name", "cmd", "args", "host", "env", "prefix", "on_exit", "dela
 TOP_KEYS = {"name", "description", "domain", "profiles", "log_dir", "bin_dir", "env", "vars", "hosts",
             "discovery_server", "processes", "stop_timeout", "robot"}
 # The robot side: "kinematic" = the controller's in-process plant; "mujoco" = reflex_mujoco
-# on the bus, the controller with --robot dds. A process with `robot: X` starts only on side X;
-# ${ROBOT} is the side, ${ROBOT_PORT} the controller's --robot value (kinematic | dds).
-ROBOT_SIDES = {"kinematic": "kinematic", "mujoco": "dds"}
+# on the bus, the controller with --robot dds; "unitree_hg" = reflex_mujoco speaking Unitree's hg
+# interface, the controller with --robot unitree_hg (the joint map beside the URDF). A process with
+# `robot: X` starts only on side X; ${ROBOT} is the side, ${ROBOT_PORT} the controller's --robot value
+# (kinematic | dds | unitree_hg).
+ROBOT_SIDES = {"kinematic": "kinematic", "mujoco": "dds", "unitree_hg": "unitree_hg"}
 SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGKILL": signal.SIGKILL, "SIGUSR1": signal.SIGUSR1}
 
 
@@ -504,9 +507,11 @@ def main(argv=None):
     ap.add_argument("--log-dir", help="folder for the process logs (default: the configuration's log_dir)")
     ap.add_argument("--set", action="append", metavar="NAME=VALUE", help="set a variable of the configuration's vars")
     ap.add_argument("--quiet", action="store_true", help="do not echo process output (logs are still written)")
-    ap.add_argument("--robot", help="the robot side: kinematic (the controller's in-process plant) or mujoco "
+    ap.add_argument("--robot", help="the robot side: kinematic (the controller's in-process plant), mujoco "
                                     "(starts the processes marked 'robot: mujoco', i.e. reflex_mujoco, and the "
-                                    "controller with --robot dds); default: the configuration's 'robot' or kinematic")
+                                    "controller with --robot dds) or unitree_hg (the processes marked 'robot: "
+                                    "unitree_hg', reflex_mujoco on Unitree's hg interface, and the controller with "
+                                    "--robot unitree_hg); default: the configuration's 'robot' or kinematic")
     args = ap.parse_args(argv)
     if args.duration < 0:
         ap.error(f"--duration {args.duration} must not be negative")

@@ -167,12 +167,16 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
   const std::string e2 = readFile(testing::TempDir() + "/beyond.log");
   EXPECT_NE(e2.find("motor"), std::string::npos) << e2;
   EXPECT_NE(e2.find("value '35'"), std::string::npos) << e2;
-  // No map at all, and a map for another robot side.
-  ChildProcess c3({binPath("reflex_controller"), "--robot", "unitree_hg", "--domain", "13", "--peer-probe", "0"},
+  // No map given and none beside the URDF, and a map for another robot side.
+  const std::string small = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/small_humanoid.urdf";
+  ChildProcess c3({binPath("reflex_controller"), "--robot", "unitree_hg", "--urdf", small, "--domain", "13", "--peer-probe", "0"},
                   testing::TempDir() + "/nomap.log");
   EXPECT_EQ(c3.wait(std::chrono::seconds(20)), 1);
   const std::string e3 = readFile(testing::TempDir() + "/nomap.log");
-  EXPECT_NE(e3.find("--robot unitree_hg needs --joint-map FILE"), std::string::npos) << e3;
+  EXPECT_NE(e3.find("no joint map: --joint-map not given and no '" + std::string(REFLEX_SOURCE_DIR) +
+                    "/bringup/robots/small_humanoid.hg.yaml' beside the URDF"),
+            std::string::npos)
+      << e3;
   ChildProcess c4({binPath("reflex_controller"), "--robot", "dds", "--joint-map", kMap, "--domain", "13", "--peer-probe", "0"},
                   testing::TempDir() + "/ddsmap.log");
   EXPECT_EQ(c4.wait(std::chrono::seconds(20)), 1);

@@ -46,11 +46,11 @@ int main(int argc, char** argv) {
   app.add_option("--interface", config.interface,
                  "'reflex' (reflex/robot_state out, reflex/joint_command in) or 'unitree_hg' (Unitree's rt/lowstate "
                  "out with tick and crc, rt/arm_sdk in blended by its weight with the robot's own controller, which "
-                 "holds the start configuration; needs --joint-map)")
+                 "holds the start configuration; --joint-map)")
       ->capture_default_str();
   app.add_option("--joint-map", config.joint_map,
                  "--interface unitree_hg: the joint map YAML (motor index <-> URDF joint), e.g. "
-                 "bringup/robots/asimo_like.hg.yaml");
+                 "bringup/robots/asimo_like.hg.yaml (default: <URDF stem>.hg.yaml beside the URDF)");
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGPIPE, SIG_IGN);
   try {

@@ -86,9 +86,8 @@ RobotNode::RobotNode(const NodeConfig& config) : config_(config) {
   if (config.interface == "unitree_hg" && config.period < 0.001)
     throw std::invalid_argument("--period " + std::to_string(config.period) +
                                 " s: with --interface unitree_hg at least 1 ms (the tick counts milliseconds)");
-  if ((config.interface == "unitree_hg") != !config.joint_map.empty())
-    throw std::invalid_argument(config.joint_map.empty() ? std::string("--interface unitree_hg needs --joint-map FILE")
-                                                         : "--joint-map '" + config.joint_map + "' is for --interface unitree_hg");
+  if (config.interface != "unitree_hg" && !config.joint_map.empty())
+    throw std::invalid_argument("--joint-map '" + config.joint_map + "' is for --interface unitree_hg");
   model_ = control::loadModel(config.urdf, control::loadCollisionConfigFor(config.urdf, config.collision));
   const Eigen::VectorXd q0 = parseInitialConfiguration(model_, config.initial);
   robot_ = std::make_unique<MujocoRobot>(model_, config.mjcf, q0);
@@ -99,7 +98,7 @@ RobotNode::RobotNode(const NodeConfig& config) : config_(config) {
   bc.participant_profile = config.participant_profile;
   bus_ = std::make_unique<bus::Participant>(bc);
   if (config.interface == "unitree_hg") {
-    hg_ = std::make_unique<HgDouble>(model_, config.joint_map, q0, *bus_);
+    hg_ = std::make_unique<HgDouble>(model_, unitree_hg::hgJointMapFor(config.urdf, config.joint_map), q0, *bus_);
   } else {
     state_writer_ = &bus_->makeWriter<msg::RobotState>();
     command_reader_ = &bus_->makeReader<msg::JointCommand>();

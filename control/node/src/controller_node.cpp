@@ -171,10 +171,8 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     throw ConfigError("--robot '" + config.robot + "' is not a robot side: use 'kinematic' (the in-process plant), 'dds' "
                       "(a robot driver on reflex/robot_state and reflex/joint_command) or 'unitree_hg' (Unitree's "
                       "rt/lowstate and rt/arm_sdk, with --joint-map)");
-  if ((config.robot == "unitree_hg") != !config.joint_map.empty())
-    throw ConfigError(config.joint_map.empty() ? std::string("--robot unitree_hg needs --joint-map FILE (motor index <-> URDF joint)")
-                                               : "--joint-map '" + config.joint_map + "' is for --robot unitree_hg, not '" +
-                                                     config.robot + "'");
+  if (config.robot != "unitree_hg" && !config.joint_map.empty())
+    throw ConfigError("--joint-map '" + config.joint_map + "' is for --robot unitree_hg, not '" + config.robot + "'");
   if (config.trigger != "timer" && config.trigger != "state")
     throw ConfigError("--trigger '" + config.trigger + "' is not a cycle trigger: use 'timer' (a cycle every period) or "
                       "'state' (a cycle per arriving robot state, with --robot dds)");
@@ -304,7 +302,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     ho.timeout = config.robot_timeout;
     ho.period = m.cm.params.period;
     ho.ramp_time = config.ramp_time;
-    m.dds = std::make_unique<UnitreeHgPort>(m.model, drivenJoints(m.model, m.cm), unitree_hg::loadHgJointMap(config.joint_map),
+    m.dds = std::make_unique<UnitreeHgPort>(m.model, drivenJoints(m.model, m.cm), unitree_hg::loadHgJointMap(unitree_hg::hgJointMapFor(config.urdf, config.joint_map)),
                                             *m.participant, ho);
     port = m.dds.get();
   } else {

@@ -60,12 +60,13 @@ int main(int argc, char** argv) {
   app.add_option("--robot", config.robot,
                  "the robot side: 'kinematic' (the in-process plant), 'dds' (a robot driver on reflex/robot_state "
                  "and reflex/joint_command) or 'unitree_hg' (Unitree's low-level interface: every joint read from "
-                 "rt/lowstate, the arms commanded on rt/arm_sdk beside the robot's walking controller; needs "
+                 "rt/lowstate, the arms commanded on rt/arm_sdk beside the robot's walking controller, with "
                  "--joint-map; idl/README.md 'Robots that already have an interface')")
       ->capture_default_str();
   app.add_option("--joint-map", config.joint_map,
                  "--robot unitree_hg: the joint map YAML (motor index <-> URDF joint, kp / kd of the commanded "
-                 "motors, joints held fixed), e.g. bringup/robots/unitree_g1_29dof.hg.yaml");
+                 "motors, joints held fixed), e.g. bringup/robots/unitree_g1_29dof.hg.yaml (default: <URDF stem>.hg.yaml "
+                 "beside the URDF)");
   app.add_option("--ramp-time", config.ramp_time,
                  "--robot unitree_hg: seconds for the arm_sdk weight to rise from 0 to 1 after the first command "
                  "and to fall back to 0 after the last cycle (the exit waits for it); (0, 60]")

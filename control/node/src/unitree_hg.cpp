@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <set>
 
 namespace reflex::unitree_hg {
@@ -177,6 +178,17 @@ HgJointMap readMap(const common::ConfigNode& root) {
 
 HgJointMap loadHgJointMap(const std::string& path) {
   return readMap(common::ConfigNode::loadFile(path, "unitree_hg joint map", &raise));
+}
+
+std::string hgJointMapFor(const std::string& urdf, const std::string& joint_map) {
+  if (!joint_map.empty()) return joint_map;
+  const std::filesystem::path u(urdf);
+  const std::string beside = (u.parent_path() / (u.stem().string() + ".hg.yaml")).string();
+  std::error_code ec;
+  if (!std::filesystem::exists(beside, ec))
+    throw control::ConfigError("no joint map: --joint-map not given and no '" + beside +
+                               "' beside the URDF (motor index <-> URDF joint; idl/README.md)");
+  return beside;
 }
 
 HgJointMap loadHgJointMapFromString(const std::string& text, const std::string& origin) {

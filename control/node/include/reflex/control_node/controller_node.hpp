@@ -49,7 +49,8 @@
 // The robot side (NodeConfig::robot): "kinematic" (default) is the in-process
 // kinematic plant; "dds" is a robot driver on the bus (DdsRobotPort, dds_robot_port.hpp): the
 // controller computes from the measured reflex/robot_state and answers each cycle with one
-// reflex/joint_command. Without a state newer than robot_timeout it computes and commands nothing
+// reflex/joint_command; "unitree_hg" is a robot on Unitree's hg interface (UnitreeHgPort,
+// unitree_hg_port.hpp: rt/lowstate in, rt/arm_sdk out, the weight ramped in and, after the loop, out). Without a state newer than robot_timeout it computes and commands nothing
 // (the robot holds once the last command's deadline passed) and says so at once: a line on stderr,
 // the heartbeat's `detail` ("robot state stale: ..."; "" again when fresh state returns), the exit
 // line; joint state is not published meanwhile.
@@ -114,7 +115,8 @@ struct NodeConfig {
   double robot_timeout = 0.050;
   /// s: with "dds", JointCommand.valid_until_ns = now + this. 0 = three controller periods; else [period, 1].
   double command_deadline = 0.0;
-  /// With "unitree_hg": the joint map (unitree_hg.hpp, loadHgJointMap), required; "" otherwise.
+  /// With "unitree_hg": the joint map (unitree_hg.hpp, loadHgJointMap); "" = <URDF stem>.hg.yaml beside
+  /// the URDF (an error if there is none). Given with another robot side: ConfigError.
   std::string joint_map;
   /// s: with "unitree_hg", the arm_sdk weight's ramp from 0 to 1 at start and back at stop; (0, 60].
   double ramp_time = 3.0;

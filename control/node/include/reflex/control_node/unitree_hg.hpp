@@ -137,6 +137,9 @@ struct HgJointMap {
 /// joint name once, gains finite and >= 0, kp and kd together. Throws control::ConfigError
 /// ("FILE:LINE:COL: KEY: PROBLEM (value 'TEXT', expected ...)").
 HgJointMap loadHgJointMap(const std::string& path);
+/// The joint map to use: `joint_map` if given, else <URDF stem>.hg.yaml beside the URDF (the rule of
+/// the controller configuration). Throws control::ConfigError naming that path when it does not exist.
+std::string hgJointMapFor(const std::string& urdf, const std::string& joint_map);
 HgJointMap loadHgJointMapFromString(const std::string& text, const std::string& origin);
 
 /// The map against a robot model, resolved to q indices. Throws control::ConfigError naming the file
