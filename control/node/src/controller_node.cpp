@@ -175,10 +175,10 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     throw ConfigError("--joint-map '" + config.joint_map + "' is for --robot unitree_hg, not '" + config.robot + "'");
   if (config.trigger != "timer" && config.trigger != "state")
     throw ConfigError("--trigger '" + config.trigger + "' is not a cycle trigger: use 'timer' (a cycle every period) or "
-                      "'state' (a cycle per arriving robot state, with --robot dds)");
-  if (config.trigger == "state" && config.robot != "dds")
+                      "'state' (a cycle per arriving robot state, with --robot dds or unitree_hg)");
+  if (config.trigger == "state" && config.robot == "kinematic")
     throw ConfigError("--trigger state runs a cycle per arriving robot state, but --robot '" + config.robot +
-                      "' sends none: use --robot dds, or --trigger timer");
+                      "' sends none: use --robot dds or unitree_hg, or --trigger timer");
   if (!(config.robot_timeout > 0.0 && config.robot_timeout <= 1.0))
     throw ConfigError("--robot-timeout " + std::to_string(config.robot_timeout) + " must be in (0, 1] s");
   if (config.robot != "kinematic" && !config.robot_state.empty())

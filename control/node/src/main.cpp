@@ -74,7 +74,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1e-3, 60.0));
   app.add_option("--robot-timeout", config.robot_timeout,
                  "seconds (system clock, against the state's stamp) after which the newest robot state is stale "
-                 "(--robot dds): the controller then commands nothing until fresh state returns; (0, 1]. Commands "
+                 "(--robot dds; with unitree_hg since the state was taken, LowState_ has no stamp): the controller then "
+                 "commands nothing until fresh state returns; (0, 1]. Commands "
                  "are anchored at the state they answer, so the timeout is about liveness: 50 ms rides out a loaded "
                  "host's scheduling stalls")
       ->capture_default_str();
@@ -84,7 +85,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--trigger", config.trigger,
                  "what starts a control cycle: 'timer' (one every controller period, 5 ms by default) or 'state' (with "
-                 "--robot dds: one per arriving reflex/robot_state, so each command answers its state at once; the "
+                 "--robot dds: one per arriving reflex/robot_state, with unitree_hg per rt/lowstate, so each command "
+                 "answers its state at once; the "
                  "driver sets the rate, e.g. 500 Hz). With 'state' a cycle spans the robot's state interval (at most "
                  "one period: no joint is commanded more than v_max times it), and the period is the longest wait: "
                  "when no state arrives within it the cycle runs as the timer's (stale after --robot-timeout: "
