@@ -10,10 +10,13 @@
 //    shifted through 32 zero bits; Crc32Core's table-free definition, computed independently below).
 //  - Joint map: the shipped G1 map against the spec's motor table; the asimo_like map against the
 //    model; every error path names the bad value.
+//  - The crc of a state and of a command (the port computes both every cycle) allocates nothing
+//    (operator new counted; no other thread runs in this program).
 #include "reflex/control_node/unitree_hg.hpp"
 
 #include "reflex/control/controller.hpp"
 #include "reflex/control/urdf_loader.hpp"
+#include "support/count_allocations.hpp"
 
 #include <gtest/gtest.h>
 
@@ -221,6 +224,21 @@ TEST(UnitreeHgLayout, CrcIgnoresTheCrcFieldAndSeesEveryOther) {
   const std::uint32_t cbase = hg::lowCmdCrc(c);
   c.motor_cmd()[29].q(0.5f);
   EXPECT_NE(hg::lowCmdCrc(c), cbase);
+}
+
+TEST(UnitreeHgCrc, AllocatesNothing) {
+  hg::LowState s;
+  hg::LowCmd c;
+  s.tick(7);
+  c.motor_cmd()[20].q(0.25f);
+  const long before = reflex::testing::allocations();
+  std::uint32_t sum = 0;
+  for (int k = 0; k < 100; ++k) {
+    s.tick(static_cast<std::uint32_t>(k));
+    sum += hg::lowStateCrc(s) + hg::lowCmdCrc(c);  // used, so nothing is optimized away
+  }
+  EXPECT_EQ(reflex::testing::allocations() - before, 0);
+  EXPECT_NE(sum, 0u);
 }
 
 // ---- joint map
