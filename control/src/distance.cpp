@@ -50,7 +50,7 @@ DistanceData::DistanceData(const Model& model)
     core_piece[p].bound_center_L = 0.5 * (model.primitives[p].a_L + model.primitives[p].b_L);
   }
   pair_has_piece.assign(model.pairs.size(), 0);
-  piece_winner.assign(model.pairs.size(), -1);
+  piece_winner.assign(model.pairs.size(), {-1, -1});
   auto hasPiece = [&](const Segment& seg) {
     for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
       if (model.primitives[static_cast<std::size_t>(p)].piece >= 0) return true;
@@ -98,6 +98,22 @@ DistanceData::DistanceData(const Model& model)
   }
   rp_gap.assign(robot_pairs.size(), 0.0);
   segment_stamp.assign(model.segments.size(), 0U);
+  // Per primitive, the radius of its bounding sphere (about its core's middle); per segment the most
+  // primitives, for the kept lists (robot segments only).
+  prim_sphere_r.assign(model.primitives.size(), 0.0);
+  std::size_t most_primitives = 1;
+  for (const Segment& seg : model.segments) {
+    most_primitives = std::max(most_primitives, static_cast<std::size_t>(std::max(seg.num_primitives, 1)));
+    if (seg.body_schema_slot) continue;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      prim_sphere_r[static_cast<std::size_t>(p)] = 0.5 * (prim.b_L - prim.a_L).norm() + prim.radius;
+    }
+  }
+  kept_a.assign(most_primitives, 0);
+  kept_b.assign(most_primitives, 0);
+  list_end.assign(robot_pairs.size(), 0);
+  list_floor.assign(robot_pairs.size(), 0.0);
   list_a.assign(pp_a.size(), 0);
   list_b.assign(pp_a.size(), 0);
   pp_s.assign(pp_a.size(), 0.0);
@@ -237,23 +253,24 @@ template <class Each>
 bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData& data, const DistanceOptions& options,
                      int i, int link_a, int link_b, double give_up, double& floor, Each&& each) {
   DistanceData::PieceCandidate* cand = data.piece_candidates.data();
-  std::size_t count = 0, first = 0;
+  std::size_t count = 0, first = 0, last = 0;
+  bool have_last = false;
+  std::array<int, 2>& winner = data.piece_winner[static_cast<std::size_t>(i)];
   each([&](int pa, int pb, double bound, double core, double s, double t) {
     // A bound that is not a number is taken first (never skipped on its account).
     const double key = bound == bound ? bound : -std::numeric_limits<double>::infinity();
     if (count == 0 || key < cand[first].bound) first = count;
-    cand[count] = {key, core, s, t, pa, pb, static_cast<int>(count)};
-    ++count;
+    if (pa == winner[0] && pb == winner[1]) last = count, have_last = true;
+    cand[count++] = {key, core, s, t, pa, pb};
   });
   // The pair that won last time goes first when it can still win (it usually does again: its
   // distance then rules out nearly every other), else the one of the smallest bound.
-  int& last = data.piece_winner[static_cast<std::size_t>(i)];
-  if (last >= 0 && static_cast<std::size_t>(last) < count && !(cand[last].bound > give_up)) first = static_cast<std::size_t>(last);
+  if (have_last && !(cand[last].bound > give_up)) first = last;
   std::swap(cand[0], cand[first]);
   double best = std::numeric_limits<double>::infinity();
   floor = std::numeric_limits<double>::infinity();
   bool on_pieces = false, overlap = false;
-  int cap_pa = -1, cap_pb = -1, cap_index = -1;
+  int cap_pa = -1, cap_pb = -1;
   double cap_core = 0.0, cap_s = 0.0, cap_t = 0.0;
   Eigen::Vector3d best_pa = Eigen::Vector3d::Zero(), best_pb = Eigen::Vector3d::Zero(), best_n = Eigen::Vector3d::UnitZ();
   // Whether (pa, pb) at distance d replaces the best so far.
@@ -267,7 +284,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     if (capsules) {  // two capsules: exact as they are
       if (better(c.bound, pa, pb)) {
         best = c.bound, on_pieces = false, overlap = false;
-        cap_pa = pa, cap_pb = pb, cap_index = c.index, cap_core = c.core, cap_s = c.s, cap_t = c.t;
+        cap_pa = pa, cap_pb = pb, cap_core = c.core, cap_s = c.s, cap_t = c.t;
       }
       return;
     }
@@ -286,7 +303,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     if (o == PieceOutcome::kApart) {
       if (better(d, pa, pb)) {
         best = d, on_pieces = true, overlap = false, best_pa = p_a, best_pb = p_b, best_n = n;
-        cap_pa = pa, cap_pb = pb, cap_index = c.index, cap_core = c.core, cap_s = c.s, cap_t = c.t;
+        cap_pa = pa, cap_pb = pb, cap_core = c.core, cap_s = c.s, cap_t = c.t;
       }
       return;
     }
@@ -301,7 +318,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     const double len = dir.norm();
     best = 0.0, on_pieces = true, overlap = true, best_pa = p_a, best_pb = p_a;
     best_n = len > kCoincidentEps ? Eigen::Vector3d(dir / len) : Eigen::Vector3d::UnitZ();
-    cap_pa = pa, cap_pb = pb, cap_index = c.index, cap_core = c.core, cap_s = c.s, cap_t = c.t;
+    cap_pa = pa, cap_pb = pb, cap_core = c.core, cap_s = c.s, cap_t = c.t;
   };
   // Only a primitive pair whose bound is not above `cut` (the best exact distance, give_up while
   // there is none) can matter; every one after the first above it is farther still.
@@ -325,7 +342,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     if (count > 0 && cand[0].bound > give_up) floor = std::min(floor, cand[0].bound);
     return false;
   }
-  last = cap_index;
+  winner = {cap_pa, cap_pb};
   if (on_pieces) {
     finishPairPoints(model, kin, data, options, i, link_a, link_b, best, best_pa, best_pb, best_n);
     data.pairs[static_cast<std::size_t>(i)].well_defined = !overlap;  // overlapping pieces: the capsules' normal
@@ -492,13 +509,46 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   const int* list_b = data.pp_b.data();
   int nlist = static_cast<int>(data.pp_a.size());
   if (prune) {
+    // A pair of the tight model keeps only the primitives of each segment whose bounding sphere lies
+    // within prune_distance of the other segment's: the others' primitive pairs are farther than it
+    // (their smallest sphere gap, list_floor, is a lower bound of their distance). A torso of 48
+    // pieces against a finger keeps the few pieces near the finger.
+    const double prune_distance = options.prune_distance;
     nlist = 0;
     for (int e = 0; e < nexact; ++e) {
       const int i = exact_pairs[e];
-      for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k, ++nlist) {
-        data.list_a[nlist] = data.pp_a[k];
-        data.list_b[nlist] = data.pp_b[k];
+      const int count = data.pp_begin[i + 1] - data.pp_begin[i];
+      double floor = kInf;
+      if (data.pair_has_piece[static_cast<std::size_t>(i)] && count > 4) {
+        const SegmentPair& pair = model.pairs[i];
+        int nka = 0, nkb = 0;
+        auto keep = [&](int seg, int other, int* kept, int& n) {
+          const Segment& sg = model.segments[seg];
+          const double* c4 = data.bound_center4_B.data() + 4 * other;
+          const Eigen::Vector3d c(c4[0], c4[1], c4[2]);
+          const double r_other = data.bound_radius[static_cast<std::size_t>(other)];
+          for (int p = sg.first_primitive; p < sg.first_primitive + sg.num_primitives; ++p) {
+            const SegmentB& w = prim[p];
+            const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r_other;
+            if (gap > prune_distance) floor = std::min(floor, gap);
+            else kept[n++] = p;
+          }
+        };
+        keep(pair.a, pair.b, data.kept_a.data(), nka);
+        keep(pair.b, pair.a, data.kept_b.data(), nkb);
+        for (int ka = 0; ka < nka; ++ka)
+          for (int kb = 0; kb < nkb; ++kb, ++nlist) {
+            data.list_a[nlist] = data.kept_a[static_cast<std::size_t>(ka)];
+            data.list_b[nlist] = data.kept_b[static_cast<std::size_t>(kb)];
+          }
+      } else {
+        for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k, ++nlist) {
+          data.list_a[nlist] = data.pp_a[k];
+          data.list_b[nlist] = data.pp_b[k];
+        }
       }
+      data.list_end[static_cast<std::size_t>(e)] = nlist;
+      data.list_floor[static_cast<std::size_t>(e)] = floor;
     }
     list_a = data.list_a.data();
     list_b = data.list_b.data();
@@ -516,13 +566,15 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   for (int e = 0, j = 0; e < nexact; ++e) {
     const int i = exact_pairs[e];
     const SegmentPair& pair = model.pairs[i];
-    const int end = j + data.pp_begin[i + 1] - data.pp_begin[i];
-    assert(end > j);  // every robot segment has a primitive (Model)
+    const int end = prune ? data.list_end[static_cast<std::size_t>(e)] : j + data.pp_begin[i + 1] - data.pp_begin[i];
+    assert(end > j || (prune && data.pair_has_piece[static_cast<std::size_t>(i)]));  // every robot segment has a primitive
     if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
       const int begin = j;
-      double bound = kInf;
-      for (; j < end; ++j) bound = std::min(bound, data.pp_core[j] - radius[list_a[j]] - radius[list_b[j]]);
-      if (prune && bound > options.prune_distance) {
+      double bound = prune ? data.list_floor[static_cast<std::size_t>(e)] : kInf;  // the primitives left out
+      double listed = kInf;
+      for (; j < end; ++j) listed = std::min(listed, data.pp_core[j] - radius[list_a[j]] - radius[list_b[j]]);
+      if (prune && listed > options.prune_distance) {  // none listed within it (or none listed: +inf)
+        bound = std::min(bound, listed);
         PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
         out.active = true;
         out.exact = false;
@@ -539,6 +591,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
                                f(list_a[k], list_b[k], data.pp_core[k] - radius[list_a[k]] - radius[list_b[k]],
                                  data.pp_core[k], data.pp_s[k], data.pp_t[k]);
                            })) {  // its pieces are all farther than prune_distance: skipped
+        floor = std::min(floor, bound);
         PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
         out.active = true;
         out.exact = false;

@@ -127,6 +127,14 @@ struct DistanceData {
   // all of pp_a / pp_b without it), and their segment parameters and core distance (scratch).
   std::vector<int> list_a, list_b;
   std::vector<double> pp_s, pp_t, pp_core;
+  // With the broad phase, per exact pair (exact list order): where its entries of list_a / list_b end,
+  // and the smallest bounding-sphere gap of a primitive it left out (+inf: none). A pair of the tight
+  // model lists only the primitives of each segment whose bounding sphere (radius prim_sphere_r, about
+  // the core's middle) is within prune_distance of the other segment's.
+  std::vector<int> list_end;
+  std::vector<double> list_floor;
+  std::vector<double> prim_sphere_r;
+  std::vector<int> kept_a, kept_b;
   // The tight model (Primitive::piece): per pair, whether a primitive of either segment is a convex
   // piece (the pair's distance is then the least over its primitive pairs of computeConvexDistance on
   // the pieces, a capsule side by its core and radius); per primitive, its core as a piece of two
@@ -139,12 +147,11 @@ struct DistanceData {
   struct PieceCandidate {
     double bound, core, s, t;
     int pa, pb;
-    int index;  ///< its place among the pair's primitive pairs
   };
   std::vector<PieceCandidate> piece_candidates;
-  /// Per pair of the tight model: the index of the primitive pair that gave its distance last time
-  /// (-1: none yet), tried first next time. Only the work depends on it, never the result.
-  std::vector<int> piece_winner;
+  /// Per pair of the tight model: the primitive pair that gave its distance last time ({-1, -1}: none
+  /// yet), tried first next time. Only the work depends on it, never the result.
+  std::vector<std::array<int, 2>> piece_winner;
   /// The kernel computeSegmentDistances runs (fastestSweepKernel() unless set: tests run both).
   SweepKernel kernel = fastestSweepKernel();
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
