@@ -573,9 +573,17 @@ void ControllerNode::run() {
     }
 
     // 2.-3. Staleness, priority, control (allocation-free) and the robot port: one step.
-    // A cycle started by a state spans the robot's state interval (0 while unknown: one period); one
-    // started by the period's end spans the period, as the timer's.
-    const CycleReport& rep = ctl.step(t_now, state_woke ? m.dds->stateInterval() : period);
+    // A cycle started by a sample on the state topic spans the time since the previous cycle, at most
+    // the robot's state interval (and, in step(), one period): a robot that reaches `positions` by its
+    // next state never moves faster than v_max, and a flood of samples (another writer, rejected
+    // states) advances walking and the trajectory no faster than real time. One started by the
+    // period's end spans the period, as the timer's.
+    double span = period;
+    if (state_woke) {
+      span = std::max(t_now - last_start, 1e-6);
+      if (m.dds->stateInterval() > 0.0) span = std::min(span, m.dds->stateInterval());
+    }
+    const CycleReport& rep = ctl.step(t_now, span);
     const ControlResult cr = rep.result;
     if (rep.robot_state_ok != robot_ok || !said_robot) {
       // Said at once (stderr, heartbeat), not at the next 2 Hz heartbeat.

@@ -87,8 +87,8 @@ int main(int argc, char** argv) {
                  "what starts a control cycle: 'timer' (one every controller period, 5 ms by default) or 'state' (with "
                  "--robot dds: one per arriving reflex/robot_state, with unitree_hg per rt/lowstate, so each command "
                  "answers its state at once; the "
-                 "driver sets the rate, e.g. 500 Hz). With 'state' a cycle spans the robot's state interval (at most "
-                 "one period: no joint is commanded more than v_max times it), and the period is the longest wait: "
+                 "driver sets the rate, e.g. 500 Hz). With 'state' a cycle spans the time since the previous one, at "
+                 "most the robot's state interval and one period (no joint is commanded more than v_max times it), and the period is the longest wait: "
                  "when no state arrives within it the cycle runs as the timer's (stale after --robot-timeout: "
                  "nothing commanded). Cycles started by a state report lateness 0")
       ->capture_default_str();

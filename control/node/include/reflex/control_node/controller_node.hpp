@@ -202,9 +202,10 @@ class ControllerNode {
   ///
   /// trigger "timer": a cycle every ControllerParams::period on absolute deadlines.
   /// trigger "state": the loop waits for the next robot state (DdsRobotPort::waitForState) and runs a
-  /// cycle as soon as one arrives, spanning the robot's state interval (DdsRobotPort::stateInterval(),
-  /// at most one period: OnboardController::step(now, dt)), so a command answers its state at once and
-  /// no joint is asked to move more than v_max times that interval. The period stays the longest wait:
+  /// cycle as soon as one arrives, spanning the time since the previous cycle, at most the robot's
+  /// state interval (DdsRobotPort::stateInterval()) and one period (OnboardController::step(now, dt)),
+  /// so a command answers its state at once and no joint is asked to move more than v_max times the
+  /// robot's interval; a flood of samples cannot run walking or the trajectory faster than real time. The period stays the longest wait:
   /// when no state arrives within it, the cycle runs exactly as the timer's would (from the newest
   /// state while it is fresh, spanning one period; nothing computed or commanded once it is stale), so
   /// staleness, the e-stop and the command deadline are those of the timer. A cycle started by a state
