@@ -10,6 +10,7 @@ find them all: its getters .string("x") .number("x") .at("x") ... and rejectUnkn
   controller   control/src/controller_config.cpp   {"key", &p.x}, getters, rejectUnknown
   collision    control/src/urdf_loader.cpp         rejectUnknown, getters
   fit overlay  control/src/fit_overlay.cpp         getters, point("x", ...)
+  hg joint map control/node/src/unitree_hg.cpp     rejectUnknown, getters
   behavior     modules/src/*.cpp                   rejectUnknown({...}) lists, getters
   vision       vision/src/{session,session_maker,calibration,calibration_images,object_map}.cpp
                getters, rejectUnknown, readRosMatrix(root, "x", ...), file("x", ...)
@@ -37,6 +38,7 @@ READERS = {
     "controller": ["control/src/controller_config.cpp"],
     "collision": ["control/src/urdf_loader.cpp"],
     "fit overlay": ["control/src/fit_overlay.cpp"],
+    "unitree_hg joint map": ["control/node/src/unitree_hg.cpp"],
     "behavior": "modules/src/*.cpp",
     "vision": ["vision/src/session.cpp", "vision/src/session_maker.cpp", "vision/src/calibration.cpp",
                "vision/src/calibration_images.cpp", "vision/src/object_map.cpp"],
