@@ -258,7 +258,8 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
   const FitOptions& o = overlay.options;
   os << "options: {max_primitives: " << o.max_primitives << ", split_ratio: " << num(o.split_ratio)
      << ", min_split_gain: " << num(o.min_split_gain) << ", quantum: " << num(o.quantum)
-     << ", max_pieces: " << o.max_pieces << ", piece_gap: " << num(o.piece_gap) << "}\n"
+     << ", max_pieces: " << o.max_pieces << ", piece_gap: " << num(o.piece_gap)
+     << ", max_pieces_large_gap: " << o.max_pieces_large_gap << ", large_gap: " << num(o.large_gap) << "}\n"
      << "links:\n";
   for (const auto& l : overlay.links) {
     const FitStats& s = l.stats;
@@ -300,6 +301,7 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
 }
 
 FitOverlay loadFitOverlay(const std::string& path) {
+  constexpr double kAnyOption = std::numeric_limits<double>::max();
   // Every error names FILE:LINE:COL: KEY.PATH and ends with "(rerun reflex_fit)": the file is written by
   // reflex_fit, so a bad one is stale or hand-edited.
   const common::ConfigNode::Raise raise = [](const std::string& m) { throw ModelError(m + " (rerun reflex_fit)"); };
@@ -313,6 +315,19 @@ FitOverlay loadFitOverlay(const std::string& path) {
   o.urdf = joinPath(dir, root.requiredString("urdf", "the URDF's path"));
   o.urdf_dir = detail::folderOf(o.urdf);
   for (const auto& [name, value] : root.child("packages").entries()) o.packages[name] = joinPath(dir, value.asString());
+  // The options the fit was made with (reflex_setup reuses a fit only if they are today's defaults);
+  // a key an older reflex_fit did not write is taken as 0, never as today's default.
+  const common::ConfigNode opts = root.child("options");
+  opts.rejectUnknown({"max_primitives", "split_ratio", "min_split_gain", "quantum", "max_pieces", "piece_gap",
+                      "max_pieces_large_gap", "large_gap"});
+  o.options.max_primitives = opts.integer("max_primitives", 0, 0, std::numeric_limits<int>::max());
+  o.options.split_ratio = opts.number("split_ratio", 0.0, 0.0, kAnyOption);
+  o.options.min_split_gain = opts.number("min_split_gain", 0.0, 0.0, kAnyOption);
+  o.options.quantum = opts.number("quantum", 0.0, 0.0, kAnyOption, "m");
+  o.options.max_pieces = opts.integer("max_pieces", 0, 0, std::numeric_limits<int>::max());
+  o.options.piece_gap = opts.number("piece_gap", 0.0, 0.0, kAnyOption, "m");
+  o.options.max_pieces_large_gap = opts.integer("max_pieces_large_gap", 0, 0, std::numeric_limits<int>::max());
+  o.options.large_gap = opts.number("large_gap", 0.0, 0.0, kAnyOption, "m");
   const common::ConfigNode links = root.at("links", "a map of links");
   links.requireMap("a map of links");
   constexpr double kAny = std::numeric_limits<double>::max();

@@ -823,6 +823,13 @@ double outsideHull(const PieceHull& h, const Eigen::Vector3d& x) {
   return worst;
 }
 
+/// A point of a hull counts as inside the link's solid (never a gap) at this winding number or more.
+/// Inside a closed mesh it is 1 (a cut's cap); across a hole of an open mesh (a head shell open at the
+/// neck and the ears) it is fractional (about 0.5 in the hole's plane, 0.9-0.95 deep in the cavity):
+/// such a point is empty space the hull closes over, a gap like any other (0.5 hid those gaps: a
+/// shoulder in the cavity of iCub's head shell was reported touching, 45 mm from its triangles).
+constexpr double kInsideWinding = 0.97;
+
 /// The generalized winding number of the mesh at x (1 inside a closed outward-wound mesh, 0 outside).
 double windingNumber(const TriangleMesh& mesh, const Eigen::Vector3d& x) {
   double sum = 0.0;
@@ -886,7 +893,7 @@ double quickGap(const TriangleMesh& mesh, const TriangleTree& tree, const PieceH
   std::sort(far.begin(), far.end(), [](const auto& u, const auto& v) { return u.first > v.first; });
   // The largest distance of a point outside the solid: the winding number only until one is found.
   for (const auto& [d, x] : far) {
-    if (std::abs(windingNumber(mesh, x)) >= 0.5) continue;  // inside the solid (a cut's cap)
+    if (std::abs(windingNumber(mesh, x)) >= kInsideWinding) continue;  // inside the solid (a cut's cap)
     return d;
   }
   return 0.0;
@@ -911,7 +918,7 @@ double pieceGap(const TriangleMesh& mesh, const TriangleTree& tree, const std::v
   }
   std::sort(far.begin(), far.end(), [](const auto& u, const auto& v) { return u.first > v.first; });
   for (const auto& [d, x] : far)
-    if (std::abs(windingNumber(mesh, x)) < 0.5) return d;  // inside the solid: never a surface point
+    if (std::abs(windingNumber(mesh, x)) < kInsideWinding) return d;  // inside the solid: never a surface point
   return 0.0;
 }
 
@@ -953,12 +960,16 @@ std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions
   for (;;) {
     for (std::size_t i = 0; i < pieces.size(); ++i)
       if (pieces[i].gap < 0.0) pieces[i].gap = pieceGap(mesh, tree, pieces, i, samples);
+    // Up to max_pieces, any gap above piece_gap is cut; beyond, only one above large_gap.
+    const bool beyond = static_cast<int>(pieces.size()) >= options.max_pieces;
+    const double cut_above = beyond ? std::max(options.piece_gap, options.large_gap) : options.piece_gap;
     std::size_t worst = pieces.size();
     for (std::size_t i = 0; i < pieces.size(); ++i)
-      if (!pieces[i].final && pieces[i].triangles.size() >= 2 && pieces[i].gap > options.piece_gap &&
+      if (!pieces[i].final && pieces[i].triangles.size() >= 2 && pieces[i].gap > cut_above &&
           (worst == pieces.size() || pieces[i].gap > pieces[worst].gap))
         worst = i;
-    if (worst == pieces.size() || static_cast<int>(pieces.size()) >= options.max_pieces) break;
+    if (worst == pieces.size() || static_cast<int>(pieces.size()) >= std::max(options.max_pieces, options.max_pieces_large_gap))
+      break;
     const PieceCluster& c = pieces[worst];
     // The cut whose two hulls stand off the mesh least (quickGap, the larger of the two), ties within
     // 0.1 mm by the least summed volume; a cut must make the hulls smaller or the gap smaller.

@@ -208,8 +208,8 @@ int run(int argc, char** argv) {
           if (!fs::equivalent(old.urdf, urdf, ec)) why_not = "it is the fit of '" + old.urdf + "'";
           else if (f.max_primitives != d.max_primitives || f.split_ratio != d.split_ratio ||
                    f.min_split_gain != d.min_split_gain || f.quantum != d.quantum ||
-                   f.gap_samples_per_primitive != d.gap_samples_per_primitive || f.max_pieces != d.max_pieces ||
-                   f.piece_gap != d.piece_gap)
+                   f.max_pieces != d.max_pieces || f.piece_gap != d.piece_gap ||
+                   f.max_pieces_large_gap != d.max_pieces_large_gap || f.large_gap != d.large_gap)
             why_not = "it was made with other options";
           else {
             reflex::control::CollisionConfig c;

@@ -270,7 +270,7 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
   EXPECT_GT(shortfall.size(), 100u) << "too few pairs near each other to judge";
   EXPECT_LE(median, 0.002);
   EXPECT_LE(p95, 0.008);
-  EXPECT_LE(max, 0.060);  // the goal is 0.025 (control/docs/real_geometry.md: why not yet)
+  EXPECT_LE(max, 0.025);
 
   // reflex_setup with only the URDF, --package-path (and the shipped SRDF) exits 0, reusing the fit
   // made above (written where it writes its own); every pair it excludes as always in collision has

@@ -334,6 +334,30 @@ TEST(Setup, OnlySuccessReplacesFilesAndNeverAnythingButARegularFile) {
   EXPECT_EQ(listing(), (std::vector<std::string>{"behavior.yaml", "collision.yaml", "controller.yaml"}));
 }
 
+// A fit in the output folder is reused only when it was made with today's default options: one
+// written by an older reflex_fit (without the large-gap options) is made again, and said so.
+TEST(Setup, AFitMadeWithOtherOptionsIsMadeAgainNotReused) {
+  const std::string dir = freshDir("fit_options");
+  const std::string fit = dir + "/mesh_humanoid.fit.yaml";
+  const std::string today = fitOverlayText(loadFitOverlay(testing::robotPath("mesh_humanoid.fit.yaml")), fit);
+  ASSERT_THAT(today, HasSubstr(", max_pieces_large_gap: 48, large_gap: 0.02}"));
+  std::ofstream(fit) << today;
+  const std::string args = testing::robotPath("mesh_humanoid.urdf") + " " + kMeshArgs + " --out " + dir + " --force";
+  const ProcessResult reused = setupRun(args);
+  ASSERT_EQ(reused.exit_code, 0) << reused.out << reused.err;
+  EXPECT_THAT(reused.out, HasSubstr("fit: reusing " + fit));
+
+  std::string older = today;
+  older.replace(older.find(", max_pieces_large_gap: 48, large_gap: 0.02}"),
+                std::string(", max_pieces_large_gap: 48, large_gap: 0.02}").size(), "}");
+  std::ofstream(fit) << older;
+  EXPECT_EQ(loadFitOverlay(fit).options.max_pieces_large_gap, 0) << "a key an older fit lacks reads as 0";
+  const ProcessResult refit = setupRun(args);
+  ASSERT_EQ(refit.exit_code, 0) << refit.out << refit.err;
+  EXPECT_THAT(refit.out, HasSubstr("fit: not reusing " + fit + ": it was made with other options"));
+  EXPECT_EQ(slurp(fit), today) << "made again with today's options: the shipped fit";
+}
+
 // A locomotion variant: asimo_like with every arm joint fixed. Its only mirrored chains of >= 4
 // revolute joints are the legs, which are never taken for arms (before: legs configured as arms, feet
 // as hands, exit 0).

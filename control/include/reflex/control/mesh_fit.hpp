@@ -72,6 +72,10 @@ struct FitOptions {
   int max_pieces = 16;
   /// ...while a piece's surface stands off the mesh surface by more than this (m, its worst gap).
   double piece_gap = 0.003;
+  /// Beyond max_pieces, a piece whose gap is above large_gap is still cut, up to this many pieces:
+  /// the few links (a shell open at the neck, a deep concavity) where 16 pieces leave centimetres.
+  int max_pieces_large_gap = 48;
+  double large_gap = 0.020;  ///< m
 };
 
 
@@ -99,8 +103,8 @@ struct PieceFit {
 };
 
 /// Cuts `mesh` (link frame) into convex pieces whose union contains it, until every piece's worst gap
-/// is at most options.piece_gap or there are options.max_pieces (mesh_fit.cpp, "Convex pieces", says
-/// how). `worst_gap` (if set): the largest remaining gap (m). Deterministic. Throws ModelError for an
+/// is at most options.piece_gap or there are options.max_pieces (then on while a gap is above
+/// options.large_gap, up to options.max_pieces_large_gap; mesh_fit.cpp, "Convex pieces", says how). `worst_gap` (if set): the largest remaining gap (m). Deterministic. Throws ModelError for an
 /// empty mesh, a bad index or a non-finite vertex.
 std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions& options, double* worst_gap);
 
