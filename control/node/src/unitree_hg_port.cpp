@@ -32,6 +32,7 @@ UnitreeHgPort::UnitreeHgPort(const control::Model& model, const std::vector<int>
   reader_ = &bus.makeReader<hg::LowState>();
   writer_ = &bus.makeWriter<hg::LowCmd>(options.command_topic, hg::kProfile);
   q_.setZero(model.nq);
+  q_own_.setZero(model.nq);
   lower_.resize(model.nq);
   upper_.resize(model.nq);
   for (int i = 0; i < model.nq; ++i) {
@@ -180,9 +181,12 @@ void UnitreeHgPort::command(const Eigen::VectorXd& q_end, const Eigen::VectorXd&
     m.q(static_cast<float>(q_end[qi]));
     m.dq(static_cast<float>(qdot[qi]));
   }
+  // The robot's own targets, as well as they can be known: where its controller held the arms before
+  // the first command (weight 0).
+  if (!sent_) q_own_ = q_;
   // Ramp in: the weight rises by dt / ramp_time per command, from 0 (the first command's weight is
-  // that one step), to 1.
-  const double w = std::min(1.0, weight_ + dt / options_.ramp_time);
+  // that one step), to 1, never faster than weightStepLimit allows.
+  const double w = std::min(1.0, weight_ + std::min(dt / options_.ramp_time, weightStepLimit(dt)));
   max_weight_step_ = std::max(max_weight_step_, w - weight_);
   weight_ = w;
   send();
@@ -195,9 +199,22 @@ void UnitreeHgPort::send() noexcept {
   sent_ = true;
 }
 
+double UnitreeHgPort::weightStepLimit(double dt) const noexcept {
+  // A change dw of the weight moves the blended target of a joint by dw * |q_cmd - q_own|: at most
+  // half of what the joint may move in dt at its velocity limit.
+  double limit = 1.0;
+  for (int motor = hg::kArmSdkFirst; motor <= hg::kArmSdkLast; ++motor) {
+    const int qi = map_.q_of_motor[static_cast<std::size_t>(motor)];
+    if (qi < 0) continue;
+    const double gap = std::abs(static_cast<double>(cmd_.motor_cmd()[static_cast<std::size_t>(motor)].q()) - q_own_[qi]);
+    if (gap > 0.0) limit = std::min(limit, kBlendSpeedShare * model_.v_max[qi] * dt / gap);
+  }
+  return limit;
+}
+
 bool UnitreeHgPort::rampOutStep(double dt) noexcept {
   if (!sent_ || weight_ <= 0.0) return false;
-  const double w = std::max(0.0, weight_ - dt / options_.ramp_time);
+  const double w = std::max(0.0, weight_ - std::min(dt / options_.ramp_time, weightStepLimit(dt)));
   max_weight_step_ = std::max(max_weight_step_, weight_ - w);
   weight_ = w;
   // The last command's positions, no velocity: the arms hold where Reflex left them while the

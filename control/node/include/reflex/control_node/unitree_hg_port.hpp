@@ -25,7 +25,12 @@
 // position, per RobotPort::command). Legs (0..11) and slots beyond 29 are never commanded (mode 0,
 // all zero). motor_cmd[29].q is the WEIGHT: it rises from 0 by dt / ramp_time per command (ramp in,
 // never a jump) to 1, and after the last cycle finish() lowers it the same way to 0 while sending the
-// last command's positions (ramp out). crc = Crc32Core of the C layout. The command is written on the
+// last command's positions (ramp out). A weight change dw moves each blended joint by dw times the
+// distance between Reflex's command and the robot's own target, which is taken to be where the robot
+// held the joint before the first command: the weight never changes by more than
+// kBlendSpeedShare * v_max * dt / that distance per command, so the blend alone moves no joint faster
+// than half its velocity limit (the ramp then takes longer than ramp_time). crc = Crc32Core of the C
+// layout. The command is written on the
 // calling thread (a reliable writer with keep-last 1 does not wait for readers).
 #pragma once
 
@@ -95,6 +100,10 @@ class UnitreeHgPort final : public BusRobotPort {
   bool accept(const unitree_hg::LowState& s, const Guid& writer, std::int64_t now_ns) noexcept;
   bool reject(int cause) noexcept;
   void send() noexcept;
+  /// The largest weight change this command may make (see the header): kBlendSpeedShare * v_max * dt /
+  /// |q_cmd - q_own| over the arm_sdk joints, 1 when they all agree.
+  double weightStepLimit(double dt) const noexcept;
+  static constexpr double kBlendSpeedShare = 0.5;
 
   const control::Model& model_;
   Options options_;
@@ -105,6 +114,7 @@ class UnitreeHgPort final : public BusRobotPort {
   unitree_hg::LowState sample_;
   unitree_hg::LowCmd cmd_;
   Eigen::VectorXd q_, lower_, upper_;
+  Eigen::VectorXd q_own_;  ///< the measured state when the first command was sent (the robot's own targets)
   bool have_state_ = false;
   std::uint32_t tick_ = 0;
   std::int64_t state_stamp_ns_ = 0, state_interval_ns_ = 0;
