@@ -27,9 +27,13 @@ With --robot mujoco the robot is the physics-simulated humanoid: reflex_mujoco i
 the run's domain before the controller, which then runs with --robot dds (it reads the measured state
 from reflex/robot_state and commands reflex/joint_command); MuJoCo's contact count (pairs closer than
 d_r, from reflex_mujoco's exit line) goes into run.json and the report, which names the plant.
+With --robot unitree_hg the same robot speaks Unitree's hg interface (reflex_mujoco --interface
+unitree_hg: rt/lowstate, rt/arm_sdk) and the controller runs with --robot unitree_hg (the joint map
+beside the URDF; the arm_sdk weight ramps in at start and out when the controller is stopped, before
+the robot is).
 
 Usage: run_flagship.py [--out DIR] [--build DIR] [--domain N] [--rate R] [--only on|off] [--secure DIR]
-                       [--robot kinematic|mujoco] [--ready-timeout S] [--no-report]
+                       [--robot kinematic|mujoco|unitree_hg] [--ready-timeout S] [--no-report]
 """
 import argparse
 import json
@@ -211,11 +215,12 @@ def run_once(args, label, avoidance):
             # The comparison run shows what happens without protection: avoidance AND the e-stop off,
             # each by its own loudly named option (the controller says so in its banner and exit line).
             ctl += ["--no-avoidance", "--disable-estop"]
-        if args.robot == "mujoco":
+        if args.robot in ("mujoco", "unitree_hg"):
             # The physics robot first, so that the controller finds its state; stopped last (reverse order).
+            hg = ["--interface", "unitree_hg"] if args.robot == "unitree_hg" else []
             procs.append(Proc("robot", [os.path.join(bindir, "reflex_mujoco")] + dds("robot") +
-                              ["--name", "reflex_mujoco"], os.path.join(out, "robot.log"), env))
-            ctl += ["--robot", "dds"]
+                              ["--name", "reflex_mujoco"] + hg, os.path.join(out, "robot.log"), env))
+            ctl += ["--robot", "unitree_hg" if args.robot == "unitree_hg" else "dds"]
         procs.append(Proc("controller", ctl, os.path.join(out, "controller.log"), env))
         # --progress 1: its status line (joint_states=N) tells wait_chain_ready that it hears the controller.
         beh = [os.path.join(bindir, "reflex_behavior"), "--config", args.behavior, "--progress", "1"] + dds("behavior")
@@ -297,7 +302,7 @@ def run_once(args, label, avoidance):
         for p in reversed(procs):
             codes[p.name] = p.stop()
         env_note["exit_codes"] = codes
-        if args.robot == "mujoco":
+        if args.robot in ("mujoco", "unitree_hg"):
             # MuJoCo's judge: physics steps and state periods with a pair closer than d_r (exit line).
             robot_log = os.path.join(out, "robot.log")
             env_note["robot_contact_steps"] = last_count(robot_log, r"contact steps (\d+)")
@@ -328,9 +333,10 @@ def main():
                     help="run with DDS-Security: each process with its own identity's profiles file "
                          "DIR/profiles/<module>.xml (DIR made by bringup/security/make_security.sh when missing "
                          "or empty)")
-    ap.add_argument("--robot", choices=["kinematic", "mujoco"], default="kinematic",
-                    help="the plant: the controller's in-process kinematic robot, or reflex_mujoco over DDS "
-                         "(the controller with --robot dds)")
+    ap.add_argument("--robot", choices=["kinematic", "mujoco", "unitree_hg"], default="kinematic",
+                    help="the plant: the controller's in-process kinematic robot, reflex_mujoco over DDS "
+                         "(the controller with --robot dds), or reflex_mujoco on Unitree's hg interface (the "
+                         "controller with --robot unitree_hg)")
     ap.add_argument("--ready-timeout", type=float, metavar="S", default=0.0,
                     help="seconds the chain may take to connect (behavior hears the controller, the recorder "
                          "records) before it is stopped and started again, at most %d attempts (default %g, "
@@ -350,7 +356,7 @@ def main():
     for path, what in ((args.session, "session folder"), (args.behavior, "behavior configuration")):
         if not os.path.exists(path):
             ap.error("%s %s does not exist" % (what, path))
-    exes = ("reflex_controller", "reflex_behavior", "reflex_vision") + (("reflex_mujoco",) if args.robot == "mujoco" else ())
+    exes = ("reflex_controller", "reflex_behavior", "reflex_vision") + (("reflex_mujoco",) if args.robot != "kinematic" else ())
     for exe in exes:
         if not os.path.exists(os.path.join(args.build, "bin", exe)):
             ap.error("%s not found in %s/bin (build first: bringup/setup.sh)" % (exe, args.build))
