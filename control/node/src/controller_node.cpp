@@ -431,7 +431,7 @@ void ControllerNode::run() {
       if (k > 0) used += k;
     };
     if (m.dds && t - last_other_writer_t <= kRobotProblemWindow)
-      append("%sIGNORING a second reflex/robot_state writer %s (%llu samples; the robot writer is %s)",
+      append("%sIGNORING a second %s writer %s (%llu samples; the robot writer is %s)", m.dds->stateTopic(),
              m.dds->otherWriter(), static_cast<unsigned long long>(m.dds->rejectedByCause()[kRobotCauseOtherWriter]),
              m.dds->boundWriter());
     if (m.dds && t - last_robot_reject_t <= kRobotProblemWindow)

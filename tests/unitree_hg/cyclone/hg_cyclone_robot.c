@@ -8,12 +8,12 @@
  * robot blends its walking controller with arm_sdk.
  * Schedule (seconds from its start): good states until --bad-at; then 3 states with a wrong crc, 3
  * states repeating the last tick, 2 LowState_ samples of 30 motors (another motor count, same type
- * name), then --stall-ms / 2 states 2 ms apart whose tick stands still (correct crc), then good states until
+ * name), 4 valid states from a second DataWriter (another participant), then --stall-ms / 2 states 2 ms apart whose tick stands still (correct crc), then good states until
  * --stop-at; then it only listens until --listen-until.
  * Every rt/arm_sdk LowCmd_ received is checked: crc (its own Crc32Core over the received C struct,
  * padding zeroed), weight, gains, finite values, which slots are commanded.
  * Prints (stdout):
- *   sent good G bad_crc 3 repeat_tick 3 short 2 stall S
+ *   sent good G bad_crc 3 repeat_tick 3 short 2 other_writer 4 stall S
  *   commands N crc_ok N crc_bad B weight_max W weight_last L max_up_step U max_down_step D
  *     longest_gap_ms T gap_start_s A non_finite F out_of_range R
  *   slot I mode M kp KP kd KD   (for every slot of the last command)
@@ -109,9 +109,11 @@ int main(int argc, char** argv) {
     return 1;
   }
   const dds_entity_t pp = dds_create_participant((dds_domainid_t)domain, NULL, NULL);
-  /* A second participant writes the 30-motor samples (its own topic of the same name and type name). */
+  /* A second participant writes the 30-motor samples (its own topic of the same name and type name),
+   * a third one plays a second robot writer (valid states from another DataWriter). */
   const dds_entity_t pp_short = dds_create_participant((dds_domainid_t)domain, NULL, NULL);
-  if (pp < 0 || pp_short < 0) {
+  const dds_entity_t pp_other = dds_create_participant((dds_domainid_t)domain, NULL, NULL);
+  if (pp < 0 || pp_short < 0 || pp_other < 0) {
     fprintf(stderr, "hg_cyclone_robot: dds_create_participant(%ld) failed\n", domain);
     return 1;
   }
@@ -124,7 +126,8 @@ int main(int argc, char** argv) {
       .m_nops = s->m_nops, .m_ops = s->m_ops, .m_meta = s->m_meta, .type_information = {NULL, 0},
       .type_mapping = {NULL, 0}, .restrict_data_representation = s->restrict_data_representation};
   const dds_entity_t t_short = dds_create_topic(pp_short, &short_desc, "rt/lowstate", NULL, NULL);
-  if (t_state < 0 || t_cmd < 0 || t_short < 0) {
+  const dds_entity_t t_other = dds_create_topic(pp_other, &unitree_hg_msg_dds__LowState__desc, "rt/lowstate", NULL, NULL);
+  if (t_state < 0 || t_cmd < 0 || t_short < 0 || t_other < 0) {
     fprintf(stderr, "hg_cyclone_robot: dds_create_topic failed: %s %s %s\n", dds_strretcode(-t_state),
             dds_strretcode(-t_cmd), dds_strretcode(-t_short));
     return 1;
@@ -137,10 +140,11 @@ int main(int argc, char** argv) {
   dds_qset_history(rq, DDS_HISTORY_KEEP_LAST, 64);
   const dds_entity_t w_state = dds_create_writer(pp, t_state, wq, NULL);
   const dds_entity_t w_short = dds_create_writer(pp_short, t_short, wq, NULL);
+  const dds_entity_t w_other = dds_create_writer(pp_other, t_other, wq, NULL);
   const dds_entity_t r_cmd = dds_create_reader(pp, t_cmd, rq, NULL);
   dds_delete_qos(wq);
   dds_delete_qos(rq);
-  if (w_state < 0 || w_short < 0 || r_cmd < 0) {
+  if (w_state < 0 || w_short < 0 || w_other < 0 || r_cmd < 0) {
     fprintf(stderr, "hg_cyclone_robot: cannot create the writers / reader\n");
     return 1;
   }
@@ -152,7 +156,7 @@ int main(int argc, char** argv) {
   float q[35];
   memcpy(q, q0, sizeof q);
   uint32_t tick = 0;
-  long sent_good = 0, sent_bad_crc = 0, sent_repeat = 0, sent_short = 0, sent_stall = 0;
+  long sent_good = 0, sent_bad_crc = 0, sent_repeat = 0, sent_short = 0, sent_stall = 0, sent_other = 0;
   long commands = 0, crc_ok = 0, crc_bad = 0, non_finite = 0, out_of_range = 0;
   double weight_max = 0, weight_last = 0, prev_weight = 0, max_up = 0, max_down = 0;
   double last_cmd_t = -1, longest_gap = 0, gap_start = 0;
@@ -231,6 +235,13 @@ int main(int argc, char** argv) {
         dds_write(w_short, &short_state), ++sent_short;
         sleep_until(now_s() + 0.002);
       }
+      /* 4 valid states (crc right, tick ahead) from another DataWriter while this one is alive. */
+      for (int i = 0; i < 4; ++i) {
+        state.tick = tick + 100 + (uint32_t)i;
+        state.crc = struct_crc(&state, sizeof state);
+        dds_write(w_other, &state), ++sent_other;
+        sleep_until(now_s() + 0.002);
+      }
       /* The tick stands still: stall_ms / 2 states with a correct crc, every 2 ms. */
       for (long k = 0; k < (long)(stall_ms / 2); ++k) {
         state.tick = tick;
@@ -246,8 +257,8 @@ int main(int argc, char** argv) {
     state.crc = struct_crc(&state, sizeof state);
     if (dds_write(w_state, &state) >= 0) ++sent_good;
   }
-  printf("sent good %ld bad_crc %ld repeat_tick %ld short %ld stall %ld\n", sent_good, sent_bad_crc, sent_repeat,
-         sent_short, sent_stall);
+  printf("sent good %ld bad_crc %ld repeat_tick %ld short %ld other_writer %ld stall %ld\n", sent_good, sent_bad_crc,
+         sent_repeat, sent_short, sent_other, sent_stall);
   printf("commands %ld crc_ok %ld crc_bad %ld weight_max %.6f weight_last %.6f max_up_step %.6f max_down_step %.6f "
          "longest_gap_ms %.1f gap_start_s %.3f non_finite %ld out_of_range %ld\n",
          commands, crc_ok, crc_bad, weight_max, weight_last, max_up, max_down, longest_gap * 1e3, gap_start, non_finite,
@@ -257,6 +268,7 @@ int main(int argc, char** argv) {
       printf("slot %d mode %d kp %.3f kd %.3f\n", k, (int)last.motor_cmd[k].mode, (double)last.motor_cmd[k].kp,
              (double)last.motor_cmd[k].kd);
   fflush(stdout);
+  dds_delete(pp_other);
   dds_delete(pp_short);
   dds_delete(pp);
   return 0;
