@@ -10,7 +10,8 @@
 // Safety never depends on another process (DESIGN.md): distances are computed here; if the module
 // that sends hand targets goes silent (no sample and no heartbeat for `input_timeout`), both hands
 // get "no target" and retract to rest on their own; a NaN or out-of-frame target is dropped and
-// counted. The loop runs on its own clock (absolute deadlines), polling the readers each cycle.
+// counted. The loop runs on its own clock (absolute deadlines), polling the readers each cycle; with
+// --trigger state a robot state starts each cycle instead, the period the longest wait (run()).
 //
 // With a robot state file (NodeConfig::robot_state) the simulated robot behaves like hardware across
 // a controller crash: its joint positions are written every cycle and a new controller starts from
