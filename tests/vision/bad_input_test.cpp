@@ -232,6 +232,8 @@ TEST_F(BadInput, CommandLineErrorsNameTheBadValue) {
   EXPECT_THAT(err, HasSubstr("/no/such/session"));
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --rate -2", err), 2);
   EXPECT_THAT(err, HasSubstr("-2"));
+  EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --max-lag 0", err), 2);
+  EXPECT_THAT(err, HasSubstr("max lag 0.000000 s must be in (0, 10]"));
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --start 99", err), 2);
   EXPECT_THAT(err, HasSubstr("start offset 99"));
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --rectify sideways", err), 2);

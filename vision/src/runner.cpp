@@ -47,6 +47,8 @@ void validateReplayOptions(const ReplayOptions& o) {
   if (!(o.publish_hz > 0.0) || o.publish_hz > 1000.0)
     throw VisionError("publish rate " + std::to_string(o.publish_hz) + " Hz must be in (0, 1000]");
   if (!(o.duration >= 0.0)) throw VisionError("duration " + std::to_string(o.duration) + " s must be >= 0");
+  if (!(o.max_lag > 0.0) || o.max_lag > 10.0)
+    throw VisionError("max lag " + std::to_string(o.max_lag) + " s must be in (0, 10]");
 }
 
 RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const ReplayOptions& options,
@@ -152,8 +154,9 @@ RunStats runVision(StereoSource& source, StereoTagPipeline& pipeline, const Repl
     if (!have_s0) startClock(s);
     if (options.duration > 0.0 && s - s0 > options.duration + 1e-9) break;
     if (clock->paced()) {
-      // Keep up with the clock like a live camera: a frame already a period late is dropped.
-      if (clock->lagAt(s) > source.framePeriod()) {
+      // Keep up with the clock: a live camera's frame already a period late is dropped; a recorded
+      // frame only beyond max_lag (the replay catches up after a competing load's burst).
+      if (clock->lagAt(s) > (source.live() ? source.framePeriod() : options.max_lag)) {
         ++stats.dropped;
         continue;
       }

@@ -72,6 +72,10 @@ int main(int argc, char** argv) {
                                   "replay speed: 1 real time, 2 twice as fast, 0 as fast as possible "
                                   "(default 1, or 0 with --dump)");
   app.add_flag("--loop", o.replay.loop, "restart the session at the start offset when it ends");
+  app.add_option("--max-lag", o.replay.max_lag,
+                 "paced replay: a frame more than this many seconds behind the replay clock is dropped (counted in "
+                 "the exit line); one less late is processed late, with its own capture stamp. (0, 10]")
+      ->capture_default_str();
   app.add_option("--start", o.start, "start offset into the session, seconds");
   app.add_option("--duration", o.replay.duration, "stop after this many seconds of session time (0 = no limit)");
   app.add_option("--publish-hz", o.replay.publish_hz, "publication rate on the replay clock, Hz")

@@ -12,8 +12,10 @@
 // Publication k is due at session time s0 + k / publish_hz and carries the newest frame processed
 // by then (its capture stamp, not the publication time); there is no publication before the first
 // frame is processed. In paced mode a separate thread keeps the publication deadlines, so a slow
-// frame never delays a publication, and a frame that is already one frame period late when it is
-// read is dropped (counted in RunStats::dropped), as a live camera would: targets stay fresh.
+// frame never delays a publication. A live camera's frame already one frame period late when it is
+// read is dropped (counted in RunStats::dropped): targets stay fresh. A recorded session's frame is
+// dropped only when it is more than ReplayOptions::max_lag behind the replay clock: a process
+// descheduled for a few periods by a competing load catches up instead of losing those frames.
 // Unpaced runs (rate 0, --dump) process every frame.
 // Stopping: every wait (a paced frame's due time) is slept in 50 ms slices that look at `stop`, the
 // unpaced publication schedule s0 + k / publish_hz is computed from the integer k (a running sum
@@ -34,6 +36,9 @@ struct ReplayOptions {
   bool loop = false;
   double publish_hz = 10.0;  ///< > 0
   double duration = 0.0;     ///< stop after this much session time (0 = no limit)
+  /// Paced replay of a recording: a frame more than this behind the replay clock (s) is dropped and
+  /// counted; one less late is processed (and published with its own capture stamp). In (0, 10].
+  double max_lag = 0.5;
 };
 
 /// Throws VisionError naming the option if out of range.
@@ -70,7 +75,7 @@ struct RunCallbacks {
 struct RunStats {
   int frames = 0;        ///< processed
   int skipped = 0;       ///< reported skipped frames
-  int dropped = 0;       ///< paced runs: frames dropped because processing fell a period behind
+  int dropped = 0;       ///< paced runs: frames dropped because processing fell behind (max_lag; live: a period)
   int publications = 0;
   int passes = 0;
   std::string end_message;  ///< non-empty if the source stopped early (truncated video, camera lost)
