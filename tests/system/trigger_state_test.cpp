@@ -8,9 +8,10 @@
 //   state's stamp) and is computed from it: positions - the positions of THAT state = velocities x dt,
 //   where dt is at most that state's interval (its stamp minus the previous state's, from this test's
 //   own record; less when the cycle followed the previous one sooner) or, for a cycle the period's end
-//   started, the period; |velocities| <= v_max (URDF), so no
-//   joint is asked to cover more than v_max x the span it is given; the robot's own measured steps
-//   never exceed v_max x the time between its states;
+//   started, the period; |velocities| <= v_max (URDF), so no joint is asked to cover more than v_max x
+//   the span it is given; the robot's own measured steps never exceed v_max x the time between its states;
+// - a second writer flooding the state topic (ignored, but each sample wakes the loop): the spans of
+//   the cycles meanwhile add up to no more than the time that passed (this test's clock);
 // - cycles follow the state rate: commands per second of the controller's own clock in a window of
 //   500 Hz states, then of 400 Hz states (against the same controller with --trigger timer: 200 Hz);
 // - when the states stop, the controller behaves as the timer does: it answers only the last state,
