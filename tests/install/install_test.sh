@@ -6,7 +6,9 @@
 #     (reflex_inspect's segment/pair count; the baseline computed here from the calibration's numbers);
 #     its second program links reflex::vision_node and runs the vision node offline on the flagship
 #     session: its CSV must equal the in-tree reflex_vision --dump byte for byte;
-#  3. the out-of-tree module project modules/examples/wave_module builds as a plugin against the installed
+#  3. docs/library.md: its CMakeLists.txt, main.cpp and build commands, extracted from the page, built
+#     and run against the prefix; its answer checked against reflex_inspect's distances;
+#  4. the out-of-tree module project modules/examples/wave_module builds as a plugin against the installed
 #     tree and runs in the INSTALLED stock reflex_behavior on the bus: `reflex_bus list` sees its module
 #     and `reflex_bus hz` counts its hand targets; without the plugin the configuration is refused, and a
 #     library that is not a plugin is refused by name.
@@ -53,6 +55,43 @@ rows=$(($(wc -l < "$work/exe.csv") - 1))
 [[ $rows -gt 10 ]] || fail "reflex_vision --dump wrote $rows detections (> 10 expected)"
 cmp -s "$work/node.csv" "$work/exe.csv" || fail "the installed reflex::vision_node's CSV differs from reflex_vision --dump: $(diff "$work/node.csv" "$work/exe.csv" | head -5)"
 echo "install_test: reflex::vision_node: $rows detections, identical to reflex_vision --dump"
+
+step "docs/library.md: its CMakeLists.txt and main.cpp, extracted from the page, built and run against the prefix"
+mkdir -p "$work/library"
+python3 - "$src/docs/library.md" "$work/library" <<'PY' || fail "docs/library.md: cannot extract its blocks"
+import re, sys
+page = open(sys.argv[1]).read()
+blocks = re.findall(r"^```(\w+)\n(.*?)^```", page, re.S | re.M)
+files = {"cmake": ("# CMakeLists.txt", "CMakeLists.txt"), "cpp": ("// main.cpp", "main.cpp")}
+written = 0
+for lang, body in blocks:
+    if lang in files and body.startswith(files[lang][0]):
+        open(sys.argv[2] + "/" + files[lang][1], "w").write(body)
+        written += 1
+    if lang == "sh":
+        open(sys.argv[2] + "/commands.sh", "w").write(body)
+        written += 1
+sys.exit(0 if written == 3 else 1)
+PY
+(cd "$work/library" && PREFIX=$prefix ROBOTS=$src/bringup/robots bash -e commands.sh) > "$work/library.out" 2>&1 \
+  || { tail -30 "$work/library.out"; fail "docs/library.md's commands"; }
+got=$(grep '^closest between the arms:' "$work/library.out") || fail "docs/library.md's program printed: $(tail -5 "$work/library.out")"
+echo "$got"
+# The independent answer: reflex_inspect's distances at the zero posture, the least over the pairs of
+# a left-arm and a right-arm segment (the default controller configuration's arms, asimo_like's, move
+# these segments).
+want=$("$build/bin/reflex_inspect" "$urdf" | python3 -c "
+import sys
+arm = lambda s: s.split('_', 1)[0] if s.split('_', 1)[-1] in ('shoulder', 'upper_arm', 'forearm', 'hand') else None
+best = None
+for line in sys.stdin:
+    f = line.strip().split(',')
+    if line.startswith('#') or len(f) < 3 or f[0] == 'segment_a': continue
+    if arm(f[0]) and arm(f[1]) and arm(f[0]) != arm(f[1]) and (best is None or float(f[2]) < float(best[2])): best = f
+print('closest between the arms: %s %s %.6f m' % (best[0], best[1], float(best[2])))")
+[[ $got == "$want" ]] || fail "docs/library.md's program says '$got', reflex_inspect '$want'"
+grep -qF "It prints \`$got\`" "$src/docs/library.md" \
+  || fail "docs/library.md states another output than its program prints ('$got')"
 
 step "out-of-tree module plugin: modules/examples/wave_module"
 cmake -S "$src/modules/examples/wave_module" -B "$work/wave" -DCMAKE_PREFIX_PATH="$prefix" \
