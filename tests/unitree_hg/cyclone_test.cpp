@@ -8,7 +8,8 @@
 //    to 1 and is 0 at the end, never jumping (the controller's own largest step is dt / ramp time);
 //    the arm_sdk slots of the joint map carry the map's kp / kd and mode 1, the legs nothing;
 //  - the robot's 3 states with a wrong crc, 2 of 30 motors (another payload size under the same type
-//    name), 3 + S with a tick that does not advance and 4 valid ones from a second DataWriter are each
+//    name), 3 + S with a tick that does not advance, a NaN and an absurd position of one motor and 4
+//    valid ones from a second DataWriter are each
 //    rejected, counted by cause in the exit line (exactly as many as sent) and named on stderr; while the tick stands still the
 //    controller goes stale and sends nothing (the robot sees the gap);
 //  - a joint map naming a joint the model does not have, or a motor the message lacks (35), no map,
@@ -83,6 +84,8 @@ TEST(UnitreeHgCyclone, StateInCommandsOutAndBadStatesRejectedCountedNamed) {
   ASSERT_EQ(numberAfter(out, "repeat_tick "), 3) << out;
   ASSERT_EQ(numberAfter(out, " short "), 2) << out;
   ASSERT_EQ(numberAfter(out, "other_writer "), 4) << out;
+  ASSERT_EQ(numberAfter(out, " nan "), 1) << out;
+  ASSERT_EQ(numberAfter(out, " far "), 1) << out;
   ASSERT_EQ(stall, 150) << out;
 
   // Counted by cause, exactly as many as sent, and named.
@@ -93,7 +96,12 @@ TEST(UnitreeHgCyclone, StateInCommandsOutAndBadStatesRejectedCountedNamed) {
   ASSERT_NE(states_at, std::string::npos) << ctl;
   unsigned long long accepted = 0, rejected = 0;
   ASSERT_EQ(std::sscanf(ctl.c_str() + states_at, "robot unitree_hg: states %llu (rejected %llu)", &accepted, &rejected), 2);
-  EXPECT_EQ(static_cast<double>(rejected), 3 + 2 + 3 + stall + 4) << ctl;
+  EXPECT_EQ(static_cast<double>(rejected), 3 + 2 + 3 + stall + 4 + 2) << ctl;
+  // Motor 18 is l_elbow in the map: a NaN and a position 50 rad out.
+  EXPECT_EQ(numberAfter(ctl, "robot_state_not_finite "), 1) << ctl;
+  EXPECT_EQ(numberAfter(ctl, "robot_state_outside_limits "), 1) << ctl;
+  EXPECT_NE(ctl.find("motor 18 (joint 'l_elbow') q nan"), std::string::npos) << ctl;
+  EXPECT_NE(ctl.find("motor 18 (joint 'l_elbow') q 50 outside its limits"), std::string::npos) << ctl;
   // A second writer of valid states while the robot's is alive: ignored, counted, named.
   EXPECT_EQ(numberAfter(ctl, "robot_state_other_writer "), 4) << ctl;
   EXPECT_NE(ctl.find("SECOND ROBOT WRITER ignored (4 samples)"), std::string::npos) << ctl;

@@ -8,12 +8,13 @@
  * robot blends its walking controller with arm_sdk.
  * Schedule (seconds from its start): good states until --bad-at; then 3 states with a wrong crc, 3
  * states repeating the last tick, 2 LowState_ samples of 30 motors (another motor count, same type
- * name), 4 valid states from a second DataWriter (another participant), then --stall-ms / 2 states 2 ms apart whose tick stands still (correct crc), then good states until
+ * name), a NaN q and a q 50 rad out on motor 18, 4 valid states from a second DataWriter (another
+ * participant), then --stall-ms / 2 states 2 ms apart whose tick stands still (correct crc), then good states until
  * --stop-at; then it only listens until --listen-until.
  * Every rt/arm_sdk LowCmd_ received is checked: crc (its own Crc32Core over the received C struct,
  * padding zeroed), weight, gains, finite values, which slots are commanded.
  * Prints (stdout):
- *   sent good G bad_crc 3 repeat_tick 3 short 2 other_writer 4 stall S
+ *   sent good G bad_crc 3 repeat_tick 3 short 2 nan 1 far 1 other_writer 4 stall S
  *   commands N crc_ok N crc_bad B weight_max W weight_last L max_up_step U max_down_step D
  *     longest_gap_ms T gap_start_s A non_finite F out_of_range R
  *   slot I mode M kp KP kd KD   (for every slot of the last command)
@@ -157,6 +158,7 @@ int main(int argc, char** argv) {
   memcpy(q, q0, sizeof q);
   uint32_t tick = 0;
   long sent_good = 0, sent_bad_crc = 0, sent_repeat = 0, sent_short = 0, sent_stall = 0, sent_other = 0;
+  long sent_nan = 0, sent_far = 0;
   long commands = 0, crc_ok = 0, crc_bad = 0, non_finite = 0, out_of_range = 0;
   double weight_max = 0, weight_last = 0, prev_weight = 0, max_up = 0, max_down = 0;
   double last_cmd_t = -1, longest_gap = 0, gap_start = 0;
@@ -235,6 +237,18 @@ int main(int argc, char** argv) {
         dds_write(w_short, &short_state), ++sent_short;
         sleep_until(now_s() + 0.002);
       }
+      /* A NaN position and one 50 rad out, each with a right crc and a new tick, on motor 18. */
+      sleep_until(now_s() + 0.012);
+      for (int i = 0; i < 2; ++i) {
+        const float keep = state.motor_state[18].q;
+        state.motor_state[18].q = i == 0 ? NAN : 50.0f;
+        state.tick = tick + 20 + (uint32_t)i;
+        state.crc = struct_crc(&state, sizeof state);
+        dds_write(w_state, &state);
+        if (i == 0) ++sent_nan; else ++sent_far;
+        state.motor_state[18].q = keep;
+        sleep_until(now_s() + 0.012);  /* alone in its control cycle: the controller's line names it */
+      }
       /* 4 valid states (crc right, tick ahead) from another DataWriter while this one is alive. */
       for (int i = 0; i < 4; ++i) {
         state.tick = tick + 100 + (uint32_t)i;
@@ -257,8 +271,8 @@ int main(int argc, char** argv) {
     state.crc = struct_crc(&state, sizeof state);
     if (dds_write(w_state, &state) >= 0) ++sent_good;
   }
-  printf("sent good %ld bad_crc %ld repeat_tick %ld short %ld other_writer %ld stall %ld\n", sent_good, sent_bad_crc,
-         sent_repeat, sent_short, sent_other, sent_stall);
+  printf("sent good %ld bad_crc %ld repeat_tick %ld short %ld nan %ld far %ld other_writer %ld stall %ld\n", sent_good,
+         sent_bad_crc, sent_repeat, sent_short, sent_nan, sent_far, sent_other, sent_stall);
   printf("commands %ld crc_ok %ld crc_bad %ld weight_max %.6f weight_last %.6f max_up_step %.6f max_down_step %.6f "
          "longest_gap_ms %.1f gap_start_s %.3f non_finite %ld out_of_range %ld\n",
          commands, crc_ok, crc_bad, weight_max, weight_last, max_up, max_down, longest_gap * 1e3, gap_start, non_finite,
