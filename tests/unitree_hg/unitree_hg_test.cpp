@@ -10,6 +10,8 @@
 //    shifted through 32 zero bits; Crc32Core's table-free definition, computed independently below).
 //  - Joint map: the shipped G1 map against the spec's motor table; the asimo_like map against the
 //    model; every error path names the bad value.
+//  - The type support: a LowState_ round-trips through Fast DDS's serializer at the XCDR1 size worked
+//    out by hand (2092 bytes); a payload 5 motors short or 4 bytes long is refused and counted.
 //  - The crc of a state and of a command (the port computes both every cycle) allocates nothing
 //    (operator new counted; no other thread runs in this program).
 #include "reflex/control_node/unitree_hg.hpp"
@@ -239,6 +241,37 @@ TEST(UnitreeHgCrc, AllocatesNothing) {
   }
   EXPECT_EQ(reflex::testing::allocations() - before, 0);
   EXPECT_NE(sum, 0u);
+}
+
+TEST(UnitreeHgTypeSupport, APayloadOfAnotherSizeIsRefusedAndCounted) {
+  using Support = reflex::bus::TopicTraits<hg::LowState>::PubSubType;
+  Support type;
+  hg::LowState s;
+  s.tick(42);
+  s.motor_state()[18].q(0.5f);
+  s.crc(hg::lowStateCrc(s));
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.getSerializedSizeProvider(&s)());
+  ASSERT_TRUE(type.serialize(&s, &payload));
+  // XCDR1 of 35 motors, by hand: version 8, modes 2 (+2 to align tick), tick 4, IMU 13 x 4 + 2 = 54
+  // (ends at 70, no padding before an octet), the first motor 1 + 1 (pad) + 52 = 54, the other 34
+  // 1 + 3 + 52 = 56 each, remote 40, reserve 16, crc 4: 2088 bytes + the 4-byte encapsulation.
+  EXPECT_EQ(payload.length, 2092u);
+  const std::uint64_t before = hg::undecodableLowStates();
+  hg::LowState back;
+  ASSERT_TRUE(type.deserialize(&payload, &back));
+  EXPECT_EQ(back.tick(), 42u);
+  EXPECT_EQ(back.crc(), s.crc());
+  EXPECT_EQ(hg::lowStateCrc(back), back.crc());
+  EXPECT_EQ(hg::undecodableLowStates(), before);
+  // 30 motors' worth (5 x 56 bytes fewer), and 4 bytes more: refused, each counted once.
+  const std::uint32_t full = payload.length;
+  payload.length = full - 5 * 56;
+  EXPECT_FALSE(type.deserialize(&payload, &back));
+  EXPECT_EQ(hg::undecodableLowStates(), before + 1);
+  payload.length = full + 4;
+  payload.reserve(full + 4);
+  EXPECT_FALSE(type.deserialize(&payload, &back));
+  EXPECT_EQ(hg::undecodableLowStates(), before + 2);
 }
 
 // ---- joint map
