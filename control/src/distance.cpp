@@ -110,6 +110,11 @@ DistanceData::DistanceData(const Model& model)
       prim_sphere_r[static_cast<std::size_t>(p)] = 0.5 * (prim.b_L - prim.a_L).norm() + prim.radius;
     }
   }
+  pp_lower.assign(pp_a.size(), 0.0);
+  pp_stamp.assign(pp_a.size(), 0U);
+  prim_motion.assign(model.primitives.size(), std::numeric_limits<double>::infinity());
+  last_X.assign(model.links.size(), Eigen::Isometry3d::Identity());
+  list_pp.assign(pp_a.size(), 0);
   kept_a.assign(most_primitives, 0);
   kept_b.assign(most_primitives, 0);
   list_end.assign(robot_pairs.size(), 0);
@@ -122,6 +127,9 @@ DistanceData::DistanceData(const Model& model)
 }
 
 namespace {
+
+/// Subtracted from a carried lower bound: the rounding of the motion bound.
+constexpr double kCarryMargin = 1e-9;
 
 /// Whether a pair that involves a body-schema slot is checked this cycle; sets the links.
 bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const SegmentPair& pair, int& link_a,
@@ -256,12 +264,17 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   std::size_t count = 0, first = 0, last = 0;
   bool have_last = false;
   std::array<int, 2>& winner = data.piece_winner[static_cast<std::size_t>(i)];
-  each([&](int pa, int pb, double bound, double core, double s, double t) {
-    // A bound that is not a number is taken first (never skipped on its account).
-    const double key = bound == bound ? bound : -std::numeric_limits<double>::infinity();
+  each([&](int pa, int pb, double bound, double core, double s, double t, int pp, double carried) {
+    // A bound that is not a number is taken first (never skipped on its account). A bound carried from
+    // the last cycle (its lower bound then, less how far the two pieces can have moved since) may be
+    // the better one: never for two capsules, whose capsule distance is their distance.
+    double key = bound == bound ? bound : -std::numeric_limits<double>::infinity();
+    if (carried > key && (model.primitives[static_cast<std::size_t>(pa)].piece >= 0 ||
+                          model.primitives[static_cast<std::size_t>(pb)].piece >= 0))
+      key = carried;
     if (count == 0 || key < cand[first].bound) first = count;
     if (pa == winner[0] && pb == winner[1]) last = count, have_last = true;
-    cand[count++] = {key, core, s, t, pa, pb};
+    cand[count++] = {key, core, s, t, pa, pb, pp, key};
   });
   // The pair that won last time goes first when it can still win (it usually does again: its
   // distance then rules out nearly every other), else the one of the smallest bound.
@@ -277,7 +290,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   auto better = [&](double d, int pa, int pb) {
     return cap_pa < 0 || d < best || (d == best && (pa < cap_pa || (pa == cap_pa && pb < cap_pb)));
   };
-  auto evaluate = [&](const DistanceData::PieceCandidate& c) {
+  auto evaluate = [&](DistanceData::PieceCandidate& c) {
     const int pa = c.pa, pb = c.pb;
     const bool capsules = model.primitives[static_cast<std::size_t>(pa)].piece < 0 &&
                           model.primitives[static_cast<std::size_t>(pb)].piece < 0;
@@ -294,8 +307,10 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
     const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
     const Eigen::Vector3d towards_b = (B.start + c.t * B.d) - (A.start + c.s * A.d);
+    ++data.num_piece_searches;
     const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b, cap_pa >= 0 ? best : give_up,
                                          towards_b, d, p_a, p_b, n);
+    c.lower = o == PieceOutcome::kTouching ? 0.0 : std::max(c.lower, d);
     if (o == PieceOutcome::kAbove) {
       floor = std::min(floor, d);
       return;
@@ -338,6 +353,12 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     }
     evaluate(cand[k]);
   }
+  // Every listed candidate's lower bound at these poses, for the next cycle to carry.
+  for (std::size_t k = 0; k < count; ++k) {
+    if (cand[k].pp < 0) continue;
+    data.pp_lower[static_cast<std::size_t>(cand[k].pp)] = cand[k].lower;
+    data.pp_stamp[static_cast<std::size_t>(cand[k].pp)] = data.cycle;
+  }
   if (cap_pa < 0) {  // every primitive pair proven farther than give_up
     if (count > 0 && cand[0].bound > give_up) floor = std::min(floor, cand[0].bound);
     return false;
@@ -369,7 +390,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
             for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
               double s, t;
               const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
-              f(pa, pb, core - radius[pa] - radius[pb], core, s, t);
+              f(pa, pb, core - radius[pa] - radius[pb], core, s, t, -1, -std::numeric_limits<double>::infinity());
             }
         })) {
       PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
@@ -460,6 +481,29 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   //    the broad phase, every robot segment's bounding sphere centre too.
   const int nseg = static_cast<int>(model.segments.size());
   for (int s = 0; s < nseg; ++s) transformSegment(model, kin, slots, data, s, prune);
+  // The tight model: how far each robot primitive can have moved since the last call (its bounding
+  // sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn theta), so a lower
+  // bound from then, less both primitives' motion, is a lower bound now.
+  data.num_piece_searches = 0;
+  if (++data.cycle == 0) {  // wrapped: no old stamp may pass for the last call's
+    std::fill(data.pp_stamp.begin(), data.pp_stamp.end(), 0U);
+    data.cycle = 2;
+  }
+  if (!model.pieces.empty()) {
+    for (int s = 0; s < model.num_robot_segments; ++s) {
+      const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+      const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(seg.link)];
+      const Eigen::Isometry3d& X0 = data.last_X[static_cast<std::size_t>(seg.link)];
+      const double turn = std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
+      for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+        const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+        const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
+        const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
+        data.prim_motion[static_cast<std::size_t>(p)] = m == m ? m : kInf;  // NaN poses: no carry
+      }
+    }
+    data.last_X = kin.X_B_L;  // no allocation: the same size every call
+  }
 
   // 2. Broad phase: robot pairs whose bounding spheres are more than prune_distance apart get that
   //    gap as a lower bound; the others are computed exactly below.
@@ -536,15 +580,21 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
         };
         keep(pair.a, pair.b, data.kept_a.data(), nka);
         keep(pair.b, pair.a, data.kept_b.data(), nkb);
+        const Segment& sa = model.segments[pair.a];
+        const Segment& sb = model.segments[pair.b];
         for (int ka = 0; ka < nka; ++ka)
           for (int kb = 0; kb < nkb; ++kb, ++nlist) {
-            data.list_a[nlist] = data.kept_a[static_cast<std::size_t>(ka)];
-            data.list_b[nlist] = data.kept_b[static_cast<std::size_t>(kb)];
+            const int pa = data.kept_a[static_cast<std::size_t>(ka)], pb = data.kept_b[static_cast<std::size_t>(kb)];
+            data.list_a[nlist] = pa;
+            data.list_b[nlist] = pb;
+            data.list_pp[static_cast<std::size_t>(nlist)] =
+                data.pp_begin[i] + (pa - sa.first_primitive) * sb.num_primitives + (pb - sb.first_primitive);
           }
       } else {
         for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k, ++nlist) {
           data.list_a[nlist] = data.pp_a[k];
           data.list_b[nlist] = data.pp_b[k];
+          data.list_pp[static_cast<std::size_t>(nlist)] = k;
         }
       }
       data.list_end[static_cast<std::size_t>(e)] = nlist;
@@ -587,9 +637,17 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
       double floor;
       if (!finishPiecePair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link,
                            prune ? options.prune_distance : kInf, floor, [&](auto&& f) {
-                             for (int k = begin; k < end; ++k)
+                             for (int k = begin; k < end; ++k) {
+                               const int pp = prune ? data.list_pp[static_cast<std::size_t>(k)] : k;
+                               const double carried =
+                                   data.pp_stamp[static_cast<std::size_t>(pp)] + 1 == data.cycle
+                                       ? data.pp_lower[static_cast<std::size_t>(pp)] -
+                                             data.prim_motion[static_cast<std::size_t>(list_a[k])] -
+                                             data.prim_motion[static_cast<std::size_t>(list_b[k])] - kCarryMargin
+                                       : -kInf;
                                f(list_a[k], list_b[k], data.pp_core[k] - radius[list_a[k]] - radius[list_b[k]],
-                                 data.pp_core[k], data.pp_s[k], data.pp_t[k]);
+                                 data.pp_core[k], data.pp_s[k], data.pp_t[k], pp, carried);
+                             }
                            })) {  // its pieces are all farther than prune_distance: skipped
         floor = std::min(floor, bound);
         PairDistance& out = data.pairs[static_cast<std::size_t>(i)];

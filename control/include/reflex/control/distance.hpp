@@ -135,6 +135,20 @@ struct DistanceData {
   std::vector<double> list_floor;
   std::vector<double> prim_sphere_r;
   std::vector<int> kept_a, kept_b;
+  std::vector<int> list_pp;  ///< per list entry, its index in pp_a / pp_b
+  // Carried bounds (the tight model): per primitive pair (pp index), a lower bound of its distance at
+  // the poses of the call stamped `pp_stamp` (the `cycle` count of computeSegmentDistances calls);
+  // the links' poses of the last call, and how far each primitive can have moved since (m). A bound
+  // from the last call, less both primitives' motion, bounds the distance now: a primitive pair
+  // proven far last cycle is skipped without a search. Only the work depends on them.
+  std::vector<double> pp_lower;
+  std::vector<std::uint32_t> pp_stamp;
+  std::uint32_t cycle = 1;  ///< never 1 + a stamp of an entry not written by the last call
+  std::vector<Eigen::Isometry3d> last_X;
+  std::vector<double> prim_motion;
+  /// Exact convex-distance searches (computeConvexDistance calls) since the last
+  /// computeSegmentDistances began: the narrow phase's work (benchmarks and tests read it).
+  int num_piece_searches = 0;
   // The tight model (Primitive::piece): per pair, whether a primitive of either segment is a convex
   // piece (the pair's distance is then the least over its primitive pairs of computeConvexDistance on
   // the pieces, a capsule side by its core and radius); per primitive, its core as a piece of two
@@ -147,6 +161,8 @@ struct DistanceData {
   struct PieceCandidate {
     double bound, core, s, t;
     int pa, pb;
+    int pp;        ///< its index in pp_a / pp_b (-1: not from the sweep's list: nothing carried)
+    double lower;  ///< its lower bound at this call's poses (the bound, or what its search proved)
   };
   std::vector<PieceCandidate> piece_candidates;
   /// Per pair of the tight model: the primitive pair that gave its distance last time ({-1, -1}: none
