@@ -304,6 +304,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     ho.ramp_time = config.ramp_time;
     m.dds = std::make_unique<UnitreeHgPort>(m.model, drivenJoints(m.model, m.cm), unitree_hg::loadHgJointMap(unitree_hg::hgJointMapFor(config.urdf, config.joint_map)),
                                             *m.participant, ho);
+    m.dds->sendThrough(*m.outbox);  // LowCmd_ too: a DDS write allocates and can block
     port = m.dds.get();
   } else {
     m.kinematic = std::make_unique<KinematicPort>(q0);

@@ -159,6 +159,11 @@ bool UnitreeHgPort::accept(const hg::LowState& s, const Guid& writer, std::int64
   return true;
 }
 
+void UnitreeHgPort::sendThrough(bus::Outbox& outbox) {
+  queue_ = &outbox.add(*writer_, cmd_, 16);
+  outbox_ = &outbox;
+}
+
 bool UnitreeHgPort::waitForState(std::chrono::nanoseconds timeout) noexcept {
   try {
     return reader_->waitForData(timeout);
@@ -195,7 +200,12 @@ void UnitreeHgPort::command(const Eigen::VectorXd& q_end, const Eigen::VectorXd&
 void UnitreeHgPort::send() noexcept {
   cmd_.motor_cmd()[hg::kWeightSlot].q(static_cast<float>(weight_));
   cmd_.crc(hg::lowCmdCrc(cmd_));
-  if (writer_->write(cmd_)) ++commands_;
+  if (queue_ != nullptr) {
+    if (queue_->push(cmd_)) ++commands_;
+    outbox_->notify();
+  } else if (writer_->write(cmd_)) {
+    ++commands_;
+  }
   sent_ = true;
 }
 

@@ -25,7 +25,8 @@
 // position, per RobotPort::command). Legs (0..11) and slots beyond 29 are never commanded (mode 0,
 // all zero). motor_cmd[29].q is the WEIGHT: it rises from 0 by dt / ramp_time per command (ramp in,
 // never a jump) to 1, and after the last cycle finish() lowers it the same way to 0 while sending the
-// last command's positions (ramp out). A weight change dw moves each blended joint by dw times the
+// last command's positions (ramp out). With sendThrough (reflex_controller) the commands go through the
+// loop's outbox, written by its thread; without (reflex_sim's plant) on the calling thread. A weight change dw moves each blended joint by dw times the
 // distance between Reflex's command and the robot's own target, which is taken to be where the robot
 // held the joint before the first command: the weight never changes by more than
 // kBlendSpeedShare * v_max * dt / that distance per command, so the blend alone moves no joint faster
@@ -39,6 +40,7 @@
 #include "reflex/control_node/unitree_hg.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/outbox.hpp>
 
 #include <array>
 #include <cstdint>
@@ -66,7 +68,10 @@ class UnitreeHgPort final : public BusRobotPort {
   int poll() noexcept override;
   const Eigen::VectorXd* measuredPositions(double now) noexcept override;
   void command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double dt) noexcept override;
-  void sendThrough(bus::Outbox& /*outbox*/) override {}  // LowCmd_ has no Header to stamp: written here
+  /// From now on command() and the ramp out queue each LowCmd_ for `outbox`'s writer thread (a DDS
+  /// write allocates inside Fast DDS and can block; measured: 5 allocations per write). Before
+  /// outbox.start().
+  void sendThrough(bus::Outbox& outbox) override;
   void finish(double period) noexcept override;
   /// One step of the ramp out: the last command again with the weight lowered by dt / ramp_time.
   /// False once the weight is 0 (that command sent).
@@ -111,6 +116,8 @@ class UnitreeHgPort final : public BusRobotPort {
   std::vector<int> commanded_;
   bus::Reader<unitree_hg::LowState>* reader_ = nullptr;
   bus::Writer<unitree_hg::LowCmd>* writer_ = nullptr;
+  bus::OutboxQueue<unitree_hg::LowCmd>* queue_ = nullptr;  ///< set by sendThrough
+  bus::Outbox* outbox_ = nullptr;
   unitree_hg::LowState sample_;
   unitree_hg::LowCmd cmd_;
   Eigen::VectorXd q_, lower_, upper_;

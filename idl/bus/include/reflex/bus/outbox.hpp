@@ -12,7 +12,8 @@
 //    longest value). Then same-size vectors and strings within those capacities copy into a slot
 //    without allocating.
 //  - push (the loop's thread): stamps the sample's header (Writer::stamp: the time and the
-//    sequence number are the control cycle's) and copies it into the ring. No allocation (see
+//    sequence number are the control cycle's; a type without a Reflex header, such as a robot's own
+//    Unitree LowCmd_, is queued as it is) and copies it into the ring. No allocation (see
 //    above), no I/O, no lock, no system call, never throws. A full ring (the writer thread is stuck
 //    in a write) drops the sample and counts it; its sequence number is used, so every reader sees
 //    the gap. Nothing is lost silently.
@@ -41,6 +42,8 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace reflex::bus {
@@ -57,6 +60,12 @@ struct OutboxStats {
 };
 
 namespace detail {
+/// True for a type with a Reflex Header (`sample.header()`), which push() stamps.
+template <class T, class = void>
+struct HasHeader : std::false_type {};
+template <class T>
+struct HasHeader<T, std::void_t<decltype(std::declval<T&>().header())>> : std::true_type {};
+
 class OutboxQueueBase {
  public:
   virtual ~OutboxQueueBase() = default;
@@ -83,7 +92,9 @@ class OutboxQueue final : public detail::OutboxQueueBase {
   /// The loop's thread: stamps `sample`'s header and queues a copy. False if the sample was refused
   /// (a @key string too long: counted by the writer) or the ring was full (dropped, counted).
   bool push(T& sample) noexcept {
-    if (!writer_.stamp(sample)) return false;
+    if constexpr (detail::HasHeader<T>::value) {
+      if (!writer_.stamp(sample)) return false;
+    }
     const std::uint64_t head = head_.load(std::memory_order_relaxed);
     if (head - tail_.load(std::memory_order_acquire) >= ring_.size()) {
       dropped_.fetch_add(1, std::memory_order_relaxed);
