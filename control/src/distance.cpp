@@ -384,20 +384,53 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
   const double* radius = data.prim_r.data();
   if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
   if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
+    // With a finite give_up, a robot pair lists only the primitives whose bounding sphere lies within
+    // give_up of the other segment's (as the sweep does with its prune distance); `left_out` is the
+    // smallest gap of those it leaves out.
+    const int* ka = nullptr;
+    const int* kb = nullptr;
+    int nka = sa.num_primitives, nkb = sb.num_primitives;
+    double left_out = std::numeric_limits<double>::infinity();
+    const bool filter = give_up < std::numeric_limits<double>::infinity() && !sa.body_schema_slot &&
+                        !sb.body_schema_slot && nka * nkb > 4;
+    if (filter) {
+      auto keep = [&](const Segment& seg, int other, int* kept, int& n) {
+        const double* c4 = data.bound_center4_B.data() + 4 * other;
+        const Eigen::Vector3d c(c4[0], c4[1], c4[2]);
+        const double r_other = data.bound_radius[static_cast<std::size_t>(other)];
+        n = 0;
+        for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+          const SegmentB& w = prim[p];
+          const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r_other;
+          if (gap > give_up) left_out = std::min(left_out, gap);
+          else kept[n++] = p;
+        }
+      };
+      const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
+      keep(sa, pair.b, data.kept_a.data(), nka);
+      keep(sb, pair.a, data.kept_b.data(), nkb);
+      ka = data.kept_a.data();
+      kb = data.kept_b.data();
+    }
     double floor;
-    if (!finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
-          for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa)
-            for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
+    const bool finished = nka > 0 && nkb > 0 &&
+        finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
+          for (int x = 0; x < nka; ++x)
+            for (int y = 0; y < nkb; ++y) {
+              const int pa = ka ? ka[x] : sa.first_primitive + x;
+              const int pb = kb ? kb[y] : sb.first_primitive + y;
               double s, t;
               const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
               f(pa, pb, core - radius[pa] - radius[pb], core, s, t, -1, -std::numeric_limits<double>::infinity());
             }
-        })) {
+        });
+    if (!finished) {
+      if (nka == 0 || nkb == 0) floor = std::numeric_limits<double>::infinity();
       PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
       out.active = true;
       out.exact = false;
       out.has_row = false;
-      out.distance = floor;
+      out.distance = std::min(floor, left_out);
     }
     return;
   }
@@ -756,7 +789,7 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
     for (const int s : {pair.a, pair.b}) {
       if (data.segment_stamp[static_cast<std::size_t>(s)] == now) continue;
       data.segment_stamp[static_cast<std::size_t>(s)] = now;
-      transformSegment(model, kin, slots, data, s, false);
+      transformSegment(model, kin, slots, data, s, true);  // with the bounding sphere (give_up's filter)
     }
     computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up);
   }
