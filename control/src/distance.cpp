@@ -131,6 +131,23 @@ namespace {
 /// Subtracted from a carried lower bound: the rounding of the motion bound.
 constexpr double kCarryMargin = 1e-9;
 
+/// The primitives of robot segment `seg` whose bounding sphere lies within `within` of robot segment
+/// `other`'s (both in B this call) into kept[0 .. n); `left_out` lowered to the smallest gap of the
+/// others (a lower bound of their distance to `other`).
+inline void keepNear(const DistanceData& data, const Segment& seg, int other, double within, int* kept, int& n,
+                     double& left_out) {
+  const double* c4 = data.bound_center4_B.data() + 4 * other;
+  const Eigen::Vector3d c(c4[0], c4[1], c4[2]);
+  const double r_other = data.bound_radius[static_cast<std::size_t>(other)];
+  n = 0;
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
+    const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r_other;
+    if (gap > within) left_out = std::min(left_out, gap);
+    else kept[n++] = p;
+  }
+}
+
 /// Whether a pair that involves a body-schema slot is checked this cycle; sets the links.
 bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const SegmentPair& pair, int& link_a,
                     int& link_b) {
@@ -394,21 +411,9 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
     const bool filter = give_up < std::numeric_limits<double>::infinity() && !sa.body_schema_slot &&
                         !sb.body_schema_slot && nka * nkb > 4;
     if (filter) {
-      auto keep = [&](const Segment& seg, int other, int* kept, int& n) {
-        const double* c4 = data.bound_center4_B.data() + 4 * other;
-        const Eigen::Vector3d c(c4[0], c4[1], c4[2]);
-        const double r_other = data.bound_radius[static_cast<std::size_t>(other)];
-        n = 0;
-        for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-          const SegmentB& w = prim[p];
-          const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r_other;
-          if (gap > give_up) left_out = std::min(left_out, gap);
-          else kept[n++] = p;
-        }
-      };
       const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
-      keep(sa, pair.b, data.kept_a.data(), nka);
-      keep(sb, pair.a, data.kept_b.data(), nkb);
+      keepNear(data, sa, pair.b, give_up, data.kept_a.data(), nka, left_out);
+      keepNear(data, sb, pair.a, give_up, data.kept_b.data(), nkb, left_out);
       ka = data.kept_a.data();
       kb = data.kept_b.data();
     }
@@ -598,23 +603,11 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
       double floor = kInf;
       if (data.pair_has_piece[static_cast<std::size_t>(i)] && count > 4) {
         const SegmentPair& pair = model.pairs[i];
-        int nka = 0, nkb = 0;
-        auto keep = [&](int seg, int other, int* kept, int& n) {
-          const Segment& sg = model.segments[seg];
-          const double* c4 = data.bound_center4_B.data() + 4 * other;
-          const Eigen::Vector3d c(c4[0], c4[1], c4[2]);
-          const double r_other = data.bound_radius[static_cast<std::size_t>(other)];
-          for (int p = sg.first_primitive; p < sg.first_primitive + sg.num_primitives; ++p) {
-            const SegmentB& w = prim[p];
-            const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r_other;
-            if (gap > prune_distance) floor = std::min(floor, gap);
-            else kept[n++] = p;
-          }
-        };
-        keep(pair.a, pair.b, data.kept_a.data(), nka);
-        keep(pair.b, pair.a, data.kept_b.data(), nkb);
         const Segment& sa = model.segments[pair.a];
         const Segment& sb = model.segments[pair.b];
+        int nka = 0, nkb = 0;
+        keepNear(data, sa, pair.b, prune_distance, data.kept_a.data(), nka, floor);
+        keepNear(data, sb, pair.a, prune_distance, data.kept_b.data(), nkb, floor);
         for (int ka = 0; ka < nka; ++ka)
           for (int kb = 0; kb < nkb; ++kb, ++nlist) {
             const int pa = data.kept_a[static_cast<std::size_t>(ka)], pb = data.kept_b[static_cast<std::size_t>(kb)];

@@ -276,7 +276,7 @@ TEST(ControlStatusOnTheBus, ClosestNamesAreClearedExactlyWhenTheArmHasNoPair) {
   std::string phases_seen;
   for (const auto& s : run.statuses) {
     const msg::ArmStatus& r = s.right();
-    const bool none = r.distance() == 1e9;
+    const bool none = r.distance() == reflex::msg::NO_PAIR_DISTANCE;
     ASSERT_EQ(none, r.closest_segment_a().empty()) << "seq " << s.header().seq() << " distance " << r.distance()
                                                    << " names '" << r.closest_segment_a() << "'";
     ASSERT_EQ(none, r.closest_segment_b().empty()) << "seq " << s.header().seq();

@@ -18,6 +18,7 @@
 // it after; --realtime passes the option to reflex_controller; --driver-rt runs this process's robot
 // threads SCHED_FIFO (a real robot's driver is real-time; without it the load delays the robot, not the
 // controller).
+#include "support/files.hpp"
 #include "state_driver.hpp"
 #include "support/child_process.hpp"
 
@@ -36,12 +37,7 @@ namespace {
 
 using namespace reflex;
 
-std::string slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+std::string slurp(const std::string& path) { return testing::readFile(path); }
 
 struct Percentiles {
   double p50 = 0, p99 = 0, p999 = 0, max = 0;

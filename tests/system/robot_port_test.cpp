@@ -15,6 +15,7 @@
 //   names in another order: every command answers one of them, within v_max * period of it;
 // - the controller dies (kill -9): the robot reports holding (RobotState.holding) within the command
 //   deadline plus a margin, and its measured positions do not change for 1 s.
+#include "support/files.hpp"
 #include "support/child_process.hpp"
 
 #include "reflex/control/onboard.hpp"
@@ -54,12 +55,7 @@ msg::HandTargets targetsMsg() {
   return t;
 }
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using testing::readFile;
 
 struct Fixture {
   std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";

@@ -20,6 +20,7 @@
 // - --realtime: the kernel's own view of the process (/proc/PID/stat policy and priority of every
 //   thread, Cpus_allowed_list, VmLck) when permitted; the refusal message when not (an unprivileged
 //   user made with setpriv), and for values no system allows.
+#include "support/files.hpp"
 #include "state_driver.hpp"
 #include "support/child_process.hpp"
 
@@ -43,12 +44,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using testing::readFile;
 
 struct Fixture {
   std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";

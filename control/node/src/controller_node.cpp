@@ -644,7 +644,7 @@ void ControllerNode::run() {
     for (int a = 0; a < 2; ++a) {
       const ArmReport& s = rep.arms[a];
       arms[a]->blend_f(s.f);
-      arms[a]->distance(std::isfinite(s.distance) ? s.distance : 1e9);
+      arms[a]->distance(std::isfinite(s.distance) ? s.distance : msg::NO_PAIR_DISTANCE);
       arms[a]->zone(toMsg(s.zone));
       arms[a]->estop_latched(rep.estop != EstopState::kClear);
       // Cleared when the arm has no pair this cycle (control.idl): never a previous cycle's names.
@@ -652,7 +652,7 @@ void ControllerNode::run() {
       arms[a]->closest_segment_a().assign(s.segment_a != nullptr ? s.segment_a : "");
       arms[a]->closest_segment_b().assign(s.segment_b != nullptr ? s.segment_b : "");
     }
-    m.status_msg.arm_distance(std::isfinite(rep.arm_distance) ? rep.arm_distance : 1e9);
+    m.status_msg.arm_distance(std::isfinite(rep.arm_distance) ? rep.arm_distance : msg::NO_PAIR_DISTANCE);
     m.status_msg.rejected_hand_targets(counts.hand_targets_rejected);
     m.status_msg.rejected_body_schema(counts.schema_rejected);
     m.status_msg.rejected_walk_commands(counts.walk_rejected);
@@ -679,7 +679,7 @@ void ControllerNode::run() {
       s.arms = data.arms;
       s.commands = rep.commands;
       s.estop = data.estop;
-      s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : 1e9;
+      s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : msg::NO_PAIR_DISTANCE;
       s.min_pair = rep.min_pair;  // the --log min_pair column (empty in older logs)
       s.virtual_distance = rep.virtual_distance;
       s.arm_distance = rep.arm_distance;

@@ -14,13 +14,7 @@ DdsRobotPort::DdsRobotPort(const control::Model& model, const std::vector<int>& 
   writer_ = &bus.makeWriter<msg::JointCommand>();
   index_.assign(static_cast<std::size_t>(model.nq), -1);
   q_.setZero(model.nq);
-  lower_.resize(model.nq);
-  upper_.resize(model.nq);
-  for (int i = 0; i < model.nq; ++i) {
-    const double tol = control::stateLimitTolerance(model, i, options.period);
-    lower_[i] = std::isfinite(model.q_lower[i]) ? model.q_lower[i] - tol : -control::kMaxUnlimitedPosition;
-    upper_[i] = std::isfinite(model.q_upper[i]) ? model.q_upper[i] + tol : control::kMaxUnlimitedPosition;
-  }
+  control::acceptedStateRange(model, options.period, lower_, upper_);
   std::vector<std::string> names;
   for (const int j : driven_) names.push_back(model.q_names[j]);
   cmd_.names(names);

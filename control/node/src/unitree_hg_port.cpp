@@ -33,14 +33,9 @@ UnitreeHgPort::UnitreeHgPort(const control::Model& model, const std::vector<int>
   writer_ = &bus.makeWriter<hg::LowCmd>(options.command_topic, hg::kProfile);
   q_.setZero(model.nq);
   q_own_.setZero(model.nq);
-  lower_.resize(model.nq);
-  upper_.resize(model.nq);
-  for (int i = 0; i < model.nq; ++i) {
-    const double tol = control::stateLimitTolerance(model, i, options.period);
-    lower_[i] = std::isfinite(model.q_lower[i]) ? model.q_lower[i] - tol : -control::kMaxUnlimitedPosition;
-    upper_[i] = std::isfinite(model.q_upper[i]) ? model.q_upper[i] + tol : control::kMaxUnlimitedPosition;
+  control::acceptedStateRange(model, options.period, lower_, upper_);
+  for (int i = 0; i < model.nq; ++i)
     if (map_.motor_of_q[static_cast<std::size_t>(i)] < 0) q_[i] = map_.fixed_value[static_cast<std::size_t>(i)];
-  }
   undecodable_seen_ = hg::undecodableLowStates();
   // The command's constant part: every slot off, the arm_sdk slots with their gains.
   for (int motor = hg::kArmSdkFirst; motor <= hg::kArmSdkLast; ++motor) {

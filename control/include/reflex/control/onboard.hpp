@@ -43,6 +43,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -202,6 +203,18 @@ inline double stateLimitTolerance(const Model& model, int i, double period) noex
 /// A joint without position limits (continuous) accepts a measured |position| up to this (rad or m):
 /// larger finite values are absurd (and lose the precision the kinematics needs).
 inline constexpr double kMaxUnlimitedPosition = 1e4;
+
+/// The measured position range a robot port accepts per model joint: the limits widened by
+/// stateLimitTolerance, +-kMaxUnlimitedPosition for a joint without limits (every port's rule).
+inline void acceptedStateRange(const Model& model, double period, Eigen::VectorXd& lower, Eigen::VectorXd& upper) {
+  lower.resize(model.nq);
+  upper.resize(model.nq);
+  for (int i = 0; i < model.nq; ++i) {
+    const double tol = stateLimitTolerance(model, i, period);
+    lower[i] = std::isfinite(model.q_lower[i]) ? model.q_lower[i] - tol : -kMaxUnlimitedPosition;
+    upper[i] = std::isfinite(model.q_upper[i]) ? model.q_upper[i] + tol : kMaxUnlimitedPosition;
+  }
+}
 
 /// The robot segments a physical body-schema segment held by `link` (a grasped object) is never
 /// checked against (bit i: segment i): every segment on the rigid body of `link` (the links joined to

@@ -62,6 +62,7 @@
 #include "reflex/control/scenarios.hpp"
 #include "reflex/control/simulation.hpp"
 #include "reflex/control_node/bus_robot_port.hpp"
+#include <reflex/msg/control.h>
 
 #include <array>
 #include <cstdint>
@@ -132,7 +133,7 @@ struct NodeStats {
   std::uint64_t cycles = 0;
   std::uint64_t overruns = 0;
   double max_lateness_us = 0.0;
-  double min_distance = 1e9;          ///< physical pairs, over the run (m)
+  double min_distance = msg::NO_PAIR_DISTANCE;  ///< physical pairs, over the run (m)
   std::uint64_t estop_count = 0;
   std::uint64_t guard_count = 0;      ///< cycles whose step the predictive guard shortened
   std::uint64_t targets_received = 0;
