@@ -649,15 +649,18 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
       double bound = prune ? data.list_floor[static_cast<std::size_t>(e)] : kInf;  // the primitives left out
       double listed = kInf;
       for (; j < end; ++j) listed = std::min(listed, data.pp_core[j] - radius[list_a[j]] - radius[list_b[j]]);
-      if (prune && listed > options.prune_distance) {  // none listed within it (or none listed: +inf)
-        bound = std::min(bound, listed);
+      // A pair left inexact, like the broad phase's: `lower` a lower bound of its distance.
+      auto skip = [&](double lower) {
         PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
         out.active = true;
         out.exact = false;
         out.has_row = false;
-        out.distance = bound;
-        pruned_floor = std::min(pruned_floor, bound);
+        out.distance = lower;
+        pruned_floor = std::min(pruned_floor, lower);
         ++data.num_pruned_pairs;
+      };
+      if (prune && listed > options.prune_distance) {  // none listed within it (or none listed: +inf)
+        skip(std::min(bound, listed));
         continue;
       }
       double floor;
@@ -675,14 +678,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
                                  data.pp_core[k], data.pp_s[k], data.pp_t[k], pp, carried);
                              }
                            })) {  // its pieces are all farther than prune_distance: skipped
-        floor = std::min(floor, bound);
-        PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
-        out.active = true;
-        out.exact = false;
-        out.has_row = false;
-        out.distance = floor;
-        pruned_floor = std::min(pruned_floor, floor);
-        ++data.num_pruned_pairs;
+        skip(std::min(floor, bound));
         continue;
       }
       if (prune) data.exact_pairs[static_cast<std::size_t>(nkept)] = i;

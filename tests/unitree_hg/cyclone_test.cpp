@@ -14,6 +14,7 @@
 //    controller goes stale and sends nothing (the robot sees the gap);
 //  - a joint map naming a joint the model does not have, or a motor the message lacks (35), no map,
 //    or a map with --robot dds is refused at start (exit 1) naming the joint / the key / the option.
+#include "support/files.hpp"
 #include "reflex/control_node/unitree_hg.hpp"
 
 #include "reflex/control/controller.hpp"
@@ -37,17 +38,8 @@ namespace hg = reflex::unitree_hg;
 const std::string kUrdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
 const std::string kMap = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.hg.yaml";
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
-/// The number after `key` in `text` (e.g. "robot_state_bad_crc "), -1 if absent.
-double numberAfter(const std::string& text, const std::string& key) {
-  const std::size_t at = text.find(key);
-  if (at == std::string::npos) return -1;
-  return std::atof(text.c_str() + at + key.size());
-}
+using reflex::testing::numberAfter;
+using reflex::testing::readFile;
 
 TEST(UnitreeHgCyclone, StateInCommandsOutAndBadStatesRejectedCountedNamed) {
   const auto model = reflex::control::loadModel(kUrdf, reflex::control::loadCollisionConfigFor(kUrdf, ""));

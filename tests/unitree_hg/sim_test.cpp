@@ -11,6 +11,7 @@
 // the measured joints, every joint's step between consecutive states at most v_max * dt (dt from
 // the ticks) over the whole run, the ramp out included; the weight never moves more than
 // dt / ramp time per command; the robot accepted the commands (crc, weight) and rejected none.
+#include "support/files.hpp"
 #include "support/child_process.hpp"
 
 #include <gtest/gtest.h>
@@ -23,16 +24,8 @@ namespace {
 
 using namespace reflex::testing;
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
-double numberAfter(const std::string& text, const std::string& key) {
-  const std::size_t at = text.find(key);
-  if (at == std::string::npos) return -1;
-  return std::atof(text.c_str() + at + key.size());
-}
+using reflex::testing::numberAfter;
+using reflex::testing::readFile;
 
 TEST(UnitreeHgSim, CrossingArmsOnThePhysicsRobotRampsInAndOutWithoutContact) {
   const std::string out = testing::TempDir() + "/hg_sim";
