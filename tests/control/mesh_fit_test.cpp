@@ -466,6 +466,28 @@ TEST(MeshFitOverlay, PiecesRoundTripAndABadPieceIsRefused) {
   refused(bad_index, "is not a vertex index");
 }
 
+// The overlay's options are read back (reflex_setup reuses a fit only with today's defaults): an
+// unknown option or a negative one is refused naming the key, like any other key of the overlay.
+TEST(MeshFitOverlay, OptionsAreReadBackAndABadOptionIsRefused) {
+  TempDir dir;
+  const std::string path = dir / "o.fit.yaml";
+  const std::string text = fitOverlayText(loadFitOverlay(testing::robotPath("mesh_humanoid.fit.yaml")), path);
+  std::ofstream(path) << text;
+  const FitOverlay back = loadFitOverlay(path);
+  EXPECT_EQ(back.options.max_pieces, FitOptions{}.max_pieces);
+  EXPECT_EQ(back.options.max_pieces_large_gap, FitOptions{}.max_pieces_large_gap);
+  EXPECT_EQ(back.options.large_gap, FitOptions{}.large_gap);
+  const std::string key = ", large_gap: 0.02}";
+  for (const auto& [replacement, want] : std::vector<std::pair<std::string, std::string>>{
+           {", large_gap: 0.02, bogus: 1}", "options.bogus"}, {", large_gap: -0.02}", "options.large_gap"}}) {
+    std::string bad = text;
+    ASSERT_NE(bad.find(key), std::string::npos);
+    bad.replace(bad.find(key), key.size(), replacement);
+    std::ofstream(path) << bad;
+    EXPECT_THAT(messageOf([&] { (void)loadFitOverlay(path); }), ::testing::HasSubstr(want)) << replacement;
+  }
+}
+
 TEST(MeshFitResolve, PackageFileAndRelativePaths) {
   TempDir dir;
   fs::create_directories(dir.path / "src" / "folder_name");
