@@ -375,6 +375,16 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     ia = startVertex(a, R_B_A.transpose() * d);
     ib = startVertex(b, -(R_B_B.transpose() * d));
     support(d, 0);
+    // That support pair already bounds the distance: A's farthest point along d is s.p_a[0] and B's
+    // nearest is s.p_b[0], so every point x of A - B has -d.x >= -d.w (the gap between the two
+    // pieces' extents along d). A good guess of d (the caller's) often proves a far pair at once.
+    const double tol = std::max(kConvexTolerance, 1e-9 * s.w[0].norm());
+    const double lower = -d.dot(s.w[0]) / d.norm() - tol;
+    if (lower > stop_above) {
+      out.above = true;
+      out.distance = lower;
+      return out;
+    }
   }
   s.size = 1;
   SubResult sub;

@@ -524,6 +524,54 @@ TEST(ConvexDistance, StopAboveGivesALowerBoundOrTheSameAnswer) {
   EXPECT_GT(same, 400);
 }
 
+/// The first support pair, in the caller's direction (towards_b), already bounds the distance: the gap
+/// between the two pieces' extents along it. With the true direction between the closest points a pair
+/// farther than stop_above is proven so before any GJK iteration; with a poor direction (random) the
+/// bound may not prove it, and either way the answer is a lower bound or the full answer.
+TEST(ConvexDistance, TheFirstDirectionAloneProvesAFarPair) {
+  std::mt19937_64 rng(78);
+  std::uniform_real_distribution<double> centre(0.05, 0.3);
+  int at_once = 0, apart = 0;
+  for (int k = 0; k < 300; ++k) {
+    const Hull ha = randomHull(rng), hb = randomHull(rng);
+    const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
+    const Eigen::Isometry3d X_B_A = pose(randomRotation(rng), centre(rng) * (randomRotation(rng) * Vec3::UnitX()));
+    const Eigen::Isometry3d X_B_B = pose(randomRotation(rng), Vec3::Zero());
+    const ConvexDistance full = computeConvexDistance(a, X_B_A, b, X_B_B);
+    if (full.penetrating) continue;
+    ++apart;
+    const double brute = bruteDistance(ha, X_B_A, hb, X_B_B);
+    const Vec3 exact_direction = full.p_B_b - full.p_B_a;
+    const Vec3 random_direction = randomRotation(rng) * Vec3::UnitX();
+    for (int which = 0; which < 2; ++which) {
+      const Vec3 towards_b = which == 0 ? exact_direction : random_direction;
+      const ConvexDistance same_path = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr,
+                                                             std::numeric_limits<double>::infinity(), towards_b);
+      EXPECT_NEAR(same_path.distance, brute, 1e-9) << "case " << k;
+      for (const double stop : {0.5 * brute, brute - 1e-4, brute + 1e-4}) {
+        const ConvexDistance r = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, stop, towards_b);
+        if (r.above) {
+          EXPECT_GT(r.distance, stop) << "case " << k;
+          EXPECT_LE(r.distance, brute + 1e-9) << "case " << k << ": the bound must be below the distance";
+          if (r.iterations == 0) ++at_once;
+        } else {
+          EXPECT_EQ(r.distance, same_path.distance) << "case " << k;
+          EXPECT_EQ(r.p_B_a, same_path.p_B_a) << "case " << k;
+        }
+      }
+      // The true direction proves half the distance at once: the extents' gap along it is the distance.
+      if (which == 0) {
+        const ConvexDistance half = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, 0.5 * brute, towards_b);
+        EXPECT_TRUE(half.above) << "case " << k;
+        EXPECT_EQ(half.iterations, 0) << "case " << k;
+      }
+    }
+  }
+  std::printf("[ convex ] first direction: %d early stops before any iteration, %d pairs apart\n", at_once, apart);
+  EXPECT_GT(apart, 200);
+  EXPECT_GE(at_once, apart);
+}
+
 TEST(ConvexDistance, NearlyTouchingRandomPiecesMatchBruteForce) {
   // Pieces pushed apart along a random direction until they are 0.1 um to 1 mm apart: the regime
   // where the controller acts and where the sub-distance sees nearly flat simplices.

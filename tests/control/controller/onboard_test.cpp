@@ -609,12 +609,14 @@ TEST(OnboardPort, AShorterCycleCommandsMeasuredPlusQdotTimesItsOwnDtAndWalksAndT
       ASSERT_LE(std::abs(port.q_end_[i] - measured[i]), model.v_max[i] * dt * (1.0 + 1e-12)) << model.q_names[i];
       worst_ratio = std::max(worst_ratio, std::abs(port.q_end_[i] - measured[i]) / (model.v_max[i] * dt));
     }
-    if (r.result == ControlResult::kOk && r.walking_advanced)
+    if (r.result == ControlResult::kOk && r.walking_advanced) {
       ASSERT_NEAR(port.q_end_[heel] - heel_before, speed * dt, 1e-12) << "cycle " << k;
+    }
     // The reference of the left arm, while far from its goal, advances trajectory_speed x dt.
     const Eigen::Vector3d ref = ctl.data().arms[kLeft].reference_B;
-    if (k >= 1 && k <= 10)
+    if (k >= 1 && k <= 10) {
       ASSERT_NEAR((ref - ref_before).norm(), cm.params.trajectory_speed * dt, 1e-12) << "cycle " << k;
+    }
     ref_before = ref;
     port.q_ = port.q_end_;  // the robot is where it was sent at the next state
   }
