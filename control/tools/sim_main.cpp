@@ -7,6 +7,7 @@
 // DIR/summary.txt, and PNG plots like the paper's figures (through python3-matplotlib). With a robot
 // over DDS the summary adds the plant's figures (robot_summary below) and DIR/reflex_mujoco*.log holds
 // the spawned robot's output.
+#include "reflex/common/shipped.hpp"
 #include "reflex/control_node/bus_plant.hpp"
 #include "reflex/control/controller.hpp"
 #include "reflex/control/scenarios.hpp"
@@ -33,14 +34,6 @@ namespace fs = std::filesystem;
 using namespace reflex::control;
 
 namespace {
-
-std::string exeDir() {
-  char buf[4096];
-  const ssize_t n = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
-  if (n <= 0) return ".";
-  buf[n] = 0;
-  return fs::path(buf).parent_path().string();
-}
 
 /// Writes the capsules of the robot at the given samples (frame = position in `picks`).
 void writePostures(const Model& model, const SimResult& result, const std::string& path,
@@ -265,7 +258,7 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_dir, "output folder (created)");
   app.add_flag("--no-avoidance", no_avoidance, "run with collision avoidance AND the e-stop off (the paper's comparison; simulation only)");
   app.add_option("--mode", mode, "avoidance variant")->check(CLI::IsMember({"one_dof", "three_dof"}));
-  app.add_option("--urdf", urdf, "robot URDF")->default_str(REFLEX_DEFAULT_URDF);
+  app.add_option("--urdf", urdf, "robot URDF")->default_str(reflex::common::defaultUrdf());
   app.add_option("--collision", collision, "collision configuration YAML (default: next to the URDF)");
   app.add_option("--controller", controller_cfg,
                  "controller configuration YAML (default: <URDF stem>.controller.yaml next to the URDF if it exists, "
@@ -328,7 +321,7 @@ int main(int argc, char** argv) {
   }
   if (!postures_from.empty()) {
     try {
-      if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
+      if (urdf.empty()) urdf = reflex::common::defaultUrdf();
       const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
       const SimResult r = readTimeseries(model, postures_from);
       if (r.samples.empty()) throw ConfigError(postures_from + ": no rows");
@@ -368,7 +361,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    if (urdf.empty()) urdf = REFLEX_DEFAULT_URDF;
+    if (urdf.empty()) urdf = reflex::common::defaultUrdf();
     const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
     const ControllerConfig config = loadControllerConfigFor(urdf, controller_cfg);
     const ControllerModel cm = makeControllerModel(model, config);
@@ -415,7 +408,7 @@ int main(int argc, char** argv) {
           fig.ramp_time = ramp_time;
         }
         if (robot_side == "mujoco" || robot_side == "unitree_hg") {
-          po.robot_binary = exeDir() + "/reflex_mujoco";
+          po.robot_binary = reflex::common::executableDir() + "/reflex_mujoco";
           po.robot_args = {"--urdf", urdf};
           if (!collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", collision});
           fig.log = (dir / (run_index == 0 ? "reflex_mujoco.log" : "reflex_mujoco_" + std::to_string(run_index) + ".log"))
@@ -469,7 +462,7 @@ int main(int argc, char** argv) {
       if (sc->name == "one_vs_three_dof" && !no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
       closeChecked(summary, summary_path);
       if (!no_plots) {
-        const std::string script = exeDir() + "/reflex_plot_sim.py";
+        const std::string script = reflex::common::executableDir() + "/reflex_plot_sim.py";
         const std::string cmd = std::string(REFLEX_PYTHON) + " '" + script + "' '" + dir.string() + "' '" + sc->name + "'";
         if (std::system(cmd.c_str()) != 0) {
           std::fprintf(stderr, "reflex_sim: warning: plotting failed (%s)\n", cmd.c_str());

@@ -1,3 +1,4 @@
+#include "reflex/common/shipped.hpp"
 #include "reflex/modules/robot_state.hpp"
 
 #include <reflex/control/urdf_loader.hpp>
@@ -7,7 +8,7 @@
 
 namespace reflex::modules {
 
-const char* const kDefaultUrdf = REFLEX_DEFAULT_URDF;
+std::string defaultRobotUrdf() { return reflex::common::defaultUrdf(); }
 
 RobotConfig readRobotConfig(const ConfigNode& node) {
   node.rejectUnknown({"urdf", "collision", "left_shoulder", "right_shoulder", "left_hand", "right_hand",

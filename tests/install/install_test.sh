@@ -11,7 +11,12 @@
 #  4. the out-of-tree module project modules/examples/wave_module builds as a plugin against the installed
 #     tree and runs in the INSTALLED stock reflex_behavior on the bus: `reflex_bus list` sees its module
 #     and `reflex_bus hz` counts its hand targets; without the plugin the configuration is refused, and a
-#     library that is not a plugin is refused by name.
+#     library that is not a plugin is refused by name;
+#  5. find_package(reflex COMPONENTS control) in a project that forbids finding Fast DDS, OpenCV and
+#     OpenSSL; an unknown component is refused by name;
+#  6. the prefix copied elsewhere and the checkout (and build tree) hidden by a mount namespace: the
+#     moved tree alone runs `reflex_sim all`, `reflex_setup` on a shipped mesh robot, and the plugin
+#     module in reflex_behavior, each finding its data in the moved PREFIX/share/reflex.
 # Usage: install_test.sh SOURCE_DIR BUILD_DIR DOMAIN
 set -euo pipefail
 src=$1 build=$2 domain=$3
@@ -23,9 +28,10 @@ step() { echo "install_test: [$(date +%T)] $*"; }
 
 step "cmake --install into $prefix"
 cmake --install "$build" --prefix "$prefix" > "$work/install.log" || { tail -20 "$work/install.log"; fail "cmake --install"; }
-for f in lib/cmake/reflex/reflexConfig.cmake lib/cmake/reflex/reflexTargets.cmake include/reflex/control/controller.hpp \
+for f in lib/cmake/reflex/reflexConfig.cmake lib/cmake/reflex/reflex-control-targets.cmake include/reflex/control/controller.hpp \
          include/reflex/msg/control.h include/reflex/modules/plugin.hpp include/reflex/vision_node/vision_node.hpp bin/reflex_controller bin/reflex_behavior \
-         bin/reflex_bus; do
+         bin/reflex_bus bin/reflex_plot_sim.py share/reflex/robots/asimo_like.urdf share/reflex/dds/reflex_profiles.xml \
+         share/reflex/view/web/index.html share/reflex/view/three/three.module.js share/reflex/sessions/flagship/session.yaml; do
   [[ -e $prefix/$f ]] || fail "not installed: $f"
 done
 
@@ -46,6 +52,22 @@ d=re.search(r'projection_matrix:.*?data:\s*\[([^\]]*)\]', open('$session/right.y
 p=[float(x) for x in d.split(',')]
 print('%.6f' % (-p[3]/p[0]))")
 [[ $(echo "$out" | sed -n 2p) == "baseline $baseline" ]] || fail "baseline: '$(echo "$out" | sed -n 2p)' != $baseline"
+
+grep -l '/usr/lib/.*\.so' "$prefix"/lib/cmake/reflex/*.cmake && fail "an exported target names a library by its absolute path (above)"
+
+step "find_package(reflex COMPONENTS control): reflex::control alone, Fast DDS / OpenCV / OpenSSL never looked for"
+cmake -S "$src/tests/install/control_only" -B "$work/control_only" -DCMAKE_PREFIX_PATH="$prefix" \
+      -DCMAKE_BUILD_TYPE=Release > "$work/control_only.log" 2>&1 || { cat "$work/control_only.log"; fail "configure control_only"; }
+cmake --build "$work/control_only" -j2 >> "$work/control_only.log" 2>&1 || { tail -30 "$work/control_only.log"; fail "build control_only"; }
+got=$("$work/control_only/control_only" "$urdf")
+[[ $got == "$want" ]] || fail "control_only says '$got', reflex_inspect '$want'"
+echo "install_test: COMPONENTS control: $got"
+mkdir -p "$work/unknown"
+printf 'cmake_minimum_required(VERSION 3.22)\nproject(unknown NONE)\nfind_package(reflex 0.1 REQUIRED COMPONENTS contrl)\n' \
+  > "$work/unknown/CMakeLists.txt"
+bad=$(cmake -S "$work/unknown" -B "$work/unknown/build" -DCMAKE_PREFIX_PATH="$prefix" 2>&1) \
+  && fail "find_package(reflex COMPONENTS contrl) was accepted"
+grep -q "unknown component 'contrl'" <<<"$bad" || fail "an unknown component is refused without naming it: $bad"
 
 step "outside project: reflex::vision_node offline on the flagship session vs the in-tree reflex_vision --dump"
 "$work/outside/outside_vision_node" "$session" "$work/node.csv" || fail "outside_vision_node"
@@ -155,4 +177,46 @@ grep -q "hand_targets=[1-9]" "$work/behavior.out" || fail "the exit line counts 
 rate=$(awk '/reflex\/hand_targets/ {print $3; exit}' "$work/hz.out")
 python3 -c "import sys; r=float('${rate:-0}'); sys.exit(0 if r >= 5 else 1)" \
   || fail "hand targets from the plugin at ${rate:-0}/s (>= 5 expected: it steps every 50 ms)"
+
+step "the prefix moved elsewhere and the checkout out of reach (a mount namespace hides $src): the installed tree alone"
+moved=$work/moved
+cp -a "$prefix" "$moved"
+# The wave configuration without its checkout-relative robot: the installed reflex_behavior's default robot.
+python3 - "$config" "$work/wave_alone.yaml" <<'PY'
+import re, sys
+text = open(sys.argv[1]).read()
+open(sys.argv[2], "w").write(re.sub(r"^robot:\n(  .*\n)+\n?", "", text, flags=re.M))
+PY
+grep -q '^robot:' "$work/wave_alone.yaml" && fail "could not drop robot: from $config"
+hide=("$src")
+[[ $build == "$src"/* ]] || hide+=("$build")
+sim_count=$("$build/bin/reflex_sim" --list | grep -cE '^[a-z_0-9]+ ' || true)
+unshare --mount --propagation private bash -s -- "$moved" "$work" "$domain" "$plugin" "${hide[@]}" > "$work/moved.out" 2>&1 <<'SH' \
+  || { cat "$work/moved.out"; fail "the moved prefix (above)"; }
+set -euo pipefail
+moved=$1 work=$2 domain=$3 plugin=$4; shift 4
+for dir in "$@"; do mount -t tmpfs tmpfs "$dir"; done
+for dir in "$@"; do [[ -z $(ls -A "$dir") ]] || { echo "could not hide $dir"; exit 1; }; done
+echo "hidden: $*"
+cd "$work"
+"$moved/bin/reflex_sim" all --out "$work/sim_moved" > "$work/sim_moved.log" 2>&1 || { tail -20 "$work/sim_moved.log"; exit 1; }
+echo "reflex_sim all: $(ls "$work/sim_moved" | wc -l) scenario folders, default robot $("$moved/bin/reflex_sim" --help | grep -o '/[^ ]*asimo_like.urdf')"
+robots=$moved/share/reflex/robots
+"$moved/bin/reflex_setup" "$robots/mesh_humanoid.urdf" --srdf "$robots/mesh_humanoid.srdf" \
+  --package-path "mesh_humanoid_description=$robots/mesh_humanoid_description" --out "$work/setup_moved" \
+  > "$work/setup_moved.log" 2>&1 || { tail -20 "$work/setup_moved.log"; exit 1; }
+echo "reflex_setup: $(ls "$work/setup_moved" | tr '\n' ' ')"
+"$moved/bin/reflex_behavior" --config "$work/wave_alone.yaml" --plugin "$plugin" --domain "$domain" --duration 3 \
+  > "$work/behavior_moved.out" 2> "$work/behavior_moved.err" || { cat "$work/behavior_moved.err"; exit 1; }
+grep -q "hand_targets=[1-9]" "$work/behavior_moved.out" || { echo "no hand target: $(cat "$work/behavior_moved.out")"; exit 1; }
+echo "reflex_behavior with the plugin: $(grep -o 'hand_targets=[0-9]*' "$work/behavior_moved.out")"
+SH
+cat "$work/moved.out"
+got_count=$(ls "$work/sim_moved" | wc -l)
+[[ $sim_count -gt 0 && $got_count -eq $sim_count ]] || fail "reflex_sim all from the moved prefix wrote $got_count scenario folders, reflex_sim --list names $sim_count"
+grep -q "default robot $moved/share/reflex/robots/asimo_like.urdf" "$work/moved.out" \
+  || fail "the moved reflex_sim's default robot is not the moved prefix's: $(grep 'default robot' "$work/moved.out")"
+for f in controller.yaml collision.yaml behavior.yaml; do
+  [[ -s $work/setup_moved/$f ]] || fail "reflex_setup from the moved prefix wrote no $f"
+done
 step "PASS (hand targets ${rate}/s)"

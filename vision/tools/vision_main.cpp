@@ -1,6 +1,7 @@
 // reflex_vision: the stereo AprilTag vision process. Thin main: parse options, build the node
 // (reflex::vision_node::VisionNode: source, pipeline, replay loop, DDS publisher or --dump CSV), install
 // the process's signal handler, run, print the exit line.
+#include "reflex/common/shipped.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision_node/vision_node.hpp"
 
@@ -91,7 +92,7 @@ int main(int argc, char** argv) {
                "session time, objects, lag");
   app.add_flag("--quiet", quiet, "no progress display");
   app.add_option("--domain", domain_text, "DDS domain id (default: $REFLEX_DOMAIN_ID, else 0)");
-  app.add_option("--profiles", o.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
+  app.add_option("--profiles", o.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
   app.add_option("--frame-id", o.frame_id, "name of the robot base frame written into ObjectTargets")
       ->capture_default_str();
   app.add_option("--wait-readers", o.wait_readers,

@@ -1,5 +1,6 @@
 // reflex_mujoco: the physics-simulated humanoid on the bus. See robot_node.hpp and control/README.md
 // ("The physics robot: reflex_mujoco").
+#include "reflex/common/shipped.hpp"
 #include "reflex/mujoco/robot_node.hpp"
 #include "reflex/control/urdf_loader.hpp"
 
@@ -21,7 +22,7 @@ int main(int argc, char** argv) {
       "SIGINT / SIGTERM stop it; the summary (steps, contact steps, commands applied / rejected, hold time,\n"
       "command latency) is printed at exit. Exit codes: 0 success, 1 set-up error."};
   reflex::mujoco::NodeConfig config;
-  config.urdf = REFLEX_DEFAULT_URDF;
+  config.urdf = reflex::common::defaultUrdf();
   bool print_mjcf = false;
   app.add_option("--urdf", config.urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", config.collision, "collision configuration (default: next to the URDF)");
@@ -38,7 +39,7 @@ int main(int argc, char** argv) {
   app.add_option("--duration", config.duration, "seconds to run (0: until stopped)")->capture_default_str();
   app.add_option("--domain", config.domain_id, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
-  app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
+  app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
   app.add_option("--participant-profile", config.participant_profile, "participant profile in the XML")
       ->capture_default_str();
   app.add_option("--name", config.module_name, "module name on the bus")->capture_default_str();

@@ -1,4 +1,5 @@
 // reflex_controller: the onboard controller process over DDS. See controller_node.hpp.
+#include "reflex/common/shipped.hpp"
 #include "reflex/control_node/controller_node.hpp"
 #include "reflex/control_node/realtime.hpp"
 
@@ -28,7 +29,7 @@ int main(int argc, char** argv) {
                "terminating signal stop it cleanly (summary, --log closed); SIGPIPE is ignored.\n"
                "Exit codes: 0 success, 1 set-up error, 3 the --log file could not be written completely."};
   reflex::control_node::NodeConfig config;
-  config.urdf = REFLEX_DEFAULT_URDF;
+  config.urdf = reflex::common::defaultUrdf();
   bool no_avoidance = false, disable_estop = false;
   app.add_option("--urdf", config.urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", config.collision, "collision configuration (default: next to the URDF)");
@@ -38,7 +39,7 @@ int main(int argc, char** argv) {
                  "switches avoidance off but never the e-stop");
   app.add_option("--domain", config.domain_id, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
-  app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
+  app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
   app.add_option("--participant-profile", config.participant_profile, "participant profile in the XML (default UDP only: a killed shared-memory reader cannot stall the controller's writes)")->capture_default_str();
   app.add_option("--duration", config.duration, "seconds to run (0: until Ctrl-C)")->check(CLI::NonNegativeNumber);
   app.add_option("--input-timeout", config.input_timeout, "seconds of silence from the target source before the hands retract")

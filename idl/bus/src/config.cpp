@@ -1,3 +1,4 @@
+#include "reflex/common/shipped.hpp"
 #include "reflex/bus/config.hpp"
 
 #include <cerrno>
@@ -6,8 +7,6 @@
 #include "reflex/bus/error.hpp"
 
 namespace reflex::bus {
-
-const char* const kDefaultProfilesFile = REFLEX_DEFAULT_PROFILES_FILE;
 
 int parseDomainId(const std::string& text, const std::string& origin) {
   const std::string where = " (from " + origin + ")";
@@ -43,7 +42,7 @@ int resolveDomainId(const std::optional<int>& configured) {
 std::string resolveProfilesFile(const std::string& configured) {
   if (!configured.empty()) return configured;
   if (const char* env = std::getenv("FASTRTPS_DEFAULT_PROFILES_FILE"); env && *env) return env;
-  return kDefaultProfilesFile;
+  return reflex::common::defaultProfilesFile();
 }
 
 }  // namespace reflex::bus

@@ -4,6 +4,7 @@
 //   reflex_behavior --list-modules [--config FILE | --plugin LIB]
 //   reflex_behavior --config my.yaml --plugin build/libwave_module.so      # a module type from a shared library
 // Swapping a module is a change of configuration: start it with another file.
+#include "reflex/common/shipped.hpp"
 #include "process_guard.hpp"
 #include "reflex/modules/behavior_node.hpp"
 #include "reflex/modules/plugin.hpp"
@@ -39,7 +40,7 @@ int main(int argc, char** argv) {
                  "inputs.joint_state_sources (repeatable; default there: controller). A recording replayed without a "
                  "live controller: --joint-state-source player");
   app.add_option("--domain", domain, "DDS domain id 0..232 (default: $REFLEX_DOMAIN_ID, else 0)");
-  app.add_option("--profiles", options.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
+  app.add_option("--profiles", options.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
   app.add_option("--participant-profile", options.participant_profile, "participant profile in the profiles file")
       ->capture_default_str();
   app.add_option("--duration", options.duration, "stop after this many seconds (0 = until SIGINT / SIGTERM)")

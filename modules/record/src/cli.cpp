@@ -1,3 +1,4 @@
+#include "reflex/common/shipped.hpp"
 #include "cli.hpp"
 
 #include "reflex/record/recorder.hpp"
@@ -24,7 +25,7 @@ struct BusOptions {
     app.add_option("--domain", domain, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
         ->check(CLI::Range(0, bus::kMaxDomainId));
     app.add_option("--profiles", profiles,
-                   "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else bringup/dds/reflex_profiles.xml)");
+                   "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else " + reflex::common::defaultProfilesFile() + ")");
     app.add_option("--participant-profile", participant_profile, "participant profile in the XML")
         ->capture_default_str();
   }
@@ -72,7 +73,7 @@ struct SceneOptions {
   SceneChannelOptions scene;
   bool none = false;
   void add(CLI::App& app) {
-    scene.urdf = REFLEX_DEFAULT_URDF;
+    scene.urdf = reflex::common::defaultUrdf();
     app.add_option("--urdf", scene.urdf, "scene channels: robot URDF (the controller's)")->capture_default_str();
     app.add_option("--collision", scene.collision, "scene channels: collision configuration (default: next to the URDF)");
     app.add_option("--controller", scene.controller,

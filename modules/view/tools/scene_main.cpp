@@ -13,6 +13,7 @@
 //
 // Bad input: exit 2 with one line naming the value (no --log / --at / --out, a bad --tile or --camera,
 // the robot files' and the time series' errors as reflex::view::readLogScenes names them).
+#include "reflex/common/shipped.hpp"
 #include <reflex/common/files.hpp>
 #include <reflex/view/log_scene.hpp>
 #include <reflex/view/scene.hpp>
@@ -65,7 +66,7 @@ int main(int argc, char** argv) {
   CLI::App app{"reflex_scene: the live view's foxglove.SceneUpdate at chosen rows of a controller time series "
                "(reflex_controller --log), as a module the view's page draws headless (static mode)"};
   std::string log, out, tile = "360x420", camera_text = "0.5,0.45,1.7,0.1,0,0.9";
-  std::string urdf = REFLEX_DEFAULT_URDF, collision, controller;
+  std::string urdf = reflex::common::defaultUrdf(), collision, controller;
   std::vector<double> at;
   app.add_option("--log", log, "time series CSV (reflex_controller --log, or reflex_sim's timeseries.csv)")->required();
   app.add_option("--at", at, "times [s] of the rows to draw (the nearest row each), comma-separated")

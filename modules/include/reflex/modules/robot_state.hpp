@@ -20,11 +20,11 @@
 
 namespace reflex::modules {
 
-/// Compiled-in default robot: <source>/bringup/robots/asimo_like.urdf.
-extern const char* const kDefaultUrdf;
+/// The default robot: the shipped asimo_like.urdf (reflex/common/shipped.hpp says where it is found).
+std::string defaultRobotUrdf();
 
 struct RobotConfig {
-  std::string urdf = kDefaultUrdf;  ///< robot description
+  std::string urdf = defaultRobotUrdf();  ///< robot description
   std::string collision;            ///< collision YAML ("" = next to the URDF)
   std::string left_shoulder = "l_shoulder", right_shoulder = "r_shoulder";
   std::string left_hand = "l_hand", right_hand = "r_hand";

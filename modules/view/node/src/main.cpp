@@ -1,6 +1,7 @@
 // reflex_view: the live 3D view of a running Reflex system, in the browser and in Foxglove.
 //   reflex_view [--port 8765] [--bind 127.0.0.1] [--domain N] [--urdf FILE] ...
 // Open http://localhost:8765, or in Foxglove: Open connection -> Foxglove WebSocket -> ws://localhost:8765.
+#include "reflex/common/shipped.hpp"
 #include "reflex/view_node/view_node.hpp"
 
 #include <reflex/bus/bus.hpp>
@@ -21,9 +22,9 @@ int main(int argc, char** argv) {
       "ws://localhost:PORT. Exit: 0 ok, 1 runtime error, 2 bad option or set-up (port in use, bad --bind, missing "
       "web folder, bad robot files)."};
   view_node::ViewOptions options;
-  options.urdf = REFLEX_DEFAULT_URDF;
-  options.server.web_dir = REFLEX_VIEW_WEB_DIR;
-  options.server.three_dir = REFLEX_VIEW_THREE_DIR;
+  options.urdf = reflex::common::defaultUrdf();
+  options.server.web_dir = reflex::common::shippedPath("view/web");
+  options.server.three_dir = reflex::common::shippedPath("view/three");
   std::string domain;
   app.add_option("--port", options.server.port, "TCP port of the page and the WebSocket (0: any free port, printed)")
       ->capture_default_str();
@@ -37,7 +38,7 @@ int main(int argc, char** argv) {
   app.add_option("--web", options.server.web_dir, "folder of the web page (index.html)")->capture_default_str();
   app.add_option("--three", options.server.three_dir, "folder of three.module.js and three.core.js")->capture_default_str();
   app.add_option("--domain", domain, "DDS domain id 0..232 (default: $REFLEX_DOMAIN_ID, else 0)");
-  app.add_option("--profiles", options.profiles_file, "DDS QoS profiles XML (default: bringup/dds/reflex_profiles.xml)");
+  app.add_option("--profiles", options.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
   app.add_option("--participant-profile", options.participant_profile, "participant profile in the profiles file")
       ->capture_default_str();
   app.add_option("--duration", options.duration, "stop after this many seconds (0 = until SIGINT / SIGTERM)")

@@ -4,7 +4,8 @@
 // Resolution (first match wins), implemented by resolveDomainId / resolveProfilesFile:
 //   domain id:     BusConfig::domain_id  >  env REFLEX_DOMAIN_ID  >  0
 //   profiles file: BusConfig::profiles_file  >  env FASTRTPS_DEFAULT_PROFILES_FILE  >
-//                  kDefaultProfilesFile (bringup/dds/reflex_profiles.xml of this checkout)
+//                  reflex::common::defaultProfilesFile() (the shipped dds/reflex_profiles.xml:
+//                  installed, PREFIX/share/reflex; in the build tree, the checkout's bringup/dds)
 // The profiles file is always loaded explicitly by the Participant constructor (also when it came
 // from FASTRTPS_DEFAULT_PROFILES_FILE, which Fast DDS itself would only log errors about), so a
 // missing or malformed file is a BusError naming the path.
@@ -15,9 +16,6 @@
 
 namespace reflex::bus {
 
-/// Compiled-in default profiles file: <source>/bringup/dds/reflex_profiles.xml.
-extern const char* const kDefaultProfilesFile;
-
 /// Highest domain id Fast DDS accepts with the default UDP port mapping (RTPS: PB + DG * id < 65536).
 inline constexpr int kMaxDomainId = 232;
 
@@ -26,7 +24,7 @@ struct BusConfig {
   std::string module_name = "reflex";
   /// DDS domain id in [0, kMaxDomainId]; empty: env REFLEX_DOMAIN_ID, else 0.
   std::optional<int> domain_id;
-  /// QoS profiles XML file; empty: env FASTRTPS_DEFAULT_PROFILES_FILE, else kDefaultProfilesFile.
+  /// QoS profiles XML file; empty: env FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped one.
   std::string profiles_file;
   /// Participant profile in the profiles file ("reflex_participant_udp": UDP only, no shared memory).
   std::string participant_profile = "reflex_participant";
@@ -41,7 +39,7 @@ int resolveDomainId(const std::optional<int>& configured);
 int parseDomainId(const std::string& text, const std::string& origin);
 
 /// The profiles file to load: `configured` if not empty, else env FASTRTPS_DEFAULT_PROFILES_FILE,
-/// else kDefaultProfilesFile. Does not check that the file exists (the Participant does).
+/// else reflex::common::defaultProfilesFile(). Does not check that the file exists (the Participant does).
 std::string resolveProfilesFile(const std::string& configured);
 
 }  // namespace reflex::bus
