@@ -4,6 +4,7 @@
 #include "reflex/control/onboard.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "reflex/control_node/dds_robot_port.hpp"
+#include "reflex/control_node/ros2_port.hpp"
 #include "reflex/control_node/unitree_hg_port.hpp"
 #include "reflex/control_node/robot_state_file.hpp"
 #include "reflex/control_node/timeseries_log.hpp"
@@ -109,6 +110,7 @@ struct ControllerNode::Impl {
   std::unique_ptr<OnboardController> ctl;    ///< everything per cycle but the bus (onboard.hpp)
   std::unique_ptr<RobotStateFile> state_file;  ///< null without --robot-state
   std::string state_note;
+  std::string interface_note;  ///< robotInterfaceNote()
   std::string config_note;  ///< describeControllerConfig
   Eigen::VectorXd q0;
   std::unique_ptr<bus::Participant> participant;
@@ -167,18 +169,23 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.config = config;
   if (!(config.input_timeout > 0.0))
     throw ConfigError("--input-timeout " + std::to_string(config.input_timeout) + " must be positive");
-  if (config.robot != "kinematic" && config.robot != "dds" && config.robot != "unitree_hg")
+  if (config.robot != "kinematic" && config.robot != "dds" && config.robot != "unitree_hg" && config.robot != "ros2")
     throw ConfigError("--robot '" + config.robot + "' is not a robot side: use 'kinematic' (the in-process plant), 'dds' "
-                      "(a robot driver on reflex/robot_state and reflex/joint_command) or 'unitree_hg' (Unitree's "
-                      "rt/lowstate and rt/arm_sdk, with --joint-map)");
+                      "(a robot driver on reflex/robot_state and reflex/joint_command), 'unitree_hg' (Unitree's "
+                      "rt/lowstate and rt/arm_sdk, with --joint-map) or 'ros2' (sensor_msgs/JointState in, a "
+                      "ros2_control controller's command out)");
+  if (config.robot != "ros2" && (!config.ros_controller.empty() || !config.ros_joints.empty() ||
+                                 config.ros_command != "forward" || config.ros_state_topic != "joint_states"))
+    throw ConfigError("--ros-state-topic / --ros-command / --ros-controller / --ros-joints are for --robot ros2, not '" +
+                      config.robot + "'");
   if (config.robot != "unitree_hg" && !config.joint_map.empty())
     throw ConfigError("--joint-map '" + config.joint_map + "' is for --robot unitree_hg, not '" + config.robot + "'");
   if (config.trigger != "timer" && config.trigger != "state")
     throw ConfigError("--trigger '" + config.trigger + "' is not a cycle trigger: use 'timer' (a cycle every period) or "
-                      "'state' (a cycle per arriving robot state, with --robot dds or unitree_hg)");
+                      "'state' (a cycle per arriving robot state, with --robot dds, unitree_hg or ros2)");
   if (config.trigger == "state" && config.robot == "kinematic")
     throw ConfigError("--trigger state runs a cycle per arriving robot state, but --robot '" + config.robot +
-                      "' sends none: use --robot dds or unitree_hg, or --trigger timer");
+                      "' sends none: use --robot dds, unitree_hg or ros2, or --trigger timer");
   if (!(config.robot_timeout > 0.0 && config.robot_timeout <= 1.0))
     throw ConfigError("--robot-timeout " + std::to_string(config.robot_timeout) + " must be in (0, 1] s");
   if (config.robot != "kinematic" && !config.robot_state.empty())
@@ -297,6 +304,23 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     m.dds = std::make_unique<DdsRobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, po);
     m.dds->sendThrough(*m.outbox);  // the commands too: a blocked write must not stop the loop
     port = m.dds.get();
+  } else if (config.robot == "ros2") {
+    Ros2RobotPort::Options ro;
+    ro.timeout = config.robot_timeout;
+    ro.period = m.cm.params.period;
+    ro.state_topic = config.ros_state_topic;
+    ro.command = config.ros_command;
+    ro.controller = config.ros_controller;
+    ro.joints = config.ros_joints;
+    auto ros = std::make_unique<Ros2RobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, ro);
+    m.interface_note = "ROS 2 on the wire: state " + std::string(ros->stateTopic()) +
+                       " (sensor_msgs::msg::dds_::JointState_), commands " + ros->commandTopic() +
+                       (config.ros_command == "trajectory" ? " (trajectory_msgs::msg::dds_::JointTrajectory_)"
+                                                           : " (std_msgs::msg::dds_::Float64MultiArray_)") +
+                       " for the joints [" + ros->commandedJointNames() + "]";
+    m.dds = std::move(ros);
+    m.dds->sendThrough(*m.outbox);
+    port = m.dds.get();
   } else if (config.robot == "unitree_hg") {
     UnitreeHgPort::Options ho;
     ho.timeout = config.robot_timeout;
@@ -364,6 +388,7 @@ ControllerNode::~ControllerNode() = default;
 
 bus::Participant& ControllerNode::bus() { return *impl_->participant; }
 const std::string& ControllerNode::robotStateNote() const { return impl_->state_note; }
+const std::string& ControllerNode::robotInterfaceNote() const { return impl_->interface_note; }
 const std::string& ControllerNode::controllerConfigNote() const { return impl_->config_note; }
 const Protection& ControllerNode::protection() const { return impl_->protection; }
 std::string ControllerNode::logFailure() const { return impl_->log_error; }

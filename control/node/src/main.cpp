@@ -60,10 +60,26 @@ int main(int argc, char** argv) {
                  "written every cycle; refused if it holds another robot or is damaged)");
   app.add_option("--robot", config.robot,
                  "the robot side: 'kinematic' (the in-process plant), 'dds' (a robot driver on reflex/robot_state "
-                 "and reflex/joint_command) or 'unitree_hg' (Unitree's low-level interface: every joint read from "
+                 "and reflex/joint_command), 'unitree_hg' (Unitree's low-level interface: every joint read from "
                  "rt/lowstate, the arms commanded on rt/arm_sdk beside the robot's walking controller, with "
-                 "--joint-map; idl/README.md 'Robots that already have an interface')")
+                 "--joint-map) or 'ros2' (ROS 2 on the wire, no ROS 2 needed here: sensor_msgs/JointState in, "
+                 "a ros2_control controller's command out; idl/README.md 'Robots that already have an interface')")
       ->capture_default_str();
+  app.add_option("--ros-state-topic", config.ros_state_topic,
+                 "--robot ros2: the ROS topic of the robot's sensor_msgs/JointState (DDS topic rt/<topic>)")
+      ->capture_default_str();
+  app.add_option("--ros-command", config.ros_command,
+                 "--robot ros2: 'forward' (std_msgs/Float64MultiArray on rt/<controller>/commands, a ros2_control "
+                 "forward_command_controller) or 'trajectory' (trajectory_msgs/JointTrajectory on "
+                 "rt/<controller>/joint_trajectory)")
+      ->capture_default_str();
+  app.add_option("--ros-controller", config.ros_controller,
+                 "--robot ros2: the ros2_control controller's name (default forward_position_controller, or "
+                 "joint_trajectory_controller with --ros-command trajectory)");
+  app.add_option("--ros-joints", config.ros_joints,
+                 "--robot ros2: the controller's joints in its order (its `joints:` parameter; a joint Reflex does "
+                 "not drive gets its measured position); default: the joints Reflex drives")
+      ->delimiter(',');
   app.add_option("--joint-map", config.joint_map,
                  "--robot unitree_hg: the joint map YAML (motor index <-> URDF joint, kp / kd of the commanded "
                  "motors, joints held fixed), e.g. bringup/robots/unitree_g1_29dof.hg.yaml (default: <URDF stem>.hg.yaml "
@@ -124,6 +140,8 @@ int main(int argc, char** argv) {
     g_node = &node;
     std::fprintf(stderr, "reflex_controller: %s\n", node.controllerConfigNote().c_str());
     if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
+    if (!node.robotInterfaceNote().empty())
+      std::fprintf(stderr, "reflex_controller: %s\n", node.robotInterfaceNote().c_str());
     const auto& protection = node.protection();
     if (config.trigger == "state")
       std::fprintf(stderr, "reflex_controller: a cycle per arriving robot state, at least every %.3f ms (--trigger state) "
@@ -134,6 +152,7 @@ int main(int argc, char** argv) {
                    1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
                    config.robot == "dds"          ? "robot over DDS"
                    : config.robot == "unitree_hg" ? "Unitree hg: rt/lowstate in, rt/arm_sdk out"
+                   : config.robot == "ros2"       ? "ROS 2: sensor_msgs/JointState in, ros2_control command out"
                                                   : "kinematic plant",
                    protection.describe().c_str());
     if (!protection.full())

@@ -126,6 +126,14 @@ struct NodeConfig {
   /// state, the period as the longest wait; needs a robot that sends states, --robot dds). Anything
   /// else: ConfigError. See ControllerNode::run().
   std::string trigger = "timer";
+  /// With "ros2" (Ros2RobotPort, ros2_port.hpp): the ROS topic of the sensor_msgs/JointState in, the
+  /// command kind ("forward": std_msgs/Float64MultiArray to a forward controller, "trajectory":
+  /// trajectory_msgs/JointTrajectory), the ros2_control controller's name ("" its kind's default) and
+  /// its joints in its order (empty: the joints Reflex drives). Given with another robot side: ConfigError.
+  std::string ros_state_topic = "joint_states";
+  std::string ros_command = "forward";
+  std::string ros_controller;
+  std::vector<std::string> ros_joints;
 };
 
 /// Counters reported at exit and in tests.
@@ -220,6 +228,8 @@ class ControllerNode {
   const NodeStats& stats() const { return stats_; }
   /// What the start-up did about the robot state ("" without a robot state file).
   const std::string& robotStateNote() const;
+  /// With --robot ros2: the DDS topics and types it speaks and the commanded joints ("" otherwise).
+  const std::string& robotInterfaceNote() const;
   /// Which controller configuration it uses and the arms it names (describeControllerConfig).
   const std::string& controllerConfigNote() const;
   const Protection& protection() const;

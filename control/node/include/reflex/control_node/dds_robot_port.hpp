@@ -14,6 +14,8 @@
 // it is not newer (stamp) than the state already held. The robot's joint names are mapped to the
 // model's joint order once, and again only when the robot's name list changes.
 //
+// The checks are JointStateIntake's (joint_state_intake.hpp), shared with Ros2RobotPort.
+//
 // One robot writer: the port BINDS to the DataWriter of the first state it accepts (its GUID). A
 // sample of any other writer is ignored and counted (cause 7, robot_state_other_writer; the newest
 // such writer is named by otherWriter()), whatever it says, while the bound writer may still be alive
@@ -37,6 +39,7 @@
 #include "reflex/control/model.hpp"
 #include "reflex/control/onboard.hpp"
 #include "reflex/control_node/bus_robot_port.hpp"
+#include "reflex/control_node/joint_state_intake.hpp"
 #include <reflex/bus/outbox.hpp>
 
 #include <reflex/bus/bus.hpp>
@@ -52,7 +55,7 @@ namespace reflex::control_node {
 
 class DdsRobotPort final : public BusRobotPort {
  public:
-  static constexpr double kFutureTolerance = 0.002;  ///< s a state's stamp may lie ahead of this host's clock
+  static constexpr double kFutureTolerance = JointStateIntake::kFutureTolerance;
 
   struct Options {
     double timeout = 0.050;   ///< s: a newest state older than this is stale (--robot-timeout; NodeConfig says why 50 ms)
@@ -64,22 +67,9 @@ class DdsRobotPort final : public BusRobotPort {
     const bus::WriterIdentities* identities = nullptr;
   };
 
-  struct Counts {
-    std::uint64_t accepted = 0;
-    std::uint64_t rejected_length = 0;       ///< names / positions / velocities / efforts lengths differ
-    std::uint64_t rejected_missing = 0;      ///< a model joint is not in the state
-    std::uint64_t rejected_non_finite = 0;   ///< NaN / Inf position or velocity of a model joint
-    std::uint64_t rejected_future = 0;       ///< stamp ahead of this host's clock by more than kFutureTolerance
-    std::uint64_t rejected_old = 0;          ///< not newer than the state held (reordered or repeated)
-    std::uint64_t rejected_duplicate = 0;    ///< a joint name listed twice
-    std::uint64_t rejected_limits = 0;       ///< a model joint's position outside its limits (+ tolerance)
-    std::uint64_t rejected_other_writer = 0; ///< from a writer other than the bound robot writer (ignored)
-    std::uint64_t writer_changes = 0;        ///< a silent bound writer replaced by a new one
-    std::uint64_t commands = 0;              ///< JointCommand samples published (with sendThrough: queued)
-    std::uint64_t rejected() const {
-      return rejected_length + rejected_missing + rejected_non_finite + rejected_future + rejected_old +
-             rejected_duplicate + rejected_limits + rejected_other_writer;
-    }
+  /// The state counts (JointStateIntake's) and the commands sent.
+  struct Counts : JointStateIntake::Counts {
+    std::uint64_t commands = 0;  ///< JointCommand samples published (with sendThrough: queued)
   };
 
   /// Makes the reader and the writer on `bus` (throws bus::BusError naming the entity). `driven`: the
@@ -96,49 +86,53 @@ class DdsRobotPort final : public BusRobotPort {
   /// (reflex/bus/outbox.hpp: a DDS write can block for a second). Call before outbox.start().
   void sendThrough(bus::Outbox& outbox) override;
 
-  const Counts& counts() const { return counts_; }
-  const char* lastRejection() const override { return rejection_; }
+  Counts counts() const {
+    Counts c;
+    static_cast<JointStateIntake::Counts&>(c) = intake_.counts();
+    c.commands = commands_;
+    return c;
+  }
+  const char* lastRejection() const override { return intake_.lastRejection(); }
   /// The latest rejection that was not another writer's sample ("" none).
-  const char* lastBadRejection() const override { return bad_rejection_; }
+  const char* lastBadRejection() const override { return intake_.lastBadRejection(); }
   /// The cause of the last rejection: 0 lengths, 1 missing joint, 2 non-finite, 3 future stamp, 4 old,
   /// 5 duplicate name, 6 outside the limits, 7 another writer.
   static constexpr int kCauses = 8;
-  static constexpr int kCauseOtherWriter = 7;
-  int lastCause() const override { return cause_; }
-  bool haveState() const override { return have_state_; }
+  static constexpr int kCauseOtherWriter = JointStateIntake::kCauseOtherWriter;
+  int lastCause() const override { return intake_.lastCause(); }
+  bool haveState() const override { return intake_.haveState(); }
   /// Age (s) of the newest accepted state now, +inf without one.
-  double stateAge() const noexcept;
-  std::uint64_t stateSeq() const override { return state_seq_; }
+  double stateAge() const noexcept { return intake_.stateAge(); }
+  std::uint64_t stateSeq() const override { return intake_.stateSeq(); }
   /// Header.stamp_ns of the newest accepted state (system clock, ns), 0 without one.
-  std::int64_t stateStampNs() const override { return state_stamp_ns_; }
+  std::int64_t stateStampNs() const override { return intake_.stateStampNs(); }
   /// The robot's state interval (s): the stamps of the newest accepted state and the one accepted
   /// before it, of the same writer; 0 while unknown (fewer than two states of the bound writer).
   /// reflex_controller --trigger state takes it as the span of a cycle (OnboardController::step(now, dt)).
-  double stateInterval() const noexcept { return 1e-9 * static_cast<double>(state_interval_ns_); }
+  double stateInterval() const noexcept override { return intake_.stateInterval(); }
   /// Blocks until a robot state (any sample on reflex/robot_state, not yet taken) is there or `timeout`
   /// passes; true if one is. Allocation-free; for --trigger state, between cycles.
-  bool waitForState(std::chrono::nanoseconds timeout) noexcept;
+  bool waitForState(std::chrono::nanoseconds timeout) noexcept override;
   /// The bound writer ("" before the first accepted state) and the newest writer ignored ("" none),
   /// each as its participant's GUID prefix and writer entity id, "01.0f.…|0.0.3.3" (log lines, heartbeat).
-  const char* boundWriter() const override { return bound_text_; }
-  const char* otherWriter() const override { return other_text_; }
+  const char* boundWriter() const override { return intake_.boundWriter(); }
+  const char* otherWriter() const override { return intake_.otherWriter(); }
   const char* stateTopic() const override { return "reflex/robot_state"; }
-  std::uint64_t acceptedStates() const override { return counts_.accepted; }
-  CauseCounts rejectedByCause() const override {
-    return {counts_.rejected_length, counts_.rejected_missing, counts_.rejected_non_finite, counts_.rejected_future,
-            counts_.rejected_old, counts_.rejected_duplicate, counts_.rejected_limits, counts_.rejected_other_writer,
-            0, 0, 0};
+  std::uint64_t acceptedStates() const override { return intake_.counts().accepted; }
+  CauseCounts rejectedByCause() const override { return causeCounts(intake_.counts()); }
+  std::uint64_t writerChanges() const override { return intake_.counts().writer_changes; }
+  std::uint64_t commandsSent() const override { return commands_; }
+
+  /// The per-cause counts of a named-joint intake, in BusRobotPort's numbering.
+  static CauseCounts causeCounts(const JointStateIntake::Counts& c) {
+    return {c.rejected_length, c.rejected_missing, c.rejected_non_finite, c.rejected_future, c.rejected_old,
+            c.rejected_duplicate, c.rejected_limits, c.rejected_other_writer, 0, 0, 0};
   }
-  std::uint64_t writerChanges() const override { return counts_.writer_changes; }
-  std::uint64_t commandsSent() const override { return counts_.commands; }
 
  private:
-  using Guid = std::array<unsigned char, 16>;
-  bool accept(const msg::RobotState& s, const Guid& writer, std::int64_t now_ns) noexcept;
-  bool reject(int cause, std::uint64_t& counter) noexcept;
-
   const control::Model& model_;
   Options options_;
+  JointStateIntake intake_;
   bus::Reader<msg::RobotState>* reader_ = nullptr;
   bus::Writer<msg::JointCommand>* writer_ = nullptr;
   bus::OutboxQueue<msg::JointCommand>* queue_ = nullptr;  ///< set by sendThrough
@@ -146,28 +140,7 @@ class DdsRobotPort final : public BusRobotPort {
   msg::RobotState sample_;
   msg::JointCommand cmd_;
   std::vector<int> driven_;
-  std::vector<std::string> robot_names_;  ///< the robot's name list the map was built for
-  std::vector<int> index_;                ///< per model joint: its index in the robot's lists, -1 if absent
-  int duplicate_ = -1;                    ///< index in robot_names_ of a name listed twice, -1 none
-  Eigen::VectorXd lower_, upper_;         ///< the accepted position range per model joint (limits + tolerance)
-  bool bound_ = false;                    ///< a robot writer is bound
-  Guid robot_writer_{};                   ///< the bound writer
-  std::int64_t writer_last_ns_ = 0;       ///< when the bound writer's last sample arrived (this host's clock)
-  Guid other_{};                          ///< the newest writer ignored
-  bool identity_checked_ = false;         ///< candidate_ was checked against the "robot" identity
-  Guid candidate_{};                      ///< the last writer checked (secure mode)
-  bool candidate_ok_ = false;
-  char bound_text_[64] = {};
-  char other_text_[64] = {};
-  Eigen::VectorXd q_;                     ///< the newest accepted measured positions (model order)
-  bool have_state_ = false;
-  std::uint64_t state_seq_ = 0;
-  std::int64_t state_stamp_ns_ = 0;
-  std::int64_t state_interval_ns_ = 0;    ///< stateInterval(), ns
-  Counts counts_;
-  char rejection_[300] = {};
-  char bad_rejection_[300] = {};
-  int cause_ = 0;
+  std::uint64_t commands_ = 0;
 };
 
 }  // namespace reflex::control_node

@@ -60,11 +60,12 @@ struct OutboxStats {
 };
 
 namespace detail {
-/// True for a type with a Reflex Header (`sample.header()`), which push() stamps.
+/// True for a type with a Reflex Header (`sample.header().seq()`), which push() stamps (a ROS 2
+/// std_msgs/Header has no seq: sent as it is).
 template <class T, class = void>
 struct HasHeader : std::false_type {};
 template <class T>
-struct HasHeader<T, std::void_t<decltype(std::declval<T&>().header())>> : std::true_type {};
+struct HasHeader<T, std::void_t<decltype(std::declval<T&>().header().seq())>> : std::true_type {};
 
 class OutboxQueueBase {
  public:

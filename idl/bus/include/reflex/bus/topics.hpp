@@ -14,9 +14,14 @@
 #include <reflex/msg/systemPubSubTypes.h>
 #include <reflex/msg/visionPubSubTypes.h>
 
+#include <reflex/bus/cdr_read.hpp>
+
+#include <fastcdr/Cdr.h>
+#include <fastcdr/FastBuffer.h>
 #include <fastcdr/exceptions/Exception.h>
 
 #include <cstddef>
+#include <type_traits>
 
 namespace reflex::bus {
 
@@ -38,6 +43,10 @@ inline std::size_t keyStringBytes(const reflex::msg::BodySchemaChange& s) noexce
   return s.segment_name().size();
 }
 
+/// SafePubSubType's default: the generated deserializer (Read: a struct with
+/// `static void read(eprosima::fastcdr::Cdr&, T&)` reads the sample instead; cdr_read.hpp).
+struct GeneratedRead {};
+
 /// The generated type support with a deserializer that never throws: fastddsgen 2.3 code catches only
 /// NotEnoughMemoryException, so a malformed payload (bad encapsulation, a boolean byte of 2, ...)
 /// let a fastcdr BadParamException escape through DataReader::take into the process (a fuzz finding:
@@ -45,12 +54,20 @@ inline std::size_t keyStringBytes(const reflex::msg::BodySchemaChange& s) noexce
 /// false, and Fast DDS drops the sample. A sample whose key string is longer than kMaxKeyStringBytes
 /// (another vendor's writer does not stop it) is rejected the same way: computing its key would throw.
 /// getKey never lets an exception out either (the writer checks first; this is the last line).
-template <class Generated>
+template <class Generated, class Read = GeneratedRead>
 class SafePubSubType final : public Generated {
  public:
   bool deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) override {
     try {
-      if (!Generated::deserialize(payload, data)) return false;
+      if constexpr (std::is_same_v<Read, GeneratedRead>) {
+        if (!Generated::deserialize(payload, data)) return false;
+      } else {  // as the generated code, with Read's reader
+        eprosima::fastcdr::FastBuffer buffer(reinterpret_cast<char*>(payload->data), payload->length);
+        eprosima::fastcdr::Cdr cdr(buffer, eprosima::fastcdr::Cdr::DEFAULT_ENDIAN, eprosima::fastcdr::Cdr::DDS_CDR);
+        cdr.read_encapsulation();
+        payload->encapsulation = cdr.endianness() == eprosima::fastcdr::Cdr::BIG_ENDIANNESS ? CDR_BE : CDR_LE;
+        Read::read(cdr, *static_cast<typename Generated::type*>(data));
+      }
     } catch (const eprosima::fastcdr::exception::Exception&) {
       return false;
     }
@@ -151,9 +168,23 @@ struct TopicTraits<reflex::msg::ControllerProtection> {
 };
 
 // The robot boundary (idl/robot.idl): the robot's measured state and the controller's command.
+/// RobotState, field by field as idl/robot.idl and common.idl lay it out, its strings read without
+/// allocating (cdr_read.hpp): the controller takes one every cycle.
+struct RobotStateRead {
+  static void read(eprosima::fastcdr::Cdr& cdr, reflex::msg::RobotState& s) {
+    cdr >> s.header().stamp_ns() >> s.header().seq();
+    readString(cdr, s.header().source());
+    readStrings(cdr, s.names(), 64);
+    readDoubles(cdr, s.positions(), 64);
+    readDoubles(cdr, s.velocities(), 64);
+    readDoubles(cdr, s.efforts(), 64);
+    cdr >> s.applied_command_seq() >> s.holding();
+  }
+};
+
 template <>
 struct TopicTraits<reflex::msg::RobotState> {
-  using PubSubType = SafePubSubType<reflex::msg::RobotStatePubSubType>;
+  using PubSubType = SafePubSubType<reflex::msg::RobotStatePubSubType, RobotStateRead>;
   static constexpr const char* kTopicName = "reflex/robot_state";
   static constexpr const char* kProfile = kProfileRobot;
 };
