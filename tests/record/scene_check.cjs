@@ -18,7 +18,7 @@
 const fs = require("fs");
 const path = require("path");
 const { indexed } = require("./mcap_check.cjs");
-const { urdfFacts, validate, jointTransform } = require(path.join(__dirname, "..", "view", "scene_check_lib.js"));
+const { urdfFacts, validate, validateOfficial, jointTransform } = require(path.join(__dirname, "..", "view", "scene_check_lib.js"));
 
 async function main() {
   const [file, urdfPath, outPath, sampleText] = process.argv.slice(2);
@@ -31,13 +31,16 @@ async function main() {
     expected: { capsules: facts.capsules, spheres: 2 * facts.capsules + facts.spheres, transforms: facts.links.length - 1 },
     channels: rec.channels.filter((c) => c.encoding === "json").map((c) => ({
       topic: c.topic, encoding: c.encoding, schema: c.schema, schema_encoding: c.schema_encoding, metadata: c.metadata })),
-    counts: {}, schemaErrors: [], capsules: [], spheres: [], transforms: [], wrongFrames: [],
+    counts: {}, schemaErrors: [], officialChecked: 0, capsules: [], spheres: [], transforms: [], wrongFrames: [],
     monotonic: true, within: true, tfWithoutJointState: 0, tfStampMismatch: 0,
     fk: { compared: 0, transforms: 0, maxTranslationError: 0, maxRotationError: 0, missingJoint: [] },
     first_log_ns: null, last_log_ns: null, scene_first_ns: null, scene_last_ns: null,
   };
-  const schemas = new Map();
-  for (const c of rec.channels) if (c.schema_data) schemas.set(c.topic, JSON.parse(c.schema_data));
+  const schemas = new Map(), schemaNames = new Map();
+  for (const c of rec.channels) if (c.schema_data) {
+    schemas.set(c.topic, JSON.parse(c.schema_data));
+    schemaNames.set(c.topic, c.schema);
+  }
   // The recorded Reflex samples: time range, and the joint states by log time.
   const jointStates = new Map();
   for (const m of rec.messages) {
@@ -53,6 +56,11 @@ async function main() {
     if (!schemas.has(m.topic)) continue;
     result.counts[m.topic] = (result.counts[m.topic] || 0) + 1;
     validate(m.msg, schemas.get(m.topic), m.topic, result.schemaErrors);
+    const schemaName = schemaNames.get(m.topic);
+    if (schemaName.startsWith("foxglove.")) {
+      validateOfficial(m.msg, schemaName, m.topic, result.schemaErrors);
+      result.officialChecked += 1;
+    }
     const t = BigInt(m.log_time);
     if (last.has(m.topic) && t <= last.get(m.topic)) result.monotonic = false;
     last.set(m.topic, t);

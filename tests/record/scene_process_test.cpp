@@ -82,6 +82,8 @@ void expectSceneChannels(const json& r, const std::string& what) {
   EXPECT_GT(scenes, 30u) << "about 4 s at up to 30 per second";
   EXPECT_EQ(tfs, scenes);
   EXPECT_TRUE(r["schemaErrors"].empty()) << r["schemaErrors"].dump();
+  // ... and against Foxglove's own published schemas (npm @foxglove/schemas, validated by ajv).
+  EXPECT_EQ(r["officialChecked"].get<std::size_t>(), scenes + tfs) << "every scene and /tf message";
   EXPECT_EQ(r["expected"]["capsules"], 17) << "the shipped robot's URDF";
   for (const json& n : r["capsules"]) ASSERT_EQ(n, r["expected"]["capsules"]);
   for (const json& n : r["spheres"]) ASSERT_EQ(n, r["expected"]["spheres"]);

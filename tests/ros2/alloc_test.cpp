@@ -17,29 +17,37 @@
 
 #include <reflex/bus/outbox.hpp>
 
+#include "support/count_allocations.hpp"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
-#include <cstdlib>
-#include <new>
 #include <thread>
 
-namespace {
-thread_local long t_allocations = 0;
-}  // namespace
 
-void* operator new(std::size_t n) {
-  ++t_allocations;
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
+namespace {
+
+/// 300 cycles of the control thread: `publish` writes a state (from another participant) twice, then
+/// poll() and command() run as the controller runs them. Returns the operator new calls of poll() +
+/// command() on this thread after the first 20 cycles (the name map is built once, at the first state).
+template <class Publish>
+long allocationsOfCycles(reflex::control_node::BusRobotPort& port, int nq, Publish&& publish) {
+  Eigen::VectorXd qdot = Eigen::VectorXd::Zero(nq);
+  long counted = 0;
+  for (int cycle = 0; cycle < 300; ++cycle) {
+    for (int k = 0; k < 2; ++k) {  // two states per cycle
+      publish();
+      std::this_thread::sleep_for(std::chrono::microseconds(100));
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(3));
+    const long before = reflex::testing::threadAllocations();
+    port.poll();
+    const Eigen::VectorXd* q = port.measuredPositions(0.0);
+    if (q != nullptr) port.command(*q, qdot, 0.005);
+    if (cycle >= 20) counted += reflex::testing::threadAllocations() - before;
+  }
+  return counted;
 }
-void* operator new[](std::size_t n) { return operator new(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-
-namespace {
 
 void pollAndCommandAllocateNothing(const std::string& kind) {
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
@@ -70,23 +78,12 @@ void pollAndCommandAllocateNothing(const std::string& kind) {
   s.position().assign(s.name().size(), 0.0);
   for (int i = 0; i < model.nq; ++i) s.position()[static_cast<std::size_t>(i)] = rest[i];
   s.velocity().assign(s.name().size(), 0.0);
-  Eigen::VectorXd qdot = Eigen::VectorXd::Zero(model.nq);
-  long counted = 0;
-  for (int cycle = 0; cycle < 300; ++cycle) {
-    for (int k = 0; k < 2; ++k) {  // two states per cycle
-      const std::int64_t now = reflex::bus::nowNs();
-      s.header().stamp().sec(static_cast<std::int32_t>(now / 1000000000));
-      s.header().stamp().nanosec(static_cast<std::uint32_t>(now % 1000000000));
-      states.write(s);
-      std::this_thread::sleep_for(std::chrono::microseconds(100));
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(3));
-    const long before = t_allocations;
-    port.poll();
-    const Eigen::VectorXd* q = port.measuredPositions(0.0);
-    if (q != nullptr) port.command(*q, qdot, 0.005);
-    if (cycle >= 20) counted += t_allocations - before;  // after the first cycles (the name map, once)
-  }
+  const long counted = allocationsOfCycles(port, model.nq, [&] {
+    const std::int64_t now = reflex::bus::nowNs();
+    s.header().stamp().sec(static_cast<std::int32_t>(now / 1000000000));
+    s.header().stamp().nanosec(static_cast<std::uint32_t>(now % 1000000000));
+    states.write(s);
+  });
   EXPECT_GT(port.acceptedStates(), 300u) << "states were taken";
   EXPECT_EQ(port.rejectedTotal(), 0u) << port.lastRejection();
   EXPECT_GT(port.commandsSent(), 200u);
@@ -120,20 +117,7 @@ TEST(DdsRobotPortAlloc, RobotStatesAndJointCommandsAllocateNothingOnTheControlTh
   s.positions().assign(static_cast<std::size_t>(model.nq), 0.0);
   for (int i = 0; i < model.nq; ++i) s.positions()[static_cast<std::size_t>(i)] = rest[i];
   s.velocities().assign(static_cast<std::size_t>(model.nq), 0.0);
-  Eigen::VectorXd qdot = Eigen::VectorXd::Zero(model.nq);
-  long counted = 0;
-  for (int cycle = 0; cycle < 300; ++cycle) {
-    for (int k = 0; k < 2; ++k) {
-      states.publish(s);
-      std::this_thread::sleep_for(std::chrono::microseconds(100));
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(3));
-    const long before = t_allocations;
-    port.poll();
-    const Eigen::VectorXd* q = port.measuredPositions(0.0);
-    if (q != nullptr) port.command(*q, qdot, 0.005);
-    if (cycle >= 20) counted += t_allocations - before;
-  }
+  const long counted = allocationsOfCycles(port, model.nq, [&] { states.publish(s); });
   EXPECT_GT(port.acceptedStates(), 300u) << "states were taken";
   EXPECT_EQ(port.rejectedTotal(), 0u) << port.lastRejection();
   EXPECT_GT(port.commandsSent(), 200u);

@@ -13,27 +13,13 @@
 
 #include <reflex/bus/outbox.hpp>
 
+#include "support/count_allocations.hpp"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
-#include <cstdlib>
-#include <new>
 #include <thread>
 
-namespace {
-thread_local long t_allocations = 0;
-}  // namespace
-
-void* operator new(std::size_t n) {
-  ++t_allocations;
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) { return operator new(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 
 namespace {
 
@@ -75,11 +61,11 @@ TEST(UnitreeHgPortAlloc, PollAndCommandAllocateNothingOnTheControlThread) {
       states.write(s);
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(3));
-    const long before = t_allocations;
+    const long before = reflex::testing::threadAllocations();
     polled += port.poll() >= 0 ? 1 : 0;
     const Eigen::VectorXd* q = port.measuredPositions(0.0);
     if (q != nullptr) port.command(*q, qdot, 0.005);
-    if (cycle >= 20) counted += t_allocations - before;  // after the first cycles (the name map, once)
+    if (cycle >= 20) counted += reflex::testing::threadAllocations() - before;  // after the first cycles (the name map, once)
   }
   EXPECT_GT(port.acceptedStates(), 300u) << "states were taken";
   EXPECT_EQ(port.rejectedTotal(), 0u);

@@ -6,8 +6,11 @@
 //                         <box> is one capsule (drawn as 1 cylinder + 2 spheres), with a <sphere> one
 //                         sphere; every <joint> with type, parent, child, origin xyz/rpy and axis
 //   validate(v, schema, where, errors)  the JSON-schema subset the advertised schemas use: every key
-//                         must be a schema property with the schema's type; enum, const (oneOf),
-//                         minimum/maximum respected; numbers finite
+//                         must be a schema property with the schema's type, every required key present;
+//                         enum, const (oneOf), minimum/maximum respected; numbers finite
+//   validateOfficial(v, schemaName, where, errors)  a foxglove.* message against Foxglove's own
+//                         published JSON schema (npm @foxglove/schemas) with a standard validator (ajv),
+//                         not against the schema Reflex advertised
 //   jointTransform(joint, q) -> {t: [x,y,z], q: [x,y,z,w]} of child in parent (URDF: origin, then the
 //                         joint's motion; rpy = Rz(yaw) Ry(pitch) Rx(roll))
 "use strict";
@@ -100,6 +103,9 @@ function validate(v, schema, where, errors) {
   if (schema.minimum !== undefined && v < schema.minimum) errors.push(`${where}: ${v} < ${schema.minimum}`);
   if (schema.maximum !== undefined && v > schema.maximum) errors.push(`${where}: ${v} > ${schema.maximum}`);
   if (t === "number" && !Number.isFinite(v)) errors.push(`${where}: not finite`);
+  if (t === "object" && schema.required) {
+    for (const k of schema.required) if (!(k in v)) errors.push(`${where}.${k}: required, missing`);
+  }
   if (t === "object" && schema.properties) {
     for (const k of Object.keys(v)) {
       if (!schema.properties[k]) errors.push(`${where}.${k}: not in the schema`);
@@ -109,4 +115,29 @@ function validate(v, schema, where, errors) {
   if (t === "array" && schema.items) v.forEach((x, i) => validate(x, schema.items, `${where}[${i}]`, errors));
 }
 
-module.exports = { urdfFacts, validate, jointTransform };
+// ---- Foxglove's official schemas (bringup/web/node_modules: @foxglove/schemas, ajv) ----
+let official = null;
+function officialValidator(schemaName) {
+  if (official === null) {
+    const path = require("path");
+    const modules = process.env.REFLEX_WEB_MODULES || path.join(__dirname, "..", "..", "bringup", "web", "node_modules");
+    const Ajv = require(path.join(modules, "ajv"));
+    official = { ajv: new Ajv({ allErrors: true, strict: false }), schemas: require(path.join(modules, "@foxglove/schemas/jsonschema")), compiled: new Map() };
+  }
+  if (!official.compiled.has(schemaName)) {
+    const schema = official.schemas[schemaName.replace(/^foxglove\./, "")];
+    official.compiled.set(schemaName, schema ? official.ajv.compile(schema) : null);
+  }
+  return official.compiled.get(schemaName);
+}
+function validateOfficial(v, schemaName, where, errors) {
+  if (errors.length > 20) return;
+  const check = officialValidator(schemaName);
+  if (check === null) {
+    errors.push(`${where}: ${schemaName} is not one of Foxglove's published schemas`);
+    return;
+  }
+  if (!check(v)) errors.push(`${where}: not a valid ${schemaName} by Foxglove's own schema: ${official.ajv.errorsText(check.errors, { separator: "; " })}`);
+}
+
+module.exports = { urdfFacts, validate, validateOfficial, jointTransform };

@@ -382,8 +382,17 @@ TEST(Scene, MessagesValidateAgainstTheirSchemasAndSchemasNameTheFoxgloveFields) 
   EXPECT_EQ(keys(s["properties"]), (std::set<std::string>{"deletions", "entities"}));
   const json& entity = s["properties"]["entities"]["items"];
   EXPECT_EQ(entity["title"], "foxglove.SceneEntity");
-  EXPECT_EQ(keys(entity["properties"]), (std::set<std::string>{"timestamp", "frame_id", "id", "lifetime", "frame_locked",
-                                                               "metadata", "spheres", "cylinders", "lines", "texts"}));
+  // Every field foxglove.SceneEntity has, each required (the published schema requires them all; a
+  // message without `arrows` or `models` fails Foxglove's own validation: view_foxglove_ws_test and
+  // record_scene_process_test check every message against it).
+  const std::set<std::string> entity_fields{"timestamp", "frame_id", "id",     "lifetime",  "frame_locked",
+                                            "metadata",  "arrows",   "cubes",  "spheres",   "cylinders",
+                                            "lines",     "triangles", "texts", "models"};
+  EXPECT_EQ(keys(entity["properties"]), entity_fields);
+  std::set<std::string> required;
+  for (const json& k : entity["required"]) required.insert(k.get<std::string>());
+  EXPECT_EQ(required, entity_fields);
+  for (const json& e : su["entities"]) EXPECT_EQ(keys(e), entity_fields) << e["id"];
   EXPECT_EQ(keys(entity["properties"]["cylinders"]["items"]["properties"]),
             (std::set<std::string>{"pose", "size", "bottom_scale", "top_scale", "color"}));
   EXPECT_EQ(keys(entity["properties"]["lines"]["items"]["properties"]),

@@ -219,6 +219,9 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     for (const auto& n : r["spheres"]) EXPECT_EQ(n.get<int>(), 2 * capsules + spheres) << "two end spheres per capsule";
     for (const auto& n : r["transforms"]) EXPECT_EQ(n, r["expectedTransforms"]);
     EXPECT_TRUE(r["schemaErrors"].empty()) << r["schemaErrors"].dump();
+    // Every /reflex/scene and /tf message also against Foxglove's own published schemas (npm
+    // @foxglove/schemas, validated by ajv), not only against the schema reflex_view advertises.
+    EXPECT_GT(r["officialChecked"].get<int>(), 100) << "messages checked against Foxglove's own schemas";
     ASSERT_EQ(r["statusErrors"].size(), 1U) << r["statusErrors"].dump();
     EXPECT_EQ(r["statusErrors"][0]["level"], 2);
     EXPECT_NE(r["statusErrors"][0]["message"].get<std::string>().find("4242"), std::string::npos);

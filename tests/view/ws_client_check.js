@@ -27,7 +27,7 @@ const WebSocket = require(path.join(modules, "ws"));
 const { FoxgloveClient } = require(path.join(modules, "@foxglove/ws-protocol"));
 
 // ---- expected counts from the URDF text, and the schema check (scene_check_lib.js) ----
-const { urdfFacts, validate } = require("./scene_check_lib.js");
+const { urdfFacts, validate, validateOfficial } = require("./scene_check_lib.js");
 const facts = urdfFacts(fs.readFileSync(args.urdf, "utf8"));
 const expectedCapsules = facts.capsules, expectedSpheres = facts.spheres;
 const expectedTransforms = facts.links.length - 1;
@@ -35,7 +35,7 @@ const expectedTransforms = facts.links.length - 1;
 // ---- the client ----
 const result = {
   expectedCapsules, expectedSpheres, expectedTransforms, channels: [], rates: {}, counts: {},
-  capsules: [], spheres: [], transforms: [], schemaErrors: [], statusErrors: [], afterUnsubscribe: null,
+  capsules: [], spheres: [], transforms: [], schemaErrors: [], officialChecked: 0, statusErrors: [], afterUnsubscribe: null,
   serverInfo: null, subprotocol: null,
 };
 const ws = new WebSocket(args.url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
@@ -87,6 +87,10 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   const msg = JSON.parse(decoder.decode(data));
   if (result.counts[sub.channel.topic]++ === 0) firstAt[sub.channel.topic] = Date.now();
   if (result.schemaErrors.length < 20) validate(msg, sub.schema, sub.channel.topic, result.schemaErrors);
+  if (sub.channel.schemaName.startsWith("foxglove.")) {
+    validateOfficial(msg, sub.channel.schemaName, sub.channel.topic, result.schemaErrors);
+    result.officialChecked += 1;
+  }
   if (typeof timestamp !== "bigint" || timestamp <= 0n) result.schemaErrors.push("messageData timestamp " + timestamp);
   if (sub.channel.topic === "/reflex/scene") {
     let capsules = 0, spheres = 0;

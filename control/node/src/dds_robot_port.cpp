@@ -10,10 +10,7 @@ namespace reflex::control_node {
 namespace {
 
 JointStateIntake::Options intakeOptions(const DdsRobotPort::Options& o) {
-  JointStateIntake::Options io;
-  io.timeout = o.timeout;
-  io.period = o.period;
-  io.rebind_silence = o.rebind_silence;
+  JointStateIntake::Options io = JointStateIntake::optionsOf(o);
   io.identities = o.identities;
   io.sample_name = "robot state seq";
   return io;

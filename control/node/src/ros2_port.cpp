@@ -21,10 +21,7 @@ namespace reflex::control_node {
 namespace {
 
 JointStateIntake::Options intakeOptions(const Ros2RobotPort::Options& o) {
-  JointStateIntake::Options io;
-  io.timeout = o.timeout;
-  io.period = o.period;
-  io.rebind_silence = o.rebind_silence;
+  JointStateIntake::Options io = JointStateIntake::optionsOf(o);
   io.velocities_optional = true;  // ROS: velocity may be empty (not measured)
   return io;
 }

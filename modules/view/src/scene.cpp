@@ -46,7 +46,8 @@ json textJson(const Eigen::Vector3d& p, const std::string& text, const Rgba& c) 
               {"text", text}};
 }
 
-/// An entity in the root frame with empty primitive lists (filled by the caller).
+/// An entity in the root frame with every primitive list foxglove.SceneEntity requires, empty (the
+/// caller fills the ones it draws).
 json entityJson(const SceneModel& scene, std::int64_t stamp_ns, const std::string& id) {
   return json{{"timestamp", stampJson(stamp_ns)},
               {"frame_id", scene.root_frame},
@@ -54,10 +55,14 @@ json entityJson(const SceneModel& scene, std::int64_t stamp_ns, const std::strin
               {"lifetime", json{{"sec", 0}, {"nsec", 0}}},
               {"frame_locked", false},
               {"metadata", json::array()},
+              {"arrows", json::array()},
+              {"cubes", json::array()},
               {"spheres", json::array()},
               {"cylinders", json::array()},
               {"lines", json::array()},
-              {"texts", json::array()}};
+              {"triangles", json::array()},
+              {"texts", json::array()},
+              {"models", json::array()}};
 }
 
 json keyValue(const std::string& key, const std::string& value) { return json{{"key", key}, {"value", value}}; }

@@ -16,8 +16,15 @@ json string(const char* d) { return typed("string", d); }
 json boolean(const char* d) { return typed("boolean", d); }
 json integer(const char* d) { return typed("integer", d); }
 
+/// An object whose every property is required (as in foxglove's published schemas).
 json object(const char* title, const char* description, json properties) {
-  return json{{"title", title}, {"description", description}, {"type", "object"}, {"properties", std::move(properties)}};
+  json required = json::array();
+  for (const auto& item : properties.items()) required.push_back(item.key());
+  return json{{"title", title},
+              {"description", description},
+              {"type", "object"},
+              {"properties", std::move(properties)},
+              {"required", std::move(required)}};
 }
 json array(json items, const char* description) {
   return json{{"type", "array"}, {"items", std::move(items)}, {"description", description}};
@@ -95,6 +102,39 @@ json line() {
                  {"colors", array(colour("A color in RGBA format"), "Per-point colors (if specified, must have the same length as `points`).")},
                  {"indices", array(json{{"type", "integer"}, {"minimum", 0}}, "Indices into the `points` and `colors` attribute arrays, which can be used to avoid duplicating attribute data.")}});
 }
+json arrow() {
+  return object("foxglove.ArrowPrimitive", "A primitive representing an arrow",
+                {{"pose", pose("Position of the arrow's tail and orientation of the arrow. Identity orientation means the arrow points in the +x direction.")},
+                 {"shaft_length", number("Length of the arrow shaft")},
+                 {"shaft_diameter", number("Diameter of the arrow shaft")},
+                 {"head_length", number("Length of the arrow head")},
+                 {"head_diameter", number("Diameter of the arrow head")},
+                 {"color", colour("Color of the arrow")}});
+}
+json cube() {
+  return object("foxglove.CubePrimitive", "A primitive representing a cube or rectangular prism",
+                {{"pose", pose("Position of the center of the cube and orientation of the cube")},
+                 {"size", vector3("Size of the cube along each axis")},
+                 {"color", colour("Color of the cube")}});
+}
+json triangles() {
+  return object("foxglove.TriangleListPrimitive", "A primitive representing a set of triangles or a surface tiled by triangles",
+                {{"pose", pose("Origin of triangles relative to reference frame")},
+                 {"points", array(point3("Point in 3D space"), "Vertices to use for triangles, interpreted as a list of triples (0-1-2, 3-4-5, ...)")},
+                 {"color", colour("Solid color to use for the whole shape. One of `color` or `colors` must be provided.")},
+                 {"colors", array(colour("A color in RGBA format"), "Per-vertex colors (if specified, must have the same length as `points`).")},
+                 {"indices", array(json{{"type", "integer"}, {"minimum", 0}}, "Indices into the `points` and `colors` attribute arrays, which can be used to avoid duplicating attribute data.")}});
+}
+json model() {
+  return object("foxglove.ModelPrimitive", "A primitive representing a 3D model file loaded from an external URL or embedded data",
+                {{"pose", pose("Origin of model relative to reference frame")},
+                 {"scale", vector3("Scale factor to apply to the model along each axis")},
+                 {"color", colour("Solid color to use for the whole model if `override_color` is true.")},
+                 {"override_color", boolean("Whether to use the color specified in `color` instead of any materials embedded in the original model.")},
+                 {"url", string("URL pointing to model file. One of `url` or `data` should be provided.")},
+                 {"media_type", string("[Media type](https://developer.mozilla.org/en-US/docs/Web/HTTP/Basics_of_HTTP/MIME_types) of embedded model (e.g. `model/gltf-binary`). Required if `data` is provided instead of `url`. Overrides the inferred media type if `url` is provided.")},
+                 {"data", json{{"type", "string"}, {"contentEncoding", "base64"}, {"description", "Embedded model. One of `url` or `data` should be provided. If `data` is provided, `media_type` must be set to indicate the type of the data."}}}});
+}
 json text() {
   return object("foxglove.TextPrimitive", "A primitive representing a text label",
                 {{"pose", pose("Position of the center of the text box and orientation of the text. Identity orientation means the text is oriented in the xy-plane and flows from -x to +x.")},
@@ -139,10 +179,14 @@ nlohmann::json sceneUpdateSchema() {
        {"lifetime", duration("Length of time (relative to `timestamp`) after which the entity should be automatically removed. Zero value indicates the entity should remain visible until it is replaced or deleted.")},
        {"frame_locked", boolean("Whether the entity should keep its location in the fixed frame (false) or follow the frame specified in `frame_id` as it moves relative to the fixed frame (true)")},
        {"metadata", array(std::move(key_value), "Additional user-provided metadata associated with the entity. Keys must be unique.")},
+       {"arrows", array(arrow(), "Arrow primitives")},
+       {"cubes", array(cube(), "Cube primitives")},
        {"spheres", array(sphere(), "Sphere primitives")},
        {"cylinders", array(cylinder(), "Cylinder primitives")},
        {"lines", array(line(), "Line primitives")},
-       {"texts", array(text(), "Text primitives")}});
+       {"triangles", array(triangles(), "Triangle list primitives")},
+       {"texts", array(text(), "Text primitives")},
+       {"models", array(model(), "Model primitives")}});
   return object("foxglove.SceneUpdate", "An update to the entities displayed in a 3D scene",
                 {{"deletions", array(std::move(deletion), "Scene entities to delete")},
                  {"entities", array(std::move(entity), "Scene entities to add or replace")}});

@@ -26,6 +26,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "support/mono_clock.h"
 #include "ros2.h"
 
 typedef sensor_msgs_msg_dds__JointState_ JointState;
@@ -38,19 +39,6 @@ static const char* kHelp =
     "Usage: ros2_cyclone_robot --domain N --q NAME=VALUE ... --joints A,B,... [--command forward|trajectory]\n"
     "                          [--controller NAME] [--rename JOINT] [--bad-at S] [--stop-at S] [--listen-until S]\n"
     "A ros2_control robot on DDS with Cyclone: rt/joint_states out, the controller's command in.\n";
-
-static double mono_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static void sleep_until(double t) {
-  const double d = t - mono_s();
-  if (d <= 0) return;
-  struct timespec ts = {(time_t)d, (long)((d - (double)(time_t)d) * 1e9)};
-  nanosleep(&ts, NULL);
-}
 
 static char* names[MAX_JOINTS + 1];
 static double q[MAX_JOINTS + 1];
@@ -160,7 +148,7 @@ int main(int argc, char** argv) {
   long commands = 0, wrong_size = 0, non_finite = 0, wrong_names = 0, wrong_points = 0;
   double first_s = -1, max_step = 0, last_cmd[MAX_JOINTS];
   int have_cmd = 0;
-  const double t0 = mono_s();
+  const double t0 = mono_now_s();
   double next = t0;
   void* samples[1] = {NULL};
   dds_sample_info_t infos[1];
@@ -170,7 +158,7 @@ int main(int argc, char** argv) {
   memset(&traj, 0, sizeof(traj));
   samples[0] = trajectory ? (void*)&traj : (void*)&fwd;
   for (;;) {
-    const double now = mono_s() - t0;
+    const double now = mono_now_s() - t0;
     if (now >= listen_until) break;
     /* Commands: check each, and move the commanded joints there. */
     while (dds_take(reader, samples, infos, 1, 1) > 0) {
@@ -211,7 +199,7 @@ int main(int argc, char** argv) {
       }
       have_cmd = 1;
     }
-    if (now < stop_at && mono_s() >= next) {
+    if (now < stop_at && mono_now_s() >= next) {
       next += 0.005;
       JointState s;
       memset(&s, 0, sizeof(s));
@@ -264,7 +252,7 @@ int main(int argc, char** argv) {
       const dds_return_t rc = dds_write(writer, &s);
       if (rc < 0) fprintf(stderr, "ros2_cyclone_robot: dds_write: %s\n", dds_strretcode(-rc));
     }
-    sleep_until(mono_s() + 0.0005);
+    mono_sleep_until(mono_now_s() + 0.0005);
   }
   printf("sent good %ld missing %ld length %ld duplicate %ld nan %ld future %ld unstamped %ld no_velocity %ld\n", good,
          bad[0], bad[1], bad[2], bad[3], bad[4], unstamped, no_velocity);

@@ -28,6 +28,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "support/mono_clock.h"
 #include "hg_short.h"
 #include "unitree_hg.h"
 
@@ -57,19 +58,6 @@ static uint32_t struct_crc(const void* p, size_t size) {
   uint32_t words[600];
   memcpy(words, p, size);
   return crc32_core(words, size / 4 - 1);
-}
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static void sleep_until(double t) {
-  const double d = t - now_s();
-  if (d <= 0) return;
-  struct timespec ts = {(time_t)d, (long)((d - (double)(time_t)d) * 1e9)};
-  nanosleep(&ts, NULL);
 }
 
 int main(int argc, char** argv) {
@@ -162,13 +150,13 @@ int main(int argc, char** argv) {
   long commands = 0, crc_ok = 0, crc_bad = 0, non_finite = 0, out_of_range = 0;
   double weight_max = 0, weight_last = 0, prev_weight = 0, max_up = 0, max_down = 0;
   double last_cmd_t = -1, longest_gap = 0, gap_start = 0;
-  const double t0 = now_s();
+  const double t0 = mono_now_s();
   double next = t0;
   int phase_done = 0;
   for (;;) {
     next += 0.002;
-    sleep_until(next);
-    const double t = now_s() - t0;
+    mono_sleep_until(next);
+    const double t = mono_now_s() - t0;
     if (t >= listen_until) break;
     /* Commands: every one that arrived. */
     for (;;) {
@@ -193,7 +181,7 @@ int main(int argc, char** argv) {
         max_up = w;  /* from 0: the first command's weight is its first step */
       }
       prev_weight = weight_last = w;
-      const double now = now_s() - t0;
+      const double now = mono_now_s() - t0;
       if (last_cmd_t >= 0 && now - last_cmd_t > longest_gap) {
         longest_gap = now - last_cmd_t;
         gap_start = last_cmd_t;
@@ -222,23 +210,23 @@ int main(int argc, char** argv) {
         state.tick = tick + 2 + (uint32_t)i;
         state.crc = struct_crc(&state, sizeof state) ^ 0x1u;
         dds_write(w_state, &state), ++sent_bad_crc;
-        sleep_until(now_s() + 0.002);
+        mono_sleep_until(mono_now_s() + 0.002);
       }
       for (int i = 0; i < 3; ++i) {
         state.tick = tick;
         state.crc = struct_crc(&state, sizeof state);
         dds_write(w_state, &state), ++sent_repeat;
-        sleep_until(now_s() + 0.002);
+        mono_sleep_until(mono_now_s() + 0.002);
       }
       for (int i = 0; i < 2; ++i) {
         memset(&short_state, 0, sizeof short_state);
         short_state.tick = tick + 10 + (uint32_t)i;
         short_state.crc = struct_crc(&short_state, sizeof short_state);
         dds_write(w_short, &short_state), ++sent_short;
-        sleep_until(now_s() + 0.002);
+        mono_sleep_until(mono_now_s() + 0.002);
       }
       /* A NaN position and one 50 rad out, each with a right crc and a new tick, on motor 18. */
-      sleep_until(now_s() + 0.012);
+      mono_sleep_until(mono_now_s() + 0.012);
       for (int i = 0; i < 2; ++i) {
         const float keep = state.motor_state[18].q;
         state.motor_state[18].q = i == 0 ? NAN : 50.0f;
@@ -247,23 +235,23 @@ int main(int argc, char** argv) {
         dds_write(w_state, &state);
         if (i == 0) ++sent_nan; else ++sent_far;
         state.motor_state[18].q = keep;
-        sleep_until(now_s() + 0.012);  /* alone in its control cycle: the controller's line names it */
+        mono_sleep_until(mono_now_s() + 0.012);  /* alone in its control cycle: the controller's line names it */
       }
       /* 4 valid states (crc right, tick ahead) from another DataWriter while this one is alive. */
       for (int i = 0; i < 4; ++i) {
         state.tick = tick + 100 + (uint32_t)i;
         state.crc = struct_crc(&state, sizeof state);
         dds_write(w_other, &state), ++sent_other;
-        sleep_until(now_s() + 0.002);
+        mono_sleep_until(mono_now_s() + 0.002);
       }
       /* The tick stands still: stall_ms / 2 states with a correct crc, every 2 ms. */
       for (long k = 0; k < (long)(stall_ms / 2); ++k) {
         state.tick = tick;
         state.crc = struct_crc(&state, sizeof state);
         dds_write(w_state, &state), ++sent_stall;
-        sleep_until(now_s() + 0.002);
+        mono_sleep_until(mono_now_s() + 0.002);
       }
-      next = now_s();
+      next = mono_now_s();
       continue;
     }
     tick += 2;

@@ -35,6 +35,16 @@ class JointStateIntake {
     bool velocities_optional = false;
   };
 
+  /// The intake's options from a port's (its timeout, period and rebind_silence).
+  template <class PortOptions>
+  static Options optionsOf(const PortOptions& port) {
+    Options o;
+    o.timeout = port.timeout;
+    o.period = port.period;
+    o.rebind_silence = port.rebind_silence;
+    return o;
+  }
+
   /// One state sample as the port's type carries it.
   struct View {
     const std::vector<std::string>& names;
