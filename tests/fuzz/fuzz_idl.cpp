@@ -1,5 +1,8 @@
-// libFuzzer target: bytes from the network -> every Reflex topic type's generated deserializer
-// (TopicTraits<T>::PubSubType::deserialize, what Fast DDS runs on every received sample).
+// libFuzzer target: bytes from the network -> every Reflex topic type's deserializer
+// (TopicTraits<T>::PubSubType::deserialize, what Fast DDS runs on every received sample): the
+// generated ones, and the field-by-field readers of the robot states (reflex/robot_state and ROS 2's
+// sensor_msgs/JointState, bus/cdr_read.hpp), whose round trip through the generated serializer also
+// checks that they read the layout the generated code writes.
 // Input: byte 0 picks the type, the rest is the serialized payload (CDR encapsulation + body).
 // Contract: deserialize either fails (returns false) or yields a sample that serializes again and
 // round-trips to the same bytes; never a crash, a sanitizer report or an exception.
@@ -7,6 +10,7 @@
 // bad-input tests against the real processes, tests/bad_input/.)
 #include "fuzz_util.hpp"
 
+#include <reflex/bus/ros2_topics.hpp>
 #include <reflex/bus/topics.hpp>
 
 #include <cstring>
@@ -51,7 +55,7 @@ void roundTrip(const std::uint8_t* data, std::size_t size) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 1) return 0;
-  const std::uint8_t which = data[0] % 8;
+  const std::uint8_t which = data[0] % 10;
   ++data;
   --size;
   try {
@@ -63,6 +67,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 4: roundTrip<reflex::msg::WalkCommand>(data, size); break;
       case 5: roundTrip<reflex::msg::JointState>(data, size); break;
       case 6: roundTrip<reflex::msg::ControlStatus>(data, size); break;
+      case 8: roundTrip<reflex::msg::RobotState>(data, size); break;
+      case 9: roundTrip<reflex::ros2::JointState>(data, size); break;
       default: roundTrip<reflex::msg::Heartbeat>(data, size); break;
     }
   } catch (const std::exception& e) {

@@ -1,10 +1,12 @@
 // Writes one serialized sample of every Reflex topic type, prefixed with the type selector byte of
 // fuzz_idl.cpp, into the folder given as argument: the seed corpus of fuzz_idl.
+#include <reflex/bus/ros2_topics.hpp>
 #include <reflex/bus/topics.hpp>
 
 #include <cstdio>
 #include <fstream>
 #include <string>
+#include <type_traits>
 
 namespace {
 
@@ -13,9 +15,14 @@ using eprosima::fastrtps::rtps::SerializedPayload_t;
 template <class T>
 bool writeSeed(const std::string& dir, std::uint8_t selector, T sample) {
   typename reflex::bus::TopicTraits<T>::PubSubType type;
-  sample.header().stamp_ns(1700000000000000000LL);
-  sample.header().seq(7);
-  sample.header().source("seed");
+  if constexpr (std::is_same_v<T, reflex::ros2::JointState>) {  // ROS 2's header: stamp and frame
+    sample.header().stamp().sec(1700000000);
+    sample.header().frame_id("base_link");
+  } else {
+    sample.header().stamp_ns(1700000000000000000LL);
+    sample.header().seq(7);
+    sample.header().source("seed");
+  }
   SerializedPayload_t out(type.getSerializedSizeProvider(&sample)());
   if (!type.serialize(&sample, &out)) return false;
   std::ofstream f(dir + "/seed_" + std::to_string(selector), std::ios::binary | std::ios::trunc);
@@ -67,9 +74,17 @@ int main(int argc, char** argv) {
   hb.module_name("vision");
   hb.host("robot");
   hb.state(STATE_RUNNING);
+  RobotState robot;  // read field by field (bus/cdr_read.hpp), not by the generated code
+  robot.names({"l_shoulder_pitch", "l_elbow"});
+  robot.positions({0.1, -0.5});
+  robot.velocities({0.0, 0.1});
+  reflex::ros2::JointState ros_joints;  // likewise, sensor_msgs/JointState from a ROS 2 robot
+  ros_joints.name({"l_shoulder_pitch", "l_elbow", "gripper_joint"});
+  ros_joints.position({0.1, -0.5, 0.01});
   const bool ok = writeSeed(dir, 0, objects) && writeSeed(dir, 1, hands) && writeSeed(dir, 2, priority) &&
                   writeSeed(dir, 3, schema) && writeSeed(dir, 4, walk) && writeSeed(dir, 5, joints) &&
-                  writeSeed(dir, 6, status) && writeSeed(dir, 7, hb);
+                  writeSeed(dir, 6, status) && writeSeed(dir, 7, hb) && writeSeed(dir, 8, robot) &&
+                  writeSeed(dir, 9, ros_joints);
   if (!ok) {
     std::fprintf(stderr, "error: cannot write the seeds into '%s'\n", dir.c_str());
     return 1;

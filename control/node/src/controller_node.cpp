@@ -313,11 +313,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
     ro.controller = config.ros_controller;
     ro.joints = config.ros_joints;
     auto ros = std::make_unique<Ros2RobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, ro);
-    m.interface_note = "ROS 2 on the wire: state " + std::string(ros->stateTopic()) +
-                       " (sensor_msgs::msg::dds_::JointState_), commands " + ros->commandTopic() +
-                       (config.ros_command == "trajectory" ? " (trajectory_msgs::msg::dds_::JointTrajectory_)"
-                                                           : " (std_msgs::msg::dds_::Float64MultiArray_)") +
-                       " for the joints [" + ros->commandedJointNames() + "]";
+    m.interface_note = ros->describe();
     m.dds = std::move(ros);
     m.dds->sendThrough(*m.outbox);
     port = m.dds.get();

@@ -20,7 +20,7 @@ JointStateIntake::Options intakeOptions(const DdsRobotPort::Options& o) {
 
 DdsRobotPort::DdsRobotPort(const control::Model& model, const std::vector<int>& driven, bus::Participant& bus,
                            const Options& options)
-    : model_(model), options_(options), intake_(model, intakeOptions(options)), driven_(driven) {
+    : NamedJointPort(model, intakeOptions(options)), options_(options), driven_(driven) {
   reader_ = &bus.makeReader<msg::RobotState>();
   writer_ = &bus.makeWriter<msg::JointCommand>();
   std::vector<std::string> names;
@@ -48,8 +48,6 @@ bool DdsRobotPort::waitForState(std::chrono::nanoseconds timeout) noexcept {
     return false;  // the caller's cycle runs as on a timeout
   }
 }
-
-const Eigen::VectorXd* DdsRobotPort::measuredPositions(double /*now*/) noexcept { return intake_.measuredPositions(); }
 
 void DdsRobotPort::command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double /*dt*/) noexcept {
   for (std::size_t k = 0; k < driven_.size(); ++k) {

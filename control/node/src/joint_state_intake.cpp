@@ -54,7 +54,7 @@ bool JointStateIntake::reject(int cause, std::uint64_t& counter) noexcept {
 
 bool JointStateIntake::accept(const View& s, const Guid& writer, std::int64_t now_ns) noexcept {
   const auto seq = static_cast<unsigned long long>(s.seq);
-  const char* what = options_.sample_name;
+  const char* what = options_.sample_name.c_str();
   // One robot writer (see the header): another writer is ignored while the bound one is alive.
   const bool bound_alive = bound_ && static_cast<double>(now_ns - writer_last_ns_) <= options_.rebind_silence * 1e9;
   const bool from_bound = bound_ && writer == robot_writer_;

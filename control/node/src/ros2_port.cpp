@@ -2,19 +2,8 @@
 #include "reflex/control_node/ros2_port.hpp"
 
 #include "reflex/control/controller.hpp"
-#include "reflex/control_node/dds_robot_port.hpp"
 
 #include <cmath>
-
-namespace reflex::ros2 {
-
-std::string ddsTopic(const std::string& ros_topic) {
-  std::size_t start = 0;
-  while (start < ros_topic.size() && ros_topic[start] == '/') ++start;
-  return "rt/" + ros_topic.substr(start);
-}
-
-}  // namespace reflex::ros2
 
 namespace reflex::control_node {
 
@@ -23,6 +12,7 @@ namespace {
 JointStateIntake::Options intakeOptions(const Ros2RobotPort::Options& o) {
   JointStateIntake::Options io = JointStateIntake::optionsOf(o);
   io.velocities_optional = true;  // ROS: velocity may be empty (not measured)
+  io.sample_name = ros2::ddsTopic(o.state_topic) + " sample";  // "rt/joint_states sample N"
   return io;
 }
 
@@ -30,9 +20,9 @@ JointStateIntake::Options intakeOptions(const Ros2RobotPort::Options& o) {
 
 Ros2RobotPort::Ros2RobotPort(const control::Model& model, const std::vector<int>& driven, bus::Participant& bus,
                              const Options& options)
-    : model_(model),
+    : NamedJointPort(model, intakeOptions(options)),
+      model_(model),
       options_(options),
-      intake_(model, intakeOptions(options)),
       state_topic_(ros2::ddsTopic(options.state_topic)) {
   if (options.command != "forward" && options.command != "trajectory")
     throw control::ConfigError("--ros-command: unknown kind '" + options.command +
@@ -56,8 +46,6 @@ Ros2RobotPort::Ros2RobotPort(const control::Model& model, const std::vector<int>
       if (k == q) throw control::ConfigError("--ros-joints: joint '" + name + "' is listed twice");
     joint_q_.push_back(q);
   }
-  sample_name_ = state_topic_ + " sample";
-  intake_.setSampleName(sample_name_.c_str());
   reader_ = &bus.makeReader<ros2::JointState>(state_topic_, ros2::kProfile);
   if (trajectory_) {
     trajectory_writer_ = &bus.makeWriter<ros2::JointTrajectory>(command_topic_, ros2::kProfile);
@@ -93,8 +81,6 @@ int Ros2RobotPort::poll() noexcept {
   }
   return rejected;
 }
-
-const Eigen::VectorXd* Ros2RobotPort::measuredPositions(double /*now*/) noexcept { return intake_.measuredPositions(); }
 
 void Ros2RobotPort::command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double dt) noexcept {
   if (trajectory_) {
@@ -140,15 +126,13 @@ bool Ros2RobotPort::waitForState(std::chrono::nanoseconds timeout) noexcept {
   }
 }
 
-std::string Ros2RobotPort::commandedJointNames() const {
-  std::string names;
-  for (const int q : joint_q_) names += (names.empty() ? "" : ", ") + model_.q_names[static_cast<std::size_t>(q)];
-  return names;
-}
-
-BusRobotPort::CauseCounts Ros2RobotPort::rejectedByCause() const {
-  const JointStateIntake::Counts& c = intake_.counts();
-  return DdsRobotPort::causeCounts(c);
+std::string Ros2RobotPort::describe() const {
+  std::string joints;
+  for (const int q : joint_q_) joints += (joints.empty() ? "" : ", ") + model_.q_names[static_cast<std::size_t>(q)];
+  return "ROS 2 on the wire: state " + state_topic_ + " (sensor_msgs::msg::dds_::JointState_), commands " +
+         command_topic_ +
+         (trajectory_ ? " (trajectory_msgs::msg::dds_::JointTrajectory_)" : " (std_msgs::msg::dds_::Float64MultiArray_)") +
+         " for the joints [" + joints + "]";
 }
 
 }  // namespace reflex::control_node

@@ -53,7 +53,7 @@
 
 namespace reflex::control_node {
 
-class DdsRobotPort final : public BusRobotPort {
+class DdsRobotPort final : public NamedJointPort {
  public:
   static constexpr double kFutureTolerance = JointStateIntake::kFutureTolerance;
 
@@ -79,7 +79,6 @@ class DdsRobotPort final : public BusRobotPort {
   /// Takes every state that arrived since the last call (once per cycle, before step()). Returns the
   /// number of samples rejected by this call; lastRejection() names the last one.
   int poll() noexcept override;
-  const Eigen::VectorXd* measuredPositions(double now) noexcept override;
   void command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double dt) noexcept override;
   /// From now on command() queues each JointCommand (stamped at once: its time and sequence number
   /// are the cycle's) for `outbox`'s writer thread instead of writing it on the control thread
@@ -92,47 +91,22 @@ class DdsRobotPort final : public BusRobotPort {
     c.commands = commands_;
     return c;
   }
-  const char* lastRejection() const override { return intake_.lastRejection(); }
-  /// The latest rejection that was not another writer's sample ("" none).
-  const char* lastBadRejection() const override { return intake_.lastBadRejection(); }
-  /// The cause of the last rejection: 0 lengths, 1 missing joint, 2 non-finite, 3 future stamp, 4 old,
-  /// 5 duplicate name, 6 outside the limits, 7 another writer.
+  /// The causes of a rejection (lastCause()): 0 lengths, 1 missing joint, 2 non-finite, 3 future stamp,
+  /// 4 old, 5 duplicate name, 6 outside the limits, 7 another writer. The state's accessors
+  /// (stateSeq: Header.seq; stateStampNs: Header.stamp_ns; stateInterval; boundWriter / otherWriter as
+  /// "01.0f.…|0.0.3.3") are NamedJointPort's.
   static constexpr int kCauses = 8;
   static constexpr int kCauseOtherWriter = JointStateIntake::kCauseOtherWriter;
-  int lastCause() const override { return intake_.lastCause(); }
-  bool haveState() const override { return intake_.haveState(); }
   /// Age (s) of the newest accepted state now, +inf without one.
   double stateAge() const noexcept { return intake_.stateAge(); }
-  std::uint64_t stateSeq() const override { return intake_.stateSeq(); }
-  /// Header.stamp_ns of the newest accepted state (system clock, ns), 0 without one.
-  std::int64_t stateStampNs() const override { return intake_.stateStampNs(); }
-  /// The robot's state interval (s): the stamps of the newest accepted state and the one accepted
-  /// before it, of the same writer; 0 while unknown (fewer than two states of the bound writer).
-  /// reflex_controller --trigger state takes it as the span of a cycle (OnboardController::step(now, dt)).
-  double stateInterval() const noexcept override { return intake_.stateInterval(); }
   /// Blocks until a robot state (any sample on reflex/robot_state, not yet taken) is there or `timeout`
   /// passes; true if one is. Allocation-free; for --trigger state, between cycles.
   bool waitForState(std::chrono::nanoseconds timeout) noexcept override;
-  /// The bound writer ("" before the first accepted state) and the newest writer ignored ("" none),
-  /// each as its participant's GUID prefix and writer entity id, "01.0f.…|0.0.3.3" (log lines, heartbeat).
-  const char* boundWriter() const override { return intake_.boundWriter(); }
-  const char* otherWriter() const override { return intake_.otherWriter(); }
   const char* stateTopic() const override { return "reflex/robot_state"; }
-  std::uint64_t acceptedStates() const override { return intake_.counts().accepted; }
-  CauseCounts rejectedByCause() const override { return causeCounts(intake_.counts()); }
-  std::uint64_t writerChanges() const override { return intake_.counts().writer_changes; }
   std::uint64_t commandsSent() const override { return commands_; }
 
-  /// The per-cause counts of a named-joint intake, in BusRobotPort's numbering.
-  static CauseCounts causeCounts(const JointStateIntake::Counts& c) {
-    return {c.rejected_length, c.rejected_missing, c.rejected_non_finite, c.rejected_future, c.rejected_old,
-            c.rejected_duplicate, c.rejected_limits, c.rejected_other_writer, 0, 0, 0};
-  }
-
  private:
-  const control::Model& model_;
   Options options_;
-  JointStateIntake intake_;
   bus::Reader<msg::RobotState>* reader_ = nullptr;
   bus::Writer<msg::JointCommand>* writer_ = nullptr;
   bus::OutboxQueue<msg::JointCommand>* queue_ = nullptr;  ///< set by sendThrough

@@ -6,6 +6,7 @@
 #pragma once
 
 #include "reflex/control/model.hpp"
+#include "reflex/control_node/bus_robot_port.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/bus/identity.hpp>
@@ -30,7 +31,7 @@ class JointStateIntake {
     /// Under DDS-Security: the bus's identities (only a writer authenticated as "robot" is bound).
     const bus::WriterIdentities* identities = nullptr;
     /// How a sample is named in messages, before its number: "robot state seq", "rt/joint_states sample".
-    const char* sample_name = "robot state seq";
+    std::string sample_name = "robot state seq";
     /// Velocities may be empty (ROS: "not measured"); else they must be as many as the names.
     bool velocities_optional = false;
   };
@@ -81,9 +82,6 @@ class JointStateIntake {
   /// state held). Never throws.
   bool take(const View& s, const bus::dds::SampleInfo& info, std::int64_t now_ns) noexcept;
 
-  /// How a sample is named in messages from now on (a string that outlives the intake).
-  void setSampleName(const char* name) { options_.sample_name = name; }
-
   /// The held positions (model order), nullptr when none was accepted or the newest is older than the
   /// timeout (its stamp against this host's system clock).
   const Eigen::VectorXd* measuredPositions() const noexcept;
@@ -129,6 +127,34 @@ class JointStateIntake {
   char rejection_[300] = {};
   char bad_rejection_[300] = {};
   int cause_ = 0;
+};
+
+/// A robot port whose robot reports named joints (DdsRobotPort, Ros2RobotPort): the intake and what
+/// BusRobotPort asks of the state, answered from it once for both. A derived port takes its samples
+/// (poll), sends its commands and names its topic.
+class NamedJointPort : public BusRobotPort {
+ public:
+  const Eigen::VectorXd* measuredPositions(double /*now*/) noexcept override { return intake_.measuredPositions(); }
+  double stateInterval() const noexcept override { return intake_.stateInterval(); }
+  const char* lastRejection() const override { return intake_.lastRejection(); }
+  const char* lastBadRejection() const override { return intake_.lastBadRejection(); }
+  int lastCause() const override { return intake_.lastCause(); }
+  bool haveState() const override { return intake_.haveState(); }
+  std::uint64_t stateSeq() const override { return intake_.stateSeq(); }
+  std::int64_t stateStampNs() const override { return intake_.stateStampNs(); }
+  const char* boundWriter() const override { return intake_.boundWriter(); }
+  const char* otherWriter() const override { return intake_.otherWriter(); }
+  std::uint64_t acceptedStates() const override { return intake_.counts().accepted; }
+  std::uint64_t writerChanges() const override { return intake_.counts().writer_changes; }
+  CauseCounts rejectedByCause() const override {
+    const JointStateIntake::Counts& c = intake_.counts();
+    return {c.rejected_length, c.rejected_missing, c.rejected_non_finite, c.rejected_future, c.rejected_old,
+            c.rejected_duplicate, c.rejected_limits, c.rejected_other_writer, 0, 0, 0};
+  }
+
+ protected:
+  NamedJointPort(const control::Model& model, const JointStateIntake::Options& options) : intake_(model, options) {}
+  JointStateIntake intake_;
 };
 
 }  // namespace reflex::control_node

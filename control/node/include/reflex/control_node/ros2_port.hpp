@@ -33,59 +33,14 @@
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/bus/outbox.hpp>
-#include <reflex/msg/ros2PubSubTypes.h>
+#include <reflex/bus/ros2_topics.hpp>
 
 #include <string>
 #include <vector>
 
-namespace reflex::ros2 {
-using JointState = ::sensor_msgs::msg::dds_::JointState_;
-using Float64MultiArray = ::std_msgs::msg::dds_::Float64MultiArray_;
-using JointTrajectory = ::trajectory_msgs::msg::dds_::JointTrajectory_;
-inline constexpr const char* kProfile = "reflex_ros2";
-/// ROS 2's DDS topic of a ROS topic name: "rt/" + the name without its leading '/'.
-std::string ddsTopic(const std::string& ros_topic);
-}  // namespace reflex::ros2
-
-namespace reflex::ros2 {
-/// sensor_msgs/JointState field by field (idl/ros2.idl), its strings read without allocating
-/// (reflex/bus/cdr_read.hpp): the controller takes one every cycle.
-struct JointStateRead {
-  static void read(eprosima::fastcdr::Cdr& cdr, JointState& s) {
-    cdr >> s.header().stamp().sec() >> s.header().stamp().nanosec();
-    bus::readString(cdr, s.header().frame_id());
-    bus::readStrings(cdr, s.name(), 256);
-    bus::readDoubles(cdr, s.position(), 256);
-    bus::readDoubles(cdr, s.velocity(), 256);
-    bus::readDoubles(cdr, s.effort(), 256);
-  }
-};
-}  // namespace reflex::ros2
-
-namespace reflex::bus {
-template <>
-struct TopicTraits<ros2::JointState> {
-  using PubSubType = SafePubSubType<::sensor_msgs::msg::dds_::JointState_PubSubType, ros2::JointStateRead>;
-  static constexpr const char* kTopicName = "rt/joint_states";
-  static constexpr const char* kProfile = ros2::kProfile;
-};
-template <>
-struct TopicTraits<ros2::Float64MultiArray> {
-  using PubSubType = SafePubSubType<::std_msgs::msg::dds_::Float64MultiArray_PubSubType>;
-  static constexpr const char* kTopicName = "rt/forward_position_controller/commands";
-  static constexpr const char* kProfile = ros2::kProfile;
-};
-template <>
-struct TopicTraits<ros2::JointTrajectory> {
-  using PubSubType = SafePubSubType<::trajectory_msgs::msg::dds_::JointTrajectory_PubSubType>;
-  static constexpr const char* kTopicName = "rt/joint_trajectory_controller/joint_trajectory";
-  static constexpr const char* kProfile = ros2::kProfile;
-};
-}  // namespace reflex::bus
-
 namespace reflex::control_node {
 
-class Ros2RobotPort final : public BusRobotPort {
+class Ros2RobotPort final : public NamedJointPort {
  public:
   struct Options {
     double timeout = 0.050;           ///< s without an accepted state before the state is stale
@@ -103,36 +58,22 @@ class Ros2RobotPort final : public BusRobotPort {
                 const Options& options);
 
   int poll() noexcept override;
-  const Eigen::VectorXd* measuredPositions(double now) noexcept override;
   void command(const Eigen::VectorXd& q_end, const Eigen::VectorXd& qdot, double dt) noexcept override;
   void sendThrough(bus::Outbox& outbox) override;
   bool waitForState(std::chrono::nanoseconds timeout) noexcept override;
-  double stateInterval() const noexcept override { return intake_.stateInterval(); }
-  const char* lastRejection() const override { return intake_.lastRejection(); }
-  const char* lastBadRejection() const override { return intake_.lastBadRejection(); }
-  int lastCause() const override { return intake_.lastCause(); }
-  bool haveState() const override { return intake_.haveState(); }
-  std::uint64_t stateSeq() const override { return intake_.stateSeq(); }
-  std::int64_t stateStampNs() const override { return intake_.stateStampNs(); }
-  const char* boundWriter() const override { return intake_.boundWriter(); }
-  const char* otherWriter() const override { return intake_.otherWriter(); }
   const char* stateTopic() const override { return state_topic_.c_str(); }
-  std::uint64_t acceptedStates() const override { return intake_.counts().accepted; }
-  CauseCounts rejectedByCause() const override;
-  std::uint64_t writerChanges() const override { return intake_.counts().writer_changes; }
   std::uint64_t commandsSent() const override { return commands_; }
   /// The DDS topic the commands go to ("rt/forward_position_controller/commands").
   const std::string& commandTopic() const { return command_topic_; }
-  /// The commanded joints in the controller's order, comma-separated.
-  std::string commandedJointNames() const;
+  /// What it speaks, one line: the topics with their DDS types and the commanded joints in order.
+  std::string describe() const;
 
  private:
   void send() noexcept;
 
   const control::Model& model_;
   Options options_;
-  JointStateIntake intake_;
-  std::string state_topic_, command_topic_, sample_name_;  ///< sample_name_: "rt/joint_states sample"
+  std::string state_topic_, command_topic_;
   bool trajectory_ = false;
   std::vector<int> joint_q_;  ///< q index of each commanded joint (Options::joints' order)
   bus::Reader<ros2::JointState>* reader_ = nullptr;

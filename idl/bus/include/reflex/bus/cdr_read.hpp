@@ -9,6 +9,7 @@
 
 #include <fastcdr/Cdr.h>
 #include <fastcdr/exceptions/BadParamException.h>
+#include <fastcdr/exceptions/NotEnoughMemoryException.h>
 
 #include <cstdint>
 #include <string>
@@ -25,6 +26,12 @@ inline void readString(eprosima::fastcdr::Cdr& cdr, std::string& s) {
     s.clear();
     return;
   }
+  // The bytes must be there before the string is sized: a hostile length (4 GB) would otherwise be
+  // allocated first (a fuzz finding: 2.8 GB for one sensor_msgs/JointState name).
+  eprosima::fastcdr::Cdr::state start = cdr.getState();  // setState takes it non-const
+  if (!cdr.jump(length))
+    throw eprosima::fastcdr::exception::NotEnoughMemoryException("CDR string longer than the sample");
+  cdr.setState(start);
   s.resize(length - 1);
   if (length > 1) cdr.deserializeArray(&s[0], length - 1);
   char nul = 0;
