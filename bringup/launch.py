@@ -188,6 +188,12 @@ class Launch:
             self.discovery = {"address": address, "port": port, "host": server_host}
         self.stop_timeout = float(doc.get("stop_timeout", 5.0))
 
+        self._resolve_processes(where, variables, hosts, robot)
+
+    def _resolve_processes(self, where, variables, hosts, robot):
+        """The configuration's processes, each checked (name, host, on_exit, stop_signal, robot side) and,
+        if enabled for this robot side, resolved into a Process (command, arguments, environment)."""
+        doc = self.doc
         base_env = {k: substitute(v, variables, f"{where}: env.{k}") for k, v in (doc.get("env") or {}).items()}
         specs = doc.get("processes")
         if not isinstance(specs, list) or not specs:

@@ -147,25 +147,21 @@ def draw_capsules(ax, rows):
     ax.set_yticks([])
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("out")
-    ap.add_argument("--session", default=os.path.join(ROOT, "bringup", "sessions", "flagship"))
-    ap.add_argument("--build", default=os.environ.get("REFLEX_BUILD_DIR", os.path.join(ROOT, "build")))
-    args = ap.parse_args()
+def load_runs(out):
+    """The runs in OUT (avoidance/, no_avoidance/): their time series, summaries, DDS security and plant notes."""
     runs = {}
     for label in ("avoidance", "no_avoidance"):
-        path = os.path.join(args.out, label, "controller.csv")
+        path = os.path.join(out, label, "controller.csv")
         if os.path.exists(path):
             runs[label] = read(path)
     if not runs:
-        raise SystemExit("report.py: no run in %s (expected avoidance/controller.csv)" % args.out)
+        raise SystemExit("report.py: no run in %s (expected avoidance/controller.csv)" % out)
     summary = {label: summarize(ts) for label, ts in runs.items()}
     security = {}  # label -> the --secure folder of run_flagship.py, or None (plain DDS)
     plant = {}     # label -> run.json: "robot" (kinematic | mujoco) and MuJoCo's contact counts
     for label in runs:
         try:
-            with open(os.path.join(args.out, label, "run.json")) as fh:
+            with open(os.path.join(out, label, "run.json")) as fh:
                 note = json.load(fh)
         except (OSError, ValueError):
             note = {}
@@ -177,11 +173,14 @@ def main():
             summary[label]["mujoco_contact_steps"] = note["robot_contact_steps"]
             summary[label]["mujoco_contact_periods"] = note.get("robot_contact_periods", 0)
 
+    return runs, summary, security, plant
+
+
+def plot_figures(out, runs, main_ts):
+    """Fig. 13 (hand status, arm-to-arm distance), f(d) and the hands against their targets, as PNGs in OUT."""
+    t = main_ts["time"]
     # Fig. 13: hand status and arm-to-arm distance.
     fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [1, 1, 3]})
-    main_label = "avoidance" if "avoidance" in runs else next(iter(runs))
-    main_ts = runs[main_label]
-    t = main_ts["time"]
     for ax, side in zip(axes[:2], ("left", "right")):
         ax.step(t, [1 if s == "given" else 0 for s in main_ts[side + "_status"]], where="post")
         ax.set_yticks([0, 1])
@@ -200,7 +199,7 @@ def main():
     axes[2].legend(fontsize=8, loc="upper right")
     fig.suptitle("Flagship: hand status and the distance between the arms (paper Fig. 13)")
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, "fig13_status_distance.png"), dpi=90)
+    fig.savefig(os.path.join(out, "fig13_status_distance.png"), dpi=90)
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(11, 3.5))
@@ -211,7 +210,7 @@ def main():
     ax.legend(fontsize=8)
     ax.set_title("blending coefficient f(d) (Eq. 13), with avoidance")
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, "blending.png"), dpi=90)
+    fig.savefig(os.path.join(out, "blending.png"), dpi=90)
     plt.close(fig)
 
     fig, axes = plt.subplots(3, 2, figsize=(11, 7), sharex=True)
@@ -225,9 +224,15 @@ def main():
     axes[0][1].legend(fontsize=8)
     fig.suptitle("hand targets from the pointing module against the hands (with avoidance)")
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, "tracking.png"), dpi=90)
+    fig.savefig(os.path.join(out, "tracking.png"), dpi=90)
     plt.close(fig)
 
+
+
+def make_strip(args, main_label, main_ts):
+    """The frame strip: the camera image above the robot at key instants inside the session's video.
+    (whether it was made, how the robot is drawn: "3d" or "2d: <why the 3D render did not run>")."""
+    t = main_ts["time"]
     # Strip: camera frame above the robot at key instants, all inside the session's video.
     strip_ok = False
     strip_robot = None  # "3d" or "2d: <why the 3D render did not run>"
@@ -315,8 +320,11 @@ def main():
         strip_ok = True
     except (subprocess.CalledProcessError, OSError, ValueError, KeyError, IndexError) as e:
         print("report.py: warning: no frame strip: %s" % e, file=sys.stderr)
-    summary["strip_robot"] = strip_robot or "none"
+    return strip_ok, strip_robot
 
+
+def write_report(args, summary, security, plant, strip_ok, strip_robot):
+    """summary.json and report.md in OUT."""
     with open(os.path.join(args.out, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=2)
     lines = ["# Flagship experiment report", "",
@@ -373,8 +381,22 @@ def main():
         fh.write("\n".join(lines) + "\n")
     print("\n".join(lines[4:4 + 16]))
     print("report.py: wrote %s/report.md and plots" % args.out)
-    return 0
 
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out")
+    ap.add_argument("--session", default=os.path.join(ROOT, "bringup", "sessions", "flagship"))
+    ap.add_argument("--build", default=os.environ.get("REFLEX_BUILD_DIR", os.path.join(ROOT, "build")))
+    args = ap.parse_args()
+    runs, summary, security, plant = load_runs(args.out)
+    main_label = "avoidance" if "avoidance" in runs else next(iter(runs))
+    main_ts = runs[main_label]
+    plot_figures(args.out, runs, main_ts)
+    strip_ok, strip_robot = make_strip(args, main_label, main_ts)
+    summary["strip_robot"] = strip_robot or "none"
+    write_report(args, summary, security, plant, strip_ok, strip_robot)
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())

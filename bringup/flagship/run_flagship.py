@@ -177,6 +177,46 @@ def session_length(session):
     return float(rows[-1][1]) - float(rows[0][1])
 
 
+def watch_replay(vision, procs, label, length):
+    """Progress while vision replays the session (a line per 10 %, or one updated line on a terminal);
+    RuntimeError when another process of the chain dies meanwhile (the recorder and the view may)."""
+    t0 = time.time()
+    tty = sys.stdout.isatty()
+    last_tenth = -1
+    while vision.alive():
+        time.sleep(1.0)
+        done = min(1.0, (time.time() - t0) / max(length, 1e-3))
+        if tty:
+            print("\rflagship: %s run %3.0f%% (%.0f of %.0f s)" % (label, 100 * done, time.time() - t0, length),
+                  end="", flush=True)
+        elif int(done * 10) != last_tenth:
+            last_tenth = int(done * 10)
+            print("flagship: %s run %3.0f%%" % (label, 100 * done), flush=True)
+        for p in procs:
+            if p is not vision and not p.alive() and p.name not in ("recorder", "view"):
+                raise RuntimeError("%s died during the run (see %s)" % (p.name, p.log.name))
+    if tty:
+        print("", flush=True)
+
+
+def stop_chain(args, out, procs, env_note):
+    """Stops the chain (last started first) and writes OUT/run.json: the note, every process's exit code
+    and, on the physics robot, MuJoCo's judge (physics steps and state periods with a pair closer than
+    d_r, from its exit line). The exit codes."""
+    codes = {}
+    for p in reversed(procs):
+        codes[p.name] = p.stop()
+    env_note["exit_codes"] = codes
+    if args.robot in ("mujoco", "unitree_hg"):
+        robot_log = os.path.join(out, "robot.log")
+        env_note["robot_contact_steps"] = last_count(robot_log, r"contact steps (\d+)")
+        env_note["robot_contact_periods"] = last_count(robot_log, r"contact periods (\d+)")
+        env_note["robot_holds"] = last_count(robot_log, r"holds begun (\d+)")
+    with open(os.path.join(out, "run.json"), "w") as fh:
+        json.dump(env_note, fh, indent=2)
+    return codes
+
+
 def run_once(args, label, avoidance):
     out = os.path.join(args.out, label)
     os.makedirs(out, exist_ok=True)
@@ -251,23 +291,7 @@ def run_once(args, label, avoidance):
                       ["--rate", str(args.rate), "--quiet", "--wait-readers", str(readers),
                        "--wait-timeout", "%g" % VISION_WAIT_S], os.path.join(out, "vision.log"), env)
         procs.append(vision)
-        t0 = time.time()
-        tty = sys.stdout.isatty()
-        last_tenth = -1
-        while vision.alive():
-            time.sleep(1.0)
-            done = min(1.0, (time.time() - t0) / max(length, 1e-3))
-            if tty:
-                print("\rflagship: %s run %3.0f%% (%.0f of %.0f s)" % (label, 100 * done, time.time() - t0, length),
-                      end="", flush=True)
-            elif int(done * 10) != last_tenth:
-                last_tenth = int(done * 10)
-                print("flagship: %s run %3.0f%%" % (label, 100 * done), flush=True)
-            for p in procs:
-                if p is not vision and not p.alive() and p.name not in ("recorder", "view"):
-                    raise RuntimeError("%s died during the run (see %s)" % (p.name, p.log.name))
-        if tty:
-            print("", flush=True)
+        watch_replay(vision, procs, label, length)
         if vision.p.returncode == 5:
             raise StartupFailed("vision's readers did not match: %s (see %s)" % (
                 last_line(vision.log.name, "reflex_vision: error:"), vision.log.name))
@@ -298,18 +322,7 @@ def run_once(args, label, avoidance):
                 log("%s; stopping the chain and starting it again (attempt %d of %d)" % (message, attempt + 1,
                                                                                           STARTUP_ATTEMPTS))
     finally:
-        codes = {}
-        for p in reversed(procs):
-            codes[p.name] = p.stop()
-        env_note["exit_codes"] = codes
-        if args.robot in ("mujoco", "unitree_hg"):
-            # MuJoCo's judge: physics steps and state periods with a pair closer than d_r (exit line).
-            robot_log = os.path.join(out, "robot.log")
-            env_note["robot_contact_steps"] = last_count(robot_log, r"contact steps (\d+)")
-            env_note["robot_contact_periods"] = last_count(robot_log, r"contact periods (\d+)")
-            env_note["robot_holds"] = last_count(robot_log, r"holds begun (\d+)")
-        with open(os.path.join(out, "run.json"), "w") as fh:
-            json.dump(env_note, fh, indent=2)
+        codes = stop_chain(args, out, procs, env_note)
     ok_codes = (0, -signal.SIGTERM, 128 + signal.SIGTERM, None)
     if codes.get("view") not in ok_codes:
         log("warning: the live view ended with exit code %s (see %s); the run itself is unaffected"

@@ -1,3 +1,4 @@
+#include "reflex/common/error.hpp"
 #include "reflex/control/pair_sampling.hpp"
 
 #include "reflex/control/distance.hpp"
@@ -37,13 +38,78 @@ std::string mm(double metres) {
 
 }  // namespace
 
+namespace {
+
+/// A configuration drawn uniformly within the limits (an infinite limit: +-pi), into q; with `only`,
+/// only the joints it marks (the others keep their values).
+void randomConfiguration(const Model& m, std::mt19937_64& rng, Eigen::VectorXd& q, const std::vector<bool>* only = nullptr) {
+  for (int i = 0; i < m.nq; ++i) {
+    if (only && !(*only)[static_cast<std::size_t>(i)]) continue;
+    const double lo = std::isfinite(m.q_lower[i]) ? m.q_lower[i] : -M_PI;
+    const double hi = std::isfinite(m.q_upper[i]) ? m.q_upper[i] : M_PI;
+    q[i] = lo == hi ? lo : std::uniform_real_distribution<double>(lo, hi)(rng);
+  }
+}
+
+/// Which pairs a set of joints moves (index into report.pairs, through `keep`): one of them on the
+/// path between the two links (the joints above one link and not above the other).
+std::vector<bool> movedBy(const Model& m, const std::vector<int>& keep, std::size_t npairs,
+                          const std::vector<std::string>& names, const char* what) {
+  std::vector<bool> in_set(static_cast<std::size_t>(m.nq), false);
+  for (const auto& name : names) {
+    const int qi = m.qIndex(name);
+    if (qi < 0) throw reflex::Error(std::string(what) + " '" + name + "' is not a movable joint of " + m.name);
+    in_set[static_cast<std::size_t>(qi)] = true;
+  }
+  std::vector<bool> moved(npairs, false);
+  for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+    if (keep[i] < 0) continue;
+    const auto& sa = m.link_support[m.segments[m.pairs[i].a].link];
+    const auto& sb = m.link_support[m.segments[m.pairs[i].b].link];
+    for (const auto* from : {&sa, &sb})
+      for (const int qi : *from) {
+        const auto& other = from == &sa ? sb : sa;
+        if (in_set[static_cast<std::size_t>(qi)] && std::find(other.begin(), other.end(), qi) == other.end())
+          moved[static_cast<std::size_t>(keep[i])] = true;
+      }
+  }
+  return moved;
+}
+
+/// Always in collision only where the real parts are (confirm_collision): the first configuration
+/// where they are apart settles it (SampledPair::confirm_apart).
+void confirmApart(const Model& m, const PairSamplingOptions& options, const std::vector<int>& keep,
+                  PairSamplingReport& report, KinematicsData& kin) {
+  Eigen::VectorXd q(m.nq);
+  std::vector<int> candidates;  // index into m.pairs
+  for (std::size_t i = 0; i < m.pairs.size(); ++i)
+    if (keep[i] >= 0 && report.pairs[static_cast<std::size_t>(keep[i])].in_collision >= options.always_fraction * options.samples)
+      candidates.push_back(static_cast<int>(i));
+  std::mt19937_64 crng(options.seed + 7);
+  for (int n = 0; n < options.confirm_samples && !candidates.empty(); ++n) {
+    randomConfiguration(m, crng, q);
+    computeForwardKinematics(m, kin, q);
+    for (auto it = candidates.begin(); it != candidates.end();) {
+      const SegmentPair& p = m.pairs[static_cast<std::size_t>(*it)];
+      if (options.confirm_collision(p.a, p.b, kin)) {
+        ++it;
+        continue;
+      }
+      report.pairs[static_cast<std::size_t>(keep[static_cast<std::size_t>(*it)])].confirm_apart = n + 1;
+      it = candidates.erase(it);
+    }
+  }
+}
+
+}  // namespace
+
 PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent, const PairSamplingOptions& options,
                                const std::function<void(double)>& progress) {
-  if (!(options.samples > 0)) throw std::invalid_argument("samples " + std::to_string(options.samples) + " must be positive");
+  if (!(options.samples > 0)) throw reflex::Error("samples " + std::to_string(options.samples) + " must be positive");
   if (!(options.always_fraction > 0.0 && options.always_fraction <= 1.0))
-    throw std::invalid_argument("always fraction " + std::to_string(options.always_fraction) + " must be in (0, 1]");
+    throw reflex::Error("always fraction " + std::to_string(options.always_fraction) + " must be in (0, 1]");
   if (!(options.near_distance >= 0.0) || !std::isfinite(options.near_distance))
-    throw std::invalid_argument("near distance " + std::to_string(options.near_distance) + " must be >= 0 m");
+    throw reflex::Error("near distance " + std::to_string(options.near_distance) + " must be >= 0 m");
   PairSamplingReport report;
   report.robot = non_adjacent.name;
   report.options = options;
@@ -79,11 +145,7 @@ PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent
   Eigen::VectorXd q(m.nq);
   const int step = std::max(1, options.samples / 100);
   for (int n = 0; n < options.samples; ++n) {
-    for (int i = 0; i < m.nq; ++i) {
-      const double lo = std::isfinite(m.q_lower[i]) ? m.q_lower[i] : -M_PI;
-      const double hi = std::isfinite(m.q_upper[i]) ? m.q_upper[i] : M_PI;
-      q[i] = lo == hi ? lo : std::uniform_real_distribution<double>(lo, hi)(rng);
-    }
+    randomConfiguration(m, rng, q);
     computeForwardKinematics(m, kin, q);
     computeSegmentDistances(m, kin, dist, sweep);
     for (std::size_t i = 0; i < dist.pairs.size(); ++i) {
@@ -96,38 +158,13 @@ PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent
     }
     if (progress && (n + 1) % step == 0) progress(static_cast<double>(n + 1) / options.samples);
   }
-  // Which pairs a driven joint moves: one on the path between the two links (the joints above one
-  // link and not above the other).
-  // Which pairs a set of joints moves: one of them on the path between the two links (the joints above
-  // one link and not above the other).
-  auto movedBy = [&](const std::vector<std::string>& names, const char* what) {
-    std::vector<bool> in_set(static_cast<std::size_t>(m.nq), false);
-    for (const auto& name : names) {
-      const int qi = m.qIndex(name);
-      if (qi < 0) throw std::invalid_argument(std::string(what) + " '" + name + "' is not a movable joint of " + m.name);
-      in_set[static_cast<std::size_t>(qi)] = true;
-    }
-    std::vector<bool> moved(report.pairs.size(), false);
-    for (std::size_t i = 0; i < m.pairs.size(); ++i) {
-      if (keep[i] < 0) continue;
-      const auto& sa = m.link_support[m.segments[m.pairs[i].a].link];
-      const auto& sb = m.link_support[m.segments[m.pairs[i].b].link];
-      for (const auto* from : {&sa, &sb})
-        for (const int qi : *from) {
-          const auto& other = from == &sa ? sb : sa;
-          if (in_set[static_cast<std::size_t>(qi)] && std::find(other.begin(), other.end(), qi) == other.end())
-            moved[static_cast<std::size_t>(keep[i])] = true;
-        }
-    }
-    return moved;
-  };
   const std::vector<bool> pair_driven =
-      options.driven_joints.empty() ? std::vector<bool>(report.pairs.size(), true) : movedBy(options.driven_joints, "driven joint");
+      options.driven_joints.empty() ? std::vector<bool>(report.pairs.size(), true) : movedBy(m, keep, report.pairs.size(), options.driven_joints, "driven joint");
   // The standing posture: the distance of every pair no arm joint moves (it is what the robot stands with).
   std::vector<bool> by_arm(report.pairs.size(), true);
   std::vector<double> standing(report.pairs.size(), std::numeric_limits<double>::infinity());
   if (options.standing.size() == m.nq) {
-    by_arm = movedBy(options.arm_joints, "arm joint");
+    by_arm = movedBy(m, keep, report.pairs.size(), options.arm_joints, "arm joint");
     computeForwardKinematics(m, kin, options.standing);
     computeSegmentDistances(m, kin, dist);
     for (std::size_t i = 0; i < dist.pairs.size(); ++i)
@@ -141,12 +178,7 @@ PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent
     for (const auto& name : options.driven_joints) driven_q[static_cast<std::size_t>(m.qIndex(name))] = true;
     for (int n = 0; n < std::max(1, options.samples / 2); ++n) {
       q = options.standing;
-      for (int i = 0; i < m.nq; ++i) {
-        if (!driven_q[static_cast<std::size_t>(i)]) continue;
-        const double lo = std::isfinite(m.q_lower[i]) ? m.q_lower[i] : -M_PI;
-        const double hi = std::isfinite(m.q_upper[i]) ? m.q_upper[i] : M_PI;
-        q[i] = lo == hi ? lo : std::uniform_real_distribution<double>(lo, hi)(rng);
-      }
+      randomConfiguration(m, rng, q, &driven_q);
       computeForwardKinematics(m, kin, q);
       computeSegmentDistances(m, kin, dist, sweep);
       for (std::size_t i = 0; i < dist.pairs.size(); ++i)
@@ -154,32 +186,7 @@ PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent
           reach[static_cast<std::size_t>(keep[i])] = std::max(reach[static_cast<std::size_t>(keep[i])], dist.pairs[i].distance);
     }
   }
-  // Always in collision only where the real parts are (confirm_collision): the first configuration
-  // where they are apart settles it.
-  if (options.confirm_collision) {
-    std::vector<int> candidates;  // index into m.pairs
-    for (std::size_t i = 0; i < m.pairs.size(); ++i)
-      if (keep[i] >= 0 && report.pairs[static_cast<std::size_t>(keep[i])].in_collision >= options.always_fraction * options.samples)
-        candidates.push_back(static_cast<int>(i));
-    std::mt19937_64 crng(options.seed + 7);
-    for (int n = 0; n < options.confirm_samples && !candidates.empty(); ++n) {
-      for (int i = 0; i < m.nq; ++i) {
-        const double lo = std::isfinite(m.q_lower[i]) ? m.q_lower[i] : -M_PI;
-        const double hi = std::isfinite(m.q_upper[i]) ? m.q_upper[i] : M_PI;
-        q[i] = lo == hi ? lo : std::uniform_real_distribution<double>(lo, hi)(crng);
-      }
-      computeForwardKinematics(m, kin, q);
-      for (auto it = candidates.begin(); it != candidates.end();) {
-        const SegmentPair& p = m.pairs[static_cast<std::size_t>(*it)];
-        if (options.confirm_collision(p.a, p.b, kin)) {
-          ++it;
-          continue;
-        }
-        report.pairs[static_cast<std::size_t>(keep[static_cast<std::size_t>(*it)])].confirm_apart = n + 1;
-        it = candidates.erase(it);
-      }
-    }
-  }
+  if (options.confirm_collision) confirmApart(m, options, keep, report, kin);
   for (std::size_t k = 0; k < report.pairs.size(); ++k) {
     auto& sp = report.pairs[k];
     sp.standing_distance = standing[k];

@@ -218,160 +218,152 @@ Eigen::VectorXd neutralConfiguration(const Model& model) {
   return q;
 }
 
-RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
-  RobotSetup setup;
-  const Tree t(m);
-  KinematicsData kin(m);
-  computeForwardKinematics(m, kin, neutralConfiguration(m));
+namespace {
+
+/// The arms from --left-hand and --right-hand: the revolute chains up to their branching links.
+std::array<Chain, 2> givenArms(const Model& m, const Tree& t, const KinematicsData& kin, const SetupOptions& o,
+                               RobotSetup& setup) {
   std::array<Chain, 2> arms;
-  if (!o.left_hand.empty() || !o.right_hand.empty()) {
-    if (o.left_hand.empty() || o.right_hand.empty())
-      throw SetupError("give both --left-hand and --right-hand (got only " +
-                       std::string(o.left_hand.empty() ? "--right-hand '" + o.right_hand : "--left-hand '" + o.left_hand) + "')");
-    const std::string given[2] = {o.left_hand, o.right_hand};
-    for (int a = 0; a < 2; ++a) {
-      const int hand = linkOrThrow(m, given[a], a == 0 ? "--left-hand" : "--right-hand");
-      arms[a] = chainToHand(m, t, kin, hand);
-      int revolute = 0;
-      for (int qi : arms[a].joints) revolute += m.links[m.q_link[qi]].type == JointType::kRevolute;
-      if (revolute < 1 || arms[a].prismatic)
-        throw SetupError(std::string(a == 0 ? "--left-hand" : "--right-hand") + " '" + given[a] +
-                         "': no chain of revolute joints leads to it from a branching link (found " +
-                         arms[a].describe(m) + ")");
-      if (static_cast<int>(arms[a].joints.size()) > 8)
-        throw SetupError(std::string(a == 0 ? "--left-hand" : "--right-hand") + " '" + given[a] + "': its chain " +
-                         arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
-                         " joints; the controller takes at most 8");
-      arms[a].links.erase(std::find(arms[a].links.begin(), arms[a].links.end(), hand) + 1, arms[a].links.end());
-    }
-    setup.decisions.push_back("arms: the revolute joints from the given hand links up to their branching links '" +
-                              m.links[arms[0].branch].name + "' / '" + m.links[arms[1].branch].name + "': left " +
-                              arms[0].describe(m) + ", right " + arms[1].describe(m) + " (--left-hand, --right-hand)");
-  } else {
-    const std::vector<Chain> chains = allChains(m, t, kin);
-    std::vector<const Chain*> cands;
-    for (const Chain& c : chains)
-      if (c.joints.size() >= 4 && !c.prismatic) cands.push_back(&c);
-    std::vector<std::array<const Chain*, 2>> pairs;  // [left, right]
-    for (std::size_t i = 0; i < cands.size(); ++i)
-      for (std::size_t j = i + 1; j < cands.size(); ++j)
-        if (mirrored(*cands[i], *cands[j])) {
-          const bool i_left = cands[i]->start_B.y() > 0;
-          pairs.push_back({i_left ? cands[i] : cands[j], i_left ? cands[j] : cands[i]});
-        }
-    if (pairs.empty()) {
-      std::string found;
-      for (const Chain& c : chains)
-        found += " " + c.describe(m) + " (" + std::to_string(c.joints.size()) + " joints" +
-                 (c.prismatic ? ", prismatic" : "") + ", from '" + m.links[c.branch].name + "' at y " +
-                 fmt("%.3f", c.start_B.y()) + ")";
-      throw SetupError("no arms found in robot '" + m.name +
-                       "': need two mirrored serial chains of >= 4 revolute joints branching from the trunk "
-                       "(first joints at (x, y, z) and (x, -y, z)); chains found:" +
-                       (found.empty() ? std::string(" none") : found) + "; give --left-hand and --right-hand");
-    }
-    // Arms end in hands, not feet: a pair whose names read like legs (hip/leg/knee/ankle/foot over
-    // shoulder/arm/elbow/wrist/hand), or whose ends reach down to the robot's lowest link, is legs (a
-    // locomotion variant with its arm joints fixed has only those).
-    // "Reach down to the lowest link" counts only with a body above the chains (at least half their
-    // drop): a trunk with chains hanging from it and nothing else is no standing robot.
-    double lowest = std::numeric_limits<double>::infinity(), highest = -lowest;
-    for (std::size_t l = 0; l < m.links.size(); ++l) {
-      lowest = std::min(lowest, kin.X_B_L[l].translation().z());
-      highest = std::max(highest, kin.X_B_L[l].translation().z());
-    }
-    std::vector<std::array<const Chain*, 2>> legs;
-    for (auto it = pairs.begin(); it != pairs.end();) {
-      const double end_z = std::min(kin.X_B_L[(*it)[0]->links.back()].translation().z(),
-                                    kin.X_B_L[(*it)[1]->links.back()].translation().z());
-      const double start_z = (*it)[0]->start_B.z();
-      const bool to_the_ground = end_z < lowest + 0.05 && highest - start_z > 0.5 * (start_z - end_z);
-      if (nameScore(m, *(*it)[0]) + nameScore(m, *(*it)[1]) < 0 || to_the_ground) {
-        legs.push_back(*it);
-        it = pairs.erase(it);
-      } else {
-        ++it;
-      }
-    }
-    if (pairs.empty()) {
-      std::string list;
-      for (const auto& p : legs)
-        list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (ending at z " +
-                fmt("%.3f", kin.X_B_L[p[0]->links.back()].translation().z()) + " m; the lowest link is at " +
-                fmt("%.3f", lowest) + " m);";
-      throw SetupError("no arms found in robot '" + m.name + "': the only mirrored chains of >= 4 revolute joints are "
-                       "legs (named like legs, or ending at the robot's lowest link):" + list +
-                       " arms need movable joints and end in hands; give --left-hand and --right-hand if these are arms");
-    }
-    if (!legs.empty())
-      setup.decisions.push_back("arms: " + std::to_string(legs.size()) + " mirrored pair(s) of chains left out as legs "
-                                "(named like legs, or ending at the robot's lowest link), e.g. " +
-                                legs[0][0]->describe(m));
-    std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) { return a[0]->start_B.z() > b[0]->start_B.z(); });
-    std::size_t pick = 0;
-    std::string why;
-    if (pairs.size() == 1) {
-      why = "the only mirrored pair of chains with >= 4 revolute joints";
-    } else if (pairs[0][0]->start_B.z() > pairs[1][0]->start_B.z() + 0.05) {
-      why = "of " + std::to_string(pairs.size()) + " mirrored pairs the one starting highest (z " +
-            fmt("%.3f", pairs[0][0]->start_B.z()) + " m, next " + fmt("%.3f", pairs[1][0]->start_B.z()) +
-            " m: legs hang below the arms)";
-    } else {
-      std::vector<int> score;
-      for (const auto& p : pairs) score.push_back(nameScore(m, *p[0]) + nameScore(m, *p[1]));
-      const auto best = std::max_element(score.begin(), score.end());
-      if (std::count(score.begin(), score.end(), *best) == 1 && *best > 0) {
-        pick = static_cast<std::size_t>(best - score.begin());
-        why = "of " + std::to_string(pairs.size()) + " mirrored pairs starting at the same height, the one whose "
-              "names read like an arm (shoulder/arm/elbow/wrist/hand)";
-      } else {
-        std::string list;
-        for (const auto& p : pairs) list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (z " +
-                                            fmt("%.3f", p[0]->start_B.z()) + ");";
-        throw SetupError("ambiguous arms in robot '" + m.name + "': " + std::to_string(pairs.size()) +
-                         " mirrored pairs of chains start within 5 cm of the same height and their names do not "
-                         "tell which are arms:" + list + " give --left-hand and --right-hand");
-      }
-    }
-    arms[0] = *pairs[pick][0];
-    arms[1] = *pairs[pick][1];
-    // REP 103 (x forward, y left) unless both arms' names say the opposite: a root frame that faces -x
-    // (iCub's: x backward, y right) names its y < 0 arm left.
-    std::string side_why = "left = y > 0 (" + fmt("%.3f", arms[0].start_B.y()) + " m)";
-    if (sideHint(m, arms[0]) < 0 && sideHint(m, arms[1]) > 0) {
-      std::swap(arms[0], arms[1]);
-      setup.forward = -Eigen::Vector3d::UnitX();
-      side_why = "the arm named left is at y " + fmt("%.3f", arms[0].start_B.y()) +
-                 " m: this URDF's root frame faces -x (x backward, y right), so forward is -x for the rest "
-                 "posture and the behavior's targets";
-    }
-    setup.decisions.push_back("arms: left " + arms[0].describe(m) + ", right " + arms[1].describe(m) + " from '" +
-                              m.links[arms[0].branch].name + "': " + why + "; " + side_why);
-    for (int a = 0; a < 2; ++a) {
-      if (static_cast<int>(arms[a].joints.size()) > 8)
-        throw SetupError("arm " + arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
-                         " joints; the controller takes at most 8: give --left-hand and --right-hand");
-    }
-  }
+  if (o.left_hand.empty() || o.right_hand.empty())
+    throw SetupError("give both --left-hand and --right-hand (got only " +
+                     std::string(o.left_hand.empty() ? "--right-hand '" + o.right_hand : "--left-hand '" + o.left_hand) + "')");
+  const std::string given[2] = {o.left_hand, o.right_hand};
   for (int a = 0; a < 2; ++a) {
-    ArmSetup& arm = setup.arms[a];
-    const Chain& c = arms[a];
-    arm.side = a == 0 ? "left" : "right";
-    for (int qi : c.joints) arm.joints.push_back(m.q_names[qi]);
-    arm.shoulder_link = m.links[c.first_link].name;
-    const int hand = (a == 0 ? o.left_hand : o.right_hand).empty() ? handOfChain(m, t, c)
-                                                                   : m.linkIndex(a == 0 ? o.left_hand : o.right_hand);
-    arm.hand_link = m.links[hand].name;
-    bool geometry = false;
-    arm.hand_point_L = handPoint(m, t, hand, &geometry);
-    setup.decisions.push_back(arm.side + " hand: link '" + arm.hand_link + "' (" +
-                              (hand == c.links.back() ? "the last link of the chain" : "the link with geometry at the chain's end") +
-                              "); hand point " + vec(arm.hand_point_L) + " m in it: " +
-                              (geometry ? "the farthest end of its collision geometry's core from the wrist"
-                                        : "its origin (the link has no collision geometry)"));
+    const int hand = linkOrThrow(m, given[a], a == 0 ? "--left-hand" : "--right-hand");
+    arms[a] = chainToHand(m, t, kin, hand);
+    int revolute = 0;
+    for (int qi : arms[a].joints) revolute += m.links[m.q_link[qi]].type == JointType::kRevolute;
+    if (revolute < 1 || arms[a].prismatic)
+      throw SetupError(std::string(a == 0 ? "--left-hand" : "--right-hand") + " '" + given[a] +
+                       "': no chain of revolute joints leads to it from a branching link (found " +
+                       arms[a].describe(m) + ")");
+    if (static_cast<int>(arms[a].joints.size()) > 8)
+      throw SetupError(std::string(a == 0 ? "--left-hand" : "--right-hand") + " '" + given[a] + "': its chain " +
+                       arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
+                       " joints; the controller takes at most 8");
+    arms[a].links.erase(std::find(arms[a].links.begin(), arms[a].links.end(), hand) + 1, arms[a].links.end());
   }
-  // Head: the highest chain end with geometry below the arms' branching link (and its ancestors) that
-  // is not an arm; a name with "head" wins. Camera: "camera" in a name rigidly below the head.
+  setup.decisions.push_back("arms: the revolute joints from the given hand links up to their branching links '" +
+                            m.links[arms[0].branch].name + "' / '" + m.links[arms[1].branch].name + "': left " +
+                            arms[0].describe(m) + ", right " + arms[1].describe(m) + " (--left-hand, --right-hand)");
+  return arms;
+}
+
+/// The arms found by structure: the mirrored pair of chains of >= 4 revolute joints that are not legs
+/// (highest first, then by name); left and right by the side of the root frame the names agree with.
+std::array<Chain, 2> foundArms(const Model& m, const Tree& t, const KinematicsData& kin, RobotSetup& setup) {
+  std::array<Chain, 2> arms;
+  const std::vector<Chain> chains = allChains(m, t, kin);
+  std::vector<const Chain*> cands;
+  for (const Chain& c : chains)
+    if (c.joints.size() >= 4 && !c.prismatic) cands.push_back(&c);
+  std::vector<std::array<const Chain*, 2>> pairs;  // [left, right]
+  for (std::size_t i = 0; i < cands.size(); ++i)
+    for (std::size_t j = i + 1; j < cands.size(); ++j)
+      if (mirrored(*cands[i], *cands[j])) {
+        const bool i_left = cands[i]->start_B.y() > 0;
+        pairs.push_back({i_left ? cands[i] : cands[j], i_left ? cands[j] : cands[i]});
+      }
+  if (pairs.empty()) {
+    std::string found;
+    for (const Chain& c : chains)
+      found += " " + c.describe(m) + " (" + std::to_string(c.joints.size()) + " joints" +
+               (c.prismatic ? ", prismatic" : "") + ", from '" + m.links[c.branch].name + "' at y " +
+               fmt("%.3f", c.start_B.y()) + ")";
+    throw SetupError("no arms found in robot '" + m.name +
+                     "': need two mirrored serial chains of >= 4 revolute joints branching from the trunk "
+                     "(first joints at (x, y, z) and (x, -y, z)); chains found:" +
+                     (found.empty() ? std::string(" none") : found) + "; give --left-hand and --right-hand");
+  }
+  // Arms end in hands, not feet: a pair whose names read like legs (hip/leg/knee/ankle/foot over
+  // shoulder/arm/elbow/wrist/hand), or whose ends reach down to the robot's lowest link, is legs (a
+  // locomotion variant with its arm joints fixed has only those).
+  // "Reach down to the lowest link" counts only with a body above the chains (at least half their
+  // drop): a trunk with chains hanging from it and nothing else is no standing robot.
+  double lowest = std::numeric_limits<double>::infinity(), highest = -lowest;
+  for (std::size_t l = 0; l < m.links.size(); ++l) {
+    lowest = std::min(lowest, kin.X_B_L[l].translation().z());
+    highest = std::max(highest, kin.X_B_L[l].translation().z());
+  }
+  std::vector<std::array<const Chain*, 2>> legs;
+  for (auto it = pairs.begin(); it != pairs.end();) {
+    const double end_z = std::min(kin.X_B_L[(*it)[0]->links.back()].translation().z(),
+                                  kin.X_B_L[(*it)[1]->links.back()].translation().z());
+    const double start_z = (*it)[0]->start_B.z();
+    const bool to_the_ground = end_z < lowest + 0.05 && highest - start_z > 0.5 * (start_z - end_z);
+    if (nameScore(m, *(*it)[0]) + nameScore(m, *(*it)[1]) < 0 || to_the_ground) {
+      legs.push_back(*it);
+      it = pairs.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  if (pairs.empty()) {
+    std::string list;
+    for (const auto& p : legs)
+      list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (ending at z " +
+              fmt("%.3f", kin.X_B_L[p[0]->links.back()].translation().z()) + " m; the lowest link is at " +
+              fmt("%.3f", lowest) + " m);";
+    throw SetupError("no arms found in robot '" + m.name + "': the only mirrored chains of >= 4 revolute joints are "
+                     "legs (named like legs, or ending at the robot's lowest link):" + list +
+                     " arms need movable joints and end in hands; give --left-hand and --right-hand if these are arms");
+  }
+  if (!legs.empty())
+    setup.decisions.push_back("arms: " + std::to_string(legs.size()) + " mirrored pair(s) of chains left out as legs "
+                              "(named like legs, or ending at the robot's lowest link), e.g. " +
+                              legs[0][0]->describe(m));
+  std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) { return a[0]->start_B.z() > b[0]->start_B.z(); });
+  std::size_t pick = 0;
+  std::string why;
+  if (pairs.size() == 1) {
+    why = "the only mirrored pair of chains with >= 4 revolute joints";
+  } else if (pairs[0][0]->start_B.z() > pairs[1][0]->start_B.z() + 0.05) {
+    why = "of " + std::to_string(pairs.size()) + " mirrored pairs the one starting highest (z " +
+          fmt("%.3f", pairs[0][0]->start_B.z()) + " m, next " + fmt("%.3f", pairs[1][0]->start_B.z()) +
+          " m: legs hang below the arms)";
+  } else {
+    std::vector<int> score;
+    for (const auto& p : pairs) score.push_back(nameScore(m, *p[0]) + nameScore(m, *p[1]));
+    const auto best = std::max_element(score.begin(), score.end());
+    if (std::count(score.begin(), score.end(), *best) == 1 && *best > 0) {
+      pick = static_cast<std::size_t>(best - score.begin());
+      why = "of " + std::to_string(pairs.size()) + " mirrored pairs starting at the same height, the one whose "
+            "names read like an arm (shoulder/arm/elbow/wrist/hand)";
+    } else {
+      std::string list;
+      for (const auto& p : pairs) list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (z " +
+                                          fmt("%.3f", p[0]->start_B.z()) + ");";
+      throw SetupError("ambiguous arms in robot '" + m.name + "': " + std::to_string(pairs.size()) +
+                       " mirrored pairs of chains start within 5 cm of the same height and their names do not "
+                       "tell which are arms:" + list + " give --left-hand and --right-hand");
+    }
+  }
+  arms[0] = *pairs[pick][0];
+  arms[1] = *pairs[pick][1];
+  // REP 103 (x forward, y left) unless both arms' names say the opposite: a root frame that faces -x
+  // (iCub's: x backward, y right) names its y < 0 arm left.
+  std::string side_why = "left = y > 0 (" + fmt("%.3f", arms[0].start_B.y()) + " m)";
+  if (sideHint(m, arms[0]) < 0 && sideHint(m, arms[1]) > 0) {
+    std::swap(arms[0], arms[1]);
+    setup.forward = -Eigen::Vector3d::UnitX();
+    side_why = "the arm named left is at y " + fmt("%.3f", arms[0].start_B.y()) +
+               " m: this URDF's root frame faces -x (x backward, y right), so forward is -x for the rest "
+               "posture and the behavior's targets";
+  }
+  setup.decisions.push_back("arms: left " + arms[0].describe(m) + ", right " + arms[1].describe(m) + " from '" +
+                            m.links[arms[0].branch].name + "': " + why + "; " + side_why);
+  for (int a = 0; a < 2; ++a) {
+    if (static_cast<int>(arms[a].joints.size()) > 8)
+      throw SetupError("arm " + arms[a].describe(m) + " has " + std::to_string(arms[a].joints.size()) +
+                       " joints; the controller takes at most 8: give --left-hand and --right-hand");
+  }
+  return arms;
+}
+
+/// Head: the highest chain end with geometry below the arms' branching link (and its ancestors) that
+/// is not an arm; a name with "head" wins. Camera: "camera" in a name rigidly below the head.
+void findHeadAndCamera(const Model& m, const Tree& t, const KinematicsData& kin, const SetupOptions& o,
+                       const std::array<Chain, 2>& arms, RobotSetup& setup) {
   int head = -1;
   std::string head_why;
   if (!o.head.empty()) {
@@ -424,6 +416,36 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
                                 "', the first link named like a camera fixed below the head");
     }
   }
+}
+
+}  // namespace
+
+RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
+  RobotSetup setup;
+  const Tree t(m);
+  KinematicsData kin(m);
+  computeForwardKinematics(m, kin, neutralConfiguration(m));
+  std::array<Chain, 2> arms;
+  if (!o.left_hand.empty() || !o.right_hand.empty()) arms = givenArms(m, t, kin, o, setup);
+  else arms = foundArms(m, t, kin, setup);
+  for (int a = 0; a < 2; ++a) {
+    ArmSetup& arm = setup.arms[a];
+    const Chain& c = arms[a];
+    arm.side = a == 0 ? "left" : "right";
+    for (int qi : c.joints) arm.joints.push_back(m.q_names[qi]);
+    arm.shoulder_link = m.links[c.first_link].name;
+    const int hand = (a == 0 ? o.left_hand : o.right_hand).empty() ? handOfChain(m, t, c)
+                                                                   : m.linkIndex(a == 0 ? o.left_hand : o.right_hand);
+    arm.hand_link = m.links[hand].name;
+    bool geometry = false;
+    arm.hand_point_L = handPoint(m, t, hand, &geometry);
+    setup.decisions.push_back(arm.side + " hand: link '" + arm.hand_link + "' (" +
+                              (hand == c.links.back() ? "the last link of the chain" : "the link with geometry at the chain's end") +
+                              "); hand point " + vec(arm.hand_point_L) + " m in it: " +
+                              (geometry ? "the farthest end of its collision geometry's core from the wrist"
+                                        : "its origin (the link has no collision geometry)"));
+  }
+  findHeadAndCamera(m, t, kin, o, arms, setup);
   return setup;
 }
 
@@ -468,46 +490,83 @@ double hi80(const Model& m, int qi) {
 
 }  // namespace
 
-void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
-  const ArmIndex ix = armIndex(m, s);
-  const Eigen::VectorXd q0 = neutralConfiguration(m);
-  KinematicsData kin(m);
-  DistanceData dist(m);
-  DistanceOptions dopt;
-  dopt.row_threshold = -std::numeric_limits<double>::infinity();
-  // Exact up to 0.1 m (above every requirement, d_a + margin); farther pairs get a lower bound.
-  dopt.prune_distance = std::max(0.1, o.d_a + o.rest_margin + 0.01);
-  computeForwardKinematics(m, kin, q0);
-  std::array<int, 2> hand{}, shoulder{};
-  std::array<Eigen::Vector3d, 2> S, goal;
-  double reach = 0.0;
-  for (int a = 0; a < 2; ++a) {
-    hand[a] = m.linkIndex(s.arms[a].hand_link);
-    shoulder[a] = m.q_link[ix.q[a][0]];
-    S[a] = kin.X_B_L[shoulder[a]].translation();
-  }
-  {  // arm length: shoulder to hand point with every arm joint at 0 (stretched, as RobotState measures it)
-    Eigen::VectorXd qz = q0;
+namespace {
+
+/// The rest posture search of findRestPosture: one object, its steps the methods.
+class RestSearch {
+ public:
+  RestSearch(const Model& model, const SetupOptions& options, RobotSetup& setup)
+      : m(model),
+        o(options),
+        s(setup),
+        ix(armIndex(m, s)),
+        q0(neutralConfiguration(m)),
+        kin(m),
+        dist(m),
+        q(m.nq),
+        required(m.pairs.size(), o.d_a + o.rest_margin) {
+    dopt.row_threshold = -std::numeric_limits<double>::infinity();
+    // Exact up to 0.1 m (above every requirement, d_a + margin); farther pairs get a lower bound.
+    dopt.prune_distance = std::max(0.1, o.d_a + o.rest_margin + 0.01);
+    computeForwardKinematics(m, kin, q0);
+    for (int a = 0; a < 2; ++a) {
+      hand[a] = m.linkIndex(s.arms[a].hand_link);
+      shoulder[a] = m.q_link[ix.q[a][0]];
+      S[a] = kin.X_B_L[shoulder[a]].translation();
+    }
+    {  // arm length: shoulder to hand point with every arm joint at 0 (stretched, as RobotState measures it)
+      Eigen::VectorXd qz = q0;
+      for (int a = 0; a < 2; ++a)
+        for (int qi : ix.q[a]) qz[qi] = std::min(std::max(0.0, m.q_lower[qi]), m.q_upper[qi]);
+      computeForwardKinematics(m, kin, qz);
+      reach = (kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0]).norm();
+    }
+    // Hand below and in front of the shoulder, slightly out: elbow bent, arm not touching the body.
+    fwd = s.forward;
+    lft = Eigen::Vector3d::UnitZ().cross(s.forward);
     for (int a = 0; a < 2; ++a)
-      for (int qi : ix.q[a]) qz[qi] = std::min(std::max(0.0, m.q_lower[qi]), m.q_upper[qi]);
-    computeForwardKinematics(m, kin, qz);
-    reach = (kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0]).norm();
+      goal[a] = S[a] + reach * (0.35 * fwd + (a == 0 ? 0.2 : -0.2) * lft - 0.7 * Eigen::Vector3d::UnitZ());
+    // Only pairs with an arm segment: the rest posture cannot change the others (legs, head, trunk).
+    std::vector<bool> moved(m.links.size(), false);
+    for (int a = 0; a < 2; ++a) moved[m.q_link[ix.q[a][0]]] = true;
+    for (std::size_t l = 0; l < m.links.size(); ++l)
+      if (m.links[l].parent >= 0 && moved[m.links[l].parent]) moved[l] = true;
+    arm_pair.assign(m.pairs.size(), false);
+    for (std::size_t i = 0; i < m.pairs.size(); ++i)
+      arm_pair[i] = !m.segments[m.pairs[i].b].body_schema_slot &&
+                    (moved[m.segments[m.pairs[i].a].link] || moved[m.segments[m.pairs[i].b].link]);
   }
-  // Hand below and in front of the shoulder, slightly out: elbow bent, arm not touching the body.
-  const Eigen::Vector3d fwd = s.forward, lft = Eigen::Vector3d::UnitZ().cross(s.forward);
-  for (int a = 0; a < 2; ++a)
-    goal[a] = S[a] + reach * (0.35 * fwd + (a == 0 ? 0.2 : -0.2) * lft - 0.7 * Eigen::Vector3d::UnitZ());
-  auto place = [&](const std::vector<double>& left, const std::vector<double>& right, Eigen::VectorXd& q) {
-    q = q0;
-    for (std::size_t i = 0; i < ix.q[0].size(); ++i) q[ix.q[0][i]] = left[i];
-    for (std::size_t i = 0; i < ix.q[1].size(); ++i) q[ix.q[1][i]] = right[i];
-  };
-  auto mirrorOf = [&](const std::vector<double>& left, const std::vector<double>& right_free) {
-    std::vector<double> r = right_free;
-    for (std::size_t i = 0; i < ix.q[1].size() && i < left.size(); ++i)
-      if (ix.mirror[i] != 0.0) r[i] = std::clamp(ix.mirror[i] * left[i], lo80(m, ix.q[1][i]), hi80(m, ix.q[1][i]));
-    return r;
-  };
+
+  void run() {
+    setRequirements();
+    search();
+    if (!best.clear && closest.ratio > 0.0) {
+      const double floor = latch_floor + 0.004;
+      const double first_ratio = closest.ratio;
+      const double scale = 0.95 * first_ratio;
+      int lowered = 0;
+      for (std::size_t i = 0; i < required.size(); ++i) {
+        if (!arm_pair[i]) continue;
+        const double r_new = std::max(scale * required[i], std::min(required[i], floor));
+        if (r_new < required[i]) ++lowered;
+        required[i] = r_new;
+      }
+      search();
+      if (best.clear)
+        s.decisions.push_back(
+            "rest: WARNING: no posture clears every arm pair by d_a + margin (or 90 % of its reach); "
+            "the clearest keeps " +
+            fmt("%.0f", 100.0 * first_ratio) + " % of it: " + std::to_string(lowered) + " requirements scaled to " +
+            fmt("%.0f", 100.0 * scale) + " % (never below " + fmt("%.3f", floor) +
+            " m): avoidance acts at rest on the pairs "
+            "listed below d_a");
+    }
+    if (!best.clear) throwNoPosture();
+    refine();
+    describe();
+  }
+
+ private:
   struct Eval {
     bool clear = false;
     double cost = std::numeric_limits<double>::infinity();
@@ -515,25 +574,26 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
     double ratio = -std::numeric_limits<double>::infinity();  // smallest distance / requirement
     int pair = -1;
   };
-  // Only pairs with an arm segment: the rest posture cannot change the others (legs, head, trunk).
-  std::vector<bool> moved(m.links.size(), false);
-  for (int a = 0; a < 2; ++a) moved[m.q_link[ix.q[a][0]]] = true;
-  for (std::size_t l = 0; l < m.links.size(); ++l)
-    if (m.links[l].parent >= 0 && moved[m.links[l].parent]) moved[l] = true;
-  std::vector<bool> arm_pair(m.pairs.size(), false);
-  for (std::size_t i = 0; i < m.pairs.size(); ++i)
-    arm_pair[i] = !m.segments[m.pairs[i].b].body_schema_slot &&
-                  (moved[m.segments[m.pairs[i].a].link] || moved[m.segments[m.pairs[i].b].link]);
-  Eigen::VectorXd q(m.nq);
+
+  void place(const std::vector<double>& left, const std::vector<double>& right, Eigen::VectorXd& q) const {
+    q = q0;
+    for (std::size_t i = 0; i < ix.q[0].size(); ++i) q[ix.q[0][i]] = left[i];
+    for (std::size_t i = 0; i < ix.q[1].size(); ++i) q[ix.q[1][i]] = right[i];
+  }
+
+  std::vector<double> mirrorOf(const std::vector<double>& left, const std::vector<double>& right_free) const {
+    std::vector<double> r = right_free;
+    for (std::size_t i = 0; i < ix.q[1].size() && i < left.size(); ++i)
+      if (ix.mirror[i] != 0.0) r[i] = std::clamp(ix.mirror[i] * left[i], lo80(m, ix.q[1][i]), hi80(m, ix.q[1][i]));
+    return r;
+  }
+
   // What each arm pair can reach: its distance range over random arm postures drawn as the search draws
   // them (the middle 80 % of the limits, the right arm mirrored). A pair the arms cannot move (a shoulder
   // sphere turning about its centre) is not asked to clear anything; a pair never farther apart than
   // d_a + margin there (a short arm's upper arm and hand, a shoulder link and the upper arm) is asked for
   // 90 % of its maximum.
-  std::vector<double> required(m.pairs.size(), o.d_a + o.rest_margin);
-  const ControllerParams defaults;
-  const double latch_floor = defaults.d_r + defaults.estop_release_margin + 0.001;
-  {
+  void setRequirements() {
     std::vector<double> lo_d(m.pairs.size(), std::numeric_limits<double>::infinity());
     std::vector<double> hi_d(m.pairs.size(), -std::numeric_limits<double>::infinity());
     std::mt19937_64 pre(o.seed + 5);
@@ -564,17 +624,22 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
       } else if (hi_d[i] < required[i]) {
         // Never below the e-stop's release (+ 1 mm): resting there would latch the red zone.
         required[i] = std::max(0.9 * hi_d[i], std::min(required[i], latch_floor));
-        s.decisions.push_back("rest: pair " + name + " is never farther apart than " + fmt("%.3f", hi_d[i]) +
-                              " m (sampled in the rest search's range): rest keeps it at >= " + fmt("%.3f", required[i]) +
-                              " m, inside the avoidance zone d_a " + fmt("%.3f", o.d_a) + " m");
+        s.decisions.push_back(
+            "rest: pair " + name + " is never farther apart than " + fmt("%.3f", hi_d[i]) +
+            " m (sampled in the rest search's range): rest keeps it at >= " + fmt("%.3f", required[i]) +
+            " m, inside the avoidance zone d_a " + fmt("%.3f", o.d_a) + " m");
       }
     }
     if (fixed_pairs > 0)
-      s.decisions.push_back("rest: " + std::to_string(fixed_pairs) + " arm pairs keep their distance whatever the arm "
-                            "joints do (e.g. " + fixed_example + ": a shoulder sphere turning about its centre): "
+      s.decisions.push_back("rest: " + std::to_string(fixed_pairs) +
+                            " arm pairs keep their distance whatever the arm "
+                            "joints do (e.g. " +
+                            fixed_example +
+                            ": a shoulder sphere turning about its centre): "
                             "not part of the rest search");
   }
-  auto evaluate = [&](const std::vector<double>& left, const std::vector<double>& right) {
+
+  Eval evaluate(const std::vector<double>& left, const std::vector<double>& right) {
     Eval e;
     place(left, right, q);
     computeForwardKinematics(m, kin, q);
@@ -602,12 +667,9 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
       }
     e.cost = c + 0.05 * centre / static_cast<double>(ix.q[0].size() + ix.q[1].size());
     return e;
-  };
-  std::vector<double> best_l, best_r, l(ix.q[0].size()), r(ix.q[1].size());
-  Eval best;
-  Eval closest;  // the clearest posture, for the error message
-  std::vector<double> closest_l, closest_r;
-  auto search = [&] {
+  }
+
+  void search() {
     std::mt19937_64 rng(o.seed);
     best = Eval{};
     closest = Eval{};
@@ -629,33 +691,10 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
         best_r = r;
       }
     }
-  };
-  search();
-  // A crowded shoulder (small shoulder links beside the chest, the neck and the head: iCub) can leave
-  // no posture that clears every pair at once. Then every requirement is scaled to 95 % of what the
-  // clearest posture keeps of it, never below the e-stop floor (d_r + estop_release_margin + 5 mm, or
-  // the pair's own requirement if smaller), and the search runs again: the arms rest with those pairs
-  // inside the avoidance zone, said here.
-  if (!best.clear && closest.ratio > 0.0) {
-    const double floor = latch_floor + 0.004;
-    const double first_ratio = closest.ratio;
-    const double scale = 0.95 * first_ratio;
-    int lowered = 0;
-    for (std::size_t i = 0; i < required.size(); ++i) {
-      if (!arm_pair[i]) continue;
-      const double r_new = std::max(scale * required[i], std::min(required[i], floor));
-      if (r_new < required[i]) ++lowered;
-      required[i] = r_new;
-    }
-    search();
-    if (best.clear)
-      s.decisions.push_back("rest: WARNING: no posture clears every arm pair by d_a + margin (or 90 % of its reach); "
-                            "the clearest keeps " + fmt("%.0f", 100.0 * first_ratio) + " % of it: " +
-                            std::to_string(lowered) + " requirements scaled to " + fmt("%.0f", 100.0 * scale) +
-                            " % (never below " + fmt("%.3f", floor) + " m): avoidance acts at rest on the pairs "
-                            "listed below d_a");
   }
-  if (!best.clear) {
+
+  /// Every pair short of what it must keep in the clearest posture, named.
+  [[noreturn]] void throwNoPosture() {
     // Every pair short of what it must keep in the clearest posture.
     place(closest_l, closest_r, q);
     computeForwardKinematics(m, kin, q);
@@ -666,56 +705,89 @@ void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) {
       if (!dist.pairs[i].active || !arm_pair[i] || dist.pairs[i].distance > required[i]) continue;
       ++n_short;
       short_pairs += std::string(short_pairs.empty() ? "" : ", ") + "'" + m.segments[m.pairs[i].a].name + "'-'" +
-                     m.segments[m.pairs[i].b].name + "' " + fmt("%.1f", 1e3 * dist.pairs[i].distance) + " mm (needs > " +
-                     fmt("%.1f", 1e3 * required[i]) + ")";
+                     m.segments[m.pairs[i].b].name + "' " + fmt("%.1f", 1e3 * dist.pairs[i].distance) +
+                     " mm (needs > " + fmt("%.1f", 1e3 * required[i]) + ")";
     }
     throw SetupError("no rest posture found for robot '" + m.name + "': of " + std::to_string(o.rest_samples) +
                      " postures within the middle 80 % of the arm joints' limits none keeps every checked pair of an "
                      "arm segment clear (d_a + margin, 90 % of what the pair reaches there, at least d_r + "
-                     "estop_release_margin + 1 mm); the clearest leaves " + std::to_string(n_short) + " short: " +
-                     short_pairs + ": exclude the pairs that cannot collide (collision YAML exclude:), or lower d_r");
+                     "estop_release_margin + 1 mm); the clearest leaves " +
+                     std::to_string(n_short) + " short: " + short_pairs +
+                     ": exclude the pairs that cannot collide (collision YAML exclude:), or lower d_r");
   }
+
   // Coordinate descent: each left joint by +-step (the right one mirrored), then unmirrored right joints.
-  for (double step : {0.2, 0.1, 0.05, 0.02, 0.01}) {
-    bool improved = true;
-    while (improved) {
-      improved = false;
-      for (int a = 0; a < 2; ++a)
-        for (std::size_t i = 0; i < ix.q[a].size(); ++i) {
-          if (a == 1 && i < ix.mirror.size() && ix.mirror[i] != 0.0) continue;
-          for (double d : {step, -step}) {
-            std::vector<double> tl = best_l, tr = best_r;
-            std::vector<double>& v = a == 0 ? tl : tr;
-            v[i] = std::clamp(v[i] + d, lo80(m, ix.q[a][i]), hi80(m, ix.q[a][i]));
-            if (a == 0) tr = mirrorOf(tl, tr);
-            const Eval e = evaluate(tl, tr);
-            if (e.clear && e.cost < best.cost - 1e-9) {
-              best = e;
-              best_l = tl;
-              best_r = tr;
-              improved = true;
+  void refine() {
+    for (double step : {0.2, 0.1, 0.05, 0.02, 0.01}) {
+      bool improved = true;
+      while (improved) {
+        improved = false;
+        for (int a = 0; a < 2; ++a)
+          for (std::size_t i = 0; i < ix.q[a].size(); ++i) {
+            if (a == 1 && i < ix.mirror.size() && ix.mirror[i] != 0.0) continue;
+            for (double d : {step, -step}) {
+              std::vector<double> tl = best_l, tr = best_r;
+              std::vector<double>& v = a == 0 ? tl : tr;
+              v[i] = std::clamp(v[i] + d, lo80(m, ix.q[a][i]), hi80(m, ix.q[a][i]));
+              if (a == 0) tr = mirrorOf(tl, tr);
+              const Eval e = evaluate(tl, tr);
+              if (e.clear && e.cost < best.cost - 1e-9) {
+                best = e;
+                best_l = tl;
+                best_r = tr;
+                improved = true;
+              }
             }
           }
-        }
+      }
     }
   }
-  s.arms[0].rest = best_l;
-  s.arms[1].rest = best_r;
-  const Eval e = evaluate(best_l, best_r);
-  const SegmentPair& p = m.pairs[e.pair];
-  s.rest_distance = e.dmin + required[e.pair];
-  s.rest_pair = m.segments[p.a].name + "-" + m.segments[p.b].name;
-  Eigen::Vector3d h = kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0];
-  std::ostringstream os;
-  os << "rest: left hand " << fmt("%.2f", h.dot(fwd)) << " m in front of, " << fmt("%.2f", h.dot(lft)) << " m beside and "
-     << fmt("%.2f", -h.z()) << " m below the shoulder (arm reach " << fmt("%.2f", reach)
-     << " m): the posture nearest to 'hand below and in front of the shoulder, arm slightly out' of " << o.rest_samples
-     << " random ones in the middle 80 % of the limits (then refined) with every checked pair of an arm above d_a + "
-     << fmt("%.3f", o.rest_margin) << " m; at rest the pair with the least margin over what it must keep is '"
-     << m.segments[p.a].name << "'-'" << m.segments[p.b].name << "', " << fmt("%.3f", s.rest_distance)
-     << " m apart; right arm mirrored";
-  s.decisions.push_back(os.str());
-}
+
+  void describe() {
+    s.arms[0].rest = best_l;
+    s.arms[1].rest = best_r;
+    const Eval e = evaluate(best_l, best_r);
+    const SegmentPair& p = m.pairs[e.pair];
+    s.rest_distance = e.dmin + required[e.pair];
+    s.rest_pair = m.segments[p.a].name + "-" + m.segments[p.b].name;
+    Eigen::Vector3d h = kin.X_B_L[hand[0]] * s.arms[0].hand_point_L - S[0];
+    std::ostringstream os;
+    os << "rest: left hand " << fmt("%.2f", h.dot(fwd)) << " m in front of, " << fmt("%.2f", h.dot(lft))
+       << " m beside and " << fmt("%.2f", -h.z()) << " m below the shoulder (arm reach " << fmt("%.2f", reach)
+       << " m): the posture nearest to 'hand below and in front of the shoulder, arm slightly out' of "
+       << o.rest_samples
+       << " random ones in the middle 80 % of the limits (then refined) with every checked pair of an arm above d_a + "
+       << fmt("%.3f", o.rest_margin) << " m; at rest the pair with the least margin over what it must keep is '"
+       << m.segments[p.a].name << "'-'" << m.segments[p.b].name << "', " << fmt("%.3f", s.rest_distance)
+       << " m apart; right arm mirrored";
+    s.decisions.push_back(os.str());
+  }
+
+  const Model& m;
+  const SetupOptions& o;
+  RobotSetup& s;
+  const ArmIndex ix;
+  const Eigen::VectorXd q0;
+  KinematicsData kin;
+  DistanceData dist;
+  DistanceOptions dopt;
+  std::array<int, 2> hand{}, shoulder{};
+  std::array<Eigen::Vector3d, 2> S, goal;
+  double reach = 0.0;
+  Eigen::Vector3d fwd, lft;
+  std::vector<bool> arm_pair;
+  Eigen::VectorXd q;
+  std::vector<double> required;
+  const double latch_floor = ControllerParams{}.d_r + ControllerParams{}.estop_release_margin + 0.001;
+  std::vector<double> best_l, best_r, l = std::vector<double>(ix.q[0].size()), r = std::vector<double>(ix.q[1].size());
+  Eval best;
+  Eval closest;  // the clearest posture, for the error message
+  std::vector<double> closest_l, closest_r;
+};
+
+}  // namespace
+
+void findRestPosture(const Model& m, const SetupOptions& o, RobotSetup& s) { RestSearch(m, o, s).run(); }
 
 namespace {
 

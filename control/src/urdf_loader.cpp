@@ -258,58 +258,10 @@ Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
   return loadModelFromString(ss.str(), config, urdf_path, warnings);
 }
 
-Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config,
-                          const std::string& origin, std::vector<std::string>* warnings) {
-  // Our own reading of the XML first: it finds what urdfdom would drop silently (urdf_audit.hpp).
-  const detail::UrdfAudit audit = detail::auditUrdf(urdf_xml);
-  if (!audit.xml_error.empty()) fail(origin, "malformed URDF: " + audit.xml_error);
-  std::vector<std::string> problems = audit.problems;
-  urdf::ModelInterfaceSharedPtr urdf_model;
-  try {
-    urdf_model = urdf::parseURDF(audit.capsules > 0 ? audit.urdfdom_xml : urdf_xml);
-  } catch (const std::exception& e) {
-    problems.push_back(std::string("urdfdom: ") + e.what());
-  }
-  for (auto& p : detail::collisionAccounting(audit, urdf_model.get())) problems.push_back(std::move(p));
-  if (!urdf_model) {
-    if (problems.empty()) fail(origin, "malformed URDF (urdfdom could not parse it; see the message above)");
-    failWithProblems(origin, "malformed URDF", problems);
-  }
-  // Every collision element of the file is accounted for, or the load fails naming the link.
-  if (!problems.empty()) {
-    // Release urdfdom's child links even on this exit (the reference cycle below).
-    for (auto& entry : urdf_model->links_)
-      if (entry.second) entry.second->child_links.clear();
-    failWithProblems(origin, "collision geometry would be left out or is out of range", problems);
-  }
-  // urdfdom holds children by shared_ptr: a kinematic loop in a malformed file (a link made the child
-  // of its own descendant) is a reference cycle that would outlive the model. Break it on every exit.
-  struct ChildLinksReleaser {
-    urdf::ModelInterfaceSharedPtr& m;
-    ~ChildLinksReleaser() {
-      for (auto& entry : m->links_)
-        if (entry.second) entry.second->child_links.clear();
-    }
-  } release_children{urdf_model};
-  if (!urdf_model->getRoot()) fail(origin, "URDF has no root link");
+namespace {
 
-  FitOverlay overlay;
-  if (!config.fit.empty()) overlay = loadFitOverlay(config.fit);
-
-  Model model;
-  model.name = urdf_model->getName();
-
-  // Breadth-first over the tree: parents before children.
-  std::vector<urdf::LinkConstSharedPtr> order{urdf_model->getRoot()};
-  std::set<std::string> reached{urdf_model->getRoot()->name};
-  for (std::size_t i = 0; i < order.size(); ++i)
-    for (const auto& child : order[i]->child_links)
-      if (reached.insert(child->name).second) order.push_back(child);
-  for (const auto& entry : urdf_model->links_)
-    if (!reached.count(entry.first))
-      fail(origin, "link '" + entry.first + "' is not connected to the root link '" + urdf_model->getRoot()->name +
-                       "' (a kinematic loop: is it the child of its own descendant?)");
-
+/// The links in `order` (parents first) with their joints and inertials; q indices in that order.
+void addLinks(Model& model, const std::vector<urdf::LinkConstSharedPtr>& order, const std::string& origin) {
   std::map<std::string, int> index_of;
   for (const auto& ulink : order) {
     Link link;
@@ -355,12 +307,17 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     model.links.push_back(link);
   }
 
+}
+
+/// Position and velocity limits per q index (a missing velocity limit: 1.0, with a warning).
+void setLimits(Model& model, const urdf::ModelInterface& urdf_model, const std::string& origin,
+               std::vector<std::string>* warnings) {
   // Limits per q index.
   model.q_lower.resize(model.nq);
   model.q_upper.resize(model.nq);
   model.v_max.resize(model.nq);
   for (int qi = 0; qi < model.nq; ++qi) {
-    const auto joint = urdf_model->getJoint(model.q_names[qi]);
+    const auto joint = urdf_model.getJoint(model.q_names[qi]);
     const std::string jwhere = "joint '" + joint->name + "'";
     double lo = -std::numeric_limits<double>::infinity();
     double hi = std::numeric_limits<double>::infinity();
@@ -384,17 +341,13 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     model.v_max[qi] = v;
   }
 
-  // Support (movable ancestors, root first) of every link.
-  model.link_support.resize(model.links.size());
-  for (std::size_t i = 0; i < model.links.size(); ++i) {
-    const Link& link = model.links[i];
-    if (link.parent >= 0) model.link_support[i] = model.link_support[link.parent];
-    if (link.q_index >= 0) model.link_support[i].push_back(link.q_index);
-  }
+}
 
-  // Meshes (and, on fitted links, boxes): the fit overlay's primitives, checked fresh.
-  const std::map<std::string, const LinkFit*> fitted = fittedLinks(origin, order, overlay);
-
+/// One segment per link with collision elements (a fitted link's pieces and capsules first), then the
+/// body-schema slots.
+void addSegments(Model& model, const std::vector<urdf::LinkConstSharedPtr>& order,
+                 const std::map<std::string, const LinkFit*>& fitted, const std::string& origin,
+                 std::vector<std::string>* warnings) {
   // Segments: one per link with collision elements.
   for (std::size_t i = 0; i < order.size(); ++i) {
     const auto& ulink = order[i];
@@ -443,6 +396,11 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
     model.segments.push_back(seg);
   }
 
+}
+
+/// The checked pairs: every pair of segments but those the SRDF or the configuration excludes, those
+/// on one rigid body, and (with exclude_adjacent) adjacent ones; slot pairs with every robot segment.
+void addPairs(Model& model, const CollisionConfig& config, const std::string& origin) {
   // Segment parent: the nearest ancestor link that carries a segment.
   std::vector<int> segment_of_link(model.links.size(), -1);
   for (int s = 0; s < model.num_robot_segments; ++s) segment_of_link[model.segments[s].link] = s;
@@ -505,6 +463,80 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
       model.pairs.push_back({a, b});
     }
   }
+}
+
+}  // namespace
+
+Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config,
+                          const std::string& origin, std::vector<std::string>* warnings) {
+  // Our own reading of the XML first: it finds what urdfdom would drop silently (urdf_audit.hpp).
+  const detail::UrdfAudit audit = detail::auditUrdf(urdf_xml);
+  if (!audit.xml_error.empty()) fail(origin, "malformed URDF: " + audit.xml_error);
+  std::vector<std::string> problems = audit.problems;
+  urdf::ModelInterfaceSharedPtr urdf_model;
+  try {
+    urdf_model = urdf::parseURDF(audit.capsules > 0 ? audit.urdfdom_xml : urdf_xml);
+  } catch (const std::exception& e) {
+    problems.push_back(std::string("urdfdom: ") + e.what());
+  }
+  for (auto& p : detail::collisionAccounting(audit, urdf_model.get())) problems.push_back(std::move(p));
+  if (!urdf_model) {
+    if (problems.empty()) fail(origin, "malformed URDF (urdfdom could not parse it; see the message above)");
+    failWithProblems(origin, "malformed URDF", problems);
+  }
+  // Every collision element of the file is accounted for, or the load fails naming the link.
+  if (!problems.empty()) {
+    // Release urdfdom's child links even on this exit (the reference cycle below).
+    for (auto& entry : urdf_model->links_)
+      if (entry.second) entry.second->child_links.clear();
+    failWithProblems(origin, "collision geometry would be left out or is out of range", problems);
+  }
+  // urdfdom holds children by shared_ptr: a kinematic loop in a malformed file (a link made the child
+  // of its own descendant) is a reference cycle that would outlive the model. Break it on every exit.
+  struct ChildLinksReleaser {
+    urdf::ModelInterfaceSharedPtr& m;
+    ~ChildLinksReleaser() {
+      for (auto& entry : m->links_)
+        if (entry.second) entry.second->child_links.clear();
+    }
+  } release_children{urdf_model};
+  if (!urdf_model->getRoot()) fail(origin, "URDF has no root link");
+
+  FitOverlay overlay;
+  if (!config.fit.empty()) overlay = loadFitOverlay(config.fit);
+
+  Model model;
+  model.name = urdf_model->getName();
+
+  // Breadth-first over the tree: parents before children.
+  std::vector<urdf::LinkConstSharedPtr> order{urdf_model->getRoot()};
+  std::set<std::string> reached{urdf_model->getRoot()->name};
+  for (std::size_t i = 0; i < order.size(); ++i)
+    for (const auto& child : order[i]->child_links)
+      if (reached.insert(child->name).second) order.push_back(child);
+  for (const auto& entry : urdf_model->links_)
+    if (!reached.count(entry.first))
+      fail(origin, "link '" + entry.first + "' is not connected to the root link '" + urdf_model->getRoot()->name +
+                       "' (a kinematic loop: is it the child of its own descendant?)");
+
+  addLinks(model, order, origin);
+
+  setLimits(model, *urdf_model, origin, warnings);
+
+  // Support (movable ancestors, root first) of every link.
+  model.link_support.resize(model.links.size());
+  for (std::size_t i = 0; i < model.links.size(); ++i) {
+    const Link& link = model.links[i];
+    if (link.parent >= 0) model.link_support[i] = model.link_support[link.parent];
+    if (link.q_index >= 0) model.link_support[i].push_back(link.q_index);
+  }
+
+  // Meshes (and, on fitted links, boxes): the fit overlay's primitives, checked fresh.
+  const std::map<std::string, const LinkFit*> fitted = fittedLinks(origin, order, overlay);
+
+  addSegments(model, order, fitted, origin, warnings);
+
+  addPairs(model, config, origin);
   return model;
 }
 

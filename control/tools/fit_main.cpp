@@ -1,6 +1,7 @@
 // reflex_fit: fits capsules and spheres to a robot's collision meshes (and boxes) and writes the fit
 // overlay `<urdf stem>.fit.yaml` (or -o FILE) that the loader reads. Never edits the URDF.
 // See control/README.md, "Meshes".
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/files.hpp"
 #include "reflex/control/mesh_fit.hpp"
 #include "package_args.hpp"
@@ -32,15 +33,14 @@ int main(int argc, char** argv) {
                  "split a link while fitted volume / convex-hull volume is above this")
       ->check(CLI::Range(1.0, 100.0));
   app.add_flag("-q,--quiet", quiet, "no per-link progress lines");
-  CLI11_PARSE(app, argc, argv);
+  return reflex::runMain("reflex_fit", app, argc, argv, [&]() -> int {
 
-  try {
     const reflex::control::PackagePaths paths = reflex::control::parsePackagePathArgs(package_args);
     if (out_path.empty()) out_path = reflex::control::defaultFitOverlayPath(urdf_path);
     if (const std::string why = reflex::common::replaceableFileProblem(out_path); !why.empty())
-      throw std::runtime_error(why);
+      throw reflex::Error(why);
     if (const std::string why = reflex::common::outputFileProblem(out_path); !why.empty())
-      throw std::runtime_error("output " + why);
+      throw reflex::Error("output " + why);
     const auto overlay = reflex::control::fitRobot(urdf_path, paths, options, [&](const std::string& line) {
       if (!quiet) std::cerr << line << std::endl;
     });
@@ -48,7 +48,7 @@ int main(int argc, char** argv) {
       std::cerr << urdf_path << ": no link has mesh or box collision elements; the overlay lists none" << std::endl;
     const std::string text = reflex::control::fitOverlayText(overlay, out_path);
     if (const std::string why = reflex::common::writeFileReplacing(out_path, text); !why.empty())
-      throw std::runtime_error(why);
+      throw reflex::Error(why);
     // Summary: one line per link.
     std::cout << "# link,primitives,vertices_enclosed,vertices,volume_ratio,worst_gap_m\n";
     for (const auto& l : overlay.links) {
@@ -59,8 +59,5 @@ int main(int argc, char** argv) {
     }
     std::cout << "# wrote " << out_path << std::endl;
     return 0;
-  } catch (const std::exception& e) {
-    std::cerr << "reflex_fit: " << e.what() << std::endl;
-    return 1;
-  }
+  });
 }

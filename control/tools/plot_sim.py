@@ -40,15 +40,8 @@ def clip(v, hi=0.2):
     return [min(x, hi) if isinstance(x, float) else x for x in v]
 
 
-def main():
-    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
-        print(__doc__)
-        return 0 if len(sys.argv) >= 2 else 2
-    out = sys.argv[1]
-    title = sys.argv[2] if len(sys.argv) > 2 else os.path.basename(out)
-    ts = read(os.path.join(out, "timeseries.csv"))
-    t = ts["time"]
-
+def plot_distance_f(out, title, ts, t):
+    """f(d) and the closest distance per arm against the zones: distance_f.png."""
     fig, axes = plt.subplots(2, 2, figsize=(11, 6), sharex=True)
     for col, side in enumerate(("left", "right")):
         axes[0][col].plot(t, ts[side + "_f"], color="tab:red")
@@ -73,6 +66,9 @@ def main():
     fig.savefig(os.path.join(out, "distance_f.png"), dpi=90)
     plt.close(fig)
 
+
+def plot_joints(out, title, ts, t):
+    """The arm joint angles: joints.png."""
     joints = [k for k in ts if k.startswith("q_") and ("shoulder" in k or "elbow" in k or "wrist" in k)]
     fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
     for ax, pre in zip(axes, ("q_l_", "q_r_")):
@@ -87,6 +83,9 @@ def main():
     fig.savefig(os.path.join(out, "joints.png"), dpi=90)
     plt.close(fig)
 
+
+def plot_hands(out, title, ts, t):
+    """Hands, targets and linear trajectories: hands.png."""
     fig, axes = plt.subplots(3, 2, figsize=(11, 7), sharex=True)
     for col, side in enumerate(("left", "right")):
         for row, ax_name in enumerate("xyz"):
@@ -104,6 +103,9 @@ def main():
     fig.savefig(os.path.join(out, "hands.png"), dpi=90)
     plt.close(fig)
 
+
+def plot_one_vs_three_dof(out, title, ts, t):
+    """With timeseries_3dof.csv: the right hand with 1-DOF and 3-DOF avoidance (paper Fig. 8)."""
     three = os.path.join(out, "timeseries_3dof.csv")
     if os.path.exists(three):
         ts3 = read(three)
@@ -130,6 +132,9 @@ def main():
         fig.savefig(os.path.join(out, "one_vs_three_dof.png"), dpi=90)
         plt.close(fig)
 
+
+def plot_postures(out, title):
+    """With postures.csv: the robot's capsules at the picked rows, from the side and the front."""
     post = os.path.join(out, "postures.csv")
     if os.path.exists(post):
         with open(post) as fh:
@@ -178,8 +183,23 @@ def main():
         fig.tight_layout()
         fig.savefig(os.path.join(out, "postures.png"), dpi=80)
         plt.close(fig)
-    return 0
 
+
+def main():
+    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
+        print(__doc__)
+        return 0 if len(sys.argv) >= 2 else 2
+    out = sys.argv[1]
+    title = sys.argv[2] if len(sys.argv) > 2 else os.path.basename(out)
+    ts = read(os.path.join(out, "timeseries.csv"))
+    t = ts["time"]
+
+    plot_distance_f(out, title, ts, t)
+    plot_joints(out, title, ts, t)
+    plot_hands(out, title, ts, t)
+    plot_one_vs_three_dof(out, title, ts, t)
+    plot_postures(out, title)
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())

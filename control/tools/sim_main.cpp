@@ -7,6 +7,7 @@
 // DIR/summary.txt, and PNG plots like the paper's figures (through python3-matplotlib). With a robot
 // over DDS the summary adds the plant's figures (robot_summary below) and DIR/reflex_mujoco*.log holds
 // the spawned robot's output.
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include "reflex/control_node/bus_plant.hpp"
 #include "reflex/control/controller.hpp"
@@ -246,13 +247,39 @@ void summarizePlant(std::ostream& os, const SimResult& r, const PlantFigures& p,
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  CLI::App app{"reflex_sim: the paper's experiments on the kinematic robot (in process, no DDS), or on a robot over DDS\n"
-               "in real time (--robot mujoco spawns reflex_mujoco on its own domain; --robot dds joins a robot already\n"
-               "on the bus), through the same onboard controller and scenario scripts"};
+/// What the command line asks for (robot_domain: resolved from --domain and the robot side).
+struct SimArgs {
   std::string robot_side = "kinematic";
   std::string scenario_name, out_dir = "out/sim", urdf, collision, controller_cfg, mode = "one_dof";
   bool list = false, no_avoidance = false, no_plots = false;
+  std::string postures_from;
+  std::vector<double> at;
+  std::optional<int> domain;
+  double robot_timeout = 0.020, command_deadline = 0.015, robot_wait = 30.0;
+  std::string joint_map;
+  double ramp_time = 3.0;
+  int robot_domain = 0;
+};
+
+void addOptions(CLI::App& app, SimArgs& a) {
+  std::string& robot_side = a.robot_side;
+  std::string& scenario_name = a.scenario_name;
+  std::string& out_dir = a.out_dir;
+  std::string& urdf = a.urdf;
+  std::string& collision = a.collision;
+  std::string& controller_cfg = a.controller_cfg;
+  std::string& mode = a.mode;
+  bool& list = a.list;
+  bool& no_avoidance = a.no_avoidance;
+  bool& no_plots = a.no_plots;
+  std::string& postures_from = a.postures_from;
+  std::vector<double>& at = a.at;
+  std::optional<int>& domain = a.domain;
+  double& robot_timeout = a.robot_timeout;
+  double& command_deadline = a.command_deadline;
+  double& robot_wait = a.robot_wait;
+  std::string& joint_map = a.joint_map;
+  double& ramp_time = a.ramp_time;
   app.add_option("scenario", scenario_name, "scenario name (see --list) or 'all'");
   app.add_flag("--list", list, "list the scenarios");
   app.add_option("--out", out_dir, "output folder (created)");
@@ -264,14 +291,10 @@ int main(int argc, char** argv) {
                  "controller configuration YAML (default: <URDF stem>.controller.yaml next to the URDF if it exists, "
                  "else the built-in asimo_like arms)");
   app.add_flag("--no-plots", no_plots, "do not render PNG plots");
-  std::string postures_from;
-  std::vector<double> at;
   app.add_option("--postures-from", postures_from,
                  "instead of simulating: write OUT/postures.csv (the robot's capsules) for rows of this time-series "
                  "CSV (reflex_sim or reflex_controller --log)");
   app.add_option("--at", at, "times (s) of the rows for --postures-from (nearest row each)")->delimiter(',');
-  std::optional<int> domain;
-  double robot_timeout = 0.020, command_deadline = 0.015, robot_wait = 30.0;
   app.add_option("--robot", robot_side,
                  "the robot side: 'kinematic' (the in-process plant, simulated time), 'mujoco' (spawns reflex_mujoco "
                  "on --domain and drives it over DDS in real time), 'dds' (a robot already on the bus, real time) or "
@@ -279,8 +302,6 @@ int main(int argc, char** argv) {
                  "unitree_hg does: rt/lowstate in, rt/arm_sdk out, the weight ramped in and out; judged like mujoco)")
       ->capture_default_str()
       ->check(CLI::IsMember({"kinematic", "mujoco", "dds", "unitree_hg"}));
-  std::string joint_map;
-  double ramp_time = 3.0;
   app.add_option("--joint-map", joint_map,
                  "--robot unitree_hg: the joint map YAML (default: <URDF stem>.hg.yaml beside the URDF)");
   app.add_option("--ramp-time", ramp_time, "--robot unitree_hg: seconds of the arm_sdk weight's ramp in and out")
@@ -300,15 +321,141 @@ int main(int argc, char** argv) {
   app.add_option("--robot-wait", robot_wait, "seconds to wait for the robot's first state (mujoco, dds); (0, 600]")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 600.0));
-  CLI11_PARSE(app, argc, argv);
+}
+
+/// --postures-from: OUT/postures.csv for rows of a time series, instead of simulating.
+int writePosturesFrom(SimArgs& a) {
+  std::string& out_dir = a.out_dir;
+  std::string& urdf = a.urdf;
+  std::string& collision = a.collision;
+  const std::string& postures_from = a.postures_from;
+  std::vector<double>& at = a.at;
+  if (urdf.empty()) urdf = reflex::common::defaultUrdf();
+  const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
+  const SimResult r = readTimeseries(model, postures_from);
+  if (r.samples.empty()) throw ConfigError(postures_from + ": no rows");
+  std::vector<std::size_t> picks;
+  if (at.empty()) picks = evenPicks(r.samples.size(), 6);
+  for (const double t : at) {
+    std::size_t best = 0;
+    for (std::size_t k = 0; k < r.samples.size(); ++k)
+      if (std::abs(r.samples[k].t - t) < std::abs(r.samples[best].t - t)) best = k;
+    picks.push_back(best);
+  }
+  fs::create_directories(out_dir);
+  writePostures(model, r, (fs::path(out_dir) / "postures.csv").string(), picks);
+  std::cout << "wrote " << (fs::path(out_dir) / "postures.csv").string() << "\n";
+  return finish(0);
+}
+
+/// One run of a scenario on a robot over DDS: a fresh reflex_mujoco per run (mujoco, unitree_hg), or
+/// the robot already on the bus (dds), started at the rest configuration; judged by the robot's own
+/// measurements, and compared with the same run on the kinematic robot.
+SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& cm, const Scenario& scenario,
+                   const SimOptions& opt, const fs::path& dir, const std::string& csv, const char* label,
+                   int run_index, std::ostream& summary) {
+  const Scenario* sc = &scenario;
+  const std::string& robot_side = a.robot_side;
+  const std::string& urdf = a.urdf;
+  const std::string& collision = a.collision;
+  const double& robot_timeout = a.robot_timeout;
+  const double& command_deadline = a.command_deadline;
+  const double& robot_wait = a.robot_wait;
+  const std::string& joint_map = a.joint_map;
+  const double& ramp_time = a.ramp_time;
+  const int robot_domain = a.robot_domain;
+  // A robot over DDS: a fresh reflex_mujoco per run (mujoco), started at the rest configuration.
+  reflex::control_node::BusPlantOptions po;
+  po.domain = robot_domain;
+  po.q_start = restConfiguration(model, cm);
+  po.margin = cm.params.d_r;
+  po.port.timeout = robot_timeout;
+  po.port.deadline = command_deadline;
+  po.first_state_timeout = robot_wait;
+  PlantFigures fig;
+  fig.robot = robot_side;
+  fig.domain = robot_domain;
+  if (robot_side == "unitree_hg") {
+    po.interface = "unitree_hg";
+    po.joint_map = !joint_map.empty() ? joint_map
+                                      : (fs::path(urdf).parent_path() / (fs::path(urdf).stem().string() + ".hg.yaml")).string();
+    po.ramp_time = ramp_time;
+    fig.ramp_time = ramp_time;
+  }
+  if (robot_side == "mujoco" || robot_side == "unitree_hg") {
+    po.robot_binary = reflex::common::executableDir() + "/reflex_mujoco";
+    po.robot_args = {"--urdf", urdf};
+    if (!collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", collision});
+    fig.log = (dir / (run_index == 0 ? "reflex_mujoco.log" : "reflex_mujoco_" + std::to_string(run_index) + ".log"))
+                  .string();
+    po.robot_log = fig.log;
+  }
+  std::cout << "  " << sc->name << " (" << label << "): " << (robot_side != "dds" ? "starting reflex_mujoco" : "joining")
+            << " on domain " << robot_domain << ", then " << sc->duration << " s in real time ..." << std::endl;
+  SimResult r;
+  double wall = 0.0;
+  {
+    reflex::control_node::BusScenarioPlant plant(model, drivenJoints(model, cm), po);
+    const auto t0 = std::chrono::steady_clock::now();
+    r = runScenario(model, cm, *sc, opt, plant);
+    wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // unitree_hg: the arm_sdk weight back to 0, watched like the scenario (contacts, joint steps).
+    if (robot_side == "unitree_hg") {
+      plant.rampOut(cm.params.period);
+      fig.ramp_out_ratio = plant.rampOutSpeedRatio();
+      fig.max_weight_step = plant.maxWeightStep();
+    }
+    fig.measured_ratio = plant.measuredSpeedRatio();
+    // The judge's last words: contacts published after the last cycle.
+    plant.awaitCycle(static_cast<double>(r.cycles) * cm.params.period, cm.params.period);
+    fig.robot_exit = plant.stop();
+    fig.contact_samples = plant.contactSamples();
+    fig.contacts_received = plant.contactsReceived();
+    fig.total_contact_steps = plant.totalContactSteps();
+    fig.min_contact = plant.minContact();
+    fig.min_contact_pair = plant.minContactPair();
+  }
+  fig.tracking = computeTracking(cm, r);
+  for (const auto& s : r.samples)
+    if (s.commanded && s.min_distance < cm.params.d_r) ++fig.below_d_r;
+  const SimResult kin = runScenario(model, cm, *sc, opt);
+  fig.kin_min_distance = kin.min_distance;
+  fig.kin_tracking = computeTracking(cm, kin);
+  fig.kin_estop = kin.estop_fired;
+  writeTimeseriesCsv(model, cm, r, (dir / csv).string());
+  for (std::ostream* os : {static_cast<std::ostream*>(&std::cout), static_cast<std::ostream*>(&summary)}) {
+    summarize(*os, model, *sc, r, label, wall, robot_side);
+    summarizePlant(*os, r, fig, cm.params.d_r);
+  }
+  return r;
+}
+
+int main(int argc, char** argv) {
+  CLI::App app{"reflex_sim: the paper's experiments on the kinematic robot (in process, no DDS), or on a robot over DDS\n"
+               "in real time (--robot mujoco spawns reflex_mujoco on its own domain; --robot dds joins a robot already\n"
+               "on the bus), through the same onboard controller and scenario scripts"};
+  SimArgs args;
+  addOptions(app, args);
+  std::string& robot_side = args.robot_side;
+  std::string& scenario_name = args.scenario_name;
+  std::string& out_dir = args.out_dir;
+  std::string& urdf = args.urdf;
+  std::string& collision = args.collision;
+  std::string& controller_cfg = args.controller_cfg;
+  std::string& mode = args.mode;
+  bool& list = args.list;
+  bool& no_avoidance = args.no_avoidance;
+  bool& no_plots = args.no_plots;
+  std::string& postures_from = args.postures_from;
+  std::optional<int>& domain = args.domain;
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   const bool over_bus = robot_side != "kinematic";
-  int robot_domain = 0;
+  int& robot_domain = args.robot_domain;
   if (over_bus) {
     try {
       robot_domain = robot_side != "dds" ? domain.value_or(197) : reflex::bus::resolveDomainId(domain);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
-      return 1;
+      return reflex::reportException("reflex_sim", e);
     }
   }
 
@@ -316,32 +463,10 @@ int main(int argc, char** argv) {
   if (!list && !out_dir.empty()) {
     if (const std::string why = reflex::common::outputFolderProblem(out_dir); !why.empty()) {
       std::fprintf(stderr, "reflex_sim: error: %s\n", why.c_str());
-      return 1;
+      return reflex::kExitRefused;
     }
   }
-  if (!postures_from.empty()) {
-    try {
-      if (urdf.empty()) urdf = reflex::common::defaultUrdf();
-      const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
-      const SimResult r = readTimeseries(model, postures_from);
-      if (r.samples.empty()) throw ConfigError(postures_from + ": no rows");
-      std::vector<std::size_t> picks;
-      if (at.empty()) picks = evenPicks(r.samples.size(), 6);
-      for (const double t : at) {
-        std::size_t best = 0;
-        for (std::size_t k = 0; k < r.samples.size(); ++k)
-          if (std::abs(r.samples[k].t - t) < std::abs(r.samples[best].t - t)) best = k;
-        picks.push_back(best);
-      }
-      fs::create_directories(out_dir);
-      writePostures(model, r, (fs::path(out_dir) / "postures.csv").string(), picks);
-      std::cout << "wrote " << (fs::path(out_dir) / "postures.csv").string() << "\n";
-      return finish(0);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
-      return 1;
-    }
-  }
+  if (!postures_from.empty()) return reflex::runGuarded("reflex_sim", [&] { return writePosturesFrom(args); });
 
   if (list) {
     for (const auto& s : builtinScenarios()) std::printf("%-22s %-22s %s\n", s.name.c_str(), s.paper.c_str(), s.description.c_str());
@@ -389,71 +514,7 @@ int main(int argc, char** argv) {
           summarize(summary, model, *sc, r, label, wall);
           return r;
         }
-        // A robot over DDS: a fresh reflex_mujoco per run (mujoco), started at the rest configuration.
-        reflex::control_node::BusPlantOptions po;
-        po.domain = robot_domain;
-        po.q_start = restConfiguration(model, cm);
-        po.margin = cm.params.d_r;
-        po.port.timeout = robot_timeout;
-        po.port.deadline = command_deadline;
-        po.first_state_timeout = robot_wait;
-        PlantFigures fig;
-        fig.robot = robot_side;
-        fig.domain = robot_domain;
-        if (robot_side == "unitree_hg") {
-          po.interface = "unitree_hg";
-          po.joint_map = !joint_map.empty() ? joint_map
-                                            : (fs::path(urdf).parent_path() / (fs::path(urdf).stem().string() + ".hg.yaml")).string();
-          po.ramp_time = ramp_time;
-          fig.ramp_time = ramp_time;
-        }
-        if (robot_side == "mujoco" || robot_side == "unitree_hg") {
-          po.robot_binary = reflex::common::executableDir() + "/reflex_mujoco";
-          po.robot_args = {"--urdf", urdf};
-          if (!collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", collision});
-          fig.log = (dir / (run_index == 0 ? "reflex_mujoco.log" : "reflex_mujoco_" + std::to_string(run_index) + ".log"))
-                        .string();
-          po.robot_log = fig.log;
-        }
-        ++run_index;
-        std::cout << "  " << sc->name << " (" << label << "): " << (robot_side != "dds" ? "starting reflex_mujoco" : "joining")
-                  << " on domain " << robot_domain << ", then " << sc->duration << " s in real time ..." << std::endl;
-        SimResult r;
-        double wall = 0.0;
-        {
-          reflex::control_node::BusScenarioPlant plant(model, drivenJoints(model, cm), po);
-          const auto t0 = std::chrono::steady_clock::now();
-          r = runScenario(model, cm, *sc, opt, plant);
-          wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-          // unitree_hg: the arm_sdk weight back to 0, watched like the scenario (contacts, joint steps).
-          if (robot_side == "unitree_hg") {
-            plant.rampOut(cm.params.period);
-            fig.ramp_out_ratio = plant.rampOutSpeedRatio();
-            fig.max_weight_step = plant.maxWeightStep();
-          }
-          fig.measured_ratio = plant.measuredSpeedRatio();
-          // The judge's last words: contacts published after the last cycle.
-          plant.awaitCycle(static_cast<double>(r.cycles) * cm.params.period, cm.params.period);
-          fig.robot_exit = plant.stop();
-          fig.contact_samples = plant.contactSamples();
-          fig.contacts_received = plant.contactsReceived();
-          fig.total_contact_steps = plant.totalContactSteps();
-          fig.min_contact = plant.minContact();
-          fig.min_contact_pair = plant.minContactPair();
-        }
-        fig.tracking = computeTracking(cm, r);
-        for (const auto& s : r.samples)
-          if (s.commanded && s.min_distance < cm.params.d_r) ++fig.below_d_r;
-        const SimResult kin = runScenario(model, cm, *sc, opt);
-        fig.kin_min_distance = kin.min_distance;
-        fig.kin_tracking = computeTracking(cm, kin);
-        fig.kin_estop = kin.estop_fired;
-        writeTimeseriesCsv(model, cm, r, (dir / csv).string());
-        for (std::ostream* os : {static_cast<std::ostream*>(&std::cout), static_cast<std::ostream*>(&summary)}) {
-          summarize(*os, model, *sc, r, label, wall, robot_side);
-          summarizePlant(*os, r, fig, cm.params.d_r);
-        }
-        return r;
+        return runOnBus(args, model, cm, *sc, opt, dir, csv, label, run_index++, summary);
       };
       const AvoidanceMode m = no_avoidance ? AvoidanceMode::kOff
                                            : (mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
@@ -473,7 +534,6 @@ int main(int argc, char** argv) {
     }
     return finish(failures ? 1 : 0);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "reflex_sim: error: %s\n", e.what());
-    return 1;
+    return reflex::reportException("reflex_sim", e);
   }
 }

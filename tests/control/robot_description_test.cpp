@@ -361,7 +361,7 @@ TEST(PairSampling, VerdictsMatchTheConstruction) {
   // Same seed, same report; bad options are named.
   EXPECT_EQ(exclusionYaml(samplePairs(all, nonadj, o)), exclusionYaml(r));
   o.samples = 0;
-  EXPECT_THROW(samplePairs(all, nonadj, o), std::invalid_argument);
+  EXPECT_THROW(samplePairs(all, nonadj, o), reflex::Error);
 }
 
 }  // namespace

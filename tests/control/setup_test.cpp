@@ -315,7 +315,7 @@ TEST(Setup, OnlySuccessReplacesFilesAndNeverAnythingButARegularFile) {
     return names;
   };
   const ProcessResult r = setupRun(urdf + " --out " + out + " --force");
-  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
   EXPECT_EQ(r.err, "reflex_setup: error: '" + out + "/behavior.yaml' exists and is a directory: reflex_setup replaces "
                    "only regular files; remove it or choose another --out\n");
   EXPECT_EQ(listing(), (std::vector<std::string>{"behavior.yaml", "controller.yaml"}));
@@ -376,7 +376,7 @@ TEST(Setup, ALegsOnlyRobotIsRefusedNeverConfiguredWithLegsAsArms) {
   ASSERT_EQ(fixed, 10);
   std::ofstream(dir + "/legs_only.urdf") << urdf;
   const ProcessResult r = setupRun(dir + "/legs_only.urdf --out " + dir + "/out");
-  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
   EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: no arms found in robot '"));
   EXPECT_THAT(r.err, HasSubstr("the only mirrored chains of >= 4 revolute joints are legs (named like legs, or ending "
                                "at the robot's lowest link): [l_hip_yaw"));
@@ -411,7 +411,7 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   std::ofstream(dir + "/amb.urdf") << robotXml("amb", chainXml("a", 4, 0, 0.2, 0.5) + chainXml("b", 4, 0, -0.2, 0.5) +
                                                           chainXml("c", 4, 0, 0.4, 0.5) + chainXml("d", 4, 0, -0.4, 0.5));
   ProcessResult r = setupRun(dir + "/amb.urdf --out " + dir + "/amb");
-  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.err, "reflex_setup: error: ambiguous arms in robot 'amb': 2 mirrored pairs of chains start within 5 cm "
                    "of the same height and their names do not tell which are arms: [a_j1 a_j2 a_j3 a_j4] / "
                    "[b_j1 b_j2 b_j3 b_j4] (z 0.500); [c_j1 c_j2 c_j3 c_j4] / [d_j1 d_j2 d_j3 d_j4] (z 0.500); "
@@ -425,7 +425,7 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   // One arm-like chain and a two-joint neck: no mirrored pair.
   std::ofstream(dir + "/one.urdf") << robotXml("one", chainXml("a", 4, 0, 0.2, 0.5) + chainXml("h", 2, 0, 0, 0.6));
   r = setupRun(dir + "/one.urdf --out " + dir + "/one");
-  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: no arms found in robot 'one': need two mirrored serial chains "
                                "of >= 4 revolute joints branching from the trunk (first joints at (x, y, z) and "
                                "(x, -y, z)); chains found: [a_j1 a_j2 a_j3 a_j4] (4 joints, from 'trunk' at y 0.200) "
@@ -437,7 +437,7 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: --right-hand 'nope' is not a link of robot 'one'\n"));
   // Bad set-up input, each named.
   r = setupRun(dir + "/nope.urdf --out " + dir + "/x");
-  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.err, "reflex_setup: error: URDF '" + dir + "/nope.urdf' does not exist\n");
   r = setupRun(dir + "/one.urdf --out " + dir + "/x --srdf " + dir + "/nope.srdf");
   EXPECT_EQ(r.err, "reflex_setup: error: --srdf '" + dir + "/nope.srdf' does not exist\n");
@@ -451,7 +451,7 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   EXPECT_THAT(r.out, HasSubstr("--close-gaps"));
   // Files already there are not replaced without --force.
   r = setupRun(dir + "/amb.urdf --out " + dir + "/amb --left-hand c_l4 --right-hand d_l4 --head trunk");
-  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("controller.yaml' exists; give --force to replace it"));
 }
 

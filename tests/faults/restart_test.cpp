@@ -173,9 +173,9 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   const double err_before = trackingError(states.back().t, robot.q(states.back().js));
   EXPECT_LT(err_before, 0.025) << "the hands follow the targets before the kill";
 
-  // A second controller on the same robot state is refused (the file is locked).
+  // A second controller on the same robot state is refused (the file is locked): exit 2.
   testing::ChildProcess second(args, tmp + "restart_controller_second.log");
-  EXPECT_EQ(second.wait(20s), 1);
+  EXPECT_EQ(second.wait(20s), 2);
   EXPECT_NE(readFile(tmp + "restart_controller_second.log").find("is in use by another process"), std::string::npos);
 
   // 2. kill -9 of the controller while the arms move.
@@ -358,7 +358,7 @@ TEST(ControllerRestart, ADamagedFileOrAnotherRobotsStateIsRefusedAtStart) {
   }
   testing::ChildProcess bad({bin("reflex_controller"), "--domain", dom, "--robot-state", garbage, "--duration", "1"},
                             tmp + "restart_garbage.log");
-  EXPECT_EQ(bad.wait(20s), 1);
+  EXPECT_EQ(bad.wait(20s), 2);  // refused at start
   std::string out = readFile(tmp + "restart_garbage.log");
   EXPECT_NE(out.find("robot state file '" + garbage + "' holds no valid robot state (slot 0: no 'RFXQ' magic"),
             std::string::npos)
@@ -376,7 +376,7 @@ TEST(ControllerRestart, ADamagedFileOrAnotherRobotsStateIsRefusedAtStart) {
   }
   testing::ChildProcess asimo({bin("reflex_controller"), "--domain", dom, "--robot-state", other, "--duration", "1"},
                               tmp + "restart_other.log");
-  EXPECT_EQ(asimo.wait(20s), 1);
+  EXPECT_EQ(asimo.wait(20s), 2);
   out = readFile(tmp + "restart_other.log");
   EXPECT_NE(out.find("robot state file '" + other + "' is the state of another robot"), std::string::npos) << out;
 }

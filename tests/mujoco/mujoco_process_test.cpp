@@ -436,7 +436,7 @@ TEST(MujocoProcess, SetupErrorsNameTheBadValue) {
     std::vector<std::string> argv = {binary(), "--domain", std::to_string(kDomain)};
     argv.insert(argv.end(), c.args.begin(), c.args.end());
     ChildProcess bad(argv, logPath("setup"));
-    EXPECT_EQ(bad.wait(60s), 1) << c.args[1];
+    EXPECT_EQ(bad.wait(60s), 2) << c.args[1];
     const std::string log = readFile(logPath("setup"));
     EXPECT_NE(log.find("reflex_mujoco: error:"), std::string::npos) << log;
     EXPECT_NE(log.find(c.message), std::string::npos) << log;

@@ -290,7 +290,7 @@ TEST(MujocoScenarios, BadValuesAreNamed) {
   EXPECT_EQ(runSim({"through_body", "--robot", "dds", "--domain", "193", "--robot-wait", "1", "--no-plots", "--out",
                     dir.string()},
                    dir, 30s),
-            1);
+            2);  // a robot that cannot be set up: refused (docs/tools.md, "Exit codes")
   const std::string log = readFile(dir / "reflex_sim.log");
   EXPECT_NE(log.find("no reflex/robot_state on domain 193 within 1 s"), std::string::npos) << log;
 }

@@ -159,7 +159,7 @@ TEST(RecordProcess, BadCommandLinesNameTheBadValue) {
   };
   for (const Case& c : cases) {
     const std::string log = tempPath("bad.log");
-    EXPECT_NE(runTool(c.args, log), 0) << c.args[1];
+    EXPECT_EQ(runTool(c.args, log), 2) << c.args[1];  // refused (docs/tools.md, "Exit codes")
     EXPECT_NE(slurp(log).find(c.needle), std::string::npos) << c.args[1] << ": " << slurp(log);
   }
   EXPECT_EQ(runTool({bin("reflex_record"), "--help"}, tempPath("help.log")), 0);

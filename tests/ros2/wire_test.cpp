@@ -176,7 +176,7 @@ TEST(Ros2Wire, OptionsTheRobotCannotServeAreRefusedAtStart) {
     std::vector<std::string> args = {binPath("reflex_controller"), "--domain", "24", "--duration", "1", "--peer-probe", "0"};
     args.insert(args.end(), c.args.begin(), c.args.end());
     ChildProcess p(args, log);
-    EXPECT_EQ(p.wait(std::chrono::seconds(20)), 1) << readFile(log);
+    EXPECT_EQ(p.wait(std::chrono::seconds(20)), 2) << readFile(log);
     EXPECT_NE(readFile(log).find(c.want), std::string::npos) << readFile(log);
   }
 }

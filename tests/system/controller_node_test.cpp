@@ -113,7 +113,7 @@ TEST(ControllerNode, BadSetupIsAClearErrorAndNonZeroExit) {
   testing::ChildProcess bad({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--urdf", "/nonexistent/robot.urdf",
                              "--domain", std::to_string(kDomain + 1)},
                             log);
-  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 1);
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
   std::ifstream in(log);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("/nonexistent/robot.urdf"), std::string::npos) << text;
@@ -176,7 +176,7 @@ TEST(ControllerNode, ANamedControllerYamlThatDoesNotExistIsNamed) {
   testing::ChildProcess bad({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--controller", "/nonexistent/ctl.yaml",
                              "--domain", std::to_string(kOwnConfigDomain + 1)},
                             log);
-  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 1);
+  EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
   std::ifstream in(log);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("reflex_controller: error: --controller '/nonexistent/ctl.yaml': no such controller configuration "

@@ -378,7 +378,7 @@ TEST(RobotPort, BadRobotOptionsAreRefusedNamingTheValue) {
     argv.insert(argv.end(), c.args.begin(), c.args.end());
     testing::ChildProcess p(argv, log);
     ASSERT_TRUE(p.started());
-    EXPECT_EQ(p.wait(std::chrono::seconds(20)), 1) << c.expect;
+    EXPECT_EQ(p.wait(std::chrono::seconds(20)), 2) << c.expect;
     const std::string text = readFile(log);
     EXPECT_NE(text.find(c.expect), std::string::npos) << text;
   }

@@ -411,7 +411,7 @@ TEST(Realtime, WhenPermittedEveryThreadRunsFifoOnTheOneCpuWithMemoryLocked) {
                                    log);
   ASSERT_TRUE(controller.started());
   if (!permittedRealtime()) {  // an unprivileged run of this test: the refusal is the answer
-    EXPECT_EQ(controller.wait(std::chrono::seconds(20)), 1);
+    EXPECT_EQ(controller.wait(std::chrono::seconds(20)), 2);
     EXPECT_NE(readFile(log).find("--realtime '" + value + "'"), std::string::npos) << readFile(log);
     return;
   }
@@ -482,7 +482,7 @@ TEST(Realtime, WithoutPermissionOrWithImpossibleValuesItIsRefusedNamingTheValueA
     argv.insert(argv.end(), c.args.begin(), c.args.end());
     testing::ChildProcess p(argv, log);
     ASSERT_TRUE(p.started()) << p.error();
-    EXPECT_EQ(p.wait(std::chrono::seconds(20)), 1) << c.expect;
+    EXPECT_EQ(p.wait(std::chrono::seconds(20)), 2) << c.expect;
     const std::string text = readFile(log);
     EXPECT_NE(text.find(c.expect), std::string::npos) << text;
     EXPECT_EQ(text.find("running at"), std::string::npos) << "never runs without what was asked: " << text;

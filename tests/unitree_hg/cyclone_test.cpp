@@ -158,7 +158,7 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
   ChildProcess c1({binPath("reflex_controller"), "--robot", "unitree_hg", "--joint-map", unknown_path, "--domain", "13",
                    "--duration", "1", "--peer-probe", "0"},
                   testing::TempDir() + "/unknown.log");
-  EXPECT_EQ(c1.wait(std::chrono::seconds(20)), 1);
+  EXPECT_EQ(c1.wait(std::chrono::seconds(20)), 2);
   const std::string e1 = readFile(testing::TempDir() + "/unknown.log");
   EXPECT_NE(e1.find("joint 'left_elbow_joint' is not a joint of the robot model 'asimo_like'"), std::string::npos) << e1;
   // A motor the message does not have (35 slots: 0..34).
@@ -168,7 +168,7 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
   ChildProcess c2({binPath("reflex_controller"), "--robot", "unitree_hg", "--joint-map", beyond_path, "--domain", "13",
                    "--duration", "1", "--peer-probe", "0"},
                   testing::TempDir() + "/beyond.log");
-  EXPECT_EQ(c2.wait(std::chrono::seconds(20)), 1);
+  EXPECT_EQ(c2.wait(std::chrono::seconds(20)), 2);
   const std::string e2 = readFile(testing::TempDir() + "/beyond.log");
   EXPECT_NE(e2.find("motor"), std::string::npos) << e2;
   EXPECT_NE(e2.find("value '35'"), std::string::npos) << e2;
@@ -176,7 +176,7 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
   const std::string small = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/small_humanoid.urdf";
   ChildProcess c3({binPath("reflex_controller"), "--robot", "unitree_hg", "--urdf", small, "--domain", "13", "--peer-probe", "0"},
                   testing::TempDir() + "/nomap.log");
-  EXPECT_EQ(c3.wait(std::chrono::seconds(20)), 1);
+  EXPECT_EQ(c3.wait(std::chrono::seconds(20)), 2);
   const std::string e3 = readFile(testing::TempDir() + "/nomap.log");
   EXPECT_NE(e3.find("no joint map: --joint-map not given and no '" + std::string(REFLEX_SOURCE_DIR) +
                     "/bringup/robots/small_humanoid.hg.yaml' beside the URDF"),
@@ -184,7 +184,7 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
       << e3;
   ChildProcess c4({binPath("reflex_controller"), "--robot", "dds", "--joint-map", kMap, "--domain", "13", "--peer-probe", "0"},
                   testing::TempDir() + "/ddsmap.log");
-  EXPECT_EQ(c4.wait(std::chrono::seconds(20)), 1);
+  EXPECT_EQ(c4.wait(std::chrono::seconds(20)), 2);
   const std::string e4 = readFile(testing::TempDir() + "/ddsmap.log");
   EXPECT_NE(e4.find("is for --robot unitree_hg, not 'dds'"), std::string::npos) << e4;
 }

@@ -421,6 +421,116 @@ StereoCalibration rigCalibration(const RigSpec& rig) {
   return c;
 }
 
+/// Whether the tag of object i (at `pose`, its card `half` wide about the tag) is fully visible in both
+/// cameras: facing them within 70 degrees, inside both images, and covered by no quad nearer the camera.
+bool tagVisible(const RenderCamera (&cams)[2], const QuadPose& pose, double half, int i, const std::vector<Quad>& quads,
+                const cv::Size& size) {
+  bool visible = true;
+  std::vector<cv::Vec3d> region;
+  for (const cv::Vec3d& l : {cv::Vec3d(-half, -half, 0), cv::Vec3d(half, -half, 0), cv::Vec3d(half, half, 0),
+                             cv::Vec3d(-half, half, 0)})
+    region.push_back(pose.R_B_Q * l + pose.p_B);
+  for (int c = 0; c < 2 && visible; ++c) {
+    const RenderCamera& cam = cams[c];
+    const cv::Vec3d view = cam.p_B_C - pose.p_B;
+    const cv::Vec3d z = pose.R_B_Q * cv::Vec3d(0, 0, 1);
+    if (!(-z.dot(view) > std::cos(70.0 * kDeg) * cv::norm(view))) visible = false;
+    std::vector<cv::Point2d> uv;
+    if (!visible || !projectDistorted(cam, region, uv)) {
+      visible = false;
+      break;
+    }
+    for (const cv::Point2d& p : uv)
+      if (p.x < 1.0 || p.y < 1.0 || p.x > size.width - 2.0 || p.y > size.height - 2.0) visible = false;
+    // Occluded if any quad nearer to this camera overlaps the tag region in the image.
+    std::vector<cv::Point2f> poly;
+    for (const cv::Vec3d& p : region) {
+      cv::Point2d q;
+      if (!projectIdeal(cam, p, q)) visible = false;
+      poly.emplace_back(static_cast<float>(q.x), static_cast<float>(q.y));
+    }
+    const double dist = cv::norm(pose.p_B - cam.p_B_C);
+    for (const Quad& q : quads) {
+      if (!visible) break;
+      if (q.object == i || !(cv::norm(q.centre_B - cam.p_B_C) < dist)) continue;
+      std::vector<cv::Point2f> other;
+      bool ok = true;
+      for (const cv::Vec3d& p : q.corners_B) {
+        cv::Point2d uvq;
+        ok = ok && projectIdeal(cam, p, uvq);
+        other.emplace_back(static_cast<float>(uvq.x), static_cast<float>(uvq.y));
+      }
+      std::vector<cv::Point2f> inter;
+      if (ok && cv::intersectConvexConvex(poly, other, inter, true) > 1e-6) visible = false;
+    }
+  }
+  return visible;
+}
+
+/// Camera c's image of the quads at time t (nearest drawn last), with the script's lighting, blur,
+/// noise and drop-outs (from `rng`); true if the frame is dropped (all black).
+bool renderImage(const RenderCamera (&cams)[2], int c, const std::vector<Quad>& quads, const SceneScript& script,
+                 double t, int S, cv::RNG& rng, cv::Mat (&out)[2]) {
+  bool dropped = false;
+  const RenderCamera& cam = cams[c];
+  cv::Mat canvas = cam.background.clone();
+  std::vector<const Quad*> order;
+  for (const Quad& q : quads) order.push_back(&q);
+  std::sort(order.begin(), order.end(), [&](const Quad* a, const Quad* b) {
+    return cv::norm(a->centre_B - cam.p_B_C) > cv::norm(b->centre_B - cam.p_B_C);
+  });
+  for (const Quad* q : order) drawQuad(canvas, cam, *q, S);
+  cv::remap(canvas, out[c], cam.map_x, cam.map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  const cv::Vec3d& L = script.render.lighting;
+  const double gain = 0.5 * (L[0] + L[1]) + 0.5 * (L[1] - L[0]) * std::sin(2 * M_PI * t / L[2] + 0.7 * c);
+  out[c].convertTo(out[c], -1, gain, 0.0);
+  const double sigma = rng.uniform(script.render.blur_sigma[0], script.render.blur_sigma[1]);
+  if (sigma > 0.05) cv::GaussianBlur(out[c], out[c], cv::Size(0, 0), sigma);
+  if (script.render.noise_sigma > 0.0) {
+    cv::Mat noise(out[c].size(), CV_16SC3);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, script.render.noise_sigma);
+    cv::Mat wide;
+    out[c].convertTo(wide, CV_16SC3);
+    wide += noise;
+    wide.convertTo(out[c], CV_8UC3);
+  }
+  if (script.render.dropout_probability > 0.0 && rng.uniform(0.0, 1.0) < script.render.dropout_probability) {
+    dropped = true;
+    out[c].setTo(cv::Scalar::all(0));
+  }
+  return dropped;
+}
+
+/// The moving quads at time t: each object's card (and the hand holding it) unless hidden, and the
+/// active occluders; every object's pose and whether it is hidden.
+std::vector<Quad> quadsAt(const SceneScript& script, double t, const TagFamily& family, double cell_scale,
+                          const std::vector<cv::Mat>& cards, const cv::Mat& skin, const std::vector<cv::Mat>& occluder_tex,
+                          std::vector<QuadPose>& poses, std::vector<bool>& hidden) {
+  std::vector<Quad> quads;
+  poses.assign(script.objects.size(), QuadPose{});
+  hidden.assign(script.objects.size(), false);
+  for (std::size_t i = 0; i < script.objects.size(); ++i) {
+    const ScriptedObject& o = script.objects[i];
+    poses[i] = evaluateTrajectory(o.path, t);
+    hidden[i] = inIntervals(o.hidden, t);
+    if (hidden[i]) continue;
+    const double card = o.tag_size * cell_scale * (family.totalWidth() + 2);
+    quads.push_back(makeQuad(poses[i], card, card, &cards[i], static_cast<int>(i)));
+    if (o.hand) {
+      QuadPose hand = poses[i];
+      hand.p_B = poses[i].p_B + poses[i].R_B_Q * cv::Vec3d(0.0, 0.5 * card + 0.02, 0.012);
+      quads.push_back(makeQuad(hand, 0.075, 0.10, &skin, -1));
+    }
+  }
+  for (std::size_t j = 0; j < script.occluders.size(); ++j) {
+    const ScriptedOccluder& o = script.occluders[j];
+    if (!o.active.empty() && !inIntervals(o.active, t)) continue;
+    quads.push_back(makeQuad(evaluateTrajectory(o.path, t), o.size[0], o.size[1], &occluder_tex[j], -1));
+  }
+
+  return quads;
+}
+
 MakeSummary makeSession(const SceneScript& script, const std::string& out_dir,
                         const std::function<void(int, int)>& progress) {
   const RigSpec& rig = script.rig;
@@ -499,57 +609,12 @@ MakeSummary makeSession(const SceneScript& script, const std::string& out_dir,
     cv::RNG rng(script.seed * 1000003ULL + static_cast<std::uint64_t>(k) * 7ULL + 11ULL);
 
     // Dynamic quads at time t.
-    std::vector<Quad> quads;
-    std::vector<QuadPose> poses(script.objects.size());
-    std::vector<bool> hidden(script.objects.size(), false);
-    for (std::size_t i = 0; i < script.objects.size(); ++i) {
-      const ScriptedObject& o = script.objects[i];
-      poses[i] = evaluateTrajectory(o.path, t);
-      hidden[i] = inIntervals(o.hidden, t);
-      if (hidden[i]) continue;
-      const double card = o.tag_size * cell_scale * (family.totalWidth() + 2);
-      quads.push_back(makeQuad(poses[i], card, card, &cards[i], static_cast<int>(i)));
-      if (o.hand) {
-        QuadPose hand = poses[i];
-        hand.p_B = poses[i].p_B + poses[i].R_B_Q * cv::Vec3d(0.0, 0.5 * card + 0.02, 0.012);
-        quads.push_back(makeQuad(hand, 0.075, 0.10, &skin, -1));
-      }
-    }
-    for (std::size_t j = 0; j < script.occluders.size(); ++j) {
-      const ScriptedOccluder& o = script.occluders[j];
-      if (!o.active.empty() && !inIntervals(o.active, t)) continue;
-      quads.push_back(makeQuad(evaluateTrajectory(o.path, t), o.size[0], o.size[1], &occluder_tex[j], -1));
-    }
+    std::vector<QuadPose> poses;
+    std::vector<bool> hidden;
+    const std::vector<Quad> quads = quadsAt(script, t, family, cell_scale, cards, skin, occluder_tex, poses, hidden);
 
     bool dropped[2] = {false, false};
-    for (int c = 0; c < 2; ++c) {
-      const RenderCamera& cam = cams[c];
-      cv::Mat canvas = cam.background.clone();
-      std::vector<const Quad*> order;
-      for (const Quad& q : quads) order.push_back(&q);
-      std::sort(order.begin(), order.end(), [&](const Quad* a, const Quad* b) {
-        return cv::norm(a->centre_B - cam.p_B_C) > cv::norm(b->centre_B - cam.p_B_C);
-      });
-      for (const Quad* q : order) drawQuad(canvas, cam, *q, S);
-      cv::remap(canvas, out[c], cam.map_x, cam.map_y, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
-      const cv::Vec3d& L = script.render.lighting;
-      const double gain = 0.5 * (L[0] + L[1]) + 0.5 * (L[1] - L[0]) * std::sin(2 * M_PI * t / L[2] + 0.7 * c);
-      out[c].convertTo(out[c], -1, gain, 0.0);
-      const double sigma = rng.uniform(script.render.blur_sigma[0], script.render.blur_sigma[1]);
-      if (sigma > 0.05) cv::GaussianBlur(out[c], out[c], cv::Size(0, 0), sigma);
-      if (script.render.noise_sigma > 0.0) {
-        cv::Mat noise(out[c].size(), CV_16SC3);
-        rng.fill(noise, cv::RNG::NORMAL, 0.0, script.render.noise_sigma);
-        cv::Mat wide;
-        out[c].convertTo(wide, CV_16SC3);
-        wide += noise;
-        wide.convertTo(out[c], CV_8UC3);
-      }
-      if (script.render.dropout_probability > 0.0 && rng.uniform(0.0, 1.0) < script.render.dropout_probability) {
-        dropped[c] = true;
-        out[c].setTo(cv::Scalar::all(0));
-      }
-    }
+    for (int c = 0; c < 2; ++c) dropped[c] = renderImage(cams, c, quads, script, t, S, rng, out);
     if (dropped[0] || dropped[1]) ++summary.dropouts;
 
     // Ground truth and visibility.
@@ -565,44 +630,7 @@ MakeSummary makeSession(const SceneScript& script, const std::string& out_dir,
       row.present = !hidden[i] && !dropped[0] && !dropped[1];
       bool visible = row.present;
       const double half = 0.5 * o.tag_size * cell_scale * family.totalWidth();
-      std::vector<cv::Vec3d> region;
-      for (const cv::Vec3d& l : {cv::Vec3d(-half, -half, 0), cv::Vec3d(half, -half, 0), cv::Vec3d(half, half, 0),
-                                 cv::Vec3d(-half, half, 0)})
-        region.push_back(poses[i].R_B_Q * l + poses[i].p_B);
-      for (int c = 0; c < 2 && visible; ++c) {
-        const RenderCamera& cam = cams[c];
-        const cv::Vec3d view = cam.p_B_C - poses[i].p_B;
-        const cv::Vec3d z = poses[i].R_B_Q * cv::Vec3d(0, 0, 1);
-        if (!(-z.dot(view) > std::cos(70.0 * kDeg) * cv::norm(view))) visible = false;
-        std::vector<cv::Point2d> uv;
-        if (!visible || !projectDistorted(cam, region, uv)) {
-          visible = false;
-          break;
-        }
-        for (const cv::Point2d& p : uv)
-          if (p.x < 1.0 || p.y < 1.0 || p.x > size.width - 2.0 || p.y > size.height - 2.0) visible = false;
-        // Occluded if any quad nearer to this camera overlaps the tag region in the image.
-        std::vector<cv::Point2f> poly;
-        for (const cv::Vec3d& p : region) {
-          cv::Point2d q;
-          if (!projectIdeal(cam, p, q)) visible = false;
-          poly.emplace_back(static_cast<float>(q.x), static_cast<float>(q.y));
-        }
-        const double dist = cv::norm(poses[i].p_B - cam.p_B_C);
-        for (const Quad& q : quads) {
-          if (!visible) break;
-          if (q.object == static_cast<int>(i) || !(cv::norm(q.centre_B - cam.p_B_C) < dist)) continue;
-          std::vector<cv::Point2f> other;
-          bool ok = true;
-          for (const cv::Vec3d& p : q.corners_B) {
-            cv::Point2d uvq;
-            ok = ok && projectIdeal(cam, p, uvq);
-            other.emplace_back(static_cast<float>(uvq.x), static_cast<float>(uvq.y));
-          }
-          std::vector<cv::Point2f> inter;
-          if (ok && cv::intersectConvexConvex(poly, other, inter, true) > 1e-6) visible = false;
-        }
-      }
+      if (visible) visible = tagVisible(cams, poses[i], half, static_cast<int>(i), quads, size);
       row.visible = visible;
       if (visible) ++summary.visible_frames[i];
       truth.push_back(row);

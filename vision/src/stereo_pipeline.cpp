@@ -192,6 +192,119 @@ StereoTagPipeline::StereoTagPipeline(const StereoCalibration& calib, const Camer
 
 StereoTagPipeline::~StereoTagPipeline() = default;
 
+bool StereoTagPipeline::grayImages(const cv::Mat& left, const cv::Mat& right, StereoResult& out) {
+  const cv::Size expected = rectifier_.calibration().left.image_size;
+  const cv::Mat* in[2] = {&left, &right};
+  for (int i = 0; i < 2; ++i) {
+    const char* side = i == 0 ? "left" : "right";
+    const cv::Mat& m = *in[i];
+    if (m.empty()) {
+      out.status = FrameStatus::kSkipped;
+      out.message = std::string(side) + " image is empty";
+      return false;
+    }
+    if (m.size() != expected) {
+      out.status = FrameStatus::kSkipped;
+      out.message = std::string(side) + " image is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) +
+                    " but the calibration says " + std::to_string(expected.width) + "x" +
+                    std::to_string(expected.height);
+      return false;
+    }
+    if (m.depth() != CV_8U || (m.channels() != 1 && m.channels() != 3 && m.channels() != 4)) {
+      out.status = FrameStatus::kSkipped;
+      out.message = std::string(side) + " image has unsupported type " + std::to_string(m.type());
+      return false;
+    }
+    if (m.channels() == 1)
+      gray_[i] = m;
+    else
+      cv::cvtColor(m, gray_[i], m.channels() == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
+  }
+
+  return true;
+}
+
+void StereoTagPipeline::detectSide(int i, std::vector<TagDetection>& dets) {
+  const bool right_side = i == 1;
+  if (options_.rectify == RectifyMode::kImages) {
+    rectifier_.rectifyImage(gray_[i], rect_[i], right_side);
+    dets = detector_[i]->detect(rect_[i]);
+    return;
+  }
+  dets = detector_[i]->detect(gray_[i]);
+  std::vector<cv::Point2d> raw, rect;
+  for (const TagDetection& d : dets) {
+    raw.push_back(d.center);
+    raw.insert(raw.end(), d.corners.begin(), d.corners.end());
+  }
+  rectifier_.rectifyPoints(raw, rect, right_side);
+  for (std::size_t k = 0; k < dets.size(); ++k) {
+    dets[k].center = rect[5 * k];
+    for (std::size_t c = 0; c < 4; ++c) dets[k].corners[c] = rect[5 * k + 1 + c];
+  }
+}
+
+bool StereoTagPipeline::observe(int id, const TagDetection& dl_ref, const TagDetection& dr, const ObjectSpec& spec_ref,
+                                ObjectObservation& o) {
+  const TagDetection* dl = &dl_ref;
+  const ObjectSpec* spec = &spec_ref;
+  const cv::Matx33d R_C_rect = rectifier_.calibration().left.R.t();
+  std::array<cv::Vec3d, 4> c_rect;
+  bool ok = true;
+  double epi = 0.0, disparity = 0.0;
+  for (std::size_t k = 0; k < 4; ++k) {
+    ok = ok && rectifier_.triangulate(dl->corners[k], dr.corners[k], c_rect[k]);
+    epi += std::abs(dl->corners[k].y - dr.corners[k].y) / 4.0;
+    disparity += ((dl->corners[k].x - rectifier_.calibration().left.P(0, 2)) -
+                  (dr.corners[k].x - rectifier_.calibration().right.P(0, 2))) / 4.0;
+  }
+  if (!ok || epi > options_.max_epipolar_px) {
+    return false;
+  }
+  cv::Vec3d centre = 0.25 * (c_rect[0] + c_rect[1] + c_rect[2] + c_rect[3]);
+  double edge = 0.0;
+  for (std::size_t k = 0; k < 4; ++k) edge += cv::norm(c_rect[(k + 1) % 4] - c_rect[k]) / 4.0;
+  const double ratio = edge / spec->tag_size;
+  if (std::abs(ratio - 1.0) > options_.max_size_deviation) {
+    return false;
+  }
+  cv::Vec3d n = (c_rect[2] - c_rect[0]).cross(c_rect[3] - c_rect[1]);
+  n = n / std::max(cv::norm(n), 1e-12);
+  double rms = 0.0;
+  if (options_.refine_with_tag_size) {
+    cv::Vec3d fit_centre, fit_z;
+    if (fitTagPoseStereo(rectifier_, dl->corners, dr.corners, c_rect, spec->tag_size, fit_centre, fit_z, rms)) {
+      centre = fit_centre;
+      n = fit_z;
+    } else {
+      rms = -1.0;
+    }
+  }
+  if (rms <= 0.0) {  // stereo-only estimate: reprojection of the triangulated corners
+    double ss = 0.0;
+    for (std::size_t k = 0; k < 4; ++k) {
+      const cv::Point2d el = rectifier_.projectRect(c_rect[k], false) - dl->corners[k];
+      const cv::Point2d er = rectifier_.projectRect(c_rect[k], true) - dr.corners[k];
+      ss += el.dot(el) + er.dot(er);
+    }
+    rms = std::sqrt(ss / 8.0);
+  }
+  if (n.dot(centre) > 0.0) n = -n;  // towards the camera
+
+  o.tag_id = id;
+  o.name = spec->name;
+  o.p_C = R_C_rect * centre;
+  o.p_B = mount_.toBase(o.p_C);
+  o.nhat_C = R_C_rect * n;
+  o.decision_margin = std::min(dl->decision_margin, dr.decision_margin);
+  o.epipolar_px = epi;
+  o.disparity_px = disparity;
+  o.size_ratio = ratio;
+  o.reprojection_px = rms;
+  o.confidence = computeConfidence(o.decision_margin, epi, ratio);
+  return true;
+}
+
 void StereoTagPipeline::process(const cv::Mat& left, const cv::Mat& right, StereoResult& out) {
   out.status = FrameStatus::kOk;
   out.message.clear();
@@ -201,53 +314,7 @@ void StereoTagPipeline::process(const cv::Mat& left, const cv::Mat& right, Stere
   out.unknown_tags = 0;
   out.rejected = 0;
 
-  const cv::Size expected = rectifier_.calibration().left.image_size;
-  const cv::Mat* in[2] = {&left, &right};
-  for (int i = 0; i < 2; ++i) {
-    const char* side = i == 0 ? "left" : "right";
-    const cv::Mat& m = *in[i];
-    if (m.empty()) {
-      out.status = FrameStatus::kSkipped;
-      out.message = std::string(side) + " image is empty";
-      return;
-    }
-    if (m.size() != expected) {
-      out.status = FrameStatus::kSkipped;
-      out.message = std::string(side) + " image is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) +
-                    " but the calibration says " + std::to_string(expected.width) + "x" +
-                    std::to_string(expected.height);
-      return;
-    }
-    if (m.depth() != CV_8U || (m.channels() != 1 && m.channels() != 3 && m.channels() != 4)) {
-      out.status = FrameStatus::kSkipped;
-      out.message = std::string(side) + " image has unsupported type " + std::to_string(m.type());
-      return;
-    }
-    if (m.channels() == 1)
-      gray_[i] = m;
-    else
-      cv::cvtColor(m, gray_[i], m.channels() == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
-  }
-
-  auto detectSide = [this](int i, std::vector<TagDetection>& dets) {
-    const bool right_side = i == 1;
-    if (options_.rectify == RectifyMode::kImages) {
-      rectifier_.rectifyImage(gray_[i], rect_[i], right_side);
-      dets = detector_[i]->detect(rect_[i]);
-      return;
-    }
-    dets = detector_[i]->detect(gray_[i]);
-    std::vector<cv::Point2d> raw, rect;
-    for (const TagDetection& d : dets) {
-      raw.push_back(d.center);
-      raw.insert(raw.end(), d.corners.begin(), d.corners.end());
-    }
-    rectifier_.rectifyPoints(raw, rect, right_side);
-    for (std::size_t k = 0; k < dets.size(); ++k) {
-      dets[k].center = rect[5 * k];
-      for (std::size_t c = 0; c < 4; ++c) dets[k].corners[c] = rect[5 * k + 1 + c];
-    }
-  };
+  if (!grayImages(left, right, out)) return;
 
   if (options_.parallel) {
     auto right_job = std::async(std::launch::async, [&] { detectSide(1, out.right); });
@@ -262,7 +329,6 @@ void StereoTagPipeline::process(const cv::Mat& left, const cv::Mat& right, Stere
   const std::map<int, const TagDetection*> L = uniqueById(out.left, duplicates);
   const std::map<int, const TagDetection*> R = uniqueById(out.right, duplicates);
   out.rejected += duplicates;
-  const cv::Matx33d R_C_rect = rectifier_.calibration().left.R.t();
 
   for (const auto& [id, dl] : L) {
     const auto it = R.find(id);
@@ -273,63 +339,9 @@ void StereoTagPipeline::process(const cv::Mat& left, const cv::Mat& right, Stere
       ++out.unknown_tags;
       continue;
     }
-    std::array<cv::Vec3d, 4> c_rect;
-    bool ok = true;
-    double epi = 0.0, disparity = 0.0;
-    for (std::size_t k = 0; k < 4; ++k) {
-      ok = ok && rectifier_.triangulate(dl->corners[k], dr.corners[k], c_rect[k]);
-      epi += std::abs(dl->corners[k].y - dr.corners[k].y) / 4.0;
-      disparity += ((dl->corners[k].x - rectifier_.calibration().left.P(0, 2)) -
-                    (dr.corners[k].x - rectifier_.calibration().right.P(0, 2))) / 4.0;
-    }
-    if (!ok || epi > options_.max_epipolar_px) {
-      ++out.rejected;
-      continue;
-    }
-    cv::Vec3d centre = 0.25 * (c_rect[0] + c_rect[1] + c_rect[2] + c_rect[3]);
-    double edge = 0.0;
-    for (std::size_t k = 0; k < 4; ++k) edge += cv::norm(c_rect[(k + 1) % 4] - c_rect[k]) / 4.0;
-    const double ratio = edge / spec->tag_size;
-    if (std::abs(ratio - 1.0) > options_.max_size_deviation) {
-      ++out.rejected;
-      continue;
-    }
-    cv::Vec3d n = (c_rect[2] - c_rect[0]).cross(c_rect[3] - c_rect[1]);
-    n = n / std::max(cv::norm(n), 1e-12);
-    double rms = 0.0;
-    if (options_.refine_with_tag_size) {
-      cv::Vec3d fit_centre, fit_z;
-      if (fitTagPoseStereo(rectifier_, dl->corners, dr.corners, c_rect, spec->tag_size, fit_centre, fit_z, rms)) {
-        centre = fit_centre;
-        n = fit_z;
-      } else {
-        rms = -1.0;
-      }
-    }
-    if (rms <= 0.0) {  // stereo-only estimate: reprojection of the triangulated corners
-      double ss = 0.0;
-      for (std::size_t k = 0; k < 4; ++k) {
-        const cv::Point2d el = rectifier_.projectRect(c_rect[k], false) - dl->corners[k];
-        const cv::Point2d er = rectifier_.projectRect(c_rect[k], true) - dr.corners[k];
-        ss += el.dot(el) + er.dot(er);
-      }
-      rms = std::sqrt(ss / 8.0);
-    }
-    if (n.dot(centre) > 0.0) n = -n;  // towards the camera
-
     ObjectObservation o;
-    o.tag_id = id;
-    o.name = spec->name;
-    o.p_C = R_C_rect * centre;
-    o.p_B = mount_.toBase(o.p_C);
-    o.nhat_C = R_C_rect * n;
-    o.decision_margin = std::min(dl->decision_margin, dr.decision_margin);
-    o.epipolar_px = epi;
-    o.disparity_px = disparity;
-    o.size_ratio = ratio;
-    o.reprojection_px = rms;
-    o.confidence = computeConfidence(o.decision_margin, epi, ratio);
-    out.objects.push_back(o);
+    if (observe(id, *dl, dr, *spec, o)) out.objects.push_back(o);
+    else ++out.rejected;
   }
 }
 

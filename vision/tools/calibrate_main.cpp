@@ -1,6 +1,7 @@
 // reflex_calibrate: stereo calibration of the user's own rig -> the ROS camera_info pair that
 // reflex_vision reads (calibrate), conversion of an OpenCV stereoCalibrate file (convert), and a
 // printable calibration board (board). Thin wrapper over reflex/vision/stereo_calibrate.hpp.
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/files.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/stereo_calibrate.hpp"
@@ -279,6 +280,57 @@ cv::Size parseSize(const std::string& text) {
 
 }  // namespace
 
+/// The `mount` subcommand and its options.
+CLI::App* addMountCommand(CLI::App& app, MountArgs& mount_args) {
+  CLI::App* mnt = app.add_subcommand(
+      "mount", "the camera in the head frame (and camera_mount.yaml) from a tag on a hand seen in several poses");
+  mnt->add_option("--urdf", mount_args.urdf, "the robot's URDF (kinematics)")->required();
+  mnt->add_option("--collision", mount_args.collision, "its collision YAML (default: next to the URDF, if any)");
+  mnt->add_option("--head-link", mount_args.head_link, "link the cameras are fixed to")->capture_default_str();
+  mnt->add_option("--hand-link", mount_args.hand_link, "link the tag is fixed to")->required();
+  mnt->add_option("--tag-point", mount_args.tag_point, "the tag centre in the hand link frame: X,Y,Z metres")->required();
+  mnt->add_option("--observations", mount_args.observations,
+                  "CSV: view,x_cam,y_cam,z_cam,<joint>,... (tag centre in the left optical frame, joint values)")
+      ->required();
+  mnt->add_option("--out", mount_args.out, "camera_mount.yaml to write (every joint at zero)")->required();
+  mnt->add_option("--camera-link", mount_args.camera_link, "compare with this URDF frame (e.g. head_camera)");
+  mnt->add_option("--outlier-factor", mount_args.options.outlier_factor,
+                  "drop views whose residual exceeds this x the median (and 5 mm), refit")
+      ->capture_default_str();
+  mnt->add_option("--min-views", mount_args.options.min_views, "fewest usable views")->capture_default_str();
+  return mnt;
+}
+
+/// `convert`: an OpenCV stereoCalibrate FileStorage file -> the camera_info pair in `out`.
+int runConvert(const std::vector<std::string>& files, ConvertOptions copt, const std::string& size, const std::string& out) {
+  copt.size = parseSize(size);
+  std::string notes;
+  const StereoCalibration c = convertOpenCvStereo(files, copt, notes);
+  std::cout << notes;
+  writePair(c, out, false);
+  return 0;
+}
+
+/// `board`: a printable board image.
+int runBoard(const BoardArgs& draw_board, int ppu, const std::string& board_out) {
+  const BoardSpec b = boardFrom(draw_board);
+  double mpp = 0.0;
+  cv::Point2d origin;
+  const cv::Mat img = drawBoard(b, ppu, mpp, origin);
+  bool ok = false;
+  try {
+    ok = cv::imwrite(board_out, img);
+  } catch (const cv::Exception& e) {
+    throw VisionError("cannot write '" + board_out + "': " + e.err);
+  }
+  if (!ok) throw VisionError("cannot write '" + board_out + "' (missing folder, or not a .png name?)");
+  std::printf("wrote %s: %dx%d px; print it so that one %s measures %.4f m (%.4f mm per pixel), then measure "
+              "the print and pass what you measure as --square\n",
+              board_out.c_str(), img.cols, img.rows, b.kind == BoardKind::kAprilGrid ? "tag's black square" : "square",
+              b.square, 1000.0 * mpp);
+  return 0;
+}
+
 int main(int argc, char** argv) {
   CLI::App app{
       "reflex_calibrate: calibrate your own stereo camera for reflex_vision.\n"
@@ -340,24 +392,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
 
   MountArgs mount_args;
-  CLI::App* mnt = app.add_subcommand(
-      "mount", "the camera in the head frame (and camera_mount.yaml) from a tag on a hand seen in several poses");
-  mnt->add_option("--urdf", mount_args.urdf, "the robot's URDF (kinematics)")->required();
-  mnt->add_option("--collision", mount_args.collision, "its collision YAML (default: next to the URDF, if any)");
-  mnt->add_option("--head-link", mount_args.head_link, "link the cameras are fixed to")->capture_default_str();
-  mnt->add_option("--hand-link", mount_args.hand_link, "link the tag is fixed to")->required();
-  mnt->add_option("--tag-point", mount_args.tag_point, "the tag centre in the hand link frame: X,Y,Z metres")->required();
-  mnt->add_option("--observations", mount_args.observations,
-                  "CSV: view,x_cam,y_cam,z_cam,<joint>,... (tag centre in the left optical frame, joint values)")
-      ->required();
-  mnt->add_option("--out", mount_args.out, "camera_mount.yaml to write (every joint at zero)")->required();
-  mnt->add_option("--camera-link", mount_args.camera_link, "compare with this URDF frame (e.g. head_camera)");
-  mnt->add_option("--outlier-factor", mount_args.options.outlier_factor,
-                  "drop views whose residual exceeds this x the median (and 5 mm), refit")
-      ->capture_default_str();
-  mnt->add_option("--min-views", mount_args.options.min_views, "fewest usable views")->capture_default_str();
+  CLI::App* mnt = addMountCommand(app, mount_args);
 
-  CLI11_PARSE(app, argc, argv);
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   try {
     // Outputs first, before any image is read.
     if (mnt->parsed()) {
@@ -372,32 +409,8 @@ int main(int argc, char** argv) {
     }
     if (mnt->parsed()) return runMount(mount_args);
     if (cal->parsed()) return runCalibrate(cal_board, pairs, session, every, cal_out, opt, quiet);
-    if (conv->parsed()) {
-      copt.size = parseSize(conv_size);
-      std::string notes;
-      const StereoCalibration c = convertOpenCvStereo(conv_files, copt, notes);
-      std::cout << notes;
-      writePair(c, conv_out, false);
-      return 0;
-    }
-    if (draw->parsed()) {
-      const BoardSpec b = boardFrom(draw_board);
-      double mpp = 0.0;
-      cv::Point2d origin;
-      const cv::Mat img = drawBoard(b, ppu, mpp, origin);
-      bool ok = false;
-      try {
-        ok = cv::imwrite(board_out, img);
-      } catch (const cv::Exception& e) {
-        throw VisionError("cannot write '" + board_out + "': " + e.err);
-      }
-      if (!ok) throw VisionError("cannot write '" + board_out + "' (missing folder, or not a .png name?)");
-      std::printf("wrote %s: %dx%d px; print it so that one %s measures %.4f m (%.4f mm per pixel), then measure "
-                  "the print and pass what you measure as --square\n",
-                  board_out.c_str(), img.cols, img.rows, b.kind == BoardKind::kAprilGrid ? "tag's black square" : "square",
-                  b.square, 1000.0 * mpp);
-      return 0;
-    }
+    if (conv->parsed()) return runConvert(conv_files, copt, conv_size, conv_out);
+    if (draw->parsed()) return runBoard(draw_board, ppu, board_out);
   } catch (const VisionError& e) {
     const std::string what = e.what();
     std::cerr << "reflex_calibrate: error: " << what << "\n";

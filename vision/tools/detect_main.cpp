@@ -1,6 +1,7 @@
 // reflex_detect: AprilTags in still images -- to check a print, a lighting set-up or a tag size
 // before running the stereo vision. Thin main over reflex::vision::TagDetector, estimateTagPose and
 // drawTags: parse the options, detect in each image, print text / CSV / JSON, write annotated copies.
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/files.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/image_file.hpp"
@@ -149,7 +150,7 @@ int main(int argc, char** argv) {
   app.add_option("--draw", draw,
                  "annotated copy: an image file (one input image), or an existing folder (one <name>_tags.png per "
                  "image)");
-  CLI11_PARSE(app, argc, argv);
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);  // our own messages name the file
   try {
     if (format != "text" && format != "csv" && format != "json")
@@ -227,9 +228,8 @@ int main(int argc, char** argv) {
       std::cerr << "reflex_detect: error: " << why << "\n";
       return 4;
     }
-  } catch (const VisionError& e) {
-    std::cerr << "reflex_detect: error: " << e.what() << "\n";
-    return 2;
+  } catch (const std::exception& e) {
+    return reflex::reportException("reflex_detect", e);
   }
   return 0;
 }

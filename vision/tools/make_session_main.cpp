@@ -1,5 +1,6 @@
 // reflex_make_session: renders a synthetic stereo session (videos, timestamps, calibration, object
 // map, ground truth) from a scene script. Thin wrapper over reflex::vision::makeSession.
+#include "reflex/common/run_main.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/session.hpp"
 #include "reflex/vision/session_maker.hpp"
@@ -19,8 +20,7 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("--out", out_dir, "session folder to write (created, its parent must exist; existing files are overwritten)")->required();
   app.add_flag("--quiet", quiet, "no progress display");
-  CLI11_PARSE(app, argc, argv);
-  try {
+  return reflex::runMain("reflex_make_session", app, argc, argv, [&]() -> int {
     if (const std::string why = reflex::vision::sessionFolderProblem(out_dir); !why.empty())
       throw reflex::vision::VisionError("--out: " + why);
     const reflex::vision::SceneScript script = reflex::vision::loadSceneScript(script_path);
@@ -35,9 +35,6 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < script.objects.size(); ++i)
       std::cout << ", " << script.objects[i].name << " fully visible in " << summary.visible_frames[i];
     std::cout << "\n";
-  } catch (const reflex::vision::VisionError& e) {
-    std::cerr << "reflex_make_session: error: " << e.what() << "\n";
-    return 2;
-  }
-  return 0;
+    return 0;
+  });
 }

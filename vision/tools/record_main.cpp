@@ -1,6 +1,7 @@
 // reflex_vision_record: records a session folder (videos, timestamps, calibration, object map,
 // mount) from live stereo cameras, or imports recorded video files offline as fast as the machine
 // allows. Thin wrapper over reflex::vision::recordSession and reflex::vision::importVideoFiles.
+#include "reflex/common/run_main.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/source.hpp"
 #include "reflex/vision/video_files.hpp"
@@ -77,23 +78,35 @@ int importFiles(const reflex::vision::VideoFilesSpec& spec, const reflex::vision
 }
 }  // namespace
 
-int main(int argc, char** argv) {
-  using namespace reflex::vision;
-  CLI::App app{
-      "reflex_vision_record: record a stereo session folder from live cameras (two devices or one\n"
-      "side-by-side device). A camera is a device index or a video file/URL (a file is read at its own\n"
-      "frame rate, as a stand-in camera, and its end is a normal end). Stops at --frames/--duration, at the\n"
-      "end of the source, or on Ctrl-C. Offline, --from-files LEFT RIGHT or --from-side-by-side FILE imports\n"
-      "recorded videos as fast as the machine allows, stamped by --timestamps CSV (frame,stamp), --fps F\n"
-      "(stamp i = i/F) or the video's own frame rate; --codec FFV1 keeps the images exactly (lossless).\n"
-      "The --out folder is created; its parent must exist. Exit: 0 recorded, 2 bad option or input (named),\n"
-      "3 nothing recorded, 4 the session could not be written (file and cause named)."};
+/// What the command line asks for.
+struct RecordArgs {
   std::string cam_left, cam_right, sbs, calib_left, calib_right, objects_path, mount_path, out, name = "recording";
   std::string codec, from_sbs, timestamps;
   std::vector<std::string> from_files;
-  RecordOptions ro;
+  reflex::vision::RecordOptions ro;
   double fps = 0.0;
   bool quiet = false, progress = false;
+  CLI::Option* fps_opt = nullptr;
+};
+
+void addOptions(CLI::App& app, RecordArgs& a) {
+  std::string& cam_left = a.cam_left;
+  std::string& cam_right = a.cam_right;
+  std::string& sbs = a.sbs;
+  std::string& calib_left = a.calib_left;
+  std::string& calib_right = a.calib_right;
+  std::string& objects_path = a.objects_path;
+  std::string& mount_path = a.mount_path;
+  std::string& out = a.out;
+  std::string& name = a.name;
+  std::string& codec = a.codec;
+  std::string& from_sbs = a.from_sbs;
+  std::string& timestamps = a.timestamps;
+  std::vector<std::string>& from_files = a.from_files;
+  reflex::vision::RecordOptions& ro = a.ro;
+  double& fps = a.fps;
+  bool& quiet = a.quiet;
+  bool& progress = a.progress;
   app.add_option("--camera-left", cam_left, "left camera: device index or video file/URL");
   app.add_option("--camera-right", cam_right, "right camera: device index or video file/URL");
   app.add_option("--side-by-side", sbs, "one side-by-side stereo camera: device index or video file/URL");
@@ -109,14 +122,47 @@ int main(int argc, char** argv) {
   app.add_option("--name", name, "session name")->capture_default_str();
   app.add_option("--frames", ro.max_frames, "stop after this many pairs (0 = no limit)");
   app.add_option("--duration", ro.duration, "stop after this many seconds (0 = no limit)");
-  auto* fps_opt = app.add_option("--fps", fps,
+  a.fps_opt = app.add_option("--fps", fps,
                                   "cameras: nominal frame rate written to the videos (default: the camera's); "
                                   "offline: stamp i = i / F (default: the video's rate)");
   app.add_option("--codec", codec,
                  "FourCC to use first (default avc1/mp4, then mp4v/mp4, MJPG/avi; FFV1/avi is lossless)");
   app.add_flag("--quiet", quiet, "no progress display");
   app.add_flag("--progress", progress, "show progress even if stderr is not a terminal");
-  CLI11_PARSE(app, argc, argv);
+}
+
+int main(int argc, char** argv) {
+  using namespace reflex::vision;
+  CLI::App app{
+      "reflex_vision_record: record a stereo session folder from live cameras (two devices or one\n"
+      "side-by-side device). A camera is a device index or a video file/URL (a file is read at its own\n"
+      "frame rate, as a stand-in camera, and its end is a normal end). Stops at --frames/--duration, at the\n"
+      "end of the source, or on Ctrl-C. Offline, --from-files LEFT RIGHT or --from-side-by-side FILE imports\n"
+      "recorded videos as fast as the machine allows, stamped by --timestamps CSV (frame,stamp), --fps F\n"
+      "(stamp i = i/F) or the video's own frame rate; --codec FFV1 keeps the images exactly (lossless).\n"
+      "The --out folder is created; its parent must exist. Exit: 0 recorded, 2 bad option or input (named),\n"
+      "3 nothing recorded, 4 the session could not be written (file and cause named)."};
+  RecordArgs args;
+  addOptions(app, args);
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
+  std::string& cam_left = args.cam_left;
+  std::string& cam_right = args.cam_right;
+  std::string& sbs = args.sbs;
+  std::string& calib_left = args.calib_left;
+  std::string& calib_right = args.calib_right;
+  std::string& objects_path = args.objects_path;
+  std::string& mount_path = args.mount_path;
+  std::string& out = args.out;
+  std::string& name = args.name;
+  std::string& codec = args.codec;
+  std::string& from_sbs = args.from_sbs;
+  std::string& timestamps = args.timestamps;
+  std::vector<std::string>& from_files = args.from_files;
+  reflex::vision::RecordOptions& ro = args.ro;
+  double& fps = args.fps;
+  bool& quiet = args.quiet;
+  bool& progress = args.progress;
+  CLI::Option* fps_opt = args.fps_opt;
   try {
     if (const std::string why = sessionFolderProblem(out); !why.empty()) throw VisionError("--out: " + why);
     const bool offline = !from_files.empty() || !from_sbs.empty();
@@ -198,9 +244,8 @@ int main(int argc, char** argv) {
                 << (stats.end_message.empty() ? "" : ": " + stats.end_message) << "\n";
       return 3;
     }
-  } catch (const VisionError& e) {
-    std::cerr << "reflex_vision_record: error: " << e.what() << "\n";
-    return 2;
+  } catch (const std::exception& e) {
+    return reflex::reportException("reflex_vision_record", e);
   }
   return 0;
 }

@@ -1,6 +1,7 @@
 // reflex_vision: the stereo AprilTag vision process. Thin main: parse options, build the node
 // (reflex::vision_node::VisionNode: source, pipeline, replay loop, DDS publisher or --dump CSV), install
 // the process's signal handler, run, print the exit line.
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision_node/vision_node.hpp"
@@ -102,7 +103,7 @@ int main(int argc, char** argv) {
                  "matching waits for authentication, seconds on a loaded machine (default 0: start at once)");
   app.add_option("--wait-timeout", o.wait_timeout, "seconds --wait-readers holds at most before exit 5")
       ->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   o.rate_given = rate_opt->count() > 0;
   o.pipeline.refine_with_tag_size = !no_refine;
   o.show_progress = !quiet && (progress_flag || isatty(STDERR_FILENO));

@@ -1,5 +1,6 @@
 // reflex_mujoco: the physics-simulated humanoid on the bus. See robot_node.hpp and control/README.md
 // ("The physics robot: reflex_mujoco").
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include "reflex/mujoco/robot_node.hpp"
 #include "reflex/control/urdf_loader.hpp"
@@ -52,9 +53,8 @@ int main(int argc, char** argv) {
   app.add_option("--joint-map", config.joint_map,
                  "--interface unitree_hg: the joint map YAML (motor index <-> URDF joint), e.g. "
                  "bringup/robots/asimo_like.hg.yaml (default: <URDF stem>.hg.yaml beside the URDF)");
-  CLI11_PARSE(app, argc, argv);
-  std::signal(SIGPIPE, SIG_IGN);
-  try {
+  return reflex::runMain("reflex_mujoco", app, argc, argv, [&]() -> int {
+    std::signal(SIGPIPE, SIG_IGN);
     if (print_mjcf) {
       const auto model = reflex::control::loadModel(
           config.urdf, reflex::control::loadCollisionConfigFor(config.urdf, config.collision));
@@ -69,8 +69,5 @@ int main(int argc, char** argv) {
     node.run();
     std::fprintf(stderr, "reflex_mujoco: %s\n", node.exitSummary().c_str());
     return 0;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "reflex_mujoco: error: %s\n", e.what());
-    return 1;
-  }
+  });
 }

@@ -1,4 +1,5 @@
 // MJCF generation from the project's Model (see mjcf.hpp for what it contains and why).
+#include "reflex/common/error.hpp"
 #include "reflex/mujoco/mjcf.hpp"
 
 #include <Eigen/Eigenvalues>
@@ -48,7 +49,7 @@ std::string esc(const std::string& s) {
 
 void requirePositive(double v, const char* name) {
   if (!(v > 0.0) || !std::isfinite(v))
-    throw std::invalid_argument(std::string("MJCF option ") + name + " = " + num(v) +
+    throw reflex::Error(std::string("MJCF option ") + name + " = " + num(v) +
                                 " must be finite and positive");
 }
 
@@ -63,11 +64,11 @@ void checkOptions(const MjcfOptions& o) {
   requirePositive(o.limb_effort, "limb_effort");
   requirePositive(o.base_effort, "base_effort");
   if (!(o.limb_armature >= 0.0) || !std::isfinite(o.limb_armature))
-    throw std::invalid_argument("MJCF option limb_armature = " + num(o.limb_armature) + " must be >= 0");
+    throw reflex::Error("MJCF option limb_armature = " + num(o.limb_armature) + " must be >= 0");
   if (!(o.limb_damping >= 0.0) || !std::isfinite(o.limb_damping))
-    throw std::invalid_argument("MJCF option limb_damping = " + num(o.limb_damping) + " must be >= 0");
+    throw reflex::Error("MJCF option limb_damping = " + num(o.limb_damping) + " must be >= 0");
   if (!(o.gravity >= 0.0) || !std::isfinite(o.gravity))
-    throw std::invalid_argument("MJCF option gravity = " + num(o.gravity) + " must be >= 0");
+    throw reflex::Error("MJCF option gravity = " + num(o.gravity) + " must be >= 0");
 }
 
 // The children of every link, in Model order (topological: a parent before its children).
@@ -329,7 +330,7 @@ std::vector<JointClass> classifyJoints(const control::Model& model) {
 std::string makeMjcf(const control::Model& model, const MjcfOptions& options, const std::vector<ServoGains>& gains) {
   checkOptions(options);
   if (!gains.empty() && static_cast<int>(gains.size()) != model.nq)
-    throw std::invalid_argument("makeMjcf: " + std::to_string(gains.size()) + " servo gains for " +
+    throw reflex::Error("makeMjcf: " + std::to_string(gains.size()) + " servo gains for " +
                                 std::to_string(model.nq) + " joints");
   return MjcfWriter(model, options, gains).write();
 }

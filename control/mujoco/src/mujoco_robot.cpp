@@ -1,4 +1,5 @@
 // The physics-simulated robot (see mujoco_robot.hpp for the per-period contract).
+#include "reflex/common/error.hpp"
 #include "reflex/mujoco/mujoco_robot.hpp"
 
 #include <algorithm>
@@ -31,12 +32,12 @@ MjModelPtr compileMjcf(const std::string& mjcf) {
   mj_defaultVFS(vfs.get());
   VfsGuard guard{vfs.get()};
   if (mj_makeEmptyFileVFS(vfs.get(), kVfsName, static_cast<int>(mjcf.size())) != 0)
-    throw std::runtime_error("MuJoCo: cannot make the in-memory MJCF file");
+    throw reflex::Error("MuJoCo: cannot make the in-memory MJCF file");
   const int index = mj_findFileVFS(vfs.get(), kVfsName);
   std::memcpy(vfs->filedata[index], mjcf.data(), mjcf.size());
   char error[1024] = "";
   MjModelPtr m(mj_loadXML(kVfsName, vfs.get(), error, sizeof error));
-  if (!m) throw std::runtime_error(std::string("MuJoCo could not compile the generated MJCF: ") + error);
+  if (!m) throw reflex::Error(std::string("MuJoCo could not compile the generated MJCF: ") + error);
   return m;
 }
 
@@ -56,7 +57,7 @@ const char* verdictName(CommandVerdict v) {
 MujocoRobot::MujocoRobot(const control::Model& model, const MjcfOptions& options, const Eigen::VectorXd& q0)
     : model_(model), gains_(servoGains(model, options)), mjcf_(makeMjcf(model, options, gains_)),
       m_(compileMjcf(mjcf_)), d_(mj_makeData(m_.get())) {
-  if (!d_) throw std::runtime_error("MuJoCo: mj_makeData failed");
+  if (!d_) throw reflex::Error("MuJoCo: mj_makeData failed");
   const int nq = model.nq;
   if (q0.size() != 0 && q0.size() != nq)
     throw std::invalid_argument("MujocoRobot: initial configuration has " + std::to_string(q0.size()) +
@@ -68,7 +69,7 @@ MujocoRobot::MujocoRobot(const control::Model& model, const MjcfOptions& options
     const char* name = model.q_names[qi].c_str();
     const int joint = mj_name2id(m_.get(), mjOBJ_JOINT, name);
     actuator_[qi] = mj_name2id(m_.get(), mjOBJ_ACTUATOR, name);
-    if (joint < 0 || actuator_[qi] < 0) throw std::runtime_error(std::string("MuJoCo model lacks joint ") + name);
+    if (joint < 0 || actuator_[qi] < 0) throw reflex::Error(std::string("MuJoCo model lacks joint ") + name);
     qpos_adr_[qi] = m_->jnt_qposadr[joint];
     dof_adr_[qi] = m_->jnt_dofadr[joint];
     q_of_name_.emplace(model.q_names[qi], qi);

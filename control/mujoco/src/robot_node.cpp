@@ -1,4 +1,5 @@
 // reflex_mujoco's DDS adapter (see robot_node.hpp).
+#include "reflex/common/error.hpp"
 #include "reflex/mujoco/robot_node.hpp"
 #include "reflex/common/files.hpp"
 
@@ -56,15 +57,15 @@ Eigen::VectorXd parseInitialConfiguration(const control::Model& model, const std
   for (int qi = 0; qi < model.nq; ++qi) q[qi] = std::clamp(0.0, model.q_lower[qi], model.q_upper[qi]);
   for (const auto& entry : entries) {
     const auto eq = entry.find('=');
-    if (eq == std::string::npos) throw std::invalid_argument("--q '" + entry + "': expected joint=value");
+    if (eq == std::string::npos) throw reflex::Error("--q '" + entry + "': expected joint=value");
     const std::string name = entry.substr(0, eq), text = entry.substr(eq + 1);
     const int qi = model.qIndex(name);
-    if (qi < 0) throw std::invalid_argument("--q '" + entry + "': unknown joint '" + name + "'");
+    if (qi < 0) throw reflex::Error("--q '" + entry + "': unknown joint '" + name + "'");
     double v = 0.0;
     if (!common::parseFiniteNumber(text, v))
-      throw std::invalid_argument("--q '" + entry + "': '" + text + "' is not a finite number");
+      throw reflex::Error("--q '" + entry + "': '" + text + "' is not a finite number");
     if (v < model.q_lower[qi] || v > model.q_upper[qi])
-      throw std::invalid_argument("--q '" + entry + "': outside the joint limits [" + std::to_string(model.q_lower[qi]) +
+      throw reflex::Error("--q '" + entry + "': outside the joint limits [" + std::to_string(model.q_lower[qi]) +
                                   ", " + std::to_string(model.q_upper[qi]) + "]");
     q[qi] = v;
   }
@@ -73,21 +74,21 @@ Eigen::VectorXd parseInitialConfiguration(const control::Model& model, const std
 
 RobotNode::RobotNode(const NodeConfig& config) : config_(config) {
   if (!(config.period > 0.0) || !std::isfinite(config.period) || config.period > 0.1)
-    throw std::invalid_argument("--period " + std::to_string(config.period) + " s: must be in (0, 0.1]");
+    throw reflex::Error("--period " + std::to_string(config.period) + " s: must be in (0, 0.1]");
   if (!(config.duration >= 0.0) || !std::isfinite(config.duration))
-    throw std::invalid_argument("--duration " + std::to_string(config.duration) + " s: must be >= 0");
+    throw reflex::Error("--duration " + std::to_string(config.duration) + " s: must be >= 0");
   const double ratio = config.period / config.mjcf.timestep;
   substeps_ = static_cast<int>(std::lround(ratio));
   if (!(config.mjcf.timestep > 0.0) || substeps_ < 1 || std::abs(ratio - substeps_) > 1e-6)
-    throw std::invalid_argument("--timestep " + std::to_string(config.mjcf.timestep) + " s: the period " +
+    throw reflex::Error("--timestep " + std::to_string(config.mjcf.timestep) + " s: the period " +
                                 std::to_string(config.period) + " s must be a whole multiple of it");
   if (config.interface != "reflex" && config.interface != "unitree_hg")
-    throw std::invalid_argument("--interface '" + config.interface + "': use 'reflex' or 'unitree_hg'");
+    throw reflex::Error("--interface '" + config.interface + "': use 'reflex' or 'unitree_hg'");
   if (config.interface == "unitree_hg" && config.period < 0.001)
-    throw std::invalid_argument("--period " + std::to_string(config.period) +
+    throw reflex::Error("--period " + std::to_string(config.period) +
                                 " s: with --interface unitree_hg at least 1 ms (the tick counts milliseconds)");
   if (config.interface != "unitree_hg" && !config.joint_map.empty())
-    throw std::invalid_argument("--joint-map '" + config.joint_map + "' is for --interface unitree_hg");
+    throw reflex::Error("--joint-map '" + config.joint_map + "' is for --interface unitree_hg");
   model_ = control::loadModel(config.urdf, control::loadCollisionConfigFor(config.urdf, config.collision));
   const Eigen::VectorXd q0 = parseInitialConfiguration(model_, config.initial);
   robot_ = std::make_unique<MujocoRobot>(model_, config.mjcf, q0);

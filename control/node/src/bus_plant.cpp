@@ -1,3 +1,4 @@
+#include "reflex/common/error.hpp"
 #include "reflex/control_node/bus_plant.hpp"
 
 #include <fcntl.h>
@@ -59,7 +60,7 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
     : model_(model), options_(options) {
   if (!options_.robot_binary.empty()) {
     if (options_.q_start.size() != model.nq)
-      throw std::runtime_error("robot plant: the start configuration has " + std::to_string(options_.q_start.size()) +
+      throw reflex::Error("robot plant: the start configuration has " + std::to_string(options_.q_start.size()) +
                                " entries, the model has " + std::to_string(model.nq));
     std::vector<std::string> argv = {options_.robot_binary, "--domain", std::to_string(options_.domain),
                                      "--margin", number(options_.margin), "--name", "reflex_mujoco_sim"};
@@ -84,7 +85,7 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
     posix_spawn_file_actions_destroy(&fa);
     if (rc != 0) {
       child_ = -1;
-      throw std::runtime_error("robot plant: cannot start '" + options_.robot_binary + "': " + std::strerror(rc));
+      throw reflex::Error("robot plant: cannot start '" + options_.robot_binary + "': " + std::strerror(rc));
     }
   }
   try {
@@ -114,7 +115,7 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
       if (child_ > 0) {
         if (const int code = waitExit(child_, std::chrono::milliseconds(0)); code >= 0) {
           child_ = -1;
-          throw std::runtime_error("robot plant: the spawned robot (" + options_.robot_binary + ") exited with status " +
+          throw reflex::Error("robot plant: the spawned robot (" + options_.robot_binary + ") exited with status " +
                                    std::to_string(code) + " before its first state" +
                                    (options_.robot_log.empty() ? std::string()
                                                                : "; the end of its output (" + options_.robot_log +
@@ -129,7 +130,7 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
           child_ = -1;
           where += " exited";
         }
-        throw std::runtime_error("robot plant: no reflex/robot_state on domain " + std::to_string(options_.domain) +
+        throw reflex::Error("robot plant: no reflex/robot_state on domain " + std::to_string(options_.domain) +
                                  " within " + number(options_.first_state_timeout) + " s: " + where);
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(5));

@@ -162,11 +162,40 @@ struct ControllerNode::Impl {
   char schema_line[512] = {};
   SimSample log_row;  ///< q / qdot sized once: filling it does not allocate
   std::uint64_t rejections_seen = 0;  ///< OnboardCounts::targets_rejected when last_rejection was last set
+
+  // The heartbeat's detail says what the controller cannot do or refuses: "" when it runs normally;
+  // with --robot dds "robot state stale ..." while it has no fresh robot state (it commands nothing),
+  // then, for kRobotProblemWindow after each, the latest robot state it rejected and the latest
+  // robot_state writer it ignored (another driver, a replay, a man in the middle).
+  struct Loop {
+    std::string detail;                  ///< reserved kDetailBytes at the start of run()
+    char robot_stale_text[200] = {};
+    double last_robot_reject_t = -1e9, last_other_writer_t = -1e9, last_heartbeat = -1.0;
+    std::uint64_t other_writer_seen = 0, bad_seen = 0;
+    char detail_buf[kDetailBytes] = {};
+    bool robot_ok = true;  ///< as last said (log, heartbeat)
+    bool said_robot = false;
+  } loop;
+
+  // run()'s steps (allocation-free, like the loop).
+  void publishHeartbeat(msg::ModuleState state);
+  /// 1. This cycle's inputs (poll, never block) handed to the onboard controller; `last_rejection`
+  /// the latest refusal among them (or nullptr). False: another controller owns the domain (stop).
+  bool takeInputs(ControllerNode& node, double t_now, const char*& last_rejection);
+  void sayRobotState(bool ok, double t_now);
+  void recordStats(const CycleReport& rep, NodeStats& stats);
+  void publishCycle(const CycleReport& rep, const char* last_rejection, double t, double t_now, double last_start,
+                    double lateness_us, NodeStats& stats);
+  void finishRun(NodeStats& stats);
+  // The constructor's steps.
+  void claimDomain(ControllerNode& node);
+  RobotPort* makeRobotPort(const Eigen::VectorXd& q0, double deadline);
+  void makeTopics();
 };
 
-ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_unique<Impl>()) {
-  Impl& m = *impl_;
-  m.config = config;
+namespace {
+/// The options that need no file: refused naming the value (before anything is loaded).
+void checkNodeOptions(const NodeConfig& config) {
   if (!(config.input_timeout > 0.0))
     throw ConfigError("--input-timeout " + std::to_string(config.input_timeout) + " must be positive");
   if (config.robot != "kinematic" && config.robot != "dds" && config.robot != "unitree_hg" && config.robot != "ros2")
@@ -191,6 +220,152 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   if (config.robot != "kinematic" && !config.robot_state.empty())
     throw ConfigError("--robot-state '" + config.robot_state + "' keeps the simulated robot's joints across restarts; "
                       "with --robot " + config.robot + " the robot measures its own: drop one of the two options");
+}
+}  // namespace
+
+/// The participant, and this controller's claim on the domain: it publishes who protects the robot,
+/// then looks for another controller for --peer-probe seconds (ConfigError if one keeps the domain).
+void ControllerNode::Impl::claimDomain(ControllerNode& node) {
+  bus::BusConfig bc;
+  bc.module_name = config.module_name;
+  if (config.domain_id >= 0) bc.domain_id = config.domain_id;
+  bc.profiles_file = config.profiles_file;
+  bc.participant_profile = config.participant_profile;
+  participant = std::make_unique<bus::Participant>(bc);
+  protection_writer = &participant->makeWriter<msg::ControllerProtection>();
+  protection_reader = &participant->makeReader<msg::ControllerProtection>();
+  const auto& prefix = participant->native().guid().guidPrefix;
+  std::copy(prefix.value, prefix.value + 12, own_participant.begin());
+
+  // Who protects the robot, for late joiners; then one controller per domain.
+  // Every controller publishes this sample first and then looks for others' for peer_probe seconds;
+  // the one that published EARLIER (Header.stamp_ns; equal stamps: the smaller participant id) keeps
+  // the domain and every later one refuses to start, so two controllers started at the same instant
+  // leave exactly one running. The robot's output writers (joint state, status, heartbeat) are made
+  // only after the probe: nothing of a refused controller ever reaches the robot's topics.
+  msg::ControllerProtection mine;
+  mine.avoidance(protection.avoidance);
+  mine.estop(protection.estop);
+  mine.reason(protection.reason);
+  mine.period(protection.period);
+  mine.robot(protection.robot);
+  protection_writer->publish(mine);
+  protection_stamp_ns = mine.header().stamp_ns();
+  const auto probe_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(config.peer_probe);
+  for (;;) {
+    msg::ControllerProtection other;
+    bus::dds::SampleInfo info;
+    while (protection_reader->takeNext(other, &info)) {
+      const ParticipantId them = participantOf(info);
+      if (them == own_participant) continue;
+      if (node.notePeerController(other, them)) {
+        // Before leaving, let this controller's own sample reach the running one (its reader may
+        // not have matched this writer yet), so it can say that a second controller showed up:
+        // this participant's reader and one other, then their acknowledgements, 1 s at most each.
+        protection_writer->waitForReaders(2, std::chrono::seconds(1));
+        protection_writer->native().wait_for_acknowledgments(eprosima::fastrtps::Duration_t(1, 0));
+        throw ConfigError(peer_refusal);
+      }
+    }
+    if (std::chrono::steady_clock::now() >= probe_end) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+/// The robot port --robot names: the in-process kinematic plant, or a robot over DDS (reflex/robot_state,
+/// ROS 2, Unitree hg) whose commands go through the outbox.
+RobotPort* ControllerNode::Impl::makeRobotPort(const Eigen::VectorXd& q0, double deadline) {
+  if (config.robot == "dds") {
+    DdsRobotPort::Options po;
+    po.timeout = config.robot_timeout;
+    po.deadline = deadline;
+    po.period = cm.params.period;
+    // Under DDS-Security only the identity "robot" can be bound (plain DDS: the first writer).
+    robot_identities = std::make_unique<bus::WriterIdentities>(*participant, std::vector<std::string>{"robot"});
+    if (robot_identities->authenticated()) po.identities = robot_identities.get();
+    dds = std::make_unique<DdsRobotPort>(model, drivenJoints(model, cm), *participant, po);
+    dds->sendThrough(*outbox);  // the commands too: a blocked write must not stop the loop
+    return dds.get();
+  } else if (config.robot == "ros2") {
+    Ros2RobotPort::Options ro;
+    ro.timeout = config.robot_timeout;
+    ro.period = cm.params.period;
+    ro.state_topic = config.ros_state_topic;
+    ro.command = config.ros_command;
+    ro.controller = config.ros_controller;
+    ro.joints = config.ros_joints;
+    auto ros = std::make_unique<Ros2RobotPort>(model, drivenJoints(model, cm), *participant, ro);
+    interface_note = ros->describe();
+    dds = std::move(ros);
+    dds->sendThrough(*outbox);
+    return dds.get();
+  } else if (config.robot == "unitree_hg") {
+    UnitreeHgPort::Options ho;
+    ho.timeout = config.robot_timeout;
+    ho.period = cm.params.period;
+    ho.ramp_time = config.ramp_time;
+    dds = std::make_unique<UnitreeHgPort>(model, drivenJoints(model, cm), unitree_hg::loadHgJointMap(unitree_hg::hgJointMapFor(config.urdf, config.joint_map)),
+                                            *participant, ho);
+    dds->sendThrough(*outbox);  // LowCmd_ too: a DDS write allocates and can block
+    return dds.get();
+  } else {
+    kinematic = std::make_unique<KinematicPort>(q0);
+    return kinematic.get();
+  }
+}
+
+/// The writers and readers of the loop, its preallocated messages and the outbox's queues (every
+/// string reserved: copying a sample into a slot never allocates), the outbox started.
+void ControllerNode::Impl::makeTopics() {
+  joint_writer = &participant->makeWriter<msg::JointState>();
+  status_writer = &participant->makeWriter<msg::ControlStatus>();
+  heartbeat_writer = &participant->makeWriter<msg::Heartbeat>();
+  targets_reader = &participant->makeReader<msg::HandTargets>();
+  priority_reader = &participant->makeReader<msg::MotionPriority>();
+  schema_reader = &participant->makeReader<msg::BodySchemaChange>();
+  walk_reader = &participant->makeReader<msg::WalkCommand>();
+  heartbeat_reader = &participant->makeReader<msg::Heartbeat>();
+
+  status_msg.last_rejection().reserve(64);  // every cause name fits: assigning it never allocates
+  joint_msg.names(model.q_names);
+  joint_msg.positions().assign(model.nq, 0.0);
+  joint_msg.velocities().assign(model.nq, 0.0);
+  schema_scratch.reserve(64);
+  // The outbox's slots are copies of these prototypes with every string reserved for the longest
+  // value it can take (a segment name: the model's longest, or an attached segment's, a DDS key
+  // string of at most bus::kMaxKeyStringBytes; the rejection is a cause name; the heartbeat's detail
+  // one of run()'s texts, < 200 bytes), so copying a sample into a slot never allocates.
+  std::size_t longest_name = bus::kMaxKeyStringBytes;
+  for (const auto& seg : model.segments) longest_name = std::max(longest_name, seg.name.size());
+  const auto reserveStatus = [longest_name](msg::ControlStatus& st) {
+    for (msg::ArmStatus* arm : {&st.left(), &st.right()}) {
+      arm->closest_segment_a().reserve(longest_name);
+      arm->closest_segment_b().reserve(longest_name);
+    }
+    st.last_rejection().reserve(64);
+    st.header().source().reserve(bus::kMaxKeyStringBytes);
+  };
+  reserveStatus(status_msg);
+  heartbeat_out_msg.module_name(config.module_name);
+  heartbeat_out_msg.host(hostName());
+  heartbeat_out_msg.pid(static_cast<std::int32_t>(getpid()));
+  heartbeat_out_msg.period_ms(500);
+  const auto reserveHeartbeat = [](msg::Heartbeat& hb) { hb.detail().reserve(kDetailBytes); };
+  reserveHeartbeat(heartbeat_out_msg);
+  for (auto* h : {&joint_msg.header(), &status_msg.header(), &heartbeat_out_msg.header()})
+    h->source(config.module_name);
+  // Written in this order each pass (the robot's commands, added by the port, first; then the
+  // heartbeat, so that the STOPPING one goes out even if a stuck status writer uses up close()'s time).
+  heartbeat_out = &outbox->add<msg::Heartbeat>(*heartbeat_writer, heartbeat_out_msg, 16, reserveHeartbeat);
+  joint_out = &outbox->add(*joint_writer, joint_msg);
+  status_out = &outbox->add<msg::ControlStatus>(*status_writer, status_msg, 64, reserveStatus);
+  outbox->start();
+}
+
+ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.config = config;
+  checkNodeOptions(config);
   const CollisionConfig cc = loadCollisionConfigFor(config.urdf, config.collision);
   m.model = loadModel(config.urdf, cc);
   if (!(config.peer_probe >= 0.0 && config.peer_probe <= 60.0))
@@ -234,50 +409,7 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   }
   m.q0 = q0;
 
-  bus::BusConfig bc;
-  bc.module_name = config.module_name;
-  if (config.domain_id >= 0) bc.domain_id = config.domain_id;
-  bc.profiles_file = config.profiles_file;
-  bc.participant_profile = config.participant_profile;
-  m.participant = std::make_unique<bus::Participant>(bc);
-  m.protection_writer = &m.participant->makeWriter<msg::ControllerProtection>();
-  m.protection_reader = &m.participant->makeReader<msg::ControllerProtection>();
-  const auto& prefix = m.participant->native().guid().guidPrefix;
-  std::copy(prefix.value, prefix.value + 12, m.own_participant.begin());
-
-  // Who protects the robot, for late joiners; then one controller per domain.
-  // Every controller publishes this sample first and then looks for others' for peer_probe seconds;
-  // the one that published EARLIER (Header.stamp_ns; equal stamps: the smaller participant id) keeps
-  // the domain and every later one refuses to start, so two controllers started at the same instant
-  // leave exactly one running. The robot's output writers (joint state, status, heartbeat) are made
-  // only after the probe: nothing of a refused controller ever reaches the robot's topics.
-  msg::ControllerProtection mine;
-  mine.avoidance(m.protection.avoidance);
-  mine.estop(m.protection.estop);
-  mine.reason(m.protection.reason);
-  mine.period(m.protection.period);
-  mine.robot(m.protection.robot);
-  m.protection_writer->publish(mine);
-  m.protection_stamp_ns = mine.header().stamp_ns();
-  const auto probe_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(config.peer_probe);
-  for (;;) {
-    msg::ControllerProtection other;
-    bus::dds::SampleInfo info;
-    while (m.protection_reader->takeNext(other, &info)) {
-      const ParticipantId them = participantOf(info);
-      if (them == m.own_participant) continue;
-      if (notePeerController(other, them)) {
-        // Before leaving, let this controller's own sample reach the running one (its reader may
-        // not have matched this writer yet), so it can say that a second controller showed up:
-        // this participant's reader and one other, then their acknowledgements, 1 s at most each.
-        m.protection_writer->waitForReaders(2, std::chrono::seconds(1));
-        m.protection_writer->native().wait_for_acknowledgments(eprosima::fastrtps::Duration_t(1, 0));
-        throw ConfigError(m.peer_refusal);
-      }
-    }
-    if (std::chrono::steady_clock::now() >= probe_end) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  m.claimDomain(*this);
   // Opened before the loop (an unwritable --log is an error at start, LogError) but after the probe:
   // a refused second controller never truncates the log of the one that runs.
   if (!config.log_csv.empty()) {
@@ -291,89 +423,10 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   OnboardOptions oo;
   oo.input_timeout = config.input_timeout;
   oo.max_target_distance = config.max_target_distance;
-  RobotPort* port = nullptr;
   m.outbox = std::make_unique<bus::Outbox>("reflex_controller");
-  if (config.robot == "dds") {
-    DdsRobotPort::Options po;
-    po.timeout = config.robot_timeout;
-    po.deadline = deadline;
-    po.period = m.cm.params.period;
-    // Under DDS-Security only the identity "robot" can be bound (plain DDS: the first writer).
-    m.robot_identities = std::make_unique<bus::WriterIdentities>(*m.participant, std::vector<std::string>{"robot"});
-    if (m.robot_identities->authenticated()) po.identities = m.robot_identities.get();
-    m.dds = std::make_unique<DdsRobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, po);
-    m.dds->sendThrough(*m.outbox);  // the commands too: a blocked write must not stop the loop
-    port = m.dds.get();
-  } else if (config.robot == "ros2") {
-    Ros2RobotPort::Options ro;
-    ro.timeout = config.robot_timeout;
-    ro.period = m.cm.params.period;
-    ro.state_topic = config.ros_state_topic;
-    ro.command = config.ros_command;
-    ro.controller = config.ros_controller;
-    ro.joints = config.ros_joints;
-    auto ros = std::make_unique<Ros2RobotPort>(m.model, drivenJoints(m.model, m.cm), *m.participant, ro);
-    m.interface_note = ros->describe();
-    m.dds = std::move(ros);
-    m.dds->sendThrough(*m.outbox);
-    port = m.dds.get();
-  } else if (config.robot == "unitree_hg") {
-    UnitreeHgPort::Options ho;
-    ho.timeout = config.robot_timeout;
-    ho.period = m.cm.params.period;
-    ho.ramp_time = config.ramp_time;
-    m.dds = std::make_unique<UnitreeHgPort>(m.model, drivenJoints(m.model, m.cm), unitree_hg::loadHgJointMap(unitree_hg::hgJointMapFor(config.urdf, config.joint_map)),
-                                            *m.participant, ho);
-    m.dds->sendThrough(*m.outbox);  // LowCmd_ too: a DDS write allocates and can block
-    port = m.dds.get();
-  } else {
-    m.kinematic = std::make_unique<KinematicPort>(q0);
-    port = m.kinematic.get();
-  }
+  RobotPort* port = m.makeRobotPort(q0, deadline);
   m.ctl = std::make_unique<OnboardController>(m.model, m.cm, *port, q0, oo);
-  m.joint_writer = &m.participant->makeWriter<msg::JointState>();
-  m.status_writer = &m.participant->makeWriter<msg::ControlStatus>();
-  m.heartbeat_writer = &m.participant->makeWriter<msg::Heartbeat>();
-  m.targets_reader = &m.participant->makeReader<msg::HandTargets>();
-  m.priority_reader = &m.participant->makeReader<msg::MotionPriority>();
-  m.schema_reader = &m.participant->makeReader<msg::BodySchemaChange>();
-  m.walk_reader = &m.participant->makeReader<msg::WalkCommand>();
-  m.heartbeat_reader = &m.participant->makeReader<msg::Heartbeat>();
-
-  m.status_msg.last_rejection().reserve(64);  // every cause name fits: assigning it never allocates
-  m.joint_msg.names(m.model.q_names);
-  m.joint_msg.positions().assign(m.model.nq, 0.0);
-  m.joint_msg.velocities().assign(m.model.nq, 0.0);
-  m.schema_scratch.reserve(64);
-  // The outbox's slots are copies of these prototypes with every string reserved for the longest
-  // value it can take (a segment name: the model's longest, or an attached segment's, a DDS key
-  // string of at most bus::kMaxKeyStringBytes; the rejection is a cause name; the heartbeat's detail
-  // one of run()'s texts, < 200 bytes), so copying a sample into a slot never allocates.
-  std::size_t longest_name = bus::kMaxKeyStringBytes;
-  for (const auto& seg : m.model.segments) longest_name = std::max(longest_name, seg.name.size());
-  const auto reserveStatus = [longest_name](msg::ControlStatus& st) {
-    for (msg::ArmStatus* arm : {&st.left(), &st.right()}) {
-      arm->closest_segment_a().reserve(longest_name);
-      arm->closest_segment_b().reserve(longest_name);
-    }
-    st.last_rejection().reserve(64);
-    st.header().source().reserve(bus::kMaxKeyStringBytes);
-  };
-  reserveStatus(m.status_msg);
-  m.heartbeat_out_msg.module_name(m.config.module_name);
-  m.heartbeat_out_msg.host(hostName());
-  m.heartbeat_out_msg.pid(static_cast<std::int32_t>(getpid()));
-  m.heartbeat_out_msg.period_ms(500);
-  const auto reserveHeartbeat = [](msg::Heartbeat& hb) { hb.detail().reserve(kDetailBytes); };
-  reserveHeartbeat(m.heartbeat_out_msg);
-  for (auto* h : {&m.joint_msg.header(), &m.status_msg.header(), &m.heartbeat_out_msg.header()})
-    h->source(m.config.module_name);
-  // Written in this order each pass (the robot's commands, added by the port, first; then the
-  // heartbeat, so that the STOPPING one goes out even if a stuck status writer uses up close()'s time).
-  m.heartbeat_out = &m.outbox->add<msg::Heartbeat>(*m.heartbeat_writer, m.heartbeat_out_msg, 16, reserveHeartbeat);
-  m.joint_out = &m.outbox->add(*m.joint_writer, m.joint_msg);
-  m.status_out = &m.outbox->add<msg::ControlStatus>(*m.status_writer, m.status_msg, 64, reserveStatus);
-  m.outbox->start();
+  m.makeTopics();
   // Lateness percentiles: at most the first 10 minutes (or the whole run) are kept.
   const double expected_cycles =
       (config.duration > 0.0 ? std::min(config.duration, 600.0) : 600.0) / m.cm.params.period + 10.0;
@@ -415,16 +468,284 @@ bool ControllerNode::notePeerController(const msg::ControllerProtection& other, 
 }
 void ControllerNode::requestEstopReset() noexcept { impl_->reset = true; }
 
+void ControllerNode::Impl::publishHeartbeat(msg::ModuleState state) {
+  const double t = nowSeconds(CLOCK_MONOTONIC);
+  int used = std::snprintf(loop.detail_buf, sizeof(loop.detail_buf), "%s", loop.robot_stale_text);
+  auto append = [&](const char* fmt, auto... args) {
+    if (used < 0 || static_cast<std::size_t>(used) >= sizeof(loop.detail_buf)) return;
+    const int k = std::snprintf(loop.detail_buf + used, sizeof(loop.detail_buf) - static_cast<std::size_t>(used), fmt,
+                                used > 0 ? "; " : "", args...);
+    if (k > 0) used += k;
+  };
+  if (dds && t - loop.last_other_writer_t <= kRobotProblemWindow)
+    append("%sIGNORING a second %s writer %s (%llu samples; the robot writer is %s)", dds->stateTopic(),
+           dds->otherWriter(), static_cast<unsigned long long>(dds->rejectedByCause()[kRobotCauseOtherWriter]),
+           dds->boundWriter());
+  if (dds && t - loop.last_robot_reject_t <= kRobotProblemWindow)
+    append("%s%llu robot states rejected, the latest: %s", static_cast<unsigned long long>(loop.bad_seen),
+           dds->lastBadRejection());
+  loop.detail.assign(loop.detail_buf);  // within the reserved capacity
+  msg::Heartbeat& hb = heartbeat_out_msg;
+  hb.state(state);
+  hb.detail().assign(loop.detail);  // within the reserved capacity
+  heartbeat_out->push(hb);
+  outbox->notify();
+}
+
+bool ControllerNode::Impl::takeInputs(ControllerNode& node, double t_now, const char*& last_rejection) {
+  // 1. Inputs (poll; never block), handed to the onboard controller by value.
+  msg::HandTargets& targets = targets_msg;
+  bus::dds::SampleInfo targets_info;
+  if (targets_reader->takeLatest(targets, &targets_info)) {
+    const ParticipantId writer = participantOf(targets_info);
+    if (!have_target_writer || writer != target_writer) ctl->newTargetSource();
+    target_writer = writer;
+    have_target_writer = true;
+    const msg::HandTarget* hands[2] = {&targets.left(), &targets.right()};
+    std::array<HandCommand, 2> commands;
+    for (int a = 0; a < 2; ++a) {
+      const auto& p = hands[a]->position_base();
+      commands[a].status = hands[a]->status() == msg::TARGET_GIVEN ? HandStatus::kGiven : HandStatus::kNoTarget;
+      commands[a].target_B = Eigen::Vector3d(p.x(), p.y(), p.z());
+    }
+    ctl->setHandTargets(commands, t_now);
+  }
+  msg::MotionPriority prio;
+  if (priority_reader->takeLatest(prio)) {
+    ctl->setPriority(prio.priority() == msg::PRIORITY_LEFT_HIGHER    ? MotionPriority::kLeftHigher
+                    : prio.priority() == msg::PRIORITY_RIGHT_HIGHER ? MotionPriority::kRightHigher
+                                                                    : MotionPriority::kEqual);
+  }
+  // A heartbeat is a sign of life of the target source only if the participant that wrote the
+  // targets wrote it too, in state RUNNING; the name it carries is not looked at.
+  bus::dds::SampleInfo hb_info;
+  while (heartbeat_reader->takeNext(heartbeat_msg, &hb_info)) {
+    if (have_target_writer && heartbeat_msg.state() == msg::STATE_RUNNING &&
+        participantOf(hb_info) == target_writer)
+      ctl->noteSourceHeartbeat(t_now);
+  }
+  // Another controller on the domain (both started at the same instant, so neither saw the
+  // other at start): loud once, counted.
+  bus::dds::SampleInfo peer_info;
+  bool yield_to_peer = false;
+  while (protection_reader->takeNext(peer_msg, &peer_info)) {
+    const ParticipantId them = participantOf(peer_info);
+    if (them != own_participant) yield_to_peer |= node.notePeerController(peer_msg, them);
+  }
+  if (yield_to_peer) return false;  // discovered late: the earlier controller keeps the domain (peerRefusal())
+  schema_scratch.clear();
+  schema_reader->takeAll(schema_scratch);
+  for (const auto& change : schema_scratch) {
+    BodySchemaRequest rq;
+    rq.operation = change.operation() == msg::SCHEMA_DETACH ? BodySchemaRequest::Operation::kDetach
+                                                             : BodySchemaRequest::Operation::kAttach;
+    rq.enabled = change.enabled();
+    rq.name = &change.segment_name();
+    rq.parent_link = &change.parent_link();
+    rq.a_L = Eigen::Vector3d(change.point_a().x(), change.point_a().y(), change.point_a().z());
+    rq.b_L = change.shape() == msg::SHAPE_SPHERE
+                 ? rq.a_L
+                 : Eigen::Vector3d(change.point_b().x(), change.point_b().y(), change.point_b().z());
+    rq.radius = change.radius();
+    rq.is_virtual = change.virtual_segment();
+    rq.motion_priority = change.motion_priority();
+    const BodySchemaOutcome& outcome = ctl->changeBodySchema(rq);
+    if (outcome.rejected()) {
+      // Formatted into a fixed buffer and printed at most LogLimiter's rate: a flood of bad
+      // segments is counted (targets_rejected) but cannot flood stderr.
+      std::snprintf(schema_line, sizeof(schema_line), "controller: %s", outcome.text);
+      schema_log.print(stderr, schema_line);
+    }
+  }
+  msg::WalkCommand walk;
+  if (walk_reader->takeLatest(walk))
+    ctl->walkCommand(walk.stop(), walk.goal_x(), walk.goal_y(), walk.goal_yaw(), walk.speed());
+  if (reset.exchange(false)) ctl->requestEstopReset();
+  // The latest refusal among this cycle's inputs (ControlStatus.last_rejection): robot states are
+  // taken after the behavior inputs above, so a refused one is the latest.
+  last_rejection = nullptr;
+  if (const OnboardCounts& c = ctl->report().counts; c.targets_rejected != rejections_seen) {
+    rejections_seen = c.targets_rejected;
+    last_rejection = rejectCauseName(static_cast<RejectCause>(c.last_rejection));
+  }
+  if (dds && dds->poll() > 0) {
+    std::snprintf(schema_line, sizeof(schema_line), "controller: %s", dds->lastRejection());
+    robot_log[static_cast<std::size_t>(dds->lastCause())].print(stderr, schema_line);
+    last_rejection = robotStateCauseName(dds->lastCause());
+    const std::uint64_t other = dds->rejectedByCause()[kRobotCauseOtherWriter];
+    const std::uint64_t bad = dds->rejectedTotal() - other;
+    if (bad != loop.bad_seen) loop.last_robot_reject_t = t_now;
+    loop.bad_seen = bad;
+    if (other != loop.other_writer_seen) {
+      loop.last_other_writer_t = t_now;
+      const bool first = loop.other_writer_seen == 0;
+      loop.other_writer_seen = other;
+      if (first) {  // a second writer is said at once (stderr above, heartbeat now), not at 2 Hz
+        publishHeartbeat(msg::STATE_RUNNING);
+        loop.last_heartbeat = t_now;
+      }
+    }
+  }
+
+  return true;
+}
+
+/// The robot state turned fresh or stale (or the first cycle): said at once (stderr, heartbeat), not
+/// at the next 2 Hz heartbeat.
+void ControllerNode::Impl::sayRobotState(bool ok, double t_now) {
+  // Said at once (stderr, heartbeat), not at the next 2 Hz heartbeat.
+  loop.robot_ok = ok;
+  loop.said_robot = true;
+  if (ok) {
+    loop.robot_stale_text[0] = '\0';
+    if (dds) {
+      std::snprintf(schema_line, sizeof(schema_line), "reflex_controller: robot state fresh (seq %llu): commanding the robot",
+                    static_cast<unsigned long long>(dds->stateSeq()));
+      robot_state_log.print(stderr, schema_line);
+    }
+  } else {
+    char text[200];
+    std::snprintf(text, sizeof(text), "robot state stale: %s on %s (timeout %.0f ms); command frozen, the robot holds",
+                  dds && dds->haveState() ? "no fresh state" : "no state yet", dds ? dds->stateTopic() : "",
+                  config.robot_timeout * 1e3);
+    std::snprintf(loop.robot_stale_text, sizeof(loop.robot_stale_text), "%s", text);
+    std::snprintf(schema_line, sizeof(schema_line), "reflex_controller: %s", text);
+    robot_state_log.print(stderr, schema_line);
+  }
+  publishHeartbeat(msg::STATE_RUNNING);
+  loop.last_heartbeat = t_now;
+}
+
+/// The exit line's figures after a step.
+void ControllerNode::Impl::recordStats(const CycleReport& rep, NodeStats& stats_) {
+  const OnboardCounts& counts = rep.counts;
+  if (rep.robot_state_ok) stats_.min_distance = std::min(stats_.min_distance, rep.min_distance);
+  stats_.estop_count = counts.estop_count;
+  stats_.guard_count = counts.guard_count;
+  stats_.targets_received = counts.targets_received;
+  stats_.targets_rejected = counts.targets_rejected;
+  stats_.rejected = counts.rejected;
+  stats_.stale_events = counts.stale_events;
+  stats_.robot_stale_events = counts.robot_stale_events;
+  stats_.robot_stale_cycles = counts.robot_stale_cycles;
+  stats_.robot_stale_at_exit = !rep.robot_state_ok;
+  if (dds) {
+    stats_.robot_states_accepted = dds->acceptedStates();
+    stats_.robot_states_rejected_by_cause = dds->rejectedByCause();
+    stats_.robot_states_rejected = dds->rejectedTotal();
+    stats_.robot_writer_changes = dds->writerChanges();
+    stats_.robot_commands = dds->commandsSent();
+  }
+}
+
+/// 4. The cycle's outputs (joint state, status, the --log row) and figures. Joint state: the
+/// kinematic robot after the step, or the robot's measured state the step answered (nothing while
+/// the robot state is stale).
+void ControllerNode::Impl::publishCycle(const CycleReport& rep, const char* last_rejection, double t, double t_now,
+                                        double last_start, double lateness_us, NodeStats& stats_) {
+  const ControlResult cr = rep.result;
+  const OnboardCounts& counts = rep.counts;
+  const ControllerData& data = ctl->data();
+  const double period = cm.params.period;
+  if (rep.robot_state_ok) {
+    const Eigen::VectorXd& q = kinematic ? kinematic->positions() : ctl->measuredPositions();
+    for (int i = 0; i < model.nq; ++i) {
+      joint_msg.positions()[i] = q[i];
+      joint_msg.velocities()[i] = cr == ControlResult::kFrozen ? 0.0 : data.qdot[i];
+    }
+    joint_out->push(joint_msg);
+  }
+  msg::ArmStatus* arms[2] = {&status_msg.left(), &status_msg.right()};
+  for (int a = 0; a < 2; ++a) {
+    const ArmReport& s = rep.arms[a];
+    arms[a]->blend_f(s.f);
+    arms[a]->distance(std::isfinite(s.distance) ? s.distance : msg::NO_PAIR_DISTANCE);
+    arms[a]->zone(toMsg(s.zone));
+    arms[a]->estop_latched(rep.estop != EstopState::kClear);
+    // Cleared when the arm has no pair this cycle (control.idl): never a previous cycle's names.
+    // Assigned in place (no temporary string): no allocation once the longest name was held.
+    arms[a]->closest_segment_a().assign(s.segment_a != nullptr ? s.segment_a : "");
+    arms[a]->closest_segment_b().assign(s.segment_b != nullptr ? s.segment_b : "");
+  }
+  status_msg.arm_distance(std::isfinite(rep.arm_distance) ? rep.arm_distance : msg::NO_PAIR_DISTANCE);
+  status_msg.rejected_hand_targets(counts.hand_targets_rejected);
+  status_msg.rejected_body_schema(counts.schema_rejected);
+  status_msg.rejected_walk_commands(counts.walk_rejected);
+  status_msg.rejected_robot_states(stats_.robot_states_rejected);
+  if (last_rejection != nullptr) {
+    status_msg.last_rejection().assign(last_rejection);  // fits the reserved capacity
+    stats_.last_rejection = last_rejection;
+  }
+  const double compute_us = (nowSeconds(CLOCK_MONOTONIC) - t_now) * 1e6;
+  if (compute_us > period * 1e6) ++stats_.overruns;
+  status_msg.cycle_period_us((t_now - last_start) * 1e6);
+  status_msg.compute_time_us(compute_us);
+  status_msg.lateness_us(lateness_us);
+  status_msg.overrun_count(stats_.overruns);
+  status_out->push(status_msg);
+  outbox->notify();
+  ++stats_.cycles;
+  stats_.max_lateness_us = std::max(stats_.max_lateness_us, lateness_us);
+  if (stats_.lateness_us.size() < stats_.lateness_us.capacity()) stats_.lateness_us.push_back(lateness_us);
+  if (log && rep.robot_state_ok) {  // a copy into the ring: no allocation, no I/O; a full ring is counted
+    SimSample& s = log_row;
+    s.t = t;
+    s.arms = data.arms;
+    s.commands = rep.commands;
+    s.estop = data.estop;
+    s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : msg::NO_PAIR_DISTANCE;
+    s.min_pair = rep.min_pair;  // the --log min_pair column (empty in older logs)
+    s.virtual_distance = rep.virtual_distance;
+    s.arm_distance = rep.arm_distance;
+    s.wall_time = nowSeconds(CLOCK_REALTIME);
+    s.q = kinematic ? kinematic->positions() : ctl->measuredPositions();
+    s.qdot = data.qdot;
+    log->push(s);
+  }
+}
+
+/// After the loop: the robot left (unitree_hg: the arm_sdk weight ramped out), the last heartbeat,
+/// the outbox and the log closed, their figures kept.
+void ControllerNode::Impl::finishRun(NodeStats& stats_) {
+  const double period = cm.params.period;
+  // Leaving the robot: with unitree_hg the arm_sdk weight ramps out (finish() blocks for the ramp time).
+  if (dds) {
+    dds->finish(period);
+    if (const auto* hg = dynamic_cast<const UnitreeHgPort*>(dds.get())) {
+      stats_.arm_sdk_weight = hg->weight();
+      stats_.arm_sdk_max_weight_step = hg->maxWeightStep();
+    }
+    stats_.robot_commands = dds->commandsSent();
+    stats_.robot_states_accepted = dds->acceptedStates();
+    stats_.robot_states_rejected_by_cause = dds->rejectedByCause();
+    stats_.robot_states_rejected = dds->rejectedTotal();
+  }
+  publishHeartbeat(msg::STATE_STOPPING);
+  outbox->close();  // writes what is queued (heartbeats first: the STOPPING one goes out), 1 s at most
+  const bus::OutboxStats ob = outbox->stats();
+  stats_.bus_written = ob.written;
+  stats_.bus_write_failures = ob.write_failures;
+  stats_.bus_dropped = ob.dropped;
+  stats_.bus_stalls = ob.stalls;
+  stats_.bus_longest_write_s = ob.longest_write_s;
+  stats_.bus_longest_topic = ob.longest_topic;
+  if (log) {
+    log->close();
+    log_error = log->error();
+    stats_.log_rows = log->writtenRows();
+    stats_.log_dropped = log->droppedRows();
+  }
+}
+
 void ControllerNode::run() {
   Impl& m = *impl_;
   OnboardController& ctl = *m.ctl;
-  ControllerData& data = ctl.data();
   const double period = m.cm.params.period;
   const auto period_ns = static_cast<long>(std::llround(period * 1e9));
   timespec next{};
   clock_gettime(CLOCK_MONOTONIC, &next);
   const double t_start = nowSeconds(CLOCK_MONOTONIC);
-  double last_start = t_start, last_heartbeat = -1.0;
+  double last_start = t_start;
   if (m.state_file && m.state_file->loaded()) {
     // Resumed from a saved robot state (a restart after a crash): the hands hold where they are
     // (targets at their current positions, avoidance active) until the target source speaks, and the
@@ -433,42 +754,9 @@ void ControllerNode::run() {
     ctl.holdHandsHere(t_start);
   }
 
-  // The heartbeat's detail says what the controller cannot do or refuses: "" when it runs normally;
-  // with --robot dds "robot state stale ..." while it has no fresh robot state (it commands nothing),
-  // then, for kRobotProblemWindow after each, the latest robot state it rejected and the latest
-  // robot_state writer it ignored (another driver, a replay, a man in the middle).
-  std::string detail;
-  detail.reserve(kDetailBytes);
-  char robot_stale_text[200] = {};
-  double last_robot_reject_t = -1e9, last_other_writer_t = -1e9;
-  std::uint64_t other_writer_seen = 0, bad_seen = 0;
-  char detail_buf[kDetailBytes] = {};
-  auto publishHeartbeat = [&](msg::ModuleState state) {
-    const double t = nowSeconds(CLOCK_MONOTONIC);
-    int used = std::snprintf(detail_buf, sizeof(detail_buf), "%s", robot_stale_text);
-    auto append = [&](const char* fmt, auto... args) {
-      if (used < 0 || static_cast<std::size_t>(used) >= sizeof(detail_buf)) return;
-      const int k = std::snprintf(detail_buf + used, sizeof(detail_buf) - static_cast<std::size_t>(used), fmt,
-                                  used > 0 ? "; " : "", args...);
-      if (k > 0) used += k;
-    };
-    if (m.dds && t - last_other_writer_t <= kRobotProblemWindow)
-      append("%sIGNORING a second %s writer %s (%llu samples; the robot writer is %s)", m.dds->stateTopic(),
-             m.dds->otherWriter(), static_cast<unsigned long long>(m.dds->rejectedByCause()[kRobotCauseOtherWriter]),
-             m.dds->boundWriter());
-    if (m.dds && t - last_robot_reject_t <= kRobotProblemWindow)
-      append("%s%llu robot states rejected, the latest: %s", static_cast<unsigned long long>(bad_seen),
-             m.dds->lastBadRejection());
-    detail.assign(detail_buf);  // within the reserved capacity
-    msg::Heartbeat& hb = m.heartbeat_out_msg;
-    hb.state(state);
-    hb.detail().assign(detail);  // within the reserved capacity
-    m.heartbeat_out->push(hb);
-    m.outbox->notify();
-  };
-  publishHeartbeat(msg::STATE_RUNNING);
-  bool robot_ok = true;  // as last said (log, heartbeat)
-  bool said_robot = false;
+  m.loop = Impl::Loop{};
+  m.loop.detail.reserve(kDetailBytes);
+  m.publishHeartbeat(msg::STATE_RUNNING);
 
   const bool on_state = m.config.trigger == "state";  // one cycle per arriving robot state (run()'s contract)
   while (!m.stop && !m.participant->stopRequested()) {
@@ -501,98 +789,8 @@ void ControllerNode::run() {
     if (m.config.duration > 0.0 && t >= m.config.duration) break;
 
     // 1. Inputs (poll; never block), handed to the onboard controller by value.
-    msg::HandTargets& targets = m.targets_msg;
-    bus::dds::SampleInfo targets_info;
-    if (m.targets_reader->takeLatest(targets, &targets_info)) {
-      const ParticipantId writer = participantOf(targets_info);
-      if (!m.have_target_writer || writer != m.target_writer) ctl.newTargetSource();
-      m.target_writer = writer;
-      m.have_target_writer = true;
-      const msg::HandTarget* hands[2] = {&targets.left(), &targets.right()};
-      std::array<HandCommand, 2> commands;
-      for (int a = 0; a < 2; ++a) {
-        const auto& p = hands[a]->position_base();
-        commands[a].status = hands[a]->status() == msg::TARGET_GIVEN ? HandStatus::kGiven : HandStatus::kNoTarget;
-        commands[a].target_B = Eigen::Vector3d(p.x(), p.y(), p.z());
-      }
-      ctl.setHandTargets(commands, t_now);
-    }
-    msg::MotionPriority prio;
-    if (m.priority_reader->takeLatest(prio)) {
-      ctl.setPriority(prio.priority() == msg::PRIORITY_LEFT_HIGHER    ? MotionPriority::kLeftHigher
-                      : prio.priority() == msg::PRIORITY_RIGHT_HIGHER ? MotionPriority::kRightHigher
-                                                                      : MotionPriority::kEqual);
-    }
-    // A heartbeat is a sign of life of the target source only if the participant that wrote the
-    // targets wrote it too, in state RUNNING; the name it carries is not looked at.
-    bus::dds::SampleInfo hb_info;
-    while (m.heartbeat_reader->takeNext(m.heartbeat_msg, &hb_info)) {
-      if (m.have_target_writer && m.heartbeat_msg.state() == msg::STATE_RUNNING &&
-          participantOf(hb_info) == m.target_writer)
-        ctl.noteSourceHeartbeat(t_now);
-    }
-    // Another controller on the domain (both started at the same instant, so neither saw the
-    // other at start): loud once, counted.
-    bus::dds::SampleInfo peer_info;
-    bool yield_to_peer = false;
-    while (m.protection_reader->takeNext(m.peer_msg, &peer_info)) {
-      const ParticipantId them = participantOf(peer_info);
-      if (them != m.own_participant) yield_to_peer |= notePeerController(m.peer_msg, them);
-    }
-    if (yield_to_peer) break;  // discovered late: the earlier controller keeps the domain (peerRefusal())
-    m.schema_scratch.clear();
-    m.schema_reader->takeAll(m.schema_scratch);
-    for (const auto& change : m.schema_scratch) {
-      BodySchemaRequest rq;
-      rq.operation = change.operation() == msg::SCHEMA_DETACH ? BodySchemaRequest::Operation::kDetach
-                                                               : BodySchemaRequest::Operation::kAttach;
-      rq.enabled = change.enabled();
-      rq.name = &change.segment_name();
-      rq.parent_link = &change.parent_link();
-      rq.a_L = Eigen::Vector3d(change.point_a().x(), change.point_a().y(), change.point_a().z());
-      rq.b_L = change.shape() == msg::SHAPE_SPHERE
-                   ? rq.a_L
-                   : Eigen::Vector3d(change.point_b().x(), change.point_b().y(), change.point_b().z());
-      rq.radius = change.radius();
-      rq.is_virtual = change.virtual_segment();
-      rq.motion_priority = change.motion_priority();
-      const BodySchemaOutcome& outcome = ctl.changeBodySchema(rq);
-      if (outcome.rejected()) {
-        // Formatted into a fixed buffer and printed at most LogLimiter's rate: a flood of bad
-        // segments is counted (targets_rejected) but cannot flood stderr.
-        std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", outcome.text);
-        m.schema_log.print(stderr, m.schema_line);
-      }
-    }
-    msg::WalkCommand walk;
-    if (m.walk_reader->takeLatest(walk))
-      ctl.walkCommand(walk.stop(), walk.goal_x(), walk.goal_y(), walk.goal_yaw(), walk.speed());
-    if (m.reset.exchange(false)) ctl.requestEstopReset();
-    // The latest refusal among this cycle's inputs (ControlStatus.last_rejection): robot states are
-    // taken after the behavior inputs above, so a refused one is the latest.
     const char* last_rejection = nullptr;
-    if (const OnboardCounts& c = ctl.report().counts; c.targets_rejected != m.rejections_seen) {
-      m.rejections_seen = c.targets_rejected;
-      last_rejection = rejectCauseName(static_cast<RejectCause>(c.last_rejection));
-    }
-    if (m.dds && m.dds->poll() > 0) {
-      std::snprintf(m.schema_line, sizeof(m.schema_line), "controller: %s", m.dds->lastRejection());
-      m.robot_log[static_cast<std::size_t>(m.dds->lastCause())].print(stderr, m.schema_line);
-      last_rejection = robotStateCauseName(m.dds->lastCause());
-      const std::uint64_t other = m.dds->rejectedByCause()[kRobotCauseOtherWriter];
-      const std::uint64_t bad = m.dds->rejectedTotal() - other;
-      if (bad != bad_seen) last_robot_reject_t = t_now;
-      bad_seen = bad;
-      if (other != other_writer_seen) {
-        last_other_writer_t = t_now;
-        const bool first = other_writer_seen == 0;
-        other_writer_seen = other;
-        if (first) {  // a second writer is said at once (stderr above, heartbeat now), not at 2 Hz
-          publishHeartbeat(msg::STATE_RUNNING);
-          last_heartbeat = t_now;
-        }
-      }
-    }
+    if (!m.takeInputs(*this, t_now, last_rejection)) break;
 
     // 2.-3. Staleness, priority, control (allocation-free) and the robot port: one step.
     // A cycle started by a sample on the state topic spans the time since the previous cycle, at most
@@ -606,143 +804,21 @@ void ControllerNode::run() {
       if (m.dds->stateInterval() > 0.0) span = std::min(span, m.dds->stateInterval());
     }
     const CycleReport& rep = ctl.step(t_now, span);
-    const ControlResult cr = rep.result;
-    if (rep.robot_state_ok != robot_ok || !said_robot) {
-      // Said at once (stderr, heartbeat), not at the next 2 Hz heartbeat.
-      robot_ok = rep.robot_state_ok;
-      said_robot = true;
-      if (robot_ok) {
-        robot_stale_text[0] = '\0';
-        if (m.dds) {
-          std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: robot state fresh (seq %llu): commanding the robot",
-                        static_cast<unsigned long long>(m.dds->stateSeq()));
-          m.robot_state_log.print(stderr, m.schema_line);
-        }
-      } else {
-        char text[200];
-        std::snprintf(text, sizeof(text), "robot state stale: %s on %s (timeout %.0f ms); command frozen, the robot holds",
-                      m.dds && m.dds->haveState() ? "no fresh state" : "no state yet", m.dds ? m.dds->stateTopic() : "",
-                      m.config.robot_timeout * 1e3);
-        std::snprintf(robot_stale_text, sizeof(robot_stale_text), "%s", text);
-        std::snprintf(m.schema_line, sizeof(m.schema_line), "reflex_controller: %s", text);
-        m.robot_state_log.print(stderr, m.schema_line);
-      }
-      publishHeartbeat(msg::STATE_RUNNING);
-      last_heartbeat = t_now;
-    }
+    if (rep.robot_state_ok != m.loop.robot_ok || !m.loop.said_robot) m.sayRobotState(rep.robot_state_ok, t_now);
     // The robot state is persisted before it is published: what any reader saw survives a crash.
     if (m.state_file && !m.state_file->save(m.kinematic->positions())) ++stats_.state_write_errors;
-    const OnboardCounts& counts = rep.counts;
-    if (rep.robot_state_ok) stats_.min_distance = std::min(stats_.min_distance, rep.min_distance);
-    stats_.estop_count = counts.estop_count;
-    stats_.guard_count = counts.guard_count;
-    stats_.targets_received = counts.targets_received;
-    stats_.targets_rejected = counts.targets_rejected;
-    stats_.rejected = counts.rejected;
-    stats_.stale_events = counts.stale_events;
-    stats_.robot_stale_events = counts.robot_stale_events;
-    stats_.robot_stale_cycles = counts.robot_stale_cycles;
-    stats_.robot_stale_at_exit = !rep.robot_state_ok;
-    if (m.dds) {
-      stats_.robot_states_accepted = m.dds->acceptedStates();
-      stats_.robot_states_rejected_by_cause = m.dds->rejectedByCause();
-      stats_.robot_states_rejected = m.dds->rejectedTotal();
-      stats_.robot_writer_changes = m.dds->writerChanges();
-      stats_.robot_commands = m.dds->commandsSent();
-    }
+    m.recordStats(rep, stats_);
 
-    // 4. Outputs. Joint state: the kinematic robot after the step, or the robot's measured state
-    // the step answered (nothing while the robot state is stale).
-    if (rep.robot_state_ok) {
-      const Eigen::VectorXd& q = m.kinematic ? m.kinematic->positions() : ctl.measuredPositions();
-      for (int i = 0; i < m.model.nq; ++i) {
-        m.joint_msg.positions()[i] = q[i];
-        m.joint_msg.velocities()[i] = cr == ControlResult::kFrozen ? 0.0 : data.qdot[i];
-      }
-      m.joint_out->push(m.joint_msg);
-    }
-    msg::ArmStatus* arms[2] = {&m.status_msg.left(), &m.status_msg.right()};
-    for (int a = 0; a < 2; ++a) {
-      const ArmReport& s = rep.arms[a];
-      arms[a]->blend_f(s.f);
-      arms[a]->distance(std::isfinite(s.distance) ? s.distance : msg::NO_PAIR_DISTANCE);
-      arms[a]->zone(toMsg(s.zone));
-      arms[a]->estop_latched(rep.estop != EstopState::kClear);
-      // Cleared when the arm has no pair this cycle (control.idl): never a previous cycle's names.
-      // Assigned in place (no temporary string): no allocation once the longest name was held.
-      arms[a]->closest_segment_a().assign(s.segment_a != nullptr ? s.segment_a : "");
-      arms[a]->closest_segment_b().assign(s.segment_b != nullptr ? s.segment_b : "");
-    }
-    m.status_msg.arm_distance(std::isfinite(rep.arm_distance) ? rep.arm_distance : msg::NO_PAIR_DISTANCE);
-    m.status_msg.rejected_hand_targets(counts.hand_targets_rejected);
-    m.status_msg.rejected_body_schema(counts.schema_rejected);
-    m.status_msg.rejected_walk_commands(counts.walk_rejected);
-    m.status_msg.rejected_robot_states(stats_.robot_states_rejected);
-    if (last_rejection != nullptr) {
-      m.status_msg.last_rejection().assign(last_rejection);  // fits the reserved capacity
-      stats_.last_rejection = last_rejection;
-    }
-    const double compute_us = (nowSeconds(CLOCK_MONOTONIC) - t_now) * 1e6;
-    if (compute_us > period * 1e6) ++stats_.overruns;
-    m.status_msg.cycle_period_us((t_now - last_start) * 1e6);
-    m.status_msg.compute_time_us(compute_us);
-    m.status_msg.lateness_us(lateness_us);
-    m.status_msg.overrun_count(stats_.overruns);
-    m.status_out->push(m.status_msg);
-    m.outbox->notify();
+    m.publishCycle(rep, last_rejection, t, t_now, last_start, lateness_us, stats_);
     last_start = t_now;
-    ++stats_.cycles;
-    stats_.max_lateness_us = std::max(stats_.max_lateness_us, lateness_us);
-    if (stats_.lateness_us.size() < stats_.lateness_us.capacity()) stats_.lateness_us.push_back(lateness_us);
-    if (m.log && rep.robot_state_ok) {  // a copy into the ring: no allocation, no I/O; a full ring is counted
-      SimSample& s = m.log_row;
-      s.t = t;
-      s.arms = data.arms;
-      s.commands = rep.commands;
-      s.estop = data.estop;
-      s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : msg::NO_PAIR_DISTANCE;
-      s.min_pair = rep.min_pair;  // the --log min_pair column (empty in older logs)
-      s.virtual_distance = rep.virtual_distance;
-      s.arm_distance = rep.arm_distance;
-      s.wall_time = nowSeconds(CLOCK_REALTIME);
-      s.q = m.kinematic ? m.kinematic->positions() : ctl.measuredPositions();
-      s.qdot = data.qdot;
-      m.log->push(s);
-    }
-    if (t_now - last_heartbeat >= 0.5) {
-      publishHeartbeat(msg::STATE_RUNNING);
-      last_heartbeat = t_now;
+    if (t_now - m.loop.last_heartbeat >= 0.5) {
+      m.publishHeartbeat(msg::STATE_RUNNING);
+      m.loop.last_heartbeat = t_now;
     }
     // Fell behind by more than a period: re-anchor the schedule instead of bursting.
     if (lateness_us > period * 1e6) clock_gettime(CLOCK_MONOTONIC, &next);
   }
-  // Leaving the robot: with unitree_hg the arm_sdk weight ramps out (finish() blocks for the ramp time).
-  if (m.dds) {
-    m.dds->finish(period);
-    if (const auto* hg = dynamic_cast<const UnitreeHgPort*>(m.dds.get())) {
-      stats_.arm_sdk_weight = hg->weight();
-      stats_.arm_sdk_max_weight_step = hg->maxWeightStep();
-    }
-    stats_.robot_commands = m.dds->commandsSent();
-    stats_.robot_states_accepted = m.dds->acceptedStates();
-    stats_.robot_states_rejected_by_cause = m.dds->rejectedByCause();
-    stats_.robot_states_rejected = m.dds->rejectedTotal();
-  }
-  publishHeartbeat(msg::STATE_STOPPING);
-  m.outbox->close();  // writes what is queued (heartbeats first: the STOPPING one goes out), 1 s at most
-  const bus::OutboxStats ob = m.outbox->stats();
-  stats_.bus_written = ob.written;
-  stats_.bus_write_failures = ob.write_failures;
-  stats_.bus_dropped = ob.dropped;
-  stats_.bus_stalls = ob.stalls;
-  stats_.bus_longest_write_s = ob.longest_write_s;
-  stats_.bus_longest_topic = ob.longest_topic;
-  if (m.log) {
-    m.log->close();
-    m.log_error = m.log->error();
-    stats_.log_rows = m.log->writtenRows();
-    stats_.log_dropped = m.log->droppedRows();
-  }
+  m.finishRun(stats_);
 }
 
 }  // namespace reflex::control_node

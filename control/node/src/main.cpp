@@ -1,4 +1,5 @@
 // reflex_controller: the onboard controller process over DDS. See controller_node.hpp.
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include "reflex/control_node/controller_node.hpp"
 #include "reflex/control_node/realtime.hpp"
@@ -16,21 +17,19 @@ reflex::control_node::ControllerNode* g_node = nullptr;
 extern "C" void onUsr1(int) {
   if (g_node) g_node->requestEstopReset();  // only sets an atomic flag
 }
-}  // namespace
-
-int main(int argc, char** argv) {
-  CLI::App app{"reflex_controller: onboard reactive controller (one cycle per controller 'period', 5 ms by default)\n"
-               "over DDS, with the in-process kinematic robot (--robot kinematic, default) or a robot driver on the bus\n"
-               "(--robot dds: reads reflex/robot_state, writes reflex/joint_command; idl/README.md). Subscribes hand\n"
-               "targets, motion priority, body schema, walk commands; publishes joint state, controller status, its\n"
-               "protection state and a heartbeat (its detail says 'robot state stale ...' while --robot dds has no\n"
-               "fresh robot state: the controller then commands nothing and the robot holds).\n"
-               "SIGUSR1 asks to leave a latched e-stop; SIGINT, SIGTERM, SIGHUP, SIGUSR2 and every other catchable\n"
-               "terminating signal stop it cleanly (summary, --log closed); SIGPIPE is ignored.\n"
-               "Exit codes: 0 success, 1 set-up error, 3 the --log file could not be written completely."};
+/// What the command line sets.
+struct Options {
   reflex::control_node::NodeConfig config;
-  config.urdf = reflex::common::defaultUrdf();
   bool no_avoidance = false, disable_estop = false;
+  std::string realtime;
+};
+
+void addOptions(CLI::App& app, Options& o) {
+  reflex::control_node::NodeConfig& config = o.config;
+  bool& no_avoidance = o.no_avoidance;
+  bool& disable_estop = o.disable_estop;
+  std::string& realtime = o.realtime;
+  config.urdf = reflex::common::defaultUrdf();
   app.add_option("--urdf", config.urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", config.collision, "collision configuration (default: next to the URDF)");
   app.add_option("--controller", config.controller,
@@ -109,23 +108,116 @@ int main(int argc, char** argv) {
                  "when no state arrives within it the cycle runs as the timer's (stale after --robot-timeout: "
                  "nothing commanded). Cycles started by a state report lateness 0")
       ->capture_default_str();
-  std::string realtime;
   app.add_option("--realtime", realtime,
                  "PRIORITY[,CPU]: run real-time: pin the process to CPU (if given), SCHED_FIFO at PRIORITY (1..99), "
                  "lock all memory (mlockall) and pre-fault the stack, before any thread starts (the DDS threads "
-                 "inherit it). Refused with exit 1, naming the value and the reason, where not permitted (needs "
+                 "inherit it). Refused with exit 2, naming the value and the reason, where not permitted (needs "
                  "root, or CAP_SYS_NICE and CAP_IPC_LOCK, or rtprio/memlock limits) or not possible (a CPU this "
                  "process may not use): it never runs without what was asked. E.g. --realtime 80,1");
   app.add_option("--name", config.module_name,
                  "module name on the bus (1.." + std::to_string(reflex::bus::kMaxKeyStringBytes) + " bytes)")
       ->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
-  config.avoidance = !no_avoidance;
-  config.estop = !disable_estop;
-  std::signal(SIGPIPE, SIG_IGN);  // from the start: a closed stderr never ends the process,
-  std::signal(SIGXFSZ, SIG_IGN);  // nor a file size limit (the failed write is reported instead)
-  std::signal(SIGUSR1, onUsr1);   // ignored until the node exists (g_node)
-  try {
+}
+
+/// The banner: the configuration, the robot, the rate and what protects the run.
+void printBanner(reflex::control_node::ControllerNode& node, const reflex::control_node::NodeConfig& config) {
+  std::fprintf(stderr, "reflex_controller: %s\n", node.controllerConfigNote().c_str());
+  if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
+  if (!node.robotInterfaceNote().empty())
+    std::fprintf(stderr, "reflex_controller: %s\n", node.robotInterfaceNote().c_str());
+  const auto& protection = node.protection();
+  if (config.trigger == "state")
+    std::fprintf(stderr, "reflex_controller: a cycle per arriving robot state, at least every %.3f ms (--trigger state) "
+                 "on domain %d, robot '%s' (robot over DDS); protection %s\n",
+                 protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(), protection.describe().c_str());
+  else
+    std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
+                 1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
+                 config.robot == "dds"          ? "robot over DDS"
+                 : config.robot == "unitree_hg" ? "Unitree hg: rt/lowstate in, rt/arm_sdk out"
+                 : config.robot == "ros2"       ? "ROS 2: sensor_msgs/JointState in, ros2_control command out"
+                                                : "kinematic plant",
+                 protection.describe().c_str());
+  if (!protection.full())
+    std::fprintf(stderr, "reflex_controller: WARNING: THIS RUN IS NOT PROTECTED: %s\n", protection.reason.c_str());
+}
+
+/// The exit line: cycles, lateness, distances, e-stops, what was rejected and why, the bus writes.
+void printExitLine(reflex::control_node::ControllerNode& node, const reflex::control_node::NodeConfig& config) {
+  const auto& protection = node.protection();
+  const auto& s = node.stats();
+  std::vector<double> lat = s.lateness_us;
+  std::sort(lat.begin(), lat.end());
+  auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))]; };
+  std::string extra;
+  if (lat.size() < s.cycles) extra += " (percentiles over the first " + std::to_string(lat.size()) + " cycles)";
+  if (s.state_write_errors > 0) extra += ", robot-state writes FAILED " + std::to_string(s.state_write_errors);
+  if (!config.log_csv.empty()) extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
+  if (s.peer_controller_samples > 0) extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
+  if (config.robot != "kinematic") {
+    extra += ", robot " + config.robot + ": states " + std::to_string(s.robot_states_accepted) + " (rejected " +
+             std::to_string(s.robot_states_rejected) + "), commands " + std::to_string(s.robot_commands) +
+             ", robot stale events " + std::to_string(s.robot_stale_events) + " (" +
+             std::to_string(s.robot_stale_cycles) + " cycles without state)";
+    if (s.robot_stale_at_exit) extra += ", ROBOT STATE STALE at exit";
+    if (s.arm_sdk_weight >= 0.0) {
+      char w[128];
+      std::snprintf(w, sizeof(w), ", arm_sdk weight at exit %.3f (largest step %.5f)", s.arm_sdk_weight,
+                    s.arm_sdk_max_weight_step);
+      extra += w;
+    }
+    if (s.robot_writer_changes > 0) extra += ", robot writer replaced " + std::to_string(s.robot_writer_changes) + " times";
+    if (s.robot_states_rejected_by_cause[7] > 0)
+      extra += ", SECOND ROBOT WRITER ignored (" + std::to_string(s.robot_states_rejected_by_cause[7]) + " samples)";
+  }
+  if (s.targets_rejected + s.robot_states_rejected > 0)
+    extra += ", rejected by cause: " + reflex::control_node::describeRejections(s) + " (last " + s.last_rejection + ")";
+  {  // the loop's bus outputs (reflex/bus/outbox.hpp): a blocked write never stopped the loop; it is named here
+    char bus_line[256];
+    std::snprintf(bus_line, sizeof(bus_line), ", bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %.1f ms%s%s)",
+                  static_cast<unsigned long long>(s.bus_written), static_cast<unsigned long long>(s.bus_dropped),
+                  static_cast<unsigned long long>(s.bus_write_failures), static_cast<unsigned long long>(s.bus_stalls),
+                  1e3 * s.bus_longest_write_s, s.bus_longest_topic.empty() ? "" : " ", s.bus_longest_topic.c_str());
+    extra += bus_line;
+  }
+  extra += ", protection " + protection.describe();
+  std::fprintf(stderr,
+               "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "
+               "min distance %.1f mm, e-stops %llu, targets %llu (rejected %llu), stale events %llu, "
+               "guard-shortened steps %llu%s\n",
+               static_cast<unsigned long long>(s.cycles), pct(0.5), pct(0.99), s.max_lateness_us,
+               static_cast<unsigned long long>(s.overruns), s.min_distance * 1000.0,
+               static_cast<unsigned long long>(s.estop_count), static_cast<unsigned long long>(s.targets_received),
+               static_cast<unsigned long long>(s.targets_rejected), static_cast<unsigned long long>(s.stale_events),
+               static_cast<unsigned long long>(s.guard_count), extra.c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"reflex_controller: onboard reactive controller (one cycle per controller 'period', 5 ms by default)\n"
+               "over DDS, with the in-process kinematic robot (--robot kinematic, default) or a robot driver on the bus\n"
+               "(--robot dds: reads reflex/robot_state, writes reflex/joint_command; idl/README.md). Subscribes hand\n"
+               "targets, motion priority, body schema, walk commands; publishes joint state, controller status, its\n"
+               "protection state and a heartbeat (its detail says 'robot state stale ...' while --robot dds has no\n"
+               "fresh robot state: the controller then commands nothing and the robot holds).\n"
+               "SIGUSR1 asks to leave a latched e-stop; SIGINT, SIGTERM, SIGHUP, SIGUSR2 and every other catchable\n"
+               "terminating signal stop it cleanly (summary, --log closed); SIGPIPE is ignored.\n"
+               "Exit codes: 0 success; 1 failed while running (expired DDS-Security credentials); 2 refused: a bad\n"
+               "option, file or set-up, named, or another controller keeps the domain; 3 the --log file could not be\n"
+               "written completely."};
+  Options options;
+  addOptions(app, options);
+  reflex::control_node::NodeConfig& config = options.config;
+  const bool& no_avoidance = options.no_avoidance;
+  const bool& disable_estop = options.disable_estop;
+  const std::string& realtime = options.realtime;
+  return reflex::runMain("reflex_controller", app, argc, argv, [&]() -> int {
+    config.avoidance = !no_avoidance;
+    config.estop = !disable_estop;
+    std::signal(SIGPIPE, SIG_IGN);  // from the start: a closed stderr never ends the process,
+    std::signal(SIGXFSZ, SIG_IGN);  // nor a file size limit (the failed write is reported instead)
+    std::signal(SIGUSR1, onUsr1);   // ignored until the node exists (g_node)
     if (!realtime.empty()) {  // before the node: every thread it starts inherits the policy and the CPU
       const std::string applied =
           reflex::control_node::applyRealtime(reflex::control_node::parseRealtime(realtime), realtime);
@@ -138,75 +230,13 @@ int main(int argc, char** argv) {
     stop_signals.erase(std::remove(stop_signals.begin(), stop_signals.end(), SIGUSR1), stop_signals.end());
     reflex::bus::StopOnSignal stop_on_signal(node.bus(), stop_signals);
     g_node = &node;
-    std::fprintf(stderr, "reflex_controller: %s\n", node.controllerConfigNote().c_str());
-    if (!node.robotStateNote().empty()) std::fprintf(stderr, "reflex_controller: %s\n", node.robotStateNote().c_str());
-    if (!node.robotInterfaceNote().empty())
-      std::fprintf(stderr, "reflex_controller: %s\n", node.robotInterfaceNote().c_str());
-    const auto& protection = node.protection();
-    if (config.trigger == "state")
-      std::fprintf(stderr, "reflex_controller: a cycle per arriving robot state, at least every %.3f ms (--trigger state) "
-                   "on domain %d, robot '%s' (robot over DDS); protection %s\n",
-                   protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(), protection.describe().c_str());
-    else
-      std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
-                   1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
-                   config.robot == "dds"          ? "robot over DDS"
-                   : config.robot == "unitree_hg" ? "Unitree hg: rt/lowstate in, rt/arm_sdk out"
-                   : config.robot == "ros2"       ? "ROS 2: sensor_msgs/JointState in, ros2_control command out"
-                                                  : "kinematic plant",
-                   protection.describe().c_str());
-    if (!protection.full())
-      std::fprintf(stderr, "reflex_controller: WARNING: THIS RUN IS NOT PROTECTED: %s\n", protection.reason.c_str());
+    printBanner(node, config);
     node.run();
-    const auto& s = node.stats();
-    std::vector<double> lat = s.lateness_us;
-    std::sort(lat.begin(), lat.end());
-    auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))]; };
-    std::string extra;
-    if (lat.size() < s.cycles) extra += " (percentiles over the first " + std::to_string(lat.size()) + " cycles)";
-    if (s.state_write_errors > 0) extra += ", robot-state writes FAILED " + std::to_string(s.state_write_errors);
-    if (!config.log_csv.empty()) extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
-    if (s.peer_controller_samples > 0) extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
-    if (config.robot != "kinematic") {
-      extra += ", robot " + config.robot + ": states " + std::to_string(s.robot_states_accepted) + " (rejected " +
-               std::to_string(s.robot_states_rejected) + "), commands " + std::to_string(s.robot_commands) +
-               ", robot stale events " + std::to_string(s.robot_stale_events) + " (" +
-               std::to_string(s.robot_stale_cycles) + " cycles without state)";
-      if (s.robot_stale_at_exit) extra += ", ROBOT STATE STALE at exit";
-      if (s.arm_sdk_weight >= 0.0) {
-        char w[128];
-        std::snprintf(w, sizeof(w), ", arm_sdk weight at exit %.3f (largest step %.5f)", s.arm_sdk_weight,
-                      s.arm_sdk_max_weight_step);
-        extra += w;
-      }
-      if (s.robot_writer_changes > 0) extra += ", robot writer replaced " + std::to_string(s.robot_writer_changes) + " times";
-      if (s.robot_states_rejected_by_cause[7] > 0)
-        extra += ", SECOND ROBOT WRITER ignored (" + std::to_string(s.robot_states_rejected_by_cause[7]) + " samples)";
-    }
-    if (s.targets_rejected + s.robot_states_rejected > 0)
-      extra += ", rejected by cause: " + reflex::control_node::describeRejections(s) + " (last " + s.last_rejection + ")";
-    {  // the loop's bus outputs (reflex/bus/outbox.hpp): a blocked write never stopped the loop; it is named here
-      char bus_line[256];
-      std::snprintf(bus_line, sizeof(bus_line), ", bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %.1f ms%s%s)",
-                    static_cast<unsigned long long>(s.bus_written), static_cast<unsigned long long>(s.bus_dropped),
-                    static_cast<unsigned long long>(s.bus_write_failures), static_cast<unsigned long long>(s.bus_stalls),
-                    1e3 * s.bus_longest_write_s, s.bus_longest_topic.empty() ? "" : " ", s.bus_longest_topic.c_str());
-      extra += bus_line;
-    }
-    extra += ", protection " + protection.describe();
-    std::fprintf(stderr,
-                 "reflex_controller: %llu cycles, lateness p50 %.0f us p99 %.0f us max %.0f us, overruns %llu, "
-                 "min distance %.1f mm, e-stops %llu, targets %llu (rejected %llu), stale events %llu, "
-                 "guard-shortened steps %llu%s\n",
-                 static_cast<unsigned long long>(s.cycles), pct(0.5), pct(0.99), s.max_lateness_us,
-                 static_cast<unsigned long long>(s.overruns), s.min_distance * 1000.0,
-                 static_cast<unsigned long long>(s.estop_count), static_cast<unsigned long long>(s.targets_received),
-                 static_cast<unsigned long long>(s.targets_rejected), static_cast<unsigned long long>(s.stale_events),
-                 static_cast<unsigned long long>(s.guard_count), extra.c_str());
+    printExitLine(node, config);
     g_node = nullptr;
     if (!node.peerRefusal().empty()) {
       std::fprintf(stderr, "reflex_controller: error: %s\n", node.peerRefusal().c_str());
-      return 1;
+      return reflex::kExitRefused;  // the same refusal as at start (another controller keeps the domain)
     }
     if (const std::string log_error = node.logFailure(); !log_error.empty()) {
       std::fprintf(stderr, "reflex_controller: error: %s\n", log_error.c_str());
@@ -215,8 +245,5 @@ int main(int argc, char** argv) {
     // DDS-Security material that expired during the run stopped the loop (bus::Participant): not success.
     if (node.bus().credentialsExpired()) return 1;
     return 0;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "reflex_controller: error: %s\n", e.what());
-    return 1;
-  }
+  });
 }

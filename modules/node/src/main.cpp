@@ -4,6 +4,7 @@
 //   reflex_behavior --list-modules [--config FILE | --plugin LIB]
 //   reflex_behavior --config my.yaml --plugin build/libwave_module.so      # a module type from a shared library
 // Swapping a module is a change of configuration: start it with another file.
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include "process_guard.hpp"
 #include "reflex/modules/behavior_node.hpp"
@@ -55,11 +56,7 @@ int main(int argc, char** argv) {
                  "configuration's own `plugins:` list (repeatable). Its code runs in this process: load only files you "
                  "trust");
   app.add_flag("--list-modules", list, "list the module types (built-in and from plugins) and exit");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
 
   // From here on a crash names the module (or plugin) whose code was running, and a call into one that
   // does not return is named. The watchdog outlives the node: the modules' stop() and destructors are
@@ -78,9 +75,8 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "reflex_behavior: plugin %s: module types %s\n", info.path.c_str(), types.c_str());
       for (const auto& t : info.types) options.type_plugins[t] = info.path;
     }
-  } catch (const modules::ConfigError& e) {
-    std::fprintf(stderr, "reflex_behavior: error: %s\n", e.what());
-    return 2;
+  } catch (const std::exception& e) {
+    return reflex::reportException("reflex_behavior", e);
   }
   if (list) {
     for (const auto& t : registry.types()) std::printf("%-12s %s\n", t.c_str(), registry.summary(t).c_str());
@@ -88,7 +84,7 @@ int main(int argc, char** argv) {
   }
   if (options.config.empty()) {
     std::fprintf(stderr, "reflex_behavior: error: --config FILE is required (see --help)\n");
-    return 2;
+    return reflex::kExitRefused;
   }
   try {
     if (!domain.empty()) options.domain_id = bus::parseDomainId(domain, "--domain");
@@ -107,15 +103,8 @@ int main(int argc, char** argv) {
     std::printf("reflex_behavior: stats %s\n", node.report().c_str());
     std::fflush(stdout);
     return 0;
-  } catch (const modules::ConfigError& e) {
-    std::fprintf(stderr, "reflex_behavior: error: %s\n", e.what());
-    return 2;
-  } catch (const bus::BusError& e) {
-    std::fprintf(stderr, "reflex_behavior: error: %s\n", e.what());
-    return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "reflex_behavior: error: %s\n", e.what());
-    return 1;
+    return reflex::reportException("reflex_behavior", e);
   } catch (...) {
     // The host turns whatever a module throws into a ModuleError; this is for anything else.
     std::fprintf(stderr,

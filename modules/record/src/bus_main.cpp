@@ -3,6 +3,7 @@
 //                                           (listens up to 5 s more while discovery still goes on)
 //   reflex_bus hz [TOPIC...] [--window S]    samples per second of every topic (or the ones named)
 // Reads only: it publishes nothing (not even a heartbeat of its own).
+#include "reflex/common/run_main.hpp"
 #include "reflex/record/bus_survey.hpp"
 #include "reflex/record/record_file.hpp"
 
@@ -62,9 +63,7 @@ int main(int argc, char** argv) {
         ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
     sub->add_option("--profiles", profiles, "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped one)");
   }
-  CLI11_PARSE(app, argc, argv);
-  int status = 1;
-  try {
+  const int status = reflex::runMain("reflex_bus", app, argc, argv, [&]() -> int {
     reflex::bus::BusConfig config;
     config.module_name = "reflex_bus";
     if (domain >= 0) config.domain_id = domain;
@@ -72,10 +71,8 @@ int main(int argc, char** argv) {
     const reflex::record::BusSurvey s = reflex::record::surveyBus(config, window, list->parsed() ? std::vector<std::string>{} : topics);
     if (list->parsed()) printProcesses(s);
     else printTopics(s);
-    status = 0;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "reflex_bus: error: %s\n", e.what());
-  }
+    return 0;
+  });
   if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
     std::fprintf(stderr, "reflex_bus: error: %s\n", why.c_str());
     return 1;

@@ -1,3 +1,4 @@
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include "cli.hpp"
 
@@ -92,16 +93,12 @@ struct SceneOptions {
   }
 };
 
-/// Runs a command: an exception is an error message and exit status 1; so is standard output that
-/// could not be written (`reflex_record info run.rfx > /dev/full`).
+/// Runs a command: an exception is an error message and exit status 2 (a reflex::Error: a bad file,
+/// option or recording) or 1 (anything else); standard output that could not be written
+/// (`reflex_record info run.rfx > /dev/full`) is exit status 1.
 template <class F>
 int guarded(const char* tool, F&& f) {
-  int status = 1;
-  try {
-    status = f();
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: error: %s\n", tool, e.what());
-  }
+  const int status = reflex::runGuarded(tool, f);
   if (const std::string why = common::flushStandardOutput(); !why.empty()) {
     std::fprintf(stderr, "%s: error: %s\n", tool, why.c_str());
     return 1;

@@ -1,5 +1,6 @@
 // reflex_play: publish a reflex_record recording (MCAP or .rfx) again (same as `reflex_record play`).
 #include "cli.hpp"
+#include "reflex/common/run_main.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -9,6 +10,6 @@ int main(int argc, char** argv) {
       "the command topics (hand targets, motion priority, body schema, walk command, joint command) are played\n"
       "only with --commands, so a replay never steers a live controller or robot."};
   auto run = reflex::record::cli::addPlay(app);
-  CLI11_PARSE(app, argc, argv);
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   return run();
 }

@@ -217,7 +217,7 @@ void Player::run() {
     if (!missing.empty()) {
       char timeout[32];
       std::snprintf(timeout, sizeof timeout, "%g", options_.wait_timeout);
-      throw RecordError("--wait-readers " + std::to_string(options_.wait_readers) + ": after " + timeout +
+      throw reflex::Failure("--wait-readers " + std::to_string(options_.wait_readers) + ": after " + timeout +
                         " s (--wait-timeout) these topics had fewer matched readers (matched): " + missing +
                         "; is every consumer running on this domain?");
     }

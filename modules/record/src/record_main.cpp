@@ -1,5 +1,6 @@
 // reflex_record: record Reflex topics to a crash-safe file, play it back, export CSV, show info.
 #include "cli.hpp"
+#include "reflex/common/run_main.hpp"
 
 #include <cstdio>
 #include <string>
@@ -34,10 +35,10 @@ int main(int argc, char** argv) {
     if (sub != "record" && sub != "play" && sub != "export" && sub != "info" && sub != "convert") {
       std::fprintf(stderr, "reflex_record: unknown command '%s' (record, play, export, info, convert; see --help)\n",
                    argv[1]);
-      return 1;
+      return reflex::kExitRefused;
     }
   }
-  CLI11_PARSE(app, argc, argv);
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   if (rec->parsed()) return run_rec();
   if (play->parsed()) return run_play();
   if (exp->parsed()) return run_exp();

@@ -13,6 +13,7 @@
 //
 // Bad input: exit 2 with one line naming the value (no --log / --at / --out, a bad --tile or --camera,
 // the robot files' and the time series' errors as reflex::view::readLogScenes names them).
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include <reflex/common/files.hpp>
 #include <reflex/view/log_scene.hpp>
@@ -38,7 +39,7 @@ void parseTile(const std::string& text, int& width, int& height) {
   if (x == std::string::npos || !reflex::common::parseFiniteNumber(text.substr(0, x), w) ||
       !reflex::common::parseFiniteNumber(text.substr(x + 1), h) || w != std::floor(w) || h != std::floor(h) || w < 16 ||
       h < 16 || w > 4096 || h > 4096)
-    throw std::invalid_argument("--tile '" + text + "' is not WIDTHxHEIGHT with whole numbers in 16..4096");
+    throw reflex::Error("--tile '" + text + "' is not WIDTHxHEIGHT with whole numbers in 16..4096");
   width = static_cast<int>(w);
   height = static_cast<int>(h);
 }
@@ -51,12 +52,12 @@ std::vector<double> parseCamera(const std::string& text) {
   while (std::getline(ss, field, ',')) {
     double value = 0;
     if (!reflex::common::parseFiniteNumber(field, value))
-      throw std::invalid_argument("--camera '" + text + "': '" + field + "' is not a finite number");
+      throw reflex::Error("--camera '" + text + "': '" + field + "' is not a finite number");
     v.push_back(value);
   }
-  if (v.size() != 6) throw std::invalid_argument("--camera '" + text + "' needs six numbers AZ,EL,RADIUS,TX,TY,TZ");
+  if (v.size() != 6) throw reflex::Error("--camera '" + text + "' needs six numbers AZ,EL,RADIUS,TX,TY,TZ");
   if (!(std::abs(v[1]) < 1.5) || !(v[2] > 0.05))
-    throw std::invalid_argument("--camera '" + text + "': elevation must be in (-1.5, 1.5) rad and radius > 0.05 m");
+    throw reflex::Error("--camera '" + text + "': elevation must be in (-1.5, 1.5) rad and radius > 0.05 m");
   return v;
 }
 
@@ -81,13 +82,12 @@ int main(int argc, char** argv) {
   app.add_option("--urdf", urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", collision, "collision YAML (default: next to the URDF)");
   app.add_option("--controller", controller, "controller YAML (zone thresholds; default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
-  CLI11_PARSE(app, argc, argv);
+  return reflex::runMain("reflex_scene", app, argc, argv, [&]() -> int {
 
-  try {
     int width = 0, height = 0;
     parseTile(tile, width, height);
     const std::vector<double> cam = parseCamera(camera_text);
-    if (const std::string why = reflex::common::regularOutputProblem(out); !why.empty()) throw std::invalid_argument(why);
+    if (const std::string why = reflex::common::regularOutputProblem(out); !why.empty()) throw reflex::Error(why);
     const reflex::view::SceneModel scene = reflex::view::loadSceneModel(urdf, collision, controller);
     const std::vector<reflex::view::LogScene> rows = reflex::view::readLogScenes(scene, log, at);
 
@@ -99,7 +99,7 @@ int main(int argc, char** argv) {
     reflex::view::SceneData data(scene);
     for (const reflex::view::LogScene& row : rows) {
       if (!reflex::view::updateScene(scene, data, row.input))
-        throw std::invalid_argument(log + " row " + std::to_string(row.row) + ": the joint positions cannot be drawn");
+        throw reflex::Error(log + " row " + std::to_string(row.row) + ": the joint positions cannot be drawn");
       doc["scenes"].push_back({{"time", row.t}, {"row", row.row}, {"update", reflex::view::buildSceneUpdate(scene, data, row.input)}});
     }
     errno = 0;
@@ -107,15 +107,12 @@ int main(int argc, char** argv) {
     file << "// Made by reflex_scene from " << log << " (" << rows.size() << " scenes); drawn by view.js (static mode).\n"
          << "export default " << doc.dump() << ";\n";
     file.close();
-    if (!file) throw std::invalid_argument(reflex::common::writeError(out, errno ? errno : EIO));
+    if (!file) throw reflex::Error(reflex::common::writeError(out, errno ? errno : EIO));
     std::printf("reflex_scene: wrote %zu scenes to %s (%s)\n", rows.size(), out.c_str(), scene.controller_note.c_str());
     if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {
       std::fprintf(stderr, "reflex_scene: error: %s\n", why.c_str());
       return 1;
     }
     return 0;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "reflex_scene: error: %s\n", e.what());
-    return 2;
-  }
+  });
 }

@@ -23,6 +23,7 @@
 // Extending: a new criterion in the nullspace goes into the xi terms of blendControllers() in controller.cpp.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/model.hpp"
@@ -41,10 +42,8 @@ namespace reflex::control {
 inline constexpr int kLeft = 0;
 inline constexpr int kRight = 1;
 
-class ConfigError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
+/// The controller's configuration errors are the YAML reader's: one ConfigError type in Reflex.
+using ConfigError = common::ConfigError;
 
 enum class AvoidanceMode { kOneDof, kThreeDof, kOff };
 enum class Zone : std::uint8_t { kFree = 0, kYellow = 1, kOrange = 2, kRed = 3 };

@@ -92,7 +92,7 @@ struct PairSamplingReport {
 /// [-pi, pi]). `all_pairs` is the robot loaded with exclude_adjacent false and no exclusions;
 /// `non_adjacent` the same robot with exclude_adjacent true (their difference is the adjacent set).
 /// `progress` (optional) is called with the fraction done, at most ~100 times.
-/// Throws std::invalid_argument naming a bad option.
+/// Throws reflex::Error naming a bad option.
 PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent, const PairSamplingOptions& options,
                                const std::function<void(double)>& progress = {});
 

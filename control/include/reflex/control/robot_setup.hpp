@@ -36,6 +36,7 @@
 // Every function throws SetupError with a message that names the bad value or the candidates.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include "reflex/control/controller.hpp"
 #include "reflex/control/model.hpp"
 
@@ -49,9 +50,9 @@
 
 namespace reflex::control {
 
-class SetupError : public std::runtime_error {
+class SetupError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 struct SetupOptions {

@@ -32,6 +32,7 @@
 // Every error names the file, the element and the bad value.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include "reflex/control/model.hpp"
 
 #include <stdexcept>
@@ -42,9 +43,9 @@
 namespace reflex::control {
 
 /// Thrown for every set-up error of the model (URDF, collision configuration).
-class ModelError : public std::runtime_error {
+class ModelError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 /// One <disable_collisions link1 link2 reason> entry of an SRDF.

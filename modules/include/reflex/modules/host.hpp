@@ -40,6 +40,7 @@
 // unchanged (it names file, line, key and value).
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include "reflex/modules/config.hpp"
 #include "reflex/modules/module.hpp"
 #include "reflex/modules/registry.hpp"
@@ -59,10 +60,10 @@ namespace reflex::modules {
 
 /// A module failed in a call at run time (threw, whatever it threw). The message names the call, the
 /// module, its type and where the type came from: "step() of module 'x' (type t, plugin /abs/lib.so)
-/// threw: ...".
-class ModuleError : public std::runtime_error {
+/// threw: ...". A run that failed (exit 1), not a refusal: a reflex::Failure.
+class ModuleError : public reflex::Failure {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Failure::Failure;
 };
 
 /// Where the host's merged outputs go. Called only on change, from the host's thread.

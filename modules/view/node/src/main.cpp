@@ -1,6 +1,7 @@
 // reflex_view: the live 3D view of a running Reflex system, in the browser and in Foxglove.
 //   reflex_view [--port 8765] [--bind 127.0.0.1] [--domain N] [--urdf FILE] ...
 // Open http://localhost:8765, or in Foxglove: Open connection -> Foxglove WebSocket -> ws://localhost:8765.
+#include "reflex/common/run_main.hpp"
 #include "reflex/common/shipped.hpp"
 #include "reflex/view_node/view_node.hpp"
 
@@ -47,11 +48,7 @@ int main(int argc, char** argv) {
   app.add_option("--progress", options.progress_period, "counters on stderr every this many seconds (0 = none)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
+  if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   try {
     if (!domain.empty()) options.domain_id = bus::parseDomainId(domain, "--domain");
     view_node::ViewNode node(options);
@@ -61,10 +58,6 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
     return 0;
   } catch (const std::exception& e) {
-    // Set-up errors (server, robot files, bus configuration) are exit code 2; anything else 1.
-    const bool setup = dynamic_cast<const view_node::ViewError*>(&e) || dynamic_cast<const control::ModelError*>(&e) ||
-                       dynamic_cast<const control::ConfigError*>(&e) || dynamic_cast<const bus::BusError*>(&e);
-    std::fprintf(stderr, "reflex_view: error: %s\n", e.what());
-    return setup ? 2 : 1;
+    return reflex::reportException("reflex_view", e);  // set-up errors (reflex::Error) 2, anything else 1
   }
 }

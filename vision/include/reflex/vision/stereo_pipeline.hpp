@@ -131,6 +131,13 @@ class StereoTagPipeline {
   CameraMount mount_;
   ObjectMap objects_;
   PipelineOptions options_;
+  /// process()'s steps: both images checked (size, type) into gray_ (false: out says why, skipped);
+  /// one side's tags, in rectified coordinates; one tag seen in both images as an observation (false:
+  /// rejected by a plausibility check).
+  bool grayImages(const cv::Mat& left, const cv::Mat& right, StereoResult& out);
+  void detectSide(int i, std::vector<TagDetection>& dets);
+  bool observe(int id, const TagDetection& dl, const TagDetection& dr, const ObjectSpec& spec, ObjectObservation& o);
+
   std::unique_ptr<TagDetector> detector_[2];
   cv::Mat gray_[2], rect_[2];
   std::vector<cv::Point2d> raw_pts_, rect_pts_;

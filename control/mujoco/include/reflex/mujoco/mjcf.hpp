@@ -71,7 +71,7 @@ struct MjcfOptions {
 std::vector<JointClass> classifyJoints(const control::Model& model);
 
 /// The MJCF text. `gains` (one per q index) may be empty: actuators then get kp = kd = 0 (used by
-/// servoGains to measure the joint inertias). Throws std::invalid_argument for bad options (a value
+/// servoGains to measure the joint inertias). Throws reflex::Error for bad options (a value
 /// not finite and positive, naming it).
 std::string makeMjcf(const control::Model& model, const MjcfOptions& options,
                      const std::vector<ServoGains>& gains = {});

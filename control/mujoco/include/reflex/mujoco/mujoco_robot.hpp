@@ -104,8 +104,8 @@ struct RobotMeasurement {
 class MujocoRobot {
  public:
   /// Builds the MJCF (makeMjcf with servoGains), compiles it, sets q = q0 (q index order; empty:
-  /// every joint at 0, or at the nearest limit) at rest and holding. Throws std::runtime_error /
-  /// std::invalid_argument naming the bad value.
+  /// every joint at 0, or at the nearest limit) at rest and holding. Throws reflex::Error (a model MuJoCo
+  /// refuses) / std::invalid_argument (a q0 of the wrong size) naming the bad value.
   MujocoRobot(const control::Model& model, const MjcfOptions& options, const Eigen::VectorXd& q0 = {});
 
   /// Checks a command against the robot at wall-clock time now_ns; if accepted it becomes the active

@@ -53,8 +53,8 @@ struct NodeStats {
 
 class RobotNode {
  public:
-  /// Loads the model, builds the robot and the DDS entities. Throws (ModelError, BusError,
-  /// std::invalid_argument, std::runtime_error) naming the bad value.
+  /// Loads the model, builds the robot and the DDS entities. Throws reflex::Error (ModelError,
+  /// BusError, ...) naming the bad value.
   explicit RobotNode(const NodeConfig& config);
   /// Runs until stop() (signals: bus::StopOnSignal on bus()) or the configured duration.
   void run();
@@ -83,7 +83,7 @@ class RobotNode {
 };
 
 /// Parses "joint=value" initial positions for `model` (q index order, the rest 0 clamped to the
-/// limits). Throws std::invalid_argument naming the bad entry (unknown joint, not a number, outside
+/// limits). Throws reflex::Error naming the bad entry (unknown joint, not a number, outside
 /// the limits).
 Eigen::VectorXd parseInitialConfiguration(const control::Model& model, const std::vector<std::string>& entries);
 

@@ -19,15 +19,16 @@
 // RLIMIT_MEMLOCK of unlimited (/etc/security/limits.conf: `user - rtprio 90`, `user - memlock unlimited`).
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include <cstddef>
 #include <stdexcept>
 #include <string>
 
 namespace reflex::control_node {
 
-class RealtimeError : public std::runtime_error {
+class RealtimeError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 struct RealtimeRequest {

@@ -31,6 +31,7 @@
 // (flock) while open, so two controllers can never drive one robot state.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include "reflex/common/crc32.hpp"
 
 #include <Eigen/Core>
@@ -42,9 +43,9 @@
 
 namespace reflex::control_node {
 
-class RobotStateError : public std::runtime_error {
+class RobotStateError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 /// FNV-1a 64 of the joint names in order, each followed by '\0' (the identity of a robot's joint set).

@@ -18,6 +18,7 @@
 // Extending: another row format only needs another pair of header / row functions.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include "reflex/control/model.hpp"
 #include "reflex/control/scenarios.hpp"
 
@@ -32,9 +33,9 @@
 
 namespace reflex::control_node {
 
-class LogError : public std::runtime_error {
+class LogError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 class TimeseriesLog {

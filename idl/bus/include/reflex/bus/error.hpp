@@ -3,14 +3,15 @@
 // the bad value came from. The data path (publish / take) never throws: it returns a status.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include <stdexcept>
 #include <string>
 
 namespace reflex::bus {
 
-class BusError : public std::runtime_error {
+class BusError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 }  // namespace reflex::bus

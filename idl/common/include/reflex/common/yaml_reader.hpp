@@ -20,6 +20,7 @@
 // control/docs/configuration.md ("Error messages") is the reference for users.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include <Eigen/Core>
 #include <yaml-cpp/yaml.h>
 
@@ -30,12 +31,6 @@
 #include <vector>
 
 namespace reflex::common {
-
-/// The default error of ConfigNode (modules::ConfigError is this type).
-class ConfigError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
 
 /// The text of a YAML value for error messages: a scalar as written, anything else in flow style,
 /// cut at 60 characters ("..."); "" for an absent or null value.

@@ -32,6 +32,7 @@
 // process (page cache) and, after the next fsync, also a power loss or kernel crash.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include "reflex/common/crc32.hpp"
 
 #include <chrono>
@@ -45,9 +46,9 @@
 namespace reflex::record {
 
 /// Set-up and I/O errors of recording files (message names the file and the bad value).
-class RecordError : public std::runtime_error {
+class RecordError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 inline constexpr char kFileMagic[8] = {'R', 'F', 'X', 'R', 'E', 'C', '\r', '\n'};

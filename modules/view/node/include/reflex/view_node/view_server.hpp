@@ -34,6 +34,7 @@
 // Anything else: 404. Only GET/HEAD.
 #pragma once
 
+#include "reflex/common/error.hpp"
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -46,9 +47,9 @@ namespace reflex::view_node {
 
 /// Set-up errors of the server (bad address, port in use, missing web folder): the message names the
 /// value and the option.
-class ViewError : public std::runtime_error {
+class ViewError : public reflex::Error {
  public:
-  using std::runtime_error::runtime_error;
+  using reflex::Error::Error;
 };
 
 struct ServerOptions {
