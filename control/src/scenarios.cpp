@@ -117,16 +117,9 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
     }
     if (options.record) {
       SimSample s;
-      s.t = t;
-      s.arms = data.arms;
+      recordCycle(s, t, data, rep);
       s.commands = input.hands;
-      s.estop = data.estop;
-      s.min_distance = rep.min_distance;
-      s.min_pair = rep.min_pair;
-      s.virtual_distance = rep.virtual_distance;
-      s.arm_distance = rep.arm_distance;
       s.q = q_before;  // the configuration this cycle computed from
-      s.qdot = data.qdot;
       s.commanded = rep.robot_state_ok;
       s.q_command = controller.commandedPositions();
       result.samples.push_back(std::move(s));

@@ -262,89 +262,66 @@ struct SimArgs {
 };
 
 void addOptions(CLI::App& app, SimArgs& a) {
-  std::string& robot_side = a.robot_side;
-  std::string& scenario_name = a.scenario_name;
-  std::string& out_dir = a.out_dir;
-  std::string& urdf = a.urdf;
-  std::string& collision = a.collision;
-  std::string& controller_cfg = a.controller_cfg;
-  std::string& mode = a.mode;
-  bool& list = a.list;
-  bool& no_avoidance = a.no_avoidance;
-  bool& no_plots = a.no_plots;
-  std::string& postures_from = a.postures_from;
-  std::vector<double>& at = a.at;
-  std::optional<int>& domain = a.domain;
-  double& robot_timeout = a.robot_timeout;
-  double& command_deadline = a.command_deadline;
-  double& robot_wait = a.robot_wait;
-  std::string& joint_map = a.joint_map;
-  double& ramp_time = a.ramp_time;
-  app.add_option("scenario", scenario_name, "scenario name (see --list) or 'all'");
-  app.add_flag("--list", list, "list the scenarios");
-  app.add_option("--out", out_dir, "output folder (created)");
-  app.add_flag("--no-avoidance", no_avoidance, "run with collision avoidance AND the e-stop off (the paper's comparison; simulation only)");
-  app.add_option("--mode", mode, "avoidance variant")->check(CLI::IsMember({"one_dof", "three_dof"}));
-  app.add_option("--urdf", urdf, "robot URDF")->default_str(reflex::common::defaultUrdf());
-  app.add_option("--collision", collision, "collision configuration YAML (default: next to the URDF)");
-  app.add_option("--controller", controller_cfg,
+  app.add_option("scenario", a.scenario_name, "scenario name (see --list) or 'all'");
+  app.add_flag("--list", a.list, "list the scenarios");
+  app.add_option("--out", a.out_dir, "output folder (created)");
+  app.add_flag("--no-avoidance", a.no_avoidance, "run with collision avoidance AND the e-stop off (the paper's comparison; simulation only)");
+  app.add_option("--mode", a.mode, "avoidance variant")->check(CLI::IsMember({"one_dof", "three_dof"}));
+  app.add_option("--urdf", a.urdf, "robot URDF")->default_str(reflex::common::defaultUrdf());
+  app.add_option("--collision", a.collision, "collision configuration YAML (default: next to the URDF)");
+  app.add_option("--controller", a.controller_cfg,
                  "controller configuration YAML (default: <URDF stem>.controller.yaml next to the URDF if it exists, "
                  "else the built-in asimo_like arms)");
-  app.add_flag("--no-plots", no_plots, "do not render PNG plots");
-  app.add_option("--postures-from", postures_from,
+  app.add_flag("--no-plots", a.no_plots, "do not render PNG plots");
+  app.add_option("--postures-from", a.postures_from,
                  "instead of simulating: write OUT/postures.csv (the robot's capsules) for rows of this time-series "
                  "CSV (reflex_sim or reflex_controller --log)");
-  app.add_option("--at", at, "times (s) of the rows for --postures-from (nearest row each)")->delimiter(',');
-  app.add_option("--robot", robot_side,
+  app.add_option("--at", a.at, "times (s) of the rows for --postures-from (nearest row each)")->delimiter(',');
+  app.add_option("--robot", a.robot_side,
                  "the robot side: 'kinematic' (the in-process plant, simulated time), 'mujoco' (spawns reflex_mujoco "
                  "on --domain and drives it over DDS in real time), 'dds' (a robot already on the bus, real time) or "
                  "'unitree_hg' (spawns reflex_mujoco --interface unitree_hg and drives it as reflex_controller --robot "
                  "unitree_hg does: rt/lowstate in, rt/arm_sdk out, the weight ramped in and out; judged like mujoco)")
       ->capture_default_str()
       ->check(CLI::IsMember({"kinematic", "mujoco", "dds", "unitree_hg"}));
-  app.add_option("--joint-map", joint_map,
+  app.add_option("--joint-map", a.joint_map,
                  "--robot unitree_hg: the joint map YAML (default: <URDF stem>.hg.yaml beside the URDF)");
-  app.add_option("--ramp-time", ramp_time, "--robot unitree_hg: seconds of the arm_sdk weight's ramp in and out")
+  app.add_option("--ramp-time", a.ramp_time, "--robot unitree_hg: seconds of the arm_sdk weight's ramp in and out")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 60.0));
-  app.add_option("--domain", domain,
+  app.add_option("--domain", a.domain,
                  "DDS domain id of the robot (--robot mujoco: default 197; dds: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
-  app.add_option("--robot-timeout", robot_timeout,
+  app.add_option("--robot-timeout", a.robot_timeout,
                  "seconds after which the newest robot state is stale (mujoco, dds): nothing is commanded; (0, 1]")
       ->capture_default_str()
       ->check(CLI::Range(1e-4, 1.0));
-  app.add_option("--command-deadline", command_deadline,
+  app.add_option("--command-deadline", a.command_deadline,
                  "seconds each joint command stays valid (mujoco, dds); (0, 1]")
       ->capture_default_str()
       ->check(CLI::Range(1e-4, 1.0));
-  app.add_option("--robot-wait", robot_wait, "seconds to wait for the robot's first state (mujoco, dds); (0, 600]")
+  app.add_option("--robot-wait", a.robot_wait, "seconds to wait for the robot's first state (mujoco, dds); (0, 600]")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 600.0));
 }
 
 /// --postures-from: OUT/postures.csv for rows of a time series, instead of simulating.
 int writePosturesFrom(SimArgs& a) {
-  std::string& out_dir = a.out_dir;
-  std::string& urdf = a.urdf;
-  std::string& collision = a.collision;
-  const std::string& postures_from = a.postures_from;
-  std::vector<double>& at = a.at;
-  if (urdf.empty()) urdf = reflex::common::defaultUrdf();
-  const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
-  const SimResult r = readTimeseries(model, postures_from);
-  if (r.samples.empty()) throw ConfigError(postures_from + ": no rows");
+  if (a.urdf.empty()) a.urdf = reflex::common::defaultUrdf();
+  const Model model = loadModel(a.urdf, loadCollisionConfigFor(a.urdf, a.collision));
+  const SimResult r = readTimeseries(model, a.postures_from);
+  if (r.samples.empty()) throw ConfigError(a.postures_from + ": no rows");
   std::vector<std::size_t> picks;
-  if (at.empty()) picks = evenPicks(r.samples.size(), 6);
-  for (const double t : at) {
+  if (a.at.empty()) picks = evenPicks(r.samples.size(), 6);
+  for (const double t : a.at) {
     std::size_t best = 0;
     for (std::size_t k = 0; k < r.samples.size(); ++k)
       if (std::abs(r.samples[k].t - t) < std::abs(r.samples[best].t - t)) best = k;
     picks.push_back(best);
   }
-  fs::create_directories(out_dir);
-  writePostures(model, r, (fs::path(out_dir) / "postures.csv").string(), picks);
-  std::cout << "wrote " << (fs::path(out_dir) / "postures.csv").string() << "\n";
+  fs::create_directories(a.out_dir);
+  writePostures(model, r, (fs::path(a.out_dir) / "postures.csv").string(), picks);
+  std::cout << "wrote " << (fs::path(a.out_dir) / "postures.csv").string() << "\n";
   return finish(0);
 }
 
@@ -355,42 +332,34 @@ SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& 
                    const SimOptions& opt, const fs::path& dir, const std::string& csv, const char* label,
                    int run_index, std::ostream& summary) {
   const Scenario* sc = &scenario;
-  const std::string& robot_side = a.robot_side;
-  const std::string& urdf = a.urdf;
-  const std::string& collision = a.collision;
-  const double& robot_timeout = a.robot_timeout;
-  const double& command_deadline = a.command_deadline;
-  const double& robot_wait = a.robot_wait;
-  const std::string& joint_map = a.joint_map;
-  const double& ramp_time = a.ramp_time;
   const int robot_domain = a.robot_domain;
   // A robot over DDS: a fresh reflex_mujoco per run (mujoco), started at the rest configuration.
   reflex::control_node::BusPlantOptions po;
   po.domain = robot_domain;
   po.q_start = restConfiguration(model, cm);
   po.margin = cm.params.d_r;
-  po.port.timeout = robot_timeout;
-  po.port.deadline = command_deadline;
-  po.first_state_timeout = robot_wait;
+  po.port.timeout = a.robot_timeout;
+  po.port.deadline = a.command_deadline;
+  po.first_state_timeout = a.robot_wait;
   PlantFigures fig;
-  fig.robot = robot_side;
+  fig.robot = a.robot_side;
   fig.domain = robot_domain;
-  if (robot_side == "unitree_hg") {
+  if (a.robot_side == "unitree_hg") {
     po.interface = "unitree_hg";
-    po.joint_map = !joint_map.empty() ? joint_map
-                                      : (fs::path(urdf).parent_path() / (fs::path(urdf).stem().string() + ".hg.yaml")).string();
-    po.ramp_time = ramp_time;
-    fig.ramp_time = ramp_time;
+    po.joint_map = !a.joint_map.empty() ? a.joint_map
+                                      : (fs::path(a.urdf).parent_path() / (fs::path(a.urdf).stem().string() + ".hg.yaml")).string();
+    po.ramp_time = a.ramp_time;
+    fig.ramp_time = a.ramp_time;
   }
-  if (robot_side == "mujoco" || robot_side == "unitree_hg") {
+  if (a.robot_side == "mujoco" || a.robot_side == "unitree_hg") {
     po.robot_binary = reflex::common::executableDir() + "/reflex_mujoco";
-    po.robot_args = {"--urdf", urdf};
-    if (!collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", collision});
+    po.robot_args = {"--urdf", a.urdf};
+    if (!a.collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", a.collision});
     fig.log = (dir / (run_index == 0 ? "reflex_mujoco.log" : "reflex_mujoco_" + std::to_string(run_index) + ".log"))
                   .string();
     po.robot_log = fig.log;
   }
-  std::cout << "  " << sc->name << " (" << label << "): " << (robot_side != "dds" ? "starting reflex_mujoco" : "joining")
+  std::cout << "  " << sc->name << " (" << label << "): " << (a.robot_side != "dds" ? "starting reflex_mujoco" : "joining")
             << " on domain " << robot_domain << ", then " << sc->duration << " s in real time ..." << std::endl;
   SimResult r;
   double wall = 0.0;
@@ -400,7 +369,7 @@ SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& 
     r = runScenario(model, cm, *sc, opt, plant);
     wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     // unitree_hg: the arm_sdk weight back to 0, watched like the scenario (contacts, joint steps).
-    if (robot_side == "unitree_hg") {
+    if (a.robot_side == "unitree_hg") {
       plant.rampOut(cm.params.period);
       fig.ramp_out_ratio = plant.rampOutSpeedRatio();
       fig.max_weight_step = plant.maxWeightStep();
@@ -424,7 +393,7 @@ SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& 
   fig.kin_estop = kin.estop_fired;
   writeTimeseriesCsv(model, cm, r, (dir / csv).string());
   for (std::ostream* os : {static_cast<std::ostream*>(&std::cout), static_cast<std::ostream*>(&summary)}) {
-    summarize(*os, model, *sc, r, label, wall, robot_side);
+    summarize(*os, model, *sc, r, label, wall, a.robot_side);
     summarizePlant(*os, r, fig, cm.params.d_r);
   }
   return r;
@@ -436,65 +405,52 @@ int main(int argc, char** argv) {
                "on the bus), through the same onboard controller and scenario scripts"};
   SimArgs args;
   addOptions(app, args);
-  std::string& robot_side = args.robot_side;
-  std::string& scenario_name = args.scenario_name;
-  std::string& out_dir = args.out_dir;
-  std::string& urdf = args.urdf;
-  std::string& collision = args.collision;
-  std::string& controller_cfg = args.controller_cfg;
-  std::string& mode = args.mode;
-  bool& list = args.list;
-  bool& no_avoidance = args.no_avoidance;
-  bool& no_plots = args.no_plots;
-  std::string& postures_from = args.postures_from;
-  std::optional<int>& domain = args.domain;
   if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
-  const bool over_bus = robot_side != "kinematic";
-  int& robot_domain = args.robot_domain;
+  const bool over_bus = args.robot_side != "kinematic";
   if (over_bus) {
     try {
-      robot_domain = robot_side != "dds" ? domain.value_or(197) : reflex::bus::resolveDomainId(domain);
+      args.robot_domain = args.robot_side != "dds" ? args.domain.value_or(197) : reflex::bus::resolveDomainId(args.domain);
     } catch (const std::exception& e) {
       return reflex::reportException("reflex_sim", e);
     }
   }
 
   // A folder that cannot be made is an error now, before any simulation (not after the first one).
-  if (!list && !out_dir.empty()) {
-    if (const std::string why = reflex::common::outputFolderProblem(out_dir); !why.empty()) {
+  if (!args.list && !args.out_dir.empty()) {
+    if (const std::string why = reflex::common::outputFolderProblem(args.out_dir); !why.empty()) {
       std::fprintf(stderr, "reflex_sim: error: %s\n", why.c_str());
       return reflex::kExitRefused;
     }
   }
-  if (!postures_from.empty()) return reflex::runGuarded("reflex_sim", [&] { return writePosturesFrom(args); });
+  if (!args.postures_from.empty()) return reflex::runGuarded("reflex_sim", [&] { return writePosturesFrom(args); });
 
-  if (list) {
+  if (args.list) {
     for (const auto& s : builtinScenarios()) std::printf("%-22s %-22s %s\n", s.name.c_str(), s.paper.c_str(), s.description.c_str());
     return finish(0);
   }
-  if (scenario_name.empty()) {
+  if (args.scenario_name.empty()) {
     std::fprintf(stderr, "reflex_sim: error: name a scenario (reflex_sim --list) or 'all'\n");
     return 2;
   }
   std::vector<const Scenario*> chosen;
-  if (scenario_name == "all") {
+  if (args.scenario_name == "all") {
     for (const auto& s : builtinScenarios()) chosen.push_back(&s);
-  } else if (const Scenario* s = findScenario(scenario_name)) {
+  } else if (const Scenario* s = findScenario(args.scenario_name)) {
     chosen.push_back(s);
   } else {
-    std::fprintf(stderr, "reflex_sim: error: unknown scenario '%s' (reflex_sim --list names them)\n", scenario_name.c_str());
+    std::fprintf(stderr, "reflex_sim: error: unknown scenario '%s' (reflex_sim --list names them)\n", args.scenario_name.c_str());
     return 2;
   }
   try {
-    if (urdf.empty()) urdf = reflex::common::defaultUrdf();
-    const Model model = loadModel(urdf, loadCollisionConfigFor(urdf, collision));
-    const ControllerConfig config = loadControllerConfigFor(urdf, controller_cfg);
+    if (args.urdf.empty()) args.urdf = reflex::common::defaultUrdf();
+    const Model model = loadModel(args.urdf, loadCollisionConfigFor(args.urdf, args.collision));
+    const ControllerConfig config = loadControllerConfigFor(args.urdf, args.controller_cfg);
     const ControllerModel cm = makeControllerModel(model, config);
-    std::cout << "reflex_sim: " << describeControllerConfig(config, urdf) << "\n";
+    std::cout << "reflex_sim: " << describeControllerConfig(config, args.urdf) << "\n";
     printScenarioFrame(std::cout, model, scenarioFrame(model, cm));
     int failures = 0;
     for (const Scenario* sc : chosen) {
-      const fs::path dir = chosen.size() > 1 ? fs::path(out_dir) / sc->name : fs::path(out_dir);
+      const fs::path dir = chosen.size() > 1 ? fs::path(args.out_dir) / sc->name : fs::path(args.out_dir);
       fs::create_directories(dir);
       const std::string summary_path = (dir / "summary.txt").string();
       std::ofstream summary(summary_path);
@@ -503,7 +459,7 @@ int main(int argc, char** argv) {
       auto run = [&](AvoidanceMode m, const std::string& csv, const char* label) {
         SimOptions opt;
         opt.mode = m;
-        opt.estop = !no_avoidance;  // the paper's comparison: neither avoidance nor the e-stop
+        opt.estop = !args.no_avoidance;  // the paper's comparison: neither avoidance nor the e-stop
         opt.camera_link = config.camera_link;
         if (!over_bus) {
           const auto t0 = std::chrono::steady_clock::now();
@@ -516,13 +472,13 @@ int main(int argc, char** argv) {
         }
         return runOnBus(args, model, cm, *sc, opt, dir, csv, label, run_index++, summary);
       };
-      const AvoidanceMode m = no_avoidance ? AvoidanceMode::kOff
-                                           : (mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
-      const SimResult main = run(m, "timeseries.csv", no_avoidance ? "avoidance off, e-stop off" : mode.c_str());
+      const AvoidanceMode m = args.no_avoidance ? AvoidanceMode::kOff
+                                           : (args.mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
+      const SimResult main = run(m, "timeseries.csv", args.no_avoidance ? "avoidance off, e-stop off" : args.mode.c_str());
       writePostures(model, main, (dir / "postures.csv").string(), evenPicks(main.samples.size(), 6));
-      if (sc->name == "one_vs_three_dof" && !no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
+      if (sc->name == "one_vs_three_dof" && !args.no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
       closeChecked(summary, summary_path);
-      if (!no_plots) {
+      if (!args.no_plots) {
         const std::string script = reflex::common::executableDir() + "/reflex_plot_sim.py";
         const std::string cmd = std::string(REFLEX_PYTHON) + " '" + script + "' '" + dir.string() + "' '" + sc->name + "'";
         if (std::system(cmd.c_str()) != 0) {

@@ -90,45 +90,28 @@ struct RecordArgs {
 };
 
 void addOptions(CLI::App& app, RecordArgs& a) {
-  std::string& cam_left = a.cam_left;
-  std::string& cam_right = a.cam_right;
-  std::string& sbs = a.sbs;
-  std::string& calib_left = a.calib_left;
-  std::string& calib_right = a.calib_right;
-  std::string& objects_path = a.objects_path;
-  std::string& mount_path = a.mount_path;
-  std::string& out = a.out;
-  std::string& name = a.name;
-  std::string& codec = a.codec;
-  std::string& from_sbs = a.from_sbs;
-  std::string& timestamps = a.timestamps;
-  std::vector<std::string>& from_files = a.from_files;
-  reflex::vision::RecordOptions& ro = a.ro;
-  double& fps = a.fps;
-  bool& quiet = a.quiet;
-  bool& progress = a.progress;
-  app.add_option("--camera-left", cam_left, "left camera: device index or video file/URL");
-  app.add_option("--camera-right", cam_right, "right camera: device index or video file/URL");
-  app.add_option("--side-by-side", sbs, "one side-by-side stereo camera: device index or video file/URL");
-  app.add_option("--from-files", from_files, "offline: import LEFT RIGHT video files (as fast as possible)")
+  app.add_option("--camera-left", a.cam_left, "left camera: device index or video file/URL");
+  app.add_option("--camera-right", a.cam_right, "right camera: device index or video file/URL");
+  app.add_option("--side-by-side", a.sbs, "one side-by-side stereo camera: device index or video file/URL");
+  app.add_option("--from-files", a.from_files, "offline: import LEFT RIGHT video files (as fast as possible)")
       ->expected(2);
-  app.add_option("--from-side-by-side", from_sbs, "offline: import one side-by-side video file (left half = left)");
-  app.add_option("--timestamps", timestamps, "offline: capture stamps, CSV 'frame,stamp' (seconds), one row per frame");
-  app.add_option("--calib-left", calib_left, "left camera_info YAML")->required();
-  app.add_option("--calib-right", calib_right, "right camera_info YAML")->required();
-  app.add_option("--objects", objects_path, "object map YAML copied into the session")->required();
-  app.add_option("--mount", mount_path, "camera mount YAML copied into the session (optional)");
-  app.add_option("--out", out, "session folder to write")->required();
-  app.add_option("--name", name, "session name")->capture_default_str();
-  app.add_option("--frames", ro.max_frames, "stop after this many pairs (0 = no limit)");
-  app.add_option("--duration", ro.duration, "stop after this many seconds (0 = no limit)");
-  a.fps_opt = app.add_option("--fps", fps,
+  app.add_option("--from-side-by-side", a.from_sbs, "offline: import one side-by-side video file (left half = left)");
+  app.add_option("--timestamps", a.timestamps, "offline: capture stamps, CSV 'frame,stamp' (seconds), one row per frame");
+  app.add_option("--calib-left", a.calib_left, "left camera_info YAML")->required();
+  app.add_option("--calib-right", a.calib_right, "right camera_info YAML")->required();
+  app.add_option("--objects", a.objects_path, "object map YAML copied into the session")->required();
+  app.add_option("--mount", a.mount_path, "camera mount YAML copied into the session (optional)");
+  app.add_option("--out", a.out, "session folder to write")->required();
+  app.add_option("--name", a.name, "session name")->capture_default_str();
+  app.add_option("--frames", a.ro.max_frames, "stop after this many pairs (0 = no limit)");
+  app.add_option("--duration", a.ro.duration, "stop after this many seconds (0 = no limit)");
+  a.fps_opt = app.add_option("--fps", a.fps,
                                   "cameras: nominal frame rate written to the videos (default: the camera's); "
                                   "offline: stamp i = i / F (default: the video's rate)");
-  app.add_option("--codec", codec,
+  app.add_option("--codec", a.codec,
                  "FourCC to use first (default avc1/mp4, then mp4v/mp4, MJPG/avi; FFV1/avi is lossless)");
-  app.add_flag("--quiet", quiet, "no progress display");
-  app.add_flag("--progress", progress, "show progress even if stderr is not a terminal");
+  app.add_flag("--quiet", a.quiet, "no progress display");
+  app.add_flag("--progress", a.progress, "show progress even if stderr is not a terminal");
 }
 
 int main(int argc, char** argv) {
@@ -145,83 +128,66 @@ int main(int argc, char** argv) {
   RecordArgs args;
   addOptions(app, args);
   if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
-  std::string& cam_left = args.cam_left;
-  std::string& cam_right = args.cam_right;
-  std::string& sbs = args.sbs;
-  std::string& calib_left = args.calib_left;
-  std::string& calib_right = args.calib_right;
-  std::string& objects_path = args.objects_path;
-  std::string& mount_path = args.mount_path;
-  std::string& out = args.out;
-  std::string& name = args.name;
-  std::string& codec = args.codec;
-  std::string& from_sbs = args.from_sbs;
-  std::string& timestamps = args.timestamps;
-  std::vector<std::string>& from_files = args.from_files;
-  reflex::vision::RecordOptions& ro = args.ro;
-  double& fps = args.fps;
-  bool& quiet = args.quiet;
-  bool& progress = args.progress;
   CLI::Option* fps_opt = args.fps_opt;
   try {
-    if (const std::string why = sessionFolderProblem(out); !why.empty()) throw VisionError("--out: " + why);
-    const bool offline = !from_files.empty() || !from_sbs.empty();
-    const int sources = (!cam_left.empty() || !cam_right.empty()) + (!sbs.empty()) + (!from_files.empty()) +
-                        (!from_sbs.empty());
+    if (const std::string why = sessionFolderProblem(args.out); !why.empty()) throw VisionError("--out: " + why);
+    const bool offline = !args.from_files.empty() || !args.from_sbs.empty();
+    const int sources = (!args.cam_left.empty() || !args.cam_right.empty()) + (!args.sbs.empty()) + (!args.from_files.empty()) +
+                        (!args.from_sbs.empty());
     if (sources != 1)
       throw VisionError("give one source: --camera-left N --camera-right M, --side-by-side N, --from-files LEFT RIGHT "
                         "or --from-side-by-side FILE");
-    if (fps_opt->count() > 0 && !(fps > 0.0 && fps <= kMaxSessionFps))
-      throw VisionError("--fps " + std::to_string(fps) + " must be a number in (0, " + std::to_string(kMaxSessionFps) +
+    if (fps_opt->count() > 0 && !(args.fps > 0.0 && args.fps <= kMaxSessionFps))
+      throw VisionError("--fps " + std::to_string(args.fps) + " must be a number in (0, " + std::to_string(kMaxSessionFps) +
                         "]");
-    if (!timestamps.empty() && !offline)
+    if (!args.timestamps.empty() && !offline)
       throw VisionError("--timestamps applies to --from-files / --from-side-by-side (cameras are stamped live)");
-    if (offline && (ro.max_frames != 0 || ro.duration != 0.0))
+    if (offline && (args.ro.max_frames != 0 || args.ro.duration != 0.0))
       throw VisionError("--frames and --duration apply to cameras; an import takes every frame of the videos");
-    if (!cam_left.empty() != !cam_right.empty())
+    if (!args.cam_left.empty() != !args.cam_right.empty())
       throw VisionError("--camera-left and --camera-right must be given together");
-    if (ro.max_frames < 0) throw VisionError("--frames " + std::to_string(ro.max_frames) + " must be >= 0");
-    if (ro.duration < 0.0) throw VisionError("--duration " + std::to_string(ro.duration) + " must be >= 0");
-    const StereoCalibration calib = loadStereoCalibration(calib_left, calib_right);
-    const ObjectMap objects = loadObjectMap(objects_path);
+    if (args.ro.max_frames < 0) throw VisionError("--frames " + std::to_string(args.ro.max_frames) + " must be >= 0");
+    if (args.ro.duration < 0.0) throw VisionError("--duration " + std::to_string(args.ro.duration) + " must be >= 0");
+    const StereoCalibration calib = loadStereoCalibration(args.calib_left, args.calib_right);
+    const ObjectMap objects = loadObjectMap(args.objects_path);
     std::optional<CameraMount> mount;
-    if (!mount_path.empty()) mount = loadCameraMount(mount_path);
+    if (!args.mount_path.empty()) mount = loadCameraMount(args.mount_path);
     SessionWriterOptions wo;
-    wo.name = name;
-    if (!codec.empty()) {
-      if (codec.size() != 4) throw VisionError("--codec '" + codec + "' is not a FourCC");
-      wo.codecs.insert(wo.codecs.begin(), {codec, containerFor(codec)});
+    wo.name = args.name;
+    if (!args.codec.empty()) {
+      if (args.codec.size() != 4) throw VisionError("--codec '" + args.codec + "' is not a FourCC");
+      wo.codecs.insert(wo.codecs.begin(), {args.codec, containerFor(args.codec)});
     }
-    const bool show = !quiet && (progress || isatty(STDERR_FILENO));
+    const bool show = !args.quiet && (args.progress || isatty(STDERR_FILENO));
     if (offline) {
       // One video twice (a path typed twice, or a link to the other) gives a "stereo" session with no
       // disparity: every tag at infinity.
       std::error_code same_ec;
-      if (!from_files.empty() && std::filesystem::equivalent(from_files[0], from_files[1], same_ec))
-        throw VisionError("--from-files: the left and the right video are the same file ('" + from_files[0] + "' and '" +
-                          from_files[1] + "'): a stereo session needs each camera's own video");
+      if (!args.from_files.empty() && std::filesystem::equivalent(args.from_files[0], args.from_files[1], same_ec))
+        throw VisionError("--from-files: the left and the right video are the same file ('" + args.from_files[0] + "' and '" +
+                          args.from_files[1] + "'): a stereo session needs each camera's own video");
       VideoFilesSpec spec;
-      spec.left = from_sbs.empty() ? from_files[0] : from_sbs;
-      spec.right = from_sbs.empty() ? from_files[1] : std::string();
-      spec.timestamps = timestamps;
-      spec.fps = fps;
-      return importFiles(spec, calib, objects, mount, wo, fps, out, show);
+      spec.left = args.from_sbs.empty() ? args.from_files[0] : args.from_sbs;
+      spec.right = args.from_sbs.empty() ? args.from_files[1] : std::string();
+      spec.timestamps = args.timestamps;
+      spec.fps = args.fps;
+      return importFiles(spec, calib, objects, mount, wo, args.fps, args.out, show);
     }
-    const std::string& first_spec = sbs.empty() ? cam_left : sbs;
+    const std::string& first_spec = args.sbs.empty() ? args.cam_left : args.sbs;
     auto left = openCapture(first_spec);
     const double cam_fps = left->get(cv::CAP_PROP_FPS);
     const double pace = isDeviceSpec(first_spec) ? 0.0 : cam_fps;
     std::unique_ptr<StereoSource> source;
-    if (!sbs.empty())
+    if (!args.sbs.empty())
       source = std::make_unique<CameraSource>(std::move(left), nullptr, calib, pace);
     else
-      source = std::make_unique<CameraSource>(std::move(left), openCapture(cam_right), calib, pace);
-    wo.fps = fps > 0.0 ? fps : (cam_fps > 0.0 && cam_fps < 500.0 ? cam_fps : 30.0);
-    SessionWriter writer(out, calib, objects, mount, wo);
+      source = std::make_unique<CameraSource>(std::move(left), openCapture(args.cam_right), calib, pace);
+    wo.fps = args.fps > 0.0 ? args.fps : (cam_fps > 0.0 && cam_fps < 500.0 ? cam_fps : 30.0);
+    SessionWriter writer(args.out, calib, objects, mount, wo);
     std::signal(SIGINT, onSignal);
     std::signal(SIGTERM, onSignal);
     const RecordStats stats = recordSession(
-        *source, writer, ro, g_stop,
+        *source, writer, args.ro, g_stop,
         [](int frame, const std::string& why) {
           std::cerr << "\nreflex_vision_record: skipped frame " << frame << ": " << why << "\n";
         },
@@ -235,7 +201,7 @@ int main(int argc, char** argv) {
       std::cerr << "reflex_vision_record: error: " << e.what() << "\n";
       return 4;
     }
-    std::cout << "recorded " << stats.recorded << " pairs (" << stats.skipped << " skipped) into " << out
+    std::cout << "recorded " << stats.recorded << " pairs (" << stats.skipped << " skipped) into " << args.out
               << " with codec " << writer.codec() << "\n";
     if (stats.recorded > 0 && !stats.end_message.empty())
       std::cerr << "reflex_vision_record: the source stopped: " << stats.end_message << "\n";

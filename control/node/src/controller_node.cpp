@@ -184,6 +184,7 @@ struct ControllerNode::Impl {
   bool takeInputs(ControllerNode& node, double t_now, const char*& last_rejection);
   void sayRobotState(bool ok, double t_now);
   void recordStats(const CycleReport& rep, NodeStats& stats);
+  void recordPortStats(NodeStats& stats) const;
   void publishCycle(const CycleReport& rep, const char* last_rejection, double t, double t_now, double last_start,
                     double lateness_us, NodeStats& stats);
   void finishRun(NodeStats& stats);
@@ -629,13 +630,16 @@ void ControllerNode::Impl::recordStats(const CycleReport& rep, NodeStats& stats_
   stats_.robot_stale_events = counts.robot_stale_events;
   stats_.robot_stale_cycles = counts.robot_stale_cycles;
   stats_.robot_stale_at_exit = !rep.robot_state_ok;
-  if (dds) {
-    stats_.robot_states_accepted = dds->acceptedStates();
-    stats_.robot_states_rejected_by_cause = dds->rejectedByCause();
-    stats_.robot_states_rejected = dds->rejectedTotal();
-    stats_.robot_writer_changes = dds->writerChanges();
-    stats_.robot_commands = dds->commandsSent();
-  }
+  if (dds) recordPortStats(stats_);
+}
+
+/// The robot port's counts (--robot dds, ros2, unitree_hg) for the exit line.
+void ControllerNode::Impl::recordPortStats(NodeStats& stats_) const {
+  stats_.robot_states_accepted = dds->acceptedStates();
+  stats_.robot_states_rejected_by_cause = dds->rejectedByCause();
+  stats_.robot_states_rejected = dds->rejectedTotal();
+  stats_.robot_writer_changes = dds->writerChanges();
+  stats_.robot_commands = dds->commandsSent();
 }
 
 /// 4. The cycle's outputs (joint state, status, the --log row) and figures. Joint state: the
@@ -689,17 +693,11 @@ void ControllerNode::Impl::publishCycle(const CycleReport& rep, const char* last
   if (stats_.lateness_us.size() < stats_.lateness_us.capacity()) stats_.lateness_us.push_back(lateness_us);
   if (log && rep.robot_state_ok) {  // a copy into the ring: no allocation, no I/O; a full ring is counted
     SimSample& s = log_row;
-    s.t = t;
-    s.arms = data.arms;
+    recordCycle(s, t, data, rep);
     s.commands = rep.commands;
-    s.estop = data.estop;
-    s.min_distance = std::isfinite(rep.min_distance) ? rep.min_distance : msg::NO_PAIR_DISTANCE;
-    s.min_pair = rep.min_pair;  // the --log min_pair column (empty in older logs)
-    s.virtual_distance = rep.virtual_distance;
-    s.arm_distance = rep.arm_distance;
+    if (!std::isfinite(rep.min_distance)) s.min_distance = msg::NO_PAIR_DISTANCE;
     s.wall_time = nowSeconds(CLOCK_REALTIME);
     s.q = kinematic ? kinematic->positions() : ctl->measuredPositions();
-    s.qdot = data.qdot;
     log->push(s);
   }
 }
@@ -715,10 +713,7 @@ void ControllerNode::Impl::finishRun(NodeStats& stats_) {
       stats_.arm_sdk_weight = hg->weight();
       stats_.arm_sdk_max_weight_step = hg->maxWeightStep();
     }
-    stats_.robot_commands = dds->commandsSent();
-    stats_.robot_states_accepted = dds->acceptedStates();
-    stats_.robot_states_rejected_by_cause = dds->rejectedByCause();
-    stats_.robot_states_rejected = dds->rejectedTotal();
+    recordPortStats(stats_);  // the commands of the ramp out too
   }
   publishHeartbeat(msg::STATE_STOPPING);
   outbox->close();  // writes what is queued (heartbeats first: the STOPPING one goes out), 1 s at most

@@ -126,6 +126,21 @@ struct SimSample {
   Eigen::VectorXd q_command;         ///< the command's end-of-cycle positions (nq; the last one if !commanded)
 };
 
+/// The time-series row of one step, the fields every writer takes from the cycle (reflex_controller
+/// --log, reflex_sim's timeseries.csv): time, arms, e-stop, closest pairs, joint velocities. The
+/// caller sets what differs: the hand commands, min_distance (the log writes IDL's "no pair" value for
+/// none), q, wall_time, commanded, q_command. Allocation-free once `s` has held a row of this model.
+inline void recordCycle(SimSample& s, double t, const ControllerData& data, const CycleReport& rep) {
+  s.t = t;
+  s.arms = data.arms;
+  s.estop = data.estop;
+  s.min_distance = rep.min_distance;
+  s.min_pair = rep.min_pair;  // the --log min_pair column (empty in older logs)
+  s.virtual_distance = rep.virtual_distance;
+  s.arm_distance = rep.arm_distance;
+  s.qdot = data.qdot;
+}
+
 struct SimResult {
   std::vector<SimSample> samples;
   double min_distance = 0.0;         ///< over the run, physical pairs
