@@ -329,27 +329,21 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     }
   }
   for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] = gradient[static_cast<std::size_t>(i)];
-  if (data.dist.pruned_floor < d_min) {
-    // The arm's closest pair may be one the broad phase skipped (its lower bound is below the closest
-    // exact distance): compute those that could be exactly, so the status is what it is unpruned.
-    // (The sweep's smallest skipped bound is at most this arm's; a pair findClosestPairs already
-    // refined is exact but not in the sweep's list: it is taken here.)
-    const DistanceOptions options = cycleDistanceOptions(cm);
-    for (const int p : arm.candidate_pairs) {
-      PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
-      if (!pd.active || !(pd.distance < d_min)) continue;
-      const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
-      const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
-      if (owner_a != a && owner_b != a) continue;
-      const int other = owner_a == a ? owner_b : owner_a;
-      if (other >= 0 && other != a && higherPriority(input.priority, a) && !recovery_only) continue;
-      refinePairDistance(model, data.kin, data.dist, p, options);
-      if (pd.distance < d_min || (pd.distance == d_min && p < closest)) {
-        d_min = pd.distance;
-        closest = p;
-      }
-    }
-  }
+  // The arm's closest pair may be one the broad phase skipped (its lower bound is below the closest
+  // exact distance): those that could be are computed exactly, so the status is what it is unpruned.
+  // (A pair findClosestPairs already refined is exact but not in the sweep's list: it is taken here.)
+  ClosestPair best{d_min, closest};
+  refineClosest(model, data.kin, data.dist, cycleDistanceOptions(cm), arm.candidate_pairs, best, [&](int p) {
+    const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
+    if (!pd.active) return false;
+    const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
+    const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
+    if (owner_a != a && owner_b != a) return false;
+    const int other = owner_a == a ? owner_b : owner_a;
+    return !(other >= 0 && other != a && higherPriority(input.priority, a) && !recovery_only);
+  });
+  d_min = best.distance;
+  closest = best.pair;
   status.distance = d_min;
   status.closest_pair = closest;
   status.zone = zoneOf(d_min, params);
@@ -607,41 +601,26 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
   auto betweenArms = [&](int i) {
     return (data.arm_pair_facts[kLeft][static_cast<std::size_t>(i)].flags & ArmPairFacts::kOtherArm) != 0;
   };
-  auto take = [](ClosestPair& best, double d, int i) {
-    if (d < best.distance || (d == best.distance && i < best.pair)) {
-      best.distance = d;
-      best.pair = i;
-    }
-  };
   // The pairs the sweep computed exactly (robot pairs are all physical).
   forEachExactPair(data.dist, [&](int i, bool robot) {
     const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
     if (!robot && !isPhysical(model, data, pd)) {
-      take(virtual_slot, pd.distance, i);
+      virtual_slot.offer(pd.distance, i);
       return;
     }
-    take(physical, pd.distance, i);
-    if (betweenArms(i)) take(between_arms, pd.distance, i);
+    physical.offer(pd.distance, i);
+    if (betweenArms(i)) between_arms.offer(pd.distance, i);
   });
   const DistanceOptions options = cycleDistanceOptions(cm);
-  // Skipped robot pairs (never slot pairs): one whose lower bound is below the closest exact distance
-  // of its kind is computed exactly. For the physical kind that is rare (the sweep's smallest
-  // skipped bound is its floor); between the arms it is every cycle the hands are apart, so the pair
-  // with the smallest bound goes first: its true distance then rules out nearly all the others.
-  // The sweep itself refines a skipped pair whose bound is below its closest exact distance (its own
-  // `closest`): that pair is exact but not in the exact list, so it is taken here too, whether exact
-  // or not (an earlier version passed it over as exact, and the closest physical pair was wrong
-  // whenever that pair was the closest: d_safe = d_a = 0.02 on the 1,343-pair robot, 79 % of
-  // random configurations; BroadPhase.ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem).
-  if (data.dist.pruned_floor < physical.distance) {
-    for (const int i : data.dist.robot_pairs) {
-      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-      if (!(pd.distance < physical.distance)) continue;  // the exact list's pairs are never below it
-      if (!pd.exact) refinePairDistance(model, data.kin, data.dist, i, options);
-      take(physical, pd.distance, i);
-      if (betweenArms(i)) take(between_arms, pd.distance, i);
-    }
-  }
+  // Skipped robot pairs (never slot pairs), refineClosest's rule. For the physical kind that is rare
+  // (the sweep's smallest skipped bound is its floor). Between the arms it is every cycle the hands
+  // are apart, so the pair with the smallest bound goes first: its true distance then rules out
+  // nearly all the others. A pair the sweep (or the physical pass) refined is exact but not in the
+  // exact list: refineClosest takes it too (an earlier version passed it over as exact, and the
+  // closest physical pair was wrong whenever that pair was the closest: d_safe = d_a = 0.02 on the
+  // 1,343-pair robot, 79 % of random configurations;
+  // BroadPhase.ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem).
+  refineClosest(model, data.kin, data.dist, options, data.dist.robot_pairs, physical);
   if (data.dist.pruned_floor < between_arms.distance) {
     int first = -1;
     double first_bound = between_arms.distance;
@@ -654,16 +633,10 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
     }
     if (first >= 0) {
       refinePairDistance(model, data.kin, data.dist, first, options);
-      take(between_arms, data.dist.pairs[static_cast<std::size_t>(first)].distance, first);
-    }
-    // The rest, and those the sweep (or the physical loop above) refined: exact, not in the list.
-    for (const int i : data.between_arm_pairs) {
-      const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-      if (!(pd.distance < between_arms.distance)) continue;
-      if (!pd.exact) refinePairDistance(model, data.kin, data.dist, i, options);
-      take(between_arms, pd.distance, i);
+      between_arms.offer(data.dist.pairs[static_cast<std::size_t>(first)].distance, first);
     }
   }
+  refineClosest(model, data.kin, data.dist, options, data.between_arm_pairs, between_arms);
   data.closest_physical = physical;
   data.closest_virtual = virtual_slot;
   data.closest_between_arms = between_arms;

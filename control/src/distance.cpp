@@ -729,26 +729,13 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
 
   // 6. The closest active pair (the lowest index among equals): over the exact pairs; then a skipped
   //    pair whose lower bound is below that distance is computed exactly, so `closest` is the true one.
-  data.closest = -1;
-  double closest_d = kInf;
-  auto take = [&](int i) {
-    const double d = data.pairs[i].distance;
-    if (d < closest_d || (d == closest_d && i < data.closest)) {
-      closest_d = d;
-      data.closest = i;
-    }
-  };
-  for (int e = 0; e < nexact; ++e) take(exact_pairs[e]);
+  ClosestPair closest;
+  for (int e = 0; e < nexact; ++e) closest.offer(data.pairs[exact_pairs[e]].distance, exact_pairs[e]);
   if (any_slot)
     for (const int i : data.slot_pairs)
-      if (data.pairs[i].active) take(i);
-  if (pruned_floor < closest_d) {
-    for (const int i : data.robot_pairs) {
-      if (data.pairs[i].exact || !(data.pairs[i].distance < closest_d)) continue;
-      refinePairDistance(model, kin, data, i, options);
-      take(i);
-    }
-  }
+      if (data.pairs[i].active) closest.offer(data.pairs[i].distance, i);
+  refineClosest(model, kin, data, options, data.robot_pairs, closest);
+  data.closest = closest.pair;
 }
 
 void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,

@@ -208,7 +208,7 @@ void writeTimeseriesCsvHeader(const Model& model, std::ostream& out) {
 }
 
 void writeTimeseriesCsvRow(const Model& model, const SimSample& s, std::ostream& out) {
-  auto num = [](double v) { return std::isfinite(v) ? v : 1e9; };  // inf (no pair) as a large number
+  auto num = [](double v) { return std::isfinite(v) ? v : kNoPairDistance; };
   out << std::setprecision(9);
   out << s.t;
   for (int a = 0; a < 2; ++a)

@@ -5,6 +5,7 @@
 // Now each is refused and counted: "published 4 samples (3 failed)", exit code 2 (not a signal),
 // and the samples with keys of 255 bytes and less reach a subscriber.
 #include "support/child_process.hpp"
+#include "../bus/bus_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/record/record_file.hpp>
@@ -57,10 +58,7 @@ TEST(LongKeyReplay, ARecordingWithLongKeysIsReplayedWithThoseSamplesRefusedAndCo
     writer.append(e);
     writer.close();
   }
-  bus::BusConfig config;
-  config.module_name = "long_key_watch";
-  config.domain_id = 189;
-  bus::Participant watch(config);
+  bus::Participant watch(bus::test::testConfig("long_key_watch", 189));
   auto& heartbeats = watch.makeReader<msg::Heartbeat>("reflex/heartbeat", bus::kProfileRecord);
 
   const std::string log = ::testing::TempDir() + "long_key_play.log";

@@ -4,6 +4,7 @@
 // through the caller's error type; every getter refuses the wrong kind, a value outside its range, a
 // missing required key and an unknown key, and accepts the ends of its range.
 #include "reflex/common/yaml_reader.hpp"
+#include "support/errors.hpp"
 
 #include <gtest/gtest.h>
 
@@ -20,12 +21,7 @@ struct OtherError : std::runtime_error {
 
 template <class Fn>
 std::string errorOf(Fn fn) {
-  try {
-    fn();
-  } catch (const ConfigError& e) {
-    return e.what();
-  }
-  return "no error";
+  return reflex::testing::messageOf<ConfigError>(fn);
 }
 
 const char* kDoc =

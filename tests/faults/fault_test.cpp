@@ -4,6 +4,7 @@
 // margin, no pair goes below d_r, the system follows again within 3 s of a restart, and a recording
 // cut by kill -9 stays readable; a bus write that blocks never stops the control loop. Domains 108..109, 224.
 #include "support/child_process.hpp"
+#include "../bus/bus_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
 #ifdef REFLEX_FAULTS_WITH_RECORDER
@@ -74,10 +75,7 @@ TEST(Faults, KillNineOfTheTargetSourceKeeps200HzRetractsAndRecoversAfterRestart)
       std::vector<std::string>{bin("reflex_fault_source"), "--domain", dom}, ::testing::TempDir() + "fault_source1.log");
   ASSERT_TRUE(controller.started() && source->started());
 
-  bus::BusConfig config;
-  config.module_name = "fault_watch";
-  config.domain_id = kDomain;
-  bus::Participant watch(config);
+  bus::Participant watch(bus::test::testConfig("fault_watch", kDomain));
   auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   auto& joints = watch.makeReader<msg::JointState>("reflex/joint_state", bus::kProfileRecord);
   ASSERT_TRUE(status.waitForWriters(1, 15s));
@@ -273,10 +271,7 @@ TEST(Faults, KillNineOfTheRecorderLeavesTheControllerAndAReadableRecording) {
   testing::ChildProcess recorder({bin("reflex_record"), "record", "-o", file, "--domain", dom},
                                  ::testing::TempDir() + "fault_recorder.log");
   ASSERT_TRUE(controller.started() && recorder.started());
-  bus::BusConfig config;
-  config.module_name = "fault_watch";
-  config.domain_id = kDomain;
-  bus::Participant watch(config);
+  bus::Participant watch(bus::test::testConfig("fault_watch", kDomain));
   auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   ASSERT_TRUE(status.waitForWriters(1, 15s));
   // The controller writes over UDP only: no Fast DDS shared-memory segment is mapped in
@@ -353,10 +348,7 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   auto vision = std::make_unique<testing::ChildProcess>(visionArgs(), tmp + "chain_vision1.log");
   ASSERT_TRUE(controller.started() && behavior->started() && vision->started());
 
-  bus::BusConfig config;
-  config.module_name = "fault_watch";
-  config.domain_id = kDomain;
-  bus::Participant watch(config);
+  bus::Participant watch(bus::test::testConfig("fault_watch", kDomain));
   auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   auto& targets = watch.makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord);
   auto& objects = watch.makeReader<msg::ObjectTargets>("reflex/object_targets", bus::kProfileRecord);

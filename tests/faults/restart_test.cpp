@@ -9,6 +9,7 @@
 // again within 3 s of the first target, no pair below d_r, 200 Hz; and the start-up refusals
 // (damaged file, another robot's file, a file in use). Domain 111.
 #include "support/child_process.hpp"
+#include "../bus/bus_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/control/controller.hpp>
@@ -125,10 +126,7 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
                                tmp + "restart_source.log");
   ASSERT_TRUE(a->started() && source.started());
 
-  bus::BusConfig config;
-  config.module_name = "restart_watch";
-  config.domain_id = kDomain;
-  bus::Participant watch(config);
+  bus::Participant watch(bus::test::testConfig("restart_watch", kDomain));
   auto& joints = watch.makeReader<msg::JointState>("reflex/joint_state", bus::kProfileRecord);
   auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   auto& targets = watch.makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord);

@@ -4,6 +4,7 @@
 // robot, a position outside the limits, a second user of the file), the CRC against its published
 // check value, and that save() allocates nothing (counted by replacing operator new) and what it costs.
 #include "support/count_allocations.hpp"
+#include "support/errors.hpp"
 
 #include <reflex/control_node/robot_state_file.hpp>
 
@@ -46,12 +47,7 @@ void writeBytes(const std::string& path, const std::vector<char>& bytes) {
 }
 
 std::string errorOf(const std::string& path, const Robot& r) {
-  try {
-    RobotStateFile f(path, r.names, r.lower, r.upper);
-  } catch (const RobotStateError& e) {
-    return e.what();
-  }
-  return "";
+  return reflex::testing::messageOf<RobotStateError>([&] { RobotStateFile f(path, r.names, r.lower, r.upper); }, "");
 }
 
 TEST(RobotStateFile, Crc32AndNameHashMatchTheirPublishedDefinitions) {

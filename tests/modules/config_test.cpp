@@ -1,6 +1,7 @@
 // Configuration errors name file, line, key and value; unknown module types and keys are errors at
 // start; every shipped configuration in bringup/behavior/ loads and builds a host.
 #include "modules_test_support.hpp"
+#include "support/errors.hpp"
 
 #include <reflex/modules/scripted.hpp>
 
@@ -11,12 +12,7 @@ namespace reflex::modules {
 namespace {
 
 std::string errorOf(const std::string& yaml, const std::string& only = "") {
-  try {
-    testing::TestHost h(yaml, builtinRegistry(), only);
-  } catch (const ConfigError& e) {
-    return e.what();
-  }
-  return "";
+  return reflex::testing::messageOf<ConfigError>([&] { testing::TestHost h(yaml, builtinRegistry(), only); }, "");
 }
 
 void expectAll(const std::string& message, std::initializer_list<const char*> parts) {

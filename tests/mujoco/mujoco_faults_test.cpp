@@ -35,6 +35,7 @@
 
 #include "reflex/mujoco/mjcf.hpp"
 #include "reflex/mujoco/mujoco_robot.hpp"
+#include "../bus/bus_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -115,12 +116,7 @@ struct Watch {
   std::vector<SeenCommand> seen_commands;
   std::vector<SeenBeat> seen_beats;  // of the controller only
   Watch()
-      : participant([] {
-          bus::BusConfig c;
-          c.module_name = "mujoco_faults_watch";
-          c.domain_id = kDomain;
-          return c;
-        }()),
+      : participant(bus::test::testConfig("mujoco_faults_watch", kDomain)),
         // The recorders' reader profile (keep last 256): every state and command, also when this
         // process is late to poll.
         states(participant.makeReader<msg::RobotState>("reflex/robot_state", bus::kProfileRecord)),

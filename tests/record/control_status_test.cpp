@@ -22,6 +22,7 @@
 #include "reflex/control/controller.hpp"
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
+#include "reflex/control/scenarios.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "reflex/record/recording.hpp"
 #include "record_support.hpp"
@@ -73,6 +74,10 @@ bad_input::ExitSummary finishAndDrain(ControllerRun& run) {
   EXPECT_EQ(run.finish(summary, 30s), 0) << run.output;
   run.drain();
   return summary;
+}
+
+TEST(ControlStatusOnTheBus, TheTimeSeriesAndTheBusWriteOneNoPairValue) {
+  EXPECT_EQ(reflex::control::kNoPairDistance, reflex::msg::NO_PAIR_DISTANCE);
 }
 
 TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecordedJointState) {

@@ -14,6 +14,7 @@
 
 #include "reflex/record/recorder.hpp"
 #include "reflex/record/recording.hpp"
+#include "../bus/bus_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -55,11 +56,8 @@ TEST(McapProcess, LiveBusRecordingReadsInTheReferenceReaderAsInTheCsvExport) {
                                tempPath("victim.log"));
   ASSERT_TRUE(controller.started() && targets.started() && objects.started() && recorder.started() &&
               victim.started());
-  bus::BusConfig cfg;
-  cfg.module_name = "watch";
-  cfg.domain_id = kDomain;
   {
-    bus::Participant watch(cfg);
+    bus::Participant watch(bus::test::testConfig("watch", kDomain));
     auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
     auto& objs = watch.makeReader<msg::ObjectTargets>("reflex/object_targets", bus::kProfileRecord);
     ASSERT_TRUE(status.waitForWriters(1, 20s));
@@ -124,9 +122,7 @@ TEST(McapProcess, LiveBusRecordingReadsInTheReferenceReaderAsInTheCsvExport) {
   EXPECT_EQ(controller.wait(20s), 0);
 
   // reflex_play plays MCAP: the status stream at twice the speed on another domain.
-  bus::BusConfig cfg2 = cfg;
-  cfg2.domain_id = kDomain + 1;
-  bus::Participant sink(cfg2);
+  bus::Participant sink(bus::test::testConfig("watch", kDomain + 1));
   auto& replayed = sink.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   testing::ChildProcess player({bin("reflex_play"), finished, "--domain", std::to_string(kDomain + 1), "--rate", "2",
                                 "--topic", "reflex/control_status", "--wait-readers", "1", "--delay", "0"},

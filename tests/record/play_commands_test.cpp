@@ -14,6 +14,7 @@
 
 #include "record_support.hpp"
 #include "samples.hpp"
+#include "../bus/bus_test_util.hpp"
 
 #include <gtest/gtest.h>
 
@@ -57,10 +58,7 @@ struct Watch {
   std::vector<msg::HandTargets> got_hands;
   std::vector<msg::WalkCommand> got_walk;
   Watch() {
-    bus::BusConfig c;
-    c.module_name = "play_watch";
-    c.domain_id = kDomain;
-    bus = std::make_unique<bus::Participant>(c);
+    bus = std::make_unique<bus::Participant>(bus::test::testConfig("play_watch", kDomain));
     status = &bus->makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
     hands = &bus->makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord);
     walk = &bus->makeReader<msg::WalkCommand>("reflex/walk_command", bus::kProfileRecord);

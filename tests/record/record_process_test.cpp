@@ -6,6 +6,7 @@
 #include "support/child_process.hpp"
 
 #include "reflex/record/recorder.hpp"
+#include "../bus/bus_test_util.hpp"
 
 #include <reflex/bus/bus.hpp>
 
@@ -42,10 +43,7 @@ TEST(RecordProcess, RecordingSurvivesKill9AndReplaysAtTwiceTheSpeed) {
                                   "--topic", "reflex/control_status", "--topic", "reflex/heartbeat"},
                                  tempPath("recorder.log"));
   ASSERT_TRUE(controller.started() && recorder.started());
-  bus::BusConfig cfg;
-  cfg.module_name = "watch";
-  cfg.domain_id = kDomain;
-  bus::Participant watch(cfg);
+  bus::Participant watch(bus::test::testConfig("watch", kDomain));
   auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   ASSERT_TRUE(status.waitForWriters(1, 15s));
   // Until the recorder itself has written over 400 status samples (its own discovery can lag this
@@ -96,9 +94,7 @@ TEST(RecordProcess, RecordingSurvivesKill9AndReplaysAtTwiceTheSpeed) {
 
   // Replay the status stream at twice the speed on another domain; it takes half the time.
   const std::string dom2 = std::to_string(kDomain + 1);
-  bus::BusConfig cfg2 = cfg;
-  cfg2.domain_id = kDomain + 1;
-  bus::Participant sink(cfg2);
+  bus::Participant sink(bus::test::testConfig("watch", kDomain + 1));
   auto& replayed = sink.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
   testing::ChildProcess player({bin("reflex_play"), file, "--domain", dom2, "--rate", "2", "--topic",
                                 "reflex/control_status", "--wait-readers", "1", "--delay", "0", "--progress"},

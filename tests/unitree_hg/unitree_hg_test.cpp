@@ -19,6 +19,7 @@
 #include "reflex/control/controller.hpp"
 #include "reflex/control/urdf_loader.hpp"
 #include "support/count_allocations.hpp"
+#include "support/errors.hpp"
 
 #include <gtest/gtest.h>
 
@@ -316,13 +317,12 @@ TEST(UnitreeHgJointMap, AsimoMapCoversEveryJoint) {
 }
 
 std::string errorOf(const std::string& yaml, bool resolve = false) {
-  try {
-    const hg::HgJointMap map = hg::loadHgJointMapFromString(yaml, "map.yaml");
-    if (resolve) hg::resolveHgJointMap(map, asimo());
-  } catch (const reflex::control::ConfigError& e) {
-    return e.what();
-  }
-  return "";
+  return reflex::testing::messageOf<reflex::control::ConfigError>(
+      [&] {
+        const hg::HgJointMap map = hg::loadHgJointMapFromString(yaml, "map.yaml");
+        if (resolve) hg::resolveHgJointMap(map, asimo());
+      },
+      "");
 }
 
 TEST(UnitreeHgJointMap, ErrorsNameTheBadValue) {

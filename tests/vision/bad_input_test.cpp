@@ -7,6 +7,7 @@
 // replay clock can follow refused; SIGTERM/SIGINT end a paced replay within a second; outputs that
 // cannot be written (--dump /dev/full, a file-size limit) are errors naming the file and cause.
 #include "support/child_process.hpp"
+#include "support/errors.hpp"
 #include "reflex/vision/error.hpp"
 #include "reflex/vision/output_file.hpp"
 #include "vision_test_util.hpp"
@@ -52,12 +53,7 @@ class BadInput : public ::testing::Test {
     return dst;
   }
   static std::string errorOpening(const std::string& dir) {
-    try {
-      SessionReader r(dir);
-    } catch (const VisionError& e) {
-      return e.what();
-    }
-    return "no error";
+    return reflex::testing::messageOf<VisionError>([&] { SessionReader r(dir); });
   }
   // Runs the whole --dump path; returns stats (throws only for setup errors).
   static RunStats runAll(const std::string& dir) {

@@ -5,6 +5,7 @@
 #include "reflex/vision/runner.hpp"
 #include "reflex/vision/session.hpp"
 #include "reflex/vision/session_maker.hpp"
+#include "../support/errors.hpp"
 
 #include <atomic>
 #include <cmath>
@@ -21,12 +22,7 @@ namespace reflex::vision::test {
 /// The message of the VisionError `f` throws, or "no error".
 template <typename F>
 std::string errorOf(F f) {
-  try {
-    f();
-  } catch (const VisionError& e) {
-    return e.what();
-  }
-  return "no error";
+  return reflex::testing::messageOf<VisionError>(f);
 }
 
 /// A fresh folder under the system temp dir, removed when the object dies.

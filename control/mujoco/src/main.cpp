@@ -6,6 +6,7 @@
 #include "reflex/control/urdf_loader.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/cli.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -21,7 +22,8 @@ int main(int argc, char** argv) {
       "measured position when there is none. MuJoCo reports every checked segment pair closer than --margin\n"
       "(d_r) with its own distance, without force until the pair penetrates (RobotContacts).\n"
       "SIGINT / SIGTERM stop it; the summary (steps, contact steps, commands applied / rejected, hold time,\n"
-      "command latency) is printed at exit. Exit codes: 0 success, 1 set-up error."};
+      "command latency) is printed at exit. Exit codes: 0 success, 1 failed while running, 2 refused: a bad\n"
+      "option, file or set-up, named."};
   reflex::mujoco::NodeConfig config;
   config.urdf = reflex::common::defaultUrdf();
   bool print_mjcf = false;
@@ -38,11 +40,8 @@ int main(int argc, char** argv) {
   app.add_option("--limb-effort", config.mjcf.limb_effort, "torque limit of arm, head, leg joints [N m]")
       ->capture_default_str();
   app.add_option("--duration", config.duration, "seconds to run (0: until stopped)")->capture_default_str();
-  app.add_option("--domain", config.domain_id, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
-      ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
-  app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
-  app.add_option("--participant-profile", config.participant_profile, "participant profile in the XML")
-      ->capture_default_str();
+  reflex::bus::BusOptions bus_options{"", "", config.participant_profile};
+  bus_options.add(app);
   app.add_option("--name", config.module_name, "module name on the bus")->capture_default_str();
   app.add_flag("--print-mjcf", print_mjcf, "print the generated MJCF to stdout and exit");
   app.add_option("--interface", config.interface,
@@ -55,6 +54,9 @@ int main(int argc, char** argv) {
                  "bringup/robots/asimo_like.hg.yaml (default: <URDF stem>.hg.yaml beside the URDF)");
   return reflex::runMain("reflex_mujoco", app, argc, argv, [&]() -> int {
     std::signal(SIGPIPE, SIG_IGN);
+    config.domain_id = bus_options.domainId();
+    config.profiles_file = bus_options.profiles;
+    config.participant_profile = bus_options.participant_profile;
     if (print_mjcf) {
       const auto model = reflex::control::loadModel(
           config.urdf, reflex::control::loadCollisionConfigFor(config.urdf, config.collision));

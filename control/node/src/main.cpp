@@ -5,6 +5,7 @@
 #include "reflex/control_node/realtime.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/cli.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -22,6 +23,9 @@ struct Options {
   reflex::control_node::NodeConfig config;
   bool no_avoidance = false, disable_estop = false;
   std::string realtime;
+  /// The controller's participant is UDP only by default: a killed shared-memory reader cannot stall
+  /// its writes.
+  reflex::bus::BusOptions bus{"", "", "reflex_participant_udp"};
 };
 
 void addOptions(CLI::App& app, Options& o) {
@@ -36,10 +40,7 @@ void addOptions(CLI::App& app, Options& o) {
                  "controller configuration YAML (default: <URDF stem>.controller.yaml beside the URDF if it exists, "
                  "else built-in, the asimo_like robot's arms; the banner names the one used); 'avoidance: off' there "
                  "switches avoidance off but never the e-stop");
-  app.add_option("--domain", config.domain_id, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
-      ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
-  app.add_option("--profiles", config.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
-  app.add_option("--participant-profile", config.participant_profile, "participant profile in the XML (default UDP only: a killed shared-memory reader cannot stall the controller's writes)")->capture_default_str();
+  o.bus.add(app, "UDP only by default: a killed shared-memory reader cannot stall the controller's writes");
   app.add_option("--duration", config.duration, "seconds to run (0: until Ctrl-C)")->check(CLI::NonNegativeNumber);
   app.add_option("--input-timeout", config.input_timeout, "seconds of silence from the target source before the hands retract")
       ->capture_default_str()->check(CLI::PositiveNumber);
@@ -214,6 +215,9 @@ int main(int argc, char** argv) {
   const std::string& realtime = options.realtime;
   return reflex::runMain("reflex_controller", app, argc, argv, [&]() -> int {
     config.avoidance = !no_avoidance;
+    config.domain_id = options.bus.domainId().value_or(-1);
+    config.profiles_file = options.bus.profiles;
+    config.participant_profile = options.bus.participant_profile;
     config.estop = !disable_estop;
     std::signal(SIGPIPE, SIG_IGN);  // from the start: a closed stderr never ends the process,
     std::signal(SIGXFSZ, SIG_IGN);  // nor a file size limit (the failed write is reported instead)

@@ -11,6 +11,7 @@
 #include "reflex/modules/plugin.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/cli.hpp>
 
 #include <CLI/CLI.hpp>
 
@@ -26,7 +27,7 @@ int main(int argc, char** argv) {
       "after SIGINT / SIGTERM (named; the process ends within 6 s of the request whatever runs); a crash inside "
       "a module keeps its signal's status (139 for SIGSEGV), the module named on stderr."};
   modules::NodeOptions options;
-  std::string domain;
+  bus::BusOptions bus_options;
   bool list = false;
   std::vector<std::string> plugin_files;
   app.add_option("--config", options.config, "behavior configuration YAML (see bringup/behavior/)");
@@ -40,10 +41,7 @@ int main(int argc, char** argv) {
                  "identity whose reflex/joint_state samples are accepted, replacing the configuration's "
                  "inputs.joint_state_sources (repeatable; default there: controller). A recording replayed without a "
                  "live controller: --joint-state-source player");
-  app.add_option("--domain", domain, "DDS domain id 0..232 (default: $REFLEX_DOMAIN_ID, else 0)");
-  app.add_option("--profiles", options.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
-  app.add_option("--participant-profile", options.participant_profile, "participant profile in the profiles file")
-      ->capture_default_str();
+  bus_options.add(app);
   app.add_option("--duration", options.duration, "stop after this many seconds (0 = until SIGINT / SIGTERM)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
@@ -87,7 +85,9 @@ int main(int argc, char** argv) {
     return reflex::kExitRefused;
   }
   try {
-    if (!domain.empty()) options.domain_id = bus::parseDomainId(domain, "--domain");
+    options.domain_id = bus_options.domainId();
+    options.profiles_file = bus_options.profiles;
+    options.participant_profile = bus_options.participant_profile;
     modules::BehaviorNode node(options, registry);
     watchdog.watch([&node] { return node.bus().stopRequested(); });
     // Before the node goes (return or exception): stop watching its bus, and start the stop clock.

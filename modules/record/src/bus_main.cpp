@@ -8,6 +8,7 @@
 #include "reflex/record/record_file.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/cli.hpp>
 
 #include "reflex/common/files.hpp"
 
@@ -49,8 +50,7 @@ int main(int argc, char** argv) {
                "  reflex_bus hz [reflex/joint_state ...] [--window 3.5]   samples per second of every topic"};
   app.require_subcommand(1);
   double window = 3.5;
-  int domain = -1;
-  std::string profiles;
+  reflex::bus::BusOptions bus_options;
   std::vector<std::string> topics;
   auto* list = app.add_subcommand("list", "live processes and their modules (from reflex/heartbeat)");
   auto* hz = app.add_subcommand(
@@ -59,15 +59,10 @@ int main(int argc, char** argv) {
   for (CLI::App* sub : {list, hz}) {
     sub->add_option("-w,--window", window, "seconds to listen (at least 3.5: every process announces itself at least every 3 s; "
                     "list then listens up to 5 s more while a process it found has not been heard)")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
-    sub->add_option("--domain", domain, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
-        ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
-    sub->add_option("--profiles", profiles, "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped one)");
+    bus_options.add(*sub);
   }
   const int status = reflex::runMain("reflex_bus", app, argc, argv, [&]() -> int {
-    reflex::bus::BusConfig config;
-    config.module_name = "reflex_bus";
-    if (domain >= 0) config.domain_id = domain;
-    config.profiles_file = profiles;
+    const reflex::bus::BusConfig config = bus_options.config("reflex_bus");
     const reflex::record::BusSurvey s = reflex::record::surveyBus(config, window, list->parsed() ? std::vector<std::string>{} : topics);
     if (list->parsed()) printProcesses(s);
     else printTopics(s);

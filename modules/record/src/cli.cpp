@@ -5,6 +5,7 @@
 #include "reflex/record/recorder.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/cli.hpp>
 
 #include "reflex/common/files.hpp"
 
@@ -18,27 +19,7 @@ namespace reflex::record::cli {
 
 namespace {
 
-struct BusOptions {
-  int domain = -1;
-  std::string profiles;
-  std::string participant_profile = "reflex_participant";
-  void add(CLI::App& app) {
-    app.add_option("--domain", domain, "DDS domain id (default: $REFLEX_DOMAIN_ID or 0)")
-        ->check(CLI::Range(0, bus::kMaxDomainId));
-    app.add_option("--profiles", profiles,
-                   "DDS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else " + reflex::common::defaultProfilesFile() + ")");
-    app.add_option("--participant-profile", participant_profile, "participant profile in the XML")
-        ->capture_default_str();
-  }
-  bus::BusConfig config(const std::string& module) const {
-    bus::BusConfig c;
-    c.module_name = module;
-    if (domain >= 0) c.domain_id = domain;
-    c.profiles_file = profiles;
-    c.participant_profile = participant_profile;
-    return c;
-  }
-};
+using bus::BusOptions;
 
 /// Format and MCAP options of a command that writes a recording (record, convert).
 struct OutputOptions {

@@ -298,12 +298,6 @@ struct ArmWorkspace {
   ArmVector v_lo, v_hi;                 ///< velocity box that keeps the step inside the joint range
 };
 
-/// The closest active pair of one kind in this cycle's distances (computeControl fills it).
-struct ClosestPair {
-  double distance = std::numeric_limits<double>::infinity();  ///< m; +inf if none
-  int pair = -1;                                              ///< index into Model::pairs, -1 if none
-};
-
 /// What one pair is to one arm in the pair-term stage (collectPairTerms). For a robot pair it is
 /// fixed by the models, so ControllerData sets it up once and the per-pair pass reads this one
 /// small record instead of the segments, the owners and the column masks (a chain of dependent

@@ -250,6 +250,45 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
 void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceData& data, int pair,
                         const DistanceOptions& options = {});
 
+/// The closest pair of one kind (the sweep's `closest`, an arm's, the controller's physical, virtual
+/// and between-the-arms pairs). Ties: the lower pair index.
+struct ClosestPair {
+  double distance = std::numeric_limits<double>::infinity();  ///< m; +inf if none
+  int pair = -1;                                              ///< index into Model::pairs, -1 if none
+  /// Takes pair `i` at distance `d` if it is closer (or as close with a lower index).
+  void offer(double d, int i) {
+    if (d < distance || (d == distance && i < pair)) {
+      distance = d;
+      pair = i;
+    }
+  }
+};
+
+/// The closest-pair rule under the broad phase, in one place. `best` holds the closest of the pairs
+/// computed exactly; a pair the broad phase skipped has only a lower bound (PairDistance::exact
+/// false), so each of `candidates` (indices into data.pairs, visited in order) whose distance or
+/// bound is below best.distance and that `admit(i)` accepts is computed exactly (refinePairDistance)
+/// and offered to `best`. A skipped pair whose bound is not below the best cannot be closer, so `best`
+/// ends as it would without pruning. Nothing to do (and no call of admit) unless the smallest
+/// skipped bound (data.pruned_floor) is below best.distance. Allocates nothing, never throws.
+template <class Admit>
+void refineClosest(const Model& model, const KinematicsData& kin, DistanceData& data, const DistanceOptions& options,
+                   const std::vector<int>& candidates, ClosestPair& best, Admit&& admit) {
+  if (!(data.pruned_floor < best.distance)) return;
+  for (const int i : candidates) {
+    const PairDistance& pd = data.pairs[static_cast<std::size_t>(i)];
+    if (!(pd.distance < best.distance) || !admit(i)) continue;
+    if (!pd.exact) refinePairDistance(model, kin, data, i, options);
+    best.offer(pd.distance, i);
+  }
+}
+
+/// refineClosest over every candidate.
+inline void refineClosest(const Model& model, const KinematicsData& kin, DistanceData& data,
+                          const DistanceOptions& options, const std::vector<int>& candidates, ClosestPair& best) {
+  refineClosest(model, kin, data, options, candidates, best, [](int) { return true; });
+}
+
 /// Enables body-schema slot `slot` with a capsule [a_L, b_L] of `radius` on `link`, never checked
 /// against the segments in `ignore_mask` (the owner link's segment is always ignored).
 /// Returns false (and changes nothing) for a bad slot, link, radius or non-finite point.

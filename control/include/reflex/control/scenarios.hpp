@@ -233,6 +233,10 @@ double armToArmDistance(const Model& model, const ControllerModel& cm, const Con
 void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,
                         const std::string& path);
 
+/// The distance written where there is no pair (+inf in memory): in the time series and on the bus
+/// (idl/control.idl's NO_PAIR_DISTANCE, the same value; control_status_test checks that they agree).
+inline constexpr double kNoPairDistance = 1.0e9;
+
 /// The CSV header row of writeTimeseriesCsv (with its newline), and one data row: the pieces a
 /// streaming writer (reflex_controller --log) uses. Stream errors are left in `out`'s state.
 void writeTimeseriesCsvHeader(const Model& model, std::ostream& out);

@@ -6,6 +6,7 @@
 #include "reflex/view_node/view_node.hpp"
 
 #include <reflex/bus/bus.hpp>
+#include <reflex/bus/cli.hpp>
 #include <reflex/control/controller.hpp>
 #include <reflex/control/urdf_loader.hpp>
 
@@ -26,7 +27,7 @@ int main(int argc, char** argv) {
   options.urdf = reflex::common::defaultUrdf();
   options.server.web_dir = reflex::common::shippedPath("view/web");
   options.server.three_dir = reflex::common::shippedPath("view/three");
-  std::string domain;
+  bus::BusOptions bus_options;
   app.add_option("--port", options.server.port, "TCP port of the page and the WebSocket (0: any free port, printed)")
       ->capture_default_str();
   app.add_option("--bind", options.server.bind,
@@ -38,10 +39,7 @@ int main(int argc, char** argv) {
   app.add_option("--rate", options.rate, "scene messages per second at most, (0, 200]")->capture_default_str();
   app.add_option("--web", options.server.web_dir, "folder of the web page (index.html)")->capture_default_str();
   app.add_option("--three", options.server.three_dir, "folder of three.module.js and three.core.js")->capture_default_str();
-  app.add_option("--domain", domain, "DDS domain id 0..232 (default: $REFLEX_DOMAIN_ID, else 0)");
-  app.add_option("--profiles", options.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
-  app.add_option("--participant-profile", options.participant_profile, "participant profile in the profiles file")
-      ->capture_default_str();
+  bus_options.add(app);
   app.add_option("--duration", options.duration, "stop after this many seconds (0 = until SIGINT / SIGTERM)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
@@ -50,7 +48,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   try {
-    if (!domain.empty()) options.domain_id = bus::parseDomainId(domain, "--domain");
+    options.domain_id = bus_options.domainId().value_or(-1);
+    options.profiles_file = bus_options.profiles;
+    options.participant_profile = bus_options.participant_profile;
     view_node::ViewNode node(options);
     bus::StopOnSignal stop_on_signal(node.bus());  // SIGINT / SIGTERM / ... -> a clean stop
     node.run();
