@@ -42,6 +42,22 @@ const ControllerModel& cmodel() {
   return cm;
 }
 
+/// A target of the reference robot's coordinates (asimo_like's base frame) on the robot benchmarked:
+/// about its own chest, scaled by its arms and trunk (ScenarioFrame::place; the identity on asimo_like),
+/// so that the crossing and guard-acting targets cross and enter this robot's body too.
+Eigen::Vector3d placed(double x, double y, double z) {
+  static const ScenarioFrame frame = scenarioFrame(model(), cmodel());
+  return frame.place(Eigen::Vector3d(x, y, z));
+}
+
+/// Both hands crossed in front of the chest (the crossing-arms states' targets).
+ControlInput crossingInput() {
+  ControlInput in;
+  in.hands[kLeft] = {HandStatus::kGiven, placed(0.30, -0.08, 0.90)};
+  in.hands[kRight] = {HandStatus::kGiven, placed(0.30, 0.08, 0.90)};
+  return in;
+}
+
 void countPairs(benchmark::State& state) { state.counters["pairs"] = static_cast<double>(model().pairs.size()); }
 
 /// A recorded crossing-arms run: configurations where avoidance is active for both arms.
@@ -127,9 +143,7 @@ void BM_ControllerCycle(benchmark::State& state) {
   ControllerModel cm = cmodel();
   cm.params.mode = static_cast<AvoidanceMode>(state.range(0));
   ControllerData data(model(), cm);
-  ControlInput in;
-  in.hands[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};
-  in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
+  const ControlInput in = crossingInput();
   const auto& qs = states();
   CycleTimes times;
   std::vector<std::uint32_t> state_of;  // per kept cycle, its state
@@ -149,8 +163,9 @@ BENCHMARK(BM_ControllerCycle)->Arg(static_cast<int>(AvoidanceMode::kOneDof))->Ar
 /// The guard-acting loop's input at cycle k: targets jump every 0.4 s between crossing, into the
 /// chest and low across; the priority flips every 0.6 s.
 ControlInput guardActingInput(std::uint64_t k) {
-  const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
-  const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
+  static const Eigen::Vector3d inside = placed(0.02, 0.0, 0.95), across_l = placed(0.30, -0.08, 0.90),
+                               across_r = placed(0.30, 0.08, 0.90);
+  static const Eigen::Vector3d low_l = placed(0.10, -0.05, 0.75), low_r = placed(0.10, 0.05, 0.75);
   const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
   ControlInput in;
   for (int a = 0; a < 2; ++a) in.hands[a] = {HandStatus::kGiven, phases[(k / 80) % 4][a]};
@@ -213,9 +228,7 @@ void BM_ControllerCycleFastestPerState(benchmark::State& state) {
       fastest.push_back(best);
     };
     if (!guard) {
-      ControlInput in;
-      in.hands[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};
-      in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
+      const ControlInput in = crossingInput();
       for (const Eigen::VectorXd& q : states()) {
         timeState(q, in);
         computeControl(model(), cm, data, q, in);  // advance as BM_ControllerCycle does
