@@ -42,6 +42,8 @@ packages=(
   # DDS-Security test credentials (bringup/security/make_security.sh); fuzzing and sanitized tests
   # (bringup/fuzz.sh, sanitize.sh --clang-fuzz, run by test.sh)
   openssl clang-14 libclang-rt-14-dev ninja-build
+  # the C++ style check (.clang-format, tests/hygiene/format_check.py)
+  clang-format-14
   # leak reproducers fail in every build, not only under LeakSanitizer (tests/fuzz/CMakeLists.txt)
   valgrind
   # the robot boundary: the physics-simulated robot (control/mujoco)

@@ -26,13 +26,13 @@ int ownerArm(const Model& model, const ControllerModel& cm, const DistanceData& 
 }
 
 int segmentLink(const Model& model, const DistanceData& dist, int s) {
-  return model.segments[s].body_schema_slot ? dist.slots[s - model.num_robot_segments].link
-                                            : model.segments[s].link;
+  return model.segments[s].body_schema_slot ? dist.slots[s - model.num_robot_segments].link : model.segments[s].link;
 }
 
 /// True if `link` lies strictly below `ancestor` in the link tree (O(depth), allocation-free).
 bool descendsFrom(const Model& model, int link, int ancestor) {
-  for (int l = model.links[static_cast<std::size_t>(link)].parent; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent)
+  for (int l = model.links[static_cast<std::size_t>(link)].parent; l >= 0;
+       l = model.links[static_cast<std::size_t>(l)].parent)
     if (l == ancestor) return true;
   return false;
 }
@@ -53,8 +53,10 @@ ArmPairFacts makeArmPairFacts(const Model& model, const std::vector<std::uint64_
   if (owner_a != a && owner_b != a) return f;
   const int other = owner_a == a ? owner_b : owner_a;
   f.flags = ArmPairFacts::kInvolved;
-  if (other >= 0 && other != a) f.flags |= ArmPairFacts::kOtherArm;
-  else if (other < 0) f.flags |= ArmPairFacts::kStatic;
+  if (other >= 0 && other != a)
+    f.flags |= ArmPairFacts::kOtherArm;
+  else if (other < 0)
+    f.flags |= ArmPairFacts::kStatic;
   if (columns[static_cast<std::size_t>(link_a)] != 0) f.flags |= ArmPairFacts::kMovesA;
   if (columns[static_cast<std::size_t>(link_b)] != 0) f.flags |= ArmPairFacts::kMovesB;
   f.side = owner_a != a ? -1 : owner_b != a ? 1 : descendsFrom(model, link_b, link_a) ? -1 : 1;
@@ -83,7 +85,6 @@ void gather(const ControllerModel::Arm& arm, const Eigen::MatrixXd& full, Mat3A&
   out.resize(3, arm.n);
   for (int i = 0; i < arm.n; ++i) out.col(i) = full.col(arm.q[i]);
 }
-
 
 }  // namespace
 
@@ -155,8 +156,8 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
     if (seg.body_schema_slot || seg.link < 0) continue;
     for (int k = 0; k < seg.num_primitives; ++k) {
       const Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
-      reach[static_cast<std::size_t>(seg.link)] = std::max(reach[static_cast<std::size_t>(seg.link)],
-                                                           std::max(prim.a_L.norm(), prim.b_L.norm()) + prim.radius);
+      reach[static_cast<std::size_t>(seg.link)] =
+          std::max(reach[static_cast<std::size_t>(seg.link)], std::max(prim.a_L.norm(), prim.b_L.norm()) + prim.radius);
     }
   }
   for (std::size_t l = nl; l-- > 1;) {  // children after parents: accumulate bottom-up
@@ -172,10 +173,9 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
     for (std::size_t i = 0; i < model.pairs.size(); ++i) {
       const SegmentPair& pr = model.pairs[i];
       if (pr.b >= model.num_robot_segments) continue;  // a body-schema slot's owner changes with its link
-      facts[i] = makeArmPairFacts(model, arm_columns_of_link[static_cast<std::size_t>(a)], a,
-                                  cm.segment_owner[static_cast<std::size_t>(pr.a)],
-                                  cm.segment_owner[static_cast<std::size_t>(pr.b)], model.segments[pr.a].link,
-                                  model.segments[pr.b].link);
+      facts[i] = makeArmPairFacts(
+          model, arm_columns_of_link[static_cast<std::size_t>(a)], a, cm.segment_owner[static_cast<std::size_t>(pr.a)],
+          cm.segment_owner[static_cast<std::size_t>(pr.b)], model.segments[pr.a].link, model.segments[pr.b].link);
     }
   }
   for (std::size_t i = 0; i < model.pairs.size(); ++i)  // the left arm's pairs with the right arm
@@ -281,8 +281,10 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     if (!(f.flags & ArmPairFacts::kInvolved)) return;
     const double d = pd.distance;
     const bool with_other_arm = (f.flags & ArmPairFacts::kOtherArm) != 0;
-    if (with_other_arm) ws.d_other_arm = std::min(ws.d_other_arm, d);
-    else if (f.flags & ArmPairFacts::kStatic) ws.d_static = std::min(ws.d_static, d);
+    if (with_other_arm)
+      ws.d_other_arm = std::min(ws.d_other_arm, d);
+    else if (f.flags & ArmPairFacts::kStatic)
+      ws.d_static = std::min(ws.d_static, d);
     if (with_other_arm && skip_other_arm) return;
     if (d < d_min) {
       d_min = d;
@@ -310,9 +312,10 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     if (robot) {
       take(p, pd, facts[p]);
     } else {  // a body-schema slot's pair: its owner and link follow the slot's link
-      take(p, pd, makeArmPairFacts(model, columns, a, ownerArm(model, cm, data.dist, pd.seg_a),
-                                   ownerArm(model, cm, data.dist, pd.seg_b), segmentLink(model, data.dist, pd.seg_a),
-                                   segmentLink(model, data.dist, pd.seg_b)));
+      take(p, pd,
+           makeArmPairFacts(model, columns, a, ownerArm(model, cm, data.dist, pd.seg_a),
+                            ownerArm(model, cm, data.dist, pd.seg_b), segmentLink(model, data.dist, pd.seg_a),
+                            segmentLink(model, data.dist, pd.seg_b)));
     }
   });
   std::array<double, kMaxArmDof> gradient{};
@@ -391,8 +394,8 @@ void mergeAvoidanceJacobian(const Model& model, const ControllerModel::Arm& arm,
 /// avoidance Eq. 4 and the rest posture without a target in its nullspace), collision avoidance
 /// (Eq. 8-12: the merged virtual force, reaching in its nullspace), blended by f(d) (Eq. 1). In
 /// recovery only the separating term of Eq. 8. Writes ws.qdot and status.qdot_force.
-void blendControllers(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
-                      bool recovery_only, ArmWorkspace& ws) {
+void blendControllers(const Model& model, const ControllerModel& cm, ControllerData& data, int a, bool recovery_only,
+                      ArmWorkspace& ws) {
   const ControllerParams& params = cm.params;
   const ControllerModel::Arm& arm = cm.arms[a];
   ArmStatus& status = data.arms[a];
@@ -402,7 +405,8 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
     const int qi = arm.q[i];
     const double lo = model.q_lower[qi], hi = model.q_upper[qi];
     const double half = 0.5 * (hi - lo);
-    xi_jla[i] = std::isfinite(half) && half > 0.0 ? -params.alpha_jla * (ws.q[i] - 0.5 * (hi + lo)) / (half * half) : 0.0;
+    xi_jla[i] =
+        std::isfinite(half) && half > 0.0 ? -params.alpha_jla * (ws.q[i] - 0.5 * (hi + lo)) / (half * half) : 0.0;
   }
   VecA xi_rest = VecA::Zero(n);
   if (!ws.target_given) xi_rest = -params.alpha_rest * (ws.q - arm.rest.head(n));
@@ -417,7 +421,8 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   MatA3 J_avoid_pinv;
   if (params.mode == AvoidanceMode::kThreeDof) dampedPseudoInverse(ws.J_avoid, params.damping, J_avoid_pinv);
   status.qdot_force = params.mode == AvoidanceMode::kThreeDof && !recovery_only
-                          ? VecA(J_avoid_pinv * (ws.force_magnitude * ws.force_dir_B)) : qdot_force;
+                          ? VecA(J_avoid_pinv * (ws.force_magnitude * ws.force_dir_B))
+                          : qdot_force;
 
   ws.qdot.resize(n);
   if (recovery_only) {
@@ -432,8 +437,10 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   VecA xi_ca = VecA::Zero(n);
   if (params.mode != AvoidanceMode::kOff) xi_ca = params.alpha_ca * ws.avoidance_gradient.transpose();
   VecA qdot_wbm(n);
-  if (ws.target_given) qdot_wbm = J_hand_pinv * ws.hand_velocity_B + N_wbm * (xi_ca + xi_jla);
-  else qdot_wbm = xi_ca + xi_jla + xi_rest;
+  if (ws.target_given)
+    qdot_wbm = J_hand_pinv * ws.hand_velocity_B + N_wbm * (xi_ca + xi_jla);
+  else
+    qdot_wbm = xi_ca + xi_jla + xi_rest;
 
   if (params.mode == AvoidanceMode::kOff || status.f <= 0.0) {
     ws.qdot = qdot_wbm;
@@ -441,8 +448,10 @@ void blendControllers(const Model& model, const ControllerModel& cm, ControllerD
   }
   // Collision avoidance, Eq. 8-12: the virtual force along one direction, reaching in its nullspace.
   VecA xi_t(n);
-  if (ws.target_given) xi_t = -params.alpha_t * (ws.J_hand.transpose() * (ws.hand_B - data.trajectories[a].ref_B));  // Eq. 12, W_t = I
-  else xi_t = xi_rest;
+  if (ws.target_given)
+    xi_t = -params.alpha_t * (ws.J_hand.transpose() * (ws.hand_B - data.trajectories[a].ref_B));  // Eq. 12, W_t = I
+  else
+    xi_t = xi_rest;
   VecA qdot_ca(n);
   MatA N_ca;
   if (params.mode == AvoidanceMode::kOneDof) {
@@ -569,8 +578,8 @@ void capStepInOrangeZone(const ControllerModel& cm, const ControllerData& data, 
 /// Controller for one arm: Eq. 1-18 on its own joints, stage by stage (ArmWorkspace). Writes the
 /// arm's joint velocities into data.qdot. recovery_only: leaving a latched e-stop, only the
 /// separating motion of Eq. 8.
-void computeArm(const Model& model, const ControllerModel& cm, ControllerData& data, int a,
-                const ControlInput& input, bool recovery_only) {
+void computeArm(const Model& model, const ControllerModel& cm, ControllerData& data, int a, const ControlInput& input,
+                bool recovery_only) {
   const ControllerModel::Arm& arm = cm.arms[a];
   ArmWorkspace& ws = data.arm_ws;
   followTrajectory(model, cm, data, a, input, recovery_only, ws);
@@ -588,7 +597,8 @@ void computeArm(const Model& model, const ControllerModel& cm, ControllerData& d
 /// A pair between physical segments (a virtual occlusion slot never counts for safety).
 bool isPhysical(const Model& model, const ControllerData& data, const PairDistance& pd) {
   const int sb = pd.seg_b;
-  return !(model.segments[sb].body_schema_slot && data.dist.slots[static_cast<std::size_t>(sb - model.num_robot_segments)].is_virtual);
+  return !(model.segments[sb].body_schema_slot &&
+           data.dist.slots[static_cast<std::size_t>(sb - model.num_robot_segments)].is_virtual);
 }
 
 /// This cycle's closest physical pair, closest virtual pair and closest pair between the two arms
@@ -717,8 +727,8 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
   for (const double s : data.link_sweep) most_sweep = std::max(most_sweep, s);
   auto consider = [&](int i, const PairDistance& pd, int owner_a, int owner_b, int link_a, int link_b) {
     if (owner_a < 0 && owner_b < 0) return;
-    const double reach = data.link_sweep[static_cast<std::size_t>(link_a)] +
-                         data.link_sweep[static_cast<std::size_t>(link_b)];
+    const double reach =
+        data.link_sweep[static_cast<std::size_t>(link_a)] + data.link_sweep[static_cast<std::size_t>(link_b)];
     // Without the broad phase (tests' brute-force reference): every such pair, whatever its bound.
     if (!cm.broad_phase || !(pd.distance - reach > floor))
       data.guard_pairs[static_cast<std::size_t>(data.num_guard_pairs++)] = i;
@@ -848,10 +858,11 @@ ControlResult computeControl(const Model& model, const ControllerModel& cm, Cont
     return ControlResult::kBadInput;
   }
   // Velocity of the joints the controller does not command, from the previous measured q.
-  const double cycle_dt = input.dt > 0.0 && input.dt < cm.params.period ? input.dt : cm.params.period;  // ControlInput::dt
+  const double cycle_dt =
+      input.dt > 0.0 && input.dt < cm.params.period ? input.dt : cm.params.period;  // ControlInput::dt
   for (int j = 0; j < model.nq; ++j) {
-    const double v = data.have_prev && !data.arm_joint[static_cast<std::size_t>(j)]
-                         ? (q[j] - data.q_prev[j]) / cycle_dt : 0.0;
+    const double v =
+        data.have_prev && !data.arm_joint[static_cast<std::size_t>(j)] ? (q[j] - data.q_prev[j]) / cycle_dt : 0.0;
     data.qdot_uncontrolled[j] = std::isfinite(v) ? v : 0.0;
   }
   data.q_prev = q;

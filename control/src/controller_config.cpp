@@ -3,8 +3,6 @@
 #include "reflex/common/yaml_reader.hpp"
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
-#include "reflex/control/scenarios.hpp"
-#include "reflex/control/urdf_loader.hpp"
 
 #include <cerrno>
 #include <cstring>
@@ -22,15 +20,23 @@ namespace {
 
 /// Every numeric key of the controller YAML and the ControllerParams field it sets.
 constexpr std::pair<const char*, double ControllerParams::*> kParamFields[] = {
-    {"d_a", &ControllerParams::d_a}, {"d_b", &ControllerParams::d_b}, {"d_r", &ControllerParams::d_r},
-    {"period", &ControllerParams::period}, {"k_virtual", &ControllerParams::k_virtual},
-    {"alpha_ca", &ControllerParams::alpha_ca}, {"d_safe", &ControllerParams::d_safe},
-    {"alpha_t", &ControllerParams::alpha_t}, {"alpha_jla", &ControllerParams::alpha_jla},
-    {"alpha_rest", &ControllerParams::alpha_rest}, {"damping", &ControllerParams::damping},
-    {"reach_gain", &ControllerParams::reach_gain}, {"max_task_speed", &ControllerParams::max_task_speed},
+    {"d_a", &ControllerParams::d_a},
+    {"d_b", &ControllerParams::d_b},
+    {"d_r", &ControllerParams::d_r},
+    {"period", &ControllerParams::period},
+    {"k_virtual", &ControllerParams::k_virtual},
+    {"alpha_ca", &ControllerParams::alpha_ca},
+    {"d_safe", &ControllerParams::d_safe},
+    {"alpha_t", &ControllerParams::alpha_t},
+    {"alpha_jla", &ControllerParams::alpha_jla},
+    {"alpha_rest", &ControllerParams::alpha_rest},
+    {"damping", &ControllerParams::damping},
+    {"reach_gain", &ControllerParams::reach_gain},
+    {"max_task_speed", &ControllerParams::max_task_speed},
     {"trajectory_speed", &ControllerParams::trajectory_speed},
     {"estop_release_margin", &ControllerParams::estop_release_margin},
-    {"guard_rate", &ControllerParams::guard_rate}, {"guard_margin", &ControllerParams::guard_margin},
+    {"guard_rate", &ControllerParams::guard_rate},
+    {"guard_margin", &ControllerParams::guard_margin},
     {"predict_margin", &ControllerParams::predict_margin}};
 
 std::string str(double v) {
@@ -79,8 +85,7 @@ std::vector<ParamRange> controllerParamRanges(const ControllerParams& p) {
       {"k_virtual", p.k_virtual, 0.5, false, "0.5", 0.5 / p.period, false, "0.5 / period", "1/s",
        "the yellow zone must separate pairs (>= 0.5/s), and k * period <= 0.5 so one cycle never "
        "moves more than half the way to d_a"},
-      {"alpha_ca", p.alpha_ca, 0.0, false, "0", 100.0, false, "100", "1/(m s)",
-       "Eq. 5 gradient step; 0 disables it"},
+      {"alpha_ca", p.alpha_ca, 0.0, false, "0", 100.0, false, "100", "1/(m s)", "Eq. 5 gradient step; 0 disables it"},
       {"alpha_t", p.alpha_t, 1.0, false, "1", 1.0 / p.period, false, "1 / period", "1/s",
        "Eq. 12 is the only reaching term inside the yellow zone (0 never reaches there); "
        "alpha_t * period <= 1 keeps the discrete gradient step from overshooting"},
@@ -154,7 +159,9 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
   for (const auto& [name, field] : kParamFields) p.*field = root.number(name, p.*field, -kAny, kAny);
   const std::string mode = root.choice("avoidance", "three_dof", {"one_dof", "three_dof", "off"});
   if (root.has("avoidance"))
-    p.mode = mode == "one_dof" ? AvoidanceMode::kOneDof : mode == "off" ? AvoidanceMode::kOff : AvoidanceMode::kThreeDof;
+    p.mode = mode == "one_dof" ? AvoidanceMode::kOneDof
+             : mode == "off"   ? AvoidanceMode::kOff
+                               : AvoidanceMode::kThreeDof;
   config.camera_link = root.string("camera_link", config.camera_link);
   const common::ConfigNode arms = root.child("arms");
   arms.rejectUnknown({"left", "right"});
@@ -179,9 +186,7 @@ ControllerConfig loadControllerConfig(const std::string& yaml_path) {
 }
 
 std::string defaultControllerConfigPath(const std::string& urdf_path) {
-  const std::string collision = defaultCollisionConfigPath(urdf_path);  // the same stem, one rule
-  const std::string suffix = ".collision.yaml";
-  return collision.substr(0, collision.size() - suffix.size()) + ".controller.yaml";
+  return robotFileBeside(urdf_path, ".controller.yaml");
 }
 
 ControllerConfig loadControllerConfigFor(const std::string& urdf_path, const std::string& yaml_path) {
@@ -203,7 +208,8 @@ std::string describeControllerConfig(const ControllerConfig& config, const std::
   if (config.source == "<defaults>")
     out = "controller configuration: built-in defaults (no " + beside + " beside the URDF)";
   else
-    out = "controller configuration " + config.source + (config.source == beside ? " (beside the URDF)" : " (--controller)");
+    out = "controller configuration " + config.source +
+          (config.source == beside ? " (beside the URDF)" : " (--controller)");
   for (std::size_t a = 0; a < config.arms.size(); ++a) {
     const ArmConfig& arm = config.arms[a];
     out += std::string(a == 0 ? ": " : ", ") + "arm " + arm.name + " to hand '" + arm.hand_link + "' (" +
@@ -216,8 +222,8 @@ ControllerModel makeControllerModel(const Model& model, const ControllerConfig& 
   validateControllerParams(config.params, config.source);
   if (model.segments.size() > static_cast<std::size_t>(kMaxSegments))
     throw ConfigError(config.source + ": robot " + model.name + " has " + std::to_string(model.segments.size()) +
-                      " segments (collision segments and body-schema slots); at most " +
-                      std::to_string(kMaxSegments) + " are supported");
+                      " segments (collision segments and body-schema slots); at most " + std::to_string(kMaxSegments) +
+                      " are supported");
   ControllerModel cm;
   cm.params = config.params;
   std::set<int> used;
@@ -277,12 +283,20 @@ ControllerModel makeControllerModel(const Model& model, const ControllerConfig& 
   return cm;
 }
 
+Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm) {
+  Eigen::VectorXd q(model.nq);
+  for (int i = 0; i < model.nq; ++i) q[i] = std::min(std::max(0.0, model.q_lower[i]), model.q_upper[i]);
+  for (const auto& arm : cm.arms)
+    for (int i = 0; i < arm.n; ++i) q[arm.q[i]] = arm.rest[i];
+  return q;
+}
+
 void checkRestPostureClearOfRedZone(const Model& model, const ControllerModel& cm, const std::string& source) {
   if (!cm.params.estop) return;
   KinematicsData kin(model);
   DistanceData dist(model);  // no body-schema slot enabled: robot pairs only
   if (!computeForwardKinematics(model, kin, restConfiguration(model, cm))) return;  // rest is inside the limits
-  DistanceOptions no_rows;  // only the distances are read
+  DistanceOptions no_rows;                                                          // only the distances are read
   no_rows.row_threshold = -std::numeric_limits<double>::infinity();
   computeSegmentDistances(model, kin, dist, no_rows);
   if (dist.closest < 0) return;

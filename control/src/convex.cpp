@@ -166,7 +166,7 @@ void s1d(const Eigen::Vector3d* w, int i, int j, SubResult& r) {
   const Eigen::Vector3d t = w[j] - w[i];
   const double tt = t.squaredNorm();
   const double u = tt > 0 ? -w[i].dot(t) / tt : 0.0;  // origin's projection: w[i] + u t
-  if (!(u > 0)) return point(w, i, r);                  // also a zero-length segment
+  if (!(u > 0)) return point(w, i, r);                // also a zero-length segment
   if (!(u < 1)) return point(w, j, r);
   r.n = 2;
   r.idx[0] = i;
@@ -326,11 +326,39 @@ void reduce(Simplex& s, SubResult& r) {
   s = t;
 }
 
+/// The end of a search: witness points from the barycentric coordinates of the closest point on each
+/// piece's support points (contact: their midpoint, distance 0), and the warm start for the next call
+/// (the support pair of the heaviest weight).
+[[gnu::always_inline]] inline void witnessPoints(const Simplex& s, const SubResult& sub, bool contact,
+                                                 ConvexWarmStart* warm, ConvexDistance& out) {
+  Eigen::Vector3d p_a = Eigen::Vector3d::Zero(), p_b = Eigen::Vector3d::Zero();
+  int heaviest = 0;
+  for (int m = 0; m < sub.n; ++m) {
+    const int k = sub.idx[m];
+    p_a += sub.lambda[m] * s.p_a[k];
+    p_b += sub.lambda[m] * s.p_b[k];
+    if (sub.lambda[m] > sub.lambda[heaviest]) heaviest = m;
+  }
+  if (contact) {
+    out.distance = 0.0;
+    out.penetrating = true;
+    out.p_B_a = out.p_B_b = 0.5 * (p_a + p_b);
+  } else {
+    out.distance = (p_a - p_b).norm();
+    out.p_B_a = p_a;
+    out.p_B_b = p_b;
+  }
+  if (warm != nullptr) {
+    warm->vertex_a = s.ia[sub.idx[heaviest]];
+    warm->vertex_b = s.ib[sub.idx[heaviest]];
+  }
+}
+
 }  // namespace
 
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
-                                     const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm,
-                                     double stop_above, const Eigen::Vector3d& towards_b) noexcept {
+                                     const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm, double stop_above,
+                                     const Eigen::Vector3d& towards_b) noexcept {
   constexpr int kMaxIterations = 64;
   ConvexDistance out;
   assert(!a.vertices_L.empty() && !b.vertices_L.empty());
@@ -433,28 +461,7 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     sub = next;
   }
 
-  // Witness points from the barycentric coordinates on each piece's support points.
-  Eigen::Vector3d p_a = Eigen::Vector3d::Zero(), p_b = Eigen::Vector3d::Zero();
-  int heaviest = 0;
-  for (int m = 0; m < sub.n; ++m) {
-    const int k = sub.idx[m];
-    p_a += sub.lambda[m] * s.p_a[k];
-    p_b += sub.lambda[m] * s.p_b[k];
-    if (sub.lambda[m] > sub.lambda[heaviest]) heaviest = m;
-  }
-  if (contact) {
-    out.distance = 0.0;
-    out.penetrating = true;
-    out.p_B_a = out.p_B_b = 0.5 * (p_a + p_b);
-  } else {
-    out.distance = (p_a - p_b).norm();
-    out.p_B_a = p_a;
-    out.p_B_b = p_b;
-  }
-  if (warm != nullptr) {
-    warm->vertex_a = s.ia[sub.idx[heaviest]];
-    warm->vertex_b = s.ib[sub.idx[heaviest]];
-  }
+  witnessPoints(s, sub, contact, warm, out);
   return out;
 }
 

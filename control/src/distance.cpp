@@ -143,8 +143,10 @@ inline void keepNear(const DistanceData& data, const Segment& seg, int other, do
   for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
     const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
     const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r_other;
-    if (gap > within) left_out = std::min(left_out, gap);
-    else kept[n++] = p;
+    if (gap > within)
+      left_out = std::min(left_out, gap);
+    else
+      kept[n++] = p;
   }
 }
 
@@ -172,8 +174,8 @@ bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const Segm
 /// s, t; surface distance `best`): normal, witness points and, below the threshold, the row.
 /// Inlined into every loop (GCC otherwise keeps one out-of-line copy: a call per pair).
 REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const KinematicsData& kin, DistanceData& data,
-                                            const DistanceOptions& options, int i, int link_a, int link_b,
-                                            double best, double core, int pa, int pb, double s, double t) {
+                                            const DistanceOptions& options, int i, int link_a, int link_b, double best,
+                                            double core, int pa, int pb, double s, double t) {
   PairDistance& out = data.pairs[i];
   const SegmentB& A = data.prim_B[pa];
   const SegmentB& B = data.prim_B[pb];
@@ -243,13 +245,15 @@ inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin,
                                   double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b, Eigen::Vector3d& n) {
   const Primitive& A = model.primitives[static_cast<std::size_t>(pa)];
   const Primitive& B = model.primitives[static_cast<std::size_t>(pb)];
-  const ConvexPiece& ca = A.piece >= 0 ? model.pieces[static_cast<std::size_t>(A.piece)] : data.core_piece[static_cast<std::size_t>(pa)];
-  const ConvexPiece& cb = B.piece >= 0 ? model.pieces[static_cast<std::size_t>(B.piece)] : data.core_piece[static_cast<std::size_t>(pb)];
+  const ConvexPiece& ca =
+      A.piece >= 0 ? model.pieces[static_cast<std::size_t>(A.piece)] : data.core_piece[static_cast<std::size_t>(pa)];
+  const ConvexPiece& cb =
+      B.piece >= 0 ? model.pieces[static_cast<std::size_t>(B.piece)] : data.core_piece[static_cast<std::size_t>(pb)];
   const double ra = A.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pa)];
   const double rb = B.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pb)];
-  const ConvexDistance c = computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(link_a)], cb,
-                                                 kin.X_B_L[static_cast<std::size_t>(link_b)], nullptr,
-                                                 stop_above + ra + rb, towards_b);
+  const ConvexDistance c =
+      computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(link_a)], cb,
+                            kin.X_B_L[static_cast<std::size_t>(link_b)], nullptr, stop_above + ra + rb, towards_b);
   if (c.above) {
     d = c.distance - ra - rb;
     return PieceOutcome::kAbove;
@@ -302,7 +306,8 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   bool on_pieces = false, overlap = false;
   int cap_pa = -1, cap_pb = -1;
   double cap_core = 0.0, cap_s = 0.0, cap_t = 0.0;
-  Eigen::Vector3d best_pa = Eigen::Vector3d::Zero(), best_pb = Eigen::Vector3d::Zero(), best_n = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d best_pa = Eigen::Vector3d::Zero(), best_pb = Eigen::Vector3d::Zero(),
+                  best_n = Eigen::Vector3d::UnitZ();
   // Whether (pa, pb) at distance d replaces the best so far.
   auto better = [&](double d, int pa, int pb) {
     return cap_pa < 0 || d < best || (d == best && (pa < cap_pa || (pa == cap_pa && pb < cap_pb)));
@@ -345,8 +350,9 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     // (the way that separates their cores).
     if (!better(0.0, pa, pb)) return;
     Eigen::Vector3d dir = -towards_b;
-    if (!(dir.norm() > kCoincidentEps)) dir = kin.X_B_L[static_cast<std::size_t>(link_a)].translation() -
-                                              kin.X_B_L[static_cast<std::size_t>(link_b)].translation();
+    if (!(dir.norm() > kCoincidentEps))
+      dir = kin.X_B_L[static_cast<std::size_t>(link_a)].translation() -
+            kin.X_B_L[static_cast<std::size_t>(link_b)].translation();
     const double len = dir.norm();
     best = 0.0, on_pieces = true, overlap = true, best_pa = p_a, best_pb = p_a;
     best_n = len > kCoincidentEps ? Eigen::Vector3d(dir / len) : Eigen::Vector3d::UnitZ();
@@ -358,11 +364,14 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   if (count > 0 && !(cand[0].bound > give_up)) evaluate(cand[0]);
   std::size_t live = 1;
   for (std::size_t k = 1; k < count; ++k) {
-    if (!(cand[k].bound > cut())) std::swap(cand[live++], cand[k]);
-    else floor = std::min(floor, cand[k].bound);
+    if (!(cand[k].bound > cut()))
+      std::swap(cand[live++], cand[k]);
+    else
+      floor = std::min(floor, cand[k].bound);
   }
-  std::sort(cand + 1, cand + live,
-            [](const DistanceData::PieceCandidate& x, const DistanceData::PieceCandidate& y) { return x.bound < y.bound; });
+  std::sort(cand + 1, cand + live, [](const DistanceData::PieceCandidate& x, const DistanceData::PieceCandidate& y) {
+    return x.bound < y.bound;
+  });
   for (std::size_t k = 1; k < live; ++k) {
     if (cand[k].bound > cut()) {
       floor = std::min(floor, cand[k].bound);
@@ -418,7 +427,8 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
       kb = data.kept_b.data();
     }
     double floor;
-    const bool finished = nka > 0 && nkb > 0 &&
+    const bool finished =
+        nka > 0 && nkb > 0 &&
         finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
           for (int x = 0; x < nka; ++x)
             for (int y = 0; y < nkb; ++y) {
@@ -508,50 +518,56 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, Dist
   computeSegmentDistances(model, kin, data.slots, data, options);
 }
 
-void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                             DistanceData& data, const DistanceOptions& options) {
-  assert(data.pairs.size() == model.pairs.size());
-  assert(data.prim_B.size() == model.primitives.size());
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  const bool prune = options.prune_distance < kInf;
+namespace {
 
-  // 1. Every enabled primitive's core into B, once (a primitive takes part in several pairs); with
-  //    the broad phase, every robot segment's bounding sphere centre too.
-  const int nseg = static_cast<int>(model.segments.size());
-  for (int s = 0; s < nseg; ++s) transformSegment(model, kin, slots, data, s, prune);
-  // The tight model: how far each robot primitive can have moved since the last call (its bounding
-  // sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn theta), so a lower
-  // bound from then, less both primitives' motion, is a lower bound now.
+/// What computeSegmentDistances's steps hand on: the robot pairs computed exactly (the broad phase's
+/// survivors, or every robot pair), the smallest lower bound of a skipped pair, and the flat list of
+/// primitive pairs whose core distances step 3 computed.
+struct Sweep {
+  bool prune = false;
+  const int* exact_pairs = nullptr;
+  int nexact = 0;
+  double pruned_floor = std::numeric_limits<double>::infinity();
+  const int* list_a = nullptr;
+  const int* list_b = nullptr;
+  int nlist = 0;
+};
+
+/// Step 1, the tight model: how far each robot primitive can have moved since the last call (its
+/// bounding sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn theta),
+/// so a lower bound from then, less both primitives' motion, is a lower bound now.
+void measurePrimitiveMotion(const Model& model, const KinematicsData& kin, DistanceData& data) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
   data.num_piece_searches = 0;
   if (++data.cycle == 0) {  // wrapped: no old stamp may pass for the last call's
     std::fill(data.pp_stamp.begin(), data.pp_stamp.end(), 0U);
     data.cycle = 2;
   }
-  if (!model.pieces.empty()) {
-    for (int s = 0; s < model.num_robot_segments; ++s) {
-      const Segment& seg = model.segments[static_cast<std::size_t>(s)];
-      const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(seg.link)];
-      const Eigen::Isometry3d& X0 = data.last_X[static_cast<std::size_t>(seg.link)];
-      const double turn = std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
-      for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-        const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-        const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
-        const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
-        data.prim_motion[static_cast<std::size_t>(p)] = m == m ? m : kInf;  // NaN poses: no carry
-      }
+  if (model.pieces.empty()) return;
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+    const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(seg.link)];
+    const Eigen::Isometry3d& X0 = data.last_X[static_cast<std::size_t>(seg.link)];
+    const double turn = std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
+      const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
+      data.prim_motion[static_cast<std::size_t>(p)] = m == m ? m : kInf;  // NaN poses: no carry
     }
-    data.last_X = kin.X_B_L;  // no allocation: the same size every call
   }
+  data.last_X = kin.X_B_L;  // no allocation: the same size every call
+}
 
-  // 2. Broad phase: robot pairs whose bounding spheres are more than prune_distance apart get that
-  //    gap as a lower bound; the others are computed exactly below.
-  const SegmentB* prim = data.prim_B.data();
-  const double* radius = data.prim_r.data();
-  const int* exact_pairs = data.robot_pairs.data();
-  int nexact = static_cast<int>(data.robot_pairs.size());
+/// Step 2, the broad phase: robot pairs whose bounding spheres are more than prune_distance apart get
+/// that gap as a lower bound; the others are listed in sw.exact_pairs for step 4.
+void broadPhase(DistanceData& data, const DistanceOptions& options, Sweep& sw) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  sw.exact_pairs = data.robot_pairs.data();
+  sw.nexact = static_cast<int>(data.robot_pairs.size());
   data.num_pruned_pairs = 0;
-  double pruned_floor = kInf;  // the smallest lower bound of a skipped pair
-  if (prune) {
+  sw.pruned_floor = kInf;
+  if (sw.prune) {
     // Every robot pair's gap (a kernel: no branch), then, without a branch either (which way a pair
     // goes is data-dependent and mispredicts), each pair's entry as skipped (the exact ones are
     // overwritten in step 4) and the kept ones appended to the exact list.
@@ -562,7 +578,8 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
     else
       detail::boundGapsScalar(data.bound_center4_B.data(), data.rp_a.data(), data.rp_b.data(), data.rp_rsum.data(),
                               nrobot, data.rp_gap.data());
-    nexact = 0;
+    int nexact = 0;
+    double pruned_floor = kInf;
     const double prune_distance = options.prune_distance;
     for (int r = 0; r < nrobot; ++r) {
       const int i = data.robot_pairs[static_cast<std::size_t>(r)];
@@ -578,25 +595,32 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
       pruned_floor = std::min(pruned_floor, keep ? kInf : gap);
     }
     data.num_pruned_pairs = nrobot - nexact;
-    exact_pairs = data.exact_pairs.data();
+    sw.exact_pairs = data.exact_pairs.data();
+    sw.nexact = nexact;
+    sw.pruned_floor = pruned_floor;
   }
-  data.num_exact_pairs = nexact;
-  data.pruned_floor = pruned_floor;
-  data.last_pruned = prune;
+  data.num_exact_pairs = sw.nexact;
+  data.pruned_floor = sw.pruned_floor;
+  data.last_pruned = sw.prune;
+}
 
-  // 3. The core closest points of those robot pairs' primitive pairs, in one tight loop over a flat
-  //    list (independent iterations: the long sqrt / division latency chains of neighbouring pairs
-  //    overlap; the AVX2 kernel runs four at a time).
-  const int* list_a = data.pp_a.data();
-  const int* list_b = data.pp_b.data();
-  int nlist = static_cast<int>(data.pp_a.size());
-  if (prune) {
+/// Step 3: the core closest points of the exact pairs' primitive pairs, in one tight loop over a flat
+/// list (independent iterations: the long sqrt / division latency chains of neighbouring pairs
+/// overlap; the AVX2 kernel runs four at a time).
+void coreDistancesOfExactPairs(const Model& model, DistanceData& data, const DistanceOptions& options, Sweep& sw) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  sw.list_a = data.pp_a.data();
+  sw.list_b = data.pp_b.data();
+  sw.nlist = static_cast<int>(data.pp_a.size());
+  if (sw.prune) {
     // A pair of the tight model keeps only the primitives of each segment whose bounding sphere lies
     // within prune_distance of the other segment's: the others' primitive pairs are farther than it
     // (their smallest sphere gap, list_floor, is a lower bound of their distance). A torso of 48
     // pieces against a finger keeps the few pieces near the finger.
     const double prune_distance = options.prune_distance;
-    nlist = 0;
+    int nlist = 0;
+    const int nexact = sw.nexact;  // locals: the list writes below could alias sw's fields
+    const int* exact_pairs = sw.exact_pairs;
     for (int e = 0; e < nexact; ++e) {
       const int i = exact_pairs[e];
       const int count = data.pp_begin[i + 1] - data.pp_begin[i];
@@ -626,24 +650,40 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
       data.list_end[static_cast<std::size_t>(e)] = nlist;
       data.list_floor[static_cast<std::size_t>(e)] = floor;
     }
-    list_a = data.list_a.data();
-    list_b = data.list_b.data();
+    sw.list_a = data.list_a.data();
+    sw.list_b = data.list_b.data();
+    sw.nlist = nlist;
   }
+  const SegmentB* prim = data.prim_B.data();
   if (data.kernel == SweepKernel::kAvx2)
-    detail::coreDistancesAvx2(prim, list_a, list_b, nlist, data.pp_core.data(), data.pp_s.data(), data.pp_t.data());
+    detail::coreDistancesAvx2(prim, sw.list_a, sw.list_b, sw.nlist, data.pp_core.data(), data.pp_s.data(),
+                              data.pp_t.data());
   else
-    detail::coreDistancesScalar(prim, list_a, list_b, nlist, data.pp_core.data(), data.pp_s.data(), data.pp_t.data());
+    detail::coreDistancesScalar(prim, sw.list_a, sw.list_b, sw.nlist, data.pp_core.data(), data.pp_s.data(),
+                                data.pp_t.data());
+}
 
-  // 4. Every exactly computed robot pair: the best of its primitive pairs (the next entries of the
-  //    list), then normal, witness points and row. A pair of the tight model: its capsules' distance
-  //    first; above prune_distance it is skipped like the broad phase's (that distance its lower
-  //    bound), else computed on the pieces.
+/// Step 4: every exactly computed robot pair, the best of its primitive pairs (the next entries of the
+/// list), then normal, witness points and row. A pair of the tight model: its capsules' distance
+/// first; above prune_distance it is skipped like the broad phase's (that distance its lower bound),
+/// else computed on the pieces. The exact list is compacted in place to the pairs computed exactly.
+void finishExactPairs(const Model& model, const KinematicsData& kin, DistanceData& data, const DistanceOptions& options,
+                      Sweep& sw) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const bool prune = sw.prune;
+  const double* radius = data.prim_r.data();
+  const int* list_a = sw.list_a;
+  const int* list_b = sw.list_b;
+  const int nexact = sw.nexact;  // locals: the writes below could alias sw's fields
+  const int* exact_pairs = sw.exact_pairs;
+  double pruned_floor = sw.pruned_floor;
   int nkept = 0;
   for (int e = 0, j = 0; e < nexact; ++e) {
     const int i = exact_pairs[e];
     const SegmentPair& pair = model.pairs[i];
     const int end = prune ? data.list_end[static_cast<std::size_t>(e)] : j + data.pp_begin[i + 1] - data.pp_begin[i];
-    assert(end > j || (prune && data.pair_has_piece[static_cast<std::size_t>(i)]));  // every robot segment has a primitive
+    assert(end > j ||
+           (prune && data.pair_has_piece[static_cast<std::size_t>(i)]));  // every robot segment has a primitive
     if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
       const int begin = j;
       double bound = prune ? data.list_floor[static_cast<std::size_t>(e)] : kInf;  // the primitives left out
@@ -668,12 +708,12 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
                            prune ? options.prune_distance : kInf, floor, [&](auto&& f) {
                              for (int k = begin; k < end; ++k) {
                                const int pp = prune ? data.list_pp[static_cast<std::size_t>(k)] : k;
-                               const double carried =
-                                   data.pp_stamp[static_cast<std::size_t>(pp)] + 1 == data.cycle
-                                       ? data.pp_lower[static_cast<std::size_t>(pp)] -
-                                             data.prim_motion[static_cast<std::size_t>(list_a[k])] -
-                                             data.prim_motion[static_cast<std::size_t>(list_b[k])] - kCarryMargin
-                                       : -kInf;
+                               const double carried = data.pp_stamp[static_cast<std::size_t>(pp)] + 1 == data.cycle
+                                                          ? data.pp_lower[static_cast<std::size_t>(pp)] -
+                                                                data.prim_motion[static_cast<std::size_t>(list_a[k])] -
+                                                                data.prim_motion[static_cast<std::size_t>(list_b[k])] -
+                                                                kCarryMargin
+                                                          : -kInf;
                                f(list_a[k], list_b[k], data.pp_core[k] - radius[list_a[k]] - radius[list_b[k]],
                                  data.pp_core[k], data.pp_s[k], data.pp_t[k], pp, carried);
                              }
@@ -699,38 +739,65 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
     finishPair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link, best,
                data.pp_core[j_best], list_a[j_best], list_b[j_best], data.pp_s[j_best], data.pp_t[j_best]);
   }
-  nexact = nkept;  // without the tight model's skipped pairs (exact_pairs compacted in place)
-  data.num_exact_pairs = nexact;
+  sw.nexact = nkept;  // without the tight model's skipped pairs (exact_pairs compacted in place)
+  sw.pruned_floor = pruned_floor;
+  data.num_exact_pairs = nkept;
   data.pruned_floor = pruned_floor;
+}
 
-  // 5. Pairs with a body-schema slot: usually all disabled; each computed directly when active.
+/// Step 5: the pairs with a body-schema slot, usually all disabled; each computed directly when
+/// active. Returns whether a slot is enabled.
+bool computeSlotPairs(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots, DistanceData& data,
+                      const DistanceOptions& options) {
   bool any_slot = false;
   for (const BodySchemaSlot& slot : slots) any_slot = any_slot || slot.enabled;
   data.any_slot_enabled = any_slot;
   // Nothing to do when every slot is disabled and every slot pair is already inactive (the usual
   // cycle: a robot holds nothing; a model has 4 slots x its segments of such pairs).
-  if (any_slot || !data.slot_pairs_inactive) {
-    for (const int i : data.slot_pairs) {
-      const SegmentPair& pair = model.pairs[i];
-      const Segment& sa = model.segments[pair.a];
-      const Segment& sb = model.segments[pair.b];
-      int link_a = sa.link, link_b = sb.link;
-      if (!any_slot || !slotPairActive(model, slots, pair, link_a, link_b)) {
-        PairDistance& out = data.pairs[i];
-        out.active = false;
-        out.has_row = false;
-        out.distance = kInf;
-        continue;
-      }
-      computeSegmentPair(model, kin, data, options, i, sa, sb, link_a, link_b);
+  if (!any_slot && data.slot_pairs_inactive) return false;
+  for (const int i : data.slot_pairs) {
+    const SegmentPair& pair = model.pairs[i];
+    const Segment& sa = model.segments[pair.a];
+    const Segment& sb = model.segments[pair.b];
+    int link_a = sa.link, link_b = sb.link;
+    if (!any_slot || !slotPairActive(model, slots, pair, link_a, link_b)) {
+      PairDistance& out = data.pairs[i];
+      out.active = false;
+      out.has_row = false;
+      out.distance = std::numeric_limits<double>::infinity();
+      continue;
     }
-    data.slot_pairs_inactive = !any_slot;
+    computeSegmentPair(model, kin, data, options, i, sa, sb, link_a, link_b);
   }
+  data.slot_pairs_inactive = !any_slot;
+  return any_slot;
+}
+
+}  // namespace
+
+void computeSegmentDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                             DistanceData& data, const DistanceOptions& options) {
+  assert(data.pairs.size() == model.pairs.size());
+  assert(data.prim_B.size() == model.primitives.size());
+  Sweep sw;
+  sw.prune = options.prune_distance < std::numeric_limits<double>::infinity();
+
+  // 1. Every enabled primitive's core into B, once (a primitive takes part in several pairs); with
+  //    the broad phase, every robot segment's bounding sphere centre too; how far each moved.
+  const int nseg = static_cast<int>(model.segments.size());
+  for (int s = 0; s < nseg; ++s) transformSegment(model, kin, slots, data, s, sw.prune);
+  measurePrimitiveMotion(model, kin, data);
+  // 2.-4. The robot pairs: broad phase, core distances, then each kept pair exactly.
+  broadPhase(data, options, sw);
+  coreDistancesOfExactPairs(model, data, options, sw);
+  finishExactPairs(model, kin, data, options, sw);
+  // 5. The body-schema slots' pairs.
+  const bool any_slot = computeSlotPairs(model, kin, slots, data, options);
 
   // 6. The closest active pair (the lowest index among equals): over the exact pairs; then a skipped
   //    pair whose lower bound is below that distance is computed exactly, so `closest` is the true one.
   ClosestPair closest;
-  for (int e = 0; e < nexact; ++e) closest.offer(data.pairs[exact_pairs[e]].distance, exact_pairs[e]);
+  for (int e = 0; e < sw.nexact; ++e) closest.offer(data.pairs[sw.exact_pairs[e]].distance, sw.exact_pairs[e]);
   if (any_slot)
     for (const int i : data.slot_pairs)
       if (data.pairs[i].active) closest.offer(data.pairs[i].distance, i);
@@ -771,9 +838,7 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
   }
 }
 
-SweepKernel fastestSweepKernel() {
-  return detail::avx2Available() ? SweepKernel::kAvx2 : SweepKernel::kScalar;
-}
+SweepKernel fastestSweepKernel() { return detail::avx2Available() ? SweepKernel::kAvx2 : SweepKernel::kScalar; }
 
 void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceData& data, int pair,
                         const DistanceOptions& options) {
@@ -784,9 +849,8 @@ void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceD
   computeSegmentPair(model, kin, data, options, pair, sa, sb, sa.link, sb.link);
 }
 
-bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link,
-                             const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
-                             std::uint64_t ignore_mask) {
+bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link, const Eigen::Vector3d& a_L,
+                             const Eigen::Vector3d& b_L, double radius, std::uint64_t ignore_mask) {
   if (slot < 0 || slot >= kBodySchemaSlots) return false;
   if (link < 0 || link >= static_cast<int>(model.links.size())) return false;
   if (!(radius > 0.0) || !std::isfinite(radius) || !a_L.allFinite() || !b_L.allFinite()) return false;
@@ -824,13 +888,11 @@ BodySchemaCheck checkBodySchemaSegment(const Model& model, int link, const Eigen
   const double length = (b_L - a_L).norm();
   const double max_length = virtual_segment ? limits.max_virtual_length : limits.max_length;
   if (length > max_length)
-    return fail(BodySchemaFault::kTooLong, length, max_length,
-                virtual_segment ? "max_virtual_length" : "max_length");
+    return fail(BodySchemaFault::kTooLong, length, max_length, virtual_segment ? "max_virtual_length" : "max_length");
   const double reach = std::max(a_L.norm(), b_L.norm());
   const double max_reach = virtual_segment ? limits.max_virtual_reach : limits.max_reach;
   if (reach > max_reach)
-    return fail(BodySchemaFault::kTooFar, reach, max_reach,
-                virtual_segment ? "max_virtual_reach" : "max_reach");
+    return fail(BodySchemaFault::kTooFar, reach, max_reach, virtual_segment ? "max_virtual_reach" : "max_reach");
   return c;
 }
 

@@ -17,8 +17,8 @@ namespace reflex::control::detail {
 /// One mesh or box collision element of a link.
 struct FitElement {
   bool box = false;
-  std::string name;              ///< the collision element's name (may be empty)
-  std::string filename;          ///< mesh: as written in the URDF
+  std::string name;                                 ///< the collision element's name (may be empty)
+  std::string filename;                             ///< mesh: as written in the URDF
   Eigen::Vector3d scale = Eigen::Vector3d::Ones();  ///< mesh: scale attribute
   Eigen::Vector3d size = Eigen::Vector3d::Zero();   ///< box: size
   Eigen::Isometry3d X_L_C = Eigen::Isometry3d::Identity();
@@ -31,9 +31,9 @@ std::vector<FitElement> fitElementsOf(const urdf::Link& link);
 /// mesh file bytes. Meshes that cannot be resolved or read are appended to `problems` (one line each,
 /// naming the link, the filename and why); `resolved` gets each mesh's path ("" if unresolved or
 /// unreadable: already reported).
-std::string fitInputsHash(const std::string& link, const std::vector<FitElement>& elements,
-                          const std::string& urdf_dir, const PackagePaths& paths,
-                          std::vector<std::string>* problems, std::vector<std::string>* resolved);
+std::string fitInputsHash(const std::string& link, const std::vector<FitElement>& elements, const std::string& urdf_dir,
+                          const PackagePaths& paths, std::vector<std::string>* problems,
+                          std::vector<std::string>* resolved);
 
 /// The folder of a file path ("." when it has none).
 std::string folderOf(const std::string& path);

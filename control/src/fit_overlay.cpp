@@ -68,13 +68,7 @@ void append(TriangleMesh& to, const TriangleMesh& from, const Eigen::Isometry3d&
 
 }  // namespace
 
-std::string defaultFitOverlayPath(const std::string& urdf_path) {
-  const auto dot = urdf_path.rfind('.');
-  const auto slash = urdf_path.rfind('/');
-  const std::string stem =
-      (dot != std::string::npos && (slash == std::string::npos || dot > slash)) ? urdf_path.substr(0, dot) : urdf_path;
-  return stem + ".fit.yaml";
-}
+std::string defaultFitOverlayPath(const std::string& urdf_path) { return robotFileBeside(urdf_path, ".fit.yaml"); }
 
 namespace {
 
@@ -253,7 +247,8 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
      << "urdf: " << quoted(relativeTo(overlay.urdf, dir)) << "\n";
   if (!overlay.packages.empty()) {
     os << "packages:\n";
-    for (const auto& [name, path] : overlay.packages) os << "  " << quoted(name) << ": " << quoted(relativeTo(path, dir)) << "\n";
+    for (const auto& [name, path] : overlay.packages)
+      os << "  " << quoted(name) << ": " << quoted(relativeTo(path, dir)) << "\n";
   }
   const FitOptions& o = overlay.options;
   os << "options: {max_primitives: " << o.max_primitives << ", split_ratio: " << num(o.split_ratio)
@@ -287,7 +282,8 @@ std::string fitOverlayText(const FitOverlay& overlay, const std::string& overlay
       os << "      - capsule: " << capsule(piece.capsule) << "\n        vertices: [";
       for (std::size_t v = 0; v < piece.vertices.size(); ++v) {
         const Eigen::Vector3d& x = piece.vertices[v];
-        os << (v ? ", " : "") << "[" << num(x.x(), "%.17g") << ", " << num(x.y(), "%.17g") << ", " << num(x.z(), "%.17g") << "]";
+        os << (v ? ", " : "") << "[" << num(x.x(), "%.17g") << ", " << num(x.y(), "%.17g") << ", "
+           << num(x.z(), "%.17g") << "]";
       }
       os << "]\n        triangles: [";
       for (std::size_t t = 0; t < piece.triangles.size(); ++t) {
@@ -368,7 +364,8 @@ FitOverlay loadFitOverlay(const std::string& path) {
       return p;
     };
     if (format == "1") {
-      const std::vector<common::ConfigNode> primitives = n.at("primitives", "a non-empty list of primitives").elements();
+      const std::vector<common::ConfigNode> primitives =
+          n.at("primitives", "a non-empty list of primitives").elements();
       if (primitives.empty()) n.fail("primitives", "empty", "a non-empty list of primitives");
       for (const common::ConfigNode& pn : primitives) l.primitives.push_back(readCapsule(pn));
     } else {
@@ -395,7 +392,8 @@ FitOverlay loadFitOverlay(const std::string& path) {
           std::array<int, 3> tri{};
           for (int k = 0; k < 3; ++k) {
             if (!(x[k] >= 0 && x[k] < nv) || x[k] != std::floor(x[k]))
-              pn.fail("triangles", "index " + num(x[k]) + " is not a vertex index", "integers in [0, " + std::to_string(nv) + ")");
+              pn.fail("triangles", "index " + num(x[k]) + " is not a vertex index",
+                      "integers in [0, " + std::to_string(nv) + ")");
             tri[k] = static_cast<int>(x[k]);
           }
           piece.triangles.push_back(tri);

@@ -49,8 +49,7 @@ KinematicsData::KinematicsData(const Model& model)
   computeForwardKinematics(model, *this, q);
 }
 
-bool computeForwardKinematics(const Model& model, KinematicsData& data,
-                              const Eigen::Ref<const Eigen::VectorXd>& q) {
+bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q) {
   if (q.size() != model.nq || !q.allFinite()) return false;
   assert(data.X_B_L.size() == model.links.size());
   data.q = q;
@@ -65,9 +64,7 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data,
     const Eigen::Isometry3d X_B_J = data.X_B_L[link.parent] * link.X_P_J;
     data.axis_B[i] = X_B_J.linear() * link.axis_J;
     switch (link.type) {
-      case JointType::kFixed:
-        data.X_B_L[i] = X_B_J;
-        break;
+      case JointType::kFixed: data.X_B_L[i] = X_B_J; break;
       case JointType::kRevolute:
         rotateAbout(X_B_J.linear(), link.axis_J, q[link.q_index], data.X_B_L[i].linear());
         data.X_B_L[i].translation() = X_B_J.translation();
@@ -92,8 +89,8 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data,
   return true;
 }
 
-void computePointJacobian(const Model& model, const KinematicsData& data, int link,
-                          const Eigen::Vector3d& p_B, Eigen::Ref<Eigen::MatrixXd> J_B) {
+void computePointJacobian(const Model& model, const KinematicsData& data, int link, const Eigen::Vector3d& p_B,
+                          Eigen::Ref<Eigen::MatrixXd> J_B) {
   assert(J_B.rows() == 3 && J_B.cols() == model.nq);
   zeroColumns(J_B);
   for (const int qi : model.link_support[link]) {
@@ -102,9 +99,8 @@ void computePointJacobian(const Model& model, const KinematicsData& data, int li
   }
 }
 
-void computeRelativeJacobian(const Model& model, const KinematicsData& data, int link1,
-                             const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
-                             Eigen::Ref<Eigen::MatrixXd> J_B) {
+void computeRelativeJacobian(const Model& model, const KinematicsData& data, int link1, const Eigen::Vector3d& p1_B,
+                             int link2, const Eigen::Vector3d& p2_B, Eigen::Ref<Eigen::MatrixXd> J_B) {
   assert(J_B.rows() == 3 && J_B.cols() == model.nq);
   zeroColumns(J_B);
   for (const int qi : model.link_support[link1]) {
@@ -143,9 +139,9 @@ void computeDirectionalRowOnSupport(const Model& model, const KinematicsData& da
   for (std::size_t k = common; k < s2.size(); ++k) row[s2[k]] = -data.twist_B.col(s2[k]).dot(x2);
 }
 
-void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1,
-                           const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
-                           const Eigen::Vector3d& n_B, Eigen::Ref<Eigen::RowVectorXd> row) {
+void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1, const Eigen::Vector3d& p1_B,
+                           int link2, const Eigen::Vector3d& p2_B, const Eigen::Vector3d& n_B,
+                           Eigen::Ref<Eigen::RowVectorXd> row) {
   assert(row.cols() == model.nq);
   zeroColumns(row);
   computeDirectionalRowOnSupport(model, data, link1, p1_B, link2, p2_B, n_B, commonSupport(model, link1, link2),

@@ -66,9 +66,7 @@ struct Circle {
 
 bool outside(const Circle& c, const Eigen::Vector2d& p) { return (p - c.c).norm() > c.r * (1.0 + 1e-12) + 1e-15; }
 
-Circle circleFrom2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-  return {0.5 * (a + b), 0.5 * (a - b).norm()};
-}
+Circle circleFrom2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return {0.5 * (a + b), 0.5 * (a - b).norm()}; }
 
 Circle circleFrom3(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& c) {
   const Eigen::Vector2d ab = b - a, ac = c - a;
@@ -200,7 +198,8 @@ QhullResult runQhull(const std::vector<Eigen::Vector3d>& pts) {
   FILE* devnull = std::fopen("/dev/null", "w");
   qh_zero(qh, devnull);
   char options[] = "qhull Qt";
-  const int exitcode = qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
+  const int exitcode =
+      qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
   if (!exitcode) {
     qh_getarea(qh, qh->facet_list);
     r.volume = qh->totvol;
@@ -249,8 +248,12 @@ Primitive fitOne(const std::vector<Eigen::Vector3d>& all, bool quick = false) {
   double best_volume = primitiveVolume(best);
   if (pts.size() < 2) return best;
   const Eigen::Matrix3d axes = principalAxes(pts);
-  std::vector<Eigen::Vector3d> starts{axes.col(2), axes.col(1), axes.col(0), Eigen::Vector3d::UnitX(),
-                                      Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
+  std::vector<Eigen::Vector3d> starts{axes.col(2),
+                                      axes.col(1),
+                                      axes.col(0),
+                                      Eigen::Vector3d::UnitX(),
+                                      Eigen::Vector3d::UnitY(),
+                                      Eigen::Vector3d::UnitZ()};
   if (quick) starts.resize(1);  // the principal axis only, coarse steps: to rank candidate cuts
   for (const Eigen::Vector3d& start : starts) {
     Eigen::Vector3d u = start;
@@ -417,7 +420,8 @@ void forEachCut(const TriangleMesh& work, const std::vector<int>& tris, const st
   std::vector<Eigen::Vector3d> centroids;
   for (int t : tris)
     centroids.push_back((work.vertices[work.triangles[t][0]] + work.vertices[work.triangles[t][1]] +
-                         work.vertices[work.triangles[t][2]]) / 3.0);
+                         work.vertices[work.triangles[t][2]]) /
+                        3.0);
   std::map<int, int> shell_size;
   for (int t : tris) ++shell_size[shell[t]];
   if (which != Cuts::kAxes && shell_size.size() > 1) {
@@ -434,8 +438,8 @@ void forEachCut(const TriangleMesh& work, const std::vector<int>& tris, const st
   }
   if (which == Cuts::kShells) return;
   const Eigen::Matrix3d pca = principalAxes(centroids);
-  const std::array<Eigen::Vector3d, 6> axes{pca.col(2), pca.col(1), pca.col(0), Eigen::Vector3d::UnitX(),
-                                            Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
+  const std::array<Eigen::Vector3d, 6> axes{
+      pca.col(2), pca.col(1), pca.col(0), Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()};
   for (const Eigen::Vector3d& axis : axes) {
     std::vector<std::pair<double, int>> order;
     for (std::size_t i = 0; i < tris.size(); ++i) order.push_back({centroids[i].dot(axis), tris[i]});
@@ -465,7 +469,8 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
   std::vector<char> used(mesh.vertices.size(), 0);
   for (const auto& t : mesh.triangles)
     for (int k = 0; k < 3; ++k) {
-      if (t[k] < 0 || t[k] >= static_cast<int>(mesh.vertices.size())) throw ModelError("fit: triangle index out of range");
+      if (t[k] < 0 || t[k] >= static_cast<int>(mesh.vertices.size()))
+        throw ModelError("fit: triangle index out of range");
       used[t[k]] = 1;
     }
   for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
@@ -511,7 +516,7 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
       };
       forEachCut(work, c.triangles, piece, 0.05, consider);
     }
-    if (!(best_gain > 0.0)) break;  // no cut helps (best_a, best_b are empty)
+    if (!(best_gain > 0.0)) break;                            // no cut helps (best_a, best_b are empty)
     best_a = makeCluster(work, std::move(best_a.triangles));  // the full fit of the chosen cut
     best_b = makeCluster(work, std::move(best_b.triangles));
     refineSplit(work, best_a, best_b);
@@ -525,7 +530,8 @@ std::vector<Primitive> fitPrimitives(const TriangleMesh& mesh, const FitOptions&
   std::vector<Primitive> prims;
   for (const auto& c : clusters) {
     Primitive p = c.prim;
-    for (int k = 0; k < 3; ++k) p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
+    for (int k = 0; k < 3; ++k)
+      p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
     if (p.sphere || (p.b_L - p.a_L).norm() < options.quantum) p.b_L = p.a_L, p.sphere = true;
     double r = 0.0;
     for (const auto& q : clusterPoints(work, c.triangles)) r = std::max(r, distanceToSegment(p.a_L, p.b_L, q));
@@ -596,7 +602,9 @@ std::vector<Primitive> fitBox(const Eigen::Vector3d& size, const Eigen::Isometry
       for (int n2 = 1; n1 * n2 <= max_prims; ++n2) {
         const double rc = 0.5 * std::hypot(size[i1] / n1, size[i2] / n2);
         auto halfCore = [&](double r) { return std::max(0.0, 0.5 * L - std::sqrt(std::max(0.0, r * r - rc * rc))); };
-        auto volume = [&](double r) { return n1 * n2 * (kPi * r * r * 2.0 * halfCore(r) + 4.0 / 3.0 * kPi * r * r * r); };
+        auto volume = [&](double r) {
+          return n1 * n2 * (kPi * r * r * 2.0 * halfCore(r) + 4.0 / 3.0 * kPi * r * r * r);
+        };
         const double r_hi = std::hypot(rc, 0.5 * L);
         constexpr int kSteps = 200;
         int best_step = 0;
@@ -650,13 +658,15 @@ std::vector<Primitive> fitBox(const Eigen::Vector3d& size, const Eigen::Isometry
       Primitive p;
       p.a_L = X_L_B * (centre - core);
       p.b_L = X_L_B * (centre + core);
-      for (int k = 0; k < 3; ++k) p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
+      for (int k = 0; k < 3; ++k)
+        p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
       p.sphere = !((p.b_L - p.a_L).norm() >= options.quantum);
       if (p.sphere) p.b_L = p.a_L;
       // The radius from the cell's 8 corners after rounding, rounded up: the cell (convex) is inside.
       double r = 0.0;
       for (int k = 0; k < 8; ++k) {
-        const Eigen::Vector3d corner(k & 1 ? half.x() : -half.x(), k & 2 ? half.y() : -half.y(), k & 4 ? half.z() : -half.z());
+        const Eigen::Vector3d corner(k & 1 ? half.x() : -half.x(), k & 2 ? half.y() : -half.y(),
+                                     k & 4 ? half.z() : -half.z());
         r = std::max(r, distanceToSegment(p.a_L, p.b_L, X_L_B * (centre + corner)));
       }
       p.radius = std::max(options.quantum, std::ceil(r / options.quantum + 1e-6) * options.quantum);
@@ -664,7 +674,6 @@ std::vector<Primitive> fitBox(const Eigen::Vector3d& size, const Eigen::Isometry
     }
   return prims;
 }
-
 
 // ---- Convex pieces: the tight model ------------------------------------------------------------
 //
@@ -708,7 +717,8 @@ class TriangleTree {
       if (n.left < 0) {
         for (int k = n.begin; k < n.end; ++k) {
           const auto& t = mesh_.triangles[static_cast<std::size_t>(order_[static_cast<std::size_t>(k)])];
-          best = std::min(best, pointTriangleDistance(x, mesh_.vertices[t[0]], mesh_.vertices[t[1]], mesh_.vertices[t[2]]));
+          best = std::min(best,
+                          pointTriangleDistance(x, mesh_.vertices[t[0]], mesh_.vertices[t[1]], mesh_.vertices[t[2]]));
         }
         if (best <= enough) return best;
         continue;
@@ -767,9 +777,9 @@ class TriangleTree {
 };
 
 struct PieceHull {
-  std::vector<Eigen::Vector3d> points;           ///< hull vertices
-  std::vector<std::array<int, 3>> triangles;     ///< indices into points (empty: flat or tiny)
-  std::vector<Eigen::Vector4d> planes;           ///< outward unit normal (xyz) and offset: n.x <= w inside
+  std::vector<Eigen::Vector3d> points;        ///< hull vertices
+  std::vector<std::array<int, 3>> triangles;  ///< indices into points (empty: flat or tiny)
+  std::vector<Eigen::Vector4d> planes;        ///< outward unit normal (xyz) and offset: n.x <= w inside
   double volume = 0.0;
 };
 
@@ -876,8 +886,8 @@ std::vector<Eigen::Vector3d> hullSamples(const PieceHull& h, int n) {
 struct PieceCluster {
   std::vector<int> triangles;  ///< indices into the subdivided mesh
   PieceHull hull;
-  double gap = -1.0;           ///< worst gap (m), -1: not measured since the last change
-  bool final = false;          ///< no cut reduces it
+  double gap = -1.0;   ///< worst gap (m), -1: not measured since the last change
+  bool final = false;  ///< no cut reduces it
 };
 
 /// A quick worst gap of one hull on its own (no other piece covers anything): its facets' centroids
@@ -928,7 +938,8 @@ std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions
   if (mesh.vertices.empty() || mesh.triangles.empty()) throw ModelError("fit: the mesh has no triangles");
   for (const auto& t : mesh.triangles)
     for (int k = 0; k < 3; ++k)
-      if (t[k] < 0 || t[k] >= static_cast<int>(mesh.vertices.size())) throw ModelError("fit: triangle index out of range");
+      if (t[k] < 0 || t[k] >= static_cast<int>(mesh.vertices.size()))
+        throw ModelError("fit: triangle index out of range");
   for (const auto& v : mesh.vertices)
     if (!v.allFinite()) throw ModelError("fit: a mesh vertex is not finite");
   TriangleMesh work = mesh;
@@ -968,7 +979,8 @@ std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions
       if (!pieces[i].final && pieces[i].triangles.size() >= 2 && pieces[i].gap > cut_above &&
           (worst == pieces.size() || pieces[i].gap > pieces[worst].gap))
         worst = i;
-    if (worst == pieces.size() || static_cast<int>(pieces.size()) >= std::max(options.max_pieces, options.max_pieces_large_gap))
+    if (worst == pieces.size() ||
+        static_cast<int>(pieces.size()) >= std::max(options.max_pieces, options.max_pieces_large_gap))
       break;
     const PieceCluster& c = pieces[worst];
     // The cut whose two hulls stand off the mesh least (quickGap, the larger of the two), ties within
@@ -1025,7 +1037,8 @@ std::vector<PieceFit> fitConvexPieces(const TriangleMesh& mesh, const FitOptions
 Primitive enclosingCapsule(const std::vector<Eigen::Vector3d>& points, const FitOptions& options) {
   if (points.empty()) throw ModelError("fit: no point to enclose");
   Primitive p = fitOne(points);
-  for (int k = 0; k < 3; ++k) p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
+  for (int k = 0; k < 3; ++k)
+    p.a_L[k] = roundTo(p.a_L[k], options.quantum), p.b_L[k] = roundTo(p.b_L[k], options.quantum);
   if (p.sphere || (p.b_L - p.a_L).norm() < options.quantum) p.b_L = p.a_L, p.sphere = true;
   double r = 0.0;
   for (const auto& q : points) r = std::max(r, distanceToSegment(p.a_L, p.b_L, q));
@@ -1067,7 +1080,6 @@ PieceFit boxPiece(const Eigen::Vector3d& size, const Eigen::Isometry3d& X_L_B, c
   f.capsule = enclosingCapsule(f.vertices, options);
   return f;
 }
-
 
 namespace {
 

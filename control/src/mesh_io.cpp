@@ -94,8 +94,8 @@ std::string detail::folderOf(const std::string& path) {
   return slash == 0 ? "/" : path.substr(0, slash);
 }
 
-std::string resolveMeshFilename(const std::string& filename, const std::string& urdf_dir,
-                                const PackagePaths& paths, std::string* why) {
+std::string resolveMeshFilename(const std::string& filename, const std::string& urdf_dir, const PackagePaths& paths,
+                                std::string* why) {
   const std::string kPackage = "package://";
   const std::string kFile = "file://";
   if (filename.compare(0, kPackage.size(), kPackage) == 0) {
@@ -108,13 +108,17 @@ std::string resolveMeshFilename(const std::string& filename, const std::string& 
       return "";
     }
     std::string dir;
-    if (const auto it = paths.packages.find(name); it != paths.packages.end()) dir = it->second;
-    else if (paths.use_ros_package_path) dir = findInRosPackagePath(name);
+    if (const auto it = paths.packages.find(name); it != paths.packages.end())
+      dir = it->second;
+    else if (paths.use_ros_package_path)
+      dir = findInRosPackagePath(name);
     if (dir.empty()) {
       if (why)
         *why = "package '" + name + "' not found (give --package-path " + name +
                "=DIR, or add its parent folder to ROS_PACKAGE_PATH" +
-               (std::getenv("ROS_PACKAGE_PATH") ? std::string(", now '") + std::getenv("ROS_PACKAGE_PATH") + "'" : std::string(", unset now")) + ")";
+               (std::getenv("ROS_PACKAGE_PATH") ? std::string(", now '") + std::getenv("ROS_PACKAGE_PATH") + "'"
+                                                : std::string(", unset now")) +
+               ")";
       return "";
     }
     return dir + "/" + rel;
@@ -147,7 +151,8 @@ void checkRawMesh(const aiScene& scene, const std::string& path) {
   for (unsigned m = 0; m < scene.mNumMeshes; ++m) faces += scene.mMeshes[m]->mNumFaces;
   if (faces > kMaxMeshTriangles)
     throw ModelError(path + ": mesh has " + std::to_string(faces) + " triangles, more than the " +
-                     std::to_string(kMaxMeshTriangles) + " a collision mesh may have: decimate it (a collision "
+                     std::to_string(kMaxMeshTriangles) +
+                     " a collision mesh may have: decimate it (a collision "
                      "mesh needs the shape, not the detail)");
   for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
     const aiMesh& am = *scene.mMeshes[m];
@@ -180,7 +185,7 @@ TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale)
   if (!raw) throw ModelError(path + ": cannot read mesh: " + importer.GetErrorString());
   checkRawMesh(*raw, path);
   const aiScene* scene = importer.ApplyPostProcessing(aiProcess_Triangulate | aiProcess_PreTransformVertices |
-                                                     aiProcess_JoinIdenticalVertices | aiProcess_SortByPType);
+                                                      aiProcess_JoinIdenticalVertices | aiProcess_SortByPType);
   if (!scene) throw ModelError(path + ": cannot read mesh: " + importer.GetErrorString());
 
   // Vertices with the same position are one vertex (an STL repeats them per face; assimp keeps
@@ -199,10 +204,11 @@ TriangleMesh loadMeshFile(const std::string& path, const Eigen::Vector3d& scale)
         if (!std::isfinite(c) || std::abs(c) > kMaxMeshCoordinate) {
           char buf[160];
           std::snprintf(buf, sizeof buf, "(%g, %g, %g) m", key[0], key[1], key[2]);
-          throw ModelError(path + ": mesh vertex " + std::to_string(v) + " of mesh " + std::to_string(m) + " at " +
-                           buf + (std::isfinite(c) ? " is out of range (|coordinate| <= " +
-                                                         std::to_string(static_cast<int>(kMaxMeshCoordinate)) + " m after scale)"
-                                                   : " is not finite"));
+          throw ModelError(
+              path + ": mesh vertex " + std::to_string(v) + " of mesh " + std::to_string(m) + " at " + buf +
+              (std::isfinite(c) ? " is out of range (|coordinate| <= " +
+                                      std::to_string(static_cast<int>(kMaxMeshCoordinate)) + " m after scale)"
+                                : " is not finite"));
         }
       const auto [it, inserted] = index_of.emplace(key, static_cast<int>(mesh.vertices.size()));
       if (inserted) mesh.vertices.emplace_back(key[0], key[1], key[2]);
@@ -229,8 +235,9 @@ std::vector<detail::FitElement> detail::fitElementsOf(const urdf::Link& link) {
     FitElement e;
     e.name = c->name;
     const urdf::Pose& pose = c->origin;
-    e.X_L_C.linear() =
-        Eigen::Quaterniond(pose.rotation.w, pose.rotation.x, pose.rotation.y, pose.rotation.z).normalized().toRotationMatrix();
+    e.X_L_C.linear() = Eigen::Quaterniond(pose.rotation.w, pose.rotation.x, pose.rotation.y, pose.rotation.z)
+                           .normalized()
+                           .toRotationMatrix();
     e.X_L_C.translation() = Eigen::Vector3d(pose.position.x, pose.position.y, pose.position.z);
     if (c->geometry->type == urdf::Geometry::MESH) {
       const auto& mesh = static_cast<const urdf::Mesh&>(*c->geometry);
@@ -276,7 +283,9 @@ std::string detail::fitInputsHash(const std::string& link, const std::vector<Fit
       if (resolved) resolved->push_back("");
       if (problems)
         problems->push_back("link '" + link + "': mesh '" + e.filename + "': cannot read '" + path + "'" +
-                            (!exists ? " (no such file)" : !S_ISREG(st.st_mode) ? " (not a regular file)" : ""));
+                            (!exists                ? " (no such file)"
+                             : !S_ISREG(st.st_mode) ? " (not a regular file)"
+                                                    : ""));
       continue;
     }
     if (resolved) resolved->push_back(path);

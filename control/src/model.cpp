@@ -20,4 +20,11 @@ int Model::segmentIndex(const std::string& segment_name) const {
   return -1;
 }
 
+std::string robotFileBeside(const std::string& urdf_path, const std::string& suffix) {
+  const auto dot = urdf_path.rfind('.');
+  const auto slash = urdf_path.rfind('/');
+  const bool has_extension = dot != std::string::npos && (slash == std::string::npos || dot > slash);
+  return (has_extension ? urdf_path.substr(0, dot) : urdf_path) + suffix;
+}
+
 }  // namespace reflex::control

@@ -1,7 +1,5 @@
 #include "reflex/control/onboard.hpp"
 
-#include "reflex/control/scenarios.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -63,7 +61,8 @@ std::uint64_t graspIgnoreMask(const Model& model, const ControllerModel& cm, int
     root = model.links[static_cast<std::size_t>(root)].parent;
   bool on_arm = false;  // held by an arm (a hand): its fingers hold the object too
   for (const auto& arm : cm.arms)
-    on_arm = on_arm || (static_cast<std::size_t>(link) < arm.link_in_arm.size() && arm.link_in_arm[static_cast<std::size_t>(link)]);
+    on_arm = on_arm || (static_cast<std::size_t>(link) < arm.link_in_arm.size() &&
+                        arm.link_in_arm[static_cast<std::size_t>(link)]);
   std::uint64_t mask = 0;
   for (int s = 0; s < model.num_robot_segments; ++s) {
     // On or below the rigid body: joined to it by fixed joints, and on an arm also by the joints below
@@ -81,7 +80,8 @@ std::uint64_t graspIgnoreMask(const Model& model, const ControllerModel& cm, int
     if (joined) mask |= std::uint64_t{1} << s;
   }
   // The nearest link above the rigid body that carries a segment (the wrist).
-  for (int l = model.links[static_cast<std::size_t>(root)].parent; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent) {
+  for (int l = model.links[static_cast<std::size_t>(root)].parent; l >= 0;
+       l = model.links[static_cast<std::size_t>(l)].parent) {
     int seg = -1;
     for (int s = 0; s < model.num_robot_segments && seg < 0; ++s)
       if (model.segments[static_cast<std::size_t>(s)].link == l) seg = s;
@@ -224,7 +224,8 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
   // whole, never stored cut short (two names alike in their first 255 bytes would share a slot).
   const bool name_fits = name.size() <= kBodySchemaNameBytes;
   if (out.check.ok() && name_fits)
-    out.attach = attachControllerSegment(model_, cm_, data_, slot, link, a, b, rq.radius, ignore, rq.is_virtual, q_expected_);
+    out.attach =
+        attachControllerSegment(model_, cm_, data_, slot, link, a, b, rq.radius, ignore, rq.is_virtual, q_expected_);
   if (out.attach.attached) {
     BodySchemaSlot& held = data_.dist.slots[slot];  // attachControllerSegment set is_virtual
     held.motion_priority = rq.motion_priority;
@@ -241,18 +242,22 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
   if (out.attach.refusing_pair >= 0) {  // control/README.md: a segment no arm can move away from
     out.kind = BodySchemaOutcome::Kind::kRejectedUnresolvable;
     reject(RejectCause::kSchemaUnresolvable);
-    std::snprintf(line, size, "body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')",
-                  name.c_str(), out.attach.distance * 1e3, model_.segments[out.attach.other_segment].name.c_str(),
-                  parent.c_str());
+    std::snprintf(
+        line, size,
+        "body-schema segment '%s' rejected: %.1f mm from '%s', which no arm can move away from it (link '%s')",
+        name.c_str(), out.attach.distance * 1e3, model_.segments[out.attach.other_segment].name.c_str(),
+        parent.c_str());
   } else if (out.check.ok() && !name_fits) {
     out.kind = BodySchemaOutcome::Kind::kRejectedCheck;
     reject(RejectCause::kSchemaBadSegment);
-    std::snprintf(line, size, "body-schema segment '%.40s...' rejected: its name has %zu bytes, more than %zu (link '%s')",
+    std::snprintf(line, size,
+                  "body-schema segment '%.40s...' rejected: its name has %zu bytes, more than %zu (link '%s')",
                   name.c_str(), name.size(), kBodySchemaNameBytes, parent.c_str());
   } else if (out.check.ok()) {
     out.kind = BodySchemaOutcome::Kind::kRejectedNoSlot;
     reject(RejectCause::kSchemaNoSlot);
-    std::snprintf(line, size, "body-schema segment '%s' rejected: no free slot (link '%s')", name.c_str(), parent.c_str());
+    std::snprintf(line, size, "body-schema segment '%s' rejected: no free slot (link '%s')", name.c_str(),
+                  parent.c_str());
   } else if (*out.check.key != '\0') {
     out.kind = BodySchemaOutcome::Kind::kRejectedCheck;
     reject(RejectCause::kSchemaBadSegment);
@@ -339,7 +344,8 @@ const CycleReport& OnboardController::step(double now, double cycle_dt) noexcept
   in.dt = dt;
   reset_ = false;
   if (anchor_) {  // first state, or the first after none: the robot held itself where it is measured
-    for (int i = 0; i < model_.nq; ++i) q_command_[i] = std::clamp(q_measured_[i], model_.q_lower[i], model_.q_upper[i]);
+    for (int i = 0; i < model_.nq; ++i)
+      q_command_[i] = std::clamp(q_measured_[i], model_.q_lower[i], model_.q_upper[i]);
     anchor_ = false;
   }
 
@@ -351,8 +357,8 @@ const CycleReport& OnboardController::step(double now, double cycle_dt) noexcept
   for (const int j : walking_.joints())
     if (data_.arm_joint[static_cast<std::size_t>(j)] == 0) q_scratch_[j] = q_command_[j];
   integrator_.reset(q_scratch_);
-  r.walking_advanced = stepPlant(model_, cm_, data_, cr, integrator_, walk_active_ ? &walking_ : nullptr,
-                                 dt, q_scratch_);
+  r.walking_advanced =
+      stepPlant(model_, cm_, data_, cr, integrator_, walk_active_ ? &walking_ : nullptr, dt, q_scratch_);
   if (cr == ControlResult::kFrozen) {
     // e-stop latched: hold what was last commanded (q_command_ as it is), not what the state says.
   } else {
@@ -373,8 +379,9 @@ const CycleReport& OnboardController::step(double now, double cycle_dt) noexcept
 
 bool OnboardController::segmentMovesWithArm(int segment, int arm) const noexcept {
   const Segment& seg = model_.segments[static_cast<std::size_t>(segment)];
-  const int link = seg.body_schema_slot ? data_.dist.slots[static_cast<std::size_t>(segment - model_.num_robot_segments)].link
-                                        : seg.link;
+  const int link = seg.body_schema_slot
+                       ? data_.dist.slots[static_cast<std::size_t>(segment - model_.num_robot_segments)].link
+                       : seg.link;
   return link >= 0 && cm_.arms[static_cast<std::size_t>(arm)].link_in_arm[static_cast<std::size_t>(link)];
 }
 
@@ -404,7 +411,7 @@ void OnboardController::fillReport(ControlResult result) noexcept {
   r.min_pair = data_.closest_physical.pair;
   r.virtual_distance = data_.closest_virtual.distance;
   r.virtual_pair = data_.closest_virtual.pair;
-  r.arm_distance = armToArmDistance(model_, cm_, data_);
+  r.arm_distance = data_.closest_between_arms.distance;  // exact under the broad phase
   r.counts.estop_count = data_.estop_count;
   r.counts.guard_count = data_.guard_count;
   r.counts.walking_holds = data_.walking_hold_count;

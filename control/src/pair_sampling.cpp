@@ -42,7 +42,8 @@ namespace {
 
 /// A configuration drawn uniformly within the limits (an infinite limit: +-pi), into q; with `only`,
 /// only the joints it marks (the others keep their values).
-void randomConfiguration(const Model& m, std::mt19937_64& rng, Eigen::VectorXd& q, const std::vector<bool>* only = nullptr) {
+void randomConfiguration(const Model& m, std::mt19937_64& rng, Eigen::VectorXd& q,
+                         const std::vector<bool>* only = nullptr) {
   for (int i = 0; i < m.nq; ++i) {
     if (only && !(*only)[static_cast<std::size_t>(i)]) continue;
     const double lo = std::isfinite(m.q_lower[i]) ? m.q_lower[i] : -M_PI;
@@ -83,7 +84,8 @@ void confirmApart(const Model& m, const PairSamplingOptions& options, const std:
   Eigen::VectorXd q(m.nq);
   std::vector<int> candidates;  // index into m.pairs
   for (std::size_t i = 0; i < m.pairs.size(); ++i)
-    if (keep[i] >= 0 && report.pairs[static_cast<std::size_t>(keep[i])].in_collision >= options.always_fraction * options.samples)
+    if (keep[i] >= 0 &&
+        report.pairs[static_cast<std::size_t>(keep[i])].in_collision >= options.always_fraction * options.samples)
       candidates.push_back(static_cast<int>(i));
   std::mt19937_64 crng(options.seed + 7);
   for (int n = 0; n < options.confirm_samples && !candidates.empty(); ++n) {
@@ -159,7 +161,8 @@ PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent
     if (progress && (n + 1) % step == 0) progress(static_cast<double>(n + 1) / options.samples);
   }
   const std::vector<bool> pair_driven =
-      options.driven_joints.empty() ? std::vector<bool>(report.pairs.size(), true) : movedBy(m, keep, report.pairs.size(), options.driven_joints, "driven joint");
+      options.driven_joints.empty() ? std::vector<bool>(report.pairs.size(), true)
+                                    : movedBy(m, keep, report.pairs.size(), options.driven_joints, "driven joint");
   // The standing posture: the distance of every pair no arm joint moves (it is what the robot stands with).
   std::vector<bool> by_arm(report.pairs.size(), true);
   std::vector<double> standing(report.pairs.size(), std::numeric_limits<double>::infinity());
@@ -183,7 +186,8 @@ PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent
       computeSegmentDistances(m, kin, dist, sweep);
       for (std::size_t i = 0; i < dist.pairs.size(); ++i)
         if (keep[i] >= 0)
-          reach[static_cast<std::size_t>(keep[i])] = std::max(reach[static_cast<std::size_t>(keep[i])], dist.pairs[i].distance);
+          reach[static_cast<std::size_t>(keep[i])] =
+              std::max(reach[static_cast<std::size_t>(keep[i])], dist.pairs[i].distance);
     }
   }
   if (options.confirm_collision) confirmApart(m, options, keep, report, kin);
@@ -191,13 +195,16 @@ PairSamplingReport samplePairs(const Model& all_pairs, const Model& non_adjacent
     auto& sp = report.pairs[k];
     sp.standing_distance = standing[k];
     sp.driven_max_distance = reach[k];
-    if (!pair_driven[k]) sp.verdict = PairVerdict::kNotDriven;
+    if (!pair_driven[k])
+      sp.verdict = PairVerdict::kNotDriven;
     else if (sp.in_collision >= options.always_fraction * options.samples && sp.confirm_apart == 0)
       sp.verdict = PairVerdict::kAlwaysInCollision;
-    else if (!by_arm[k] && standing[k] <= options.touch_distance) sp.verdict = PairVerdict::kTouchingStanding;
+    else if (!by_arm[k] && standing[k] <= options.touch_distance)
+      sp.verdict = PairVerdict::kTouchingStanding;
     else if (options.exclude_always_near && std::min(sp.max_distance, sp.driven_max_distance) < options.near_distance)
       sp.verdict = PairVerdict::kAlwaysNear;
-    else if (sp.min_distance > options.near_distance) sp.verdict = PairVerdict::kNeverClose;
+    else if (sp.min_distance > options.near_distance)
+      sp.verdict = PairVerdict::kNeverClose;
   }
   return report;
 }
@@ -246,11 +253,12 @@ std::string exclusionYaml(const PairSamplingReport& r) {
     ++always_near;
     const bool touch = p.min_distance <= o.touch_distance;
     y += std::string("  # ") + (touch ? "WARNING: " : "") + "never farther apart than " +
-         mm(std::min(p.max_distance, p.driven_max_distance)) +
-         " (closest " + mm(p.min_distance) + "), always inside d_a " + mm(o.near_distance) +
+         mm(std::min(p.max_distance, p.driven_max_distance)) + " (closest " + mm(p.min_distance) +
+         "), always inside d_a " + mm(o.near_distance) +
          ": the avoidance would act at every posture and the arm could follow no target; not checked" +
-         (p.confirm_apart > 0 ? " (the model overlaps in " + std::to_string(p.in_collision) + " samples, but the "
-                                "meshes are apart in one: not excluded as always in collision)"
+         (p.confirm_apart > 0 ? " (the model overlaps in " + std::to_string(p.in_collision) +
+                                    " samples, but the "
+                                    "meshes are apart in one: not excluded as always in collision)"
                               : std::string()) +
          (touch ? " (they can touch: the joint limits and the robot's own controller must keep them apart)" : "") +
          "\n";

@@ -36,7 +36,7 @@ struct Chain {
   std::vector<int> links;   // every link of the run, top first
   std::vector<int> joints;  // q indices of its joints, top first
   bool prismatic = false;
-  int first_link = -1;      // link moved by the first joint
+  int first_link = -1;                                // link moved by the first joint
   Eigen::Vector3d start_B = Eigen::Vector3d::Zero();  // first joint's origin at the neutral configuration
   std::string describe(const Model& m) const {
     std::string s = "[";
@@ -225,8 +225,9 @@ std::array<Chain, 2> givenArms(const Model& m, const Tree& t, const KinematicsDa
                                RobotSetup& setup) {
   std::array<Chain, 2> arms;
   if (o.left_hand.empty() || o.right_hand.empty())
-    throw SetupError("give both --left-hand and --right-hand (got only " +
-                     std::string(o.left_hand.empty() ? "--right-hand '" + o.right_hand : "--left-hand '" + o.left_hand) + "')");
+    throw SetupError(
+        "give both --left-hand and --right-hand (got only " +
+        std::string(o.left_hand.empty() ? "--right-hand '" + o.right_hand : "--left-hand '" + o.left_hand) + "')");
   const std::string given[2] = {o.left_hand, o.right_hand};
   for (int a = 0; a < 2; ++a) {
     const int hand = linkOrThrow(m, given[a], a == 0 ? "--left-hand" : "--right-hand");
@@ -304,15 +305,19 @@ std::array<Chain, 2> foundArms(const Model& m, const Tree& t, const KinematicsDa
       list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (ending at z " +
               fmt("%.3f", kin.X_B_L[p[0]->links.back()].translation().z()) + " m; the lowest link is at " +
               fmt("%.3f", lowest) + " m);";
-    throw SetupError("no arms found in robot '" + m.name + "': the only mirrored chains of >= 4 revolute joints are "
-                     "legs (named like legs, or ending at the robot's lowest link):" + list +
+    throw SetupError("no arms found in robot '" + m.name +
+                     "': the only mirrored chains of >= 4 revolute joints are "
+                     "legs (named like legs, or ending at the robot's lowest link):" +
+                     list +
                      " arms need movable joints and end in hands; give --left-hand and --right-hand if these are arms");
   }
   if (!legs.empty())
-    setup.decisions.push_back("arms: " + std::to_string(legs.size()) + " mirrored pair(s) of chains left out as legs "
+    setup.decisions.push_back("arms: " + std::to_string(legs.size()) +
+                              " mirrored pair(s) of chains left out as legs "
                               "(named like legs, or ending at the robot's lowest link), e.g. " +
                               legs[0][0]->describe(m));
-  std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) { return a[0]->start_B.z() > b[0]->start_B.z(); });
+  std::sort(pairs.begin(), pairs.end(),
+            [](const auto& a, const auto& b) { return a[0]->start_B.z() > b[0]->start_B.z(); });
   std::size_t pick = 0;
   std::string why;
   if (pairs.size() == 1) {
@@ -327,15 +332,17 @@ std::array<Chain, 2> foundArms(const Model& m, const Tree& t, const KinematicsDa
     const auto best = std::max_element(score.begin(), score.end());
     if (std::count(score.begin(), score.end(), *best) == 1 && *best > 0) {
       pick = static_cast<std::size_t>(best - score.begin());
-      why = "of " + std::to_string(pairs.size()) + " mirrored pairs starting at the same height, the one whose "
+      why = "of " + std::to_string(pairs.size()) +
+            " mirrored pairs starting at the same height, the one whose "
             "names read like an arm (shoulder/arm/elbow/wrist/hand)";
     } else {
       std::string list;
-      for (const auto& p : pairs) list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (z " +
-                                          fmt("%.3f", p[0]->start_B.z()) + ");";
+      for (const auto& p : pairs)
+        list += " " + p[0]->describe(m) + " / " + p[1]->describe(m) + " (z " + fmt("%.3f", p[0]->start_B.z()) + ");";
       throw SetupError("ambiguous arms in robot '" + m.name + "': " + std::to_string(pairs.size()) +
                        " mirrored pairs of chains start within 5 cm of the same height and their names do not "
-                       "tell which are arms:" + list + " give --left-hand and --right-hand");
+                       "tell which are arms:" +
+                       list + " give --left-hand and --right-hand");
     }
   }
   arms[0] = *pairs[pick][0];
@@ -388,9 +395,10 @@ void findHeadAndCamera(const Model& m, const Tree& t, const KinematicsData& kin,
     }
     if (head < 0) {  // a robot without a head (an upper body, a two-arm manipulator): the arms' trunk
       head = arms[0].branch;
-      head_why = "NO HEAD: no chain of 1 to 3 joints other than the arms ends in a link with collision geometry, so "
-                 "the arms' branching link stands in for the head (and the head camera, unless --camera); give "
-                 "--head and --camera for a camera elsewhere";
+      head_why =
+          "NO HEAD: no chain of 1 to 3 joints other than the arms ends in a link with collision geometry, so "
+          "the arms' branching link stands in for the head (and the head camera, unless --camera); give "
+          "--head and --camera for a camera elsewhere";
     }
   }
   setup.head_link = m.links[head].name;
@@ -426,8 +434,10 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
   KinematicsData kin(m);
   computeForwardKinematics(m, kin, neutralConfiguration(m));
   std::array<Chain, 2> arms;
-  if (!o.left_hand.empty() || !o.right_hand.empty()) arms = givenArms(m, t, kin, o, setup);
-  else arms = foundArms(m, t, kin, setup);
+  if (!o.left_hand.empty() || !o.right_hand.empty())
+    arms = givenArms(m, t, kin, o, setup);
+  else
+    arms = foundArms(m, t, kin, setup);
   for (int a = 0; a < 2; ++a) {
     ArmSetup& arm = setup.arms[a];
     const Chain& c = arms[a];
@@ -439,11 +449,12 @@ RobotSetup findRobotStructure(const Model& m, const SetupOptions& o) {
     arm.hand_link = m.links[hand].name;
     bool geometry = false;
     arm.hand_point_L = handPoint(m, t, hand, &geometry);
-    setup.decisions.push_back(arm.side + " hand: link '" + arm.hand_link + "' (" +
-                              (hand == c.links.back() ? "the last link of the chain" : "the link with geometry at the chain's end") +
-                              "); hand point " + vec(arm.hand_point_L) + " m in it: " +
-                              (geometry ? "the farthest end of its collision geometry's core from the wrist"
-                                        : "its origin (the link has no collision geometry)"));
+    setup.decisions.push_back(
+        arm.side + " hand: link '" + arm.hand_link + "' (" +
+        (hand == c.links.back() ? "the last link of the chain" : "the link with geometry at the chain's end") +
+        "); hand point " + vec(arm.hand_point_L) + " m in it: " +
+        (geometry ? "the farthest end of its collision geometry's core from the wrist"
+                  : "its origin (the link has no collision geometry)"));
   }
   findHeadAndCamera(m, t, kin, o, arms, setup);
   return setup;
@@ -469,8 +480,10 @@ ArmIndex armIndex(const Model& m, const RobotSetup& s) {
       Eigen::Vector3d mu = kin.axis_B[m.q_link[ix.q[0][i]]];
       mu.y() = -mu.y();
       const Eigen::Vector3d ur = kin.axis_B[m.q_link[ix.q[1][i]]];
-      if ((ur - mu).norm() < 1e-6) sign = -1.0;
-      else if ((ur + mu).norm() < 1e-6) sign = 1.0;
+      if ((ur - mu).norm() < 1e-6)
+        sign = -1.0;
+      else if ((ur + mu).norm() < 1e-6)
+        sign = 1.0;
     }
     ix.mirror.push_back(sign);
   }
@@ -933,7 +946,8 @@ int findArmGaps(const Model& m, const SetupOptions& o, RobotSetup& s) {
       Eigen::Vector3d to_L;
     };
     std::vector<Stretch> stretches;
-    for (std::size_t i = 0; i + 1 < path.size(); ++i) stretches.push_back({path[i], m.links[path[i + 1]].X_P_J.translation()});
+    for (std::size_t i = 0; i + 1 < path.size(); ++i)
+      stretches.push_back({path[i], m.links[path[i + 1]].X_P_J.translation()});
     stretches.push_back({hand, arm.hand_point_L});
     for (std::size_t si = 0; si < stretches.size(); ++si) {
       const Stretch& st = stretches[si];
@@ -990,8 +1004,8 @@ int findArmGaps(const Model& m, const SetupOptions& o, RobotSetup& s) {
       g.closing.sphere = (g.closing.b_L - g.closing.a_L).norm() < 1e-9;
       if (g.closing.sphere) g.closing.b_L = g.closing.a_L;
       std::ostringstream msg;
-      msg << "warning: " << arm.side << " arm: link '" << g.link << "': "
-          << (si + 1 == stretches.size() ? "the stretch to the hand point" : "the stretch between its joints")
+      msg << "warning: " << arm.side << " arm: link '" << g.link
+          << "': " << (si + 1 == stretches.size() ? "the stretch to the hand point" : "the stretch between its joints")
           << " lies up to " << fmt("%.3f", worst) << " m outside every collision primitive of the link, at "
           << vec(worst_p) << " m in '" << g.link << "' (tolerance " << fmt("%.3f", o.gap_tolerance)
           << " m): a capsule from " << vec(g.closing.a_L) << " to " << vec(g.closing.b_L) << " m, radius "

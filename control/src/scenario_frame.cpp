@@ -111,7 +111,9 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
     }
   }
   f.trunk_half_width = 0.5 * (y_hi - y_lo);
-  f.reference = (f.axes - Eigen::Matrix3d::Identity()).norm() < kSameLandmark && (f.chest - kRefChest).norm() < kSameLandmark && std::abs(f.half_width - kRefHalfWidth) < kSameLandmark &&
+  f.reference = (f.axes - Eigen::Matrix3d::Identity()).norm() < kSameLandmark &&
+                (f.chest - kRefChest).norm() < kSameLandmark &&
+                std::abs(f.half_width - kRefHalfWidth) < kSameLandmark &&
                 std::abs(f.arm_length - kRefArmLength) < kSameLandmark &&
                 std::abs(f.trunk_half_width - kRefTrunkHalfWidth) < kSameLandmark;
   if (!f.reference)

@@ -12,13 +12,14 @@
 
 namespace reflex::control {
 
-bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vector3d& a_L,
-                             const Eigen::Vector3d& b_L, double radius, bool is_virtual,
-                             const std::vector<std::string>& ignore) {
+bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L,
+                             double radius, bool is_virtual, const std::vector<std::string>& ignore) {
   // A scenario that needs a link or segment this robot lacks is an error naming it, never a silent
   // skip (a missing l_hand used to drop the bar without a word).
   const int l = model.linkIndex(link);
-  if (l < 0) throw ConfigError("the scenario attaches a segment to link '" + link + "', which robot '" + model.name + "' does not have");
+  if (l < 0)
+    throw ConfigError("the scenario attaches a segment to link '" + link + "', which robot '" + model.name +
+                      "' does not have");
   std::uint64_t mask = 0;
   for (const auto& name : ignore) {
     const int s = model.segmentIndex(name);
@@ -32,18 +33,6 @@ bool ScenarioContext::attach(int slot, const std::string& link, const Eigen::Vec
 
 void ScenarioContext::detach(int slot) {
   if (detachBodySchemaSegment(data.dist, slot)) data.dist.slots[static_cast<std::size_t>(slot)].is_virtual = false;
-}
-
-double armToArmDistance(const Model& /*model*/, const ControllerModel& /*cm*/, const ControllerData& data) {
-  return data.closest_between_arms.distance;  // computed by computeControl (exact under the broad phase)
-}
-
-Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm) {
-  Eigen::VectorXd q(model.nq);
-  for (int i = 0; i < model.nq; ++i) q[i] = std::min(std::max(0.0, model.q_lower[i]), model.q_upper[i]);
-  for (const auto& arm : cm.arms)
-    for (int i = 0; i < arm.n; ++i) q[arm.q[i]] = arm.rest[i];
-  return q;
 }
 
 SimResult runScenario(const Model& model, const ControllerModel& cm, const Scenario& scenario,
@@ -80,8 +69,8 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
     if (k > 0) {
       const double interval = plant.stateInterval(dt);
       for (int i = 0; i < model.nq; ++i)
-        result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio,
-                                                std::abs(plant.positions()[i] - q_before[i]) / (model.v_max[i] * interval));
+        result.max_joint_speed_ratio = std::max(
+            result.max_joint_speed_ratio, std::abs(plant.positions()[i] - q_before[i]) / (model.v_max[i] * interval));
     }
     if (scenario.script) scenario.script(t, input, ctx);
     controller.setControlInput(input, t);  // the script owns the whole input: never stale
@@ -106,7 +95,8 @@ SimResult runScenario(const Model& model, const ControllerModel& cm_in, const Sc
     result.min_virtual_distance = std::min(result.min_virtual_distance, rep.virtual_distance);
     if (data.estop != EstopState::kClear) result.estop_fired = true;
     for (int i = 0; i < model.nq; ++i)
-      result.max_command_speed_ratio = std::max(result.max_command_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
+      result.max_command_speed_ratio =
+          std::max(result.max_command_speed_ratio, std::abs(data.qdot[i]) / model.v_max[i]);
     result.max_joint_speed_ratio = std::max(result.max_joint_speed_ratio, result.max_command_speed_ratio);
     for (int a = 0; a < 2; ++a) {
       if (input.hands[a].status != HandStatus::kGiven) continue;
@@ -201,8 +191,8 @@ void writeTimeseriesCsvHeader(const Model& model, std::ostream& out) {
     out << ',' << s << "_f," << s << "_distance," << s << "_pair," << s << "_zone," << s << "_force";
   out << ",estop,min_distance,min_pair,virtual_distance,arm_distance,wall_time";
   for (const char* s : side)
-    out << ',' << s << "_status," << s << "_hand_x," << s << "_hand_y," << s << "_hand_z," << s << "_target_x,"
-        << s << "_target_y," << s << "_target_z," << s << "_ref_x," << s << "_ref_y," << s << "_ref_z";
+    out << ',' << s << "_status," << s << "_hand_x," << s << "_hand_y," << s << "_hand_z," << s << "_target_x," << s
+        << "_target_y," << s << "_target_z," << s << "_ref_x," << s << "_ref_y," << s << "_ref_z";
   for (int i = 0; i < model.nq; ++i) out << ",q_" << model.q_names[i];
   out << '\n';
 }
@@ -212,8 +202,8 @@ void writeTimeseriesCsvRow(const Model& model, const SimSample& s, std::ostream&
   out << std::setprecision(9);
   out << s.t;
   for (int a = 0; a < 2; ++a)
-    out << ',' << s.arms[a].f << ',' << num(s.arms[a].distance) << ',' << pairName(model, s.arms[a].closest_pair)
-        << ',' << zoneName(s.arms[a].zone) << ',' << s.arms[a].force;
+    out << ',' << s.arms[a].f << ',' << num(s.arms[a].distance) << ',' << pairName(model, s.arms[a].closest_pair) << ','
+        << zoneName(s.arms[a].zone) << ',' << s.arms[a].force;
   out << ',' << static_cast<int>(s.estop) << ',' << num(s.min_distance) << ',' << pairName(model, s.min_pair) << ','
       << num(s.virtual_distance) << ',' << num(s.arm_distance) << ',' << std::setprecision(16) << s.wall_time
       << std::setprecision(9);

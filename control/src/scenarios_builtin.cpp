@@ -54,13 +54,16 @@ Scenario throughBody() {
   Scenario s;
   s.name = "through_body";
   s.paper = "Sec. 8.2.2, Figs. 6-7";
-  s.description = "the straight path from beside the body to a target in front of it passes through the "
-                  "body: the wrist goes around it";
+  s.description =
+      "the straight path from beside the body to a target in front of it passes through the "
+      "body: the wrist goes around it";
   s.duration = 7.0;
   s.script = [](double t, ControlInput& in, ScenarioContext& ctx) {
     none(in, kLeft);
-    if (t < 2.0) reach(in, ctx, kRight, -0.10, -0.33, 0.80);
-    else reach(in, ctx, kRight, 0.30, -0.05, 0.85);
+    if (t < 2.0)
+      reach(in, ctx, kRight, -0.10, -0.33, 0.80);
+    else
+      reach(in, ctx, kRight, 0.30, -0.05, 0.85);
   };
   return s;
 }
@@ -69,13 +72,16 @@ Scenario oneVsThreeDof() {
   Scenario s;
   s.name = "one_vs_three_dof";
   s.paper = "Sec. 8.2.2, Figs. 8-9";
-  s.description = "the same reach with 1-DOF and 3-DOF avoidance (reflex_sim runs both): the 1-DOF "
-                  "controller keeps more joints for reaching and arrives sooner";
+  s.description =
+      "the same reach with 1-DOF and 3-DOF avoidance (reflex_sim runs both): the 1-DOF "
+      "controller keeps more joints for reaching and arrives sooner";
   s.duration = 8.0;
   s.script = [](double t, ControlInput& in, ScenarioContext& ctx) {
     none(in, kLeft);
-    if (t < 2.0) reach(in, ctx, kRight, -0.10, -0.33, 0.80);
-    else reach(in, ctx, kRight, 0.27, 0.03, 0.82);
+    if (t < 2.0)
+      reach(in, ctx, kRight, -0.10, -0.33, 0.80);
+    else
+      reach(in, ctx, kRight, 0.27, 0.03, 0.82);
   };
   return s;
 }
@@ -97,8 +103,9 @@ Scenario walkingTargetBehind() {
   Scenario s;
   s.name = "walking_target_behind";
   s.paper = "Sec. 8.3.2, Fig. 11";
-  s.description = "the right hand's target is 0.8 m in front of the start; the robot walks 1.5 m forward so "
-                  "the target ends up behind it: the arm does not penetrate the body";
+  s.description =
+      "the right hand's target is 0.8 m in front of the start; the robot walks 1.5 m forward so "
+      "the target ends up behind it: the arm does not penetrate the body";
   s.duration = 9.0;
   s.walk_distance = 1.5;
   s.walk_speed = 0.25;
@@ -120,8 +127,9 @@ Scenario graspedBar() {
   Scenario s;
   s.name = "grasped_bar";
   s.paper = "Sec. 8.5.1, Fig. 14";
-  s.description = "a bar held in the left hand is part of the body schema with higher motion priority: "
-                  "the right arm avoids the bar while both hands have targets";
+  s.description =
+      "a bar held in the left hand is part of the body schema with higher motion priority: "
+      "the right arm avoids the bar while both hands have targets";
   s.duration = 8.0;
   s.script = [](double t, ControlInput& in, ScenarioContext& ctx) {
     if (t == 0.0) {
@@ -148,8 +156,8 @@ Scenario graspedBar() {
         across = Eigen::Vector3d::Unit(best);
       }
       const double half = ctx.frame().length(0.16);
-      ctx.attach(0, hand, arm.hand_point_L - half * across, arm.hand_point_L + half * across,
-                 ctx.frame().length(0.015), false, ignore);
+      ctx.attach(0, hand, arm.hand_point_L - half * across, arm.hand_point_L + half * across, ctx.frame().length(0.015),
+                 false, ignore);
     }
     in.priority = MotionPriority::kLeftHigher;
     // The left hand sweeps the bar in a circle in front of the chest; the right hand holds a target
@@ -165,8 +173,9 @@ Scenario occlusion() {
   Scenario s;
   s.name = "occlusion";
   s.paper = "Sec. 8.5.2, Fig. 15";
-  s.description = "a virtual capsule from the head camera to the looked-at object: the right hand's path "
-                  "across the face goes around the gaze line";
+  s.description =
+      "a virtual capsule from the head camera to the looked-at object: the right hand's path "
+      "across the face goes around the gaze line";
   s.duration = 8.0;
   s.script = [](double t, ControlInput& in, ScenarioContext& ctx) {
     const Eigen::Vector3d object = ctx.frame().place(Eigen::Vector3d(0.45, 0.05, 0.92));
@@ -188,7 +197,8 @@ Scenario occlusion() {
 }
 
 std::vector<Scenario> makeScenarios() {
-  return {targetInsideBody(), throughBody(), oneVsThreeDof(), crossingArms(), walkingTargetBehind(), graspedBar(), occlusion()};
+  return {targetInsideBody(),    throughBody(), oneVsThreeDof(), crossingArms(),
+          walkingTargetBehind(), graspedBar(),  occlusion()};
 }
 
 }  // namespace

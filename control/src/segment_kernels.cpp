@@ -12,8 +12,7 @@ namespace reflex::control::detail {
 // The AVX2 kernel reads a SegmentB as 8 doubles: start x y z, d x y z, dd, inv_dd.
 static_assert(sizeof(SegmentB) == 8 * sizeof(double), "SegmentB must be 8 packed doubles");
 
-void coreDistancesScalar(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s,
-                         double* t) {
+void coreDistancesScalar(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s, double* t) {
   for (int j = 0; j < n; ++j) {
     double sj, tj;  // locals: writing through s / t directly would force reloads (aliasing)
     core[j] = coreDistance(prim[a[j]], prim[b[j]], sj, tj);
@@ -63,8 +62,8 @@ __attribute__((target("avx2"))) inline Four loadFour(const SegmentB& p0, const S
   Four f;
   transpose4(_mm256_loadu_pd(q0), _mm256_loadu_pd(q1), _mm256_loadu_pd(q2), _mm256_loadu_pd(q3), f.sx, f.sy, f.sz,
              f.dx);
-  transpose4(_mm256_loadu_pd(q0 + 4), _mm256_loadu_pd(q1 + 4), _mm256_loadu_pd(q2 + 4), _mm256_loadu_pd(q3 + 4),
-             f.dy, f.dz, f.dd, f.inv_dd);
+  transpose4(_mm256_loadu_pd(q0 + 4), _mm256_loadu_pd(q1 + 4), _mm256_loadu_pd(q2 + 4), _mm256_loadu_pd(q3 + 4), f.dy,
+             f.dz, f.dd, f.inv_dd);
   return f;
 }
 
@@ -90,12 +89,12 @@ __attribute__((target("avx2"))) void coreDistancesAvx2(const SegmentB* prim, con
     const __m256d rx = _mm256_sub_pd(A.sx, B.sx);
     const __m256d ry = _mm256_sub_pd(A.sy, B.sy);
     const __m256d rz = _mm256_sub_pd(A.sz, B.sz);
-    const __m256d f = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(B.dx, rx), _mm256_mul_pd(B.dy, ry)),
-                                    _mm256_mul_pd(B.dz, rz));
-    const __m256d c = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(A.dx, rx), _mm256_mul_pd(A.dy, ry)),
-                                    _mm256_mul_pd(A.dz, rz));
-    const __m256d bb = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(A.dx, B.dx), _mm256_mul_pd(A.dy, B.dy)),
-                                     _mm256_mul_pd(A.dz, B.dz));
+    const __m256d f =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(B.dx, rx), _mm256_mul_pd(B.dy, ry)), _mm256_mul_pd(B.dz, rz));
+    const __m256d c =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(A.dx, rx), _mm256_mul_pd(A.dy, ry)), _mm256_mul_pd(A.dz, rz));
+    const __m256d bb =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(A.dx, B.dx), _mm256_mul_pd(A.dy, B.dy)), _mm256_mul_pd(A.dz, B.dz));
     const __m256d ae = _mm256_mul_pd(A.dd, B.dd);
     const __m256d denom = _mm256_sub_pd(ae, _mm256_mul_pd(bb, bb));
     const __m256d not_parallel = _mm256_and_pd(_mm256_cmp_pd(denom, _mm256_mul_pd(parallel_eps, ae), _CMP_GT_OQ),
@@ -106,10 +105,14 @@ __attribute__((target("avx2"))) void coreDistancesAvx2(const SegmentB* prim, con
     const __m256d t1 = clamp01x4(_mm256_mul_pd(_mm256_add_pd(_mm256_mul_pd(bb, s0), f), B.inv_dd));
     const __m256d s1 = clamp01x4(_mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(bb, t1), c), A.inv_dd));
     // coreDistance.
-    const __m256d ex = _mm256_sub_pd(_mm256_add_pd(A.sx, _mm256_mul_pd(s1, A.dx)), _mm256_add_pd(B.sx, _mm256_mul_pd(t1, B.dx)));
-    const __m256d ey = _mm256_sub_pd(_mm256_add_pd(A.sy, _mm256_mul_pd(s1, A.dy)), _mm256_add_pd(B.sy, _mm256_mul_pd(t1, B.dy)));
-    const __m256d ez = _mm256_sub_pd(_mm256_add_pd(A.sz, _mm256_mul_pd(s1, A.dz)), _mm256_add_pd(B.sz, _mm256_mul_pd(t1, B.dz)));
-    const __m256d sq = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
+    const __m256d ex =
+        _mm256_sub_pd(_mm256_add_pd(A.sx, _mm256_mul_pd(s1, A.dx)), _mm256_add_pd(B.sx, _mm256_mul_pd(t1, B.dx)));
+    const __m256d ey =
+        _mm256_sub_pd(_mm256_add_pd(A.sy, _mm256_mul_pd(s1, A.dy)), _mm256_add_pd(B.sy, _mm256_mul_pd(t1, B.dy)));
+    const __m256d ez =
+        _mm256_sub_pd(_mm256_add_pd(A.sz, _mm256_mul_pd(s1, A.dz)), _mm256_add_pd(B.sz, _mm256_mul_pd(t1, B.dz)));
+    const __m256d sq =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
     _mm256_storeu_pd(core + j, _mm256_sqrt_pd(sq));
     _mm256_storeu_pd(s + j, s1);
     _mm256_storeu_pd(t + j, t1);
@@ -141,8 +144,7 @@ bool avx2Available() {
 
 #else
 
-void coreDistancesAvx2(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s,
-                       double* t) {
+void coreDistancesAvx2(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s, double* t) {
   coreDistancesScalar(prim, a, b, n, core, s, t);
 }
 

@@ -15,12 +15,10 @@ namespace reflex::control::detail {
 
 /// For j in [0, n): the closest-point parameters s[j], t[j] of primitives prim[a[j]], prim[b[j]]
 /// and their core distance core[j]. Allocation-free, never throws.
-void coreDistancesScalar(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s,
-                         double* t);
+void coreDistancesScalar(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s, double* t);
 
 /// The same, four pairs at a time with AVX2 (the rest scalar). Only call when avx2Available().
-void coreDistancesAvx2(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s,
-                       double* t);
+void coreDistancesAvx2(const SegmentB* prim, const int* a, const int* b, int n, double* core, double* s, double* t);
 
 /// The broad phase's bounds: for r in [0, n), gap[r] = |c[a[r]] - c[b[r]]| - rsum[r], where c holds
 /// 4 doubles per segment (x, y, z, 0) and the norm is sqrt((x^2 + y^2) + z^2).

@@ -14,8 +14,8 @@ void KinematicRobot::command(const Eigen::Ref<const Eigen::VectorXd>& qdot, doub
   }
 }
 
-void KinematicRobot::setWalkingJoints(const Eigen::Ref<const Eigen::VectorXd>& q_walk,
-                                      const std::vector<int>& indices, double dt) {
+void KinematicRobot::setWalkingJoints(const Eigen::Ref<const Eigen::VectorXd>& q_walk, const std::vector<int>& indices,
+                                      double dt) {
   const double step_dt = std::isfinite(dt) && dt > 0.0 ? dt : 0.0;
   for (const int i : indices) {
     if (i < 0 || i >= model_.nq || !std::isfinite(q_walk[i])) continue;
@@ -102,7 +102,7 @@ void WalkingPattern::step(double dt, Eigen::Ref<Eigen::VectorXd> q) {
   // Legs swing in anti-phase; the stance knee stays slightly bent; the body bobs with the step.
   for (int s = 0; s < 2; ++s) {
     const double ph = std::sin(phase_ + (s == 0 ? 0.0 : M_PI));
-    const double swing = amplitude * 0.30 * ph;                                      // hip pitch (rad)
+    const double swing = amplitude * 0.30 * ph;  // hip pitch (rad)
     const double lift = amplitude * 0.45 * std::max(0.0, std::sin(phase_ + (s == 0 ? 0.0 : M_PI) + M_PI / 2));
     follow(hip_[s], -swing - 0.5 * lift);
     follow(knee_[s], 0.1 * amplitude + lift);
@@ -112,7 +112,7 @@ void WalkingPattern::step(double dt, Eigen::Ref<Eigen::VectorXd> q) {
 }
 
 bool stepPlant(const Model& model, const ControllerModel& cm, ControllerData& data, ControlResult result,
-               RobotInterface& robot, WalkingPattern* walking, double dt, Eigen::VectorXd& q_scratch) {
+               KinematicRobot& robot, WalkingPattern* walking, double dt, Eigen::VectorXd& q_scratch) {
   if (result == ControlResult::kFrozen) return false;  // e-stop latched: nothing moves
   // Walking owns its joints: the controller never commands them (its qdot is 0 there), and a
   // velocity on them here would add to the walking step beyond v_max dt.

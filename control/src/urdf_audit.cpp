@@ -170,11 +170,11 @@ void checkLink(const XMLElement& link, const std::string& name, UrdfAudit& audit
 
 void checkJoint(const XMLElement& joint, std::vector<std::string>& out) {
   const char* name = joint.Attribute("name");
-  const std::string prefix =
-      std::string("joint '") + (name ? name : "<unnamed>") + "' (" + lineOf(joint) + "): ";
+  const std::string prefix = std::string("joint '") + (name ? name : "<unnamed>") + "' (" + lineOf(joint) + "): ";
   if (!name) out.push_back(prefix + "has no name");
   checkOrigin(joint, true, prefix, out);
-  if (const XMLElement* axis = joint.FirstChildElement("axis")) checkVector(*axis, "xyz", 3, false, HUGE_VAL, "", prefix, out);
+  if (const XMLElement* axis = joint.FirstChildElement("axis"))
+    checkVector(*axis, "xyz", 3, false, HUGE_VAL, "", prefix, out);
   if (const XMLElement* limit = joint.FirstChildElement("limit")) {
     checkScalar(*limit, "lower", false, kMaxJointLimit, "", prefix, out);
     checkScalar(*limit, "upper", false, kMaxJointLimit, "", prefix, out);
@@ -255,14 +255,16 @@ UrdfAudit auditUrdf(const std::string& xml) {
     for (const char* kind : {"collision", "visual"})
       for (XMLElement* c = link->FirstChildElement(kind); c; c = c->NextSiblingElement(kind))
         if (XMLElement* g = c->FirstChildElement("geometry"))
-          for (XMLElement* shape = g->FirstChildElement("capsule"); shape; shape = shape->NextSiblingElement("capsule")) {
+          for (XMLElement* shape = g->FirstChildElement("capsule"); shape;
+               shape = shape->NextSiblingElement("capsule")) {
             shape->SetName("cylinder");
             ++audit.capsules;
           }
   if (audit.capsules > 0) {
     tinyxml2::XMLPrinter printer;
     doc.Print(&printer);
-    audit.urdfdom_xml.assign(printer.CStr(), static_cast<std::size_t>(printer.CStrSize() > 0 ? printer.CStrSize() - 1 : 0));
+    audit.urdfdom_xml.assign(printer.CStr(),
+                             static_cast<std::size_t>(printer.CStrSize() > 0 ? printer.CStrSize() - 1 : 0));
   }
   return audit;
 }
@@ -273,9 +275,9 @@ std::vector<std::string> collisionAccounting(const UrdfAudit& audit, const urdf:
     int read = expected;
     if (model) {
       const auto ulink = model->getLink(link);
-      read = !ulink ? 0
-                    : !ulink->collision_array.empty() ? static_cast<int>(ulink->collision_array.size())
-                                                      : (ulink->collision ? 1 : 0);
+      read = !ulink                            ? 0
+             : !ulink->collision_array.empty() ? static_cast<int>(ulink->collision_array.size())
+                                               : (ulink->collision ? 1 : 0);
     }
     const bool dropped = read != expected;
     std::string line;
@@ -284,7 +286,8 @@ std::vector<std::string> collisionAccounting(const UrdfAudit& audit, const urdf:
     for (const auto& p : audit.collision_problems.at(link)) line += "; " + p;
     if (dropped || !model)
       for (const auto& p : audit.other_problems.at(link)) line += "; " + p;
-    if (dropped && line.find("; ", 2) == std::string::npos) line += "; no reason found here (urdfdom's message above says why)";
+    if (dropped && line.find("; ", 2) == std::string::npos)
+      line += "; no reason found here (urdfdom's message above says why)";
     if (!line.empty()) problems.push_back("link '" + link + "'" + line.replace(0, 1, ":"));
   }
   return problems;

@@ -25,9 +25,7 @@
 namespace reflex::control {
 namespace {
 
-[[noreturn]] void fail(const std::string& origin, const std::string& what) {
-  throw ModelError(origin + ": " + what);
-}
+[[noreturn]] void fail(const std::string& origin, const std::string& what) { throw ModelError(origin + ": " + what); }
 
 /// One ModelError for all problems found, one per line, each naming its link or joint.
 [[noreturn]] void failWithProblems(const std::string& origin, const std::string& what,
@@ -53,9 +51,8 @@ std::string fmt(double v) {
 }
 
 /// Appends the primitives of one URDF collision element (in the link frame).
-void addCollision(const std::string& origin, const std::string& link_name,
-                  const urdf::Collision& collision, std::vector<Primitive>& out,
-                  std::vector<std::string>* warnings) {
+void addCollision(const std::string& origin, const std::string& link_name, const urdf::Collision& collision,
+                  std::vector<Primitive>& out, std::vector<std::string>* warnings) {
   if (!collision.geometry) fail(origin, "link '" + link_name + "' has a collision element without geometry");
   const Eigen::Isometry3d X_L_C = toIsometry(collision.origin);
   const std::string where = "link '" + link_name + "' collision '" + collision.name + "'";
@@ -88,8 +85,8 @@ void addCollision(const std::string& origin, const std::string& link_name,
       const auto& box = static_cast<const urdf::Box&>(*collision.geometry);
       const Eigen::Vector3d dim(box.dim.x, box.dim.y, box.dim.z);
       if (!(dim.minCoeff() > 0.0) || !dim.allFinite())
-        fail(origin, where + ": box size " + fmt(dim.x()) + " " + fmt(dim.y()) + " " + fmt(dim.z()) +
-                         " must be positive");
+        fail(origin,
+             where + ": box size " + fmt(dim.x()) + " " + fmt(dim.y()) + " " + fmt(dim.z()) + " must be positive");
       // The box fitted on its own (mesh_fit.hpp, fitBox): a grid of capsules that encloses it,
       // the same primitives reflex_fit writes for it, so no overlay is needed for a box.
       const FitOptions options;
@@ -97,10 +94,11 @@ void addCollision(const std::string& origin, const std::string& link_name,
       if (warnings) {
         const FitStats st = measureFit(boxMesh(dim, X_L_C), fitted, options, dim.prod());
         char numbers[200];
-        std::snprintf(numbers, sizeof numbers,
-                      " fitted with %zu primitive%s (%d/%d corners enclosed, fitted volume / box volume %.2f, worst gap %.4f m)",
-                      fitted.size(), fitted.size() == 1 ? "" : "s", st.vertices_enclosed, st.vertices,
-                      st.volume_ratio, st.worst_gap);
+        std::snprintf(
+            numbers, sizeof numbers,
+            " fitted with %zu primitive%s (%d/%d corners enclosed, fitted volume / box volume %.2f, worst gap %.4f m)",
+            fitted.size(), fitted.size() == 1 ? "" : "s", st.vertices_enclosed, st.vertices, st.volume_ratio,
+            st.worst_gap);
         warnings->push_back(origin + ": " + where + ": box " + fmt(dim.x()) + " x " + fmt(dim.y()) + " x " +
                             fmt(dim.z()) + " m" + numbers);
       }
@@ -108,8 +106,7 @@ void addCollision(const std::string& origin, const std::string& link_name,
       return;
     }
     case urdf::Geometry::MESH:
-    default:
-      fail(origin, where + ": mesh collision geometry needs a fit; run: reflex_fit " + origin);
+    default: fail(origin, where + ": mesh collision geometry needs a fit; run: reflex_fit " + origin);
   }
   out.push_back(prim);
 }
@@ -140,11 +137,14 @@ std::map<std::string, const LinkFit*> fittedLinks(const std::string& origin,
       continue;
     }
     std::vector<std::string> unreadable;
-    const std::string inputs = detail::fitInputsHash(ulink->name, elements, overlay.urdf_dir, paths, &unreadable, nullptr);
-    if (!unreadable.empty()) stale.insert(stale.end(), unreadable.begin(), unreadable.end());
+    const std::string inputs =
+        detail::fitInputsHash(ulink->name, elements, overlay.urdf_dir, paths, &unreadable, nullptr);
+    if (!unreadable.empty())
+      stale.insert(stale.end(), unreadable.begin(), unreadable.end());
     else if (inputs != it->second->inputs)
-      stale.push_back("link '" + ulink->name + "': its meshes, filenames, scales, origins or boxes changed since the fit (inputs " +
-                      inputs + ", fitted " + it->second->inputs + ")");
+      stale.push_back("link '" + ulink->name +
+                      "': its meshes, filenames, scales, origins or boxes changed since the fit (inputs " + inputs +
+                      ", fitted " + it->second->inputs + ")");
     else
       out[ulink->name] = it->second;
   }
@@ -171,12 +171,7 @@ std::map<std::string, const LinkFit*> fittedLinks(const std::string& origin,
 }  // namespace
 
 std::string defaultCollisionConfigPath(const std::string& urdf_path) {
-  const auto dot = urdf_path.rfind('.');
-  const auto slash = urdf_path.rfind('/');
-  const std::string stem =
-      (dot != std::string::npos && (slash == std::string::npos || dot > slash)) ? urdf_path.substr(0, dot)
-                                                                                 : urdf_path;
-  return stem + ".collision.yaml";
+  return robotFileBeside(urdf_path, ".collision.yaml");
 }
 
 CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
@@ -199,7 +194,8 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
     root.fail("cylinder_as", "not a cylinder policy",
               "capsule (the capsule around the cylinder's axis: the only one until the mesh fitter reads cylinders "
               "as shapes to fit)");
-  if (root.has("fit")) config.fit = root.resolvePath(root.requiredString("fit", "the path of a fit overlay (written by reflex_fit)"));
+  if (root.has("fit"))
+    config.fit = root.resolvePath(root.requiredString("fit", "the path of a fit overlay (written by reflex_fit)"));
   if (root.has("srdf")) {
     config.srdf = root.resolvePath(root.requiredString("srdf", "the path of an SRDF file"));
     config.srdf_disabled = loadSrdfDisabledCollisions(config.srdf);
@@ -218,12 +214,12 @@ std::vector<SrdfPair> loadSrdfDisabledCollisions(const std::string& srdf_path) {
   if (!robot || std::strcmp(robot->Name(), "robot") != 0)
     throw ModelError(srdf_path + ": the top element must be <robot>, found <" + (robot ? robot->Name() : "") + ">");
   std::vector<SrdfPair> pairs;
-  for (const auto* d = robot->FirstChildElement("disable_collisions"); d; d = d->NextSiblingElement("disable_collisions")) {
+  for (const auto* d = robot->FirstChildElement("disable_collisions"); d;
+       d = d->NextSiblingElement("disable_collisions")) {
     const char* l1 = d->Attribute("link1");
     const char* l2 = d->Attribute("link2");
     const std::string where = srdf_path + ":" + std::to_string(d->GetLineNum());
-    if (!l1 || !l2 || !*l1 || !*l2)
-      throw ModelError(where + ": <disable_collisions> needs link1 and link2");
+    if (!l1 || !l2 || !*l1 || !*l2) throw ModelError(where + ": <disable_collisions> needs link1 and link2");
     const char* reason = d->Attribute("reason");
     pairs.push_back({l1, l2, reason ? reason : "", where});
   }
@@ -238,8 +234,7 @@ CollisionConfig loadCollisionConfigFor(const std::string& urdf_path, const std::
   return loadCollisionConfig(guess);  // something there: read it (a FIFO or device is refused)
 }
 
-Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
-                std::vector<std::string>* warnings) {
+Model loadModel(const std::string& urdf_path, const CollisionConfig& config, std::vector<std::string>* warnings) {
   if (const std::string why = common::inputFileProblem(urdf_path); !why.empty())
     throw ModelError("URDF file " + why);  // a FIFO or device would block or never end
   std::ifstream in(urdf_path);
@@ -279,8 +274,9 @@ void addLinks(Model& model, const std::vector<urdf::LinkConstSharedPtr>& order, 
         case urdf::Joint::CONTINUOUS: link.type = JointType::kRevolute; break;
         case urdf::Joint::PRISMATIC: link.type = JointType::kPrismatic; break;
         default:
-          fail(origin, jwhere + ": floating and planar joints are not supported; model them as a chain "
-                                "of prismatic and revolute joints");
+          fail(origin, jwhere +
+                           ": floating and planar joints are not supported; model them as a chain "
+                           "of prismatic and revolute joints");
       }
       if (link.type != JointType::kFixed) {
         // Normalised from its largest component: |axis| of "1e308 1e308 0" overflows to inf and
@@ -306,7 +302,6 @@ void addLinks(Model& model, const std::vector<urdf::LinkConstSharedPtr>& order, 
     index_of[link.name] = static_cast<int>(model.links.size());
     model.links.push_back(link);
   }
-
 }
 
 /// Position and velocity limits per q index (a missing velocity limit: 1.0, with a warning).
@@ -332,15 +327,13 @@ void setLimits(Model& model, const urdf::ModelInterface& urdf_model, const std::
     if (!(lo <= hi)) fail(origin, jwhere + ": lower limit " + fmt(lo) + " exceeds upper limit " + fmt(hi));
     if (!(v > 0.0) || !std::isfinite(v)) {
       if (warnings)
-        warnings->push_back(origin + ": " + jwhere + ": no positive velocity limit (" + fmt(v) +
-                            "); using 1.0");
+        warnings->push_back(origin + ": " + jwhere + ": no positive velocity limit (" + fmt(v) + "); using 1.0");
       v = 1.0;
     }
     model.q_lower[qi] = lo;
     model.q_upper[qi] = hi;
     model.v_max[qi] = v;
   }
-
 }
 
 /// One segment per link with collision elements (a fitted link's pieces and capsules first), then the
@@ -383,8 +376,8 @@ void addSegments(Model& model, const std::vector<urdf::LinkConstSharedPtr>& orde
   if (model.num_robot_segments == 0)
     fail(origin, "no link has collision geometry; add spheres or cylinders (read as capsules)");
   if (model.num_robot_segments + kBodySchemaSlots > kMaxSegments)
-    fail(origin, "too many collision segments (" + std::to_string(model.num_robot_segments) +
-                     "); at most " + std::to_string(kMaxSegments - kBodySchemaSlots) + " are supported");
+    fail(origin, "too many collision segments (" + std::to_string(model.num_robot_segments) + "); at most " +
+                     std::to_string(kMaxSegments - kBodySchemaSlots) + " are supported");
   for (int s = 0; s < kBodySchemaSlots; ++s) {
     Segment seg;
     seg.name = "body_schema_" + std::to_string(s);
@@ -395,7 +388,6 @@ void addSegments(Model& model, const std::vector<urdf::LinkConstSharedPtr>& orde
     model.primitives.push_back(Primitive{});
     model.segments.push_back(seg);
   }
-
 }
 
 /// The checked pairs: every pair of segments but those the SRDF or the configuration excludes, those
@@ -437,7 +429,8 @@ void addPairs(Model& model, const CollisionConfig& config, const std::string& or
   std::vector<int> body_of_link(model.links.size());
   for (std::size_t l = 0; l < model.links.size(); ++l) {
     const Link& link = model.links[l];
-    body_of_link[l] = (link.parent >= 0 && link.type == JointType::kFixed) ? body_of_link[link.parent] : static_cast<int>(l);
+    body_of_link[l] =
+        (link.parent >= 0 && link.type == JointType::kFixed) ? body_of_link[link.parent] : static_cast<int>(l);
   }
   // Adjacency, looking through links without collision geometry as the field
   // does: a segment and the nearest segment up its chain (joined by one joint, or through links
@@ -467,8 +460,8 @@ void addPairs(Model& model, const CollisionConfig& config, const std::string& or
 
 }  // namespace
 
-Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config,
-                          const std::string& origin, std::vector<std::string>* warnings) {
+Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config, const std::string& origin,
+                          std::vector<std::string>* warnings) {
   // Our own reading of the XML first: it finds what urdfdom would drop silently (urdf_audit.hpp).
   const detail::UrdfAudit audit = detail::auditUrdf(urdf_xml);
   if (!audit.xml_error.empty()) fail(origin, "malformed URDF: " + audit.xml_error);

@@ -17,8 +17,9 @@
 #include <vector>
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_fit: fit capsules and spheres enclosing every vertex of a robot's collision meshes "
-               "and boxes; writes the fit overlay the loader reads (<urdf stem>.fit.yaml). Never edits the URDF."};
+  CLI::App app{
+      "reflex_fit: fit capsules and spheres enclosing every vertex of a robot's collision meshes "
+      "and boxes; writes the fit overlay the loader reads (<urdf stem>.fit.yaml). Never edits the URDF."};
   std::string urdf_path, out_path;
   std::vector<std::string> package_args;
   reflex::control::FitOptions options;
@@ -27,14 +28,12 @@ int main(int argc, char** argv) {
   app.add_option("--package-path", package_args,
                  "NAME=DIR: where package://NAME/... meshes are (repeatable; then ROS_PACKAGE_PATH is searched)");
   app.add_option("-o,--output", out_path, "overlay file to write (default: <urdf stem>.fit.yaml next to the URDF)");
-  app.add_option("--max-primitives", options.max_primitives, "most primitives per link")
-      ->check(CLI::Range(1, 16));
+  app.add_option("--max-primitives", options.max_primitives, "most primitives per link")->check(CLI::Range(1, 16));
   app.add_option("--split-ratio", options.split_ratio,
                  "split a link while fitted volume / convex-hull volume is above this")
       ->check(CLI::Range(1.0, 100.0));
   app.add_flag("-q,--quiet", quiet, "no per-link progress lines");
   return reflex::runMain("reflex_fit", app, argc, argv, [&]() -> int {
-
     const reflex::control::PackagePaths paths = reflex::control::parsePackagePathArgs(package_args);
     if (out_path.empty()) out_path = reflex::control::defaultFitOverlayPath(urdf_path);
     if (const std::string why = reflex::common::replaceableFileProblem(out_path); !why.empty())
@@ -54,8 +53,8 @@ int main(int argc, char** argv) {
     for (const auto& l : overlay.links) {
       char buf[64];
       std::snprintf(buf, sizeof buf, "%.3f,%.4f", l.stats.volume_ratio, l.stats.worst_gap);
-      std::cout << l.link << "," << l.primitives.size() << "," << l.stats.vertices_enclosed << "," << l.stats.vertices << ","
-                << buf << "\n";
+      std::cout << l.link << "," << l.primitives.size() << "," << l.stats.vertices_enclosed << "," << l.stats.vertices
+                << "," << buf << "\n";
     }
     std::cout << "# wrote " << out_path << std::endl;
     return 0;

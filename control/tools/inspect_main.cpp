@@ -54,8 +54,8 @@ void setJoint(const Model& model, Eigen::VectorXd& q, const std::string& name, c
   const double v = parseNumber(value, where + " joint '" + name + "'");
   if (v < model.q_lower[qi] - 1e-12 || v > model.q_upper[qi] + 1e-12) {
     std::ostringstream os;
-    os << where << ": joint '" << name << "' value " << v << " is outside its limits [" << model.q_lower[qi]
-       << ", " << model.q_upper[qi] << "]";
+    os << where << ": joint '" << name << "' value " << v << " is outside its limits [" << model.q_lower[qi] << ", "
+       << model.q_upper[qi] << "]";
     throw reflex::Error(os.str());
   }
   q[qi] = v;
@@ -77,7 +77,7 @@ void readCsvRow(const Model& model, Eigen::VectorXd& q, const std::string& path,
   const auto values = splitCsv(line);
   if (values.size() != names.size())
     throw reflex::Error(path + ": row " + std::to_string(row) + " has " + std::to_string(values.size()) +
-                             " values for " + std::to_string(names.size()) + " columns");
+                        " values for " + std::to_string(names.size()) + " columns");
   for (std::size_t i = 0; i < names.size(); ++i) {
     if (names[i] == "time" || names[i] == "t") continue;
     setJoint(model, q, names[i], values[i], path + " column " + std::to_string(i + 1));
@@ -94,8 +94,9 @@ std::string jsonString(const std::string& s) {
 }
 
 /// --sample-pairs: a proposal of which pairs to check, from `samples` random configurations.
-int proposePairs(const std::string& urdf_path, const std::string& config_path, reflex::control::PairSamplingOptions sampling,
-                 int samples, const std::string& write_path, bool force) {
+int proposePairs(const std::string& urdf_path, const std::string& config_path,
+                 reflex::control::PairSamplingOptions sampling, int samples, const std::string& write_path,
+                 bool force) {
   sampling.samples = samples;
   const reflex::control::CollisionConfig user_config = reflex::control::loadCollisionConfigFor(urdf_path, config_path);
   reflex::control::CollisionConfig every;  // the user's cylinder policy; no exclusions at all
@@ -130,7 +131,8 @@ int proposePairs(const std::string& urdf_path, const std::string& config_path, r
     always += p.verdict == reflex::control::PairVerdict::kAlwaysInCollision;
     never += p.verdict == reflex::control::PairVerdict::kNeverClose;
   }
-  std::fprintf(stderr, "reflex_inspect: %s: %d samples: %d pairs always in collision (excluded), %d never "
+  std::fprintf(stderr,
+               "reflex_inspect: %s: %d samples: %d pairs always in collision (excluded), %d never "
                "closer than %.0f mm (commented out), %d checked, %zu adjacent%s%s\n",
                report.robot.c_str(), sampling.samples, always, never, sampling.near_distance * 1000.0,
                static_cast<int>(report.pairs.size()) - always - never, report.adjacent.size(),
@@ -172,11 +174,12 @@ void printDistances(const Model& model, const reflex::control::DistanceData& dis
     const char* a = model.segments[pd.seg_a].name.c_str();
     const char* b = model.segments[pd.seg_b].name.c_str();
     if (json) {
-      std::printf("%s    {\"a\": %s, \"b\": %s, \"distance\": %.6f, \"pa\": [%.6f, %.6f, %.6f], "
-                  "\"pb\": [%.6f, %.6f, %.6f]}", first ? "" : ",\n",
-                  jsonString(model.segments[pd.seg_a].name).c_str(),
-                  jsonString(model.segments[pd.seg_b].name).c_str(), pd.distance, pd.p_B_a.x(),
-                  pd.p_B_a.y(), pd.p_B_a.z(), pd.p_B_b.x(), pd.p_B_b.y(), pd.p_B_b.z());
+      std::printf(
+          "%s    {\"a\": %s, \"b\": %s, \"distance\": %.6f, \"pa\": [%.6f, %.6f, %.6f], "
+          "\"pb\": [%.6f, %.6f, %.6f]}",
+          first ? "" : ",\n", jsonString(model.segments[pd.seg_a].name).c_str(),
+          jsonString(model.segments[pd.seg_b].name).c_str(), pd.distance, pd.p_B_a.x(), pd.p_B_a.y(), pd.p_B_a.z(),
+          pd.p_B_b.x(), pd.p_B_b.y(), pd.p_B_b.z());
     } else {
       std::printf("%s,%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", a, b, pd.distance, pd.p_B_a.x(), pd.p_B_a.y(),
                   pd.p_B_a.z(), pd.p_B_b.x(), pd.p_B_b.y(), pd.p_B_b.z());
@@ -187,11 +190,11 @@ void printDistances(const Model& model, const reflex::control::DistanceData& dis
     const auto& c = dist.pairs[dist.closest];
     if (json)
       std::printf("\n  ],\n  \"closest\": {\"a\": %s, \"b\": %s, \"distance\": %.6f}\n}\n",
-                  jsonString(model.segments[c.seg_a].name).c_str(),
-                  jsonString(model.segments[c.seg_b].name).c_str(), c.distance);
+                  jsonString(model.segments[c.seg_a].name).c_str(), jsonString(model.segments[c.seg_b].name).c_str(),
+                  c.distance);
     else
-      std::printf("# closest: %s,%s,%.6f\n", model.segments[c.seg_a].name.c_str(),
-                  model.segments[c.seg_b].name.c_str(), c.distance);
+      std::printf("# closest: %s,%s,%.6f\n", model.segments[c.seg_a].name.c_str(), model.segments[c.seg_b].name.c_str(),
+                  c.distance);
   } else if (json) {
     std::printf("\n  ],\n  \"closest\": null\n}\n");
   }
@@ -208,12 +211,14 @@ int run(int argc, char** argv) {
   int csv_row = 0;
   std::string format = "csv";
   bool list_only = false;
-  app.add_option("urdf", urdf_path, "URDF file (collision elements: spheres, cylinders and capsules; meshes and boxes through the fit "
+  app.add_option("urdf", urdf_path,
+                 "URDF file (collision elements: spheres, cylinders and capsules; meshes and boxes through the fit "
                  "overlay <urdf stem>.fit.yaml written by reflex_fit; boxes without one fitted here the same way)")
       ->required();
   app.add_option("--config", config_path,
                  "collision configuration YAML (default: <urdf stem>.collision.yaml if it exists)");
-  app.add_option("--q", q_args, "joint values, name=value (radians / metres); others stay 0 (or the nearest limit if 0 is outside)");
+  app.add_option("--q", q_args,
+                 "joint values, name=value (radians / metres); others stay 0 (or the nearest limit if 0 is outside)");
   app.add_option("--csv", csv_path, "joint values from a CSV file: header row of joint names, value rows");
   app.add_option("--row", csv_row, "row of --csv to use (0 = first after the header)")->check(CLI::NonNegativeNumber);
   app.add_option("--format", format, "output format")->check(CLI::IsMember({"csv", "json"}));
@@ -249,8 +254,7 @@ int run(int argc, char** argv) {
     if (!csv_path.empty()) readCsvRow(model, q, csv_path, csv_row);
     for (const auto& arg : q_args) {
       const auto eq = arg.find('=');
-      if (eq == std::string::npos)
-        throw reflex::Error("--q '" + arg + "': expected name=value");
+      if (eq == std::string::npos) throw reflex::Error("--q '" + arg + "': expected name=value");
       setJoint(model, q, arg.substr(0, eq), arg.substr(eq + 1), "--q");
     }
 
@@ -262,18 +266,23 @@ int run(int argc, char** argv) {
     const bool json = format == "json";
     int robot_pairs = 0;  // pairs of two robot segments (the slot pairs are inactive here)
     for (const auto& p : model.pairs) robot_pairs += model.segments[p.b].body_schema_slot ? 0 : 1;
-    if (json) std::printf("{\n  \"robot\": %s,\n  \"segments\": [\n", jsonString(model.name).c_str());
-    else std::printf("# robot %s: %d segments, %d checked pairs (+%d with body-schema slots), %d joints\n"
-                     "# segment,link,primitives\n",
-                     model.name.c_str(), model.num_robot_segments, robot_pairs,
-                     static_cast<int>(model.pairs.size()) - robot_pairs, model.nq);
+    if (json)
+      std::printf("{\n  \"robot\": %s,\n  \"segments\": [\n", jsonString(model.name).c_str());
+    else
+      std::printf(
+          "# robot %s: %d segments, %d checked pairs (+%d with body-schema slots), %d joints\n"
+          "# segment,link,primitives\n",
+          model.name.c_str(), model.num_robot_segments, robot_pairs, static_cast<int>(model.pairs.size()) - robot_pairs,
+          model.nq);
     printSegments(model, json);
     if (list_only) {
       if (json) std::printf("  ]\n}\n");
       return 0;
     }
-    if (json) std::printf("  ],\n  \"pairs\": [\n");
-    else std::printf("segment_a,segment_b,distance_m,pa_x,pa_y,pa_z,pb_x,pb_y,pb_z\n");
+    if (json)
+      std::printf("  ],\n  \"pairs\": [\n");
+    else
+      std::printf("segment_a,segment_b,distance_m,pa_x,pa_y,pa_z,pb_x,pb_y,pb_z\n");
     printDistances(model, dist, json);
     return 0;
   });

@@ -64,7 +64,8 @@ bool hasMeshCollision(const std::string& urdf) {
 
 // A copy of the URDF with the gap-closing <collision> elements added to their links; relative mesh
 // filenames are made absolute so they still resolve from the copy's folder.
-void writeClosedUrdf(const std::string& urdf, const std::string& out, const std::vector<reflex::control::ArmGap>& gaps) {
+void writeClosedUrdf(const std::string& urdf, const std::string& out,
+                     const std::vector<reflex::control::ArmGap>& gaps) {
   tinyxml2::XMLDocument doc;
   if (doc.LoadFile(urdf.c_str()) != tinyxml2::XML_SUCCESS) throw reflex::Error(urdf + ": cannot read the URDF");
   tinyxml2::XMLElement* robot = doc.FirstChildElement("robot");
@@ -116,7 +117,6 @@ struct Staging {
 
 std::string vec3(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
 
-
 /// Exit code: the files are written, but the closed-loop check did not reach the rest posture.
 constexpr int kExitNotReached = 3;
 
@@ -132,20 +132,25 @@ struct Args {
 void addOptions(CLI::App& app, Args& a) {
   a.sampling.samples = 5000;
   app.add_option("urdf", a.urdf, "the robot's URDF")->required();
-  app.add_option("--srdf", a.srdf, "SRDF whose <disable_collisions> pairs are excluded (written as srdf: in collision.yaml)");
+  app.add_option("--srdf", a.srdf,
+                 "SRDF whose <disable_collisions> pairs are excluded (written as srdf: in collision.yaml)");
   app.add_option("--package-path", a.package_args, "NAME=DIR: where package://NAME/... meshes are (repeatable)");
   app.add_option("--out", a.out_dir, "folder to write the configuration files into (created)")->required();
   app.add_option("--left-hand", a.o.left_hand, "left hand link (default: found by structure; give with --right-hand)");
   app.add_option("--right-hand", a.o.right_hand, "right hand link");
   app.add_option("--head", a.o.head, "head link (default: found by structure)");
   app.add_option("--camera", a.o.camera, "head camera link (default: a link named like a camera fixed below the head)");
-  app.add_option("--samples", a.sampling.samples, "random configurations for the pair sampling")->check(CLI::Range(100, 1000000));
+  app.add_option("--samples", a.sampling.samples, "random configurations for the pair sampling")
+      ->check(CLI::Range(100, 1000000));
   app.add_option("--seed", a.sampling.seed, "random seed (pair sampling, rest search, gap check)");
-  app.add_option("--gap-tolerance", a.o.gap_tolerance, "m: an arm skeleton point farther than this from the arm's "
-                 "primitives is a gap")->check(CLI::Range(0.001, 0.5));
+  app.add_option("--gap-tolerance", a.o.gap_tolerance,
+                 "m: an arm skeleton point farther than this from the arm's "
+                 "primitives is a gap")
+      ->check(CLI::Range(0.001, 0.5));
   app.add_option("--rest-margin", a.o.rest_margin, "m: the rest posture clears every arm pair by d_a + this")
       ->check(CLI::Range(0.0, 0.2));
-  app.add_flag("--close-gaps", a.close_gaps, "write DIR/<stem>.urdf, a copy of the URDF with the capsules that close "
+  app.add_flag("--close-gaps", a.close_gaps,
+               "write DIR/<stem>.urdf, a copy of the URDF with the capsules that close "
                "the gaps, and configure the robot from it");
   app.add_flag("--force", a.force, "replace files already in DIR");
 }
@@ -197,7 +202,8 @@ class Setup {
     for (const auto& [what, path] : {std::pair<std::string, std::string>{"URDF", a_.urdf}, {"--srdf", a_.srdf}}) {
       if (path.empty()) continue;
       if (!fs::exists(path)) throw reflex::Error(what + " '" + path + "' does not exist");
-      if (const std::string why = reflex::common::inputFileProblem(path); !why.empty()) throw reflex::Error(what + " " + why);
+      if (const std::string why = reflex::common::inputFileProblem(path); !why.empty())
+        throw reflex::Error(what + " " + why);
     }
     paths_ = reflex::control::parsePackagePathArgs(a_.package_args);
     if (const std::string why = reflex::common::outputFolderProblem(final_dir_); !why.empty())
@@ -205,7 +211,8 @@ class Setup {
     std::error_code ec;
     fs::create_directories(final_dir_, ec);
     if (ec) throw reflex::Error("--out '" + final_dir_ + "': cannot create the folder: " + ec.message());
-    std::vector<std::string> outputs = {finalPath("controller.yaml"), finalPath("collision.yaml"), finalPath("behavior.yaml")};
+    std::vector<std::string> outputs = {finalPath("controller.yaml"), finalPath("collision.yaml"),
+                                        finalPath("behavior.yaml")};
     if (hasMeshCollision(a_.urdf)) outputs.push_back(finalPath(stem_ + ".fit.yaml"));
     if (a_.close_gaps) outputs.push_back(finalPath(stem_ + ".urdf"));
     for (const std::string& p : outputs) {
@@ -213,7 +220,7 @@ class Setup {
       if (::lstat(p.c_str(), &st) != 0) continue;
       if (!S_ISREG(st.st_mode))
         throw reflex::Error("'" + p + "' exists and is " + reflex::common::fileKind(st.st_mode) +
-                                 ": reflex_setup replaces only regular files; remove it or choose another --out");
+                            ": reflex_setup replaces only regular files; remove it or choose another --out");
       if (!a_.force && p != finalPath(stem_ + ".fit.yaml"))
         throw reflex::Error("'" + p + "' exists; give --force to replace it");
     }
@@ -249,11 +256,12 @@ class Setup {
       const reflex::control::FitOptions d;
       const auto& f = old.options;
       std::error_code ec;
-      if (!fs::equivalent(old.urdf, a_.urdf, ec)) why_not = "it is the fit of '" + old.urdf + "'";
+      if (!fs::equivalent(old.urdf, a_.urdf, ec))
+        why_not = "it is the fit of '" + old.urdf + "'";
       else if (f.max_primitives != d.max_primitives || f.split_ratio != d.split_ratio ||
-               f.min_split_gain != d.min_split_gain || f.quantum != d.quantum ||
-               f.max_pieces != d.max_pieces || f.piece_gap != d.piece_gap ||
-               f.max_pieces_large_gap != d.max_pieces_large_gap || f.large_gap != d.large_gap)
+               f.min_split_gain != d.min_split_gain || f.quantum != d.quantum || f.max_pieces != d.max_pieces ||
+               f.piece_gap != d.piece_gap || f.max_pieces_large_gap != d.max_pieces_large_gap ||
+               f.large_gap != d.large_gap)
         why_not = "it was made with other options";
       else {
         reflex::control::CollisionConfig c;
@@ -306,18 +314,20 @@ class Setup {
     collision_final_ = collision;
     if (!a_.srdf.empty()) {
       collision += "srdf: " + relativeTo(a_.srdf, out_dir_) + "   # its <disable_collisions> pairs are excluded too\n";
-      collision_final_ += "srdf: " + relativeTo(a_.srdf, final_dir_) + "   # its <disable_collisions> pairs are excluded too\n";
+      collision_final_ +=
+          "srdf: " + relativeTo(a_.srdf, final_dir_) + "   # its <disable_collisions> pairs are excluded too\n";
     }
     if (meshes_) {
       collision += "fit: " + fs::path(fit_path).filename().string() + "   # the mesh fit (reflex_fit)\n";
       collision_final_ += "fit: " + fs::path(fit_path).filename().string() + "   # the mesh fit (reflex_fit)\n";
     }
     writeFile(stagedPath("collision.yaml"), collision);
-    std::printf("pairs: %d sampled configurations%s: %d pairs always in collision (excluded), %d never closer than "
-                "d_a (listed, commented out: still checked), %zu adjacent (not checked), %d moved by no joint Reflex "
-                "drives, %d never out of d_a, %d touching standing (these three not checked: listed in %s)\n",
-                sampling.samples, a_.srdf.empty() ? "" : " after the SRDF's exclusions", always, never,
-                report.adjacent.size(), undriven, near, standing, finalPath("collision.yaml").c_str());
+    std::printf(
+        "pairs: %d sampled configurations%s: %d pairs always in collision (excluded), %d never closer than "
+        "d_a (listed, commented out: still checked), %zu adjacent (not checked), %d moved by no joint Reflex "
+        "drives, %d never out of d_a, %d touching standing (these three not checked: listed in %s)\n",
+        sampling.samples, a_.srdf.empty() ? "" : " after the SRDF's exclusions", always, never, report.adjacent.size(),
+        undriven, near, standing, finalPath("collision.yaml").c_str());
   }
 
   /// The joints Reflex drives (both arms, the walking joints; a pair no driven joint moves is not
@@ -356,19 +366,21 @@ class Setup {
   /// A warning for a pair that is not checked although it comes close.
   void warnUnchecked(const reflex::control::SampledPair& p) const {
     if (p.verdict == reflex::control::PairVerdict::kAlwaysNear && p.min_distance <= a_.sampling.touch_distance)
-      std::printf("WARNING: pair '%s'-'%s' is never farther apart than %.1f mm (inside d_a at every posture) and comes "
-                  "%.1f mm close: NOT checked (the avoidance would hold the arm off every target); the joint limits "
-                  "and the robot's own controller must keep it apart\n",
-                  p.a.c_str(), p.b.c_str(), 1e3 * std::min(p.max_distance, p.driven_max_distance),
-                  1e3 * p.min_distance);
+      std::printf(
+          "WARNING: pair '%s'-'%s' is never farther apart than %.1f mm (inside d_a at every posture) and comes "
+          "%.1f mm close: NOT checked (the avoidance would hold the arm off every target); the joint limits "
+          "and the robot's own controller must keep it apart\n",
+          p.a.c_str(), p.b.c_str(), 1e3 * std::min(p.max_distance, p.driven_max_distance), 1e3 * p.min_distance);
     if (p.verdict == reflex::control::PairVerdict::kTouchingStanding)
-      std::printf("WARNING: pair '%s'-'%s' is %.1f mm apart in the standing posture and no arm joint moves it: NOT "
-                  "checked (the red zone would latch at start); the robot's own controller must keep it apart\n",
-                  p.a.c_str(), p.b.c_str(), 1e3 * p.standing_distance);
+      std::printf(
+          "WARNING: pair '%s'-'%s' is %.1f mm apart in the standing posture and no arm joint moves it: NOT "
+          "checked (the red zone would latch at start); the robot's own controller must keep it apart\n",
+          p.a.c_str(), p.b.c_str(), 1e3 * p.standing_distance);
     if (p.verdict == reflex::control::PairVerdict::kNotDriven && p.min_distance < a_.sampling.near_distance)
-      std::printf("WARNING: pair '%s'-'%s' is moved by no joint Reflex drives and comes %.1f mm close (sampled over "
-                  "the joints that move it): NOT checked; the robot's own controller must keep it apart\n",
-                  p.a.c_str(), p.b.c_str(), 1e3 * p.min_distance);
+      std::printf(
+          "WARNING: pair '%s'-'%s' is moved by no joint Reflex drives and comes %.1f mm close (sampled over "
+          "the joints that move it): NOT checked; the robot's own controller must keep it apart\n",
+          p.a.c_str(), p.b.c_str(), 1e3 * p.min_distance);
   }
 
   /// 3. The robot as the controller will load it, and what the setup finds on it (closing the arm
@@ -382,15 +394,17 @@ class Setup {
     reflex::control::findArmGaps(model_, a_.o, setup_);
     for (const auto& g : setup_.gaps) {
       std::printf("%s\n", g.message.c_str());
-      std::printf("  paste into <link name=\"%s\"> of the URDF (Reflex reads a cylinder as that capsule), or rerun "
-                  "with --close-gaps:\n  %s\n", g.link.c_str(), g.urdf_snippet.c_str());
+      std::printf(
+          "  paste into <link name=\"%s\"> of the URDF (Reflex reads a cylinder as that capsule), or rerun "
+          "with --close-gaps:\n  %s\n",
+          g.link.c_str(), g.urdf_snippet.c_str());
     }
     if (!a_.close_gaps || setup_.gaps.empty()) return;
     const std::string closed_urdf = stagedPath(stem_ + ".urdf");
     writeClosedUrdf(a_.urdf, closed_urdf, setup_.gaps);
     closing_gaps_ = setup_.gaps;
-    std::printf("gaps: wrote %s with %zu closing capsules; configuring that robot\n", finalPath(stem_ + ".urdf").c_str(),
-                setup_.gaps.size());
+    std::printf("gaps: wrote %s with %zu closing capsules; configuring that robot\n",
+                finalPath(stem_ + ".urdf").c_str(), setup_.gaps.size());
     robot_urdf_ = closed_urdf;
     if (meshes_) fit(robot_urdf_);
     model_ = reflex::control::loadModel(robot_urdf_, reflex::control::loadCollisionConfig(collision_path));
@@ -403,7 +417,8 @@ class Setup {
   /// 4. controller.yaml, read back and resolved against the robot.
   void writeControllerConfig() {
     std::string& ctl = controller_text_;
-    ctl = "# Controller configuration of " + model_.name + ", written by reflex_setup (every key: "
+    ctl = "# Controller configuration of " + model_.name +
+          ", written by reflex_setup (every key: "
           "control/docs/configuration.md).\n# Parameters not given take their defaults (control/README.md, "
           "\"Controller parameters\").\n";
     for (const auto& d : setup_.decisions) ctl += "# " + d + "\n";
@@ -417,7 +432,8 @@ class Setup {
       ctl += "]   # rad\n";
     }
     if (!setup_.camera_link.empty())
-      ctl += "camera_link: " + setup_.camera_link + "   # the head camera (reflex_sim's occlusion gaze line starts here)\n";
+      ctl += "camera_link: " + setup_.camera_link +
+             "   # the head camera (reflex_sim's occlusion gaze line starts here)\n";
     writeFile(stagedPath("controller.yaml"), ctl);
     const auto cconf = reflex::control::loadControllerConfig(stagedPath("controller.yaml"));
     cm_ = std::make_unique<reflex::control::ControllerModel>(reflex::control::makeControllerModel(model_, cconf));
@@ -460,12 +476,13 @@ class Setup {
       }
       if (reached) break;
     }
-    std::printf("behavior: both hands to %s / %s (rest + %.2f m %s): %s; closest pair during the "
-                "run %.3f m (d_r %.3f m), %llu e-stops\n",
-                vec3(reach_.target_B[0]).c_str(), vec3(reach_.target_B[1]).c_str(), offset, towards.c_str(),
-                reached ? ("reached within 10 mm after " + num(reach_.reached_at) + " s of a closed-loop run").c_str()
-                        : ("NOT reached in 4 s (errors " + num(reach_.error[0]) + " / " + num(reach_.error[1]) + " m)").c_str(),
-                reach_.min_distance, cm.params.d_r, static_cast<unsigned long long>(reach_.estops));
+    std::printf(
+        "behavior: both hands to %s / %s (rest + %.2f m %s): %s; closest pair during the "
+        "run %.3f m (d_r %.3f m), %llu e-stops\n",
+        vec3(reach_.target_B[0]).c_str(), vec3(reach_.target_B[1]).c_str(), offset, towards.c_str(),
+        reached ? ("reached within 10 mm after " + num(reach_.reached_at) + " s of a closed-loop run").c_str()
+                : ("NOT reached in 4 s (errors " + num(reach_.error[0]) + " / " + num(reach_.error[1]) + " m)").c_str(),
+        reach_.min_distance, cm.params.d_r, static_cast<unsigned long long>(reach_.estops));
     return reached;
   }
 
@@ -473,17 +490,21 @@ class Setup {
   void writeBehaviorConfig() {
     const std::string behavior_path = stagedPath("behavior.yaml");
     std::string& beh = behavior_text_;
-    beh = "# Behavior configuration for " + model_.name + ", written by reflex_setup: both hands reach to a\n"
+    beh = "# Behavior configuration for " + model_.name +
+          ", written by reflex_setup: both hands reach to a\n"
           "# point near their rest positions and stay (checked by a closed-loop run at set-up).\n"
-          "#   reflex_behavior --config " + finalPath("behavior.yaml") +
+          "#   reflex_behavior --config " +
+          finalPath("behavior.yaml") +
           "\n# Keys: modules/README.md, control/docs/configuration.md.\n"
           "process: behavior\n\nrobot:\n";
     beh += "  urdf: " + relativeTo(robotUrdfFinal(), final_dir_) + "   # relative to this file\n";
     beh += "  collision: collision.yaml\n";
-    beh += "  left_shoulder: " + setup_.arms[0].shoulder_link + "\n  right_shoulder: " + setup_.arms[1].shoulder_link + "\n";
+    beh += "  left_shoulder: " + setup_.arms[0].shoulder_link + "\n  right_shoulder: " + setup_.arms[1].shoulder_link +
+           "\n";
     beh += "  left_hand: " + setup_.arms[0].hand_link + "\n  right_hand: " + setup_.arms[1].hand_link + "\n";
     beh += "  head: " + setup_.head_link + "\n  head_camera: " + setup_.camera_link + "\n";
-    beh += "  hand_point: " + vec3(setup_.arms[0].hand_point_L) + "   # m, in the hand link (the left hand's; "
+    beh += "  hand_point: " + vec3(setup_.arms[0].hand_point_L) +
+           "   # m, in the hand link (the left hand's; "
            "the controller has one per arm)\n\n";
     beh += "modules:\n  - name: reach\n    type: scripted\n    config:\n      timeline:\n        - {t: 0.0, left: " +
            vec3(reach_.target_B[0]) + ", right: " + vec3(reach_.target_B[1]) + "}\n";
@@ -500,7 +521,8 @@ class Setup {
     if (robot_urdf_ != a_.urdf) writeClosedUrdf(a_.urdf, robotUrdfFinal(), closing_gaps_);
     writeFile(finalPath("behavior.yaml"), behavior_text_);
     std::printf("wrote %s, %s, %s%s%s\n", finalPath("controller.yaml").c_str(), finalPath("collision.yaml").c_str(),
-                finalPath("behavior.yaml").c_str(), meshes_ ? ", " : "", meshes_ ? finalPath(stem_ + ".fit.yaml").c_str() : "");
+                finalPath("behavior.yaml").c_str(), meshes_ ? ", " : "",
+                meshes_ ? finalPath(stem_ + ".fit.yaml").c_str() : "");
     std::printf("next: reflex_sim SCENARIO --urdf %s --collision %s --controller %s --out RUN\n",
                 robotUrdfFinal().c_str(), finalPath("collision.yaml").c_str(), finalPath("controller.yaml").c_str());
     std::printf("next: reflex_controller --urdf %s --collision %s --controller %s; reflex_behavior --config %s\n",
@@ -523,11 +545,12 @@ class Setup {
 };
 
 int run(int argc, char** argv) {
-  CLI::App app{"reflex_setup: find a humanoid's arms, hands, head, rest posture and collision pairs from its "
-               "URDF and write DIR/controller.yaml, DIR/collision.yaml and DIR/behavior.yaml (and the mesh fit), "
-               "printing every choice and why. See control/README.md, \"Setting up a new robot\". Exit: 0 written, "
-               "2 refused (named; nothing written), 3 written but the closed-loop check did not reach the rest "
-               "posture."};
+  CLI::App app{
+      "reflex_setup: find a humanoid's arms, hands, head, rest posture and collision pairs from its "
+      "URDF and write DIR/controller.yaml, DIR/collision.yaml and DIR/behavior.yaml (and the mesh fit), "
+      "printing every choice and why. See control/README.md, \"Setting up a new robot\". Exit: 0 written, "
+      "2 refused (named; nothing written), 3 written but the closed-loop check did not reach the rest "
+      "posture."};
   Args args;
   addOptions(app, args);
   if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;

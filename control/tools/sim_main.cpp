@@ -52,8 +52,8 @@ void writePostures(const Model& model, const SimResult& result, const std::strin
       for (int p = sg.first_primitive; p < sg.first_primitive + sg.num_primitives; ++p) {
         const Eigen::Vector3d a = kin.X_B_L[sg.link] * model.primitives[p].a_L;
         const Eigen::Vector3d b = kin.X_B_L[sg.link] * model.primitives[p].b_L;
-        out << f << ',' << s.t << ',' << sg.name << ',' << a.x() << ',' << a.y() << ',' << a.z() << ',' << b.x()
-            << ',' << b.y() << ',' << b.z() << ',' << model.primitives[p].radius << '\n';
+        out << f << ',' << s.t << ',' << sg.name << ',' << a.x() << ',' << a.y() << ',' << a.z() << ',' << b.x() << ','
+            << b.y() << ',' << b.z() << ',' << model.primitives[p].radius << '\n';
       }
     }
   }
@@ -148,16 +148,19 @@ std::string direction(const Eigen::Vector3d& d) {
 void printScenarioFrame(std::ostream& os, const Model& model, const ScenarioFrame& f) {
   auto mm = [](const Eigen::Vector3d& p) {
     std::ostringstream s;
-    s << std::fixed << std::setprecision(0) << '(' << p.x() * 1000 << ", " << p.y() * 1000 << ", " << p.z() * 1000 << ')';
+    s << std::fixed << std::setprecision(0) << '(' << p.x() * 1000 << ", " << p.y() * 1000 << ", " << p.z() * 1000
+      << ')';
     return s.str();
   };
   os << "robot " << model.name << ": chest " << mm(f.chest) << " mm, shoulders " << std::fixed << std::setprecision(0)
      << 2000 * f.half_width << " mm apart, arm " << f.arm_length * 1000 << " mm; scenarios "
      << (f.reference ? std::string("as written (the reference robot)")
-                     : "scaled x " + std::to_string(f.scale.x()).substr(0, 5) + ", y " + std::to_string(f.scale.y()).substr(0, 5) +
-                           ", z " + std::to_string(f.scale.z()).substr(0, 5) + " about the chest")
+                     : "scaled x " + std::to_string(f.scale.x()).substr(0, 5) + ", y " +
+                           std::to_string(f.scale.y()).substr(0, 5) + ", z " +
+                           std::to_string(f.scale.z()).substr(0, 5) + " about the chest")
      << (f.axes.isIdentity(1e-9) ? std::string() : "; forward is " + direction(f.axes.col(0)) + " in its root frame")
-     << '\n' << std::defaultfloat << std::setprecision(6);
+     << '\n'
+     << std::defaultfloat << std::setprecision(6);
 }
 
 void summarize(std::ostream& os, const Model& model, const Scenario& sc, const SimResult& r, const char* label,
@@ -166,7 +169,8 @@ void summarize(std::ostream& os, const Model& model, const Scenario& sc, const S
   if (robot == "kinematic")
     os << "  robot                 kinematic (in-process plant, OnboardController + KinematicPort)\n";
   else
-    os << "  robot                 " << robot << " (a robot over DDS, OnboardController + " << (robot == "unitree_hg" ? "UnitreeHgPort" : "DdsRobotPort") << ")\n";
+    os << "  robot                 " << robot << " (a robot over DDS, OnboardController + "
+       << (robot == "unitree_hg" ? "UnitreeHgPort" : "DdsRobotPort") << ")\n";
   os << "  min distance          " << r.min_distance * 1000.0 << " mm at t = " << r.min_time << " s ("
      << pairName(model, r.min_pair) << ")\n";
   if (std::isfinite(r.min_virtual_distance))
@@ -187,8 +191,8 @@ void summarize(std::ostream& os, const Model& model, const Scenario& sc, const S
        << " measured (between the states' stamps)\n";
   os << "  non-finite output     " << (r.non_finite ? "YES" : "no") << "\n";
   if (robot == "kinematic")
-    os << "  cycles " << r.cycles << ", simulated " << r.cycles * 0.005 << " s in " << wall * 1000.0
-       << " ms wall (" << (wall > 0 ? r.cycles * 0.005 / wall : 0.0) << "x real time)\n";
+    os << "  cycles " << r.cycles << ", simulated " << r.cycles * 0.005 << " s in " << wall * 1000.0 << " ms wall ("
+       << (wall > 0 ? r.cycles * 0.005 / wall : 0.0) << "x real time)\n";
   else
     os << "  cycles " << r.cycles << ", " << r.cycles * 0.005 << " s of scenario in " << wall * 1000.0
        << " ms wall (real time)\n";
@@ -196,18 +200,18 @@ void summarize(std::ostream& os, const Model& model, const Scenario& sc, const S
 
 /// What a run on a robot over DDS measured besides the scenario's own figures.
 struct PlantFigures {
-  std::string robot;                     ///< "mujoco" / "dds"
+  std::string robot;  ///< "mujoco" / "dds"
   int domain = 0;
   std::array<ArmTracking, 2> tracking;
-  std::uint64_t below_d_r = 0;           ///< cycles whose measured state had a physical pair below d_r
+  std::uint64_t below_d_r = 0;  ///< cycles whose measured state had a physical pair below d_r
   std::uint64_t contact_samples = 0, contacts_received = 0, total_contact_steps = 0;
   double min_contact = std::numeric_limits<double>::infinity();
   std::string min_contact_pair;
   int robot_exit = 0;
   std::string log;
-  double ramp_out_ratio = -1.0;          ///< unitree_hg: max |dq| / (v_max dt) while the arm_sdk weight ramped out
-  double measured_ratio = 0.0;           ///< max |dq| / (v_max dt) between consecutive states, the whole run
-  double max_weight_step = 0.0;          ///< unitree_hg: the weight's largest step between two commands
+  double ramp_out_ratio = -1.0;  ///< unitree_hg: max |dq| / (v_max dt) while the arm_sdk weight ramped out
+  double measured_ratio = 0.0;   ///< max |dq| / (v_max dt) between consecutive states, the whole run
+  double max_weight_step = 0.0;  ///< unitree_hg: the weight's largest step between two commands
   double ramp_time = 0.0;
   // The same scenario on the kinematic plant, for comparison.
   double kin_min_distance = 0.0;
@@ -217,13 +221,15 @@ struct PlantFigures {
 
 /// The lines a run over DDS adds to the summary (after summarize's). Every figure in mm / mrad / ms.
 void summarizePlant(std::ostream& os, const SimResult& r, const PlantFigures& p, double d_r) {
-  os << "  plant                 " << p.robot << " over DDS on domain " << p.domain
-     << " (OnboardController + " << (p.robot == "unitree_hg" ? "UnitreeHgPort" : "DdsRobotPort") << ", real time; the distances above are our distance module on the MEASURED "
+  os << "  plant                 " << p.robot << " over DDS on domain " << p.domain << " (OnboardController + "
+     << (p.robot == "unitree_hg" ? "UnitreeHgPort" : "DdsRobotPort")
+     << ", real time; the distances above are our distance module on the MEASURED "
         "joint positions)\n";
   os << "  measured below d_r    " << p.below_d_r << " cycles (d_r = " << d_r * 1000.0 << " mm)\n";
   os << "  MuJoCo contacts       " << p.contact_samples << " of " << p.contacts_received
      << " RobotContacts samples name a pair closer than d_r; robot's contact steps " << p.total_contact_steps;
-  if (std::isfinite(p.min_contact)) os << "; smallest " << p.min_contact * 1000.0 << " mm (" << p.min_contact_pair << ")";
+  if (std::isfinite(p.min_contact))
+    os << "; smallest " << p.min_contact * 1000.0 << " mm (" << p.min_contact_pair << ")";
   os << "\n";
   const char* side[2] = {"left", "right"};
   for (int a = 0; a < 2; ++a)
@@ -265,7 +271,8 @@ void addOptions(CLI::App& app, SimArgs& a) {
   app.add_option("scenario", a.scenario_name, "scenario name (see --list) or 'all'");
   app.add_flag("--list", a.list, "list the scenarios");
   app.add_option("--out", a.out_dir, "output folder (created)");
-  app.add_flag("--no-avoidance", a.no_avoidance, "run with collision avoidance AND the e-stop off (the paper's comparison; simulation only)");
+  app.add_flag("--no-avoidance", a.no_avoidance,
+               "run with collision avoidance AND the e-stop off (the paper's comparison; simulation only)");
   app.add_option("--mode", a.mode, "avoidance variant")->check(CLI::IsMember({"one_dof", "three_dof"}));
   app.add_option("--urdf", a.urdf, "robot URDF")->default_str(reflex::common::defaultUrdf());
   app.add_option("--collision", a.collision, "collision configuration YAML (default: next to the URDF)");
@@ -329,8 +336,8 @@ int writePosturesFrom(SimArgs& a) {
 /// the robot already on the bus (dds), started at the rest configuration; judged by the robot's own
 /// measurements, and compared with the same run on the kinematic robot.
 SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& cm, const Scenario& scenario,
-                   const SimOptions& opt, const fs::path& dir, const std::string& csv, const char* label,
-                   int run_index, std::ostream& summary) {
+                   const SimOptions& opt, const fs::path& dir, const std::string& csv, const char* label, int run_index,
+                   std::ostream& summary) {
   const Scenario* sc = &scenario;
   const int robot_domain = a.robot_domain;
   // A robot over DDS: a fresh reflex_mujoco per run (mujoco), started at the rest configuration.
@@ -346,8 +353,9 @@ SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& 
   fig.domain = robot_domain;
   if (a.robot_side == "unitree_hg") {
     po.interface = "unitree_hg";
-    po.joint_map = !a.joint_map.empty() ? a.joint_map
-                                      : (fs::path(a.urdf).parent_path() / (fs::path(a.urdf).stem().string() + ".hg.yaml")).string();
+    po.joint_map = !a.joint_map.empty()
+                       ? a.joint_map
+                       : (fs::path(a.urdf).parent_path() / (fs::path(a.urdf).stem().string() + ".hg.yaml")).string();
     po.ramp_time = a.ramp_time;
     fig.ramp_time = a.ramp_time;
   }
@@ -355,12 +363,13 @@ SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& 
     po.robot_binary = reflex::common::executableDir() + "/reflex_mujoco";
     po.robot_args = {"--urdf", a.urdf};
     if (!a.collision.empty()) po.robot_args.insert(po.robot_args.end(), {"--collision", a.collision});
-    fig.log = (dir / (run_index == 0 ? "reflex_mujoco.log" : "reflex_mujoco_" + std::to_string(run_index) + ".log"))
-                  .string();
+    fig.log =
+        (dir / (run_index == 0 ? "reflex_mujoco.log" : "reflex_mujoco_" + std::to_string(run_index) + ".log")).string();
     po.robot_log = fig.log;
   }
-  std::cout << "  " << sc->name << " (" << label << "): " << (a.robot_side != "dds" ? "starting reflex_mujoco" : "joining")
-            << " on domain " << robot_domain << ", then " << sc->duration << " s in real time ..." << std::endl;
+  std::cout << "  " << sc->name << " (" << label
+            << "): " << (a.robot_side != "dds" ? "starting reflex_mujoco" : "joining") << " on domain " << robot_domain
+            << ", then " << sc->duration << " s in real time ..." << std::endl;
   SimResult r;
   double wall = 0.0;
   {
@@ -400,16 +409,18 @@ SimResult runOnBus(const SimArgs& a, const Model& model, const ControllerModel& 
 }
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_sim: the paper's experiments on the kinematic robot (in process, no DDS), or on a robot over DDS\n"
-               "in real time (--robot mujoco spawns reflex_mujoco on its own domain; --robot dds joins a robot already\n"
-               "on the bus), through the same onboard controller and scenario scripts"};
+  CLI::App app{
+      "reflex_sim: the paper's experiments on the kinematic robot (in process, no DDS), or on a robot over DDS\n"
+      "in real time (--robot mujoco spawns reflex_mujoco on its own domain; --robot dds joins a robot already\n"
+      "on the bus), through the same onboard controller and scenario scripts"};
   SimArgs args;
   addOptions(app, args);
   if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
   const bool over_bus = args.robot_side != "kinematic";
   if (over_bus) {
     try {
-      args.robot_domain = args.robot_side != "dds" ? args.domain.value_or(197) : reflex::bus::resolveDomainId(args.domain);
+      args.robot_domain =
+          args.robot_side != "dds" ? args.domain.value_or(197) : reflex::bus::resolveDomainId(args.domain);
     } catch (const std::exception& e) {
       return reflex::reportException("reflex_sim", e);
     }
@@ -425,7 +436,8 @@ int main(int argc, char** argv) {
   if (!args.postures_from.empty()) return reflex::runGuarded("reflex_sim", [&] { return writePosturesFrom(args); });
 
   if (args.list) {
-    for (const auto& s : builtinScenarios()) std::printf("%-22s %-22s %s\n", s.name.c_str(), s.paper.c_str(), s.description.c_str());
+    for (const auto& s : builtinScenarios())
+      std::printf("%-22s %-22s %s\n", s.name.c_str(), s.paper.c_str(), s.description.c_str());
     return finish(0);
   }
   if (args.scenario_name.empty()) {
@@ -438,7 +450,8 @@ int main(int argc, char** argv) {
   } else if (const Scenario* s = findScenario(args.scenario_name)) {
     chosen.push_back(s);
   } else {
-    std::fprintf(stderr, "reflex_sim: error: unknown scenario '%s' (reflex_sim --list names them)\n", args.scenario_name.c_str());
+    std::fprintf(stderr, "reflex_sim: error: unknown scenario '%s' (reflex_sim --list names them)\n",
+                 args.scenario_name.c_str());
     return 2;
   }
   try {
@@ -472,15 +485,19 @@ int main(int argc, char** argv) {
         }
         return runOnBus(args, model, cm, *sc, opt, dir, csv, label, run_index++, summary);
       };
-      const AvoidanceMode m = args.no_avoidance ? AvoidanceMode::kOff
-                                           : (args.mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
-      const SimResult main = run(m, "timeseries.csv", args.no_avoidance ? "avoidance off, e-stop off" : args.mode.c_str());
+      const AvoidanceMode m = args.no_avoidance
+                                  ? AvoidanceMode::kOff
+                                  : (args.mode == "three_dof" ? AvoidanceMode::kThreeDof : AvoidanceMode::kOneDof);
+      const SimResult main =
+          run(m, "timeseries.csv", args.no_avoidance ? "avoidance off, e-stop off" : args.mode.c_str());
       writePostures(model, main, (dir / "postures.csv").string(), evenPicks(main.samples.size(), 6));
-      if (sc->name == "one_vs_three_dof" && !args.no_avoidance) run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
+      if (sc->name == "one_vs_three_dof" && !args.no_avoidance)
+        run(AvoidanceMode::kThreeDof, "timeseries_3dof.csv", "three_dof");
       closeChecked(summary, summary_path);
       if (!args.no_plots) {
         const std::string script = reflex::common::executableDir() + "/reflex_plot_sim.py";
-        const std::string cmd = std::string(REFLEX_PYTHON) + " '" + script + "' '" + dir.string() + "' '" + sc->name + "'";
+        const std::string cmd =
+            std::string(REFLEX_PYTHON) + " '" + script + "' '" + dir.string() + "' '" + sc->name + "'";
         if (std::system(cmd.c_str()) != 0) {
           std::fprintf(stderr, "reflex_sim: warning: plotting failed (%s)\n", cmd.c_str());
           ++failures;

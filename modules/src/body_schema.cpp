@@ -16,7 +16,8 @@ void GraspedBarModule::configure(const ConfigNode& c, const RobotState& robot) {
   config_.segment = c.string("segment", config_.segment);
   config_.a_L = c.vec3("point_a", config_.a_L);
   config_.b_L = c.vec3("point_b", config_.b_L);
-  if ((config_.a_L - config_.b_L).norm() < 1e-6) c.fail("point_b", "equals point_a", "a point different from point_a (a capsule)");
+  if ((config_.a_L - config_.b_L).norm() < 1e-6)
+    c.fail("point_b", "equals point_a", "a point different from point_a (a capsule)");
   config_.radius = c.number("radius", config_.radius, 0.001, 0.5);
   config_.motion_priority = c.integer("motion_priority", config_.motion_priority, 0, 1000);
   config_.spin_rate = c.number("spin_rate", config_.spin_rate, -20.0, 20.0);
@@ -85,9 +86,7 @@ void GraspedBarModule::stop(ModuleContext& ctx) {
   attached_ = false;
 }
 
-std::string GraspedBarModule::status() const {
-  return config_.segment + (attached_ ? " attached" : " detached");
-}
+std::string GraspedBarModule::status() const { return config_.segment + (attached_ ? " attached" : " detached"); }
 
 // ---------------------------------------------------------------- occlusion (Sec. 8.5.2)
 
@@ -105,9 +104,12 @@ void OcclusionModule::configure(const ConfigNode& c, const RobotState& /*robot*/
   const auto hands = c.strings("cover_hands", {"left", "right"});
   config_.cover_hands[0] = config_.cover_hands[1] = false;
   for (const auto& h : hands) {
-    if (h == "left") config_.cover_hands[0] = true;
-    else if (h == "right") config_.cover_hands[1] = true;
-    else c.fail("cover_hands", "not a list of hands", "a list of left / right");
+    if (h == "left")
+      config_.cover_hands[0] = true;
+    else if (h == "right")
+      config_.cover_hands[1] = true;
+    else
+      c.fail("cover_hands", "not a list of hands", "a list of left / right");
   }
   config_.lost_timeout = c.number("lost_timeout", config_.lost_timeout, 0.05, 60.0);
   config_.update_period = c.number("update_period", config_.update_period, 0.005, 1.0);
@@ -172,11 +174,13 @@ void OcclusionModule::update(ModuleContext& ctx) {
     s.a_L = X_head_B * cam_B;
     s.b_L = s.a_L + Eigen::Vector3d(0.0, 0.0, 0.01);
   }
-  const bool moved = !published_ || (s.a_L - last_.a_L).norm() > config_.min_change ||
-                     (s.b_L - last_.b_L).norm() > config_.min_change;
+  const bool moved =
+      !published_ || (s.a_L - last_.a_L).norm() > config_.min_change || (s.b_L - last_.b_L).norm() > config_.min_change;
   if (published_ && s.enabled != last_.enabled) {
     ctx.log(std::string("'") + config_.segment + "' switched " + (s.enabled ? "on" : "off") +
-            (covered_ ? " (a hand covers the object)" : !seen ? " (object not seen)" : ""));
+            (covered_ ? " (a hand covers the object)"
+             : !seen  ? " (object not seen)"
+                      : ""));
   }
   if (moved || s.enabled != last_.enabled) {
     ctx.attachSegment(s);
@@ -206,8 +210,10 @@ void WalkingModule::configure(const ConfigNode& c, const RobotState& robot) {
   config_.x_joint = c.string("x_joint", config_.x_joint);
   config_.y_joint = c.string("y_joint", config_.y_joint);
   if (config_.relative) {
-    if (robot.model().qIndex(config_.x_joint) < 0) c.fail("x_joint", "no such joint in the robot", "a joint of the robot");
-    if (robot.model().qIndex(config_.y_joint) < 0) c.fail("y_joint", "no such joint in the robot", "a joint of the robot");
+    if (robot.model().qIndex(config_.x_joint) < 0)
+      c.fail("x_joint", "no such joint in the robot", "a joint of the robot");
+    if (robot.model().qIndex(config_.y_joint) < 0)
+      c.fail("y_joint", "no such joint in the robot", "a joint of the robot");
   }
 }
 

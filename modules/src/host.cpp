@@ -15,12 +15,9 @@ namespace reflex::modules {
 
 const char* priorityName(ArmPriority p) {
   switch (p) {
-    case ArmPriority::kLeftHigher:
-      return "left_higher";
-    case ArmPriority::kRightHigher:
-      return "right_higher";
-    case ArmPriority::kEqual:
-      break;
+    case ArmPriority::kLeftHigher: return "left_higher";
+    case ArmPriority::kRightHigher: return "right_higher";
+    case ArmPriority::kEqual: break;
   }
   return "equal";
 }
@@ -33,17 +30,21 @@ HostConfig parseHostConfig(const ConfigNode& root, const ModuleRegistry& registr
   c.process = root.string("process", c.process);
   c.robot = readRobotConfig(root.child("robot"));
   const ConfigNode in = root.child("inputs");
-  in.rejectUnknown({"known_objects", "future_tolerance", "max_range", "frames", "object_sources", "joint_state_sources"});
+  in.rejectUnknown(
+      {"known_objects", "future_tolerance", "max_range", "frames", "object_sources", "joint_state_sources"});
   c.inputs.known_objects = in.strings("known_objects", {});
   c.inputs.future_tolerance = in.number("future_tolerance", c.inputs.future_tolerance, 0.0, 60.0);
   c.inputs.max_range = in.number("max_range", c.inputs.max_range, 0.1, 100.0);
   c.inputs.frames = in.strings("frames", c.inputs.frames);
   if (c.inputs.frames.empty()) in.fail("frames", "names no frame", "at least one base frame");
   // Writers whose samples are accepted (identities, never a name inside the message).
-  for (auto [key, list, example] : {std::make_tuple("object_sources", &c.inputs.object_sources, "vision"),
-                                    std::make_tuple("joint_state_sources", &c.inputs.joint_state_sources, "controller")}) {
+  for (auto [key, list, example] :
+       {std::make_tuple("object_sources", &c.inputs.object_sources, "vision"),
+        std::make_tuple("joint_state_sources", &c.inputs.joint_state_sources, "controller")}) {
     *list = in.strings(key, *list);
-    if (list->empty()) in.fail(key, "names no identity", std::string("at least one identity whose samples are accepted (e.g. ") + example + ")");
+    if (list->empty())
+      in.fail(key, "names no identity",
+              std::string("at least one identity whose samples are accepted (e.g. ") + example + ")");
     for (const auto& src : *list) {
       if (src.empty()) in.fail(key, "holds an empty identity name", "a list of non-empty identity names");
     }
@@ -72,11 +73,23 @@ HostConfig loadHostConfig(const std::string& path, const ModuleRegistry& registr
 namespace {
 
 // The calls the host makes into a module.
-enum ModuleCall { kFactory, kConfigure, kClaims, kStepPeriod, kStart, kOnObjects, kOnJointState, kStep, kStop,
-                  kStatus, kDestructor, kCallCount };
+enum ModuleCall {
+  kFactory,
+  kConfigure,
+  kClaims,
+  kStepPeriod,
+  kStart,
+  kOnObjects,
+  kOnJointState,
+  kStep,
+  kStop,
+  kStatus,
+  kDestructor,
+  kCallCount
+};
 constexpr std::array<const char*, kCallCount> kCallNames = {
-    "the factory", "configure()", "claims()", "stepPeriod()", "start()", "onObjects()", "onJointState()",
-    "step()", "stop()", "status()", "the destructor"};
+    "the factory",    "configure()", "claims()", "stepPeriod()", "start()",       "onObjects()",
+    "onJointState()", "step()",      "stop()",   "status()",     "the destructor"};
 
 }  // namespace
 
@@ -195,8 +208,11 @@ class BehaviorHost::Context final : public ModuleContext {
 
 BehaviorHost::BehaviorHost(const HostConfig& config, const ModuleRegistry& registry, OutputSink& sink, LogFn log,
                            const std::string& only_module)
-    : process_name_(config.process), inputs_(config.inputs), joint_state_period_(config.joint_state_period),
-      sink_(sink), log_(std::move(log)) {
+    : process_name_(config.process),
+      inputs_(config.inputs),
+      joint_state_period_(config.joint_state_period),
+      sink_(sink),
+      log_(std::move(log)) {
   if (!log_) log_ = [](const std::string& line) { std::fprintf(stderr, "%s\n", line.c_str()); };
   robot_ = std::make_unique<RobotState>(config.robot);
   std::string names;
@@ -454,9 +470,9 @@ std::string BehaviorHost::status() const {
     const std::string st = callModule(*s, kStatus, [&] { return s->module->status(); });
     m << s->module->name() << (st.empty() ? "" : "[" + st + "]") << " ";
   }
-  m << "frames=" << stats_.frames_received << " objects=" << stats_.objects_accepted
-    << " rejected=" << stats_.rejectedObjects() + stats_.frames_rejected_future + stats_.frames_rejected_frame +
-                           stats_.frames_rejected_source
+  m << "frames=" << stats_.frames_received << " objects=" << stats_.objects_accepted << " rejected="
+    << stats_.rejectedObjects() + stats_.frames_rejected_future + stats_.frames_rejected_frame +
+           stats_.frames_rejected_source
     << " joint_states=" << stats_.joint_states;
   return m.str();
 }

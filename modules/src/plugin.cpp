@@ -22,8 +22,7 @@ std::vector<std::string> pluginPaths(const ConfigNode& root) {
 PluginInfo loadModulePlugin(const std::string& path, ModuleRegistry& registry) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec))
-    throw ConfigError("module plugin '" + path + "': no such file");
+  if (!fs::is_regular_file(path, ec)) throw ConfigError("module plugin '" + path + "': no such file");
   const std::string absolute = fs::absolute(path, ec).lexically_normal().string();
   // RTLD_NOW: an unresolved symbol is an error here, not a crash in the middle of a run. RTLD_LOCAL: two
   // plugins never see each other's symbols. dlopen runs the library's static constructors before it
@@ -79,8 +78,8 @@ PluginInfo loadModulePlugin(const std::string& path, ModuleRegistry& registry) {
   if (info.types.empty()) throw ConfigError("module plugin '" + path + "': registers no module type");
   for (const std::string& t : info.types) {
     if (registry.has(t))
-      throw ConfigError("module plugin '" + path + "': module type '" + t + "' is already registered (known: " +
-                        registry.typeList() + ")");
+      throw ConfigError("module plugin '" + path + "': module type '" + t +
+                        "' is already registered (known: " + registry.typeList() + ")");
   }
   registry.merge(std::move(added));
   // The handle stays open for the life of the process: the registered factories are its code.
@@ -89,7 +88,8 @@ PluginInfo loadModulePlugin(const std::string& path, ModuleRegistry& registry) {
 
 std::vector<PluginInfo> loadModulePlugins(const std::string& config_path, ModuleRegistry& registry) {
   std::vector<PluginInfo> out;
-  for (const std::string& p : pluginPaths(ConfigNode::loadFile(config_path))) out.push_back(loadModulePlugin(p, registry));
+  for (const std::string& p : pluginPaths(ConfigNode::loadFile(config_path)))
+    out.push_back(loadModulePlugin(p, registry));
   return out;
 }
 

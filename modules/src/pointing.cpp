@@ -7,8 +7,8 @@
 
 namespace reflex::modules {
 
-std::optional<Eigen::Vector3d> pointingTarget(const Eigen::Vector3d& s_B, const Eigen::Vector3d& o_B,
-                                              PointingMode mode, double ray_distance, double reach) {
+std::optional<Eigen::Vector3d> pointingTarget(const Eigen::Vector3d& s_B, const Eigen::Vector3d& o_B, PointingMode mode,
+                                              double ray_distance, double reach) {
   const Eigen::Vector3d d_B = o_B - s_B;
   const double dist = d_B.norm();
   if (!(dist > 1e-6) || !std::isfinite(dist)) return std::nullopt;
@@ -19,9 +19,8 @@ std::optional<Eigen::Vector3d> pointingTarget(const Eigen::Vector3d& s_B, const 
 }
 
 void PointingModule::configure(const ConfigNode& c, const RobotState& robot) {
-  c.rejectUnknown({"hands", "objects", "mode", "ray_distance", "reach", "lost_timeout", "min_confidence",
-                   "assignment", "swap_margin", "swap_hold", "priority_rule", "priority_margin", "priority_tie",
-                   "step_period"});
+  c.rejectUnknown({"hands", "objects", "mode", "ray_distance", "reach", "lost_timeout", "min_confidence", "assignment",
+                   "swap_margin", "swap_hold", "priority_rule", "priority_margin", "priority_tie", "step_period"});
   const auto hands = c.strings("hands", {"left", "right"});
   config_.hands[0] = config_.hands[1] = false;
   for (const auto& h : hands) {
@@ -45,9 +44,9 @@ void PointingModule::configure(const ConfigNode& c, const RobotState& robot) {
       c.choice("assignment", "sticky", {"sticky", "nearest"}) == "sticky" ? Assignment::kSticky : Assignment::kNearest;
   config_.swap_margin = c.number("swap_margin", config_.swap_margin, 0.0, 2.0);
   config_.swap_hold = c.number("swap_hold", config_.swap_hold, 0.0, 60.0);
-  const std::string rule =
-      c.choice("priority_rule", "first_assigned", {"first_assigned", "nearer_object", "equal", "left", "right", "none"});
-  config_.priority_rule = rule == "first_assigned" ? PriorityRule::kFirstAssigned
+  const std::string rule = c.choice("priority_rule", "first_assigned",
+                                    {"first_assigned", "nearer_object", "equal", "left", "right", "none"});
+  config_.priority_rule = rule == "first_assigned"  ? PriorityRule::kFirstAssigned
                           : rule == "nearer_object" ? PriorityRule::kNearerObject
                           : rule == "equal"         ? PriorityRule::kEqual
                           : rule == "left"          ? PriorityRule::kLeft
@@ -173,15 +172,11 @@ void PointingModule::considerReassignment(ModuleContext& ctx) {
 ArmPriority PointingModule::decidePriority(const RobotState& robot) {
   switch (config_.priority_rule) {
     case PriorityRule::kNone:
-    case PriorityRule::kEqual:
-      return ArmPriority::kEqual;
-    case PriorityRule::kLeft:
-      return ArmPriority::kLeftHigher;
-    case PriorityRule::kRight:
-      return ArmPriority::kRightHigher;
+    case PriorityRule::kEqual: return ArmPriority::kEqual;
+    case PriorityRule::kLeft: return ArmPriority::kLeftHigher;
+    case PriorityRule::kRight: return ArmPriority::kRightHigher;
     case PriorityRule::kFirstAssigned:
-    case PriorityRule::kNearerObject:
-      break;
+    case PriorityRule::kNearerObject: break;
   }
   const bool given[2] = {!assign_[0].object.empty(), !assign_[1].object.empty()};
   if (!given[0] && !given[1]) return ArmPriority::kEqual;
@@ -193,8 +188,10 @@ ArmPriority PointingModule::decidePriority(const RobotState& robot) {
   }
   double d[2];
   for (Hand h : kBothHands) d[handIndex(h)] = (tracks_[assign_[handIndex(h)].object].p_B - robot.shoulder_B(h)).norm();
-  if (priority_ == ArmPriority::kLeftHigher) return d[1] + config_.priority_margin < d[0] ? ArmPriority::kRightHigher : priority_;
-  if (priority_ == ArmPriority::kRightHigher) return d[0] + config_.priority_margin < d[1] ? ArmPriority::kLeftHigher : priority_;
+  if (priority_ == ArmPriority::kLeftHigher)
+    return d[1] + config_.priority_margin < d[0] ? ArmPriority::kRightHigher : priority_;
+  if (priority_ == ArmPriority::kRightHigher)
+    return d[0] + config_.priority_margin < d[1] ? ArmPriority::kLeftHigher : priority_;
   if (d[0] < d[1]) return ArmPriority::kLeftHigher;
   if (d[1] < d[0]) return ArmPriority::kRightHigher;
   return higher(config_.priority_tie);
@@ -210,10 +207,11 @@ void PointingModule::publish(ModuleContext& ctx) {
       ctx.setHand(h, HandTarget::none());
       continue;
     }
-    const auto target = pointingTarget(robot.shoulder_B(h), tracks_[a.object].p_B, config_.mode,
-                                       config_.ray_distance, config_.reach);
+    const auto target =
+        pointingTarget(robot.shoulder_B(h), tracks_[a.object].p_B, config_.mode, config_.ray_distance, config_.reach);
     if (!target) {  // the object is at the shoulder: nothing to point along
-      if (!degenerate_logged_[i]) ctx.log(std::string("'") + a.object + "' is at the shoulder: " + handName(h) + " hand has no target");
+      if (!degenerate_logged_[i])
+        ctx.log(std::string("'") + a.object + "' is at the shoulder: " + handName(h) + " hand has no target");
       degenerate_logged_[i] = true;
       ctx.setHand(h, HandTarget::none());
       continue;

@@ -11,8 +11,8 @@ namespace reflex::modules {
 std::string defaultRobotUrdf() { return reflex::common::defaultUrdf(); }
 
 RobotConfig readRobotConfig(const ConfigNode& node) {
-  node.rejectUnknown({"urdf", "collision", "left_shoulder", "right_shoulder", "left_hand", "right_hand",
-                      "head", "head_camera", "hand_point"});
+  node.rejectUnknown({"urdf", "collision", "left_shoulder", "right_shoulder", "left_hand", "right_hand", "head",
+                      "head_camera", "hand_point"});
   RobotConfig c;
   if (node.has("urdf")) c.urdf = node.resolvePath(node.string("urdf", ""));
   if (node.has("collision")) c.collision = node.resolvePath(node.string("collision", ""));
@@ -87,8 +87,6 @@ double RobotState::jointPosition(const std::string& name, double def) const {
 
 Eigen::Vector3d RobotState::shoulder_B(Hand h) const { return X_B_L(shoulder_link_[handIndex(h)]).translation(); }
 
-Eigen::Vector3d RobotState::handPoint_B(Hand h) const {
-  return X_B_L(hand_link_[handIndex(h)]) * config_.hand_point_L;
-}
+Eigen::Vector3d RobotState::handPoint_B(Hand h) const { return X_B_L(hand_link_[handIndex(h)]) * config_.hand_point_L; }
 
 }  // namespace reflex::modules

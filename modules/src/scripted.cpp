@@ -81,7 +81,8 @@ std::vector<TimelineEvent> readTimelineCsv(const std::string& path) {
       bool ok = false;
       e.kind = TimelineEvent::Kind::kPriority;
       e.priority = parsePriority(cols[2], ok);
-      if (!ok) throw ConfigError(where + ": column 'x': expected left, right or equal for a priority, got '" + cols[2] + "'");
+      if (!ok)
+        throw ConfigError(where + ": column 'x': expected left, right or equal for a priority, got '" + cols[2] + "'");
     } else if (cols[1] == "left" || cols[1] == "right") {
       e.hand = cols[1] == "left" ? Hand::kLeft : Hand::kRight;
       if (cols[2] == "none") {
@@ -109,8 +110,7 @@ std::vector<TimelineEvent> readTimelineYaml(const ConfigNode& node, const std::s
   for (const ConfigNode& e : node.list(key)) {
     e.rejectUnknown({"t", "left", "right", "priority"});
     const double t = e.requiredNumber("t", 0.0, 1e6);
-    if (!e.has("left") && !e.has("right") && !e.has("priority"))
-      e.failAt("t", "event without left, right or priority");
+    if (!e.has("left") && !e.has("right") && !e.has("priority")) e.failAt("t", "event without left, right or priority");
     checkOrder(events, e.where("t"), t);
     for (Hand h : kBothHands) {
       const char* k = handName(h);
@@ -123,7 +123,8 @@ std::vector<TimelineEvent> readTimelineYaml(const ConfigNode& node, const std::s
         ev.target = HandTarget::none();
       } else {
         const Eigen::Vector3d p = e.vec3(k, Eigen::Vector3d::Zero());
-        if (p.norm() > kMaxTargetDistance) e.fail(k, "target farther than 2 m from the base origin", "[x, y, z] within 2 m, or none");
+        if (p.norm() > kMaxTargetDistance)
+          e.fail(k, "target farther than 2 m from the base origin", "[x, y, z] within 2 m, or none");
         ev.target = HandTarget::at(p);
       }
       events.push_back(ev);
@@ -155,14 +156,17 @@ void ScriptedModule::configure(const ConfigNode& c, const RobotState& /*robot*/)
       events_ = readTimelineYaml(ConfigNode::loadFile(path), "timeline");
     }
   }
-  if (events_.empty()) c.fail(c.has("timeline") ? "timeline" : "file", "the timeline has no events", "at least one event");
+  if (events_.empty())
+    c.fail(c.has("timeline") ? "timeline" : "file", "the timeline has no events", "at least one event");
   loop_period_ = c.number("loop_period", 0.0, 0.0, 1e6);
   if (loop_period_ > 0.0 && loop_period_ <= events_.back().t)
     c.fail("loop_period", "not longer than the last event's time", "0 (no loop) or longer than the last event's time");
   step_period_ = c.number("step_period", step_period_, 0.001, 1.0);
   for (const auto& e : events_) {
-    if (e.kind == TimelineEvent::Kind::kHand) hands_[handIndex(e.hand)] = true;
-    else priority_ = true;
+    if (e.kind == TimelineEvent::Kind::kHand)
+      hands_[handIndex(e.hand)] = true;
+    else
+      priority_ = true;
   }
 }
 
@@ -187,8 +191,10 @@ void ScriptedModule::advance(ModuleContext& ctx) {
   auto applyUntil = [&](double t) {
     while (next_ < events_.size() && events_[next_].t <= t) {
       const TimelineEvent& e = events_[next_++];
-      if (e.kind == TimelineEvent::Kind::kHand) ctx.setHand(e.hand, e.target);
-      else ctx.setPriority(e.priority);
+      if (e.kind == TimelineEvent::Kind::kHand)
+        ctx.setHand(e.hand, e.target);
+      else
+        ctx.setPriority(e.priority);
     }
   };
   double t = ctx.now().t - t0_;

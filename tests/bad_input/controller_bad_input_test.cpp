@@ -180,8 +180,14 @@ TEST(ControllerBadInput, OldFutureAndDuplicateStampsAreHarmlessAndCannotKeepASil
   auto& targets = run.source->makeWriter<msg::HandTargets>();
   ASSERT_TRUE(run.waitMatched(targets));
   const std::int64_t now = bus::nowNs();
-  const std::int64_t stamps[] = {0, -1, std::numeric_limits<std::int64_t>::min(), std::numeric_limits<std::int64_t>::max(),
-                                 now + 3600LL * 1000000000LL, now - 3600LL * 1000000000LL, now, now};
+  const std::int64_t stamps[] = {0,
+                                 -1,
+                                 std::numeric_limits<std::int64_t>::min(),
+                                 std::numeric_limits<std::int64_t>::max(),
+                                 now + 3600LL * 1000000000LL,
+                                 now - 3600LL * 1000000000LL,
+                                 now,
+                                 now};
   const std::uint64_t seqs[] = {0, 0, 5, 5, 4, 3, std::numeric_limits<std::uint64_t>::max(), 1};
   int sent = 0;
   run.pumpCount(16, 70ms, [&](int k) {
@@ -251,9 +257,10 @@ TEST(ControllerBadInput, OneKilohertzPublisherDoesNotSlowThe200HzLoop) {
   std::sort(periods.begin(), periods.end());
   const double median = periods[periods.size() / 2];
   const double p99 = periods[periods.size() * 99 / 100];
-  std::printf("flood: %.0f samples/s published for %.2f s; controller status %.0f Hz, cycle period median %.0f us, "
-              "p99 %.0f us\n",
-              rate, seconds, static_cast<double>(run.statuses.size()) / seconds, median, p99);
+  std::printf(
+      "flood: %.0f samples/s published for %.2f s; controller status %.0f Hz, cycle period median %.0f us, "
+      "p99 %.0f us\n",
+      rate, seconds, static_cast<double>(run.statuses.size()) / seconds, median, p99);
   EXPECT_GT(rate, 700.0) << "the flood really ran near 1 kHz";
   EXPECT_NEAR(median, 5000.0, 250.0);
   EXPECT_GT(static_cast<double>(run.statuses.size()), 0.75 * 200.0 * seconds);

@@ -68,10 +68,12 @@ TEST(ControllerContract, AvoidanceOffInTheYamlKeepsTheEstopAndEveryOutputSaysSo)
   EXPECT_GE(s.estops, 1) << run.output;
   EXPECT_GT(s.min_distance_mm, 0.0) << "stopped before the arms went through each other";
   EXPECT_NE(run.output.find("running at 100.0 Hz (period 10.000 ms)"), std::string::npos) << run.output;
-  EXPECT_NE(run.output.find("WARNING: THIS RUN IS NOT PROTECTED: collision avoidance OFF by 'avoidance: off' in " + yaml),
-            std::string::npos)
+  EXPECT_NE(
+      run.output.find("WARNING: THIS RUN IS NOT PROTECTED: collision avoidance OFF by 'avoidance: off' in " + yaml),
+      std::string::npos)
       << run.output;
-  EXPECT_NE(run.output.find("protection REDUCED: collision avoidance OFF"), std::string::npos) << "exit line\n" << run.output;
+  EXPECT_NE(run.output.find("protection REDUCED: collision avoidance OFF"), std::string::npos) << "exit line\n"
+                                                                                               << run.output;
 }
 
 // Item 3: the e-stop goes off only by its own loud option, and the run says so everywhere.
@@ -223,7 +225,8 @@ TEST(ControllerContract, ALogWriteErrorDuringTheRunIsExitCode3NamingTheFile) {
   // ulimit -f counts 1024-byte blocks in bash: 16 KB hold the header and a few dozen rows.
   // UDP only: Fast DDS's shared-memory segments would exceed the limit themselves.
   const std::string script = "ulimit -f 16; exec '" + controllerExe() +
-                             "' --domain 187 --participant-profile reflex_participant_udp --duration 2 --log '" + csv + "'";
+                             "' --domain 187 --participant-profile reflex_participant_udp --duration 2 --log '" + csv +
+                             "'";
   testing::ChildProcess shell({"/bin/bash", "-c", script}, out);
   ASSERT_TRUE(shell.started());
   const int rc = shell.wait(30s);
@@ -267,7 +270,8 @@ TEST(ControllerContract, ASecondControllerOnTheDomainRefusesToStart) {
   ASSERT_EQ(first.finish(s), 0) << first.output;
   ASSERT_TRUE(s.found) << first.output;
   EXPECT_NE(first.output.find("another controller ('controller_b', robot 'asimo_like')"), std::string::npos)
-      << "the first one says a second one showed up\n" << first.output;
+      << "the first one says a second one showed up\n"
+      << first.output;
 }
 
 }  // namespace

@@ -80,8 +80,9 @@ class ControllerRun {
  public:
   ControllerRun(int domain, double duration_s, const std::string& name, std::vector<std::string> extra = {})
       : log_(::testing::TempDir() + "bad_input_" + name + ".log") {
-    std::vector<std::string> argv = {controllerExe(), "--domain", std::to_string(domain), "--duration",
-                                     std::to_string(duration_s), "--input-timeout", "1.0"};
+    std::vector<std::string> argv = {
+        controllerExe(),   "--domain", std::to_string(domain), "--duration", std::to_string(duration_s),
+        "--input-timeout", "1.0"};
     argv.insert(argv.end(), extra.begin(), extra.end());
     process_ = std::make_unique<testing::ChildProcess>(argv, log_);
     bus::BusConfig config;
@@ -132,7 +133,8 @@ class ControllerRun {
   /// least `value`, at most `limit`; whether it got there. For lockstep: the next bad sample is
   /// sent only once the controller has counted the last one, so none is replaced unread.
   template <class Counter>
-  bool waitStatusCount(Counter counter, std::uint64_t value, std::chrono::milliseconds limit = std::chrono::seconds(3)) {
+  bool waitStatusCount(Counter counter, std::uint64_t value,
+                       std::chrono::milliseconds limit = std::chrono::seconds(3)) {
     const auto end = std::chrono::steady_clock::now() + limit;
     do {
       drain();

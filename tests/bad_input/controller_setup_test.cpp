@@ -13,9 +13,9 @@ namespace reflex::bad_input {
 namespace {
 
 struct Case {
-  std::string name;                 // test case name (also the catalogue row)
-  std::vector<std::string> args;    // after the executable
-  std::string expect;               // text the error output must contain
+  std::string name;               // test case name (also the catalogue row)
+  std::vector<std::string> args;  // after the executable
+  std::string expect;             // text the error output must contain
 };
 
 // A fresh folder per run: nothing left over from an earlier run (e.g. a collision YAML that sits
@@ -37,7 +37,9 @@ std::vector<Case> cases() {
   // Bad files, written once.
   writeFile(tmp("malformed.urdf"), "<robot name='x'><link name='a'>");
   writeFile(tmp("empty.urdf"), "");
-  writeFile(tmp("binary.urdf"), std::string("\x7f" "ELF\x02\x01\x01\0\0\0", 10));
+  writeFile(tmp("binary.urdf"), std::string("\x7f"
+                                            "ELF\x02\x01\x01\0\0\0",
+                                            10));
   writeFile(tmp("mesh.urdf"),
             "<robot name='m'><link name='base'><collision><geometry><mesh filename='x.stl'/></geometry></collision>"
             "</link></robot>");
@@ -50,7 +52,8 @@ std::vector<Case> cases() {
   writeFile(tmp("unknown_key.controller.yaml"), "d_z: 0.01\n");
   writeFile(tmp("unknown_joint.controller.yaml"), "arms:\n  left:\n    joints: [l_no_such_joint]\n");
   // small_humanoid's own configuration with d_r 20 mm: its feet are 11.63 mm apart at rest.
-  writeFile(tmp("red_rest.controller.yaml"), readFile(robots + "small_humanoid.controller.yaml") + "d_r: 0.02\nd_b: 0.03\n");
+  writeFile(tmp("red_rest.controller.yaml"),
+            readFile(robots + "small_humanoid.controller.yaml") + "d_r: 0.02\nd_b: 0.03\n");
   writeFile(tmp("truncated.xml"), base_profiles.substr(0, base_profiles.size() / 2));
   writeFile(tmp("not_xml.xml"), "this is not XML at all {\n");
   writeFile(tmp("bad_qos.xml"),
@@ -67,7 +70,8 @@ std::vector<Case> cases() {
     std::string without_udp = base_profiles;
     const auto a = without_udp.find("<participant profile_name=\"reflex_participant_udp\">");
     const auto b = without_udp.find("</participant>", a);
-    if (a == std::string::npos || b == std::string::npos) throw std::runtime_error("no reflex_participant_udp in " + profiles);
+    if (a == std::string::npos || b == std::string::npos)
+      throw std::runtime_error("no reflex_participant_udp in " + profiles);
     without_udp.erase(a, b + std::string("</participant>").size() - a);
     writeFile(tmp("no_udp_profile.xml"), without_udp);
   }
@@ -80,9 +84,11 @@ std::vector<Case> cases() {
       {"URDF is a folder", {"--urdf", ::testing::TempDir()}, ::testing::TempDir()},
       {"mesh-only collision URDF", {"--urdf", tmp("mesh.urdf")}, "mesh"},
       {"missing collision YAML", {"--urdf", urdf, "--collision", "/nonexistent/c.yaml"}, "/nonexistent/c.yaml"},
-      {"malformed collision YAML", {"--urdf", urdf, "--collision", tmp("collision_malformed.yaml")},
+      {"malformed collision YAML",
+       {"--urdf", urdf, "--collision", tmp("collision_malformed.yaml")},
        tmp("collision_malformed.yaml")},
-      {"unknown segment in collision YAML", {"--urdf", urdf, "--collision", tmp("collision_unknown.yaml")},
+      {"unknown segment in collision YAML",
+       {"--urdf", urdf, "--collision", tmp("collision_unknown.yaml")},
        "no_such_segment"},
       {"missing controller YAML", {"--controller", "/nonexistent/ctl.yaml"}, "/nonexistent/ctl.yaml"},
       {"malformed controller YAML", {"--controller", tmp("malformed.controller.yaml")}, "YAML syntax error"},
@@ -98,10 +104,12 @@ std::vector<Case> cases() {
       {"truncated profiles XML", {"--domain", d, "--profiles", tmp("truncated.xml")}, tmp("truncated.xml")},
       {"profiles file not XML", {"--domain", d, "--profiles", tmp("not_xml.xml")}, tmp("not_xml.xml")},
       {"bad QoS value in profiles XML", {"--domain", d, "--profiles", tmp("bad_qos.xml")}, tmp("bad_qos.xml")},
-      {"profiles XML without any profile", {"--domain", d, "--profiles", tmp("no_profiles.xml")},
+      {"profiles XML without any profile",
+       {"--domain", d, "--profiles", tmp("no_profiles.xml")},
        tmp("no_profiles.xml")},
       {"unknown participant profile", {"--domain", d, "--participant-profile", "no_such_profile"}, "no_such_profile"},
-      {"profiles XML without the default participant profile", {"--domain", d, "--profiles", tmp("no_udp_profile.xml")},
+      {"profiles XML without the default participant profile",
+       {"--domain", d, "--profiles", tmp("no_udp_profile.xml")},
        "unknown participant QoS profile 'reflex_participant_udp'"},
       {"domain id out of range", {"--domain", "999"}, "999"},
       {"domain id not a number", {"--domain", "abc"}, "abc"},
@@ -110,9 +118,11 @@ std::vector<Case> cases() {
       {"NaN input timeout", {"--input-timeout", "nan"}, "nan"},
       {"unknown option", {"--no-such-option"}, "--no-such-option"},
       // A --log that cannot be written is an error before the loop.
-      {"--log on a full device", {"--domain", d, "--log", reflex::testing::fullDevice()},
+      {"--log on a full device",
+       {"--domain", d, "--log", reflex::testing::fullDevice()},
        "'" + reflex::testing::fullDevice() + "': No space left on device"},
-      {"--log in a missing folder", {"--domain", d, "--log", tmp("no_such_folder/run.csv")},
+      {"--log in a missing folder",
+       {"--domain", d, "--log", tmp("no_such_folder/run.csv")},
        tmp("no_such_folder/run.csv")},
       {"--log is a folder", {"--domain", d, "--log", tmp("")}, "is a directory"},
       // The module name is the key of the heartbeat (at most 255 bytes).

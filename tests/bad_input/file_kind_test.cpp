@@ -123,17 +123,19 @@ TEST(FileKind, EveryLoaderRefusesAFifoADeviceAndAFolderWithinASecond) {
                                     }),
       loader<reflex::vision::VisionError>("camera calibration",
                                           [](const std::string& p) { reflex::vision::loadCameraInfo(p); }),
-      loader<reflex::vision::VisionError>("camera mount", [](const std::string& p) { reflex::vision::loadCameraMount(p); }),
+      loader<reflex::vision::VisionError>("camera mount",
+                                          [](const std::string& p) { reflex::vision::loadCameraMount(p); }),
       loader<reflex::vision::VisionError>("object map", [](const std::string& p) { reflex::vision::loadObjectMap(p); }),
-      loader<reflex::vision::VisionError>("timestamps CSV", [](const std::string& p) { reflex::vision::loadTimestamps(p); }),
+      loader<reflex::vision::VisionError>("timestamps CSV",
+                                          [](const std::string& p) { reflex::vision::loadTimestamps(p); }),
       loader<reflex::vision::VisionError>("ground truth CSV",
                                           [](const std::string& p) { reflex::vision::loadGroundTruth(p); }),
   };
   for (const Loader& l : loaders) {
     for (const auto& [path, kind] : nf.cases()) {
       const int status = runInChild(std::chrono::seconds(1), [&, p = path, k = kind] { return l.run(p, k); });
-      EXPECT_EQ(status, 0) << l.name << " given " << path << " (" << kind << "): "
-                           << (status == -1 ? "still blocked after 1 s" : "status " + std::to_string(status));
+      EXPECT_EQ(status, 0) << l.name << " given " << path << " (" << kind
+                           << "): " << (status == -1 ? "still blocked after 1 s" : "status " + std::to_string(status));
     }
   }
 }
@@ -204,8 +206,9 @@ TEST(OutputFiles, TheRecordingWriterAndTheExporterNameTheFileAndTheCause) {
             "cannot write recording '" + full + "': No space left on device");
   // A folder that does not exist, and a folder in the file's place.
   const std::string missing = message([] { reflex::record::RecordWriter w("/nonexistent_reflex_dir/run.rfx"); });
-  EXPECT_NE(missing.find("folder '/nonexistent_reflex_dir' of output file '/nonexistent_reflex_dir/run.rfx' does not exist"),
-            std::string::npos)
+  EXPECT_NE(
+      missing.find("folder '/nonexistent_reflex_dir' of output file '/nonexistent_reflex_dir/run.rfx' does not exist"),
+      std::string::npos)
       << missing;
   const NonFiles nf;
   EXPECT_NE(message([&] { reflex::record::RecordWriter w(nf.folder); }).find("is a directory"), std::string::npos);
@@ -241,12 +244,12 @@ TEST(OutputFiles, ToolsExitNonZeroNamingTheOutputAndTheCause) {
   };
   const std::vector<Case> cases = {
       {bin + "/reflex_inspect " + urdf + " > " + full, "cannot write the standard output: No space left on device"},
-      {bin + "/reflex_record info " + seed + " > " + full,
-       "cannot write the standard output: No space left on device"},
+      {bin + "/reflex_record info " + seed + " > " + full, "cannot write the standard output: No space left on device"},
       {bin + "/reflex_record export " + seed + " --topic reflex/joint_state --csv " + full,
        "cannot write '" + full + "': No space left on device"},
       {bin + "/reflex_record export " + seed + " --dir /dev/null/csv", "'/dev/null/csv'"},
-      {bin + "/reflex_record record --domain 205 -o " + full + " --duration 1", "'" + full + "': No space left on device"},
+      {bin + "/reflex_record record --domain 205 -o " + full + " --duration 1",
+       "'" + full + "': No space left on device"},
       {bin + "/reflex_record record --domain 205 -o " + nf.dir + "/no/such/run.rfx --duration 1",
        "'" + nf.dir + "/no/such' of output file"},
       {bin + "/reflex_sim target_inside_body --no-plots --out " + nf.dir + "/sim_stdout > " + full,
@@ -283,11 +286,17 @@ TEST(OutputFiles, AnAtomicReplaceNeverReplacesADeviceAFifoOrAFolder) {
   auto kind = [](const std::string& p) {
     struct stat st {};
     if (::lstat(p.c_str(), &st) != 0) return std::string("missing");
-    return std::string(S_ISCHR(st.st_mode) ? "chr" : S_ISFIFO(st.st_mode) ? "fifo" : S_ISDIR(st.st_mode) ? "dir"
-                       : S_ISLNK(st.st_mode) ? "link" : S_ISREG(st.st_mode) ? "reg" : "other");
+    return std::string(S_ISCHR(st.st_mode)    ? "chr"
+                       : S_ISFIFO(st.st_mode) ? "fifo"
+                       : S_ISDIR(st.st_mode)  ? "dir"
+                       : S_ISLNK(st.st_mode)  ? "link"
+                       : S_ISREG(st.st_mode)  ? "reg"
+                                              : "other");
   };
   const std::vector<std::pair<std::string, std::string>> refused = {
-      {dev, "is a character device"}, {nf.fifo, "is a FIFO (named pipe)"}, {nf.folder, "is a directory"},
+      {dev, "is a character device"},
+      {nf.fifo, "is a FIFO (named pipe)"},
+      {nf.folder, "is a directory"},
       {link_dev, "(a link to '" + dev + "') is a character device"}};
   for (const auto& [path, what] : refused) {
     const std::string before = kind(path);
@@ -315,8 +324,10 @@ TEST(OutputFiles, AnAtomicReplaceNeverReplacesADeviceAFifoOrAFolder) {
 
   // reflex_inspect --sample-pairs --write: the same rule, before the sampling.
   const ProcessResult ri = runShell("timeout -s KILL 60 " + std::string(REFLEX_BIN_DIR) + "/reflex_inspect " +
-                                    std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf --sample-pairs 100 "
-                                    "--write " + link_dev + " --force 2>&1");
+                                    std::string(REFLEX_SOURCE_DIR) +
+                                    "/bringup/robots/asimo_like.urdf --sample-pairs 100 "
+                                    "--write " +
+                                    link_dev + " --force 2>&1");
   EXPECT_TRUE(ri.exit_code != 0 && ri.exit_code != -1) << ri.out;
   EXPECT_NE(ri.out.find("--write: output file '" + link_dev + "' (a link to '" + dev + "') is a character device"),
             std::string::npos)

@@ -63,9 +63,8 @@ TEST(LongKeyReplay, ARecordingWithLongKeysIsReplayedWithThoseSamplesRefusedAndCo
 
   const std::string log = ::testing::TempDir() + "long_key_play.log";
   // --commands: the body schema is a command topic, played only when asked.
-  testing::ChildProcess player({std::string(REFLEX_BIN_DIR) + "/reflex_play", file, "--commands", "--domain", "189",
-                                "--delay", "2"},
-                               log);
+  testing::ChildProcess player(
+      {std::string(REFLEX_BIN_DIR) + "/reflex_play", file, "--commands", "--domain", "189", "--delay", "2"}, log);
   ASSERT_TRUE(player.started());
   const int rc = player.wait(30s);
   std::ifstream in(log);

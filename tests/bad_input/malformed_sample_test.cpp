@@ -59,11 +59,11 @@ TEST(MalformedSamples, RawBytesOnTheHandTargetsTopicNeverCrashTheController) {
   std::this_thread::sleep_for(1000ms);  // the controller's reader matches the rogue writer
 
   std::vector<std::vector<std::uint8_t>> samples = {
-      {0x02, 0x00, 0x00, 0x00, 1, 2, 3, 4},             // bad encapsulation (first byte non-zero)
-      {0x00, 0x07, 0x00, 0x00, 1, 2, 3, 4},             // unknown representation id
-      {0x00, 0x01, 0x00, 0x00},                         // header only: body missing
+      {0x02, 0x00, 0x00, 0x00, 1, 2, 3, 4},              // bad encapsulation (first byte non-zero)
+      {0x00, 0x07, 0x00, 0x00, 1, 2, 3, 4},              // unknown representation id
+      {0x00, 0x01, 0x00, 0x00},                          // header only: body missing
       {0x00, 0x01, 0x00, 0x00, 0xff, 0xff, 0xff, 0x7f},  // truncated inside the header fields
-      {},                                               // empty payload
+      {},                                                // empty payload
   };
   // A little-endian header whose source string claims 2^31 bytes.
   std::vector<std::uint8_t> long_string = {0x00, 0x01, 0x00, 0x00};
@@ -79,7 +79,8 @@ TEST(MalformedSamples, RawBytesOnTheHandTargetsTopicNeverCrashTheController) {
   }
   run.drain();
   run.statuses.clear();
-  run.pumpCount(static_cast<int>(samples.size()), 30ms, [&](int k) { writer->write(&samples[static_cast<std::size_t>(k)]); });
+  run.pumpCount(static_cast<int>(samples.size()), 30ms,
+                [&](int k) { writer->write(&samples[static_cast<std::size_t>(k)]); });
   run.pump(1000ms, 50ms, [](int) {});
   EXPECT_GT(run.statuses.size(), 0.75 * 200.0 * (0.03 * samples.size() + 1.0)) << "the controller kept publishing";
   run.expectSafeAndFinite();

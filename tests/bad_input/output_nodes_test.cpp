@@ -84,9 +84,9 @@ struct Nodes {
 };
 
 enum class Kind {
-  kWhole,   ///< a file read back as a whole: every non-regular node refused
-  kFolder,  ///< an output folder: device, FIFO and link to a device refused (a folder is what it wants)
-  kStream,  ///< written through a device or a FIFO; a folder refused
+  kWhole,         ///< a file read back as a whole: every non-regular node refused
+  kFolder,        ///< an output folder: device, FIFO and link to a device refused (a folder is what it wants)
+  kStream,        ///< written through a device or a FIFO; a folder refused
   kFileOrFolder,  ///< a file (as kWhole) or an existing folder to write into (reflex_detect --draw)
 };
 
@@ -153,8 +153,8 @@ TEST(OutputNodes, EveryWritingToolRefusesOrWritesThroughAndLeavesEveryNodeAsItWa
            session + "/left.yaml --calib-right " + session + "/right.yaml --objects " + session +
            "/objects.yaml --quiet --out {OUT}",
        Kind::kFolder},
-      {"reflex_controller --log", bin + "/reflex_controller --urdf " + asimo + " --duration 0.2 --domain 198 --log {OUT}",
-       Kind::kStream},
+      {"reflex_controller --log",
+       bin + "/reflex_controller --urdf " + asimo + " --duration 0.2 --domain 198 --log {OUT}", Kind::kStream},
       {"reflex_vision --dump", bin + "/reflex_vision --session " + session + " --duration 1 --dump {OUT}",
        Kind::kStream},
       {"reflex_record export --csv", bin + "/reflex_record export " + seed + " --topic reflex/joint_state --csv {OUT}",
@@ -185,8 +185,9 @@ TEST(OutputNodes, EveryWritingToolRefusesOrWritesThroughAndLeavesEveryNodeAsItWa
       if (through) {
         EXPECT_EQ(r.exit_code, 0) << what << " is written through\n" << err;
       } else {
-        EXPECT_TRUE(r.exit_code != 0 && r.exit_code != -1 && r.exit_code != 137) << what << ": exit " << r.exit_code
-                                                                                 << "\n" << err;
+        EXPECT_TRUE(r.exit_code != 0 && r.exit_code != -1 && r.exit_code != 137)
+            << what << ": exit " << r.exit_code << "\n"
+            << err;
         EXPECT_NE(err.find("'" + node.path + "'"), std::string::npos) << what << ": the path is not named\n" << err;
         EXPECT_NE(err.find(phrase(node.kind)), std::string::npos) << what << ": the kind is not named\n" << err;
       }

@@ -159,9 +159,11 @@ void expectSafeTruth(const std::string& driver_text, const std::string& controll
   const Truth truth = parseTruth(driver_text);
   ASSERT_TRUE(truth.found) << driver_text;
   const double d_r = control::defaultControllerConfig().params.d_r;
-  std::printf("truth: min distance %.2f mm (%s), max command speed / v_max %.4f, beyond a limit %.3g, non-arm motion %.3g, lied %llu\n",
-              truth.min_distance * 1e3, truth.pair.c_str(), truth.speed_ratio, truth.beyond_limit, truth.other_motion,
-              truth.lied);
+  std::printf(
+      "truth: min distance %.2f mm (%s), max command speed / v_max %.4f, beyond a limit %.3g, non-arm motion %.3g, "
+      "lied %llu\n",
+      truth.min_distance * 1e3, truth.pair.c_str(), truth.speed_ratio, truth.beyond_limit, truth.other_motion,
+      truth.lied);
   EXPECT_GE(truth.min_distance, d_r) << driver_text << controller_text;
   EXPECT_LE(truth.speed_ratio, 1.0 + 1e-9) << controller_text;
   EXPECT_LE(truth.beyond_limit, 1e-12) << controller_text;
@@ -186,8 +188,9 @@ long causeCount(const std::string& text, const std::string& cause) {
 TEST(RobotPortAttack, StateBeyondALimitIsRejectedAndNoCommandExceedsVmax) {
   std::string ctext, dtext;
   std::vector<std::string> details;
-  runAttack({161, {"--lie", "beyond_limit", "--lie-joint", "l_elbow", "--lie-from", "1.5", "--lie-for", "0.3",
-                   "--lie-amount", "0.05"}},
+  runAttack({161,
+             {"--lie", "beyond_limit", "--lie-joint", "l_elbow", "--lie-from", "1.5", "--lie-for", "0.3",
+              "--lie-amount", "0.05"}},
             ctext, dtext, details);
   expectSafeTruth(dtext, ctext);
   EXPECT_GT(parseTruth(dtext).lied, 100u);
@@ -199,9 +202,10 @@ TEST(RobotPortAttack, StateBeyondALimitIsRejectedAndNoCommandExceedsVmax) {
 TEST(RobotPortAttack, AbsurdFiniteValueIsRejectedAndNeverEchoed) {
   std::string ctext, dtext;
   std::vector<std::string> details;
-  runAttack({162, {"--lie", "absurd", "--lie-joint", "l_elbow", "--lie-from", "1.5", "--lie-for", "0.3",
-                   "--lie-amount", "1e300"}},
-            ctext, dtext, details);
+  runAttack(
+      {162,
+       {"--lie", "absurd", "--lie-joint", "l_elbow", "--lie-from", "1.5", "--lie-for", "0.3", "--lie-amount", "1e300"}},
+      ctext, dtext, details);
   expectSafeTruth(dtext, ctext);
   EXPECT_GT(causeCount(ctext, "robot_state_outside_limits"), 10) << ctext;
   EXPECT_TRUE(anyContains(details, "1e+300")) << "the heartbeat's detail names the value";
@@ -210,8 +214,9 @@ TEST(RobotPortAttack, AbsurdFiniteValueIsRejectedAndNeverEchoed) {
 TEST(RobotPortAttack, DuplicatedJointNameIsRejected) {
   std::string ctext, dtext;
   std::vector<std::string> details;
-  runAttack({163, {"--lie", "duplicate", "--lie-joint", "l_elbow", "--lie-from", "1.5", "--lie-for", "0.3",
-                   "--lie-amount", "0.05"}},
+  runAttack({163,
+             {"--lie", "duplicate", "--lie-joint", "l_elbow", "--lie-from", "1.5", "--lie-for", "0.3", "--lie-amount",
+              "0.05"}},
             ctext, dtext, details);
   expectSafeTruth(dtext, ctext);
   EXPECT_GT(causeCount(ctext, "robot_state_duplicate_name"), 10) << ctext;

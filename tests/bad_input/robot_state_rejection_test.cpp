@@ -57,10 +57,10 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   ASSERT_GE(elbow, 0);
 
   const std::string log = ::testing::TempDir() + "robot_state_rejection.controller.log";
-  testing::ChildProcess controller({bad_input::controllerExe(), "--domain", std::to_string(kDomain), "--robot", "dds",
-                                    "--peer-probe", "0", "--participant-profile", "reflex_participant_udp",
-                                    "--duration", "120"},
-                                   log);
+  testing::ChildProcess controller(
+      {bad_input::controllerExe(), "--domain", std::to_string(kDomain), "--robot", "dds", "--peer-probe", "0",
+       "--participant-profile", "reflex_participant_udp", "--duration", "120"},
+      log);
   ASSERT_TRUE(controller.started());
   bus::BusConfig config;
   config.module_name = "test_robot";
@@ -74,7 +74,7 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   ASSERT_TRUE(commands.waitForWriters(1, 15s)) << readFile(log);
   ASSERT_TRUE(status.waitForWriters(1, 15s)) << readFile(log);
 
-  bool extra_joint = false;  // good states with one joint the model lacks (taken on purpose)
+  bool extra_joint = false;           // good states with one joint the model lacks (taken on purpose)
   double q0_override = std::nan("");  // l_elbow's position in good states, if not NaN
   auto good = [&] {
     msg::RobotState st;
@@ -141,8 +141,8 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   std::uint64_t expected = 0;
   // Sends one bad state (spoil edits a good one; `stamped`: spoil set the header, written as is),
   // then asserts the count and the cause from the bus, and that good states are taken again.
-  auto sendBad = [&](Cause& cause, const char* what, const std::function<void(msg::RobotState&)>& spoil,
-                     bool stamped, bus::Writer<msg::RobotState>* via = nullptr) {
+  auto sendBad = [&](Cause& cause, const char* what, const std::function<void(msg::RobotState&)>& spoil, bool stamped,
+                     bus::Writer<msg::RobotState>* via = nullptr) {
     SCOPED_TRACE(what);
     if (::testing::Test::HasFatalFailure()) return;
     msg::RobotState st = good();
@@ -162,7 +162,8 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     ++cause.sent;
     ++expected;
     // No good state until the bad one is counted: each count is then the bad state's alone.
-    const bool counted = ticksUntil(3s, [&] { return latest.rejected_robot_states() >= expected; }, true);
+    const bool counted = ticksUntil(
+        3s, [&] { return latest.rejected_robot_states() >= expected; }, true);
     ASSERT_TRUE(counted) << "rejected_robot_states stayed " << latest.rejected_robot_states() << "\n" << readFile(log);
     EXPECT_EQ(latest.rejected_robot_states(), expected);
     EXPECT_EQ(latest.last_rejection(), cause.name);
@@ -178,25 +179,40 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     st.velocities().erase(st.velocities().begin() + i);
   };
 
-  sendBad(length, "velocities one short", [](msg::RobotState& st) { st.velocities().pop_back(); }, false);
-  sendBad(length, "efforts one short", [](msg::RobotState& st) { st.efforts().assign(st.names().size() - 1, 0.0); }, false);
-  sendBad(length, "one position too many", [](msg::RobotState& st) { st.positions().push_back(0.0); }, false);
-  sendBad(missing, "l_elbow left out", [&](msg::RobotState& st) { drop(st, elbow); }, false);
-  sendBad(missing, "l_elbow misspelt", [&](msg::RobotState& st) { st.names()[static_cast<std::size_t>(elbow)] = "l_elbw"; }, false);
-  sendBad(non_finite, "NaN position", [](msg::RobotState& st) { st.positions()[3] = std::nan(""); }, false);
-  sendBad(non_finite, "+Inf velocity", [](msg::RobotState& st) { st.velocities()[5] = HUGE_VAL; }, false);
-  sendBad(non_finite, "-Inf position", [](msg::RobotState& st) { st.positions()[0] = -HUGE_VAL; }, false);
+  sendBad(
+      length, "velocities one short", [](msg::RobotState& st) { st.velocities().pop_back(); }, false);
+  sendBad(
+      length, "efforts one short", [](msg::RobotState& st) { st.efforts().assign(st.names().size() - 1, 0.0); }, false);
+  sendBad(
+      length, "one position too many", [](msg::RobotState& st) { st.positions().push_back(0.0); }, false);
+  sendBad(
+      missing, "l_elbow left out", [&](msg::RobotState& st) { drop(st, elbow); }, false);
+  sendBad(
+      missing, "l_elbow misspelt", [&](msg::RobotState& st) { st.names()[static_cast<std::size_t>(elbow)] = "l_elbw"; },
+      false);
+  sendBad(
+      non_finite, "NaN position", [](msg::RobotState& st) { st.positions()[3] = std::nan(""); }, false);
+  sendBad(
+      non_finite, "+Inf velocity", [](msg::RobotState& st) { st.velocities()[5] = HUGE_VAL; }, false);
+  sendBad(
+      non_finite, "-Inf position", [](msg::RobotState& st) { st.positions()[0] = -HUGE_VAL; }, false);
   std::uint64_t own_seq = kOwnSeq;
-  sendBad(future, "stamped 1 s ahead", [&](msg::RobotState& st) {
-    st.header().seq(++own_seq);
-    st.header().stamp_ns(bus::nowNs() + 1'000'000'000);
-  }, true);
+  sendBad(
+      future, "stamped 1 s ahead",
+      [&](msg::RobotState& st) {
+        st.header().seq(++own_seq);
+        st.header().stamp_ns(bus::nowNs() + 1'000'000'000);
+      },
+      true);
   // 0.5 s: far past the 2 ms tolerance even when the test or the controller stalls between the stamp
   // and the check (at 50 ms a 48 ms stall let it through, and every later count was off).
-  sendBad(future, "stamped 0.5 s ahead", [&](msg::RobotState& st) {
-    st.header().seq(++own_seq);
-    st.header().stamp_ns(bus::nowNs() + 500'000'000);
-  }, true);
+  sendBad(
+      future, "stamped 0.5 s ahead",
+      [&](msg::RobotState& st) {
+        st.header().seq(++own_seq);
+        st.header().stamp_ns(bus::nowNs() + 500'000'000);
+      },
+      true);
   // Old: a state the controller has answered (so it holds that one or a newer one), sent again.
   const std::uint64_t repeat_seq = answered_seq;
   ASSERT_TRUE(good_seqs.count(repeat_seq));
@@ -214,32 +230,50 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
       return found;
     }));
   }
-  sendBad(old, "an answered state sent again", [&](msg::RobotState& st) { st.header() = repeated.header(); }, true);
-  sendBad(old, "a new seq stamped 1 s before it", [&](msg::RobotState& st) {
-    st.header().seq(++own_seq);
-    st.header().stamp_ns(repeated.header().stamp_ns() - 1'000'000'000);
-  }, true);
+  sendBad(
+      old, "an answered state sent again", [&](msg::RobotState& st) { st.header() = repeated.header(); }, true);
+  sendBad(
+      old, "a new seq stamped 1 s before it",
+      [&](msg::RobotState& st) {
+        st.header().seq(++own_seq);
+        st.header().stamp_ns(repeated.header().stamp_ns() - 1'000'000'000);
+      },
+      true);
 
-  Cause duplicate{"robot_state_duplicate_name"}, limits{"robot_state_outside_limits"}, other{"robot_state_other_writer"};
-  sendBad(duplicate, "l_elbow twice, same value", [&](msg::RobotState& st) {
-    st.names().push_back("l_elbow");
-    st.positions().push_back(q0[elbow]);
-    st.velocities().push_back(0.0);
-  }, false);
-  sendBad(duplicate, "l_elbow twice, another value", [&](msg::RobotState& st) {
-    st.names().insert(st.names().begin(), "l_elbow");
-    st.positions().insert(st.positions().begin(), q0[elbow] + 0.05);
-    st.velocities().insert(st.velocities().begin(), 0.0);
-  }, false);
+  Cause duplicate{"robot_state_duplicate_name"}, limits{"robot_state_outside_limits"},
+      other{"robot_state_other_writer"};
+  sendBad(
+      duplicate, "l_elbow twice, same value",
+      [&](msg::RobotState& st) {
+        st.names().push_back("l_elbow");
+        st.positions().push_back(q0[elbow]);
+        st.velocities().push_back(0.0);
+      },
+      false);
+  sendBad(
+      duplicate, "l_elbow twice, another value",
+      [&](msg::RobotState& st) {
+        st.names().insert(st.names().begin(), "l_elbow");
+        st.positions().insert(st.positions().begin(), q0[elbow] + 0.05);
+        st.velocities().insert(st.velocities().begin(), 0.0);
+      },
+      false);
   const int r_elbow = model.qIndex("r_elbow");
   const double period = control::defaultControllerConfig().params.period;
-  sendBad(limits, "l_elbow 0.05 rad past its upper limit",
-          [&](msg::RobotState& st) { st.positions()[static_cast<std::size_t>(elbow)] = model.q_upper[elbow] + 0.05; }, false);
-  sendBad(limits, "l_elbow 1e300", [&](msg::RobotState& st) { st.positions()[static_cast<std::size_t>(elbow)] = 1e300; }, false);
-  sendBad(limits, "r_elbow below its lower limit by twice the tolerance", [&](msg::RobotState& st) {
-    st.positions()[static_cast<std::size_t>(r_elbow)] =
-        model.q_lower[r_elbow] - 2.0 * control::stateLimitTolerance(model, r_elbow, period);
-  }, false);
+  sendBad(
+      limits, "l_elbow 0.05 rad past its upper limit",
+      [&](msg::RobotState& st) { st.positions()[static_cast<std::size_t>(elbow)] = model.q_upper[elbow] + 0.05; },
+      false);
+  sendBad(
+      limits, "l_elbow 1e300", [&](msg::RobotState& st) { st.positions()[static_cast<std::size_t>(elbow)] = 1e300; },
+      false);
+  sendBad(
+      limits, "r_elbow below its lower limit by twice the tolerance",
+      [&](msg::RobotState& st) {
+        st.positions()[static_cast<std::size_t>(r_elbow)] =
+            model.q_lower[r_elbow] - 2.0 * control::stateLimitTolerance(model, r_elbow, period);
+      },
+      false);
   // Within the tolerance: a good state, taken and answered.
   {
     double& e = q0_override;
@@ -255,7 +289,8 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     bus::Participant intruder(second);
     auto& intruder_states = intruder.makeWriter<msg::RobotState>();
     ASSERT_TRUE(intruder_states.waitForReaders(1, 15s));
-    sendBad(other, "a good state from a second writer", [](msg::RobotState&) {}, false, &intruder_states);
+    sendBad(
+        other, "a good state from a second writer", [](msg::RobotState&) {}, false, &intruder_states);
   }
 
   // A robot with one joint more than the model: its states are taken, never counted.
@@ -266,11 +301,12 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   EXPECT_EQ(latest.rejected_robot_states(), expected);
   EXPECT_EQ(latest.rejected_hand_targets() + latest.rejected_body_schema() + latest.rejected_walk_commands(), 0u);
   EXPECT_EQ(bad_answers, 0) << "a command answered a bad state";
-  std::printf("sent %llu bad states (length %d, missing %d, non-finite %d, future %d, old %d, duplicate %d, limits %d, "
-              "other writer %d), %zu good; status counted %llu\n",
-              static_cast<unsigned long long>(expected), length.sent, missing.sent, non_finite.sent, future.sent, old.sent,
-              duplicate.sent, limits.sent, other.sent, good_seqs.size(),
-              static_cast<unsigned long long>(latest.rejected_robot_states()));
+  std::printf(
+      "sent %llu bad states (length %d, missing %d, non-finite %d, future %d, old %d, duplicate %d, limits %d, "
+      "other writer %d), %zu good; status counted %llu\n",
+      static_cast<unsigned long long>(expected), length.sent, missing.sent, non_finite.sent, future.sent, old.sent,
+      duplicate.sent, limits.sent, other.sent, good_seqs.size(),
+      static_cast<unsigned long long>(latest.rejected_robot_states()));
 
   controller.signal(SIGTERM);
   EXPECT_EQ(controller.wait(20s), 0);
@@ -282,10 +318,10 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
   EXPECT_EQ(rejected, expected);
   EXPECT_GT(accepted, 100u);
   char by_cause[500];
-  std::snprintf(by_cause, sizeof(by_cause), "rejected by cause: %s %d, %s %d, %s %d, %s %d, %s %d, %s %d, %s %d, %s %d (last %s)",
-                length.name, length.sent, missing.name, missing.sent, non_finite.name, non_finite.sent, future.name,
-                future.sent, old.name, old.sent, duplicate.name, duplicate.sent, limits.name, limits.sent, other.name,
-                other.sent, other.name);
+  std::snprintf(
+      by_cause, sizeof(by_cause), "rejected by cause: %s %d, %s %d, %s %d, %s %d, %s %d, %s %d, %s %d, %s %d (last %s)",
+      length.name, length.sent, missing.name, missing.sent, non_finite.name, non_finite.sent, future.name, future.sent,
+      old.name, old.sent, duplicate.name, duplicate.sent, limits.name, limits.sent, other.name, other.sent, other.name);
   EXPECT_NE(text.find(by_cause), std::string::npos) << "expected '" << by_cause << "' in\n" << text;
   // Each refusal is named on stderr with the bad value.
   for (const char* line : {"names but", "joint 'l_elbow' is missing", "position nan", "velocity inf", "position -inf",

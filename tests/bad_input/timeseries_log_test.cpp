@@ -23,9 +23,9 @@ namespace reflex::control_node {
 namespace {
 
 const control::Model& model() {
-  static const control::Model m = control::loadModel(std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf",
-                                                     control::loadCollisionConfig(std::string(REFLEX_SOURCE_DIR) +
-                                                                                  "/bringup/robots/asimo_like.collision.yaml"));
+  static const control::Model m = control::loadModel(
+      std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf",
+      control::loadCollisionConfig(std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.collision.yaml"));
   return m;
 }
 

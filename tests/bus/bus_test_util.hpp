@@ -29,19 +29,53 @@ inline BusConfig testConfig(const std::string& module, int domain,
 
 template <class T>
 T sampleOf(int k);
-template <> inline msg::ObjectTargets sampleOf<msg::ObjectTargets>(int k) { return objectTargets(k); }
-template <> inline msg::HandTargets sampleOf<msg::HandTargets>(int k) { return handTargets(k); }
-template <> inline msg::MotionPriority sampleOf<msg::MotionPriority>(int k) { return motionPriority(k); }
-template <> inline msg::BodySchemaChange sampleOf<msg::BodySchemaChange>(int k) { return bodySchemaChange(k); }
-template <> inline msg::WalkCommand sampleOf<msg::WalkCommand>(int k) { return walkCommand(k); }
-template <> inline msg::JointState sampleOf<msg::JointState>(int k) { return jointState(k); }
-template <> inline msg::ControlStatus sampleOf<msg::ControlStatus>(int k) { return controlStatus(k); }
-template <> inline msg::Heartbeat sampleOf<msg::Heartbeat>(int k) { return heartbeat(k); }
-template <> inline msg::ControllerProtection sampleOf<msg::ControllerProtection>(int k) {
+template <>
+inline msg::ObjectTargets sampleOf<msg::ObjectTargets>(int k) {
+  return objectTargets(k);
+}
+template <>
+inline msg::HandTargets sampleOf<msg::HandTargets>(int k) {
+  return handTargets(k);
+}
+template <>
+inline msg::MotionPriority sampleOf<msg::MotionPriority>(int k) {
+  return motionPriority(k);
+}
+template <>
+inline msg::BodySchemaChange sampleOf<msg::BodySchemaChange>(int k) {
+  return bodySchemaChange(k);
+}
+template <>
+inline msg::WalkCommand sampleOf<msg::WalkCommand>(int k) {
+  return walkCommand(k);
+}
+template <>
+inline msg::JointState sampleOf<msg::JointState>(int k) {
+  return jointState(k);
+}
+template <>
+inline msg::ControlStatus sampleOf<msg::ControlStatus>(int k) {
+  return controlStatus(k);
+}
+template <>
+inline msg::Heartbeat sampleOf<msg::Heartbeat>(int k) {
+  return heartbeat(k);
+}
+template <>
+inline msg::ControllerProtection sampleOf<msg::ControllerProtection>(int k) {
   return controllerProtection(k);
 }
-template <> inline msg::RobotState sampleOf<msg::RobotState>(int k) { return robotState(k); }
-template <> inline msg::JointCommand sampleOf<msg::JointCommand>(int k) { return jointCommand(k); }
-template <> inline msg::RobotContacts sampleOf<msg::RobotContacts>(int k) { return robotContacts(k); }
+template <>
+inline msg::RobotState sampleOf<msg::RobotState>(int k) {
+  return robotState(k);
+}
+template <>
+inline msg::JointCommand sampleOf<msg::JointCommand>(int k) {
+  return jointCommand(k);
+}
+template <>
+inline msg::RobotContacts sampleOf<msg::RobotContacts>(int k) {
+  return robotContacts(k);
+}
 
 }  // namespace reflex::bus::test

@@ -12,15 +12,16 @@ namespace reflex::bus::test {
 namespace {
 
 using namespace std::chrono_literals;
-using namespace reflex::testing;  // ChildProcess, binPath (support/child_process.hpp)
+using namespace reflex::testing;                // ChildProcess, binPath (support/child_process.hpp)
 const ChildOutput kPipe = ChildOutput::pipe();  // stdout through a pipe (readUntil, output)
 constexpr const char* kTypes = "joint_state,control_status,hand_targets,body_schema";
 
 TEST(Interop, FastDdsReaderReceivesCycloneTopics) {
   ChildProcess reader({binPath("bus_sub_program"), "--domain", "50", "--types", kTypes, "--participant-profile",
-                       "reflex_participant_udp", "--expect-source", "cyclone_writer", "--timeout-s", "20"}, kPipe);
-  ChildProcess writer({binPath("bus_cyclone_writer"), "--domain", "50", "--types", kTypes,
-                       "--max-seconds", "40"}, kPipe);
+                       "reflex_participant_udp", "--expect-source", "cyclone_writer", "--timeout-s", "20"},
+                      kPipe);
+  ChildProcess writer({binPath("bus_cyclone_writer"), "--domain", "50", "--types", kTypes, "--max-seconds", "40"},
+                      kPipe);
   ASSERT_NE(writer.readUntil("running", 10s).find("running"), std::string::npos) << writer.output();
 
   const int code = reader.wait(30s);

@@ -240,7 +240,8 @@ TEST(BusOutbox, AWriteThatBlocksNeverHoldsUpThePush) {
   for (int k = 0; k < 10; ++k) {
     const auto t0 = std::chrono::steady_clock::now();
     writer.publish(js);
-    longest_direct = std::max(longest_direct, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    longest_direct =
+        std::max(longest_direct, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
   EXPECT_GT(longest_direct, 0.15) << "the direct write blocks (the test can fail)";
 
@@ -261,10 +262,11 @@ TEST(BusOutbox, AWriteThatBlocksNeverHoldsUpThePush) {
   }
   outbox.close();
   const OutboxStats s = outbox.stats();
-  std::printf("outbox: direct publish blocked up to %.0f ms; behind the outbox the longest push took %.1f us, the writer "
-              "thread's longest write %.0f ms, %llu writes over 50 ms, %llu of 200 samples dropped\n",
-              1e3 * longest_direct, 1e6 * longest_push, 1e3 * s.longest_write_s, static_cast<unsigned long long>(s.stalls),
-              static_cast<unsigned long long>(s.dropped));
+  std::printf(
+      "outbox: direct publish blocked up to %.0f ms; behind the outbox the longest push took %.1f us, the writer "
+      "thread's longest write %.0f ms, %llu writes over 50 ms, %llu of 200 samples dropped\n",
+      1e3 * longest_direct, 1e6 * longest_push, 1e3 * s.longest_write_s, static_cast<unsigned long long>(s.stalls),
+      static_cast<unsigned long long>(s.dropped));
   // A push that waited for a write would take >= 150 ms (each write blocks that long here); 50 ms
   // leaves room for a loaded machine's preemption (2 ms did not always: the woken writer thread can
   // take the core from the pushing one).

@@ -108,7 +108,8 @@ TEST(Participant, GetsTheNextIdOfTheHostsCounterUnlessItsProfileSetsOne) {
 
   // An id neither of them holds (Fast DDS refuses a second participant of one process with the same id).
   int fixed_id = (a.participantId() + 50) % kParticipantIdRange;
-  while (fixed_id == a.participantId() || fixed_id == b.participantId()) fixed_id = (fixed_id + 1) % kParticipantIdRange;
+  while (fixed_id == a.participantId() || fixed_id == b.participantId())
+    fixed_id = (fixed_id + 1) % kParticipantIdRange;
   const std::string path = ::testing::TempDir() + "reflex_profiles_fixed_id.xml";
   {
     std::ofstream f(path);
@@ -169,8 +170,8 @@ TEST(Participant, SkipsAnIdAParticipantOfThisProcessHoldsAndIsDiscovered) {
     EXPECT_EQ(rawParticipantId(p.native()), p.participantId());
     const auto end = std::chrono::steady_clock::now() + 10s;
     while (listener.discovered.load() < 1 && std::chrono::steady_clock::now() < end) std::this_thread::sleep_for(20ms);
-    EXPECT_GE(listener.discovered.load(), 1) << "the participant of id " << p.participantId()
-                                             << " was not discovered by the one of id " << held;
+    EXPECT_GE(listener.discovered.load(), 1)
+        << "the participant of id " << p.participantId() << " was not discovered by the one of id " << held;
   }
   factory->delete_participant(raw);
 }
@@ -196,8 +197,7 @@ TEST(Heartbeat, PublishesModuleHostPidStateAndPeriod) {
 
   Participant monitor(testConfig("hb_monitor", kDomain));
   auto& state_reader = monitor.makeReader<msg::Heartbeat>();  // reflex_heartbeat: late joiner gets seq 1
-  auto& record_reader =
-      monitor.makeReader<msg::Heartbeat>(TopicTraits<msg::Heartbeat>::kTopicName, kProfileRecord);
+  auto& record_reader = monitor.makeReader<msg::Heartbeat>(TopicTraits<msg::Heartbeat>::kTopicName, kProfileRecord);
   ASSERT_TRUE(state_reader.waitForData(2s));
   msg::Heartbeat first;
   ASSERT_TRUE(state_reader.takeNext(first));
@@ -287,11 +287,11 @@ TEST(Config, ProfilesFileFromConfigurationEnvironmentOrDefault) {
 }
 
 TEST(Stamp, NowIsTheSystemClockInNanoseconds) {
-  const auto before = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                          std::chrono::system_clock::now().time_since_epoch()).count();
+  const auto before =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
   const std::int64_t now = nowNs();
-  const auto after = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                         std::chrono::system_clock::now().time_since_epoch()).count();
+  const auto after =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count();
   EXPECT_LE(before, now);
   EXPECT_LE(now, after);
   EXPECT_GT(now, 1'600'000'000'000'000'000LL) << "after September 2020: epoch-based, not steady";

@@ -14,9 +14,8 @@
 namespace reflex::bus::test {
 
 inline const std::vector<std::string> kAllTypeNames = {
-    "object_targets", "hand_targets", "motion_priority", "body_schema",
-    "walk_command",   "joint_state",  "control_status",  "heartbeat",
-    "robot_state",    "joint_command", "robot_contacts"};
+    "object_targets", "hand_targets", "motion_priority", "body_schema",   "walk_command",  "joint_state",
+    "control_status", "heartbeat",    "robot_state",     "joint_command", "robot_contacts"};
 
 /// Calls fn(static_cast<T*>(nullptr)) for the type named `name`; false if the name is unknown.
 template <class Fn>

@@ -49,11 +49,10 @@ int main(int argc, char** argv) {
       for (auto& p : publishers) p();
     });
     bool timed_out = false;
-    bus.every(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(max_seconds)),
-              [&] {
-                timed_out = true;
-                bus.stop();
-              });
+    bus.every(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(max_seconds)), [&] {
+      timed_out = true;
+      bus.stop();
+    });
     StopOnSignal stop_on_signal(bus);
     std::cout << "running (participant id " << bus.participantId() << ")" << std::endl;
     bus.run();

@@ -96,11 +96,13 @@ TEST(Qos, LateJoinerReceivesTheCurrentStateOfEveryBodySchemaSegment) {
   auto& reader = controller.makeReader<msg::BodySchemaChange>();
   ASSERT_TRUE(reader.waitForData(5s));
   std::map<std::string, msg::BodySchemaChange> by_name;
-  ASSERT_TRUE(eventually([&] {
-    msg::BodySchemaChange c;
-    while (reader.takeNext(c)) by_name[c.segment_name()] = c;
-    return by_name.size() >= 3;
-  }, 5000ms));
+  ASSERT_TRUE(eventually(
+      [&] {
+        msg::BodySchemaChange c;
+        while (reader.takeNext(c)) by_name[c.segment_name()] = c;
+        return by_name.size() >= 3;
+      },
+      5000ms));
   std::this_thread::sleep_for(100ms);
   msg::BodySchemaChange c;
   while (reader.takeNext(c)) by_name[c.segment_name()] = c;
@@ -116,8 +118,7 @@ TEST(Qos, KeepLastOneDropsOldSamples) {
   Participant bus(testConfig("qos_keep_last", 44));
   auto& state_writer = bus.makeWriter<msg::ControlStatus>();
   auto& state_reader = bus.makeReader<msg::ControlStatus>();
-  auto& record_reader = bus.makeReader<msg::ControlStatus>(TopicTraits<msg::ControlStatus>::kTopicName,
-                                                          kProfileRecord);
+  auto& record_reader = bus.makeReader<msg::ControlStatus>(TopicTraits<msg::ControlStatus>::kTopicName, kProfileRecord);
   auto& behavior_writer = bus.makeWriter<msg::MotionPriority>();
   auto& behavior_reader = bus.makeReader<msg::MotionPriority>();
   ASSERT_TRUE(state_writer.waitForReaders(2, 5s));
@@ -170,7 +171,6 @@ TEST(Qos, ObjectTargetsExpireAfterTheirLifespan) {
   ASSERT_TRUE(writer.publish(stale));
   std::this_thread::sleep_for(500ms);
   EXPECT_FALSE(reader.takeNext(got)) << "sample seq " << got.header().seq() << " outlived its lifespan";
-
 }
 
 TEST(Qos, SilentHeartbeatWriterIsDeclaredNotAlive) {

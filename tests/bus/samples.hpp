@@ -33,8 +33,7 @@ void diffEnum(const std::string& path, E expected, E actual, Diffs& out) {
   diffValue(path, static_cast<std::int64_t>(expected), static_cast<std::int64_t>(actual), out);
 }
 template <class V>
-void diffVector(const std::string& path, const std::vector<V>& expected, const std::vector<V>& actual,
-                Diffs& out) {
+void diffVector(const std::string& path, const std::vector<V>& expected, const std::vector<V>& actual, Diffs& out) {
   diffValue(path + ".size()", expected.size(), actual.size(), out);
   for (std::size_t i = 0; i < expected.size() && i < actual.size(); ++i) {
     diffValue(path + "[" + std::to_string(i) + "]", expected[i], actual[i], out);
@@ -90,8 +89,7 @@ inline void diff(const std::string& p, const msg::MotionPriority& e, const msg::
   diff(p + ".header", e.header(), a.header(), out);
   diffEnum(p + ".priority", e.priority(), a.priority(), out);
 }
-inline void diff(const std::string& p, const msg::BodySchemaChange& e, const msg::BodySchemaChange& a,
-                 Diffs& out) {
+inline void diff(const std::string& p, const msg::BodySchemaChange& e, const msg::BodySchemaChange& a, Diffs& out) {
   diff(p + ".header", e.header(), a.header(), out);
   diffValue(p + ".segment_name", e.segment_name(), a.segment_name(), out);
   diffEnum(p + ".operation", e.operation(), a.operation(), out);
@@ -352,7 +350,7 @@ inline msg::RobotState robotState(int k) {
     m.names().push_back(i == 5 ? "l_shoulder_pitch" : "joint_" + std::to_string(i));
     m.positions().push_back(-3.0 + 0.1 * i + 1e-6 * k);
     m.velocities().push_back(i % 2 == 0 ? -0.25 * i - 0.125 : 1e-308);  // no -0.0: JSON (the reference reader) has none
-    if (i < 63) m.efforts().push_back(-100.0 + 3.5 * i);  // one short: efforts need not be complete here
+    if (i < 63) m.efforts().push_back(-100.0 + 3.5 * i);                // one short: efforts need not be complete here
   }
   m.applied_command_seq(0xFFFF'FFFF'FFFF'FFFEULL - static_cast<std::uint64_t>(k));
   m.holding(k % 2 == 1);

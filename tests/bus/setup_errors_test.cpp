@@ -49,7 +49,8 @@ TEST(SetupErrors, UnknownParticipantProfile) {
 
 TEST(SetupErrors, UnknownWriterAndReaderProfiles) {
   Participant bus(testConfig("e", kDomain));
-  std::string msg = busErrorOf([&] { bus.makeWriter<msg::JointState>("reflex/joint_state", "no_such_writer_profile"); });
+  std::string msg =
+      busErrorOf([&] { bus.makeWriter<msg::JointState>("reflex/joint_state", "no_such_writer_profile"); });
   EXPECT_THAT(msg, HasSubstr("'no_such_writer_profile'"));
   EXPECT_THAT(msg, HasSubstr("'reflex/joint_state'"));
   EXPECT_THAT(msg, HasSubstr(kProfilesFile));
@@ -96,8 +97,7 @@ TEST(SetupErrors, MissingProfilesFileFromConfigurationOrEnvironment) {
 TEST(SetupErrors, TopicNameReusedWithAnotherType) {
   Participant bus(testConfig("e", kDomain));
   bus.makeWriter<msg::JointState>("reflex/shared_name", kProfileState);
-  const std::string msg =
-      busErrorOf([&] { bus.makeReader<msg::ControlStatus>("reflex/shared_name", kProfileState); });
+  const std::string msg = busErrorOf([&] { bus.makeReader<msg::ControlStatus>("reflex/shared_name", kProfileState); });
   EXPECT_THAT(msg, HasSubstr("'reflex/shared_name'"));
   EXPECT_THAT(msg, HasSubstr("reflex::msg::JointState"));
   EXPECT_THAT(msg, HasSubstr("reflex::msg::ControlStatus"));

@@ -43,7 +43,8 @@ int main(int argc, char** argv) {
           T expected = test::sampleOf<T>(7);
           test::Diffs d;
           const auto& h = got.header();
-          if (h.source() != expect_source) d.push_back("header.source: expected " + expect_source + ", got " + h.source());
+          if (h.source() != expect_source)
+            d.push_back("header.source: expected " + expect_source + ", got " + h.source());
           if (h.seq() < 1) d.push_back("header.seq: expected >= 1, got 0");
           if (std::llabs(h.stamp_ns() - nowNs()) > 60'000'000'000LL) {
             d.push_back("header.stamp_ns " + std::to_string(h.stamp_ns()) + " is not within a minute of now");

@@ -20,7 +20,7 @@ namespace reflex::bus::test {
 namespace {
 
 using namespace std::chrono_literals;
-using namespace reflex::testing;  // ChildProcess, binPath (support/child_process.hpp)
+using namespace reflex::testing;                // ChildProcess, binPath (support/child_process.hpp)
 const ChildOutput kPipe = ChildOutput::pipe();  // stdout through a pipe (readUntil, output)
 
 TEST(TwoProcess, SubscriberVerifiesEveryTypeFromAnotherProcess) {
@@ -31,8 +31,8 @@ TEST(TwoProcess, SubscriberVerifiesEveryTypeFromAnotherProcess) {
   const int sub_code = sub.wait(30s);
   ASSERT_NE(sub_code, ChildProcess::kStillRunning) << "subscriber did not finish; output:\n" << sub.output();
   EXPECT_EQ(sub_code, 0) << sub.output();
-  for (const char* type : {"object_targets", "hand_targets", "motion_priority", "body_schema",
-                           "walk_command", "joint_state", "control_status", "heartbeat"}) {
+  for (const char* type : {"object_targets", "hand_targets", "motion_priority", "body_schema", "walk_command",
+                           "joint_state", "control_status", "heartbeat"}) {
     EXPECT_NE(sub.output().find(std::string("verified ") + type), std::string::npos) << type;
   }
 
@@ -40,21 +40,19 @@ TEST(TwoProcess, SubscriberVerifiesEveryTypeFromAnotherProcess) {
   const int pub_code = pub.wait(10s);
   ASSERT_NE(pub_code, ChildProcess::kStillRunning) << "publisher ignored SIGTERM";
   EXPECT_EQ(pub_code, 0);
-  EXPECT_NE(pub.output().find("stopped by signal " + std::to_string(SIGTERM)), std::string::npos)
-      << pub.output();
+  EXPECT_NE(pub.output().find("stopped by signal " + std::to_string(SIGTERM)), std::string::npos) << pub.output();
 }
 
 TEST(TwoProcess, SigintStopsTheRunLoopCleanly) {
-  ChildProcess pub({binPath("bus_pub_program"), "--domain", "48", "--types", "joint_state",
-                    "--max-seconds", "30"}, kPipe);
+  ChildProcess pub({binPath("bus_pub_program"), "--domain", "48", "--types", "joint_state", "--max-seconds", "30"},
+                   kPipe);
   ASSERT_NE(pub.readUntil("running", 10s).find("running"), std::string::npos) << pub.output();
   std::this_thread::sleep_for(200ms);  // let it publish a while
   pub.signal(SIGINT);
   const int code = pub.wait(10s);
   ASSERT_NE(code, ChildProcess::kStillRunning) << "publisher ignored SIGINT";
   EXPECT_EQ(code, 0);
-  EXPECT_NE(pub.output().find("stopped by signal " + std::to_string(SIGINT)), std::string::npos)
-      << pub.output();
+  EXPECT_NE(pub.output().find("stopped by signal " + std::to_string(SIGINT)), std::string::npos) << pub.output();
 }
 
 // StopOnSignal (shared by every DDS process) stops the loop cleanly on every
@@ -62,8 +60,8 @@ TEST(TwoProcess, SigintStopsTheRunLoopCleanly) {
 TEST(TwoProcess, EveryCatchableTerminatingSignalStopsTheRunLoopCleanly) {
   for (const int sig : {SIGHUP, SIGUSR1, SIGUSR2, SIGQUIT, SIGALRM, SIGVTALRM, SIGPROF, SIGPWR, SIGRTMIN, SIGRTMAX}) {
     SCOPED_TRACE("signal " + std::to_string(sig));
-    ChildProcess pub({binPath("bus_pub_program"), "--domain", "48", "--types", "joint_state",
-                      "--max-seconds", "30"}, kPipe);
+    ChildProcess pub({binPath("bus_pub_program"), "--domain", "48", "--types", "joint_state", "--max-seconds", "30"},
+                     kPipe);
     ASSERT_NE(pub.readUntil("running", 10s).find("running"), std::string::npos) << pub.output();
     pub.signal(sig);
     const int code = pub.wait(10s);
@@ -98,8 +96,15 @@ TEST(TwoProcess, AReplacedPublisherIsHeardAtOnceByAReaderThatKnewTheOneItReplace
     }
     return false;
   };
-  const std::vector<std::string> args = {binPath("bus_pub_program"), "--domain", std::to_string(kDomain),
-                                         "--types", "joint_state", "--period-ms", "10", "--max-seconds", "60"};
+  const std::vector<std::string> args = {binPath("bus_pub_program"),
+                                         "--domain",
+                                         std::to_string(kDomain),
+                                         "--types",
+                                         "joint_state",
+                                         "--period-ms",
+                                         "10",
+                                         "--max-seconds",
+                                         "60"};
   ChildProcess first(args, kPipe);
   ASSERT_NE(first.readUntil("running", 10s).find("running"), std::string::npos) << first.output();
   ASSERT_TRUE(firstSampleWithin(10s)) << "the first publisher was never heard";
@@ -116,8 +121,8 @@ TEST(TwoProcess, AReplacedPublisherIsHeardAtOnceByAReaderThatKnewTheOneItReplace
   const bool heard = firstSampleWithin(15s);
   const double after = std::chrono::duration<double>(std::chrono::steady_clock::now() - running).count();
   const int second_id = printedParticipantId(second.output());
-  std::printf("replaced publisher: participant id %d, then %d; heard %.3f s after it was set up\n", first_id,
-              second_id, after);
+  std::printf("replaced publisher: participant id %d, then %d; heard %.3f s after it was set up\n", first_id, second_id,
+              after);
   ASSERT_TRUE(heard) << "the replacing publisher was not heard within 15 s";
   EXPECT_GE(first_id, 0);
   EXPECT_NE(second_id, first_id) << "the replacing process took the id of the one it replaced";

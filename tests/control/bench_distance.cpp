@@ -104,7 +104,8 @@ struct Setup {
     std::mt19937_64 rng(42);
     for (int c = 0; c < kConfigurations; ++c) {
       Eigen::VectorXd q(model.nq);
-      for (int i = 0; i < model.nq; ++i) q[i] = std::uniform_real_distribution<double>(model.q_lower[i], model.q_upper[i])(rng);
+      for (int i = 0; i < model.nq; ++i)
+        q[i] = std::uniform_real_distribution<double>(model.q_lower[i], model.q_upper[i])(rng);
       qs.push_back(q);
       kin.emplace_back(model);
       computeForwardKinematics(model, kin.back(), q);
@@ -395,7 +396,8 @@ ConvexHull qhullHull(const std::vector<Eigen::Vector3d>& pts) {
   FILE* devnull = std::fopen("/dev/null", "w");
   qh_zero(qh, devnull);
   char options[] = "qhull Qt";
-  const int exitcode = qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
+  const int exitcode =
+      qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
   ConvexHull hull;
   if (!exitcode) {
     std::vector<int> index(pts.size(), -1);
@@ -430,11 +432,11 @@ ConvexHull qhullHull(const std::vector<Eigen::Vector3d>& pts) {
 
 /// The pieces and poses of one size (see the opening block), built on first use.
 struct ConvexSet {
-  std::vector<ConvexPiece> pieces;                       // 2 per pair: a, b
+  std::vector<ConvexPiece> pieces;                        // 2 per pair: a, b
   std::vector<std::shared_ptr<fcl::Convexd>> fcl_pieces;  // the same hulls
-  std::vector<Eigen::Isometry3d> X_B_A;                  // [pair * kConvexPoses + pose]; B at identity
-  double hull_vertices = 0.0;                            // mean over the pieces
-  double mean_distance = 0.0;                            // mean over every pose (m)
+  std::vector<Eigen::Isometry3d> X_B_A;                   // [pair * kConvexPoses + pose]; B at identity
+  double hull_vertices = 0.0;                             // mean over the pieces
+  double mean_distance = 0.0;                             // mean over every pose (m)
 };
 
 const ConvexSet& convexSet(int vertices) {
@@ -502,8 +504,8 @@ void ConvexDistance_Reflex(benchmark::State& state) {
   double iterations = 0.0;
   for (auto _ : state) {
     const int p = k / kConvexPoses;
-    const ConvexDistance r = computeConvexDistance(set.pieces[2 * p], set.X_B_A[k], set.pieces[2 * p + 1], I,
-                                                   use_warm ? &warm[p] : nullptr);
+    const ConvexDistance r =
+        computeConvexDistance(set.pieces[2 * p], set.X_B_A[k], set.pieces[2 * p + 1], I, use_warm ? &warm[p] : nullptr);
     benchmark::DoNotOptimize(r);
     iterations += r.iterations;
     k = (k + 1) % (kConvexPairs * kConvexPoses);
@@ -561,8 +563,7 @@ int main(int argc, char** argv) {
       "bench_distance [--robot=NAME|PATH.urdf] [benchmark options]\n"
       "  --robot  a robot of bringup/robots by name (default asimo_like; many_segment_humanoid:\n"
       "           the >= 1,000-pair robot) or a URDF path; collision configuration next to it\n",
-      &g_urdf, nullptr,
-      [] {
+      &g_urdf, nullptr, [] {
         std::printf("robot: %s, %zu checked robot pairs, %s sweep kernel\n", g_urdf.c_str(), setup().robot_pairs.size(),
                     fastestSweepKernel() == SweepKernel::kAvx2 ? "AVX2" : "scalar");
       });

@@ -54,12 +54,17 @@ inline int benchMain(int argc, char** argv, const char* program, const char* usa
     const std::string value = arg.substr(arg.find('=') + 1);
     if (value.empty()) {
       std::fprintf(stderr, "%s: %s needs a value (see --help)\n", program,
-                   robot ? "--robot" : collision ? "--collision" : "--config");
+                   robot       ? "--robot"
+                   : collision ? "--collision"
+                               : "--config");
       return 2;
     }
-    if (robot) *urdf = robotUrdf(value);
-    else if (collision) collisionOption() = value;
-    else *config = value;
+    if (robot)
+      *urdf = robotUrdf(value);
+    else if (collision)
+      collisionOption() = value;
+    else
+      *config = value;
   }
   argc = kept;
   try {

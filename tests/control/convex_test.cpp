@@ -60,7 +60,8 @@ Hull qhullHull(const std::vector<Vec3>& pts) {
   FILE* devnull = std::fopen("/dev/null", "w");
   qh_zero(qh, devnull);
   char options[] = "qhull Qt";
-  const int exitcode = qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
+  const int exitcode =
+      qh_new_qhull(qh, 3, static_cast<int>(pts.size()), coords.data(), False, options, nullptr, devnull);
   Hull hull;
   if (!exitcode) {
     std::vector<int> index(pts.size(), -1);
@@ -146,7 +147,9 @@ Eigen::Isometry3d pose(const Eigen::Quaterniond& q, const Vec3& p) {
   return X;
 }
 
-Eigen::Isometry3d translation(double x, double y, double z) { return pose(Eigen::Quaterniond::Identity(), Vec3(x, y, z)); }
+Eigen::Isometry3d translation(double x, double y, double z) {
+  return pose(Eigen::Quaterniond::Identity(), Vec3(x, y, z));
+}
 
 /// Random points in an ellipsoid of semi-axes `axes` around the origin.
 std::vector<Vec3> randomPoints(int n, const Vec3& axes, std::mt19937_64& rng) {
@@ -178,8 +181,10 @@ double bruteDistance(const Hull& a, const Eigen::Isometry3d& X_B_A, const Hull& 
   if (outside(b, X_B_B.inverse() * (X_B_A * a.vertices[0])) <= 0) return 0.0;
   if (outside(a, X_B_A.inverse() * (X_B_B * b.vertices[0])) <= 0) return 0.0;
   std::vector<std::array<Vec3, 3>> ta, tb;
-  for (const auto& t : a.triangles) ta.push_back({X_B_A * a.vertices[t[0]], X_B_A * a.vertices[t[1]], X_B_A * a.vertices[t[2]]});
-  for (const auto& t : b.triangles) tb.push_back({X_B_B * b.vertices[t[0]], X_B_B * b.vertices[t[1]], X_B_B * b.vertices[t[2]]});
+  for (const auto& t : a.triangles)
+    ta.push_back({X_B_A * a.vertices[t[0]], X_B_A * a.vertices[t[1]], X_B_A * a.vertices[t[2]]});
+  for (const auto& t : b.triangles)
+    tb.push_back({X_B_B * b.vertices[t[0]], X_B_B * b.vertices[t[1]], X_B_B * b.vertices[t[2]]});
   double best = std::numeric_limits<double>::infinity();
   Vec3 P, Q;
   for (const auto& s : ta)
@@ -324,7 +329,7 @@ TEST(ConvexDistance, CubesApartAlongAnAxisADiagonalAndACorner) {
     EXPECT_NEAR(r.p_B_a.x(), 2.0, 1e-12);
     EXPECT_NEAR(r.p_B_b.x(), 1.0, 1e-12);
     EXPECT_LE((r.p_B_a - r.p_B_b - Vec3(1, 0, 0)).norm(), 1e-12);  // points from B towards A
-    EXPECT_GE(r.p_B_b.y(), -0.6 - 1e-12);  // on the faces' common part
+    EXPECT_GE(r.p_B_b.y(), -0.6 - 1e-12);                          // on the faces' common part
     EXPECT_LE(r.p_B_b.z(), 0.8 + 1e-12);
   }
   {  // edge-edge along the xy diagonal
@@ -359,10 +364,10 @@ TEST(ConvexDistance, PointAgainstCubeFaceEdgeAndVertex) {
     Vec3 point, closest;
   };
   const Case cases[] = {
-      {Vec3(3, 0.2, -0.3), Vec3(1, 0.2, -0.3)},   // face
-      {Vec3(3, 3, 0.5), Vec3(1, 1, 0.5)},         // edge
-      {Vec3(2, 3, 4), Vec3(1, 1, 1)},             // vertex
-      {Vec3(-1.5, 0.9, -2.5), Vec3(-1, 0.9, -1)}, // another edge
+      {Vec3(3, 0.2, -0.3), Vec3(1, 0.2, -0.3)},    // face
+      {Vec3(3, 3, 0.5), Vec3(1, 1, 0.5)},          // edge
+      {Vec3(2, 3, 4), Vec3(1, 1, 1)},              // vertex
+      {Vec3(-1.5, 0.9, -2.5), Vec3(-1, 0.9, -1)},  // another edge
   };
   for (const Case& k : cases) {
     const ConvexDistance r = computeConvexDistance(dot, translation(k.point.x(), k.point.y(), k.point.z()), c,
@@ -379,7 +384,8 @@ TEST(ConvexDistance, PointAgainstCubeFaceEdgeAndVertex) {
   }
   // A point inside the cube, and on its surface.
   for (const Vec3& p : {Vec3(0.3, -0.2, 0.1), Vec3(1, 0.5, 0.5)}) {
-    const ConvexDistance r = computeConvexDistance(dot, translation(p.x(), p.y(), p.z()), c, Eigen::Isometry3d::Identity());
+    const ConvexDistance r =
+        computeConvexDistance(dot, translation(p.x(), p.y(), p.z()), c, Eigen::Isometry3d::Identity());
     expectConsistent(r);
     EXPECT_TRUE(r.penetrating);
     EXPECT_EQ(r.distance, 0.0);
@@ -392,7 +398,7 @@ TEST(ConvexDistance, TouchingAndOverlappingCubesPenetrate) {
   const ConvexPiece c = pieceOf(h);
   const Eigen::Isometry3d I = Eigen::Isometry3d::Identity();
   for (const Eigen::Isometry3d& X_B_A : {translation(2, 0, 0), translation(2, 2, 2), translation(2, 0.3, 1.1),
-                                        translation(1.5, 0, 0), translation(0.1, -0.3, 0.2), I}) {
+                                         translation(1.5, 0, 0), translation(0.1, -0.3, 0.2), I}) {
     const ConvexDistance r = computeConvexDistance(c, X_B_A, c, I);
     expectConsistent(r);
     EXPECT_TRUE(r.penetrating) << X_B_A.translation().transpose();
@@ -407,7 +413,8 @@ TEST(ConvexDistance, RotatedPieces) {
   const ConvexPiece c = pieceOf(cube(1.0));
   // A turned 45 degrees about z: its vertical edge at x = cx - sqrt(2) faces B's face x = 1.
   const double cx = 1.0 + std::sqrt(2.0) + 0.5;
-  const Eigen::Isometry3d X_B_A = pose(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 4, Vec3::UnitZ())), Vec3(cx, 0.2, 0));
+  const Eigen::Isometry3d X_B_A =
+      pose(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 4, Vec3::UnitZ())), Vec3(cx, 0.2, 0));
   const ConvexDistance r = computeConvexDistance(c, X_B_A, c, Eigen::Isometry3d::Identity());
   expectConsistent(r);
   EXPECT_NEAR(r.distance, 0.5, 1e-12);
@@ -482,9 +489,10 @@ TEST(ConvexDistance, MatchesBruteForceAndFclOnRandomPieces) {
       EXPECT_LE(fclDistance(*fclConvex(ha), X_B_A, *fclConvex(hb), X_B_B), 0.0) << "case " << k;  // FCL: -1
     }
   }
-  std::printf("[ convex ] %d random pairs (%d separated, %d overlapping): max |GJK - brute| = %.3g m, "
-              "max witness outside its hull = %.3g m, max |GJK - FCL| = %.3g m over %d, max iterations %d\n",
-              kCases, separated, overlapping, worst, worst_inside, worst_fcl, fcl_checked, max_iterations);
+  std::printf(
+      "[ convex ] %d random pairs (%d separated, %d overlapping): max |GJK - brute| = %.3g m, "
+      "max witness outside its hull = %.3g m, max |GJK - FCL| = %.3g m over %d, max iterations %d\n",
+      kCases, separated, overlapping, worst, worst_inside, worst_fcl, fcl_checked, max_iterations);
   EXPECT_GE(separated, kCases / 4);  // both kinds well represented
   EXPECT_GE(overlapping, kCases / 10);
 }
@@ -545,8 +553,8 @@ TEST(ConvexDistance, TheFirstDirectionAloneProvesAFarPair) {
     const Vec3 random_direction = randomRotation(rng) * Vec3::UnitX();
     for (int which = 0; which < 2; ++which) {
       const Vec3 towards_b = which == 0 ? exact_direction : random_direction;
-      const ConvexDistance same_path = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr,
-                                                             std::numeric_limits<double>::infinity(), towards_b);
+      const ConvexDistance same_path =
+          computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, std::numeric_limits<double>::infinity(), towards_b);
       EXPECT_NEAR(same_path.distance, brute, 1e-9) << "case " << k;
       for (const double stop : {0.5 * brute, brute - 1e-4, brute + 1e-4}) {
         const ConvexDistance r = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, stop, towards_b);
@@ -623,7 +631,8 @@ TEST(ConvexDistance, ParallelFacesMatchBruteForce) {
     const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
     const Eigen::Quaterniond q = randomRotation(rng);
     Eigen::Quaterniond qa = q;
-    if (k % 2) qa = q * Eigen::Quaterniond(Eigen::AngleAxisd(std::pow(10.0, tilt(rng)), randomRotation(rng) * Vec3::UnitX()));
+    if (k % 2)
+      qa = q * Eigen::Quaterniond(Eigen::AngleAxisd(std::pow(10.0, tilt(rng)), randomRotation(rng) * Vec3::UnitX()));
     // Offset in the boxes' frame: apart along one axis by 0..2 cm, anywhere across the others.
     const int axis = k % 3;
     Vec3 offset_Q(u(rng), u(rng), u(rng));
@@ -732,7 +741,8 @@ TEST(ConvexDistance, DoesNotAllocate) {
   pieces.push_back(makeConvexPiece(randomPoints(30, Vec3(0.03, 0.02, 0.04), rng), {}));  // no graph
   pieces.push_back(makeConvexPiece({Vec3::Zero()}, {}));
   std::vector<Eigen::Isometry3d> poses;
-  for (int k = 0; k < 64; ++k) poses.push_back(pose(randomRotation(rng), randomRotation(rng) * Vec3(0.1 * (k % 4), 0, 0)));
+  for (int k = 0; k < 64; ++k)
+    poses.push_back(pose(randomRotation(rng), randomRotation(rng) * Vec3(0.1 * (k % 4), 0, 0)));
   std::vector<ConvexWarmStart> warm(pieces.size() * pieces.size());
   double sum = 0.0;
   int queries = 0;
@@ -741,7 +751,8 @@ TEST(ConvexDistance, DoesNotAllocate) {
     for (std::size_t j = 0; j < pieces.size(); ++j)
       for (std::size_t p = 0; p + 1 < poses.size(); ++p, ++queries) {
         sum += computeConvexDistance(pieces[i], poses[p], pieces[j], poses[p + 1]).distance;
-        sum += computeConvexDistance(pieces[i], poses[p], pieces[j], poses[p + 1], &warm[i * pieces.size() + j]).distance;
+        sum +=
+            computeConvexDistance(pieces[i], poses[p], pieces[j], poses[p + 1], &warm[i * pieces.size() + j]).distance;
         sum += supportVertex(pieces[i], poses[p].translation(), static_cast<int>(p));
       }
   const long allocations = testing::allocations() - before;
@@ -812,8 +823,8 @@ TEST(ConvexDistance, FlatPiecesSegmentsAndPoints) {
   EXPECT_TRUE(r.penetrating);
   EXPECT_LE((r.p_B_a - Vec3(0.1, 0.2, 0.3)).norm(), 1e-15);
   // Collinear and repeated vertices (a degenerate "hull"): the segment they span.
-  const ConvexPiece line = makeConvexPiece({Vec3(-1, 0, 0), Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(1, 0, 0)},
-                                           {{0, 1, 3}, {1, 2, 3}});
+  const ConvexPiece line =
+      makeConvexPiece({Vec3(-1, 0, 0), Vec3(0, 0, 0), Vec3(0, 0, 0), Vec3(1, 0, 0)}, {{0, 1, 3}, {1, 2, 3}});
   r = computeConvexDistance(line, translation(0, 2, 0), c, I);
   expectConsistent(r);
   EXPECT_NEAR(r.distance, 1.0, 1e-12);
@@ -830,8 +841,10 @@ TEST(ConvexDistance, RandomFlatPiecesMatchBruteForce) {
     const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
     // Every third pair coplanar (the same plane z = 0 in B).
     const bool coplanar = k % 3 == 0 && k % 2 == 1;
-    const Eigen::Quaterniond qa = coplanar ? Eigen::Quaterniond(Eigen::AngleAxisd(k, Vec3::UnitZ())) : randomRotation(rng);
-    const Vec3 dir = coplanar ? Vec3(std::cos(k * 0.7), std::sin(k * 0.7), 0) : Vec3(randomRotation(rng) * Vec3::UnitX());
+    const Eigen::Quaterniond qa =
+        coplanar ? Eigen::Quaterniond(Eigen::AngleAxisd(k, Vec3::UnitZ())) : randomRotation(rng);
+    const Vec3 dir =
+        coplanar ? Vec3(std::cos(k * 0.7), std::sin(k * 0.7), 0) : Vec3(randomRotation(rng) * Vec3::UnitX());
     const Eigen::Isometry3d X_B_A = pose(qa, centre(rng) * dir);
     const Eigen::Isometry3d X_B_B = coplanar ? Eigen::Isometry3d::Identity() : pose(randomRotation(rng), Vec3::Zero());
     const ConvexDistance r = computeConvexDistance(a, X_B_A, b, X_B_B);

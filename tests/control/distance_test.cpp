@@ -43,9 +43,8 @@ bool hasPair(const Model& m, const std::string& a, const std::string& b) {
 }
 
 int robotPairCount(const Model& m) {
-  return static_cast<int>(std::count_if(m.pairs.begin(), m.pairs.end(), [&](const SegmentPair& p) {
-    return !m.segments[p.b].body_schema_slot;
-  }));
+  return static_cast<int>(std::count_if(m.pairs.begin(), m.pairs.end(),
+                                        [&](const SegmentPair& p) { return !m.segments[p.b].body_schema_slot; }));
 }
 
 int yamlExcludeEntries(const std::string& path) {
@@ -67,14 +66,24 @@ TEST(DistancePairs, ShippedRobotChecksEveryPairButNeighboursAndExclusions) {
   const int excluded = yamlExcludeEntries(testing::robotPath("asimo_like.collision.yaml"));
   EXPECT_EQ(excluded, 45);
   EXPECT_EQ(robotPairCount(m), 136 - 16 - excluded);
-  for (const auto& [a, b] : {std::pair{"body", "chest"}, {"chest", "head"}, {"chest", "l_shoulder"},
-                            {"l_shoulder", "l_upper_arm"}, {"l_upper_arm", "l_forearm"},
-                            {"r_forearm", "r_hand"}, {"body", "l_thigh"}, {"l_shank", "l_foot"},
-                            {"l_thigh", "r_thigh"}, {"head", "body"}})
+  for (const auto& [a, b] : {std::pair{"body", "chest"},
+                             {"chest", "head"},
+                             {"chest", "l_shoulder"},
+                             {"l_shoulder", "l_upper_arm"},
+                             {"l_upper_arm", "l_forearm"},
+                             {"r_forearm", "r_hand"},
+                             {"body", "l_thigh"},
+                             {"l_shank", "l_foot"},
+                             {"l_thigh", "r_thigh"},
+                             {"head", "body"}})
     EXPECT_FALSE(hasPair(m, a, b)) << a << "-" << b;
-  for (const auto& [a, b] : {std::pair{"l_hand", "r_hand"}, {"l_hand", "head"}, {"l_forearm", "body"},
-                            {"r_upper_arm", "chest"}, {"l_hand", "l_thigh"}, {"l_shoulder", "l_hand"},
-                            {"l_upper_arm", "l_hand"}})
+  for (const auto& [a, b] : {std::pair{"l_hand", "r_hand"},
+                             {"l_hand", "head"},
+                             {"l_forearm", "body"},
+                             {"r_upper_arm", "chest"},
+                             {"l_hand", "l_thigh"},
+                             {"l_shoulder", "l_hand"},
+                             {"l_upper_arm", "l_hand"}})
     EXPECT_TRUE(hasPair(m, a, b)) << a << "-" << b;
   // Every robot segment against each body-schema slot; never slot against slot; a < b always.
   EXPECT_EQ(static_cast<int>(m.pairs.size()) - robotPairCount(m), 17 * kBodySchemaSlots);
@@ -143,9 +152,10 @@ FclPair fclSegmentDistance(const Model& m, const KinematicsData& kin, int sa, in
         out.d = d;
         out.p_a = result.nearest_points[0];
         out.p_b = result.nearest_points[1];
-        out.parallel = !P.sphere && !Q.sphere &&
-                       (XA.linear() * (P.b_L - P.a_L)).normalized().cross(
-                           (XB.linear() * (Q.b_L - Q.a_L)).normalized()).norm() < 1e-3;
+        out.parallel =
+            !P.sphere && !Q.sphere &&
+            (XA.linear() * (P.b_L - P.a_L)).normalized().cross((XB.linear() * (Q.b_L - Q.a_L)).normalized()).norm() <
+                1e-3;
       } else {
         out.second = std::min(out.second, d);
       }
@@ -196,8 +206,8 @@ void checkRobotAgainstFcl(const Model& m, int configurations, std::uint64_t seed
   }
   EXPECT_GT(compared, configurations * robotPairCount(m) * 9 / 10);
   EXPECT_GT(points, compared / 2);
-  std::printf("%s vs FCL: %d pair distances (max error %.3g m), %d witness pairs (max error %.3g m)\n",
-              m.name.c_str(), compared, max_d, points, max_p);
+  std::printf("%s vs FCL: %d pair distances (max error %.3g m), %d witness pairs (max error %.3g m)\n", m.name.c_str(),
+              compared, max_d, points, max_p);
 }
 
 TEST(DistanceFcl, ShippedRobotAgreesWithFcl) { checkRobotAgainstFcl(testing::loadRobot(testing::kAsimo), 60, 7); }
@@ -244,7 +254,8 @@ void checkRowsAgainstFiniteDifferences(const Model& m, int configurations, std::
         qp[j] += h;
         qm[j] -= h;
         const double fd = (pairDistanceAt(m, kin_fd, dist_fd, qp, static_cast<int>(i)) -
-                           pairDistanceAt(m, kin_fd, dist_fd, qm, static_cast<int>(i))) / (2 * h);
+                           pairDistanceAt(m, kin_fd, dist_fd, qm, static_cast<int>(i))) /
+                          (2 * h);
         const double e = std::abs(fd - dist.rows(static_cast<Eigen::Index>(i), j));
         max_err = std::max(max_err, e);
         ASSERT_LT(e, 1e-6) << m.segments[pd.seg_a].name << "-" << m.segments[pd.seg_b].name << " joint "
@@ -254,9 +265,10 @@ void checkRowsAgainstFiniteDifferences(const Model& m, int configurations, std::
       rows_nonzero += dist.rows.row(static_cast<Eigen::Index>(i)).cwiseAbs().maxCoeff() > 1e-6 ? 1 : 0;
     }
   }
-  std::printf("%s: %d avoidance rows vs central differences (h = 1e-6; %d of them non-zero, of %d active "
-              "pairs): max error %.3g\n",
-              m.name.c_str(), rows_checked, rows_nonzero, active_pairs, max_err);
+  std::printf(
+      "%s: %d avoidance rows vs central differences (h = 1e-6; %d of them non-zero, of %d active "
+      "pairs): max error %.3g\n",
+      m.name.c_str(), rows_checked, rows_nonzero, active_pairs, max_err);
   // A check of no rows, or of zero rows only, would pass whatever the rows were:
   // nearly every active pair is well defined at random configurations, and every checked pair has a
   // segment that some joint moves (pairs no joint moves are excluded in the shipped configurations).
@@ -358,9 +370,10 @@ void checkBroadPhase(const Model& m, double prune_distance, int configurations, 
     }
   }
   // Not vacuous: pairs inside the distance were compared, and pairs were skipped and refined.
-  std::printf("%s, prune distance %.3f m, %d configurations: %ld pairs within it identical, %ld skipped "
-              "(lower bounds), %ld of them refined\n", m.name.c_str(), prune_distance, configurations, within,
-              skipped, refined);
+  std::printf(
+      "%s, prune distance %.3f m, %d configurations: %ld pairs within it identical, %ld skipped "
+      "(lower bounds), %ld of them refined\n",
+      m.name.c_str(), prune_distance, configurations, within, skipped, refined);
   EXPECT_GT(within, configurations / 2);
   EXPECT_GT(skipped, configurations);
   EXPECT_GT(refined, 0);
@@ -423,7 +436,9 @@ TEST(DistanceTightModel, ResultsDoNotDependOnEarlierCycles) {
       for (std::size_t i = 0; i < m.pairs.size(); ++i) {
         if (!fresh.pairs[i].active) continue;
         const std::string name = m.segments[fresh.pairs[i].seg_a].name + "-" + m.segments[fresh.pairs[i].seg_b].name;
-        ASSERT_EQ(reused.pairs[i].exact, fresh.pairs[i].exact) << name << " cycle " << c << " prune " << prune << " fresh " << fresh.pairs[i].distance << " reused " << reused.pairs[i].distance << " exact " << exact.pairs[i].distance;
+        ASSERT_EQ(reused.pairs[i].exact, fresh.pairs[i].exact)
+            << name << " cycle " << c << " prune " << prune << " fresh " << fresh.pairs[i].distance << " reused "
+            << reused.pairs[i].distance << " exact " << exact.pairs[i].distance;
         if (!reused.pairs[i].exact) {
           EXPECT_LE(reused.pairs[i].distance, exact.pairs[i].distance) << name << " cycle " << c;
           EXPECT_GT(reused.pairs[i].distance, prune) << name << " cycle " << c;
@@ -435,9 +450,10 @@ TEST(DistanceTightModel, ResultsDoNotDependOnEarlierCycles) {
         ++compared;
       }
     }
-    std::printf("tight model along a trajectory, prune %.3f m: %ld exact pairs identical, %ld left as lower bounds; "
-                "%ld searches with what the last cycles carried, %ld without\n",
-                prune, compared, bounded, searches_reused, searches_fresh);
+    std::printf(
+        "tight model along a trajectory, prune %.3f m: %ld exact pairs identical, %ld left as lower bounds; "
+        "%ld searches with what the last cycles carried, %ld without\n",
+        prune, compared, bounded, searches_reused, searches_fresh);
     EXPECT_GT(compared, prune < 1.0 ? 300 : 300 * 100);
     // Not vacuous: the carried bounds did skip searches (few here: most of this robot's links are one
     // piece, so a pair's one search is its answer; on Romeo's crossed arms they halve the searches).
@@ -484,8 +500,10 @@ TEST(DistanceListedPairs, TightPairsBeyondTheGiveUpDistanceComeOutAsLowerBounds)
       EXPECT_EQ(l.nhat_B, f.nhat_B) << "pair " << i;
     }
   }
-  std::printf("tight model, give-up %.3f m: %ld pairs within it identical, %ld beyond it left as lower bounds, "
-              "%ld beyond it exact (capsule pairs)\n", kGiveUp, within, bounded, exact_beyond);
+  std::printf(
+      "tight model, give-up %.3f m: %ld pairs within it identical, %ld beyond it left as lower bounds, "
+      "%ld beyond it exact (capsule pairs)\n",
+      kGiveUp, within, bounded, exact_beyond);
   EXPECT_GT(within, 150);
   EXPECT_GT(bounded, 150 * 20);
 }
@@ -546,9 +564,7 @@ TEST(DistanceListedPairs, ListedPairsEqualTheFullSweepAndNothingElseChanges) {
 // coincident cores, NaN and infinite coordinates, batches not a multiple of four).
 
 /// Whether two doubles are the same bits, or both NaN (a NaN's sign and payload carry nothing).
-bool sameBits(double a, double b) {
-  return (std::isnan(a) && std::isnan(b)) || std::memcmp(&a, &b, sizeof a) == 0;
-}
+bool sameBits(double a, double b) { return (std::isnan(a) && std::isnan(b)) || std::memcmp(&a, &b, sizeof a) == 0; }
 
 TEST(DistanceSweepKernels, TheFastestKernelIsAvx2WhereTheCpuHasIt) {
   __builtin_cpu_init();
@@ -612,16 +628,16 @@ TEST(DistanceSweepKernels, KernelsGiveTheSameBitsOnEveryBranch) {
   std::vector<SegmentB> prim;
   for (int k = 0; k < 200; ++k) prim.emplace_back(rnd(), rnd());
   const Vector3d p(0.1, 0.2, 0.3), d(0.05, -0.02, 0.1);
-  prim.emplace_back(p, p + d);                                    // 200
+  prim.emplace_back(p, p + d);                                                      // 200
   prim.emplace_back(p + Vector3d(0, 0.03, 0), p + Vector3d(0, 0.03, 0) + 2.0 * d);  // parallel to 200
-  prim.emplace_back(p + d, p - d);                                // anti-parallel, overlapping 200
-  prim.emplace_back(p, p);                                        // a point (sphere)
-  prim.emplace_back(p + 0.5 * d, p + 0.5 * d);                    // a point on 200's core
-  prim.emplace_back(p + d, p + d + 1e-9 * Vector3d(1, 1, 0));     // nearly a point
-  prim.emplace_back(p, p + d * (1.0 + 1e-15));                    // nearly identical to 200
-  prim.emplace_back(Vector3d(nan, 0, 0), Vector3d(0, 0, 0));      // NaN
-  prim.emplace_back(Vector3d(0, inf, 0), Vector3d(0, 0, 1));      // infinite
-  prim.emplace_back(Vector3d(1e200, 0, 0), Vector3d(-1e200, 0, 1));  // huge
+  prim.emplace_back(p + d, p - d);                                                  // anti-parallel, overlapping 200
+  prim.emplace_back(p, p);                                                          // a point (sphere)
+  prim.emplace_back(p + 0.5 * d, p + 0.5 * d);                                      // a point on 200's core
+  prim.emplace_back(p + d, p + d + 1e-9 * Vector3d(1, 1, 0));                       // nearly a point
+  prim.emplace_back(p, p + d * (1.0 + 1e-15));                                      // nearly identical to 200
+  prim.emplace_back(Vector3d(nan, 0, 0), Vector3d(0, 0, 0));                        // NaN
+  prim.emplace_back(Vector3d(0, inf, 0), Vector3d(0, 0, 1));                        // infinite
+  prim.emplace_back(Vector3d(1e200, 0, 0), Vector3d(-1e200, 0, 1));                 // huge
   const int special_begin = 200, nprim = static_cast<int>(prim.size());
   std::vector<int> a, b;
   for (int i = special_begin; i < nprim; ++i)
@@ -645,7 +661,8 @@ TEST(DistanceSweepKernels, KernelsGiveTheSameBitsOnEveryBranch) {
     detail::coreDistancesScalar(prim.data(), a.data(), b.data(), n, core1.data(), s1.data(), t1.data());
   int nan_results = 0;
   for (int k = 0; k < n; ++k) {
-    ASSERT_TRUE(sameBits(core1[k], core0[k])) << "pair " << a[k] << "-" << b[k] << ": " << core1[k] << " vs " << core0[k];
+    ASSERT_TRUE(sameBits(core1[k], core0[k]))
+        << "pair " << a[k] << "-" << b[k] << ": " << core1[k] << " vs " << core0[k];
     ASSERT_TRUE(sameBits(s1[k], s0[k])) << "pair " << a[k] << "-" << b[k];
     ASSERT_TRUE(sameBits(t1[k], t0[k])) << "pair " << a[k] << "-" << b[k];
     nan_results += std::isnan(core0[k]);
@@ -662,8 +679,10 @@ TEST(DistanceSweepKernels, KernelsGiveTheSameBitsOnEveryBranch) {
   std::vector<double> rsum(n), gap0(n), gap1(n);
   for (int k = 0; k < n; ++k) rsum[k] = 0.01 * (k % 7);
   detail::boundGapsScalar(c4.data(), a.data(), b.data(), rsum.data(), n, gap0.data());
-  if (detail::avx2Available()) detail::boundGapsAvx2(c4.data(), a.data(), b.data(), rsum.data(), n, gap1.data());
-  else detail::boundGapsScalar(c4.data(), a.data(), b.data(), rsum.data(), n, gap1.data());
+  if (detail::avx2Available())
+    detail::boundGapsAvx2(c4.data(), a.data(), b.data(), rsum.data(), n, gap1.data());
+  else
+    detail::boundGapsScalar(c4.data(), a.data(), b.data(), rsum.data(), n, gap1.data());
   for (int k = 0; k < n; ++k) {
     ASSERT_TRUE(sameBits(gap1[k], gap0[k])) << "pair " << a[k] << "-" << b[k];
     if (std::isfinite(gap0[k])) {  // independent: Eigen's norm, to rounding
@@ -782,8 +801,10 @@ TEST(DistanceBodySchema, SlotPairsComeOutInactiveAfterEveryWayOfComputingThem) {
     int n = 0;
     for (const int i : slot_pairs) {
       const PairDistance& pd = dist.pairs[static_cast<std::size_t>(i)];
-      if (pd.active) ++n;
-      else EXPECT_EQ(pd.distance, std::numeric_limits<double>::infinity());
+      if (pd.active)
+        ++n;
+      else
+        EXPECT_EQ(pd.distance, std::numeric_limits<double>::infinity());
     }
     return n;
   };
@@ -845,8 +866,10 @@ TEST(DistanceBodySchema, CheckRejectsAbsurdSegmentsAndNamesTheBadValue) {
 
   // Accepted: the grasped bar of bringup/behavior/bar_occlusion.yaml (0.30 m, r 0.02), the bar of the
   // grasped_bar scenario, a sphere exactly at the radius limit, a capsule exactly at the length limit.
-  EXPECT_TRUE(checkBodySchemaSegment(m, hand, Vector3d(0, -0.15, -0.06), Vector3d(0, 0.15, -0.06), 0.02, false, lim).ok());
-  EXPECT_TRUE(checkBodySchemaSegment(m, hand, Vector3d(-0.16, 0, -0.06), Vector3d(0.16, 0, -0.06), 0.02, false, lim).ok());
+  EXPECT_TRUE(
+      checkBodySchemaSegment(m, hand, Vector3d(0, -0.15, -0.06), Vector3d(0, 0.15, -0.06), 0.02, false, lim).ok());
+  EXPECT_TRUE(
+      checkBodySchemaSegment(m, hand, Vector3d(-0.16, 0, -0.06), Vector3d(0.16, 0, -0.06), 0.02, false, lim).ok());
   EXPECT_TRUE(checkBodySchemaSegment(m, hand, o, o, 0.5, false, lim).ok());
   EXPECT_TRUE(checkBodySchemaSegment(m, hand, Vector3d(-0.5, 0, 0), Vector3d(0.5, 0, 0), 0.01, false, lim).ok());
   // A gaze line from the head camera to an object on the floor 3 m ahead (the behavior host's
@@ -895,7 +918,8 @@ TEST(DistanceBodySchema, CheckRejectsAbsurdSegmentsAndNamesTheBadValue) {
   EXPECT_EQ(c.fault, BodySchemaFault::kNonFinite);
   EXPECT_TRUE(std::isnan(c.value));
   EXPECT_STREQ(c.key, "");
-  EXPECT_EQ(checkBodySchemaSegment(m, hand, a, Vector3d(-inf, 0, 0), 0.02, false, lim).fault, BodySchemaFault::kNonFinite);
+  EXPECT_EQ(checkBodySchemaSegment(m, hand, a, Vector3d(-inf, 0, 0), 0.02, false, lim).fault,
+            BodySchemaFault::kNonFinite);
   EXPECT_EQ(checkBodySchemaSegment(m, hand, a, a, inf, false, lim).fault, BodySchemaFault::kNonFinite);
   EXPECT_EQ(checkBodySchemaSegment(m, hand, a, a, 0.0, false, lim).fault, BodySchemaFault::kRadiusNotPositive);
   EXPECT_EQ(checkBodySchemaSegment(m, hand, a, a, -0.01, false, lim).fault, BodySchemaFault::kRadiusNotPositive);

@@ -27,8 +27,8 @@ struct Result {
   bool well_defined = false;
 };
 
-Result query(const Vector3d& a0, const Vector3d& a1, double ra, const Vector3d& b0, const Vector3d& b1,
-             double rb, const Vector3d& fallback = Vector3d::UnitZ()) {
+Result query(const Vector3d& a0, const Vector3d& a1, double ra, const Vector3d& b0, const Vector3d& b1, double rb,
+             const Vector3d& fallback = Vector3d::UnitZ()) {
   Result r;
   r.well_defined = capsuleCapsuleDistance(a0, a1, ra, b0, b1, rb, fallback, r.d, r.p_a, r.p_b, r.n);
   return r;
@@ -44,8 +44,8 @@ void expectInvariants(const Result& r) {
 }
 
 void expectVec(const Vector3d& actual, const Vector3d& expected, double tol = 1e-12) {
-  EXPECT_LT((actual - expected).norm(), tol) << "actual " << actual.transpose() << ", expected "
-                                              << expected.transpose();
+  EXPECT_LT((actual - expected).norm(), tol)
+      << "actual " << actual.transpose() << ", expected " << expected.transpose();
 }
 
 // ---------------------------------------------------------------- sphere - sphere
@@ -396,8 +396,8 @@ TEST(GeometryFcl, RandomPairsAgreeWithFcl) {
       ASSERT_LT(e, 1e-9) << "pair " << i << " kind " << kind;
       ++n.distance_compared;
       if (unique) {
-        const double ep = std::max((result.nearest_points[0] - r.p_a).norm(),
-                                   (result.nearest_points[1] - r.p_b).norm());
+        const double ep =
+            std::max((result.nearest_points[0] - r.p_a).norm(), (result.nearest_points[1] - r.p_b).norm());
         max_p_err = std::max(max_p_err, ep);
         ASSERT_LT(ep, 1e-9) << "pair " << i << " kind " << kind;
         ++n.points_compared;
@@ -433,10 +433,10 @@ TEST(GeometryFcl, RandomPairsAgreeWithFcl) {
   EXPECT_GE(n.distance_compared, 10000);
   EXPECT_GE(n.points_compared, 8000);
   EXPECT_GE(n.penetrating_compared, 100);
-  std::printf("FCL cross-check: %d distances (max error %.3g m), %d witness pairs (max error %.3g m), "
-              "%d penetrating (max error %.3g m)\n",
-              n.distance_compared, max_d_err, n.points_compared, max_p_err, n.penetrating_compared,
-              max_pen_err);
+  std::printf(
+      "FCL cross-check: %d distances (max error %.3g m), %d witness pairs (max error %.3g m), "
+      "%d penetrating (max error %.3g m)\n",
+      n.distance_compared, max_d_err, n.points_compared, max_p_err, n.penetrating_compared, max_pen_err);
 }
 
 }  // namespace

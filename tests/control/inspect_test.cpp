@@ -26,9 +26,7 @@ using ::testing::HasSubstr;
 using test::ProcessResult;
 using test::slurp;
 
-ProcessResult inspect(const std::string& args) {
-  return test::runTool("reflex_inspect", args);
-}
+ProcessResult inspect(const std::string& args) { return test::runTool("reflex_inspect", args); }
 
 std::vector<std::string> split(const std::string& s, char sep) {
   std::vector<std::string> out;
@@ -57,7 +55,10 @@ std::vector<CsvRow> parseCsv(const std::string& out, std::string& header) {
     const auto f = split(line, ',');
     EXPECT_EQ(f.size(), 9u) << line;
     if (f.size() != 9) continue;
-    rows.push_back({f[0], f[1], std::stod(f[2]), {std::stod(f[3]), std::stod(f[4]), std::stod(f[5])},
+    rows.push_back({f[0],
+                    f[1],
+                    std::stod(f[2]),
+                    {std::stod(f[3]), std::stod(f[4]), std::stod(f[5])},
                     {std::stod(f[6]), std::stod(f[7]), std::stod(f[8])}});
   }
   return rows;
@@ -198,8 +199,7 @@ void expectCsvMatchesLibrary(const ProcessResult& r, const Expected& e) {
     EXPECT_LT((rows[i].pb - pd.p_B_b).cwiseAbs().maxCoeff(), 5.1e-7);
   }
   const PairDistance& c = e.dist.pairs[e.dist.closest];
-  EXPECT_THAT(r.out, HasSubstr("# closest: " + e.model.segments[c.seg_a].name + "," +
-                               e.model.segments[c.seg_b].name));
+  EXPECT_THAT(r.out, HasSubstr("# closest: " + e.model.segments[c.seg_a].name + "," + e.model.segments[c.seg_b].name));
 }
 
 TEST(Inspect, HelpExitsZero) {
@@ -218,10 +218,10 @@ TEST(Inspect, CsvOfTheShippedRobotAtZeroMatchesTheLibrary) {
 }
 
 TEST(Inspect, JointValuesFromTheCommandLine) {
-  const std::map<std::string, double> q = {{"l_shoulder_pitch", -1.2}, {"l_elbow", -1.9}, {"neck_yaw", 0.4},
-                                           {"r_shoulder_roll", -0.6}};
+  const std::map<std::string, double> q = {
+      {"l_shoulder_pitch", -1.2}, {"l_elbow", -1.9}, {"neck_yaw", 0.4}, {"r_shoulder_roll", -0.6}};
   const ProcessResult r = inspect(testing::robotPath("asimo_like.urdf") +
-                        " --q l_shoulder_pitch=-1.2 l_elbow=-1.9 --q neck_yaw=0.4 --q r_shoulder_roll=-0.6");
+                                  " --q l_shoulder_pitch=-1.2 l_elbow=-1.9 --q neck_yaw=0.4 --q r_shoulder_roll=-0.6");
   expectCsvMatchesLibrary(r, Expected(testing::kAsimo, q));
 }
 

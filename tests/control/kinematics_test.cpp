@@ -134,8 +134,8 @@ void checkAgainstKdl(const std::string& robot, const std::vector<std::string>& t
   EXPECT_LT(max_p, 1e-9);
   EXPECT_LT(max_r, 1e-9);
   EXPECT_LT(max_j, 1e-9);
-  std::printf("%s vs KDL, %d configurations x %zu tips: max |dp| %.3g m, max |dR| %.3g, max |dJ| %.3g\n",
-              robot.c_str(), configurations, tips.size(), max_p, max_r, max_j);
+  std::printf("%s vs KDL, %d configurations x %zu tips: max |dp| %.3g m, max |dR| %.3g, max |dJ| %.3g\n", robot.c_str(),
+              configurations, tips.size(), max_p, max_r, max_j);
 }
 
 TEST(KinematicsKdl, ShippedRobotTipsAgreeWithKdl) {
@@ -192,8 +192,8 @@ TEST(KinematicsFiniteDifferences, JacobiansRelativeJacobianAndRowOfEveryLink) {
     EXPECT_LT(max_j, 1e-6);
     EXPECT_LT(max_rel, 1e-6);
     EXPECT_LT(max_row, 1e-6);
-    std::printf("%s vs central differences (h = 1e-6), every link: max |dJ| %.3g, relative %.3g, row %.3g\n",
-                robot, max_j, max_rel, max_row);
+    std::printf("%s vs central differences (h = 1e-6), every link: max |dJ| %.3g, relative %.3g, row %.3g\n", robot,
+                max_j, max_rel, max_row);
   }
 }
 

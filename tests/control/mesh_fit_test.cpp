@@ -76,9 +76,9 @@ struct TempDir {
   std::string operator/(const std::string& name) const { return (path / name).string(); }
 };
 
-using test::RawMesh;
 using test::linkMeshes;
 using test::parse3;
+using test::RawMesh;
 using test::readWithAssimp;
 
 /// Distance from p to the capsule a-b of radius r, minus r (computed here, not by the fitter).
@@ -181,20 +181,22 @@ TEST(MeshFit, FittedDistanceNeverExceedsFclMeshDistance) {
     bvh[model.segmentIndex(link)] = m;
   }
   OracleTally t;
-  expectFittedNeverFartherThanOracle(model, 150, 7, 1e-9, [&](std::size_t i, const Eigen::Isometry3d& X_B_La,
-                                                              const Eigen::Isometry3d& X_B_Lb) {
-    const SegmentPair& p = model.pairs[i];
-    const fcl::Transform3d Xa(X_B_La.matrix()), Xb(X_B_Lb.matrix());
-    fcl::CollisionRequestd creq;
-    fcl::CollisionResultd cres;
-    fcl::collide(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, creq, cres);
-    if (cres.isCollision()) return std::optional<TrueDistance>(TrueDistance{true, 0.0});
-    fcl::DistanceRequestd dreq;
-    dreq.enable_nearest_points = false;
-    fcl::DistanceResultd dres;
-    fcl::distance(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, dreq, dres);
-    return std::optional<TrueDistance>(TrueDistance{false, dres.min_distance});
-  }, t);
+  expectFittedNeverFartherThanOracle(
+      model, 150, 7, 1e-9,
+      [&](std::size_t i, const Eigen::Isometry3d& X_B_La, const Eigen::Isometry3d& X_B_Lb) {
+        const SegmentPair& p = model.pairs[i];
+        const fcl::Transform3d Xa(X_B_La.matrix()), Xb(X_B_Lb.matrix());
+        fcl::CollisionRequestd creq;
+        fcl::CollisionResultd cres;
+        fcl::collide(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, creq, cres);
+        if (cres.isCollision()) return std::optional<TrueDistance>(TrueDistance{true, 0.0});
+        fcl::DistanceRequestd dreq;
+        dreq.enable_nearest_points = false;
+        fcl::DistanceResultd dres;
+        fcl::distance(bvh.at(p.a).get(), Xa, bvh.at(p.b).get(), Xb, dreq, dres);
+        return std::optional<TrueDistance>(TrueDistance{false, dres.min_distance});
+      },
+      t);
   const int checked = t.checked, colliding = t.colliding;
   const double closest_margin = t.closest_margin;
   EXPECT_GT(checked, 10000);
@@ -220,9 +222,11 @@ TEST(MeshFit, GroundTruthVolumesAndStatedBounds) {
     Primitive gt;
     gt.radius = t[0]["radius"].as<double>();
     if (t[0]["sphere"]) {
-      gt.a_L = gt.b_L = Vector3d(t[0]["sphere"][0].as<double>(), t[0]["sphere"][1].as<double>(), t[0]["sphere"][2].as<double>());
+      gt.a_L = gt.b_L =
+          Vector3d(t[0]["sphere"][0].as<double>(), t[0]["sphere"][1].as<double>(), t[0]["sphere"][2].as<double>());
     } else {
-      for (int k = 0; k < 3; ++k) gt.a_L[k] = t[0]["capsule"][0][k].as<double>(), gt.b_L[k] = t[0]["capsule"][1][k].as<double>();
+      for (int k = 0; k < 3; ++k)
+        gt.a_L[k] = t[0]["capsule"][0][k].as<double>(), gt.b_L[k] = t[0]["capsule"][1][k].as<double>();
     }
     const auto prims = segmentPrimitives(model, l.link);
     ASSERT_EQ(prims.size(), 1u) << l.link << " is one primitive in truth";
@@ -291,18 +295,21 @@ TEST(MeshFit, RealWorldAssimpTestModelsFitWithEveryVertexEnclosed) {
 TEST(MeshFit, GeneratorAndReflexFitReproduceTheCommittedFilesByteForByte) {
   TempDir dir;
   const std::string script = testing::robotPath("make_mesh_humanoid.py");
-  ASSERT_EQ(std::system((std::string(REFLEX_PYTHON) + " " + script + " " + dir.path.string() + " > /dev/null").c_str()), 0);
+  ASSERT_EQ(std::system((std::string(REFLEX_PYTHON) + " " + script + " " + dir.path.string() + " > /dev/null").c_str()),
+            0);
   int compared = 0;
   for (const auto& e : fs::recursive_directory_iterator(dir.path)) {
     if (!e.is_regular_file()) continue;
     const std::string rel = fs::relative(e.path(), dir.path).string();
-    EXPECT_EQ(readFile(e.path().string()), readFile(testing::robotPath(rel))) << rel << " differs from the committed file";
+    EXPECT_EQ(readFile(e.path().string()), readFile(testing::robotPath(rel)))
+        << rel << " differs from the committed file";
     ++compared;
   }
   EXPECT_EQ(compared, 5 + 16);  // urdf, srdf, collision, truth, package.xml; 16 meshes
   const std::string out = dir / "mesh_humanoid.fit.yaml";
   const std::string cmd = std::string(REFLEX_FIT) + " " + dir / "mesh_humanoid.urdf" +
-                          " --package-path mesh_humanoid_description=" + dir / "mesh_humanoid_description" + " -q > /dev/null";
+                          " --package-path mesh_humanoid_description=" + dir / "mesh_humanoid_description" +
+                          " -q > /dev/null";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   EXPECT_EQ(readFile(out), readFile(testing::robotPath("mesh_humanoid.fit.yaml")));
 }
@@ -310,12 +317,13 @@ TEST(MeshFit, GeneratorAndReflexFitReproduceTheCommittedFilesByteForByte) {
 /// A one-link robot with the given collision XML, in `dir`.
 std::string writeRobot(const TempDir& dir, const std::string& collisions) {
   const std::string path = dir / "r.urdf";
-  std::ofstream(path) << "<robot name=\"r\"><link name=\"base\"/>\n<link name=\"a\">" << collisions
-                      << "</link>\n<link name=\"b\"><collision><geometry><sphere radius=\"0.1\"/></geometry></collision></link>\n"
-                      << "<joint name=\"j1\" type=\"revolute\"><parent link=\"base\"/><child link=\"a\"/><axis xyz=\"0 0 1\"/>"
-                      << "<limit lower=\"-1\" upper=\"1\" velocity=\"1\" effort=\"1\"/></joint>\n"
-                      << "<joint name=\"j2\" type=\"revolute\"><parent link=\"base\"/><child link=\"b\"/><origin xyz=\"1 0 0\"/>"
-                      << "<axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" velocity=\"1\" effort=\"1\"/></joint></robot>\n";
+  std::ofstream(path)
+      << "<robot name=\"r\"><link name=\"base\"/>\n<link name=\"a\">" << collisions
+      << "</link>\n<link name=\"b\"><collision><geometry><sphere radius=\"0.1\"/></geometry></collision></link>\n"
+      << "<joint name=\"j1\" type=\"revolute\"><parent link=\"base\"/><child link=\"a\"/><axis xyz=\"0 0 1\"/>"
+      << "<limit lower=\"-1\" upper=\"1\" velocity=\"1\" effort=\"1\"/></joint>\n"
+      << "<joint name=\"j2\" type=\"revolute\"><parent link=\"base\"/><child link=\"b\"/><origin xyz=\"1 0 0\"/>"
+      << "<axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" velocity=\"1\" effort=\"1\"/></joint></robot>\n";
   return path;
 }
 
@@ -332,20 +340,22 @@ TEST(MeshFitErrors, UnresolvedPackagesAndUnreadableMeshesAreNamedInOneMessage) {
   TempDir dir;
   ::unsetenv("ROS_PACKAGE_PATH");
   std::ofstream(dir / "bad.stl") << "this is not a mesh";
-  const std::string urdf = writeRobot(dir,
-      "<collision><geometry><mesh filename=\"package://nopkg/a.stl\"/></geometry></collision>"
-      "<collision><geometry><mesh filename=\"missing.obj\"/></geometry></collision>"
-      "<collision><geometry><mesh filename=\"bad.stl\"/></geometry></collision>");
+  const std::string urdf =
+      writeRobot(dir,
+                 "<collision><geometry><mesh filename=\"package://nopkg/a.stl\"/></geometry></collision>"
+                 "<collision><geometry><mesh filename=\"missing.obj\"/></geometry></collision>"
+                 "<collision><geometry><mesh filename=\"bad.stl\"/></geometry></collision>");
   const std::string msg = messageOf([&] { fitRobot(urdf, {}, {}); });
   const std::regex expected(
       std::regex_replace(urdf, std::regex("[.]"), "[.]") +
       ": cannot fit: 3 meshes not resolved or not readable:\n"
       "  link 'a': mesh 'package://nopkg/a[.]stl': package 'nopkg' not found \\(give --package-path nopkg=DIR, or add "
       "its parent folder to ROS_PACKAGE_PATH, unset now\\)\n"
-      "  link 'a': mesh 'missing[.]obj': cannot read '" + std::regex_replace(dir / "missing.obj", std::regex("[.]"), "[.]") +
+      "  link 'a': mesh 'missing[.]obj': cannot read '" +
+      std::regex_replace(dir / "missing.obj", std::regex("[.]"), "[.]") +
       "' \\(no such file\\)\n"
-      "  link 'a': mesh 'bad[.]stl': " + std::regex_replace(dir / "bad.stl", std::regex("[.]"), "[.]") +
-      ": cannot read mesh: .+");
+      "  link 'a': mesh 'bad[.]stl': " +
+      std::regex_replace(dir / "bad.stl", std::regex("[.]"), "[.]") + ": cannot read mesh: .+");
   EXPECT_TRUE(std::regex_match(msg, expected)) << msg;
 }
 
@@ -353,13 +363,16 @@ TEST(MeshFitErrors, MissingFitNamesEveryMeshLinkAndTheCommand) {
   TempDir dir;
   std::ofstream(dir / "m.obj") << "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nf 1 2 3\n";
   const std::string urdf = dir / "r.urdf";
-  std::ofstream(urdf) << "<robot name=\"r\"><link name=\"base\"><collision><geometry><mesh filename=\"m.obj\"/></geometry></collision></link>"
-                      << "<link name=\"arm\"><collision><geometry><mesh filename=\"m.obj\"/></geometry></collision></link>"
-                      << "<joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/><axis xyz=\"0 0 1\"/>"
-                      << "<limit lower=\"-1\" upper=\"1\" velocity=\"1\" effort=\"1\"/></joint></robot>\n";
+  std::ofstream(urdf)
+      << "<robot name=\"r\"><link name=\"base\"><collision><geometry><mesh "
+         "filename=\"m.obj\"/></geometry></collision></link>"
+      << "<link name=\"arm\"><collision><geometry><mesh filename=\"m.obj\"/></geometry></collision></link>"
+      << "<joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/><axis xyz=\"0 0 1\"/>"
+      << "<limit lower=\"-1\" upper=\"1\" velocity=\"1\" effort=\"1\"/></joint></robot>\n";
   EXPECT_EQ(messageOf([&] { loadModel(urdf, {}); }),
             urdf + ": 2 links have mesh collision geometry and no fit: 'base' 'arm'; run: reflex_fit " + urdf +
-                " (it writes " + dir / "r.fit.yaml" + ", which the loader reads; or name an overlay with 'fit:' in the collision YAML)");
+                " (it writes " + dir / "r.fit.yaml" +
+                ", which the loader reads; or name an overlay with 'fit:' in the collision YAML)");
   // After reflex_fit's library call, the same robot loads, with the fit read from the default place.
   const FitOverlay overlay = fitRobot(urdf, {}, {});
   std::ofstream(dir / "r.fit.yaml") << fitOverlayText(overlay, dir / "r.fit.yaml");
@@ -370,12 +383,15 @@ TEST(MeshFitErrors, MissingFitNamesEveryMeshLinkAndTheCommand) {
 TEST(MeshFitErrors, StaleOverlayNamesTheLink) {
   TempDir dir;
   std::ofstream(dir / "m.obj") << "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nf 1 2 3\n";
-  const std::string urdf = writeRobot(dir, "<collision><geometry><mesh filename=\"m.obj\"/></geometry></collision>"
-                                           "<collision><origin xyz=\"0 0 0.3\"/><geometry><box size=\"0.1 0.1 0.1\"/></geometry></collision>");
+  const std::string urdf =
+      writeRobot(dir,
+                 "<collision><geometry><mesh filename=\"m.obj\"/></geometry></collision>"
+                 "<collision><origin xyz=\"0 0 0.3\"/><geometry><box size=\"0.1 0.1 0.1\"/></geometry></collision>");
   const std::string fit = dir / "r.fit.yaml";
   std::ofstream(fit) << fitOverlayText(fitRobot(urdf, {}, {}), fit);
   const Model fresh = loadModel(urdf, {});
-  EXPECT_EQ(fresh.segments[fresh.segmentIndex("a")].num_primitives, static_cast<int>(loadFitOverlay(fit).links[0].primitives.size()));
+  EXPECT_EQ(fresh.segments[fresh.segmentIndex("a")].num_primitives,
+            static_cast<int>(loadFitOverlay(fit).links[0].primitives.size()));
   const std::string old_inputs = loadFitOverlay(fit).links[0].inputs;
   std::ofstream(dir / "m.obj", std::ios::app) << "v 0 0 0.2\nf 1 2 4\n";  // the mesh changed
   const std::string msg = messageOf([&] { loadModel(urdf, {}); });
@@ -384,7 +400,8 @@ TEST(MeshFitErrors, StaleOverlayNamesTheLink) {
                             std::regex_replace(urdf, std::regex("[.]"), "[.]") + " -o " +
                             std::regex_replace(fit, std::regex("[.]"), "[.]") +
                             "\\):\n  link 'a': its meshes, filenames, scales, origins or boxes changed since the fit "
-                            "\\(inputs [0-9a-f]{16}, fitted " + old_inputs + "\\)");
+                            "\\(inputs [0-9a-f]{16}, fitted " +
+                            old_inputs + "\\)");
   EXPECT_TRUE(std::regex_match(msg, expected)) << msg;
 }
 
@@ -432,7 +449,8 @@ TEST(MeshFitOverlay, PiecesRoundTripAndABadPieceIsRefused) {
   LinkFit l;
   l.link = "box_link";
   l.inputs = "0123456789abcdef";
-  const Eigen::Isometry3d X(Eigen::Translation3d(0.1, -0.2, 0.3) * Eigen::AngleAxisd(0.3, Vector3d(1, 2, 3).normalized()));
+  const Eigen::Isometry3d X(Eigen::Translation3d(0.1, -0.2, 0.3) *
+                            Eigen::AngleAxisd(0.3, Vector3d(1, 2, 3).normalized()));
   l.pieces = {boxPiece(Vector3d(0.1, 0.2, 0.3), X, FitOptions{})};
   l.primitives = {l.pieces[0].capsule};
   o.links.push_back(l);
@@ -494,7 +512,8 @@ TEST(MeshFitResolve, PackageFileAndRelativePaths) {
   std::ofstream(dir / "src/folder_name/package.xml") << "<package format=\"3\"><name>real_name</name></package>";
   ::setenv("ROS_PACKAGE_PATH", (dir / "src").c_str(), 1);
   std::string why;
-  EXPECT_EQ(resolveMeshFilename("package://real_name/m/x.stl", "/u", {}, &why), dir / "src/folder_name" + "/m/x.stl") << why;
+  EXPECT_EQ(resolveMeshFilename("package://real_name/m/x.stl", "/u", {}, &why), dir / "src/folder_name" + "/m/x.stl")
+      << why;
   EXPECT_EQ(resolveMeshFilename("package://folder_name/x.stl", "/u", {}, &why), "") << "package.xml names it real_name";
   PackagePaths explicit_paths;
   explicit_paths.packages["real_name"] = "/elsewhere";
@@ -537,7 +556,8 @@ Eigen::Isometry3d pose(const Vector3d& xyz, const Vector3d& rpy) {
   Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
   X.translation() = xyz;
   X.linear() = (Eigen::AngleAxisd(rpy.z(), Vector3d::UnitZ()) * Eigen::AngleAxisd(rpy.y(), Vector3d::UnitY()) *
-                Eigen::AngleAxisd(rpy.x(), Vector3d::UnitX())).toRotationMatrix();
+                Eigen::AngleAxisd(rpy.x(), Vector3d::UnitX()))
+                   .toRotationMatrix();
   return X;
 }
 
@@ -588,8 +608,8 @@ TEST(MeshFitBox, EverySurfacePointInsideAndFlatBoxesFarTighterThanTheOldCapsule)
 
 /// Every collision shape of every link of a URDF as FCL shapes in the link frame, read here with
 /// tinyxml2: boxes as boxes, spheres as spheres, cylinders as the capsules Reflex reads them as.
-std::map<std::string, std::vector<std::pair<std::shared_ptr<fcl::CollisionGeometryd>, Eigen::Isometry3d>>>
-fclShapes(const std::string& urdf_path, std::set<std::string>* box_links) {
+std::map<std::string, std::vector<std::pair<std::shared_ptr<fcl::CollisionGeometryd>, Eigen::Isometry3d>>> fclShapes(
+    const std::string& urdf_path, std::set<std::string>* box_links) {
   tinyxml2::XMLDocument doc;
   EXPECT_EQ(doc.LoadFile(urdf_path.c_str()), tinyxml2::XML_SUCCESS);
   std::map<std::string, std::vector<std::pair<std::shared_ptr<fcl::CollisionGeometryd>, Eigen::Isometry3d>>> out;
@@ -623,7 +643,8 @@ TEST(MeshFitBox, SmallHumanoidBoxesFittedWithoutAnOverlayAndNeverCloserThanFclSa
   std::vector<std::string> warnings;
   const Model model = testing::loadRobot(testing::kSmall, &warnings);
   EXPECT_EQ(warnings.size(), 6u);
-  for (const auto& w : warnings) EXPECT_THAT(w, ::testing::MatchesRegex(".*box .* m fitted with [1-6] primitives? \\(8/8 corners enclosed.*"));
+  for (const auto& w : warnings)
+    EXPECT_THAT(w, ::testing::MatchesRegex(".*box .* m fitted with [1-6] primitives? \\(8/8 corners enclosed.*"));
   EXPECT_GE(segmentPrimitives(model, "l_foot").size(), 2u);  // 0.16 x 0.08 x 0.02 m
   EXPECT_GE(segmentPrimitives(model, "r_foot").size(), 2u);
 
@@ -634,27 +655,29 @@ TEST(MeshFitBox, SmallHumanoidBoxesFittedWithoutAnOverlayAndNeverCloserThanFclSa
   const auto shapes = fclShapes(testing::robotPath("small_humanoid.urdf"), &box_links);
   ASSERT_EQ(box_links.size(), 6u);
   OracleTally t;
-  expectFittedNeverFartherThanOracle(model, 300, 11, 1e-6, [&](std::size_t i, const Eigen::Isometry3d& X_B_La,
-                                                               const Eigen::Isometry3d& X_B_Lb) {
-    const std::string& la = model.segments[model.pairs[i].a].name;
-    const std::string& lb = model.segments[model.pairs[i].b].name;
-    if (!box_links.count(la) && !box_links.count(lb)) return std::optional<TrueDistance>();
-    TrueDistance truth{false, std::numeric_limits<double>::infinity()};
-    for (const auto& [ga, X_La_shape] : shapes.at(la))
-      for (const auto& [gb, X_Lb_shape] : shapes.at(lb)) {
-        const fcl::Transform3d Xa((X_B_La * X_La_shape).matrix()), Xb((X_B_Lb * X_Lb_shape).matrix());
-        fcl::CollisionRequestd creq;
-        fcl::CollisionResultd cres;
-        fcl::collide(ga.get(), Xa, gb.get(), Xb, creq, cres);
-        truth.touching = truth.touching || cres.isCollision();
-        fcl::DistanceRequestd dreq;
-        dreq.gjk_solver_type = fcl::GST_INDEP;
-        fcl::DistanceResultd dres;
-        fcl::distance(ga.get(), Xa, gb.get(), Xb, dreq, dres);
-        truth.distance = std::min(truth.distance, dres.min_distance);
-      }
-    return std::optional<TrueDistance>(truth);
-  }, t);
+  expectFittedNeverFartherThanOracle(
+      model, 300, 11, 1e-6,
+      [&](std::size_t i, const Eigen::Isometry3d& X_B_La, const Eigen::Isometry3d& X_B_Lb) {
+        const std::string& la = model.segments[model.pairs[i].a].name;
+        const std::string& lb = model.segments[model.pairs[i].b].name;
+        if (!box_links.count(la) && !box_links.count(lb)) return std::optional<TrueDistance>();
+        TrueDistance truth{false, std::numeric_limits<double>::infinity()};
+        for (const auto& [ga, X_La_shape] : shapes.at(la))
+          for (const auto& [gb, X_Lb_shape] : shapes.at(lb)) {
+            const fcl::Transform3d Xa((X_B_La * X_La_shape).matrix()), Xb((X_B_Lb * X_Lb_shape).matrix());
+            fcl::CollisionRequestd creq;
+            fcl::CollisionResultd cres;
+            fcl::collide(ga.get(), Xa, gb.get(), Xb, creq, cres);
+            truth.touching = truth.touching || cres.isCollision();
+            fcl::DistanceRequestd dreq;
+            dreq.gjk_solver_type = fcl::GST_INDEP;
+            fcl::DistanceResultd dres;
+            fcl::distance(ga.get(), Xa, gb.get(), Xb, dreq, dres);
+            truth.distance = std::min(truth.distance, dres.min_distance);
+          }
+        return std::optional<TrueDistance>(truth);
+      },
+      t);
   const int checked = t.checked, colliding = t.colliding;
   const double closest_margin = t.closest_margin;
   EXPECT_GT(checked, 5000);
@@ -680,7 +703,7 @@ TEST(MeshesIntersect, CrossingApartContainedAndACornerPokingIn) {
     X.translation() = Eigen::Vector3d(x, y, z);
     return X;
   };
-  EXPECT_TRUE(meshesIntersect(a, I, a, at(0.15, 0.0, 0.0)));   // overlap 0.05 m
+  EXPECT_TRUE(meshesIntersect(a, I, a, at(0.15, 0.0, 0.0)));  // overlap 0.05 m
   for (int k = 0; k < 3; ++k) {
     Eigen::Vector3d d = Eigen::Vector3d::Zero();
     d[k] = 0.2 + 0.001;
@@ -688,8 +711,8 @@ TEST(MeshesIntersect, CrossingApartContainedAndACornerPokingIn) {
     d[k] = 0.2 - 0.001;
     EXPECT_TRUE(meshesIntersect(a, I, a, at(d.x(), d.y(), d.z()))) << "1 mm deep along axis " << k;
   }
-  EXPECT_TRUE(meshesIntersect(a, I, small, at(0.01, -0.02, 0.03)));   // inside: no triangle crosses
-  EXPECT_TRUE(meshesIntersect(small, at(0.01, -0.02, 0.03), a, I));   // the same, the other way round
+  EXPECT_TRUE(meshesIntersect(a, I, small, at(0.01, -0.02, 0.03)));  // inside: no triangle crosses
+  EXPECT_TRUE(meshesIntersect(small, at(0.01, -0.02, 0.03), a, I));  // the same, the other way round
   EXPECT_FALSE(meshesIntersect(a, I, small, at(0.5, 0.0, 0.0)));
   // A box turned 45 degrees about z and about x: its lowest corner 1 mm below the top face of a.
   Eigen::Isometry3d X = Eigen::Isometry3d::Identity();
@@ -755,7 +778,8 @@ void writeBinaryStl(const std::string& path, std::uint32_t n,
   out.write(header.data(), 80);
   out.write(reinterpret_cast<const char*>(&n), 4);
   for (std::uint32_t i = 0; i < n; ++i) {
-    float f[12] = {0, 0, 1, 0.001f * (i % 1000), 0, 0, 0.001f * (i % 1000) + 0.01f, 0, 0, 0.001f * (i % 1000), 0.01f, 0};
+    float f[12] = {0,     0, 1, 0.001f * (i % 1000), 0, 0, 0.001f * (i % 1000) + 0.01f, 0, 0, 0.001f * (i % 1000),
+                   0.01f, 0};
     for (int k = 0; k < 3 && patch; ++k) patch(i, k, f + 3 + 3 * k);
     out.write(reinterpret_cast<const char*>(f), sizeof f);
     const std::uint16_t attr = 0;
@@ -794,8 +818,9 @@ TEST(MeshFit, MeshValuesBeyondTheRangesAndMeshesBeyondTheSizeAreRefused) {
   EXPECT_THAT(message(dir + "six.stl", Vector3d::Constant(2.0)), ::testing::HasSubstr(", 0, 12) m is out of range"));
   writeBinaryStl(dir + "big.stl", 200001);
   EXPECT_EQ(message(dir + "big.stl", Vector3d::Ones()),
-            dir + "big.stl: mesh has 200001 triangles, more than the 200000 a collision mesh may have: decimate it (a "
-                  "collision mesh needs the shape, not the detail)");
+            dir +
+                "big.stl: mesh has 200001 triangles, more than the 200000 a collision mesh may have: decimate it (a "
+                "collision mesh needs the shape, not the detail)");
   writeBinaryStl(dir + "ok.stl", 200000);
   EXPECT_EQ(message(dir + "ok.stl", Vector3d::Ones()), "(loaded)");
 }

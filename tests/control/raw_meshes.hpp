@@ -92,8 +92,10 @@ inline std::map<std::string, RawMesh> linkMeshes(const std::string& urdf_path,
             resolved = true;
           }
         }
-        if (!resolved && f.compare(0, 7, "file://") == 0) f = f.substr(7);
-        else if (!resolved && !f.empty() && f[0] != '/') f = fs::path(urdf_path).parent_path().string() + "/" + f;
+        if (!resolved && f.compare(0, 7, "file://") == 0)
+          f = f.substr(7);
+        else if (!resolved && !f.empty() && f[0] != '/')
+          f = fs::path(urdf_path).parent_path().string() + "/" + f;
         part = readWithAssimp(f, parse3(m->Attribute("scale"), Eigen::Vector3d::Ones()), X);
       } else if (auto* b = g->FirstChildElement("box")) {
         const Eigen::Vector3d s = parse3(b->Attribute("size"), Eigen::Vector3d::Zero());

@@ -129,7 +129,8 @@ LastRow lastRow(const std::string& path, const std::string& min_column, double* 
     if (line.empty()) continue;
     last = line;
     const auto f = split(line);
-    if (static_cast<std::size_t>(min_at) < f.size()) *min_value = std::min(*min_value, std::strtod(f[min_at].c_str(), nullptr));
+    if (static_cast<std::size_t>(min_at) < f.size())
+      *min_value = std::min(*min_value, std::strtod(f[min_at].c_str(), nullptr));
   }
   LastRow r;
   const auto f = split(last);
@@ -260,11 +261,12 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
   std::size_t pieces_vertices = 0;
   for (const auto& pc : model.pieces) pieces_vertices += pc.vertices_L.size();
   const double median = quantile(shortfall, 0.5), p95 = quantile(shortfall, 0.95), max = quantile(shortfall, 1.0);
-  std::printf("| robot | segments | pieces (hull vertices) | fit s | pairs checked | meshes intersecting (one inside) | "
-              "above the mesh | pairs < 100 mm | shortfall median / p95 / max (mm) | worst pair |\n");
+  std::printf(
+      "| robot | segments | pieces (hull vertices) | fit s | pairs checked | meshes intersecting (one inside) | "
+      "above the mesh | pairs < 100 mm | shortfall median / p95 / max (mm) | worst pair |\n");
   std::printf("| %s | %d | %zu (%zu) | %.1f | %ld | %ld (%ld) | %ld | %zu | %.2f / %.2f / %.2f | %s |\n", robot.name,
-              model.num_robot_segments, model.pieces.size(), pieces_vertices, fit_s, checked, touching, contained, above,
-              shortfall.size(), median * 1e3, p95 * 1e3, max * 1e3, worst_pair.c_str());
+              model.num_robot_segments, model.pieces.size(), pieces_vertices, fit_s, checked, touching, contained,
+              above, shortfall.size(), median * 1e3, p95 * 1e3, max * 1e3, worst_pair.c_str());
   EXPECT_EQ(above, 0) << "largest excess " << worst_above << " m";
   EXPECT_EQ(touching_apart, 0);
   EXPECT_GT(shortfall.size(), 100u) << "too few pairs near each other to judge";
@@ -291,9 +293,10 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
   for (const auto& [a, b] : always)
     EXPECT_TRUE(!apart.count(a + "-" + b) && !apart.count(b + "-" + a))
         << a << "-" << b << " is excluded as always in collision, but its meshes are apart in a sample";
-  std::printf("%s: reflex_setup exit 0 in %.1f s (fit reused); %zu pairs excluded as always in collision, none apart "
-              "in the 200 samples\n",
-              robot.name, setup_s, always.size());
+  std::printf(
+      "%s: reflex_setup exit 0 in %.1f s (fit reused); %zu pairs excluded as always in collision, none apart "
+      "in the 200 samples\n",
+      robot.name, setup_s, always.size());
 
   // The paper's experiments on the robot with what set-up wrote, with avoidance and without
   // (reflex_sim all, kinematic plant). With avoidance: no e-stop, no pair below d_r. A scenario is
@@ -314,10 +317,11 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
   KinematicsData setup_kin(setup_model);
   DistanceData setup_dist(setup_model);
   int judged = 0, judged_pass = 0;
-  std::printf("%s: reflex_sim all, d_r %.1f mm, d_a %.1f mm\n| scenario | e-stop | closest with avoidance (mm) | "
-              "closest without (mm) | without: hands on target, end clear of d_a | hands with vs without at the end (mm) "
-              "| outcome |\n",
-              robot.name, cc.params.d_r * 1e3, cc.params.d_a * 1e3);
+  std::printf(
+      "%s: reflex_sim all, d_r %.1f mm, d_a %.1f mm\n| scenario | e-stop | closest with avoidance (mm) | "
+      "closest without (mm) | without: hands on target, end clear of d_a | hands with vs without at the end (mm) "
+      "| outcome |\n",
+      robot.name, cc.params.d_r * 1e3, cc.params.d_a * 1e3);
   for (const auto& entry : std::filesystem::directory_iterator(out + "/sim_on")) {
     if (!entry.is_directory()) continue;
     const std::string name = entry.path().filename().string();
@@ -334,7 +338,8 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
     for (const char* side : {"left", "right"}) {
       const std::string sd = side;
       if (summary.find(sd + " hand: final error") == std::string::npos) continue;  // no target for this hand
-      const Eigen::Vector3d hand_off(end_off.num(sd + "_hand_x"), end_off.num(sd + "_hand_y"), end_off.num(sd + "_hand_z"));
+      const Eigen::Vector3d hand_off(end_off.num(sd + "_hand_x"), end_off.num(sd + "_hand_y"),
+                                     end_off.num(sd + "_hand_z"));
       const Eigen::Vector3d target_off(end_off.num(sd + "_target_x"), end_off.num(sd + "_target_y"),
                                        end_off.num(sd + "_target_z"));
       const Eigen::Vector3d hand_on(end_on.num(sd + "_hand_x"), end_on.num(sd + "_hand_y"), end_on.num(sd + "_hand_z"));
@@ -342,11 +347,13 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
       gap = std::max(gap, (hand_on - hand_off).norm());
     }
     Eigen::VectorXd q = Eigen::VectorXd::Zero(setup_model.nq);
-    for (int j = 0; j < setup_model.nq; ++j) q[j] = end_off.num("q_" + setup_model.q_names[static_cast<std::size_t>(j)]);
+    for (int j = 0; j < setup_model.nq; ++j)
+      q[j] = end_off.num("q_" + setup_model.q_names[static_cast<std::size_t>(j)]);
     ASSERT_TRUE(q.allFinite()) << name << ": the time series lacks a joint";
     ASSERT_TRUE(computeForwardKinematics(setup_model, setup_kin, q));
     computeSegmentDistances(setup_model, setup_kin, setup_dist);
-    bool clear = end_off.num("min_distance") >= cc.params.d_a || end_off.field["min_pair"].find("body_schema") == std::string::npos;
+    bool clear = end_off.num("min_distance") >= cc.params.d_a ||
+                 end_off.field["min_pair"].find("body_schema") == std::string::npos;
     for (std::size_t i = 0; i < setup_model.pairs.size() && clear; ++i) {
       const SegmentPair& p = setup_model.pairs[i];
       if (p.b >= setup_model.num_robot_segments) continue;
@@ -398,7 +405,9 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedRobots, RealGeometry, ::testing::ValuesIn(kRobots),
-                         [](const ::testing::TestParamInfo<SharedRobot>& info) { return std::string(info.param.name); });
+                         [](const ::testing::TestParamInfo<SharedRobot>& info) {
+                           return std::string(info.param.name);
+                         });
 
 }  // namespace
 }  // namespace reflex::control

@@ -53,7 +53,8 @@ std::string modelErrorOf(Fn&& fn) {
 std::string twoLinks(const std::string& arm_xml) {
   return R"(<?xml version="1.0"?><robot name="t">
 <link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
-<link name="arm">)" + arm_xml + R"(</link>
+<link name="arm">)" +
+         arm_xml + R"(</link>
 <joint name="j" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 1"/><axis xyz="0 1 0"/>
 <limit lower="-1" upper="1" velocity="2" effort="1"/></joint></robot>)";
 }
@@ -76,7 +77,8 @@ TEST(UrdfCapsule, ReadAsTheCapsuleItDescribes) {
   CollisionConfig both;  // base and arm are neighbours: check them anyway, to measure the distance
   both.exclude_adjacent = false;
   const Model m = loadModelFromString(
-      twoLinks(R"(<collision><origin xyz="0 0 0.1"/><geometry><capsule radius="0.05" length="0.3"/></geometry></collision>)"),
+      twoLinks(
+          R"(<collision><origin xyz="0 0 0.1"/><geometry><capsule radius="0.05" length="0.3"/></geometry></collision>)"),
       both, "capsule.urdf");
   const int s = m.segmentIndex("arm");
   ASSERT_GE(s, 0);
@@ -88,7 +90,8 @@ TEST(UrdfCapsule, ReadAsTheCapsuleItDescribes) {
   EXPECT_NEAR(onlyPairDistance(m), 0.80, 1e-12);
   // The same element written as a cylinder gives the same primitive (cylinder_as: capsule).
   const Model c = loadModelFromString(
-      twoLinks(R"(<collision><origin xyz="0 0 0.1"/><geometry><cylinder radius="0.05" length="0.3"/></geometry></collision>)"),
+      twoLinks(
+          R"(<collision><origin xyz="0 0 0.1"/><geometry><cylinder radius="0.05" length="0.3"/></geometry></collision>)"),
       {}, "cylinder.urdf");
   const Primitive& q = c.primitives[c.segments[c.segmentIndex("arm")].first_primitive];
   EXPECT_EQ(q.a_L, p.a_L);
@@ -97,11 +100,11 @@ TEST(UrdfCapsule, ReadAsTheCapsuleItDescribes) {
 }
 
 TEST(UrdfCapsule, AVisualCapsuleNoLongerCostsTheLinkItsCollisionElements) {
-  const Model m = loadModelFromString(
-      twoLinks(R"(<visual><geometry><capsule radius="0.05" length="0.3"/></geometry></visual>
+  const Model m =
+      loadModelFromString(twoLinks(R"(<visual><geometry><capsule radius="0.05" length="0.3"/></geometry></visual>
 <collision><geometry><sphere radius="0.04"/></geometry></collision>
 <collision><origin xyz="0 0 0.2"/><geometry><capsule radius="0.03" length="0.1"/></geometry></collision>)"),
-      {}, "visual_capsule.urdf");
+                          {}, "visual_capsule.urdf");
   const int s = m.segmentIndex("arm");
   ASSERT_GE(s, 0);
   EXPECT_EQ(m.segments[s].num_primitives, 2);
@@ -109,8 +112,9 @@ TEST(UrdfCapsule, AVisualCapsuleNoLongerCostsTheLinkItsCollisionElements) {
 
 TEST(UrdfCapsule, BadCapsuleAttributesAreNamed) {
   const std::string e1 = modelErrorOf([] {
-    loadModelFromString(twoLinks(R"(<collision><geometry><capsule radius="0.05 " length="0.3"/></geometry></collision>)"),
-                        {}, "bad.urdf");
+    loadModelFromString(
+        twoLinks(R"(<collision><geometry><capsule radius="0.05 " length="0.3"/></geometry></collision>)"), {},
+        "bad.urdf");
   });
   EXPECT_THAT(e1, HasSubstr("link 'arm'"));
   EXPECT_THAT(e1, HasSubstr("<capsule> radius '0.05 '"));
@@ -120,8 +124,9 @@ TEST(UrdfCapsule, BadCapsuleAttributesAreNamed) {
   });
   EXPECT_THAT(e2, HasSubstr("<capsule> length: missing"));
   const std::string e3 = modelErrorOf([] {
-    loadModelFromString(twoLinks(R"(<collision><geometry><capsule radius="-0.05" length="0.3"/></geometry></collision>)"),
-                        {}, "bad.urdf");
+    loadModelFromString(
+        twoLinks(R"(<collision><geometry><capsule radius="-0.05" length="0.3"/></geometry></collision>)"), {},
+        "bad.urdf");
   });
   EXPECT_THAT(e3, HasSubstr("radius -0.05 must be positive"));
 }
@@ -131,8 +136,9 @@ TEST(UrdfCapsule, TheCylinderPolicyIsExplicit) {
   EXPECT_EQ(loadCollisionConfig(ok).cylinder_as, "capsule");
   const std::string bad = tempFile("cyl_bad.collision.yaml", "cylinder_as: fitted\n");
   EXPECT_EQ(modelErrorOf([&] { loadCollisionConfig(bad); }),
-            bad + ":1:14: cylinder_as: not a cylinder policy (value 'fitted', expected capsule (the capsule around the "
-                  "cylinder's axis: the only one until the mesh fitter reads cylinders as shapes to fit))");
+            bad +
+                ":1:14: cylinder_as: not a cylinder policy (value 'fitted', expected capsule (the capsule around the "
+                "cylinder's axis: the only one until the mesh fitter reads cylinders as shapes to fit))");
 }
 
 // ---- which pairs are checked ------------------------------------------------------------------
@@ -154,10 +160,10 @@ struct Tree {
 Tree makeTree() {
   Tree t;
   const std::vector<std::tuple<std::string, std::string, bool>> joints = {
-      {"root", "imu", true},        {"imu", "imu_cover", true},    {"root", "pelvis", false},
-      {"pelvis", "l_hip", false},   {"pelvis", "r_hip", false},    {"root", "chest_bare", false},
-      {"chest_bare", "l_sh", false}, {"chest_bare", "r_sh", false}, {"l_sh", "l_arm", false},
-      {"r_sh", "r_arm", false},     {"l_arm", "l_wrist_bare", false}, {"l_wrist_bare", "l_hand", false},
+      {"root", "imu", true},         {"imu", "imu_cover", true},       {"root", "pelvis", false},
+      {"pelvis", "l_hip", false},    {"pelvis", "r_hip", false},       {"root", "chest_bare", false},
+      {"chest_bare", "l_sh", false}, {"chest_bare", "r_sh", false},    {"l_sh", "l_arm", false},
+      {"r_sh", "r_arm", false},      {"l_arm", "l_wrist_bare", false}, {"l_wrist_bare", "l_hand", false},
       {"root", "head", false}};
   t.with_geometry = {"root", "imu", "imu_cover", "l_hip", "r_hip", "l_arm", "r_arm", "l_hand", "head"};
   std::string x = "<?xml version=\"1.0\"?><robot name=\"tree\">\n";
@@ -173,8 +179,8 @@ Tree makeTree() {
   }
   int j = 0;
   for (const auto& [p, c, f] : joints) {
-    x += "<joint name=\"j" + std::to_string(j++) + "\" type=\"" + (f ? "fixed" : "revolute") + "\"><parent link=\"" + p +
-         "\"/><child link=\"" + c + "\"/><origin xyz=\"0.1 0 0\"/>" +
+    x += "<joint name=\"j" + std::to_string(j++) + "\" type=\"" + (f ? "fixed" : "revolute") + "\"><parent link=\"" +
+         p + "\"/><child link=\"" + c + "\"/><origin xyz=\"0.1 0 0\"/>" +
          (f ? "" : "<axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" velocity=\"1\" effort=\"1\"/>") + "</joint>\n";
     t.joints.emplace_back(p, c);
     if (f) t.fixed_children.push_back(c);
@@ -195,8 +201,8 @@ std::set<std::pair<std::string, std::string>> checkedPairs(const Model& m) {
 }
 
 /// The rules, from their text, by brute force over the tree (independent of the loader's code).
-std::set<std::pair<std::string, std::string>> expectedPairs(const Tree& t, bool exclude_adjacent,
-                                                          const std::set<std::pair<std::string, std::string>>& extra) {
+std::set<std::pair<std::string, std::string>> expectedPairs(
+    const Tree& t, bool exclude_adjacent, const std::set<std::pair<std::string, std::string>>& extra) {
   auto parentOf = [&](const std::string& l) -> std::string {
     for (const auto& [p, c] : t.joints)
       if (c == l) return p;
@@ -274,12 +280,14 @@ TEST(PairRules, SrdfDisabledCollisionsAreExcludedAndBareLinksIgnored) {
 
 TEST(PairRules, SrdfErrorsNameTheFileLineAndLink) {
   const Tree t = makeTree();
-  const std::string srdf = tempFile("wrong.srdf", "<robot name=\"x\">\n<disable_collisions link1=\"l_arm\" link2=\"tail\"/>\n</robot>\n");
+  const std::string srdf =
+      tempFile("wrong.srdf", "<robot name=\"x\">\n<disable_collisions link1=\"l_arm\" link2=\"tail\"/>\n</robot>\n");
   CollisionConfig cfg;
   cfg.srdf_disabled = loadSrdfDisabledCollisions(srdf);
   EXPECT_EQ(modelErrorOf([&] { loadModelFromString(t.urdf, cfg, "tree.urdf"); }),
             srdf + ":2: disable_collisions names link 'tail', which tree.urdf does not have");
-  const std::string no_link2 = tempFile("half.srdf", "<robot name=\"x\">\n\n<disable_collisions link1=\"l_arm\"/>\n</robot>\n");
+  const std::string no_link2 =
+      tempFile("half.srdf", "<robot name=\"x\">\n\n<disable_collisions link1=\"l_arm\"/>\n</robot>\n");
   EXPECT_EQ(modelErrorOf([&] { loadSrdfDisabledCollisions(no_link2); }),
             no_link2 + ":3: <disable_collisions> needs link1 and link2");
   const std::string not_robot = tempFile("notrobot.srdf", "<model/>\n");
@@ -288,7 +296,8 @@ TEST(PairRules, SrdfErrorsNameTheFileLineAndLink) {
   EXPECT_THAT(modelErrorOf([&] { loadSrdfDisabledCollisions(::testing::TempDir() + "missing.srdf"); }),
               HasSubstr("missing.srdf"));
   const std::string yaml = tempFile("emptysrdf.collision.yaml", "srdf: \"\"\n");
-  EXPECT_THAT(modelErrorOf([&] { loadCollisionConfig(yaml); }), HasSubstr(yaml + ":1:7: srdf: not a name (value '', expected a non-empty string)"));
+  EXPECT_THAT(modelErrorOf([&] { loadCollisionConfig(yaml); }),
+              HasSubstr(yaml + ":1:7: srdf: not a name (value '', expected a non-empty string)"));
 }
 
 // ---- the sampling tool ------------------------------------------------------------------------
@@ -332,9 +341,12 @@ TEST(PairSampling, VerdictsMatchTheConstruction) {
   std::map<std::pair<std::string, std::string>, PairVerdict> got;
   for (const auto& p : r.pairs) got[{p.a, p.b}] = p.verdict;
   const std::map<std::pair<std::string, std::string>, PairVerdict> want = {
-      {{"base", "l2"}, PairVerdict::kAlwaysInCollision}, {{"l1", "l3"}, PairVerdict::kNeverClose},
-      {{"l1", "l4"}, PairVerdict::kNeverClose},          {{"l2", "l3"}, PairVerdict::kNeverClose},
-      {{"l2", "l4"}, PairVerdict::kChecked},             {{"l3", "l4"}, PairVerdict::kNeverClose}};
+      {{"base", "l2"}, PairVerdict::kAlwaysInCollision},
+      {{"l1", "l3"}, PairVerdict::kNeverClose},
+      {{"l1", "l4"}, PairVerdict::kNeverClose},
+      {{"l2", "l3"}, PairVerdict::kNeverClose},
+      {{"l2", "l4"}, PairVerdict::kChecked},
+      {{"l3", "l4"}, PairVerdict::kNeverClose}};
   EXPECT_EQ(got, want);
   const std::vector<std::pair<std::string, std::string>> adjacent = {
       {"base", "l1"}, {"base", "l3"}, {"base", "l4"}, {"l1", "l2"}};

@@ -41,9 +41,7 @@ namespace fs = std::filesystem;
 using test::ProcessResult;
 using test::slurp;
 
-ProcessResult setupRun(const std::string& args) {
-  return test::runTool("reflex_setup", args);
-}
+ProcessResult setupRun(const std::string& args) { return test::runTool("reflex_setup", args); }
 
 std::string freshDir(const std::string& name) {
   const std::string dir = ::testing::TempDir() + "reflex_setup_" + name;
@@ -206,29 +204,46 @@ TEST_P(ShippedRobot, FindsTheKnownArmsHeadAndARestClearOfTheBodyAndTheFilesWorkI
   }
 }
 
-const std::string kMeshArgs = "--srdf " + testing::robotPath("mesh_humanoid.srdf") + " --package-path mesh_humanoid_description=" +
-                              testing::robotPath("mesh_humanoid_description");
+const std::string kMeshArgs =
+    "--srdf " + testing::robotPath("mesh_humanoid.srdf") +
+    " --package-path mesh_humanoid_description=" + testing::robotPath("mesh_humanoid_description");
 
 INSTANTIATE_TEST_SUITE_P(
     Robots, ShippedRobot,
-    ::testing::Values(
-        Truth{"asimo_like", "", {"l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_elbow", "l_wrist"},
-              "l_shoulder", "head", "head_camera", false},
-        Truth{"small_humanoid", "",
-              {"l_shoulder_pitch", "l_shoulder_roll", "l_arm_yaw", "l_elbow", "l_wrist_yaw", "l_wrist_pitch"},
-              "l_shoulder", "head", "camera", false},
-        Truth{"mesh_humanoid", kMeshArgs, {"l_shoulder_pitch", "l_shoulder_roll", "l_arm_yaw", "l_elbow", "l_wrist_pitch"},
-              "l_shoulder_link", "head", "camera_link", true}),
+    ::testing::Values(Truth{"asimo_like",
+                            "",
+                            {"l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_elbow", "l_wrist"},
+                            "l_shoulder",
+                            "head",
+                            "head_camera",
+                            false},
+                      Truth{"small_humanoid",
+                            "",
+                            {"l_shoulder_pitch", "l_shoulder_roll", "l_arm_yaw", "l_elbow", "l_wrist_yaw",
+                             "l_wrist_pitch"},
+                            "l_shoulder",
+                            "head",
+                            "camera",
+                            false},
+                      Truth{"mesh_humanoid",
+                            kMeshArgs,
+                            {"l_shoulder_pitch", "l_shoulder_roll", "l_arm_yaw", "l_elbow", "l_wrist_pitch"},
+                            "l_shoulder_link",
+                            "head",
+                            "camera_link",
+                            true}),
     [](const auto& info) { return info.param.robot; });
 
 // The ASIMO-like robot with its left forearm capsule shortened: core z -0.02 .. -0.095 (radius 0.045),
 // so its surface ends at z = -0.14, 6 cm before the wrist at z = -0.2 (l_forearm frame).
 std::string gapRobot(const std::string& dir) {
   std::string urdf = slurp(testing::robotPath("asimo_like.urdf"));
-  const std::string old_el = "<collision name=\"l_forearm_0\">\n      <origin xyz=\"0 0 -0.1\" rpy=\"0 3.14159 0\"/>\n"
-                             "      <geometry><cylinder radius=\"0.045\" length=\"0.16\"/>";
-  const std::string new_el = "<collision name=\"l_forearm_0\">\n      <origin xyz=\"0 0 -0.0575\" rpy=\"0 3.14159 0\"/>\n"
-                             "      <geometry><cylinder radius=\"0.045\" length=\"0.075\"/>";
+  const std::string old_el =
+      "<collision name=\"l_forearm_0\">\n      <origin xyz=\"0 0 -0.1\" rpy=\"0 3.14159 0\"/>\n"
+      "      <geometry><cylinder radius=\"0.045\" length=\"0.16\"/>";
+  const std::string new_el =
+      "<collision name=\"l_forearm_0\">\n      <origin xyz=\"0 0 -0.0575\" rpy=\"0 3.14159 0\"/>\n"
+      "      <geometry><cylinder radius=\"0.045\" length=\"0.075\"/>";
   const auto at = urdf.find(old_el);
   EXPECT_NE(at, std::string::npos);
   urdf.replace(at, old_el.size(), new_el);
@@ -244,10 +259,12 @@ TEST(Setup, WarnsAboutAForearmGapWithTheClosingCapsuleAndClosesIt) {
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   // Analytic: the wrist (0, 0, -0.2) is 0.2 - 0.095 - 0.045 = 0.060 m outside the capsule; the points
   // more than 10 mm outside run from z = -0.155 (the 5 mm grid's first beyond -0.15) to the wrist.
-  EXPECT_THAT(r.out, HasSubstr(
-      "warning: left arm: link 'l_forearm': the stretch between its joints lies up to 0.060 m outside every collision "
-      "primitive of the link, at (0.000, 0.000, -0.200) m in 'l_forearm' (tolerance 0.010 m): a capsule from "
-      "(0.000, 0.000, -0.095) to (0.000, 0.000, -0.200) m, radius 0.045 m, closes it\n"));
+  EXPECT_THAT(
+      r.out,
+      HasSubstr("warning: left arm: link 'l_forearm': the stretch between its joints lies up to 0.060 m outside every "
+                "collision "
+                "primitive of the link, at (0.000, 0.000, -0.200) m in 'l_forearm' (tolerance 0.010 m): a capsule from "
+                "(0.000, 0.000, -0.095) to (0.000, 0.000, -0.200) m, radius 0.045 m, closes it\n"));
   EXPECT_THAT(r.out, HasSubstr("<collision name=\"l_forearm_gap\"><origin xyz=\"0.0000 0.0000 -0.1475\""));
   EXPECT_EQ(r.out.find("warning: right arm"), std::string::npos);
 
@@ -316,8 +333,9 @@ TEST(Setup, OnlySuccessReplacesFilesAndNeverAnythingButARegularFile) {
   };
   const ProcessResult r = setupRun(urdf + " --out " + out + " --force");
   EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
-  EXPECT_EQ(r.err, "reflex_setup: error: '" + out + "/behavior.yaml' exists and is a directory: reflex_setup replaces "
-                   "only regular files; remove it or choose another --out\n");
+  EXPECT_EQ(r.err, "reflex_setup: error: '" + out +
+                       "/behavior.yaml' exists and is a directory: reflex_setup replaces "
+                       "only regular files; remove it or choose another --out\n");
   EXPECT_EQ(listing(), (std::vector<std::string>{"behavior.yaml", "controller.yaml"}));
   EXPECT_EQ(slurp(out + "/controller.yaml"), "keep\n");
   EXPECT_TRUE(fs::is_directory(out + "/behavior.yaml"));
@@ -392,8 +410,8 @@ std::string chainXml(const std::string& p, int joints, double x, double y, doubl
     os << "<link name=\"" << link << "\"><collision><origin xyz=\"0 0 -0.06\"/><geometry><cylinder radius=\"0.02\" "
        << "length=\"0.06\"/></geometry></collision></link>\n"
        << "<joint name=\"" << p << "_j" << j << "\" type=\"revolute\"><parent link=\"" << parent << "\"/><child link=\""
-       << link << "\"/><origin xyz=\"" << (j == 1 ? x : 0.0) << " " << (j == 1 ? y : 0.0) << " "
-       << (j == 1 ? z : -0.12) << "\"/><axis xyz=\"" << (j % 2 ? "0 1 0" : "1 0 0")
+       << link << "\"/><origin xyz=\"" << (j == 1 ? x : 0.0) << " " << (j == 1 ? y : 0.0) << " " << (j == 1 ? z : -0.12)
+       << "\"/><axis xyz=\"" << (j % 2 ? "0 1 0" : "1 0 0")
        << "\"/><limit lower=\"-1\" upper=\"1\" velocity=\"2\" effort=\"10\"/></joint>\n";
     parent = link;
   }
@@ -401,21 +419,25 @@ std::string chainXml(const std::string& p, int joints, double x, double y, doubl
 }
 
 std::string robotXml(const std::string& name, const std::string& chains) {
-  return "<robot name=\"" + name + "\"><link name=\"trunk\"><collision><geometry><sphere radius=\"0.05\"/></geometry>"
-         "</collision></link>\n" + chains + "</robot>\n";
+  return "<robot name=\"" + name +
+         "\"><link name=\"trunk\"><collision><geometry><sphere radius=\"0.05\"/></geometry>"
+         "</collision></link>\n" +
+         chains + "</robot>\n";
 }
 
 TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   const std::string dir = freshDir("bad");
   // Two mirrored pairs at the same height, named neutrally.
   std::ofstream(dir + "/amb.urdf") << robotXml("amb", chainXml("a", 4, 0, 0.2, 0.5) + chainXml("b", 4, 0, -0.2, 0.5) +
-                                                          chainXml("c", 4, 0, 0.4, 0.5) + chainXml("d", 4, 0, -0.4, 0.5));
+                                                          chainXml("c", 4, 0, 0.4, 0.5) +
+                                                          chainXml("d", 4, 0, -0.4, 0.5));
   ProcessResult r = setupRun(dir + "/amb.urdf --out " + dir + "/amb");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.err, "reflex_setup: error: ambiguous arms in robot 'amb': 2 mirrored pairs of chains start within 5 cm "
-                   "of the same height and their names do not tell which are arms: [a_j1 a_j2 a_j3 a_j4] / "
-                   "[b_j1 b_j2 b_j3 b_j4] (z 0.500); [c_j1 c_j2 c_j3 c_j4] / [d_j1 d_j2 d_j3 d_j4] (z 0.500); "
-                   "give --left-hand and --right-hand\n");
+  EXPECT_EQ(r.err,
+            "reflex_setup: error: ambiguous arms in robot 'amb': 2 mirrored pairs of chains start within 5 cm "
+            "of the same height and their names do not tell which are arms: [a_j1 a_j2 a_j3 a_j4] / "
+            "[b_j1 b_j2 b_j3 b_j4] (z 0.500); [c_j1 c_j2 c_j3 c_j4] / [d_j1 d_j2 d_j3 d_j4] (z 0.500); "
+            "give --left-hand and --right-hand\n");
   // The flags resolve it.
   r = setupRun(dir + "/amb.urdf --out " + dir + "/amb --left-hand c_l4 --right-hand d_l4 --head trunk");
   EXPECT_EQ(r.exit_code, 0) << r.err;
@@ -432,7 +454,8 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
                                "[h_j1 h_j2] (2 joints, from 'trunk' at y 0.000); give --left-hand and --right-hand\n"));
   // Bad flags.
   r = setupRun(dir + "/one.urdf --out " + dir + "/one --left-hand a_l4");
-  EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: give both --left-hand and --right-hand (got only --left-hand 'a_l4')\n"));
+  EXPECT_THAT(r.err,
+              HasSubstr("reflex_setup: error: give both --left-hand and --right-hand (got only --left-hand 'a_l4')\n"));
   r = setupRun(dir + "/one.urdf --out " + dir + "/one --left-hand a_l4 --right-hand nope");
   EXPECT_THAT(r.err, HasSubstr("reflex_setup: error: --right-hand 'nope' is not a link of robot 'one'\n"));
   // Bad set-up input, each named.
@@ -444,8 +467,9 @@ TEST(Setup, AmbiguousAndMissingArmsAreErrorsNamingTheCandidates) {
   r = setupRun(dir + "/one.urdf --out " + dir + "/x --package-path foo");
   EXPECT_EQ(r.err, "reflex_setup: error: --package-path 'foo' must be NAME=DIR\n");
   r = setupRun(dir + "/one.urdf --out /dev/null/x");
-  EXPECT_EQ(r.err, "reflex_setup: error: --out: output folder '/dev/null/x' cannot be created: '/dev/null' is a "
-                   "character device\n");
+  EXPECT_EQ(r.err,
+            "reflex_setup: error: --out: output folder '/dev/null/x' cannot be created: '/dev/null' is a "
+            "character device\n");
   r = setupRun("--help");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_THAT(r.out, HasSubstr("--close-gaps"));

@@ -47,9 +47,11 @@ void expectModelError(Fn&& fn, const std::vector<std::string>& parts) {
 /// A URDF with a base and one movable link `arm` carrying `collision_xml`.
 std::string oneLink(const std::string& collision_xml, const std::string& joint_extra = "") {
   return R"(<?xml version="1.0"?><robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
-<link name="arm">)" + collision_xml + R"(</link>
+<link name="arm">)" +
+         collision_xml + R"(</link>
 <joint name="j" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 1"/><axis xyz="0 1 0"/>
-<limit lower="-1" upper="1" velocity="2" effort="1"/>)" + joint_extra + R"(</joint></robot>)";
+<limit lower="-1" upper="1" velocity="2" effort="1"/>)" +
+         joint_extra + R"(</joint></robot>)";
 }
 
 std::string tempFile(const std::string& name, const std::string& text) {
@@ -67,16 +69,17 @@ TEST(UrdfLoaderShipped, AsimoLikeHasTheStructureOfSection81) {
   EXPECT_EQ(m.links[0].name, "world");
   // 21 controlled DOF (Sec. 8.1) + 2 x 6 leg joints.
   const std::vector<std::string> controlled = {
-      "heel_x", "heel_y", "heel_yaw", "body_x", "body_y", "body_z", "body_roll", "body_pitch", "body_yaw",
-      "neck_yaw", "neck_pitch", "l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_elbow", "l_wrist",
-      "r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow", "r_wrist"};
+      "heel_x",          "heel_y",         "heel_yaw", "body_x",   "body_y",           "body_z",
+      "body_roll",       "body_pitch",     "body_yaw", "neck_yaw", "neck_pitch",       "l_shoulder_pitch",
+      "l_shoulder_roll", "l_shoulder_yaw", "l_elbow",  "l_wrist",  "r_shoulder_pitch", "r_shoulder_roll",
+      "r_shoulder_yaw",  "r_elbow",        "r_wrist"};
   EXPECT_EQ(controlled.size(), 21u);
   for (const auto& j : controlled) EXPECT_GE(m.qIndex(j), 0) << j;
   EXPECT_EQ(m.nq, 33);
   // Fig. 1: 17 segments.
-  const std::set<std::string> segments = {"head", "chest", "body", "l_shoulder", "r_shoulder", "l_upper_arm",
-                                          "r_upper_arm", "l_forearm", "r_forearm", "l_hand", "r_hand", "l_thigh",
-                                          "r_thigh", "l_shank", "r_shank", "l_foot", "r_foot"};
+  const std::set<std::string> segments = {
+      "head",   "chest",  "body",    "l_shoulder", "r_shoulder", "l_upper_arm", "r_upper_arm", "l_forearm", "r_forearm",
+      "l_hand", "r_hand", "l_thigh", "r_thigh",    "l_shank",    "r_shank",     "l_foot",      "r_foot"};
   ASSERT_EQ(m.num_robot_segments, 17);
   for (int s = 0; s < m.num_robot_segments; ++s) EXPECT_TRUE(segments.count(m.segments[s].name));
   EXPECT_EQ(m.segments[m.segmentIndex("chest")].num_primitives, 3);
@@ -130,8 +133,9 @@ TEST(UrdfLoaderShipped, SecondHumanoidLoadsWithBoxWarnings) {
   EXPECT_GE(m.qIndex("l_wrist_yaw"), 0);
   // Boxes: pelvis, torso, 2 hands, 2 feet, each fitted (fitBox) and its numbers reported.
   EXPECT_EQ(warnings.size(), 6u);
-  for (const auto& w : warnings) EXPECT_THAT(w, AllOf(HasSubstr("fitted with"), HasSubstr("(8/8 corners enclosed"),
-                                                     HasSubstr("small_humanoid.urdf")));
+  for (const auto& w : warnings)
+    EXPECT_THAT(w,
+                AllOf(HasSubstr("fitted with"), HasSubstr("(8/8 corners enclosed"), HasSubstr("small_humanoid.urdf")));
   // The continuous wrist has no position limits.
   const int w = m.qIndex("l_wrist_yaw");
   EXPECT_EQ(m.q_lower[w], -std::numeric_limits<double>::infinity());
@@ -142,7 +146,8 @@ TEST(UrdfLoaderShipped, SecondHumanoidLoadsWithBoxWarnings) {
 // ---------------------------------------------------------------- primitives, hand-computed
 TEST(UrdfLoaderPrimitives, SphereAtItsOrigin) {
   const Model m = loadModelFromString(
-      oneLink(R"(<collision><origin xyz="0.1 0.2 0.3" rpy="0.5 0.5 0.5"/><geometry><sphere radius="0.04"/></geometry></collision>)"),
+      oneLink(
+          R"(<collision><origin xyz="0.1 0.2 0.3" rpy="0.5 0.5 0.5"/><geometry><sphere radius="0.04"/></geometry></collision>)"),
       CollisionConfig{}, "inline");
   const Segment& s = m.segments[m.segmentIndex("arm")];
   ASSERT_EQ(s.num_primitives, 1);
@@ -156,7 +161,8 @@ TEST(UrdfLoaderPrimitives, SphereAtItsOrigin) {
 TEST(UrdfLoaderPrimitives, CylinderIsACapsuleAlongItsAxis) {
   // Cylinder axis z turned by pitch pi/2 onto +x; length 0.4 centred at (0, 0, -0.1).
   const Model m = loadModelFromString(
-      oneLink(R"(<collision><origin xyz="0 0 -0.1" rpy="0 1.5707963267948966 0"/><geometry><cylinder radius="0.05" length="0.4"/></geometry></collision>)"),
+      oneLink(
+          R"(<collision><origin xyz="0 0 -0.1" rpy="0 1.5707963267948966 0"/><geometry><cylinder radius="0.05" length="0.4"/></geometry></collision>)"),
       CollisionConfig{}, "inline");
   const Primitive& p = m.primitives[m.segments[m.segmentIndex("arm")].first_primitive];
   EXPECT_FALSE(p.sphere);
@@ -166,11 +172,10 @@ TEST(UrdfLoaderPrimitives, CylinderIsACapsuleAlongItsAxis) {
 }
 
 TEST(UrdfLoaderPrimitives, SeveralElementsMakeOneSegment) {
-  const Model m = loadModelFromString(
-      oneLink(R"(<collision><geometry><sphere radius="0.04"/></geometry></collision>
+  const Model m = loadModelFromString(oneLink(R"(<collision><geometry><sphere radius="0.04"/></geometry></collision>
                  <collision><geometry><cylinder radius="0.03" length="0.2"/></geometry></collision>
                  <collision><origin xyz="0 0 0.5"/><geometry><sphere radius="0.02"/></geometry></collision>)"),
-      CollisionConfig{}, "inline");
+                                      CollisionConfig{}, "inline");
   ASSERT_EQ(m.num_robot_segments, 2);
   EXPECT_EQ(m.segments[m.segmentIndex("arm")].num_primitives, 3);
   EXPECT_EQ(static_cast<int>(m.segments.size()), 2 + kBodySchemaSlots);
@@ -180,16 +185,19 @@ TEST(UrdfLoaderPrimitives, BoxIsFittedByCapsulesAlongItsEdgesWithItsNumbersInAWa
   const Vector3d size(0.1, 0.3, 0.06);
   const Vector3d origin(0.05, -0.02, 0.2);
   const Eigen::Matrix3d R = (Eigen::AngleAxisd(0.3, Vector3d::UnitZ()) * Eigen::AngleAxisd(-0.7, Vector3d::UnitY()) *
-                             Eigen::AngleAxisd(1.1, Vector3d::UnitX())).toRotationMatrix();
+                             Eigen::AngleAxisd(1.1, Vector3d::UnitX()))
+                                .toRotationMatrix();
   char xml[256];
-  std::snprintf(xml, sizeof xml,
-                R"(<collision><origin xyz="0.05 -0.02 0.2" rpy="1.1 -0.7 0.3"/><geometry><box size="0.1 0.3 0.06"/></geometry></collision>)");
+  std::snprintf(
+      xml, sizeof xml,
+      R"(<collision><origin xyz="0.05 -0.02 0.2" rpy="1.1 -0.7 0.3"/><geometry><box size="0.1 0.3 0.06"/></geometry></collision>)");
   std::vector<std::string> warnings;
   const Model m = loadModelFromString(oneLink(xml), CollisionConfig{}, "boxrobot.urdf", &warnings);
   ASSERT_EQ(warnings.size(), 1u);
   const Segment& seg = m.segments[m.segmentIndex("arm")];
-  EXPECT_THAT(warnings[0], AllOf(HasSubstr("boxrobot.urdf"), HasSubstr("arm"), HasSubstr("box 0.1 x 0.3 x 0.06 m fitted with " +
-                                                                                       std::to_string(seg.num_primitives) + " primitives"),
+  EXPECT_THAT(warnings[0], AllOf(HasSubstr("boxrobot.urdf"), HasSubstr("arm"),
+                                 HasSubstr("box 0.1 x 0.3 x 0.06 m fitted with " + std::to_string(seg.num_primitives) +
+                                           " primitives"),
                                  HasSubstr("(8/8 corners enclosed")));
   // A flat box (6 cm thin): several capsules side by side.
   EXPECT_GE(seg.num_primitives, 2);
@@ -292,19 +300,22 @@ TEST(UrdfLoaderErrors, BadBoxAndJointDefinitions) {
       },
       {"box.urdf", "box size 0.1 0 0.2"});
   // Floating joints are not supported.
-  const std::string floating = R"(<robot name="f"><link name="a"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+  const std::string floating =
+      R"(<robot name="f"><link name="a"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
     <link name="b"/><joint name="free" type="floating"><parent link="a"/><child link="b"/></joint></robot>)";
   expectModelError([&] { loadModelFromString(floating, CollisionConfig{}, "float.urdf"); },
                    {"float.urdf", "joint 'free'", "floating"});
   // No collision geometry at all.
-  expectModelError([] { loadModelFromString(R"(<robot name="e"><link name="a"/></robot>)", CollisionConfig{}, "e.urdf"); },
-                   {"e.urdf", "no link has collision geometry"});
+  expectModelError(
+      [] { loadModelFromString(R"(<robot name="e"><link name="a"/></robot>)", CollisionConfig{}, "e.urdf"); },
+      {"e.urdf", "no link has collision geometry"});
 }
 
 TEST(UrdfLoaderErrors, KinematicLoopNamesTheDisconnectedLink) {
   // b is the child of c, its own descendant: urdfdom still returns a model rooted at a, in which b and
   // c hang in a loop (found by fuzz_urdf as a leak of that loop; tests/fuzz/regressions/fuzz_urdf/).
-  const std::string loop = R"(<robot name="l"><link name="a"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+  const std::string loop =
+      R"(<robot name="l"><link name="a"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
     <link name="b"/><link name="c"/>
     <joint name="ab" type="fixed"><parent link="a"/><child link="a2"/></joint><link name="a2"/>
     <joint name="cb" type="fixed"><parent link="c"/><child link="b"/></joint>
@@ -365,17 +376,25 @@ TEST(UrdfLoaderConfig, MalformedYaml) {
   const std::string broken = tempFile("reflex_broken.collision.yaml", "exclude: [[a, b\n");
   expectModelError([&] { loadCollisionConfig(broken); }, {broken, "YAML syntax error"});
   const std::string key = tempFile("reflex_key.collision.yaml", "exclude_adjacent: true\nexclud: []\n");
-  expectModelError([&] { loadCollisionConfig(key); }, {key + ":2:1: exclud: unknown key (expected one of exclude_adjacent, exclude, srdf, cylinder_as, fit)"});
+  expectModelError(
+      [&] { loadCollisionConfig(key); },
+      {key + ":2:1: exclud: unknown key (expected one of exclude_adjacent, exclude, srdf, cylinder_as, fit)"});
   const std::string flag = tempFile("reflex_flag.collision.yaml", "exclude_adjacent: maybe\n");
-  expectModelError([&] { loadCollisionConfig(flag); }, {flag + ":1:19: exclude_adjacent: not true or false (value 'maybe', expected true or false)"});
+  expectModelError([&] { loadCollisionConfig(flag); },
+                   {flag + ":1:19: exclude_adjacent: not true or false (value 'maybe', expected true or false)"});
   const std::string triple = tempFile("reflex_triple.collision.yaml", "exclude:\n  - [a, b, c]\n");
-  expectModelError([&] { loadCollisionConfig(triple); }, {triple + ":2:5: exclude[0]: not a pair (value '[a, b, c]', expected a pair [segment_a, segment_b])"});
+  expectModelError(
+      [&] { loadCollisionConfig(triple); },
+      {triple + ":2:5: exclude[0]: not a pair (value '[a, b, c]', expected a pair [segment_a, segment_b])"});
   const std::string notlist = tempFile("reflex_notlist.collision.yaml", "exclude: head\n");
-  expectModelError([&] { loadCollisionConfig(notlist); }, {notlist + ":1:10: exclude: not a list (value 'head', expected a list)"});
+  expectModelError([&] { loadCollisionConfig(notlist); },
+                   {notlist + ":1:10: exclude: not a list (value 'head', expected a list)"});
   const std::string nested = tempFile("reflex_nested.collision.yaml", "exclude:\n  - [a, {x: 1}]\n");
   expectModelError([&] { loadCollisionConfig(nested); }, {nested, "exclude[0]: not a pair", "'[a, {x: 1}]'"});
   const std::string top = tempFile("reflex_top.collision.yaml", "- a\n- b\n");
-  expectModelError([&] { loadCollisionConfig(top); }, {top + ":1:1: (document): not a map of keys (value '[a, b]', expected a map of keys at the top level)"});
+  expectModelError(
+      [&] { loadCollisionConfig(top); },
+      {top + ":1:1: (document): not a map of keys (value '[a, b]', expected a map of keys at the top level)"});
   expectModelError([] { loadCollisionConfig("/nonexistent/x.collision.yaml"); },
                    {"/nonexistent/x.collision.yaml", "cannot open"});
 }
@@ -402,10 +421,12 @@ TEST(UrdfLoaderAccounting, ShippedRobotsKeepEveryCollisionElement) {
     const int primitives = static_cast<int>(m.primitives.size()) - kBodySchemaSlots;
     // One primitive per element, except a box: one or more (fitBox's cells).
     const std::regex box_tag("<box ");
-    const int boxes = static_cast<int>(std::distance(std::sregex_iterator(text.begin(), text.end(), box_tag),
-                                                     std::sregex_iterator()));
-    if (boxes == 0) EXPECT_EQ(primitives, countCollisionElements(text)) << robot;
-    else EXPECT_GE(primitives, countCollisionElements(text) + boxes) << robot << ": some box not fitted with 2+";
+    const int boxes = static_cast<int>(
+        std::distance(std::sregex_iterator(text.begin(), text.end(), box_tag), std::sregex_iterator()));
+    if (boxes == 0)
+      EXPECT_EQ(primitives, countCollisionElements(text)) << robot;
+    else
+      EXPECT_GE(primitives, countCollisionElements(text) + boxes) << robot << ": some box not fitted with 2+";
     EXPECT_GT(primitives, 15) << robot;
   }
 }
@@ -556,13 +577,15 @@ TEST(UrdfLoaderAccounting, OneMessageNamesEveryAffectedLink) {
 }
 
 TEST(UrdfLoaderAccounting, GeometryOutsideEveryLinkIsRefusedButGazeboBlocksAreNot) {
-  const std::string base = R"(<link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>)";
+  const std::string base =
+      R"(<link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>)";
   // A <link> nested in another element (urdfdom reads only <robot>'s own children).
   expectModelError(
       [&] {
-        loadModelFromString(R"(<robot name="t">)" + base +
-                                R"(<group><link name="l_hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link></group></robot>)",
-                            CollisionConfig{}, "nested.urdf");
+        loadModelFromString(
+            R"(<robot name="t">)" + base +
+                R"(<group><link name="l_hand"><collision><geometry><sphere radius="0.05"/></geometry></collision></link></group></robot>)",
+            CollisionConfig{}, "nested.urdf");
       },
       {"nested.urdf", "link 'l_hand'", "inside <group>", "urdfdom ignores it"});
   // A <collision> inside a <visual> or directly in <robot>.
@@ -576,8 +599,9 @@ TEST(UrdfLoaderAccounting, GeometryOutsideEveryLinkIsRefusedButGazeboBlocksAreNo
   // Two shapes in one geometry: urdfdom reads the first only.
   expectModelError(
       [&] {
-        loadModelFromString(R"(<robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/><box size="1 1 1"/></geometry></collision></link></robot>)",
-                            CollisionConfig{}, "two.urdf");
+        loadModelFromString(
+            R"(<robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/><box size="1 1 1"/></geometry></collision></link></robot>)",
+            CollisionConfig{}, "two.urdf");
       },
       {"two.urdf", "link 'base'", "more than one shape"});
   // Gazebo extension blocks carry <collision> surface parameters, not geometry: accepted.
@@ -599,11 +623,15 @@ TEST(UrdfLoaderAccounting, JointValuesMustBeFiniteAndInRange) {
   };
   for (const auto& c : cases) {  // not a structured binding: a lambda may not capture one (clang 14, C++17)
     const std::string& extra = c.first;
-    expectModelError([&] { loadModelFromString(oneLink(R"(<collision><geometry><sphere radius="0.04"/></geometry></collision>)", extra),
-                                               CollisionConfig{}, "joint.urdf"); },
-                     {"joint.urdf", "joint 'j'", c.second});
+    expectModelError(
+        [&] {
+          loadModelFromString(oneLink(R"(<collision><geometry><sphere radius="0.04"/></geometry></collision>)", extra),
+                              CollisionConfig{}, "joint.urdf");
+        },
+        {"joint.urdf", "joint 'j'", c.second});
   }
-  const std::string fast = R"(<?xml version="1.0"?><robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
+  const std::string fast =
+      R"(<?xml version="1.0"?><robot name="t"><link name="base"><collision><geometry><sphere radius="0.1"/></geometry></collision></link>
 <link name="arm"/><joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
 <limit lower="-1" upper="1e300" velocity="1e300" effort="1"/></joint></robot>)";
   expectModelError([&] { loadModelFromString(fast, CollisionConfig{}, "fast.urdf"); },

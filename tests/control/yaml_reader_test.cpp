@@ -63,11 +63,16 @@ TEST(YamlReader, EveryErrorIsTheOneFormat) {
             "doc.yaml:9:5: items[1]: not a map (value '7', expected a map of keys)");
   EXPECT_EQ(errorOf([&] { root.child("inner").requiredNumber("gain", 0.0, 1.0); }),
             "doc.yaml:5:3: inner.gain: missing (expected a number in [0, 1])");
-  EXPECT_EQ(errorOf([&] { root.choice("name", "left", {"up", "down"}); }),
+  EXPECT_EQ(errorOf([&] {
+              root.choice("name", "left", {"up", "down"});
+            }),
             "doc.yaml:2:7: name: unknown value (value 'left', expected one of up, down)");
-  EXPECT_EQ(errorOf([&] { root.rejectUnknown({"gain", "name", "flag", "items"}); }),
+  EXPECT_EQ(errorOf([&] {
+              root.rejectUnknown({"gain", "name", "flag", "items"});
+            }),
             "doc.yaml:4:1: inner: unknown key (expected one of gain, name, flag, items)");
-  EXPECT_EQ(errorOf([&] { root.child("name"); }), "doc.yaml:2:7: name: not a map (value 'left', expected a map of keys)");
+  EXPECT_EQ(errorOf([&] { root.child("name"); }),
+            "doc.yaml:2:7: name: not a map (value 'left', expected a map of keys)");
 }
 
 TEST(YamlReader, NonFiniteAndOverlongValues) {
@@ -76,17 +81,20 @@ TEST(YamlReader, NonFiniteAndOverlongValues) {
             "d.yaml:1:4: a: not a finite number (value '.nan', expected a number in [-1e+300, 1e+300])");
   EXPECT_NE(errorOf([&] { root.number("b", 0.0, -1e300, 1e300); }).find("(value '.inf'"), std::string::npos);
   // A long value is cut at 60 characters.
-  EXPECT_EQ(errorOf([&] { root.number("c", 0.0, 0.0, 1.0); }),
-            "d.yaml:3:4: c: not a finite number (value '" + std::string(57, 'x') + "...', expected a number in [0, 1])");
+  EXPECT_EQ(
+      errorOf([&] { root.number("c", 0.0, 0.0, 1.0); }),
+      "d.yaml:3:4: c: not a finite number (value '" + std::string(57, 'x') + "...', expected a number in [0, 1])");
 }
 
 TEST(YamlReader, DocumentAndFileErrors) {
   EXPECT_EQ(errorOf([] { ConfigNode::loadString("- a\n- b\n", "l.yaml"); }),
             "l.yaml:1:1: (document): not a map of keys (value '[a, b]', expected a map of keys at the top level)");
   EXPECT_EQ(errorOf([] { ConfigNode::loadString("a: [1, 2\n", "s.yaml"); }).rfind("s.yaml:", 0), 0U);
-  EXPECT_NE(errorOf([] { ConfigNode::loadString("a: [1, 2\n", "s.yaml"); }).find(": YAML syntax error: "), std::string::npos);
+  EXPECT_NE(errorOf([] { ConfigNode::loadString("a: [1, 2\n", "s.yaml"); }).find(": YAML syntax error: "),
+            std::string::npos);
   EXPECT_NO_THROW(ConfigNode::loadString("", "e.yaml", &ConfigNode::raiseConfigError, /*allow_empty=*/true));
-  EXPECT_NE(errorOf([] { ConfigNode::loadString("", "e.yaml"); }).find("e.yaml: (document): not a map of keys"), std::string::npos);
+  EXPECT_NE(errorOf([] { ConfigNode::loadString("", "e.yaml"); }).find("e.yaml: (document): not a map of keys"),
+            std::string::npos);
   EXPECT_EQ(errorOf([] { ConfigNode::loadFile("/nonexistent/c.yaml", "test configuration"); }),
             "/nonexistent/c.yaml: cannot open test configuration (No such file or directory)");
 }

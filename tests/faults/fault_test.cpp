@@ -68,11 +68,12 @@ TEST(Faults, KillNineOfTheTargetSourceKeeps200HzRetractsAndRecoversAfterRestart)
   constexpr double kInputTimeout = 0.5;
   const std::string dom = std::to_string(kDomain);
   const std::string log = ::testing::TempDir() + "fault_controller.log";
-  testing::ChildProcess controller({bin("reflex_controller"), "--domain", dom, "--duration", "16", "--input-timeout",
-                                    std::to_string(kInputTimeout)},
-                                   log);
-  auto source = std::make_unique<testing::ChildProcess>(
-      std::vector<std::string>{bin("reflex_fault_source"), "--domain", dom}, ::testing::TempDir() + "fault_source1.log");
+  testing::ChildProcess controller(
+      {bin("reflex_controller"), "--domain", dom, "--duration", "16", "--input-timeout", std::to_string(kInputTimeout)},
+      log);
+  auto source =
+      std::make_unique<testing::ChildProcess>(std::vector<std::string>{bin("reflex_fault_source"), "--domain", dom},
+                                              ::testing::TempDir() + "fault_source1.log");
   ASSERT_TRUE(controller.started() && source->started());
 
   bus::Participant watch(bus::test::testConfig("fault_watch", kDomain));
@@ -135,8 +136,9 @@ TEST(Faults, KillNineOfTheTargetSourceKeeps200HzRetractsAndRecoversAfterRestart)
 
   // Restart: followed again within 3 s.
   const double t_restart = now();
-  source = std::make_unique<testing::ChildProcess>(
-      std::vector<std::string>{bin("reflex_fault_source"), "--domain", dom}, ::testing::TempDir() + "fault_source2.log");
+  source =
+      std::make_unique<testing::ChildProcess>(std::vector<std::string>{bin("reflex_fault_source"), "--domain", dom},
+                                              ::testing::TempDir() + "fault_source2.log");
   ASSERT_TRUE(source->started());
   pumpUntil(t_restart + 4.0);
   double t_recover = -1.0;
@@ -146,9 +148,10 @@ TEST(Faults, KillNineOfTheTargetSourceKeeps200HzRetractsAndRecoversAfterRestart)
       break;
     }
   }
-  std::printf("fault: retract %.2f s after kill -9 (input timeout %.1f s), follows again %.2f s after restart, "
-              "status %.0f Hz around the kill, median cycle %.0f us\n",
-              t_retract, kInputTimeout, t_recover, rate, periods[periods.size() / 2]);
+  std::printf(
+      "fault: retract %.2f s after kill -9 (input timeout %.1f s), follows again %.2f s after restart, "
+      "status %.0f Hz around the kill, median cycle %.0f us\n",
+      t_retract, kInputTimeout, t_recover, rate, periods[periods.size() / 2]);
   EXPECT_GE(t_recover, 0.0) << "the restarted source is followed";
   EXPECT_LT(t_recover, 3.0) << "within 3 s of the restart (process start + discovery + motion)";
   for (const auto& s : statuses) EXPECT_GE(std::min(s.left().distance(), s.right().distance()), 0.005);
@@ -243,13 +246,15 @@ TEST(Faults, ABusWriteThatBlocksNeverStopsTheControlLoop) {
   double longest_ms = 0.0;
   const auto at = out.find("bus writes ");
   ASSERT_NE(at, std::string::npos) << out;
-  ASSERT_EQ(std::sscanf(out.c_str() + at, "bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %lf ms",
-                        &written, &dropped, &refused, &blocked, &longest_ms),
-            5)
+  ASSERT_EQ(
+      std::sscanf(out.c_str() + at, "bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %lf ms",
+                  &written, &dropped, &refused, &blocked, &longest_ms),
+      5)
       << out;
-  std::printf("fault: blocked bus writes: %zu loop cycles at %.1f Hz, largest gap %.1f ms; bus writes %llu, dropped %llu, "
-              "refused %llu, blocked > 50 ms %llu, longest %.0f ms\n",
-              wall.size(), rate, 1e3 * gap, written, dropped, refused, blocked, longest_ms);
+  std::printf(
+      "fault: blocked bus writes: %zu loop cycles at %.1f Hz, largest gap %.1f ms; bus writes %llu, dropped %llu, "
+      "refused %llu, blocked > 50 ms %llu, longest %.0f ms\n",
+      wall.size(), rate, 1e3 * gap, written, dropped, refused, blocked, longest_ms);
   EXPECT_GT(blocked, 3U) << "the writes did block (the test can fail)";
   EXPECT_GT(longest_ms, 150.0);
   EXPECT_GT(dropped, 100U) << "what the blocked writer could not take is counted";
@@ -329,8 +334,8 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   const std::string src = REFLEX_SOURCE_DIR;
   const std::string tmp = ::testing::TempDir();
   auto visionArgs = [&] {
-    return std::vector<std::string>{bin("reflex_vision"), "--session", src + "/bringup/sessions/flagship", "--loop",
-                                    "--quiet", "--domain", d};
+    return std::vector<std::string>{
+        bin("reflex_vision"), "--session", src + "/bringup/sessions/flagship", "--loop", "--quiet", "--domain", d};
   };
   // Behavior on UDP: with Fast DDS 2.9's shared memory, a kill -9 of a reader process stalls its
   // peers' writers (the port health check), seen here once as the controller's status stream at
@@ -339,11 +344,17 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   // (its bus outbox, ABusWriteThatBlocksNeverStopsTheControlLoop above), but its published stream
   // would still pause for the check; this test checks the chain's restart.
   auto behaviorArgs = [&] {
-    return std::vector<std::string>{bin("reflex_behavior"), "--config", src + "/bringup/behavior/pointing.yaml",
-                                    "--domain", d, "--participant-profile", "reflex_participant_udp"};
+    return std::vector<std::string>{bin("reflex_behavior"),
+                                    "--config",
+                                    src + "/bringup/behavior/pointing.yaml",
+                                    "--domain",
+                                    d,
+                                    "--participant-profile",
+                                    "reflex_participant_udp"};
   };
-  testing::ChildProcess controller({bin("reflex_controller"), "--domain", d, "--duration", "45", "--input-timeout", "0.5"},
-                                   tmp + "chain_controller.log");
+  testing::ChildProcess controller(
+      {bin("reflex_controller"), "--domain", d, "--duration", "45", "--input-timeout", "0.5"},
+      tmp + "chain_controller.log");
   auto behavior = std::make_unique<testing::ChildProcess>(behaviorArgs(), tmp + "chain_behavior1.log");
   auto vision = std::make_unique<testing::ChildProcess>(visionArgs(), tmp + "chain_vision1.log");
   ASSERT_TRUE(controller.started() && behavior->started() && vision->started());
@@ -360,8 +371,8 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   // Recovery is measured on the publishers' own stamps (Header.stamp_ns, CLOCK_REALTIME, one host):
   // DDS orders samples per writer only, so this watcher may take a restarted process's first frame
   // after the hand targets it caused; arrival order across topics proves nothing.
-  std::vector<std::int64_t> object_stamps;        // every vision frame's stamp
-  std::vector<std::int64_t> behavior_beat_stamps; // every heartbeat of the behavior process
+  std::vector<std::int64_t> object_stamps;         // every vision frame's stamp
+  std::vector<std::int64_t> behavior_beat_stamps;  // every heartbeat of the behavior process
   std::vector<msg::ObjectTargets> obj_batch;
   std::vector<msg::Heartbeat> beat_batch;
   auto now = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
@@ -478,11 +489,11 @@ TEST(Faults, KillNineOfVisionAndOfBehaviorInTheRealChainAndRestart) {
   for (const auto& s : statuses) periods.push_back(s.cycle_period_us());
   std::sort(periods.begin(), periods.end());
   for (const auto& s : statuses) EXPECT_GE(std::min(s.left().distance(), s.right().distance()), 0.005);
-  std::printf("fault chain: kill -9 vision -> no target after %.2f s; vision restart -> target after %.2f s "
-              "(%.2f s after its first frame); kill -9 behavior -> %.0f status/s; behavior restart -> target after "
-              "%.2f s (%.2f s after its first sign of life); median cycle %.0f us\n",
-              lost, vision_recovery, vision_back, during_rate, behavior_recovery,
-              behavior_back, periods[periods.size() / 2]);
+  std::printf(
+      "fault chain: kill -9 vision -> no target after %.2f s; vision restart -> target after %.2f s "
+      "(%.2f s after its first frame); kill -9 behavior -> %.0f status/s; behavior restart -> target after "
+      "%.2f s (%.2f s after its first sign of life); median cycle %.0f us\n",
+      lost, vision_recovery, vision_back, during_rate, behavior_recovery, behavior_back, periods[periods.size() / 2]);
   EXPECT_NEAR(periods[periods.size() / 2], 5000.0, 250.0);
   vision.reset();
   behavior.reset();

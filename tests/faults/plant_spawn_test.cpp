@@ -41,8 +41,11 @@ TEST(BusPlant, ARobotThatExitsAtOnceIsReportedAtOnceWithItsLastWords) {
     const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::string what = e.what();
     EXPECT_LT(waited, 5.0) << "said after " << waited << " s: " << what;
-    EXPECT_NE(what.find("robot plant: the spawned robot (" + script + ") exited with status 3 before its first state; "
-                        "the end of its output (" + o.robot_log + "): robot: starting | MuJoCo could not compile the "
+    EXPECT_NE(what.find("robot plant: the spawned robot (" + script +
+                        ") exited with status 3 before its first state; "
+                        "the end of its output (" +
+                        o.robot_log +
+                        "): robot: starting | MuJoCo could not compile the "
                         "generated MJCF: mass and inertia of moving bodies must be larger than mjMINVAL"),
               std::string::npos)
         << what;

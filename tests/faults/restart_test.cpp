@@ -39,8 +39,8 @@ using control::kLeft;
 using control::kRight;
 
 constexpr int kDomain = 111;
-constexpr double kPeriod = 0.005;  // the controller's cycle (s), defaults of controller.hpp
-constexpr double kDr = 0.005;      // d_r (m)
+constexpr double kPeriod = 0.005;      // the controller's cycle (s), defaults of controller.hpp
+constexpr double kDr = 0.005;          // d_r (m)
 constexpr double kInputTimeout = 0.5;  // s, --input-timeout of both controllers
 
 std::string bin(const std::string& exe) { return std::string(REFLEX_BIN_DIR) + "/" + exe; }
@@ -51,9 +51,7 @@ std::string readFile(const std::string& path) {
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
 
-double wallNow() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
+double wallNow() { return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count(); }
 
 /// The robot model and the hands, computed here from the URDF (not taken from the controller).
 struct Robot {
@@ -119,8 +117,9 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   const std::string log_b = tmp + "restart_controller_b.csv";
   std::remove(state.c_str());
   std::remove(log_b.c_str());
-  const std::vector<std::string> args = {bin("reflex_controller"), "--domain", dom, "--robot-state", state,
-                                         "--input-timeout", std::to_string(kInputTimeout)};
+  const std::vector<std::string> args = {
+      bin("reflex_controller"),     "--domain", dom, "--robot-state", state, "--input-timeout",
+      std::to_string(kInputTimeout)};
   auto a = std::make_unique<testing::ChildProcess>(args, tmp + "restart_controller_a.log");
   testing::ChildProcess source({bin("reflex_fault_source"), "--domain", dom, "--targets", "near", "--sway", "0.03"},
                                tmp + "restart_source.log");
@@ -148,10 +147,11 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
       tb.clear();
       targets.takeAll(tb);
       for (const auto& g : tb) {
-        goals.push_back({t, {Eigen::Vector3d(g.left().position_base().x(), g.left().position_base().y(),
-                                             g.left().position_base().z()),
-                             Eigen::Vector3d(g.right().position_base().x(), g.right().position_base().y(),
-                                             g.right().position_base().z())}});
+        goals.push_back(
+            {t,
+             {Eigen::Vector3d(g.left().position_base().x(), g.left().position_base().y(), g.left().position_base().z()),
+              Eigen::Vector3d(g.right().position_base().x(), g.right().position_base().y(),
+                              g.right().position_base().z())}});
       }
       status.takeAll(statuses);
     }
@@ -197,10 +197,11 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   {  // The file holds the robot's last state; read it with the controller's own loader (then released).
     control_node::RobotStateFile f(state, robot.model.q_names, robot.model.q_lower, robot.model.q_upper);
     ASSERT_TRUE(f.loaded());
-    std::printf("restart: state file record %llu written %.1f ms after the last JointState seen, %.1f ms before "
-                "kill -9\n",
-                static_cast<unsigned long long>(f.loadedSequence()), 1e3 * (1e-9 * f.loadedWallNs() - stamp_last),
-                1e3 * (t_kill - 1e-9 * f.loadedWallNs()));
+    std::printf(
+        "restart: state file record %llu written %.1f ms after the last JointState seen, %.1f ms before "
+        "kill -9\n",
+        static_cast<unsigned long long>(f.loadedSequence()), 1e3 * (1e-9 * f.loadedWallNs() - stamp_last),
+        1e3 * (t_kill - 1e-9 * f.loadedWallNs()));
   }
 
   // 3. The same command again, now with a log and a duration. The target source is stopped across
@@ -265,7 +266,8 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
     rest_worst = std::max(rest_worst, std::abs(q_rest[i] - q_before[i]) / step);
   }
   const auto h_before = robot.hands(q_before), h_after = robot.hands(q_after);
-  const double hand_jump = std::max((h_after[kLeft] - h_before[kLeft]).norm(), (h_after[kRight] - h_before[kRight]).norm());
+  const double hand_jump =
+      std::max((h_after[kLeft] - h_before[kLeft]).norm(), (h_after[kRight] - h_before[kRight]).norm());
   EXPECT_LE(worst, cycles + 1e-6) << "joint change in velocity-limited cycles; allowed " << cycles;
   EXPECT_GT(rest_worst, 4.0 * cycles) << "a start from rest would have been a jump (the test can fail)";
   EXPECT_LT(hand_jump, 0.005) << "hands continuous within 5 mm";
@@ -328,20 +330,23 @@ TEST(ControllerRestart, KillNineAndARestartFromTheRobotStateFileResumeWithoutAJu
   std::vector<double> periods;
   for (std::size_t i = n_before + 1; i < states.size(); ++i) {
     if (states[i].js.header().seq() == states[i - 1].js.header().seq() + 1)
-      periods.push_back(1e-6 * static_cast<double>(states[i].js.header().stamp_ns() - states[i - 1].js.header().stamp_ns()));
+      periods.push_back(1e-6 *
+                        static_cast<double>(states[i].js.header().stamp_ns() - states[i - 1].js.header().stamp_ns()));
   }
   ASSERT_GT(periods.size(), 100U);
   std::sort(periods.begin(), periods.end());
   EXPECT_NEAR(periods[periods.size() / 2], 5.0, 0.25) << "median period after the restart (ms)";
 
-  std::printf("restart: first cycle of the new controller %.3f s after the restart, %.2f s after kill -9; largest "
-              "joint change %.4f rad = %.2f velocity-limited cycles (allowed %d; from rest it would be %.0f); hands "
-              "moved %.2f mm, then held within %.2f mm for %.2f s; tracking error before the kill %.1f mm; first target %.2f s and followed (< 25 mm) "
-              "%.2f s after the restart (%.2f s after the first target); seen here after %.2f s; closest pair %.1f mm "
-              "(restarted: %.1f mm); median period %.2f ms\n",
-              std::stod(csv.rows[0][c_wall]) - t_restart, std::stod(csv.rows[0][c_wall]) - t_kill, jump_rad, worst,
-              cycles, rest_worst, 1e3 * hand_jump, 1e3 * held, t_held, 1e3 * err_before, t_given, t_follow, t_follow - t_given,
-              first_seen.t - t_restart, 1e3 * d_min, 1e3 * d_min_b, periods[periods.size() / 2]);
+  std::printf(
+      "restart: first cycle of the new controller %.3f s after the restart, %.2f s after kill -9; largest "
+      "joint change %.4f rad = %.2f velocity-limited cycles (allowed %d; from rest it would be %.0f); hands "
+      "moved %.2f mm, then held within %.2f mm for %.2f s; tracking error before the kill %.1f mm; first target %.2f s "
+      "and followed (< 25 mm) "
+      "%.2f s after the restart (%.2f s after the first target); seen here after %.2f s; closest pair %.1f mm "
+      "(restarted: %.1f mm); median period %.2f ms\n",
+      std::stod(csv.rows[0][c_wall]) - t_restart, std::stod(csv.rows[0][c_wall]) - t_kill, jump_rad, worst, cycles,
+      rest_worst, 1e3 * hand_jump, 1e3 * held, t_held, 1e3 * err_before, t_given, t_follow, t_follow - t_given,
+      first_seen.t - t_restart, 1e3 * d_min, 1e3 * d_min_b, periods[periods.size() / 2]);
 }
 
 // The start-up refusals of a robot state file, with the real process: a damaged file and the state

@@ -21,7 +21,6 @@
 #include <new>
 #include <sys/resource.h>
 
-
 namespace reflex::control_node {
 namespace {
 
@@ -76,8 +75,10 @@ TEST(RobotStateFile, NoFileStartsFromRestThenTheLastRecordIsLoaded) {
   ASSERT_TRUE(g.loaded());
   EXPECT_EQ(g.loadedSequence(), 7U);
   EXPECT_EQ(g.loadedPositions(), Eigen::VectorXd(Eigen::Vector3d(0.1 * 7, -0.2 * 7, 0.3 * 7)));  // bit-exact
-  const auto age_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                          std::chrono::system_clock::now().time_since_epoch()).count() - g.loadedWallNs();
+  const auto age_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count() -
+      g.loadedWallNs();
   EXPECT_GE(age_ns, 0);
   EXPECT_LT(age_ns, 60'000'000'000LL) << "written just now";
   // The sequence continues, into the slot that does not hold the newest record.
@@ -128,7 +129,7 @@ TEST(RobotStateFile, AFileCutAtEveryLengthLoadsTheLastCompleteRecordOrIsRefused)
   const std::string path = freshPath("cut");
   {
     RobotStateFile f(path, r.names, r.lower, r.upper);
-    ASSERT_TRUE(f.save(Eigen::Vector3d(0.1, 0.2, 0.3)));   // record 1, slot 0
+    ASSERT_TRUE(f.save(Eigen::Vector3d(0.1, 0.2, 0.3)));     // record 1, slot 0
     ASSERT_TRUE(f.save(Eigen::Vector3d(-0.1, -0.2, -0.3)));  // record 2, slot 1
   }
   const std::vector<char> whole = readBytes(path);
@@ -170,7 +171,8 @@ TEST(RobotStateFile, GarbageAnotherRobotOrAPositionOutsideTheLimitsIsRefusedNami
   EXPECT_NE(msg.find("another robot (3 joints"), std::string::npos) << msg;
   const std::string bigger = freshPath("bigger");
   {
-    RobotStateFile f(bigger, {"a", "b", "c", "d"}, Eigen::VectorXd::Constant(4, -1.0), Eigen::VectorXd::Constant(4, 1.0));
+    RobotStateFile f(bigger, {"a", "b", "c", "d"}, Eigen::VectorXd::Constant(4, -1.0),
+                     Eigen::VectorXd::Constant(4, 1.0));
     ASSERT_TRUE(f.save(Eigen::VectorXd::Zero(4)));
     ASSERT_TRUE(f.save(Eigen::VectorXd::Zero(4)));
   }
@@ -228,10 +230,11 @@ TEST(RobotStateFile, SaveAllocatesNothingAndItsCostIsPrinted) {
   std::sort(us.begin(), us.end());
   // Voluntary context switches = the thread blocked (in pwrite); involuntary = it was preempted
   // (on a loaded machine the rare long samples are preemptions, multiples of the 4 ms tick).
-  std::printf("robot state save (33 joints, %zu-byte pwrite to %s): p50 %.2f us, p99 %.2f us, p99.9 %.2f us, max "
-              "%.1f us over %d writes; context switches while writing: voluntary %ld, involuntary %ld\n",
-              robotStateSlotSize(33), ::testing::TempDir().c_str(), us[kN / 2], us[kN * 99 / 100],
-              us[kN * 999 / 1000], us.back(), kN, ru1.ru_nvcsw - ru0.ru_nvcsw, ru1.ru_nivcsw - ru0.ru_nivcsw);
+  std::printf(
+      "robot state save (33 joints, %zu-byte pwrite to %s): p50 %.2f us, p99 %.2f us, p99.9 %.2f us, max "
+      "%.1f us over %d writes; context switches while writing: voluntary %ld, involuntary %ld\n",
+      robotStateSlotSize(33), ::testing::TempDir().c_str(), us[kN / 2], us[kN * 99 / 100], us[kN * 999 / 1000],
+      us.back(), kN, ru1.ru_nvcsw - ru0.ru_nvcsw, ru1.ru_nivcsw - ru0.ru_nivcsw);
   EXPECT_LT(us[kN / 2], 500.0) << "a tenth of the 5 ms period, with a wide margin for a loaded machine";
   f.reset();
   RobotStateFile g(path, names, lower, upper);

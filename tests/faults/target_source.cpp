@@ -19,9 +19,12 @@ int main(int argc, char** argv) {
   app.add_option("--name", name, "module name")->capture_default_str();
   std::string kind = "crossing";
   double sway = 0.0;
-  app.add_option("--targets", kind, "crossing, apart or near (in front of the chest, hands close together)")->capture_default_str()->check(CLI::IsMember({"crossing", "apart", "near"}));
+  app.add_option("--targets", kind, "crossing, apart or near (in front of the chest, hands close together)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"crossing", "apart", "near"}));
   app.add_option("--sway", sway, "amplitude (m) of an up-and-down motion of both targets, period 2 s")
-      ->capture_default_str()->check(CLI::Range(0.0, 0.1));
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.1));
   CLI11_PARSE(app, argc, argv);
   try {
     reflex::bus::BusConfig config;
@@ -37,7 +40,9 @@ int main(int argc, char** argv) {
     bus.every(std::chrono::milliseconds(100), [&] {
       timespec ts{};
       clock_gettime(CLOCK_REALTIME, &ts);
-      const double phase = 2.0 * M_PI * std::fmod(static_cast<double>(ts.tv_sec % 1000) + 1e-9 * static_cast<double>(ts.tv_nsec), 2.0) / 2.0;
+      const double phase =
+          2.0 * M_PI * std::fmod(static_cast<double>(ts.tv_sec % 1000) + 1e-9 * static_cast<double>(ts.tv_nsec), 2.0) /
+          2.0;
       const double z = 0.90 + sway * std::sin(phase);
       reflex::msg::HandTargets t;
       t.left().status(reflex::msg::TARGET_GIVEN);

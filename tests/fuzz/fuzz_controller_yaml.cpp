@@ -8,8 +8,9 @@
 namespace {
 const reflex::control::Model& shippedModel() {
   using namespace reflex::control;
-  static const Model model = loadModel(REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.urdf",
-                                       loadCollisionConfig(REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.collision.yaml"));
+  static const Model model =
+      loadModel(REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.urdf",
+                loadCollisionConfig(REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.collision.yaml"));
   return model;
 }
 }  // namespace

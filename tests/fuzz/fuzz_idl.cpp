@@ -20,7 +20,6 @@ namespace {
 
 using eprosima::fastrtps::rtps::SerializedPayload_t;
 
-
 template <class T>
 void roundTrip(const std::uint8_t* data, std::size_t size) {
   typename reflex::bus::TopicTraits<T>::PubSubType type;

@@ -81,8 +81,7 @@ constexpr std::uint64_t kWorkPerByte = 64;
 constexpr std::uint64_t kWorkConstant = 1u << 20;
 
 [[noreturn]] void invariantBroken(const char* what, std::uint64_t offset) {
-  std::fprintf(stderr, "FUZZ FINDING: RecordReader %s (byte %llu)\n", what,
-               static_cast<unsigned long long>(offset));
+  std::fprintf(stderr, "FUZZ FINDING: RecordReader %s (byte %llu)\n", what, static_cast<unsigned long long>(offset));
   std::abort();
 }
 
@@ -115,7 +114,8 @@ void readRecording(const std::vector<std::uint8_t>& bytes) {
     }
     if (reader.bytesExamined() > kWorkPerByte * bytes.size() + kWorkConstant)
       invariantBroken("read more than 64 x the file size (not linear time)", reader.bytesExamined());
-    if (n != info.records) invariantBroken("counted different records in two reads of the same file", reader.validEnd());
+    if (n != info.records)
+      invariantBroken("counted different records in two reads of the same file", reader.validEnd());
     if (reader.tailState() == TailState::kTorn) {
       for (std::size_t pos = reader.validEnd() + 1; pos < bytes.size(); ++pos) {
         if (validRecordAt(bytes, pos)) invariantBroken("called the tail torn but a valid record follows", pos);
@@ -126,7 +126,8 @@ void readRecording(const std::vector<std::uint8_t>& bytes) {
     reader.setResync(false);
     while (reader.next(e)) {
     }
-    if (reader.validEnd() > reader.fileSize()) invariantBroken("valid end beyond the end of the file", reader.validEnd());
+    if (reader.validEnd() > reader.fileSize())
+      invariantBroken("valid end beyond the end of the file", reader.validEnd());
   });
 }
 

@@ -17,7 +17,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (const TimelineEvent& e : events) {
       const bool ok = std::isfinite(e.t) && e.t >= last && (!e.target.given || e.target.p_B.allFinite());
       if (!ok) {
-        std::fprintf(stderr, "FUZZ FINDING: readTimelineCsv accepted an event at t = %g out of order or not finite\n", e.t);
+        std::fprintf(stderr, "FUZZ FINDING: readTimelineCsv accepted an event at t = %g out of order or not finite\n",
+                     e.t);
         std::abort();
       }
       last = e.t;

@@ -25,10 +25,10 @@ TEST(Shipped, TheBuildTreeReadsTheCheckoutItWasBuiltFrom) {
   EXPECT_EQ(shippedPath("view/three/three.module.js"), src + "/bringup/web/node_modules/three/build/three.module.js");
   EXPECT_EQ(shippedPath("idl/control.idl"), src + "/idl/control.idl");
   // Every folder the install puts under share/reflex (CMakeLists.txt) has its file in the checkout.
-  for (const char* rel : {"robots/asimo_like.urdf", "robots/mesh_humanoid_description", "dds/reflex_profiles.xml",
-                          "behavior/pointing.yaml", "vision/camera_mount.yaml", "sessions/flagship/session.yaml",
-                          "idl/control.idl", "view/web/index.html", "view/three/three.module.js",
-                          "view/three/three.core.js"})
+  for (const char* rel :
+       {"robots/asimo_like.urdf", "robots/mesh_humanoid_description", "dds/reflex_profiles.xml",
+        "behavior/pointing.yaml", "vision/camera_mount.yaml", "sessions/flagship/session.yaml", "idl/control.idl",
+        "view/web/index.html", "view/three/three.module.js", "view/three/three.core.js"})
     EXPECT_TRUE(fs::exists(shippedPath(rel))) << rel << " -> " << shippedPath(rel);
 }
 

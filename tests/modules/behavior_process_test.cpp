@@ -38,8 +38,8 @@ const std::string kBehaviorDir = std::string(REFLEX_SOURCE_DIR) + "/bringup/beha
 // The test's own view of the bus.
 struct Observer {
   bus::Participant participant;
-  bus::Reader<msg::HandTargets>& all_hands;    // every sample (record profile, deep history)
-  bus::Reader<msg::HandTargets>& hands;        // the current state (reliable, transient local)
+  bus::Reader<msg::HandTargets>& all_hands;  // every sample (record profile, deep history)
+  bus::Reader<msg::HandTargets>& hands;      // the current state (reliable, transient local)
   bus::Reader<msg::MotionPriority>& priority;
   bus::Reader<msg::BodySchemaChange>& schema;
   bus::Reader<msg::Heartbeat>& heartbeat;
@@ -110,7 +110,8 @@ Eigen::Vector3d vec(const msg::Vector3& v) { return {v.x(), v.y(), v.z()}; }
 // Shoulder of the robot at rest, from the URDF through reflex::control (not through the modules).
 Eigen::Vector3d restShoulder(const std::string& link) {
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
-  const control::Model model = control::loadModel(urdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(urdf)));
+  const control::Model model =
+      control::loadModel(urdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(urdf)));
   control::KinematicsData data(model);
   Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
   for (int i = 0; i < model.nq; ++i) q[i] = std::clamp(0.0, model.q_lower[i], model.q_upper[i]);
@@ -148,8 +149,8 @@ std::vector<CsvTarget> firstTargets(const std::string& path) {
 }
 
 std::vector<std::string> behavior(const std::string& config, std::vector<std::string> extra = {}) {
-  std::vector<std::string> a{kBin + "/reflex_behavior", "--config", config, "--domain", std::to_string(kDomain),
-                             "--progress", "0"};
+  std::vector<std::string> a{kBin + "/reflex_behavior", "--config",   config, "--domain",
+                             std::to_string(kDomain),   "--progress", "0"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }
@@ -213,10 +214,13 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
     std::printf("pointing: %zu hand-target samples, %d heartbeats in %.2f s\n", bus.hand_log.size(), beats, window);
 
     EXPECT_EQ(proc.terminate(), 0) << proc.output();
-    bus.collectUntil([&] { return bus.last_hands.left().status() == msg::TARGET_NONE &&
-                                  bus.last_hands.right().status() == msg::TARGET_NONE &&
-                                  bus.priority_log.back().priority() == msg::PRIORITY_EQUAL; },
-                     5000ms);
+    bus.collectUntil(
+        [&] {
+          return bus.last_hands.left().status() == msg::TARGET_NONE &&
+                 bus.last_hands.right().status() == msg::TARGET_NONE &&
+                 bus.priority_log.back().priority() == msg::PRIORITY_EQUAL;
+        },
+        5000ms);
     EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.last_hands.right().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.priority_log.back().priority(), msg::PRIORITY_EQUAL);
@@ -235,9 +239,12 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
   {
     Child proc(behavior(kBehaviorDir + "/scripted.yaml"), ::testing::TempDir() + "modules_behavior_scripted.log");
     ASSERT_TRUE(proc.started());
-    bus.collectUntil([&] { return bus.have_hands && bus.last_hands.left().status() == msg::TARGET_GIVEN &&
-                                  bus.last_hands.right().status() == msg::TARGET_GIVEN; },
-                     15000ms);
+    bus.collectUntil(
+        [&] {
+          return bus.have_hands && bus.last_hands.left().status() == msg::TARGET_GIVEN &&
+                 bus.last_hands.right().status() == msg::TARGET_GIVEN;
+        },
+        15000ms);
     ASSERT_TRUE(bus.have_hands) << proc.output();
     const auto expected = firstTargets(kBehaviorDir + "/scripted_timeline.csv");
     ASSERT_EQ(expected.size(), 2u);
@@ -249,9 +256,12 @@ TEST(BehaviorProcess, PointingThenScriptedConfigurationSameBinary) {
       EXPECT_EQ(t.object_name(), "");  // scripted: nothing to do with the objects
     }
     EXPECT_EQ(proc.terminate(), 0) << proc.output();
-    bus.collectUntil([&] { return bus.last_hands.left().status() == msg::TARGET_NONE &&
-                                  bus.last_hands.right().status() == msg::TARGET_NONE; },
-                     5000ms);
+    bus.collectUntil(
+        [&] {
+          return bus.last_hands.left().status() == msg::TARGET_NONE &&
+                 bus.last_hands.right().status() == msg::TARGET_NONE;
+        },
+        5000ms);
     EXPECT_EQ(bus.last_hands.left().status(), msg::TARGET_NONE);
     EXPECT_EQ(bus.last_hands.right().status(), msg::TARGET_NONE);
   }
@@ -314,7 +324,8 @@ TEST(BehaviorProcess, BarAndOcclusionTogetherAttachBothAndRemoveBothAtStop) {
   bus.collectUntil(
       [&] {
         for (const auto& s : bus.schema_log) last[s.segment_name()] = s;
-        return last["grasped_bar"].operation() == msg::SCHEMA_DETACH && last["gaze_line"].operation() == msg::SCHEMA_DETACH;
+        return last["grasped_bar"].operation() == msg::SCHEMA_DETACH &&
+               last["gaze_line"].operation() == msg::SCHEMA_DETACH;
       },
       5000ms);
   EXPECT_EQ(last["grasped_bar"].operation(), msg::SCHEMA_DETACH);
@@ -382,7 +393,8 @@ TEST(BehaviorProcess, StartUpErrorsNameTheBadValue) {
 // one only after the first has been silent for 0.5 s (a restarted controller).
 TEST(BehaviorProcess, JointStatesFromASecondWriterAreIgnoredAndCounted) {
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
-  const control::Model model = control::loadModel(urdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(urdf)));
+  const control::Model model =
+      control::loadModel(urdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(urdf)));
   Child proc(behavior(kBehaviorDir + "/scripted.yaml", {"--duration", "6"}),
              ::testing::TempDir() + "modules_behavior_two_writers.log");
   ASSERT_TRUE(proc.started());

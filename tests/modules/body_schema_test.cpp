@@ -68,8 +68,10 @@ TEST(GraspedBar, TimedAttachDetachAndArmPriority) {
     const bool on = h->segments().count("grasped_bar") > 0;
     if (on && attached_at < 0.0) attached_at = t;
     if (!on && attached_at > 0.0 && detached_at < 0.0) detached_at = t;
-    if (on) EXPECT_EQ(h->priority(), ArmPriority::kLeftHigher);
-    else EXPECT_EQ(h->priority(), ArmPriority::kEqual);
+    if (on)
+      EXPECT_EQ(h->priority(), ArmPriority::kLeftHigher);
+    else
+      EXPECT_EQ(h->priority(), ArmPriority::kEqual);
   }
   EXPECT_NEAR(attached_at, 1.0, 0.05 + 1e-9);
   EXPECT_NEAR(detached_at, 2.0, 0.05 + 1e-9);
@@ -143,7 +145,8 @@ TEST(Occlusion, FollowsTheObjectAndSwitchesOffWhenCoveredOrLost) {
 }
 
 TEST(Walking, SendsTheGoalAfterTheDelayAndStopsAtStop) {
-  TestHost h("modules:\n  - {name: walk, type: walking, config: {goal: [1.5, 0.2, 0.1], speed: 0.25, start_after: 1.0}}\n");
+  TestHost h(
+      "modules:\n  - {name: walk, type: walking, config: {goal: [1.5, 0.2, 0.1], speed: 0.25, start_after: 1.0}}\n");
   EXPECT_TRUE(h->claims().walk);
   h->start(at(0.0));
   for (int k = 1; k < 19; ++k) h->tick(at(0.05 * k));
@@ -157,7 +160,8 @@ TEST(Walking, SendsTheGoalAfterTheDelayAndStopsAtStop) {
 }
 
 TEST(Walking, RelativeGoalAddsTheRobotPosition) {
-  TestHost h("modules:\n  - {name: walk, type: walking, config: {goal: [1.5, 0.0, 0.0], relative: true, start_after: 0.5}}\n");
+  TestHost h(
+      "modules:\n  - {name: walk, type: walking, config: {goal: [1.5, 0.0, 0.0], relative: true, start_after: 0.5}}\n");
   h->start(at(0.0));
   JointStateSample js;
   js.source = "controller";  // the default joint_state_sources

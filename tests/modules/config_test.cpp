@@ -27,7 +27,8 @@ TEST(ModulesConfig, UnknownModuleTypeNamesItAndTheKnownOnes) {
 
 TEST(ModulesConfig, BadValueNamesFileLineKeyAndValue) {
   expectAll(errorOf("modules:\n  - name: p\n    type: pointing\n    config:\n      ray_distance: abc\n"),
-            {"test.yaml:5:21: modules[0].config.ray_distance: not a finite number (value 'abc', expected a number in [0.05, "});
+            {"test.yaml:5:21: modules[0].config.ray_distance: not a finite number (value 'abc', expected a number in "
+             "[0.05, "});
   expectAll(errorOf("modules:\n  - {name: p, type: pointing, config: {ray_distance: 0.9}}\n"),
             {"modules[0].config.ray_distance", "out of range", "'0.9'"});
   expectAll(errorOf("modules:\n  - {name: p, type: pointing, config: {ray_distance: .nan}}\n"),
@@ -51,9 +52,11 @@ TEST(ModulesConfig, UnknownKeysAreErrors) {
 TEST(ModulesConfig, StructuralErrors) {
   expectAll(errorOf("process: behavior\n"), {"test.yaml:1:1: modules: missing (expected a list of modules)"});
   expectAll(errorOf("modules: []\n"), {"modules", "empty"});
-  expectAll(errorOf("modules:\n  - {name: a, type: pointing}\n  - {name: a, type: walking, config: {goal: [1, 0, 0]}}\n"),
-            {"modules[1].name", "duplicate", "'a'"});
-  expectAll(errorOf("modules:\n  - {name: w, type: walking}\n"), {"modules[0].config.goal: missing (expected [x, y, yaw] in the world frame)"});
+  expectAll(
+      errorOf("modules:\n  - {name: a, type: pointing}\n  - {name: a, type: walking, config: {goal: [1, 0, 0]}}\n"),
+      {"modules[1].name", "duplicate", "'a'"});
+  expectAll(errorOf("modules:\n  - {name: w, type: walking}\n"),
+            {"modules[0].config.goal: missing (expected [x, y, yaw] in the world frame)"});
   expectAll(errorOf("modules:\n  - {name: o, type: occlusion}\n"), {"exactly one of 'object'"});
   expectAll(errorOf("modules:\n  - name\n"), {"modules[0]", "expected a map"});
   expectAll(errorOf("robot: {left_hand: paw}\nmodules:\n  - {name: p, type: pointing}\n"),
@@ -105,14 +108,18 @@ TEST(ModulesConfig, TimelineCsvErrorsNameFileLineAndColumn) {
   };
   const std::string bad_number = write("tl_bad.csv", "t,hand,x,y,z\n0,right,0.3,abc,1.0\n");
   expectAll(err(bad_number), {"tl_bad.csv:2", "column 'y'", "'abc'"});
-  expectAll(err(write("tl_hand.csv", "t,hand,x,y,z\n# comment\n0,foot,0.3,0,1.0\n")), {"tl_hand.csv:3", "column 'hand'", "'foot'"});
-  expectAll(err(write("tl_order.csv", "t,hand,x,y,z\n2,right,none,,\n1,right,none,,\n")), {"tl_order.csv:3", "out of time order"});
+  expectAll(err(write("tl_hand.csv", "t,hand,x,y,z\n# comment\n0,foot,0.3,0,1.0\n")),
+            {"tl_hand.csv:3", "column 'hand'", "'foot'"});
+  expectAll(err(write("tl_order.csv", "t,hand,x,y,z\n2,right,none,,\n1,right,none,,\n")),
+            {"tl_order.csv:3", "out of time order"});
   expectAll(err(write("tl_header.csv", "time,hand,x,y,z\n")), {"tl_header.csv:1", "header"});
   expectAll(err(write("tl_far.csv", "t,hand,x,y,z\n0,left,3,0,0\n")), {"tl_far.csv:2", "farther than 2 m"});
   expectAll(err(write("tl_prio.csv", "t,hand,x,y,z\n0,priority,up,,\n")), {"tl_prio.csv:2", "'up'"});
   expectAll(err(dir + "tl_missing.csv"), {"tl_missing.csv", "cannot be opened"});
-  expectAll(errorOf("modules:\n  - {name: s, type: scripted, config: {timeline: [{t: 1, left: none}, {t: 0.5, left: none}]}}\n"),
-            {"modules[0].config.timeline[1].t", "out of time order"});
+  expectAll(
+      errorOf(
+          "modules:\n  - {name: s, type: scripted, config: {timeline: [{t: 1, left: none}, {t: 0.5, left: none}]}}\n"),
+      {"modules[0].config.timeline[1].t", "out of time order"});
   expectAll(errorOf("modules:\n  - {name: s, type: scripted, config: {}}\n"), {"exactly one of 'timeline'"});
 }
 

@@ -103,9 +103,10 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
     }
   };
 
-  Child behavior({kBin + "/reflex_behavior", "--config", std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/pointing.yaml",
-                  "--domain", std::to_string(kDomain), "--progress", "0"},
-                 ::testing::TempDir() + "modules_flagship_behavior.log");
+  Child behavior(
+      {kBin + "/reflex_behavior", "--config", std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/pointing.yaml",
+       "--domain", std::to_string(kDomain), "--progress", "0"},
+      ::testing::TempDir() + "modules_flagship_behavior.log");
   ASSERT_TRUE(behavior.started());
   ASSERT_TRUE(hands_reader.waitForWriters(1, 10s)) << behavior.output();
 
@@ -116,8 +117,8 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
   std::vector<std::size_t> stretch_begin;  // index into `hands` where each stretch starts
   for (const Stretch s : {Stretch{"8", "13"}, Stretch{"40", "14"}}) {
     stretch_begin.push_back(hands.size());
-    Child vision({kBin + "/reflex_vision", "--session", kSession, "--start", s.start, "--duration", s.duration, "--quiet",
-                  "--domain", std::to_string(kDomain)},
+    Child vision({kBin + "/reflex_vision", "--session", kSession, "--start", s.start, "--duration", s.duration,
+                  "--quiet", "--domain", std::to_string(kDomain)},
                  ::testing::TempDir() + "modules_flagship_vision_" + s.start + ".log");
     ASSERT_TRUE(vision.started());
     collectWhile([&] { return vision.wait(0ms) == -1 && seconds(Clock::now(), t0) < 100.0; });
@@ -163,10 +164,11 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
       return k;
     };
     const std::size_t latest = latestBefore(nullptr);
-    if (latest < seen.size()) latency.push_back(1e-9 * static_cast<double>(h_ns - seen[latest].objects.header().stamp_ns()));
+    if (latest < seen.size())
+      latency.push_back(1e-9 * static_cast<double>(h_ns - seen[latest].objects.header().stamp_ns()));
     const msg::HandTarget* t[2] = {&h.hands.left(), &h.hands.right()};
-    std::uint64_t next_floor = latest < seen.size() ? seen[latest].objects.image_index()
-                                                    : std::numeric_limits<std::uint64_t>::max();
+    std::uint64_t next_floor =
+        latest < seen.size() ? seen[latest].objects.image_index() : std::numeric_limits<std::uint64_t>::max();
     for (int i = 0; i < 2; ++i) {
       if (t[i]->status() != msg::TARGET_GIVEN) continue;
       const std::string& name = t[i]->object_name();
@@ -205,9 +207,10 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
       has_floor = true;
     }
   }
-  std::printf("flagship: %d given targets checked against ground truth, worst direction error %.2f deg "
-              "(%d matched a frame this observer lost, %d a frame older than the latest stamped before)\n",
-              checked, worst_deg, followed_unseen, followed_older);
+  std::printf(
+      "flagship: %d given targets checked against ground truth, worst direction error %.2f deg "
+      "(%d matched a frame this observer lost, %d a frame older than the latest stamped before)\n",
+      checked, worst_deg, followed_unseen, followed_older);
   EXPECT_GT(checked, 150);
   std::sort(latency.begin(), latency.end());
   if (!latency.empty())
@@ -246,9 +249,10 @@ TEST(FlagshipPointing, BehaviorAgainstVisionReplayPublishesSensibleHandTargets) 
       EXPECT_EQ(h.hands.right().status(), msg::TARGET_GIVEN) << "the cup is never lost, at " << ht << " s";
     }
   }
-  std::printf("flagship: can last seen %.3f s into the run, left hand off %.3f s later, back %.3f s after the can "
-              "reappeared\n",
-              last_can - stampSeconds(seen.front().objects), left_none - last_can, left_back - back_can);
+  std::printf(
+      "flagship: can last seen %.3f s into the run, left hand off %.3f s later, back %.3f s after the can "
+      "reappeared\n",
+      last_can - stampSeconds(seen.front().objects), left_none - last_can, left_back - back_can);
   EXPECT_GE(left_none - last_can, 1.0 - 0.02);
   EXPECT_LE(left_none - last_can, 1.0 + 0.3);  // + one step period (0.05 s) + one tick + scheduling under load
   EXPECT_GE(left_back - back_can, -0.02);

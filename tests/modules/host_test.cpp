@@ -170,7 +170,8 @@ TEST_F(HostTest, FramesInAnUnknownFrameAreRejectedWhole) {
 TEST_F(HostTest, ObjectsAreAcceptedOnlyFromTheConfiguredWriters) {
   TestHost h(kProbe, probeRegistry());
   h->start(at(0.0));
-  for (const char* bad : {"player", "", "behavior", "recorder", "Vision", "vision ", "reflex.vision", "CN=reflex.vision"}) {
+  for (const char* bad :
+       {"player", "", "behavior", "recorder", "Vision", "vision ", "reflex.vision", "CN=reflex.vision"}) {
     ObjectsFrame f = frameAt(0.0, {object("cup", {0.45, -0.1, 0.95})});
     f.source = bad;
     h->onObjects(f, at(0.0));
@@ -216,10 +217,10 @@ TEST_F(HostTest, ObjectsAreAcceptedOnlyFromTheConfiguredWriters) {
 TEST_F(HostTest, UnknownOutOfRangeAndDuplicateObjectsAreRejected) {
   TestHost h(kProbe, probeRegistry());
   h->start(at(0.0));
-  h->onObjects(frameAt(0.0, {object("", {0.4, 0.0, 1.0}), object("ghost", {0.4, 0.0, 1.0}),
-                             object("cup", {3.5, 0.0, 0.0}), object("can", {0.4, 0.1, 1.0}),
-                             object("can", {0.4, 0.2, 1.0})}),
-               at(0.0));
+  h->onObjects(
+      frameAt(0.0, {object("", {0.4, 0.0, 1.0}), object("ghost", {0.4, 0.0, 1.0}), object("cup", {3.5, 0.0, 0.0}),
+                    object("can", {0.4, 0.1, 1.0}), object("can", {0.4, 0.2, 1.0})}),
+      at(0.0));
   ASSERT_EQ(frames_.size(), 1u);
   ASSERT_EQ(frames_[0].objects.size(), 1u);
   EXPECT_EQ(frames_[0].objects[0].p_B, Eigen::Vector3d(0.4, 0.1, 1.0));
@@ -298,7 +299,9 @@ TEST_F(HostTest, JointStatesMoveTheRobotAndBadOnesAreRejected) {
 
 TEST_F(HostTest, TwoModulesClaimingOneOutputAreRefused) {
   try {
-    TestHost h("modules:\n  - {name: a, type: pointing}\n  - {name: b, type: scripted, config: {timeline: [{t: 0, right: none}]}}\n");
+    TestHost h(
+        "modules:\n  - {name: a, type: pointing}\n  - {name: b, type: scripted, config: {timeline: [{t: 0, right: "
+        "none}]}}\n");
     FAIL() << "expected ConfigError";
   } catch (const ConfigError& e) {
     const std::string m = e.what();

@@ -79,8 +79,8 @@ struct TestHost {
   explicit TestHost(const std::string& yaml, const ModuleRegistry& registry = builtinRegistry(),
                     const std::string& only = "") {
     const HostConfig config = parseHostConfig(ConfigNode::loadString(yaml, "test.yaml"), registry);
-    host = std::make_unique<BehaviorHost>(config, registry, sink, [this](const std::string& l) { log.push_back(l); },
-                                          only);
+    host = std::make_unique<BehaviorHost>(
+        config, registry, sink, [this](const std::string& l) { log.push_back(l); }, only);
   }
   BehaviorHost* operator->() { return host.get(); }
   const HandTarget& lastHand(Hand h) const {

@@ -82,7 +82,8 @@ int main(int argc, char** argv) {
       frame.frame_id("base_link");
       if (inject) frame.objects().push_back(target(objects[0].name, 0, nan, objects[0].y, objects[0].z));
       for (std::size_t i = 0; i < objects.size(); ++i)
-        frame.objects().push_back(target(objects[i].name, static_cast<int>(i), objects[i].x, objects[i].y, objects[i].z));
+        frame.objects().push_back(
+            target(objects[i].name, static_cast<int>(i), objects[i].x, objects[i].y, objects[i].z));
       if (inject) frame.objects().push_back(target("ghost", 99, 0.40, 0.0, 1.0));
       writer.publish(frame);
       if (inject && index % 3 == 0) {

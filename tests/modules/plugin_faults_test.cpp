@@ -37,8 +37,15 @@ std::string writeConfig(const std::string& file, const std::string& name, const 
 }
 
 std::vector<std::string> behavior(const std::string& config, std::vector<std::string> extra = {}) {
-  std::vector<std::string> a{std::string(REFLEX_BIN_DIR) + "/reflex_behavior", "--config", config, "--plugin",
-                             REFLEX_FAULTY_PLUGIN, "--domain", std::to_string(kDomain), "--progress", "0"};
+  std::vector<std::string> a{std::string(REFLEX_BIN_DIR) + "/reflex_behavior",
+                             "--config",
+                             config,
+                             "--plugin",
+                             REFLEX_FAULTY_PLUGIN,
+                             "--domain",
+                             std::to_string(kDomain),
+                             "--progress",
+                             "0"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }
@@ -68,9 +75,9 @@ TEST(PluginFaults, AStepThatNeverReturnsIsNamedAndSigtermEndsTheProcessWithinThe
   // process's exit; 4 s leaves room for a loaded machine, below the 6 s bound of any stop).
   EXPECT_GE(stop_s, 1.9) << log;
   EXPECT_LT(stop_s, 4.0) << log;
-  EXPECT_NE(log.find("not stopped 2.0 s after the stop request: " + named("step()", "spinner", "spin") +
-                     " has not returned"),
-            std::string::npos)
+  EXPECT_NE(
+      log.find("not stopped 2.0 s after the stop request: " + named("step()", "spinner", "spin") + " has not returned"),
+      std::string::npos)
       << log;
   std::printf("stop time with a step() that never returns: %.2f s (exit %d)\n", stop_s, code);
 }

@@ -22,7 +22,8 @@ std::string pointingConfig(const std::string& extra) {
          "modules:\n"
          "  - name: pointing\n"
          "    type: pointing\n"
-         "    config: {" + extra + "}\n";
+         "    config: {" +
+         extra + "}\n";
 }
 
 // ---------------------------------------------------------------- geometry (analytic)
@@ -85,7 +86,7 @@ TEST(Pointing, HandTargetsPointAtTheirObjectsOnTheRay) {
     const Eigen::Vector3d t = h->hand(hand).p_B;
     EXPECT_NEAR((t - s).norm(), 0.35, 1e-12);
     EXPECT_NEAR((t - s).cross(obj - s).norm(), 0.0, 1e-12);  // collinear
-    EXPECT_GT((t - s).dot(obj - s), 0.0);                      // same direction
+    EXPECT_GT((t - s).dot(obj - s), 0.0);                    // same direction
   }
 }
 
@@ -95,7 +96,7 @@ TEST(Pointing, ObjectModeGivesTheObjectWhenWithinReach) {
   const Eigen::Vector3d sr = testing::shoulder(*h.host, Hand::kRight);
   const Eigen::Vector3d cup = sr + Eigen::Vector3d(0.40, 0.05, -0.05);  // 0.406 m away
   const Eigen::Vector3d sl = testing::shoulder(*h.host, Hand::kLeft);
-  const Eigen::Vector3d can = sl + Eigen::Vector3d(0.6, 0.0, 0.0);      // 0.6 m away: beyond reach
+  const Eigen::Vector3d can = sl + Eigen::Vector3d(0.6, 0.0, 0.0);  // 0.6 m away: beyond reach
   h->onObjects(frameAt(0.1, {object("cup", cup), object("can", can)}), at(0.1));
   EXPECT_EQ(h->hand(Hand::kRight).p_B, cup);
   EXPECT_NEAR((h->hand(Hand::kLeft).p_B - (sl + Eigen::Vector3d(0.45, 0.0, 0.0))).norm(), 0.0, 1e-12);

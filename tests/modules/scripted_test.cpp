@@ -23,7 +23,6 @@ const char* kInline =
     "        - {t: 1.0, left: [0.35, 0.15, 0.95]}\n"
     "        - {t: 2.5, right: [0.32, 0.10, 1.00], left: none, priority: equal}\n";
 
-
 struct Change {
   double t;
   Hand hand;

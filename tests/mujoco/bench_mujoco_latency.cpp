@@ -35,18 +35,22 @@ double percentile(std::vector<double> v, double p) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"bench_mujoco_latency: RobotState.stamp -> answering JointCommand latency, this program as the controller"};
+  CLI::App app{
+      "bench_mujoco_latency: RobotState.stamp -> answering JointCommand latency, this program as the controller"};
   double duration = 10.0;
   int domain = 159;
   std::string mode = "cycle", participant_profile = "reflex_participant", log = "/tmp/bench_mujoco_latency_robot.log";
   bool no_spawn = false;
   app.add_option("--duration", duration, "seconds to measure")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--domain", domain, "DDS domain id")->capture_default_str()->check(CLI::Range(0, 232));
-  app.add_option("--mode", mode, "immediate | cycle")->capture_default_str()->check(CLI::IsMember({"immediate", "cycle"}));
+  app.add_option("--mode", mode, "immediate | cycle")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"immediate", "cycle"}));
   app.add_option("--participant-profile", participant_profile, "participant profile (reflex_participant_udp: UDP only)")
       ->capture_default_str();
   app.add_option("--robot-log", log, "where reflex_mujoco's output goes")->capture_default_str();
-  app.add_flag("--no-spawn", no_spawn, "use a reflex_mujoco already running on the domain (its exit line has its side)");
+  app.add_flag("--no-spawn", no_spawn,
+               "use a reflex_mujoco already running on the domain (its exit line has its side)");
   CLI11_PARSE(app, argc, argv);
 
   std::unique_ptr<reflex::testing::ChildProcess> robot;

@@ -63,9 +63,9 @@ constexpr int kDomain = 195;
 constexpr double kRobotTimeout = 0.050;  // s: reflex_controller's default --robot-timeout
 constexpr double kPeriod = 0.005;        // s: the controller's period (controller.hpp default)
 constexpr double kBackWithin = 3.0;      // s: "back to normal within 3 s"
-const std::vector<std::string> kArmJoints = {"l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_elbow",
-                                             "l_wrist",          "r_shoulder_pitch", "r_shoulder_roll",
-                                             "r_shoulder_yaw",   "r_elbow",          "r_wrist"};
+const std::vector<std::string> kArmJoints = {
+    "l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_elbow", "l_wrist",
+    "r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow", "r_wrist"};
 
 std::string bin(const std::string& exe) { return std::string(REFLEX_BIN_DIR) + "/" + exe; }
 std::string logPath(const std::string& name) { return ::testing::TempDir() + "/mujoco_faults_" + name + ".log"; }
@@ -78,8 +78,9 @@ double sec(std::int64_t ns) { return 1e-9 * static_cast<double>(ns); }
 std::vector<std::string> robotArgs() {
   // UDP only (idl/README.md, Writing a robot driver): on Fast DDS 2.9's shared memory the controller's
   // writers stall ~1 s for the port health check after the robot's kill -9 (seen: "stale" after 1.5 s).
-  return {bin("reflex_mujoco"), "--domain", std::to_string(kDomain), "--name", "mujoco_faults", "--participant-profile",
-          "reflex_participant_udp"};
+  return {
+      bin("reflex_mujoco"),    "--domain", std::to_string(kDomain), "--name", "mujoco_faults", "--participant-profile",
+      "reflex_participant_udp"};
 }
 std::vector<std::string> controllerArgs() {
   // UDP only too: a controller restarted after kill -9 takes its predecessor's participant id, and
@@ -87,8 +88,15 @@ std::vector<std::string> controllerArgs() {
   // the new one only after 3 s typically and once not within 29 s (the robot, on UDP, was commanded
   // at once; bringup/README.md, "A controller restart"). Over UDP the new controller is found at
   // once. This test is about the robot and the controller recovering, not that transport defect.
-  return {bin("reflex_controller"), "--domain", std::to_string(kDomain), "--robot", "dds", "--name", "ctl_faults",
-          "--participant-profile", "reflex_participant_udp"};
+  return {bin("reflex_controller"),
+          "--domain",
+          std::to_string(kDomain),
+          "--robot",
+          "dds",
+          "--name",
+          "ctl_faults",
+          "--participant-profile",
+          "reflex_participant_udp"};
 }
 
 // What this process saw on the bus, each with its arrival time (system clock, ns).
@@ -169,13 +177,15 @@ std::int64_t firstAfter(const std::vector<T>& seen, std::int64_t from, P pred) {
 // heartbeat without detail (from `pid` if non-zero). Returns the latest of the four arrivals, -1 if
 // one is missing.
 std::int64_t backToNormal(const Watch& w, std::int64_t from, std::int64_t fresh_after, std::int32_t pid) {
-  const std::int64_t state = firstAfter(w.seen_states, from, [&](const Seen& s) { return s.state.header().stamp_ns() > fresh_after; });
+  const std::int64_t state =
+      firstAfter(w.seen_states, from, [&](const Seen& s) { return s.state.header().stamp_ns() > fresh_after; });
   const std::int64_t command =
       firstAfter(w.seen_commands, from, [&](const SeenCommand& c) { return c.state_stamp > fresh_after; });
   const std::int64_t applied = firstAfter(w.seen_states, from, [&](const Seen& s) {
     return s.state.header().stamp_ns() > fresh_after && !s.state.holding() && s.state.applied_command_seq() > 0;
   });
-  const std::int64_t ok = firstAfter(w.seen_beats, from, [&](const SeenBeat& b) { return b.detail.empty() && (pid == 0 || b.pid == pid); });
+  const std::int64_t ok =
+      firstAfter(w.seen_beats, from, [&](const SeenBeat& b) { return b.detail.empty() && (pid == 0 || b.pid == pid); });
   if (state < 0 || command < 0 || applied < 0 || ok < 0) return -1;
   return std::max({state, command, applied, ok});
 }
@@ -198,18 +208,22 @@ double largestArmSpeed(const msg::RobotState& s) {
 TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
   auto robot = std::make_unique<ChildProcess>(robotArgs(), logPath("robot1"));
   auto controller = std::make_unique<ChildProcess>(controllerArgs(), logPath("controller1"));
-  ChildProcess behavior({bin("reflex_behavior"), "--config", std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/scripted.yaml",
-                         "--domain", std::to_string(kDomain)},
-                        logPath("behavior"));
+  ChildProcess behavior(
+      {bin("reflex_behavior"), "--config", std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/scripted.yaml",
+       "--domain", std::to_string(kDomain)},
+      logPath("behavior"));
   ASSERT_TRUE(robot->started() && controller->started() && behavior.started());
   Watch w;
 
   // 1. Normal operation, arms moving.
   const std::int64_t t_start = bus::nowNs();
   ASSERT_TRUE(w.pumpUntil(60.0, [&] { return backToNormal(w, t_start, 0, 0) >= 0; }))
-      << "robot:\n" << readFile(logPath("robot1")) << "controller:\n" << readFile(logPath("controller1"));
-  ASSERT_TRUE(w.pumpUntil(15.0, [&] { return !w.seen_states.empty() && largestArmSpeed(w.seen_states.back().state) > 0.05; }))
-      << "the scripted hands move the arms";
+      << "robot:\n"
+      << readFile(logPath("robot1")) << "controller:\n"
+      << readFile(logPath("controller1"));
+  ASSERT_TRUE(w.pumpUntil(15.0, [&] {
+    return !w.seen_states.empty() && largestArmSpeed(w.seen_states.back().state) > 0.05;
+  })) << "the scripted hands move the arms";
   std::printf("[ measured ] normal operation %.1f s after the start; the arms move\n", sec(bus::nowNs() - t_start));
 
   // 2. kill -9 of the robot while the arms move.
@@ -231,10 +245,12 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
   const std::int64_t stale_at =
       firstAfter(w.seen_beats, t_kill_robot, [](const SeenBeat& b) { return b.detail.find("robot state stale") == 0; });
   ASSERT_GE(stale_at, 0) << "the controller's heartbeat says 'robot state stale'\n" << readFile(logPath("controller1"));
-  std::printf("[ measured ] robot killed: the controller said 'robot state stale' %.0f ms after the robot's last state "
-              "(timeout %.0f ms)\n",
-              1e-6 * static_cast<double>(stale_at - last_state_stamp), kRobotTimeout * 1e3);
-  EXPECT_LT(sec(stale_at - last_state_stamp), kRobotTimeout + 0.5) << "said within the timeout and a loaded host's delay";
+  std::printf(
+      "[ measured ] robot killed: the controller said 'robot state stale' %.0f ms after the robot's last state "
+      "(timeout %.0f ms)\n",
+      1e-6 * static_cast<double>(stale_at - last_state_stamp), kRobotTimeout * 1e3);
+  EXPECT_LT(sec(stale_at - last_state_stamp), kRobotTimeout + 0.5)
+      << "said within the timeout and a loaded host's delay";
   // Frozen: no command stamped after the last state's stamp + timeout + two periods, none answering
   // a later state; and nothing at all during the last second.
   std::int64_t last_command_stamp = 0;
@@ -246,10 +262,11 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
     if (c.at >= t_kill_robot) max_answered = std::max(max_answered, c.state_seq);
     if (c.at >= stale_at + 500'000'000) ++late_commands;
   }
-  std::printf("[ measured ] last command stamped %.1f ms after the robot's last state (bound %.0f ms); commands in the "
-              "last second: %d\n",
-              1e-6 * static_cast<double>(last_command_stamp - last_state_stamp), (kRobotTimeout + 2 * kPeriod) * 1e3,
-              late_commands);
+  std::printf(
+      "[ measured ] last command stamped %.1f ms after the robot's last state (bound %.0f ms); commands in the "
+      "last second: %d\n",
+      1e-6 * static_cast<double>(last_command_stamp - last_state_stamp), (kRobotTimeout + 2 * kPeriod) * 1e3,
+      late_commands);
   EXPECT_LE(sec(last_command_stamp - last_state_stamp), kRobotTimeout + 2 * kPeriod) << "the command is frozen";
   EXPECT_LE(max_answered, last_state_seq) << "no command answers a state that never was";
   EXPECT_EQ(late_commands, 0);
@@ -264,16 +281,17 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
       << readFile(logPath("robot2"));
   {
     const std::int64_t back = backToNormal(w, t_restart_robot, t_restart_robot, 0);
-    const std::int64_t first_state = firstAfter(w.seen_states, t_restart_robot,
-                                                [&](const Seen& s) { return s.state.header().stamp_ns() > t_restart_robot; });
+    const std::int64_t first_state = firstAfter(
+        w.seen_states, t_restart_robot, [&](const Seen& s) { return s.state.header().stamp_ns() > t_restart_robot; });
     std::int64_t first_stamp = 0;
     for (const Seen& s : w.seen_states)
       if (s.at == first_state) first_stamp = s.state.header().stamp_ns();
     // Asserted from the new robot's first state: what comes before is the robot booting (MuJoCo
     // building it: 0.3-5.3 s measured on a loaded two-core host), not the system recovering.
-    std::printf("[ measured ] robot restarted: back to normal %.0f ms after its first state (%.2f s after the restart, "
-                "which includes building the robot in MuJoCo and discovery)\n",
-                1e-6 * static_cast<double>(back - first_stamp), sec(back - t_restart_robot));
+    std::printf(
+        "[ measured ] robot restarted: back to normal %.0f ms after its first state (%.2f s after the restart, "
+        "which includes building the robot in MuJoCo and discovery)\n",
+        1e-6 * static_cast<double>(back - first_stamp), sec(back - t_restart_robot));
     EXPECT_LT(sec(back - first_stamp), kBackWithin);
   }
 
@@ -298,10 +316,12 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
     return g;
   };
   double gravity_seen = 0.0;
-  ASSERT_TRUE(w.pumpUntil(20.0, [&] {
-    gravity_seen = std::max(gravity_seen, shoulderGravity(w.seen_states.back().state));
-    return gravity_seen > 2.0;
-  })) << "the arms are raised (scripted targets in front of the chest): largest shoulder gravity torque seen "
+  ASSERT_TRUE(w.pumpUntil(20.0,
+                          [&] {
+                            gravity_seen = std::max(gravity_seen, shoulderGravity(w.seen_states.back().state));
+                            return gravity_seen > 2.0;
+                          }))
+      << "the arms are raised (scripted targets in front of the chest): largest shoulder gravity torque seen "
       << gravity_seen << " N m";
   const std::int64_t t_kill_ctl = bus::nowNs();
   controller->signal(SIGKILL);
@@ -345,16 +365,18 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
   double energy2 = 0.0;  // 2 V [J]
   for (std::size_t k = 0; k < h0.names().size(); ++k) {
     const int qi = model.qIndex(h0.names()[k]);
-    v0[static_cast<std::size_t>(mm.jnt_dofadr[mj_name2id(&mm, mjOBJ_JOINT, h0.names()[k].c_str())])] = h0.velocities()[k];
+    v0[static_cast<std::size_t>(mm.jnt_dofadr[mj_name2id(&mm, mjOBJ_JOINT, h0.names()[k].c_str())])] =
+        h0.velocities()[k];
     e0[k] = h0.positions()[k] - reference->positions()[k];
     energy2 += twin.gains()[qi].kp * e0[k] * e0[k];
   }
   mj_mulM(&mm, &md, Mv0.data(), v0.data());
   for (int d = 0; d < mm.nv; ++d) energy2 += v0[static_cast<std::size_t>(d)] * Mv0[static_cast<std::size_t>(d)];
-  std::printf("[ measured ] at the hold: 2V = %.3e J (largest arm speed %.3f rad/s, largest shoulder torque %.2f N m); "
-              "reference: %s\n",
-              energy2, largestArmSpeed(h0), largestShoulderEffort(h0),
-              contiguous ? "the state before the hold" : "the settled position (the state before the hold was lost)");
+  std::printf(
+      "[ measured ] at the hold: 2V = %.3e J (largest arm speed %.3f rad/s, largest shoulder torque %.2f N m); "
+      "reference: %s\n",
+      energy2, largestArmSpeed(h0), largestShoulderEffort(h0),
+      contiguous ? "the state before the hold" : "the settled position (the state before the hold was lost)");
   double worst_ratio = 0.0;
   bool held_throughout = true;
   for (const std::string& joint : kArmJoints) {
@@ -379,9 +401,10 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
       if (at_half) settled = std::max(settled, std::abs(s.state.positions()[i] - at_half->positions()[i]));
     }
     ASSERT_NE(at_half, nullptr);
-    std::printf("[ measured ] %-16s drift over 2 s %.2e rad (bound %.2e, kp %.1f N m/rad); settled 0.5-2 s %.2e rad "
-                "(bound tau_g/kp = %.2e, gravity %.2f N m)\n",
-                joint.c_str(), drift, bound, kp, settled, settled_bound, tau_g);
+    std::printf(
+        "[ measured ] %-16s drift over 2 s %.2e rad (bound %.2e, kp %.1f N m/rad); settled 0.5-2 s %.2e rad "
+        "(bound tau_g/kp = %.2e, gravity %.2f N m)\n",
+        joint.c_str(), drift, bound, kp, settled, settled_bound, tau_g);
     EXPECT_LT(drift, bound) << joint;
     if (std::abs(tau_g) > 0.1) {
       EXPECT_LT(settled, settled_bound) << joint << " (loaded by gravity)";
@@ -404,11 +427,13 @@ TEST(MujocoFaults, KillAndRestartTheRobotAndTheController) {
   // process starting (the URDF, the DDS participant, the 1 s --peer-probe for another controller:
   // 1.2-3.1 s measured on a loaded two-core host), not the system recovering.
   const std::int64_t back = backToNormal(w, t_restart_ctl, t_restart_ctl, pid2);
-  const std::int64_t first_beat = firstAfter(w.seen_beats, t_restart_ctl, [&](const SeenBeat& b) { return b.pid == pid2; });
+  const std::int64_t first_beat =
+      firstAfter(w.seen_beats, t_restart_ctl, [&](const SeenBeat& b) { return b.pid == pid2; });
   ASSERT_GE(first_beat, 0);
-  std::printf("[ measured ] controller restarted: back to normal %.0f ms after its first heartbeat (%.2f s after the "
-              "restart, which includes its start-up and the 1 s peer probe)\n",
-              1e-6 * static_cast<double>(back - first_beat), sec(back - t_restart_ctl));
+  std::printf(
+      "[ measured ] controller restarted: back to normal %.0f ms after its first heartbeat (%.2f s after the "
+      "restart, which includes its start-up and the 1 s peer probe)\n",
+      1e-6 * static_cast<double>(back - first_beat), sec(back - t_restart_ctl));
   EXPECT_LT(sec(back - first_beat), kBackWithin);
 
   w.pumpFor(1.0);

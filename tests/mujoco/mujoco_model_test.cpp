@@ -96,9 +96,10 @@ TEST_P(ModelFidelity, BodyPosesAndGeomsEqualTheProjectsKinematics) {
       }
     }
   }
-  std::printf("[ measured ] %s: %d body poses, max position error %.2e m, max rotation error %.2e; %d geoms, "
-              "max endpoint error %.2e m\n",
-              GetParam(), poses, max_pos, max_rot, geoms, max_geom);
+  std::printf(
+      "[ measured ] %s: %d body poses, max position error %.2e m, max rotation error %.2e; %d geoms, "
+      "max endpoint error %.2e m\n",
+      GetParam(), poses, max_pos, max_rot, geoms, max_geom);
   EXPECT_LT(max_pos, 1e-9);
   EXPECT_LT(max_rot, 1e-9);
   EXPECT_LT(max_geom, 1e-9);
@@ -172,8 +173,8 @@ TEST(Judge, ReportsPairsBelowTheMarginWithItsOwnDistanceAndNoForceUntilPenetrati
     double separation;
     bool reported;
   };
-  for (const Case c : {Case{0.003, true}, Case{0.008, false}, Case{0.0049, true}, Case{0.0051, false},
-                       Case{-0.001, true}}) {
+  for (const Case c :
+       {Case{0.003, true}, Case{0.008, false}, Case{0.0049, true}, Case{0.0051, false}, Case{-0.001, true}}) {
     Eigen::VectorXd q(1);
     q << kRa + kRb + c.separation;
     robot.setPositions(q);
@@ -189,8 +190,9 @@ TEST(Judge, ReportsPairsBelowTheMarginWithItsOwnDistanceAndNoForceUntilPenetrati
     ASSERT_EQ(d.ncon, 1);
     mjtNum force[6];
     mj_contactForce(&m, &d, 0, force);
-    std::printf("[ measured ] separation %+.4f m: MuJoCo dist %+.9f m, project %+.9f m, exclude %d, normal force %.3f N\n",
-                c.separation, d.contact[0].dist, dist.pairs[0].distance, d.contact[0].exclude, force[0]);
+    std::printf(
+        "[ measured ] separation %+.4f m: MuJoCo dist %+.9f m, project %+.9f m, exclude %d, normal force %.3f N\n",
+        c.separation, d.contact[0].dist, dist.pairs[0].distance, d.contact[0].exclude, force[0]);
     if (c.separation > 0.0) {
       EXPECT_EQ(d.contact[0].exclude, 1) << "in the gap: reported, not in the solver";
       EXPECT_EQ(force[0], 0.0);
@@ -212,9 +214,10 @@ TEST(Judge, UrdfInertialIsUsedWithItsRotatedFrame) {
   // principal inertia in its principal axes.
   Eigen::Matrix3d I_urdf;
   I_urdf << 0.011, -0.001, 0.0005, -0.001, 0.012, 0.001, 0.0005, 0.001, 0.013;
-  const Eigen::Matrix3d R_rpy = (Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()) *
-                                 Eigen::AngleAxisd(-0.2, Eigen::Vector3d::UnitY()) *
-                                 Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitX())).toRotationMatrix();
+  const Eigen::Matrix3d R_rpy =
+      (Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(-0.2, Eigen::Vector3d::UnitY()) *
+       Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
   const Eigen::Matrix3d I_L = R_rpy * I_urdf * R_rpy.transpose();
   const Eigen::Quaterniond iq(m.body_iquat[4 * b], m.body_iquat[4 * b + 1], m.body_iquat[4 * b + 2],
                               m.body_iquat[4 * b + 3]);
@@ -241,7 +244,10 @@ TEST(Judge, DegenerateUrdfInertialsAreRepairedAndSaid) {
   const MjcfOptions options;
   const auto repairs = inertialRepairs(model, options);
   ASSERT_EQ(repairs.size(), 1u);
-  EXPECT_EQ(repairs[0].rfind("link 'b': URDF <inertial> mass 0 -> 0.01 kg, principal inertia [0 0 0] -> [1e-05 1e-05 1e-05] kg m^2", 0), 0u)
+  EXPECT_EQ(
+      repairs[0].rfind(
+          "link 'b': URDF <inertial> mass 0 -> 0.01 kg, principal inertia [0 0 0] -> [1e-05 1e-05 1e-05] kg m^2", 0),
+      0u)
       << repairs[0];
   // A tensor breaking A + B >= C (principal 0.001, 0.001, 0.01, turned): the two smaller raised to 0.005
   // and 2e-6 of it (a margin MuJoCo's own rounding cannot undo), the axes kept; a valid tensor and mass
@@ -282,7 +288,8 @@ TEST(Judge, AgreesWithTheProjectsDistancesOnTheRobotAtRandomConfigurations) {
   control::KinematicsData kin(model);
   control::DistanceData dist(model);
   std::map<std::pair<int, int>, int> pair_index;
-  for (std::size_t i = 0; i < model.pairs.size(); ++i) pair_index[{model.pairs[i].a, model.pairs[i].b}] = static_cast<int>(i);
+  for (std::size_t i = 0; i < model.pairs.size(); ++i)
+    pair_index[{model.pairs[i].a, model.pairs[i].b}] = static_cast<int>(i);
   std::mt19937_64 rng(7);
   int compared = 0, penetrating = 0, below = 0;
   double max_err = 0.0;
@@ -312,8 +319,10 @@ TEST(Judge, AgreesWithTheProjectsDistancesOnTheRobotAtRandomConfigurations) {
       }
     }
   }
-  std::printf("[ measured ] %d reported pairs compared (%d penetrating), %d project pairs below the margin; "
-              "max distance difference %.2e m\n", compared, penetrating, below, max_err);
+  std::printf(
+      "[ measured ] %d reported pairs compared (%d penetrating), %d project pairs below the margin; "
+      "max distance difference %.2e m\n",
+      compared, penetrating, below, max_err);
   EXPECT_GT(compared, 200);
   EXPECT_GT(penetrating, 20);
   EXPECT_EQ(compared, below);
@@ -376,8 +385,9 @@ TEST(CommandGate, BadCommandsAreRejectedCountedAndChangeNothing) {
     robot.step(1, kNow);
     max_speed = std::max(max_speed, std::abs(robot.measurement().qdot[qi]));
   }
-  std::printf("[ measured ] l_elbow to a target 2 rad away: largest speed %.4f rad/s (limit %.2f), at %.4f rad after 1 s\n",
-              max_speed, v_max, robot.measurement().q[qi]);
+  std::printf(
+      "[ measured ] l_elbow to a target 2 rad away: largest speed %.4f rad/s (limit %.2f), at %.4f rad after 1 s\n",
+      max_speed, v_max, robot.measurement().q[qi]);
   EXPECT_LT(max_speed, 1.02 * v_max) << "the joint follows the rate-limited reference";
   EXPECT_NEAR(robot.measurement().q[qi], -2.0, 1e-3);
   // Its deadline passes: the robot holds where it is measured.

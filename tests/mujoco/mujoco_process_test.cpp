@@ -63,8 +63,19 @@ std::string logPath(const std::string& name) { return ::testing::TempDir() + "/m
 
 // Arms forward and bent, so that gravity loads the shoulders and elbows.
 std::vector<std::string> robotArgs(const std::string& name) {
-  return {binary(), "--domain", std::to_string(kDomain), "--name", "mujoco_" + name,
-          "--q", "l_shoulder_pitch=-0.6", "--q", "r_shoulder_pitch=-0.6", "--q", "l_elbow=-0.8", "--q", "r_elbow=-0.8"};
+  return {binary(),
+          "--domain",
+          std::to_string(kDomain),
+          "--name",
+          "mujoco_" + name,
+          "--q",
+          "l_shoulder_pitch=-0.6",
+          "--q",
+          "r_shoulder_pitch=-0.6",
+          "--q",
+          "l_elbow=-0.8",
+          "--q",
+          "r_elbow=-0.8"};
 }
 
 double seconds(std::int64_t ns) { return 1e-9 * static_cast<double>(ns); }
@@ -200,10 +211,11 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
       best_max = m;
     }
   }
-  std::printf("[ measured ] tracking a %.1f rad %.1f Hz sinusoid (peak %.2f rad/s) on 4 arm joints over %zu states: "
-              "error median %.4f rad, p95 %.4f, RMS %.4f, max %.4f; servo lag %.0f ms (residual RMS %.4f rad, max %.4f)\n",
-              kAmp, kFreq, kAmp * 2 * M_PI * kFreq, samples.size(), median, p95, rms, max_err, best_lag * 1e3, best_rms,
-              best_max);
+  std::printf(
+      "[ measured ] tracking a %.1f rad %.1f Hz sinusoid (peak %.2f rad/s) on 4 arm joints over %zu states: "
+      "error median %.4f rad, p95 %.4f, RMS %.4f, max %.4f; servo lag %.0f ms (residual RMS %.4f rad, max %.4f)\n",
+      kAmp, kFreq, kAmp * 2 * M_PI * kFreq, samples.size(), median, p95, rms, max_err, best_lag * 1e3, best_rms,
+      best_max);
   // Bounds: the servo (10 Hz, critically damped) follows its reference with a lag of about 25 ms: its
   // velocity feed-forward acts only while the reference travels to a commanded position, never past
   // it (measured on a loaded run: median 15.5 mrad, RMS 15.9, lag 24 ms, residual after the lag 2.5
@@ -237,8 +249,9 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
   for (int i : arm) drift = std::max(drift, std::abs(hold_end.positions()[i] - hold_start.positions()[i]));
   double gravity_torque = 0.0;
   for (int i : arm) gravity_torque = std::max(gravity_torque, std::abs(hold_end.efforts()[i]));
-  std::printf("[ measured ] holding over %.2f s (robot clock): arm drift %.2e rad, largest arm holding torque %.2f N m\n",
-              seconds(hold_end.header().stamp_ns() - hold_start.header().stamp_ns()), drift, gravity_torque);
+  std::printf(
+      "[ measured ] holding over %.2f s (robot clock): arm drift %.2e rad, largest arm holding torque %.2f N m\n",
+      seconds(hold_end.header().stamp_ns() - hold_start.header().stamp_ns()), drift, gravity_torque);
   EXPECT_LT(drift, 1e-4);  // measured: 1.5e-9 rad (PD hold with gravity feed-forward)
   EXPECT_GT(gravity_torque, 1.0) << "the arms are loaded by gravity";
 
@@ -248,7 +261,8 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
   const auto hb_end = std::chrono::steady_clock::now() + 5s;
   msg::Heartbeat hb;
   while (!running && std::chrono::steady_clock::now() < hb_end) {
-    while (heartbeats.takeNext(hb)) running = running || (hb.module_name() == "mujoco_track" && hb.state() == msg::STATE_RUNNING);
+    while (heartbeats.takeNext(hb))
+      running = running || (hb.module_name() == "mujoco_track" && hb.state() == msg::STATE_RUNNING);
     std::this_thread::sleep_for(10ms);
   }
   EXPECT_TRUE(running) << "reflex/heartbeat of mujoco_track, RUNNING";
@@ -257,10 +271,12 @@ TEST(MujocoProcess, TracksCommandsThenHoldsAgainstGravityWhenTheyStop) {
   const std::string log = readFile(logPath("track"));
   std::smatch m;
   ASSERT_TRUE(std::regex_search(log, m, std::regex("command latency p50 (\\d+) us p99 (\\d+) us over (\\d+)"))) << log;
-  std::printf("[ measured ] command latency (RobotState.stamp -> JointCommand arrival, this test as the controller): "
-              "p50 %s us, p99 %s us over %s commands\n",
-              m[1].str().c_str(), m[2].str().c_str(), m[3].str().c_str());
-  ASSERT_TRUE(std::regex_search(log, m, std::regex("overruns (\\d+) \\(periods lost (\\d+)\\), max lateness (\\d+) us")));
+  std::printf(
+      "[ measured ] command latency (RobotState.stamp -> JointCommand arrival, this test as the controller): "
+      "p50 %s us, p99 %s us over %s commands\n",
+      m[1].str().c_str(), m[2].str().c_str(), m[3].str().c_str());
+  ASSERT_TRUE(
+      std::regex_search(log, m, std::regex("overruns (\\d+) \\(periods lost (\\d+)\\), max lateness (\\d+) us")));
   std::printf("[ measured ] robot loop: %s overruns, %s periods lost, max lateness %s us\n", m[1].str().c_str(),
               m[2].str().c_str(), m[3].str().c_str());
   EXPECT_NE(log.find("unstable steps 0"), std::string::npos) << log;
@@ -337,7 +353,8 @@ TEST(MujocoProcess, LateAndMalformedCommandsAreCountedAndNeverApplied) {
     always_holding = always_holding && s.holding() && s.applied_command_seq() == 0;
     for (std::size_t i = 0; i < n; ++i) moved = std::max(moved, std::abs(s.positions()[i] - q0[i]));
   }
-  std::printf("[ measured ] %zu states during bad commands: largest joint motion %.2e rad\n", cmd.received.size(), moved);
+  std::printf("[ measured ] %zu states during bad commands: largest joint motion %.2e rad\n", cmd.received.size(),
+              moved);
   EXPECT_TRUE(always_holding);
   EXPECT_LT(moved, 2e-3);
 
@@ -397,10 +414,11 @@ TEST(MujocoProcess, TheJudgeReportsPairsBelowTheMarginOnTheBus) {
     std::this_thread::sleep_for(1s);
     msg::RobotContacts c;
     ASSERT_TRUE(contacts.takeLatest(c)) << "RobotContacts are published with every state";
-    std::printf("[ measured ] %s,%s at %.1f mm by the distance module (l_shoulder_roll %.6f): %zu pairs reported, "
-                "total contact steps %llu\n",
-                a.c_str(), b.c_str(), target * 1e3, roll, c.contacts().size(),
-                static_cast<unsigned long long>(c.total_contact_steps()));
+    std::printf(
+        "[ measured ] %s,%s at %.1f mm by the distance module (l_shoulder_roll %.6f): %zu pairs reported, "
+        "total contact steps %llu\n",
+        a.c_str(), b.c_str(), target * 1e3, roll, c.contacts().size(),
+        static_cast<unsigned long long>(c.total_contact_steps()));
     EXPECT_GT(c.state_seq(), 0u);
     if (target < 0.005) {
       ASSERT_EQ(c.contacts().size(), 1u);
@@ -414,7 +432,8 @@ TEST(MujocoProcess, TheJudgeReportsPairsBelowTheMarginOnTheBus) {
     }
     EXPECT_EQ(robot.terminate(), 0);
     const std::string log = readFile(logPath(name));
-    EXPECT_NE(log.find(target < 0.005 ? "contact " + a + "," + b + " min distance" : "contact steps 0"), std::string::npos)
+    EXPECT_NE(log.find(target < 0.005 ? "contact " + a + "," + b + " min distance" : "contact steps 0"),
+              std::string::npos)
         << log;
   }
 }

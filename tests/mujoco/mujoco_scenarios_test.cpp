@@ -40,8 +40,9 @@ using namespace std::chrono_literals;
 using reflex::testing::ChildProcess;
 namespace fs = std::filesystem;
 
-const std::vector<std::string> kScenarios = {"target_inside_body", "through_body", "one_vs_three_dof", "crossing_arms",
-                                             "walking_target_behind", "grasped_bar", "occlusion"};
+const std::vector<std::string> kScenarios = {"target_inside_body", "through_body",          "one_vs_three_dof",
+                                             "crossing_arms",      "walking_target_behind", "grasped_bar",
+                                             "occlusion"};
 
 std::string bin(const std::string& name) { return std::string(REFLEX_BIN_DIR) + "/" + name; }
 
@@ -79,7 +80,9 @@ struct Figures {
   double mujoco_min_mm = 1e9;  ///< MuJoCo's smallest contact distance (1e9: none reported)
   std::string mujoco_pair, min_pair;
   long cycles = -1, late_cycles = -1;  ///< the controller's cycles, and those that began a period late or more
-  double lateFraction() const { return cycles > 0 ? static_cast<double>(late_cycles) / static_cast<double>(cycles) : 1.0; }
+  double lateFraction() const {
+    return cycles > 0 ? static_cast<double>(late_cycles) / static_cast<double>(cycles) : 1.0;
+  }
 };
 
 Figures parse(const std::string& block) {
@@ -108,8 +111,10 @@ Figures parse(const std::string& block) {
   if (std::regex_search(block, m, std::regex(R"(late cycles (\d+))"))) f.late_cycles = std::stol(m[1]);
   const char* side[2] = {"left", "right"};
   for (int a = 0; a < 2; ++a)
-    if (std::regex_search(block, m, std::regex(std::string(side[a]) +
-                                               R"( arm tracking\s+max ([0-9.e+-]+) mrad, RMS ([0-9.e+-]+) mrad, lag ([0-9.e+-]+) ms)"))) {
+    if (std::regex_search(
+            block, m,
+            std::regex(std::string(side[a]) +
+                       R"( arm tracking\s+max ([0-9.e+-]+) mrad, RMS ([0-9.e+-]+) mrad, lag ([0-9.e+-]+) ms)"))) {
       f.max_mrad[a] = std::stod(m[1]);
       f.rms_mrad[a] = std::stod(m[2]);
       f.lag_ms[a] = std::stod(m[3]);
@@ -181,7 +186,8 @@ constexpr double kDisturbedLate = 0.02;
 
 TEST(MujocoScenarios, AllSevenAvoidOnThePhysicsRobot) {
   const fs::path dir = outDir("all");
-  const int rc = runSim({"all", "--robot", "mujoco", "--domain", "190", "--no-plots", "--out", dir.string()}, dir, 240s);
+  const int rc =
+      runSim({"all", "--robot", "mujoco", "--domain", "190", "--no-plots", "--out", dir.string()}, dir, 240s);
   ASSERT_EQ(rc, 0) << readFile(dir / "reflex_sim.log");
   for (const auto& name : kScenarios) {
     fs::path summary = dir / name / "summary.txt";
@@ -193,12 +199,13 @@ TEST(MujocoScenarios, AllSevenAvoidOnThePhysicsRobot) {
       double late = 0.0;
       for (const Figures& f : runs) {
         ASSERT_TRUE(f.found) << name << ": no MuJoCo contact line\n" << readFile(summary);
-        std::printf("%-22s robot %s: min distance %.2f mm, MuJoCo contacts %ld of %ld samples, below d_r %ld, "
-                    "tracking L max %.2f RMS %.3f mrad lag %.1f ms, R max %.2f RMS %.3f mrad lag %.1f ms, late cycles "
-                    "%ld of %ld\n",
-                    name.c_str(), f.robot.c_str(), f.min_distance_mm, f.contact_samples, f.contacts_received,
-                    f.below_d_r, f.max_mrad[0], f.rms_mrad[0], f.lag_ms[0], f.max_mrad[1], f.rms_mrad[1], f.lag_ms[1],
-                    f.late_cycles, f.cycles);
+        std::printf(
+            "%-22s robot %s: min distance %.2f mm, MuJoCo contacts %ld of %ld samples, below d_r %ld, "
+            "tracking L max %.2f RMS %.3f mrad lag %.1f ms, R max %.2f RMS %.3f mrad lag %.1f ms, late cycles "
+            "%ld of %ld\n",
+            name.c_str(), f.robot.c_str(), f.min_distance_mm, f.contact_samples, f.contacts_received, f.below_d_r,
+            f.max_mrad[0], f.rms_mrad[0], f.lag_ms[0], f.max_mrad[1], f.rms_mrad[1], f.lag_ms[1], f.late_cycles,
+            f.cycles);
         const std::string run_failure = avoidanceFailure(f);
         failure += (failure.empty() || run_failure.empty() ? "" : "; ") + run_failure;
         late = std::max(late, f.lateFraction());
@@ -219,8 +226,8 @@ TEST(MujocoScenarios, AllSevenAvoidOnThePhysicsRobot) {
       std::printf("%s: %s and the outcome failed (%s); running it again (attempt %d of 3)\n", name.c_str(), why,
                   failure.c_str(), attempt + 1);
       const fs::path again = dir / (name + "_again" + std::to_string(attempt));
-      ASSERT_EQ(runSim({name, "--robot", "mujoco", "--domain", "190", "--no-plots", "--out", again.string()}, again, 90s),
-                0)
+      ASSERT_EQ(
+          runSim({name, "--robot", "mujoco", "--domain", "190", "--no-plots", "--out", again.string()}, again, 90s), 0)
           << readFile(again / "reflex_sim.log");
       summary = again / "summary.txt";
     }
@@ -237,8 +244,9 @@ TEST(MujocoScenarios, WithoutAvoidanceMujocoReportsContacts) {
   ASSERT_EQ(runs.size(), 1U);
   const Figures& f = runs[0];
   ASSERT_TRUE(f.found) << readFile(dir / "summary.txt");
-  std::printf("without avoidance: min distance %.2f mm, MuJoCo contacts %ld of %ld samples (%ld steps), below d_r %ld\n",
-              f.min_distance_mm, f.contact_samples, f.contacts_received, f.contact_steps, f.below_d_r);
+  std::printf(
+      "without avoidance: min distance %.2f mm, MuJoCo contacts %ld of %ld samples (%ld steps), below d_r %ld\n",
+      f.min_distance_mm, f.contact_samples, f.contacts_received, f.contact_steps, f.below_d_r);
   EXPECT_GT(f.contact_samples, 10);
   EXPECT_GT(f.contact_steps, 10);
   EXPECT_GT(f.below_d_r, 10);
@@ -252,8 +260,8 @@ TEST(MujocoScenarios, WithoutAvoidanceMujocoReportsContacts) {
   // cycle measured may still be in flight when the cycle polls (CI, stop 24: ours 1.3 um below it).
   const RobotMinimum robot = robotMinimum(readFile(dir / "reflex_mujoco.log"));
   ASSERT_TRUE(robot.found) << readFile(dir / "reflex_mujoco.log");
-  std::printf("robot's own smallest: %.3f mm (%s); ours %.4f mm (%s)\n", robot.mm, robot.pair.c_str(), f.min_distance_mm,
-              f.min_pair.c_str());
+  std::printf("robot's own smallest: %.3f mm (%s); ours %.4f mm (%s)\n", robot.mm, robot.pair.c_str(),
+              f.min_distance_mm, f.min_pair.c_str());
   EXPECT_EQ(robot.pair, f.min_pair);
   EXPECT_LE(robot.mm, f.min_distance_mm + 1e-3);
   EXPECT_LT(f.min_distance_mm - robot.mm, 1.0);
@@ -265,10 +273,11 @@ TEST(MujocoScenarios, AttachesToARobotAlreadyOnTheBus) {
   const fs::path dir = outDir("attach");
   fs::create_directories(dir);
   // A robot already running, at its own start posture (all joints 0): the scenario starts from where it is.
-  ChildProcess robot({bin("reflex_mujoco"), "--domain", "192", "--name", "attached_robot"}, (dir / "robot.log").string());
+  ChildProcess robot({bin("reflex_mujoco"), "--domain", "192", "--name", "attached_robot"},
+                     (dir / "robot.log").string());
   ASSERT_TRUE(robot.started());
-  const int rc = runSim({"target_inside_body", "--robot", "dds", "--domain", "192", "--no-plots", "--out", dir.string()},
-                        dir, 90s);
+  const int rc = runSim(
+      {"target_inside_body", "--robot", "dds", "--domain", "192", "--no-plots", "--out", dir.string()}, dir, 90s);
   ASSERT_EQ(rc, 0) << readFile(dir / "reflex_sim.log");
   const auto runs = parseSummary(dir / "summary.txt");
   ASSERT_EQ(runs.size(), 1U);

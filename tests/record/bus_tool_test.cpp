@@ -51,7 +51,8 @@ TEST(BusTool, ListsTheControllerAndMeasuresItsRates) {
   std::string list;
   bool found = false;
   for (int attempt = 0; attempt < 10 && !found; ++attempt) {
-    ASSERT_EQ(runTool({bin("reflex_bus"), "list", "--domain", kDomain, "--window", "2"}, list_log), 0) << slurp(list_log);
+    ASSERT_EQ(runTool({bin("reflex_bus"), "list", "--domain", kDomain, "--window", "2"}, list_log), 0)
+        << slurp(list_log);
     list = slurp(list_log);
     std::istringstream lines(list);
     for (std::string line; std::getline(lines, line);) {
@@ -65,7 +66,8 @@ TEST(BusTool, ListsTheControllerAndMeasuresItsRates) {
     }
   }
   EXPECT_TRUE(found) << list;
-  EXPECT_EQ(list.find("reflex_bus"), std::string::npos) << "the tool must not publish a heartbeat of its own:\n" << list;
+  EXPECT_EQ(list.find("reflex_bus"), std::string::npos) << "the tool must not publish a heartbeat of its own:\n"
+                                                        << list;
 
   const std::string hz_log = tempPath("hz.log");
   ASSERT_EQ(runTool({bin("reflex_bus"), "hz", "--domain", kDomain, "--window", "3", "reflex/control_status",
@@ -110,7 +112,8 @@ TEST(BusTool, ListsEveryProcessEvenWithAWindowShorterThanDiscovery) {
     const std::string list = slurp(log);
     EXPECT_NE(list.find("# domain 87, 3 process(es) seen in "), std::string::npos) << "run " << run << ":\n" << list;
     for (const char* module : {"controller", "source_a", "source_b"})
-      EXPECT_NE(list.find(std::string(" ") + module + " "), std::string::npos) << module << " in run " << run << ":\n" << list;
+      EXPECT_NE(list.find(std::string(" ") + module + " "), std::string::npos) << module << " in run " << run << ":\n"
+                                                                               << list;
   }
 }
 

@@ -105,7 +105,8 @@ TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecorded
   EXPECT_EQ(run.finish(summary, 30s), 0) << run.output;
   EXPECT_EQ(recorder.wait(30s), 0) << readFile(tempPath("recorder.log"));
 
-  const control::Model model = control::loadModel(kUrdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(kUrdf)));
+  const control::Model model =
+      control::loadModel(kUrdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(kUrdf)));
   const control::ControllerModel cm = control::makeControllerModel(model, control::defaultControllerConfig());
   std::map<std::uint64_t, msg::JointState> joints;  // by header.seq
   std::vector<msg::ControlStatus> statuses;
@@ -127,7 +128,7 @@ TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecorded
   double min_recorded = 1e9;
   for (const msg::ControlStatus& st : statuses) {
     const auto it = joints.find(st.header().seq() - 1);  // the positions this cycle computed from
-    if (it == joints.end()) continue;                     // best effort: a dropped sample
+    if (it == joints.end()) continue;                    // best effort: a dropped sample
     const msg::JointState& js = it->second;
     Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
     ASSERT_EQ(js.names().size(), js.positions().size());
@@ -184,7 +185,9 @@ TEST(ControlStatusOnTheBus, ARecordingAloneGivesFig13TheArmDistanceOfTheRecorded
         const control::PairDistance& pd = dist.pairs[i];
         if (!pd.active) continue;
         best = std::min(best, pd.distance);
-        if (model.segments[static_cast<std::size_t>(pd.seg_a)].name + "|" + model.segments[static_cast<std::size_t>(pd.seg_b)].name == row[c_pair])
+        if (model.segments[static_cast<std::size_t>(pd.seg_a)].name + "|" +
+                model.segments[static_cast<std::size_t>(pd.seg_b)].name ==
+            row[c_pair])
           named = pd.distance;
       }
       ASSERT_NEAR(std::stod(row[c_dist]), best, 1e-6) << "row " << rows;
@@ -241,14 +244,16 @@ TEST(ControlStatusOnTheBus, RefusedInputsAreCountedPerTopicAndNamedInTheStatusAn
   const auto heel = std::find(names.begin(), names.end(), "heel_x") - names.begin();
   ASSERT_LT(static_cast<std::size_t>(heel), names.size());
   for (const auto& js : run.joint_states)
-    ASSERT_EQ(js.positions()[static_cast<std::size_t>(heel)], run.joint_states.front().positions()[static_cast<std::size_t>(heel)]);
+    ASSERT_EQ(js.positions()[static_cast<std::size_t>(heel)],
+              run.joint_states.front().positions()[static_cast<std::size_t>(heel)]);
 }
 
 TEST(ControlStatusOnTheBus, ClosestNamesAreClearedExactlyWhenTheArmHasNoPair) {
   // The shipped collision configuration plus: every pair of a right-arm segment with anything but a
   // left-arm segment excluded. Under right-arm priority the right arm ignores the left arm (Sec. 7.2)
   // and so has no pair at all.
-  const control::Model model = control::loadModel(kUrdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(kUrdf)));
+  const control::Model model =
+      control::loadModel(kUrdf, control::loadCollisionConfig(control::defaultCollisionConfigPath(kUrdf)));
   const control::ControllerModel cm = control::makeControllerModel(model, control::defaultControllerConfig());
   std::string yaml = readFile(control::defaultCollisionConfigPath(kUrdf));
   int excluded = 0;
@@ -256,8 +261,8 @@ TEST(ControlStatusOnTheBus, ClosestNamesAreClearedExactlyWhenTheArmHasNoPair) {
     if (model.segments[p.a].body_schema_slot || model.segments[p.b].body_schema_slot) continue;
     const auto in = [&](int arm, int s) { return ((cm.arms[arm].segment_mask >> s) & 1U) != 0; };
     const bool right_pair = in(control::kRight, p.a) || in(control::kRight, p.b);
-    const bool arm_pair = (in(control::kRight, p.a) && in(control::kLeft, p.b)) ||
-                          (in(control::kLeft, p.a) && in(control::kRight, p.b));
+    const bool arm_pair =
+        (in(control::kRight, p.a) && in(control::kLeft, p.b)) || (in(control::kLeft, p.a) && in(control::kRight, p.b));
     if (!right_pair || arm_pair) continue;
     yaml += "  - [" + model.segments[p.a].name + ", " + model.segments[p.b].name + "]\n";
     ++excluded;
@@ -282,8 +287,8 @@ TEST(ControlStatusOnTheBus, ClosestNamesAreClearedExactlyWhenTheArmHasNoPair) {
   for (const auto& s : run.statuses) {
     const msg::ArmStatus& r = s.right();
     const bool none = r.distance() == reflex::msg::NO_PAIR_DISTANCE;
-    ASSERT_EQ(none, r.closest_segment_a().empty()) << "seq " << s.header().seq() << " distance " << r.distance()
-                                                   << " names '" << r.closest_segment_a() << "'";
+    ASSERT_EQ(none, r.closest_segment_a().empty())
+        << "seq " << s.header().seq() << " distance " << r.distance() << " names '" << r.closest_segment_a() << "'";
     ASSERT_EQ(none, r.closest_segment_b().empty()) << "seq " << s.header().seq();
     if (!none) {
       EXPECT_EQ(r.closest_segment_a().rfind("r_", 0), 0u) << "the arm's own segment first: " << r.closest_segment_a();
@@ -293,10 +298,11 @@ TEST(ControlStatusOnTheBus, ClosestNamesAreClearedExactlyWhenTheArmHasNoPair) {
     if (phases_seen.empty() || phases_seen.back() != c) phases_seen += c;
   }
   EXPECT_NE(phases_seen.find("ncnc"), std::string::npos)
-      << "named (equal priority, the default), cleared (right arm higher), named, cleared again (seen: "
-      << phases_seen << ")";
+      << "named (equal priority, the default), cleared (right arm higher), named, cleared again (seen: " << phases_seen
+      << ")";
   // The left arm always has pairs (torso, legs): always named, the left arm's segment first.
-  for (const auto& s : run.statuses) ASSERT_EQ(s.left().closest_segment_a().rfind("l_", 0), 0u) << s.left().closest_segment_a();
+  for (const auto& s : run.statuses)
+    ASSERT_EQ(s.left().closest_segment_a().rfind("l_", 0), 0u) << s.left().closest_segment_a();
 }
 
 }  // namespace

@@ -164,8 +164,8 @@ TEST(HostileMcap, AChunkDeclaringOneGibibyteIsRefusedBeforeAnyLargeAllocation) {
   const std::vector<std::uint8_t> bomb = zstdZeros(kGiB);
   cases.push_back({"zstd bomb", mcapWithChunk(kGiB, "zstd", bomb), "more than 1000 x"});
   // 3. The same bomb declaring what the ratio cap allows: decoding stops at the declared size.
-  cases.push_back({"zstd bomb within the ratio", mcapWithChunk(1000 * bomb.size(), "zstd", bomb),
-                   "more than the declared"});
+  cases.push_back(
+      {"zstd bomb within the ratio", mcapWithChunk(1000 * bomb.size(), "zstd", bomb), "more than the declared"});
   for (const Case& c : cases) {
     const std::string path = tempPath("chunk.mcap");
     writeFile(path, c.file);
@@ -259,12 +259,12 @@ TEST(HostileSamples, EveryTopicTypeIsCheckedAndItsValidSamplesPass) {
   // The check reads the types from the IDL text: a type it could not parse would silently go
   // unchecked. Every codec's type: a valid sample passes, the same cut after its encapsulation does not.
   const std::vector<RecordEntry> valid = {
-      test::encodeEntry(bus::test::objectTargets(3), 1), test::encodeEntry(bus::test::handTargets(3), 1),
-      test::encodeEntry(bus::test::motionPriority(3), 1), test::encodeEntry(bus::test::bodySchemaChange(3), 1),
-      test::encodeEntry(bus::test::walkCommand(3), 1),    test::encodeEntry(bus::test::jointState(3), 1),
-      test::encodeEntry(bus::test::controlStatus(3), 1),  test::encodeEntry(bus::test::heartbeat(3), 1),
+      test::encodeEntry(bus::test::objectTargets(3), 1),        test::encodeEntry(bus::test::handTargets(3), 1),
+      test::encodeEntry(bus::test::motionPriority(3), 1),       test::encodeEntry(bus::test::bodySchemaChange(3), 1),
+      test::encodeEntry(bus::test::walkCommand(3), 1),          test::encodeEntry(bus::test::jointState(3), 1),
+      test::encodeEntry(bus::test::controlStatus(3), 1),        test::encodeEntry(bus::test::heartbeat(3), 1),
       test::encodeEntry(bus::test::controllerProtection(3), 1), test::encodeEntry(bus::test::robotState(3), 1),
-      test::encodeEntry(bus::test::jointCommand(3), 1),   test::encodeEntry(bus::test::robotContacts(3), 1)};
+      test::encodeEntry(bus::test::jointCommand(3), 1),         test::encodeEntry(bus::test::robotContacts(3), 1)};
   ASSERT_EQ(valid.size(), allCodecs().size());
   for (const RecordEntry& e : valid) {
     EXPECT_EQ(cdrLengthProblem(e.type, e.payload.data(), e.payload.size()), "") << e.type;

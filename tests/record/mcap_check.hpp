@@ -37,7 +37,8 @@ inline json runReference(const std::string& mode, const std::string& file, const
     return json();
   }
   const std::string out = work + "_" + mode + ".json", log = work + "_" + mode + ".log";
-  std::vector<std::string> argv = {node, std::string(REFLEX_SOURCE_DIR) + "/tests/record/mcap_check.cjs", mode, file, out};
+  std::vector<std::string> argv = {node, std::string(REFLEX_SOURCE_DIR) + "/tests/record/mcap_check.cjs", mode, file,
+                                   out};
   if (!step.empty()) argv.push_back(step);
   std::remove(out.c_str());
   testing::ChildProcess p(argv, log);
@@ -65,12 +66,18 @@ inline std::vector<std::string> csvFields(const std::string& line) {
   for (std::size_t i = 0; i < line.size(); ++i) {
     const char c = line[i];
     if (quoted) {
-      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') out.back() += '"', ++i;
-      else if (c == '"') quoted = false;
-      else out.back() += c;
-    } else if (c == '"') quoted = true;
-    else if (c == ',') out.emplace_back();
-    else out.back() += c;
+      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"')
+        out.back() += '"', ++i;
+      else if (c == '"')
+        quoted = false;
+      else
+        out.back() += c;
+    } else if (c == '"')
+      quoted = true;
+    else if (c == ',')
+      out.emplace_back();
+    else
+      out.back() += c;
   }
   return out;
 }
@@ -92,9 +99,11 @@ inline bool sameValue(const json& v, const std::string& field) {
 
 /// The JSON pointer of a CSV column of a type's export (codecs.cpp), "" for a column derived otherwise.
 inline std::string pointerOf(const std::string& type, const std::string& col) {
-  static const std::map<std::string, std::string> common = {
-      {"stamp_ns", "/msg/header/stamp_ns"}, {"seq", "/msg/header/seq"}, {"source", "/msg/header/source"},
-      {"receive_ns", "/log_time"}, {"source_ns", "/publish_time"}};
+  static const std::map<std::string, std::string> common = {{"stamp_ns", "/msg/header/stamp_ns"},
+                                                            {"seq", "/msg/header/seq"},
+                                                            {"source", "/msg/header/source"},
+                                                            {"receive_ns", "/log_time"},
+                                                            {"source_ns", "/publish_time"}};
   if (common.count(col)) return common.at(col);
   const auto side = col.substr(0, col.find('_'));
   const auto rest = col.find('_') == std::string::npos ? std::string() : col.substr(col.find('_') + 1);
@@ -105,8 +114,8 @@ inline std::string pointerOf(const std::string& type, const std::string& col) {
   }
   if (type == "reflex::msg::ControlStatus" && (side == "left" || side == "right")) {
     static const std::map<std::string, std::string> arm = {
-        {"f", "blend_f"}, {"distance", "distance"}, {"zone", "zone"}, {"estop", "estop_latched"},
-        {"closest_a", "closest_segment_a"}, {"closest_b", "closest_segment_b"}};
+        {"f", "blend_f"},           {"distance", "distance"},           {"zone", "zone"},
+        {"estop", "estop_latched"}, {"closest_a", "closest_segment_a"}, {"closest_b", "closest_segment_b"}};
     return "/msg/" + side + "/" + arm.at(rest);
   }
   if (type == "reflex::msg::BodySchemaChange" && (side == "a" || side == "b") && rest.size() == 1)
@@ -136,8 +145,8 @@ inline std::size_t expectCsvMatches(const json& messages, const std::string& top
     const std::size_t n_rows = objects    ? std::max<std::size_t>(1, m["msg"]["objects"].size())
                                : contacts ? std::max<std::size_t>(1, m["msg"]["contacts"].size())
                                           : 1;
-    const bool per_joint = type == "reflex::msg::JointState" || type == "reflex::msg::RobotState" ||
-                           type == "reflex::msg::JointCommand";
+    const bool per_joint =
+        type == "reflex::msg::JointState" || type == "reflex::msg::RobotState" || type == "reflex::msg::JointCommand";
     for (std::size_t k = 0; k < n_rows; ++k, ++row) {
       if (row >= rows.size()) {
         ADD_FAILURE() << topic << ": the reference reader has more messages than " << csv_path << " has rows";
@@ -169,13 +178,19 @@ inline std::size_t expectCsvMatches(const json& messages, const std::string& top
           v = m["msg"]["objects"].size();
         } else if (objects && std::string(",object,tag_id,x,y,z,x_cam,y_cam,z_cam,confidence,").find("," + col + ",") !=
                                   std::string::npos) {
-          if (m["msg"]["objects"].empty()) v = "";
+          if (m["msg"]["objects"].empty())
+            v = "";
           else {
             const json& o = m["msg"]["objects"][k];
-            static const std::map<std::string, std::string> ptr = {
-                {"object", "/name"}, {"tag_id", "/tag_id"}, {"x", "/position_base/x"}, {"y", "/position_base/y"},
-                {"z", "/position_base/z"}, {"x_cam", "/position_camera/x"}, {"y_cam", "/position_camera/y"},
-                {"z_cam", "/position_camera/z"}, {"confidence", "/confidence"}};
+            static const std::map<std::string, std::string> ptr = {{"object", "/name"},
+                                                                   {"tag_id", "/tag_id"},
+                                                                   {"x", "/position_base/x"},
+                                                                   {"y", "/position_base/y"},
+                                                                   {"z", "/position_base/z"},
+                                                                   {"x_cam", "/position_camera/x"},
+                                                                   {"y_cam", "/position_camera/y"},
+                                                                   {"z_cam", "/position_camera/z"},
+                                                                   {"confidence", "/confidence"}};
             v = o.at(json::json_pointer(ptr.at(col)));
           }
         } else {

@@ -54,8 +54,7 @@ TEST(McapProcess, LiveBusRecordingReadsInTheReferenceReaderAsInTheCsvExport) {
   testing::ChildProcess victim({bin("reflex_record"), "record", "-o", killed, "--domain", dom, "--chunk-ms", "200",
                                 "--compression", "lz4", "--name", "victim"},
                                tempPath("victim.log"));
-  ASSERT_TRUE(controller.started() && targets.started() && objects.started() && recorder.started() &&
-              victim.started());
+  ASSERT_TRUE(controller.started() && targets.started() && objects.started() && recorder.started() && victim.started());
   {
     bus::Participant watch(bus::test::testConfig("watch", kDomain));
     auto& status = watch.makeReader<msg::ControlStatus>("reflex/control_status", bus::kProfileRecord);
@@ -104,7 +103,8 @@ TEST(McapProcess, LiveBusRecordingReadsInTheReferenceReaderAsInTheCsvExport) {
   }
   // Publish time is the writer's DDS source time, log time the receive time (and never before it).
   for (const json& m : idx["messages"])
-    ASSERT_LE(std::stoull(m["publish_time"].get<std::string>()), std::stoull(m["log_time"].get<std::string>()) + 5'000'000)
+    ASSERT_LE(std::stoull(m["publish_time"].get<std::string>()),
+              std::stoull(m["log_time"].get<std::string>()) + 5'000'000)
         << m.dump();
 
   // The killed file: every complete chunk, in both readers; a torn tail.

@@ -199,7 +199,8 @@ TEST(Mcap, FileCutAtEveryByteYieldsEveryCompleteChunk) {
         ADD_FAILURE() << "a file of " << cut << " bytes opened";
       } catch (const RecordError& e) {
         EXPECT_NE(std::string(e.what()).find("cut inside its magic (" + std::to_string(cut) + " of 8 bytes)"),
-                  std::string::npos) << e.what();
+                  std::string::npos)
+            << e.what();
       }
       continue;
     }
@@ -349,8 +350,8 @@ TEST(Mcap, WriterTakesChannelsOfAnyEncoding) {
   const std::string file = tempPath("json.mcap");
   {
     McapWriter w(file, {});
-    const std::uint16_t scene = w.addChannel({"scene", "json", "foxglove.SceneUpdate", "jsonschema",
-                                              R"({"type":"object"})", {{"origin", "test"}}});
+    const std::uint16_t scene = w.addChannel(
+        {"scene", "json", "foxglove.SceneUpdate", "jsonschema", R"({"type":"object"})", {{"origin", "test"}}});
     const std::string msg = R"({"entities":[]})";
     w.write(scene, 1, 5, 5, reinterpret_cast<const std::uint8_t*>(msg.data()), msg.size());
     w.close();
@@ -401,7 +402,8 @@ TEST(Mcap, RobotTypesDecodeInTheReferenceReaderAsInTheCsvExport) {
   ASSERT_EQ(runTool({bin("reflex_record"), "export", file, "--dir", dir}, tempPath("export_robot.log")), 0)
       << slurp(tempPath("export_robot.log"));
   for (const std::string topic : {"reflex/robot_state", "reflex/joint_command", "reflex/robot_contacts"})
-    EXPECT_EQ(mcap_check::expectCsvMatches(idx["messages"], topic, dir + "/" + csvFileNameForTopic(topic)), 3u) << topic;
+    EXPECT_EQ(mcap_check::expectCsvMatches(idx["messages"], topic, dir + "/" + csvFileNameForTopic(topic)), 3u)
+        << topic;
 }
 
 }  // namespace

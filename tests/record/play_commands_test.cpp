@@ -114,9 +114,8 @@ TEST(PlayCommands, CommandsArePlayedOnlyWithTheExplicitFlag) {
   {
     Watch watch;
     const std::string log = tempPath("commands.log");
-    testing::ChildProcess player({bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--delay", "2",
-                                  "--quiet", "--commands"},
-                                 log);
+    testing::ChildProcess player(
+        {bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--delay", "2", "--quiet", "--commands"}, log);
     ASSERT_TRUE(player.started());
     bool hands_matched = false;
     EXPECT_EQ(watch.follow(player, hands_matched), 0) << slurp(log);
@@ -135,9 +134,8 @@ TEST(PlayCommands, CommandsArePlayedOnlyWithTheExplicitFlag) {
   }
   // -t of a command topic without --commands: refused at start, naming the topic and the option.
   const std::string log = tempPath("refused.log");
-  testing::ChildProcess player({bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--quiet", "-t",
-                                "reflex/hand_targets"},
-                               log);
+  testing::ChildProcess player(
+      {bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--quiet", "-t", "reflex/hand_targets"}, log);
   ASSERT_TRUE(player.started());
   const int rc = player.wait(30s);
   const std::string out = slurp(log);

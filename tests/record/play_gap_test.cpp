@@ -69,16 +69,17 @@ TEST(PlayGap, AHundredYearGapIsPlayedAsTheMaximumGapAndReported) {
   const std::string out = slurp(log);
   EXPECT_NE(out.find("1 gap(s) between records longer than --max-gap 10 s are played as 10 s"), std::string::npos)
       << out;
-  EXPECT_NE(out.find("longest 3.1536e+09 s"), std::string::npos) << "names the gap (100 x 365 days in seconds): " << out;
+  EXPECT_NE(out.find("longest 3.1536e+09 s"), std::string::npos)
+      << "names the gap (100 x 365 days in seconds): " << out;
   EXPECT_NE(out.find("published 3 samples"), std::string::npos) << out;
 }
 
 TEST(PlayGap, SigtermEndsThePlayerWithinASecondDuringAWait) {
   const std::string file = hundredYearGap();
   const std::string log = tempPath("term.log");
-  testing::ChildProcess player({bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--delay", "0",
-                                "--quiet", "--max-gap", "3600"},
-                               log);
+  testing::ChildProcess player(
+      {bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--delay", "0", "--quiet", "--max-gap", "3600"},
+      log);
   ASSERT_TRUE(player.started());
   const auto t0 = SteadyClock::now();
   while (slurp(log).find("window") == std::string::npos && secondsSince(t0) < 20.0) std::this_thread::sleep_for(20ms);
@@ -97,7 +98,8 @@ TEST(PlayGap, ANonPositiveMaximumGapIsRefused) {
   const std::string file = hundredYearGap();
   const std::string log = tempPath("bad.log");
   for (const char* bad : {"0", "-1", "nan"}) {
-    testing::ChildProcess player({bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--max-gap", bad}, log);
+    testing::ChildProcess player({bin("reflex_play"), file, "--domain", std::to_string(kDomain), "--max-gap", bad},
+                                 log);
     EXPECT_NE(player.wait(20s), 0) << bad;
     EXPECT_NE(slurp(log).find("--max-gap"), std::string::npos) << bad << ": " << slurp(log);
   }

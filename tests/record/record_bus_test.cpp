@@ -485,17 +485,65 @@ TEST(RecordBus, BadOptionsAreClearErrors) {
   PlayerOptions po;
   po.input = file;
   po.bus = busConfig("player");
-  expectError([&] { PlayerOptions o = po; o.rate = -2; Player p(o); }, "-2");
-  expectError([&] { PlayerOptions o = po; o.start = 5.0; Player p(o); }, "beyond the end");
-  expectError([&] { PlayerOptions o = po; o.topics = {"reflex/joint_state"}; Player p(o); }, "reflex/control_status");
-  expectError([&] { PlayerOptions o = po; o.input = tempPath("missing.rfx"); Player p(o); }, "missing.rfx");
+  expectError(
+      [&] {
+        PlayerOptions o = po;
+        o.rate = -2;
+        Player p(o);
+      },
+      "-2");
+  expectError(
+      [&] {
+        PlayerOptions o = po;
+        o.start = 5.0;
+        Player p(o);
+      },
+      "beyond the end");
+  expectError(
+      [&] {
+        PlayerOptions o = po;
+        o.topics = {"reflex/joint_state"};
+        Player p(o);
+      },
+      "reflex/control_status");
+  expectError(
+      [&] {
+        PlayerOptions o = po;
+        o.input = tempPath("missing.rfx");
+        Player p(o);
+      },
+      "missing.rfx");
   RecorderOptions ro;
   ro.output = tempPath("bad.rfx");
   ro.bus = busConfig("recorder");
-  expectError([&] { RecorderOptions o = ro; o.topics = {"reflex/jointstate"}; Recorder r(o); }, "reflex/jointstate");
-  expectError([&] { RecorderOptions o = ro; o.topics = {"my/topic:Joints"}; Recorder r(o); }, "Joints");
-  expectError([&] { RecorderOptions o = ro; o.exclude = {"x/y"}; Recorder r(o); }, "x/y");
-  expectError([&] { RecorderOptions o = ro; o.output = "/nonexistent_dir/r.rfx"; Recorder r(o); }, "/nonexistent_dir/r.rfx");
+  expectError(
+      [&] {
+        RecorderOptions o = ro;
+        o.topics = {"reflex/jointstate"};
+        Recorder r(o);
+      },
+      "reflex/jointstate");
+  expectError(
+      [&] {
+        RecorderOptions o = ro;
+        o.topics = {"my/topic:Joints"};
+        Recorder r(o);
+      },
+      "Joints");
+  expectError(
+      [&] {
+        RecorderOptions o = ro;
+        o.exclude = {"x/y"};
+        Recorder r(o);
+      },
+      "x/y");
+  expectError(
+      [&] {
+        RecorderOptions o = ro;
+        o.output = "/nonexistent_dir/r.rfx";
+        Recorder r(o);
+      },
+      "/nonexistent_dir/r.rfx");
   const TopicSpec custom = parseTopicSpec("test/targets:HandTargets");
   EXPECT_EQ(custom.topic, "test/targets");
   ASSERT_NE(custom.codec, nullptr);

@@ -272,8 +272,7 @@ TEST(Crc32, CombineEqualsTheCrcOfTheConcatenation) {
     for (auto& x : b) x = static_cast<std::uint8_t>(rng());
     std::vector<std::uint8_t> ab = a;
     ab.insert(ab.end(), b.begin(), b.end());
-    EXPECT_EQ(crc32Combine(crc32(a.data(), a.size()), crc32(b.data(), b.size()), b.size()),
-              crc32(ab.data(), ab.size()))
+    EXPECT_EQ(crc32Combine(crc32(a.data(), a.size()), crc32(b.data(), b.size()), b.size()), crc32(ab.data(), ab.size()))
         << a.size() << " + " << b.size();
   }
 }
@@ -299,7 +298,7 @@ std::vector<std::uint8_t> craftedRecording(std::size_t size) {
     putU32(b, at + 4, len);
     putU32(b, at + 8, 0xDEADBEEFu);  // wrong CRC
     // receive_ns, source_ns = 0; topic length 0, type length 0 (bytes at +28..+32 stay 0)
-    putU32(b, at + 32, len - 24);      // payload length: the rest of the body
+    putU32(b, at + 32, len - 24);  // payload length: the rest of the body
   }
   std::copy(tail.begin(), tail.end(), b.begin() + static_cast<std::ptrdiff_t>(end));
   return b;
@@ -356,11 +355,12 @@ TEST(RecordFileLinearTime, CraftedResyncInputReadsInLinearTime) {
   writeBytes(p8, c8, c8.size());
   const auto v2 = validRecording(pv, 2 * mb);
   const ReadStats s2 = readAll(p2), s8 = readAll(p8), sv = readAll(pv);
-  std::printf("crafted 2 MB: %.4f s, %llu bytes examined; crafted 8 MB: %.4f s, %llu bytes; valid %.1f MB: %.4f s, "
-              "%llu bytes\n",
-              s2.seconds, static_cast<unsigned long long>(s2.examined), s8.seconds,
-              static_cast<unsigned long long>(s8.examined), v2.size() / 1048576.0, sv.seconds,
-              static_cast<unsigned long long>(sv.examined));
+  std::printf(
+      "crafted 2 MB: %.4f s, %llu bytes examined; crafted 8 MB: %.4f s, %llu bytes; valid %.1f MB: %.4f s, "
+      "%llu bytes\n",
+      s2.seconds, static_cast<unsigned long long>(s2.examined), s8.seconds,
+      static_cast<unsigned long long>(s8.examined), v2.size() / 1048576.0, sv.seconds,
+      static_cast<unsigned long long>(sv.examined));
   // The crafted files hold exactly one valid record (the last), after corrupt bytes.
   EXPECT_EQ(s2.records, 1u);
   EXPECT_EQ(s8.records, 1u);
@@ -414,10 +414,11 @@ TEST(RecordFileLinearTime, DamagedHeadersClaimingMidSizeBodiesCostNoMoreThanAVal
   writeBytes(path, b, b.size());
   validRecording(valid, b.size());
   const ReadStats s = readAll(path), v = readAll(valid);
-  std::printf("damaged 64 KiB headers, %zu bytes: %.4f s, %llu bytes examined; valid %llu bytes examined: %.4f s "
-              "(ratio %.1f)\n",
-              b.size(), s.seconds, static_cast<unsigned long long>(s.examined), static_cast<unsigned long long>(v.examined),
-              v.seconds, s.seconds / v.seconds);
+  std::printf(
+      "damaged 64 KiB headers, %zu bytes: %.4f s, %llu bytes examined; valid %llu bytes examined: %.4f s "
+      "(ratio %.1f)\n",
+      b.size(), s.seconds, static_cast<unsigned long long>(s.examined), static_cast<unsigned long long>(v.examined),
+      v.seconds, s.seconds / v.seconds);
   EXPECT_EQ(s.records, records);
   EXPECT_EQ(s.tail, TailState::kCorrupt);
   // Work: at most kCheckBeforeReading (1 KiB) or one check per damaged header; 64 KiB each was ~1,000 x.

@@ -81,7 +81,9 @@ TEST(RecordProcess, RecordingSurvivesKill9AndReplaysAtTwiceTheSpeed) {
   std::ifstream in(csv);
   std::string line;
   std::getline(in, line);
-  while (std::getline(in, line)) seqs.push_back(std::stoull(line.substr(line.find(',', line.find(',', line.find(',', line.find(',') + 1) + 1) + 1) + 1)));
+  while (std::getline(in, line))
+    seqs.push_back(
+        std::stoull(line.substr(line.find(',', line.find(',', line.find(',', line.find(',') + 1) + 1) + 1) + 1)));
   ASSERT_EQ(seqs.size(), n_status);
   for (std::size_t i = 1; i < seqs.size(); ++i) ASSERT_GT(seqs[i], seqs[i - 1]);
   EXPECT_GE(static_cast<double>(seqs.size()) / static_cast<double>(seqs.back() - seqs.front() + 1), 0.98);

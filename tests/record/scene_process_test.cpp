@@ -55,8 +55,8 @@ json sceneCheck(const std::string& file, const std::string& name) {
   }
   const std::string out = tempPath(name + "_scene.json"), log = tempPath(name + "_scene.log");
   std::remove(out.c_str());
-  testing::ChildProcess p({node, std::string(REFLEX_SOURCE_DIR) + "/tests/record/scene_check.cjs", file, kUrdf, out, "10"},
-                          log);
+  testing::ChildProcess p(
+      {node, std::string(REFLEX_SOURCE_DIR) + "/tests/record/scene_check.cjs", file, kUrdf, out, "10"}, log);
   const int rc = p.wait(std::chrono::minutes(2));
   if (rc != 0) {
     ADD_FAILURE() << "scene_check.cjs " << file << " exited " << rc << ":\n" << slurp(log);
@@ -111,7 +111,8 @@ void expectSceneChannels(const json& r, const std::string& what) {
 }
 
 /// (log time, payload) of the messages of `topic` in an MCAP file, by Reflex's reader.
-std::vector<std::pair<std::int64_t, std::vector<std::uint8_t>>> messagesOf(const std::string& file, const std::string& topic) {
+std::vector<std::pair<std::int64_t, std::vector<std::uint8_t>>> messagesOf(const std::string& file,
+                                                                           const std::string& topic) {
   std::vector<std::pair<std::int64_t, std::vector<std::uint8_t>>> out;
   McapSampleReader reader(file);
   RecordEntry e;
@@ -134,9 +135,9 @@ TEST(SceneChannels, RecordingsOfALiveBusCarryTheRobotForFoxglove) {
                                    tempPath("controller.log"));
   testing::ChildProcess targets({bin("reflex_fault_source"), "--domain", dom, "--targets", "apart"},
                                 tempPath("targets.log"));
-  testing::ChildProcess objects({bin("reflex_modules_object_publisher"), "--domain", dom, "--object",
-                                 "red_cup=0.4,0.1,0.2", "--duration", "14"},
-                                tempPath("objects.log"));
+  testing::ChildProcess objects(
+      {bin("reflex_modules_object_publisher"), "--domain", dom, "--object", "red_cup=0.4,0.1,0.2", "--duration", "14"},
+      tempPath("objects.log"));
   testing::ChildProcess rec_live({bin("reflex_record"), "record", "-o", live, "--domain", dom, "--chunk-ms", "200"},
                                  tempPath("live.log"));
   testing::ChildProcess rec_rfx({bin("reflex_record"), "record", "-o", rfx, "--domain", dom, "--name", "rfx"},
@@ -212,8 +213,9 @@ TEST(SceneChannels, RecordingsOfALiveBusCarryTheRobotForFoxglove) {
       << slurp(tempPath("export.log"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/reflex_joint_state.csv"));
   EXPECT_FALSE(std::filesystem::exists(dir + "/_tf.csv"));
-  EXPECT_NE(slurp(tempPath("export.log")).find("/reflex/scene (foxglove.SceneUpdate) is not a Reflex topic type: no CSV"),
-            std::string::npos);
+  EXPECT_NE(
+      slurp(tempPath("export.log")).find("/reflex/scene (foxglove.SceneUpdate) is not a Reflex topic type: no CSV"),
+      std::string::npos);
   ASSERT_EQ(runTool({bin("reflex_play"), live, "--domain", std::to_string(kDomain + 1), "--rate", "8", "--delay", "0.2",
                      "--quiet"},
                     tempPath("play.log")),
@@ -226,10 +228,10 @@ TEST(SceneChannels, RecordingsOfALiveBusCarryTheRobotForFoxglove) {
 TEST(SceneChannels, ARecordingWithoutJointStatesSaysSoOnce) {
   // Nobody publishes on domain 202: the joint state topic is recorded, but no sample comes.
   const std::string file = tempPath("empty.mcap"), log = tempPath("empty.log");
-  ASSERT_EQ(runTool({bin("reflex_record"), "record", "-o", file, "--domain", std::to_string(kDomain + 2), "--duration",
-                     "1"},
-                    log),
-            0)
+  ASSERT_EQ(
+      runTool({bin("reflex_record"), "record", "-o", file, "--domain", std::to_string(kDomain + 2), "--duration", "1"},
+              log),
+      0)
       << slurp(log);
   EXPECT_EQ(occurrences(slurp(log), "no reflex/joint_state sample: no scene channels"), 1) << slurp(log);
   EXPECT_EQ(scanRecording(file).topics.count("/tf"), 0u);

@@ -24,7 +24,6 @@
 #include <chrono>
 #include <thread>
 
-
 namespace {
 
 /// 300 cycles of the control thread: `publish` writes a state (from another participant) twice, then
@@ -92,7 +91,9 @@ void pollAndCommandAllocateNothing(const std::string& kind) {
 }
 
 TEST(Ros2PortAlloc, ForwardCommandsAllocateNothingOnTheControlThread) { pollAndCommandAllocateNothing("forward"); }
-TEST(Ros2PortAlloc, TrajectoryCommandsAllocateNothingOnTheControlThread) { pollAndCommandAllocateNothing("trajectory"); }
+TEST(Ros2PortAlloc, TrajectoryCommandsAllocateNothingOnTheControlThread) {
+  pollAndCommandAllocateNothing("trajectory");
+}
 
 TEST(DdsRobotPortAlloc, RobotStatesAndJointCommandsAllocateNothingOnTheControlThread) {
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";

@@ -45,15 +45,15 @@ struct PairRun {
 };
 
 /// The controller (extra arguments) and the robot (--command kind, --controller name) on domain 24.
-PairRun runPair(const std::vector<std::string>& controller_extra, const std::string& kind, const std::string& controller_name,
-            double bad_at, const std::string& tag) {
+PairRun runPair(const std::vector<std::string>& controller_extra, const std::string& kind,
+                const std::string& controller_name, double bad_at, const std::string& tag) {
   const auto model = reflex::control::loadModel(kUrdf, reflex::control::loadCollisionConfigFor(kUrdf, ""));
   const auto cm = reflex::control::makeControllerModel(model, reflex::control::loadControllerConfigFor(kUrdf, ""));
   const Eigen::VectorXd rest = reflex::control::restConfiguration(model, cm);
   PairRun run;
   const std::string log = testing::TempDir() + "/ros2_controller_" + tag + ".log";
-  std::vector<std::string> args = {binPath("reflex_controller"), "--robot", "ros2", "--domain", "24",
-                                   "--duration", "5", "--peer-probe", "0"};
+  std::vector<std::string> args = {
+      binPath("reflex_controller"), "--robot", "ros2", "--domain", "24", "--duration", "5", "--peer-probe", "0"};
   args.insert(args.end(), controller_extra.begin(), controller_extra.end());
   ChildProcess controller(args, log);
   EXPECT_TRUE(controller.started()) << controller.error();
@@ -70,9 +70,21 @@ PairRun runPair(const std::vector<std::string>& controller_extra, const std::str
   }
   std::string joined;
   for (const auto& j : run.joints) joined += (joined.empty() ? "" : ",") + j;
-  std::vector<std::string> robot_args = {binPath("ros2_cyclone_robot"), "--domain", "24", "--joints", joined,
-                                         "--command", kind, "--rename", "l_elbow", "--bad-at",
-                                         std::to_string(bad_at), "--stop-at", "5.5", "--listen-until", "6.5"};
+  std::vector<std::string> robot_args = {binPath("ros2_cyclone_robot"),
+                                         "--domain",
+                                         "24",
+                                         "--joints",
+                                         joined,
+                                         "--command",
+                                         kind,
+                                         "--rename",
+                                         "l_elbow",
+                                         "--bad-at",
+                                         std::to_string(bad_at),
+                                         "--stop-at",
+                                         "5.5",
+                                         "--listen-until",
+                                         "6.5"};
   if (!controller_name.empty()) robot_args.insert(robot_args.end(), {"--controller", controller_name});
   for (int i = 0; i < model.nq; ++i) {
     robot_args.push_back("--q");
@@ -124,8 +136,9 @@ TEST(Ros2Wire, ForwardControllerStateInCommandsOutBadStatesRejectedCountedNamed)
   ASSERT_NE(states_at, std::string::npos) << ctl;
   unsigned long long accepted = 0, rejected = 0;
   ASSERT_EQ(std::sscanf(ctl.c_str() + states_at, "robot ros2: states %llu (rejected %llu)", &accepted, &rejected), 2);
-  EXPECT_EQ(rejected, 6u) << "the unstamped states, those without velocities and the unknown gripper joint are accepted\n"
-                          << ctl;
+  EXPECT_EQ(rejected, 6u)
+      << "the unstamped states, those without velocities and the unknown gripper joint are accepted\n"
+      << ctl;
   EXPECT_GT(accepted, 600u) << ctl;  // 200 Hz for ~4.5 s while the controller runs
   EXPECT_NE(ctl.find("rt/joint_states sample"), std::string::npos) << ctl;
   EXPECT_NE(ctl.find("rejected: joint 'l_elbow' is missing"), std::string::npos) << ctl;
@@ -139,12 +152,13 @@ TEST(Ros2Wire, ForwardControllerStateInCommandsOutBadStatesRejectedCountedNamed)
   EXPECT_EQ(numberAfter(out, "non_finite "), 0) << out;
   EXPECT_LE(numberAfter(out, "max_step_rad "), 2 * fastestLimit(r.joints) * 0.005 * (1 + 1e-9)) << out;
   EXPECT_EQ(numberAfter(ctl.substr(states_at), "commands "), commands)
-      << "every command the controller sent arrived (reliable)\n" << ctl;
+      << "every command the controller sent arrived (reliable)\n"
+      << ctl;
 }
 
 TEST(Ros2Wire, TrajectoryControllerGetsOnePointPerCycleWithItsJointNames) {
   const PairRun r = runPair({"--ros-command", "trajectory", "--ros-controller", "arms_controller"}, "trajectory",
-                        "arms_controller", 99.0, "trajectory");
+                            "arms_controller", 99.0, "trajectory");
   const std::string& out = r.robot_out;
   const std::string& ctl = r.controller_log;
   EXPECT_NE(ctl.find("commands rt/arms_controller/joint_trajectory (trajectory_msgs::msg::dds_::JointTrajectory_)"),
@@ -173,7 +187,8 @@ TEST(Ros2Wire, OptionsTheRobotCannotServeAreRefusedAtStart) {
   int k = 0;
   for (const Case& c : cases) {
     const std::string log = testing::TempDir() + "/ros2_refused_" + std::to_string(k++) + ".log";
-    std::vector<std::string> args = {binPath("reflex_controller"), "--domain", "24", "--duration", "1", "--peer-probe", "0"};
+    std::vector<std::string> args = {
+        binPath("reflex_controller"), "--domain", "24", "--duration", "1", "--peer-probe", "0"};
     args.insert(args.end(), c.args.begin(), c.args.end());
     ChildProcess p(args, log);
     EXPECT_EQ(p.wait(std::chrono::seconds(20)), 2) << readFile(log);

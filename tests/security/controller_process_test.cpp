@@ -35,10 +35,10 @@ TEST(SecureController, FollowsASecureSourceAt200HzAndHidesItsStateFromOutsiders)
   const std::string dir = makeSecurityMaterial("proc");
   loadProfiles(dir);
   const std::string log = dir + "/controller.log";
-  testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain",
-                                    std::to_string(kDomain), "--duration", "12", "--input-timeout", "1.0",
-                                    "--profiles", dir + "/profiles/controller.xml"},
-                                   log);
+  testing::ChildProcess controller(
+      {std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain", std::to_string(kDomain), "--duration", "12",
+       "--input-timeout", "1.0", "--profiles", dir + "/profiles/controller.xml"},
+      log);
   ASSERT_TRUE(controller.started());
 
   auto behavior = secureParticipant(dir, "behavior", kDomain);
@@ -76,7 +76,8 @@ TEST(SecureController, FollowsASecureSourceAt200HzAndHidesItsStateFromOutsiders)
   });
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   // 200 Hz over DDS-Security: allow for best-effort losses on a loaded 2-core machine.
-  EXPECT_GT(static_cast<double>(statuses.size()), 0.75 * 200.0 * seconds) << statuses.size() << " in " << seconds << " s";
+  EXPECT_GT(static_cast<double>(statuses.size()), 0.75 * 200.0 * seconds)
+      << statuses.size() << " in " << seconds << " s";
   ASSERT_FALSE(statuses.empty());
   std::vector<double> periods;
   for (const auto& s : statuses) periods.push_back(s.cycle_period_us());
@@ -114,10 +115,10 @@ TEST(SecureController, DrivesARobotOfTheRobotIdentityAndNoOtherWriter) {
   const std::string dir = makeSecurityMaterial("robot");
   loadProfiles(dir);
   const std::string log = dir + "/controller_robot.log";
-  testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain",
-                                    std::to_string(kRobotDomain), "--duration", "20", "--robot", "dds", "--peer-probe",
-                                    "0", "--profiles", dir + "/profiles/controller.xml"},
-                                   log);
+  testing::ChildProcess controller(
+      {std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--domain", std::to_string(kRobotDomain), "--duration", "20",
+       "--robot", "dds", "--peer-probe", "0", "--profiles", dir + "/profiles/controller.xml"},
+      log);
   ASSERT_TRUE(controller.started());
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/asimo_like.urdf";
   const control::Model model = control::loadModel(urdf, control::loadCollisionConfigFor(urdf, ""));
@@ -186,18 +187,18 @@ TEST(SecureController, VisionBehaviorControllerChainRunsSecurely) {
   const std::string bin = REFLEX_BIN_DIR;
   const std::string d = std::to_string(kDomain);
   const std::string src = REFLEX_SOURCE_DIR;
-  testing::ChildProcess controller({bin + "/reflex_controller", "--domain", d, "--duration", "26", "--profiles",
-                                    dir + "/profiles/controller.xml"},
-                                   dir + "/controller.log");
+  testing::ChildProcess controller(
+      {bin + "/reflex_controller", "--domain", d, "--duration", "26", "--profiles", dir + "/profiles/controller.xml"},
+      dir + "/controller.log");
   testing::ChildProcess behavior({bin + "/reflex_behavior", "--config", src + "/bringup/behavior/pointing.yaml",
                                   "--domain", d, "--duration", "23", "--profiles", dir + "/profiles/behavior.xml"},
                                  dir + "/behavior.log");
   // Vision holds its replay until behavior (the one reader it can authenticate with) has matched, so
   // the session is not spent on the handshake (a fixed 3 s wait was not always enough under load).
-  testing::ChildProcess vision({bin + "/reflex_vision", "--session", src + "/bringup/sessions/flagship", "--domain", d,
-                                "--duration", "18", "--quiet", "--wait-readers", "1", "--wait-timeout", "20",
-                                "--profiles", dir + "/profiles/vision.xml"},
-                               dir + "/vision.log");
+  testing::ChildProcess vision(
+      {bin + "/reflex_vision", "--session", src + "/bringup/sessions/flagship", "--domain", d, "--duration", "18",
+       "--quiet", "--wait-readers", "1", "--wait-timeout", "20", "--profiles", dir + "/profiles/vision.xml"},
+      dir + "/vision.log");
   ASSERT_TRUE(controller.started() && behavior.started() && vision.started());
   auto outsider = plainParticipant("outsider", kDomain);
   auto& outsider_targets = outsider->makeReader<msg::HandTargets>("reflex/hand_targets", bus::kProfileRecord);

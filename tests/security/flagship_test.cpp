@@ -128,7 +128,8 @@ TEST(SecureFlagship, AvoidanceRunGivesThePlainOutcomeAndAnOutsiderReceivesNothin
 
   // The recorder (its own identity) recorded the chain: vision's objects (10 Hz for 60 s), behavior's
   // hand targets, the controller's status (200 Hz); best effort on a loaded machine, hence the margins.
-  const std::string info = commandOutput(std::string(REFLEX_BIN_DIR) + "/reflex_record info " + out + "/avoidance/bus.mcap");
+  const std::string info =
+      commandOutput(std::string(REFLEX_BIN_DIR) + "/reflex_record info " + out + "/avoidance/bus.mcap");
   EXPECT_GT(recordedCount(info, "reflex/object_targets"), 400) << info;
   EXPECT_GT(recordedCount(info, "reflex/hand_targets"), 100) << info;
   EXPECT_GT(recordedCount(info, "reflex/control_status"), 6000) << info;
@@ -138,12 +139,13 @@ TEST(SecureFlagship, AvoidanceRunGivesThePlainOutcomeAndAnOutsiderReceivesNothin
   EXPECT_GE(discovered.count(), 4u) << "discovered: " << discovered.names();
   EXPECT_EQ(received.load(), 0u) << "an unauthenticated participant read samples of the secure run";
   EXPECT_EQ(matched.load(), 0) << "an unauthenticated participant matched a secure writer";
-  std::printf("secure flagship: %.0f s, closest arms %.1f mm, closest pair %.1f mm, max f %.2f; outsider discovered "
-              "%zu participants (%s), received %zu samples\n",
-              seconds, 1000.0 * flagship::field(run.summary, "avoidance", "min_arm_distance_m"),
-              1000.0 * flagship::field(run.summary, "avoidance", "min_distance_all_pairs_m"),
-              flagship::field(run.summary, "avoidance", "max_f"), discovered.count(), discovered.names().c_str(),
-              received.load());
+  std::printf(
+      "secure flagship: %.0f s, closest arms %.1f mm, closest pair %.1f mm, max f %.2f; outsider discovered "
+      "%zu participants (%s), received %zu samples\n",
+      seconds, 1000.0 * flagship::field(run.summary, "avoidance", "min_arm_distance_m"),
+      1000.0 * flagship::field(run.summary, "avoidance", "min_distance_all_pairs_m"),
+      flagship::field(run.summary, "avoidance", "max_f"), discovered.count(), discovered.names().c_str(),
+      received.load());
 }
 
 TEST(SecureFlagship, ABadSecureFolderIsRefusedBeforeAnythingStartsNamingIt) {
@@ -153,8 +155,8 @@ TEST(SecureFlagship, ABadSecureFolderIsRefusedBeforeAnythingStartsNamingIt) {
   const std::string out = base + "/out";
   auto expectRefused = [&](const std::string& secure, const std::string& what) {
     SCOPED_TRACE("--secure " + secure);
-    const flagship::Run run = flagship::runFlagship(out, "--only on --domain " + std::to_string(kDomain) +
-                                                             " --secure " + secure + " --no-report");
+    const flagship::Run run = flagship::runFlagship(
+        out, "--only on --domain " + std::to_string(kDomain) + " --secure " + secure + " --no-report");
     EXPECT_EQ(run.exit_code, 2) << run.log;
     EXPECT_NE(run.log.find("--secure " + secure), std::string::npos) << run.log;
     EXPECT_NE(run.log.find(what), std::string::npos) << run.log;

@@ -51,7 +51,7 @@ int runShell(const std::string& cmd) {
 }
 
 std::string fileMode(const std::string& path) {
-  struct stat st{};
+  struct stat st {};
   if (::stat(path.c_str(), &st) != 0) return "missing";
   char buf[8];
   std::snprintf(buf, sizeof(buf), "%03o", st.st_mode & 0777);
@@ -171,9 +171,9 @@ TEST(SecurityHardening, BadMaterialStopsTheParticipantNamingTheFileAndTheCause) 
   const std::string cert = dir + "/vision/cert.pem", key = dir + "/vision/key.pem";
   struct Case {
     std::string what;
-    std::string file;                    // the file to change (restored afterwards)
+    std::string file;  // the file to change (restored afterwards)
     std::function<void()> change;
-    std::vector<std::string> expected;   // substrings of the error
+    std::vector<std::string> expected;  // substrings of the error
   };
   const std::string perm_xml = readFile(dir + "/vision/permissions.xml");
   auto signWithCa = [&](const std::string& xml_text, const std::string& out) {
@@ -187,39 +187,59 @@ TEST(SecurityHardening, BadMaterialStopsTheParticipantNamingTheFileAndTheCause) 
     return s;
   };
   const std::vector<Case> cases = {
-      {"governance edited after signing", gov,
+      {"governance edited after signing",
+       gov,
        [&] { writeFile(gov, replaceAll(readFile(gov), "<rtps_protection_kind>SIGN", "<rtps_protection_kind>NONE")); },
        {"governance file '" + gov + "'", "bad signature"}},
-      {"permissions edited after signing (a topic granted)", perm,
-       [&] { writeFile(perm, replaceAll(readFile(perm), "<topic>reflex/heartbeat</topic>", "<topic>reflex/hand_targets</topic>")); },
+      {"permissions edited after signing (a topic granted)",
+       perm,
+       [&] {
+         writeFile(perm,
+                   replaceAll(readFile(perm), "<topic>reflex/heartbeat</topic>", "<topic>reflex/hand_targets</topic>"));
+       },
        {"permissions file '" + perm + "'", "bad signature"}},
-      {"permissions signed by another CA", perm,
+      {"permissions signed by another CA",
+       perm,
        [&] { writeFile(perm, readFile(dir + "/intruder/permissions.p7s")); },
        {"permissions file '" + perm + "'", "bad signature"}},
       {"governance missing", gov, [&] { std::remove(gov.c_str()); }, {"governance file '" + gov + "'", "missing"}},
-      {"governance not S/MIME", gov, [&] { writeFile(gov, "<dds/>\n"); },
+      {"governance not S/MIME",
+       gov,
+       [&] { writeFile(gov, "<dds/>\n"); },
        {"governance file '" + gov + "'", "not an S/MIME signed document"}},
-      {"permissions expired (signed by the CA)", perm,
+      {"permissions expired (signed by the CA)",
+       perm,
        [&] {
          std::string x = std::regex_replace(perm_xml, std::regex("<not_before>[^<]*</not_before>"),
                                             "<not_before>2020-01-01T00:00:00</not_before>");
-         x = std::regex_replace(x, std::regex("<not_after>[^<]*</not_after>"), "<not_after>2021-01-01T00:00:00</not_after>");
+         x = std::regex_replace(x, std::regex("<not_after>[^<]*</not_after>"),
+                                "<not_after>2021-01-01T00:00:00</not_after>");
          signWithCa(x, perm);
        },
        {"permissions file '" + perm + "'", "grant of 'CN=reflex.vision' expired at 2021-01-01 00:00:00 UTC"}},
-      {"permissions of another identity (behavior's)", perm,
+      {"permissions of another identity (behavior's)",
+       perm,
        [&] { writeFile(perm, readFile(dir + "/behavior/permissions.p7s")); },
        {"permissions file '" + perm + "'", "no grant for the identity certificate's subject 'CN=reflex.vision'",
         "CN=reflex.behavior"}},
-      {"certificate expired an hour ago", cert, [&] { makeCertificate(dir, "vision", -7200, -3600); },
+      {"certificate expired an hour ago",
+       cert,
+       [&] { makeCertificate(dir, "vision", -7200, -3600); },
        {"identity_certificate file '" + cert + "'", "certificate 'CN=reflex.vision' expired at"}},
-      {"certificate not valid yet", cert, [&] { makeCertificate(dir, "vision", 3600, 7200); },
+      {"certificate not valid yet",
+       cert,
+       [&] { makeCertificate(dir, "vision", 3600, 7200); },
        {"identity_certificate file '" + cert + "'", "is not valid before"}},
-      {"certificate of another CA", cert, [&] { writeFile(cert, readFile(dir + "/intruder/cert.pem")); },
+      {"certificate of another CA",
+       cert,
+       [&] { writeFile(cert, readFile(dir + "/intruder/cert.pem")); },
        {"identity_certificate file '" + cert + "'", "does not verify against the identity CA"}},
-      {"private key of another identity", key, [&] { writeFile(key, readFile(dir + "/behavior/key.pem")); },
+      {"private key of another identity",
+       key,
+       [&] { writeFile(key, readFile(dir + "/behavior/key.pem")); },
        {"private_key file '" + key + "'", "not the private key of the identity certificate"}},
-      {"certificate replaced by a folder", cert,
+      {"certificate replaced by a folder",
+       cert,
        [&] {
          std::remove(cert.c_str());
          ::mkdir(cert.c_str(), 0700);
@@ -233,7 +253,8 @@ TEST(SecurityHardening, BadMaterialStopsTheParticipantNamingTheFileAndTheCause) 
     c.change();
     const std::string error = participantError(dir, "vision", kDomain);
     EXPECT_NE(error, "") << "the participant was created";
-    for (const auto& e : c.expected) EXPECT_NE(error.find(e), std::string::npos) << "expected '" << e << "' in: " << error;
+    for (const auto& e : c.expected)
+      EXPECT_NE(error.find(e), std::string::npos) << "expected '" << e << "' in: " << error;
   }
   // A private key others can read: refused at run time too, as make_security.sh refuses it.
   for (const char* mode : {"644", "640", "604"}) {
@@ -401,7 +422,8 @@ TEST(SecurityHardening, TheWriterGuidAuthenticatesTheCertificateSubjectNotTheHea
     std::copy(std::begin(guid.guidPrefix.value), std::end(guid.guidPrefix.value), g.begin());
     return g;
   };
-  const auto vision_bits = bus::subjectGuidBits("CN=reflex.vision"), player_bits = bus::subjectGuidBits("CN=reflex.player");
+  const auto vision_bits = bus::subjectGuidBits("CN=reflex.vision"),
+             player_bits = bus::subjectGuidBits("CN=reflex.player");
   EXPECT_TRUE(bus::prefixMatchesSubjectBits(prefixOf(*vision), vision_bits)) << bus::toString(prefixOf(*vision));
   EXPECT_FALSE(bus::prefixMatchesSubjectBits(prefixOf(*vision), player_bits));
   EXPECT_TRUE(bus::prefixMatchesSubjectBits(prefixOf(*player), player_bits)) << bus::toString(prefixOf(*player));
@@ -455,9 +477,17 @@ TEST(SecurityHardening, BehaviorTakesObjectsOnlyFromTheConfiguredIdentities) {
   };
   auto runBehavior = [&](const std::vector<std::string>& extra, const std::string& tag, long& vision_sent,
                          long& player_sent) {
-    std::vector<std::string> argv = {bin + "/reflex_behavior", "--config", src + "/bringup/behavior/pointing.yaml",
-                                     "--profiles", dir + "/profiles/behavior.xml", "--domain",
-                                     std::to_string(kDomain), "--duration", "150", "--progress", "0"};
+    std::vector<std::string> argv = {bin + "/reflex_behavior",
+                                     "--config",
+                                     src + "/bringup/behavior/pointing.yaml",
+                                     "--profiles",
+                                     dir + "/profiles/behavior.xml",
+                                     "--domain",
+                                     std::to_string(kDomain),
+                                     "--duration",
+                                     "150",
+                                     "--progress",
+                                     "0"};
     argv.insert(argv.end(), extra.begin(), extra.end());
     const std::string log = ::testing::TempDir() + "hardening_behavior_" + tag + ".log";
     std::string output;
@@ -538,8 +568,10 @@ TEST(SecurityHardening, BehaviorTakesObjectsOnlyFromTheConfiguredIdentities) {
   vision_sent = player_sent = 0;
   auto [rep, out_rep] = runBehavior({"--object-source", "player"}, "replay", vision_sent, player_sent);
   ASSERT_GE(rep.frames, 0) << out_rep;
-  std::printf("--object-source player: %ld vision + %ld player frames sent; behavior: frames=%ld accepted=%ld "
-              "rejected_source=%ld\n", vision_sent, player_sent, rep.frames, rep.accepted, rep.rejected_source);
+  std::printf(
+      "--object-source player: %ld vision + %ld player frames sent; behavior: frames=%ld accepted=%ld "
+      "rejected_source=%ld\n",
+      vision_sent, player_sent, rep.frames, rep.accepted, rep.rejected_source);
   EXPECT_EQ(rep.frames, rep.accepted + rep.rejected_source) << out_rep;
   EXPECT_GT(rep.accepted, player_sent / 2) << out_rep;
   EXPECT_LE(rep.accepted, player_sent) << out_rep;

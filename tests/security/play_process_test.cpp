@@ -21,7 +21,8 @@ namespace reflex::security_test {
 namespace {
 
 using namespace std::chrono_literals;
-constexpr int kDomain = 216;  // its own (111 is faults_controller_restart_test's: a plain controller there reached the outsider)
+constexpr int kDomain =
+    216;  // its own (111 is faults_controller_restart_test's: a plain controller there reached the outsider)
 constexpr int kSamples = 20;  // per topic, 50 ms apart: a 1 s recording
 
 // Serialized by the type's own Fast DDS type support, as the recorder stores it.
@@ -125,8 +126,8 @@ TEST(SecurePlay, ObservationTopicsReachAPermittedSubscriberAndNoOutsider) {
   auto& outsider_joints = outsider->makeReader<msg::JointState>("reflex/joint_state", bus::kProfileRecord);
 
   const std::string log = dir + "/play.log";
-  testing::ChildProcess player({play(), rec, "--loop", "--domain",
-                                std::to_string(kDomain), "--quiet", "--profiles", dir + "/profiles/player.xml"},
+  testing::ChildProcess player({play(), rec, "--loop", "--domain", std::to_string(kDomain), "--quiet", "--profiles",
+                                dir + "/profiles/player.xml"},
                                log);
   ASSERT_TRUE(player.started());
   ASSERT_TRUE(objects.waitForWriters(1, 30s)) << "the secure player is authenticated\n" << readFile(log);

@@ -258,8 +258,8 @@ TEST_F(Security, ModuleCannotCreateEndpointsItsPermissionsDoNotGrant) {
   EXPECT_NO_THROW(player->makeWriter<msg::ObjectTargets>());
   EXPECT_NO_THROW(player->makeWriter<msg::JointState>());
   EXPECT_NO_THROW(player->makeWriter<msg::ControlStatus>());
-  for (const char* topic : {"reflex/hand_targets", "reflex/motion_priority", "reflex/body_schema", "reflex/walk_command",
-                            "reflex/heartbeat"}) {
+  for (const char* topic : {"reflex/hand_targets", "reflex/motion_priority", "reflex/body_schema",
+                            "reflex/walk_command", "reflex/heartbeat"}) {
     try {
       if (std::string(topic) == "reflex/hand_targets") player->makeWriter<msg::HandTargets>();
       if (std::string(topic) == "reflex/motion_priority") player->makeWriter<msg::MotionPriority>();
@@ -306,8 +306,10 @@ TEST_F(Security, TamperedPermissionsStopTheParticipant) {
       replaceAll(replaceAll(vision_profile, "reflex_secure_vision", "reflex_mismatched_vision"),
                  dir_ + "/vision/permissions.p7s", dir_ + "/behavior/permissions.p7s");
   const std::string file = bad_dir + "/profiles.xml";
-  writeFile(file, "<?xml version=\"1.0\"?>\n<dds xmlns=\"http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles\">"
-                  "<profiles>" + tampered_profile + mismatched_profile + "</profiles></dds>\n");
+  writeFile(file,
+            "<?xml version=\"1.0\"?>\n<dds xmlns=\"http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles\">"
+            "<profiles>" +
+                tampered_profile + mismatched_profile + "</profiles></dds>\n");
   bus::BusConfig config;
   config.module_name = "vision";
   config.domain_id = 99;

@@ -48,10 +48,10 @@ int viewPort(const std::string& log) {
 
 /// The reference client for `seconds` against the view on `port`: its JSON result line.
 nlohmann::json wsClient(int port, const std::string& log) {
-  testing::ChildProcess p({REFLEX_NODE, kSource + "/tests/view/ws_client_check.js", "--url",
-                           "ws://127.0.0.1:" + std::to_string(port), "--urdf", kUrdf, "--modules", kModules,
-                           "--seconds", "3"},
-                          log);
+  testing::ChildProcess p(
+      {REFLEX_NODE, kSource + "/tests/view/ws_client_check.js", "--url", "ws://127.0.0.1:" + std::to_string(port),
+       "--urdf", kUrdf, "--modules", kModules, "--seconds", "3"},
+      log);
   EXPECT_EQ(p.wait(30s), 0) << readFile(log);
   std::istringstream lines(readFile(log));
   std::string line, last;
@@ -86,9 +86,9 @@ TEST(SecureView, ReceivesTheSceneUnderAReadOnlyIdentityThatCannotWrite) {
   testing::ChildProcess view({kBin + "/reflex_view", "--domain", dom, "--port", "0", "--duration", "40", "--profiles",
                               dir + "/profiles/view.xml"},
                              view_log);
-  testing::ChildProcess plain_view({kBin + "/reflex_view", "--domain", dom, "--port", "0", "--duration", "40",
-                                    "--profiles", kBaseProfiles},
-                                   plain_log);
+  testing::ChildProcess plain_view(
+      {kBin + "/reflex_view", "--domain", dom, "--port", "0", "--duration", "40", "--profiles", kBaseProfiles},
+      plain_log);
   ASSERT_TRUE(controller.started() && view.started() && plain_view.started());
   const int port = viewPort(view_log), plain_port = viewPort(plain_log);
   ASSERT_GT(port, 0) << readFile(view_log);

@@ -26,24 +26,30 @@ extern "C" void onSignal(int) { g_stop = true; }
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"bench_soak: simulated hours of random reactive targets for the reflex controller; reports the\n"
-               "closest approach of any pair and fails on any pair below d_r, e-stop, NaN or velocity-limit breach."};
+  CLI::App app{
+      "bench_soak: simulated hours of random reactive targets for the reflex controller; reports the\n"
+      "closest approach of any pair and fails on any pair below d_r, e-stop, NaN or velocity-limit breach."};
   double hours = 0.0, episode = 10.0, progress = 10.0, wall_limit = 0.0;
   std::uint64_t first_seed = 1;
   int threads = 1;
   std::string urdf = REFLEX_SOURCE_DIR "/bringup/robots/asimo_like.urdf", collision, controller;
   app.add_option("--hours", hours, "simulated hours to run")->required()->check(CLI::PositiveNumber);
-  app.add_option("--episode", episode, "simulated seconds per episode")->capture_default_str()->check(CLI::Range(0.5, 3600.0));
+  app.add_option("--episode", episode, "simulated seconds per episode")
+      ->capture_default_str()
+      ->check(CLI::Range(0.5, 3600.0));
   app.add_option("--seed", first_seed, "seed of the first episode (episode k uses seed + k)")->capture_default_str();
   app.add_option("--threads", threads, "worker threads")->capture_default_str()->check(CLI::Range(1, 64));
-  app.add_option("--progress", progress, "wall seconds between progress lines (0: none)")->capture_default_str()
+  app.add_option("--progress", progress, "wall seconds between progress lines (0: none)")
+      ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   app.add_option("--wall-limit", wall_limit, "stop after this many wall seconds (0: none) and report what was reached")
-      ->capture_default_str()->check(CLI::NonNegativeNumber);
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--urdf", urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", collision, "collision configuration (default: next to the URDF)");
-  app.add_option("--controller", controller,
-                 "controller configuration (default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
+  app.add_option(
+      "--controller", controller,
+      "controller configuration (default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
   CLI11_PARSE(app, argc, argv);
 
   using namespace reflex::control;
@@ -95,11 +101,12 @@ int main(int argc, char** argv) {
     std::lock_guard<std::mutex> lock(mutex);
     const double sim_h = static_cast<double>(done) * episode / 3600.0;
     const double w = wall();
-    std::printf("bench_soak: %s %.3f of %.3f simulated hours, %llu episodes, %llu cycles, wall %.0f s (x%.1f real time), "
-                "closest approach %.2f mm (seed %llu, pair %d), violations %llu\n",
-                what, sim_h, hours, static_cast<unsigned long long>(done), static_cast<unsigned long long>(cycles), w,
-                w > 0.0 ? sim_h * 3600.0 / w : 0.0, worst.min_distance * 1000.0,
-                static_cast<unsigned long long>(worst.seed), worst.min_pair, static_cast<unsigned long long>(violations));
+    std::printf(
+        "bench_soak: %s %.3f of %.3f simulated hours, %llu episodes, %llu cycles, wall %.0f s (x%.1f real time), "
+        "closest approach %.2f mm (seed %llu, pair %d), violations %llu\n",
+        what, sim_h, hours, static_cast<unsigned long long>(done), static_cast<unsigned long long>(cycles), w,
+        w > 0.0 ? sim_h * 3600.0 / w : 0.0, worst.min_distance * 1000.0, static_cast<unsigned long long>(worst.seed),
+        worst.min_pair, static_cast<unsigned long long>(violations));
     std::fflush(stdout);
   };
 
@@ -122,8 +129,8 @@ int main(int argc, char** argv) {
   for (auto& t : pool) t.join();
   report(done >= episodes_total ? "done:" : "stopped early:");
   if (violations > 0) {
-    std::fprintf(stderr, "bench_soak: %llu episodes violated safety; first seeds:",
-                 static_cast<unsigned long long>(violations));
+    std::fprintf(
+        stderr, "bench_soak: %llu episodes violated safety; first seeds:", static_cast<unsigned long long>(violations));
     for (const auto& o : bad) std::fprintf(stderr, " %llu", static_cast<unsigned long long>(o.seed));
     std::fprintf(stderr, "\n");
     return 1;

@@ -49,7 +49,8 @@ Scenario randomReactiveEpisode(std::uint64_t seed, double duration) {
       }
     }
     const double p = u(rng);
-    in.priority = p < 0.5 ? MotionPriority::kEqual : (p < 0.75 ? MotionPriority::kLeftHigher : MotionPriority::kRightHigher);
+    in.priority =
+        p < 0.5 ? MotionPriority::kEqual : (p < 0.75 ? MotionPriority::kLeftHigher : MotionPriority::kRightHigher);
   };
   return s;
 }

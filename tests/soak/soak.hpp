@@ -20,11 +20,11 @@ reflex::control::Scenario randomReactiveEpisode(std::uint64_t seed, double durat
 struct EpisodeOutcome {
   std::uint64_t seed = 0;
   std::uint64_t cycles = 0;
-  double min_distance = 0.0;      ///< closest physical pair (m)
+  double min_distance = 0.0;  ///< closest physical pair (m)
   int min_pair = -1;
   double min_time = 0.0;
-  bool violation = false;         ///< below d_r, e-stop, non-finite or over a velocity limit
-  std::string why;                ///< what was violated ("" if none)
+  bool violation = false;  ///< below d_r, e-stop, non-finite or over a velocity limit
+  std::string why;         ///< what was violated ("" if none)
 };
 
 /// Runs episode `seed` and checks it.

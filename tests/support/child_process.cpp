@@ -92,8 +92,10 @@ int ChildProcess::wait(std::chrono::milliseconds timeout) {
   const auto end = std::chrono::steady_clock::now() + timeout;
   while (!reap(false)) {
     if (std::chrono::steady_clock::now() >= end) return kStillRunning;
-    if (pipe_ >= 0) drainPipe(10);  // waits up to 10 ms for output
-    else std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (pipe_ >= 0)
+      drainPipe(10);  // waits up to 10 ms for output
+    else
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   return code_;
 }
@@ -127,13 +129,9 @@ void ChildProcess::drainPipe(int timeout_ms) {
 
 std::string ChildProcess::output() {
   switch (out_.kind) {
-    case ChildOutput::Kind::kFile:
-      return readWholeFile(out_.path);
-    case ChildOutput::Kind::kPipe:
-      drainPipe(0);
-      return read_;
-    case ChildOutput::Kind::kInherit:
-      break;
+    case ChildOutput::Kind::kFile: return readWholeFile(out_.path);
+    case ChildOutput::Kind::kPipe: drainPipe(0); return read_;
+    case ChildOutput::Kind::kInherit: break;
   }
   return {};
 }

@@ -83,9 +83,7 @@ class ChildProcess {
 };
 
 /// Path of an executable built into the project's bin folder (build/bin/`name`).
-inline std::string binPath(const std::string& name) {
-  return std::string(REFLEX_BIN_DIR) + "/" + name;
-}
+inline std::string binPath(const std::string& name) { return std::string(REFLEX_BIN_DIR) + "/" + name; }
 
 /// A "full" character device of this test program's own (1, 7: every write fails with ENOSPC), in a
 /// private folder made at the first call and removed at exit: a test that needs a full device never

@@ -46,7 +46,9 @@ Percentiles percentiles(std::vector<double> v) {
   Percentiles p;
   if (v.empty()) return p;
   std::sort(v.begin(), v.end());
-  auto at = [&](double q) { return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))]; };
+  auto at = [&](double q) {
+    return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
+  };
   p.p50 = at(0.5);
   p.p99 = at(0.99);
   p.p999 = at(0.999);
@@ -69,9 +71,21 @@ struct Options {
 
 int runOne(const Options& o, const control::Model& model, const control::ControllerModel& cm, const std::string& mode) {
   const std::string log = o.work + "/reflex_trigger_bench." + mode + ".log";
-  std::vector<std::string> argv = {o.bin_dir + "/reflex_controller", "--domain", std::to_string(o.domain), "--robot", "dds",
-                                   "--trigger", mode, "--peer-probe", "0", "--input-timeout", "5", "--urdf", o.urdf,
-                                   "--duration", std::to_string(o.seconds + 8.0)};
+  std::vector<std::string> argv = {o.bin_dir + "/reflex_controller",
+                                   "--domain",
+                                   std::to_string(o.domain),
+                                   "--robot",
+                                   "dds",
+                                   "--trigger",
+                                   mode,
+                                   "--peer-probe",
+                                   "0",
+                                   "--input-timeout",
+                                   "5",
+                                   "--urdf",
+                                   o.urdf,
+                                   "--duration",
+                                   std::to_string(o.seconds + 8.0)};
   if (!o.realtime.empty()) {
     argv.push_back("--realtime");
     argv.push_back(o.realtime);
@@ -80,7 +94,8 @@ int runOne(const Options& o, const control::Model& model, const control::Control
   if (o.stress > 0) {
     stress = std::make_unique<testing::ChildProcess>(
         // Normal scheduling, whatever this process runs at (chrt --other 0).
-        std::vector<std::string>{"/usr/bin/chrt", "--other", "0", "/usr/bin/stress-ng", "--cpu", std::to_string(o.stress), "--quiet"},
+        std::vector<std::string>{"/usr/bin/chrt", "--other", "0", "/usr/bin/stress-ng", "--cpu",
+                                 std::to_string(o.stress), "--quiet"},
         o.work + "/reflex_trigger_bench.stress.log");
     if (!stress->started()) {
       std::fprintf(stderr, "reflex_trigger_bench: cannot start stress-ng: %s\n", stress->error().c_str());
@@ -119,7 +134,8 @@ int runOne(const Options& o, const control::Model& model, const control::Control
   controller.signal(SIGTERM);
   controller.wait(std::chrono::seconds(20));
   if (stress) stress->terminate(std::chrono::seconds(5));
-  if (driver.realtimeFailed()) std::fprintf(stderr, "reflex_trigger_bench: WARNING: --driver-rt refused (not permitted)\n");
+  if (driver.realtimeFailed())
+    std::fprintf(stderr, "reflex_trigger_bench: WARNING: --driver-rt refused (not permitted)\n");
 
   const auto sent = driver.sent();
   const auto got = driver.received();
@@ -144,20 +160,25 @@ int runOne(const Options& o, const control::Model& model, const control::Control
     late_period += arrived.back() > period_ms;
   }
   const Percentiles ps = percentiles(stamped), pa = percentiles(arrived);
-  std::printf("--trigger %-5s %6zu states, answered %6zu (%5.1f %%), commands %6zu | stamped p50 %.3f p99 %.3f p99.9 %.3f max %.3f ms"
-              " | arrived p50 %.3f p99 %.3f p99.9 %.3f max %.3f ms | missed (answer > %.1f ms or none) %zu = %.2f %%, "
-              "answer > %.0f ms %zu\n",
-              mode.c_str(), states, states - unanswered, states ? 100.0 * static_cast<double>(states - unanswered) / static_cast<double>(states) : 0.0,
-              got.size(), ps.p50, ps.p99, ps.p999, ps.max, pa.p50, pa.p99, pa.p999, pa.max, interval_ms,
-              late_interval + unanswered, states ? 100.0 * static_cast<double>(late_interval + unanswered) / static_cast<double>(states) : 0.0,
-              period_ms, late_period);
+  std::printf(
+      "--trigger %-5s %6zu states, answered %6zu (%5.1f %%), commands %6zu | stamped p50 %.3f p99 %.3f p99.9 %.3f max "
+      "%.3f ms"
+      " | arrived p50 %.3f p99 %.3f p99.9 %.3f max %.3f ms | missed (answer > %.1f ms or none) %zu = %.2f %%, "
+      "answer > %.0f ms %zu\n",
+      mode.c_str(), states, states - unanswered,
+      states ? 100.0 * static_cast<double>(states - unanswered) / static_cast<double>(states) : 0.0, got.size(), ps.p50,
+      ps.p99, ps.p999, ps.max, pa.p50, pa.p99, pa.p999, pa.max, interval_ms, late_interval + unanswered,
+      states ? 100.0 * static_cast<double>(late_interval + unanswered) / static_cast<double>(states) : 0.0, period_ms,
+      late_period);
   const std::string text = slurp(log);
   const auto pos = text.find("cycles, lateness");
   if (pos != std::string::npos) {
     const auto start = text.rfind('\n', pos);
     const auto stop = text.find(", rejected by cause", pos);
     std::printf("    controller: %s\n", text.substr(start == std::string::npos ? 0 : start + 1,
-                                                   (stop == std::string::npos ? text.find('\n', pos) : stop) - (start == std::string::npos ? 0 : start + 1)).c_str());
+                                                    (stop == std::string::npos ? text.find('\n', pos) : stop) -
+                                                        (start == std::string::npos ? 0 : start + 1))
+                                            .c_str());
   } else {
     std::printf("    controller log:\n%s\n", text.c_str());
   }
@@ -170,32 +191,41 @@ int runOne(const Options& o, const control::Model& model, const control::Control
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_trigger_bench: robot state -> joint command latency of reflex_controller --robot dds, --trigger "
-               "state against --trigger timer (this process is the robot), optionally --realtime and under stress-ng "
-               "load. Figures: docs/speed.md."};
+  CLI::App app{
+      "reflex_trigger_bench: robot state -> joint command latency of reflex_controller --robot dds, --trigger "
+      "state against --trigger timer (this process is the robot), optionally --realtime and under stress-ng "
+      "load. Figures: docs/speed.md."};
   Options o;
   app.add_option("--bin-dir", o.bin_dir, "folder of reflex_controller")->capture_default_str();
   app.add_option("--domain", o.domain, "DDS domain id")->capture_default_str()->check(CLI::Range(0, 231));
   app.add_option("--rate", o.rate, "robot states per second")->capture_default_str()->check(CLI::Range(50.0, 2000.0));
   app.add_option("--seconds", o.seconds, "measured seconds per run (after 2 s of warm-up)")
-      ->capture_default_str()->check(CLI::Range(1.0, 3600.0));
-  app.add_option("--modes", o.modes, "the triggers to run, in order")->delimiter(',')->capture_default_str()
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 3600.0));
+  app.add_option("--modes", o.modes, "the triggers to run, in order")
+      ->delimiter(',')
+      ->capture_default_str()
       ->check(CLI::IsMember({"state", "timer"}));
   app.add_option("--realtime", o.realtime, "passed to reflex_controller --realtime (PRIORITY[,CPU])");
   app.add_option("--driver-rt", o.driver_rt, "SCHED_FIFO priority of this process's robot threads (0: normal)")
-      ->capture_default_str()->check(CLI::Range(0, 99));
+      ->capture_default_str()
+      ->check(CLI::Range(0, 99));
   app.add_option("--stress", o.stress, "run `stress-ng --cpu N` during each run (0: none)")
-      ->capture_default_str()->check(CLI::Range(0, 64));
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
   app.add_option("--work", o.work, "folder for the controller's logs")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
     const control::Model model = control::loadModel(o.urdf, control::loadCollisionConfigFor(o.urdf, ""));
-    const control::ControllerModel cm = control::makeControllerModel(model, control::loadControllerConfigFor(o.urdf, ""));
+    const control::ControllerModel cm =
+        control::makeControllerModel(model, control::loadControllerConfigFor(o.urdf, ""));
     double load[3] = {0, 0, 0};
     if (getloadavg(load, 3) < 0) load[0] = -1;
-    std::printf("reflex_trigger_bench: %.0f Hz robot states, %.0f s per run, %s, load average %.2f %.2f %.2f%s%s\n", o.rate,
-                o.seconds, o.realtime.empty() ? "controller without --realtime" : ("controller --realtime " + o.realtime).c_str(),
-                load[0], load[1], load[2], o.stress > 0 ? (", stress-ng --cpu " + std::to_string(o.stress)).c_str() : "",
+    std::printf("reflex_trigger_bench: %.0f Hz robot states, %.0f s per run, %s, load average %.2f %.2f %.2f%s%s\n",
+                o.rate, o.seconds,
+                o.realtime.empty() ? "controller without --realtime" : ("controller --realtime " + o.realtime).c_str(),
+                load[0], load[1], load[2],
+                o.stress > 0 ? (", stress-ng --cpu " + std::to_string(o.stress)).c_str() : "",
                 o.driver_rt > 0 ? (", robot threads SCHED_FIFO " + std::to_string(o.driver_rt)).c_str() : "");
     int rc = 0;
     for (const auto& mode : o.modes) rc |= runOne(o, model, cm, mode);

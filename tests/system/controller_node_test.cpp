@@ -83,7 +83,8 @@ TEST(ControllerNode, FollowsTargetsSafelyAndRetractsWhenTheSourceGoesSilent) {
   ASSERT_TRUE(joints.takeLatest(js));
   ASSERT_EQ(js.names().size(), js.positions().size());
   std::size_t r_elbow = 0;
-  for (; r_elbow < js.names().size() && js.names()[r_elbow] != "r_elbow"; ++r_elbow) {}
+  for (; r_elbow < js.names().size() && js.names()[r_elbow] != "r_elbow"; ++r_elbow) {
+  }
   ASSERT_LT(r_elbow, js.names().size());
   const double elbow_reaching = js.positions()[r_elbow];
   EXPECT_LT(elbow_reaching, -0.6) << "the right elbow bent to reach the target";
@@ -98,7 +99,8 @@ TEST(ControllerNode, FollowsTargetsSafelyAndRetractsWhenTheSourceGoesSilent) {
   const double elbow_after = js.positions()[r_elbow];
   EXPECT_GT(elbow_after, elbow_reaching + 0.15) << "the right arm retracts";
   EXPECT_NEAR(elbow_after, -0.5, 0.1) << "towards its rest posture (elbow -0.5)";
-  for (std::size_t k = phase1; k < statuses.size(); ++k) EXPECT_GE(std::min(statuses[k].left().distance(), statuses[k].right().distance()), 0.005);
+  for (std::size_t k = phase1; k < statuses.size(); ++k)
+    EXPECT_GE(std::min(statuses[k].left().distance(), statuses[k].right().distance()), 0.005);
 
   EXPECT_EQ(controller.wait(std::chrono::seconds(10)), 0);
   std::ifstream in(log);
@@ -128,10 +130,10 @@ constexpr int kOwnConfigDomain = 231;
 TEST(ControllerNode, FindsTheRobotsControllerYamlBesideTheUrdf) {
   const std::string robots = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/";
   const std::string log = ::testing::TempDir() + "controller_node_own_config.log";
-  testing::ChildProcess controller({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--urdf",
-                                    robots + "small_humanoid.urdf", "--domain", std::to_string(kOwnConfigDomain),
-                                    "--duration", "3", "--peer-probe", "0"},
-                                   log);
+  testing::ChildProcess controller(
+      {std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--urdf", robots + "small_humanoid.urdf", "--domain",
+       std::to_string(kOwnConfigDomain), "--duration", "3", "--peer-probe", "0"},
+      log);
   ASSERT_TRUE(controller.started());
   bus::BusConfig config;
   config.module_name = "test_watch";
@@ -156,7 +158,8 @@ TEST(ControllerNode, FindsTheRobotsControllerYamlBesideTheUrdf) {
   ASSERT_EQ(std::sscanf(rest_line.c_str() + rest_line.find('[') + 1, "%*f , %lf", &rest_roll), 1) << rest_line;
   ASSERT_EQ(js.names().size(), js.positions().size());
   std::size_t roll = 0;
-  for (; roll < js.names().size() && js.names()[roll] != "l_shoulder_roll"; ++roll) {}
+  for (; roll < js.names().size() && js.names()[roll] != "l_shoulder_roll"; ++roll) {
+  }
   ASSERT_LT(roll, js.names().size()) << "the small humanoid's joints";
   // (0.55 rad there; the built-in arms rest at 0.25. The avoidance may move it slightly at rest.)
   EXPECT_NEAR(js.positions()[roll], rest_roll, 0.05) << "at the rest posture of small_humanoid.controller.yaml";
@@ -173,15 +176,16 @@ TEST(ControllerNode, FindsTheRobotsControllerYamlBesideTheUrdf) {
 
 TEST(ControllerNode, ANamedControllerYamlThatDoesNotExistIsNamed) {
   const std::string log = ::testing::TempDir() + "controller_node_missing_config.log";
-  testing::ChildProcess bad({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--controller", "/nonexistent/ctl.yaml",
-                             "--domain", std::to_string(kOwnConfigDomain + 1)},
+  testing::ChildProcess bad({std::string(REFLEX_BIN_DIR) + "/reflex_controller", "--controller",
+                             "/nonexistent/ctl.yaml", "--domain", std::to_string(kOwnConfigDomain + 1)},
                             log);
   EXPECT_EQ(bad.wait(std::chrono::seconds(10)), 2);
   std::ifstream in(log);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  EXPECT_NE(text.find("reflex_controller: error: --controller '/nonexistent/ctl.yaml': no such controller configuration "
-                      "file (No such file or directory)"),
-            std::string::npos)
+  EXPECT_NE(
+      text.find("reflex_controller: error: --controller '/nonexistent/ctl.yaml': no such controller configuration "
+                "file (No such file or directory)"),
+      std::string::npos)
       << text;
 }
 

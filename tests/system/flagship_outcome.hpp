@@ -61,8 +61,9 @@ inline std::string fileText(const std::string& path) {
 /// is removed first, so a summary is always this run's).
 inline Run runFlagship(const std::string& out, const std::string& args) {
   std::filesystem::remove(out + "/summary.json");
-  const std::string cmd = std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR + "/bringup/flagship/run_flagship.py --out " +
-                          out + " --build " + REFLEX_BIN_DIR + "/.. " + args;
+  const std::string cmd = std::string("/usr/bin/python3 ") + REFLEX_SOURCE_DIR +
+                          "/bringup/flagship/run_flagship.py --out " + out + " --build " + REFLEX_BIN_DIR + "/.. " +
+                          args;
   Run run;
   const reflex::testing::ProcessResult r = reflex::testing::runShell(cmd, "", std::chrono::minutes(15));
   run.log = r.out;

@@ -28,8 +28,7 @@ TEST(Flagship, AvoidanceKeepsTheCrossingArmsApartAndWithoutItTheyPenetrate) {
 
   EXPECT_EQ(reflex::flagship::flag(json, "avoidance", "secure"), 0) << "a plain run\n" << json;
   reflex::flagship::expectAvoidanceOutcome(json, out + "/avoidance");
-  EXPECT_LT(field(json, "no_avoidance", "min_arm_distance_m"), 0.0) << "without avoidance the arms penetrate\n"
-                                                                    << json;
+  EXPECT_LT(field(json, "no_avoidance", "min_arm_distance_m"), 0.0) << "without avoidance the arms penetrate\n" << json;
   // The report's strip draws the robot with the live view's renderer (headless Chromium), not 2D sticks.
   EXPECT_NE(json.find("\"strip_robot\": \"3d\""), std::string::npos) << json;
 }

@@ -162,9 +162,10 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
   const auto dds_hands = fx.hands(last_state);
   const auto kin_hands = fx.kinematicHands(reach_time);
   for (int a = 0; a < 2; ++a) {
-    std::printf("arm %d: measured hand %.4f %.4f %.4f, kinematic plant %.4f %.4f %.4f, |diff| %.2f mm, to target %.2f mm\n",
-                a, dds_hands[a].x(), dds_hands[a].y(), dds_hands[a].z(), kin_hands[a].x(), kin_hands[a].y(),
-                kin_hands[a].z(), (dds_hands[a] - kin_hands[a]).norm() * 1e3, (dds_hands[a] - kTargets[a]).norm() * 1e3);
+    std::printf(
+        "arm %d: measured hand %.4f %.4f %.4f, kinematic plant %.4f %.4f %.4f, |diff| %.2f mm, to target %.2f mm\n", a,
+        dds_hands[a].x(), dds_hands[a].y(), dds_hands[a].z(), kin_hands[a].x(), kin_hands[a].y(), kin_hands[a].z(),
+        (dds_hands[a] - kin_hands[a]).norm() * 1e3, (dds_hands[a] - kTargets[a]).norm() * 1e3);
     EXPECT_LT((dds_hands[a] - kin_hands[a]).norm(), 0.01) << "arm " << a << " as with the kinematic plant";
     EXPECT_LT((dds_hands[a] - kTargets[a]).norm(), 0.01) << "arm " << a << " reached its target";
   }
@@ -180,7 +181,8 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
   // Latency from the robot's measurement to the command answering it (one host, one clock): never
   // above --robot-timeout (50 ms by default: an older state is not answered).
   std::vector<double> latency_ms;
-  for (const auto& cmd : cmds) latency_ms.push_back(static_cast<double>(cmd.header().stamp_ns() - cmd.state_stamp_ns()) * 1e-6);
+  for (const auto& cmd : cmds)
+    latency_ms.push_back(static_cast<double>(cmd.header().stamp_ns() - cmd.state_stamp_ns()) * 1e-6);
   std::sort(latency_ms.begin(), latency_ms.end());
   std::printf("state -> command latency over %zu commands: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n", latency_ms.size(),
               latency_ms[latency_ms.size() / 2], latency_ms[latency_ms.size() * 99 / 100], latency_ms.back());
@@ -216,9 +218,10 @@ TEST(RobotPort, TheControllerDrivesADdsRobotLikeTheKinematicPlantFreezesWithoutI
     if (recovered_after < 0.0 && !cmds.empty() && ctl_detail.empty()) recovered_after = since;
     if (applied_after < 0.0 && have_state && last_state.applied_command_seq() > 0) applied_after = since;
   }
-  std::printf("restart: the controller commanded again %.2f s after the robot restarted; the new robot's state first "
-              "seen here after %.2f s, applying commands after %.2f s\n",
-              recovered_after, state_after, applied_after);
+  std::printf(
+      "restart: the controller commanded again %.2f s after the robot restarted; the new robot's state first "
+      "seen here after %.2f s, applying commands after %.2f s\n",
+      recovered_after, state_after, applied_after);
   ASSERT_GE(recovered_after, 0.0) << readFile(ctl_log);
   EXPECT_LT(recovered_after, 3.0);
   ASSERT_GE(applied_after, 0.0) << "the restarted robot applies the controller's commands";
@@ -265,8 +268,8 @@ TEST(RobotPort, BadRobotStatesAreRejectedNamedAndCountedAndNeverAnswered) {
   Fixture fx;
   const std::string bin = REFLEX_BIN_DIR;
   const std::string ctl_log = ::testing::TempDir() + "robot_port_test.bad_states.log";
-  testing::ChildProcess controller({bin + "/reflex_controller", "--domain", std::to_string(kDomain + 2), "--robot", "dds",
-                                    "--peer-probe", "0", "--duration", "30"},
+  testing::ChildProcess controller({bin + "/reflex_controller", "--domain", std::to_string(kDomain + 2), "--robot",
+                                    "dds", "--peer-probe", "0", "--duration", "30"},
                                    ctl_log);
   ASSERT_TRUE(controller.started());
   bus::BusConfig config;
@@ -307,18 +310,24 @@ TEST(RobotPort, BadRobotStatesAreRejectedNamedAndCountedAndNeverAnswered) {
   };
   const std::string elbow = "l_elbow";
   ASSERT_GE(fx.model.qIndex(elbow), 0);
-  send("lacks l_elbow", [&](msg::RobotState& st) {
-    for (std::size_t k = 0; k < st.names().size(); ++k)
-      if (st.names()[k] == elbow) {
-        st.names().erase(st.names().begin() + static_cast<long>(k));
-        st.positions().erase(st.positions().begin() + static_cast<long>(k));
-        st.velocities().erase(st.velocities().begin() + static_cast<long>(k));
-        break;
-      }
-  }, false);
-  send("has a NaN", [](msg::RobotState& st) { st.positions()[3] = std::nan(""); }, false);
-  send("has lengths that differ", [](msg::RobotState& st) { st.velocities().pop_back(); }, false);
-  send("is stamped 1 s in the future", [](msg::RobotState&) {}, true);
+  send(
+      "lacks l_elbow",
+      [&](msg::RobotState& st) {
+        for (std::size_t k = 0; k < st.names().size(); ++k)
+          if (st.names()[k] == elbow) {
+            st.names().erase(st.names().begin() + static_cast<long>(k));
+            st.positions().erase(st.positions().begin() + static_cast<long>(k));
+            st.velocities().erase(st.velocities().begin() + static_cast<long>(k));
+            break;
+          }
+      },
+      false);
+  send(
+      "has a NaN", [](msg::RobotState& st) { st.positions()[3] = std::nan(""); }, false);
+  send(
+      "has lengths that differ", [](msg::RobotState& st) { st.velocities().pop_back(); }, false);
+  send(
+      "is stamped 1 s in the future", [](msg::RobotState&) {}, true);
 
   // Good states, names reversed.
   std::map<std::uint64_t, msg::RobotState> sent;
@@ -374,7 +383,8 @@ TEST(RobotPort, BadRobotOptionsAreRefusedNamingTheValue) {
   int n = 0;
   for (const auto& c : cases) {
     const std::string log = ::testing::TempDir() + "robot_port_test.bad" + std::to_string(n++) + ".log";
-    std::vector<std::string> argv = {bin + "/reflex_controller", "--domain", std::to_string(kDomain + 1), "--peer-probe", "0"};
+    std::vector<std::string> argv = {bin + "/reflex_controller", "--domain", std::to_string(kDomain + 1),
+                                     "--peer-probe", "0"};
     argv.insert(argv.end(), c.args.begin(), c.args.end());
     testing::ChildProcess p(argv, log);
     ASSERT_TRUE(p.started());

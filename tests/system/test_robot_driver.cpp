@@ -70,7 +70,8 @@ int main(int argc, char** argv) {
     Eigen::VectorXd q = control::restConfiguration(model, cm), qdot = Eigen::VectorXd::Zero(model.nq);
     const Eigen::VectorXd q_start = q;
     const int lie_index = model.qIndex(lie_joint);
-    if (lie != "none" && lie_index < 0) throw std::runtime_error("--lie-joint '" + lie_joint + "' is not a joint of " + urdf);
+    if (lie != "none" && lie_index < 0)
+      throw std::runtime_error("--lie-joint '" + lie_joint + "' is not a joint of " + urdf);
     control::KinematicsData kin(model);
     control::DistanceData dist(model);
     double truth_min = 1e9, truth_speed_ratio = 0.0, truth_beyond_limit = 0.0, truth_other_motion = 0.0;
@@ -142,8 +143,8 @@ int main(int argc, char** argv) {
         for (std::size_t k = 0; k < map.size(); ++k) {  // the command itself, against the URDF
           const int i = map[k];
           truth_speed_ratio = std::max(truth_speed_ratio, std::abs(cmd.velocities()[k]) / model.v_max[i]);
-          truth_beyond_limit = std::max({truth_beyond_limit, cmd.positions()[k] - model.q_upper[i],
-                                         model.q_lower[i] - cmd.positions()[k]});
+          truth_beyond_limit = std::max(
+              {truth_beyond_limit, cmd.positions()[k] - model.q_upper[i], model.q_lower[i] - cmd.positions()[k]});
         }
       } else {
         ++hold_ticks;
@@ -185,8 +186,8 @@ int main(int argc, char** argv) {
       state.holding(!valid);
       state_writer.publish(state);
     }
-    std::fprintf(stderr, "reflex_test_robot: commands %llu (refused %llu), ticks applying %llu, holding %llu\n", commands,
-                 refused, applied_ticks, hold_ticks);
+    std::fprintf(stderr, "reflex_test_robot: commands %llu (refused %llu), ticks applying %llu, holding %llu\n",
+                 commands, refused, applied_ticks, hold_ticks);
     std::fprintf(stderr,
                  "reflex_test_robot: truth: min distance %.6f m (%s), max command speed / v_max %.6f, max command "
                  "beyond a limit %.6g, max motion of a non-arm joint %.6g, states lied %llu\n",

@@ -83,9 +83,10 @@ ControllerRun runController(const Fixture& fx, const std::string& trigger, int d
   ControllerRun run;
   const std::string bin = REFLEX_BIN_DIR;
   const std::string log = ::testing::TempDir() + "trigger_state_test." + trigger + ".log";
-  testing::ChildProcess controller({bin + "/reflex_controller", "--domain", std::to_string(domain), "--robot", "dds",
-                                    "--trigger", trigger, "--peer-probe", "0", "--input-timeout", "5", "--duration", "60"},
-                                   log);
+  testing::ChildProcess controller(
+      {bin + "/reflex_controller", "--domain", std::to_string(domain), "--robot", "dds", "--trigger", trigger,
+       "--peer-probe", "0", "--input-timeout", "5", "--duration", "60"},
+      log);
   EXPECT_TRUE(controller.started());
   testing::StateDriver driver(fx.model, fx.cm, domain, 0.002, control::restConfiguration(fx.model, fx.cm));
   auto& targets = driver.bus().makeWriter<msg::HandTargets>();
@@ -233,7 +234,8 @@ TEST(TriggerState, OneCycleAnswersEachStateAtTheStateRateWithinVmaxOfItsInterval
   for (const auto& r : state.got) {
     const msg::JointCommand& c = r.command;
     const auto it = by_seq.find(c.state_seq());
-    ASSERT_NE(it, by_seq.end()) << "command " << c.header().seq() << " answers state " << c.state_seq() << ", never sent";
+    ASSERT_NE(it, by_seq.end()) << "command " << c.header().seq() << " answers state " << c.state_seq()
+                                << ", never sent";
     const testing::StateDriver::SentState& s = *it->second;
     ASSERT_EQ(c.state_stamp_ns(), s.stamp_ns) << "state " << s.seq;
     // The span: (positions - measured) / velocities of the fastest joint not at a limit.
@@ -278,13 +280,15 @@ TEST(TriggerState, OneCycleAnswersEachStateAtTheStateRateWithinVmaxOfItsInterval
       worst_ratio = std::max(worst_ratio, std::abs(c.positions()[k] - s.q[i]) / (fx.model.v_max[i] * span));
     }
   }
-  std::printf("--trigger state: %zu commands: %d span their state's interval, %d less (the time since the previous "
-              "cycle), %d a period (started by the period's end), %d still; largest step %.3f of v_max x span; the "
-              "robot's largest step %.3f of v_max x its interval\n",
-              state.got.size(), spans_interval, spans_shorter, spans_period, still, worst_ratio, state.worst_speed_ratio);
+  std::printf(
+      "--trigger state: %zu commands: %d span their state's interval, %d less (the time since the previous "
+      "cycle), %d a period (started by the period's end), %d still; largest step %.3f of v_max x span; the "
+      "robot's largest step %.3f of v_max x its interval\n",
+      state.got.size(), spans_interval, spans_shorter, spans_period, still, worst_ratio, state.worst_speed_ratio);
   EXPECT_LE(worst_ratio, 1.0 + 1e-9);
   EXPECT_GT(worst_ratio, 0.3) << "the arms moved fast enough for the bound to matter";
-  EXPECT_GT(spans_interval + spans_shorter, 10 * spans_period) << "cycles are started by states, rarely by the period's end";
+  EXPECT_GT(spans_interval + spans_shorter, 10 * spans_period)
+      << "cycles are started by states, rarely by the period's end";
   EXPECT_LE(state.worst_speed_ratio, 1.0 + 1e-9) << "the robot never moved a joint faster than its limit";
 
   // 1b. A flood of samples on the state topic (a second writer, ignored) wakes the loop more often,
@@ -311,7 +315,8 @@ TEST(TriggerState, OneCycleAnswersEachStateAtTheStateRateWithinVmaxOfItsInterval
   const double flood_window = 1e-9 * static_cast<double>(state.e1 - state.e0 - 100'000'000);
   std::printf("a second writer flooding the state topic: %zu commands in %.2f s, their spans add up to %.3f s\n",
               flood_commands, flood_window, span_sum);
-  EXPECT_GT(static_cast<double>(flood_commands), 600.0 * flood_window) << "the flood woke the loop more often than the robot";
+  EXPECT_GT(static_cast<double>(flood_commands), 600.0 * flood_window)
+      << "the flood woke the loop more often than the robot";
   EXPECT_LE(span_sum, flood_window + period);
 
   // 2. The cycle rate follows the state rate; the timer stays at 1 / period.
@@ -319,9 +324,11 @@ TEST(TriggerState, OneCycleAnswersEachStateAtTheStateRateWithinVmaxOfItsInterval
   const double a_timer = commandRate(timer, timer.a0, timer.a1), b_timer = commandRate(timer, timer.b0, timer.b1);
   const auto [p50_state, p99_state] = latency(state, state.a0, state.a1);
   const auto [p50_timer, p99_timer] = latency(timer, timer.a0, timer.a1);
-  std::printf("commands per second: states at 500 Hz: --trigger state %.1f, timer %.1f; at 400 Hz: state %.1f, timer %.1f\n"
-              "state -> command (the controller's stamp), 500 Hz: state p50 %.3f ms p99 %.3f ms; timer p50 %.3f ms p99 %.3f ms\n",
-              a_state, a_timer, b_state, b_timer, p50_state, p99_state, p50_timer, p99_timer);
+  std::printf(
+      "commands per second: states at 500 Hz: --trigger state %.1f, timer %.1f; at 400 Hz: state %.1f, timer %.1f\n"
+      "state -> command (the controller's stamp), 500 Hz: state p50 %.3f ms p99 %.3f ms; timer p50 %.3f ms p99 %.3f "
+      "ms\n",
+      a_state, a_timer, b_state, b_timer, p50_state, p99_state, p50_timer, p99_timer);
   // Bounds wide enough for a loaded host (measured under a load of 6: state 497 / 337, timer 164 / 200).
   EXPECT_GT(a_state, 400.0);
   EXPECT_LT(a_state, 520.0);
@@ -348,8 +355,10 @@ TEST(TriggerState, OneCycleAnswersEachStateAtTheStateRateWithinVmaxOfItsInterval
   // 3. States stop: only the last one is answered, for no longer than --robot-timeout plus a period,
   // then nothing, as with the timer; both report the stale robot and recover.
   const Pause ps = pauseBehaviour(state, period), pt = pauseBehaviour(timer, period);
-  std::printf("states stopped: --trigger state answered the last state %d more times, the last %.1f ms after it; "
-              "timer %d times, %.1f ms\n", ps.commands, ps.last_after_ms, pt.commands, pt.last_after_ms);
+  std::printf(
+      "states stopped: --trigger state answered the last state %d more times, the last %.1f ms after it; "
+      "timer %d times, %.1f ms\n",
+      ps.commands, ps.last_after_ms, pt.commands, pt.last_after_ms);
   for (const Pause* p : {&ps, &pt}) {
     EXPECT_TRUE(p->all_answer_last);
     EXPECT_LE(p->last_after_ms, (robot_timeout + period) * 1e3 + 1.0);
@@ -406,9 +415,8 @@ TEST(Realtime, WhenPermittedEveryThreadRunsFifoOnTheOneCpuWithMemoryLocked) {
   const std::string log = ::testing::TempDir() + "trigger_state_test.rt.log";
   const int cpu = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN)) - 1;
   const std::string value = "5," + std::to_string(cpu);
-  testing::ChildProcess controller({bin + "/reflex_controller", "--domain", "22", "--peer-probe", "0", "--duration", "4",
-                                    "--realtime", value},
-                                   log);
+  testing::ChildProcess controller(
+      {bin + "/reflex_controller", "--domain", "22", "--peer-probe", "0", "--duration", "4", "--realtime", value}, log);
   ASSERT_TRUE(controller.started());
   if (!permittedRealtime()) {  // an unprivileged run of this test: the refusal is the answer
     EXPECT_EQ(controller.wait(std::chrono::seconds(20)), 2);
@@ -457,17 +465,22 @@ TEST(Realtime, WithoutPermissionOrWithImpossibleValuesItIsRefusedNamingTheValueA
       {{}, {"--realtime", "80,-1"}, "--realtime '80,-1' is not PRIORITY[,CPU]"},
       {{}, {"--realtime", "80,4096"}, "--realtime '80,4096': CPU 4096 is not one this process may run on (allowed: "},
       {{}, {"--trigger", "statee", "--robot", "dds"}, "--trigger 'statee' is not a cycle trigger"},
-      {{}, {"--trigger", "state"}, "--trigger state runs a cycle per arriving robot state, but --robot 'kinematic' sends none"},
+      {{},
+       {"--trigger", "state"},
+       "--trigger state runs a cycle per arriving robot state, but --robot 'kinematic' sends none"},
   };
   const int cpus = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN));
-  cases.push_back({{}, {"--realtime", "80," + std::to_string(cpus)},
-                   "--realtime '80," + std::to_string(cpus) + "': CPU " + std::to_string(cpus) + " is not one this process may run on"});
+  cases.push_back({{},
+                   {"--realtime", "80," + std::to_string(cpus)},
+                   "--realtime '80," + std::to_string(cpus) + "': CPU " + std::to_string(cpus) +
+                       " is not one this process may run on"});
   if (geteuid() == 0) {
     // An unprivileged user (nobody): no CAP_SYS_NICE, rtprio limit 0.
-    cases.push_back({{"/usr/bin/setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"},
-                     {"--realtime", "80"},
-                     "--realtime '80': SCHED_FIFO priority 80 refused (sched_setscheduler: Operation not permitted): this "
-                     "process has neither CAP_SYS_NICE nor an rtprio limit of at least 80 (ulimit -r is 0)"});
+    cases.push_back(
+        {{"/usr/bin/setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"},
+         {"--realtime", "80"},
+         "--realtime '80': SCHED_FIFO priority 80 refused (sched_setscheduler: Operation not permitted): this "
+         "process has neither CAP_SYS_NICE nor an rtprio limit of at least 80 (ulimit -r is 0)"});
   } else if (!permittedRealtime()) {
     cases.push_back({{}, {"--realtime", "80"}, "--realtime '80': SCHED_FIFO priority 80 refused"});
   }
@@ -476,8 +489,8 @@ TEST(Realtime, WithoutPermissionOrWithImpossibleValuesItIsRefusedNamingTheValueA
     const std::string log = ::testing::TempDir() + "trigger_state_test.bad" + std::to_string(n++) + ".log";
     std::vector<std::string> argv = c.prefix;
     argv.push_back(bin + "/reflex_controller");
-    for (const std::string& a : {std::string("--domain"), std::string("22"), std::string("--peer-probe"), std::string("0"),
-                                 std::string("--duration"), std::string("2")})
+    for (const std::string& a : {std::string("--domain"), std::string("22"), std::string("--peer-probe"),
+                                 std::string("0"), std::string("--duration"), std::string("2")})
       argv.push_back(a);
     argv.insert(argv.end(), c.args.begin(), c.args.end());
     testing::ChildProcess p(argv, log);

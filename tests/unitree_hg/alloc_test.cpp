@@ -20,7 +20,6 @@
 #include <chrono>
 #include <thread>
 
-
 namespace {
 
 namespace hg = reflex::unitree_hg;
@@ -49,7 +48,8 @@ TEST(UnitreeHgPortAlloc, PollAndCommandAllocateNothingOnTheControlThread) {
   hg::LowState s;
   for (int motor = 0; motor < hg::kMotors; ++motor)
     if (r.q_of_motor[static_cast<std::size_t>(motor)] >= 0)
-      s.motor_state()[static_cast<std::size_t>(motor)].q(static_cast<float>(rest[r.q_of_motor[static_cast<std::size_t>(motor)]]));
+      s.motor_state()[static_cast<std::size_t>(motor)].q(
+          static_cast<float>(rest[r.q_of_motor[static_cast<std::size_t>(motor)]]));
   Eigen::VectorXd qdot = Eigen::VectorXd::Zero(model.nq);
   std::uint32_t tick = 0;
   long counted = 0;
@@ -65,7 +65,8 @@ TEST(UnitreeHgPortAlloc, PollAndCommandAllocateNothingOnTheControlThread) {
     polled += port.poll() >= 0 ? 1 : 0;
     const Eigen::VectorXd* q = port.measuredPositions(0.0);
     if (q != nullptr) port.command(*q, qdot, 0.005);
-    if (cycle >= 20) counted += reflex::testing::threadAllocations() - before;  // after the first cycles (the name map, once)
+    if (cycle >= 20)
+      counted += reflex::testing::threadAllocations() - before;  // after the first cycles (the name map, once)
   }
   EXPECT_GT(port.acceptedStates(), 300u) << "states were taken";
   EXPECT_EQ(port.rejectedTotal(), 0u);

@@ -55,8 +55,17 @@ TEST(UnitreeHgCyclone, StateInCommandsOutAndBadStatesRejectedCountedNamed) {
   ASSERT_NE(controller.readUntil("reflex_controller: running at", std::chrono::seconds(30)).find("running at"),
             std::string::npos)
       << readFile(log);
-  std::vector<std::string> robot_args = {binPath("hg_cyclone_robot"), "--domain", "13", "--bad-at", "2.5",
-                                         "--stall-ms", "300", "--stop-at", "6.5", "--listen-until", "8.5"};
+  std::vector<std::string> robot_args = {binPath("hg_cyclone_robot"),
+                                         "--domain",
+                                         "13",
+                                         "--bad-at",
+                                         "2.5",
+                                         "--stall-ms",
+                                         "300",
+                                         "--stop-at",
+                                         "6.5",
+                                         "--listen-until",
+                                         "8.5"};
   for (const auto& m : map.motors) {
     robot_args.push_back("--q");
     robot_args.push_back(std::to_string(m.motor) + "=" + std::to_string(rest[model.qIndex(m.joint)]));
@@ -87,7 +96,8 @@ TEST(UnitreeHgCyclone, StateInCommandsOutAndBadStatesRejectedCountedNamed) {
   const std::size_t states_at = ctl.find("robot unitree_hg: states ");
   ASSERT_NE(states_at, std::string::npos) << ctl;
   unsigned long long accepted = 0, rejected = 0;
-  ASSERT_EQ(std::sscanf(ctl.c_str() + states_at, "robot unitree_hg: states %llu (rejected %llu)", &accepted, &rejected), 2);
+  ASSERT_EQ(std::sscanf(ctl.c_str() + states_at, "robot unitree_hg: states %llu (rejected %llu)", &accepted, &rejected),
+            2);
   EXPECT_EQ(static_cast<double>(rejected), 3 + 2 + 3 + stall + 4 + 2) << ctl;
   // Motor 18 is l_elbow in the map: a NaN and a position 50 rad out.
   EXPECT_EQ(numberAfter(ctl, "robot_state_not_finite "), 1) << ctl;
@@ -160,7 +170,8 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
                   testing::TempDir() + "/unknown.log");
   EXPECT_EQ(c1.wait(std::chrono::seconds(20)), 2);
   const std::string e1 = readFile(testing::TempDir() + "/unknown.log");
-  EXPECT_NE(e1.find("joint 'left_elbow_joint' is not a joint of the robot model 'asimo_like'"), std::string::npos) << e1;
+  EXPECT_NE(e1.find("joint 'left_elbow_joint' is not a joint of the robot model 'asimo_like'"), std::string::npos)
+      << e1;
   // A motor the message does not have (35 slots: 0..34).
   std::string beyond = base;
   beyond.replace(beyond.find("motor: 31,"), std::string("motor: 31,").size(), "motor: 35,");
@@ -174,16 +185,18 @@ TEST(UnitreeHgCyclone, AMapTheRobotCannotServeIsRefusedAtStart) {
   EXPECT_NE(e2.find("value '35'"), std::string::npos) << e2;
   // No map given and none beside the URDF, and a map for another robot side.
   const std::string small = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/small_humanoid.urdf";
-  ChildProcess c3({binPath("reflex_controller"), "--robot", "unitree_hg", "--urdf", small, "--domain", "13", "--peer-probe", "0"},
-                  testing::TempDir() + "/nomap.log");
+  ChildProcess c3(
+      {binPath("reflex_controller"), "--robot", "unitree_hg", "--urdf", small, "--domain", "13", "--peer-probe", "0"},
+      testing::TempDir() + "/nomap.log");
   EXPECT_EQ(c3.wait(std::chrono::seconds(20)), 2);
   const std::string e3 = readFile(testing::TempDir() + "/nomap.log");
   EXPECT_NE(e3.find("no joint map: --joint-map not given and no '" + std::string(REFLEX_SOURCE_DIR) +
                     "/bringup/robots/small_humanoid.hg.yaml' beside the URDF"),
             std::string::npos)
       << e3;
-  ChildProcess c4({binPath("reflex_controller"), "--robot", "dds", "--joint-map", kMap, "--domain", "13", "--peer-probe", "0"},
-                  testing::TempDir() + "/ddsmap.log");
+  ChildProcess c4(
+      {binPath("reflex_controller"), "--robot", "dds", "--joint-map", kMap, "--domain", "13", "--peer-probe", "0"},
+      testing::TempDir() + "/ddsmap.log");
   EXPECT_EQ(c4.wait(std::chrono::seconds(20)), 2);
   const std::string e4 = readFile(testing::TempDir() + "/ddsmap.log");
   EXPECT_NE(e4.find("is for --robot unitree_hg, not 'dds'"), std::string::npos) << e4;

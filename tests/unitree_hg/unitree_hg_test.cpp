@@ -70,19 +70,21 @@ struct CLowState {
 // The spec's table (offsets and sizes).
 static_assert(sizeof(CMotorCmd) == 28 && offsetof(CMotorCmd, q) == 4 && offsetof(CMotorCmd, kd) == 20 &&
               offsetof(CMotorCmd, reserve) == 24);
-static_assert(sizeof(CMotorState) == 56 && offsetof(CMotorState, temperature) == 20 && offsetof(CMotorState, vol) == 24 &&
-              offsetof(CMotorState, sensor) == 28 && offsetof(CMotorState, motorstate) == 36 &&
-              offsetof(CMotorState, reserve) == 40);
+static_assert(sizeof(CMotorState) == 56 && offsetof(CMotorState, temperature) == 20 &&
+              offsetof(CMotorState, vol) == 24 && offsetof(CMotorState, sensor) == 28 &&
+              offsetof(CMotorState, motorstate) == 36 && offsetof(CMotorState, reserve) == 40);
 static_assert(sizeof(CImu) == 56 && offsetof(CImu, gyroscope) == 16 && offsetof(CImu, accelerometer) == 28 &&
               offsetof(CImu, rpy) == 40 && offsetof(CImu, temperature) == 52);
 static_assert(sizeof(CLowCmd) == 1004 && offsetof(CLowCmd, mode_machine) == 1 && offsetof(CLowCmd, motor_cmd) == 4 &&
               offsetof(CLowCmd, reserve) == 984 && offsetof(CLowCmd, crc) == 1000);
-static_assert(sizeof(CLowState) == 2092 && offsetof(CLowState, mode_pr) == 8 && offsetof(CLowState, mode_machine) == 9 &&
-              offsetof(CLowState, tick) == 12 && offsetof(CLowState, imu_state) == 16 &&
-              offsetof(CLowState, motor_state) == 72 && offsetof(CLowState, wireless_remote) == 2032 &&
-              offsetof(CLowState, reserve) == 2072 && offsetof(CLowState, crc) == 2088);
+static_assert(sizeof(CLowState) == 2092 && offsetof(CLowState, mode_pr) == 8 &&
+              offsetof(CLowState, mode_machine) == 9 && offsetof(CLowState, tick) == 12 &&
+              offsetof(CLowState, imu_state) == 16 && offsetof(CLowState, motor_state) == 72 &&
+              offsetof(CLowState, wireless_remote) == 2032 && offsetof(CLowState, reserve) == 2072 &&
+              offsetof(CLowState, crc) == 2088);
 // The library's constants agree with the table.
-static_assert(hg::LowCmdOffsets::reserve == offsetof(CLowCmd, reserve) && hg::LowCmdOffsets::crc == offsetof(CLowCmd, crc));
+static_assert(hg::LowCmdOffsets::reserve == offsetof(CLowCmd, reserve) &&
+              hg::LowCmdOffsets::crc == offsetof(CLowCmd, crc));
 static_assert(hg::LowStateOffsets::motor_state == offsetof(CLowState, motor_state) &&
               hg::LowStateOffsets::wireless_remote == offsetof(CLowState, wireless_remote) &&
               hg::LowStateOffsets::crc == offsetof(CLowState, crc));
@@ -151,9 +153,19 @@ TEST(UnitreeHgLayout, LowCmdPacksAsTheCStruct) {
       auto& m = cmd.motor_cmd()[static_cast<std::size_t>(i)];
       CMotorCmd& k = c.motor_cmd[i];
       k.mode = static_cast<std::uint8_t>(rng());
-      k.q = randf(rng); k.dq = randf(rng); k.tau = randf(rng); k.kp = randf(rng); k.kd = randf(rng);
+      k.q = randf(rng);
+      k.dq = randf(rng);
+      k.tau = randf(rng);
+      k.kp = randf(rng);
+      k.kd = randf(rng);
       k.reserve = rng();
-      m.mode(k.mode); m.q(k.q); m.dq(k.dq); m.tau(k.tau); m.kp(k.kp); m.kd(k.kd); m.reserve(k.reserve);
+      m.mode(k.mode);
+      m.q(k.q);
+      m.dq(k.dq);
+      m.tau(k.tau);
+      m.kp(k.kp);
+      m.kd(k.kd);
+      m.reserve(k.reserve);
     }
     for (int j = 0; j < 4; ++j) cmd.reserve()[static_cast<std::size_t>(j)] = c.reserve[j] = rng();
     c.crc = rng();
@@ -192,12 +204,23 @@ TEST(UnitreeHgLayout, LowStatePacksAsTheCStruct) {
       auto& m = s.motor_state()[static_cast<std::size_t>(i)];
       CMotorState& k = c.motor_state[i];
       k.mode = static_cast<std::uint8_t>(rng());
-      k.q = randf(rng); k.dq = randf(rng); k.ddq = randf(rng); k.tau_est = randf(rng); k.vol = randf(rng);
+      k.q = randf(rng);
+      k.dq = randf(rng);
+      k.ddq = randf(rng);
+      k.tau_est = randf(rng);
+      k.vol = randf(rng);
       k.temperature[0] = static_cast<std::int16_t>(rng());
       k.temperature[1] = static_cast<std::int16_t>(rng());
-      k.sensor[0] = rng(); k.sensor[1] = rng(); k.motorstate = rng();
+      k.sensor[0] = rng();
+      k.sensor[1] = rng();
+      k.motorstate = rng();
       for (int j = 0; j < 4; ++j) k.reserve[j] = rng();
-      m.mode(k.mode); m.q(k.q); m.dq(k.dq); m.ddq(k.ddq); m.tau_est(k.tau_est); m.vol(k.vol);
+      m.mode(k.mode);
+      m.q(k.q);
+      m.dq(k.dq);
+      m.ddq(k.ddq);
+      m.tau_est(k.tau_est);
+      m.vol(k.vol);
       m.temperature() = {k.temperature[0], k.temperature[1]};
       m.sensor() = {k.sensor[0], k.sensor[1]};
       m.motorstate(k.motorstate);
@@ -278,17 +301,18 @@ TEST(UnitreeHgTypeSupport, APayloadOfAnotherSizeIsRefusedAndCounted) {
 // ---- joint map
 
 const char* const kG1Table[29] = {
-    "left_hip_pitch_joint", "left_hip_roll_joint", "left_hip_yaw_joint", "left_knee_joint",
-    "left_ankle_pitch_joint", "left_ankle_roll_joint", "right_hip_pitch_joint", "right_hip_roll_joint",
-    "right_hip_yaw_joint", "right_knee_joint", "right_ankle_pitch_joint", "right_ankle_roll_joint",
-    "waist_yaw_joint", "waist_roll_joint", "waist_pitch_joint", "left_shoulder_pitch_joint",
-    "left_shoulder_roll_joint", "left_shoulder_yaw_joint", "left_elbow_joint", "left_wrist_roll_joint",
-    "left_wrist_pitch_joint", "left_wrist_yaw_joint", "right_shoulder_pitch_joint", "right_shoulder_roll_joint",
-    "right_shoulder_yaw_joint", "right_elbow_joint", "right_wrist_roll_joint", "right_wrist_pitch_joint",
+    "left_hip_pitch_joint",     "left_hip_roll_joint",     "left_hip_yaw_joint",         "left_knee_joint",
+    "left_ankle_pitch_joint",   "left_ankle_roll_joint",   "right_hip_pitch_joint",      "right_hip_roll_joint",
+    "right_hip_yaw_joint",      "right_knee_joint",        "right_ankle_pitch_joint",    "right_ankle_roll_joint",
+    "waist_yaw_joint",          "waist_roll_joint",        "waist_pitch_joint",          "left_shoulder_pitch_joint",
+    "left_shoulder_roll_joint", "left_shoulder_yaw_joint", "left_elbow_joint",           "left_wrist_roll_joint",
+    "left_wrist_pitch_joint",   "left_wrist_yaw_joint",    "right_shoulder_pitch_joint", "right_shoulder_roll_joint",
+    "right_shoulder_yaw_joint", "right_elbow_joint",       "right_wrist_roll_joint",     "right_wrist_pitch_joint",
     "right_wrist_yaw_joint"};
 
 TEST(UnitreeHgJointMap, ShippedG1MapIsTheSpecTable) {
-  const hg::HgJointMap map = hg::loadHgJointMap(std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/unitree_g1_29dof.hg.yaml");
+  const hg::HgJointMap map =
+      hg::loadHgJointMap(std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/unitree_g1_29dof.hg.yaml");
   ASSERT_EQ(map.motors.size(), 29u);
   for (int i = 0; i < 29; ++i) {
     EXPECT_EQ(map.motors[static_cast<std::size_t>(i)].motor, i);
@@ -326,7 +350,8 @@ std::string errorOf(const std::string& yaml, bool resolve = false) {
 }
 
 TEST(UnitreeHgJointMap, ErrorsNameTheBadValue) {
-  EXPECT_NE(errorOf("motors:\n  - {motor: 29, joint: l_elbow}\n").find("slot 29 is the arm_sdk weight"), std::string::npos);
+  EXPECT_NE(errorOf("motors:\n  - {motor: 29, joint: l_elbow}\n").find("slot 29 is the arm_sdk weight"),
+            std::string::npos);
   EXPECT_NE(errorOf("motors:\n  - {motor: 35, joint: l_elbow}\n").find("motors[0].motor"), std::string::npos);
   EXPECT_NE(errorOf("motors:\n  - {motor: 1, joint: a}\n  - {motor: 1, joint: b}\n").find("motor listed twice"),
             std::string::npos);

@@ -41,12 +41,14 @@ std::string writeLog(const SceneModel& scene, const std::string& name, const std
   return path;
 }
 
-const std::string kArms = ",left_f,left_distance,left_pair,left_zone,left_status,left_target_x,left_target_y,left_target_z,"
-                          "right_f,right_distance,right_pair,right_zone,right_status,right_target_x,right_target_y,right_target_z,estop";
+const std::string kArms =
+    ",left_f,left_distance,left_pair,left_zone,left_status,left_target_x,left_target_y,left_target_z,"
+    "right_f,right_distance,right_pair,right_zone,right_status,right_target_x,right_target_y,right_target_z,estop";
 
 TEST(LogScene, NearestRowsWithTheirJointsZonesAndTargets) {
   const SceneModel scene = asimo();
-  const std::string path = writeLog(scene, "log_ok.csv", kArms,
+  const std::string path = writeLog(
+      scene, "log_ok.csv", kArms,
       {{"0.0", ",0,0.2,,free,no_target,nan,nan,nan,0,0.3,,free,no_target,nan,nan,nan,0"},
        {"1.0", ",0.5,0.012,chest|l_hand,yellow,given,0.3,0.2,1.0,0,0.3,,free,no_target,nan,nan,nan,0"},
        {"2.0", ",1,0.004,r_forearm|l_hand,red,given,0.3,0.2,1.0,1,0.004,r_forearm|l_hand,red,given,0.3,-0.1,0.9,2"}});
@@ -88,7 +90,8 @@ TEST(LogScene, WithoutArmColumnsTheArmsAreNeutral) {
   EXPECT_FALSE(s[0].input.targets[0].given);
 }
 
-void expectError(const SceneModel& scene, const std::string& path, const std::vector<double>& at, const std::string& text) {
+void expectError(const SceneModel& scene, const std::string& path, const std::vector<double>& at,
+                 const std::string& text) {
   try {
     readLogScenes(scene, path, at);
     ADD_FAILURE() << "no error, expected: " << text;
@@ -107,7 +110,8 @@ TEST(LogScene, BadInputIsNamed) {
   expectError(scene, writeLog(scene, "log_zone.csv", ",left_zone", {{"0", ",purple"}}), {0.0},
               "row 1 column left_zone: zone 'purple' is none of free, yellow, orange, red");
   expectError(scene, writeLog(scene, "log_short.csv", ",left_zone", {{"0", ""}}), {0.0}, "row 1: ");
-  expectError(scene, writeLog(scene, "log_time.csv", "", {{"0", ""}, {"nan", ""}}), {0.0}, "row 2 column time: 'nan' is not finite");
+  expectError(scene, writeLog(scene, "log_time.csv", "", {{"0", ""}, {"nan", ""}}), {0.0},
+              "row 2 column time: 'nan' is not finite");
   expectError(scene, writeLog(scene, "log_f.csv", ",left_zone,left_f", {{"0", ",free,x1"}}), {0.0},
               "column left_f: 'x1' is not a number");
   {
@@ -118,7 +122,8 @@ TEST(LogScene, BadInputIsNamed) {
     for (int i = 0; i < scene.model.nq; ++i) f << (i == 3 ? ",nan" : ",0");
     f << "\n";
   }
-  expectError(scene, dir + "log_nan_q.csv", {0.0}, "column q_" + scene.model.q_names[3] + ": 'nan' is not a finite joint position");
+  expectError(scene, dir + "log_nan_q.csv", {0.0},
+              "column q_" + scene.model.q_names[3] + ": 'nan' is not a finite joint position");
   expectError(scene, writeLog(scene, "log_at.csv", "", {{"0", ""}}), {NAN}, "a requested time is not finite");
   std::ofstream(dir + "log_empty.csv") << "";
   expectError(scene, dir + "log_empty.csv", {0.0}, "empty time series");

@@ -53,8 +53,8 @@ std::string readFile(const std::string& path) {
 int runRender(const std::string& args, const std::string& out, std::string& log) {
   fs::create_directories(out);
   const std::string log_path = out + "/render.log";
-  reflex::testing::ChildProcess p({"/bin/sh", "-c", "exec /usr/bin/python3 " + kScript + " --build " + kBuild + " " + args},
-                                  log_path);
+  reflex::testing::ChildProcess p(
+      {"/bin/sh", "-c", "exec /usr/bin/python3 " + kScript + " --build " + kBuild + " " + args}, log_path);
   const int rc = p.wait(std::chrono::seconds(110));
   log = readFile(log_path);
   return rc;
@@ -63,9 +63,9 @@ int runRender(const std::string& args, const std::string& out, std::string& log)
 /// Pixel (u right, v down) [px] of the world point p_B in a kWidth x kHeight picture, as a pinhole camera
 /// at target + radius (cos el cos az, cos el sin az, sin el) looking at the target, z up.
 Eigen::Vector2d project(const Eigen::Vector3d& p_B) {
-  const Eigen::Vector3d c_B = kTarget + kRadius * Eigen::Vector3d(std::cos(kElevation) * std::cos(kAzimuth),
-                                                                  std::cos(kElevation) * std::sin(kAzimuth),
-                                                                  std::sin(kElevation));
+  const Eigen::Vector3d c_B =
+      kTarget + kRadius * Eigen::Vector3d(std::cos(kElevation) * std::cos(kAzimuth),
+                                          std::cos(kElevation) * std::sin(kAzimuth), std::sin(kElevation));
   const Eigen::Vector3d forward = (kTarget - c_B).normalized();
   const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
   const Eigen::Vector3d up = right.cross(forward);
@@ -100,8 +100,8 @@ TEST(ReportRender, AKnownPostureIsDrawnWhereForwardKinematicsPutsIt) {
   const Model model = loadModel(kUrdf, loadCollisionConfigFor(kUrdf, ""));
   Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
   // Arms raised sideways, elbows a little bent: both hands clear of the body seen from the front.
-  const std::pair<const char*, double> posture[] = {{"l_shoulder_roll", 1.1}, {"r_shoulder_roll", -1.1},
-                                                    {"l_elbow", -0.4}, {"r_elbow", -0.4}};
+  const std::pair<const char*, double> posture[] = {
+      {"l_shoulder_roll", 1.1}, {"r_shoulder_roll", -1.1}, {"l_elbow", -0.4}, {"r_elbow", -0.4}};
   for (const auto& [name, value] : posture) {
     ASSERT_GE(model.qIndex(name), 0) << name;
     q[model.qIndex(name)] = value;
@@ -120,14 +120,16 @@ TEST(ReportRender, AKnownPostureIsDrawnWhereForwardKinematicsPutsIt) {
   }
   std::string log;
   std::ostringstream camera;
-  camera << kAzimuth << "," << kElevation << "," << kRadius << "," << kTarget.x() << "," << kTarget.y() << "," << kTarget.z();
+  camera << kAzimuth << "," << kElevation << "," << kRadius << "," << kTarget.x() << "," << kTarget.y() << ","
+         << kTarget.z();
   const auto t0 = std::chrono::steady_clock::now();
   ASSERT_EQ(runRender("--log " + csv + " --at 0.5 --out " + out + " --tile " + std::to_string(kWidth) + "x" +
                           std::to_string(kHeight) + " --camera " + camera.str(),
                       out, log),
             0)
       << log;
-  std::printf("render_scenes.py: %.1f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  std::printf("render_scenes.py: %.1f s\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 
   const cv::Mat img = cv::imread(out + "/scene_0.png", cv::IMREAD_COLOR);
   ASSERT_FALSE(img.empty()) << log;

@@ -37,9 +37,12 @@ using reflex::testing::robotPath;
 
 SceneModel asimo() { return loadSceneModel(robotPath("asimo_like.urdf"), "", ""); }
 
-Eigen::Vector3d vec(const json& j) { return {j.at("x").get<double>(), j.at("y").get<double>(), j.at("z").get<double>()}; }
+Eigen::Vector3d vec(const json& j) {
+  return {j.at("x").get<double>(), j.at("y").get<double>(), j.at("z").get<double>()};
+}
 Eigen::Quaterniond quat(const json& j) {
-  return Eigen::Quaterniond(j.at("w").get<double>(), j.at("x").get<double>(), j.at("y").get<double>(), j.at("z").get<double>());
+  return Eigen::Quaterniond(j.at("w").get<double>(), j.at("x").get<double>(), j.at("y").get<double>(),
+                            j.at("z").get<double>());
 }
 
 /// Checks `v` against `schema` (the subset our schemas use); appends every violation to `errors`.
@@ -58,8 +61,13 @@ void validate(const json& v, const json& schema, const std::string& where, std::
       types.insert(schema["type"].get<std::string>());
     }
   }
-  std::string t = v.is_null() ? "null" : v.is_boolean() ? "boolean" : v.is_number_integer() ? "integer"
-                : v.is_number() ? "number" : v.is_string() ? "string" : v.is_array() ? "array" : "object";
+  std::string t = v.is_null()             ? "null"
+                  : v.is_boolean()        ? "boolean"
+                  : v.is_number_integer() ? "integer"
+                  : v.is_number()         ? "number"
+                  : v.is_string()         ? "string"
+                  : v.is_array()          ? "array"
+                                          : "object";
   if (!types.empty() && !types.count(t) && !(t == "integer" && types.count("number"))) {
     errors.push_back(where + ": " + t + " where the schema says " + schema["type"].dump());
     return;
@@ -80,7 +88,8 @@ void validate(const json& v, const json& schema, const std::string& where, std::
     }
   }
   if (v.is_array() && schema.contains("items"))
-    for (std::size_t i = 0; i < v.size(); ++i) validate(v[i], schema["items"], where + "[" + std::to_string(i) + "]", errors);
+    for (std::size_t i = 0; i < v.size(); ++i)
+      validate(v[i], schema["items"], where + "[" + std::to_string(i) + "]", errors);
 }
 
 std::set<std::string> keys(const json& properties) {
@@ -120,7 +129,10 @@ TEST(Scene, FrameTransformsComposeToForwardKinematicsOnBothRobots) {
         X.linear() = quat(t["rotation"]).normalized().toRotationMatrix();
         EXPECT_NEAR(quat(t["rotation"]).norm(), 1.0, 1e-12);
         X.translation() = vec(t["translation"]);
-        ASSERT_TRUE(parent_of.emplace(t["child_frame_id"].get<std::string>(), std::make_pair(t["parent_frame_id"].get<std::string>(), X)).second)
+        ASSERT_TRUE(parent_of
+                        .emplace(t["child_frame_id"].get<std::string>(),
+                                 std::make_pair(t["parent_frame_id"].get<std::string>(), X))
+                        .second)
             << "one transform per child";
       }
       control::KinematicsData fk(model);
@@ -255,7 +267,8 @@ TEST(Scene, ClosestLineToABodySchemaSegment) {
   for (const json& e : update["entities"]) by_id[e["id"].get<std::string>()] = e;
   const json& right = by_id.at("closest/right");
   ASSERT_EQ(right["lines"].size(), 1U);
-  EXPECT_LT((vec(right["lines"][0]["points"][0]) - pa).norm() + (vec(right["lines"][0]["points"][1]) - pb).norm(), 1e-12);
+  EXPECT_LT((vec(right["lines"][0]["points"][0]) - pa).norm() + (vec(right["lines"][0]["points"][1]) - pb).norm(),
+            1e-12);
   in.schema_segments = {far};
   ASSERT_TRUE(updateScene(scene, data, in));
   by_id.clear();
@@ -321,8 +334,10 @@ TEST(Scene, ClosestPairLineAndZoneColours) {
     return Rgba{c["r"], c["g"], c["b"], c["a"]};
   };
   auto same = [](Rgba a, Rgba b) { return a.r == b.r && a.g == b.g && a.b == b.b && a.a == b.a; };
-  for (const char* s : {"l_upper_arm", "l_forearm", "l_hand"}) EXPECT_TRUE(same(colourOf(s), zoneColour(Zone::kOrange))) << s;
-  for (const char* s : {"r_upper_arm", "r_forearm", "r_hand"}) EXPECT_TRUE(same(colourOf(s), zoneColour(Zone::kYellow))) << s;
+  for (const char* s : {"l_upper_arm", "l_forearm", "l_hand"})
+    EXPECT_TRUE(same(colourOf(s), zoneColour(Zone::kOrange))) << s;
+  for (const char* s : {"r_upper_arm", "r_forearm", "r_hand"})
+    EXPECT_TRUE(same(colourOf(s), zoneColour(Zone::kYellow))) << s;
   EXPECT_TRUE(same(colourOf("chest"), zoneColour(Zone::kOrange))) << "the partner of the left arm's closest pair";
   EXPECT_TRUE(same(colourOf("head"), neutralColour()));
   EXPECT_TRUE(same(colourOf("l_thigh"), neutralColour()));
@@ -385,8 +400,8 @@ TEST(Scene, MessagesValidateAgainstTheirSchemasAndSchemasNameTheFoxgloveFields) 
   // Every field foxglove.SceneEntity has, each required (the published schema requires them all; a
   // message without `arrows` or `models` fails Foxglove's own validation: view_foxglove_ws_test and
   // record_scene_process_test check every message against it).
-  const std::set<std::string> entity_fields{"timestamp", "frame_id", "id",     "lifetime",  "frame_locked",
-                                            "metadata",  "arrows",   "cubes",  "spheres",   "cylinders",
+  const std::set<std::string> entity_fields{"timestamp", "frame_id",  "id",    "lifetime", "frame_locked",
+                                            "metadata",  "arrows",    "cubes", "spheres",  "cylinders",
                                             "lines",     "triangles", "texts", "models"};
   EXPECT_EQ(keys(entity["properties"]), entity_fields);
   std::set<std::string> required;
@@ -395,8 +410,9 @@ TEST(Scene, MessagesValidateAgainstTheirSchemasAndSchemasNameTheFoxgloveFields) 
   for (const json& e : su["entities"]) EXPECT_EQ(keys(e), entity_fields) << e["id"];
   EXPECT_EQ(keys(entity["properties"]["cylinders"]["items"]["properties"]),
             (std::set<std::string>{"pose", "size", "bottom_scale", "top_scale", "color"}));
-  EXPECT_EQ(keys(entity["properties"]["lines"]["items"]["properties"]),
-            (std::set<std::string>{"type", "pose", "thickness", "scale_invariant", "points", "color", "colors", "indices"}));
+  EXPECT_EQ(
+      keys(entity["properties"]["lines"]["items"]["properties"]),
+      (std::set<std::string>{"type", "pose", "thickness", "scale_invariant", "points", "color", "colors", "indices"}));
   EXPECT_EQ(keys(entity["properties"]["texts"]["items"]["properties"]),
             (std::set<std::string>{"pose", "billboard", "font_size", "scale_invariant", "color", "text"}));
   const json f = frameTransformsSchema();
@@ -458,8 +474,8 @@ TEST(Scene, BadJointInputIsSkippedAndCounted) {
   SceneData data(scene);
   Eigen::VectorXd q;
   int unknown = 0, rejected = 0;
-  const int set = jointPositionsToQ(scene, {"l_elbow", "no_such_joint", "r_elbow", "x"}, {-1.0, 2.0, std::nan(""), 1.0, 5.0}, q,
-                                    &unknown, &rejected);
+  const int set = jointPositionsToQ(scene, {"l_elbow", "no_such_joint", "r_elbow", "x"},
+                                    {-1.0, 2.0, std::nan(""), 1.0, 5.0}, q, &unknown, &rejected);
   EXPECT_EQ(set, 1);
   EXPECT_EQ(unknown, 3) << "two unknown names and one position without a name";
   EXPECT_EQ(rejected, 1);
@@ -498,8 +514,9 @@ TEST(Scene, FindsTheRobotsControllerYamlBesideTheUrdf) {
     loadSceneModel(robotPath("small_humanoid.urdf"), "", "/nonexistent/ctl.yaml");
     ADD_FAILURE() << "no error";
   } catch (const control::ConfigError& e) {
-    EXPECT_EQ(std::string(e.what()),
-              "--controller '/nonexistent/ctl.yaml': no such controller configuration file (No such file or directory)");
+    EXPECT_EQ(
+        std::string(e.what()),
+        "--controller '/nonexistent/ctl.yaml': no such controller configuration file (No such file or directory)");
   }
 }
 

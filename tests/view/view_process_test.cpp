@@ -72,7 +72,8 @@ bool exists(const std::string& path) {
   if (!exists(kModules + "/ws") || !exists(kModules + "/@foxglove/ws-protocol") || !exists(kModules + "/three/build"))
     return ::testing::AssertionFailure() << kModules << " incomplete: run `npm ci` in bringup/web (bringup/setup.sh)";
   if (chromium && (std::string(REFLEX_CHROMIUM).empty() || !exists(REFLEX_CHROMIUM)))
-    return ::testing::AssertionFailure() << "chromium not found (Debian package chromium; bringup/setup.sh installs it)";
+    return ::testing::AssertionFailure()
+           << "chromium not found (Debian package chromium; bringup/setup.sh installs it)";
   return ::testing::AssertionSuccess();
 }
 
@@ -123,8 +124,13 @@ struct LiveSystem {
   std::string url() const { return "http://127.0.0.1:" + std::to_string(port) + "/"; }
   static std::vector<std::string> publisherArgs(int domain, const std::vector<std::string>& objects) {
     if (objects.empty()) return {"/bin/true"};
-    std::vector<std::string> argv{kBin + "/reflex_modules_object_publisher", "--domain", std::to_string(domain),
-                                  "--duration", "60", "--rate", "10"};
+    std::vector<std::string> argv{kBin + "/reflex_modules_object_publisher",
+                                  "--domain",
+                                  std::to_string(domain),
+                                  "--duration",
+                                  "60",
+                                  "--rate",
+                                  "10"};
     for (const std::string& o : objects) argv.insert(argv.end(), {"--object", o});
     return argv;
   }
@@ -194,10 +200,10 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     LiveSystem sys(kDomain, "view_ws");
     ASSERT_GT(sys.port, 0) << readText(sys.view_log);
     std::this_thread::sleep_for(2s);  // the controller's first samples
-    const nlohmann::json r =
-        runJson({REFLEX_NODE, kSource + "/tests/view/ws_client_check.js", "--url", "ws://127.0.0.1:" + std::to_string(sys.port),
-                 "--urdf", kUrdf, "--modules", kModules, "--seconds", "4"},
-                ::testing::TempDir() + "view_ws_client.log", 30s);
+    const nlohmann::json r = runJson(
+        {REFLEX_NODE, kSource + "/tests/view/ws_client_check.js", "--url", "ws://127.0.0.1:" + std::to_string(sys.port),
+         "--urdf", kUrdf, "--modules", kModules, "--seconds", "4"},
+        ::testing::TempDir() + "view_ws_client.log", 30s);
     ASSERT_TRUE(r.contains("rates")) << r.dump();
     std::printf("ws client: %s\n", r.dump().substr(0, 600).c_str());
     EXPECT_EQ(r["subprotocol"], "foxglove.websocket.v1");
@@ -232,9 +238,9 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     ASSERT_FALSE(prefix.empty()) << "the view's participant was discovered";
     EXPECT_TRUE(watch.writersOf(prefix).empty()) << "reflex_view writes " << *watch.writersOf(prefix).begin();
     const std::set<std::string> readers = watch.readersOf(prefix);
-    EXPECT_EQ(readers, (std::set<std::string>{"reflex/joint_state", "reflex/control_status", "reflex/hand_targets",
-                                              "reflex/object_targets", "reflex/controller_protection",
-                                              "reflex/body_schema"}));
+    EXPECT_EQ(readers,
+              (std::set<std::string>{"reflex/joint_state", "reflex/control_status", "reflex/hand_targets",
+                                     "reflex/object_targets", "reflex/controller_protection", "reflex/body_schema"}));
     EXPECT_FALSE(watch.writersOf(watch.prefixOf("controller")).empty()) << "the watch sees writers at all";
 
     EXPECT_EQ(sys.view.terminate(), 0);
@@ -252,16 +258,17 @@ TEST(ReflexView, PageRendersTheRobotInHeadlessChromium) {
   ASSERT_GT(sys.port, 0) << readText(sys.view_log);
   const std::string shot = std::string(REFLEX_ARTEFACT_DIR) + "/reflex_view_page.png";
   std::remove(shot.c_str());
-  const nlohmann::json r = runJson({REFLEX_NODE, kSource + "/tests/view/page_check.js", "--url", sys.url(), "--urdf", kUrdf,
-                                    "--modules", kModules, "--chromium", REFLEX_CHROMIUM, "--screenshot", shot,
-                                    "--seconds", "4"},
-                                   ::testing::TempDir() + "view_page_check.log", 90s);
+  const nlohmann::json r =
+      runJson({REFLEX_NODE, kSource + "/tests/view/page_check.js", "--url", sys.url(), "--urdf", kUrdf, "--modules",
+               kModules, "--chromium", REFLEX_CHROMIUM, "--screenshot", shot, "--seconds", "4"},
+              ::testing::TempDir() + "view_page_check.log", 90s);
   ASSERT_TRUE(r.contains("view")) << r.dump();
   std::printf("page: %s\n", r.dump().substr(0, 900).c_str());
   const nlohmann::json& v = r["view"];
   EXPECT_TRUE(v["connected"].get<bool>());
   EXPECT_GT(v["framesReceived"].get<int>(), 0);
-  EXPECT_GE(r["framesDuringWait"].get<double>() / r["waitSeconds"].get<double>(), 15.0) << "scene updates per second drawn";
+  EXPECT_GE(r["framesDuringWait"].get<double>() / r["waitSeconds"].get<double>(), 15.0)
+      << "scene updates per second drawn";
   EXPECT_EQ(v["capsulesDrawn"], r["expectedCapsules"]);
   EXPECT_EQ(v["spheresDrawn"], r["expectedSpheres"]);
   EXPECT_EQ(r["expectedCapsules"], 17);
@@ -275,7 +282,8 @@ TEST(ReflexView, PageRendersTheRobotInHeadlessChromium) {
   EXPECT_EQ(v["closestLines"], 2) << "one closest-pair line per arm";
   int given = 0;
   for (const auto& a : v["lastStatus"]["arms"]) given += a["target_given"].get<bool>() ? 1 : 0;
-  EXPECT_NEAR(v["targetsDrawn"].get<int>(), given, 1) << "targets drawn follow the hand targets (one may change in between)";
+  EXPECT_NEAR(v["targetsDrawn"].get<int>(), given, 1)
+      << "targets drawn follow the hand targets (one may change in between)";
   EXPECT_EQ(v["objectsDrawn"], 2) << "the two published objects";
   EXPECT_GE(v["schemaDrawn"].get<int>(), 1) << "the grasped bar (and the gaze line while it is enabled)";
   EXPECT_FALSE(v["cameraImage"].get<bool>());
@@ -328,9 +336,10 @@ TEST(ReflexView, ASlowClientSkipsMessagesAndTheViewDoesNotGrow) {
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   a.sin_port = htons(static_cast<std::uint16_t>(sys.port));
   ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)), 0);
-  const std::string handshake = "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                                "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
-                                "Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
+  const std::string handshake =
+      "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+      "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+      "Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
   ASSERT_EQ(::send(fd, handshake.data(), handshake.size(), 0), static_cast<ssize_t>(handshake.size()));
   char reply[512] = {};
   ASSERT_GT(::recv(fd, reply, sizeof(reply) - 1, 0), 0);
@@ -344,7 +353,8 @@ TEST(ReflexView, ASlowClientSkipsMessagesAndTheViewDoesNotGrow) {
   // Its queue stays at the budget: disconnected kMaxStall (10 s) after the first skipped message.
   socklen_t len = sizeof(a);
   ASSERT_EQ(::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len), 0);
-  const std::string line = "client 127.0.0.1:" + std::to_string(ntohs(a.sin_port)) + " disconnected: its queue has stayed";
+  const std::string line =
+      "client 127.0.0.1:" + std::to_string(ntohs(a.sin_port)) + " disconnected: its queue has stayed";
   const auto end = std::chrono::steady_clock::now() + 20s;
   while (readText(sys.view_log).find(line) == std::string::npos && std::chrono::steady_clock::now() < end)
     std::this_thread::sleep_for(200ms);
@@ -388,9 +398,10 @@ class RawClient {
     socklen_t len = sizeof(a);
     ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &len);
     local_port_ = ntohs(a.sin_port);
-    const std::string handshake = "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                                  "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
-                                  "Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
+    const std::string handshake =
+        "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+        "Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
     if (!sendAll(handshake)) return;
     while (buffer_.find("\r\n\r\n") == std::string::npos)
       if (!fill(5000)) return;
@@ -569,10 +580,11 @@ TEST(ReflexView, AClientFloodingUnknownChannelsWithoutReadingIsDisconnectedAndIt
   const int good = goodClientMessages(sys.port, 2.0);
   EXPECT_EQ(sys.view.terminate(), 0);
   const std::string log = readText(sys.view_log);
-  std::printf("flood of unknown channels: %ld messages of 200 (%zu bytes each); view RSS %ld kB, peak %ld kB, %ld kB 1 s "
-              "after the close, %ld kB 3 s after; a good client then got %d transforms in 2 s\n%s\n",
-              messages, frame.size(), rss_before, rss_peak, rss_closed, rss_later, good,
-              disconnectLine(log, flood_port).c_str());
+  std::printf(
+      "flood of unknown channels: %ld messages of 200 (%zu bytes each); view RSS %ld kB, peak %ld kB, %ld kB 1 s "
+      "after the close, %ld kB 3 s after; a good client then got %d transforms in 2 s\n%s\n",
+      messages, frame.size(), rss_before, rss_peak, rss_closed, rss_later, good,
+      disconnectLine(log, flood_port).c_str());
   EXPECT_TRUE(closed) << "the view disconnects the flooding client";
   EXPECT_LT(rss_peak - rss_before, 100 * 1024) << "the view's memory stays bounded while flooded";
   EXPECT_LT(rss_later - rss_before, 20 * 1024) << "and comes back once the client is gone";
@@ -627,10 +639,11 @@ TEST(ReflexView, AJunkSenderIsDisconnectedWhileAGoodClientIsStillServed) {
   const long rss_after = residentKb(view);
   EXPECT_EQ(sys.view.terminate(), 0);
   const std::string log = readText(sys.view_log);
-  std::printf("junk sender: %ld messages, closed %s after %lld ms; view RSS %ld kB, peak %ld kB, after %ld kB; the "
-              "viewer got %d transforms in 5 s\n%s\n",
-              sent, closed ? "yes" : "NO", static_cast<long long>(closed_after.count()), rss_before, rss_peak, rss_after,
-              good_during, disconnectLine(log, junk_port).c_str());
+  std::printf(
+      "junk sender: %ld messages, closed %s after %lld ms; view RSS %ld kB, peak %ld kB, after %ld kB; the "
+      "viewer got %d transforms in 5 s\n%s\n",
+      sent, closed ? "yes" : "NO", static_cast<long long>(closed_after.count()), rss_before, rss_peak, rss_after,
+      good_during, disconnectLine(log, junk_port).c_str());
   EXPECT_TRUE(closed) << "the junk sender is disconnected";
   EXPECT_LT(closed_after, 3s);
   EXPECT_LT(rss_peak - rss_before, 20 * 1024);
@@ -643,7 +656,8 @@ TEST(ReflexView, SubscriptionsPerClientAreCappedAndTheRefusalNamesTheCap) {
   // 64 subscriptions per client, a million more refused and the client disconnected; 32 clients at
   // once; a message past 64 KiB.
   const std::string view_log = ::testing::TempDir() + "view_subs_view.log";
-  testing::ChildProcess view_process({kBin + "/reflex_view", "--domain", "136", "--port", "0", "--duration", "60"}, view_log);
+  testing::ChildProcess view_process({kBin + "/reflex_view", "--domain", "136", "--port", "0", "--duration", "60"},
+                                     view_log);
   const int port = bannerPort(view_log);
   ASSERT_GT(port, 0) << readText(view_log);
   const pid_t view = view_process.pid();
@@ -734,7 +748,8 @@ TEST(ReflexView, StartupErrorsNameTheBadValue) {
   auto run = [](std::vector<std::string> extra, int expect_rc, const std::string& expect_text) {
     std::vector<std::string> argv{kBin + "/reflex_view", "--domain", "132"};
     argv.insert(argv.end(), extra.begin(), extra.end());
-    if (std::find(extra.begin(), extra.end(), "--duration") == extra.end()) argv.insert(argv.end(), {"--duration", "1"});
+    if (std::find(extra.begin(), extra.end(), "--duration") == extra.end())
+      argv.insert(argv.end(), {"--duration", "1"});
     const std::string log = ::testing::TempDir() + "view_setup.log";
     testing::ChildProcess p(argv, log);
     EXPECT_EQ(p.wait(15s), expect_rc) << readText(log);
@@ -744,7 +759,8 @@ TEST(ReflexView, StartupErrorsNameTheBadValue) {
   int port = 0;
   const int fd = listeningSocket(port);
   ASSERT_GE(fd, 0);
-  run({"--port", std::to_string(port)}, 2, "cannot listen on 127.0.0.1:" + std::to_string(port) + ": Address already in use");
+  run({"--port", std::to_string(port)}, 2,
+      "cannot listen on 127.0.0.1:" + std::to_string(port) + ": Address already in use");
   ::close(fd);
   run({"--bind", "999.1.2.3"}, 2, "--bind '999.1.2.3' is not an IP address");
   run({"--bind", "localhost"}, 2, "--bind 'localhost' is not an IP address");

@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
   }
   apriltag_detector_destroy(detector);
   tag36h11_destroy(family);
-  std::printf("%ld detects (%s), %d with a wrong tag count, no crash\n", starts,
-              reuse ? "one pool" : "a new pool each", wrong);
+  std::printf("%ld detects (%s), %d with a wrong tag count, no crash\n", starts, reuse ? "one pool" : "a new pool each",
+              wrong);
   return wrong == 0 ? 0 : 1;
 }

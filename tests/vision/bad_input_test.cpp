@@ -66,8 +66,8 @@ class BadInput : public ::testing::Test {
   }
   static int runCli(const std::string& args, std::string& err) {
     TempDir tmp("cli");
-    const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_vision " + args + " > " + (tmp / "out") + " 2> " +
-                            (tmp / "err");
+    const std::string cmd =
+        std::string(REFLEX_BIN_DIR) + "/reflex_vision " + args + " > " + (tmp / "out") + " 2> " + (tmp / "err");
     const int rc = std::system(cmd.c_str());
     err = readText(tmp / "err");
     return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
@@ -176,7 +176,9 @@ TEST_F(BadInput, MissingOrInconsistentCalibration) {
   const std::string d = copyOf("mp4");
   const std::string right = readText(d + "/right.yaml");
   // Right projection without the baseline.
-  writeText(d + "/right.yaml", std::regex_replace(right, std::regex(R"((projection_matrix:[\s\S]*?data: \[[^,]+, [^,]+, [^,]+, )[^,]+,)"), "$1 0,"));
+  writeText(d + "/right.yaml",
+            std::regex_replace(right, std::regex(R"((projection_matrix:[\s\S]*?data: \[[^,]+, [^,]+, [^,]+, )[^,]+,)"),
+                               "$1 0,"));
   EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("right.yaml"), HasSubstr("P[0][3]")));
   // Image size disagreeing with the left camera (wider: the principal point stays inside the image).
   writeText(d + "/right.yaml", std::regex_replace(right, std::regex("image_width: 640"), "image_width: 800"));
@@ -257,10 +259,10 @@ TEST_F(BadInput, CommandLineErrorsNameTheBadValue) {
             std::regex_replace(readText(no_mount + "/session.yaml"), std::regex("camera_mount: .*\n"), ""));
   EXPECT_EQ(runCli("--session " + no_mount + " --dump " + (dir_ / "x.csv"), err), 2);
   EXPECT_THAT(err, HasSubstr("has no camera_mount.yaml: pass --mount FILE"));
-  EXPECT_EQ(runCli("--session " + no_mount + " --dump " + (dir_ / "x.csv") + " --mount " +
-                       (*base_ / "mp4/camera_mount.yaml"),
-                   err),
-            0)
+  EXPECT_EQ(
+      runCli("--session " + no_mount + " --dump " + (dir_ / "x.csv") + " --mount " + (*base_ / "mp4/camera_mount.yaml"),
+             err),
+      0)
       << err;
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump /no/such/dir/x.csv", err), 2);
   EXPECT_THAT(err, HasSubstr("/no/such/dir/x.csv"));
@@ -330,23 +332,29 @@ TEST_F(BadInput, SessionsThatCannotGiveAnyDetectionAreRefusedAtLoad) {
   {  // frame count in the manifest: negative, or not what timestamps.csv lists
     const std::string d = copyOf("mp4", "case4");
     editFile(d + "/session.yaml", "frames: 15", "frames: -3");
-    EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("session.yaml:"), HasSubstr(": frames: out of range (value '-3', expected an integer in [1, ")));
+    EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("session.yaml:"),
+                                       HasSubstr(": frames: out of range (value '-3', expected an integer in [1, ")));
     editFile(d + "/session.yaml", "frames: -3", "frames: 7");
     EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("frames = 7"), HasSubstr("lists 15")));
   }
   {  // nominal frame rate
     const std::string d = copyOf("mp4", "case5");
     editFile(d + "/session.yaml", "fps: 10", "fps: 1e9");
-    EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("session.yaml:"), HasSubstr(": fps: out of range (value '1e9', expected (0, ")));
+    EXPECT_THAT(errorOpening(d),
+                AllOf(HasSubstr("session.yaml:"), HasSubstr(": fps: out of range (value '1e9', expected (0, ")));
   }
   {  // tag sizes no camera can see, an object map without objects
     const std::string d = copyOf("mp4", "case6");
     editFile(d + "/objects.yaml", "size: 0.06", "size: 1e-05");
-    EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("objects.yaml:"), HasSubstr(": objects[0].size: out of range (value '1e-05', expected a number in [0.002, 5] m")));
+    EXPECT_THAT(errorOpening(d),
+                AllOf(HasSubstr("objects.yaml:"),
+                      HasSubstr(": objects[0].size: out of range (value '1e-05', expected a number in [0.002, 5] m")));
     editFile(d + "/objects.yaml", "size: 1e-05", "size: 100");
     EXPECT_THAT(errorOpening(d), HasSubstr("objects[0].size: out of range (value '100'"));
     writeText(d + "/objects.yaml", "family: tag36h11\nobjects: []\n");
-    EXPECT_THAT(errorOpening(d), AllOf(HasSubstr("objects.yaml:"), HasSubstr(": objects: the list is empty (no tag would ever be reported) (value '[]', expected at least one object)")));
+    EXPECT_THAT(errorOpening(d),
+                AllOf(HasSubstr("objects.yaml:"), HasSubstr(": objects: the list is empty (no tag would ever be "
+                                                            "reported) (value '[]', expected at least one object)")));
   }
   {  // a baseline of a nanometre (P[0][3] still negative, so the sign check passed) and of 100 km
     const std::string d = copyOf("mp4", "case7");
@@ -495,9 +503,9 @@ TEST_F(BadInput, SessionToolsNameTheFileTheyCouldNotWrite) {
     const int rc = std::system(("bash -c \"" + sh + "\"").c_str());
     return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
   };
-  EXPECT_EQ(limited(bin("reflex_make_session") + " --quiet --script " + (dir_ / "scene.yaml") + " --out " +
-                    (dir_ / "made")),
-            2);
+  EXPECT_EQ(
+      limited(bin("reflex_make_session") + " --quiet --script " + (dir_ / "scene.yaml") + " --out " + (dir_ / "made")),
+      2);
   EXPECT_THAT(readText(dir_ / "out.txt"), HasSubstr(dir_ / "made/"));
   const std::string& s = *base_ / "mp4";
   EXPECT_EQ(limited(bin("reflex_vision_record") + " --quiet --camera-left " + s + "/left.mp4 --camera-right " + s +

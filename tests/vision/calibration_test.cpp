@@ -13,8 +13,8 @@
 
 using namespace reflex::vision;
 using reflex::vision::test::errorOf;
-using ::testing::HasSubstr;
 using ::testing::AllOf;
+using ::testing::HasSubstr;
 using ::testing::Not;
 
 namespace {
@@ -46,7 +46,6 @@ std::string rightFrom(const std::string& left) {
   std::string r = std::regex_replace(left, std::regex("narrow_stereo/left"), "narrow_stereo/right");
   return std::regex_replace(r, std::regex(R"(\[495.0, 0, 320.0, 0,)"), "[495.0, 0, 320.0, -29.7,");
 }
-
 
 }  // namespace
 
@@ -84,24 +83,33 @@ TEST(Calibration, ErrorsNameFileAndField) {
   };
   // wrong rows*cols vs data length
   EXPECT_THAT(bad(R"(data: \[501.2, 0, 318.7, 0, 500.9, 241.3, 0, 0, 1\])", "data: [501.2, 0, 318.7, 0, 500.9, 241.3]"),
-              AllOf(HasSubstr("cam.yaml:"), HasSubstr("camera_matrix.data: has 6 numbers (value"), HasSubstr("expected rows*cols = 3*3 numbers)")));
+              AllOf(HasSubstr("cam.yaml:"), HasSubstr("camera_matrix.data: has 6 numbers (value"),
+                    HasSubstr("expected rows*cols = 3*3 numbers)")));
   // non-positive focal length
   EXPECT_THAT(bad("501.2", "-501.2"), AllOf(HasSubstr("cam.yaml"), HasSubstr("fx = -501.2")));
   EXPECT_THAT(bad(R"(\[495.0, 0, 320.0, 0, 0, 495.0)", "[0, 0, 320.0, 0, 0, 495.0"),
               AllOf(HasSubstr("projection_matrix"), HasSubstr("fx'")));
   // missing field
   EXPECT_THAT(bad("image_height: 480\n", ""), AllOf(HasSubstr("cam.yaml"), HasSubstr("image_height")));
-  EXPECT_THAT(bad("rectification_matrix:", "rectification_matrixx:"), HasSubstr("rectification_matrix: missing (expected a 3x3 matrix {rows, cols, data})"));
+  EXPECT_THAT(bad("rectification_matrix:", "rectification_matrixx:"),
+              HasSubstr("rectification_matrix: missing (expected a 3x3 matrix {rows, cols, data})"));
   // unknown distortion model, wrong coefficient count
-  EXPECT_THAT(bad("plumb_bob", "fisheye62"), HasSubstr("distortion_model: unknown distortion model (value 'fisheye62', expected one of plumb_bob, rational_polynomial, equidistant)"));
-  EXPECT_THAT(bad("plumb_bob", "rational_polynomial"), HasSubstr("distortion_coefficients.data: has 5 coefficients (value '[-0.041, 0.013, 0.0004, -0.0002, 0]', expected 8 for the distortion model 'rational_polynomial')"));
+  EXPECT_THAT(bad("plumb_bob", "fisheye62"), HasSubstr("distortion_model: unknown distortion model (value 'fisheye62', "
+                                                       "expected one of plumb_bob, rational_polynomial, equidistant)"));
+  EXPECT_THAT(bad("plumb_bob", "rational_polynomial"),
+              HasSubstr("distortion_coefficients.data: has 5 coefficients (value '[-0.041, 0.013, 0.0004, -0.0002, "
+                        "0]', expected 8 for the distortion model 'rational_polynomial')"));
   // wrong shape
-  EXPECT_THAT(bad("  rows: 3\n  cols: 4", "  rows: 4\n  cols: 3"), HasSubstr("projection_matrix: a 4x3 matrix (value '{rows: 4, cols: 3, data: "));
+  EXPECT_THAT(bad("  rows: 3\n  cols: 4", "  rows: 4\n  cols: 3"),
+              HasSubstr("projection_matrix: a 4x3 matrix (value '{rows: 4, cols: 3, data: "));
   // not a number, not a rotation, negative size, syntax
-  EXPECT_THAT(bad("318.7", "abc"), HasSubstr("camera_matrix.data[2]: not a finite number (value 'abc', expected a list of finite numbers)"));
+  EXPECT_THAT(bad("318.7", "abc"),
+              HasSubstr("camera_matrix.data[2]: not a finite number (value 'abc', expected a list of finite numbers)"));
   EXPECT_THAT(bad(R"(data: \[1, 0, 0, 0, 1, 0, 0, 0, 1\])", "data: [2, 0, 0, 0, 1, 0, 0, 0, 1]"),
-              HasSubstr("rectification_matrix.data: not a rotation (value '[2, 0, 0, 0, 1, 0, 0, 0, 1]', expected R R^T = I and det > 0)"));
-  EXPECT_THAT(bad("image_width: 640", "image_width: -640"), HasSubstr("image_width: out of range (value '-640', expected an integer in [16, 16384])"));
+              HasSubstr("rectification_matrix.data: not a rotation (value '[2, 0, 0, 0, 1, 0, 0, 0, 1]', expected R "
+                        "R^T = I and det > 0)"));
+  EXPECT_THAT(bad("image_width: 640", "image_width: -640"),
+              HasSubstr("image_width: out of range (value '-640', expected an integer in [16, 16384])"));
   EXPECT_THAT(bad("camera_matrix:", "camera_matrix: [oops"), HasSubstr("YAML syntax error"));
   EXPECT_THAT(errorOf([] { loadCameraInfo("/nonexistent/left.yaml"); }), HasSubstr("/nonexistent/left.yaml"));
 }
@@ -132,7 +140,8 @@ TEST(Calibration, StereoInconsistenciesAreErrors) {
   }
   mirrored.right.P(0, 3) = -mirrored.right.P(0, 3);
   const std::string why = errorOf([&] { validateStereoCalibration(mirrored, "L.yaml", "R.yaml"); });
-  EXPECT_THAT(why, AllOf(HasSubstr("L.yaml"), HasSubstr("rectified focal lengths fx' = -"), HasSubstr("must be positive")));
+  EXPECT_THAT(why,
+              AllOf(HasSubstr("L.yaml"), HasSubstr("rectified focal lengths fx' = -"), HasSubstr("must be positive")));
   EXPECT_THAT(why, Not(HasSubstr("must be 0")));
 }
 
@@ -161,39 +170,51 @@ TEST(CameraMount, SceneScriptWithoutMountIsRefused) {
   const std::string script = reflex::vision::test::nearScript(1.0);
   EXPECT_NO_THROW(parseSceneScript(script, "s.yaml"));
   const std::string without = std::regex_replace(script, std::regex("  mount:[^\n]*\n(    [^\n]*\n)*"), "");
-  EXPECT_THAT(errorOf([&] { parseSceneScript(without, "s.yaml"); }),
-              AllOf(HasSubstr("s.yaml:"), HasSubstr(": rig.mount: missing (expected the left camera in the robot base frame"), HasSubstr("bringup/vision/camera_mount.yaml")));
+  EXPECT_THAT(
+      errorOf([&] { parseSceneScript(without, "s.yaml"); }),
+      AllOf(HasSubstr("s.yaml:"), HasSubstr(": rig.mount: missing (expected the left camera in the robot base frame"),
+            HasSubstr("bringup/vision/camera_mount.yaml")));
   const std::string no_rig = std::regex_replace(script, std::regex("rig:\n(  [^\n]*\n)*"), "");
-  EXPECT_THAT(errorOf([&] { parseSceneScript(no_rig, "s.yaml"); }), HasSubstr(": rig: missing (expected a map {image_size, left, right, baseline, right_rpy_deg, mount})"));
+  EXPECT_THAT(errorOf([&] { parseSceneScript(no_rig, "s.yaml"); }),
+              HasSubstr(": rig: missing (expected a map {image_size, left, right, baseline, right_rpy_deg, mount})"));
 }
 
 TEST(CameraMount, ParseAndErrors) {
   const CameraMount m =
       parseCameraMount("translation: [0.1, 0.0, 1.0]\nrotation_matrix: [0,0,1, -1,0,0, 0,-1,0]\n", "mount.yaml");
   EXPECT_EQ(m.p_B_C, cv::Vec3d(0.1, 0.0, 1.0));
-  EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0.1, 0.0]\nrotation_matrix: [1,0,0,0,1,0,0,0,1]", "m.yaml"); }),
-              HasSubstr("m.yaml:1:14: translation: has 2 numbers (value '[0.1, 0.0]', expected a list of 3 finite numbers)"));
-  EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0, 0, 1]\nrotation_matrix: [1,0,0,0,1,0,0,0,-1]", "m.yaml"); }),
-              HasSubstr("m.yaml:2:18: rotation_matrix: not a rotation (value '[1, 0, 0, 0, 1, 0, 0, 0, -1]', expected R R^T = I within 1e-5 and det > 0)"));
+  EXPECT_THAT(
+      errorOf([] { parseCameraMount("translation: [0.1, 0.0]\nrotation_matrix: [1,0,0,0,1,0,0,0,1]", "m.yaml"); }),
+      HasSubstr("m.yaml:1:14: translation: has 2 numbers (value '[0.1, 0.0]', expected a list of 3 finite numbers)"));
+  EXPECT_THAT(
+      errorOf([] { parseCameraMount("translation: [0, 0, 1]\nrotation_matrix: [1,0,0,0,1,0,0,0,-1]", "m.yaml"); }),
+      HasSubstr("m.yaml:2:18: rotation_matrix: not a rotation (value '[1, 0, 0, 0, 1, 0, 0, 0, -1]', expected R R^T = "
+                "I within 1e-5 and det > 0)"));
   EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0, 0, 1]\n", "m.yaml"); }),
               HasSubstr("m.yaml:1:1: rotation_matrix: missing (expected 9 numbers, row-major)"));
 }
 
 TEST(ObjectMap, ParseAndErrors) {
-  const ObjectMap m = parseObjectMap("family: tag36h11\nobjects:\n  - {id: 0, name: cup, size: 0.06}\n"
-                                     "  - {id: 3, name: can, size: 0.05}\n",
-                                     "objects.yaml");
+  const ObjectMap m = parseObjectMap(
+      "family: tag36h11\nobjects:\n  - {id: 0, name: cup, size: 0.06}\n"
+      "  - {id: 3, name: can, size: 0.05}\n",
+      "objects.yaml");
   ASSERT_NE(m.find(3), nullptr);
   EXPECT_EQ(m.find(3)->name, "can");
   EXPECT_EQ(m.find(1), nullptr);
   EXPECT_EQ(m.findByName("cup")->tag_id, 0);
-  EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, name: a, size: 0.06}\n  - {id: 0, name: b, size: 0.06}\n", "o.yaml"); }),
+  EXPECT_THAT(errorOf([] {
+                parseObjectMap("objects:\n  - {id: 0, name: a, size: 0.06}\n  - {id: 0, name: b, size: 0.06}\n",
+                               "o.yaml");
+              }),
               AllOf(HasSubstr("o.yaml"), HasSubstr("duplicate tag id")));
   EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, name: a, size: -1}\n", "o.yaml"); }),
-              HasSubstr("o.yaml:2:28: objects[0].size: out of range (value '-1', expected a number in [0.002, 5] m (edge of the black square))"));
+              HasSubstr("o.yaml:2:28: objects[0].size: out of range (value '-1', expected a number in [0.002, 5] m "
+                        "(edge of the black square))"));
   EXPECT_THAT(errorOf([] { parseObjectMap("objects:\n  - {id: 0, size: 0.06}\n", "o.yaml"); }),
               HasSubstr("o.yaml:2:5: objects[0].name: missing (expected the object's name)"));
-  EXPECT_THAT(errorOf([] { parseObjectMap("family: tag36h11\n", "o.yaml"); }), HasSubstr("o.yaml:1:1: objects: missing (expected a list of {id, name, size})"));
+  EXPECT_THAT(errorOf([] { parseObjectMap("family: tag36h11\n", "o.yaml"); }),
+              HasSubstr("o.yaml:1:1: objects: missing (expected a list of {id, name, size})"));
 }
 
 // Values no physical camera has, each refused with the file, field, value and
@@ -205,8 +226,10 @@ TEST(Calibration, PhysicallyImpossibleValuesAreRefused) {
   };
   EXPECT_EQ(bad("xxx", "xxx"), "no error");
   // focal length against the 640 px width: [32, 32000] px
-  EXPECT_THAT(bad("501.2", "0.001"), AllOf(HasSubstr("cam.yaml:"), HasSubstr(": camera_matrix.data: focal length fx = 0.001 px is out of range"),
-                                           HasSubstr("[32, 32000]")));
+  EXPECT_THAT(
+      bad("501.2", "0.001"),
+      AllOf(HasSubstr("cam.yaml:"), HasSubstr(": camera_matrix.data: focal length fx = 0.001 px is out of range"),
+            HasSubstr("[32, 32000]")));
   EXPECT_THAT(bad("501.2", "1e9"), HasSubstr("fx = 1000000000 px"));
   EXPECT_EQ(bad("501.2, 0, 318.7, 0, 500.9", "32, 0, 318.7, 0, 32"), "no error");  // the limit itself is accepted
   // pixel aspect fy/fx in [0.25, 4]
@@ -221,8 +244,10 @@ TEST(Calibration, PhysicallyImpossibleValuesAreRefused) {
   // P's last row
   EXPECT_THAT(bad("0, 0, 1, 0]", "0, 0, 2, 0]"), HasSubstr("projection_matrix.data: last row is not [0, 0, 1, 0]"));
   // image size
-  EXPECT_THAT(bad("image_width: 640", "image_width: 4"), HasSubstr("image_width: out of range (value '4', expected an integer in [16, 16384])"));
-  EXPECT_THAT(bad("image_height: 480", "image_height: 100000"), HasSubstr("image_height: out of range (value '100000'"));
+  EXPECT_THAT(bad("image_width: 640", "image_width: 4"),
+              HasSubstr("image_width: out of range (value '4', expected an integer in [16, 16384])"));
+  EXPECT_THAT(bad("image_height: 480", "image_height: 100000"),
+              HasSubstr("image_height: out of range (value '100000'"));
 }
 
 TEST(Calibration, BaselineOutsideThePhysicalRangeIsRefused) {
@@ -231,7 +256,9 @@ TEST(Calibration, BaselineOutsideThePhysicalRangeIsRefused) {
   EXPECT_NO_THROW(validateStereoCalibration({l, r}, "L.yaml", "R.yaml"));  // 6 cm
   for (const double baseline : {1e-9, 5e-4, 11.0, 1e5}) {
     r.P(0, 3) = -r.P(0, 0) * baseline;
-    EXPECT_THAT(errorOf([&] { validateStereoCalibration({l, r}, "L.yaml", "R.yaml"); }),
+    EXPECT_THAT(errorOf([&] {
+                  validateStereoCalibration({l, r}, "L.yaml", "R.yaml");
+                }),
                 AllOf(HasSubstr("R.yaml"), HasSubstr("baseline"), HasSubstr("[0.001, 10] m")))
         << baseline;
   }
@@ -241,9 +268,10 @@ TEST(Calibration, BaselineOutsideThePhysicalRangeIsRefused) {
 
 TEST(ObjectMap, ImpossibleTagSizesAndEmptyMapsAreRefused) {
   for (const char* size : {"1e-6", "0.0019", "5.1", "1e6"})
-    EXPECT_THAT(errorOf([&] { parseObjectMap(std::string("objects:\n  - {id: 0, name: a, size: ") + size + "}\n", "o.yaml"); }),
-                HasSubstr(std::string("o.yaml:2:28: objects[0].size: out of range (value '") + size +
-                          "', expected a number in [0.002, 5] m (edge of the black square))"))
+    EXPECT_THAT(
+        errorOf([&] { parseObjectMap(std::string("objects:\n  - {id: 0, name: a, size: ") + size + "}\n", "o.yaml"); }),
+        HasSubstr(std::string("o.yaml:2:28: objects[0].size: out of range (value '") + size +
+                  "', expected a number in [0.002, 5] m (edge of the black square))"))
         << size;
   EXPECT_NO_THROW(parseObjectMap("objects:\n  - {id: 0, name: a, size: 0.002}\n  - {id: 1, name: b, size: 5}\n", "o"));
   EXPECT_THAT(errorOf([] { parseObjectMap("objects: []\n", "o.yaml"); }),
@@ -270,8 +298,9 @@ TEST(Calibration, DistortionNoLensHasIsRefused) {
 }
 
 TEST(CameraMount, AMountFarFromTheRobotIsRefused) {
-  EXPECT_THAT(errorOf([] { parseCameraMount("translation: [0.1, 1e6, 1.0]\nrotation_matrix: [0,0,1, -1,0,0, 0,-1,0]\n",
-                                            "m.yaml"); }),
+  EXPECT_THAT(errorOf([] {
+                parseCameraMount("translation: [0.1, 1e6, 1.0]\nrotation_matrix: [0,0,1, -1,0,0, 0,-1,0]\n", "m.yaml");
+              }),
               AllOf(HasSubstr("m.yaml"), HasSubstr("translation[1] = 1000000 m"), HasSubstr("10 m")));
   EXPECT_NO_THROW(parseCameraMount("translation: [0.1, -9.9, 1.0]\nrotation_matrix: [0,0,1, -1,0,0, 0,-1,0]\n", "m"));
 }

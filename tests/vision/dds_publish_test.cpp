@@ -69,7 +69,8 @@ TEST(VisionDds, PublishesObjectTargetsAt10HzMatchingGroundTruth) {
   // discovery completes, which takes seconds on a loaded machine.
   ASSERT_GE(got.size(), 30u);
   // Rate from the writer's sequence numbers and header stamps (robust to a lost sample).
-  const double mean_period = 1e-9 * static_cast<double>(got.back().header().stamp_ns() - got.front().header().stamp_ns()) /
+  const double mean_period = 1e-9 *
+                             static_cast<double>(got.back().header().stamp_ns() - got.front().header().stamp_ns()) /
                              static_cast<double>(got.back().header().seq() - got.front().header().seq());
   std::cout << got.size() << " samples, mean period " << 1000.0 * mean_period << " ms\n";
   EXPECT_NEAR(1.0 / mean_period, 10.0, 0.2);
@@ -113,9 +114,9 @@ TEST(VisionDds, SigtermEndsTheProcessPromptlyDuringAWait) {
   std::string ts = "frame,stamp\n";
   for (int k = 0; k < 10; ++k) ts += std::to_string(k) + "," + std::to_string(0.1 * k + (k >= 3 ? 9.5 : 0.0)) + "\n";
   writeText(dir / "s/timestamps.csv", ts);
-  reflex::testing::ChildProcess p({std::string(REFLEX_BIN_DIR) + "/reflex_vision", "--session", dir / "s", "--domain",
-                                   "85", "--progress"},
-                                  dir / "log.txt");
+  reflex::testing::ChildProcess p(
+      {std::string(REFLEX_BIN_DIR) + "/reflex_vision", "--session", dir / "s", "--domain", "85", "--progress"},
+      dir / "log.txt");
   ASSERT_TRUE(p.started());
   const auto t0 = std::chrono::steady_clock::now();
   const auto since = [](std::chrono::steady_clock::time_point t) {
@@ -179,8 +180,8 @@ TEST(VisionDds, WaitReadersHoldsTheReplayUntilAReaderMatchedAndTheFirstFramesArr
 TEST(VisionDds, WaitReadersGivesUpAfterTheTimeoutWithExit5AndRefusesBadValues) {
   TempDir dir("dds_wait_timeout");
   makeSession(parseSceneScript(nearScript(1.0), "near"), dir / "s");
-  const std::string vision = std::string(REFLEX_BIN_DIR) + "/reflex_vision --session " + (dir / "s") +
-                             " --domain 85 --quiet ";
+  const std::string vision =
+      std::string(REFLEX_BIN_DIR) + "/reflex_vision --session " + (dir / "s") + " --domain 85 --quiet ";
   // Nobody reads reflex/object_targets on domain 85 now (the other tests' readers are gone).
   reflex::testing::ProcessResult r = reflex::testing::runShell(vision + "--wait-readers 2 --wait-timeout 1.5");
   EXPECT_EQ(r.exit_code, 5) << r.out;

@@ -78,9 +78,9 @@ void writeCamera(const std::string& path) {
 }
 
 int runTool(const std::string& args, std::string& out, std::string& err, const TempDir& dir) {
-  const int rc = std::system((std::string(REFLEX_BIN_DIR) + "/reflex_detect " + args + " > " + (dir / "out.txt") +
-                              " 2> " + (dir / "err.txt"))
-                                 .c_str());
+  const int rc = std::system(
+      (std::string(REFLEX_BIN_DIR) + "/reflex_detect " + args + " > " + (dir / "out.txt") + " 2> " + (dir / "err.txt"))
+          .c_str());
   out = readText(dir / "out.txt");
   err = readText(dir / "err.txt");
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
@@ -291,8 +291,11 @@ TEST(Detect, BadInputsAreNamed) {
   const std::vector<Case> sizes = {
       {fx.dir / "thin.png", "image '" + (fx.dir / "thin.png") + "' is 100x1 px: smaller than 16 px a side", 2},
       {fx.dir / "wide.png", "image '" + (fx.dir / "wide.png") + "' is 40000x16 px: more than 16384 px a side", 2},
-      {fx.dir / "huge.png", "image '" + (fx.dir / "huge.png") + "' is 20000x20000 px: more than 16384 px a side or 50 "
-                            "megapixels, refused before decoding", 2},
+      {fx.dir / "huge.png",
+       "image '" + (fx.dir / "huge.png") +
+           "' is 20000x20000 px: more than 16384 px a side or 50 "
+           "megapixels, refused before decoding",
+       2},
   };
   for (const Case& c : sizes) {
     std::string out, err;

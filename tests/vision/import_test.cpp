@@ -48,11 +48,13 @@ Frames decodeSession(const std::string& dir) {
 
 /// Writes frames [0, count) into a lossless FFV1 AVI; the file is checked to hold them all.
 /// (OpenCV's FFmpeg writer rounds an odd width down; its own MJPEG writer, `odd_width`, keeps it.)
-void writeVideo(const std::string& path, const std::vector<cv::Mat>& frames, std::size_t count, bool odd_width = false) {
+void writeVideo(const std::string& path, const std::vector<cv::Mat>& frames, std::size_t count,
+                bool odd_width = false) {
   ASSERT_GT(count, 0u);
-  cv::VideoWriter w(path, odd_width ? cv::CAP_OPENCV_MJPEG : cv::CAP_FFMPEG,
-                    odd_width ? cv::VideoWriter::fourcc('M', 'J', 'P', 'G') : cv::VideoWriter::fourcc('F', 'F', 'V', '1'),
-                    10.0, frames[0].size(), true);
+  cv::VideoWriter w(
+      path, odd_width ? cv::CAP_OPENCV_MJPEG : cv::CAP_FFMPEG,
+      odd_width ? cv::VideoWriter::fourcc('M', 'J', 'P', 'G') : cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 10.0,
+      frames[0].size(), true);
   ASSERT_TRUE(w.isOpened()) << path;
   for (std::size_t i = 0; i < count; ++i) w.write(frames[i]);
   w.release();
@@ -178,11 +180,13 @@ TEST(Import, BadInputsAreNamedAndLeaveNoSession) {
     std::string args, expected;
   };
   const std::vector<Case> cases = {
-      {" --from-files " + (dir / "nope.avi") + " " + (dir / "right.avi"), "'" + (dir / "nope.avi") + "' does not exist"},
+      {" --from-files " + (dir / "nope.avi") + " " + (dir / "right.avi"),
+       "'" + (dir / "nope.avi") + "' does not exist"},
       {" --from-files " + (dir / "left.avi") + " " + (dir / "short.avi"), "has 10 frames but right video"},
       {" --from-files " + (dir / "left.avi") + " " + (dir / "small.avi"), "is 640x480 but right video"},
       {" --from-side-by-side " + (dir / "odd.avi"), "is 1279 pixels wide"},
-      {" --from-files " + (dir / "left.avi") + " " + (dir / "left.avi"), "the left and the right video are the same file"},
+      {" --from-files " + (dir / "left.avi") + " " + (dir / "left.avi"),
+       "the left and the right video are the same file"},
       {" --from-side-by-side " + (dir / "left.avi"), "has 320x480 halves but the calibration says 640x480"},
       {lr + " --timestamps " + (dir / "short.csv"), "lists 9 frames but video"},
       {lr + " --timestamps " + (dir / "long.csv"), "lists 12 frames but video"},
@@ -218,8 +222,8 @@ TEST(StandInCamera, AVideoFileEndsNormallyAndATruncatedOneIsAnError) {
                              "/objects.yaml --mount " + fx.session + "/camera_mount.yaml --quiet --dump " +
                              (dir / "dump.csv");
   std::string out;
-  ASSERT_EQ(runTool(vision + " --camera-left " + (dir / "left.avi") + " --camera-right " + (dir / "right.avi"), out, dir),
-            0)
+  ASSERT_EQ(
+      runTool(vision + " --camera-left " + (dir / "left.avi") + " --camera-right " + (dir / "right.avi"), out, dir), 0)
       << out;
   EXPECT_THAT(out, HasSubstr("10 frames processed"));
   EXPECT_THAT(out, ::testing::Not(HasSubstr("error")));
@@ -229,6 +233,6 @@ TEST(StandInCamera, AVideoFileEndsNormallyAndATruncatedOneIsAnError) {
   EXPECT_EQ(runTool(vision + " --camera-left " + (dir / "left.avi") + " --camera-right " + (dir / "cut.avi"), out, dir),
             3)
       << out;
-  EXPECT_THAT(out, AllOf(HasSubstr("right video file ended after"), HasSubstr("of the 10 frames"),
-                         HasSubstr("truncated")));
+  EXPECT_THAT(out,
+              AllOf(HasSubstr("right video file ended after"), HasSubstr("of the 10 frames"), HasSubstr("truncated")));
 }

@@ -55,8 +55,8 @@ double angleDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
 
 int runCalibrate(const std::string& args, std::string& out, std::string& err) {
   TempDir tmp("mcli");
-  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_calibrate " + args + " > " + (tmp / "out") + " 2> " +
-                          (tmp / "err");
+  const std::string cmd =
+      std::string(REFLEX_BIN_DIR) + "/reflex_calibrate " + args + " > " + (tmp / "out") + " 2> " + (tmp / "err");
   const int rc = std::system(cmd.c_str());
   out = test::readText(tmp / "out");
   err = test::readText(tmp / "err");
@@ -79,7 +79,7 @@ TrueMount trueMount(const reflex::control::Model& m) {
   return {rotCv(X_H_Cu.linear()) * turn, vecCv(X_H_Cu.translation()) + cv::Vec3d(0.005, -0.004, 0.003)};
 }
 
-const char* const kJoints[] = {"neck_yaw",        "neck_pitch", "l_shoulder_pitch", "l_shoulder_roll",
+const char* const kJoints[] = {"neck_yaw",       "neck_pitch", "l_shoulder_pitch", "l_shoulder_roll",
                                "l_shoulder_yaw", "l_elbow",    "l_wrist"};
 
 // Rows "view,x_cam,y_cam,z_cam,<joints>" for random poses in which the camera sees the tag point
@@ -107,7 +107,8 @@ std::string observationsCsv(const reflex::control::Model& m, const TrueMount& t,
     if (exact) exact->push_back({"v" + std::to_string(rows), p_C, p_H});
     p_C += cv::Vec3d(rng.gaussian(0.001), rng.gaussian(0.001), rng.gaussian(0.001));
     if (rows == outlier) p_C += cv::Vec3d(0.03, -0.03, 0.03);
-    os << (rows == outlier ? "moved_tag" : "pose_" + std::to_string(rows)) << "," << cv::format("%.6f,%.6f,%.6f", p_C[0], p_C[1], p_C[2]);
+    os << (rows == outlier ? "moved_tag" : "pose_" + std::to_string(rows)) << ","
+       << cv::format("%.6f,%.6f,%.6f", p_C[0], p_C[1], p_C[2]);
     for (double x : v) os << "," << cv::format("%.6f", x);
     os << "\n";
     ++rows;
@@ -140,7 +141,8 @@ TEST(Mount, RegistrationIsExactOnExactDataAndRefusesDegenerateData) {
   EXPECT_LT(cv::norm(r.p_H_C - t.p_H_C), 1e-9);
   EXPECT_LT(r.rms, 1e-9);
   std::vector<MountObservation> line;
-  for (int i = 0; i < 8; ++i) line.push_back({"l" + std::to_string(i), cv::Vec3d(0, 0, 0.3 + 0.05 * i), cv::Vec3d(0.3 + 0.05 * i, 0, 0)});
+  for (int i = 0; i < 8; ++i)
+    line.push_back({"l" + std::to_string(i), cv::Vec3d(0, 0, 0.3 + 0.05 * i), cv::Vec3d(0.3 + 0.05 * i, 0, 0)});
   EXPECT_THROW(
       {
         try {
@@ -167,8 +169,10 @@ TEST(Mount, CliRecoversTheKnownMountAndDropsTheMovedTag) {
   const Eigen::Vector3d p_hand(0.0, 0.0, -0.05);
   test::writeText(d / "obs.csv", observationsCsv(m, t, p_hand, 31, 7));
   std::string out, err;
-  const std::string base = "mount --urdf " + kUrdf + " --hand-link l_hand --tag-point 0,0,-0.05 --camera-link head_camera";
-  ASSERT_EQ(runCalibrate(base + " --observations " + (d / "obs.csv") + " --out " + (d / "camera_mount.yaml"), out, err), 0)
+  const std::string base =
+      "mount --urdf " + kUrdf + " --hand-link l_hand --tag-point 0,0,-0.05 --camera-link head_camera";
+  ASSERT_EQ(runCalibrate(base + " --observations " + (d / "obs.csv") + " --out " + (d / "camera_mount.yaml"), out, err),
+            0)
       << out << err;
   std::printf("%s", out.c_str());
   EXPECT_THAT(out, HasSubstr("moved_tag"));

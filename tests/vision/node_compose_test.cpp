@@ -124,8 +124,8 @@ TEST(VisionNode, TwoNodesInOneProcessMatchGroundTruthAndStopApart) {
   EXPECT_GT(a.stats().frames, b.stats().frames);
 
   // Every published object against the ground truth, per node; header and frame name per node.
-  for (const auto& [source, frame_id] : std::map<std::string, std::string>{{"vision_a", "base_link"},
-                                                                          {"vision_b", "base_b"}}) {
+  for (const auto& [source, frame_id] :
+       std::map<std::string, std::string>{{"vision_a", "base_link"}, {"vision_b", "base_b"}}) {
     int compared = 0;
     const std::vector<reflex::msg::ObjectTargets>& samples = got[source];
     for (std::size_t i = 0; i < samples.size(); ++i) {

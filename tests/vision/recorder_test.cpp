@@ -59,9 +59,9 @@ TEST(Recorder, TwoFakeCamerasFromVideoFiles) {
   const std::string s = dir / "s";
   std::string out;
   const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_vision_record --camera-left " + s +
-                          "/left.mp4 --camera-right " + s + "/right.mp4 --calib-left " + s + "/left.yaml --calib-right " +
-                          s + "/right.yaml --objects " + s + "/objects.yaml --mount " + s + "/camera_mount.yaml --out " +
-                          (dir / "rec") + " --quiet";
+                          "/left.mp4 --camera-right " + s + "/right.mp4 --calib-left " + s +
+                          "/left.yaml --calib-right " + s + "/right.yaml --objects " + s + "/objects.yaml --mount " +
+                          s + "/camera_mount.yaml --out " + (dir / "rec") + " --quiet";
   ASSERT_EQ(run(cmd, out, dir), 0) << out;
   EXPECT_THAT(out, HasSubstr("recorded 20 pairs"));
   compareSessions(s, dir / "rec", 20);

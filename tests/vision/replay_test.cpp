@@ -42,8 +42,8 @@ class Replay : public ::testing::Test {
   static Run run(const std::string& session, double rate, double duration, bool loop = false, double start = 0.0,
                  double max_lag = ReplayOptions{}.max_lag, const std::function<void(int)>& after_frame = nullptr) {
     SessionSource source(session, start);
-    StereoTagPipeline pipeline(source.calibration(), source.info().mount.value(),
-                               source.info().objects, PipelineOptions{});
+    StereoTagPipeline pipeline(source.calibration(), source.info().mount.value(), source.info().objects,
+                               PipelineOptions{});
     Run r;
     RunCallbacks cb;
     cb.on_publish = [&](const Publication& p) {
@@ -83,7 +83,8 @@ class Replay : public ::testing::Test {
     }
     const double mean = sxx / sxy;
     double worst = 0.0;
-    for (std::size_t i = 1; i < r.wall.size(); ++i) worst = std::max(worst, std::abs(r.wall[i] - r.wall[i - 1] - 1.0 / hz));
+    for (std::size_t i = 1; i < r.wall.size(); ++i)
+      worst = std::max(worst, std::abs(r.wall[i] - r.wall[i - 1] - 1.0 / hz));
     std::cout << "publications " << r.wall.size() << ", mean rate " << mean << " Hz (target " << hz
               << "), worst period error " << 1000.0 * worst << " ms\n";
     EXPECT_NEAR(mean, hz, 0.02 * hz);
@@ -181,7 +182,6 @@ TEST_F(Replay, ProgressWithAStartOffsetCountsTheSessionsFramesAndPrintsSessionTi
   EXPECT_GT(r.progress.back().run_time, r.progress.back().session_time - start)
       << "run time (since the offset) keeps growing across passes; session time starts again";
 }
-
 
 // Paced replay keeps every frame it can: a frame processed late (a slow frame, a process descheduled
 // by a competing load) is still processed, unless it is more than max_lag behind the replay clock;

@@ -24,8 +24,8 @@ void checkSession(const std::string& script_text, const char* tag, int min_visib
   const Evaluation e = evaluate(truth, dets);
   std::cout << tag << ": " << made.frames << " frames (" << made.codec << ", " << made.dropouts
             << " drop-outs), visible " << e.visible << ", detected " << e.detected_visible << " ("
-            << 100.0 * e.detection_rate() << " %), RMS " << e.rms_mm << " mm over " << e.rms_samples
-            << ", max " << e.max_visible_error_mm << " mm, invented " << e.invented << "\n";
+            << 100.0 * e.detection_rate() << " %), RMS " << e.rms_mm << " mm over " << e.rms_samples << ", max "
+            << e.max_visible_error_mm << " mm, invented " << e.invented << "\n";
   EXPECT_GE(e.visible, min_visible) << "the session must exercise the pipeline";
   EXPECT_GE(e.detection_rate(), 0.99);
   EXPECT_GT(e.rms_samples, min_visible / 2);
@@ -43,8 +43,8 @@ TEST(Session, Range) { checkSession(rangeScript(), "range", 60); }
 TEST(Session, FlagshipThroughTheExecutable) {
   const std::string session = std::string(REFLEX_SOURCE_DIR) + "/bringup/sessions/flagship";
   TempDir dir("flagship");
-  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_vision --session " + session + " --dump " +
-                          (dir / "out.csv") + " --quiet";
+  const std::string cmd =
+      std::string(REFLEX_BIN_DIR) + "/reflex_vision --session " + session + " --dump " + (dir / "out.csv") + " --quiet";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
   std::ifstream in(dir / "out.csv");
   std::string line;
@@ -64,8 +64,8 @@ TEST(Session, FlagshipThroughTheExecutable) {
   const Evaluation band = evaluate(truth, dets, 0.5, 1.5);
   std::cout << "flagship: visible " << e.visible << ", detected " << e.detected_visible << " ("
             << 100.0 * e.detection_rate() << " %), RMS " << e.rms_mm << " mm over " << e.rms_samples
-            << " (0.5-1.5 m: " << band.rms_mm << " mm over " << band.rms_samples << "), max "
-            << e.max_visible_error_mm << " mm, invented " << e.invented << "\n";
+            << " (0.5-1.5 m: " << band.rms_mm << " mm over " << band.rms_samples << "), max " << e.max_visible_error_mm
+            << " mm, invented " << e.invented << "\n";
   EXPECT_GT(e.visible, 900);
   EXPECT_GE(e.detection_rate(), 0.99);
   EXPECT_LE(e.rms_mm, 5.0);
@@ -74,11 +74,13 @@ TEST(Session, FlagshipThroughTheExecutable) {
   double closest = 1e9;
   for (const GroundTruthRow& a : truth)
     for (const GroundTruthRow& b : truth)
-      if (a.frame == b.frame && a.object == "cup" && b.object == "can") closest = std::min(closest, cv::norm(a.p_B - b.p_B));
+      if (a.frame == b.frame && a.object == "cup" && b.object == "can")
+        closest = std::min(closest, cv::norm(a.p_B - b.p_B));
   EXPECT_LT(closest, 0.06);
   for (const GroundTruthRow& r : truth) {
     if (!r.present) continue;
-    const double reach = std::min(cv::norm(r.p_B - cv::Vec3d(0, 0.2, 1.05)), cv::norm(r.p_B - cv::Vec3d(0, -0.2, 1.05)));
+    const double reach =
+        std::min(cv::norm(r.p_B - cv::Vec3d(0, 0.2, 1.05)), cv::norm(r.p_B - cv::Vec3d(0, -0.2, 1.05)));
     EXPECT_LT(reach, 0.55) << r.object << " at frame " << r.frame << " is out of reach";
   }
 }
@@ -94,8 +96,8 @@ TEST(SessionMaker, RegeneratesTheSameGroundTruth) {
 }
 
 TEST(SessionMaker, TrajectoryPassesThroughKeyframes) {
-  const std::vector<Keyframe> path = {{0.0, {0.5, 0.1, 1.0}, {0, 0, 0}}, {1.0, {0.6, 0.0, 1.1}, {0, 30, 0}},
-                                      {3.0, {0.5, -0.1, 1.0}, {0, 0, 0}}};
+  const std::vector<Keyframe> path = {
+      {0.0, {0.5, 0.1, 1.0}, {0, 0, 0}}, {1.0, {0.6, 0.0, 1.1}, {0, 30, 0}}, {3.0, {0.5, -0.1, 1.0}, {0, 0, 0}}};
   for (const Keyframe& k : path) EXPECT_LT(cv::norm(evaluateTrajectory(path, k.t).p_B - k.p_B), 1e-12);
   EXPECT_LT(cv::norm(evaluateTrajectory(path, -5).p_B - path.front().p_B), 1e-12);
   EXPECT_LT(cv::norm(evaluateTrajectory(path, 99).p_B - path.back().p_B), 1e-12);

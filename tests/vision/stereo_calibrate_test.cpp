@@ -91,7 +91,7 @@ struct DrawnBoard {
   BoardSpec spec;
   cv::Mat image;
   double mpp = 0.0;
-  cv::Point2d origin;  // pixel-corner coordinates of board point (0, 0)
+  cv::Point2d origin;                // pixel-corner coordinates of board point (0, 0)
   std::vector<cv::Point3d> outline;  // board corners (metres) that must be in view
 };
 
@@ -248,15 +248,15 @@ TEST(Board, DetectedWhereTheHomographyPutsIt) {
   for (const BoardSpec& spec : {checkerboard(), aprilgrid(), charuco()}) {
     SCOPED_TRACE(boardKindName(spec.kind));
     const DrawnBoard b = drawn(spec, spec.kind == BoardKind::kAprilGrid ? 6 : 40);
-    const cv::Matx33d H = cv::Matx33d(0.8, 0.12, 40, -0.06, 0.85, 30, 1e-4, 5e-5, 1) *
-                          (520.0 / std::max(b.image.cols, b.image.rows));
+    const cv::Matx33d H =
+        cv::Matx33d(0.8, 0.12, 40, -0.06, 0.85, 30, 1e-4, 5e-5, 1) * (520.0 / std::max(b.image.cols, b.image.rows));
     cv::Mat img;
     cv::warpPerspective(b.image, img, cv::Mat(H), cv::Size(700, 560), cv::INTER_AREA, cv::BORDER_CONSTANT,
                         cv::Scalar(128));
     const BoardObservation obs = detectBoard(spec, img);
     const std::map<int, cv::Point3f> pts = boardPoints(spec);
-    const std::size_t expected = spec.kind == BoardKind::kCharuco ? static_cast<std::size_t>((spec.cols - 1) * (spec.rows - 1))
-                                                                   : pts.size();
+    const std::size_t expected =
+        spec.kind == BoardKind::kCharuco ? static_cast<std::size_t>((spec.cols - 1) * (spec.rows - 1)) : pts.size();
     EXPECT_EQ(obs.ids.size(), expected);
     double worst = 0.0;
     for (std::size_t i = 0; i < obs.ids.size(); ++i) {
@@ -280,8 +280,8 @@ TEST(Board, BothCamerasOfAPairOrderACheckerboardSeenDiagonallyAlike) {
   const cv::Size size(700, 700);
   const cv::Point2f centre(350.0f, 350.0f);
   cv::Mat base(size, CV_8U, cv::Scalar(128));
-  b.image.copyTo(base(cv::Rect((size.width - b.image.cols) / 2, (size.height - b.image.rows) / 2, b.image.cols,
-                               b.image.rows)));
+  b.image.copyTo(
+      base(cv::Rect((size.width - b.image.cols) / 2, (size.height - b.image.rows) / 2, b.image.cols, b.image.rows)));
   auto turned = [&](double deg) {
     cv::Mat out;
     cv::warpAffine(base, out, cv::getRotationMatrix2D(centre, deg, 1.0), size, cv::INTER_AREA, cv::BORDER_CONSTANT,
@@ -360,8 +360,8 @@ TEST(SyntheticRig, RecoversTheKnownRigAndDropsTheCorruptedView) {
     p += cv::Point2f(static_cast<float>(m * std::cos(a)), static_cast<float>(m * std::sin(a)));
   }
   std::vector<std::string> log;
-  const StereoCalibrateResult res =
-      calibrateStereo(b.spec, r.views, kSize, StereoCalibrateOptions{}, [&](const std::string& s) { log.push_back(s); });
+  const StereoCalibrateResult res = calibrateStereo(b.spec, r.views, kSize, StereoCalibrateOptions{},
+                                                    [&](const std::string& s) { log.push_back(s); });
   expectRig(res.calibration, res.R, "calibrateStereo");
   int dropped = 0;
   for (const ViewReport& v : res.views) {
@@ -381,11 +381,12 @@ TEST(SyntheticRig, RecoversTheKnownRigAndDropsTheCorruptedView) {
   EXPECT_LT(res.epipolar_rms, 0.3);
   EXPECT_LT(res.epipolar_max, 1.0);
   // Measured numbers, for the README.
-  std::printf("checkerboard: rms %.4f px, epipolar rms %.4f max %.4f px; fx %.3f/%.3f (true 512/506), cx %.3f/%.3f "
-              "(true 324.5/315), baseline %.6f m (true %.6f), rotation error %.4f deg\n",
-              res.rms, res.epipolar_rms, res.epipolar_max, res.calibration.left.K(0, 0), res.calibration.right.K(0, 0),
-              res.calibration.left.K(0, 2), res.calibration.right.K(0, 2), res.calibration.baseline(),
-              cv::norm(rig().right_centre_L), angleDeg(res.R, rig().right.R_cam_L));
+  std::printf(
+      "checkerboard: rms %.4f px, epipolar rms %.4f max %.4f px; fx %.3f/%.3f (true 512/506), cx %.3f/%.3f "
+      "(true 324.5/315), baseline %.6f m (true %.6f), rotation error %.4f deg\n",
+      res.rms, res.epipolar_rms, res.epipolar_max, res.calibration.left.K(0, 0), res.calibration.right.K(0, 0),
+      res.calibration.left.K(0, 2), res.calibration.right.K(0, 2), res.calibration.baseline(),
+      cv::norm(rig().right_centre_L), angleDeg(res.R, rig().right.R_cam_L));
   // The result is what reflex_vision accepts: written, loaded back by its own reader.
   TempDir d("calib");
   saveCameraInfo(d / "left.yaml", res.calibration.left);
@@ -431,7 +432,6 @@ void writeOpenCvFiles(const std::string& intr, const std::string& extr, double t
   if (with_rect) fe << "R1" << R1 << "R2" << R2 << "P1" << P1 << "P2" << P2 << "Q" << Q;
   fe.release();
 }
-
 
 }  // namespace
 
@@ -486,7 +486,9 @@ TEST(Convert, BadFilesAreNamed) {
   const std::string e1 = errorOf([&] { convertOpenCvStereo({d / "intrinsics.yml"}, ConvertOptions{}, notes); });
   EXPECT_THAT(e1, HasSubstr("missing R|rotation, T|translation"));
   // No size anywhere.
-  EXPECT_THAT(errorOf([&] { convertOpenCvStereo({d / "intrinsics.yml", d / "extrinsics.yml"}, o, notes); }),
+  EXPECT_THAT(errorOf([&] {
+                convertOpenCvStereo({d / "intrinsics.yml", d / "extrinsics.yml"}, o, notes);
+              }),
               HasSubstr("pass --size WIDTHxHEIGHT"));
   // A FileStorage file without any of the keys: every one named with its spellings.
   {
@@ -529,8 +531,8 @@ namespace {
 
 int runCalibrate(const std::string& args, std::string& out, std::string& err) {
   TempDir tmp("cli");
-  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_calibrate " + args + " > " + (tmp / "out") + " 2> " +
-                          (tmp / "err");
+  const std::string cmd =
+      std::string(REFLEX_BIN_DIR) + "/reflex_calibrate " + args + " > " + (tmp / "out") + " 2> " + (tmp / "err");
   const int rc = std::system(cmd.c_str());
   out = reflex::vision::test::readText(tmp / "out");
   err = reflex::vision::test::readText(tmp / "err");
@@ -558,7 +560,8 @@ TEST(Cli, CalibratesFromPngPairs) {
   cv::imwrite(d / "left_999.png", blank);
   cv::imwrite(d / "right_999.png", blank);
   std::string out, err;
-  const int rc = runCalibrate("calibrate --pairs " + d.path() + boardArgs(b.spec) + " --out " + (d / "calib"), out, err);
+  const int rc =
+      runCalibrate("calibrate --pairs " + d.path() + boardArgs(b.spec) + " --out " + (d / "calib"), out, err);
   ASSERT_EQ(rc, 0) << out << err;
   EXPECT_THAT(err, HasSubstr("view 15/15 left_999.png: left 0 points, right 0 points"));
   EXPECT_THAT(out, HasSubstr("left_999.png"));
@@ -584,16 +587,18 @@ TEST(Cli, CalibratesFromPngPairs) {
   vw[0].release();
   vw[1].release();
   test::writeText(d / "session/session.yaml", "left_video: left.avi\nright_video: right.avi\n");
-  ASSERT_EQ(runCalibrate("calibrate --session " + (d / "session") + boardArgs(b.spec) + " --out " + (d / "calib2"), out, err),
-            0)
+  ASSERT_EQ(
+      runCalibrate("calibrate --session " + (d / "session") + boardArgs(b.spec) + " --out " + (d / "calib2"), out, err),
+      0)
       << out << err;
   EXPECT_THAT(err, HasSubstr("view 15/15 frame 14: left 0 points"));
   const StereoCalibration c2 = loadStereoCalibration(d / "calib2/left.yaml", d / "calib2/right.yaml");
-  for (int i = 0; i < 12; ++i) EXPECT_NEAR(c2.right.P.val[i], c.right.P.val[i], 1e-6 * std::max(1.0, std::abs(c.right.P.val[i])));
-  EXPECT_EQ(runCalibrate("calibrate --session " + (d / "session") + boardArgs(b.spec) + " --every 0 --out " +
-                             (d / "calib3"),
-                         out, err),
-            2);
+  for (int i = 0; i < 12; ++i)
+    EXPECT_NEAR(c2.right.P.val[i], c.right.P.val[i], 1e-6 * std::max(1.0, std::abs(c.right.P.val[i])));
+  EXPECT_EQ(
+      runCalibrate("calibrate --session " + (d / "session") + boardArgs(b.spec) + " --every 0 --out " + (d / "calib3"),
+                   out, err),
+      2);
   EXPECT_THAT(err, HasSubstr("--every 0"));
 
   // convert: FileStorage files -> the same format.

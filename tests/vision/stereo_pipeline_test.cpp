@@ -54,8 +54,8 @@ cv::Point2d projectRaw(const StereoCalibration& c, const cv::Vec3d& p_C, bool ri
 TEST(StereoRectifier, TriangulatesExactProjectionsBack) {
   const StereoCalibration c = testRig();
   const StereoRectifier rect(c);
-  for (const cv::Vec3d& p_C : {cv::Vec3d(0.0, 0.0, 0.5), cv::Vec3d(-0.12, 0.08, 0.7), cv::Vec3d(0.3, -0.2, 1.5),
-                              cv::Vec3d(0.05, 0.1, 1.0)}) {
+  for (const cv::Vec3d& p_C :
+       {cv::Vec3d(0.0, 0.0, 0.5), cv::Vec3d(-0.12, 0.08, 0.7), cv::Vec3d(0.3, -0.2, 1.5), cv::Vec3d(0.05, 0.1, 1.0)}) {
     std::vector<cv::Point2d> l, r;
     rect.rectifyPoints({projectRaw(c, p_C, false)}, l, false);
     rect.rectifyPoints({projectRaw(c, p_C, true)}, r, true);
@@ -120,7 +120,7 @@ TEST(Confidence, RangeAndMonotonicity) {
   EXPECT_NEAR(computeConfidence(100, 1.0, 1.0), std::exp(-0.5), 1e-12);
   EXPECT_NEAR(computeConfidence(100, 0, 1.05), std::exp(-0.5), 1e-12);
   EXPECT_NEAR(computeConfidence(80, 2.0, 0.9), 0.8 * std::exp(-2.0) * std::exp(-2.0), 1e-12);
-  EXPECT_EQ(computeConfidence(0, 10, 3.0), 0.0);  // no decision margin: no confidence
+  EXPECT_EQ(computeConfidence(0, 10, 3.0), 0.0);   // no decision margin: no confidence
   EXPECT_EQ(computeConfidence(-20, 0, 1.0), 0.0);  // a margin below 0 clamps to 0, not negative
   EXPECT_LT(computeConfidence(50, 0, 1.0), computeConfidence(90, 0, 1.0));
   EXPECT_LT(computeConfidence(90, 1.5, 1.0), computeConfidence(90, 0.2, 1.0));
@@ -190,8 +190,8 @@ TEST(TagDetector, WorkerThreadsOnlyWithALibapriltagWhosePoolStartsSafely) {
       TagDetector d(o);
       FAIL() << "threads = 2 accepted with libapriltag " << apriltagVersion();
     } catch (const VisionError& e) {
-      EXPECT_THAT(e.what(), AllOf(HasSubstr("threads = 2"), HasSubstr("libapriltag " + apriltagVersion()),
-                                  HasSubstr("3.4.3")));
+      EXPECT_THAT(e.what(),
+                  AllOf(HasSubstr("threads = 2"), HasSubstr("libapriltag " + apriltagVersion()), HasSubstr("3.4.3")));
     }
     return;
   }

@@ -67,7 +67,8 @@ void pipelineBench(benchmark::State& state, RectifyMode mode, bool parallel, dou
     found += r.objects.size();
     i = (i + 1) % f.left.size();
   }
-  state.counters["pairs_per_s"] = benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["pairs_per_s"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
   state.counters["objects_per_pair"] = static_cast<double>(found) / static_cast<double>(state.iterations());
 }
 
@@ -108,7 +109,8 @@ void bareBench(benchmark::State& state, bool parallel, double decimate) {
     apriltag_detector_destroy(td[k]);  // before its family (the detector's decode table lives in it)
     tag36h11_destroy(fam[k]);
   }
-  state.counters["pairs_per_s"] = benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["pairs_per_s"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
   state.counters["tags_per_pair"] = static_cast<double>(found) / static_cast<double>(state.iterations());
 }
 
@@ -136,7 +138,8 @@ BENCHMARK_CAPTURE(bareBench, bare_apriltag_leftright_parallel_d2, true, 2.0)->Us
 BENCHMARK_CAPTURE(pipelineBench, pipeline_images_serial_d2, RectifyMode::kImages, false, 2.0)->UseRealTime();
 BENCHMARK_CAPTURE(bareBench, bare_apriltag_serial_d2, false, 2.0)->UseRealTime();
 BENCHMARK_CAPTURE(pipelineBench, pipeline_points_serial_d2, RectifyMode::kPoints, false, 2.0)->UseRealTime();
-BENCHMARK_CAPTURE(pipelineBench, pipeline_images_serial_norefine_d2, RectifyMode::kImages, false, 2.0, false)->UseRealTime();
+BENCHMARK_CAPTURE(pipelineBench, pipeline_images_serial_norefine_d2, RectifyMode::kImages, false, 2.0, false)
+    ->UseRealTime();
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);

@@ -70,7 +70,8 @@ inline std::string rigYaml() {
 /// while, drop-out frames, timestamp jitter, lighting changes, person in the background.
 inline std::string nearScript(double duration = 6.0) {
   std::ostringstream os;
-  os << "name: near_test\nduration: " << duration << "\nfps: 10\nseed: 7\n" << rigYaml() << R"(render:
+  os << "name: near_test\nduration: " << duration << "\nfps: 10\nseed: 7\n"
+     << rigYaml() << R"(render:
   noise_sigma: 2.0
   dropout_probability: 0.03
   timestamp_jitter: 0.002
@@ -106,7 +107,8 @@ occluders:
 /// Range session: a 10 cm and a 6 cm tag sweeping 0.5 m <-> 1.5 m from the camera, tilted.
 inline std::string rangeScript(double duration = 6.0) {
   std::ostringstream os;
-  os << "name: range_test\nduration: " << duration << "\nfps: 10\nseed: 11\n" << rigYaml() << R"(render:
+  os << "name: range_test\nduration: " << duration << "\nfps: 10\nseed: 11\n"
+     << rigYaml() << R"(render:
   noise_sigma: 2.0
   dropout_probability: 0.02
   timestamp_jitter: 0.002
@@ -141,9 +143,9 @@ struct Evaluation {
   int visible = 0;           ///< (frame, object) pairs with the tag fully visible
   int detected_visible = 0;  ///< of those, detected
   int rms_samples = 0;
-  double rms_mm = 0.0;       ///< over detected visible pairs with camera distance in [lo, hi]
+  double rms_mm = 0.0;  ///< over detected visible pairs with camera distance in [lo, hi]
   double max_visible_error_mm = 0.0;
-  int invented = 0;          ///< detections of absent objects, or farther than 30 mm from the truth
+  int invented = 0;  ///< detections of absent objects, or farther than 30 mm from the truth
   double detection_rate() const { return visible ? double(detected_visible) / visible : 0.0; }
 };
 
@@ -184,8 +186,7 @@ inline Evaluation evaluate(const std::vector<GroundTruthRow>& truth, const std::
 inline std::vector<Detection> detectSession(const std::string& dir, PipelineOptions options = {}) {
   SessionSource source(dir, 0.0);
   options.detector.family = source.info().objects.family();
-  StereoTagPipeline pipeline(source.calibration(), source.info().mount.value(),
-                             source.info().objects, options);
+  StereoTagPipeline pipeline(source.calibration(), source.info().mount.value(), source.info().objects, options);
   std::vector<Detection> out;
   RunCallbacks cb;
   cb.on_frame = [&](const StereoFrame& f, double, const StereoResult& r) {

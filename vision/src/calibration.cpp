@@ -16,9 +16,11 @@ using namespace detail;
 
 // A ROS matrix field: {rows, cols, data}; rows*cols must equal data length (and the expected shape,
 // rows > 0). Returns the matrix node (for messages about its values) and fills `data`.
-ConfigNode readRosMatrix(const ConfigNode& root, const std::string& key, int rows, int cols, std::vector<double>& data) {
-  const std::string shape = rows > 0 ? "a " + std::to_string(rows) + "x" + std::to_string(cols) + " matrix {rows, cols, data}"
-                                     : "a matrix {rows, cols, data}";
+ConfigNode readRosMatrix(const ConfigNode& root, const std::string& key, int rows, int cols,
+                         std::vector<double>& data) {
+  const std::string shape =
+      rows > 0 ? "a " + std::to_string(rows) + "x" + std::to_string(cols) + " matrix {rows, cols, data}"
+               : "a matrix {rows, cols, data}";
   const ConfigNode m = root.at(key, shape);
   m.requireMap(shape);
   const int r = m.at("rows", "an integer").asInteger(0, 1000);
@@ -62,8 +64,10 @@ void checkIntrinsics(double fx, double fy, double cx, double cy, const cv::Size&
                 "[" + fmt(L::kMinAspect * fx) + ", " + fmt(L::kMaxAspect * fx) + "] px (fx" + prime + " = " + fmt(fx) +
                     ": pixel aspect between " + fmt(L::kMinAspect) + " and " + fmt(L::kMaxAspect) + ")");
   if (!(cx >= 0.0 && cx <= w) || !(cy >= 0.0 && cy <= h))
-    matrix.fail("data", "principal point (cx" + prime + ", cy" + prime + ") = (" + fmt(cx) + ", " + fmt(cy) + ") is outside the image",
-                "a point inside the " + std::to_string(size.width) + "x" + std::to_string(size.height) + " image");
+    matrix.fail(
+        "data",
+        "principal point (cx" + prime + ", cy" + prime + ") = (" + fmt(cx) + ", " + fmt(cy) + ") is outside the image",
+        "a point inside the " + std::to_string(size.width) + "x" + std::to_string(size.height) + " image");
 }
 
 // Fraction of the rectified image (a 32 x 24 grid of pixel centres) that sees the raw image: each
@@ -77,8 +81,8 @@ double rectifiedCoverage(const CameraInfo& c) {
   std::vector<cv::Point3d> rays;
   for (int r = 0; r < kRows; ++r)
     for (int k = 0; k < kCols; ++k) {
-      const cv::Vec3d ray = back * cv::Vec3d((k + 0.5) * c.image_size.width / kCols,
-                                              (r + 0.5) * c.image_size.height / kRows, 1.0);
+      const cv::Vec3d ray =
+          back * cv::Vec3d((k + 0.5) * c.image_size.width / kCols, (r + 0.5) * c.image_size.height / kRows, 1.0);
       if (ray[2] > 1e-9) rays.emplace_back(ray[0] / ray[2], ray[1] / ray[2], 1.0);  // behind the camera: unseen
     }
   if (rays.empty()) return 0.0;
@@ -105,11 +109,14 @@ void writeRosMatrix(std::ostream& os, const std::string& key, int rows, int cols
 CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& source) {
   // An OpenCV FileStorage calibration (stereoCalibrate's M1 D1 ..., "%YAML:1.0", !!opencv-matrix or
   // XML) is not camera_info: say how to turn it into one instead of naming the first missing field.
-  const bool opencv_file = yaml_text.rfind("%YAML:1.0", 0) == 0 || yaml_text.find("!!opencv-matrix") != std::string::npos ||
+  const bool opencv_file = yaml_text.rfind("%YAML:1.0", 0) == 0 ||
+                           yaml_text.find("!!opencv-matrix") != std::string::npos ||
                            yaml_text.find("<opencv_storage>") != std::string::npos;
   if (opencv_file && yaml_text.find("camera_matrix:") == std::string::npos)
-    throw VisionError(source + ": missing field 'camera_matrix': this is an OpenCV FileStorage calibration, not a ROS "
-                      "camera_info file; convert it with `reflex_calibrate convert " + source +
+    throw VisionError(source +
+                      ": missing field 'camera_matrix': this is an OpenCV FileStorage calibration, not a ROS "
+                      "camera_info file; convert it with `reflex_calibrate convert " +
+                      source +
                       " [EXTRINSICS_FILE] --out DIR` (writes DIR/left.yaml and DIR/right.yaml, see vision/README.md)");
   const ConfigNode root = parseYaml(yaml_text, source);
   CameraInfo info;
@@ -151,9 +158,7 @@ CameraInfo parseCameraInfo(const std::string& yaml_text, const std::string& sour
   return info;
 }
 
-CameraInfo loadCameraInfo(const std::string& path) {
-  return parseCameraInfo(readTextFile(path, "calibration"), path);
-}
+CameraInfo loadCameraInfo(const std::string& path) { return parseCameraInfo(readTextFile(path, "calibration"), path); }
 
 void saveCameraInfo(const std::string& path, const CameraInfo& info) {
   std::ostringstream os;
@@ -179,7 +184,7 @@ void validateStereoCalibration(const StereoCalibration& calib, const std::string
   // A rectified focal length that is not positive (a calibration that converged to a mirrored
   // solution, e.g. k3 running away) makes every check below meaningless: said first, as what it is.
   for (const auto& [camera, source] : {std::pair<const CameraInfo*, const std::string*>{&l, &left_source},
-                                      std::pair<const CameraInfo*, const std::string*>{&r, &right_source}}) {
+                                       std::pair<const CameraInfo*, const std::string*>{&r, &right_source}}) {
     if (!(camera->P(0, 0) > 0.0) || !(camera->P(1, 1) > 0.0))
       throw VisionError(*source + ": projection_matrix has the rectified focal lengths fx' = " + fmt(camera->P(0, 0)) +
                         ", fy' = " + fmt(camera->P(1, 1)) + "; both must be positive");
@@ -192,7 +197,7 @@ void validateStereoCalibration(const StereoCalibration& calib, const std::string
     throw VisionError(right_source + ": projection_matrix P[0][3] = " + fmt(r.P(0, 3)) +
                       " must be negative (-fx' * baseline) for the right camera (is left/right swapped?)");
   for (const auto& [camera, source] : {std::pair<const CameraInfo*, const std::string*>{&l, &left_source},
-                                      std::pair<const CameraInfo*, const std::string*>{&r, &right_source}}) {
+                                       std::pair<const CameraInfo*, const std::string*>{&r, &right_source}}) {
     const double coverage = rectifiedCoverage(*camera);
     if (coverage < CalibrationLimits::kMinRectifiedCoverage)
       throw VisionError(*source + ": only " + fmt(100.0 * coverage) +
@@ -209,8 +214,8 @@ void validateStereoCalibration(const StereoCalibration& calib, const std::string
     throw VisionError(right_source + ": projection_matrix P[1][3] must be 0 (only horizontal stereo is supported)");
   auto same = [&](double a, double b, const char* field) {
     if (std::abs(a - b) > 1e-6 * std::max(1.0, std::abs(a)))
-      throw VisionError("rectified intrinsics differ: " + std::string(field) + " = " + fmt(a) + " in " +
-                        left_source + " but " + fmt(b) + " in " + right_source);
+      throw VisionError("rectified intrinsics differ: " + std::string(field) + " = " + fmt(a) + " in " + left_source +
+                        " but " + fmt(b) + " in " + right_source);
   };
   same(l.P(0, 0), r.P(0, 0), "projection_matrix fx'");
   same(l.P(1, 1), r.P(1, 1), "projection_matrix fy'");
@@ -239,8 +244,9 @@ CameraMount detail::readCameraMount(const ConfigNode& root) {
   for (int i = 0; i < 9; ++i) m.R_B_C.val[i] = r[static_cast<std::size_t>(i)];
   for (int i = 0; i < 3; ++i)
     if (std::abs(t[static_cast<std::size_t>(i)]) > kMaxMountOffset)
-      root.fail("translation", "translation[" + std::to_string(i) + "] = " + fmt(t[static_cast<std::size_t>(i)]) +
-                                   " m is too far from the robot base frame",
+      root.fail("translation",
+                "translation[" + std::to_string(i) + "] = " + fmt(t[static_cast<std::size_t>(i)]) +
+                    " m is too far from the robot base frame",
                 "at most " + fmt(kMaxMountOffset) + " m on each axis");
   if (!isRotation(m.R_B_C)) root.fail("rotation_matrix", "not a rotation", "R R^T = I within 1e-5 and det > 0");
   return m;
@@ -255,8 +261,8 @@ void saveCameraMount(const std::string& path, const CameraMount& mount, const st
   os << "# Left camera optical frame C (z forward, x right, y down) in the robot base frame B\n"
         "# (x forward, y left, z up, metres): p_B = R_B_C p_C + p_B_C.\n";
   if (!comment.empty()) os << "# " << comment << "\n";
-  os << std::setprecision(12) << "translation: [" << mount.p_B_C[0] << ", " << mount.p_B_C[1] << ", "
-     << mount.p_B_C[2] << "]\nrotation_matrix: [";
+  os << std::setprecision(12) << "translation: [" << mount.p_B_C[0] << ", " << mount.p_B_C[1] << ", " << mount.p_B_C[2]
+     << "]\nrotation_matrix: [";
   for (int i = 0; i < 9; ++i) os << (i ? ", " : "") << mount.R_B_C.val[i];
   os << "]  # row-major R_B_C\n";
   writeTextFile(path, os.str(), "camera mount file");

@@ -44,12 +44,14 @@ CalibrationImages CalibrationImages::fromPairsFolder(const std::string& dir) {
     const std::set<std::string> rs(r.begin(), r.end()), ls(l.begin(), l.end());
     for (const std::string& n : l) {
       if (!rs.count(n))
-        throw VisionError((root / "left" / n).string() + " has no right image (expected " + (root / "right" / n).string() + ")");
+        throw VisionError((root / "left" / n).string() + " has no right image (expected " +
+                          (root / "right" / n).string() + ")");
       c.files_.emplace_back((root / "left" / n).string(), (root / "right" / n).string());
     }
     for (const std::string& n : r)
       if (!ls.count(n))
-        throw VisionError((root / "right" / n).string() + " has no left image (expected " + (root / "left" / n).string() + ")");
+        throw VisionError((root / "right" / n).string() + " has no left image (expected " +
+                          (root / "left" / n).string() + ")");
   } else {
     std::map<std::string, std::string> left, right;  // suffix -> file
     for (const std::string& n : imageNames(root)) {
@@ -58,12 +60,14 @@ CalibrationImages CalibrationImages::fromPairsFolder(const std::string& dir) {
     }
     for (const auto& [suffix, n] : left) {
       if (!right.count(suffix))
-        throw VisionError((root / n).string() + " has no right image (expected " + (root / ("right" + suffix)).string() + ")");
+        throw VisionError((root / n).string() + " has no right image (expected " +
+                          (root / ("right" + suffix)).string() + ")");
       c.files_.emplace_back((root / n).string(), (root / right[suffix]).string());
     }
     for (const auto& [suffix, n] : right)
       if (!left.count(suffix))
-        throw VisionError((root / n).string() + " has no left image (expected " + (root / ("left" + suffix)).string() + ")");
+        throw VisionError((root / n).string() + " has no left image (expected " + (root / ("left" + suffix)).string() +
+                          ")");
   }
   if (c.files_.empty())
     throw VisionError("no image pairs in '" + dir +
@@ -109,8 +113,9 @@ bool CalibrationImages::next(std::string& name, cv::Mat& left, cv::Mat& right) {
     right = readImage(r);
     name = fs::path(l).filename().string();
     if (left.size() != right.size())
-      throw VisionError("image sizes differ: " + l + " is " + std::to_string(left.cols) + "x" + std::to_string(left.rows) +
-                        " but " + r + " is " + std::to_string(right.cols) + "x" + std::to_string(right.rows));
+      throw VisionError("image sizes differ: " + l + " is " + std::to_string(left.cols) + "x" +
+                        std::to_string(left.rows) + " but " + r + " is " + std::to_string(right.cols) + "x" +
+                        std::to_string(right.rows));
     return true;
   }
   for (;;) {

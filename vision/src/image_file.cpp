@@ -37,7 +37,8 @@ std::optional<cv::Size> imageFileHeaderSize(const std::string& path) {
     const auto w = static_cast<std::int32_t>(le32(&h[18]));
     const auto ht = static_cast<std::int32_t>(le32(&h[22]));
     const long long aw = w < 0 ? -static_cast<long long>(w) : w, ah = ht < 0 ? -static_cast<long long>(ht) : ht;
-    return cv::Size(static_cast<int>(std::min<long long>(aw, 0x7fffffff)), static_cast<int>(std::min<long long>(ah, 0x7fffffff)));
+    return cv::Size(static_cast<int>(std::min<long long>(aw, 0x7fffffff)),
+                    static_cast<int>(std::min<long long>(ah, 0x7fffffff)));
   }
   // JPEG: markers up to a start of frame (SOF0..SOF15 but DHT C4, JPG C8, DAC CC): height, width.
   if (h[0] == 0xFF && h[1] == 0xD8) {
@@ -64,7 +65,8 @@ std::optional<cv::Size> imageFileHeaderSize(const std::string& path) {
 std::string imageSizeProblem(const std::string& what, const cv::Size& size) {
   const std::string dims = std::to_string(size.width) + "x" + std::to_string(size.height);
   if (size.width < kMinImageSide || size.height < kMinImageSide)
-    return what + " is " + dims + " px: smaller than " + std::to_string(kMinImageSide) + " px a side, too small to hold a tag";
+    return what + " is " + dims + " px: smaller than " + std::to_string(kMinImageSide) +
+           " px a side, too small to hold a tag";
   if (size.width > kMaxImageSide || size.height > kMaxImageSide ||
       static_cast<long long>(size.width) * size.height > kMaxImagePixels)
     return what + " is " + dims + " px: more than " + std::to_string(kMaxImageSide) + " px a side or " +

@@ -56,8 +56,10 @@ double median(std::vector<double> v) {
 
 }  // namespace
 
-MountResult estimateCameraInHead(const std::vector<MountObservation>& obs, const MountOptions& o, const CalibrateLog& log) {
-  if (!(o.outlier_factor > 1.0)) throw VisionError("outlier factor = " + fmt(o.outlier_factor) + " must be greater than 1");
+MountResult estimateCameraInHead(const std::vector<MountObservation>& obs, const MountOptions& o,
+                                 const CalibrateLog& log) {
+  if (!(o.outlier_factor > 1.0))
+    throw VisionError("outlier factor = " + fmt(o.outlier_factor) + " must be greater than 1");
   if (o.min_views < 3) throw VisionError("min views = " + std::to_string(o.min_views) + " must be at least 3");
   MountResult res;
   std::vector<std::size_t> kept;
@@ -82,8 +84,8 @@ MountResult estimateCameraInHead(const std::vector<MountObservation>& obs, const
     ++res.rounds;
     const RigidFit f = fitRigid(obs, kept);
     if (f.spread < o.min_spread_m)
-      throw VisionError("the tag points spread only " + fmt(1000.0 * f.spread) + " mm across their main line (at least " +
-                        fmt(1000.0 * o.min_spread_m) +
+      throw VisionError("the tag points spread only " + fmt(1000.0 * f.spread) +
+                        " mm across their main line (at least " + fmt(1000.0 * o.min_spread_m) +
                         " mm): move the hand to places that are not on one line (up/down and left/right)");
     res.R_H_C = f.R;
     res.p_H_C = f.t;

@@ -52,15 +52,14 @@ ObjectMap parseObjectMap(const std::string& yaml_text, const std::string& source
     ObjectSpec o;
     o.tag_id = item.at("id", "a tag id").asInteger(0, std::numeric_limits<int>::max());
     o.name = item.requiredString("name", "the object's name");
-    o.tag_size = item.requiredNumber("size", ObjectMap::kMinTagSize, ObjectMap::kMaxTagSize, "m (edge of the black square)");
+    o.tag_size =
+        item.requiredNumber("size", ObjectMap::kMinTagSize, ObjectMap::kMaxTagSize, "m (edge of the black square)");
     objects.push_back(o);
   }
   return ObjectMap(family, objects, source);
 }
 
-ObjectMap loadObjectMap(const std::string& path) {
-  return parseObjectMap(readTextFile(path, "object map"), path);
-}
+ObjectMap loadObjectMap(const std::string& path) { return parseObjectMap(readTextFile(path, "object map"), path); }
 
 void saveObjectMap(const std::string& path, const ObjectMap& map) {
   std::ostringstream os;

@@ -294,8 +294,8 @@ void SessionReader::open() {
   }
   if (sizes[0] != sizes[1])
     throw VisionError("video sizes differ: '" + paths[0] + "' is " + std::to_string(sizes[0].width) + "x" +
-                      std::to_string(sizes[0].height) + " but '" + paths[1] + "' is " +
-                      std::to_string(sizes[1].width) + "x" + std::to_string(sizes[1].height));
+                      std::to_string(sizes[0].height) + " but '" + paths[1] + "' is " + std::to_string(sizes[1].width) +
+                      "x" + std::to_string(sizes[1].height));
   const cv::Size calib = info_.calibration.left.image_size;
   if (sizes[0] != calib)
     throw VisionError("video '" + paths[0] + "' is " + std::to_string(sizes[0].width) + "x" +
@@ -328,9 +328,9 @@ ReadStatus SessionReader::read(StereoFrame& frame, std::string& message) {
   const bool ok_right = cap_[1].read(frame.right);
   const int index = next_++;
   if (!ok_left || !ok_right || frame.left.empty() || frame.right.empty()) {
-    const char* which = (!ok_left || frame.left.empty()) ? (!ok_right || frame.right.empty() ? "both videos"
-                                                                                                : "the left video")
-                                                         : "the right video";
+    const char* which = (!ok_left || frame.left.empty())
+                            ? (!ok_right || frame.right.empty() ? "both videos" : "the left video")
+                            : "the right video";
     message = std::string(which) + " ended at frame " + std::to_string(index) + " of " +
               std::to_string(info_.frameCount()) + " listed in " + info_.files.timestamps +
               " (truncated or corrupt video)";
@@ -352,7 +352,7 @@ std::string sessionFolderProblem(const std::string& dir) {
   if (std::string why = common::outputFolderProblem(dir); !why.empty()) return why;
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return "";  // made by the writer: nothing in it yet
-  const SessionFiles files;  // the writer's own names; the optional ones as it writes them
+  const SessionFiles files;                   // the writer's own names; the optional ones as it writes them
   std::vector<std::string> names = {files.timestamps, files.left_calibration, files.right_calibration, files.objects,
                                     "session.yaml",   "camera_mount.yaml",    "ground_truth.csv"};
   for (const auto& codec : SessionWriterOptions{}.codecs) {
@@ -473,8 +473,8 @@ void SessionWriter::finish(const std::string& ground_truth_file) {
     if (ec) bytes = 0;
     if (!opened || (frames > 0 && frames != static_cast<long>(stamps_.size())) || bytes == 0) {
       throw VisionError("cannot write video '" + path + "': it holds " +
-                        (opened ? std::to_string(std::max(frames, 0L)) + " frames" : std::string("no readable video")) + " (" +
-                        std::to_string(bytes) + " bytes) but " + std::to_string(stamps_.size()) +
+                        (opened ? std::to_string(std::max(frames, 0L)) + " frames" : std::string("no readable video")) +
+                        " (" + std::to_string(bytes) + " bytes) but " + std::to_string(stamps_.size()) +
                         " pairs were written (disk full or write error?)");
     }
   }

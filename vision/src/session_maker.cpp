@@ -156,8 +156,8 @@ void drawQuad(cv::Mat& canvas, const RenderCamera& cam, const Quad& quad, int S)
   const cv::Size big(roi.width * S, roi.height * S);
   cv::Mat warped, mask, small, small_mask;
   cv::warpPerspective(tex, warped, H, big, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(0));
-  cv::warpPerspective(cv::Mat(tex.size(), CV_8U, cv::Scalar(255)), mask, H, big, cv::INTER_LINEAR,
-                      cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::warpPerspective(cv::Mat(tex.size(), CV_8U, cv::Scalar(255)), mask, H, big, cv::INTER_LINEAR, cv::BORDER_CONSTANT,
+                      cv::Scalar(0));
   cv::resize(warped, small, roi.size(), 0, 0, cv::INTER_AREA);
   cv::resize(mask, small_mask, roi.size(), 0, 0, cv::INTER_AREA);
   cv::Mat alpha, beta;
@@ -341,8 +341,8 @@ SceneScript parseSceneScript(const std::string& yaml_text, const std::string& so
                                        "shipped robot with its head at zero: bringup/vision/camera_mount.yaml)"));
   if (root.has("render")) {
     const ConfigNode r = root.child("render");
-    r.rejectUnknown({"supersample", "noise_sigma", "blur_sigma", "lighting", "dropout_probability", "timestamp_jitter",
-                     "person"});
+    r.rejectUnknown(
+        {"supersample", "noise_sigma", "blur_sigma", "lighting", "dropout_probability", "timestamp_jitter", "person"});
     s.render.supersample = r.integer("supersample", s.render.supersample, 1, 8);
     s.render.noise_sigma = r.number("noise_sigma", s.render.noise_sigma, -kAnyNumber, kAnyNumber);
     if (r.has("blur_sigma")) {
@@ -350,7 +350,8 @@ SceneScript parseSceneScript(const std::string& yaml_text, const std::string& so
       s.render.blur_sigma = cv::Vec2d(v[0], v[1]);
     }
     if (r.has("lighting")) s.render.lighting = vec3Of(r.at("lighting", "3 numbers"));
-    s.render.dropout_probability = r.number("dropout_probability", s.render.dropout_probability, -kAnyNumber, kAnyNumber);
+    s.render.dropout_probability =
+        r.number("dropout_probability", s.render.dropout_probability, -kAnyNumber, kAnyNumber);
     s.render.timestamp_jitter = r.number("timestamp_jitter", s.render.timestamp_jitter, -kAnyNumber, kAnyNumber, "s");
     s.render.person = r.boolean("person", s.render.person);
     if (s.render.timestamp_jitter < 0.0 || s.render.timestamp_jitter >= 0.5 / s.fps)
@@ -427,8 +428,8 @@ bool tagVisible(const RenderCamera (&cams)[2], const QuadPose& pose, double half
                 const cv::Size& size) {
   bool visible = true;
   std::vector<cv::Vec3d> region;
-  for (const cv::Vec3d& l : {cv::Vec3d(-half, -half, 0), cv::Vec3d(half, -half, 0), cv::Vec3d(half, half, 0),
-                             cv::Vec3d(-half, half, 0)})
+  for (const cv::Vec3d& l :
+       {cv::Vec3d(-half, -half, 0), cv::Vec3d(half, -half, 0), cv::Vec3d(half, half, 0), cv::Vec3d(-half, half, 0)})
     region.push_back(pose.R_B_Q * l + pose.p_B);
   for (int c = 0; c < 2 && visible; ++c) {
     const RenderCamera& cam = cams[c];
@@ -504,8 +505,9 @@ bool renderImage(const RenderCamera (&cams)[2], int c, const std::vector<Quad>& 
 /// The moving quads at time t: each object's card (and the hand holding it) unless hidden, and the
 /// active occluders; every object's pose and whether it is hidden.
 std::vector<Quad> quadsAt(const SceneScript& script, double t, const TagFamily& family, double cell_scale,
-                          const std::vector<cv::Mat>& cards, const cv::Mat& skin, const std::vector<cv::Mat>& occluder_tex,
-                          std::vector<QuadPose>& poses, std::vector<bool>& hidden) {
+                          const std::vector<cv::Mat>& cards, const cv::Mat& skin,
+                          const std::vector<cv::Mat>& occluder_tex, std::vector<QuadPose>& poses,
+                          std::vector<bool>& hidden) {
   std::vector<Quad> quads;
   poses.assign(script.objects.size(), QuadPose{});
   hidden.assign(script.objects.size(), false);
@@ -581,8 +583,8 @@ MakeSummary makeSession(const SceneScript& script, const std::string& out_dir,
   std::vector<cv::Mat> occluder_tex;
   for (const ScriptedObject& o : script.objects) cards.push_back(cardTexture(family, o.tag_id, 32));
   for (const ScriptedOccluder& o : script.occluders)
-    occluder_tex.push_back(noiseTexture(tex_rng, cv::Size(64, 64),
-                                        cv::Scalar(o.colour_bgr[0], o.colour_bgr[1], o.colour_bgr[2]), 10, 8));
+    occluder_tex.push_back(
+        noiseTexture(tex_rng, cv::Size(64, 64), cv::Scalar(o.colour_bgr[0], o.colour_bgr[1], o.colour_bgr[2]), 10, 8));
 
   const StereoCalibration calib = rigCalibration(rig);
   std::vector<ObjectSpec> specs;
@@ -601,10 +603,9 @@ MakeSummary makeSession(const SceneScript& script, const std::string& out_dir,
   cv::RNG stamp_rng(script.seed * 104729 + 3);
   cv::Mat out[2];
   for (int k = 0; k < frames; ++k) {
-    const double jitter =
-        script.render.timestamp_jitter > 0.0 ? stamp_rng.uniform(-script.render.timestamp_jitter,
-                                                                 script.render.timestamp_jitter)
-                                             : 0.0;
+    const double jitter = script.render.timestamp_jitter > 0.0
+                              ? stamp_rng.uniform(-script.render.timestamp_jitter, script.render.timestamp_jitter)
+                              : 0.0;
     const double t = k / script.fps + jitter;
     cv::RNG rng(script.seed * 1000003ULL + static_cast<std::uint64_t>(k) * 7ULL + 11ULL);
 

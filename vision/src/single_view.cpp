@@ -15,8 +15,8 @@ std::vector<cv::Point3d> tagCorners(double s) {
 }
 
 /// Camera points -> raw pixels with the camera's own distortion model.
-std::vector<cv::Point2d> projectRaw(const CameraInfo& camera, const std::vector<cv::Point3d>& p_T, const cv::Vec3d& rvec,
-                                    const cv::Vec3d& tvec) {
+std::vector<cv::Point2d> projectRaw(const CameraInfo& camera, const std::vector<cv::Point3d>& p_T,
+                                    const cv::Vec3d& rvec, const cv::Vec3d& tvec) {
   std::vector<cv::Point2d> px;
   const cv::Mat K(camera.K), D(camera.D);
   if (camera.distortion_model == "equidistant")

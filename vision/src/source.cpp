@@ -76,7 +76,8 @@ ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
       message.clear();
       return ReadStatus::kEnd;  // stopped: a normal end
     }
-    next_due_ += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / pace_));
+    next_due_ +=
+        std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / pace_));
   }
   const bool stereo = static_cast<bool>(cap_[1]);
   const bool grabbed_left = cap_[0]->grab();
@@ -92,8 +93,7 @@ ReadStatus CameraSource::next(StereoFrame& frame, std::string& message) {
       return ReadStatus::kEnd;
     }
   }
-  const double stamp =
-      std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  const double stamp = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
   bool ok = grabbed;
   if (ok && stereo) {
     ok = cap_[0]->retrieve(frame.left) && cap_[1]->retrieve(frame.right);

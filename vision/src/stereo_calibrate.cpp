@@ -22,14 +22,22 @@ struct DictionaryName {
   cv::aruco::PREDEFINED_DICTIONARY_NAME id;
 };
 const DictionaryName kDictionaries[] = {
-    {"DICT_4X4_50", cv::aruco::DICT_4X4_50},       {"DICT_4X4_100", cv::aruco::DICT_4X4_100},
-    {"DICT_4X4_250", cv::aruco::DICT_4X4_250},     {"DICT_4X4_1000", cv::aruco::DICT_4X4_1000},
-    {"DICT_5X5_50", cv::aruco::DICT_5X5_50},       {"DICT_5X5_100", cv::aruco::DICT_5X5_100},
-    {"DICT_5X5_250", cv::aruco::DICT_5X5_250},     {"DICT_5X5_1000", cv::aruco::DICT_5X5_1000},
-    {"DICT_6X6_50", cv::aruco::DICT_6X6_50},       {"DICT_6X6_100", cv::aruco::DICT_6X6_100},
-    {"DICT_6X6_250", cv::aruco::DICT_6X6_250},     {"DICT_6X6_1000", cv::aruco::DICT_6X6_1000},
-    {"DICT_7X7_50", cv::aruco::DICT_7X7_50},       {"DICT_7X7_100", cv::aruco::DICT_7X7_100},
-    {"DICT_7X7_250", cv::aruco::DICT_7X7_250},     {"DICT_7X7_1000", cv::aruco::DICT_7X7_1000},
+    {"DICT_4X4_50", cv::aruco::DICT_4X4_50},
+    {"DICT_4X4_100", cv::aruco::DICT_4X4_100},
+    {"DICT_4X4_250", cv::aruco::DICT_4X4_250},
+    {"DICT_4X4_1000", cv::aruco::DICT_4X4_1000},
+    {"DICT_5X5_50", cv::aruco::DICT_5X5_50},
+    {"DICT_5X5_100", cv::aruco::DICT_5X5_100},
+    {"DICT_5X5_250", cv::aruco::DICT_5X5_250},
+    {"DICT_5X5_1000", cv::aruco::DICT_5X5_1000},
+    {"DICT_6X6_50", cv::aruco::DICT_6X6_50},
+    {"DICT_6X6_100", cv::aruco::DICT_6X6_100},
+    {"DICT_6X6_250", cv::aruco::DICT_6X6_250},
+    {"DICT_6X6_1000", cv::aruco::DICT_6X6_1000},
+    {"DICT_7X7_50", cv::aruco::DICT_7X7_50},
+    {"DICT_7X7_100", cv::aruco::DICT_7X7_100},
+    {"DICT_7X7_250", cv::aruco::DICT_7X7_250},
+    {"DICT_7X7_1000", cv::aruco::DICT_7X7_1000},
     {"DICT_ARUCO_ORIGINAL", cv::aruco::DICT_ARUCO_ORIGINAL},
 };
 
@@ -136,12 +144,13 @@ std::string boardKindName(BoardKind kind) {
 
 void validateBoard(const BoardSpec& b) {
   const std::string what = boardKindName(b.kind) + " board: ";
-  const char* unit = b.kind == BoardKind::kCheckerboard ? "inner corners" : b.kind == BoardKind::kCharuco ? "squares"
-                                                                                                          : "tags";
+  const char* unit = b.kind == BoardKind::kCheckerboard ? "inner corners"
+                     : b.kind == BoardKind::kCharuco    ? "squares"
+                                                        : "tags";
   const int min_side = b.kind == BoardKind::kAprilGrid ? 1 : 2;
   if (b.cols < min_side || b.rows < min_side || b.cols > 200 || b.rows > 200)
-    throw VisionError(what + std::to_string(b.cols) + " x " + std::to_string(b.rows) + " " + unit + ": each side must be in [" +
-                      std::to_string(min_side) + ", 200]");
+    throw VisionError(what + std::to_string(b.cols) + " x " + std::to_string(b.rows) + " " + unit +
+                      ": each side must be in [" + std::to_string(min_side) + ", 200]");
   if (b.kind == BoardKind::kAprilGrid && b.cols * b.rows < 2)
     throw VisionError(what + "a grid of one tag is too few points (at least 2 tags)");
   if (!(b.square > 0.0 && b.square < 10.0))
@@ -210,7 +219,8 @@ std::map<int, cv::Point3f> boardPoints(const BoardSpec& b) {
 
 cv::Mat drawBoard(const BoardSpec& b, int ppu, double& metres_per_pixel, cv::Point2d& origin_px) {
   validateBoard(b);
-  if (ppu < 1 || ppu > 1000) throw VisionError("pixels per square/cell = " + std::to_string(ppu) + " must be in [1, 1000]");
+  if (ppu < 1 || ppu > 1000)
+    throw VisionError("pixels per square/cell = " + std::to_string(ppu) + " must be in [1, 1000]");
   switch (b.kind) {
     case BoardKind::kCheckerboard: {
       // (cols+1) x (rows+1) squares, the top-left one black, one square of white margin around.
@@ -242,8 +252,8 @@ cv::Mat drawBoard(const BoardSpec& b, int ppu, double& metres_per_pixel, cv::Poi
       const int gap_px = static_cast<int>(std::lround(gap_cells * ppu));
       if (std::abs(gap_cells * ppu - gap_px) > 1e-6)
         throw VisionError("aprilgrid: the spacing is " + fmt(gap_cells) + " cells, which " + std::to_string(ppu) +
-                          " pixels per cell cannot draw exactly; choose a spacing of whole cells (cell = " +
-                          fmt(cell) + " m)");
+                          " pixels per cell cannot draw exactly; choose a spacing of whole cells (cell = " + fmt(cell) +
+                          " m)");
       const int border = (family.totalWidth() - family.widthAtBorder()) / 2;  // white cells around the black square
       const int tag_px = family.widthAtBorder() * ppu, pitch_px = tag_px + gap_px;
       const int margin = ppu * (border + 1);
@@ -252,7 +262,8 @@ cv::Mat drawBoard(const BoardSpec& b, int ppu, double& metres_per_pixel, cv::Poi
       for (int i = 0; i < b.cols * b.rows; ++i) {
         cv::Mat bits = family.bitmap(b.first_id + i), big;
         cv::resize(bits, big, cv::Size(), ppu, ppu, cv::INTER_NEAREST);
-        const int x = margin + (i % b.cols) * pitch_px - border * ppu, y = margin + (i / b.cols) * pitch_px - border * ppu;
+        const int x = margin + (i % b.cols) * pitch_px - border * ppu,
+                  y = margin + (i / b.cols) * pitch_px - border * ppu;
         big.copyTo(img(cv::Rect(x, y, big.cols, big.rows)));
       }
       metres_per_pixel = cell / ppu;
@@ -271,7 +282,8 @@ BoardObservation detectBoard(const BoardSpec& b, const cv::Mat& image) {
   else if (image.channels() == 1)
     gray = image;
   else
-    throw VisionError("detectBoard: expected a grey or BGR image, got " + std::to_string(image.channels()) + " channels");
+    throw VisionError("detectBoard: expected a grey or BGR image, got " + std::to_string(image.channels()) +
+                      " channels");
   if (gray.depth() != CV_8U) throw VisionError("detectBoard: expected an 8-bit image");
   BoardObservation obs;
   switch (b.kind) {
@@ -358,7 +370,8 @@ StereoCalibrateResult calibrateStereo(const BoardSpec& board, const std::vector<
   };
   if (!(options.outlier_factor > 1.0))
     throw VisionError("outlier factor = " + fmt(options.outlier_factor) + " must be greater than 1");
-  if (options.min_views < 3) throw VisionError("min views = " + std::to_string(options.min_views) + " must be at least 3");
+  if (options.min_views < 3)
+    throw VisionError("min views = " + std::to_string(options.min_views) + " must be at least 3");
   if (!(options.alpha >= 0.0 && options.alpha <= 1.0))
     throw VisionError("alpha = " + fmt(options.alpha) + " must be in [0, 1]");
   const std::map<int, cv::Point3f> points = boardPoints(board);
@@ -372,12 +385,12 @@ StereoCalibrateResult calibrateStereo(const BoardSpec& board, const std::vector<
     v.points = static_cast<int>(common[i].board.size());
     if (v.points < options.min_points) {
       v.dropped = true;
-      v.why = views[i].left.ids.empty() && views[i].right.ids.empty()
-                  ? "no board found"
-                  : views[i].left.ids.empty()   ? "no board found in the left image"
-                    : views[i].right.ids.empty() ? "no board found in the right image"
-                                                 : "only " + std::to_string(v.points) + " points seen in both images (at least " +
-                                                       std::to_string(options.min_points) + ")";
+      v.why = views[i].left.ids.empty() && views[i].right.ids.empty() ? "no board found"
+              : views[i].left.ids.empty()                             ? "no board found in the left image"
+              : views[i].right.ids.empty()
+                  ? "no board found in the right image"
+                  : "only " + std::to_string(v.points) + " points seen in both images (at least " +
+                        std::to_string(options.min_points) + ")";
     } else {
       kept.push_back(i);
     }

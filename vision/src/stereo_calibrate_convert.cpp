@@ -35,8 +35,8 @@ class Storages {
       try {
         if (!fs->open(f, cv::FileStorage::READ)) throw VisionError("");
       } catch (const cv::Exception& e) {
-        throw VisionError(f + ": not an OpenCV FileStorage file (YAML with %YAML:1.0, XML or JSON): " +
-                          std::string(e.err));
+        throw VisionError(f +
+                          ": not an OpenCV FileStorage file (YAML with %YAML:1.0, XML or JSON): " + std::string(e.err));
       } catch (const VisionError&) {
         throw VisionError(f + ": not an OpenCV FileStorage file (YAML with %YAML:1.0, XML or JSON)");
       }
@@ -138,7 +138,8 @@ cv::Size readSize(const Storages& s, const ConvertOptions& o, std::string& notes
     notes += "image size " + std::to_string(o.size.width) + "x" + std::to_string(o.size.height) + " from --size\n";
     return o.size;
   }
-  throw VisionError(s.fileList() + ": no image size (image_width + image_height, or image_size: [w, h]); OpenCV's "
+  throw VisionError(s.fileList() +
+                    ": no image size (image_width + image_height, or image_size: [w, h]); OpenCV's "
                     "stereo_calib sample does not store it: pass --size WIDTHxHEIGHT");
 }
 

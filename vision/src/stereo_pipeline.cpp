@@ -36,8 +36,7 @@ StereoRectifier::StereoRectifier(const StereoCalibration& calib) : calib_(calib)
     const CameraInfo& c = cam(calib_, i == 1);
     const cv::Mat P(c.P);
     if (c.distortion_model == "equidistant")
-      cv::fisheye::initUndistortRectifyMap(c.K, c.D, c.R, P.colRange(0, 3), c.image_size, CV_16SC2, map1_[i],
-                                           map2_[i]);
+      cv::fisheye::initUndistortRectifyMap(c.K, c.D, c.R, P.colRange(0, 3), c.image_size, CV_16SC2, map1_[i], map2_[i]);
     else
       cv::initUndistortRectifyMap(c.K, c.D, c.R, P.colRange(0, 3), c.image_size, CV_16SC2, map1_[i], map2_[i]);
   }
@@ -170,8 +169,8 @@ double computeConfidence(double decision_margin, double epipolar_px, double size
   return std::clamp(m * e * s, 0.0, 1.0);
 }
 
-StereoTagPipeline::StereoTagPipeline(const StereoCalibration& calib, const CameraMount& mount,
-                                     const ObjectMap& objects, const PipelineOptions& options)
+StereoTagPipeline::StereoTagPipeline(const StereoCalibration& calib, const CameraMount& mount, const ObjectMap& objects,
+                                     const PipelineOptions& options)
     : rectifier_(calib), mount_(mount), objects_(objects), options_(options) {
   if (objects_.family() != options_.detector.family)
     throw VisionError("object map family '" + objects_.family() + "' differs from the detector family '" +
@@ -256,7 +255,8 @@ bool StereoTagPipeline::observe(int id, const TagDetection& dl_ref, const TagDet
     ok = ok && rectifier_.triangulate(dl->corners[k], dr.corners[k], c_rect[k]);
     epi += std::abs(dl->corners[k].y - dr.corners[k].y) / 4.0;
     disparity += ((dl->corners[k].x - rectifier_.calibration().left.P(0, 2)) -
-                  (dr.corners[k].x - rectifier_.calibration().right.P(0, 2))) / 4.0;
+                  (dr.corners[k].x - rectifier_.calibration().right.P(0, 2))) /
+                 4.0;
   }
   if (!ok || epi > options_.max_epipolar_px) {
     return false;
@@ -340,8 +340,10 @@ void StereoTagPipeline::process(const cv::Mat& left, const cv::Mat& right, Stere
       continue;
     }
     ObjectObservation o;
-    if (observe(id, *dl, dr, *spec, o)) out.objects.push_back(o);
-    else ++out.rejected;
+    if (observe(id, *dl, dr, *spec, o))
+      out.objects.push_back(o);
+    else
+      ++out.rejected;
   }
 }
 

@@ -118,9 +118,9 @@ bool VideoFilesReader::next(StereoFrame& frame) {
     frame.left = sbs_.colRange(0, size_.width).clone();
     frame.right = sbs_.colRange(size_.width, 2 * size_.width).clone();
   } else if (frame.left.size() != size_ || frame.right.size() != size_) {
-    throw VisionError("frame " + std::to_string(next_) + " of videos '" + spec_.left + "' / '" + spec_.right +
-                      "' is " + sizeText(frame.left.size()) + " / " + sizeText(frame.right.size()) +
-                      ", not the calibration's " + sizeText(size_));
+    throw VisionError("frame " + std::to_string(next_) + " of videos '" + spec_.left + "' / '" + spec_.right + "' is " +
+                      sizeText(frame.left.size()) + " / " + sizeText(frame.right.size()) + ", not the calibration's " +
+                      sizeText(size_));
   }
   frame.index = next_;
   frame.stamp = stamps_.empty() ? next_ / fps_ : stamps_[static_cast<std::size_t>(next_)];

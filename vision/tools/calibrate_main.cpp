@@ -59,7 +59,8 @@ BoardSpec boardFrom(const BoardArgs& b) {
 // Throws naming `out` when it cannot be the output folder (a device, a FIFO, a file in its place; its
 // parent missing) or when left.yaml / right.yaml in it are not regular files: before any work.
 void checkOutputFolder(const std::string& out) {
-  if (const std::string why = reflex::common::outputFolderProblem(out); !why.empty()) throw VisionError("--out: " + why);
+  if (const std::string why = reflex::common::outputFolderProblem(out); !why.empty())
+    throw VisionError("--out: " + why);
   std::error_code ec;
   if (!fs::is_directory(out, ec)) return;  // made later: nothing in it yet
   for (const char* name : {"left.yaml", "right.yaml"}) {
@@ -136,8 +137,8 @@ int runCalibrate(const BoardArgs& ba, const std::string& pairs, const std::strin
       size = l.size();
       first = name;
     } else if (l.size() != size) {
-      throw VisionError(name + " is " + std::to_string(l.cols) + "x" + std::to_string(l.rows) + " but " + first + " is " +
-                        std::to_string(size.width) + "x" + std::to_string(size.height) +
+      throw VisionError(name + " is " + std::to_string(l.cols) + "x" + std::to_string(l.rows) + " but " + first +
+                        " is " + std::to_string(size.width) + "x" + std::to_string(size.height) +
                         ": every pair must have the same image size");
     }
     StereoView v;
@@ -154,7 +155,8 @@ int runCalibrate(const BoardArgs& ba, const std::string& pairs, const std::strin
   if (views.empty()) throw VisionError("no image pairs read");
   if (with_board == 0)
     throw VisionError("no " + boardKindName(board.kind) + " board (" + std::to_string(board.cols) + " x " +
-                      std::to_string(board.rows) + ") found in both images of any of the " + std::to_string(views.size()) +
+                      std::to_string(board.rows) + ") found in both images of any of the " +
+                      std::to_string(views.size()) +
                       " pairs: check --board, --cols, --rows (checkerboard: INNER corners) and the lighting");
   const StereoCalibrateResult res = calibrateStereo(board, views, size, opt, [&](const std::string& s) {
     if (!quiet) std::fprintf(stderr, "%s\n", s.c_str());
@@ -175,9 +177,10 @@ int runCalibrate(const BoardArgs& ba, const std::string& pairs, const std::strin
   cv::Rodrigues(res.R, rvec);
   std::printf("\nviews: %d kept of %zu (%d calibration rounds)\n", kept, res.views.size(), res.rounds);
   std::printf("reprojection RMS: %.3f px (good: < 0.5 px)\n", res.rms);
-  std::printf("rectified epipolar error |y_L - y_R|: RMS %.3f px, max %.3f px (good: RMS < 0.5 px; "
-              "reflex_vision rejects a tag above 2 px)\n",
-              res.epipolar_rms, res.epipolar_max);
+  std::printf(
+      "rectified epipolar error |y_L - y_R|: RMS %.3f px, max %.3f px (good: RMS < 0.5 px; "
+      "reflex_vision rejects a tag above 2 px)\n",
+      res.epipolar_rms, res.epipolar_max);
   printCamera("left", res.calibration.left);
   printCamera("right", res.calibration.right);
   std::printf("  baseline %.5f m, T = (%.5f, %.5f, %.5f) m, rotation between the cameras %.3f deg\n",
@@ -217,7 +220,8 @@ int runMount(const MountArgs& a) {
       tp.push_back(v);
     }
   }
-  if (tp.size() != 3) throw VisionError("--tag-point '" + a.tag_point + "' must be X,Y,Z (metres, in the hand link frame)");
+  if (tp.size() != 3)
+    throw VisionError("--tag-point '" + a.tag_point + "' must be X,Y,Z (metres, in the hand link frame)");
   reflex::control::Model model;
   try {
     model = reflex::control::loadModel(a.urdf, reflex::control::loadCollisionConfigFor(a.urdf, a.collision));
@@ -235,21 +239,27 @@ int runMount(const MountArgs& a) {
   k.hand_link = link(a.hand_link, "--hand-link");
   k.p_hand = Eigen::Vector3d(tp[0], tp[1], tp[2]);
   const int camera_link = a.camera_link.empty() ? -1 : link(a.camera_link, "--camera-link");
-  if (std::error_code ec; !fs::is_directory(fs::path(a.out).has_parent_path() ? fs::path(a.out).parent_path() : ".", ec))
+  if (std::error_code ec;
+      !fs::is_directory(fs::path(a.out).has_parent_path() ? fs::path(a.out).parent_path() : ".", ec))
     throw VisionError("--out '" + a.out + "': its folder does not exist");
   const std::vector<MountObservation> obs = readMountObservations(a.observations, k);
-  const MountResult r = estimateCameraInHead(obs, a.options, [](const std::string& s) { std::fprintf(stderr, "%s\n", s.c_str()); });
+  const MountResult r =
+      estimateCameraInHead(obs, a.options, [](const std::string& s) { std::fprintf(stderr, "%s\n", s.c_str()); });
 
   std::printf("%-20s %12s  %s\n", "view", "residual_mm", "status");
   for (const MountViewReport& v : r.views)
-    std::printf("%-20s %12.2f  %s\n", v.name.c_str(), 1000.0 * v.residual, v.dropped ? ("dropped: " + v.why).c_str() : "kept");
+    std::printf("%-20s %12.2f  %s\n", v.name.c_str(), 1000.0 * v.residual,
+                v.dropped ? ("dropped: " + v.why).c_str() : "kept");
   int kept = 0;
   for (const MountViewReport& v : r.views) kept += !v.dropped;
   const cv::Vec3d rpy = rpyOf(r.R_H_C);
-  std::printf("\nviews: %d kept of %zu; residual RMS %.2f mm, max %.2f mm (good: a few mm, about the stereo error at "
-              "that distance)\n", kept, r.views.size(), 1000.0 * r.rms, 1000.0 * r.max);
-  std::printf("camera in %s (URDF origin of a fixed joint %s -> camera): xyz=\"%.5f %.5f %.5f\" rpy=\"%.5f %.5f %.5f\"\n",
-              a.head_link.c_str(), a.head_link.c_str(), r.p_H_C[0], r.p_H_C[1], r.p_H_C[2], rpy[0], rpy[1], rpy[2]);
+  std::printf(
+      "\nviews: %d kept of %zu; residual RMS %.2f mm, max %.2f mm (good: a few mm, about the stereo error at "
+      "that distance)\n",
+      kept, r.views.size(), 1000.0 * r.rms, 1000.0 * r.max);
+  std::printf(
+      "camera in %s (URDF origin of a fixed joint %s -> camera): xyz=\"%.5f %.5f %.5f\" rpy=\"%.5f %.5f %.5f\"\n",
+      a.head_link.c_str(), a.head_link.c_str(), r.p_H_C[0], r.p_H_C[1], r.p_H_C[2], rpy[0], rpy[1], rpy[2]);
   const Eigen::Isometry3d X_B_H = linkPoseAtZero(model, k.head_link);
   CameraMount mount;
   mount.R_B_C = toCv(X_B_H.linear()) * r.R_H_C;
@@ -288,7 +298,8 @@ CLI::App* addMountCommand(CLI::App& app, MountArgs& mount_args) {
   mnt->add_option("--collision", mount_args.collision, "its collision YAML (default: next to the URDF, if any)");
   mnt->add_option("--head-link", mount_args.head_link, "link the cameras are fixed to")->capture_default_str();
   mnt->add_option("--hand-link", mount_args.hand_link, "link the tag is fixed to")->required();
-  mnt->add_option("--tag-point", mount_args.tag_point, "the tag centre in the hand link frame: X,Y,Z metres")->required();
+  mnt->add_option("--tag-point", mount_args.tag_point, "the tag centre in the hand link frame: X,Y,Z metres")
+      ->required();
   mnt->add_option("--observations", mount_args.observations,
                   "CSV: view,x_cam,y_cam,z_cam,<joint>,... (tag centre in the left optical frame, joint values)")
       ->required();
@@ -302,7 +313,8 @@ CLI::App* addMountCommand(CLI::App& app, MountArgs& mount_args) {
 }
 
 /// `convert`: an OpenCV stereoCalibrate FileStorage file -> the camera_info pair in `out`.
-int runConvert(const std::vector<std::string>& files, ConvertOptions copt, const std::string& size, const std::string& out) {
+int runConvert(const std::vector<std::string>& files, ConvertOptions copt, const std::string& size,
+               const std::string& out) {
   copt.size = parseSize(size);
   std::string notes;
   const StereoCalibration c = convertOpenCvStereo(files, copt, notes);
@@ -324,10 +336,11 @@ int runBoard(const BoardArgs& draw_board, int ppu, const std::string& board_out)
     throw VisionError("cannot write '" + board_out + "': " + e.err);
   }
   if (!ok) throw VisionError("cannot write '" + board_out + "' (missing folder, or not a .png name?)");
-  std::printf("wrote %s: %dx%d px; print it so that one %s measures %.4f m (%.4f mm per pixel), then measure "
-              "the print and pass what you measure as --square\n",
-              board_out.c_str(), img.cols, img.rows, b.kind == BoardKind::kAprilGrid ? "tag's black square" : "square",
-              b.square, 1000.0 * mpp);
+  std::printf(
+      "wrote %s: %dx%d px; print it so that one %s measures %.4f m (%.4f mm per pixel), then measure "
+      "the print and pass what you measure as --square\n",
+      board_out.c_str(), img.cols, img.rows, b.kind == BoardKind::kAprilGrid ? "tag's black square" : "square",
+      b.square, 1000.0 * mpp);
   return 0;
 }
 
@@ -353,14 +366,16 @@ int main(int argc, char** argv) {
   StereoCalibrateOptions opt;
   CLI::App* cal = app.add_subcommand("calibrate", "stereo calibration from image pairs or a session");
   addBoardOptions(cal, cal_board);
-  cal->add_option("--pairs", pairs, "folder of image pairs: left/ + right/ with equal names, or left*.png + right*.png");
+  cal->add_option("--pairs", pairs,
+                  "folder of image pairs: left/ + right/ with equal names, or left*.png + right*.png");
   cal->add_option("--session", session, "recorded session folder (its two videos; no calibration needed)");
   cal->add_option("--every", every, "session: use every N-th pair")->capture_default_str();
   cal->add_option("--out", cal_out, "folder for left.yaml and right.yaml (created; its parent must exist)")->required();
   cal->add_option("--outlier-factor", opt.outlier_factor,
                   "drop views whose reprojection RMS exceeds this x the median (and --min-outlier-px), recalibrate")
       ->capture_default_str();
-  cal->add_option("--min-outlier-px", opt.min_outlier_px, "never drop a view below this RMS, px")->capture_default_str();
+  cal->add_option("--min-outlier-px", opt.min_outlier_px, "never drop a view below this RMS, px")
+      ->capture_default_str();
   cal->add_option("--min-views", opt.min_views, "fewest usable views")->capture_default_str();
   cal->add_option("--min-points", opt.min_points, "fewest points seen in both images for a view to count")
       ->capture_default_str();
@@ -376,7 +391,8 @@ int main(int argc, char** argv) {
   CLI::App* conv = app.add_subcommand("convert", "OpenCV stereoCalibrate FileStorage file(s) -> camera_info pair");
   conv->add_option("FILE", conv_files, "FileStorage file(s): one with everything, or intrinsics.yml extrinsics.yml")
       ->required();
-  conv->add_option("--out", conv_out, "folder for left.yaml and right.yaml (created; its parent must exist)")->required();
+  conv->add_option("--out", conv_out, "folder for left.yaml and right.yaml (created; its parent must exist)")
+      ->required();
   conv->add_option("--size", conv_size, "image size WIDTHxHEIGHT when the file holds none");
   conv->add_option("--alpha", copt.alpha, "rectification free scaling when the file has no R1 R2 P1 P2")
       ->capture_default_str();

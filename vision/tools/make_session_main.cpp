@@ -16,9 +16,10 @@ int main(int argc, char** argv) {
       "Exit: 0 written, 2 bad script or a file that could not be written (named, with the cause)."};
   std::string script_path, out_dir;
   bool quiet = false;
-  app.add_option("--script", script_path, "scene script YAML (e.g. bringup/sessions/flagship/scene.yaml)")
+  app.add_option("--script", script_path, "scene script YAML (e.g. bringup/sessions/flagship/scene.yaml)")->required();
+  app.add_option("--out", out_dir,
+                 "session folder to write (created, its parent must exist; existing files are overwritten)")
       ->required();
-  app.add_option("--out", out_dir, "session folder to write (created, its parent must exist; existing files are overwritten)")->required();
   app.add_flag("--quiet", quiet, "no progress display");
   return reflex::runMain("reflex_make_session", app, argc, argv, [&]() -> int {
     if (const std::string why = reflex::vision::sessionFolderProblem(out_dir); !why.empty())

@@ -29,8 +29,7 @@ std::vector<std::string> splitCsv(const std::string& line) {
 
 double parseNumber(const std::string& text, const std::string& where) {
   double v = 0.0;
-  if (!common::parseFiniteNumber(text, v))
-    throw VisionError(where + ": '" + text + "' is not a finite number");
+  if (!common::parseFiniteNumber(text, v)) throw VisionError(where + ": '" + text + "' is not a finite number");
   return v;
 }
 
@@ -52,14 +51,19 @@ std::vector<MountObservation> readMountObservations(const std::string& path, con
   for (std::size_t c = 0; c < header.size(); ++c) {
     const std::string& h = header[c];
     const int ci = static_cast<int>(c);
-    if (h == "view") col_view = ci;
-    else if (h == "x_cam") col_x = ci;
-    else if (h == "y_cam") col_y = ci;
-    else if (h == "z_cam") col_z = ci;
-    else if (const int qi = k.model->qIndex(h); qi >= 0) q_of_col[ci] = qi;
+    if (h == "view")
+      col_view = ci;
+    else if (h == "x_cam")
+      col_x = ci;
+    else if (h == "y_cam")
+      col_y = ci;
+    else if (h == "z_cam")
+      col_z = ci;
+    else if (const int qi = k.model->qIndex(h); qi >= 0)
+      q_of_col[ci] = qi;
     else
-      throw VisionError(path + ": line 1: column '" + h + "' is neither view, x_cam, y_cam, z_cam nor a movable joint of " +
-                        k.model->name);
+      throw VisionError(path + ": line 1: column '" + h +
+                        "' is neither view, x_cam, y_cam, z_cam nor a movable joint of " + k.model->name);
   }
   for (const auto& [name, col] : {std::pair<const char*, int>{"x_cam", col_x}, {"y_cam", col_y}, {"z_cam", col_z}})
     if (col < 0) throw VisionError(path + ": line 1: missing column '" + std::string(name) + "'");
@@ -78,11 +82,14 @@ std::vector<MountObservation> readMountObservations(const std::string& path, con
                         std::to_string(header.size()));
     MountObservation m;
     m.name = col_view >= 0 ? cells[static_cast<std::size_t>(col_view)] : "line " + std::to_string(line_no);
-    auto cell = [&](int c) { return parseNumber(cells[static_cast<std::size_t>(c)], where + ", " + header[static_cast<std::size_t>(c)]); };
+    auto cell = [&](int c) {
+      return parseNumber(cells[static_cast<std::size_t>(c)], where + ", " + header[static_cast<std::size_t>(c)]);
+    };
     m.p_C = cv::Vec3d(cell(col_x), cell(col_y), cell(col_z));
     q.setZero();
     for (const auto& [c, qi] : q_of_col) q[qi] = cell(c);
-    if (!control::computeForwardKinematics(*k.model, data, q)) throw VisionError(where + ": joint values refused by the kinematics");
+    if (!control::computeForwardKinematics(*k.model, data, q))
+      throw VisionError(where + ": joint values refused by the kinematics");
     const Eigen::Vector3d p_B = data.X_B_L[static_cast<std::size_t>(k.hand_link)] * k.p_hand;
     const Eigen::Vector3d p_H = data.X_B_L[static_cast<std::size_t>(k.head_link)].inverse() * p_B;
     m.p_H = cv::Vec3d(p_H.x(), p_H.y(), p_H.z());

@@ -69,11 +69,12 @@ int importFiles(const reflex::vision::VideoFilesSpec& spec, const reflex::vision
     return 4;
   }
   const double span = stats.last_stamp - stats.first_stamp;
-  std::printf("imported %d pairs%s into %s with codec %s: stamps %.6f .. %.6f s (span %.3f s, %.2f pairs/s of "
-              "session time); %.1f pairs/s achieved (%.2f s)\n",
-              stats.frames, stats.stopped ? " (interrupted)" : "", out.c_str(), writer.codec().c_str(),
-              stats.first_stamp, stats.last_stamp, span, stats.frames > 1 && span > 0.0 ? (stats.frames - 1) / span : 0.0,
-              stats.frames / std::max(1e-9, stats.wall_seconds), stats.wall_seconds);
+  std::printf(
+      "imported %d pairs%s into %s with codec %s: stamps %.6f .. %.6f s (span %.3f s, %.2f pairs/s of "
+      "session time); %.1f pairs/s achieved (%.2f s)\n",
+      stats.frames, stats.stopped ? " (interrupted)" : "", out.c_str(), writer.codec().c_str(), stats.first_stamp,
+      stats.last_stamp, span, stats.frames > 1 && span > 0.0 ? (stats.frames - 1) / span : 0.0,
+      stats.frames / std::max(1e-9, stats.wall_seconds), stats.wall_seconds);
   return 0;
 }
 }  // namespace
@@ -96,7 +97,8 @@ void addOptions(CLI::App& app, RecordArgs& a) {
   app.add_option("--from-files", a.from_files, "offline: import LEFT RIGHT video files (as fast as possible)")
       ->expected(2);
   app.add_option("--from-side-by-side", a.from_sbs, "offline: import one side-by-side video file (left half = left)");
-  app.add_option("--timestamps", a.timestamps, "offline: capture stamps, CSV 'frame,stamp' (seconds), one row per frame");
+  app.add_option("--timestamps", a.timestamps,
+                 "offline: capture stamps, CSV 'frame,stamp' (seconds), one row per frame");
   app.add_option("--calib-left", a.calib_left, "left camera_info YAML")->required();
   app.add_option("--calib-right", a.calib_right, "right camera_info YAML")->required();
   app.add_option("--objects", a.objects_path, "object map YAML copied into the session")->required();
@@ -106,8 +108,8 @@ void addOptions(CLI::App& app, RecordArgs& a) {
   app.add_option("--frames", a.ro.max_frames, "stop after this many pairs (0 = no limit)");
   app.add_option("--duration", a.ro.duration, "stop after this many seconds (0 = no limit)");
   a.fps_opt = app.add_option("--fps", a.fps,
-                                  "cameras: nominal frame rate written to the videos (default: the camera's); "
-                                  "offline: stamp i = i / F (default: the video's rate)");
+                             "cameras: nominal frame rate written to the videos (default: the camera's); "
+                             "offline: stamp i = i / F (default: the video's rate)");
   app.add_option("--codec", a.codec,
                  "FourCC to use first (default avc1/mp4, then mp4v/mp4, MJPG/avi; FFV1/avi is lossless)");
   app.add_flag("--quiet", a.quiet, "no progress display");
@@ -132,14 +134,15 @@ int main(int argc, char** argv) {
   try {
     if (const std::string why = sessionFolderProblem(args.out); !why.empty()) throw VisionError("--out: " + why);
     const bool offline = !args.from_files.empty() || !args.from_sbs.empty();
-    const int sources = (!args.cam_left.empty() || !args.cam_right.empty()) + (!args.sbs.empty()) + (!args.from_files.empty()) +
-                        (!args.from_sbs.empty());
+    const int sources = (!args.cam_left.empty() || !args.cam_right.empty()) + (!args.sbs.empty()) +
+                        (!args.from_files.empty()) + (!args.from_sbs.empty());
     if (sources != 1)
-      throw VisionError("give one source: --camera-left N --camera-right M, --side-by-side N, --from-files LEFT RIGHT "
-                        "or --from-side-by-side FILE");
+      throw VisionError(
+          "give one source: --camera-left N --camera-right M, --side-by-side N, --from-files LEFT RIGHT "
+          "or --from-side-by-side FILE");
     if (fps_opt->count() > 0 && !(args.fps > 0.0 && args.fps <= kMaxSessionFps))
-      throw VisionError("--fps " + std::to_string(args.fps) + " must be a number in (0, " + std::to_string(kMaxSessionFps) +
-                        "]");
+      throw VisionError("--fps " + std::to_string(args.fps) + " must be a number in (0, " +
+                        std::to_string(kMaxSessionFps) + "]");
     if (!args.timestamps.empty() && !offline)
       throw VisionError("--timestamps applies to --from-files / --from-side-by-side (cameras are stamped live)");
     if (offline && (args.ro.max_frames != 0 || args.ro.duration != 0.0))
@@ -164,8 +167,8 @@ int main(int argc, char** argv) {
       // disparity: every tag at infinity.
       std::error_code same_ec;
       if (!args.from_files.empty() && std::filesystem::equivalent(args.from_files[0], args.from_files[1], same_ec))
-        throw VisionError("--from-files: the left and the right video are the same file ('" + args.from_files[0] + "' and '" +
-                          args.from_files[1] + "'): a stereo session needs each camera's own video");
+        throw VisionError("--from-files: the left and the right video are the same file ('" + args.from_files[0] +
+                          "' and '" + args.from_files[1] + "'): a stereo session needs each camera's own video");
       VideoFilesSpec spec;
       spec.left = args.from_sbs.empty() ? args.from_files[0] : args.from_sbs;
       spec.right = args.from_sbs.empty() ? args.from_files[1] : std::string();

@@ -93,14 +93,16 @@ int main(int argc, char** argv) {
                "session time, objects, lag");
   app.add_flag("--quiet", quiet, "no progress display");
   app.add_option("--domain", domain_text, "DDS domain id (default: $REFLEX_DOMAIN_ID, else 0)");
-  app.add_option("--profiles", o.profiles_file, "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
+  app.add_option("--profiles", o.profiles_file,
+                 "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
   app.add_option("--frame-id", o.frame_id, "name of the robot base frame written into ObjectTargets")
       ->capture_default_str();
-  app.add_option("--wait-readers", o.wait_readers,
-                 "hold the start until this many readers of reflex/object_targets have matched (e.g. 2: "
-                 "reflex_behavior and reflex_record), then 0.3 s for their side of the match, so the first frames reach "
-                 "them; under DDS-Security "
-                 "matching waits for authentication, seconds on a loaded machine (default 0: start at once)");
+  app.add_option(
+      "--wait-readers", o.wait_readers,
+      "hold the start until this many readers of reflex/object_targets have matched (e.g. 2: "
+      "reflex_behavior and reflex_record), then 0.3 s for their side of the match, so the first frames reach "
+      "them; under DDS-Security "
+      "matching waits for authentication, seconds on a loaded machine (default 0: start at once)");
   app.add_option("--wait-timeout", o.wait_timeout, "seconds --wait-readers holds at most before exit 5")
       ->capture_default_str();
   if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;
@@ -125,9 +127,8 @@ int main(int argc, char** argv) {
     }
     const reflex::vision::RunStats& stats = node.stats();
     std::cerr << "reflex_vision: " << stats.frames << " frames processed, " << stats.skipped << " skipped, "
-              << stats.dropped << " dropped to keep up, "
-              << stats.publications << " publications" << (o.dump.empty() ? "" : " (dump: " + o.dump + ")")
-              << "\n";
+              << stats.dropped << " dropped to keep up, " << stats.publications << " publications"
+              << (o.dump.empty() ? "" : " (dump: " + o.dump + ")") << "\n";
     try {
       node.closeOutput();
     } catch (const VisionError& e) {

@@ -33,8 +33,8 @@ void HgDouble::takeCommands(MujocoRobot& robot, std::int64_t now_ns) noexcept {
     bool finite = true;
     for (int motor = hg::kArmSdkFirst; motor <= hg::kArmSdkLast; ++motor) {
       const auto& m = cmd_.motor_cmd()[static_cast<std::size_t>(motor)];
-      finite = finite && std::isfinite(m.q()) && std::isfinite(m.dq()) && std::isfinite(m.kp()) && std::isfinite(m.kd()) &&
-               m.kp() >= 0.0f && m.kd() >= 0.0f;
+      finite = finite && std::isfinite(m.q()) && std::isfinite(m.dq()) && std::isfinite(m.kp()) &&
+               std::isfinite(m.kd()) && m.kp() >= 0.0f && m.kd() >= 0.0f;
     }
     if (!finite) {
       ++counts_.rejected_not_finite;

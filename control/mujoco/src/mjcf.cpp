@@ -49,8 +49,7 @@ std::string esc(const std::string& s) {
 
 void requirePositive(double v, const char* name) {
   if (!(v > 0.0) || !std::isfinite(v))
-    throw reflex::Error(std::string("MJCF option ") + name + " = " + num(v) +
-                                " must be finite and positive");
+    throw reflex::Error(std::string("MJCF option ") + name + " = " + num(v) + " must be finite and positive");
 }
 
 void checkOptions(const MjcfOptions& o) {
@@ -139,7 +138,10 @@ constexpr int kMaxContacts = 400;
 class MjcfWriter {
  public:
   MjcfWriter(const Model& model, const MjcfOptions& options, const std::vector<ServoGains>& gains)
-      : model_(model), options_(options), gains_(gains), children_(childrenOf(model)),
+      : model_(model),
+        options_(options),
+        gains_(gains),
+        children_(childrenOf(model)),
         segment_of_link_(model.links.size(), -1) {
     for (int s = 0; s < model.num_robot_segments; ++s) segment_of_link_[model.segments[s].link] = s;
   }
@@ -176,17 +178,16 @@ class MjcfWriter {
   void writeBody(int l, const std::string& in) {
     const auto& link = model_.links[l];
     const Eigen::Quaterniond quat(link.X_P_J.linear());
-    out_ << in << "<body name=\"" << esc(link.name) << "\" pos=\"" << vec(link.X_P_J.translation())
-         << "\" quat=\"" << num(quat.w()) << " " << num(quat.x()) << " " << num(quat.y()) << " " << num(quat.z())
-         << "\">\n";
+    out_ << in << "<body name=\"" << esc(link.name) << "\" pos=\"" << vec(link.X_P_J.translation()) << "\" quat=\""
+         << num(quat.w()) << " " << num(quat.x()) << " " << num(quat.y()) << " " << num(quat.z()) << "\">\n";
     const std::string in2 = in + "  ";
     if (link.has_inertial) {
       double mass = link.mass;
       Eigen::Matrix3d I = link.inertia_L;
       repairInertial(options_, mass, I, nullptr);
       out_ << in2 << "<inertial pos=\"" << vec(link.com_L) << "\" mass=\"" << num(mass) << "\" fullinertia=\""
-           << num(I(0, 0)) << " " << num(I(1, 1)) << " " << num(I(2, 2)) << " " << num(I(0, 1)) << " "
-           << num(I(0, 2)) << " " << num(I(1, 2)) << "\"/>\n";
+           << num(I(0, 0)) << " " << num(I(1, 1)) << " " << num(I(2, 2)) << " " << num(I(0, 1)) << " " << num(I(0, 2))
+           << " " << num(I(1, 2)) << "\"/>\n";
     } else if (segment_of_link_[l] < 0) {
       const std::string i = num(options_.min_inertia);
       out_ << in2 << "<inertial pos=\"0 0 0\" mass=\"" << num(options_.min_mass) << "\" diaginertia=\"" << i << " " << i
@@ -294,8 +295,8 @@ class MjcfWriter {
       const double effort = gains_.empty() ? 1.0 : g.effort;
       out_ << "    <general name=\"" << esc(model_.q_names[qi]) << "\" joint=\"" << esc(model_.q_names[qi])
            << "\" gaintype=\"fixed\" gainprm=\"1\" biastype=\"affine\" biasprm=\"0 " << num(-g.kp)
-           << " 0\" ctrllimited=\"false\" forcelimited=\"true\" forcerange=\"" << num(-effort) << " "
-           << num(effort) << "\"/>\n";
+           << " 0\" ctrllimited=\"false\" forcelimited=\"true\" forcerange=\"" << num(-effort) << " " << num(effort)
+           << "\"/>\n";
     }
     out_ << "  </actuator>\n";
   }
@@ -330,8 +331,8 @@ std::vector<JointClass> classifyJoints(const control::Model& model) {
 std::string makeMjcf(const control::Model& model, const MjcfOptions& options, const std::vector<ServoGains>& gains) {
   checkOptions(options);
   if (!gains.empty() && static_cast<int>(gains.size()) != model.nq)
-    throw reflex::Error("makeMjcf: " + std::to_string(gains.size()) + " servo gains for " +
-                                std::to_string(model.nq) + " joints");
+    throw reflex::Error("makeMjcf: " + std::to_string(gains.size()) + " servo gains for " + std::to_string(model.nq) +
+                        " joints");
   return MjcfWriter(model, options, gains).write();
 }
 
@@ -343,7 +344,8 @@ std::vector<ServoGains> servoGains(const control::Model& model, const MjcfOption
   for (int qi = 0; qi < model.nq; ++qi) {
     gains[qi].joint_class = classes[qi];
     const bool limb = classes[qi] == JointClass::kLimb;
-    gains[qi].armature = limb && model.links[model.q_link[qi]].type == JointType::kRevolute ? options.limb_armature : 0.0;
+    gains[qi].armature =
+        limb && model.links[model.q_link[qi]].type == JointType::kRevolute ? options.limb_armature : 0.0;
     gains[qi].damping = limb ? options.limb_damping : 0.0;
     gains[qi].effort = limb ? options.limb_effort : options.base_effort;
   }
@@ -351,8 +353,8 @@ std::vector<ServoGains> servoGains(const control::Model& model, const MjcfOption
   for (int qi = 0; qi < model.nq; ++qi) {
     const int joint = mj_name2id(m.get(), mjOBJ_JOINT, model.q_names[qi].c_str());
     const double inertia = m->dof_M0[m->jnt_dofadr[joint]];
-    const double w = kTwoPi * (gains[qi].joint_class == JointClass::kLimb ? options.limb_bandwidth_hz
-                                                                           : options.base_bandwidth_hz);
+    const double w =
+        kTwoPi * (gains[qi].joint_class == JointClass::kLimb ? options.limb_bandwidth_hz : options.base_bandwidth_hz);
     gains[qi].kp = inertia * w * w;
     gains[qi].kd = 2.0 * inertia * w;
   }

@@ -55,13 +55,16 @@ const char* verdictName(CommandVerdict v) {
 }
 
 MujocoRobot::MujocoRobot(const control::Model& model, const MjcfOptions& options, const Eigen::VectorXd& q0)
-    : model_(model), gains_(servoGains(model, options)), mjcf_(makeMjcf(model, options, gains_)),
-      m_(compileMjcf(mjcf_)), d_(mj_makeData(m_.get())) {
+    : model_(model),
+      gains_(servoGains(model, options)),
+      mjcf_(makeMjcf(model, options, gains_)),
+      m_(compileMjcf(mjcf_)),
+      d_(mj_makeData(m_.get())) {
   if (!d_) throw reflex::Error("MuJoCo: mj_makeData failed");
   const int nq = model.nq;
   if (q0.size() != 0 && q0.size() != nq)
-    throw std::invalid_argument("MujocoRobot: initial configuration has " + std::to_string(q0.size()) +
-                                " values for " + std::to_string(nq) + " joints");
+    throw std::invalid_argument("MujocoRobot: initial configuration has " + std::to_string(q0.size()) + " values for " +
+                                std::to_string(nq) + " joints");
   qpos_adr_.resize(nq);
   dof_adr_.resize(nq);
   actuator_.resize(nq);

@@ -17,7 +17,7 @@ namespace {
 
 constexpr std::size_t kMaxLatencySamples = 1000000;
 
-constexpr std::int64_t kMaxCatchUp = 20;  // periods run at once after a late wake-up
+constexpr std::int64_t kMaxCatchUp = 20;                  // periods run at once after a late wake-up
 constexpr std::int64_t kHeartbeatPeriodNs = 500'000'000;  // as bus::HeartbeatPublisher's default
 
 std::int64_t monotonicNs() {
@@ -65,8 +65,8 @@ Eigen::VectorXd parseInitialConfiguration(const control::Model& model, const std
     if (!common::parseFiniteNumber(text, v))
       throw reflex::Error("--q '" + entry + "': '" + text + "' is not a finite number");
     if (v < model.q_lower[qi] || v > model.q_upper[qi])
-      throw reflex::Error("--q '" + entry + "': outside the joint limits [" + std::to_string(model.q_lower[qi]) +
-                                  ", " + std::to_string(model.q_upper[qi]) + "]");
+      throw reflex::Error("--q '" + entry + "': outside the joint limits [" + std::to_string(model.q_lower[qi]) + ", " +
+                          std::to_string(model.q_upper[qi]) + "]");
     q[qi] = v;
   }
   return q;
@@ -81,12 +81,12 @@ RobotNode::RobotNode(const NodeConfig& config) : config_(config) {
   substeps_ = static_cast<int>(std::lround(ratio));
   if (!(config.mjcf.timestep > 0.0) || substeps_ < 1 || std::abs(ratio - substeps_) > 1e-6)
     throw reflex::Error("--timestep " + std::to_string(config.mjcf.timestep) + " s: the period " +
-                                std::to_string(config.period) + " s must be a whole multiple of it");
+                        std::to_string(config.period) + " s must be a whole multiple of it");
   if (config.interface != "reflex" && config.interface != "unitree_hg")
     throw reflex::Error("--interface '" + config.interface + "': use 'reflex' or 'unitree_hg'");
   if (config.interface == "unitree_hg" && config.period < 0.001)
     throw reflex::Error("--period " + std::to_string(config.period) +
-                                " s: with --interface unitree_hg at least 1 ms (the tick counts milliseconds)");
+                        " s: with --interface unitree_hg at least 1 ms (the tick counts milliseconds)");
   if (config.interface != "unitree_hg" && !config.joint_map.empty())
     throw reflex::Error("--joint-map '" + config.joint_map + "' is for --interface unitree_hg");
   model_ = control::loadModel(config.urdf, control::loadCollisionConfigFor(config.urdf, config.collision));
@@ -115,10 +115,10 @@ std::string RobotNode::summary() const {
   for (int b = 0; b < m.nbody; ++b) mass += m.body_mass[b];
   std::ostringstream os;
   os << "robot '" << model_.name << "': " << m.nbody << " bodies, " << m.njnt << " joints, " << m.ngeom
-     << " geoms (collision capsules / spheres / convex pieces), " << m.npair << " contact pairs (from " << robotPairCount(model_)
-     << " checked segment pairs), " << m.nu << " actuators, mass " << fixed(mass, 2) << " kg, timestep "
-     << fixed(m.opt.timestep * 1e3, 3) << " ms x " << substeps_ << " per period " << fixed(config_.period * 1e3, 3)
-     << " ms, margin = gap = " << fixed(config_.mjcf.margin * 1e3, 2) << " mm\n";
+     << " geoms (collision capsules / spheres / convex pieces), " << m.npair << " contact pairs (from "
+     << robotPairCount(model_) << " checked segment pairs), " << m.nu << " actuators, mass " << fixed(mass, 2)
+     << " kg, timestep " << fixed(m.opt.timestep * 1e3, 3) << " ms x " << substeps_ << " per period "
+     << fixed(config_.period * 1e3, 3) << " ms, margin = gap = " << fixed(config_.mjcf.margin * 1e3, 2) << " mm\n";
   for (const auto& r : inertialRepairs(model_, config_.mjcf)) os << "REPAIRED " << r << "\n";
   os << "servos (PD + bias feed-forward): joint class kp kd effort armature damping\n";
   const auto& gains = robot_->gains();
@@ -145,8 +145,8 @@ void RobotNode::run() {
 
   const auto period_ns = static_cast<std::int64_t>(std::llround(config_.period * 1e9));
   const std::int64_t t_start = monotonicNs();
-  std::int64_t next = t_start;          // start of the next period [ns, CLOCK_MONOTONIC]
-  std::int64_t simulated_periods = 0;   // periods of physics run since t_start
+  std::int64_t next = t_start;         // start of the next period [ns, CLOCK_MONOTONIC]
+  std::int64_t simulated_periods = 0;  // periods of physics run since t_start
   const double t_end = config_.duration > 0.0 ? monotonicSeconds() + config_.duration : 0.0;
   // The heartbeat (reflex/heartbeat) from this loop: setState publishes at once; every 500 ms.
   heartbeat_->setState(msg::STATE_RUNNING);
@@ -198,7 +198,8 @@ void RobotNode::run() {
       state.efforts()[qi] = meas.effort[qi];
     }
     if (hg_) {
-      hg_->publishState(meas, static_cast<std::int64_t>(std::llround(static_cast<double>(simulated_periods) * config_.period * 1e3)));
+      hg_->publishState(
+          meas, static_cast<std::int64_t>(std::llround(static_cast<double>(simulated_periods) * config_.period * 1e3)));
       contacts.state_seq(hg_->tick());
     } else {
       state.applied_command_seq(meas.applied_command_seq);
@@ -239,13 +240,14 @@ std::string RobotNode::exitSummary() const {
   const double dt = robot_->timestep();
   std::ostringstream os;
   os << "steps " << meas.steps << " (" << fixed(meas.steps * dt, 3) << " s simulated), periods " << stats_.periods
-     << ", overruns " << stats_.overruns << " (periods lost " << stats_.lost_periods << "), max lateness " << fixed(stats_.max_lateness_us, 0) << " us"
+     << ", overruns " << stats_.overruns << " (periods lost " << stats_.lost_periods << "), max lateness "
+     << fixed(stats_.max_lateness_us, 0) << " us"
      << ", contact steps " << meas.contact_steps << ", contact periods " << stats_.contact_periods
      << ", commands applied " << c.accepted << " rejected " << c.rejected() << " (unknown name " << c.rejected_unknown
      << ", length " << c.rejected_length << ", not finite " << c.rejected_not_finite << ", duplicate "
-     << c.rejected_duplicate << ", empty " << c.rejected_empty << ", expired " << c.rejected_expired
-     << "), clamped " << c.position_clamped << ", holds begun " << c.holds << ", hold time "
-     << fixed(meas.hold_steps * dt, 3) << " s, unstable steps " << meas.unstable_steps;
+     << c.rejected_duplicate << ", empty " << c.rejected_empty << ", expired " << c.rejected_expired << "), clamped "
+     << c.position_clamped << ", holds begun " << c.holds << ", hold time " << fixed(meas.hold_steps * dt, 3)
+     << " s, unstable steps " << meas.unstable_steps;
   os << ", command latency p50 " << fixed(percentile(stats_.command_latency_us, 0.5), 0) << " us p99 "
      << fixed(percentile(stats_.command_latency_us, 0.99), 0) << " us over " << stats_.command_latency_us.size()
      << " commands";

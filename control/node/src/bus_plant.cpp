@@ -61,9 +61,14 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
   if (!options_.robot_binary.empty()) {
     if (options_.q_start.size() != model.nq)
       throw reflex::Error("robot plant: the start configuration has " + std::to_string(options_.q_start.size()) +
-                               " entries, the model has " + std::to_string(model.nq));
-    std::vector<std::string> argv = {options_.robot_binary, "--domain", std::to_string(options_.domain),
-                                     "--margin", number(options_.margin), "--name", "reflex_mujoco_sim"};
+                          " entries, the model has " + std::to_string(model.nq));
+    std::vector<std::string> argv = {options_.robot_binary,
+                                     "--domain",
+                                     std::to_string(options_.domain),
+                                     "--margin",
+                                     number(options_.margin),
+                                     "--name",
+                                     "reflex_mujoco_sim"};
     for (int i = 0; i < model.nq; ++i)
       if (options_.q_start[i] != 0.0) {
         argv.push_back("--q");
@@ -98,7 +103,8 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
       ho.timeout = options_.port.timeout;
       ho.period = options_.port.period;
       ho.ramp_time = options_.ramp_time;
-      auto hg = std::make_unique<UnitreeHgPort>(model, driven, unitree_hg::loadHgJointMap(options_.joint_map), *bus_, ho);
+      auto hg =
+          std::make_unique<UnitreeHgPort>(model, driven, unitree_hg::loadHgJointMap(options_.joint_map), *bus_, ho);
       hg_ = hg.get();
       port_ = std::move(hg);
     } else {
@@ -116,22 +122,22 @@ BusScenarioPlant::BusScenarioPlant(const control::Model& model, const std::vecto
         if (const int code = waitExit(child_, std::chrono::milliseconds(0)); code >= 0) {
           child_ = -1;
           throw reflex::Error("robot plant: the spawned robot (" + options_.robot_binary + ") exited with status " +
-                                   std::to_string(code) + " before its first state" +
-                                   (options_.robot_log.empty() ? std::string()
-                                                               : "; the end of its output (" + options_.robot_log +
-                                                                     "): " + lastLines(options_.robot_log, 3)));
+                              std::to_string(code) + " before its first state" +
+                              (options_.robot_log.empty() ? std::string()
+                                                          : "; the end of its output (" + options_.robot_log +
+                                                                "): " + lastLines(options_.robot_log, 3)));
         }
       }
       if (std::chrono::steady_clock::now() - t0 > limit) {
-        std::string where = options_.robot_binary.empty()
-                                ? "no robot on the bus"
-                                : "the spawned robot (" + options_.robot_binary + "; its output: " + options_.robot_log + ")";
+        std::string where = options_.robot_binary.empty() ? "no robot on the bus"
+                                                          : "the spawned robot (" + options_.robot_binary +
+                                                                "; its output: " + options_.robot_log + ")";
         if (child_ > 0 && waitExit(child_, std::chrono::milliseconds(0)) >= 0) {
           child_ = -1;
           where += " exited";
         }
         throw reflex::Error("robot plant: no reflex/robot_state on domain " + std::to_string(options_.domain) +
-                                 " within " + number(options_.first_state_timeout) + " s: " + where);
+                            " within " + number(options_.first_state_timeout) + " s: " + where);
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
       port_->poll();
@@ -201,7 +207,8 @@ bool BusScenarioPlant::awaitCycle(double t, double period) {
     started_ = true;
     start_ = now;
   }
-  const auto due = start_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(t));
+  const auto due =
+      start_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(t));
   const bool late = now - due >= std::chrono::duration<double>(period);
   if (now < due) std::this_thread::sleep_until(due);
   poll();
@@ -213,7 +220,8 @@ void BusScenarioPlant::rampOut(double period) {
   Eigen::VectorXd q_before = q_;
   std::int64_t stamp_before = stamp_;
   auto next = std::chrono::steady_clock::now();
-  const auto step = std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period));
+  const auto step =
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period));
   bool more = true;
   while (more) {
     more = hg_->rampOutStep(period);

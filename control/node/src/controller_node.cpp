@@ -69,15 +69,15 @@ ParticipantId participantOf(const bus::dds::SampleInfo& info) {
 }  // namespace
 
 namespace {
-constexpr std::size_t kDetailBytes = 640;     ///< the heartbeat's detail text, at most (reserved once)
-constexpr double kRobotProblemWindow = 2.0;   ///< s a rejected robot state / ignored writer stays in the detail
+constexpr std::size_t kDetailBytes = 640;    ///< the heartbeat's detail text, at most (reserved once)
+constexpr double kRobotProblemWindow = 2.0;  ///< s a rejected robot state / ignored writer stays in the detail
 }  // namespace
 
 const char* robotStateCauseName(int cause) noexcept {
-  static const char* const kNames[] = {"robot_state_length", "robot_state_missing_joint", "robot_state_not_finite",
-                                       "robot_state_future_stamp", "robot_state_old_stamp", "robot_state_duplicate_name",
-                                       "robot_state_outside_limits", "robot_state_other_writer",
-                                       "robot_state_bad_crc", "robot_state_motor_count", "robot_state_old_tick"};
+  static const char* const kNames[] = {
+      "robot_state_length",    "robot_state_missing_joint",  "robot_state_not_finite",     "robot_state_future_stamp",
+      "robot_state_old_stamp", "robot_state_duplicate_name", "robot_state_outside_limits", "robot_state_other_writer",
+      "robot_state_bad_crc",   "robot_state_motor_count",    "robot_state_old_tick"};
   static_assert(sizeof(kNames) / sizeof(kNames[0]) == kRobotStateCauses, "one name per robot port cause");
   return cause >= 0 && cause < kRobotStateCauses ? kNames[cause] : "robot_state_?";
 }
@@ -107,11 +107,11 @@ struct ControllerNode::Impl {
   std::unique_ptr<KinematicPort> kinematic;  ///< --robot kinematic
   std::unique_ptr<BusRobotPort> dds;         ///< --robot dds (DdsRobotPort) or unitree_hg (UnitreeHgPort)
   std::unique_ptr<bus::WriterIdentities> robot_identities;  ///< --robot dds: who wrote a robot state
-  std::unique_ptr<OnboardController> ctl;    ///< everything per cycle but the bus (onboard.hpp)
-  std::unique_ptr<RobotStateFile> state_file;  ///< null without --robot-state
+  std::unique_ptr<OnboardController> ctl;                   ///< everything per cycle but the bus (onboard.hpp)
+  std::unique_ptr<RobotStateFile> state_file;               ///< null without --robot-state
   std::string state_note;
   std::string interface_note;  ///< robotInterfaceNote()
-  std::string config_note;  ///< describeControllerConfig
+  std::string config_note;     ///< describeControllerConfig
   Eigen::VectorXd q0;
   std::unique_ptr<bus::Participant> participant;
   bus::Writer<msg::JointState>* joint_writer = nullptr;
@@ -160,7 +160,7 @@ struct ControllerNode::Impl {
   /// is counted (exit line) but cannot flood stderr.
   bus::LogLimiter robot_state_log{4};
   char schema_line[512] = {};
-  SimSample log_row;  ///< q / qdot sized once: filling it does not allocate
+  SimSample log_row;                  ///< q / qdot sized once: filling it does not allocate
   std::uint64_t rejections_seen = 0;  ///< OnboardCounts::targets_rejected when last_rejection was last set
 
   // The heartbeat's detail says what the controller cannot do or refuses: "" when it runs normally;
@@ -168,7 +168,7 @@ struct ControllerNode::Impl {
   // then, for kRobotProblemWindow after each, the latest robot state it rejected and the latest
   // robot_state writer it ignored (another driver, a replay, a man in the middle).
   struct Loop {
-    std::string detail;                  ///< reserved kDetailBytes at the start of run()
+    std::string detail;  ///< reserved kDetailBytes at the start of run()
     char robot_stale_text[200] = {};
     double last_robot_reject_t = -1e9, last_other_writer_t = -1e9, last_heartbeat = -1.0;
     std::uint64_t other_writer_seen = 0, bad_seen = 0;
@@ -200,18 +200,21 @@ void checkNodeOptions(const NodeConfig& config) {
   if (!(config.input_timeout > 0.0))
     throw ConfigError("--input-timeout " + std::to_string(config.input_timeout) + " must be positive");
   if (config.robot != "kinematic" && config.robot != "dds" && config.robot != "unitree_hg" && config.robot != "ros2")
-    throw ConfigError("--robot '" + config.robot + "' is not a robot side: use 'kinematic' (the in-process plant), 'dds' "
+    throw ConfigError("--robot '" + config.robot +
+                      "' is not a robot side: use 'kinematic' (the in-process plant), 'dds' "
                       "(a robot driver on reflex/robot_state and reflex/joint_command), 'unitree_hg' (Unitree's "
                       "rt/lowstate and rt/arm_sdk, with --joint-map) or 'ros2' (sensor_msgs/JointState in, a "
                       "ros2_control controller's command out)");
   if (config.robot != "ros2" && (!config.ros_controller.empty() || !config.ros_joints.empty() ||
                                  config.ros_command != "forward" || config.ros_state_topic != "joint_states"))
-    throw ConfigError("--ros-state-topic / --ros-command / --ros-controller / --ros-joints are for --robot ros2, not '" +
-                      config.robot + "'");
+    throw ConfigError(
+        "--ros-state-topic / --ros-command / --ros-controller / --ros-joints are for --robot ros2, not '" +
+        config.robot + "'");
   if (config.robot != "unitree_hg" && !config.joint_map.empty())
     throw ConfigError("--joint-map '" + config.joint_map + "' is for --robot unitree_hg, not '" + config.robot + "'");
   if (config.trigger != "timer" && config.trigger != "state")
-    throw ConfigError("--trigger '" + config.trigger + "' is not a cycle trigger: use 'timer' (a cycle every period) or "
+    throw ConfigError("--trigger '" + config.trigger +
+                      "' is not a cycle trigger: use 'timer' (a cycle every period) or "
                       "'state' (a cycle per arriving robot state, with --robot dds, unitree_hg or ros2)");
   if (config.trigger == "state" && config.robot == "kinematic")
     throw ConfigError("--trigger state runs a cycle per arriving robot state, but --robot '" + config.robot +
@@ -219,8 +222,10 @@ void checkNodeOptions(const NodeConfig& config) {
   if (!(config.robot_timeout > 0.0 && config.robot_timeout <= 1.0))
     throw ConfigError("--robot-timeout " + std::to_string(config.robot_timeout) + " must be in (0, 1] s");
   if (config.robot != "kinematic" && !config.robot_state.empty())
-    throw ConfigError("--robot-state '" + config.robot_state + "' keeps the simulated robot's joints across restarts; "
-                      "with --robot " + config.robot + " the robot measures its own: drop one of the two options");
+    throw ConfigError("--robot-state '" + config.robot_state +
+                      "' keeps the simulated robot's joints across restarts; "
+                      "with --robot " +
+                      config.robot + " the robot measures its own: drop one of the two options");
 }
 }  // namespace
 
@@ -305,8 +310,9 @@ RobotPort* ControllerNode::Impl::makeRobotPort(const Eigen::VectorXd& q0, double
     ho.timeout = config.robot_timeout;
     ho.period = cm.params.period;
     ho.ramp_time = config.ramp_time;
-    dds = std::make_unique<UnitreeHgPort>(model, drivenJoints(model, cm), unitree_hg::loadHgJointMap(unitree_hg::hgJointMapFor(config.urdf, config.joint_map)),
-                                            *participant, ho);
+    dds = std::make_unique<UnitreeHgPort>(
+        model, drivenJoints(model, cm),
+        unitree_hg::loadHgJointMap(unitree_hg::hgJointMapFor(config.urdf, config.joint_map)), *participant, ho);
     dds->sendThrough(*outbox);  // LowCmd_ too: a DDS write allocates and can block
     return dds.get();
   } else {
@@ -392,11 +398,12 @@ ControllerNode::ControllerNode(const NodeConfig& config) : impl_(std::make_uniqu
   m.protection.robot = m.model.name;
   const double deadline = config.command_deadline > 0.0 ? config.command_deadline : 3.0 * m.cm.params.period;
   if (!(deadline >= m.cm.params.period && deadline <= 1.0))
-    throw ConfigError("--command-deadline " + std::to_string(config.command_deadline) + " must be in [period = " +
-                      std::to_string(m.cm.params.period) + ", 1] s (0: three periods)");
+    throw ConfigError("--command-deadline " + std::to_string(config.command_deadline) +
+                      " must be in [period = " + std::to_string(m.cm.params.period) + ", 1] s (0: three periods)");
   Eigen::VectorXd q0 = restConfiguration(m.model, m.cm);
   if (!config.robot_state.empty()) {
-    m.state_file = std::make_unique<RobotStateFile>(config.robot_state, m.model.q_names, m.model.q_lower, m.model.q_upper);
+    m.state_file =
+        std::make_unique<RobotStateFile>(config.robot_state, m.model.q_names, m.model.q_lower, m.model.q_upper);
     char note[512];
     if (m.state_file->loaded()) {
       q0 = m.state_file->loadedPositions();
@@ -446,7 +453,8 @@ const std::string& ControllerNode::peerRefusal() const { return impl_->peer_refu
 
 void ControllerNode::stop() noexcept { impl_->stop = true; }
 
-bool ControllerNode::notePeerController(const msg::ControllerProtection& other, const std::array<unsigned char, 12>& them) {
+bool ControllerNode::notePeerController(const msg::ControllerProtection& other,
+                                        const std::array<unsigned char, 12>& them) {
   Impl& m = *impl_;
   const std::int64_t stamp = other.header().stamp_ns();
   const bool they_were_first =
@@ -514,15 +522,14 @@ bool ControllerNode::Impl::takeInputs(ControllerNode& node, double t_now, const 
   msg::MotionPriority prio;
   if (priority_reader->takeLatest(prio)) {
     ctl->setPriority(prio.priority() == msg::PRIORITY_LEFT_HIGHER    ? MotionPriority::kLeftHigher
-                    : prio.priority() == msg::PRIORITY_RIGHT_HIGHER ? MotionPriority::kRightHigher
-                                                                    : MotionPriority::kEqual);
+                     : prio.priority() == msg::PRIORITY_RIGHT_HIGHER ? MotionPriority::kRightHigher
+                                                                     : MotionPriority::kEqual);
   }
   // A heartbeat is a sign of life of the target source only if the participant that wrote the
   // targets wrote it too, in state RUNNING; the name it carries is not looked at.
   bus::dds::SampleInfo hb_info;
   while (heartbeat_reader->takeNext(heartbeat_msg, &hb_info)) {
-    if (have_target_writer && heartbeat_msg.state() == msg::STATE_RUNNING &&
-        participantOf(hb_info) == target_writer)
+    if (have_target_writer && heartbeat_msg.state() == msg::STATE_RUNNING && participantOf(hb_info) == target_writer)
       ctl->noteSourceHeartbeat(t_now);
   }
   // Another controller on the domain (both started at the same instant, so neither saw the
@@ -539,7 +546,7 @@ bool ControllerNode::Impl::takeInputs(ControllerNode& node, double t_now, const 
   for (const auto& change : schema_scratch) {
     BodySchemaRequest rq;
     rq.operation = change.operation() == msg::SCHEMA_DETACH ? BodySchemaRequest::Operation::kDetach
-                                                             : BodySchemaRequest::Operation::kAttach;
+                                                            : BodySchemaRequest::Operation::kAttach;
     rq.enabled = change.enabled();
     rq.name = &change.segment_name();
     rq.parent_link = &change.parent_link();
@@ -600,7 +607,8 @@ void ControllerNode::Impl::sayRobotState(bool ok, double t_now) {
   if (ok) {
     loop.robot_stale_text[0] = '\0';
     if (dds) {
-      std::snprintf(schema_line, sizeof(schema_line), "reflex_controller: robot state fresh (seq %llu): commanding the robot",
+      std::snprintf(schema_line, sizeof(schema_line),
+                    "reflex_controller: robot state fresh (seq %llu): commanding the robot",
                     static_cast<unsigned long long>(dds->stateSeq()));
       robot_state_log.print(stderr, schema_line);
     }
@@ -766,7 +774,8 @@ void ControllerNode::run() {
       for (;;) {
         timespec ts{};
         clock_gettime(CLOCK_MONOTONIC, &ts);
-        const long long left_ns = (static_cast<long long>(next.tv_sec) - ts.tv_sec) * 1000000000LL + (next.tv_nsec - ts.tv_nsec);
+        const long long left_ns =
+            (static_cast<long long>(next.tv_sec) - ts.tv_sec) * 1000000000LL + (next.tv_nsec - ts.tv_nsec);
         if (left_ns <= 0) break;
         if (m.dds->waitForState(std::chrono::nanoseconds(left_ns))) {
           state_woke = true;

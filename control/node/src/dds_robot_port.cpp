@@ -34,8 +34,8 @@ int DdsRobotPort::poll() noexcept {
   int rejected = 0;
   bus::dds::SampleInfo info;
   while (reader_->takeNext(sample_, &info)) {
-    const JointStateIntake::View view{sample_.names(),         sample_.positions(),       sample_.velocities(),
-                                      sample_.efforts(),       sample_.header().stamp_ns(), sample_.header().seq()};
+    const JointStateIntake::View view{sample_.names(),   sample_.positions(),         sample_.velocities(),
+                                      sample_.efforts(), sample_.header().stamp_ns(), sample_.header().seq()};
     if (!intake_.take(view, info, bus::nowNs())) ++rejected;
   }
   return rejected;

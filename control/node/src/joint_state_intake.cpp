@@ -64,9 +64,8 @@ bool JointStateIntake::accept(const View& s, const Guid& writer, std::int64_t no
       other_ = writer;
       formatGuid(writer, other_text_);
     }
-    std::snprintf(rejection_, sizeof(rejection_),
-                  "%s %llu ignored: written by %s, not the robot writer %s%s", what, seq, other_text_,
-                  bound_ ? bound_text_ : "(none bound yet)",
+    std::snprintf(rejection_, sizeof(rejection_), "%s %llu ignored: written by %s, not the robot writer %s%s", what,
+                  seq, other_text_, bound_ ? bound_text_ : "(none bound yet)",
                   identity_ok ? "" : " (not authenticated as the identity 'robot')");
     return reject(kCauseOtherWriter, counts_.rejected_other_writer);
   }
@@ -113,8 +112,8 @@ bool JointStateIntake::accept(const View& s, const Guid& writer, std::int64_t no
     const double p = s.positions[static_cast<std::size_t>(k)];
     const double v = no_velocities ? 0.0 : s.velocities[static_cast<std::size_t>(k)];
     if (!std::isfinite(p) || !std::isfinite(v)) {
-      std::snprintf(rejection_, sizeof(rejection_), "%s %llu rejected: joint '%s' position %g velocity %g",
-                    what, seq, model_.q_names[i].c_str(), p, v);
+      std::snprintf(rejection_, sizeof(rejection_), "%s %llu rejected: joint '%s' position %g velocity %g", what, seq,
+                    model_.q_names[i].c_str(), p, v);
       return reject(2, counts_.rejected_non_finite);
     }
     // !(lo <= p && p <= hi): outside the accepted range (limits + one cycle at v_max; see the header).
@@ -129,15 +128,14 @@ bool JointStateIntake::accept(const View& s, const Guid& writer, std::int64_t no
   }
   const std::int64_t ahead = s.stamp_ns - now_ns;
   if (static_cast<double>(ahead) > kFutureTolerance * 1e9) {
-    std::snprintf(rejection_, sizeof(rejection_),
-                  "%s %llu rejected: stamped %.1f ms in the future (tolerance %.1f ms)", what, seq,
-                  static_cast<double>(ahead) * 1e-6, kFutureTolerance * 1e3);
+    std::snprintf(rejection_, sizeof(rejection_), "%s %llu rejected: stamped %.1f ms in the future (tolerance %.1f ms)",
+                  what, seq, static_cast<double>(ahead) * 1e-6, kFutureTolerance * 1e3);
     return reject(3, counts_.rejected_future);
   }
   // A state of a newly bound writer (a restarted driver) starts its own stamp sequence.
   if (have_state_ && from_bound && s.stamp_ns <= state_stamp_ns_) {
-    std::snprintf(rejection_, sizeof(rejection_), "%s %llu rejected: stamp not newer than %s %llu's",
-                  what, seq, what, static_cast<unsigned long long>(state_seq_));
+    std::snprintf(rejection_, sizeof(rejection_), "%s %llu rejected: stamp not newer than %s %llu's", what, seq, what,
+                  static_cast<unsigned long long>(state_seq_));
     return reject(4, counts_.rejected_old);
   }
   if (!from_bound) {  // the first accepted state of this writer: bind it
@@ -147,7 +145,8 @@ bool JointStateIntake::accept(const View& s, const Guid& writer, std::int64_t no
     writer_last_ns_ = now_ns;
     formatGuid(writer, bound_text_);
   }
-  for (int i = 0; i < model_.nq; ++i) q_[i] = s.positions[static_cast<std::size_t>(index_[static_cast<std::size_t>(i)])];
+  for (int i = 0; i < model_.nq; ++i)
+    q_[i] = s.positions[static_cast<std::size_t>(index_[static_cast<std::size_t>(i)])];
   // The robot's interval: two consecutive accepted states of one writer (a new writer starts unknown).
   state_interval_ns_ = have_state_ && from_bound ? s.stamp_ns - state_stamp_ns_ : 0;
   have_state_ = true;

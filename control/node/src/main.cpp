@@ -42,8 +42,10 @@ void addOptions(CLI::App& app, Options& o) {
                  "switches avoidance off but never the e-stop");
   o.bus.add(app, "UDP only by default: a killed shared-memory reader cannot stall the controller's writes");
   app.add_option("--duration", config.duration, "seconds to run (0: until Ctrl-C)")->check(CLI::NonNegativeNumber);
-  app.add_option("--input-timeout", config.input_timeout, "seconds of silence from the target source before the hands retract")
-      ->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--input-timeout", config.input_timeout,
+                 "seconds of silence from the target source before the hands retract")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   app.add_flag("--no-avoidance", no_avoidance,
                "collision avoidance off (comparison runs only; never on a robot); the e-stop stays on");
   app.add_flag("--disable-estop", disable_estop,
@@ -80,21 +82,23 @@ void addOptions(CLI::App& app, Options& o) {
                  "--robot ros2: the controller's joints in its order (its `joints:` parameter; a joint Reflex does "
                  "not drive gets its measured position); default: the joints Reflex drives")
       ->delimiter(',');
-  app.add_option("--joint-map", config.joint_map,
-                 "--robot unitree_hg: the joint map YAML (motor index <-> URDF joint, kp / kd of the commanded "
-                 "motors, joints held fixed), e.g. bringup/robots/unitree_g1_29dof.hg.yaml (default: <URDF stem>.hg.yaml "
-                 "beside the URDF)");
+  app.add_option(
+      "--joint-map", config.joint_map,
+      "--robot unitree_hg: the joint map YAML (motor index <-> URDF joint, kp / kd of the commanded "
+      "motors, joints held fixed), e.g. bringup/robots/unitree_g1_29dof.hg.yaml (default: <URDF stem>.hg.yaml "
+      "beside the URDF)");
   app.add_option("--ramp-time", config.ramp_time,
                  "--robot unitree_hg: seconds for the arm_sdk weight to rise from 0 to 1 after the first command "
                  "and to fall back to 0 after the last cycle (the exit waits for it); (0, 60]")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 60.0));
-  app.add_option("--robot-timeout", config.robot_timeout,
-                 "seconds (system clock, against the state's stamp) after which the newest robot state is stale "
-                 "(--robot dds; with unitree_hg since the state was taken, LowState_ has no stamp): the controller then "
-                 "commands nothing until fresh state returns; (0, 1]. Commands "
-                 "are anchored at the state they answer, so the timeout is about liveness: 50 ms rides out a loaded "
-                 "host's scheduling stalls")
+  app.add_option(
+         "--robot-timeout", config.robot_timeout,
+         "seconds (system clock, against the state's stamp) after which the newest robot state is stale "
+         "(--robot dds; with unitree_hg since the state was taken, LowState_ has no stamp): the controller then "
+         "commands nothing until fresh state returns; (0, 1]. Commands "
+         "are anchored at the state they answer, so the timeout is about liveness: 50 ms rides out a loaded "
+         "host's scheduling stalls")
       ->capture_default_str();
   app.add_option("--command-deadline", config.command_deadline,
                  "seconds each joint command stays valid (--robot dds; JointCommand.valid_until_ns = now + this); "
@@ -105,7 +109,8 @@ void addOptions(CLI::App& app, Options& o) {
                  "--robot dds: one per arriving reflex/robot_state, with unitree_hg per rt/lowstate, so each command "
                  "answers its state at once; the "
                  "driver sets the rate, e.g. 500 Hz). With 'state' a cycle spans the time since the previous one, at "
-                 "most the robot's state interval and one period (no joint is commanded more than v_max times it), and the period is the longest wait: "
+                 "most the robot's state interval and one period (no joint is commanded more than v_max times it), and "
+                 "the period is the longest wait: "
                  "when no state arrives within it the cycle runs as the timer's (stale after --robot-timeout: "
                  "nothing commanded). Cycles started by a state report lateness 0")
       ->capture_default_str();
@@ -128,17 +133,20 @@ void printBanner(reflex::control_node::ControllerNode& node, const reflex::contr
     std::fprintf(stderr, "reflex_controller: %s\n", node.robotInterfaceNote().c_str());
   const auto& protection = node.protection();
   if (config.trigger == "state")
-    std::fprintf(stderr, "reflex_controller: a cycle per arriving robot state, at least every %.3f ms (--trigger state) "
+    std::fprintf(stderr,
+                 "reflex_controller: a cycle per arriving robot state, at least every %.3f ms (--trigger state) "
                  "on domain %d, robot '%s' (robot over DDS); protection %s\n",
-                 protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(), protection.describe().c_str());
-  else
-    std::fprintf(stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
-                 1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
-                 config.robot == "dds"          ? "robot over DDS"
-                 : config.robot == "unitree_hg" ? "Unitree hg: rt/lowstate in, rt/arm_sdk out"
-                 : config.robot == "ros2"       ? "ROS 2: sensor_msgs/JointState in, ros2_control command out"
-                                                : "kinematic plant",
+                 protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
                  protection.describe().c_str());
+  else
+    std::fprintf(
+        stderr, "reflex_controller: running at %.1f Hz (period %.3f ms) on domain %d, robot '%s' (%s); protection %s\n",
+        1.0 / protection.period, protection.period * 1e3, node.bus().domainId(), protection.robot.c_str(),
+        config.robot == "dds"          ? "robot over DDS"
+        : config.robot == "unitree_hg" ? "Unitree hg: rt/lowstate in, rt/arm_sdk out"
+        : config.robot == "ros2"       ? "ROS 2: sensor_msgs/JointState in, ros2_control command out"
+                                       : "kinematic plant",
+        protection.describe().c_str());
   if (!protection.full())
     std::fprintf(stderr, "reflex_controller: WARNING: THIS RUN IS NOT PROTECTED: %s\n", protection.reason.c_str());
 }
@@ -149,12 +157,16 @@ void printExitLine(reflex::control_node::ControllerNode& node, const reflex::con
   const auto& s = node.stats();
   std::vector<double> lat = s.lateness_us;
   std::sort(lat.begin(), lat.end());
-  auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))]; };
+  auto pct = [&](double p) {
+    return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, static_cast<std::size_t>(p * lat.size()))];
+  };
   std::string extra;
   if (lat.size() < s.cycles) extra += " (percentiles over the first " + std::to_string(lat.size()) + " cycles)";
   if (s.state_write_errors > 0) extra += ", robot-state writes FAILED " + std::to_string(s.state_write_errors);
-  if (!config.log_csv.empty()) extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
-  if (s.peer_controller_samples > 0) extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
+  if (!config.log_csv.empty())
+    extra += ", log rows " + std::to_string(s.log_rows) + " (dropped " + std::to_string(s.log_dropped) + ")";
+  if (s.peer_controller_samples > 0)
+    extra += ", ANOTHER CONTROLLER seen " + std::to_string(s.peer_controller_samples) + " times";
   if (config.robot != "kinematic") {
     extra += ", robot " + config.robot + ": states " + std::to_string(s.robot_states_accepted) + " (rejected " +
              std::to_string(s.robot_states_rejected) + "), commands " + std::to_string(s.robot_commands) +
@@ -167,7 +179,8 @@ void printExitLine(reflex::control_node::ControllerNode& node, const reflex::con
                     s.arm_sdk_max_weight_step);
       extra += w;
     }
-    if (s.robot_writer_changes > 0) extra += ", robot writer replaced " + std::to_string(s.robot_writer_changes) + " times";
+    if (s.robot_writer_changes > 0)
+      extra += ", robot writer replaced " + std::to_string(s.robot_writer_changes) + " times";
     if (s.robot_states_rejected_by_cause[7] > 0)
       extra += ", SECOND ROBOT WRITER ignored (" + std::to_string(s.robot_states_rejected_by_cause[7]) + " samples)";
   }
@@ -175,7 +188,8 @@ void printExitLine(reflex::control_node::ControllerNode& node, const reflex::con
     extra += ", rejected by cause: " + reflex::control_node::describeRejections(s) + " (last " + s.last_rejection + ")";
   {  // the loop's bus outputs (reflex/bus/outbox.hpp): a blocked write never stopped the loop; it is named here
     char bus_line[256];
-    std::snprintf(bus_line, sizeof(bus_line), ", bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %.1f ms%s%s)",
+    std::snprintf(bus_line, sizeof(bus_line),
+                  ", bus writes %llu (dropped %llu, refused %llu, blocked > 50 ms %llu, longest %.1f ms%s%s)",
                   static_cast<unsigned long long>(s.bus_written), static_cast<unsigned long long>(s.bus_dropped),
                   static_cast<unsigned long long>(s.bus_write_failures), static_cast<unsigned long long>(s.bus_stalls),
                   1e3 * s.bus_longest_write_s, s.bus_longest_topic.empty() ? "" : " ", s.bus_longest_topic.c_str());
@@ -196,17 +210,18 @@ void printExitLine(reflex::control_node::ControllerNode& node, const reflex::con
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_controller: onboard reactive controller (one cycle per controller 'period', 5 ms by default)\n"
-               "over DDS, with the in-process kinematic robot (--robot kinematic, default) or a robot driver on the bus\n"
-               "(--robot dds: reads reflex/robot_state, writes reflex/joint_command; idl/README.md). Subscribes hand\n"
-               "targets, motion priority, body schema, walk commands; publishes joint state, controller status, its\n"
-               "protection state and a heartbeat (its detail says 'robot state stale ...' while --robot dds has no\n"
-               "fresh robot state: the controller then commands nothing and the robot holds).\n"
-               "SIGUSR1 asks to leave a latched e-stop; SIGINT, SIGTERM, SIGHUP, SIGUSR2 and every other catchable\n"
-               "terminating signal stop it cleanly (summary, --log closed); SIGPIPE is ignored.\n"
-               "Exit codes: 0 success; 1 failed while running (expired DDS-Security credentials); 2 refused: a bad\n"
-               "option, file or set-up, named, or another controller keeps the domain; 3 the --log file could not be\n"
-               "written completely."};
+  CLI::App app{
+      "reflex_controller: onboard reactive controller (one cycle per controller 'period', 5 ms by default)\n"
+      "over DDS, with the in-process kinematic robot (--robot kinematic, default) or a robot driver on the bus\n"
+      "(--robot dds: reads reflex/robot_state, writes reflex/joint_command; idl/README.md). Subscribes hand\n"
+      "targets, motion priority, body schema, walk commands; publishes joint state, controller status, its\n"
+      "protection state and a heartbeat (its detail says 'robot state stale ...' while --robot dds has no\n"
+      "fresh robot state: the controller then commands nothing and the robot holds).\n"
+      "SIGUSR1 asks to leave a latched e-stop; SIGINT, SIGTERM, SIGHUP, SIGUSR2 and every other catchable\n"
+      "terminating signal stop it cleanly (summary, --log closed); SIGPIPE is ignored.\n"
+      "Exit codes: 0 success; 1 failed while running (expired DDS-Security credentials); 2 refused: a bad\n"
+      "option, file or set-up, named, or another controller keeps the domain; 3 the --log file could not be\n"
+      "written completely."};
   Options options;
   addOptions(app, options);
   reflex::control_node::NodeConfig& config = options.config;
@@ -222,7 +237,7 @@ int main(int argc, char** argv) {
     std::signal(SIGPIPE, SIG_IGN);  // from the start: a closed stderr never ends the process,
     std::signal(SIGXFSZ, SIG_IGN);  // nor a file size limit (the failed write is reported instead)
     std::signal(SIGUSR1, onUsr1);   // ignored until the node exists (g_node)
-    if (!realtime.empty()) {  // before the node: every thread it starts inherits the policy and the CPU
+    if (!realtime.empty()) {        // before the node: every thread it starts inherits the policy and the CPU
       const std::string applied =
           reflex::control_node::applyRealtime(reflex::control_node::parseRealtime(realtime), realtime);
       std::fprintf(stderr, "reflex_controller: real-time: %s\n", applied.c_str());

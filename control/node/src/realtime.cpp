@@ -56,9 +56,9 @@ __attribute__((noinline)) void prefaultStack(std::size_t bytes) {
 }  // namespace
 
 RealtimeRequest parseRealtime(const std::string& text) {
-  const std::string why =
-      "--realtime '" + text + "' is not PRIORITY[,CPU]: a SCHED_FIFO priority 1..99, optionally a comma and the "
-      "CPU to run on (0-based), e.g. 80 or 80,1";
+  const std::string why = "--realtime '" + text +
+                          "' is not PRIORITY[,CPU]: a SCHED_FIFO priority 1..99, optionally a comma and the "
+                          "CPU to run on (0-based), e.g. 80 or 80,1";
   RealtimeRequest r;
   const std::size_t comma = text.find(',');
   auto toInt = [&](const std::string& part, int& out) {
@@ -88,8 +88,9 @@ std::string applyRealtime(const RealtimeRequest& request, const std::string& opt
     if (sched_getaffinity(0, sizeof(allowed), &allowed) != 0)
       throw RealtimeError(head + "cannot read this process's CPUs (sched_getaffinity: " + errnoText(errno) + ")");
     if (request.cpu >= CPU_SETSIZE || !CPU_ISSET(request.cpu, &allowed))
-      throw RealtimeError(head + "CPU " + std::to_string(request.cpu) + " is not one this process may run on (allowed: " +
-                          describeCpus(allowed) + "; " + std::to_string(sysconf(_SC_NPROCESSORS_ONLN)) + " online)");
+      throw RealtimeError(head + "CPU " + std::to_string(request.cpu) +
+                          " is not one this process may run on (allowed: " + describeCpus(allowed) + "; " +
+                          std::to_string(sysconf(_SC_NPROCESSORS_ONLN)) + " online)");
     cpu_set_t one;
     CPU_ZERO(&one);
     CPU_SET(request.cpu, &one);
@@ -103,8 +104,8 @@ std::string applyRealtime(const RealtimeRequest& request, const std::string& opt
   param.sched_priority = request.priority;
   if (sched_setscheduler(0, SCHED_FIFO, &param) != 0) {
     const int e = errno;
-    std::string reason = head + "SCHED_FIFO priority " + std::to_string(request.priority) + " refused (sched_setscheduler: " +
-                         errnoText(e) + ")";
+    std::string reason = head + "SCHED_FIFO priority " + std::to_string(request.priority) +
+                         " refused (sched_setscheduler: " + errnoText(e) + ")";
     if (e == EPERM)
       reason += ": this process has neither CAP_SYS_NICE nor an rtprio limit of at least " +
                 std::to_string(request.priority) + " (ulimit -r is " + limitText(RLIMIT_RTPRIO) + "); " + permit;
@@ -121,8 +122,8 @@ std::string applyRealtime(const RealtimeRequest& request, const std::string& opt
   }
   // 4. The stack, pre-faulted (and so locked).
   prefaultStack(kPrefaultStackBytes);
-  summary += ", memory locked (VmLck " + std::to_string(lockedKb()) + " kB), " + std::to_string(kPrefaultStackBytes / 1024) +
-             " KiB of stack pre-faulted";
+  summary += ", memory locked (VmLck " + std::to_string(lockedKb()) + " kB), " +
+             std::to_string(kPrefaultStackBytes / 1024) + " KiB of stack pre-faulted";
   return summary;
 }
 

@@ -20,8 +20,8 @@ namespace {
 
 constexpr char kMagic[4] = {'R', 'F', 'X', 'Q'};
 constexpr std::uint32_t kVersion = 1;
-constexpr std::size_t kHeaderSize = 40;           // bytes before q
-constexpr std::uint32_t kMaxJoints = 4096;        // a sanity bound for a file of unknown origin
+constexpr std::size_t kHeaderSize = 40;     // bytes before q
+constexpr std::uint32_t kMaxJoints = 4096;  // a sanity bound for a file of unknown origin
 constexpr off_t kMaxFileSize = 2 * static_cast<off_t>(robotStateSlotSize(static_cast<int>(kMaxJoints)));
 
 template <typename T>
@@ -118,7 +118,8 @@ RobotStateFile::RobotStateFile(const std::string& path, const std::vector<std::s
   if (nq_ <= 0 || q_lower.size() != nq_ || q_upper.size() != nq_)
     throw RobotStateError(where + ": the robot model has no joints or inconsistent limits");
   // Read back and rewritten in place: only a regular file (a device, a FIFO, a folder refused by name).
-  if (const std::string why = common::inputFileProblem(path); !why.empty()) throw RobotStateError("robot state file " + why);
+  if (const std::string why = common::inputFileProblem(path); !why.empty())
+    throw RobotStateError("robot state file " + why);
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) throw RobotStateError("cannot open " + where + ": " + errnoText());
   try {
@@ -156,9 +157,10 @@ RobotStateFile::RobotStateFile(const std::string& path, const std::vector<std::s
       for (int i = 0; i < nq_; ++i) {
         const double v = readAt<double>(s.q + 8 * static_cast<std::size_t>(i));
         if (!std::isfinite(v) || v < q_lower[i] - 1e-9 || v > q_upper[i] + 1e-9)
-          throw RobotStateError(where + ": joint '" + q_names[static_cast<std::size_t>(i)] + "' = " + std::to_string(v) +
-                                " is not finite or outside its limits [" + std::to_string(q_lower[i]) + ", " +
-                                std::to_string(q_upper[i]) + "]; delete the file to start from rest");
+          throw RobotStateError(where + ": joint '" + q_names[static_cast<std::size_t>(i)] +
+                                "' = " + std::to_string(v) + " is not finite or outside its limits [" +
+                                std::to_string(q_lower[i]) + ", " + std::to_string(q_upper[i]) +
+                                "]; delete the file to start from rest");
         q_loaded_[i] = std::min(std::max(v, q_lower[i]), q_upper[i]);
       }
       loaded_ = true;

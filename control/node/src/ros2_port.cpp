@@ -11,7 +11,7 @@ namespace {
 
 JointStateIntake::Options intakeOptions(const Ros2RobotPort::Options& o) {
   JointStateIntake::Options io = JointStateIntake::optionsOf(o);
-  io.velocities_optional = true;  // ROS: velocity may be empty (not measured)
+  io.velocities_optional = true;                               // ROS: velocity may be empty (not measured)
   io.sample_name = ros2::ddsTopic(o.state_topic) + " sample";  // "rt/joint_states sample N"
   return io;
 }
@@ -29,9 +29,9 @@ Ros2RobotPort::Ros2RobotPort(const control::Model& model, const std::vector<int>
                                "' (expected forward: std_msgs/Float64MultiArray to a forward controller, or "
                                "trajectory: trajectory_msgs/JointTrajectory)");
   trajectory_ = options.command == "trajectory";
-  const std::string controller =
-      !options.controller.empty() ? options.controller
-                                  : (trajectory_ ? "joint_trajectory_controller" : "forward_position_controller");
+  const std::string controller = !options.controller.empty()
+                                     ? options.controller
+                                     : (trajectory_ ? "joint_trajectory_controller" : "forward_position_controller");
   command_topic_ = ros2::ddsTopic(controller + (trajectory_ ? "/joint_trajectory" : "/commands"));
   std::vector<std::string> names = options.joints;
   if (names.empty())
@@ -68,15 +68,16 @@ int Ros2RobotPort::poll() noexcept {
     // ROS time; 0: the driver does not stamp, taken as measured when its writer wrote it (the DDS
     // source timestamp: the sender's clock, like its own stamps, so a burst stays in order), else when
     // this host took it.
-    std::int64_t stamp_ns = static_cast<std::int64_t>(stamp.sec()) * 1000000000LL + static_cast<std::int64_t>(stamp.nanosec());
+    std::int64_t stamp_ns =
+        static_cast<std::int64_t>(stamp.sec()) * 1000000000LL + static_cast<std::int64_t>(stamp.nanosec());
     if (stamp.sec() == 0 && stamp.nanosec() == 0) {
       const auto& source = info.source_timestamp;
-      const std::int64_t written = static_cast<std::int64_t>(source.seconds()) * 1000000000LL +
-                                   static_cast<std::int64_t>(source.nanosec());
+      const std::int64_t written =
+          static_cast<std::int64_t>(source.seconds()) * 1000000000LL + static_cast<std::int64_t>(source.nanosec());
       stamp_ns = written > 0 && written <= now ? written : now;
     }
-    const JointStateIntake::View view{sample_.name(), sample_.position(), sample_.velocity(), sample_.effort(),
-                                      stamp_ns,       ++received_};
+    const JointStateIntake::View view{sample_.name(),   sample_.position(), sample_.velocity(),
+                                      sample_.effort(), stamp_ns,           ++received_};
     if (!intake_.take(view, info, now)) ++rejected;
   }
   return rejected;
@@ -101,7 +102,8 @@ void Ros2RobotPort::command(const Eigen::VectorXd& q_end, const Eigen::VectorXd&
 void Ros2RobotPort::send() noexcept {
   bool sent = false;
   if (trajectory_) {
-    sent = trajectory_queue_ != nullptr ? trajectory_queue_->push(trajectory_msg_) : trajectory_writer_->write(trajectory_msg_);
+    sent = trajectory_queue_ != nullptr ? trajectory_queue_->push(trajectory_msg_)
+                                        : trajectory_writer_->write(trajectory_msg_);
   } else {
     sent = forward_queue_ != nullptr ? forward_queue_->push(forward_) : forward_writer_->write(forward_);
   }
@@ -131,7 +133,8 @@ std::string Ros2RobotPort::describe() const {
   for (const int q : joint_q_) joints += (joints.empty() ? "" : ", ") + model_.q_names[static_cast<std::size_t>(q)];
   return "ROS 2 on the wire: state " + state_topic_ + " (sensor_msgs::msg::dds_::JointState_), commands " +
          command_topic_ +
-         (trajectory_ ? " (trajectory_msgs::msg::dds_::JointTrajectory_)" : " (std_msgs::msg::dds_::Float64MultiArray_)") +
+         (trajectory_ ? " (trajectory_msgs::msg::dds_::JointTrajectory_)"
+                      : " (std_msgs::msg::dds_::Float64MultiArray_)") +
          " for the joints [" + joints + "]";
 }
 

@@ -26,8 +26,8 @@ TimeseriesLog::TimeseriesLog(const control::Model& model, const std::string& pat
   if (file_ == nullptr) {
     const int err = errno;
     if (fd >= 0) ::close(fd);
-    throw LogError("cannot open the --log file '" + path + "' for writing: " +
-                   (err == ENXIO ? std::string("a FIFO with no reader") : reasonOf(err)));
+    throw LogError("cannot open the --log file '" + path +
+                   "' for writing: " + (err == ENXIO ? std::string("a FIFO with no reader") : reasonOf(err)));
   }
   std::ostringstream header;
   control::writeTimeseriesCsvHeader(model, header);

@@ -165,8 +165,7 @@ HgJointMap readMap(const common::ConfigNode& root) {
   if (root.has("fixed")) {
     const common::ConfigNode fixed = root.child("fixed");
     for (const auto& [name, value] : fixed.entries()) {
-      if (!names.insert(name).second)
-        fixed.fail(name, "joint listed twice (as a motor and fixed)", "each joint once");
+      if (!names.insert(name).second) fixed.fail(name, "joint listed twice (as a motor and fixed)", "each joint once");
       map.fixed.push_back({name, value.asNumber(-1e4, 1e4, "rad or m")});
     }
   }
@@ -182,8 +181,7 @@ HgJointMap loadHgJointMap(const std::string& path) {
 
 std::string hgJointMapFor(const std::string& urdf, const std::string& joint_map) {
   if (!joint_map.empty()) return joint_map;
-  const std::filesystem::path u(urdf);
-  const std::string beside = (u.parent_path() / (u.stem().string() + ".hg.yaml")).string();
+  const std::string beside = control::robotFileBeside(urdf, ".hg.yaml");
   std::error_code ec;
   if (!std::filesystem::exists(beside, ec))
     throw control::ConfigError("no joint map: --joint-map not given and no '" + beside +

@@ -27,7 +27,8 @@ UnitreeHgPort::UnitreeHgPort(const control::Model& model, const std::vector<int>
     commanded_.push_back(qi);
   }
   if (commanded_.empty())
-    throw control::ConfigError(map.source + ": no joint the controller drives is on a motor the arm_sdk weight blends "
+    throw control::ConfigError(map.source +
+                               ": no joint the controller drives is on a motor the arm_sdk weight blends "
                                "(12..28): nothing could be commanded");
   reader_ = &bus.makeReader<hg::LowState>();
   writer_ = &bus.makeWriter<hg::LowCmd>(options.command_topic, hg::kProfile);
@@ -105,8 +106,10 @@ bool UnitreeHgPort::accept(const hg::LowState& s, const Guid& writer, std::int64
   if (from_bound) writer_last_ns_ = now_ns;
   const std::uint32_t crc = hg::lowStateCrc(s);
   if (crc != s.crc()) {
-    std::snprintf(rejection_, sizeof(rejection_), "%s tick %llu rejected: crc 0x%08x, expected 0x%08x (Crc32Core of the "
-                  "C layout)", hg::kStateTopic, tick, static_cast<unsigned>(s.crc()), static_cast<unsigned>(crc));
+    std::snprintf(rejection_, sizeof(rejection_),
+                  "%s tick %llu rejected: crc 0x%08x, expected 0x%08x (Crc32Core of the "
+                  "C layout)",
+                  hg::kStateTopic, tick, static_cast<unsigned>(s.crc()), static_cast<unsigned>(crc));
     return reject(kCauseBadCrc);
   }
   // The tick must advance (modulo 2^32: a wrap is an advance, a step back of up to 2^31 is not).
@@ -211,7 +214,8 @@ double UnitreeHgPort::weightStepLimit(double dt) const noexcept {
   for (int motor = hg::kArmSdkFirst; motor <= hg::kArmSdkLast; ++motor) {
     const int qi = map_.q_of_motor[static_cast<std::size_t>(motor)];
     if (qi < 0) continue;
-    const double gap = std::abs(static_cast<double>(cmd_.motor_cmd()[static_cast<std::size_t>(motor)].q()) - q_own_[qi]);
+    const double gap =
+        std::abs(static_cast<double>(cmd_.motor_cmd()[static_cast<std::size_t>(motor)].q()) - q_own_[qi]);
     if (gap > 0.0) limit = std::min(limit, kBlendSpeedShare * model_.v_max[qi] * dt / gap);
   }
   return limit;
@@ -233,7 +237,8 @@ bool UnitreeHgPort::rampOutStep(double dt) noexcept {
 void UnitreeHgPort::finish(double period) noexcept {
   if (!(period > 0.0)) period = options_.period;
   auto next = std::chrono::steady_clock::now();
-  const auto step = std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period));
+  const auto step =
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period));
   while (rampOutStep(period)) {
     next += step;
     std::this_thread::sleep_until(next);

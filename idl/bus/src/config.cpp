@@ -11,8 +11,8 @@ namespace reflex::bus {
 int parseDomainId(const std::string& text, const std::string& origin) {
   const std::string where = " (from " + origin + ")";
   if (text.empty()) {
-    throw BusError("empty DDS domain id" + where + "; expected an integer in [0, " +
-                   std::to_string(kMaxDomainId) + "]");
+    throw BusError("empty DDS domain id" + where + "; expected an integer in [0, " + std::to_string(kMaxDomainId) +
+                   "]");
   }
   errno = 0;
   char* end = nullptr;
@@ -28,8 +28,7 @@ int resolveDomainId(const std::optional<int>& configured) {
   if (configured) {
     if (*configured < 0 || *configured > kMaxDomainId) {
       throw BusError("bad DDS domain id '" + std::to_string(*configured) +
-                     "' (from the configuration); expected an integer in [0, " +
-                     std::to_string(kMaxDomainId) + "]");
+                     "' (from the configuration); expected an integer in [0, " + std::to_string(kMaxDomainId) + "]");
     }
     return *configured;
   }

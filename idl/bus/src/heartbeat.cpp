@@ -26,8 +26,8 @@ HeartbeatPublisher::HeartbeatPublisher(Participant& bus, std::chrono::millisecon
     const auto lease_ms = static_cast<long long>(lease.seconds) * 1000 + lease.nanosec / 1'000'000;
     if (period.count() >= lease_ms) {
       throw BusError("heartbeat period " + std::to_string(period.count()) +
-                     " ms is not shorter than the liveliness lease " + std::to_string(lease_ms) +
-                     " ms of profile '" + writer_.profileName() + "'");
+                     " ms is not shorter than the liveliness lease " + std::to_string(lease_ms) + " ms of profile '" +
+                     writer_.profileName() + "'");
     }
   }
   sample_.module_name(bus.moduleName());

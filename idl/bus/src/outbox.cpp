@@ -7,7 +7,9 @@
 namespace reflex::bus {
 
 Outbox::Outbox(std::string name, std::chrono::milliseconds stall_report, std::chrono::milliseconds close_budget)
-    : name_(std::move(name)), stall_s_(std::chrono::duration<double>(stall_report).count()), close_budget_(close_budget) {
+    : name_(std::move(name)),
+      stall_s_(std::chrono::duration<double>(stall_report).count()),
+      close_budget_(close_budget) {
   sem_init(&wake_, 0, 0);
 }
 

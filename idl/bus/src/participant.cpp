@@ -97,8 +97,7 @@ std::vector<int> participantIdsOfThisProcess() {
 }
 
 std::int64_t nowNs() noexcept {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -106,8 +105,7 @@ std::int64_t nowNs() noexcept {
 
 namespace detail {
 
-void ReaderCounters::on_requested_deadline_missed(dds::DataReader*,
-                                                  const dds::RequestedDeadlineMissedStatus& s) {
+void ReaderCounters::on_requested_deadline_missed(dds::DataReader*, const dds::RequestedDeadlineMissedStatus& s) {
   deadline_missed_.store(static_cast<std::uint64_t>(s.total_count));
 }
 void ReaderCounters::on_sample_lost(dds::DataReader*, const dds::SampleLostStatus& s) {
@@ -116,8 +114,7 @@ void ReaderCounters::on_sample_lost(dds::DataReader*, const dds::SampleLostStatu
 void ReaderCounters::on_sample_rejected(dds::DataReader*, const dds::SampleRejectedStatus& s) {
   samples_rejected_.store(static_cast<std::uint64_t>(s.total_count));
 }
-void ReaderCounters::on_requested_incompatible_qos(dds::DataReader*,
-                                                   const dds::RequestedIncompatibleQosStatus& s) {
+void ReaderCounters::on_requested_incompatible_qos(dds::DataReader*, const dds::RequestedIncompatibleQosStatus& s) {
   incompatible_qos_.store(static_cast<std::uint64_t>(s.total_count));
 }
 void ReaderCounters::on_liveliness_changed(dds::DataReader*, const dds::LivelinessChangedStatus& s) {
@@ -141,15 +138,13 @@ ReaderStats ReaderCounters::snapshot() const {
   return r;
 }
 
-void WriterCounters::on_offered_deadline_missed(dds::DataWriter*,
-                                                const dds::OfferedDeadlineMissedStatus& s) {
+void WriterCounters::on_offered_deadline_missed(dds::DataWriter*, const dds::OfferedDeadlineMissedStatus& s) {
   deadline_missed_.store(static_cast<std::uint64_t>(s.total_count));
 }
 void WriterCounters::on_liveliness_lost(dds::DataWriter*, const dds::LivelinessLostStatus& s) {
   liveliness_lost_.store(static_cast<std::uint64_t>(s.total_count));
 }
-void WriterCounters::on_offered_incompatible_qos(dds::DataWriter*,
-                                                 const dds::OfferedIncompatibleQosStatus& s) {
+void WriterCounters::on_offered_incompatible_qos(dds::DataWriter*, const dds::OfferedIncompatibleQosStatus& s) {
   incompatible_qos_.store(static_cast<std::uint64_t>(s.total_count));
 }
 void WriterCounters::on_publication_matched(dds::DataWriter*, const dds::PublicationMatchedStatus& s) {
@@ -188,7 +183,8 @@ bool ReaderBase::waitForData(std::chrono::nanoseconds timeout) {
 // (discovery, Fast DDS threads), the result of the security check, and the expiry watchdog.
 struct Participant::Extras final : public dds::DomainParticipantListener {
   // Discovery: GUID prefix -> announced name (not authenticated).
-  void on_participant_discovery(dds::DomainParticipant*, eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
+  void on_participant_discovery(dds::DomainParticipant*,
+                                eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
     using Status = eprosima::fastrtps::rtps::ParticipantDiscoveryInfo;
     GuidPrefix prefix{};
     std::copy(std::begin(info.info.m_guid.guidPrefix.value), std::end(info.info.m_guid.guidPrefix.value),
@@ -274,8 +270,7 @@ Participant::Participant(const BusConfig& config)
   }
 
   dds::DomainParticipantQos qos;
-  if (factory->get_participant_qos_from_profile(config.participant_profile, qos) !=
-      ReturnCode_t::RETCODE_OK) {
+  if (factory->get_participant_qos_from_profile(config.participant_profile, qos) != ReturnCode_t::RETCODE_OK) {
     throw BusError("unknown participant QoS profile '" + config.participant_profile + "'" + where());
   }
   // Security material: checked here so that a bad file is named (Fast DDS would only fail below).
@@ -322,8 +317,7 @@ Participant::Participant(const BusConfig& config)
   }
   if (participant_ == nullptr) {
     throw BusError("could not create the DDS participant '" + module_name_ + "' on domain " +
-                   std::to_string(domain_id_) + " with profile '" + config.participant_profile + "'" +
-                   where());
+                   std::to_string(domain_id_) + " with profile '" + config.participant_profile + "'" + where());
   }
   // From here on the participant exists: release it if anything else fails.
   try {
@@ -331,8 +325,7 @@ Participant::Participant(const BusConfig& config)
     if (publisher_ == nullptr) {
       throw BusError("could not create the DDS publisher of participant '" + module_name_ + "'");
     }
-    subscriber_ =
-        participant_->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT, nullptr, dds::StatusMask::none());
+    subscriber_ = participant_->create_subscriber(dds::SUBSCRIBER_QOS_DEFAULT, nullptr, dds::StatusMask::none());
     if (subscriber_ == nullptr) {
       throw BusError("could not create the DDS subscriber of participant '" + module_name_ + "'");
     }
@@ -378,8 +371,7 @@ dds::Topic& Participant::topicFor(const std::string& topic_name, dds::TypeSuppor
     }
     return *it->second;
   }
-  if (participant_->find_type(type_name).empty() &&
-      type.register_type(participant_) != ReturnCode_t::RETCODE_OK) {
+  if (participant_->find_type(type_name).empty() && type.register_type(participant_) != ReturnCode_t::RETCODE_OK) {
     throw BusError("could not register type '" + type_name + "' for topic '" + topic_name + "'");
   }
   dds::Topic* topic = participant_->create_topic(topic_name, type_name, dds::TOPIC_QOS_DEFAULT);
@@ -393,8 +385,8 @@ dds::Topic& Participant::topicFor(const std::string& topic_name, dds::TypeSuppor
 void Participant::createWriter(detail::WriterBase& w, dds::TypeSupport type) {
   dds::DataWriterQos qos;
   if (publisher_->get_datawriter_qos_from_profile(w.profile_name_, qos) != ReturnCode_t::RETCODE_OK) {
-    throw BusError("unknown data_writer QoS profile '" + w.profile_name_ + "' for topic '" +
-                   w.topic_name_ + "'" + where());
+    throw BusError("unknown data_writer QoS profile '" + w.profile_name_ + "' for topic '" + w.topic_name_ + "'" +
+                   where());
   }
   dds::Topic& topic = topicFor(w.topic_name_, std::move(type));
   dds::StatusMask mask = dds::StatusMask::none();
@@ -410,16 +402,16 @@ void Participant::createWriter(detail::WriterBase& w, dds::TypeSupport type) {
                      "(bringup/security/make_security.sh, publish[...]; or the QoS of profile '" +
                      w.profile_name_ + "' is inconsistent)" + where());
     }
-    throw BusError("could not create the DataWriter of topic '" + w.topic_name_ + "' with profile '" +
-                   w.profile_name_ + "' (inconsistent QoS in the profile?)" + where());
+    throw BusError("could not create the DataWriter of topic '" + w.topic_name_ + "' with profile '" + w.profile_name_ +
+                   "' (inconsistent QoS in the profile?)" + where());
   }
 }
 
 void Participant::createReader(detail::ReaderBase& r, dds::TypeSupport type) {
   dds::DataReaderQos qos;
   if (subscriber_->get_datareader_qos_from_profile(r.profile_name_, qos) != ReturnCode_t::RETCODE_OK) {
-    throw BusError("unknown data_reader QoS profile '" + r.profile_name_ + "' for topic '" +
-                   r.topic_name_ + "'" + where());
+    throw BusError("unknown data_reader QoS profile '" + r.profile_name_ + "' for topic '" + r.topic_name_ + "'" +
+                   where());
   }
   dds::Topic& topic = topicFor(r.topic_name_, std::move(type));
   // Data availability is NOT in the listener mask: it goes to the reader's StatusCondition (WaitSet).
@@ -435,8 +427,8 @@ void Participant::createReader(detail::ReaderBase& r, dds::TypeSupport type) {
                      "(bringup/security/make_security.sh, subscribe[...]; or the QoS of profile '" +
                      r.profile_name_ + "' is inconsistent)" + where());
     }
-    throw BusError("could not create the DataReader of topic '" + r.topic_name_ + "' with profile '" +
-                   r.profile_name_ + "' (inconsistent QoS in the profile?)" + where());
+    throw BusError("could not create the DataReader of topic '" + r.topic_name_ + "' with profile '" + r.profile_name_ +
+                   "' (inconsistent QoS in the profile?)" + where());
   }
   r.reader_->get_statuscondition().set_enabled_statuses(dds::StatusMask::data_available());
 }
@@ -500,14 +492,13 @@ bool Participant::loop(const Clock::time_point* end) {
 
     auto wake = end != nullptr ? *end : Clock::time_point::max();
     for (const auto& t : timers_) wake = std::min(wake, t.next);
-    const auto timeout = wake == Clock::time_point::max() ? eprosima::fastrtps::c_TimeInfinite
-                                                          : toDuration(wake - now);
+    const auto timeout = wake == Clock::time_point::max() ? eprosima::fastrtps::c_TimeInfinite : toDuration(wake - now);
     dds::ConditionSeq active;
     const ReturnCode_t rc = wait_set.wait(active, timeout);
     if (rc == ReturnCode_t::RETCODE_TIMEOUT) continue;
     if (rc != ReturnCode_t::RETCODE_OK) {
-      throw BusError("WaitSet wait failed in participant '" + module_name_ + "' (return code " +
-                     std::to_string(rc()) + ")");
+      throw BusError("WaitSet wait failed in participant '" + module_name_ + "' (return code " + std::to_string(rc()) +
+                     ")");
     }
     for (dds::Condition* c : active) {
       for (auto& [condition, reader] : dispatch) {

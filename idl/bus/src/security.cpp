@@ -31,13 +31,27 @@ namespace {
 using Clock = std::chrono::system_clock;
 
 // RAII for the OpenSSL objects used here.
-struct BioFree { void operator()(BIO* b) const { BIO_free(b); } };
-struct X509Free { void operator()(X509* x) const { X509_free(x); } };
-struct KeyFree { void operator()(EVP_PKEY* k) const { EVP_PKEY_free(k); } };
-struct StoreFree { void operator()(X509_STORE* s) const { X509_STORE_free(s); } };
-struct StoreCtxFree { void operator()(X509_STORE_CTX* c) const { X509_STORE_CTX_free(c); } };
-struct Pkcs7Free { void operator()(PKCS7* p) const { PKCS7_free(p); } };
-struct NameFree { void operator()(X509_NAME* n) const { X509_NAME_free(n); } };
+struct BioFree {
+  void operator()(BIO* b) const { BIO_free(b); }
+};
+struct X509Free {
+  void operator()(X509* x) const { X509_free(x); }
+};
+struct KeyFree {
+  void operator()(EVP_PKEY* k) const { EVP_PKEY_free(k); }
+};
+struct StoreFree {
+  void operator()(X509_STORE* s) const { X509_STORE_free(s); }
+};
+struct StoreCtxFree {
+  void operator()(X509_STORE_CTX* c) const { X509_STORE_CTX_free(c); }
+};
+struct Pkcs7Free {
+  void operator()(PKCS7* p) const { PKCS7_free(p); }
+};
+struct NameFree {
+  void operator()(X509_NAME* n) const { X509_NAME_free(n); }
+};
 using Bio = std::unique_ptr<BIO, BioFree>;
 using Cert = std::unique_ptr<X509, X509Free>;
 using Key = std::unique_ptr<EVP_PKEY, KeyFree>;
@@ -68,7 +82,7 @@ struct File {
 File readMaterial(const std::string& property, const std::string& path) {
   File f{property, path, ""};
   if (path.empty()) throw BusError("DDS-Security: property " + property + " is missing from the participant profile");
-  struct stat st{};
+  struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
     throw BusError("DDS-Security: " + f.where() + ": " + (errno == ENOENT ? "missing" : std::strerror(errno)));
   }
@@ -125,7 +139,8 @@ Clock::time_point checkCertTimes(const File& f, X509* cert, Clock::time_point no
 
 Store storeWith(X509* ca) {
   Store s(X509_STORE_new());
-  if (!s || X509_STORE_add_cert(s.get(), ca) != 1) throw BusError("DDS-Security: OpenSSL cannot build a certificate store");
+  if (!s || X509_STORE_add_cert(s.get(), ca) != 1)
+    throw BusError("DDS-Security: OpenSSL cannot build a certificate store");
   return s;
 }
 
@@ -157,7 +172,8 @@ std::string trim(const std::string& s) {
 
 // The text of the first <tag>...</tag> inside `text` from `from`, or "" (the permissions documents
 // are flat enough for this: Reflex writes them, and a signed document cannot be changed).
-std::string element(const std::string& text, const std::string& tag, std::size_t from = 0, std::size_t to = std::string::npos) {
+std::string element(const std::string& text, const std::string& tag, std::size_t from = 0,
+                    std::size_t to = std::string::npos) {
   const std::string open = "<" + tag + ">", close = "</" + tag + ">";
   const auto b = text.find(open, from);
   if (b == std::string::npos || b >= to) return "";
@@ -270,15 +286,15 @@ SecurityCheck checkSecurityMaterial(const SecurityMaterial& m, Clock::time_point
     X509_STORE_CTX_set_flags(ctx.get(), X509_V_FLAG_NO_CHECK_TIME);  // times are checked above, with dates
     if (X509_verify_cert(ctx.get()) != 1) {
       throw BusError("DDS-Security: " + cert_file.where() + ": certificate '" + result.subject +
-                     "' does not verify against the identity CA '" + ca_file.path +
-                     "' (" + X509_verify_cert_error_string(X509_STORE_CTX_get_error(ctx.get())) + ")");
+                     "' does not verify against the identity CA '" + ca_file.path + "' (" +
+                     X509_verify_cert_error_string(X509_STORE_CTX_get_error(ctx.get())) + ")");
     }
   }
   const File key_file = readMaterial(auth + "private_key", m.private_key);
   {
     // The same rule as make_security.sh: a private key that group or others can read may have been
     // copied; it is refused, not used.
-    struct stat st{};
+    struct stat st {};
     if (::stat(key_file.path.c_str(), &st) == 0 && (st.st_mode & 077) != 0) {
       char mode[8];
       std::snprintf(mode, sizeof(mode), "%04o", static_cast<unsigned>(st.st_mode & 07777));
@@ -291,7 +307,9 @@ SecurityCheck checkSecurityMaterial(const SecurityMaterial& m, Clock::time_point
   {
     Bio b = memBio(key_file.text);
     Key key(PEM_read_bio_PrivateKey(b.get(), nullptr, nullptr, nullptr));
-    if (!key) throw BusError("DDS-Security: " + key_file.where() + ": not a PEM private key without password (" + sslError() + ")");
+    if (!key)
+      throw BusError("DDS-Security: " + key_file.where() + ": not a PEM private key without password (" + sslError() +
+                     ")");
     if (X509_check_private_key(cert.get(), key.get()) != 1) {
       ERR_clear_error();
       throw BusError("DDS-Security: " + key_file.where() + ": not the private key of the identity certificate '" +
@@ -315,12 +333,14 @@ SecurityCheck checkSecurityMaterial(const SecurityMaterial& m, Clock::time_point
   // The grant of this certificate's subject, and its validity.
   const std::vector<std::string> subject_parts = nameParts(result.subject);
   std::string subjects_seen;
-  for (std::size_t pos = permissions.find("<grant"); pos != std::string::npos; pos = permissions.find("<grant", pos + 1)) {
+  for (std::size_t pos = permissions.find("<grant"); pos != std::string::npos;
+       pos = permissions.find("<grant", pos + 1)) {
     const std::size_t end = permissions.find("</grant>", pos);
     const std::string subject = element(permissions, "subject_name", pos, end);
     subjects_seen += (subjects_seen.empty() ? "'" : ", '") + subject + "'";
     if (nameParts(subject) != subject_parts) continue;
-    const std::string nb = element(permissions, "not_before", pos, end), na = element(permissions, "not_after", pos, end);
+    const std::string nb = element(permissions, "not_before", pos, end),
+                      na = element(permissions, "not_after", pos, end);
     Clock::time_point t_nb, t_na;
     if (!parseIsoUtc(nb, t_nb) || !parseIsoUtc(na, t_na)) {
       throw BusError("DDS-Security: " + perm_file.where() + ": grant of '" + subject + "': validity '" + nb + "' .. '" +
@@ -331,7 +351,8 @@ SecurityCheck checkSecurityMaterial(const SecurityMaterial& m, Clock::time_point
                      formatUtc(t_nb));
     }
     if (now >= t_na) {
-      throw BusError("DDS-Security: " + perm_file.where() + ": grant of '" + subject + "' expired at " + formatUtc(t_na));
+      throw BusError("DDS-Security: " + perm_file.where() + ": grant of '" + subject + "' expired at " +
+                     formatUtc(t_na));
     }
     until(t_na, "permissions grant of '" + subject + "' in '" + perm_file.path + "'");
     return result;
@@ -363,12 +384,15 @@ std::array<std::uint8_t, 6> subjectGuidBits(const std::string& subject) {
     cur.clear();
     if (p.empty()) return;
     const auto eq = p.find('=');
-    if (eq == std::string::npos || eq == 0) throw BusError("subject name '" + subject + "': '" + p + "' is not KEY=VALUE");
+    if (eq == std::string::npos || eq == 0)
+      throw BusError("subject name '" + subject + "': '" + p + "' is not KEY=VALUE");
     attrs.emplace_back(trim(p.substr(0, eq)), trim(p.substr(eq + 1)));
   };
   for (char c : subject) {
-    if (c == ',') flush();
-    else cur += c;
+    if (c == ',')
+      flush();
+    else
+      cur += c;
   }
   flush();
   if (attrs.empty()) throw BusError("empty subject name");

@@ -32,14 +32,13 @@ extern "C" void onStopSignal(int signal_number) {
 }  // namespace
 
 std::vector<int> stopSignals() {
-  std::vector<int> s = {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGVTALRM,
-                        SIGPROF, SIGPOLL, SIGPWR, SIGSTKFLT, SIGXCPU};
+  std::vector<int> s = {SIGINT,    SIGTERM, SIGHUP,  SIGQUIT, SIGUSR1,   SIGUSR2, SIGALRM,
+                        SIGVTALRM, SIGPROF, SIGPOLL, SIGPWR,  SIGSTKFLT, SIGXCPU};
   for (int r = SIGRTMIN; r <= SIGRTMAX; ++r) s.push_back(r);
   return s;
 }
 
-StopOnSignal::StopOnSignal(Participant& participant, std::vector<int> signals)
-    : signals_(std::move(signals)) {
+StopOnSignal::StopOnSignal(Participant& participant, std::vector<int> signals) : signals_(std::move(signals)) {
   if (g_installed.exchange(true)) {
     throw BusError("a StopOnSignal already exists in this process; only one may be installed");
   }

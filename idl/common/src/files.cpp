@@ -180,13 +180,11 @@ std::string outputFolderProblem(const std::string& dir) {
     if (::stat(probe.c_str(), &st) == 0) {
       if (!S_ISDIR(st.st_mode)) {
         if (probe == dir) return "output folder " + quoted(dir) + " is " + fileKind(st.st_mode);
-        return "output folder " + quoted(dir) + " cannot be created: " + quoted(probe) + " is " +
-               fileKind(st.st_mode);
+        return "output folder " + quoted(dir) + " cannot be created: " + quoted(probe) + " is " + fileKind(st.st_mode);
       }
       if (::access(probe.c_str(), W_OK | X_OK) != 0) {
         if (probe == dir) return "cannot write into output folder " + quoted(dir) + ": " + std::strerror(errno);
-        return "output folder " + quoted(dir) + " cannot be created in " + quoted(probe) + ": " +
-               std::strerror(errno);
+        return "output folder " + quoted(dir) + " cannot be created in " + quoted(probe) + ": " + std::strerror(errno);
       }
       return "";
     }

@@ -127,9 +127,13 @@ void ConfigNode::raise(const std::string& message) const {
 
 std::string ConfigNode::keyPath(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
 
-YAML::Mark ConfigNode::mark() const { return node_.IsDefined() && !node_.Mark().is_null() ? node_.Mark() : absent_mark_; }
+YAML::Mark ConfigNode::mark() const {
+  return node_.IsDefined() && !node_.Mark().is_null() ? node_.Mark() : absent_mark_;
+}
 
-std::string ConfigNode::where() const { return file_ + markText(mark()) + ": " + (path_.empty() ? "(document)" : path_); }
+std::string ConfigNode::where() const {
+  return file_ + markText(mark()) + ": " + (path_.empty() ? "(document)" : path_);
+}
 
 std::string ConfigNode::where(const std::string& key) const {
   YAML::Mark m = mark();
@@ -201,21 +205,23 @@ std::string ConfigNode::asString() const {
 
 std::vector<double> ConfigNode::asNumbers(std::size_t count, const std::string& shape) const {
   const std::string expected = !shape.empty() ? shape
-                               : count == 0  ? "a list of finite numbers"
-                                             : "a list of " + std::to_string(count) + " finite numbers";
+                               : count == 0   ? "a list of finite numbers"
+                                              : "a list of " + std::to_string(count) + " finite numbers";
   if (!node_.IsSequence()) failHere("not a list of numbers", expected);
   if (count != 0 && node_.size() != count) failHere("has " + std::to_string(node_.size()) + " numbers", expected);
   std::vector<double> out(node_.size());
   for (std::size_t i = 0; i < node_.size(); ++i)
     if (!parseDouble(node_[i], out[i]) || !std::isfinite(out[i]))
-      ConfigNode(node_[i], file_, path_ + "[" + std::to_string(i) + "]", raise_).failHere("not a finite number", expected);
+      ConfigNode(node_[i], file_, path_ + "[" + std::to_string(i) + "]", raise_)
+          .failHere("not a finite number", expected);
   return out;
 }
 
 std::vector<ConfigNode> ConfigNode::elements() const {
   if (!node_.IsSequence()) failHere("not a list", "a list");
   std::vector<ConfigNode> out;
-  for (std::size_t i = 0; i < node_.size(); ++i) out.emplace_back(node_[i], file_, path_ + "[" + std::to_string(i) + "]", raise_);
+  for (std::size_t i = 0; i < node_.size(); ++i)
+    out.emplace_back(node_[i], file_, path_ + "[" + std::to_string(i) + "]", raise_);
   return out;
 }
 
@@ -242,7 +248,9 @@ bool ConfigNode::has(const std::string& key) const {
   return node_.IsMap() && node_[key].IsDefined() && !node_[key].IsNull();
 }
 
-ConfigNode ConfigNode::item(const std::string& key) const { return ConfigNode(node_[key], file_, keyPath(key), raise_); }
+ConfigNode ConfigNode::item(const std::string& key) const {
+  return ConfigNode(node_[key], file_, keyPath(key), raise_);
+}
 
 ConfigNode ConfigNode::at(const std::string& key, const std::string& expected) const {
   if (!node_.IsMap()) failHere("not a map", "a map with the key '" + key + "'");
@@ -345,7 +353,8 @@ void ConfigNode::rejectUnknown(const std::vector<std::string>& allowed) const {
           if (kv.first.Scalar() == k) return kv.first;
         return YAML::Node();
       }();
-      raise(file_ + markText(key_node.Mark()) + ": " + keyPath(k) + ": unknown key (expected one of " + joined(allowed) + ")");
+      raise(file_ + markText(key_node.Mark()) + ": " + keyPath(k) + ": unknown key (expected one of " +
+            joined(allowed) + ")");
     }
   }
 }

@@ -83,7 +83,7 @@ class DdsSink final : public OutputSink {
   /// Waits until every matched reader acknowledged what was published (reliable writers).
   void waitForAcknowledgments(std::chrono::milliseconds timeout) {
     const eprosima::fastrtps::Duration_t d(static_cast<std::int32_t>(timeout.count() / 1000),
-                                          static_cast<std::uint32_t>((timeout.count() % 1000) * 1000000));
+                                           static_cast<std::uint32_t>((timeout.count() % 1000) * 1000000));
     if (hands_) hands_->native().wait_for_acknowledgments(d);
     if (priority_) priority_->native().wait_for_acknowledgments(d);
     if (schema_) schema_->native().wait_for_acknowledgments(d);
@@ -102,7 +102,8 @@ class DdsSink final : public OutputSink {
   void count(bool published, const char* what, const std::string& name) {
     if (published) return;
     if (refused_++ % 1000 == 0) {
-      std::fprintf(stderr, "reflex_behavior: %s %s%.60s%s refused by the bus (%llu so far; a key longer than %zu bytes?)\n",
+      std::fprintf(stderr,
+                   "reflex_behavior: %s %s%.60s%s refused by the bus (%llu so far; a key longer than %zu bytes?)\n",
                    what, name.empty() ? "" : "'", name.c_str(), name.empty() ? "" : (name.size() > 60 ? "...'" : "'"),
                    static_cast<unsigned long long>(refused_), bus::kMaxKeyStringBytes);
     }
@@ -127,9 +128,9 @@ struct BehaviorNode::Impl {
   static constexpr double kJointWriterSilence = 0.5;  // s (the controller publishes every 5 ms)
   bool have_joint_writer = false;
   std::array<unsigned char, 16> joint_writer{};
-  double joint_writer_last = -1.0;                    // host time of its last sample
-  std::uint64_t joint_states_other_writer = 0;        // samples ignored: from a second writer
-  std::uint64_t joint_writer_changes = 0;             // a silent writer replaced by a new one
+  double joint_writer_last = -1.0;                 // host time of its last sample
+  std::uint64_t joint_states_other_writer = 0;     // samples ignored: from a second writer
+  std::uint64_t joint_writer_changes = 0;          // a silent writer replaced by a new one
   std::unique_ptr<bus::WriterIdentities> writers;  // who wrote an object frame (inputs.object_sources)
   bus::LogLimiter host_log;                        // the host's per-sample lines, rate-limited
 
@@ -138,7 +139,8 @@ struct BehaviorNode::Impl {
   }
 };
 
-BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& registry) : impl_(std::make_unique<Impl>()) {
+BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& registry)
+    : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.options = options;
   m.config = loadHostConfig(options.config, registry);
@@ -248,11 +250,13 @@ BehaviorNode::BehaviorNode(const NodeOptions& options, const ModuleRegistry& reg
     m.joints.positions = js.positions();
     m.host->onJointState(m.joints, m.now());
   });
-  m.bus->every(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(m.config.tick_period)),
-               [&m] { m.host->tick(m.now()); });
+  m.bus->every(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(m.config.tick_period)),
+      [&m] { m.host->tick(m.now()); });
   if (options.progress_period > 0.0 && !options.quiet) {
-    m.bus->every(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(options.progress_period)),
-                 [&m] { std::fprintf(stderr, "%s: %s\n", m.host->processName().c_str(), m.host->status().c_str()); });
+    m.bus->every(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(options.progress_period)),
+        [&m] { std::fprintf(stderr, "%s: %s\n", m.host->processName().c_str(), m.host->status().c_str()); });
   }
 }
 
@@ -272,7 +276,8 @@ void BehaviorNode::run() {
     m.host->start(m.now());
     m.heartbeat->setState(msg::STATE_RUNNING, "modules: " + names);
     if (m.options.duration > 0.0) {
-      m.bus->runFor(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(m.options.duration)));
+      m.bus->runFor(
+          std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(m.options.duration)));
     } else {
       m.bus->run();
     }
@@ -290,15 +295,14 @@ std::string BehaviorNode::report() const {
   std::ostringstream m;
   m << "frames=" << s.frames_received << " objects_accepted=" << s.objects_accepted
     << " rejected_source=" << s.frames_rejected_source << " rejected_future=" << s.frames_rejected_future
-    << " rejected_frame=" << s.frames_rejected_frame
-    << " rejected_invalid=" << s.objects_rejected_invalid
+    << " rejected_frame=" << s.frames_rejected_frame << " rejected_invalid=" << s.objects_rejected_invalid
     << " rejected_unknown=" << s.objects_rejected_unknown << " rejected_range=" << s.objects_rejected_range
     << " rejected_duplicate=" << s.objects_rejected_duplicate << " joint_states=" << s.joint_states
     << " joint_states_rejected=" << s.joint_states_rejected
-    << " joint_states_rejected_source=" << s.joint_states_rejected_source << " hand_targets=" << s.hand_targets_published
-    << " priority=" << s.priority_published << " segment_changes=" << s.segment_changes_published
-    << " walk=" << s.walk_published << " outputs_rejected=" << s.outputs_rejected
-    << " forced_cleanups=" << s.forced_cleanups
+    << " joint_states_rejected_source=" << s.joint_states_rejected_source
+    << " hand_targets=" << s.hand_targets_published << " priority=" << s.priority_published
+    << " segment_changes=" << s.segment_changes_published << " walk=" << s.walk_published
+    << " outputs_rejected=" << s.outputs_rejected << " forced_cleanups=" << s.forced_cleanups
     << " outputs_refused_by_bus=" << impl_->sink.refused()
     << " joint_states_other_writer=" << impl_->joint_states_other_writer
     << " joint_writer_changes=" << impl_->joint_writer_changes;

@@ -155,17 +155,17 @@ void StopWatchdog::loop() {
     const std::int64_t since_stop = now - stop_ns_;
     const bool module_stuck = call.what && since_stop >= ns(bounds_.module_bound);
     if (!module_stuck && since_stop < ns(bounds_.process_bound)) continue;
-    const double bound_s = 1e-3 * static_cast<double>(module_stuck ? bounds_.module_bound.count()
-                                                                    : bounds_.process_bound.count());
-    const int n =
-        call.what ? std::snprintf(text, sizeof text,
-                                  "reflex_behavior: not stopped %.1f s after the stop request: %s has not returned "
-                                  "(running for %.1f s); exit %d without clean-up\n",
-                                  bound_s, call.what, call_s, exit_code_)
-                  : std::snprintf(text, sizeof text,
-                                  "reflex_behavior: not stopped %.1f s after the stop request, no module call "
-                                  "running (the bus or its teardown); exit %d without clean-up\n",
-                                  bound_s, exit_code_);
+    const double bound_s =
+        1e-3 * static_cast<double>(module_stuck ? bounds_.module_bound.count() : bounds_.process_bound.count());
+    const int n = call.what
+                      ? std::snprintf(text, sizeof text,
+                                      "reflex_behavior: not stopped %.1f s after the stop request: %s has not returned "
+                                      "(running for %.1f s); exit %d without clean-up\n",
+                                      bound_s, call.what, call_s, exit_code_)
+                      : std::snprintf(text, sizeof text,
+                                      "reflex_behavior: not stopped %.1f s after the stop request, no module call "
+                                      "running (the bus or its teardown); exit %d without clean-up\n",
+                                      bound_s, exit_code_);
     writeStderr(text, static_cast<std::size_t>(std::clamp<int>(n, 0, sizeof text - 1)));
     ::_exit(exit_code_);
   }

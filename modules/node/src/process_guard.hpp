@@ -27,8 +27,8 @@ namespace reflex::modules {
 void installFatalSignalReport();
 
 struct StopBounds {
-  std::chrono::milliseconds overrun{1000};        ///< a call longer than this is named (once) while running
-  std::chrono::milliseconds module_bound{2000};   ///< after the stop request: a module call still running ends it
+  std::chrono::milliseconds overrun{1000};       ///< a call longer than this is named (once) while running
+  std::chrono::milliseconds module_bound{2000};  ///< after the stop request: a module call still running ends it
   /// After the stop request: the process ends, whatever runs. Above the normal stop's worst case (up to
   /// 2 s for the removals' acknowledgments, then the DDS teardown) with room for a loaded machine.
   std::chrono::milliseconds process_bound{6000};
@@ -58,7 +58,7 @@ class StopWatchdog {
   std::condition_variable wake_;
   bool quit_ = false;
   std::function<bool()> stop_requested_;
-  std::int64_t stop_ns_ = 0;       // steadyNowNs() of the stop request (0: not yet)
+  std::int64_t stop_ns_ = 0;        // steadyNowNs() of the stop request (0: not yet)
   std::int64_t reported_call_ = 0;  // since_ns of the call last named as overrunning
   std::thread thread_;
 };

@@ -45,27 +45,35 @@ void printTopics(const reflex::record::BusSurvey& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_bus: what runs on the Reflex bus (reads only).\n"
-               "  reflex_bus list [--window 3.5]                 processes and modules from their heartbeats\n"
-               "  reflex_bus hz [reflex/joint_state ...] [--window 3.5]   samples per second of every topic"};
+  CLI::App app{
+      "reflex_bus: what runs on the Reflex bus (reads only).\n"
+      "  reflex_bus list [--window 3.5]                 processes and modules from their heartbeats\n"
+      "  reflex_bus hz [reflex/joint_state ...] [--window 3.5]   samples per second of every topic"};
   app.require_subcommand(1);
   double window = 3.5;
   reflex::bus::BusOptions bus_options;
   std::vector<std::string> topics;
   auto* list = app.add_subcommand("list", "live processes and their modules (from reflex/heartbeat)");
-  auto* hz = app.add_subcommand(
-      "hz", "samples per second (over the span from the first to the last sample, as ros2 topic hz) and matched writers of each topic");
+  auto* hz = app.add_subcommand("hz",
+                                "samples per second (over the span from the first to the last sample, as ros2 topic "
+                                "hz) and matched writers of each topic");
   hz->add_option("topic", topics, "topics to measure (default: every Reflex topic); NAME or NAME:TYPE");
   for (CLI::App* sub : {list, hz}) {
-    sub->add_option("-w,--window", window, "seconds to listen (at least 3.5: every process announces itself at least every 3 s; "
-                    "list then listens up to 5 s more while a process it found has not been heard)")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
+    sub->add_option("-w,--window", window,
+                    "seconds to listen (at least 3.5: every process announces itself at least every 3 s; "
+                    "list then listens up to 5 s more while a process it found has not been heard)")
+        ->check(CLI::Range(0.1, 3600.0))
+        ->capture_default_str();
     bus_options.add(*sub);
   }
   const int status = reflex::runMain("reflex_bus", app, argc, argv, [&]() -> int {
     const reflex::bus::BusConfig config = bus_options.config("reflex_bus");
-    const reflex::record::BusSurvey s = reflex::record::surveyBus(config, window, list->parsed() ? std::vector<std::string>{} : topics);
-    if (list->parsed()) printProcesses(s);
-    else printTopics(s);
+    const reflex::record::BusSurvey s =
+        reflex::record::surveyBus(config, window, list->parsed() ? std::vector<std::string>{} : topics);
+    if (list->parsed())
+      printProcesses(s);
+    else
+      printTopics(s);
     return 0;
   });
   if (const std::string why = reflex::common::flushStandardOutput(); !why.empty()) {

@@ -46,8 +46,8 @@ BusSurvey surveyBus(const bus::BusConfig& config, double window_s, const std::ve
   // arrives at once; a module that died is gone with its writer (its liveliness lease, 1.5 s).
   std::map<std::string, ModuleSeen> modules;
   auto& hb = bus.makeReader<msg::Heartbeat>();
-  std::set<std::string> writers_heard;  // the heartbeat writers whose beat arrived (GUIDs)
-  std::set<bus::GuidPrefix> prefixes_heard;  // and their participants
+  std::set<std::string> writers_heard;               // the heartbeat writers whose beat arrived (GUIDs)
+  std::set<bus::GuidPrefix> prefixes_heard;          // and their participants
   std::chrono::steady_clock::time_point last_new{};  // when a module was first heard
   hb.onDataWithInfo([&](const msg::Heartbeat& h, const bus::dds::SampleInfo& info) {
     std::ostringstream guid;
@@ -78,9 +78,9 @@ BusSurvey surveyBus(const bus::BusConfig& config, double window_s, const std::ve
     TopicSeen* t = &seen.back().first;
     auto* span = &first_last[seen.size() - 1];
     seen.back().second = &s.codec->subscribe(bus, s.topic, bus::kProfileRecord, [t, span](RecordEntry&&) {
-      const std::int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                   std::chrono::steady_clock::now().time_since_epoch())
-                                   .count();
+      const std::int64_t now =
+          std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+              .count();
       if (t->samples++ == 0) span->first = now;
       span->second = now;
     });

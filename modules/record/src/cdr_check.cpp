@@ -14,11 +14,11 @@ namespace {
 /// One IDL type as far as its CDR lengths go.
 struct Type {
   enum Kind { kPrimitive, kString, kSequence, kStruct, kUnsupported } kind = kUnsupported;
-  std::size_t size = 0;              ///< kPrimitive: bytes (also the alignment)
-  std::uint64_t bound = 0;           ///< kSequence: the IDL bound, 0 for none
+  std::size_t size = 0;                 ///< kPrimitive: bytes (also the alignment)
+  std::uint64_t bound = 0;              ///< kSequence: the IDL bound, 0 for none
   std::shared_ptr<const Type> element;  ///< kSequence
-  std::string struct_name;           ///< kStruct: fully qualified ("reflex::msg::Header")
-  std::string text;                  ///< as written, for messages ("sequence<string, 64>")
+  std::string struct_name;              ///< kStruct: fully qualified ("reflex::msg::Header")
+  std::string text;                     ///< as written, for messages ("sequence<string, 64>")
 };
 
 struct Field {
@@ -180,8 +180,8 @@ class Parser {
       return t;
     }
     static const std::map<std::string, std::size_t> primitives = {
-        {"boolean", 1}, {"char", 1},   {"octet", 1},  {"int8", 1},   {"uint8", 1},   {"short", 2},
-        {"int16", 2},   {"uint16", 2}, {"long", 4},   {"int32", 4},  {"uint32", 4},  {"float", 4},
+        {"boolean", 1}, {"char", 1},   {"octet", 1},  {"int8", 1},  {"uint8", 1},  {"short", 2},
+        {"int16", 2},   {"uint16", 2}, {"long", 4},   {"int32", 4}, {"uint32", 4}, {"float", 4},
         {"int64", 8},   {"uint64", 8}, {"double", 8}, {"wchar", 2}};
     std::string word = take();
     if (word == "unsigned") word = take();  // same size as the signed type
@@ -300,8 +300,8 @@ class Walker {
         std::uint32_t len = 0;
         if (!u32(len, field)) return false;
         if (len > left())
-          return fail(field + ": string of " + std::to_string(len) + " bytes claimed at byte " +
-                      std::to_string(at_) + ", " + std::to_string(left()) + " bytes left");
+          return fail(field + ": string of " + std::to_string(len) + " bytes claimed at byte " + std::to_string(at_) +
+                      ", " + std::to_string(left()) + " bytes left");
         at_ += len;
         return true;
       }

@@ -28,15 +28,16 @@ struct OutputOptions {
   std::uint64_t chunk_bytes = 1u << 20;
   int chunk_ms = 500;
   void add(CLI::App& app) {
-    app.add_option("--format", format,
-                   "file format: mcap, rfx, or auto (rfx if the file name ends in .rfx, else MCAP)")
+    app.add_option("--format", format, "file format: mcap, rfx, or auto (rfx if the file name ends in .rfx, else MCAP)")
         ->capture_default_str();
     app.add_option("--compression", compression, "MCAP chunk compression: none, zstd or lz4")->capture_default_str();
     app.add_option("--chunk-size", chunk_bytes, "MCAP: close a chunk when its records reach this many bytes")
-        ->capture_default_str()->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 30));
+        ->capture_default_str()
+        ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 30));
     app.add_option("--chunk-ms", chunk_ms,
                    "MCAP: close a chunk when its first message is this old (ms); a crash loses the open chunk")
-        ->capture_default_str()->check(CLI::Range(1, 600000));
+        ->capture_default_str()
+        ->check(CLI::Range(1, 600000));
   }
   /// Throws RecordError naming a bad --format or --compression value.
   RecordingOptions options(const std::string& path) const {
@@ -57,11 +58,13 @@ struct SceneOptions {
   void add(CLI::App& app) {
     scene.urdf = reflex::common::defaultUrdf();
     app.add_option("--urdf", scene.urdf, "scene channels: robot URDF (the controller's)")->capture_default_str();
-    app.add_option("--collision", scene.collision, "scene channels: collision configuration (default: next to the URDF)");
+    app.add_option("--collision", scene.collision,
+                   "scene channels: collision configuration (default: next to the URDF)");
     app.add_option("--controller", scene.controller,
                    "scene channels: controller YAML, arms and zone thresholds (default: <URDF stem>.controller.yaml "
                    "beside the URDF if it exists, else built-in)");
-    app.add_option("--scene-rate", scene.rate, "scene channels: messages per second of recording time at most, (0, 200]")
+    app.add_option("--scene-rate", scene.rate,
+                   "scene channels: messages per second of recording time at most, (0, 200]")
         ->capture_default_str();
     app.add_flag("--no-scene", none,
                  "MCAP without the scene channels /tf and /reflex/scene (made by default from reflex/joint_state, "
@@ -141,8 +144,10 @@ std::function<int()> addPlay(CLI::App& app) {
       }
       for (const std::string& ex : o->exclude)
         if (!o->commands && isCommandTopic(ex))
-          std::fprintf(stderr, "reflex_play: note: -x %s changes nothing: command topics are played only with "
-                       "--commands\n", ex.c_str());
+          std::fprintf(stderr,
+                       "reflex_play: note: -x %s changes nothing: command topics are played only with "
+                       "--commands\n",
+                       ex.c_str());
       if (player.stats().gaps_shortened > 0)
         std::fprintf(stderr,
                      "reflex_play: %llu gap(s) between records longer than --max-gap %g s are played as %g s "
@@ -168,7 +173,8 @@ std::function<int()> addRecord(CLI::App& app) {
   auto name = std::make_shared<std::string>("recorder");
   auto out = std::make_shared<OutputOptions>();
   auto scene = std::make_shared<SceneOptions>();
-  app.add_option("-o,--output", o->output, "recording file to write (run.mcap; run.rfx for the old format)")->required();
+  app.add_option("-o,--output", o->output, "recording file to write (run.mcap; run.rfx for the old format)")
+      ->required();
   app.add_option("-t,--topic", o->topics,
                  "topic to record (repeatable): a Reflex topic name, or NAME:TYPE for another topic name "
                  "(default: every Reflex topic)");
@@ -177,11 +183,12 @@ std::function<int()> addRecord(CLI::App& app) {
       ->check(CLI::NonNegativeNumber);
   out->add(app);
   app.add_option("--flush-ms", *flush_ms, "rfx: hand buffered records to the kernel at least this often (ms)")
-      ->capture_default_str()->check(CLI::Range(0, 60000));
+      ->capture_default_str()
+      ->check(CLI::Range(0, 60000));
   app.add_option("--sync-ms", *sync_ms, "fsync the file this often (ms; 0: after every flush)")
-      ->capture_default_str()->check(CLI::Range(0, 600000));
-  app.add_flag("--append", o->writer.append,
-               "rfx: append to an existing recording (a torn last record is cut off)");
+      ->capture_default_str()
+      ->check(CLI::Range(0, 600000));
+  app.add_flag("--append", o->writer.append, "rfx: append to an existing recording (a torn last record is cut off)");
   app.add_flag("--late-joiner-state", *late_joiner,
                "read state topics (hand targets, priority, body schema, walk, heartbeat) with their own "
                "reliable transient-local profile: the recording starts with the state published before it "
@@ -235,7 +242,8 @@ std::function<int()> addExport(CLI::App& app) {
                  "digits, _ - . as %XX>.csv; topics that would share a name are refused, naming them)");
   return [input, topics, csv, dir] {
     return guarded("reflex_record export", [&] {
-      if (csv->empty() == dir->empty()) throw RecordError("give exactly one of --csv FILE (with one --topic) or --dir DIR");
+      if (csv->empty() == dir->empty())
+        throw RecordError("give exactly one of --csv FILE (with one --topic) or --dir DIR");
       std::vector<CsvExport> targets;
       bool refused = false;
       RecordingInfo info;
@@ -252,7 +260,8 @@ std::function<int()> addExport(CLI::App& app) {
         std::vector<std::string> list = *topics;
         if (list.empty()) {
           for (const auto& kv : info.topics) {
-            if (findCodecByType(kv.second.type)) list.push_back(kv.first);
+            if (findCodecByType(kv.second.type))
+              list.push_back(kv.first);
             else  // the scene channels (/tf, /reflex/scene: JSON for viewers) have no CSV form
               std::fprintf(stderr, "reflex_record: %s (%s) is not a Reflex topic type: no CSV\n",
                            printableName(kv.first).c_str(), printableName(kv.second.type).c_str());
@@ -263,8 +272,10 @@ std::function<int()> addExport(CLI::App& app) {
         for (const auto& kv : collisions) {
           std::string names;
           for (const std::string& t : kv.second) names += (names.empty() ? "'" : ", '") + printableName(t) + "'";
-          std::fprintf(stderr, "reflex_record: error: topics %s would all be written to %s: none of them exported "
-                       "(export each with --csv)\n", names.c_str(), printableName(kv.first).c_str());
+          std::fprintf(stderr,
+                       "reflex_record: error: topics %s would all be written to %s: none of them exported "
+                       "(export each with --csv)\n",
+                       names.c_str(), printableName(kv.first).c_str());
           refused = true;
         }
         for (const std::string& t : list) {

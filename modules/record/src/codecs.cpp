@@ -63,7 +63,8 @@ void csvRows(std::ostream& o, const std::string& prefix, const msg::MotionPriori
 }
 
 void csvColumns(std::ostream& o, const msg::BodySchemaChange&) {
-  o << ",segment_name,operation,parent_link,shape,a_x,a_y,a_z,b_x,b_y,b_z,radius,motion_priority,enabled,virtual_segment";
+  o << ",segment_name,operation,parent_link,shape,a_x,a_y,a_z,b_x,b_y,b_z,radius,motion_priority,enabled,virtual_"
+       "segment";
 }
 void csvRows(std::ostream& o, const std::string& prefix, const msg::BodySchemaChange& s) {
   o << prefix << ',' << csvField(s.segment_name()) << ',' << static_cast<int>(s.operation()) << ','
@@ -153,8 +154,8 @@ void csvColumns(std::ostream& o, const msg::RobotContacts&) {
   o << ",state_seq,total_contact_steps,n_contacts,segment_a,segment_b,distance";
 }
 void csvRows(std::ostream& o, const std::string& prefix, const msg::RobotContacts& s) {
-  const std::string head = prefix + "," + std::to_string(s.state_seq()) + "," + std::to_string(s.total_contact_steps()) +
-                           "," + std::to_string(s.contacts().size());
+  const std::string head = prefix + "," + std::to_string(s.state_seq()) + "," +
+                           std::to_string(s.total_contact_steps()) + "," + std::to_string(s.contacts().size());
   if (s.contacts().empty()) o << head << ",,,\n";
   for (const auto& c : s.contacts())
     o << head << ',' << csvField(c.segment_a()) << ',' << csvField(c.segment_b()) << ',' << num(c.distance()) << '\n';
@@ -256,8 +257,7 @@ class Codec final : public TopicCodec {
     const T s = decode(e);
     std::ostringstream o;
     o << printableName(e.topic) << " seq " << s.header().seq() << " from '" << printableName(s.header().source())
-      << "' stamp "
-      << s.header().stamp_ns() << ":";
+      << "' stamp " << s.header().stamp_ns() << ":";
     std::ostringstream row;
     csvRows(row, "", s);
     std::string r = row.str();

@@ -33,7 +33,7 @@ std::uint64_t convertRecording(const std::string& input, const std::string& outp
   }
   writer->close();
   if (scene_note)
-    *scene_note = channels      ? channels->summary()
+    *scene_note = channels        ? channels->summary()
                   : scene.enabled ? "an .rfx output has no scene channels (/tf, /reflex/scene)"
                                   : "";
   return n;
@@ -152,12 +152,13 @@ CsvExportReport exportCsvFiles(const std::string& input, std::vector<CsvExport> 
     if (it == info.topics.end()) {
       std::string have;
       for (const auto& kv : info.topics) have += " " + printableName(kv.first);
-      throw RecordError("topic '" + printableName(t.topic) + "' is not in recording '" + input + "' (it has:" +
-                        (have.empty() ? std::string(" nothing") : have) + ")");
+      throw RecordError("topic '" + printableName(t.topic) + "' is not in recording '" + input +
+                        "' (it has:" + (have.empty() ? std::string(" nothing") : have) + ")");
     }
     const TopicCodec* codec = findCodecByType(it->second.type);
     if (!codec)
-      throw RecordError("topic '" + printableName(t.topic) + "' has unknown type '" + printableName(it->second.type) + "'");
+      throw RecordError("topic '" + printableName(t.topic) + "' has unknown type '" + printableName(it->second.type) +
+                        "'");
     codecs.push_back(codec);
   }
   CsvExportReport report;

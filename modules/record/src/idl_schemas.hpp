@@ -7,9 +7,9 @@
 namespace reflex::record {
 
 struct IdlSchemaFile {
-  const char* file;                 ///< e.g. "control.idl"
-  std::vector<const char*> types;   ///< fully qualified struct names it declares, e.g. "reflex::msg::JointState"
-  const char* text;                 ///< its text with included files inlined and preprocessor lines removed
+  const char* file;                ///< e.g. "control.idl"
+  std::vector<const char*> types;  ///< fully qualified struct names it declares, e.g. "reflex::msg::JointState"
+  const char* text;                ///< its text with included files inlined and preprocessor lines removed
 };
 
 /// Every IDL file of idl/ (REFLEX_IDL_FILES), in that order.

@@ -19,8 +19,17 @@ namespace reflex::record {
 namespace {
 
 enum Op : std::uint8_t {
-  kHeader = 0x01, kFooter = 0x02, kSchema = 0x03, kChannel = 0x04, kMessage = 0x05, kChunk = 0x06,
-  kMessageIndex = 0x07, kChunkIndex = 0x08, kStatistics = 0x0B, kSummaryOffset = 0x0E, kDataEnd = 0x0F,
+  kHeader = 0x01,
+  kFooter = 0x02,
+  kSchema = 0x03,
+  kChannel = 0x04,
+  kMessage = 0x05,
+  kChunk = 0x06,
+  kMessageIndex = 0x07,
+  kChunkIndex = 0x08,
+  kStatistics = 0x0B,
+  kSummaryOffset = 0x0E,
+  kDataEnd = 0x0F,
 };
 constexpr std::size_t kRecordPrefix = 1 + 8;             // opcode + content length
 constexpr std::size_t kFooterSize = kRecordPrefix + 20;  // summary_start, summary_offset_start, crc
@@ -75,7 +84,8 @@ class In {
   std::uint64_t uint(int bytes) {
     if (!take(static_cast<std::uint64_t>(bytes))) return 0;
     std::uint64_t v = 0;
-    for (int i = bytes - 1; i >= 0; --i) v = (v << 8) | p_[at_ - static_cast<std::uint64_t>(bytes) + static_cast<std::uint64_t>(i)];
+    for (int i = bytes - 1; i >= 0; --i)
+      v = (v << 8) | p_[at_ - static_cast<std::uint64_t>(bytes) + static_cast<std::uint64_t>(i)];
     return v;
   }
   std::string str() {
@@ -282,7 +292,8 @@ std::uint16_t McapWriter::addChannel(const McapChannelSpec& spec) {
   if (channels_.size() >= 0xFFFF) throw RecordError("MCAP recording '" + path_ + "': more than 65535 channels");
   std::uint16_t schema_id = 0;
   for (const Schema& s : schemas_)
-    if (s.name == spec.schema_name && s.encoding == spec.schema_encoding && s.data == spec.schema_data) schema_id = s.id;
+    if (s.name == spec.schema_name && s.encoding == spec.schema_encoding && s.data == spec.schema_data)
+      schema_id = s.id;
   if (schema_id == 0 && !(spec.schema_name.empty() && spec.schema_encoding.empty() && spec.schema_data.empty())) {
     if (schemas_.size() >= 0xFFFE) throw RecordError("MCAP recording '" + path_ + "': more than 65534 schemas");
     schema_id = static_cast<std::uint16_t>(schemas_.size() + 1);
@@ -294,7 +305,8 @@ std::uint16_t McapWriter::addChannel(const McapChannelSpec& spec) {
 }
 
 namespace {
-void putSchema(Out& o, std::uint16_t id, const std::string& name, const std::string& encoding, const std::string& data) {
+void putSchema(Out& o, std::uint16_t id, const std::string& name, const std::string& encoding,
+               const std::string& data) {
   const std::size_t at = o.begin(kSchema);
   o.u16(id);
   o.str(name);
@@ -509,7 +521,7 @@ McapReader::McapReader(const std::string& path) : path_(path) {
   if (const std::string why = common::inputFileProblem(path); !why.empty()) throw RecordError("recording " + why);
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd_ < 0) throw RecordError("cannot open recording '" + path + "': " + std::strerror(errno));
-  struct stat st{};
+  struct stat st {};
   if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd_);
     throw RecordError("recording '" + path + "' is not a regular file");
@@ -533,7 +545,9 @@ McapReader::~McapReader() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-bool McapReader::readAt(std::uint64_t offset, void* dst, std::size_t n) { return common::preadAll(fd_, offset, dst, n); }
+bool McapReader::readAt(std::uint64_t offset, void* dst, std::size_t n) {
+  return common::preadAll(fd_, offset, dst, n);
+}
 
 void McapReader::rewind() {
   pos_ = valid_end_ = 8;
@@ -572,8 +586,10 @@ bool McapReader::parseInner(const std::uint8_t* p, std::uint64_t len, std::uint8
     s.name = in.str();
     s.encoding = in.str();
     s.data = in.str();
-    if (!in.ok()) fail(TailState::kCorrupt, "malformed Schema record at byte " + std::to_string(at));
-    else if (s.id != 0) schemas_[s.id] = std::move(s);  // id 0 is invalid: ignored, as the spec says
+    if (!in.ok())
+      fail(TailState::kCorrupt, "malformed Schema record at byte " + std::to_string(at));
+    else if (s.id != 0)
+      schemas_[s.id] = std::move(s);  // id 0 is invalid: ignored, as the spec says
   } else if (op == kChannel) {
     McapChannelRecord c;
     c.id = static_cast<std::uint16_t>(in.uint(2));
@@ -581,8 +597,10 @@ bool McapReader::parseInner(const std::uint8_t* p, std::uint64_t len, std::uint8
     c.topic = in.str();
     c.message_encoding = in.str();
     c.metadata = in.strMap();
-    if (!in.ok()) fail(TailState::kCorrupt, "malformed Channel record at byte " + std::to_string(at));
-    else channels_[c.id] = std::move(c);
+    if (!in.ok())
+      fail(TailState::kCorrupt, "malformed Channel record at byte " + std::to_string(at));
+    else
+      channels_[c.id] = std::move(c);
   } else if (op == kMessage && out) {
     out->channel_id = static_cast<std::uint16_t>(in.uint(2));
     out->sequence = static_cast<std::uint32_t>(in.uint(4));
@@ -602,8 +620,8 @@ void McapReader::finishFile(std::uint64_t data_end) {
   ended_ = true;
   // Footer and closing magic at the very end; the summary CRC covers [summary_start, footer + 25).
   std::uint8_t tail[kFooterSize + 8];
-  if (size_ < data_end + sizeof(tail) || !readAt(size_ - sizeof(tail), tail, sizeof(tail)) ||
-      tail[0] != kFooter || std::memcmp(tail + kFooterSize, kMcapMagic, 8) != 0) {
+  if (size_ < data_end + sizeof(tail) || !readAt(size_ - sizeof(tail), tail, sizeof(tail)) || tail[0] != kFooter ||
+      std::memcmp(tail + kFooterSize, kMcapMagic, 8) != 0) {
     fail(TailState::kTorn, "no footer after the data section (file cut after byte " + std::to_string(data_end) + ")");
     return;
   }
@@ -622,7 +640,8 @@ void McapReader::finishFile(std::uint64_t data_end) {
   std::uint32_t crc = 0;
   std::vector<std::uint8_t> buf(64 * 1024);
   for (std::uint64_t x = from; x < footer_at + kRecordPrefix + 16;) {
-    const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(buf.size(), footer_at + kRecordPrefix + 16 - x));
+    const std::size_t n =
+        static_cast<std::size_t>(std::min<std::uint64_t>(buf.size(), footer_at + kRecordPrefix + 16 - x));
     if (!readAt(x, buf.data(), n)) return;
     crc = crc32(buf.data(), n, crc);
     x += n;
@@ -636,8 +655,9 @@ bool McapReader::nextTopLevel() {
   if (ended_) return false;
   std::uint8_t prefix[kRecordPrefix];
   if (pos_ + kRecordPrefix > size_ || !readAt(pos_, prefix, kRecordPrefix)) {
-    fail(TailState::kTorn, pos_ == size_ ? "file ends after byte " + std::to_string(pos_) + " without DataEnd and footer"
-                                         : "file cut inside the record at byte " + std::to_string(pos_));
+    fail(TailState::kTorn, pos_ == size_
+                               ? "file ends after byte " + std::to_string(pos_) + " without DataEnd and footer"
+                               : "file cut inside the record at byte " + std::to_string(pos_));
     ended_ = true;
     return false;
   }
@@ -657,7 +677,8 @@ bool McapReader::nextTopLevel() {
     if (len >= 4) readAt(pos_ + kRecordPrefix, b, 4);
     const std::uint32_t stored = static_cast<std::uint32_t>(b[0]) | (static_cast<std::uint32_t>(b[1]) << 8) |
                                  (static_cast<std::uint32_t>(b[2]) << 16) | (static_cast<std::uint32_t>(b[3]) << 24);
-    if (len < 4) fail(TailState::kCorrupt, "malformed DataEnd record at byte " + std::to_string(at));
+    if (len < 4)
+      fail(TailState::kCorrupt, "malformed DataEnd record at byte " + std::to_string(at));
     else if (stored != 0 && stored != data_crc_)
       fail(TailState::kCorrupt, "data section CRC mismatch (DataEnd at byte " + std::to_string(at) + " stores " +
                                     hex(stored) + ", the bytes give " + hex(data_crc_) + ")");
@@ -765,7 +786,8 @@ const std::string& omgidlSchemaFor(const std::string& type_name) {
   return it == by_type.end() ? none : it->second;
 }
 
-McapSampleWriter::McapSampleWriter(const std::string& path, const McapWriterOptions& options) : writer_(path, options) {}
+McapSampleWriter::McapSampleWriter(const std::string& path, const McapWriterOptions& options)
+    : writer_(path, options) {}
 
 void McapSampleWriter::append(const RecordEntry& e) {
   if (e.receive_ns < 0)

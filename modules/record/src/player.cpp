@@ -17,9 +17,7 @@ class PlayClock {
  public:
   explicit PlayClock(double max_gap) : max_gap_(max_gap) {}
   /// Gap in recording time between the previous record (or the start offset) and this one, s.
-  double gapBefore(std::int64_t since_begin_ns) const {
-    return 1e-9 * static_cast<double>(since_begin_ns - prev_ns_);
-  }
+  double gapBefore(std::int64_t since_begin_ns) const { return 1e-9 * static_cast<double>(since_begin_ns - prev_ns_); }
   /// Playing time of this record; advances the clock.
   double playTime(std::int64_t since_begin_ns) {
     const double gap = gapBefore(since_begin_ns);
@@ -42,9 +40,9 @@ class PlayClock {
 // beside `reflex_controller --robot dds`, recorded positions would be what a real robot is commanded from.
 const std::vector<std::string>& commandTopics() {
   static const std::vector<std::string> topics = {
-      bus::TopicTraits<msg::HandTargets>::kTopicName, bus::TopicTraits<msg::MotionPriority>::kTopicName,
+      bus::TopicTraits<msg::HandTargets>::kTopicName,      bus::TopicTraits<msg::MotionPriority>::kTopicName,
       bus::TopicTraits<msg::BodySchemaChange>::kTopicName, bus::TopicTraits<msg::WalkCommand>::kTopicName,
-      bus::TopicTraits<msg::JointCommand>::kTopicName, bus::TopicTraits<msg::RobotState>::kTopicName};
+      bus::TopicTraits<msg::JointCommand>::kTopicName,     bus::TopicTraits<msg::RobotState>::kTopicName};
   return topics;
 }
 
@@ -138,14 +136,15 @@ Player::Player(const PlayerOptions& options) : options_(options) {
       throw RecordError("topic '" + t + "' is not in recording '" + options.input + "' (it has:" + have + ")");
     }
     if (isCommandTopic(t) && !options.commands)
-      throw RecordError("topic '" + t + "' is a command topic: a replay publishes observations only unless "
+      throw RecordError("topic '" + t +
+                        "' is a command topic: a replay publishes observations only unless "
                         "--commands is given (it would steer a live controller or robot)");
   }
   for (const std::string& ex : options.exclude) {
     const auto it = std::find(topics.begin(), topics.end(), ex);
     const bool not_played =
         ex == protection_topic || (info.topics.count(ex) && !findCodecByType(info.topics.at(ex).type));
-    if (it == topics.end() && not_played && options.topics.empty()) continue;  // not played anyway
+    if (it == topics.end() && not_played && options.topics.empty()) continue;     // not played anyway
     if (it == topics.end() && isCommandTopic(ex) && !options.commands) continue;  // not played anyway (note: cli)
     if (it == topics.end()) throw RecordError("--exclude '" + ex + "' is not among the played topics");
     topics.erase(it);
@@ -190,7 +189,8 @@ void Player::run() {
   using Clock = std::chrono::steady_clock;
   const bool fast = options_.rate == 0.0;
   const auto sleepFor = [&](double seconds) {  // interruptible by stop()
-    const auto until = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+    const auto until =
+        Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
     while (!stop_ && !bus_->stopRequested() && Clock::now() < until)
       std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(50)));
   };
@@ -205,8 +205,10 @@ void Player::run() {
           missing += (missing.empty() ? "" : ", ") + topic + " (" + std::to_string(publisher->matchedReaders()) + ")";
       return missing;
     };
-    std::fprintf(stderr, "reflex_play: holding the start until every played topic has %d matched reader(s) (at most "
-                 "%g s)\n", options_.wait_readers, options_.wait_timeout);
+    std::fprintf(stderr,
+                 "reflex_play: holding the start until every played topic has %d matched reader(s) (at most "
+                 "%g s)\n",
+                 options_.wait_readers, options_.wait_timeout);
     const auto t0 = Clock::now();
     std::string missing = short_of_readers();
     while (!missing.empty() && !stop_ && !bus_->stopRequested() && Clock::now() < deadline) {
@@ -218,8 +220,8 @@ void Player::run() {
       char timeout[32];
       std::snprintf(timeout, sizeof timeout, "%g", options_.wait_timeout);
       throw reflex::Failure("--wait-readers " + std::to_string(options_.wait_readers) + ": after " + timeout +
-                        " s (--wait-timeout) these topics had fewer matched readers (matched): " + missing +
-                        "; is every consumer running on this domain?");
+                            " s (--wait-timeout) these topics had fewer matched readers (matched): " + missing +
+                            "; is every consumer running on this domain?");
     }
     std::fprintf(stderr, "reflex_play: readers matched after %.2f s, starting\n",
                  std::chrono::duration<double>(Clock::now() - t0).count());

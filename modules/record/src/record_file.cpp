@@ -28,9 +28,7 @@ std::uint32_t getU32(const std::uint8_t* p) {
   return static_cast<std::uint32_t>(p[0]) | (static_cast<std::uint32_t>(p[1]) << 8) |
          (static_cast<std::uint32_t>(p[2]) << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
 }
-std::uint16_t getU16(const std::uint8_t* p) {
-  return static_cast<std::uint16_t>(p[0] | (p[1] << 8));
-}
+std::uint16_t getU16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] | (p[1] << 8)); }
 std::int64_t getI64(const std::uint8_t* p) {
   std::uint64_t u = 0;
   for (int i = 7; i >= 0; --i) u = (u << 8) | p[i];
@@ -47,7 +45,8 @@ std::vector<std::uint8_t> encodeRecord(const RecordEntry& e) {
   if (e.receive_ns < 0)
     throw RecordError("sample of topic '" + e.topic + "' has a negative receive time " + std::to_string(e.receive_ns) +
                       " ns (ns since the Unix epoch expected)");
-  if (e.topic.size() > 0xFFFF) throw RecordError("topic name longer than 65535 bytes: '" + e.topic.substr(0, 64) + "...'");
+  if (e.topic.size() > 0xFFFF)
+    throw RecordError("topic name longer than 65535 bytes: '" + e.topic.substr(0, 64) + "...'");
   if (e.type.size() > 0xFFFF) throw RecordError("type name longer than 65535 bytes: '" + e.type.substr(0, 64) + "...'");
   const std::size_t body_size = 8 + 8 + 2 + e.topic.size() + 2 + e.type.size() + 4 + e.payload.size();
   if (body_size > kMaxBodySize)
@@ -79,7 +78,7 @@ int detail::openOutputFile(const std::string& path, bool truncate, bool& regular
   const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | O_NONBLOCK | (truncate ? O_TRUNC : 0);
   const int fd = ::open(path.c_str(), flags, 0644);
   if (fd < 0) throw RecordError(sysError("cannot open recording", path));
-  struct stat st{};
+  struct stat st {};
   regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
   if (::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK) != 0) {
     const std::string msg = sysError("cannot set up recording", path);
@@ -118,7 +117,7 @@ RecordWriter::RecordWriter(const std::string& path, const WriterOptions& options
   // At start, not at the end of a recording: a missing folder, a folder in the file's place, ...
   if (const std::string why = common::outputFileProblem(path); !why.empty()) throw RecordError("recording: " + why);
   if (options.append) {
-    struct stat st{};
+    struct stat st {};
     if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
       throw RecordError("cannot append to recording '" + path + "': it is " + common::fileKind(st.st_mode) +
                         ", not a regular file");
@@ -126,7 +125,8 @@ RecordWriter::RecordWriter(const std::string& path, const WriterOptions& options
       RecordReader check(path);  // throws if it is not a recording
       check.setResync(false);
       RecordEntry scratch;
-      while (check.next(scratch)) {}
+      while (check.next(scratch)) {
+      }
       if (check.tailState() == TailState::kCorrupt)
         throw RecordError("cannot append to '" + path + "': corrupt record at byte " +
                           std::to_string(check.firstCorruptOffset()));
@@ -212,7 +212,7 @@ namespace {
 
 using common::preadAll;
 
-constexpr std::size_t kBlock = 4096;        // read cache: direct-mapped blocks of the file
+constexpr std::size_t kBlock = 4096;  // read cache: direct-mapped blocks of the file
 constexpr std::size_t kCacheBlocks = 64;
 constexpr std::size_t kDirectRead = 4 * kBlock;  // larger reads bypass the cache
 /// A body longer than this is checked (checkAt: inner lengths, then the CRC from the marks, about
@@ -229,7 +229,7 @@ RecordReader::RecordReader(const std::string& path) : path_(path) {
   if (const std::string why = common::inputFileProblem(path); !why.empty()) throw RecordError("recording " + why);
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd_ < 0) throw RecordError(sysError("cannot open recording", path));
-  struct stat st{};
+  struct stat st {};
   if (::fstat(fd_, &st) != 0) {
     const std::string msg = sysError("cannot stat recording", path);
     ::close(fd_);

@@ -21,7 +21,8 @@ int main(int argc, char** argv) {
       "records of the last --flush-ms. play, export and info read both (detected by the first bytes)."};
   app.require_subcommand(1);
   auto* rec = app.add_subcommand("record", "record topics to a file");
-  auto* play = app.add_subcommand("play", "publish a recording again (rate, loop, start offset; observations only unless --commands)");
+  auto* play = app.add_subcommand(
+      "play", "publish a recording again (rate, loop, start offset; observations only unless --commands)");
   auto* exp = app.add_subcommand("export", "write the samples of a topic as CSV");
   auto* info = app.add_subcommand("info", "topics, counts, duration and integrity of a recording");
   auto* conv = app.add_subcommand("convert", "copy a recording into another format (e.g. .rfx -> MCAP)");

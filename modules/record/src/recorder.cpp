@@ -31,8 +31,8 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
   recording.rfx = options.writer;
   recording.mcap = options.mcap;
   if (options.scene.enabled) {  // the robot files before the recording file: a bad one leaves no file
-    const bool joints = std::any_of(specs.begin(), specs.end(),
-                                    [](const TopicSpec& s) { return s.topic == "reflex/joint_state"; });
+    const bool joints =
+        std::any_of(specs.begin(), specs.end(), [](const TopicSpec& s) { return s.topic == "reflex/joint_state"; });
     if (recording.format != RecordingFormat::kMcap)
       scene_note_ = "an .rfx recording has no scene channels (/tf, /reflex/scene): record MCAP or convert it";
     else if (!joints)
@@ -48,7 +48,7 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
     // state published once (the controller's protection: avoidance on or off, e-stop) is always read
     // with its own transient-local profile, so every recording says how the robot was protected.
     const bool once = std::string(s.codec->defaultProfile()) == bus::kProfileControllerInfo;
-    const std::string profile = !s.codec->isState()                ? bus::kProfileRecord
+    const std::string profile = !s.codec->isState()                 ? bus::kProfileRecord
                                 : options.late_joiner_state || once ? s.codec->defaultProfile()
                                                                     : bus::kProfileRecordReliable;
     TopicCount* count = &counts_[s.topic];
@@ -63,7 +63,8 @@ Recorder::Recorder(const RecorderOptions& options) : options_(options) {
 bool Recorder::waitForWriters(std::chrono::nanoseconds timeout) const {
   const auto end = std::chrono::steady_clock::now() + timeout;
   for (const bus::detail::ReaderBase* r : readers_) {
-    const auto left = std::max(std::chrono::nanoseconds(0), std::chrono::nanoseconds(end - std::chrono::steady_clock::now()));
+    const auto left =
+        std::max(std::chrono::nanoseconds(0), std::chrono::nanoseconds(end - std::chrono::steady_clock::now()));
     if (!r->waitForWriters(1, left)) return false;
   }
   return true;
@@ -98,8 +99,7 @@ void Recorder::run() {
     if (options_.progress && now - last_print >= std::chrono::seconds(1)) {
       last_print = now;
       std::fprintf(stderr, "reflex_record: %.0f s, %llu samples, %.1f MB -> %s\n",
-                   std::chrono::duration<double>(now - start).count(),
-                   static_cast<unsigned long long>(totalSamples()),
+                   std::chrono::duration<double>(now - start).count(), static_cast<unsigned long long>(totalSamples()),
                    1e-6 * static_cast<double>(writer_->bytesWritten()), options_.output.c_str());
     }
   });

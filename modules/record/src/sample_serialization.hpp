@@ -25,7 +25,8 @@ inline std::vector<std::uint8_t> serializeSample(const T& sample) {
   const std::uint32_t size = type.getSerializedSizeProvider(data)();
   eprosima::fastrtps::rtps::SerializedPayload_t payload(size);
   if (!type.serialize(data, &payload))
-    throw RecordError(std::string("cannot serialize a ") + type.getName() + " sample (" + std::to_string(size) + " bytes)");
+    throw RecordError(std::string("cannot serialize a ") + type.getName() + " sample (" + std::to_string(size) +
+                      " bytes)");
   return std::vector<std::uint8_t>(payload.data, payload.data + payload.length);
 }
 

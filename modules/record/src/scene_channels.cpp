@@ -34,7 +34,8 @@ struct SceneChannels::Impl {
     feed->add(sample);
     return true;
   }
-  void write(McapWriter* writer, std::uint16_t channel, std::uint64_t log_time, std::uint64_t publish_time, const std::string& text) {
+  void write(McapWriter* writer, std::uint16_t channel, std::uint64_t log_time, std::uint64_t publish_time,
+             const std::string& text) {
     writer->write(channel, sequence, log_time, publish_time, reinterpret_cast<const std::uint8_t*>(text.data()),
                   text.size());
   }
@@ -61,12 +62,18 @@ void SceneChannels::add(const RecordEntry& e, McapWriter& writer) {
   Impl& m = *impl_;
   const std::string& t = e.type;
   bool ok = true;
-  if (t == "reflex::msg::JointState") ok = m.feedSample(e, m.joints);
-  else if (t == "reflex::msg::ControlStatus") ok = m.feedSample(e, m.status);
-  else if (t == "reflex::msg::HandTargets") ok = m.feedSample(e, m.targets);
-  else if (t == "reflex::msg::ObjectTargets") ok = m.feedSample(e, m.objects);
-  else if (t == "reflex::msg::BodySchemaChange") ok = m.feedSample(e, m.schema);
-  else return;
+  if (t == "reflex::msg::JointState")
+    ok = m.feedSample(e, m.joints);
+  else if (t == "reflex::msg::ControlStatus")
+    ok = m.feedSample(e, m.status);
+  else if (t == "reflex::msg::HandTargets")
+    ok = m.feedSample(e, m.targets);
+  else if (t == "reflex::msg::ObjectTargets")
+    ok = m.feedSample(e, m.objects);
+  else if (t == "reflex::msg::BodySchemaChange")
+    ok = m.feedSample(e, m.schema);
+  else
+    return;
   if (!ok) ++stats_.undecodable;
   stats_.joint_states = m.feed->stats().joint_states;
   stats_.joint_entries_skipped = m.feed->stats().joint_entries_skipped;
@@ -86,9 +93,14 @@ void SceneChannels::add(const RecordEntry& e, McapWriter& writer) {
     return;
   }
   if (m.tf_channel == 0) {
-    McapChannelSpec tf{"/tf", "json", "foxglove.FrameTransforms", "jsonschema", view::frameTransformsSchema().dump(), {}};
-    McapChannelSpec scene{"/reflex/scene", "json", "foxglove.SceneUpdate", "jsonschema",
-                          view::sceneUpdateSchema().dump(), {{"robot", m.scene.model.name}}};
+    McapChannelSpec tf{"/tf", "json", "foxglove.FrameTransforms", "jsonschema", view::frameTransformsSchema().dump(),
+                       {}};
+    McapChannelSpec scene{"/reflex/scene",
+                          "json",
+                          "foxglove.SceneUpdate",
+                          "jsonschema",
+                          view::sceneUpdateSchema().dump(),
+                          {{"robot", m.scene.model.name}}};
     m.tf_channel = writer.addChannel(tf);
     m.scene_channel = writer.addChannel(scene);
   }
@@ -97,8 +109,10 @@ void SceneChannels::add(const RecordEntry& e, McapWriter& writer) {
   ++m.sequence;
   const auto log_time = static_cast<std::uint64_t>(std::max<std::int64_t>(e.receive_ns, 0));
   const auto publish_time = input.stamp_ns > 0 ? static_cast<std::uint64_t>(input.stamp_ns) : log_time;
-  m.write(&writer, m.tf_channel, log_time, publish_time, view_node::dumpJson(view::buildFrameTransforms(m.scene, *m.data, input)));
-  m.write(&writer, m.scene_channel, log_time, publish_time, view_node::dumpJson(view::buildSceneUpdate(m.scene, *m.data, input)));
+  m.write(&writer, m.tf_channel, log_time, publish_time,
+          view_node::dumpJson(view::buildFrameTransforms(m.scene, *m.data, input)));
+  m.write(&writer, m.scene_channel, log_time, publish_time,
+          view_node::dumpJson(view::buildSceneUpdate(m.scene, *m.data, input)));
   ++stats_.scenes;
 }
 
@@ -107,7 +121,8 @@ std::string SceneChannels::summary() const {
   if (stats_.joint_states == 0) {
     std::snprintf(line, sizeof(line), "no reflex/joint_state sample: no scene channels (/tf, /reflex/scene)");
   } else {
-    std::snprintf(line, sizeof(line), "scene channels /tf and /reflex/scene: %llu scenes from %llu joint states (robot %s)",
+    std::snprintf(line, sizeof(line),
+                  "scene channels /tf and /reflex/scene: %llu scenes from %llu joint states (robot %s)",
                   static_cast<unsigned long long>(stats_.scenes), static_cast<unsigned long long>(stats_.joint_states),
                   robotName().c_str());
   }

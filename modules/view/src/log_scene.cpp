@@ -37,8 +37,7 @@ double parseAnyNumber(const std::string& text, const std::string& where) {
   char* end = nullptr;
   errno = 0;
   const double v = std::strtod(begin, &end);
-  if (text.empty() || end != begin + text.size())
-    throw ConfigError(where + ": '" + text + "' is not a number");
+  if (text.empty() || end != begin + text.size()) throw ConfigError(where + ": '" + text + "' is not a number");
   return v;
 }
 
@@ -157,11 +156,12 @@ std::vector<LogScene> readLogScenes(const SceneModel& scene, const std::string& 
     const std::size_t row = lines.size() + 1;
     std::vector<std::string> v = splitCsvLine(line);
     if (v.size() < header.size())
-      throw ConfigError(path + " row " + std::to_string(row) + ": " + std::to_string(v.size()) + " values, the header has " +
-                        std::to_string(header.size()));
+      throw ConfigError(path + " row " + std::to_string(row) + ": " + std::to_string(v.size()) +
+                        " values, the header has " + std::to_string(header.size()));
     const std::string where = path + " row " + std::to_string(row) + " column time";
     const double t = parseAnyNumber(v[static_cast<std::size_t>(columns.time)], where);
-    if (!std::isfinite(t)) throw ConfigError(where + ": '" + v[static_cast<std::size_t>(columns.time)] + "' is not finite");
+    if (!std::isfinite(t))
+      throw ConfigError(where + ": '" + v[static_cast<std::size_t>(columns.time)] + "' is not finite");
     times.push_back(t);
     lines.push_back(std::move(line));
   }

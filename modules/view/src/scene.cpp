@@ -203,7 +203,8 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
   auto colour = [&](int s, Zone z) {
     if (s < 0 || s >= static_cast<int>(model.segments.size())) return;
     const auto i = static_cast<std::size_t>(s);
-    if (!data.segment_in_arm[i] || static_cast<int>(z) > static_cast<int>(data.segment_zone[i])) data.segment_zone[i] = z;
+    if (!data.segment_in_arm[i] || static_cast<int>(z) > static_cast<int>(data.segment_zone[i]))
+      data.segment_zone[i] = z;
     data.segment_in_arm[i] = true;
   };
   for (std::size_t arm = 0; arm < 2; ++arm) {
@@ -219,7 +220,8 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
     colour(b, st.zone);
     const int lo = std::min(a, b), hi = std::max(a, b);
     for (std::size_t p = 0; p < model.pairs.size(); ++p)
-      if (model.pairs[p].a == lo && model.pairs[p].b == hi && data.dist.pairs[p].active) data.closest_pair[arm] = static_cast<int>(p);
+      if (model.pairs[p].a == lo && model.pairs[p].b == hi && data.dist.pairs[p].active)
+        data.closest_pair[arm] = static_cast<int>(p);
   }
   // The lines: the named pair's witness points, or for a body-schema slot (the view does not know the
   // controller's slot numbering) the nearest enabled schema segment of the input to the arm's segment.
@@ -242,8 +244,8 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
     double best = std::numeric_limits<double>::infinity();
     for (const SchemaSegmentState& sch : input.schema_segments) {
       const int link = model.linkIndex(sch.parent_link);
-      if (!sch.enabled || link < 0 || !(sch.radius > 0.0) ||
-          !std::isfinite(sch.radius) || !finite(sch.a_L) || !finite(sch.b_L))
+      if (!sch.enabled || link < 0 || !(sch.radius > 0.0) || !std::isfinite(sch.radius) || !finite(sch.a_L) ||
+          !finite(sch.b_L))
         continue;
       const Eigen::Isometry3d& X_B_S = data.kin.X_B_L[static_cast<std::size_t>(link)];
       const Eigen::Vector3d s0 = X_B_S * sch.a_L, s1 = X_B_S * (sch.capsule ? sch.b_L : sch.a_L);
@@ -297,14 +299,15 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
     if (data.closest_line[arm]) {
       {
         const Rgba c = zoneColour(input.arms[arm].zone);
-        e["lines"].push_back(json{{"type", 2},  // LINE_LIST: one segment a -> b
-                                  {"pose", poseJson(Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity())},
-                                  {"thickness", 3.0},
-                                  {"scale_invariant", true},
-                                  {"points", json::array({vec3Json(data.closest_a_B[arm]), vec3Json(data.closest_b_B[arm])})},
-                                  {"color", colourJson({c.r, c.g, c.b, 1.0})},
-                                  {"colors", json::array()},
-                                  {"indices", json::array()}});
+        e["lines"].push_back(
+            json{{"type", 2},  // LINE_LIST: one segment a -> b
+                 {"pose", poseJson(Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity())},
+                 {"thickness", 3.0},
+                 {"scale_invariant", true},
+                 {"points", json::array({vec3Json(data.closest_a_B[arm]), vec3Json(data.closest_b_B[arm])})},
+                 {"color", colourJson({c.r, c.g, c.b, 1.0})},
+                 {"colors", json::array()},
+                 {"indices", json::array()}});
         e["metadata"].push_back(keyValue("pair", input.arms[arm].closest_a + "," + input.arms[arm].closest_b));
       }
     }
@@ -326,13 +329,14 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
   for (const ObjectState& o : input.objects) {
     if (!finite(o.p_B)) continue;
     objects["spheres"].push_back(sphereJson(o.p_B, 0.06, Rgba{0.1, 0.8, 0.9, 0.9}));
-    objects["texts"].push_back(textJson(o.p_B + Eigen::Vector3d(0, 0, 0.05), o.name.empty() ? "?" : o.name,
-                                        Rgba{0.1, 0.8, 0.9, 1.0}));
+    objects["texts"].push_back(
+        textJson(o.p_B + Eigen::Vector3d(0, 0, 0.05), o.name.empty() ? "?" : o.name, Rgba{0.1, 0.8, 0.9, 1.0}));
   }
   entities.push_back(std::move(objects));
   for (const SchemaSegmentState& b : input.schema_segments) {
     const int link = model.linkIndex(b.parent_link);
-    if (!b.enabled || link < 0 || !(b.radius > 0.0) || !std::isfinite(b.radius) || !finite(b.a_L) || !finite(b.b_L)) continue;
+    if (!b.enabled || link < 0 || !(b.radius > 0.0) || !std::isfinite(b.radius) || !finite(b.a_L) || !finite(b.b_L))
+      continue;
     json e = entityJson(scene, input.stamp_ns, "schema/" + b.name);
     const Eigen::Isometry3d& X_B_L = data.kin.X_B_L[static_cast<std::size_t>(link)];
     const Eigen::Vector3d a_B = X_B_L * b.a_L, b_B = X_B_L * b.b_L;

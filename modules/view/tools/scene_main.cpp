@@ -64,8 +64,9 @@ std::vector<double> parseCamera(const std::string& text) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"reflex_scene: the live view's foxglove.SceneUpdate at chosen rows of a controller time series "
-               "(reflex_controller --log), as a module the view's page draws headless (static mode)"};
+  CLI::App app{
+      "reflex_scene: the live view's foxglove.SceneUpdate at chosen rows of a controller time series "
+      "(reflex_controller --log), as a module the view's page draws headless (static mode)"};
   std::string log, out, tile = "360x420", camera_text = "0.5,0.45,1.7,0.1,0,0.9";
   std::string urdf = reflex::common::defaultUrdf(), collision, controller;
   std::vector<double> at;
@@ -81,9 +82,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--urdf", urdf, "robot URDF")->capture_default_str();
   app.add_option("--collision", collision, "collision YAML (default: next to the URDF)");
-  app.add_option("--controller", controller, "controller YAML (zone thresholds; default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
+  app.add_option("--controller", controller,
+                 "controller YAML (zone thresholds; default: <URDF stem>.controller.yaml beside the URDF if it exists, "
+                 "else built-in)");
   return reflex::runMain("reflex_scene", app, argc, argv, [&]() -> int {
-
     int width = 0, height = 0;
     parseTile(tile, width, height);
     const std::vector<double> cam = parseCamera(camera_text);
@@ -93,18 +95,21 @@ int main(int argc, char** argv) {
 
     nlohmann::json doc;
     doc["tile"] = {{"width", width}, {"height", height}};
-    doc["camera"] = {{"azimuth", cam[0]}, {"elevation", cam[1]}, {"radius", cam[2]}, {"target", {cam[3], cam[4], cam[5]}}};
+    doc["camera"] = {
+        {"azimuth", cam[0]}, {"elevation", cam[1]}, {"radius", cam[2]}, {"target", {cam[3], cam[4], cam[5]}}};
     doc["robot"] = scene.model.name;
     doc["scenes"] = nlohmann::json::array();
     reflex::view::SceneData data(scene);
     for (const reflex::view::LogScene& row : rows) {
       if (!reflex::view::updateScene(scene, data, row.input))
         throw reflex::Error(log + " row " + std::to_string(row.row) + ": the joint positions cannot be drawn");
-      doc["scenes"].push_back({{"time", row.t}, {"row", row.row}, {"update", reflex::view::buildSceneUpdate(scene, data, row.input)}});
+      doc["scenes"].push_back(
+          {{"time", row.t}, {"row", row.row}, {"update", reflex::view::buildSceneUpdate(scene, data, row.input)}});
     }
     errno = 0;
     std::ofstream file(out);
-    file << "// Made by reflex_scene from " << log << " (" << rows.size() << " scenes); drawn by view.js (static mode).\n"
+    file << "// Made by reflex_scene from " << log << " (" << rows.size()
+         << " scenes); drawn by view.js (static mode).\n"
          << "export default " << doc.dump() << ";\n";
     file.close();
     if (!file) throw reflex::Error(reflex::common::writeError(out, errno ? errno : EIO));

@@ -9,10 +9,10 @@
 #include "cyclone_samples.h"
 
 typedef struct {
-  const char* name;                    /* --types name, as in tests/bus/program_types.hpp */
-  const char* topic;                   /* Reflex topic name (reflex::bus::TopicTraits) */
+  const char* name;  /* --types name, as in tests/bus/program_types.hpp */
+  const char* topic; /* Reflex topic name (reflex::bus::TopicTraits) */
   const dds_topic_descriptor_t* desc;
-  int behavior;                        /* 1: reflex_behavior profile, 0: reflex_state profile */
+  int behavior; /* 1: reflex_behavior profile, 0: reflex_state profile */
   size_t size;
   int (*check)(const void* sample, const char* source);
   void (*fill)(void* sample);
@@ -30,12 +30,12 @@ static void fill_body_schema_v(void* s) { fill_body_schema(s); }
 static const reflex_type_t reflex_types[] = {
     {"joint_state", "reflex/joint_state", &reflex_msg_JointState_desc, 0, sizeof(reflex_msg_JointState),
      check_joint_state_v, fill_joint_state_v},
-    {"control_status", "reflex/control_status", &reflex_msg_ControlStatus_desc, 0,
-     sizeof(reflex_msg_ControlStatus), check_control_status_v, fill_control_status_v},
+    {"control_status", "reflex/control_status", &reflex_msg_ControlStatus_desc, 0, sizeof(reflex_msg_ControlStatus),
+     check_control_status_v, fill_control_status_v},
     {"hand_targets", "reflex/hand_targets", &reflex_msg_HandTargets_desc, 1, sizeof(reflex_msg_HandTargets),
      check_hand_targets_v, fill_hand_targets_v},
-    {"body_schema", "reflex/body_schema", &reflex_msg_BodySchemaChange_desc, 1,
-     sizeof(reflex_msg_BodySchemaChange), check_body_schema_v, fill_body_schema_v},
+    {"body_schema", "reflex/body_schema", &reflex_msg_BodySchemaChange_desc, 1, sizeof(reflex_msg_BodySchemaChange),
+     check_body_schema_v, fill_body_schema_v},
 };
 #define REFLEX_NUM_TYPES (sizeof reflex_types / sizeof reflex_types[0])
 
@@ -59,9 +59,9 @@ static dds_qos_t* reflex_qos(const reflex_type_t* t) {
 typedef struct {
   long domain;
   int selected[REFLEX_NUM_TYPES];
-  const char* source;   /* reader: expected Header.source */
-  double seconds;       /* reader: timeout; writer: give up after */
-  long period_ms;       /* writer */
+  const char* source; /* reader: expected Header.source */
+  double seconds;     /* reader: timeout; writer: give up after */
+  long period_ms;     /* writer */
 } reflex_args_t;
 
 /* Parses the common options; returns 0 on success, 1 after printing an error naming the bad value
@@ -98,8 +98,10 @@ static int reflex_parse_args(int argc, char** argv, reflex_args_t* a, const char
           if (strcmp(tok, reflex_types[k].name) == 0) a->selected[k] = found = 1;
         }
         if (!found) {
-          fprintf(stderr, "%s: unknown type '%s' in --types (known: joint_state, control_status, "
-                          "hand_targets, body_schema)\n", argv[0], tok);
+          fprintf(stderr,
+                  "%s: unknown type '%s' in --types (known: joint_state, control_status, "
+                  "hand_targets, body_schema)\n",
+                  argv[0], tok);
           return 1;
         }
       }

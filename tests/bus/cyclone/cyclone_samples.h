@@ -102,8 +102,8 @@ static int check_joint_state(const reflex_msg_JointState* m, const char* source)
   return n;
 }
 
-static int check_arm(const char* arm, const reflex_msg_ArmStatus* a, double f, const char* sa, const char* sb,
-                     double d, reflex_msg_Zone zone, bool estop) {
+static int check_arm(const char* arm, const reflex_msg_ArmStatus* a, double f, const char* sa, const char* sb, double d,
+                     reflex_msg_Zone zone, bool estop) {
   char what[64];
   int n = 0;
   snprintf(what, sizeof what, "%s.blend_f", arm);

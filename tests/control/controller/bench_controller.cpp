@@ -125,7 +125,8 @@ void reportPercentiles(benchmark::State& state, CycleTimes& times) {
 /// than kInterruptedUs above that was hit by an interruption (BM_MachineInterruptions: 38-45 us each
 /// on this VM; the cycles' own spread is a few us). Counters: interrupted_share (of all cycles) and
 /// p99_uninterrupted_us (the wall p99 of the others).
-void reportInterruptions(benchmark::State& state, const std::vector<double>& wall, const std::vector<std::uint32_t>& state_of) {
+void reportInterruptions(benchmark::State& state, const std::vector<double>& wall,
+                         const std::vector<std::uint32_t>& state_of) {
   constexpr double kInterruptedUs = 15.0;
   if (wall.empty()) return;
   std::vector<double> fastest(states().size(), 1e30);
@@ -157,7 +158,9 @@ void BM_ControllerCycle(benchmark::State& state) {
   reportInterruptions(state, times.wall, state_of);  // before reportPercentiles sorts the times
   reportPercentiles(state, times);
 }
-BENCHMARK(BM_ControllerCycle)->Arg(static_cast<int>(AvoidanceMode::kOneDof))->Arg(static_cast<int>(AvoidanceMode::kThreeDof))
+BENCHMARK(BM_ControllerCycle)
+    ->Arg(static_cast<int>(AvoidanceMode::kOneDof))
+    ->Arg(static_cast<int>(AvoidanceMode::kThreeDof))
     ->ArgName("mode");
 
 /// The guard-acting loop's input at cycle k: targets jump every 0.4 s between crossing, into the
@@ -254,7 +257,12 @@ void BM_ControllerCycleFastestPerState(benchmark::State& state) {
   state.counters["state_p99_us"] = percentile(fastest, 0.99) / 1000.0;
   state.counters["state_max_us"] = fastest.back() / 1000.0;
 }
-BENCHMARK(BM_ControllerCycleFastestPerState)->ArgName("set")->Arg(0)->Arg(1)->Iterations(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ControllerCycleFastestPerState)
+    ->ArgName("set")
+    ->Arg(0)
+    ->Arg(1)
+    ->Iterations(1)
+    ->Unit(benchmark::kMillisecond);
 
 /// The machine's own interruptions, the peer of every p99 above: one second of reading the steady
 /// clock in a loop; a step of more than 3 us between two reads is time the thread did not run

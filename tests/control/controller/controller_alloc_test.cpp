@@ -1,6 +1,6 @@
-// The 5 ms control path allocates nothing: global operator new/delete are replaced by counting
-// versions, and a full controller cycle (kinematics, every pair, both controllers, blend, safety
-// filter, predictive guard, e-stop logic, body-schema slots) must leave the count unchanged, and so
+// The 5 ms control path allocates nothing: operator new and (not under AddressSanitizer) malloc /
+// calloc / realloc, which Eigen's dynamic matrices use, are counted (support/count_allocations.hpp);
+// a full controller cycle (kinematics, every pair, both controllers, blend, safety filter, predictive guard, e-stop logic, body-schema slots) must leave the count unchanged, and so
 // must the plant step (walking and its guard) and the controller's body-schema attach, and the
 // onboard controller (onboard.hpp: every input call and step(), with its refusals) that
 // reflex_controller and runScenario drive.
@@ -11,38 +11,12 @@
 
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstdlib>
-#include <new>
-
-namespace {
-std::atomic<long> g_allocations{0};
-}
-
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, std::align_val_t a) {
-  ++g_allocations;
-  if (void* p = std::aligned_alloc(static_cast<std::size_t>(a), ((n + static_cast<std::size_t>(a) - 1) / static_cast<std::size_t>(a)) * static_cast<std::size_t>(a))) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+#include "support/count_allocations.hpp"
 
 namespace reflex::control {
 namespace {
+
+using reflex::testing::AllocationCount;
 
 TEST(ControllerAllocation, ACycleAllocatesNothing) {
   const Model& model = testing::shippedModel();
@@ -59,14 +33,13 @@ TEST(ControllerAllocation, ACycleAllocatesNothing) {
     in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
     computeControl(model, cmm, data, q, in);  // warm-up
     long max_f = 0;
-    const long before = g_allocations.load();
+    AllocationCount cycles;
     for (int k = 0; k < 1500; ++k) {
       computeControl(model, cmm, data, q, in);
       q += data.qdot * cmm.params.period;
       if (data.arms[kLeft].f > 0.5) ++max_f;
     }
-    const long after = g_allocations.load();
-    EXPECT_EQ(after - before, 0) << "allocations in 1500 cycles";
+    EXPECT_EQ(cycles.count(), 0) << "allocations in 1500 cycles";
     EXPECT_GT(max_f, 0) << "the cycles exercised the collision controller";
     // The predictive guard's path: with the first-order floor at d_r (guard_margin 0) and the
     // targets jumping between crossing, into the chest and low across, the guard shortens steps; still nothing
@@ -80,20 +53,20 @@ TEST(ControllerAllocation, ACycleAllocatesNothing) {
     const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
     const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
     const Eigen::Vector3d phases[4][2] = {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}};
-    const long before_guard = g_allocations.load();
+    AllocationCount guard_cycles;
     for (int k = 0; k < 1500; ++k) {
       for (int a = 0; a < 2; ++a) gin.hands[a].target_B = phases[(k / 80) % 4][a];
       gin.priority = static_cast<MotionPriority>((k / 120) % 3);
       computeControl(model, guarded, gdata, gq, gin);
       gq += gdata.qdot * guarded.params.period;
     }
-    EXPECT_EQ(g_allocations.load() - before_guard, 0) << "allocations with the predictive guard acting";
+    EXPECT_EQ(guard_cycles.count(), 0) << "allocations with the predictive guard acting";
     EXPECT_GT(gdata.guard_count, 0U) << "the guard shortened steps in these cycles";
     // The e-stop path too.
     in.reset_estop = true;
-    const long before2 = g_allocations.load();
+    AllocationCount estop_cycle;
     computeControl(model, cmm, data, q, in);
-    EXPECT_EQ(g_allocations.load() - before2, 0);
+    EXPECT_EQ(estop_cycle.count(), 0);
   }
 }
 
@@ -111,17 +84,17 @@ TEST(ControllerAllocation, ThePlantStepWalkingGuardAndSegmentCheckAllocateNothin
   const Eigen::Vector3d post = chest + Eigen::Vector3d(0.30, 0.0, 0.0);
   const int world = model.linkIndex("world");
   walking.start(0.6, 0.25);
-  const long before = g_allocations.load();
+  AllocationCount counted;
   const SegmentAttach refused =
       attachControllerSegment(model, cm, data, 1, world, chest, chest, 0.05, 0, false, robot.jointPositions());
-  const SegmentAttach obstacle = attachControllerSegment(model, cm, data, 0, world, post - Eigen::Vector3d(0, 0, 0.1),
-                                                         post + Eigen::Vector3d(0, 0, 0.1), 0.04, 0, false,
-                                                         robot.jointPositions());
+  const SegmentAttach obstacle =
+      attachControllerSegment(model, cm, data, 0, world, post - Eigen::Vector3d(0, 0, 0.1),
+                              post + Eigen::Vector3d(0, 0, 0.1), 0.04, 0, false, robot.jointPositions());
   for (int k = 0; k < 800; ++k) {
     cr = computeControl(model, cm, data, robot.jointPositions(), ControlInput{});
     stepPlant(model, cm, data, cr, robot, &walking, cm.params.period, scratch);
   }
-  EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in 800 plant steps";
+  EXPECT_EQ(counted.count(), 0) << "allocations in 800 plant steps";
   EXPECT_FALSE(refused.attached);
   EXPECT_TRUE(obstacle.attached);
   EXPECT_GT(data.walking_hold_count, 0U) << "the walking guard held steps";
@@ -163,7 +136,7 @@ TEST(ControllerAllocation, TheOnboardControllersInputsAndStepAllocateNothing) {
   ControlInput scripted;
   scripted.hands = crossing;
   long stepped = 0;
-  const long before = g_allocations.load();
+  AllocationCount counted;
   double t = 0.0;
   for (int k = 0; k < 1000; ++k, t += 0.005) {
     if (k % 50 == 0) ctl.setHandTargets(k % 100 == 0 ? crossing : bad, t);
@@ -182,7 +155,7 @@ TEST(ControllerAllocation, TheOnboardControllersInputsAndStepAllocateNothing) {
     // Every other cycle spans 2 ms, as a cycle per arriving robot state at 500 Hz does (step(now, dt)).
     stepped += (k % 2 == 1 ? ctl.step(t, 0.002) : ctl.step(t)).robot_state_ok;
   }
-  EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in 1000 onboard cycles with every input";
+  EXPECT_EQ(counted.count(), 0) << "allocations in 1000 onboard cycles with every input";
   EXPECT_EQ(stepped, 1000);
   EXPECT_GT(ctl.report().counts.schema_rejected, 0U);
   EXPECT_GT(ctl.report().counts.hand_targets_rejected, 0U);

@@ -49,7 +49,8 @@ TEST(ControllerConfig, DefaultsAreThePapers) {
 }
 
 TEST(ControllerConfig, YamlOverridesDefaults) {
-  const std::string path = writeTemp("d_a: 0.05\nd_b: 0.012\navoidance: three_dof\narms:\n  left:\n    rest: [0.1, 0.2, 0.0, -0.4, 0.0]\n");
+  const std::string path =
+      writeTemp("d_a: 0.05\nd_b: 0.012\navoidance: three_dof\narms:\n  left:\n    rest: [0.1, 0.2, 0.0, -0.4, 0.0]\n");
   const ControllerConfig c = loadControllerConfig(path);
   EXPECT_DOUBLE_EQ(c.params.d_a, 0.05);
   EXPECT_DOUBLE_EQ(c.params.d_b, 0.012);
@@ -67,7 +68,8 @@ TEST(ControllerConfig, BadValuesAreClearErrors) {
   expectError("period: 1.5\n", "period: outside its range (value '1.5'");
   expectError("damping: .nan\n", "damping: not a finite number (value '.nan'");
   expectError("d_safe: 0.01\n", "d_safe: outside its range (value '0.01'");
-  expectError("avoidance: sideways\n", "avoidance: unknown value (value 'sideways', expected one of one_dof, three_dof, off)");
+  expectError("avoidance: sideways\n",
+              "avoidance: unknown value (value 'sideways', expected one of one_dof, three_dof, off)");
   expectError("alpha_t: fast\n", "alpha_t: not a finite number (value 'fast'");
   expectError("no_such_key: 1\n", ":1:1: no_such_key: unknown key (expected one of avoidance, camera_link, arms, d_a");
   expectError("guard_rate: 500\n", "guard_rate");
@@ -173,11 +175,11 @@ TEST(ControllerConfig, EveryBoundHoldsAtItsEndAndFailsJustBeyondNamingKeyValueRa
       }
       ++refused;
       ASSERT_NE(error, "") << b.key << " = " << value << " must be refused";
-      EXPECT_NE(error.find(path), std::string::npos) << error;                               // the file
+      EXPECT_NE(error.find(path), std::string::npos) << error;  // the file
       EXPECT_NE(error.find(std::string(b.key) + ": outside its range (value '" + value + "'"), std::string::npos)
           << error;  // key and value as written
       EXPECT_NE(error.find(", expected "), std::string::npos) << error;
-      EXPECT_NE(error.find(text(b.value)), std::string::npos) << error;                      // the range's end
+      EXPECT_NE(error.find(text(b.value)), std::string::npos) << error;  // the range's end
     }
   }
   EXPECT_EQ(accepted + refused, 3 * static_cast<int>(documentedBounds().size()));
@@ -216,8 +218,9 @@ TEST(ControllerConfig, ErrorsHaveTheOneFormatFileLineColumnKeyValueExpected) {
   } catch (const ConfigError& e) {
     error = e.what();
   }
-  EXPECT_EQ(error, path + ":2:6: d_b: outside its range (value '-0.01', expected (d_r = 0.005, 0.1] m: zones "
-                          "ordered d_r < d_b < d_a (Eq. 13))");
+  EXPECT_EQ(error, path +
+                       ":2:6: d_b: outside its range (value '-0.01', expected (d_r = 0.005, 0.1] m: zones "
+                       "ordered d_r < d_b < d_a (Eq. 13))");
   std::remove(path.c_str());
   // A nested key: its full path, at its value's position.
   const std::string nested = writeTemp("arms:\n  left:\n    hand_point: [0, 0]\n");
@@ -227,17 +230,21 @@ TEST(ControllerConfig, ErrorsHaveTheOneFormatFileLineColumnKeyValueExpected) {
   } catch (const ConfigError& e) {
     error = e.what();
   }
-  EXPECT_EQ(error, nested + ":3:17: arms.left.hand_point: has 2 numbers (value '[0, 0]', expected [x, y, z] of finite numbers)");
+  EXPECT_EQ(
+      error,
+      nested + ":3:17: arms.left.hand_point: has 2 numbers (value '[0, 0]', expected [x, y, z] of finite numbers)");
   std::remove(nested.c_str());
 }
 
 TEST(ControllerConfig, ConfigurationsThatValidateButCannotWorkAreRefused) {
   // Each validated before and gave a robot that cannot work.
-  expectError("estop_release_margin: 100\n", "estop_release_margin: outside its range (value '100', expected [0, d_b - d_r = 0.005] m");
+  expectError("estop_release_margin: 100\n",
+              "estop_release_margin: outside its range (value '100', expected [0, d_b - d_r = 0.005] m");
   expectError("alpha_t: 0\n", "alpha_t: outside its range (value '0', expected [1, 1 / period = 200] 1/s");
   expectError("reach_gain: 0\n", "reach_gain: outside its range (value '0'");
   expectError("period: 1e-9\n", "period: outside its range (value '1e-9', expected [0.001, 0.1] s");
-  expectError("trajectory_speed: 1.0\n", "trajectory_speed: outside its range (value '1.0', expected [0.01, max_task_speed = 0.6] m/s");
+  expectError("trajectory_speed: 1.0\n",
+              "trajectory_speed: outside its range (value '1.0', expected [0.01, max_task_speed = 0.6] m/s");
   expectError("damping: 0\n", "damping: outside its range (value '0'");
   expectError("k_virtual: 1000\n", "k_virtual: outside its range (value '1000'");
 }
@@ -306,7 +313,8 @@ TEST(ControllerConfig, AModelWithMoreSegmentsThanTheMasksHoldIsRefusedNamingCoun
   // refused at set-up, never truncated. 64 passes, 65 fails.
   Model model = testing::shippedModel();
   ASSERT_LE(model.segments.size(), static_cast<std::size_t>(kMaxSegments));
-  while (model.segments.size() < static_cast<std::size_t>(kMaxSegments)) model.segments.push_back(model.segments.back());
+  while (model.segments.size() < static_cast<std::size_t>(kMaxSegments))
+    model.segments.push_back(model.segments.back());
   // The copies are of a body-schema slot past the model's slots: a model no distance sweep can run
   // on, so the set-up's rest-posture check (which needs the e-stop) is off for the passing case.
   ControllerConfig no_estop = defaultControllerConfig();
@@ -317,8 +325,10 @@ TEST(ControllerConfig, AModelWithMoreSegmentsThanTheMasksHoldIsRefusedNamingCoun
     makeControllerModel(model, defaultControllerConfig());
     FAIL() << "65 segments accepted";
   } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("has 65 segments (collision segments and body-schema slots); at most 64 are supported"),
-              std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(
+                  "has 65 segments (collision segments and body-schema slots); at most 64 are supported"),
+              std::string::npos)
+        << e.what();
   }
 }
 

@@ -41,8 +41,8 @@ TEST(BlendingCoefficient, MatchesEquation13) {
   EXPECT_DOUBLE_EQ(blendingCoefficient(0.0, da, db), 1.0);
   EXPECT_DOUBLE_EQ(blendingCoefficient(-0.01, da, db), 1.0);
   EXPECT_DOUBLE_EQ(blendingCoefficient(db, da, db), 1.0);
-  EXPECT_DOUBLE_EQ(blendingCoefficient(0.025, da, db), 0.5);   // midway
-  EXPECT_DOUBLE_EQ(blendingCoefficient(0.034, da, db), 0.2);   // (0.034 - 0.04) / (0.01 - 0.04)
+  EXPECT_DOUBLE_EQ(blendingCoefficient(0.025, da, db), 0.5);  // midway
+  EXPECT_DOUBLE_EQ(blendingCoefficient(0.034, da, db), 0.2);  // (0.034 - 0.04) / (0.01 - 0.04)
   EXPECT_DOUBLE_EQ(blendingCoefficient(da, da, db), 0.0);
   EXPECT_DOUBLE_EQ(blendingCoefficient(0.5, da, db), 0.0);
   EXPECT_DOUBLE_EQ(blendingCoefficient(std::nan(""), da, db), 1.0);  // unknown distance: most cautious
@@ -123,8 +123,8 @@ TEST(Redundancy, NullspaceProjectorsAnnihilateTheTask) {
     ArmVector xi(n);
     for (int j = 0; j < n; ++j) xi[j] = g(rng);
     EXPECT_LT((J * (N * xi)).norm(), 1e-12) << "trial " << trial;
-    EXPECT_LT((N * N - N).norm(), 1e-10);       // a projector
-    EXPECT_LT((N - N.transpose()).norm(), 1e-12);  // orthogonal
+    EXPECT_LT((N * N - N).norm(), 1e-10);                        // a projector
+    EXPECT_LT((N - N.transpose()).norm(), 1e-12);                // orthogonal
     EXPECT_NEAR(N.trace(), n - (trial % 5 == 0 ? 2 : 3), 1e-9);  // rank of the nullspace
     ArmRow row(n);
     for (int j = 0; j < n; ++j) row[j] = g(rng);
@@ -238,7 +238,8 @@ TEST(Controller, NullspaceTermsLeaveTheReachingTaskUnchanged) {
       const Eigen::Vector3d va = J * a.qdot, vb = J * b.qdot;
       double speed_ratio = 0.0;
       for (int i = 0; i < model.nq; ++i)
-        speed_ratio = std::max({speed_ratio, std::abs(a.qdot[i]) / model.v_max[i], std::abs(b.qdot[i]) / model.v_max[i]});
+        speed_ratio =
+            std::max({speed_ratio, std::abs(a.qdot[i]) / model.v_max[i], std::abs(b.qdot[i]) / model.v_max[i]});
       if (speed_ratio >= 1.0 - 1e-9) continue;  // velocity scaling would change both
       bool at_limit = false;
       for (int i = 0; i < arm.n; ++i)
@@ -319,8 +320,10 @@ TEST(Controller, HigherPriorityArmIsUntouchedByTheOtherArm) {
     s.script = [right_crosses](double, ControlInput& in, ScenarioContext&) {
       in.priority = MotionPriority::kLeftHigher;
       in.hands[kLeft] = {HandStatus::kGiven, Eigen::Vector3d(0.30, -0.08, 0.90)};
-      if (right_crosses) in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
-      else in.hands[kRight].status = HandStatus::kNoTarget;
+      if (right_crosses)
+        in.hands[kRight] = {HandStatus::kGiven, Eigen::Vector3d(0.30, 0.08, 0.90)};
+      else
+        in.hands[kRight].status = HandStatus::kNoTarget;
     };
     return runScenario(model, cm, s);
   };
@@ -338,7 +341,7 @@ TEST(Controller, HigherPriorityArmIsUntouchedByTheOtherArm) {
     }
   }
   EXPECT_EQ(max_diff, 0.0);
-  EXPECT_GT(max_right_diff, 0.1);            // the right arm did move in the crossing run
+  EXPECT_GT(max_right_diff, 0.1);                   // the right arm did move in the crossing run
   EXPECT_GE(crossing.min_distance, cm.params.d_r);  // and it avoided the left arm
   EXPECT_FALSE(crossing.estop_fired);
 }
@@ -379,8 +382,8 @@ TEST(PredictiveGuard, NoStepEndsBelowTheFloorAndCloserThanBefore) {
   // the other hand, with the motion priority flipping.
   const Eigen::Vector3d inside(0.02, 0.0, 0.95), across_l(0.30, -0.08, 0.90), across_r(0.30, 0.08, 0.90);
   const Eigen::Vector3d low_l(0.10, -0.05, 0.75), low_r(0.10, 0.05, 0.75);
-  const std::array<std::array<Eigen::Vector3d, 2>, 4> phases{{{across_l, across_r}, {inside, across_r},
-                                                              {low_l, inside}, {across_l, low_r}}};
+  const std::array<std::array<Eigen::Vector3d, 2>, 4> phases{
+      {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}}};
   double closest = 1.0;
   int checked = 0;
   for (int k = 0; k < 1600; ++k) {
@@ -628,7 +631,8 @@ void attackBroadPhase(const Model& model, unsigned seed, int* sweep_refined) {
       for (int h = 0; h < 2; ++h)
         in.hands[h] = {HandStatus::kGiven, Eigen::Vector3d(uniform(0.0, 0.4), uniform(-0.3, 0.3), uniform(0.7, 1.1))};
       in.priority = static_cast<MotionPriority>(k / 50 % 3);
-      ASSERT_EQ(computeControl(model, pruned, dp, q, in), computeControl(model, brute, db, q, in)) << what << " cycle " << k;
+      ASSERT_EQ(computeControl(model, pruned, dp, q, in), computeControl(model, brute, db, q, in))
+          << what << " cycle " << k;
       if (broad_phase::sweepRefinedItsClosest(dp.dist)) ++*sweep_refined;
       ASSERT_NO_FATAL_FAILURE(broad_phase::expectSameCycle(dp, db, what + " cycle " + std::to_string(k)));
       // Odd trials: independent random configurations; even ones: the closed loop, a jump every 100.

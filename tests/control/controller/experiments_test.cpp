@@ -17,8 +17,8 @@ namespace reflex::control {
 namespace {
 
 using testing::defaultControllerModel;
-using testing::shippedModel;
 using testing::kAsimoUrdf;
+using testing::shippedModel;
 
 SimResult run(const std::string& name, AvoidanceMode mode) {
   const Scenario* s = findScenario(name);
@@ -91,9 +91,11 @@ void expectSafeAndSmooth(const std::string& name) {
       // Walking swings the legs the arms avoid: allow two reversals per step on top of the baseline.
       const Scenario* sc = findScenario(name);
       ASSERT_NE(sc, nullptr) << name;
-      const int allowed = kMaxJointReversals +
-                          (sc->walk_speed > 0.0 ? static_cast<int>(2.0 * sc->walk_distance / sc->walk_speed / kWalkStepPeriod) : 0);
-      EXPECT_LT(reversals(q, kJointStep), allowed) << name << " joint " << model.q_names[cm.arms[a].q[i]] << " oscillates";
+      const int allowed =
+          kMaxJointReversals +
+          (sc->walk_speed > 0.0 ? static_cast<int>(2.0 * sc->walk_distance / sc->walk_speed / kWalkStepPeriod) : 0);
+      EXPECT_LT(reversals(q, kJointStep), allowed)
+          << name << " joint " << model.q_names[cm.arms[a].q[i]] << " oscillates";
     }
   }
 }
@@ -103,8 +105,8 @@ void expectSafeAndSmooth(const std::string& name) {
 TEST(Experiments, TheListHoldsThePapersSevenExperiments) {
   std::vector<std::string> names;
   for (const auto& s : builtinScenarios()) names.push_back(s.name);
-  const std::vector<std::string> paper = {"target_inside_body", "through_body",  "one_vs_three_dof", "crossing_arms",
-                                          "walking_target_behind", "grasped_bar", "occlusion"};
+  const std::vector<std::string> paper = {"target_inside_body",    "through_body", "one_vs_three_dof", "crossing_arms",
+                                          "walking_target_behind", "grasped_bar",  "occlusion"};
   EXPECT_EQ(names, paper);
 }
 
@@ -200,7 +202,7 @@ TEST(Experiments, AScenarioOnARobotWithoutItsLinksNamesThem) {
 TEST(Experiments, TargetInsideTheBodyStopsAtTheSide) {
   const SimResult on = run("target_inside_body", AvoidanceMode::kOneDof);
   const SimResult off = run("target_inside_body", AvoidanceMode::kOff);
-  EXPECT_LT(off.final_error[kRight], kOnTarget);   // without avoidance the hand goes into the body
+  EXPECT_LT(off.final_error[kRight], kOnTarget);  // without avoidance the hand goes into the body
   EXPECT_GT(on.final_error[kRight], kHeldOff);    // with it the arm stops outside
   const auto& last = on.samples.back();
   EXPECT_GE(last.arms[kRight].distance, defaultControllerModel().params.d_b * 0.5);
@@ -238,8 +240,8 @@ TEST(Experiments, CrossingArmsEndBetweenRedAndYellow) {
   EXPECT_GE(d, p.d_r);
   EXPECT_LE(d, p.d_a);
   const Model& model = shippedModel();
-  const std::string pair = model.segments[model.pairs[last.min_pair].a].name + "|" +
-                           model.segments[model.pairs[last.min_pair].b].name;
+  const std::string pair =
+      model.segments[model.pairs[last.min_pair].a].name + "|" + model.segments[model.pairs[last.min_pair].b].name;
   EXPECT_TRUE(pair.find("l_") != std::string::npos && pair.find("r_") != std::string::npos)
       << "the closest pair at the end is arm against arm, got " << pair;
 }
@@ -262,10 +264,10 @@ TEST(Experiments, GraspedBarIsAvoidedByTheLowerPriorityArm) {
   auto barDistance = [&](const SimResult& r) {
     KinematicsData kin(model);
     DistanceData dist(model);
-    attachBodySchemaSegment(model, dist, 0, model.linkIndex("l_hand"), Eigen::Vector3d(-0.16, 0, -0.06),
-                            Eigen::Vector3d(0.16, 0, -0.06), 0.015,
-                            (std::uint64_t{1} << model.segmentIndex("l_hand")) |
-                                (std::uint64_t{1} << model.segmentIndex("l_forearm")));
+    attachBodySchemaSegment(
+        model, dist, 0, model.linkIndex("l_hand"), Eigen::Vector3d(-0.16, 0, -0.06), Eigen::Vector3d(0.16, 0, -0.06),
+        0.015,
+        (std::uint64_t{1} << model.segmentIndex("l_hand")) | (std::uint64_t{1} << model.segmentIndex("l_forearm")));
     double dmin = 1.0;
     for (const auto& s : r.samples) {
       computeForwardKinematics(model, kin, s.q);

@@ -30,7 +30,8 @@ using testing::defaultControllerModel;
 using testing::shippedModel;
 
 bool descends(const Model& model, int link, int ancestor) {
-  for (int l = model.links[static_cast<std::size_t>(link)].parent; l >= 0; l = model.links[static_cast<std::size_t>(l)].parent)
+  for (int l = model.links[static_cast<std::size_t>(link)].parent; l >= 0;
+       l = model.links[static_cast<std::size_t>(l)].parent)
     if (l == ancestor) return true;
   return false;
 }
@@ -38,9 +39,9 @@ bool descends(const Model& model, int link, int ancestor) {
 /// One yellow pair as this test sees it: which side is the arm's point.
 struct Term {
   int pair = -1;
-  double weight = 0.0;        // |F_ij| = k (d_a - d)
-  Eigen::Vector3d e;          // unit, from the other segment towards the arm's point
-  Eigen::MatrixXd J_rel;      // 3 x n: rate of (arm point - other point), arm columns
+  double weight = 0.0;    // |F_ij| = k (d_a - d)
+  Eigen::Vector3d e;      // unit, from the other segment towards the arm's point
+  Eigen::MatrixXd J_rel;  // 3 x n: rate of (arm point - other point), arm columns
 };
 
 /// The arm's yellow pairs (equal priority, no e-stop: every pair that involves the arm).
@@ -197,13 +198,14 @@ TEST(MergedForce, SameArmPairsPushTheDistalSegmentAndTheMergeNeverApproachesTheC
       }
     }
   }
-  std::printf("%d yellow-zone arm states (%d merge several pairs, %d of them with a same-arm pair); "
-              "max |code - independent| = %.2e rad/s\n"
-              "not squeezed: closest pair approached in %d of %d; %d of %d yellow pairs flipped by their own force\n"
-              "squeezed (another yellow pair pushes against the closest one): closest pair approached in %d of %d "
-              "(worst %.2f mm/s); %d yellow pairs flipped\n",
-              states, multi, with_same_arm, max_diff, closest_approaching, free_checked, yellow_flipped, yellow_checked,
-              squeezed_approaching, squeezed_states, worst_squeezed * 1e3, squeezed_flipped);
+  std::printf(
+      "%d yellow-zone arm states (%d merge several pairs, %d of them with a same-arm pair); "
+      "max |code - independent| = %.2e rad/s\n"
+      "not squeezed: closest pair approached in %d of %d; %d of %d yellow pairs flipped by their own force\n"
+      "squeezed (another yellow pair pushes against the closest one): closest pair approached in %d of %d "
+      "(worst %.2f mm/s); %d yellow pairs flipped\n",
+      states, multi, with_same_arm, max_diff, closest_approaching, free_checked, yellow_flipped, yellow_checked,
+      squeezed_approaching, squeezed_states, worst_squeezed * 1e3, squeezed_flipped);
   EXPECT_GE(states, want);
   EXPECT_GE(with_same_arm, 1000) << "the draw must exercise merges with a same-arm pair";
   EXPECT_GE(yellow_checked, 3000);

@@ -294,7 +294,8 @@ TEST(OnboardBodySchema, RefusalsAreNamedAndCounted) {
   const std::string pack = "pack";
   const BodySchemaOutcome& r4 = ctl.changeBodySchema(attachRequest(pack, "world", chest, chest, 0.05));
   ASSERT_EQ(r4.kind, BodySchemaOutcome::Kind::kRejectedUnresolvable) << r4.text;
-  EXPECT_NE(std::string(r4.text).find("which no arm can move away from it (link 'world')"), std::string::npos) << r4.text;
+  EXPECT_NE(std::string(r4.text).find("which no arm can move away from it (link 'world')"), std::string::npos)
+      << r4.text;
   // Its distance, from the distance module directly: the sphere against the segment it names.
   DistanceData dist(model);
   ASSERT_TRUE(attachBodySchemaSegment(model, dist, 0, model.linkIndex("world"), chest, chest, 0.05));
@@ -419,8 +420,8 @@ TEST(OnboardWalking, TheHeelTravelsSpeedTimesDtPerClearCycleAndHoldsInEstopAndRe
       ASSERT_TRUE(r.walking_advanced || r.counts.walking_holds > 0);
     } else {
       (r.estop == EstopState::kLatched ? latched : recovering) += 1;
-      ASSERT_EQ(port.positions()[heel], before) << "the heel moved while the e-stop was "
-                                                << (r.estop == EstopState::kLatched ? "latched" : "recovering");
+      ASSERT_EQ(port.positions()[heel], before)
+          << "the heel moved while the e-stop was " << (r.estop == EstopState::kLatched ? "latched" : "recovering");
       ASSERT_FALSE(r.walking_advanced);
     }
   }
@@ -459,7 +460,8 @@ TEST(OnboardPriority, GivenPriorityOrAGraspedObjectsArmAndTheSameVelocitiesAsCom
     in.hands = crossing();
     in.priority = expected;
     computeControl(model, cm, ref, q, in);
-    for (int i = 0; i < model.nq; ++i) ASSERT_EQ(ctl.data().qdot[i], ref.qdot[i]) << what << ", joint " << model.q_names[i];
+    for (int i = 0; i < model.nq; ++i)
+      ASSERT_EQ(ctl.data().qdot[i], ref.qdot[i]) << what << ", joint " << model.q_names[i];
     t += kDt;
   };
   ctl.setHandTargets(crossing(), 0.0);
@@ -470,10 +472,12 @@ TEST(OnboardPriority, GivenPriorityOrAGraspedObjectsArmAndTheSameVelocitiesAsCom
   const std::string cup = "cup", gaze = "gaze";
   const Eigen::Vector3d a(0.0, 0.0, -0.05), b(0.0, 0.0, -0.08);
   // A virtual segment with priority does not count; a grasped object in the right hand does.
-  ASSERT_EQ(ctl.changeBodySchema(attachRequest(gaze, "l_hand", a, b, 0.01, true, 1)).kind, BodySchemaOutcome::Kind::kAttached);
+  ASSERT_EQ(ctl.changeBodySchema(attachRequest(gaze, "l_hand", a, b, 0.01, true, 1)).kind,
+            BodySchemaOutcome::Kind::kAttached);
   ref.dist.slots = ctl.data().dist.slots;  // the reference needs the same slots: mirror them
   for (int k = 0; k < 20; ++k) check(MotionPriority::kEqual, "virtual segment with priority");
-  ASSERT_EQ(ctl.changeBodySchema(attachRequest(cup, "r_hand", a, b, 0.01, false, 1)).kind, BodySchemaOutcome::Kind::kAttached);
+  ASSERT_EQ(ctl.changeBodySchema(attachRequest(cup, "r_hand", a, b, 0.01, false, 1)).kind,
+            BodySchemaOutcome::Kind::kAttached);
   ref.dist.slots = ctl.data().dist.slots;
   for (int k = 0; k < 50; ++k) check(MotionPriority::kRightHigher, "grasped object in the right hand");
   ctl.setPriority(MotionPriority::kLeftHigher);
@@ -510,7 +514,8 @@ TEST(OnboardPlant, TheSameJointPositionsAsThePreIssue13LoopWithWalking) {
     not_ok += cr != ControlResult::kOk;
     max_f = std::max({max_f, data.arms[kLeft].f, data.arms[kRight].f});
     stepPlant(model, cm, data, cr, robot, &walking, kDt, scratch);
-    for (int i = 0; i < model.nq; ++i) ASSERT_EQ(port.positions()[i], robot.jointPositions()[i]) << "cycle " << k << " " << model.q_names[i];
+    for (int i = 0; i < model.nq; ++i)
+      ASSERT_EQ(port.positions()[i], robot.jointPositions()[i]) << "cycle " << k << " " << model.q_names[i];
     ASSERT_EQ(ctl.report().result, cr);
   }
   EXPECT_NEAR(port.positions()[heel] - q0[heel], 0.3, 1e-9) << "walked the whole way";
@@ -710,7 +715,8 @@ TEST(OnboardRejections, OneCounterPerCauseAtTheBoundsAndTheLatestCauseNamed) {
   // Body schema: a segment beyond BodySchemaLimits (radius 10 m) is its own cause.
   const std::string big = "big";
   const Eigen::Vector3d p(0.3, 0.0, 1.5);
-  EXPECT_EQ(ctl.changeBodySchema(attachRequest(big, "world", p, p, 10.0)).kind, BodySchemaOutcome::Kind::kRejectedCheck);
+  EXPECT_EQ(ctl.changeBodySchema(attachRequest(big, "world", p, p, 10.0)).kind,
+            BodySchemaOutcome::Kind::kRejectedCheck);
   EXPECT_EQ(count(RejectCause::kSchemaBadSegment), 1U);
   EXPECT_EQ(last(), static_cast<int>(RejectCause::kSchemaBadSegment));
   // The groups are the causes summed; the total is every refusal.

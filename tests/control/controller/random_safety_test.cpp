@@ -41,13 +41,15 @@ Scenario randomEpisode(std::uint32_t seed, bool walk) {
         in.hands[a].target_B = Eigen::Vector3d(0.05 * (u(*rng) - 0.5), 0.12 * (u(*rng) - 0.5), 0.65 + 0.35 * u(*rng));
       } else if (u(*rng) < 0.4) {  // crossing: a target on the other side of the body
         const double side = a == kLeft ? -1.0 : 1.0;
-        in.hands[a].target_B = Eigen::Vector3d(0.15 + 0.25 * u(*rng), side * (0.05 + 0.3 * u(*rng)), 0.7 + 0.4 * u(*rng));
+        in.hands[a].target_B =
+            Eigen::Vector3d(0.15 + 0.25 * u(*rng), side * (0.05 + 0.3 * u(*rng)), 0.7 + 0.4 * u(*rng));
       } else {
         in.hands[a].target_B = Eigen::Vector3d(x(*rng), y(*rng), z(*rng));
       }
     }
     const double p = u(*rng);
-    in.priority = p < 0.6 ? MotionPriority::kEqual : (p < 0.8 ? MotionPriority::kLeftHigher : MotionPriority::kRightHigher);
+    in.priority =
+        p < 0.6 ? MotionPriority::kEqual : (p < 0.8 ? MotionPriority::kLeftHigher : MotionPriority::kRightHigher);
   };
   return s;
 }
@@ -70,7 +72,8 @@ TEST(RandomSafety, ThousandEpisodesNeverReachTheRedZone) {
       worst = r.min_distance;
       worst_seed = seed;
     }
-    ASSERT_GE(r.min_distance, cm.params.d_r) << "episode seed " << seed << " pair " << r.min_pair << " at t=" << r.min_time;
+    ASSERT_GE(r.min_distance, cm.params.d_r)
+        << "episode seed " << seed << " pair " << r.min_pair << " at t=" << r.min_time;
     ASSERT_FALSE(r.estop_fired) << "episode seed " << seed;
     ASSERT_FALSE(r.non_finite) << "episode seed " << seed;
     ASSERT_LE(r.max_joint_speed_ratio, 1.0 + 1e-9) << "episode seed " << seed;
@@ -95,12 +98,15 @@ ControllerParams randomValidParams(ControllerParams p, std::mt19937& rng) {
   };
   for (const ParamRange& r : controllerParamRanges(p)) {
     double* field = controllerParamField(p, r.key);
-    if (field == nullptr) ADD_FAILURE() << "a range for an unknown key " << r.key;
-    else if (u(rng) < 0.5 && r.hi > r.lo) *field = draw(r);
+    if (field == nullptr)
+      ADD_FAILURE() << "a range for an unknown key " << r.key;
+    else if (u(rng) < 0.5 && r.hi > r.lo)
+      *field = draw(r);
   }
   for (int pass = 0; pass < 4; ++pass)  // the ends that depend on other keys moved with them
     for (const ParamRange& r : controllerParamRanges(p))
-      if (double* field = controllerParamField(p, r.key); field != nullptr && !r.contains(*field) && r.hi > r.lo) *field = draw(r);
+      if (double* field = controllerParamField(p, r.key); field != nullptr && !r.contains(*field) && r.hi > r.lo)
+        *field = draw(r);
   return p;
 }
 

@@ -123,7 +123,8 @@ TEST_P(OnEveryRobot, RestPostureIsInsideTheLimitsAndClearOfTheBody) {
   }
   Eigen::VectorXd straight = q;
   for (const auto& arm : r.cm.arms)
-    for (int i = 0; i < arm.n; ++i) straight[arm.q[i]] = std::clamp(0.0, r.model.q_lower[arm.q[i]], r.model.q_upper[arm.q[i]]);
+    for (int i = 0; i < arm.n; ++i)
+      straight[arm.q[i]] = std::clamp(0.0, r.model.q_lower[arm.q[i]], r.model.q_upper[arm.q[i]]);
   auto distances = [&](const Eigen::VectorXd& at) {
     KinematicsData kin(r.model);
     EXPECT_TRUE(computeForwardKinematics(r.model, kin, at));
@@ -139,7 +140,8 @@ TEST_P(OnEveryRobot, RestPostureIsInsideTheLimitsAndClearOfTheBody) {
     const std::string name = r.model.segments[pr.a].name + "|" + r.model.segments[pr.b].name;
     if (!rest[i].active || !(((left | right) >> pr.a) & 1U || ((left | right) >> pr.b) & 1U)) continue;
     ++checked;
-    const bool one_arm = (((left >> pr.a) & 1U) && ((left >> pr.b) & 1U)) || (((right >> pr.a) & 1U) && ((right >> pr.b) & 1U));
+    const bool one_arm =
+        (((left >> pr.a) & 1U) && ((left >> pr.b) & 1U)) || (((right >> pr.a) & 1U) && ((right >> pr.b) & 1U));
     if (one_arm && rest[i].distance <= r.cm.params.d_a) {
       EXPECT_GE(rest[i].distance, open[i].distance - 0.002) << name;
       EXPECT_GT(rest[i].distance, r.cm.params.d_b) << name;
@@ -250,8 +252,8 @@ TEST_P(OnEveryRobot, CrossingArmsStopArmAgainstArm) {
   }
   ASSERT_LT(closest, r.model.pairs.size());
   const SegmentPair& pair = r.model.pairs[closest];
-  const bool arm_vs_arm = (((left >> pair.a) & 1U) && ((right >> pair.b) & 1U)) ||
-                          (((right >> pair.a) & 1U) && ((left >> pair.b) & 1U));
+  const bool arm_vs_arm =
+      (((left >> pair.a) & 1U) && ((right >> pair.b) & 1U)) || (((right >> pair.a) & 1U) && ((left >> pair.b) & 1U));
   EXPECT_TRUE(arm_vs_arm) << r.model.segments[pair.a].name << "|" << r.model.segments[pair.b].name;
   double off_arms = std::numeric_limits<double>::infinity();
   for (const auto& s : off.samples) off_arms = std::min(off_arms, s.arm_distance);

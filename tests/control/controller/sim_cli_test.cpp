@@ -17,7 +17,8 @@ struct ProcessResult {
 };
 
 ProcessResult sh(const std::string& args) {
-  const reflex::testing::ProcessResult r = reflex::testing::runShell(reflex::testing::binPath("reflex_sim") + " " + args);
+  const reflex::testing::ProcessResult r =
+      reflex::testing::runShell(reflex::testing::binPath("reflex_sim") + " " + args);
   return {r.exit_code, r.out};
 }
 

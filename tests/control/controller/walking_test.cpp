@@ -67,8 +67,10 @@ TEST(Walking, AnyCommandSequenceKeepsEveryJointOfThePlantWithinItsVelocityLimitA
         ++commands;
         const double r = u(rng);
         auto pick = [&](double lo, double hi) { return u(rng) < 0.2 ? odd[rng() % 7] : lo + (hi - lo) * u(rng); };
-        if (r < 0.2) walking.stop();
-        else walking.start(pick(-0.5, 3.0), pick(0.0, 2.0), pick(0.0, 4.0));
+        if (r < 0.2)
+          walking.stop();
+        else
+          walking.start(pick(-0.5, 3.0), pick(0.0, 2.0), pick(0.0, 4.0));
       }
       // The pattern alone, from the robot's current positions.
       Eigen::VectorXd q_pattern = robot.jointPositions();
@@ -76,7 +78,8 @@ TEST(Walking, AnyCommandSequenceKeepsEveryJointOfThePlantWithinItsVelocityLimitA
       walking.step(dt, q_pattern);
       walking.restore(s);
       for (int j = 0; j < model.nq; ++j)
-        worst_pattern = std::max(worst_pattern, std::abs(q_pattern[j] - robot.jointPositions()[j]) / (model.v_max[j] * dt));
+        worst_pattern =
+            std::max(worst_pattern, std::abs(q_pattern[j] - robot.jointPositions()[j]) / (model.v_max[j] * dt));
       // The plant: arm velocities anywhere up to 3x their limit, sometimes NaN; the controller's result.
       for (int j = 0; j < model.nq; ++j) qdot[j] = (u(rng) < 0.01 ? nan : 3.0 * (2.0 * u(rng) - 1.0) * model.v_max[j]);
       data.qdot = qdot;
@@ -202,7 +205,8 @@ TEST(WalkingAndEstop, WalkingStopsInFrontOfASegmentOnTheRootThatNoArmCanMoveAndR
   s.script = [&](double t, ControlInput& in, ScenarioContext& ctx) {
     in.reset_estop = std::abs(t - 3.0) < 1e-9;  // an operator resets whatever latched (nothing should)
     if (!attached && t == 0.0)
-      attached = ctx.attach(0, "world", post - Eigen::Vector3d(0, 0, 0.1), post + Eigen::Vector3d(0, 0, 0.1), 0.04, false);
+      attached =
+          ctx.attach(0, "world", post - Eigen::Vector3d(0, 0, 0.1), post + Eigen::Vector3d(0, 0, 0.1), 0.04, false);
     if (t_removed < 0.0 && t >= 3.5) {
       ctx.detach(0);
       t_removed = t;
@@ -216,10 +220,11 @@ TEST(WalkingAndEstop, WalkingStopsInFrontOfASegmentOnTheRootThatNoArmCanMoveAndR
     if (x.t < t_removed) closest = std::min(closest, x.min_distance);
     if (x.t <= t_removed) heel_at_removal = x.q[heel] - r.samples.front().q[heel];
   }
-  std::printf("closest %.3f mm while the segment stood (floor %.3f mm); walked %.3f m before its removal; "
-              "%llu walking steps held\n",
-              closest * 1e3, (cm.params.d_r + cm.params.predict_margin) * 1e3, heel_at_removal,
-              static_cast<unsigned long long>(r.walking_holds));
+  std::printf(
+      "closest %.3f mm while the segment stood (floor %.3f mm); walked %.3f m before its removal; "
+      "%llu walking steps held\n",
+      closest * 1e3, (cm.params.d_r + cm.params.predict_margin) * 1e3, heel_at_removal,
+      static_cast<unsigned long long>(r.walking_holds));
   EXPECT_FALSE(r.estop_fired);
   EXPECT_GE(closest, cm.params.d_r + cm.params.predict_margin - 1e-9);
   EXPECT_GT(r.walking_holds, 100U);
@@ -247,7 +252,8 @@ TEST(BodySchema, APhysicalSegmentTouchingAPartNoArmCanMoveIsRefused) {
   EXPECT_LT(a.distance, 0.0);
   EXPECT_FALSE(data.dist.slots[1].enabled) << "the slot stays as it was";
   // Carried by the chest (a backpack) but reaching into the head: refused too.
-  const Eigen::Vector3d head_L = data.kin.X_B_L[chest].inverse() * data.kin.X_B_L[model.linkIndex("head")].translation();
+  const Eigen::Vector3d head_L =
+      data.kin.X_B_L[chest].inverse() * data.kin.X_B_L[model.linkIndex("head")].translation();
   const std::uint64_t own = std::uint64_t{1} << model.segmentIndex("chest");
   a = attachControllerSegment(model, cm, data, 1, chest, head_L, head_L + z, 0.03, own, false, q);
   EXPECT_FALSE(a.attached);

@@ -72,14 +72,22 @@ int main(int argc, char** argv) {
       return 1;
     }
     ++i;
-    if (strcmp(a, "--domain") == 0) domain = strtol(v, NULL, 10);
-    else if (strcmp(a, "--bad-at") == 0) bad_at = atof(v);
-    else if (strcmp(a, "--stop-at") == 0) stop_at = atof(v);
-    else if (strcmp(a, "--listen-until") == 0) listen_until = atof(v);
-    else if (strcmp(a, "--command") == 0) command = v;
-    else if (strcmp(a, "--controller") == 0) controller = v;
-    else if (strcmp(a, "--rename") == 0) rename = v;
-    else if (strcmp(a, "--joints") == 0) joints_arg = strdup(v);
+    if (strcmp(a, "--domain") == 0)
+      domain = strtol(v, NULL, 10);
+    else if (strcmp(a, "--bad-at") == 0)
+      bad_at = atof(v);
+    else if (strcmp(a, "--stop-at") == 0)
+      stop_at = atof(v);
+    else if (strcmp(a, "--listen-until") == 0)
+      listen_until = atof(v);
+    else if (strcmp(a, "--command") == 0)
+      command = v;
+    else if (strcmp(a, "--controller") == 0)
+      controller = v;
+    else if (strcmp(a, "--rename") == 0)
+      rename = v;
+    else if (strcmp(a, "--joints") == 0)
+      joints_arg = strdup(v);
     else if (strcmp(a, "--q") == 0) {
       const char* eq = strchr(v, '=');
       if (eq == NULL || nq >= MAX_JOINTS) {
@@ -107,7 +115,7 @@ int main(int argc, char** argv) {
     }
     ++ncmd;
   }
-  names[nq] = "gripper_joint";  /* a joint the robot model does not have */
+  names[nq] = "gripper_joint"; /* a joint the robot model does not have */
   q[nq] = 0.01;
   const int nsent = nq + 1;
   if (controller == NULL) controller = trajectory ? "joint_trajectory_controller" : "forward_position_controller";
@@ -124,7 +132,8 @@ int main(int argc, char** argv) {
   dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
   dds_qset_durability(qos, DDS_DURABILITY_VOLATILE);
   dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 10);
-  const dds_entity_t state_topic = dds_create_topic(participant, &sensor_msgs_msg_dds__JointState__desc, "rt/joint_states", NULL, NULL);
+  const dds_entity_t state_topic =
+      dds_create_topic(participant, &sensor_msgs_msg_dds__JointState__desc, "rt/joint_states", NULL, NULL);
   const dds_entity_t command_topic =
       trajectory ? dds_create_topic(participant, &trajectory_msgs_msg_dds__JointTrajectory__desc, cmd_topic, NULL, NULL)
                  : dds_create_topic(participant, &std_msgs_msg_dds__Float64MultiArray__desc, cmd_topic, NULL, NULL);
@@ -144,7 +153,7 @@ int main(int argc, char** argv) {
   char* sent_names[MAX_JOINTS + 2];
   long good = 0, unstamped = 0, no_velocity = 0;
   long bad[6] = {0, 0, 0, 0, 0, 0}; /* renamed (2), short, duplicate, NaN, future */
-  int phase = 0; /* 0 good, 1 bad ones done */
+  int phase = 0;                    /* 0 good, 1 bad ones done */
   long commands = 0, wrong_size = 0, non_finite = 0, wrong_names = 0, wrong_points = 0;
   double first_s = -1, max_step = 0, last_cmd[MAX_JOINTS];
   int have_cmd = 0;
@@ -220,11 +229,12 @@ int main(int argc, char** argv) {
         static int step = 0;
         const int r = rename != NULL ? find_joint(rename) : 0;
         switch (step) {
-          case 0: case 1: sent_names[r] = "renamed_joint"; break;       /* the model's joint is missing */
-          case 2: npos = n - 1; break;                                   /* one position too few */
-          case 3: sent_names[1] = sent_names[0]; break;                  /* a name listed twice */
-          case 4: pos[r] = NAN; break;                                   /* NaN */
-          case 5: s.header.stamp.sec += 1; break;                        /* 1 s ahead */
+          case 0:
+          case 1: sent_names[r] = "renamed_joint"; break; /* the model's joint is missing */
+          case 2: npos = n - 1; break;                    /* one position too few */
+          case 3: sent_names[1] = sent_names[0]; break;   /* a name listed twice */
+          case 4: pos[r] = NAN; break;                    /* NaN */
+          case 5: s.header.stamp.sec += 1; break;         /* 1 s ahead */
           default: break;
         }
         ++bad[step < 2 ? 0 : step - 1];

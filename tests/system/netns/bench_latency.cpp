@@ -116,17 +116,31 @@ int measureTargets(const Options& o) {
   // A recorder beside the controller (same host / namespace): its receive times are when the targets
   // reach a process on the robot host (the transport part, without the wait for the next cycle).
   const std::string rfx = o.work + "/bench_targets.rfx";
-  std::vector<std::string> rec = {o.bin_dir + "/reflex_record", "record", "-o", rfx, "--domain", dom, "--flush-ms",
-                                  "50", "-t", "reflex/hand_targets", "-t", "reflex/object_targets"};
+  std::vector<std::string> rec = {o.bin_dir + "/reflex_record",
+                                  "record",
+                                  "-o",
+                                  rfx,
+                                  "--domain",
+                                  dom,
+                                  "--flush-ms",
+                                  "50",
+                                  "-t",
+                                  "reflex/hand_targets",
+                                  "-t",
+                                  "reflex/object_targets"};
   if (!profiles.empty()) rec = cat(rec, {"--profiles", profiles});
   rec = cat(rtPrefix(o), rec);
   if (!o.robot_ns.empty()) rec = cat(nsPrefix(o.robot_ns), rec);
   reflex::testing::ChildProcess recorder(rec, o.work + "/bench_recorder.log");
   std::unique_ptr<reflex::testing::ChildProcess> behavior;
   if (o.path == "objects") {
-    std::vector<std::string> b = {o.bin_dir + "/reflex_behavior", "--config",
-                                  std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/pointing.yaml", "--domain", dom,
-                                  "--progress", "0"};
+    std::vector<std::string> b = {o.bin_dir + "/reflex_behavior",
+                                  "--config",
+                                  std::string(REFLEX_SOURCE_DIR) + "/bringup/behavior/pointing.yaml",
+                                  "--domain",
+                                  dom,
+                                  "--progress",
+                                  "0"};
     if (!profiles.empty()) b = cat(b, {"--profiles", profiles});
     b = cat(rtPrefix(o), b);
     behavior = std::make_unique<reflex::testing::ChildProcess>(b, o.work + "/bench_behavior.log");
@@ -279,8 +293,8 @@ int measureTargets(const Options& o) {
     }
   }
   const bool objects = o.path == "objects";
-  std::printf("latency (%s%s, %s): %d targets every %.0f ms, %zu not seen applied\n",
-              o.rt > 0 ? "SCHED_FIFO, " : "", o.netns ? "across network namespaces: bench in one, controller in another (UDP)" : "one host",
+  std::printf("latency (%s%s, %s): %d targets every %.0f ms, %zu not seen applied\n", o.rt > 0 ? "SCHED_FIFO, " : "",
+              o.netns ? "across network namespaces: bench in one, controller in another (UDP)" : "one host",
               objects ? "ObjectTargets -> reflex_behavior pointing -> HandTargets -> reflex_controller"
                       : "HandTargets -> reflex_controller",
               o.samples, o.period * 1e3, missed);
@@ -319,17 +333,25 @@ int main(int argc, char** argv) {
   Options o;
   app.add_option("--bin-dir", o.bin_dir, "folder of reflex_controller / reflex_behavior")->capture_default_str();
   app.add_option("--domain", o.domain, "DDS domain id (the lateness run uses domain + 1)")
-      ->capture_default_str()->check(CLI::Range(0, 231));
+      ->capture_default_str()
+      ->check(CLI::Range(0, 231));
   app.add_option("--samples", o.samples, "number of targets")->capture_default_str()->check(CLI::Range(10, 100000));
   app.add_option("--period", o.period, "seconds between targets")->capture_default_str()->check(CLI::Range(0.05, 5.0));
   app.add_option("--minutes", o.minutes, "length of the lateness run (0: skip)")
-      ->capture_default_str()->check(CLI::Range(0.0, 600.0));
-  app.add_option("--path", o.path, "hands: HandTargets straight to the controller; objects: ObjectTargets through "
-                 "reflex_behavior (pointing)")->capture_default_str()->check(CLI::IsMember({"hands", "objects"}));
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 600.0));
+  app.add_option("--path", o.path,
+                 "hands: HandTargets straight to the controller; objects: ObjectTargets through "
+                 "reflex_behavior (pointing)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"hands", "objects"}));
   app.add_flag("--netns", o.netns, "run the controller (and behavior) in another network namespace (root)");
   app.add_option("--work", o.work, "folder for the child processes' logs")->capture_default_str();
-  app.add_option("--rt", o.rt, "run the controller, recorder and behavior with SCHED_FIFO at this priority "
-                 "(chrt -f; 0: normal scheduling)")->capture_default_str()->check(CLI::Range(0, 99));
+  app.add_option("--rt", o.rt,
+                 "run the controller, recorder and behavior with SCHED_FIFO at this priority "
+                 "(chrt -f; 0: normal scheduling)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 99));
   app.add_option("--robot-ns", o.robot_ns, "(internal) the controller's namespace");
   CLI11_PARSE(app, argc, argv);
   if (!o.netns || !o.robot_ns.empty()) {
@@ -345,14 +367,15 @@ int main(int argc, char** argv) {
   }
   const std::string tag = "rfxb-" + std::to_string(getpid());
   const std::string src = tag + "-src", robot = tag + "-robot";
-  const std::string a_if = "rb" + std::to_string(getpid() % 100000) + "a", b_if = "rb" + std::to_string(getpid() % 100000) + "b";
+  const std::string a_if = "rb" + std::to_string(getpid() % 100000) + "a",
+                    b_if = "rb" + std::to_string(getpid() % 100000) + "b";
   const std::string net = "10." + std::to_string(o.domain) + ".0.";
-  int rc = sh("ip netns add " + src) | sh("ip netns add " + robot) |
-           sh("ip -n " + src + " link set lo up") | sh("ip -n " + robot + " link set lo up") |
-           sh("ip link add " + a_if + " type veth peer name " + b_if) | sh("ip link set " + a_if + " netns " + src) |
-           sh("ip link set " + b_if + " netns " + robot) | sh("ip -n " + src + " addr add " + net + "1/24 dev " + a_if) |
-           sh("ip -n " + robot + " addr add " + net + "2/24 dev " + b_if) | sh("ip -n " + src + " link set " + a_if + " up") |
-           sh("ip -n " + robot + " link set " + b_if + " up") |
+  int rc = sh("ip netns add " + src) | sh("ip netns add " + robot) | sh("ip -n " + src + " link set lo up") |
+           sh("ip -n " + robot + " link set lo up") | sh("ip link add " + a_if + " type veth peer name " + b_if) |
+           sh("ip link set " + a_if + " netns " + src) | sh("ip link set " + b_if + " netns " + robot) |
+           sh("ip -n " + src + " addr add " + net + "1/24 dev " + a_if) |
+           sh("ip -n " + robot + " addr add " + net + "2/24 dev " + b_if) |
+           sh("ip -n " + src + " link set " + a_if + " up") | sh("ip -n " + robot + " link set " + b_if + " up") |
            sh("ip -n " + src + " route add 224.0.0.0/4 dev " + a_if) |
            sh("ip -n " + robot + " route add 224.0.0.0/4 dev " + b_if);
   if (rc == 0) {

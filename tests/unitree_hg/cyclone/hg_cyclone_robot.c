@@ -109,13 +109,21 @@ int main(int argc, char** argv) {
   const dds_entity_t t_state = dds_create_topic(pp, &unitree_hg_msg_dds__LowState__desc, "rt/lowstate", NULL, NULL);
   const dds_entity_t t_cmd = dds_create_topic(pp, &unitree_hg_msg_dds__LowCmd__desc, "rt/arm_sdk", NULL, NULL);
   const dds_topic_descriptor_t* s = &reflex_test_LowStateShort__desc;
-  const dds_topic_descriptor_t short_desc = {
-      .m_size = s->m_size, .m_align = s->m_align, .m_flagset = s->m_flagset & ~DDS_TOPIC_XTYPES_METADATA,
-      .m_nkeys = s->m_nkeys, .m_typename = "unitree_hg::msg::dds_::LowState_", .m_keys = s->m_keys,
-      .m_nops = s->m_nops, .m_ops = s->m_ops, .m_meta = s->m_meta, .type_information = {NULL, 0},
-      .type_mapping = {NULL, 0}, .restrict_data_representation = s->restrict_data_representation};
+  const dds_topic_descriptor_t short_desc = {.m_size = s->m_size,
+                                             .m_align = s->m_align,
+                                             .m_flagset = s->m_flagset & ~DDS_TOPIC_XTYPES_METADATA,
+                                             .m_nkeys = s->m_nkeys,
+                                             .m_typename = "unitree_hg::msg::dds_::LowState_",
+                                             .m_keys = s->m_keys,
+                                             .m_nops = s->m_nops,
+                                             .m_ops = s->m_ops,
+                                             .m_meta = s->m_meta,
+                                             .type_information = {NULL, 0},
+                                             .type_mapping = {NULL, 0},
+                                             .restrict_data_representation = s->restrict_data_representation};
   const dds_entity_t t_short = dds_create_topic(pp_short, &short_desc, "rt/lowstate", NULL, NULL);
-  const dds_entity_t t_other = dds_create_topic(pp_other, &unitree_hg_msg_dds__LowState__desc, "rt/lowstate", NULL, NULL);
+  const dds_entity_t t_other =
+      dds_create_topic(pp_other, &unitree_hg_msg_dds__LowState__desc, "rt/lowstate", NULL, NULL);
   if (t_state < 0 || t_cmd < 0 || t_short < 0 || t_other < 0) {
     fprintf(stderr, "hg_cyclone_robot: dds_create_topic failed: %s %s %s\n", dds_strretcode(-t_state),
             dds_strretcode(-t_cmd), dds_strretcode(-t_short));
@@ -160,13 +168,16 @@ int main(int argc, char** argv) {
     if (t >= listen_until) break;
     /* Commands: every one that arrived. */
     for (;;) {
-      memset(&cmd, 0, sizeof cmd);  /* padding zero, as the SDK's crc needs */
+      memset(&cmd, 0, sizeof cmd); /* padding zero, as the SDK's crc needs */
       void* ptrs[1] = {&cmd};
       dds_sample_info_t info;
       if (dds_take(r_cmd, ptrs, &info, 1, 1) <= 0) break;
       if (!info.valid_data) continue;
       ++commands;
-      if (struct_crc(&cmd, sizeof cmd) == cmd.crc) ++crc_ok; else ++crc_bad;
+      if (struct_crc(&cmd, sizeof cmd) == cmd.crc)
+        ++crc_ok;
+      else
+        ++crc_bad;
       const double w = cmd.motor_cmd[29].q;
       if (!isfinite(w) || w < 0 || w > 1) ++out_of_range;
       for (int k = 0; k < 35; ++k)
@@ -178,7 +189,7 @@ int main(int argc, char** argv) {
         if (w - prev_weight > max_up) max_up = w - prev_weight;
         if (prev_weight - w > max_down) max_down = prev_weight - w;
       } else {
-        max_up = w;  /* from 0: the first command's weight is its first step */
+        max_up = w; /* from 0: the first command's weight is its first step */
       }
       prev_weight = weight_last = w;
       const double now = mono_now_s() - t0;
@@ -190,7 +201,7 @@ int main(int argc, char** argv) {
       last = cmd;
       have_last = 1;
     }
-    if (t >= stop_at) continue;  /* listening only */
+    if (t >= stop_at) continue; /* listening only */
     /* The robot: arm_sdk motors blended by the weight with the start configuration. */
     if (have_last) {
       const float w = last.motor_cmd[29].q;
@@ -233,9 +244,12 @@ int main(int argc, char** argv) {
         state.tick = tick + 20 + (uint32_t)i;
         state.crc = struct_crc(&state, sizeof state);
         dds_write(w_state, &state);
-        if (i == 0) ++sent_nan; else ++sent_far;
+        if (i == 0)
+          ++sent_nan;
+        else
+          ++sent_far;
         state.motor_state[18].q = keep;
-        mono_sleep_until(mono_now_s() + 0.012);  /* alone in its control cycle: the controller's line names it */
+        mono_sleep_until(mono_now_s() + 0.012); /* alone in its control cycle: the controller's line names it */
       }
       /* 4 valid states (crc right, tick ahead) from another DataWriter while this one is alive. */
       for (int i = 0; i < 4; ++i) {
@@ -261,10 +275,11 @@ int main(int argc, char** argv) {
   }
   printf("sent good %ld bad_crc %ld repeat_tick %ld short %ld nan %ld far %ld other_writer %ld stall %ld\n", sent_good,
          sent_bad_crc, sent_repeat, sent_short, sent_nan, sent_far, sent_other, sent_stall);
-  printf("commands %ld crc_ok %ld crc_bad %ld weight_max %.6f weight_last %.6f max_up_step %.6f max_down_step %.6f "
-         "longest_gap_ms %.1f gap_start_s %.3f non_finite %ld out_of_range %ld\n",
-         commands, crc_ok, crc_bad, weight_max, weight_last, max_up, max_down, longest_gap * 1e3, gap_start, non_finite,
-         out_of_range);
+  printf(
+      "commands %ld crc_ok %ld crc_bad %ld weight_max %.6f weight_last %.6f max_up_step %.6f max_down_step %.6f "
+      "longest_gap_ms %.1f gap_start_s %.3f non_finite %ld out_of_range %ld\n",
+      commands, crc_ok, crc_bad, weight_max, weight_last, max_up, max_down, longest_gap * 1e3, gap_start, non_finite,
+      out_of_range);
   if (have_last)
     for (int k = 0; k < 35; ++k)
       printf("slot %d mode %d kp %.3f kd %.3f\n", k, (int)last.motor_cmd[k].mode, (double)last.motor_cmd[k].kp,

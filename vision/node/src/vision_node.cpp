@@ -66,8 +66,10 @@ bool waitForReaders(const VisionPublisher& publisher, int readers, double timeou
                     std::string& why) {
   const auto t0 = std::chrono::steady_clock::now();
   const auto deadline = t0 + std::chrono::duration<double>(timeout);
-  std::fprintf(stderr, "reflex_vision: holding the start until %d reader(s) of reflex/object_targets matched "
-               "(at most %.0f s)\n", readers, timeout);
+  std::fprintf(stderr,
+               "reflex_vision: holding the start until %d reader(s) of reflex/object_targets matched "
+               "(at most %.0f s)\n",
+               readers, timeout);
   // In slices, so that a stop() (SIGTERM) while holding ends the wait at once.
   while (!publisher.waitForReaders(readers, std::chrono::milliseconds(100))) {
     if (stop.load()) return false;
@@ -104,8 +106,8 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
     throw VisionError("--wait-readers applies to publishing on the bus, not to --dump");
   m.wait_readers = o.wait_readers;
   m.wait_timeout = o.wait_timeout;
-  const int sources = (!o.session.empty()) + (!o.camera_left.empty() || !o.camera_right.empty()) +
-                      (!o.side_by_side.empty());
+  const int sources =
+      (!o.session.empty()) + (!o.camera_left.empty() || !o.camera_right.empty()) + (!o.side_by_side.empty());
   if (sources != 1)
     throw VisionError("give exactly one source: --session DIR, --camera-left N --camera-right M, or --side-by-side N");
   if (!o.camera_left.empty() != !o.camera_right.empty())
@@ -126,7 +128,8 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
     if (!o.calib_left.empty() || !o.calib_right.empty())
       throw VisionError("--calib-left/--calib-right apply to cameras; a session carries its own calibration");
   } else {
-    if (o.calib_left.empty() || o.calib_right.empty()) throw VisionError("live cameras need --calib-left and --calib-right");
+    if (o.calib_left.empty() || o.calib_right.empty())
+      throw VisionError("live cameras need --calib-left and --calib-right");
     if (o.objects.empty()) throw VisionError("live cameras need --objects");
     if (o.mount.empty()) throw VisionError(std::string("live cameras need --mount FILE") + kMountHelp);
     if (o.start != 0.0 || m.replay.loop) throw VisionError("--start and --loop apply to sessions only");
@@ -144,7 +147,8 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
   }
   if (!o.objects.empty()) objects = loadObjectMap(o.objects);
   if (!o.mount.empty()) mount = loadCameraMount(o.mount);
-  if (!mount) throw VisionError("the session " + o.session + " has no camera_mount.yaml: pass --mount FILE" + kMountHelp);
+  if (!mount)
+    throw VisionError("the session " + o.session + " has no camera_mount.yaml: pass --mount FILE" + kMountHelp);
   popt.detector.family = o.family.empty() ? objects.family() : o.family;
   m.pipeline = std::make_unique<StereoTagPipeline>(m.source->calibration(), *mount, objects, popt);
 
@@ -174,9 +178,9 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
     if (!n.dump) return;
     for (const ObjectObservation& ob : r.objects) {
       n.row.str("");
-      n.row << std::setprecision(6) << stamp << ',' << f.index << ',' << ob.name << ',' << ob.tag_id << ','
-            << ob.p_B[0] << ',' << ob.p_B[1] << ',' << ob.p_B[2] << ',' << ob.p_C[0] << ',' << ob.p_C[1] << ','
-            << ob.p_C[2] << ',' << std::setprecision(4) << ob.confidence << '\n';
+      n.row << std::setprecision(6) << stamp << ',' << f.index << ',' << ob.name << ',' << ob.tag_id << ',' << ob.p_B[0]
+            << ',' << ob.p_B[1] << ',' << ob.p_B[2] << ',' << ob.p_C[0] << ',' << ob.p_C[1] << ',' << ob.p_C[2] << ','
+            << std::setprecision(4) << ob.confidence << '\n';
       n.dump->write(n.row.str());
     }
     if (n.dump->failed()) stop_.store(true);  // no point in going on: closeOutput() reports it
@@ -238,7 +242,7 @@ const RunStats& VisionNode::run() {
     }
     stop_.store(true);
     worker.join();
-    const std::string& error = !worker_error.empty() ? worker_error
+    const std::string& error = !worker_error.empty()      ? worker_error
                                : !readers_missing.empty() ? readers_missing
                                                           : stats_.end_message;
     if (!error.empty())

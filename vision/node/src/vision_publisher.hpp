@@ -30,7 +30,9 @@ class VisionPublisher {
   /// Readers of reflex/object_targets matched now (under DDS-Security: authenticated and keyed).
   int matchedReaders() const { return writer_.stats().matched_readers; }
   /// Blocks until `count` readers matched (true) or `timeout` passes (false).
-  bool waitForReaders(int count, std::chrono::nanoseconds timeout) const { return writer_.waitForReaders(count, timeout); }
+  bool waitForReaders(int count, std::chrono::nanoseconds timeout) const {
+    return writer_.waitForReaders(count, timeout);
+  }
 
  private:
   reflex::bus::Participant bus_;

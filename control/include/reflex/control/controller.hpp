@@ -69,10 +69,11 @@ struct ControllerParams {
   double alpha_rest = 1.5;   ///< attraction to the rest posture when a hand has no target (1/s). [0, 1/period]
   double damping = 0.02;     ///< singularity-robust inverse damping lambda (m). [0.001, 0.2]
   double reach_gain = 10.0;  ///< trajectory tracking gain (1/s). [1, 1/period]
-  double max_task_speed = 0.6;     ///< task-space speed limit of the reaching task (m/s). [0.05, 2]
-  double trajectory_speed = 0.35;  ///< speed of the linear trajectory to a new target (m/s), Sec. 8. [0.01, max_task_speed]
-  double guard_rate = 50.0;           ///< safety filter: max approach speed per metre above the floor (1/s). [1, 0.5/period]
-  double guard_margin = 0.001;        ///< safety filter floor above d_r (m). [0, d_b - d_r)
+  double max_task_speed = 0.6;  ///< task-space speed limit of the reaching task (m/s). [0.05, 2]
+  double trajectory_speed =
+      0.35;                  ///< speed of the linear trajectory to a new target (m/s), Sec. 8. [0.01, max_task_speed]
+  double guard_rate = 50.0;  ///< safety filter: max approach speed per metre above the floor (1/s). [1, 0.5/period]
+  double guard_margin = 0.001;          ///< safety filter floor above d_r (m). [0, d_b - d_r)
   double estop_release_margin = 0.001;  ///< recovery ends when every pair is above d_r + this (m). [0, d_b - d_r]
   /// Predictive guard (not in the paper): the commanded step is checked at the configuration it
   /// leads to, and shortened until no physical pair ends below d_r + predict_margin closer than it
@@ -90,17 +91,17 @@ struct ControllerParams {
 /// depend on other keys, e.g. k_virtual <= 0.5 / period, carry the other keys' current values).
 struct ParamRange {
   const char* key;
-  double value;               ///< the parameter's value in the set it was evaluated for
+  double value;  ///< the parameter's value in the set it was evaluated for
   double lo;
-  bool lo_open;               ///< true: value > lo; false: value >= lo
-  std::string lo_text;        ///< how the lower end is written ("0.001", "d_r", "d_b - d_r")
+  bool lo_open;         ///< true: value > lo; false: value >= lo
+  std::string lo_text;  ///< how the lower end is written ("0.001", "d_r", "d_b - d_r")
   double hi;
   bool hi_open;
   std::string hi_text;
   const char* unit;
-  const char* why;            ///< the reason for the range, one sentence
-  bool contains(double v) const;   ///< finite and inside the range
-  std::string describe() const;    ///< e.g. "[0.5, 0.5 / period = 100] 1/s"
+  const char* why;                ///< the reason for the range, one sentence
+  bool contains(double v) const;  ///< finite and inside the range
+  std::string describe() const;   ///< e.g. "[0.5, 0.5 / period = 100] 1/s"
 };
 
 /// Every numeric ControllerParams field with its range, in the order validateControllerParams checks them.
@@ -116,12 +117,12 @@ struct ArmConfig {
   std::vector<std::string> joints;  ///< controlled joints, shoulder to wrist
   std::string hand_link;
   Eigen::Vector3d hand_point_L = Eigen::Vector3d::Zero();  ///< reaching point in the hand link frame
-  std::vector<double> rest;         ///< rest posture (rad), one per joint
+  std::vector<double> rest;                                ///< rest posture (rad), one per joint
 };
 
 struct ControllerConfig {
   ControllerParams params;
-  std::array<ArmConfig, 2> arms;    ///< [kLeft], [kRight]
+  std::array<ArmConfig, 2> arms;  ///< [kLeft], [kRight]
   /// The head camera's link: where the gaze line of the occlusion experiment starts (Sec. 8.5.2,
   /// reflex_sim). Checked by whoever uses it (a scenario names it if the robot lacks it).
   std::string camera_link = "head_camera";
@@ -159,14 +160,14 @@ void validateControllerParams(const ControllerParams& params, const std::string&
 struct ControllerModel {
   struct Arm {
     std::string name;
-    int n = 0;                               ///< number of controlled joints
-    std::array<int, kMaxArmDof> q{};         ///< their q indices
+    int n = 0;                        ///< number of controlled joints
+    std::array<int, kMaxArmDof> q{};  ///< their q indices
     int hand_link = -1;
     Eigen::Vector3d hand_point_L = Eigen::Vector3d::Zero();
     Eigen::Matrix<double, kMaxArmDof, 1> rest = Eigen::Matrix<double, kMaxArmDof, 1>::Zero();
-    std::vector<bool> link_in_arm;           ///< per link: moved by this arm's joints
-    std::uint64_t segment_mask = 0;          ///< robot segments moved by this arm
-    std::vector<int> candidate_pairs;        ///< pairs that involve this arm (or a body-schema slot)
+    std::vector<bool> link_in_arm;     ///< per link: moved by this arm's joints
+    std::uint64_t segment_mask = 0;    ///< robot segments moved by this arm
+    std::vector<int> candidate_pairs;  ///< pairs that involve this arm (or a body-schema slot)
   };
   ControllerParams params;
   std::array<Arm, 2> arms;
@@ -189,6 +190,9 @@ struct ControllerModel {
 /// kMaxSegments segments (naming the count and the limit).
 ControllerModel makeControllerModel(const Model& model, const ControllerConfig& config);
 
+/// The rest configuration: zeros (clamped to limits) with the arms at their rest postures.
+Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm);
+
 /// Throws ConfigError (prefixed with `source`) when the rest posture (restConfiguration: the arms'
 /// rest, every other joint at 0 clamped to its limits) has a pair closer than d_r +
 /// estop_release_margin: the e-stop would latch whenever the arms rest, and for a pair no arm moves
@@ -204,7 +208,7 @@ struct HandCommand {
 struct ControlInput {
   std::array<HandCommand, 2> hands;
   MotionPriority priority = MotionPriority::kEqual;
-  bool reset_estop = false;   ///< request to leave a latched e-stop (only separating motion allowed)
+  bool reset_estop = false;  ///< request to leave a latched e-stop (only separating motion allowed)
   /// s the cycle spans when it is shorter than ControllerParams::period (a cycle per arriving robot
   /// state, e.g. 2 ms at 500 Hz): the trajectory advances and the velocity of the joints the
   /// controller does not command is estimated over it. Anything not in (0, period] (0 by default,
@@ -214,13 +218,13 @@ struct ControlInput {
 };
 
 struct ArmStatus {
-  double f = 0.0;                    ///< blending coefficient f(d), Eq. 13
+  double f = 0.0;                                             ///< blending coefficient f(d), Eq. 13
   double distance = std::numeric_limits<double>::infinity();  ///< closest distance of this arm (m)
-  int closest_pair = -1;             ///< index into Model::pairs
+  int closest_pair = -1;                                      ///< index into Model::pairs
   Zone zone = Zone::kFree;
-  double force = 0.0;                ///< |F_virtual^all| (m/s), Eq. 17
-  Eigen::Vector3d force_dir_B = Eigen::Vector3d::Zero();  ///< unit direction of F^all
-  Eigen::Vector3d force_point_B = Eigen::Vector3d::Zero(); ///< P_cp1^all, Eq. 18
+  double force = 0.0;                                       ///< |F_virtual^all| (m/s), Eq. 17
+  Eigen::Vector3d force_dir_B = Eigen::Vector3d::Zero();    ///< unit direction of F^all
+  Eigen::Vector3d force_point_B = Eigen::Vector3d::Zero();  ///< P_cp1^all, Eq. 18
   Eigen::Vector3d hand_B = Eigen::Vector3d::Zero();
   Eigen::Vector3d reference_B = Eigen::Vector3d::Zero();  ///< point on the linear trajectory
   /// The virtual-force term of the collision controller alone (rad/s, the arm's joints in
@@ -243,7 +247,7 @@ enum class ControlResult { kOk, kFrozen, kRecovering, kBadInput };
 struct VirtualForceSum {
   Eigen::Vector3d weighted_force = Eigen::Vector3d::Zero();  ///< sum |F_ij| F_ij
   Eigen::Vector3d weighted_point = Eigen::Vector3d::Zero();  ///< sum |F_ij| P_cp1,ij
-  double weight = 0.0;                                        ///< sum |F_ij|
+  double weight = 0.0;                                       ///< sum |F_ij|
 
   /// Adds the pair force F_ij = k (d_a - d_ij) e_ij (Eq. 14) applied at p_cp1 (nothing if d >= d_a).
   /// e_ij is the unit direction from the other segment towards the arm (Eq. 16).
@@ -268,34 +272,34 @@ struct ArmWorkspace {
     double weight = 0.0;  ///< |F_ij| = k (d_a - d_ij) (m/s)
   };
   // trajectory stage
-  ArmVector q;                          ///< the arm's joint positions
-  Eigen::Vector3d hand_B = Eigen::Vector3d::Zero();            ///< reaching point
-  TaskJacobian J_hand;                  ///< 3 x n Jacobian of hand_B
-  Eigen::Vector3d hand_velocity_B = Eigen::Vector3d::Zero();   ///< task velocity of Eq. 2 (m/s)
-  bool target_given = false;            ///< the hand follows a target this cycle
+  ArmVector q;                                                ///< the arm's joint positions
+  Eigen::Vector3d hand_B = Eigen::Vector3d::Zero();           ///< reaching point
+  TaskJacobian J_hand;                                        ///< 3 x n Jacobian of hand_B
+  Eigen::Vector3d hand_velocity_B = Eigen::Vector3d::Zero();  ///< task velocity of Eq. 2 (m/s)
+  bool target_given = false;                                  ///< the hand follows a target this cycle
   // pair-term stage
-  std::vector<ForceTerm> force_terms;   ///< pairs inside the yellow zone; first num_force_terms valid
+  std::vector<ForceTerm> force_terms;  ///< pairs inside the yellow zone; first num_force_terms valid
   int num_force_terms = 0;
-  std::vector<int> guarded_pairs;       ///< pairs inside the orange zone with a row (safety filter)
+  std::vector<int> guarded_pairs;  ///< pairs inside the orange zone with a row (safety filter)
   int num_guarded = 0;
-  std::vector<double> other_rate;       ///< per guarded pair: rate of d from everything but this arm (m/s)
-  double other_approach = 0.0;          ///< max over the guarded pairs of -other_rate, at least 0 (m/s)
+  std::vector<double> other_rate;  ///< per guarded pair: rate of d from everything but this arm (m/s)
+  double other_approach = 0.0;     ///< max over the guarded pairs of -other_rate, at least 0 (m/s)
   VirtualForceSum forces;
-  ArmRow avoidance_gradient;            ///< sum of row (d_safe - d) over pairs within d_safe (Eq. 5)
+  ArmRow avoidance_gradient;  ///< sum of row (d_safe - d) over pairs within d_safe (Eq. 5)
   /// Eq. 5 summed per link (collectPairTerms): the links touched this cycle (first num_grad_links),
   /// and per touched link the sums of +-(d_safe - d) (p x n) and +-(d_safe - d) n over its pairs.
   std::vector<int> grad_link;
   std::vector<Eigen::Vector3d> grad_M, grad_N;
   int num_grad_links = 0;
-  double d_other_arm = 0.0;             ///< closest contact with the other arm (m)
-  double d_static = 0.0;                ///< closest contact with what no arm moves (m)
+  double d_other_arm = 0.0;  ///< closest contact with the other arm (m)
+  double d_static = 0.0;     ///< closest contact with what no arm moves (m)
   // merged-Jacobian stage (Eq. 17-18)
-  TaskJacobian J_avoid;                 ///< weighted relative Jacobian of the force pairs (3 x n)
-  double force_magnitude = 0.0;         ///< |F^all| (m/s)
-  Eigen::Vector3d force_dir_B = Eigen::Vector3d::Zero();       ///< unit direction of F^all
+  TaskJacobian J_avoid;                                   ///< weighted relative Jacobian of the force pairs (3 x n)
+  double force_magnitude = 0.0;                           ///< |F^all| (m/s)
+  Eigen::Vector3d force_dir_B = Eigen::Vector3d::Zero();  ///< unit direction of F^all
   // blend stage and after
-  ArmVector qdot;                       ///< the arm's joint velocities, refined stage by stage
-  ArmVector v_lo, v_hi;                 ///< velocity box that keeps the step inside the joint range
+  ArmVector qdot;        ///< the arm's joint velocities, refined stage by stage
+  ArmVector v_lo, v_hi;  ///< velocity box that keeps the step inside the joint range
 };
 
 /// What one pair is to one arm in the pair-term stage (collectPairTerms). For a robot pair it is
@@ -304,11 +308,11 @@ struct ArmWorkspace {
 /// loads per pair); a body-schema slot's pair gets it each cycle (its link can change).
 struct ArmPairFacts {
   enum Flag : std::uint8_t {
-    kInvolved = 1,   ///< the arm moves one of the pair's segments (else the pair is not the arm's)
-    kOtherArm = 2,   ///< the other segment is the other arm's
-    kStatic = 4,     ///< the other segment is moved by no arm
-    kMovesA = 8,     ///< an arm joint moves seg_a's link (Eq. 5's gradient has a term there)
-    kMovesB = 16,    ///< ... seg_b's link
+    kInvolved = 1,  ///< the arm moves one of the pair's segments (else the pair is not the arm's)
+    kOtherArm = 2,  ///< the other segment is the other arm's
+    kStatic = 4,    ///< the other segment is moved by no arm
+    kMovesA = 8,    ///< an arm joint moves seg_a's link (Eq. 5's gradient has a term there)
+    kMovesB = 16,   ///< ... seg_b's link
   };
   std::int32_t link_a = -1, link_b = -1;  ///< the links of seg_a, seg_b
   std::uint8_t flags = 0;
@@ -321,11 +325,11 @@ struct ControllerData {
 
   KinematicsData kin;
   DistanceData dist;
-  Eigen::VectorXd qdot;                 ///< output joint velocities (nq); non-arm joints are 0
+  Eigen::VectorXd qdot;  ///< output joint velocities (nq); non-arm joints are 0
   std::array<ArmStatus, 2> arms;
   std::array<Trajectory, 2> trajectories;
   EstopState estop = EstopState::kClear;
-  int estop_pair = -1;                  ///< pair that triggered the last e-stop
+  int estop_pair = -1;  ///< pair that triggered the last e-stop
   std::uint64_t estop_count = 0;
   /// This cycle's closest physical pair (the red-zone test's; virtual slots never count), closest
   /// pair with a virtual slot, and closest robot pair between a left-arm and a right-arm segment (the
@@ -342,7 +346,7 @@ struct ControllerData {
   Eigen::VectorXd qdot_uncontrolled;
   Eigen::VectorXd q_prev;
   bool have_prev = false;
-  std::vector<char> arm_joint;          ///< per q index: commanded by one of the arms
+  std::vector<char> arm_joint;  ///< per q index: commanded by one of the arms
   /// Per arm, per link: bit i set if the arm's joint i (ControllerModel::Arm::q[i]) moves the link
   /// (lies on its support path), so a point Jacobian restricted to the arm's columns needs no nq-wide
   /// scratch.
@@ -366,10 +370,10 @@ struct ControllerData {
   Eigen::VectorXd q_next;
   KinematicsData kin_next;
   DistanceData dist_next;
-  DistanceData dist_hold;               ///< arms held still, only the uncontrolled joints moving
+  DistanceData dist_hold;  ///< arms held still, only the uncontrolled joints moving
   // scratch
-  ArmWorkspace arm_ws;                  ///< one arm's cycle (reused by both arms)
-  Eigen::MatrixXd J_full;               ///< 3 x nq
+  ArmWorkspace arm_ws;     ///< one arm's cycle (reused by both arms)
+  Eigen::MatrixXd J_full;  ///< 3 x nq
 };
 
 /// The blending coefficient of Eq. 13.
@@ -415,9 +419,9 @@ int findUnresolvableContact(const Model& model, const ControllerModel& cm, Contr
 /// What attachControllerSegment did.
 struct SegmentAttach {
   bool attached = false;
-  int refusing_pair = -1;       ///< the pair findUnresolvableContact found (refused), else -1
-  int other_segment = -1;       ///< its segment other than the slot
-  double distance = 0.0;        ///< its distance (m)
+  int refusing_pair = -1;  ///< the pair findUnresolvableContact found (refused), else -1
+  int other_segment = -1;  ///< its segment other than the slot
+  double distance = 0.0;   ///< its distance (m)
 };
 
 /// Attaches a body-schema segment for the controller (reflex_controller and the scenarios use it):
@@ -427,6 +431,7 @@ struct SegmentAttach {
 /// refusing_pair -1. Allocation-free; never throws.
 SegmentAttach attachControllerSegment(const Model& model, const ControllerModel& cm, ControllerData& data, int slot,
                                       int link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
-                                      std::uint64_t ignore_mask, bool is_virtual, const Eigen::Ref<const Eigen::VectorXd>& q);
+                                      std::uint64_t ignore_mask, bool is_virtual,
+                                      const Eigen::Ref<const Eigen::VectorXd>& q);
 
 }  // namespace reflex::control

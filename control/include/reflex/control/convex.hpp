@@ -52,9 +52,20 @@ struct ConvexPiece {
 };
 
 /// The 14 directions of ConvexPiece::start_vertex (unnormalized: the axes and the cube's diagonals).
-inline constexpr std::array<std::array<double, 3>, 14> kStartDirections = {{
-    {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1},
-    {1, 1, 1}, {1, 1, -1}, {1, -1, 1}, {1, -1, -1}, {-1, 1, 1}, {-1, 1, -1}, {-1, -1, 1}, {-1, -1, -1}}};
+inline constexpr std::array<std::array<double, 3>, 14> kStartDirections = {{{1, 0, 0},
+                                                                            {-1, 0, 0},
+                                                                            {0, 1, 0},
+                                                                            {0, -1, 0},
+                                                                            {0, 0, 1},
+                                                                            {0, 0, -1},
+                                                                            {1, 1, 1},
+                                                                            {1, 1, -1},
+                                                                            {1, -1, 1},
+                                                                            {1, -1, -1},
+                                                                            {-1, 1, 1},
+                                                                            {-1, 1, -1},
+                                                                            {-1, -1, 1},
+                                                                            {-1, -1, -1}}};
 
 /// The vertex a support query of `piece` in direction d_L starts from: the start vertex of the
 /// direction of kStartDirections nearest d_L (largest cosine). Allocation-free.

@@ -37,11 +37,11 @@ namespace reflex::control {
 struct PairDistance {
   // The fields every cycle writes for every pair (also those the broad phase skips) first, so they
   // share a cache line.
-  int seg_a = -1, seg_b = -1;   ///< segment indices (a < b)
+  int seg_a = -1, seg_b = -1;  ///< segment indices (a < b)
   double distance = std::numeric_limits<double>::infinity();
-  bool well_defined = true;     ///< false when the core points coincided (fallback normal)
-  bool active = false;          ///< false for pairs of disabled body-schema slots (distance = inf)
-  bool has_row = false;         ///< rows.row(i) is valid for this cycle
+  bool well_defined = true;  ///< false when the core points coincided (fallback normal)
+  bool active = false;       ///< false for pairs of disabled body-schema slots (distance = inf)
+  bool has_row = false;      ///< rows.row(i) is valid for this cycle
   /// false: skipped by the broad phase (DistanceOptions::prune_distance) this cycle. `distance` is
   /// then a lower bound of the true distance, above prune_distance (the segments' bounding spheres'
   /// gap); witness points and normal are not computed (left as they were), has_row is false.
@@ -62,11 +62,11 @@ inline constexpr std::size_t kBodySchemaNameBytes = 255;
 /// controller `motion_priority` and `name`. Plain data of fixed size: copying a slot never allocates.
 struct BodySchemaSlot {
   bool enabled = false;
-  int link = 0;                              ///< link the endpoints are expressed in
+  int link = 0;  ///< link the endpoints are expressed in
   Eigen::Vector3d a_L = Eigen::Vector3d::Zero();
   Eigen::Vector3d b_L = Eigen::Vector3d::Zero();
   double radius = 0.0;
-  std::uint64_t ignore_mask = 0;             ///< bit i set: never checked against segment i
+  std::uint64_t ignore_mask = 0;  ///< bit i set: never checked against segment i
   /// Virtual (occlusion, Sec. 8.5.2) segment: avoided like any other, never triggers the e-stop nor
   /// counts as the closest physical pair. Set by attachControllerSegment.
   bool is_virtual = false;
@@ -105,13 +105,13 @@ SweepKernel fastestSweepKernel();
 struct DistanceData {
   explicit DistanceData(const Model& model);
 
-  std::vector<PairDistance> pairs;  ///< same order as Model::pairs
+  std::vector<PairDistance> pairs;                                              ///< same order as Model::pairs
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows;  ///< npairs x nq
   /// The body schema computeSegmentDistances(model, kin, data) uses. ControllerData::dist.slots is
   /// the controller's body schema, its one owner; the scratch DistanceData of the predictive guards
   /// leave theirs unused and are computed with data.dist.slots (passed const&, never copied).
   BodySchemaSlots slots;
-  int closest = -1;                 ///< index of the active pair with the smallest distance, -1 if none
+  int closest = -1;  ///< index of the active pair with the smallest distance, -1 if none
   // Scratch of computeSegmentDistances (built from the model here; values valid only during the call).
   // Per primitive:
   std::vector<SegmentB> prim_B;  ///< core segment in B (start, direction, squared length)
@@ -181,13 +181,13 @@ struct DistanceData {
   // cycle's gap between the spheres (m, scratch).
   std::vector<int> rp_a, rp_b;
   std::vector<double> rp_rsum, rp_gap;
-  std::vector<int> exact_pairs;              ///< robot pairs the broad phase kept this cycle (scratch)
+  std::vector<int> exact_pairs;  ///< robot pairs the broad phase kept this cycle (scratch)
   /// The robot pairs the last computeSegmentDistances computed exactly, ascending: its first
   /// num_exact_pairs entries (exact_pairs with the broad phase, robot_pairs without). A pair made
   /// exact later by refinePairDistance is not in it.
   const std::vector<int>& exactList() const { return last_pruned ? exact_pairs : robot_pairs; }
-  bool last_pruned = false;                  ///< the last computeSegmentDistances used the broad phase
-  bool any_slot_enabled = false;             ///< ... and was given an enabled body-schema slot
+  bool last_pruned = false;       ///< the last computeSegmentDistances used the broad phase
+  bool any_slot_enabled = false;  ///< ... and was given an enabled body-schema slot
   /// Every body-schema slot pair's entry is inactive (distance +inf, no row): nothing has computed one
   /// since computeSegmentDistances last cleared them (or since construction).
   bool slot_pairs_inactive = true;
@@ -195,7 +195,7 @@ struct DistanceData {
   /// The smallest lower bound of a pair the broad phase skipped in the last computeSegmentDistances
   /// (m); +inf when it skipped none.
   double pruned_floor = std::numeric_limits<double>::infinity();
-  int num_pruned_pairs = 0;                  ///< robot pairs the broad phase skipped this cycle
+  int num_pruned_pairs = 0;  ///< robot pairs the broad phase skipped this cycle
   // computeListedPairDistances: per segment, the call that last put it into B (scratch).
   std::vector<std::uint32_t> segment_stamp;
   std::uint32_t segment_stamp_now = 0;
@@ -215,8 +215,8 @@ void forEachExactPair(const DistanceData& data, F&& f) {
     return;
   }
   for (int e = 0, s = 0; e < nexact || s < nslot;) {
-    const bool robot = s >= nslot || (e < nexact && exact[static_cast<std::size_t>(e)] <
-                                                        data.slot_pairs[static_cast<std::size_t>(s)]);
+    const bool robot =
+        s >= nslot || (e < nexact && exact[static_cast<std::size_t>(e)] < data.slot_pairs[static_cast<std::size_t>(s)]);
     const int p = robot ? exact[static_cast<std::size_t>(e++)] : data.slot_pairs[static_cast<std::size_t>(s++)];
     if (robot || data.pairs[static_cast<std::size_t>(p)].active) f(p, robot);
   }
@@ -292,9 +292,8 @@ inline void refineClosest(const Model& model, const KinematicsData& kin, Distanc
 /// Enables body-schema slot `slot` with a capsule [a_L, b_L] of `radius` on `link`, never checked
 /// against the segments in `ignore_mask` (the owner link's segment is always ignored).
 /// Returns false (and changes nothing) for a bad slot, link, radius or non-finite point.
-bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link,
-                             const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
-                             std::uint64_t ignore_mask = 0);
+bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link, const Eigen::Vector3d& a_L,
+                             const Eigen::Vector3d& b_L, double radius, std::uint64_t ignore_mask = 0);
 
 /// Disables a slot (its name, is_virtual and motion_priority are the caller's). Returns false for a
 /// bad slot index.
@@ -331,9 +330,9 @@ enum class BodySchemaFault : std::uint8_t {
 /// the name of that BodySchemaLimits field; "" where no size limit applies).
 struct BodySchemaCheck {
   BodySchemaFault fault = BodySchemaFault::kNone;
-  double value = 0.0;       ///< the bad value (m): radius, length or endpoint distance
-  double limit = 0.0;       ///< the limit it broke (m)
-  const char* key = "";     ///< the BodySchemaLimits field broken, e.g. "max_radius"
+  double value = 0.0;    ///< the bad value (m): radius, length or endpoint distance
+  double limit = 0.0;    ///< the limit it broke (m)
+  const char* key = "";  ///< the BodySchemaLimits field broken, e.g. "max_radius"
   bool ok() const { return fault == BodySchemaFault::kNone; }
 };
 

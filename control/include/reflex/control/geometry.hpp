@@ -75,9 +75,8 @@ inline void closestParametersSegmentSegment(const SegmentB& A, const SegmentB& B
 /// Closest points c1 on [a0, a1] and c2 on [b0, b1] (either segment may have zero length).
 /// When the segments are parallel the closest pair is not unique; one valid pair is returned
 /// (see closestParametersSegmentSegment). s, t are the segment parameters in [0, 1].
-inline void closestPointsSegmentSegment(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1,
-                                        const Eigen::Vector3d& b0, const Eigen::Vector3d& b1,
-                                        Eigen::Vector3d& c1, Eigen::Vector3d& c2, double& s,
+inline void closestPointsSegmentSegment(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1, const Eigen::Vector3d& b0,
+                                        const Eigen::Vector3d& b1, Eigen::Vector3d& c1, Eigen::Vector3d& c2, double& s,
                                         double& t) {
   const SegmentB A(a0, a1), B(b0, b1);
   closestParametersSegmentSegment(A, B, s, t);
@@ -91,9 +90,8 @@ inline void closestPointsSegmentSegment(const Eigen::Vector3d& a0, const Eigen::
 /// If the core points coincide, `fallback_n` (unit) is used as the normal and false is returned.
 inline bool capsuleCapsuleDistance(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1, double ra,
                                    const Eigen::Vector3d& b0, const Eigen::Vector3d& b1, double rb,
-                                   const Eigen::Vector3d& fallback_n, double& d,
-                                   Eigen::Vector3d& p_a, Eigen::Vector3d& p_b,
-                                   Eigen::Vector3d& nhat) {
+                                   const Eigen::Vector3d& fallback_n, double& d, Eigen::Vector3d& p_a,
+                                   Eigen::Vector3d& p_b, Eigen::Vector3d& nhat) {
   Eigen::Vector3d c_a, c_b;
   double s, t;
   closestPointsSegmentSegment(a0, a1, b0, b1, c_a, c_b, s, t);

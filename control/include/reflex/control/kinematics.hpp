@@ -31,23 +31,21 @@ struct KinematicsData {
 
 /// Forward kinematics. Returns false (and leaves `data` unchanged) if q has the wrong size or a
 /// non-finite value; the caller then keeps its last valid state.
-bool computeForwardKinematics(const Model& model, KinematicsData& data,
-                              const Eigen::Ref<const Eigen::VectorXd>& q);
+bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q);
 
 /// J_B (3 x nq) of the point p_B rigidly attached to `link` (after computeForwardKinematics).
-void computePointJacobian(const Model& model, const KinematicsData& data, int link,
-                          const Eigen::Vector3d& p_B, Eigen::Ref<Eigen::MatrixXd> J_B);
+void computePointJacobian(const Model& model, const KinematicsData& data, int link, const Eigen::Vector3d& p_B,
+                          Eigen::Ref<Eigen::MatrixXd> J_B);
 
 /// Relative Jacobian J_B_p1 - J_B_p2 (3 x nq) of two points on two links: the rate of p1 - p2.
-void computeRelativeJacobian(const Model& model, const KinematicsData& data, int link1,
-                             const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
-                             Eigen::Ref<Eigen::MatrixXd> J_B);
+void computeRelativeJacobian(const Model& model, const KinematicsData& data, int link1, const Eigen::Vector3d& p1_B,
+                             int link2, const Eigen::Vector3d& p2_B, Eigen::Ref<Eigen::MatrixXd> J_B);
 
 /// The directional row n^T (J_B_p1 - J_B_p2) (1 x nq): the rate of the distance along n_B.
 /// With n_B = (p1 - p2)/d this is the paper's J_ca|row,y (Eq. 8): positive row velocity separates.
-void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1,
-                           const Eigen::Vector3d& p1_B, int link2, const Eigen::Vector3d& p2_B,
-                           const Eigen::Vector3d& n_B, Eigen::Ref<Eigen::RowVectorXd> row);
+void computeDirectionalRow(const Model& model, const KinematicsData& data, int link1, const Eigen::Vector3d& p1_B,
+                           int link2, const Eigen::Vector3d& p2_B, const Eigen::Vector3d& n_B,
+                           Eigen::Ref<Eigen::RowVectorXd> row);
 
 /// How many joints the support paths of link1 and link2 share from the root (Model::link_support).
 std::size_t commonSupport(const Model& model, int link1, int link2);

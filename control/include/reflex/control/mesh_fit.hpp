@@ -47,8 +47,8 @@ struct PackagePaths {
 /// Resolves a URDF mesh filename to a file path: `package://NAME/rel` (PackagePaths), `file:///abs`,
 /// an absolute path, or a path relative to `urdf_dir`. Returns "" and sets `why` (naming the package
 /// or the path tried) when it cannot; does not check that the file is readable.
-std::string resolveMeshFilename(const std::string& filename, const std::string& urdf_dir,
-                                const PackagePaths& paths, std::string* why);
+std::string resolveMeshFilename(const std::string& filename, const std::string& urdf_dir, const PackagePaths& paths,
+                                std::string* why);
 
 /// Reads a mesh file with assimp (see the opening block) and multiplies every vertex by `scale`.
 /// Throws ModelError naming the file and assimp's reason (unreadable, not a mesh, no triangles).
@@ -61,12 +61,12 @@ inline constexpr double kMaxMeshCoordinate = 10.0;  ///< m, as every URDF length
 
 /// Fitting options. The defaults are what reflex_fit uses.
 struct FitOptions {
-  int max_primitives = 6;        ///< per link's meshes (greedy cuts), and per box element (fitBox)
+  int max_primitives = 6;  ///< per link's meshes (greedy cuts), and per box element (fitBox)
   /// Split a link's cluster while (sum of fitted volumes) / (convex-hull volume) is above this...
   double split_ratio = 1.3;
   /// ...and a split reduces the summed fitted volume by at least this fraction of it.
   double min_split_gain = 0.05;
-  double quantum = 1e-6;         ///< m: written coordinates are multiples of it, radii rounded up
+  double quantum = 1e-6;                ///< m: written coordinates are multiples of it, radii rounded up
   int gap_samples_per_primitive = 600;  ///< surface samples per primitive for the worst gap
   /// The tight model (fitConvexPieces): a link's mesh is cut into at most this many convex pieces...
   int max_pieces = 16;
@@ -78,18 +78,16 @@ struct FitOptions {
   double large_gap = 0.020;  ///< m
 };
 
-
-
 /// Per-link numbers of a fit (what the overlay records and reflex_fit prints).
 struct FitStats {
-  int vertices = 0;             ///< mesh + box vertices of the link (after scale and origin)
-  int vertices_enclosed = 0;    ///< of those, inside a fitted primitive (re-checked after rounding)
+  int vertices = 0;           ///< mesh + box vertices of the link (after scale and origin)
+  int vertices_enclosed = 0;  ///< of those, inside a fitted primitive (re-checked after rounding)
   int triangles = 0;
-  double hull_volume = 0.0;     ///< m^3, convex hull of all vertices (qhull); 0 for a flat set
-  double fitted_volume = 0.0;   ///< m^3, sum of the primitives' volumes (an upper bound of their union)
-  double volume_ratio = 0.0;    ///< fitted / hull; 0 when the hull volume is 0
-  double worst_gap = 0.0;       ///< m, largest distance from a sampled point of the primitives'
-                                ///< outer surface (not inside another primitive) to the mesh
+  double hull_volume = 0.0;    ///< m^3, convex hull of all vertices (qhull); 0 for a flat set
+  double fitted_volume = 0.0;  ///< m^3, sum of the primitives' volumes (an upper bound of their union)
+  double volume_ratio = 0.0;   ///< fitted / hull; 0 when the hull volume is 0
+  double worst_gap = 0.0;      ///< m, largest distance from a sampled point of the primitives'
+                               ///< outer surface (not inside another primitive) to the mesh
 };
 
 /// One convex piece of a link (the tight model, convex.hpp): the convex hull of a cluster of the
@@ -152,8 +150,8 @@ double signedDistanceToPrimitive(const Primitive& prim, const Eigen::Vector3d& p
 /// One fitted link of the overlay.
 struct LinkFit {
   std::string link;
-  std::string inputs;   ///< hash of the inputs (fitInputsHash)
-  int elements = 0;     ///< mesh and box elements fitted
+  std::string inputs;  ///< hash of the inputs (fitInputsHash)
+  int elements = 0;    ///< mesh and box elements fitted
   FitStats stats;
   std::vector<Primitive> primitives;  ///< link frame
   /// The tight model (format 2 overlays): pieces[i] is the convex piece primitives[i] encloses (the
@@ -163,12 +161,12 @@ struct LinkFit {
 
 /// A fit overlay: every link with mesh or box collision elements, fitted.
 struct FitOverlay {
-  std::string urdf;                               ///< as written (relative to the overlay's folder)
-  std::string urdf_dir;                           ///< resolved, for relative mesh paths
-  std::map<std::string, std::string> packages;    ///< NAME -> folder (resolved when read)
+  std::string urdf;                             ///< as written (relative to the overlay's folder)
+  std::string urdf_dir;                         ///< resolved, for relative mesh paths
+  std::map<std::string, std::string> packages;  ///< NAME -> folder (resolved when read)
   FitOptions options;
   std::vector<LinkFit> links;
-  std::string source;                             ///< the overlay file, for messages
+  std::string source;  ///< the overlay file, for messages
 };
 
 /// "dir/robot.urdf" -> "dir/robot.fit.yaml".

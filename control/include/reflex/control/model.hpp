@@ -23,12 +23,12 @@ enum class JointType { kFixed, kRevolute, kPrismatic };
 /// One link and the joint that connects it to its parent (every non-root link has exactly one).
 struct Link {
   std::string name;
-  int parent = -1;                                        ///< parent link index, -1 for the root
-  Eigen::Isometry3d X_P_J = Eigen::Isometry3d::Identity(); ///< joint origin in the parent link frame
+  int parent = -1;                                          ///< parent link index, -1 for the root
+  Eigen::Isometry3d X_P_J = Eigen::Isometry3d::Identity();  ///< joint origin in the parent link frame
   JointType type = JointType::kFixed;
-  Eigen::Vector3d axis_J = Eigen::Vector3d::UnitZ();      ///< unit joint axis in the joint frame
-  int q_index = -1;                                       ///< index into q, -1 if fixed
-  std::string joint_name;                                 ///< empty for the root
+  Eigen::Vector3d axis_J = Eigen::Vector3d::UnitZ();  ///< unit joint axis in the joint frame
+  int q_index = -1;                                   ///< index into q, -1 if fixed
+  std::string joint_name;                             ///< empty for the root
   /// The URDF <inertial>, if the link has one (the controller does not use it; the physics robot
   /// reflex_mujoco does): mass [kg], centre of mass in L [m], inertia about the centre of mass in
   /// L's axes [kg m^2] (the URDF's inertial-frame tensor rotated into L).
@@ -54,8 +54,8 @@ struct Primitive {
 /// A collision segment (paper Fig. 1): one or several primitives rigidly attached to one link.
 /// Primitives are stored flat in Model::primitives[first_primitive, first_primitive + num_primitives).
 struct Segment {
-  std::string name;   ///< the link name for robot segments; the slot name for body-schema slots
-  int link = -1;      ///< link the primitives are expressed in (body-schema slots: set at run time)
+  std::string name;  ///< the link name for robot segments; the slot name for body-schema slots
+  int link = -1;     ///< link the primitives are expressed in (body-schema slots: set at run time)
   int first_primitive = 0;
   int num_primitives = 0;
   bool body_schema_slot = false;  ///< a run-time slot (grasped object / virtual segment), Sec. 8.5
@@ -70,12 +70,12 @@ struct SegmentPair {
 /// The immutable robot model. Build it with loadModel(); do not edit it after loading.
 struct Model {
   std::string name;
-  std::vector<Link> links;       ///< topological order: a parent always comes before its children
-  int nq = 0;                    ///< number of movable (revolute / prismatic) joints
-  std::vector<std::string> q_names;     ///< joint name per q index
-  Eigen::VectorXd q_lower, q_upper;     ///< position limits per q index (rad or m)
-  Eigen::VectorXd v_max;                ///< velocity limits per q index (rad/s or m/s), > 0
-  std::vector<int> q_link;              ///< link moved by each q index
+  std::vector<Link> links;           ///< topological order: a parent always comes before its children
+  int nq = 0;                        ///< number of movable (revolute / prismatic) joints
+  std::vector<std::string> q_names;  ///< joint name per q index
+  Eigen::VectorXd q_lower, q_upper;  ///< position limits per q index (rad or m)
+  Eigen::VectorXd v_max;             ///< velocity limits per q index (rad/s or m/s), > 0
+  std::vector<int> q_link;           ///< link moved by each q index
   /// For each link, the q indices of the movable joints on the path from the root to it,
   /// root first (its own joint last if movable). Used by every Jacobian.
   std::vector<std::vector<int>> link_support;
@@ -83,15 +83,19 @@ struct Model {
   std::vector<Primitive> primitives;
   /// The convex pieces of fitted meshes and boxes (link frame of the primitive that refers to them).
   std::vector<ConvexPiece> pieces;
-  std::vector<Segment> segments;        ///< robot segments first, then the body-schema slots
+  std::vector<Segment> segments;  ///< robot segments first, then the body-schema slots
   int num_robot_segments = 0;
-  std::vector<SegmentPair> pairs;       ///< checked pairs (configuration), including slot pairs
+  std::vector<SegmentPair> pairs;  ///< checked pairs (configuration), including slot pairs
 
   /// Index lookups; return -1 when the name is unknown.
   int linkIndex(const std::string& link_name) const;
   int qIndex(const std::string& joint_name) const;
   int segmentIndex(const std::string& segment_name) const;
 };
+
+/// The file of a robot's set that lies beside its URDF: the URDF's path without its extension, then
+/// `suffix` (".collision.yaml", ".controller.yaml", ".fit.yaml", ...). One rule for every such file.
+std::string robotFileBeside(const std::string& urdf_path, const std::string& suffix);
 
 /// Capacity of a body-schema slot (one capsule each) and the number of slots every model has.
 inline constexpr int kBodySchemaSlots = 4;

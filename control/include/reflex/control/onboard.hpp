@@ -91,24 +91,26 @@ struct OnboardOptions {
 struct BodySchemaRequest {
   enum class Operation : std::uint8_t { kAttach, kDetach };
   Operation operation = Operation::kAttach;
-  bool enabled = true;                 ///< kAttach with false: detached but the name keeps its slot
-  const std::string* name = nullptr;   ///< segment name (must outlive the call)
-  const std::string* parent_link = nullptr;  ///< link the endpoints are given in (must outlive the call)
+  bool enabled = true;                            ///< kAttach with false: detached but the name keeps its slot
+  const std::string* name = nullptr;              ///< segment name (must outlive the call)
+  const std::string* parent_link = nullptr;       ///< link the endpoints are given in (must outlive the call)
   Eigen::Vector3d a_L = Eigen::Vector3d::Zero();  ///< capsule core endpoints in the link frame (m)
   Eigen::Vector3d b_L = Eigen::Vector3d::Zero();  ///< equal to a_L for a sphere
-  double radius = 0.0;                 ///< m
-  bool is_virtual = false;             ///< virtual (occlusion) segment: avoided, never an e-stop
-  int motion_priority = 0;             ///< > 0 on a physical segment of an arm: that arm gets priority
+  double radius = 0.0;                            ///< m
+  bool is_virtual = false;                        ///< virtual (occlusion) segment: avoided, never an e-stop
+  int motion_priority = 0;                        ///< > 0 on a physical segment of an arm: that arm gets priority
 };
 
 /// What changeBodySchema did. A refusal names its reason in `text` (a NUL-terminated line without a
 /// process prefix, e.g. "body-schema segment 'pack' rejected: no free slot (link 'chest')").
 struct BodySchemaOutcome {
   enum class Kind : std::uint8_t {
-    kAttached, kDetached, kUnknownName,  ///< kUnknownName: a detach of a name never attached (ignored, not counted)
-    kRejectedCheck,                      ///< checkBodySchemaSegment refused it (check.fault, value, limit, key)
-    kRejectedNoSlot,                     ///< every slot is taken by another name
-    kRejectedUnresolvable,               ///< findUnresolvableContact refused it (attach.refusing_pair ...)
+    kAttached,
+    kDetached,
+    kUnknownName,           ///< kUnknownName: a detach of a name never attached (ignored, not counted)
+    kRejectedCheck,         ///< checkBodySchemaSegment refused it (check.fault, value, limit, key)
+    kRejectedNoSlot,        ///< every slot is taken by another name
+    kRejectedUnresolvable,  ///< findUnresolvableContact refused it (attach.refusing_pair ...)
   };
   Kind kind = Kind::kUnknownName;
   int slot = -1;
@@ -120,14 +122,14 @@ struct BodySchemaOutcome {
 
 /// Why an input was refused: one counter per cause (OnboardCounts::rejected).
 enum class RejectCause : std::uint8_t {
-  kHandTargetNotFinite,   ///< a given hand target with a NaN / Inf coordinate (per hand)
-  kHandTargetTooFar,      ///< a given hand target farther than max_target_distance from the base origin (per hand)
-  kSchemaBadSegment,      ///< checkBodySchemaSegment refused the segment (BodySchemaOutcome::kRejectedCheck)
-  kSchemaNoSlot,          ///< every body-schema slot is taken by another name
-  kSchemaUnresolvable,    ///< the segment would touch one that no arm can move away from it
-  kWalkBadValue,          ///< a walk command with a non-finite goal_x or speed, or speed <= 0
-  kWalkUnsupportedGoal,   ///< a walk command whose goal_y or goal_yaw is not 0: the walking pattern walks
-                          ///< along the base x axis only (|goal_y| and |goal_yaw| <= kWalkGoalTolerance)
+  kHandTargetNotFinite,  ///< a given hand target with a NaN / Inf coordinate (per hand)
+  kHandTargetTooFar,     ///< a given hand target farther than max_target_distance from the base origin (per hand)
+  kSchemaBadSegment,     ///< checkBodySchemaSegment refused the segment (BodySchemaOutcome::kRejectedCheck)
+  kSchemaNoSlot,         ///< every body-schema slot is taken by another name
+  kSchemaUnresolvable,   ///< the segment would touch one that no arm can move away from it
+  kWalkBadValue,         ///< a walk command with a non-finite goal_x or speed, or speed <= 0
+  kWalkUnsupportedGoal,  ///< a walk command whose goal_y or goal_yaw is not 0: the walking pattern walks
+                         ///< along the base x axis only (|goal_y| and |goal_yaw| <= kWalkGoalTolerance)
 };
 inline constexpr int kRejectCauses = 7;
 /// The cause's name as the exit line and reflex/control_status (last_rejection) print it, e.g.
@@ -140,30 +142,30 @@ inline constexpr double kWalkGoalTolerance = 1e-3;
 
 /// Counters since construction (the node's exit line, tests).
 struct OnboardCounts {
-  std::uint64_t cycles = 0;              ///< step() calls
-  std::uint64_t computed_cycles = 0;     ///< cycles with a robot state (control computed, command sent)
-  std::uint64_t targets_received = 0;    ///< setHandTargets calls
-  std::uint64_t targets_rejected = 0;    ///< every rejected input: the three groups below summed
+  std::uint64_t cycles = 0;                 ///< step() calls
+  std::uint64_t computed_cycles = 0;        ///< cycles with a robot state (control computed, command sent)
+  std::uint64_t targets_received = 0;       ///< setHandTargets calls
+  std::uint64_t targets_rejected = 0;       ///< every rejected input: the three groups below summed
   std::uint64_t hand_targets_rejected = 0;  ///< non-finite or farther than max_target_distance (per hand)
-  std::uint64_t schema_rejected = 0;     ///< body-schema changes refused
-  std::uint64_t walk_rejected = 0;       ///< walk commands refused (kWalkBadValue + kWalkUnsupportedGoal)
+  std::uint64_t schema_rejected = 0;        ///< body-schema changes refused
+  std::uint64_t walk_rejected = 0;          ///< walk commands refused (kWalkBadValue + kWalkUnsupportedGoal)
   std::array<std::uint64_t, kRejectCauses> rejected{};  ///< per RejectCause (index = the enum's value)
-  int last_rejection = -1;               ///< the RejectCause of the latest refusal, -1 none yet
-  std::uint64_t stale_events = 0;        ///< transitions to "inputs stale" (hands retract)
-  std::uint64_t robot_stale_cycles = 0;  ///< cycles without a robot state
-  std::uint64_t robot_stale_events = 0;  ///< transitions from "robot state ok" to "no robot state"
-  std::uint64_t estop_count = 0;         ///< ControllerData::estop_count
-  std::uint64_t guard_count = 0;         ///< ControllerData::guard_count
-  std::uint64_t walking_holds = 0;       ///< ControllerData::walking_hold_count
-  std::uint64_t bad_input_count = 0;     ///< ControllerData::bad_input_count
+  int last_rejection = -1;                              ///< the RejectCause of the latest refusal, -1 none yet
+  std::uint64_t stale_events = 0;                       ///< transitions to "inputs stale" (hands retract)
+  std::uint64_t robot_stale_cycles = 0;                 ///< cycles without a robot state
+  std::uint64_t robot_stale_events = 0;                 ///< transitions from "robot state ok" to "no robot state"
+  std::uint64_t estop_count = 0;                        ///< ControllerData::estop_count
+  std::uint64_t guard_count = 0;                        ///< ControllerData::guard_count
+  std::uint64_t walking_holds = 0;                      ///< ControllerData::walking_hold_count
+  std::uint64_t bad_input_count = 0;                    ///< ControllerData::bad_input_count
 };
 
 /// One arm in the cycle report.
 struct ArmReport {
-  double f = 0.0;                                              ///< blending coefficient, Eq. 13
+  double f = 0.0;                                             ///< blending coefficient, Eq. 13
   double distance = std::numeric_limits<double>::infinity();  ///< closest pair of this arm (m)
   Zone zone = Zone::kFree;
-  int closest_pair = -1;                                       ///< index into Model::pairs, -1 none
+  int closest_pair = -1;  ///< index into Model::pairs, -1 none
   /// The closest pair's segments: segment_a is THIS arm's segment (whichever side of Model::pairs it
   /// is on; for a pair of two segments of this arm, the pair's first), segment_b the other one.
   /// Both nullptr exactly when closest_pair is -1 (no pair of the arm was considered this cycle).
@@ -173,14 +175,14 @@ struct ArmReport {
 
 /// The outcome of one step().
 struct CycleReport {
-  double now = 0.0;                  ///< the step's time (s, the caller's monotonic clock)
-  bool robot_state_ok = false;       ///< false: no usable robot state: nothing computed or commanded;
-                                     ///< every field below but inputs_stale/commands/priority/counts is the last cycle's
-  bool inputs_stale = true;          ///< the target source is silent: both hands retract
+  double now = 0.0;             ///< the step's time (s, the caller's monotonic clock)
+  bool robot_state_ok = false;  ///< false: no usable robot state: nothing computed or commanded;
+                                ///< every field below but inputs_stale/commands/priority/counts is the last cycle's
+  bool inputs_stale = true;     ///< the target source is silent: both hands retract
   ControlResult result = ControlResult::kOk;
   EstopState estop = EstopState::kClear;
-  bool walking_advanced = false;     ///< walking took a step this cycle
-  std::array<HandCommand, 2> commands;  ///< the hand commands the controller followed (after staleness)
+  bool walking_advanced = false;                     ///< walking took a step this cycle
+  std::array<HandCommand, 2> commands;               ///< the hand commands the controller followed (after staleness)
   MotionPriority priority = MotionPriority::kEqual;  ///< the priority it applied
   std::array<ArmReport, 2> arms;
   double min_distance = std::numeric_limits<double>::infinity();  ///< closest physical pair (m)
@@ -197,9 +199,7 @@ struct CycleReport {
 /// clamped to the limits, brings it back within one cycle at no more than v_max; a reading further out
 /// is not a state the controller can answer within v_max and the limits, and is refused (the robot
 /// port rejects the whole state).
-inline double stateLimitTolerance(const Model& model, int i, double period) noexcept {
-  return model.v_max[i] * period;
-}
+inline double stateLimitTolerance(const Model& model, int i, double period) noexcept { return model.v_max[i] * period; }
 /// A joint without position limits (continuous) accepts a measured |position| up to this (rad or m):
 /// larger finite values are absurd (and lose the precision the kinematics needs).
 inline constexpr double kMaxUnlimitedPosition = 1e4;
@@ -265,7 +265,9 @@ class OnboardController {
   /// walked in x alone). A stop is always accepted (its goal is ignored).
   bool walkCommand(bool stop, double goal_x, double goal_y, double goal_yaw, double speed) noexcept;
   /// The same with goal_y = goal_yaw = 0.
-  bool walkCommand(bool stop, double goal_x, double speed) noexcept { return walkCommand(stop, goal_x, 0.0, 0.0, speed); }
+  bool walkCommand(bool stop, double goal_x, double speed) noexcept {
+    return walkCommand(stop, goal_x, 0.0, 0.0, speed);
+  }
   /// Walks `distance` m forward from where the heel is at the next step (scenarios). See WalkingPattern::start.
   bool startWalking(double distance, double speed) noexcept;
   /// Asks the next step to leave a latched e-stop (only separating motion, Sec. 7.1).

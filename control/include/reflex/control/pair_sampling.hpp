@@ -70,7 +70,7 @@ struct PairSamplingOptions {
 enum class PairVerdict { kChecked, kAlwaysInCollision, kNeverClose, kNotDriven, kTouchingStanding, kAlwaysNear };
 
 struct SampledPair {
-  std::string a, b;  ///< segment names
+  std::string a, b;      ///< segment names
   int in_collision = 0;  ///< samples with distance <= 0 (overlapping pieces report 0)
   double min_distance = std::numeric_limits<double>::infinity();
   double max_distance = -std::numeric_limits<double>::infinity();  ///< above max(near_distance, 0.1 m): a lower bound
@@ -84,7 +84,7 @@ struct SampledPair {
 struct PairSamplingReport {
   std::string robot;
   PairSamplingOptions options;
-  std::vector<SampledPair> pairs;                              ///< non-adjacent robot pairs
+  std::vector<SampledPair> pairs;                             ///< non-adjacent robot pairs
   std::vector<std::pair<std::string, std::string>> adjacent;  ///< dropped by the adjacency rule
 };
 

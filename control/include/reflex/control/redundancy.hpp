@@ -13,7 +13,7 @@ inline constexpr int kMaxArmDof = 8;
 using ArmVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxArmDof, 1>;
 using ArmRow = Eigen::Matrix<double, 1, Eigen::Dynamic, Eigen::RowMajor, 1, kMaxArmDof>;
 using ArmMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxArmDof, kMaxArmDof>;
-using TaskJacobian = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxArmDof>;       ///< 3 x n
+using TaskJacobian = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxArmDof>;         ///< 3 x n
 using TaskJacobianInverse = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, kMaxArmDof, 3>;  ///< n x 3
 
 /// Singularity-robust (damped least-squares) inverse J^T (J J^T + lambda^2 I)^-1 (Nakamura; Wampler).

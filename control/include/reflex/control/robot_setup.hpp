@@ -72,29 +72,29 @@ struct ArmSetup {
   std::string shoulder_link;        ///< child link of the first joint (its origin is the shoulder)
   std::string hand_link;
   Eigen::Vector3d hand_point_L = Eigen::Vector3d::Zero();  ///< m, hand link frame
-  std::vector<double> rest;         ///< rad, one per joint
+  std::vector<double> rest;                                ///< rad, one per joint
 };
 
 /// A stretch of an arm's skeleton outside every primitive of the arm.
 struct ArmGap {
   std::string side;
-  std::string link;                 ///< the link that carries the stretch
-  double gap = 0.0;                 ///< m, largest distance of a skeleton point to the arm's primitives' surface
+  std::string link;  ///< the link that carries the stretch
+  double gap = 0.0;  ///< m, largest distance of a skeleton point to the arm's primitives' surface
   Eigen::Vector3d point_L = Eigen::Vector3d::Zero();  ///< where (link frame)
-  Primitive closing;                ///< capsule in the link frame that covers the stretch
-  std::string message;              ///< the warning, one line
-  std::string urdf_snippet;         ///< the <collision> element to paste into the link
+  Primitive closing;                                  ///< capsule in the link frame that covers the stretch
+  std::string message;                                ///< the warning, one line
+  std::string urdf_snippet;                           ///< the <collision> element to paste into the link
 };
 
 struct RobotSetup {
-  std::array<ArmSetup, 2> arms;     ///< [0] left, [1] right
+  std::array<ArmSetup, 2> arms;  ///< [0] left, [1] right
   std::string head_link, camera_link;
   /// The robot's forward direction in the root frame: +x (REP 103), or -x when both arms' names say
   /// the root frame faces backward (left arm at y < 0).
   Eigen::Vector3d forward = Eigen::Vector3d::UnitX();
   std::vector<ArmGap> gaps;
-  double rest_distance = 0.0;       ///< m, closest checked pair at rest
-  std::string rest_pair;            ///< "a-b"
+  double rest_distance = 0.0;          ///< m, closest checked pair at rest
+  std::string rest_pair;               ///< "a-b"
   std::vector<std::string> decisions;  ///< one line per decision, with its reason
 };
 
@@ -115,9 +115,9 @@ int findArmGaps(const Model& model, const SetupOptions& options, RobotSetup& set
 /// sent to target_B (root frame, m) at t = 0; `cm` from the written controller configuration.
 struct ReachCheck {
   std::array<Eigen::Vector3d, 2> target_B{};
-  std::array<double, 2> error{};     ///< m, hand point to target at the end
-  double reached_at = -1.0;          ///< s, first time both hands were within `tolerance` (-1: never)
-  double min_distance = 0.0;         ///< m, closest physical pair over the run
+  std::array<double, 2> error{};  ///< m, hand point to target at the end
+  double reached_at = -1.0;       ///< s, first time both hands were within `tolerance` (-1: never)
+  double min_distance = 0.0;      ///< m, closest physical pair over the run
   std::uint64_t estops = 0;
 };
 ReachCheck checkReach(const Model& model, const ControllerModel& cm, const std::array<Eigen::Vector3d, 2>& target_B,

@@ -27,14 +27,14 @@ namespace reflex::control {
 /// reference robot's chest lands at this robot's chest, one arm length in front of the reference
 /// shoulders lands one arm length in front of this robot's shoulders, and so on.
 struct ScenarioFrame {
-  std::array<Eigen::Vector3d, 2> shoulder;   ///< [kLeft], [kRight]: origin of the arm's first joint
+  std::array<Eigen::Vector3d, 2> shoulder;          ///< [kLeft], [kRight]: origin of the arm's first joint
   Eigen::Vector3d chest = Eigen::Vector3d::Zero();  ///< midpoint of the two shoulders
-  double half_width = 0.0;                   ///< half the shoulder-to-shoulder distance
-  int trunk_segment = -1;                    ///< the segment the arms hang from (asimo_like: chest)
-  double trunk_half_width = 0.0;             ///< half its width (extent of its primitives to the left)
-  double arm_length = 0.0;                   ///< shoulder -> hand point along the chain (joint origins,
-                                             ///< then the hand point): the straight arm's reach
-  std::array<Eigen::Vector3d, 2> hand_rest;  ///< hand points at the rest posture
+  double half_width = 0.0;                          ///< half the shoulder-to-shoulder distance
+  int trunk_segment = -1;                           ///< the segment the arms hang from (asimo_like: chest)
+  double trunk_half_width = 0.0;                    ///< half its width (extent of its primitives to the left)
+  double arm_length = 0.0;                          ///< shoulder -> hand point along the chain (joint origins,
+                                                    ///< then the hand point): the straight arm's reach
+  std::array<Eigen::Vector3d, 2> hand_rest;         ///< hand points at the rest posture
   /// The scales of place(): forward and up by arm_length, sideways by trunk_half_width, each over
   /// the reference robot's. Exactly 1 (and place() the identity, bit for bit) on the reference robot.
   Eigen::Vector3d scale = Eigen::Vector3d::Ones();
@@ -42,7 +42,7 @@ struct ScenarioFrame {
   /// is x forward, y left, z up, REP 103): left is the direction from the right shoulder to the left
   /// one, level; up is the root's z. A robot facing its -x (iCub) gets a half turn about z.
   Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
-  bool reference = false;                    ///< this robot's landmarks are the reference robot's (1 nm)
+  bool reference = false;  ///< this robot's landmarks are the reference robot's (1 nm)
 
   /// A point of the reference robot's scenario coordinates on this robot, about the chest:
   /// chest + axes * (scale * (p - chest_ref)). For what is about the body: inside it, across its midline.
@@ -64,14 +64,14 @@ struct ScenarioContext {
   const Model& model;
   ControllerData& data;
   const ControllerModel& cm;
-  const Eigen::VectorXd& q;          ///< the robot's current configuration
+  const Eigen::VectorXd& q;  ///< the robot's current configuration
   /// Attaches a capsule to a link (body schema, Sec. 8.5.1) or, with is_virtual, a virtual segment
   /// (occlusion, Sec. 8.5.2). Endpoints in the link frame. Throws ConfigError naming a link or an
   /// ignored segment the robot does not have. Returns false for other bad arguments, and for a
   /// physical segment that findUnresolvableContact refuses (it overlaps, within d_r +
   /// estop_release_margin, a segment that no arm can move away from it; the slot stays as it was).
-  bool attach(int slot, const std::string& link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L,
-              double radius, bool is_virtual, const std::vector<std::string>& ignore = {});
+  bool attach(int slot, const std::string& link, const Eigen::Vector3d& a_L, const Eigen::Vector3d& b_L, double radius,
+              bool is_virtual, const std::vector<std::string>& ignore = {});
   void detach(int slot);
   /// The camera link the gaze line starts at (occlusion, Sec. 8.5.2): the controller configuration's
   /// camera_link (ControllerConfig::camera_link, default head_camera).
@@ -87,16 +87,16 @@ struct ScenarioContext {
   /// towards p_B it can reach (a robot's joint limits differ from the reference robot's: the mesh
   /// humanoid's shoulder rolls 0.2 rad inwards). Computed once per target (not on the control path).
   Eigen::Vector3d reachable(int arm, const Eigen::Vector3d& p_B);
-  std::optional<ScenarioFrame> frame_cache{};  ///< filled by frame()
+  std::optional<ScenarioFrame> frame_cache{};                    ///< filled by frame()
   std::vector<std::array<Eigen::Vector3d, 2>> reach_cache[2]{};  ///< filled by reachable(): {asked, answer}
 };
 
 struct Scenario {
   std::string name;
   std::string description;
-  std::string paper;                 ///< section / figure it reproduces
-  double duration = 5.0;             ///< seconds
-  double walk_distance = 0.0;        ///< metres walked forward from t = walk_start
+  std::string paper;           ///< section / figure it reproduces
+  double duration = 5.0;       ///< seconds
+  double walk_distance = 0.0;  ///< metres walked forward from t = walk_start
   double walk_speed = 0.0;
   double walk_start = 0.0;
   /// Sets the hand commands (and body schema) at time t. Called every cycle before the controller.
@@ -105,8 +105,8 @@ struct Scenario {
 
 struct SimOptions {
   AvoidanceMode mode = AvoidanceMode::kOneDof;
-  bool estop = true;                 ///< the red-zone e-stop (a switch of its own: mode kOff keeps it)
-  bool record = true;                ///< keep one SimSample per cycle
+  bool estop = true;                        ///< the red-zone e-stop (a switch of its own: mode kOff keeps it)
+  bool record = true;                       ///< keep one SimSample per cycle
   std::string camera_link = "head_camera";  ///< ScenarioContext::camera_link (ControllerConfig::camera_link)
 };
 
@@ -115,15 +115,15 @@ struct SimSample {
   std::array<ArmStatus, 2> arms;
   std::array<HandCommand, 2> commands;
   EstopState estop = EstopState::kClear;
-  double min_distance = 0.0;         ///< closest physical pair (m)
+  double min_distance = 0.0;  ///< closest physical pair (m)
   int min_pair = -1;
-  double virtual_distance = 0.0;     ///< closest pair with a virtual segment (m), +inf if none
-  double arm_distance = 0.0;         ///< closest pair between the two arms (m), the paper's Fig. 13
-  double wall_time = 0.0;            ///< system clock (s since the epoch) when logged by a process; 0 in simulation
-  Eigen::VectorXd q;                 ///< the configuration this cycle computed from (measured by the plant)
+  double virtual_distance = 0.0;  ///< closest pair with a virtual segment (m), +inf if none
+  double arm_distance = 0.0;      ///< closest pair between the two arms (m), the paper's Fig. 13
+  double wall_time = 0.0;         ///< system clock (s since the epoch) when logged by a process; 0 in simulation
+  Eigen::VectorXd q;              ///< the configuration this cycle computed from (measured by the plant)
   Eigen::VectorXd qdot;
-  bool commanded = true;             ///< a command was sent this cycle (false: no usable robot state)
-  Eigen::VectorXd q_command;         ///< the command's end-of-cycle positions (nq; the last one if !commanded)
+  bool commanded = true;      ///< a command was sent this cycle (false: no usable robot state)
+  Eigen::VectorXd q_command;  ///< the command's end-of-cycle positions (nq; the last one if !commanded)
 };
 
 /// The time-series row of one step, the fields every writer takes from the cycle (reflex_controller
@@ -143,16 +143,16 @@ inline void recordCycle(SimSample& s, double t, const ControllerData& data, cons
 
 struct SimResult {
   std::vector<SimSample> samples;
-  double min_distance = 0.0;         ///< over the run, physical pairs
+  double min_distance = 0.0;  ///< over the run, physical pairs
   double min_time = 0.0;
   int min_pair = -1;
   double min_virtual_distance = 0.0;
   bool estop_fired = false;
-  std::uint64_t guard_cycles = 0;    ///< cycles whose step the predictive guard shortened
-  std::uint64_t walking_holds = 0;   ///< walking steps the walking guard held (checkWalkingStep)
-  bool non_finite = false;           ///< a NaN/Inf reached the robot (must never happen)
-  double max_joint_speed_ratio = 0.0;  ///< max over cycles and joints of |qdot_i| / v_max_i (commanded) and
-                                       ///< |dq_i| / (v_max_i dt) (what the plant did, walking joints included)
+  std::uint64_t guard_cycles = 0;        ///< cycles whose step the predictive guard shortened
+  std::uint64_t walking_holds = 0;       ///< walking steps the walking guard held (checkWalkingStep)
+  bool non_finite = false;               ///< a NaN/Inf reached the robot (must never happen)
+  double max_joint_speed_ratio = 0.0;    ///< max over cycles and joints of |qdot_i| / v_max_i (commanded) and
+                                         ///< |dq_i| / (v_max_i dt) (what the plant did, walking joints included)
   double max_command_speed_ratio = 0.0;  ///< max over cycles and joints of |qdot_i| / v_max_i (commanded only)
   std::array<double, 2> reach_time{{-1.0, -1.0}};  ///< first time within 1 cm of the final target, -1 never
   std::array<double, 2> final_error{{0.0, 0.0}};   ///< |hand - target| at the end (m)
@@ -207,27 +207,20 @@ SimResult runScenario(const Model& model, const ControllerModel& cm, const Scena
 /// cycle k names the positions for the start of cycle k+1; the error of cycle k+1 is measured(k+1) -
 /// command(k), over the arm's joints, over cycle pairs that both had a robot state.
 struct ArmTracking {
-  double max_error = 0.0;   ///< rad (largest |error| of any joint of the arm)
-  double rms_error = 0.0;   ///< rad (over joints and cycles)
-  double lag = 0.0;         ///< s: the shift of the commands (0 .. 0.2 s, refined between cycles by a
-                            ///< parabola through the best three) that best fits the measurement
-  std::uint64_t cycles = 0; ///< cycle pairs counted
+  double max_error = 0.0;    ///< rad (largest |error| of any joint of the arm)
+  double rms_error = 0.0;    ///< rad (over joints and cycles)
+  double lag = 0.0;          ///< s: the shift of the commands (0 .. 0.2 s, refined between cycles by a
+                             ///< parabola through the best three) that best fits the measurement
+  std::uint64_t cycles = 0;  ///< cycle pairs counted
 };
 
 /// Tracking error and servo lag per arm from recorded samples (SimOptions::record). The kinematic
 /// plant gives exactly 0, 0, 0 (its next measured state IS the command).
 std::array<ArmTracking, 2> computeTracking(const ControllerModel& cm, const SimResult& result);
 
-/// The rest configuration: zeros (clamped to limits) with the arms at their rest postures.
-Eigen::VectorXd restConfiguration(const Model& model, const ControllerModel& cm);
-
 /// The built-in scenarios (the paper's experiments), for reflex_sim --list.
 const std::vector<Scenario>& builtinScenarios();
 const Scenario* findScenario(const std::string& name);
-
-/// The closest distance between a segment of the left arm and one of the right arm (m), +inf if none:
-/// data.closest_between_arms of the last computeControl (the pairs are not scanned again).
-double armToArmDistance(const Model& model, const ControllerModel& cm, const ControllerData& data);
 
 /// Writes the time series as CSV: header row, one row per cycle.
 void writeTimeseriesCsv(const Model& model, const ControllerModel& cm, const SimResult& result,

@@ -16,33 +16,23 @@
 
 namespace reflex::control {
 
-/// The robot of one plant step (stepPlant). OnboardController (onboard.hpp) steps a KinematicRobot
-/// started from the measured state as its one-cycle integrator and hands the result to a RobotPort:
-/// a real robot's driver is reached through RobotPort (over DDS: idl/README.md, "Writing a robot
-/// driver"), not through this interface.
-class RobotInterface {
+/// The robot of one plant step (stepPlant), a first-order kinematic integrator: q += clamp(qdot,
+/// v_max) dt, clamped to the position limits; a non-finite velocity or walking position is 0 motion.
+/// No joint ever moves more than v_max dt per call. It is not a robot interface: OnboardController
+/// (onboard.hpp) steps one started from the measured state as its one-cycle prediction and hands the
+/// result to a RobotPort, the one way to a robot (a real robot's driver over DDS: idl/README.md,
+/// "Writing a robot driver").
+class KinematicRobot {
  public:
-  virtual ~RobotInterface() = default;
-  /// Measured joint positions (nq).
-  virtual const Eigen::VectorXd& jointPositions() const = 0;
-  /// Applies joint velocities for one period dt; the driver enforces its own limits.
-  virtual void command(const Eigen::Ref<const Eigen::VectorXd>& qdot, double dt) = 0;
+  KinematicRobot(const Model& model, const Eigen::VectorXd& q0);
+  /// Joint positions (nq).
+  const Eigen::VectorXd& jointPositions() const { return q_; }
+  /// Applies joint velocities for one period dt.
+  void command(const Eigen::Ref<const Eigen::VectorXd>& qdot, double dt);
   /// Joints owned by walking / balance, written as positions (legs, heel, virtual link): each listed
   /// joint moves towards q_walk by at most v_max dt in this period of dt seconds (never faster than
   /// its velocity limit, whatever the walking source asks for).
-  virtual void setWalkingJoints(const Eigen::Ref<const Eigen::VectorXd>& q_walk, const std::vector<int>& indices,
-                                double dt) = 0;
-};
-
-/// First-order kinematic robot: q += clamp(qdot, v_max) dt, clamped to the position limits; a
-/// non-finite velocity or walking position is 0 motion. No joint ever moves more than v_max dt per call.
-class KinematicRobot final : public RobotInterface {
- public:
-  KinematicRobot(const Model& model, const Eigen::VectorXd& q0);
-  const Eigen::VectorXd& jointPositions() const override { return q_; }
-  void command(const Eigen::Ref<const Eigen::VectorXd>& qdot, double dt) override;
-  void setWalkingJoints(const Eigen::Ref<const Eigen::VectorXd>& q_walk, const std::vector<int>& indices,
-                        double dt) override;
+  void setWalkingJoints(const Eigen::Ref<const Eigen::VectorXd>& q_walk, const std::vector<int>& indices, double dt);
   void reset(const Eigen::VectorXd& q) { q_ = q; }
 
  private:
@@ -112,6 +102,6 @@ class WalkingPattern {
 ///   (data.walking_hold_count) and tried again next cycle.
 /// Allocation-free (q_scratch has nq entries); never throws. Returns true if walking advanced.
 bool stepPlant(const Model& model, const ControllerModel& cm, ControllerData& data, ControlResult result,
-               RobotInterface& robot, WalkingPattern* walking, double dt, Eigen::VectorXd& q_scratch);
+               KinematicRobot& robot, WalkingPattern* walking, double dt, Eigen::VectorXd& q_scratch);
 
 }  // namespace reflex::control

@@ -57,11 +57,11 @@ struct SrdfPair {
 struct CollisionConfig {
   bool exclude_adjacent = true;
   std::vector<std::pair<std::string, std::string>> exclude;
-  std::string srdf;                        ///< SRDF path ("" if none)
-  std::vector<SrdfPair> srdf_disabled;     ///< its disable_collisions entries
-  std::string cylinder_as = "capsule";     ///< cylinder policy
-  std::string fit;                         ///< fit overlay path ("" = loadModel's default, if present)
-  std::string source = "<defaults>";  ///< where it was read from, for error messages
+  std::string srdf;                     ///< SRDF path ("" if none)
+  std::vector<SrdfPair> srdf_disabled;  ///< its disable_collisions entries
+  std::string cylinder_as = "capsule";  ///< cylinder policy
+  std::string fit;                      ///< fit overlay path ("" = loadModel's default, if present)
+  std::string source = "<defaults>";    ///< where it was read from, for error messages
 };
 
 /// Reads the <disable_collisions> entries of an SRDF (tinyxml2; other SRDF elements are ignored).
@@ -87,7 +87,7 @@ Model loadModel(const std::string& urdf_path, const CollisionConfig& config,
                 std::vector<std::string>* warnings = nullptr);
 
 /// Same, from URDF XML text; `origin` names the source in error messages.
-Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config,
-                          const std::string& origin, std::vector<std::string>* warnings = nullptr);
+Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config, const std::string& origin,
+                          std::vector<std::string>* warnings = nullptr);
 
 }  // namespace reflex::control

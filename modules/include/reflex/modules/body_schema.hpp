@@ -37,9 +37,9 @@ class GraspedBarModule final : public Module {
     double spin_rate = 0.0;                                  ///< [rad/s]
     Eigen::Vector3d spin_axis_L = Eigen::Vector3d::UnitZ();  ///< unit, hand link frame
     Eigen::Vector3d spin_center_L = Eigen::Vector3d(0.0, 0.0, -0.06);
-    double attach_after = 0.0;  ///< [s]
-    double detach_after = 0.0;  ///< [s] 0 = never
-    double update_period = 0.1; ///< [s]
+    double attach_after = 0.0;   ///< [s]
+    double detach_after = 0.0;   ///< [s] 0 = never
+    double update_period = 0.1;  ///< [s]
     bool arm_priority = false;
   };
 
@@ -68,15 +68,15 @@ class OcclusionModule final : public Module {
  public:
   struct Config {
     std::string segment = "gaze_line";
-    std::string object;                              ///< object to look at ("" = point)
+    std::string object;                                 ///< object to look at ("" = point)
     Eigen::Vector3d point_B = Eigen::Vector3d::Zero();  ///< fixed target if object is ""
     double radius = 0.03;
-    double end_margin = 0.10;       ///< [m] the capsule ends this far before the object
-    double cover_distance = 0.08;   ///< [m] hand point this close to the object = covered
+    double end_margin = 0.10;      ///< [m] the capsule ends this far before the object
+    double cover_distance = 0.08;  ///< [m] hand point this close to the object = covered
     bool cover_hands[2] = {true, true};
-    double lost_timeout = 1.0;      ///< [s]
-    double update_period = 0.05;    ///< [s]
-    double min_change = 0.005;      ///< [m] endpoint motion that is republished
+    double lost_timeout = 1.0;    ///< [s]
+    double update_period = 0.05;  ///< [s]
+    double min_change = 0.005;    ///< [m] endpoint motion that is republished
   };
 
   explicit OcclusionModule(std::string name) : Module(std::move(name)) {}

@@ -98,11 +98,11 @@ struct ModuleEntry {
 };
 
 struct HostConfig {
-  std::string file;                 ///< where it was read from
+  std::string file;  ///< where it was read from
   std::string process = "behavior";
   RobotConfig robot;
   InputPolicy inputs;
-  double tick_period = 0.02;        ///< [s]
+  double tick_period = 0.02;  ///< [s]
   /// [s] modules' onJointState runs at most this often (the robot state itself follows every sample)
   double joint_state_period = 0.1;
   std::vector<ModuleEntry> modules;
@@ -119,8 +119,8 @@ HostConfig parseHostConfig(const ConfigNode& root, const ModuleRegistry& registr
 struct HostStats {
   std::uint64_t frames_received = 0;
   std::uint64_t frames_rejected_future = 0;
-  std::uint64_t frames_rejected_frame = 0;       ///< frame_id not one of InputPolicy::frames
-  std::uint64_t frames_rejected_source = 0;      ///< writer not one of InputPolicy::object_sources
+  std::uint64_t frames_rejected_frame = 0;   ///< frame_id not one of InputPolicy::frames
+  std::uint64_t frames_rejected_source = 0;  ///< writer not one of InputPolicy::object_sources
   std::uint64_t objects_accepted = 0;
   std::uint64_t objects_rejected_invalid = 0;    ///< NaN / inf position or confidence, confidence out of [0, 1]
   std::uint64_t objects_rejected_unknown = 0;    ///< "" or not in known_objects
@@ -129,12 +129,12 @@ struct HostStats {
   std::uint64_t joint_states = 0;
   std::uint64_t joint_states_rejected = 0;
   std::uint64_t joint_states_rejected_source = 0;  ///< writer not one of InputPolicy::joint_state_sources
-  std::uint64_t outputs_rejected = 0;            ///< non-finite hand target / bad segment from a module
+  std::uint64_t outputs_rejected = 0;              ///< non-finite hand target / bad segment from a module
   std::uint64_t hand_targets_published = 0;
   std::uint64_t priority_published = 0;
   std::uint64_t segment_changes_published = 0;
   std::uint64_t walk_published = 0;
-  std::uint64_t forced_cleanups = 0;             ///< things a module left behind at stop (host removed them)
+  std::uint64_t forced_cleanups = 0;  ///< things a module left behind at stop (host removed them)
 
   std::uint64_t rejectedObjects() const {
     return objects_rejected_invalid + objects_rejected_unknown + objects_rejected_range + objects_rejected_duplicate;

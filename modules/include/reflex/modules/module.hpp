@@ -40,11 +40,11 @@ namespace reflex::modules {
 
 /// What a module writes (and reads). Declared after configure(), fixed afterwards.
 struct Claims {
-  bool hands[2] = {false, false};  ///< indexed by handIndex(Hand)
-  bool priority = false;           ///< motion priority between the arms
-  bool walk = false;               ///< walking commands
+  bool hands[2] = {false, false};     ///< indexed by handIndex(Hand)
+  bool priority = false;              ///< motion priority between the arms
+  bool walk = false;                  ///< walking commands
   std::vector<std::string> segments;  ///< body-schema segment names it attaches
-  bool objects = false;            ///< wants onObjects (the process then subscribes to object targets)
+  bool objects = false;               ///< wants onObjects (the process then subscribes to object targets)
 };
 
 /// The world as a module sees it during start / onObjects / onJointState / step / stop.

@@ -29,11 +29,11 @@
 #define REFLEX_MODULE_API_TAG "reflex-module-api/1"
 
 /// Defines the two entry points reflex_behavior looks up; the body registers the plugin's module types.
-#define REFLEX_MODULE_PLUGIN(registry_var)                                                              \
-  extern "C" __attribute__((visibility("default"))) const char* reflex_module_api_tag() {            \
-    return REFLEX_MODULE_API_TAG;                                                                      \
-  }                                                                                                    \
-  extern "C" __attribute__((visibility("default"))) void reflex_register_modules(                    \
+#define REFLEX_MODULE_PLUGIN(registry_var)                                                \
+  extern "C" __attribute__((visibility("default"))) const char* reflex_module_api_tag() { \
+    return REFLEX_MODULE_API_TAG;                                                         \
+  }                                                                                       \
+  extern "C" __attribute__((visibility("default"))) void reflex_register_modules(         \
       ::reflex::modules::ModuleRegistry& registry_var)
 
 namespace reflex::modules {

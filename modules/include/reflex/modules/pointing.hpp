@@ -35,8 +35,8 @@ enum class PointingMode { kRay, kObject };
 
 /// The hand target that points from shoulder s_B at object o_B (see the header comment).
 /// nullopt if the object is (numerically) at the shoulder: there is no direction to point in.
-std::optional<Eigen::Vector3d> pointingTarget(const Eigen::Vector3d& s_B, const Eigen::Vector3d& o_B,
-                                              PointingMode mode, double ray_distance, double reach);
+std::optional<Eigen::Vector3d> pointingTarget(const Eigen::Vector3d& s_B, const Eigen::Vector3d& o_B, PointingMode mode,
+                                              double ray_distance, double reach);
 
 class PointingModule final : public Module {
  public:
@@ -47,13 +47,13 @@ class PointingModule final : public Module {
     bool hands[2] = {true, true};
     std::vector<std::string> objects;  ///< objects to point at; empty = every accepted object
     PointingMode mode = PointingMode::kRay;
-    double ray_distance = 0.40;        ///< [m] from the shoulder, mode ray
-    double reach = 0.0;                ///< [m] mode object; 0 = the robot's arm reach
-    double lost_timeout = 1.0;         ///< [s]
-    double min_confidence = 0.0;       ///< objects below are not "seen"
+    double ray_distance = 0.40;   ///< [m] from the shoulder, mode ray
+    double reach = 0.0;           ///< [m] mode object; 0 = the robot's arm reach
+    double lost_timeout = 1.0;    ///< [s]
+    double min_confidence = 0.0;  ///< objects below are not "seen"
     Assignment assignment = Assignment::kSticky;
-    double swap_margin = 0.10;         ///< [m] assignment nearest
-    double swap_hold = 1.0;            ///< [s] assignment nearest
+    double swap_margin = 0.10;  ///< [m] assignment nearest
+    double swap_hold = 1.0;     ///< [s] assignment nearest
     PriorityRule priority_rule = PriorityRule::kFirstAssigned;
     double priority_margin = 0.03;     ///< [m] nearer_object hysteresis
     Hand priority_tie = Hand::kRight;  ///< first_assigned / nearer_object tie

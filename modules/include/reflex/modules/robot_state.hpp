@@ -25,7 +25,7 @@ std::string defaultRobotUrdf();
 
 struct RobotConfig {
   std::string urdf = defaultRobotUrdf();  ///< robot description
-  std::string collision;            ///< collision YAML ("" = next to the URDF)
+  std::string collision;                  ///< collision YAML ("" = next to the URDF)
   std::string left_shoulder = "l_shoulder", right_shoulder = "r_shoulder";
   std::string left_hand = "l_hand", right_hand = "r_hand";
   std::string head = "head", head_camera = "head_camera";
@@ -62,9 +62,7 @@ class RobotState {
   /// The hand's reaching point in B.
   Eigen::Vector3d handPoint_B(Hand h) const;
   int handLink(Hand h) const { return hand_link_[handIndex(h)]; }
-  const std::string& handLinkName(Hand h) const {
-    return h == Hand::kLeft ? config_.left_hand : config_.right_hand;
-  }
+  const std::string& handLinkName(Hand h) const { return h == Hand::kLeft ? config_.left_hand : config_.right_hand; }
   int headLink() const { return head_link_; }
   const Eigen::Isometry3d& X_B_head() const { return X_B_L(head_link_); }
   Eigen::Vector3d camera_B() const { return X_B_L(camera_link_).translation(); }

@@ -21,10 +21,10 @@
 namespace reflex::modules {
 
 struct TimelineEvent {
-  double t = 0.0;                ///< [s] after start
+  double t = 0.0;  ///< [s] after start
   enum class Kind { kHand, kPriority } kind = Kind::kHand;
-  Hand hand = Hand::kLeft;       ///< kHand
-  HandTarget target;             ///< kHand
+  Hand hand = Hand::kLeft;                     ///< kHand
+  HandTarget target;                           ///< kHand
   ArmPriority priority = ArmPriority::kEqual;  ///< kPriority
 };
 

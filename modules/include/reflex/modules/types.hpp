@@ -24,7 +24,7 @@ inline Hand otherHand(Hand h) { return h == Hand::kLeft ? Hand::kRight : Hand::k
 
 /// One named object seen by vision (reflex::msg::ObjectTarget).
 struct ObjectObservation {
-  std::string name;                              ///< object name; "" = unknown tag
+  std::string name;  ///< object name; "" = unknown tag
   int tag_id = -1;
   Eigen::Vector3d p_B = Eigen::Vector3d::Zero();  ///< object (tag centre) in the base frame [m]
   double confidence = 1.0;                        ///< 0..1
@@ -84,20 +84,20 @@ inline ArmPriority higher(Hand h) { return h == Hand::kLeft ? ArmPriority::kLeft
 /// An extra body-schema segment (paper Sec. 8.5; reflex::msg::BodySchemaChange with SCHEMA_ATTACH).
 /// Invariants: radius > 0, endpoints finite; a sphere has a_L == b_L.
 struct SegmentSpec {
-  std::string name;           ///< unique segment name (the topic's key)
-  std::string parent_link;    ///< URDF link the segment is attached to
-  bool capsule = true;        ///< false: sphere at a_L
+  std::string name;                               ///< unique segment name (the topic's key)
+  std::string parent_link;                        ///< URDF link the segment is attached to
+  bool capsule = true;                            ///< false: sphere at a_L
   Eigen::Vector3d a_L = Eigen::Vector3d::Zero();  ///< first endpoint in the parent link frame [m]
   Eigen::Vector3d b_L = Eigen::Vector3d::Zero();  ///< second endpoint [m] (capsule only)
-  double radius = 0.0;        ///< [m] > 0
-  int motion_priority = 0;    ///< higher wins; the arms have 0 (Sec. 8.5.1)
-  bool enabled = true;        ///< false: kept, but ignored by the distance computation
-  bool virtual_segment = false;  ///< true: avoided but never moved (occlusion, Sec. 8.5.2)
+  double radius = 0.0;                            ///< [m] > 0
+  int motion_priority = 0;                        ///< higher wins; the arms have 0 (Sec. 8.5.1)
+  bool enabled = true;                            ///< false: kept, but ignored by the distance computation
+  bool virtual_segment = false;                   ///< true: avoided but never moved (occlusion, Sec. 8.5.2)
 
   bool operator==(const SegmentSpec& o) const {
-    return name == o.name && parent_link == o.parent_link && capsule == o.capsule && a_L == o.a_L &&
-           b_L == o.b_L && radius == o.radius && motion_priority == o.motion_priority &&
-           enabled == o.enabled && virtual_segment == o.virtual_segment;
+    return name == o.name && parent_link == o.parent_link && capsule == o.capsule && a_L == o.a_L && b_L == o.b_L &&
+           radius == o.radius && motion_priority == o.motion_priority && enabled == o.enabled &&
+           virtual_segment == o.virtual_segment;
   }
   bool operator!=(const SegmentSpec& o) const { return !(*this == o); }
 };

@@ -18,7 +18,8 @@ int main(int argc, char** argv) {
   using namespace reflex;
   CLI::App app{
       "reflex_view: live 3D view of a running Reflex system. Reads reflex/joint_state, control_status, hand_targets, "
-      "object_targets, controller_protection and body_schema (never writes to the bus) and serves, on one port, the Foxglove "
+      "object_targets, controller_protection and body_schema (never writes to the bus) and serves, on one port, the "
+      "Foxglove "
       "WebSocket protocol (foxglove.websocket.v1: channels /tf, /reflex/scene, /reflex/status, JSON) and the bundled "
       "web page (three.js). Open http://localhost:PORT, or in Foxglove: Open connection -> Foxglove WebSocket -> "
       "ws://localhost:PORT. Exit: 0 ok, 1 runtime error, 2 bad option or set-up (port in use, bad --bind, missing "
@@ -35,10 +36,13 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--urdf", options.urdf, "robot URDF (the controller's)")->capture_default_str();
   app.add_option("--collision", options.collision, "collision configuration (default: next to the URDF)");
-  app.add_option("--controller", options.controller, "controller YAML: arms and zone thresholds (default: <URDF stem>.controller.yaml beside the URDF if it exists, else built-in)");
+  app.add_option("--controller", options.controller,
+                 "controller YAML: arms and zone thresholds (default: <URDF stem>.controller.yaml beside the URDF if "
+                 "it exists, else built-in)");
   app.add_option("--rate", options.rate, "scene messages per second at most, (0, 200]")->capture_default_str();
   app.add_option("--web", options.server.web_dir, "folder of the web page (index.html)")->capture_default_str();
-  app.add_option("--three", options.server.three_dir, "folder of three.module.js and three.core.js")->capture_default_str();
+  app.add_option("--three", options.server.three_dir, "folder of three.module.js and three.core.js")
+      ->capture_default_str();
   bus_options.add(app);
   app.add_option("--duration", options.duration, "stop after this many seconds (0 = until SIGINT / SIGTERM)")
       ->check(CLI::NonNegativeNumber)

@@ -91,18 +91,18 @@ std::string ViewNode::report() const {
       << " messages_sent=" << s.messages_sent.load() << " dropped_slow_client=" << s.dropped.load()
       << " bad_client_messages=" << s.bad_client_messages.load() << " replies_not_sent=" << s.replies_not_sent.load()
       << " clients_disconnected=" << s.clients_disconnected.load() << " clients_refused=" << s.clients_refused.load()
-      << " http_requests=" << s.http_requests.load()
-      << " http_not_found=" << s.http_not_found.load();
+      << " http_requests=" << s.http_requests.load() << " http_not_found=" << s.http_not_found.load();
   return out.str();
 }
 
 void ViewNode::run() {
   Impl& m = *impl_;
   m.server->start();
-  std::printf("reflex_view: serving %s (web page) and %s (Foxglove: Open connection -> Foxglove WebSocket); robot %s, "
-              "domain %d\n",
-              m.server->url().c_str(), ("ws" + m.server->url().substr(4)).c_str(), m.scene.model.name.c_str(),
-              m.bus->domainId());
+  std::printf(
+      "reflex_view: serving %s (web page) and %s (Foxglove: Open connection -> Foxglove WebSocket); robot %s, "
+      "domain %d\n",
+      m.server->url().c_str(), ("ws" + m.server->url().substr(4)).c_str(), m.scene.model.name.c_str(),
+      m.bus->domainId());
   std::printf("reflex_view: %s\n", m.scene.controller_note.c_str());
   std::fflush(stdout);
 
@@ -127,21 +127,22 @@ void ViewNode::run() {
     ++stats_.scenes;
     const auto stamp = static_cast<std::uint64_t>(std::max<std::int64_t>(input.stamp_ns, 0));
     if (m.server->subscribed(kChannelTf))
-      m.server->publish(kChannelTf, stamp,
-                        std::make_shared<const std::string>(dumpJson(view::buildFrameTransforms(m.scene, *m.data, input))));
+      m.server->publish(
+          kChannelTf, stamp,
+          std::make_shared<const std::string>(dumpJson(view::buildFrameTransforms(m.scene, *m.data, input))));
     if (m.server->subscribed(kChannelScene))
       m.server->publish(kChannelScene, stamp,
                         std::make_shared<const std::string>(dumpJson(view::buildSceneUpdate(m.scene, *m.data, input))));
     if (m.server->subscribed(kChannelStatus))
-      m.server->publish(kChannelStatus, stamp,
-                        std::make_shared<const std::string>(dumpJson(view::buildViewStatus(m.scene, input, m.protection))));
+      m.server->publish(
+          kChannelStatus, stamp,
+          std::make_shared<const std::string>(dumpJson(view::buildViewStatus(m.scene, input, m.protection))));
   };
   const auto period = std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / m.options.rate));
   m.bus->every(period, serve);
   if (m.options.progress_period > 0.0) {
-    m.bus->every(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 * m.options.progress_period)), [this] {
-      std::fprintf(stderr, "reflex_view: %s\n", report().c_str());
-    });
+    m.bus->every(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 * m.options.progress_period)),
+                 [this] { std::fprintf(stderr, "reflex_view: %s\n", report().c_str()); });
   }
   if (m.options.duration > 0.0) {
     m.bus->runFor(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 * m.options.duration)));

@@ -88,13 +88,13 @@ std::string dumpReply(const json& j) { return j.dump(-1, ' ', false, json::error
 
 /// One client's state, held only while it is connected (erased on close).
 struct ClientState {
-  std::map<std::uint32_t, std::size_t> subs;  ///< subscription id -> channel index
-  std::string address;                        ///< "127.0.0.1:45678": names the client in the log
+  std::map<std::uint32_t, std::size_t> subs;           ///< subscription id -> channel index
+  std::string address;                                 ///< "127.0.0.1:45678": names the client in the log
   std::chrono::steady_clock::time_point window_start;  ///< start of the current one-second window
   std::size_t bad_in_window = 0;                       ///< bad messages in that window
   bool closing = false;                                ///< disconnected by us: nothing more queued or read
-  bool full = false;                                   ///< a data frame was skipped, and the queue stayed above half the budget
-  std::chrono::steady_clock::time_point full_since;    ///< since then
+  bool full = false;  ///< a data frame was skipped, and the queue stayed above half the budget
+  std::chrono::steady_clock::time_point full_since;  ///< since then
 };
 
 }  // namespace
@@ -158,8 +158,8 @@ struct ViewServer::Impl {
       c.full_since = now;
     } else if (now - c.full_since > ViewServer::kMaxStall) {
       disconnect(con, c, true,
-                 "its queue has stayed at the budget of " + std::to_string(ViewServer::kMaxBufferedBytes) + " bytes for " +
-                     std::to_string(ViewServer::kMaxStall.count()) + " s (it does not read)");
+                 "its queue has stayed at the budget of " + std::to_string(ViewServer::kMaxBufferedBytes) +
+                     " bytes for " + std::to_string(ViewServer::kMaxStall.count()) + " s (it does not read)");
     }
     return false;
   }
@@ -227,7 +227,9 @@ struct ViewServer::Impl {
         if (!s.is_object() || !s.contains("id") || !s["id"].is_number_unsigned() || !s.contains("channelId") ||
             !s["channelId"].is_number_unsigned() || s["id"].get<std::uint64_t>() > 0xFFFFFFFFull ||
             s["channelId"].get<std::uint64_t>() > 0xFFFFFFFFull) {
-          badMessage(hdl, c, "subscribe: bad subscription " + excerpt(dumpReply(s)) + " (needs unsigned 32-bit id and channelId)");
+          badMessage(
+              hdl, c,
+              "subscribe: bad subscription " + excerpt(dumpReply(s)) + " (needs unsigned 32-bit id and channelId)");
           continue;
         }
         const auto id = s["id"].get<std::uint32_t>();
@@ -237,9 +239,10 @@ struct ViewServer::Impl {
         } else if (subs.count(id)) {
           badMessage(hdl, c, "subscribe: subscription id " + std::to_string(id) + " is already in use");
         } else if (subs.size() >= ViewServer::kMaxSubscriptionsPerClient) {
-          badMessage(hdl, c, "subscribe: subscription id " + std::to_string(id) + " refused: at most " +
-                                 std::to_string(ViewServer::kMaxSubscriptionsPerClient) +
-                                 " subscriptions per client (unsubscribe one first)");
+          badMessage(hdl, c,
+                     "subscribe: subscription id " + std::to_string(id) + " refused: at most " +
+                         std::to_string(ViewServer::kMaxSubscriptionsPerClient) +
+                         " subscriptions per client (unsubscribe one first)");
         } else {
           subs[id] = static_cast<std::size_t>(ch);
           channel_subscribers[static_cast<std::size_t>(ch)]++;
@@ -287,7 +290,8 @@ struct ViewServer::Impl {
     if (it == clients.end()) return;
     websocketpp::lib::error_code ec;
     Server::connection_ptr con = server.get_con_from_hdl(hdl, ec);
-    if (!ec && con && !it->second.closing && con->get_local_close_code() == websocketpp::close::status::message_too_big) {
+    if (!ec && con && !it->second.closing &&
+        con->get_local_close_code() == websocketpp::close::status::message_too_big) {
       // websocketpp refused the message itself (set_max_message_size): say so like our own limits.
       stats->clients_disconnected++;
       std::fprintf(stderr, "reflex_view: client %s disconnected: a message of more than %zu bytes\n",
@@ -364,7 +368,8 @@ ViewServer::ViewServer(const ServerOptions& options, std::vector<Channel> channe
   m.server.set_close_handshake_timeout(1000);
   m.server.set_reuse_addr(true);
   const websocketpp::lib::asio::ip::tcp::endpoint endpoint(address, static_cast<unsigned short>(options.port));
-  const std::string where = (address.is_v6() ? "[" + options.bind + "]" : options.bind) + ":" + std::to_string(options.port);
+  const std::string where =
+      (address.is_v6() ? "[" + options.bind + "]" : options.bind) + ":" + std::to_string(options.port);
   {
     // websocketpp reports every bind failure as "Underlying Transport Error": bind once here with the
     // same options to name the cause (address in use, not an address of this machine, permission).
@@ -464,7 +469,8 @@ void ViewServer::stop() noexcept {
     websocketpp::lib::asio::post(m.server.get_io_service(), [&m] {
       websocketpp::lib::error_code ec;
       m.server.stop_listening(ec);
-      for (auto& [hdl, c] : m.clients) m.server.close(hdl, websocketpp::close::status::going_away, "reflex_view stopping", ec);
+      for (auto& [hdl, c] : m.clients)
+        m.server.close(hdl, websocketpp::close::status::going_away, "reflex_view stopping", ec);
     });
     const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(500);
     while (stats_.open.load() > 0 && std::chrono::steady_clock::now() < end)

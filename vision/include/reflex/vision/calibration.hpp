@@ -22,8 +22,8 @@ namespace reflex::vision {
 /// Physically possible ranges, checked at load (VisionError naming the file, field and value and
 /// the range); a calibration outside them cannot produce any detection.
 struct CalibrationLimits {
-  static constexpr int kMinImageSide = 16;       ///< pixels, width and height
-  static constexpr int kMaxImageSide = 16384;    ///< pixels (beyond: the rectification maps alone take GBs)
+  static constexpr int kMinImageSide = 16;     ///< pixels, width and height
+  static constexpr int kMaxImageSide = 16384;  ///< pixels (beyond: the rectification maps alone take GBs)
   /// Focal length per image width, fx / width, for K and P: 0.05 is a ~169 deg horizontal field of
   /// view (beyond a fisheye's), 50 a ~1.1 deg telephoto.
   static constexpr double kMinFocalPerWidth = 0.05;

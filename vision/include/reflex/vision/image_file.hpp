@@ -10,8 +10,8 @@
 
 namespace reflex::vision {
 
-inline constexpr int kMinImageSide = 16;              ///< px: smaller images cannot hold a tag
-inline constexpr int kMaxImageSide = 16384;            ///< px per side
+inline constexpr int kMinImageSide = 16;                ///< px: smaller images cannot hold a tag
+inline constexpr int kMaxImageSide = 16384;             ///< px per side
 inline constexpr long long kMaxImagePixels = 50000000;  ///< width x height
 
 /// The width and height a PNG, JPEG or BMP file states in its header (nullopt for other formats or

@@ -32,7 +32,7 @@
 namespace reflex::vision {
 
 struct ReplayOptions {
-  double rate = 1.0;         ///< >= 0; 0 = as fast as possible
+  double rate = 1.0;  ///< >= 0; 0 = as fast as possible
   bool loop = false;
   double publish_hz = 10.0;  ///< > 0
   double duration = 0.0;     ///< stop after this much session time (0 = no limit)
@@ -47,21 +47,21 @@ void validateReplayOptions(const ReplayOptions& options);
 /// What one publication carries.
 struct Publication {
   std::uint64_t sequence = 0;
-  double publish_time = 0.0;  ///< session-clock time the publication was due at
-  double capture_stamp = 0.0; ///< session-clock capture stamp of the frame it carries (incl. loop offset)
-  double capture_wall = 0.0;  ///< that capture mapped to UNIX time on the replay clock (live: the stamp)
-  int frame = -1;             ///< source frame index, -1 before the first frame
+  double publish_time = 0.0;   ///< session-clock time the publication was due at
+  double capture_stamp = 0.0;  ///< session-clock capture stamp of the frame it carries (incl. loop offset)
+  double capture_wall = 0.0;   ///< that capture mapped to UNIX time on the replay clock (live: the stamp)
+  int frame = -1;              ///< source frame index, -1 before the first frame
   std::vector<ObjectObservation> objects;
 };
 
 struct RunProgress {
-  int frame = 0;           ///< index in the recording (StereoFrame::index), < frames
-  int frames = -1;         ///< frames of the whole recording (StereoSource::recordingFrames), -1 for live
+  int frame = 0;    ///< index in the recording (StereoFrame::index), < frames
+  int frames = -1;  ///< frames of the whole recording (StereoSource::recordingFrames), -1 for live
   int pass = 0;
-  double session_time = 0; ///< the frame's session time: its stamp minus the recording's first stamp (s;
-                           ///< with --start, the offset included; the same in every loop pass)
-  double run_time = 0;     ///< session-clock seconds since this run's first frame (the start offset)
-  double lag = 0;          ///< how far processing is behind the replay clock, s (paced only)
+  double session_time = 0;  ///< the frame's session time: its stamp minus the recording's first stamp (s;
+                            ///< with --start, the offset included; the same in every loop pass)
+  double run_time = 0;      ///< session-clock seconds since this run's first frame (the start offset)
+  double lag = 0;           ///< how far processing is behind the replay clock, s (paced only)
   int objects = 0;
 };
 
@@ -73,9 +73,9 @@ struct RunCallbacks {
 };
 
 struct RunStats {
-  int frames = 0;        ///< processed
-  int skipped = 0;       ///< reported skipped frames
-  int dropped = 0;       ///< paced runs: frames dropped because processing fell behind (max_lag; live: a period)
+  int frames = 0;   ///< processed
+  int skipped = 0;  ///< reported skipped frames
+  int dropped = 0;  ///< paced runs: frames dropped because processing fell behind (max_lag; live: a period)
   int publications = 0;
   int passes = 0;
   std::string end_message;  ///< non-empty if the source stopped early (truncated video, camera lost)

@@ -52,8 +52,8 @@ struct SessionFiles {
   std::string left_calibration = "left.yaml";
   std::string right_calibration = "right.yaml";
   std::string objects = "objects.yaml";
-  std::string camera_mount;   ///< empty if none
-  std::string ground_truth;   ///< empty if none
+  std::string camera_mount;  ///< empty if none
+  std::string ground_truth;  ///< empty if none
 };
 
 struct SessionInfo {

@@ -47,10 +47,10 @@ QuadPose evaluateTrajectory(const std::vector<Keyframe>& path, double t);
 struct ScriptedObject {
   std::string name;
   int tag_id = 0;
-  double tag_size = 0.06;                          ///< black-square edge, m
+  double tag_size = 0.06;  ///< black-square edge, m
   std::vector<Keyframe> path;
-  std::vector<std::pair<double, double>> hidden;   ///< [t0, t1) intervals where it is out of sight
-  bool hand = true;                                ///< draw a hand holding it (just behind, below)
+  std::vector<std::pair<double, double>> hidden;  ///< [t0, t1) intervals where it is out of sight
+  bool hand = true;                               ///< draw a hand holding it (just behind, below)
 };
 
 struct ScriptedOccluder {
@@ -65,21 +65,21 @@ struct RigSpec {
   cv::Size image_size{640, 480};
   cv::Matx33d K_left = cv::Matx33d(500, 0, 319.5, 0, 500, 239.5, 0, 0, 1);
   cv::Matx33d K_right = cv::Matx33d(500, 0, 319.5, 0, 500, 239.5, 0, 0, 1);
-  std::vector<double> D_left = std::vector<double>(5, 0.0);   ///< plumb_bob
+  std::vector<double> D_left = std::vector<double>(5, 0.0);  ///< plumb_bob
   std::vector<double> D_right = std::vector<double>(5, 0.0);
-  double baseline = 0.06;                  ///< m, right camera along +x of the left optical frame
-  cv::Vec3d right_rpy_deg{0, 0, 0};        ///< right camera rotation relative to the left
-  CameraMount mount;                       ///< required in a scene script (rig.mount), no default
+  double baseline = 0.06;            ///< m, right camera along +x of the left optical frame
+  cv::Vec3d right_rpy_deg{0, 0, 0};  ///< right camera rotation relative to the left
+  CameraMount mount;                 ///< required in a scene script (rig.mount), no default
 };
 
 struct RenderSpec {
   int supersample = 4;
-  double noise_sigma = 2.0;                  ///< grey levels
-  cv::Vec2d blur_sigma{0.3, 0.7};            ///< per-frame Gaussian blur sigma range, px
-  cv::Vec3d lighting{0.8, 1.1, 20.0};        ///< gain min, max, period (s)
-  double dropout_probability = 0.0;          ///< per frame and camera: a black image
-  double timestamp_jitter = 0.0;             ///< s, uniform +- on capture stamps
-  bool person = true;                        ///< torso and head behind the objects
+  double noise_sigma = 2.0;            ///< grey levels
+  cv::Vec2d blur_sigma{0.3, 0.7};      ///< per-frame Gaussian blur sigma range, px
+  cv::Vec3d lighting{0.8, 1.1, 20.0};  ///< gain min, max, period (s)
+  double dropout_probability = 0.0;    ///< per frame and camera: a black image
+  double timestamp_jitter = 0.0;       ///< s, uniform +- on capture stamps
+  bool person = true;                  ///< torso and head behind the objects
 };
 
 struct SceneScript {

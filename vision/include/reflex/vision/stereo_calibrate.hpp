@@ -100,32 +100,32 @@ struct StereoCalibrateOptions {
   /// views AND min_outlier_px; outliers are dropped and the rig recalibrated until none is left.
   double outlier_factor = 3.0;
   double min_outlier_px = 0.25;
-  int min_views = 6;         ///< fewer usable views (after dropping) is an error
-  int min_points = 6;        ///< a view needs at least this many points seen in both images
-  double alpha = 0.0;        ///< stereoRectify free scaling: 0 = only valid pixels (ROS default), 1 = all
-  bool rational = false;     ///< rational_polynomial (8 coefficients) instead of plumb_bob (5)
-  bool fix_k3 = false;       ///< keep the plumb_bob k3 at 0 (few views or a narrow lens)
+  int min_views = 6;      ///< fewer usable views (after dropping) is an error
+  int min_points = 6;     ///< a view needs at least this many points seen in both images
+  double alpha = 0.0;     ///< stereoRectify free scaling: 0 = only valid pixels (ROS default), 1 = all
+  bool rational = false;  ///< rational_polynomial (8 coefficients) instead of plumb_bob (5)
+  bool fix_k3 = false;    ///< keep the plumb_bob k3 at 0 (few views or a narrow lens)
 };
 
 struct ViewReport {
   std::string name;
-  int points = 0;          ///< points seen in both images
-  double rms_left = 0.0;   ///< reprojection RMS in the left image, px (last calibration it was in)
+  int points = 0;         ///< points seen in both images
+  double rms_left = 0.0;  ///< reprojection RMS in the left image, px (last calibration it was in)
   double rms_right = 0.0;
-  double epipolar_rms = 0.0;   ///< |y_left - y_right| RMS of its points after rectification, px (kept views)
+  double epipolar_rms = 0.0;  ///< |y_left - y_right| RMS of its points after rectification, px (kept views)
   bool dropped = false;
-  std::string why;         ///< why it was dropped (empty if kept)
+  std::string why;  ///< why it was dropped (empty if kept)
 };
 
 struct StereoCalibrateResult {
-  StereoCalibration calibration;   ///< the camera_info pair (K, D, R = R1/R2, P = P1/P2)
-  cv::Matx33d R;                   ///< p_R = R p_L + T (stereoCalibrate)
-  cv::Vec3d T;                     ///< metres
-  double rms = 0.0;                ///< joint reprojection RMS of the kept views, px (stereoCalibrate's)
-  double epipolar_rms = 0.0;       ///< |y_L - y_R| over every kept point after rectification, px
+  StereoCalibration calibration;  ///< the camera_info pair (K, D, R = R1/R2, P = P1/P2)
+  cv::Matx33d R;                  ///< p_R = R p_L + T (stereoCalibrate)
+  cv::Vec3d T;                    ///< metres
+  double rms = 0.0;               ///< joint reprojection RMS of the kept views, px (stereoCalibrate's)
+  double epipolar_rms = 0.0;      ///< |y_L - y_R| over every kept point after rectification, px
   double epipolar_max = 0.0;
-  int rounds = 0;                  ///< calibrations run (1 + rounds that dropped views)
-  std::vector<ViewReport> views;   ///< every view given, in order, kept or dropped
+  int rounds = 0;                 ///< calibrations run (1 + rounds that dropped views)
+  std::vector<ViewReport> views;  ///< every view given, in order, kept or dropped
 };
 
 /// Progress and round messages ("round 2: dropped pair_07 (2.31 px > 3 x median 0.12 px)").
@@ -233,10 +233,10 @@ struct MountViewReport {
 };
 
 struct MountResult {
-  cv::Matx33d R_H_C;       ///< left optical frame in the head frame
-  cv::Vec3d p_H_C;         ///< metres
-  double rms = 0.0;        ///< residual RMS of the kept views, metres
-  double max = 0.0;        ///< largest kept residual, metres
+  cv::Matx33d R_H_C;  ///< left optical frame in the head frame
+  cv::Vec3d p_H_C;    ///< metres
+  double rms = 0.0;   ///< residual RMS of the kept views, metres
+  double max = 0.0;   ///< largest kept residual, metres
   int rounds = 0;
   std::vector<MountViewReport> views;
 };

@@ -73,10 +73,10 @@ struct PipelineOptions {
 struct ObjectObservation {
   int tag_id = -1;
   std::string name;
-  cv::Vec3d p_C;             ///< tag centre, left optical frame, metres
-  cv::Vec3d p_B;             ///< tag centre, robot base frame, metres
-  cv::Vec3d nhat_C;          ///< unit normal of the tag plane, pointing from the tag towards the camera
-  double confidence = 0.0;   ///< product of the margin, epipolar and size cues (see computeConfidence)
+  cv::Vec3d p_C;                 ///< tag centre, left optical frame, metres
+  cv::Vec3d p_B;                 ///< tag centre, robot base frame, metres
+  cv::Vec3d nhat_C;              ///< unit normal of the tag plane, pointing from the tag towards the camera
+  double confidence = 0.0;       ///< product of the margin, epipolar and size cues (see computeConfidence)
   double decision_margin = 0.0;  ///< smaller of the two images' AprilTag decision margins
   double epipolar_px = 0.0;      ///< mean |v_L - v_R| over the four corners
   double disparity_px = 0.0;     ///< mean disparity of the four corners
@@ -100,11 +100,11 @@ enum class FrameStatus { kOk, kSkipped };
 
 struct StereoResult {
   FrameStatus status = FrameStatus::kOk;
-  std::string message;                    ///< why a frame was skipped
-  std::vector<ObjectObservation> objects; ///< sorted by tag id
-  std::vector<TagDetection> left, right;  ///< all accepted detections, rectified pixel coordinates
-  int unknown_tags = 0;                   ///< matched ids absent from the object map (not reported)
-  int rejected = 0;                       ///< mapped tags rejected (epipolar, disparity, size, duplicate)
+  std::string message;                     ///< why a frame was skipped
+  std::vector<ObjectObservation> objects;  ///< sorted by tag id
+  std::vector<TagDetection> left, right;   ///< all accepted detections, rectified pixel coordinates
+  int unknown_tags = 0;                    ///< matched ids absent from the object map (not reported)
+  int rejected = 0;                        ///< mapped tags rejected (epipolar, disparity, size, duplicate)
 };
 
 class StereoTagPipeline {

@@ -56,11 +56,11 @@ class TagFamily {
 
 struct DetectorOptions {
   std::string family = "tag36h11";
-  double decimate = 1.0;        ///< quad_decimate (>= 1); corners are refined at full resolution
-  int threads = 1;              ///< libapriltag worker threads of one detector (1..64; only 1 if !apriltagWorkerPoolIsSafe())
-  double blur_sigma = 0.0;      ///< quad_sigma (>= 0)
+  double decimate = 1.0;  ///< quad_decimate (>= 1); corners are refined at full resolution
+  int threads = 1;        ///< libapriltag worker threads of one detector (1..64; only 1 if !apriltagWorkerPoolIsSafe())
+  double blur_sigma = 0.0;  ///< quad_sigma (>= 0)
   bool refine_edges = true;
-  int max_hamming = 1;          ///< detections with more corrected bits are dropped (0..2)
+  int max_hamming = 1;                ///< detections with more corrected bits are dropped (0..2)
   double min_decision_margin = 20.0;  ///< detections below this margin are dropped (>= 0)
 };
 

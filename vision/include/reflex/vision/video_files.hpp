@@ -29,10 +29,10 @@
 namespace reflex::vision {
 
 struct VideoFilesSpec {
-  std::string left;           ///< left video, or the side-by-side video
-  std::string right;          ///< right video; empty for a side-by-side video
-  std::string timestamps;     ///< timestamps CSV, or empty
-  double fps = 0.0;           ///< > 0: stamp i = i / fps; 0: unset (the CSV's stamps or the video's rate)
+  std::string left;        ///< left video, or the side-by-side video
+  std::string right;       ///< right video; empty for a side-by-side video
+  std::string timestamps;  ///< timestamps CSV, or empty
+  double fps = 0.0;        ///< > 0: stamp i = i / fps; 0: unset (the CSV's stamps or the video's rate)
   bool side_by_side() const { return right.empty(); }
 };
 
@@ -66,8 +66,8 @@ class VideoFilesReader {
 };
 
 struct ImportStats {
-  int frames = 0;             ///< pairs written
-  double first_stamp = 0.0;   ///< seconds, session clock
+  int frames = 0;            ///< pairs written
+  double first_stamp = 0.0;  ///< seconds, session clock
   double last_stamp = 0.0;
   double wall_seconds = 0.0;  ///< time the import took
   bool stopped = false;       ///< ended by the stop flag before the end of the videos

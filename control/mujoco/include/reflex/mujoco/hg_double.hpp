@@ -32,8 +32,8 @@ struct HgDoubleCounts {
   std::uint64_t states = 0;
   std::uint64_t accepted = 0;
   std::uint64_t rejected_crc = 0, rejected_weight = 0, rejected_not_finite = 0, rejected_size = 0;
-  double max_weight_step = 0.0;   ///< between two accepted commands
-  double weight = 0.0;            ///< of the last accepted command
+  double max_weight_step = 0.0;  ///< between two accepted commands
+  double weight = 0.0;           ///< of the last accepted command
   std::uint64_t rejected() const { return rejected_crc + rejected_weight + rejected_not_finite + rejected_size; }
 };
 
@@ -41,7 +41,8 @@ class HgDouble {
  public:
   /// Reads and resolves the joint map against `model` (throws control::ConfigError naming it), makes
   /// the writer of rt/lowstate and the reader of rt/arm_sdk on `bus`. own: the start configuration.
-  HgDouble(const control::Model& model, const std::string& joint_map, const Eigen::VectorXd& own, bus::Participant& bus);
+  HgDouble(const control::Model& model, const std::string& joint_map, const Eigen::VectorXd& own,
+           bus::Participant& bus);
 
   /// Takes every rt/arm_sdk sample and offers the robot this period's servo targets. No allocation
   /// once the first offer was made.

@@ -60,11 +60,11 @@ struct MjcfOptions {
   // Servo design (servoGains): a critically damped PD servo of bandwidth `bandwidth` on the joint's
   // inertia at the zero configuration, kp = I w^2, kd = 2 I w.
   double limb_bandwidth_hz = 10.0;
-  double limb_armature = 0.01;     ///< [kg m^2]: a small motor through a 100:1 gear
-  double limb_damping = 0.1;       ///< [N m s/rad] passive joint friction
-  double limb_effort = 100.0;      ///< [N m] torque limit (the shipped URDFs' effort attribute)
+  double limb_armature = 0.01;  ///< [kg m^2]: a small motor through a 100:1 gear
+  double limb_damping = 0.1;    ///< [N m s/rad] passive joint friction
+  double limb_effort = 100.0;   ///< [N m] torque limit (the shipped URDFs' effort attribute)
   double base_bandwidth_hz = 10.0;
-  double base_effort = 5000.0;     ///< [N or N m]: must carry the whole robot (virtual joints)
+  double base_effort = 5000.0;  ///< [N or N m]: must carry the whole robot (virtual joints)
 };
 
 /// The class of every q index (see JointClass).

@@ -71,8 +71,8 @@ enum class CommandVerdict {
   kLengthMismatch,  ///< names, positions, velocities of different lengths
   kUnknownName,     ///< a name that is not a movable joint of this robot
   kDuplicateName,
-  kNotFinite,       ///< a NaN or infinite position or velocity
-  kExpired,         ///< valid_until_ns already passed on arrival
+  kNotFinite,  ///< a NaN or infinite position or velocity
+  kExpired,    ///< valid_until_ns already passed on arrival
 };
 const char* verdictName(CommandVerdict v);
 
@@ -91,9 +91,9 @@ struct CommandCounters {
 
 /// What the robot measured at the end of the last step() (sized from the Model: q index order).
 struct RobotMeasurement {
-  Eigen::VectorXd q, qdot, effort;   ///< [rad|m], [rad/s|m/s], actuator force [N m|N]
-  std::vector<SegmentContact> contacts;  ///< capacity reserved; pairs below the margin now
-  std::uint64_t applied_command_seq = 0; ///< 0 while holding
+  Eigen::VectorXd q, qdot, effort;        ///< [rad|m], [rad/s|m/s], actuator force [N m|N]
+  std::vector<SegmentContact> contacts;   ///< capacity reserved; pairs below the margin now
+  std::uint64_t applied_command_seq = 0;  ///< 0 while holding
   bool holding = true;
   std::uint64_t steps = 0;           ///< physics steps since start
   std::uint64_t contact_steps = 0;   ///< physics steps whose collision detection reported a pair
@@ -146,7 +146,7 @@ class MujocoRobot {
   std::vector<int> qpos_adr_, dof_adr_, actuator_;  // per q index
   std::vector<int> geom_segment_;                   // per MuJoCo geom: Model segment index or -1
   std::unordered_map<std::string, int> q_of_name_;
-  std::vector<int> command_q_;            // q index per name of the last accepted name list
+  std::vector<int> command_q_;  // q index per name of the last accepted name list
   std::vector<std::string> command_names_;
   Eigen::VectorXd q_target_, qdot_target_, q_ref_, qdot_ref_;
   std::int64_t valid_until_ns_ = 0;

@@ -27,11 +27,11 @@ namespace reflex::mujoco {
 
 struct NodeConfig {
   std::string urdf;
-  std::string collision;                 ///< empty: next to the URDF
-  std::vector<std::string> initial;      ///< "joint=value" (rad or m); other joints 0 (or nearest limit)
-  double period = 0.001;                 ///< [s] state publication and command intake period
-  MjcfOptions mjcf;                      ///< timestep (period must be a whole multiple), margin (d_r), gains
-  double duration = 0.0;                 ///< [s] wall time to run; 0: until stopped
+  std::string collision;             ///< empty: next to the URDF
+  std::vector<std::string> initial;  ///< "joint=value" (rad or m); other joints 0 (or nearest limit)
+  double period = 0.001;             ///< [s] state publication and command intake period
+  MjcfOptions mjcf;                  ///< timestep (period must be a whole multiple), margin (d_r), gains
+  double duration = 0.0;             ///< [s] wall time to run; 0: until stopped
   std::optional<int> domain_id;
   /// UDP only by default, like reflex_controller and as idl/README.md asks of every robot driver: a
   /// dead shared-memory reader stalls a Fast DDS 2.9 writer for the port health check (about 1 s).
@@ -46,9 +46,9 @@ struct NodeConfig {
 struct NodeStats {
   std::uint64_t periods = 0, overruns = 0, lost_periods = 0, states_published = 0;
   double max_lateness_us = 0.0;
-  std::uint64_t contact_periods = 0;          ///< published states with at least one contact
-  std::vector<SegmentContact> worst_contacts; ///< the smallest distance seen per pair (names via model)
-  std::vector<double> command_latency_us;     ///< per accepted command: arrival - state_stamp_ns (first 1e6)
+  std::uint64_t contact_periods = 0;           ///< published states with at least one contact
+  std::vector<SegmentContact> worst_contacts;  ///< the smallest distance seen per pair (names via model)
+  std::vector<double> command_latency_us;      ///< per accepted command: arrival - state_stamp_ns (first 1e6)
 };
 
 class RobotNode {

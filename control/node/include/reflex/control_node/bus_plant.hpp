@@ -37,22 +37,22 @@
 namespace reflex::control_node {
 
 struct BusPlantOptions {
-  int domain = 0;                 ///< DDS domain id (the spawned robot's too)
-  std::string robot_binary;       ///< reflex_mujoco to spawn; empty: attach to a robot already on the bus
+  int domain = 0;                       ///< DDS domain id (the spawned robot's too)
+  std::string robot_binary;             ///< reflex_mujoco to spawn; empty: attach to a robot already on the bus
   std::vector<std::string> robot_args;  ///< extra arguments for the spawned robot (--urdf, --collision ...)
-  std::string robot_log;          ///< the spawned robot's stdout + stderr (file, truncated)
-  Eigen::VectorXd q_start;        ///< the spawned robot's start configuration (nq; passed as --q joint=value)
-  double margin = 0.005;          ///< the spawned robot's contact margin (d_r, m)
-  double first_state_timeout = 30.0;  ///< s to wait for the robot's first state
-  double warmup = 0.5;            ///< s of holding the first measured configuration before the scenario
-  DdsRobotPort::Options port;     ///< robot-state timeout, command deadline
+  std::string robot_log;                ///< the spawned robot's stdout + stderr (file, truncated)
+  Eigen::VectorXd q_start;              ///< the spawned robot's start configuration (nq; passed as --q joint=value)
+  double margin = 0.005;                ///< the spawned robot's contact margin (d_r, m)
+  double first_state_timeout = 30.0;    ///< s to wait for the robot's first state
+  double warmup = 0.5;                  ///< s of holding the first measured configuration before the scenario
+  DdsRobotPort::Options port;           ///< robot-state timeout, command deadline
   /// The robot's interface: "dds" (reflex/robot_state, reflex/joint_command) or "unitree_hg"
   /// (rt/lowstate, rt/arm_sdk through UnitreeHgPort with `joint_map`; a spawned reflex_mujoco gets
   /// --interface unitree_hg --joint-map too). With unitree_hg the time between two states is the
   /// difference of their ticks, taken as milliseconds (reflex_mujoco's tick; LowState_ has no stamp).
   std::string interface = "dds";
   std::string joint_map;
-  double ramp_time = 3.0;         ///< s, the arm_sdk weight's ramp (unitree_hg)
+  double ramp_time = 3.0;  ///< s, the arm_sdk weight's ramp (unitree_hg)
 };
 
 class BusScenarioPlant final : public control::ScenarioPlant {
@@ -92,7 +92,9 @@ class BusScenarioPlant final : public control::ScenarioPlant {
   double minContact() const { return min_contact_; }
   const std::string& minContactPair() const { return min_contact_pair_; }
   std::uint64_t totalContactSteps() const { return total_contact_steps_; }
-  const char* description() const { return options_.robot_binary.empty() ? "dds" : hg_ ? "mujoco (unitree_hg)" : "mujoco"; }
+  const char* description() const {
+    return options_.robot_binary.empty() ? "dds" : hg_ ? "mujoco (unitree_hg)" : "mujoco";
+  }
 
  private:
   void poll() noexcept;

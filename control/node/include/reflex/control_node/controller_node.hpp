@@ -80,10 +80,10 @@ class ControllerProtection;
 namespace reflex::control_node {
 
 struct NodeConfig {
-  std::string urdf;                  ///< robot description
-  std::string collision;             ///< collision configuration ("" = next to the URDF)
-  std::string controller;            ///< controller YAML ("" = <stem>.controller.yaml beside the URDF, else defaults)
-  std::string profiles_file;         ///< DDS profiles ("" = bus defaults)
+  std::string urdf;           ///< robot description
+  std::string collision;      ///< collision configuration ("" = next to the URDF)
+  std::string controller;     ///< controller YAML ("" = <stem>.controller.yaml beside the URDF, else defaults)
+  std::string profiles_file;  ///< DDS profiles ("" = bus defaults)
   /// UDP only by default: on Fast DDS 2.9's shared memory, a reader process killed at
   /// the wrong moment (a recorder, a view) stalls every write of this participant for 1-3 s (the
   /// port health check), so the robot and every module lost the controller's outputs meanwhile.
@@ -100,7 +100,7 @@ struct NodeConfig {
   /// s to look for another controller on the domain before the loop starts (>= 0; 0: no wait, the
   /// run-time detection still reports one).
   double peer_probe = 1.0;
-  std::string log_csv;               ///< stream the time series (reflex_sim's format) to this file
+  std::string log_csv;  ///< stream the time series (reflex_sim's format) to this file
   /// Joint positions of the simulated robot, kept across controller restarts ("" = none: start from
   /// rest). Loaded at start, written every cycle; see robot_state_file.hpp for format and policy.
   std::string robot_state;
@@ -143,29 +143,31 @@ struct NodeStats {
   double max_lateness_us = 0.0;
   double min_distance = msg::NO_PAIR_DISTANCE;  ///< physical pairs, over the run (m)
   std::uint64_t estop_count = 0;
-  std::uint64_t guard_count = 0;      ///< cycles whose step the predictive guard shortened
+  std::uint64_t guard_count = 0;  ///< cycles whose step the predictive guard shortened
   std::uint64_t targets_received = 0;
-  std::uint64_t targets_rejected = 0;   ///< every refused hand target, body-schema change and walk command
+  std::uint64_t targets_rejected = 0;  ///< every refused hand target, body-schema change and walk command
   std::array<std::uint64_t, control::kRejectCauses> rejected{};  ///< the same per control::RejectCause
-  std::uint64_t stale_events = 0;     ///< transitions to "inputs stale"
-  std::uint64_t state_write_errors = 0;  ///< failed writes of the robot state file
-  std::vector<double> lateness_us;    ///< per cycle (for percentiles), reserved up front
+  std::uint64_t stale_events = 0;                                ///< transitions to "inputs stale"
+  std::uint64_t state_write_errors = 0;                          ///< failed writes of the robot state file
+  std::vector<double> lateness_us;                               ///< per cycle (for percentiles), reserved up front
   std::uint64_t peer_controller_samples = 0;  ///< protection samples of ANOTHER controller seen while running
-  std::uint64_t log_rows = 0;         ///< --log rows written
-  std::uint64_t log_dropped = 0;      ///< --log rows dropped (the writer could not keep up)
+  std::uint64_t log_rows = 0;                 ///< --log rows written
+  std::uint64_t log_dropped = 0;              ///< --log rows dropped (the writer could not keep up)
   // The robot side (--robot dds; zero with the kinematic plant).
-  std::uint64_t robot_stale_events = 0;    ///< transitions to "no fresh robot state" (the first missing state counts)
-  std::uint64_t robot_stale_cycles = 0;    ///< cycles that computed and commanded nothing for lack of state
+  std::uint64_t robot_stale_events = 0;  ///< transitions to "no fresh robot state" (the first missing state counts)
+  std::uint64_t robot_stale_cycles = 0;  ///< cycles that computed and commanded nothing for lack of state
   bool robot_stale_at_exit = false;
   std::uint64_t robot_states_accepted = 0;
   std::uint64_t robot_states_rejected = 0;  ///< wrong lengths, a missing joint, NaN, a future or old stamp,
                                             ///< a name twice, outside the limits, another writer's
-  std::array<std::uint64_t, kRobotStateCauses> robot_states_rejected_by_cause{};  ///< the same per cause (robotStateCauseName)
-  std::uint64_t robot_writer_changes = 0;   ///< a silent robot writer replaced by a new one
-  double arm_sdk_weight = -1.0;             ///< --robot unitree_hg: the arm_sdk weight last sent (-1: other robots)
-  double arm_sdk_max_weight_step = 0.0;     ///< --robot unitree_hg: its largest change between two commands
-  const char* last_rejection = "";          ///< the latest refusal's cause name ("" none), as in ControlStatus
-  std::uint64_t robot_commands = 0;         ///< JointCommand samples handed to the bus (queued for the outbox's writer thread; its drops are in bus_dropped)
+  std::array<std::uint64_t, kRobotStateCauses>
+      robot_states_rejected_by_cause{};    ///< the same per cause (robotStateCauseName)
+  std::uint64_t robot_writer_changes = 0;  ///< a silent robot writer replaced by a new one
+  double arm_sdk_weight = -1.0;            ///< --robot unitree_hg: the arm_sdk weight last sent (-1: other robots)
+  double arm_sdk_max_weight_step = 0.0;    ///< --robot unitree_hg: its largest change between two commands
+  const char* last_rejection = "";         ///< the latest refusal's cause name ("" none), as in ControlStatus
+  std::uint64_t robot_commands =
+      0;  ///< JointCommand samples handed to the bus (queued for the outbox's writer thread; its drops are in bus_dropped)
   // The loop's bus outputs (joint state, status, heartbeat, joint commands), written by the outbox's thread
   // (reflex/bus/outbox.hpp): what reached the middleware, what it refused, what a full ring dropped, and
   // the writes that blocked (longer than 50 ms; the loop never waits for them).

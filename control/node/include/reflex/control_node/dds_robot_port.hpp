@@ -58,9 +58,10 @@ class DdsRobotPort final : public NamedJointPort {
   static constexpr double kFutureTolerance = JointStateIntake::kFutureTolerance;
 
   struct Options {
-    double timeout = 0.050;   ///< s: a newest state older than this is stale (--robot-timeout; NodeConfig says why 50 ms)
-    double deadline = 0.015;  ///< s: valid_until_ns = now + this (--command-deadline)
-    double period = 0.005;    ///< s: the control period (the limit tolerance is v_max * period)
+    double timeout =
+        0.050;  ///< s: a newest state older than this is stale (--robot-timeout; NodeConfig says why 50 ms)
+    double deadline = 0.015;      ///< s: valid_until_ns = now + this (--command-deadline)
+    double period = 0.005;        ///< s: the control period (the limit tolerance is v_max * period)
     double rebind_silence = 1.0;  ///< s the bound robot writer must be silent before another may replace it
     /// Under DDS-Security: the identities of the bus (the port binds only a writer authenticated as
     /// "robot"); nullptr on plain DDS (the first writer is bound).
@@ -74,7 +75,8 @@ class DdsRobotPort final : public NamedJointPort {
 
   /// Makes the reader and the writer on `bus` (throws bus::BusError naming the entity). `driven`: the
   /// q indices the controller commands (OnboardController::drivenJoints()).
-  DdsRobotPort(const control::Model& model, const std::vector<int>& driven, bus::Participant& bus, const Options& options);
+  DdsRobotPort(const control::Model& model, const std::vector<int>& driven, bus::Participant& bus,
+               const Options& options);
 
   /// Takes every state that arrived since the last call (once per cycle, before step()). Returns the
   /// number of samples rejected by this call; lastRejection() names the last one.

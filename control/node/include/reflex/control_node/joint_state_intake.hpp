@@ -58,15 +58,15 @@ class JointStateIntake {
 
   struct Counts {
     std::uint64_t accepted = 0;
-    std::uint64_t rejected_length = 0;       ///< names / positions / velocities / efforts lengths differ
-    std::uint64_t rejected_missing = 0;      ///< a model joint is not in the state
-    std::uint64_t rejected_non_finite = 0;   ///< NaN / Inf position or velocity of a model joint
-    std::uint64_t rejected_future = 0;       ///< stamp ahead of this host's clock by more than kFutureTolerance
-    std::uint64_t rejected_old = 0;          ///< not newer than the state held (reordered or repeated)
-    std::uint64_t rejected_duplicate = 0;    ///< a joint name listed twice
-    std::uint64_t rejected_limits = 0;       ///< a model joint's position outside its limits (+ tolerance)
-    std::uint64_t rejected_other_writer = 0; ///< from a writer other than the bound robot writer (ignored)
-    std::uint64_t writer_changes = 0;        ///< a silent bound writer replaced by a new one
+    std::uint64_t rejected_length = 0;        ///< names / positions / velocities / efforts lengths differ
+    std::uint64_t rejected_missing = 0;       ///< a model joint is not in the state
+    std::uint64_t rejected_non_finite = 0;    ///< NaN / Inf position or velocity of a model joint
+    std::uint64_t rejected_future = 0;        ///< stamp ahead of this host's clock by more than kFutureTolerance
+    std::uint64_t rejected_old = 0;           ///< not newer than the state held (reordered or repeated)
+    std::uint64_t rejected_duplicate = 0;     ///< a joint name listed twice
+    std::uint64_t rejected_limits = 0;        ///< a model joint's position outside its limits (+ tolerance)
+    std::uint64_t rejected_other_writer = 0;  ///< from a writer other than the bound robot writer (ignored)
+    std::uint64_t writer_changes = 0;         ///< a silent bound writer replaced by a new one
     std::uint64_t rejected() const {
       return rejected_length + rejected_missing + rejected_non_finite + rejected_future + rejected_old +
              rejected_duplicate + rejected_limits + rejected_other_writer;
@@ -118,7 +118,7 @@ class JointStateIntake {
   bool candidate_ok_ = false;
   char bound_text_[64] = {};
   char other_text_[64] = {};
-  Eigen::VectorXd q_;                     ///< the newest accepted measured positions (model order)
+  Eigen::VectorXd q_;  ///< the newest accepted measured positions (model order)
   bool have_state_ = false;
   std::uint64_t state_seq_ = 0;
   std::int64_t state_stamp_ns_ = 0;
@@ -148,8 +148,17 @@ class NamedJointPort : public BusRobotPort {
   std::uint64_t writerChanges() const override { return intake_.counts().writer_changes; }
   CauseCounts rejectedByCause() const override {
     const JointStateIntake::Counts& c = intake_.counts();
-    return {c.rejected_length, c.rejected_missing, c.rejected_non_finite, c.rejected_future, c.rejected_old,
-            c.rejected_duplicate, c.rejected_limits, c.rejected_other_writer, 0, 0, 0};
+    return {c.rejected_length,
+            c.rejected_missing,
+            c.rejected_non_finite,
+            c.rejected_future,
+            c.rejected_old,
+            c.rejected_duplicate,
+            c.rejected_limits,
+            c.rejected_other_writer,
+            0,
+            0,
+            0};
   }
 
  protected:

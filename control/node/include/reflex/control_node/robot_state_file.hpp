@@ -62,8 +62,8 @@ class RobotStateFile {
   /// Opens or creates `path` for a robot with these joints and limits and reads the saved state.
   /// Throws RobotStateError naming the file on an I/O error, a lock held by another process, or
   /// content that is not a valid state of this robot (see the policy above).
-  RobotStateFile(const std::string& path, const std::vector<std::string>& q_names,
-                 const Eigen::VectorXd& q_lower, const Eigen::VectorXd& q_upper);
+  RobotStateFile(const std::string& path, const std::vector<std::string>& q_names, const Eigen::VectorXd& q_lower,
+                 const Eigen::VectorXd& q_upper);
   ~RobotStateFile();
   RobotStateFile(const RobotStateFile&) = delete;
   RobotStateFile& operator=(const RobotStateFile&) = delete;

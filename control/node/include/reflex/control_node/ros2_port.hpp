@@ -43,13 +43,13 @@ namespace reflex::control_node {
 class Ros2RobotPort final : public NamedJointPort {
  public:
   struct Options {
-    double timeout = 0.050;           ///< s without an accepted state before the state is stale
-    double period = 0.005;            ///< s: the control period (limit tolerance v_max * period)
-    double rebind_silence = 1.0;      ///< s the bound writer must be silent before another may replace it
-    std::string state_topic = "joint_states";          ///< ROS topic of the JointState
-    std::string command = "forward";                    ///< "forward" or "trajectory"
-    std::string controller;           ///< ros2_control controller name ("": the default of `command`)
-    std::vector<std::string> joints;  ///< the controller's joints in its order (empty: those Reflex drives)
+    double timeout = 0.050;                    ///< s without an accepted state before the state is stale
+    double period = 0.005;                     ///< s: the control period (limit tolerance v_max * period)
+    double rebind_silence = 1.0;               ///< s the bound writer must be silent before another may replace it
+    std::string state_topic = "joint_states";  ///< ROS topic of the JointState
+    std::string command = "forward";           ///< "forward" or "trajectory"
+    std::string controller;                    ///< ros2_control controller name ("": the default of `command`)
+    std::vector<std::string> joints;           ///< the controller's joints in its order (empty: those Reflex drives)
   };
 
   /// Makes the reader and the writer on `bus`. Throws control::ConfigError for an unknown command kind

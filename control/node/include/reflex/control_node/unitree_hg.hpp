@@ -33,12 +33,12 @@ namespace reflex::unitree_hg {
 using LowCmd = ::unitree_hg::msg::dds_::LowCmd_;
 using LowState = ::unitree_hg::msg::dds_::LowState_;
 
-inline constexpr int kMotors = 35;             ///< motor slots of LowCmd_ / LowState_
-inline constexpr int kWeightSlot = 29;         ///< rt/arm_sdk: motor_cmd[29].q is the weight in [0, 1]
-inline constexpr int kArmSdkFirst = 12;        ///< rt/arm_sdk: the weight blends motors 12..28 (waist, arms)
+inline constexpr int kMotors = 35;       ///< motor slots of LowCmd_ / LowState_
+inline constexpr int kWeightSlot = 29;   ///< rt/arm_sdk: motor_cmd[29].q is the weight in [0, 1]
+inline constexpr int kArmSdkFirst = 12;  ///< rt/arm_sdk: the weight blends motors 12..28 (waist, arms)
 inline constexpr int kArmSdkLast = 28;
-inline constexpr std::size_t kLowCmdBytes = 1004;    ///< sizeof the SDK's LowCmd_
-inline constexpr std::size_t kLowStateBytes = 2092;  ///< sizeof the SDK's LowState_
+inline constexpr std::size_t kLowCmdBytes = 1004;                         ///< sizeof the SDK's LowCmd_
+inline constexpr std::size_t kLowStateBytes = 2092;                       ///< sizeof the SDK's LowState_
 inline constexpr std::size_t kLowCmdCrcWords = kLowCmdBytes / 4 - 1;      ///< 250
 inline constexpr std::size_t kLowStateCrcWords = kLowStateBytes / 4 - 1;  ///< 522
 inline constexpr const char* kStateTopic = "rt/lowstate";
@@ -53,8 +53,8 @@ struct MotorCmdOffsets {
   static constexpr std::size_t mode = 0, q = 4, dq = 8, tau = 12, kp = 16, kd = 20, reserve = 24, size = 28;
 };
 struct MotorStateOffsets {
-  static constexpr std::size_t mode = 0, q = 4, dq = 8, ddq = 12, tau_est = 16, temperature = 20, vol = 24,
-                               sensor = 28, motorstate = 36, reserve = 40, size = 56;
+  static constexpr std::size_t mode = 0, q = 4, dq = 8, ddq = 12, tau_est = 16, temperature = 20, vol = 24, sensor = 28,
+                               motorstate = 36, reserve = 40, size = 56;
 };
 struct ImuOffsets {
   static constexpr std::size_t quaternion = 0, gyroscope = 16, accelerometer = 28, rpy = 40, temperature = 52,
@@ -65,9 +65,8 @@ struct LowCmdOffsets {
                                size = kLowCmdBytes;
 };
 struct LowStateOffsets {
-  static constexpr std::size_t version = 0, mode_pr = 8, mode_machine = 9, tick = 12, imu_state = 16,
-                               motor_state = 72, wireless_remote = 2032, reserve = 2072, crc = 2088,
-                               size = kLowStateBytes;
+  static constexpr std::size_t version = 0, mode_pr = 8, mode_machine = 9, tick = 12, imu_state = 16, motor_state = 72,
+                               wireless_remote = 2032, reserve = 2072, crc = 2088, size = kLowStateBytes;
 };
 
 /// Crc32Core over `count` 32-bit words (see the header). No allocation.
@@ -114,21 +113,21 @@ extern std::atomic<std::uint64_t> g_undecodable_low_cmds;
 // ---- the joint map
 
 struct HgMotor {
-  int motor = -1;           ///< slot 0..34 (never 29, the arm_sdk weight)
-  std::string joint;        ///< URDF joint name
-  bool has_gains = false;   ///< kp and kd given (required for a motor Reflex commands)
-  double kp = 0.0;          ///< N m/rad, sent in MotorCmd_.kp
-  double kd = 0.0;          ///< N m s/rad, sent in MotorCmd_.kd
+  int motor = -1;          ///< slot 0..34 (never 29, the arm_sdk weight)
+  std::string joint;       ///< URDF joint name
+  bool has_gains = false;  ///< kp and kd given (required for a motor Reflex commands)
+  double kp = 0.0;         ///< N m/rad, sent in MotorCmd_.kp
+  double kd = 0.0;         ///< N m s/rad, sent in MotorCmd_.kd
 };
 
 struct HgFixedJoint {
   std::string joint;
-  double value = 0.0;       ///< rad or m, reported for this joint in every state
+  double value = 0.0;  ///< rad or m, reported for this joint in every state
 };
 
 struct HgJointMap {
-  std::string source;       ///< the file it was read from
-  std::string robot;        ///< free text ("g1_29dof")
+  std::string source;               ///< the file it was read from
+  std::string robot;                ///< free text ("g1_29dof")
   std::vector<HgMotor> motors;      ///< in file order
   std::vector<HgFixedJoint> fixed;  ///< in file order
 };
@@ -146,10 +145,10 @@ HgJointMap loadHgJointMapFromString(const std::string& text, const std::string& 
 /// and the joint: a name the model does not have ("unknown joint"), a model joint neither mapped nor
 /// fixed, a fixed value outside the joint's limits.
 struct HgResolvedMap {
-  std::array<int, kMotors> q_of_motor{};   ///< q index per slot, -1 unmapped
-  std::vector<int> motor_of_q;             ///< slot per q index, -1 for a fixed joint
-  std::vector<double> fixed_value;         ///< per q index (used where motor_of_q is -1)
-  std::array<float, kMotors> kp{}, kd{};   ///< per slot (0 where no gains)
+  std::array<int, kMotors> q_of_motor{};  ///< q index per slot, -1 unmapped
+  std::vector<int> motor_of_q;            ///< slot per q index, -1 for a fixed joint
+  std::vector<double> fixed_value;        ///< per q index (used where motor_of_q is -1)
+  std::array<float, kMotors> kp{}, kd{};  ///< per slot (0 where no gains)
   std::array<bool, kMotors> has_gains{};
 };
 HgResolvedMap resolveHgJointMap(const HgJointMap& map, const control::Model& model);
@@ -168,8 +167,8 @@ struct TopicTraits<unitree_hg::LowState> {
 
 template <>
 struct TopicTraits<unitree_hg::LowCmd> {
-  using PubSubType = unitree_hg::CountingPubSubType<::unitree_hg::msg::dds_::LowCmd_PubSubType,
-                                                    unitree_hg::g_undecodable_low_cmds>;
+  using PubSubType =
+      unitree_hg::CountingPubSubType<::unitree_hg::msg::dds_::LowCmd_PubSubType, unitree_hg::g_undecodable_low_cmds>;
   static constexpr const char* kTopicName = unitree_hg::kArmSdkTopic;
   static constexpr const char* kProfile = unitree_hg::kProfile;
 };

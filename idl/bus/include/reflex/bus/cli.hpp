@@ -16,8 +16,8 @@ namespace reflex::bus {
 
 /// --domain / --profiles / --participant-profile as given on a command line.
 struct BusOptions {
-  std::string domain;   ///< as typed; empty: not given ($REFLEX_DOMAIN_ID, else 0)
-  std::string profiles; ///< empty: not given ($FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped file)
+  std::string domain;    ///< as typed; empty: not given ($REFLEX_DOMAIN_ID, else 0)
+  std::string profiles;  ///< empty: not given ($FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped file)
   std::string participant_profile = "reflex_participant";
 
   /// Adds the options to `app`. `participant_note` (if not empty) is added to --participant-profile's
@@ -37,9 +37,9 @@ struct BusOptions {
               }
             },
             "DOMAIN"));
-    app.add_option("--profiles", profiles,
-                   "DDS QoS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else " +
-                       common::defaultProfilesFile() + ")");
+    app.add_option(
+        "--profiles", profiles,
+        "DDS QoS profiles XML (default: $FASTRTPS_DEFAULT_PROFILES_FILE, else " + common::defaultProfilesFile() + ")");
     if (with_participant_profile) {
       app.add_option("--participant-profile", participant_profile,
                      "participant profile in the profiles XML" +

@@ -22,8 +22,7 @@ class HeartbeatPublisher {
   /// Makes the heartbeat writer, publishes STATE_CONFIGURING at once, and registers a timer that
   /// republishes the current state every `period` inside bus.run(). Throws BusError if `period` is
   /// not positive or not shorter than the writer's liveliness lease (it would be declared dead).
-  explicit HeartbeatPublisher(Participant& bus,
-                              std::chrono::milliseconds period = std::chrono::milliseconds(500));
+  explicit HeartbeatPublisher(Participant& bus, std::chrono::milliseconds period = std::chrono::milliseconds(500));
   HeartbeatPublisher(const HeartbeatPublisher&) = delete;
   HeartbeatPublisher& operator=(const HeartbeatPublisher&) = delete;
 

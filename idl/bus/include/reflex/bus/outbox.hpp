@@ -83,8 +83,7 @@ class OutboxQueueBase {
 template <class T>
 class OutboxQueue final : public detail::OutboxQueueBase {
  public:
-  OutboxQueue(Writer<T>& writer, std::size_t capacity, const T& prototype,
-              const std::function<void(T&)>& reserve)
+  OutboxQueue(Writer<T>& writer, std::size_t capacity, const T& prototype, const std::function<void(T&)>& reserve)
       : writer_(writer), ring_(capacity, prototype) {
     if (reserve)
       for (T& slot : ring_) reserve(slot);

@@ -82,22 +82,22 @@ std::vector<int> participantIdsOfThisProcess();
 
 /// Status counters of a reader since it was created (totals, never reset).
 struct ReaderStats {
-  std::uint64_t deadline_missed = 0;    ///< requested deadline missed (no sample within the deadline)
-  std::uint64_t samples_lost = 0;       ///< samples the reader knows it will never receive
-  std::uint64_t samples_rejected = 0;   ///< samples dropped for lack of resources
-  std::uint64_t incompatible_qos = 0;   ///< writers seen whose offered QoS does not match
+  std::uint64_t deadline_missed = 0;   ///< requested deadline missed (no sample within the deadline)
+  std::uint64_t samples_lost = 0;      ///< samples the reader knows it will never receive
+  std::uint64_t samples_rejected = 0;  ///< samples dropped for lack of resources
+  std::uint64_t incompatible_qos = 0;  ///< writers seen whose offered QoS does not match
   // Liveliness is tracked only by readers whose profile requests a finite lease (reflex_heartbeat).
-  std::uint64_t liveliness_lost = 0;    ///< times a matched writer was declared not alive
-  std::int32_t alive_writers = 0;       ///< matched writers currently alive
-  std::int32_t matched_writers = 0;     ///< matched writers now
+  std::uint64_t liveliness_lost = 0;  ///< times a matched writer was declared not alive
+  std::int32_t alive_writers = 0;     ///< matched writers currently alive
+  std::int32_t matched_writers = 0;   ///< matched writers now
 };
 
 /// Status counters of a writer since it was created (totals, never reset).
 struct WriterStats {
-  std::uint64_t deadline_missed = 0;    ///< offered deadline missed (did not publish within the deadline)
-  std::uint64_t liveliness_lost = 0;    ///< times this writer failed to assert liveliness in its lease
-  std::uint64_t incompatible_qos = 0;   ///< readers seen whose requested QoS does not match
-  std::int32_t matched_readers = 0;     ///< matched readers now
+  std::uint64_t deadline_missed = 0;   ///< offered deadline missed (did not publish within the deadline)
+  std::uint64_t liveliness_lost = 0;   ///< times this writer failed to assert liveliness in its lease
+  std::uint64_t incompatible_qos = 0;  ///< readers seen whose requested QoS does not match
+  std::int32_t matched_readers = 0;    ///< matched readers now
   /// Samples publish() / write() refused because a @key string exceeds kMaxKeyStringBytes (never
   /// handed to DDS, whose key computation would abort the process).
   std::uint64_t refused_key_too_long = 0;
@@ -117,8 +117,8 @@ class ReaderCounters final : public dds::DataReaderListener {
   ReaderStats snapshot() const;
 
  private:
-  std::atomic<std::uint64_t> deadline_missed_{0}, samples_lost_{0}, samples_rejected_{0},
-      incompatible_qos_{0}, liveliness_lost_{0};
+  std::atomic<std::uint64_t> deadline_missed_{0}, samples_lost_{0}, samples_rejected_{0}, incompatible_qos_{0},
+      liveliness_lost_{0};
   std::atomic<std::int32_t> alive_writers_{0}, matched_writers_{0};
 };
 
@@ -157,8 +157,7 @@ class WriterBase {
 
  protected:
   WriterBase(std::string topic_name, std::string profile_name, std::string source)
-      : topic_name_(std::move(topic_name)), profile_name_(std::move(profile_name)),
-        source_(std::move(source)) {}
+      : topic_name_(std::move(topic_name)), profile_name_(std::move(profile_name)), source_(std::move(source)) {}
   bool writeRaw(void* sample) noexcept;
 
   std::string topic_name_, profile_name_, source_;

@@ -54,4 +54,3 @@ struct TopicTraits<ros2::JointTrajectory> {
   static constexpr const char* kProfile = ros2::kProfile;
 };
 }  // namespace reflex::bus
-

@@ -35,21 +35,21 @@ namespace reflex::bus {
 
 /// The files of one participant's DDS-Security configuration (paths without "file://").
 struct SecurityMaterial {
-  bool enabled = false;                ///< the QoS names an authentication plugin
-  bool access_control = false;         ///< the QoS names an access-control plugin (governance, permissions)
-  std::string identity_ca;             ///< dds.sec.auth.builtin.PKI-DH.identity_ca
-  std::string identity_certificate;    ///< dds.sec.auth.builtin.PKI-DH.identity_certificate
-  std::string private_key;             ///< dds.sec.auth.builtin.PKI-DH.private_key
-  std::string permissions_ca;          ///< dds.sec.access.builtin.Access-Permissions.permissions_ca
-  std::string governance;              ///< dds.sec.access.builtin.Access-Permissions.governance
-  std::string permissions;             ///< dds.sec.access.builtin.Access-Permissions.permissions
+  bool enabled = false;              ///< the QoS names an authentication plugin
+  bool access_control = false;       ///< the QoS names an access-control plugin (governance, permissions)
+  std::string identity_ca;           ///< dds.sec.auth.builtin.PKI-DH.identity_ca
+  std::string identity_certificate;  ///< dds.sec.auth.builtin.PKI-DH.identity_certificate
+  std::string private_key;           ///< dds.sec.auth.builtin.PKI-DH.private_key
+  std::string permissions_ca;        ///< dds.sec.access.builtin.Access-Permissions.permissions_ca
+  std::string governance;            ///< dds.sec.access.builtin.Access-Permissions.governance
+  std::string permissions;           ///< dds.sec.access.builtin.Access-Permissions.permissions
 };
 
 /// What checkSecurityMaterial found valid, and until when.
 struct SecurityCheck {
-  std::string subject;                                   ///< identity certificate subject, RFC 2253 ("CN=reflex.vision")
-  std::chrono::system_clock::time_point valid_until;     ///< earliest end of validity of the material
-  std::string valid_until_what;                          ///< what ends then ("identity certificate '...'")
+  std::string subject;                                ///< identity certificate subject, RFC 2253 ("CN=reflex.vision")
+  std::chrono::system_clock::time_point valid_until;  ///< earliest end of validity of the material
+  std::string valid_until_what;                       ///< what ends then ("identity certificate '...'")
 };
 
 /// Reads the security properties of a participant QoS property list (name, value pairs).

@@ -50,7 +50,8 @@ class StopOnSignal {
 
   std::vector<int> signals_;
   std::vector<struct sigaction> previous_;
-  struct sigaction previous_pipe_ {}, previous_xfsz_ {};
+  struct sigaction previous_pipe_ {
+  }, previous_xfsz_{};
   int pipe_read_ = -1;
   std::atomic<int> last_signal_{0};
   std::thread watcher_;

@@ -39,9 +39,7 @@ std::size_t keyStringBytes(const T&) noexcept {
   return 0;
 }
 inline std::size_t keyStringBytes(const reflex::msg::Heartbeat& s) noexcept { return s.module_name().size(); }
-inline std::size_t keyStringBytes(const reflex::msg::BodySchemaChange& s) noexcept {
-  return s.segment_name().size();
-}
+inline std::size_t keyStringBytes(const reflex::msg::BodySchemaChange& s) noexcept { return s.segment_name().size(); }
 
 /// SafePubSubType's default: the generated deserializer (Read: a struct with
 /// `static void read(eprosima::fastcdr::Cdr&, T&)` reads the sample instead; cdr_read.hpp).
@@ -87,14 +85,16 @@ template <class T>
 struct TopicTraits;
 
 // Profile names (bringup/dds/reflex_profiles.xml).
-inline constexpr const char* kProfileState = "reflex_state";                 // controller output, every control cycle
-inline constexpr const char* kProfileBehavior = "reflex_behavior";           // behavior module outputs
+inline constexpr const char* kProfileState = "reflex_state";                   // controller output, every control cycle
+inline constexpr const char* kProfileBehavior = "reflex_behavior";             // behavior module outputs
 inline constexpr const char* kProfileObjectTargets = "reflex_object_targets";  // vision output
-inline constexpr const char* kProfileHeartbeat = "reflex_heartbeat";         // module heartbeats
-inline constexpr const char* kProfileRecord = "reflex_record";               // reader only: recorders
-inline constexpr const char* kProfileRecordReliable = "reflex_record_reliable";  // reader only: recorders, reliable topics
+inline constexpr const char* kProfileHeartbeat = "reflex_heartbeat";           // module heartbeats
+inline constexpr const char* kProfileRecord = "reflex_record";                 // reader only: recorders
+inline constexpr const char* kProfileRecordReliable =
+    "reflex_record_reliable";  // reader only: recorders, reliable topics
 inline constexpr const char* kProfileControllerInfo = "reflex_controller_info";  // controller protection
-inline constexpr const char* kProfileRobot = "reflex_robot";                 // robot state / joint command (the robot's rate / every control cycle)
+inline constexpr const char* kProfileRobot =
+    "reflex_robot";  // robot state / joint command (the robot's rate / every control cycle)
 
 template <>
 struct TopicTraits<reflex::msg::ObjectTargets> {

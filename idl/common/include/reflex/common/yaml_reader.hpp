@@ -49,8 +49,8 @@ class ConfigNode {
   ConfigNode(YAML::Node node, std::string file, std::string path, Raise raise = &raiseConfigError);
   /// Parses a YAML file whose root is a map (an empty file is an empty map if `allow_empty`).
   /// `what` names the file's kind in the messages of a file that cannot be read ("controller configuration").
-  static ConfigNode loadFile(const std::string& path, const std::string& what = "configuration file", Raise raise = &raiseConfigError,
-                             bool allow_empty = false);
+  static ConfigNode loadFile(const std::string& path, const std::string& what = "configuration file",
+                             Raise raise = &raiseConfigError, bool allow_empty = false);
   /// Parses YAML text; `origin` stands for the file name in messages.
   static ConfigNode loadString(const std::string& text, const std::string& origin, Raise raise = &raiseConfigError,
                                bool allow_empty = false);

@@ -25,8 +25,8 @@ class Participant;
 namespace reflex::modules {
 
 struct NodeOptions {
-  std::string config;            ///< behavior configuration YAML
-  std::string module;            ///< run only this module of the configuration ("" = all)
+  std::string config;  ///< behavior configuration YAML
+  std::string module;  ///< run only this module of the configuration ("" = all)
   /// Replaces the configuration's inputs.object_sources when not empty (--object-source).
   std::vector<std::string> object_sources;
   /// Replaces the configuration's inputs.joint_state_sources when not empty (--joint-state-source).

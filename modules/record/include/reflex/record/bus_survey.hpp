@@ -16,11 +16,11 @@ struct ModuleSeen {
   std::string module_name;
   std::string host;
   int pid = 0;
-  std::string state;      ///< RUNNING, CONFIGURING, STOPPING, ERROR
+  std::string state;  ///< RUNNING, CONFIGURING, STOPPING, ERROR
   unsigned period_ms = 0;
   std::string detail;
-  int heartbeats = 0;     ///< heartbeats received in the window (the first is the module's last beat)
-  double age_s = 0.0;     ///< time since its stamp when the window ended (s)
+  int heartbeats = 0;  ///< heartbeats received in the window (the first is the module's last beat)
+  double age_s = 0.0;  ///< time since its stamp when the window ended (s)
 };
 
 /// One process: the modules that share a host and pid.
@@ -38,7 +38,7 @@ struct TopicSeen {
   /// time discovery takes at the window's start is not counted as silence); samples / window when
   /// fewer than two arrived.
   double hz = 0.0;
-  int writers = 0;        ///< matched writers when the window ended
+  int writers = 0;  ///< matched writers when the window ended
 };
 
 struct BusSurvey {

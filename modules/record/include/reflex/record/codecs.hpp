@@ -21,7 +21,7 @@ class Participant;
 namespace detail {
 class ReaderBase;
 }
-}
+}  // namespace reflex::bus
 
 namespace reflex::record {
 
@@ -59,8 +59,9 @@ class TopicCodec {
   /// Makes a reader of `topic` with the data_reader profile `profile` on `bus`; every valid sample
   /// is serialized and handed to `sink` (from bus.run()). Returns the reader (owned by `bus`).
   /// Throws as Participant::makeReader.
-  virtual bus::detail::ReaderBase& subscribe(bus::Participant& bus, const std::string& topic, const std::string& profile,
-                         std::function<void(RecordEntry&&)> sink) const = 0;
+  virtual bus::detail::ReaderBase& subscribe(bus::Participant& bus, const std::string& topic,
+                                             const std::string& profile,
+                                             std::function<void(RecordEntry&&)> sink) const = 0;
   /// Makes a writer of `topic` with the data_writer profile `profile`. Throws as makeWriter.
   virtual std::unique_ptr<SamplePublisher> makePublisher(bus::Participant& bus, const std::string& topic,
                                                          const std::string& profile) const = 0;

@@ -49,11 +49,11 @@ const char* mcapCompressionName(McapCompression c);
 
 struct McapWriterOptions {
   McapCompression compression = McapCompression::kZstd;
-  std::uint64_t chunk_bytes = 1u << 20;            ///< close a chunk when its records reach this size (> 0)
-  std::chrono::milliseconds chunk_interval{500};   ///< ... or when its first message is this old (> 0)
-  std::chrono::milliseconds sync_interval{1000};   ///< fsync(2) period (0: after every chunk)
-  std::string profile;                             ///< Header.profile ("": none of the well-known ones)
-  std::string library = "reflex";                  ///< Header.library
+  std::uint64_t chunk_bytes = 1u << 20;           ///< close a chunk when its records reach this size (> 0)
+  std::chrono::milliseconds chunk_interval{500};  ///< ... or when its first message is this old (> 0)
+  std::chrono::milliseconds sync_interval{1000};  ///< fsync(2) period (0: after every chunk)
+  std::string profile;                            ///< Header.profile ("": none of the well-known ones)
+  std::string library = "reflex";                 ///< Header.library
 };
 
 /// What a channel is: one topic with one message encoding and schema.
@@ -192,8 +192,7 @@ class McapReader {
   bool readAt(std::uint64_t offset, void* dst, std::size_t n);
   void fail(TailState state, const std::string& what);
   bool nextTopLevel();  ///< reads one top-level record; false when reading ends
-  bool parseInner(const std::uint8_t* p, std::uint64_t len, std::uint8_t op, std::uint64_t at,
-                  McapMessageRecord* out);
+  bool parseInner(const std::uint8_t* p, std::uint64_t len, std::uint8_t op, std::uint64_t at, McapMessageRecord* out);
   void finishFile(std::uint64_t data_end);
 
   std::string path_;

@@ -55,7 +55,7 @@ inline constexpr char kFileMagic[8] = {'R', 'F', 'X', 'R', 'E', 'C', '\r', '\n'}
 inline constexpr std::uint32_t kFormatVersion = 1;
 inline constexpr std::uint32_t kRecordSync = 0x43455252u;  // "RREC" read as little-endian u32
 inline constexpr std::size_t kFileHeaderSize = 16;
-inline constexpr std::size_t kRecordHeaderSize = 12;       // sync + length + CRC
+inline constexpr std::size_t kRecordHeaderSize = 12;  // sync + length + CRC
 /// Upper bound on one record's body; a length above it is treated as corruption, not allocated.
 inline constexpr std::uint32_t kMaxBodySize = 64u << 20;
 
@@ -65,9 +65,9 @@ struct RecordEntry {
   /// negative receive time is invalid (corrupt), so the difference of any two receive times of a
   /// file fits an int64 (players and exporters subtract them).
   std::int64_t receive_ns = 0;
-  std::int64_t source_ns = 0;    ///< DDS source timestamp of the writer (ns since epoch), 0 if unknown
-  std::string topic;             ///< DDS topic name, e.g. "reflex/control_status"
-  std::string type;              ///< DDS type name, e.g. "reflex::msg::ControlStatus"
+  std::int64_t source_ns = 0;         ///< DDS source timestamp of the writer (ns since epoch), 0 if unknown
+  std::string topic;                  ///< DDS topic name, e.g. "reflex/control_status"
+  std::string type;                   ///< DDS type name, e.g. "reflex::msg::ControlStatus"
   std::vector<std::uint8_t> payload;  ///< serialized sample: encapsulation header + XCDR1 body
 };
 
@@ -178,7 +178,6 @@ class RecordWriter final : public SampleWriter {
   std::uint64_t records_ = 0, bytes_ = 0;
 };
 
-
 /// Reads a recording sequentially. Never returns a record whose CRC does not check.
 class RecordReader final : public SampleReader {
  public:
@@ -228,8 +227,8 @@ class RecordReader final : public SampleReader {
   std::string path_;
   int fd_ = -1;
   std::unique_ptr<std::uint8_t[]> window_;  ///< read cache: direct-mapped 4 KiB blocks (not zeroed)
-  std::vector<std::uint64_t> block_index_; ///< which block each cache slot holds (~0: none)
-  std::vector<std::uint32_t> crc_marks_;   ///< crc_marks_[i] = CRC-32 of the file's bytes [0, i * stride)
+  std::vector<std::uint64_t> block_index_;  ///< which block each cache slot holds (~0: none)
+  std::vector<std::uint32_t> crc_marks_;    ///< crc_marks_[i] = CRC-32 of the file's bytes [0, i * stride)
   std::uint64_t size_ = 0, pos_ = kFileHeaderSize, valid_end_ = kFileHeaderSize;
   std::uint64_t skipped_ = 0, first_corrupt_ = 0, examined_ = 0;
   TailState state_ = TailState::kClean;

@@ -33,10 +33,10 @@ class Participant;
 namespace reflex::record {
 
 struct RecorderOptions {
-  std::string output;                 ///< recording file to create (or append to, see writer.append)
-  std::string format = "auto";        ///< "mcap", "rfx" or "auto": rfx for a name ending in .rfx, else MCAP
-  std::vector<std::string> topics;    ///< topic specs (parseTopicSpec); empty = every known topic
-  std::vector<std::string> exclude;   ///< topic names not to record (with the default "all")
+  std::string output;                ///< recording file to create (or append to, see writer.append)
+  std::string format = "auto";       ///< "mcap", "rfx" or "auto": rfx for a name ending in .rfx, else MCAP
+  std::vector<std::string> topics;   ///< topic specs (parseTopicSpec); empty = every known topic
+  std::vector<std::string> exclude;  ///< topic names not to record (with the default "all")
   /// false (default): each topic is read with a reader that keeps the writers' promise and every
   /// sample of a burst: best-effort topics (200 Hz state, vision) with reflex_record (best effort,
   /// keep last 256), reliable topics (behavior decisions, heartbeats) with reflex_record_reliable
@@ -46,10 +46,10 @@ struct RecorderOptions {
   /// recording starts with the state published BEFORE the recorder started, but that profile keeps
   /// only the newest sample per instance (a burst of changes between two takes keeps its last one).
   bool late_joiner_state = false;
-  double duration = 0.0;              ///< seconds to record (0: until stop())
-  bool progress = false;              ///< print a status line to stderr about once a second
-  WriterOptions writer;               ///< .rfx durability policy (and append)
-  McapWriterOptions mcap;             ///< MCAP chunking, compression, fsync period
+  double duration = 0.0;   ///< seconds to record (0: until stop())
+  bool progress = false;   ///< print a status line to stderr about once a second
+  WriterOptions writer;    ///< .rfx durability policy (and append)
+  McapWriterOptions mcap;  ///< MCAP chunking, compression, fsync period
   /// MCAP only: also write the scene channels /tf and /reflex/scene (scene_channels.hpp) from the
   /// recorded joint state, status, targets, objects and body schema. Not for .rfx, nor when
   /// reflex/joint_state is not recorded (sceneNote() says why).
@@ -105,27 +105,27 @@ class Recorder {
 };
 
 struct PlayerOptions {
-  std::string input;                  ///< recording to play
-  double rate = 1.0;                  ///< speed factor (> 0); 0 = as fast as possible
-  bool loop = false;                  ///< start again at the start offset when the end is reached
-  double start = 0.0;                 ///< seconds after the first record to start from
-  double duration = 0.0;              ///< seconds of recording time to play from the start (0: to the end)
-  double delay = 0.5;                 ///< seconds between creating the writers and the first sample (discovery)
+  std::string input;      ///< recording to play
+  double rate = 1.0;      ///< speed factor (> 0); 0 = as fast as possible
+  bool loop = false;      ///< start again at the start offset when the end is reached
+  double start = 0.0;     ///< seconds after the first record to start from
+  double duration = 0.0;  ///< seconds of recording time to play from the start (0: to the end)
+  double delay = 0.5;     ///< seconds between creating the writers and the first sample (discovery)
   /// Hold the start until every played topic has this many matched readers (then 0.3 s for their side
   /// of the match, then `delay`), at most wait_timeout seconds; else a RecordError naming each topic
   /// short of readers and how many it had. 0: start after `delay` alone.
   int wait_readers = 0;
-  double wait_timeout = 60.0;         ///< seconds (> 0)
-  std::vector<std::string> topics;    ///< topic names to play; empty = every topic in the file but
-                                      ///< reflex/controller_protection (a live controller's claim; see player.cpp)
-                                      ///< and, without `commands`, the command topics (isCommandTopic)
-  std::vector<std::string> exclude;   ///< topic names not to play (a command topic without `commands`: a no-op)
+  double wait_timeout = 60.0;        ///< seconds (> 0)
+  std::vector<std::string> topics;   ///< topic names to play; empty = every topic in the file but
+                                     ///< reflex/controller_protection (a live controller's claim; see player.cpp)
+                                     ///< and, without `commands`, the command topics (isCommandTopic)
+  std::vector<std::string> exclude;  ///< topic names not to play (a command topic without `commands`: a no-op)
   /// Play the command topics too (reflex_play --commands). Off by default: a replay
   /// republishes observations only, so it never steers a live controller or robot. Without it a
   /// command topic named in `topics` is a RecordError naming the topic and the option.
   bool commands = false;
-  bool restamp = false;               ///< move sample time stamps to the playing time (see SamplePublisher)
-  bool progress = false;              ///< status line on stderr
+  bool restamp = false;   ///< move sample time stamps to the playing time (see SamplePublisher)
+  bool progress = false;  ///< status line on stderr
   /// Longest wait between consecutive played records, seconds of recording time (> 0). A longer gap
   /// (a recording resumed hours later, crafted receive times 100 years apart) is played as max_gap:
   /// the player never waits in silence for longer; the shortened gaps are counted and reported.
@@ -142,13 +142,13 @@ const std::vector<std::string>& commandTopics();
 bool isCommandTopic(const std::string& topic);
 
 struct PlayerStats {
-  std::uint64_t published = 0;        ///< samples written
-  std::uint64_t failed = 0;           ///< payloads that did not deserialize or writes refused
-  std::uint64_t loops = 0;            ///< completed passes
-  std::uint64_t gaps_shortened = 0;   ///< gaps in the played window longer than max_gap (one pass)
-  double longest_gap = 0.0;           ///< the longest of them, seconds of recording time (0 if none)
-  double longest_gap_at = 0.0;        ///< where it ends, seconds after the start offset
-  TailState tail = TailState::kClean; ///< how the file ended
+  std::uint64_t published = 0;         ///< samples written
+  std::uint64_t failed = 0;            ///< payloads that did not deserialize or writes refused
+  std::uint64_t loops = 0;             ///< completed passes
+  std::uint64_t gaps_shortened = 0;    ///< gaps in the played window longer than max_gap (one pass)
+  double longest_gap = 0.0;            ///< the longest of them, seconds of recording time (0 if none)
+  double longest_gap_at = 0.0;         ///< where it ends, seconds after the start offset
+  TailState tail = TailState::kClean;  ///< how the file ended
 };
 
 class Player {
@@ -212,9 +212,9 @@ struct CsvExport {
   std::uint64_t samples = 0;  ///< rows written (set by exportCsvFiles)
 };
 struct CsvExportReport {
-  std::vector<CsvExport> files;     ///< the targets, with their sample counts
-  std::uint64_t undecodable = 0;    ///< samples of those topics that did not decode: skipped
-  std::string first_undecodable;    ///< where the first was and why ("sample 12 of the file (t = ...): ...")
+  std::vector<CsvExport> files;   ///< the targets, with their sample counts
+  std::uint64_t undecodable = 0;  ///< samples of those topics that did not decode: skipped
+  std::string first_undecodable;  ///< where the first was and why ("sample 12 of the file (t = ...): ...")
   /// "3 samples could not be decoded, first at sample 12 of the file (t = 0.500000 s): ..."; "" if none.
   std::string undecodableMessage() const;
 };

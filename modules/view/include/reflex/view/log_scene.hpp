@@ -29,9 +29,9 @@ namespace reflex::view {
 
 /// One row of a controller time series as a scene input.
 struct LogScene {
-  double t = 0.0;        ///< [s] the row's `time`
-  std::size_t row = 0;   ///< 1-based data row (the header is row 0)
-  SceneInput input;      ///< q (model order), arms, targets; no objects, no body-schema segments
+  double t = 0.0;       ///< [s] the row's `time`
+  std::size_t row = 0;  ///< 1-based data row (the header is row 0)
+  SceneInput input;     ///< q (model order), arms, targets; no objects, no body-schema segments
 };
 
 /// Reads the rows of the CSV `path` nearest to each time of `at` (one LogScene per entry of `at`, in

@@ -54,10 +54,10 @@ const char* zoneName(Zone zone);
 /// The immutable part: robot model, which segments each arm moves, zone thresholds.
 struct SceneModel {
   control::Model model;
-  std::array<std::string, 2> arm_names{"left", "right"};   ///< [0] left, [1] right (controller order)
-  std::array<std::uint64_t, 2> arm_segments{0, 0};         ///< bit s: robot segment s moved by that arm
-  double d_a = 0.040, d_b = 0.010, d_r = 0.005;            ///< zone thresholds [m] (controller params)
-  std::string root_frame;                                  ///< name of the URDF root link (frame of every entity)
+  std::array<std::string, 2> arm_names{"left", "right"};  ///< [0] left, [1] right (controller order)
+  std::array<std::uint64_t, 2> arm_segments{0, 0};        ///< bit s: robot segment s moved by that arm
+  double d_a = 0.040, d_b = 0.010, d_r = 0.005;           ///< zone thresholds [m] (controller params)
+  std::string root_frame;                                 ///< name of the URDF root link (frame of every entity)
   std::string controller_note;  ///< loadSceneModel: which controller configuration (describeControllerConfig)
 };
 
@@ -109,8 +109,8 @@ struct SchemaSegmentState {
 
 /// Everything one scene is built from. Non-finite positions are skipped when drawing (never emitted).
 struct SceneInput {
-  std::int64_t stamp_ns = 0;   ///< system clock [ns]: the joint state's Header.stamp_ns
-  Eigen::VectorXd q;           ///< model.nq joint positions, model q order (see jointPositionsToQ)
+  std::int64_t stamp_ns = 0;  ///< system clock [ns]: the joint state's Header.stamp_ns
+  Eigen::VectorXd q;          ///< model.nq joint positions, model q order (see jointPositionsToQ)
   std::array<ArmState, 2> arms;
   std::array<HandTargetState, 2> targets;
   std::vector<ObjectState> objects;
@@ -129,8 +129,8 @@ struct SceneData {
   /// named segment. closest_line[arm] false: nothing to draw.
   std::array<bool, 2> closest_line{false, false};
   std::array<Eigen::Vector3d, 2> closest_a_B, closest_b_B;
-  std::vector<Zone> segment_zone;           ///< per segment: the zone it is coloured with
-  std::vector<bool> segment_in_arm;         ///< per segment: moved by an arm or named in a closest pair
+  std::vector<Zone> segment_zone;    ///< per segment: the zone it is coloured with
+  std::vector<bool> segment_in_arm;  ///< per segment: moved by an arm or named in a closest pair
 };
 
 /// Fills q (resized to model.nq, unset joints keep their value, or 0 on resize) from JointState names

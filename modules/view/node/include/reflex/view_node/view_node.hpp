@@ -30,15 +30,15 @@ class Participant;
 namespace reflex::view_node {
 
 struct ViewOptions {
-  std::string urdf;                 ///< robot description (as given to reflex_controller)
-  std::string collision;            ///< "" = next to the URDF
-  std::string controller;           ///< controller YAML ("" = defaults): arms and zone thresholds
+  std::string urdf;        ///< robot description (as given to reflex_controller)
+  std::string collision;   ///< "" = next to the URDF
+  std::string controller;  ///< controller YAML ("" = defaults): arms and zone thresholds
   std::string profiles_file;
   std::string participant_profile = "reflex_participant";
-  int domain_id = -1;               ///< -1 = bus default
-  double duration = 0.0;            ///< s (0 = until SIGINT / SIGTERM)
-  double rate = 30.0;               ///< scene messages per second at most, (0, 200]
-  double progress_period = 0.0;     ///< s between status lines on stderr (0 = none)
+  int domain_id = -1;            ///< -1 = bus default
+  double duration = 0.0;         ///< s (0 = until SIGINT / SIGTERM)
+  double rate = 30.0;            ///< scene messages per second at most, (0, 200]
+  double progress_period = 0.0;  ///< s between status lines on stderr (0 = none)
   ServerOptions server;
   std::string module_name = "view";
 };

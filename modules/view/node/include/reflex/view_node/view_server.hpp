@@ -58,7 +58,7 @@ struct ServerOptions {
   std::string web_dir;             ///< folder with index.html and the page's scripts
   std::string three_dir;           ///< folder with three.module.js and three.core.js
   std::string name = "reflex_view";
-  std::string metadata_robot;      ///< serverInfo.metadata.robot
+  std::string metadata_robot;  ///< serverInfo.metadata.robot
 };
 
 /// A channel advertised to every client.
@@ -70,17 +70,17 @@ struct Channel {
 };
 
 struct ServerStats {
-  std::atomic<std::uint64_t> connections{0};      ///< WebSocket connections opened, since start
-  std::atomic<std::uint64_t> open{0};             ///< open now
-  std::atomic<std::uint64_t> http_requests{0};    ///< plain HTTP requests served (any status)
+  std::atomic<std::uint64_t> connections{0};    ///< WebSocket connections opened, since start
+  std::atomic<std::uint64_t> open{0};           ///< open now
+  std::atomic<std::uint64_t> http_requests{0};  ///< plain HTTP requests served (any status)
   std::atomic<std::uint64_t> http_not_found{0};
-  std::atomic<std::uint64_t> messages_sent{0};    ///< messageData frames sent
-  std::atomic<std::uint64_t> dropped{0};          ///< messageData frames not sent to a slow client
+  std::atomic<std::uint64_t> messages_sent{0};  ///< messageData frames sent
+  std::atomic<std::uint64_t> dropped{0};        ///< messageData frames not sent to a slow client
   std::atomic<std::uint64_t> bad_client_messages{0};
   std::atomic<std::uint64_t> replies_not_sent{0};      ///< bad messages past kMaxRepliesPerSecond: not answered
   std::atomic<std::uint64_t> clients_disconnected{0};  ///< clients over a limit, disconnected by the server
   std::atomic<std::uint64_t> clients_refused{0};       ///< handshakes refused past kMaxClients
-  std::atomic<std::uint64_t> subscriptions{0};    ///< subscribe requests accepted, since start
+  std::atomic<std::uint64_t> subscriptions{0};         ///< subscribe requests accepted, since start
 };
 
 class ViewServer {
