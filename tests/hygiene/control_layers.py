@@ -43,10 +43,10 @@ def resolve(root, including, name):
 
 def check(root):
     """The includes of the core that point up, as lines, and the number of core files read."""
-    todo = core_sources(root)
+    pending = core_sources(root)
     seen, bad = set(), []
-    while todo:
-        path = todo.pop()
+    while pending:
+        path = pending.pop()
         if path in seen:
             continue
         seen.add(path)
@@ -56,7 +56,7 @@ def check(root):
                 continue
             found = resolve(root, path, name)
             if found and found.startswith(os.path.join(root, "control")):
-                todo.append(found)
+                pending.append(found)
     return bad, len(seen)
 
 
