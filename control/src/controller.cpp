@@ -73,6 +73,7 @@ DistanceOptions cycleDistanceOptions(const ControllerModel& cm) {
   // (collectPairTerms), so the pairs between d_a and d_safe need none.
   options.row_threshold = cm.params.d_a;
   if (cm.broad_phase) options.prune_distance = std::max(cm.params.d_safe, cm.params.d_a);
+  options.find_closest = false;  // findClosestPairs finds every closest pair the cycle needs
   return options;
 }
 
@@ -255,8 +256,6 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
   ws.avoidance_gradient = ArmRow::Zero(arm.n);
   ws.d_other_arm = kInf;
   ws.d_static = kInf;
-  double d_min = kInf;
-  int closest = -1;
   // Eq. 5's gradient sum_p (d_safe - d_p) row_p on the arm's columns, without the rows: with the
   // twist (w, v) of arm joint i, row_p[i] = [i moves link_a] (w . (p_a x n) + v . n)
   // - [i moves link_b] (w . (p_b x n) + v . n). So the pairs' weighted (p x n, n) are summed per link
@@ -286,10 +285,6 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     else if (f.flags & ArmPairFacts::kStatic)
       ws.d_static = std::min(ws.d_static, d);
     if (with_other_arm && skip_other_arm) return;
-    if (d < d_min) {
-      d_min = d;
-      closest = p;
-    }
     if (d < params.d_safe && !recovery_only) {
       const double w = params.d_safe - d;
       if (f.flags & ArmPairFacts::kMovesA) accumulate(f.link_a, pd.p_B_a, pd.nhat_B, w);
@@ -305,7 +300,7 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
   };
   // The pairs the sweep computed exactly, in ascending pair order (the candidate pairs' order). A
   // robot pair the broad phase skipped is beyond d_safe, d_a and d_b: it feeds no term and no
-  // contact and can only be the arm's closest pair (checked below).
+  // contact (it can only be the arm's closest pair, which findClosestPairs found).
   const ArmPairFacts* facts = data.arm_pair_facts[static_cast<std::size_t>(a)].data();
   forEachExactPair(data.dist, [&](int p, bool robot) {
     const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
@@ -332,23 +327,12 @@ void collectPairTerms(const Model& model, const ControllerModel& cm, ControllerD
     }
   }
   for (int i = 0; i < arm.n; ++i) ws.avoidance_gradient[i] = gradient[static_cast<std::size_t>(i)];
-  // The arm's closest pair may be one the broad phase skipped (its lower bound is below the closest
-  // exact distance): those that could be are computed exactly, so the status is what it is unpruned.
-  // (A pair findClosestPairs already refined is exact but not in the sweep's list: it is taken here.)
-  ClosestPair best{d_min, closest};
-  refineClosest(model, data.kin, data.dist, cycleDistanceOptions(cm), arm.candidate_pairs, best, [&](int p) {
-    const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(p)];
-    if (!pd.active) return false;
-    const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
-    const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
-    if (owner_a != a && owner_b != a) return false;
-    const int other = owner_a == a ? owner_b : owner_a;
-    return !(other >= 0 && other != a && higherPriority(input.priority, a) && !recovery_only);
-  });
-  d_min = best.distance;
-  closest = best.pair;
+  // The arm's closest pair (findClosestPairs, exact also where the broad phase skipped pairs): of
+  // every pair it moves, or without the other arm's when the other arm is its obstacle.
+  const ClosestPair& best = data.arm_closest[static_cast<std::size_t>(a)][skip_other_arm ? 1 : 0];
+  const double d_min = best.distance;
   status.distance = d_min;
-  status.closest_pair = closest;
+  status.closest_pair = best.pair;
   status.zone = zoneOf(d_min, params);
   status.f = params.mode == AvoidanceMode::kOff ? 0.0 : blendingCoefficient(d_min, params.d_a, params.d_b);
 }
@@ -601,36 +585,54 @@ bool isPhysical(const Model& model, const ControllerData& data, const PairDistan
            data.dist.slots[static_cast<std::size_t>(sb - model.num_robot_segments)].is_virtual);
 }
 
-/// This cycle's closest physical pair, closest virtual pair and closest pair between the two arms
-/// (ties: the lower pair index). A pair the broad phase skipped is computed exactly when its lower
-/// bound is below the closest exact distance of a kind it belongs to, so all three are what the
-/// unpruned sweep gives.
+/// What a body-schema slot's pair is to arm a (ArmPairFacts::kInvolved, kOtherArm), from the owners
+/// of its segments (a robot pair's facts are ControllerData::arm_pair_facts).
+std::uint8_t slotPairFlags(int a, int owner_a, int owner_b) {
+  if (owner_a != a && owner_b != a) return 0;
+  const int other = owner_a == a ? owner_b : owner_a;
+  return ArmPairFacts::kInvolved | (other >= 0 && other != a ? ArmPairFacts::kOtherArm : 0);
+}
+
+/// Every closest pair a cycle reports, ties to the lower pair index: the closest physical pair, the
+/// closest virtual one, the closest between the two arms, and each arm's (of every pair it moves, and
+/// without the other arm's: data.arm_closest). First the pairs the sweep computed exactly, then one
+/// walk over the skipped robot pairs: one whose lower bound is below the closest of a kind it belongs
+/// to is computed exactly and offered to that kind (refineClosest's rule for several kinds at once),
+/// so every one is what the unpruned sweep gives.
 void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerData& data) {
   ClosestPair physical, virtual_slot, between_arms;
-  // A robot pair between a left-arm and a right-arm segment (a slot pair's facts are empty).
-  auto betweenArms = [&](int i) {
-    return (data.arm_pair_facts[kLeft][static_cast<std::size_t>(i)].flags & ArmPairFacts::kOtherArm) != 0;
+  std::array<std::array<ClosestPair, 2>, 2> arm{};
+  auto offerToArms = [&](int i, double d, std::uint8_t left, std::uint8_t right) {
+    const std::array<std::uint8_t, 2> flags{left, right};
+    for (std::size_t a = 0; a < 2; ++a) {
+      if (!(flags[a] & ArmPairFacts::kInvolved)) continue;
+      arm[a][0].offer(d, i);
+      if (!(flags[a] & ArmPairFacts::kOtherArm)) arm[a][1].offer(d, i);
+    }
   };
+  const std::vector<ArmPairFacts>& left_facts = data.arm_pair_facts[kLeft];
+  const std::vector<ArmPairFacts>& right_facts = data.arm_pair_facts[kRight];
   // The pairs the sweep computed exactly (robot pairs are all physical).
   forEachExactPair(data.dist, [&](int i, bool robot) {
     const PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
-    if (!robot && !isPhysical(model, data, pd)) {
-      virtual_slot.offer(pd.distance, i);
+    if (robot) {
+      const std::uint8_t left = left_facts[static_cast<std::size_t>(i)].flags;
+      physical.offer(pd.distance, i);
+      if (left & ArmPairFacts::kOtherArm) between_arms.offer(pd.distance, i);
+      offerToArms(i, pd.distance, left, right_facts[static_cast<std::size_t>(i)].flags);
       return;
     }
-    physical.offer(pd.distance, i);
-    if (betweenArms(i)) between_arms.offer(pd.distance, i);
+    if (isPhysical(model, data, pd))
+      physical.offer(pd.distance, i);
+    else
+      virtual_slot.offer(pd.distance, i);
+    const int owner_a = ownerArm(model, cm, data.dist, pd.seg_a);
+    const int owner_b = ownerArm(model, cm, data.dist, pd.seg_b);
+    offerToArms(i, pd.distance, slotPairFlags(kLeft, owner_a, owner_b), slotPairFlags(kRight, owner_a, owner_b));
   });
   const DistanceOptions options = cycleDistanceOptions(cm);
-  // Skipped robot pairs (never slot pairs), refineClosest's rule. For the physical kind that is rare
-  // (the sweep's smallest skipped bound is its floor). Between the arms it is every cycle the hands
-  // are apart, so the pair with the smallest bound goes first: its true distance then rules out
-  // nearly all the others. A pair the sweep (or the physical pass) refined is exact but not in the
-  // exact list: refineClosest takes it too (an earlier version passed it over as exact, and the
-  // closest physical pair was wrong whenever that pair was the closest: d_safe = d_a = 0.02 on the
-  // 1,343-pair robot, 79 % of random configurations;
-  // BroadPhase.ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem).
-  refineClosest(model, data.kin, data.dist, options, data.dist.robot_pairs, physical);
+  // Between the arms a skipped pair is the closest every cycle the hands are apart: the one with the
+  // smallest bound goes first, its true distance then rules out nearly all the others.
   if (data.dist.pruned_floor < between_arms.distance) {
     int first = -1;
     double first_bound = between_arms.distance;
@@ -646,10 +648,45 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
       between_arms.offer(data.dist.pairs[static_cast<std::size_t>(first)].distance, first);
     }
   }
-  refineClosest(model, data.kin, data.dist, options, data.between_arm_pairs, between_arms);
+  // The skipped robot pairs (never slot pairs), in one walk. A pair is refined when its bound is below
+  // the closest of some kind it belongs to, and offered to each such kind. The kinds only get closer
+  // during the walk, so a bound at or above the farthest of them at the start rules a pair out. A pair
+  // already refined (by the sweep or the step above) is exact but not in the sweep's list: the walk
+  // takes it too (BroadPhase.ClosestPairsAreTheBruteForcesWhenTheCycleRefinedThem).
+  double farthest = std::max(physical.distance, between_arms.distance);
+  for (const auto& of_arm : arm) farthest = std::max({farthest, of_arm[0].distance, of_arm[1].distance});
+  if (data.dist.pruned_floor < farthest) {
+    for (const int i : data.dist.robot_pairs) {
+      PairDistance& pd = data.dist.pairs[static_cast<std::size_t>(i)];
+      const double bound = pd.distance;
+      if (!(bound < farthest)) continue;
+      const std::uint8_t left = left_facts[static_cast<std::size_t>(i)].flags;
+      const std::array<std::uint8_t, 2> flags{left, right_facts[static_cast<std::size_t>(i)].flags};
+      // The kinds pair i belongs to whose closest its bound is below.
+      const bool to_physical = bound < physical.distance;
+      const bool to_between = (left & ArmPairFacts::kOtherArm) && bound < between_arms.distance;
+      std::array<std::array<bool, 2>, 2> to_arm{};
+      bool any = to_physical || to_between;
+      for (std::size_t a = 0; a < 2; ++a) {
+        if (!(flags[a] & ArmPairFacts::kInvolved)) continue;
+        to_arm[a][0] = bound < arm[a][0].distance;
+        to_arm[a][1] = !(flags[a] & ArmPairFacts::kOtherArm) && bound < arm[a][1].distance;
+        any = any || to_arm[a][0] || to_arm[a][1];
+      }
+      if (!any) continue;
+      if (!pd.exact) refinePairDistance(model, data.kin, data.dist, i, options);
+      const double d = pd.distance;
+      if (to_physical) physical.offer(d, i);
+      if (to_between) between_arms.offer(d, i);
+      for (std::size_t a = 0; a < 2; ++a)
+        for (std::size_t k = 0; k < 2; ++k)
+          if (to_arm[a][k]) arm[a][k].offer(d, i);
+    }
+  }
   data.closest_physical = physical;
   data.closest_virtual = virtual_slot;
   data.closest_between_arms = between_arms;
+  data.arm_closest = arm;
 }
 
 /// Distances (no avoidance rows) of every pair at configuration q, with this cycle's body-schema
@@ -661,6 +698,7 @@ bool computeDistancesAt(const Model& model, const ControllerModel& cm, Controlle
   if (!computeForwardKinematics(model, data.kin_next, q)) return false;
   DistanceOptions no_rows;
   no_rows.row_threshold = -kInf;
+  no_rows.find_closest = false;  // the callers compare every pair with a floor
   if (cm.broad_phase) no_rows.prune_distance = cm.params.d_b;
   computeSegmentDistances(model, data.kin_next, data.dist.slots, out, no_rows);  // this cycle's schema, not copied
   return true;

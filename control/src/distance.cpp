@@ -796,6 +796,8 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
 
   // 6. The closest active pair (the lowest index among equals): over the exact pairs; then a skipped
   //    pair whose lower bound is below that distance is computed exactly, so `closest` is the true one.
+  data.closest = -1;
+  if (!options.find_closest) return;
   ClosestPair closest;
   for (int e = 0; e < sw.nexact; ++e) closest.offer(data.pairs[sw.exact_pairs[e]].distance, sw.exact_pairs[e]);
   if (any_slot)

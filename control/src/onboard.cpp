@@ -126,7 +126,6 @@ OnboardController::OnboardController(const Model& model, const ControllerModel& 
       throw ConfigError("onboard controller: the initial position of joint '" + model.q_names[i] + "' is " +
                         std::to_string(q0[i]) + " (not finite)");
   q_measured_ = q0;
-  q_expected_ = q0;
   q_command_ = q0;
   qdot_command_.setZero(model.nq);
   q_scratch_ = q0;
@@ -171,7 +170,7 @@ void OnboardController::setControlInput(const ControlInput& input, double now) n
 }
 
 bool OnboardController::holdHandsHere(double now) noexcept {
-  if (!computeForwardKinematics(model_, data_.kin, q_expected_)) return false;
+  if (!computeForwardKinematics(model_, data_.kin, q_command_)) return false;
   for (int a = 0; a < 2; ++a) {
     input_.hands[a].status = HandStatus::kGiven;
     input_.hands[a].target_B = data_.kin.X_B_L[cm_.arms[a].hand_link] * cm_.arms[a].hand_point_L;
@@ -225,7 +224,7 @@ const BodySchemaOutcome& OnboardController::changeBodySchema(const BodySchemaReq
   const bool name_fits = name.size() <= kBodySchemaNameBytes;
   if (out.check.ok() && name_fits)
     out.attach =
-        attachControllerSegment(model_, cm_, data_, slot, link, a, b, rq.radius, ignore, rq.is_virtual, q_expected_);
+        attachControllerSegment(model_, cm_, data_, slot, link, a, b, rq.radius, ignore, rq.is_virtual, q_command_);
   if (out.attach.attached) {
     BodySchemaSlot& held = data_.dist.slots[slot];  // attachControllerSegment set is_virtual
     held.motion_priority = rq.motion_priority;
@@ -288,7 +287,7 @@ bool OnboardController::walkCommand(bool stop, double goal_x, double goal_y, dou
     return false;
   }
   const int heel = model_.qIndex("heel_x");
-  const double x = heel >= 0 ? q_expected_[heel] : 0.0;
+  const double x = heel >= 0 ? q_command_[heel] : 0.0;
   walking_.start(goal_x - x, std::min(speed, options_.max_walk_speed));
   walk_active_ = true;
   return true;
@@ -353,10 +352,9 @@ const CycleReport& OnboardController::step(double now, double cycle_dt) noexcept
   // measured state, the walking joints from the last command (walking owns them; a state never moves
   // them).
   const ControlResult cr = computeControl(model_, cm_, data_, q_measured_, in);
-  q_scratch_ = q_measured_;
+  integrator_.reset(q_measured_);
   for (const int j : walking_.joints())
-    if (data_.arm_joint[static_cast<std::size_t>(j)] == 0) q_scratch_[j] = q_command_[j];
-  integrator_.reset(q_scratch_);
+    if (data_.arm_joint[static_cast<std::size_t>(j)] == 0) integrator_.setJointPosition(j, q_command_[j]);
   r.walking_advanced =
       stepPlant(model_, cm_, data_, cr, integrator_, walk_active_ ? &walking_ : nullptr, dt, q_scratch_);
   if (cr == ControlResult::kFrozen) {
@@ -371,7 +369,6 @@ const CycleReport& OnboardController::step(double now, double cycle_dt) noexcept
     qdot_command_[i] = std::clamp((q_command_[i] - q_measured_[i]) / dt, -model_.v_max[i], model_.v_max[i]);
   }
   port_.command(q_command_, qdot_command_, dt);
-  q_expected_ = q_command_;
   ++r.counts.computed_cycles;
   fillReport(cr);
   return r;

@@ -499,12 +499,15 @@ void expectSameCycle(const ControllerData& dp, const ControllerData& db, const s
   }
 }
 
-// Whether the sweep's closest pair is a robot pair it refined itself: exact, but not in its exact list.
-bool sweepRefinedItsClosest(const DistanceData& dist) {
-  const int c = dist.closest;
-  const std::vector<int>& exact = dist.exactList();
-  return c >= 0 && dist.pair_common[static_cast<std::size_t>(c)] >= 0 &&
-         !std::binary_search(exact.begin(), exact.begin() + dist.num_exact_pairs, c);
+// Whether the cycle's closest physical pair or closest pair between the arms is a robot pair the
+// broad phase skipped and the cycle refined (exact, but not in the sweep's exact list).
+bool cycleRefinedAClosestPair(const ControllerData& data) {
+  const std::vector<int>& exact = data.dist.exactList();
+  for (const int c : {data.closest_physical.pair, data.closest_between_arms.pair})
+    if (c >= 0 && data.dist.pair_common[static_cast<std::size_t>(c)] >= 0 &&
+        !std::binary_search(exact.begin(), exact.begin() + data.dist.num_exact_pairs, c))
+      return true;
+  return false;
 }
 
 void checkRobot(const Model& model) {
@@ -557,13 +560,13 @@ TEST(BroadPhase, ControlOutputIsTheBruteForcesBitForBitOnTheThousandPairRobot) {
   broad_phase::checkRobot(loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf))));
 }
 
-// The sweep refines a skipped pair whose bound is below its closest exact distance, so that pair is
-// exact but not in the sweep's exact list. The controller's closest physical pair and closest pair
-// between the arms must still be the brute force's. With the defaults no shipped robot reaches that
-// case (some pair is always within the 0.10 m broad-phase distance); with d_safe = d_a = 0.02 the
-// 1,343-pair robot does in most configurations (the closest physical pair was wrong in 79 % of them
-// before the fix: 37.98 mm reported, 37.92 mm true).
-TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem) {
+// A closest pair may be one the broad phase skipped: the cycle refines it (exact, but not in the
+// sweep's exact list). The controller's closest physical pair and closest pair between the arms must
+// still be the brute force's. With the defaults no shipped robot reaches that case (some pair is
+// always within the 0.10 m broad-phase distance); with d_safe = d_a = 0.02 the 1,343-pair robot does
+// in most configurations (when a refined pair was passed over as exact, the closest physical pair was
+// wrong in 79 % of them: 37.98 mm reported, 37.92 mm true).
+TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheCycleRefinedThem) {
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/many_segment_humanoid.urdf";
   const Model model = loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf)));
   ControllerConfig config = defaultControllerConfig();
@@ -576,16 +579,16 @@ TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem) {
   const Eigen::VectorXd rest = restConfiguration(model, pruned);
   std::mt19937 rng(14);
   std::uniform_real_distribution<double> offset(-0.5, 0.5);
-  int refined_by_sweep = 0;
+  int refined_closest = 0;
   const ControlInput no_targets;
   for (int k = 0; k < 400; ++k) {
     Eigen::VectorXd q = rest;
     for (int j = 0; j < model.nq; ++j) q[j] += offset(rng);
     ASSERT_EQ(computeControl(model, pruned, dp, q, no_targets), computeControl(model, brute, db, q, no_targets)) << k;
-    if (broad_phase::sweepRefinedItsClosest(dp.dist)) ++refined_by_sweep;  // the case under test
+    if (broad_phase::cycleRefinedAClosestPair(dp)) ++refined_closest;  // the case under test
     ASSERT_NO_FATAL_FAILURE(broad_phase::expectSameCycle(dp, db, "configuration " + std::to_string(k)));
   }
-  EXPECT_GT(refined_by_sweep, 100) << "the configurations must reach the case, else this test compares nothing";
+  EXPECT_GT(refined_closest, 100) << "the configurations must reach the case, else this test compares nothing";
 }
 
 // The same comparison as an attack: random zones (d_r < d_b < d_a <= d_safe, half of them with
@@ -593,7 +596,7 @@ TEST(BroadPhase, ClosestPairsAreTheBruteForcesWhenTheSweepRefinedThem) {
 // random targets with the priority flipping, or independent random configurations; every output the
 // broad phase may change must be the brute force's. (Before the fix it found the case above in 2
 // of 40 trials on the 1,343-pair robot.)
-void attackBroadPhase(const Model& model, unsigned seed, int* sweep_refined) {
+void attackBroadPhase(const Model& model, unsigned seed, int* refined_closest) {
   std::mt19937 rng(seed);
   auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
   for (int trial = 0; trial < 40; ++trial) {
@@ -633,7 +636,7 @@ void attackBroadPhase(const Model& model, unsigned seed, int* sweep_refined) {
       in.priority = static_cast<MotionPriority>(k / 50 % 3);
       ASSERT_EQ(computeControl(model, pruned, dp, q, in), computeControl(model, brute, db, q, in))
           << what << " cycle " << k;
-      if (broad_phase::sweepRefinedItsClosest(dp.dist)) ++*sweep_refined;
+      if (broad_phase::cycleRefinedAClosestPair(dp)) ++*refined_closest;
       ASSERT_NO_FATAL_FAILURE(broad_phase::expectSameCycle(dp, db, what + " cycle " + std::to_string(k)));
       // Odd trials: independent random configurations; even ones: the closed loop, a jump every 100.
       if (trial % 2 == 1) {
@@ -650,13 +653,13 @@ void attackBroadPhase(const Model& model, unsigned seed, int* sweep_refined) {
 TEST(BroadPhase, ControlOutputIsTheBruteForcesForRandomZonesSlotsAndConfigurations) {
   const std::string urdf = std::string(REFLEX_SOURCE_DIR) + "/bringup/robots/many_segment_humanoid.urdf";
   const Model many = loadModel(urdf, loadCollisionConfig(defaultCollisionConfigPath(urdf)));
-  int sweep_refined = 0;
+  int refined_closest = 0;
   for (const unsigned seed : {1U, 2U}) {
-    attackBroadPhase(shippedModel(), seed, &sweep_refined);
-    attackBroadPhase(many, seed, &sweep_refined);
+    attackBroadPhase(shippedModel(), seed, &refined_closest);
+    attackBroadPhase(many, seed, &refined_closest);
   }
-  std::printf("cycles whose closest pair the sweep refined: %d\n", sweep_refined);
-  EXPECT_GT(sweep_refined, 0) << "the attack must reach a sweep-refined closest pair";
+  std::printf("cycles whose closest pair the cycle refined: %d\n", refined_closest);
+  EXPECT_GT(refined_closest, 0) << "the attack must reach a refined closest pair";
 }
 
 }  // namespace

@@ -336,6 +336,9 @@ struct ControllerData {
   /// paper's Fig. 13), from data.dist, exact also where the broad phase skipped pairs. Written
   /// whenever the distances are computed (not on kBadInput): callers read them instead of rescanning.
   ClosestPair closest_physical, closest_virtual, closest_between_arms;
+  /// Per arm, its closest pair [0] of every pair the arm moves, [1] without the other arm's (what the
+  /// arm avoids when it has motion priority), found with the three above (ArmStatus takes one).
+  std::array<std::array<ClosestPair, 2>, 2> arm_closest;
   std::uint64_t bad_input_count = 0;
   /// Predictive guard: how many cycles shortened the commanded step.
   std::uint64_t guard_count = 0;

@@ -92,6 +92,10 @@ struct DistanceOptions {
   /// A robot pair of convex pieces (the tight model) whose enclosing capsules are more than this apart
   /// is skipped the same way (its distance: the capsules' distance, a lower bound).
   double prune_distance = std::numeric_limits<double>::infinity();
+  /// The sweep's last step: the closest active pair into DistanceData::closest. false: closest = -1
+  /// (a caller that finds the closest pairs it needs itself, as the controller's cycle does, saves a
+  /// walk over the pairs and the refinements that go with it).
+  bool find_closest = true;
 };
 
 /// The sweep's primitive-pair kernel (computeSegmentDistances). Both give the same bits (the same
@@ -111,7 +115,7 @@ struct DistanceData {
   /// the controller's body schema, its one owner; the scratch DistanceData of the predictive guards
   /// leave theirs unused and are computed with data.dist.slots (passed const&, never copied).
   BodySchemaSlots slots;
-  int closest = -1;  ///< index of the active pair with the smallest distance, -1 if none
+  int closest = -1;  ///< index of the active pair with the smallest distance, -1 if none (or not asked for)
   // Scratch of computeSegmentDistances (built from the model here; values valid only during the call).
   // Per primitive:
   std::vector<SegmentB> prim_B;  ///< core segment in B (start, direction, squared length)

@@ -285,9 +285,9 @@ class OnboardController {
   const CycleReport& step(double now, double dt) noexcept;
 
   const CycleReport& report() const { return report_; }
-  /// The configuration the robot is expected at after the last command (the measured state advanced
-  /// by it; KinematicPort: its next measured state). Used for body-schema placement checks.
-  const Eigen::VectorXd& jointPositions() const { return q_expected_; }
+  /// The configuration the robot is expected at after the last command: the commanded positions
+  /// (commandedPositions(); KinematicPort: its next measured state). Used for body-schema placement checks.
+  const Eigen::VectorXd& jointPositions() const { return q_command_; }
   /// The measured positions the last computed cycle used.
   const Eigen::VectorXd& measuredPositions() const { return q_measured_; }
   /// The last command (positions at the end of the cycle, velocities over it).
@@ -325,7 +325,7 @@ class OnboardController {
   bool stale_ = true;
   bool robot_ok_ = true;  ///< for robot_stale_events (the first missing state counts as an event)
   bool anchor_ = true;    ///< the next computed cycle anchors the last command at the measured state
-  Eigen::VectorXd q_measured_, q_expected_, q_command_, qdot_command_, q_scratch_;
+  Eigen::VectorXd q_measured_, q_command_, qdot_command_, q_scratch_;
   std::vector<int> driven_;
   BodySchemaOutcome schema_outcome_;
   CycleReport report_;

@@ -34,6 +34,8 @@ class KinematicRobot {
   /// its velocity limit, whatever the walking source asks for).
   void setWalkingJoints(const Eigen::Ref<const Eigen::VectorXd>& q_walk, const std::vector<int>& indices, double dt);
   void reset(const Eigen::VectorXd& q) { q_ = q; }
+  /// Sets joint j's position (0 <= j < nq), as reset does for every joint.
+  void setJointPosition(int j, double q) { q_[j] = q; }
 
  private:
   const Model& model_;
