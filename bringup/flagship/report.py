@@ -11,7 +11,8 @@ missing) and writes into OUT_DIR:
                              robot drawn in 3D by the live view's own renderer (modules/view/web,
                              static mode, headless Chromium: modules/view/tools/render_scenes.py); if
                              that cannot run, 2D capsules, and the strip's title and report.md say why
-  summary.json, report.md    the outcome figures
+  summary.json, report.md    the outcome figures (summary.json's strip_times: the strip's panels' controller
+                             times and the closest approach's)
 """
 import argparse
 import bisect
@@ -33,6 +34,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 SHOULDER = {"left": (0.0, 0.23, 1.04), "right": (0.0, -0.23, 1.04)}
 REACH = 0.48
+# The strip's 3D view (render_scenes.py --camera AZ,EL,RADIUS,TX,TY,TZ): from behind the robot (azimuth pi:
+# the camera on -x looking along +x, the robot's own view direction) and 60 deg above, so the arms in
+# front of the chest are not hidden by it and left and right are where the camera image has them.
+STRIP_CAMERA = "3.1416,1.05,1.45,0.25,0,0.95"
 
 
 def read(path):
@@ -186,12 +191,15 @@ def plot_figures(out, runs, main_ts):
         ax.set_yticks([0, 1])
         ax.set_yticklabels(["no target", "given"])
         ax.set_ylabel(side + " hand")
-    style = {"avoidance": ("tab:blue", "-", "with avoidance"), "no_avoidance": ("tab:red", "--", "without avoidance")}
+    # The runs thick (with avoidance solid blue on top, without it dashed purple), the zone bounds thin and
+    # dotted: no run shares a colour or a line style with a bound.
+    style = {"avoidance": ("tab:blue", "-", "with avoidance", 3), "no_avoidance": ("tab:purple", "--", "without avoidance", 2)}
     for label, ts in runs.items():
-        color, ls, name = style[label]
-        axes[2].plot(ts["time"], [min(d, 0.3) * 1000 for d in ts["arm_distance"]], color=color, ls=ls, label=name)
+        color, ls, name, z = style[label]
+        axes[2].plot(ts["time"], [min(d, 0.3) * 1000 for d in ts["arm_distance"]], color=color, ls=ls, lw=1.6,
+                     zorder=z, label=name)
     for v, c, name in ((D_A, "gold", "yellow zone d_a"), (D_B, "orange", "orange zone d_b"), (D_R, "red", "red zone d_r")):
-        axes[2].axhline(v * 1000, color=c, ls="--", lw=1, label=name)
+        axes[2].axhline(v * 1000, color=c, ls=":", lw=1.2, label=name)
     axes[2].axhline(0, color="black", lw=0.8)
     axes[2].set_ylabel("arm-to-arm distance (mm)")
     axes[2].set_xlabel("time (s)")
@@ -236,6 +244,7 @@ def make_strip(args, main_label, main_ts):
     # Strip: camera frame above the robot at key instants, all inside the session's video.
     strip_ok = False
     strip_robot = None  # "3d" or "2d: <why the 3D render did not run>"
+    strip_times = {}  # the panels' controller times and the closest approach's (summary.json)
     try:
         try:
             with open(os.path.join(args.out, main_label, "run.json")) as fh:
@@ -255,22 +264,33 @@ def make_strip(args, main_label, main_ts):
         arm = main_ts["arm_distance"]
         k_min = min(in_video, key=lambda k: arm[k])
         lost = next((k for k in range(first + 1, last + 1) if main_ts["left_status"][k] != "given" and main_ts["left_status"][k - 1] == "given"), None)
+        # Four different moments, never the same one twice: both hands reaching (3 s in), a target lost,
+        # the arms entering the yellow zone on their way to the closest approach, the closest approach.
+        # (The end of the video was a fifth pick; it is usually the same crossing as the closest approach.)
         picks = [min(last, first + int(3.0 / 0.005))]
         if lost is not None:
             picks.append(min(last, lost + 200))
-        picks += [max(first, k_min - 800), k_min, max(first, last - int(0.25 / rate / 0.005))]
+        approach = next((k for k in range(k_min, first - 1, -1) if arm[k] >= D_A), None)
+        if approach is not None and t[k_min] - t[approach] >= 2.0:
+            picks.append(approach)
+        else:  # no approach 2 s long: 2 s before the closest approach
+            picks.append(max(first, k_min - int(2.0 / 0.005)))
+        picks.append(k_min)
         kept = []
-        for k in sorted(set(picks)):  # at least 1 s apart (the end of the video is often the closest approach)
-            if not kept or t[k] - t[kept[-1]] >= 1.0:
+        for k in sorted(set(picks)):  # at least 2 s apart
+            if not kept or t[k] - t[kept[-1]] >= 2.0:
                 kept.append(k)
+            elif k == k_min:  # the closest approach wins over a pick too close before it
+                kept[-1] = k
         picks = kept
         times = [t[k] for k in picks]
+        strip_times = {"panels_s": [round(x, 3) for x in times], "closest_approach_s": round(t[k_min], 3)}
         tmp = os.path.join(args.out, "strip")
         os.makedirs(tmp, exist_ok=True)
         log_csv = os.path.join(args.out, main_label, "controller.csv")
         render = subprocess.run([sys.executable, os.path.join(ROOT, "modules", "view", "tools", "render_scenes.py"),
                                  "--log", log_csv, "--at", ",".join("%.4f" % x for x in times), "--out", tmp,
-                                 "--tile", "320x380", "--build", args.build],
+                                 "--tile", "320x380", "--build", args.build, "--camera", STRIP_CAMERA],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         tiles = []
         if render.returncode == 0:
@@ -306,12 +326,14 @@ def make_strip(args, main_label, main_ts):
             else:
                 draw_capsules(axes[1][i], [r for r in prow if int(r["frame"]) == i])
         if tiles:
-            fig.suptitle("camera (left image) and the robot as the live view draws it (capsules coloured by zone: "
-                         "green free, yellow, orange, red; grey not in an arm's closest pair)\n"
+            fig.suptitle("camera (left image) and the robot as the live view draws it, seen from behind and above, "
+                         "looking where its cameras look (its left arm on the image's left, as in the camera image)\n"
+                         "capsules coloured by zone: green free, yellow, orange, red; grey not in an arm's closest "
+                         "pair; white bars: each arm's closest pair\n"
                          "camera frame at controller time t: session start %.2f s, from the %s" % (offset, synced_by),
                          fontsize=9)
         else:
-            axes[1][0].set_ylabel("robot (seen from the camera)")
+            axes[1][0].set_ylabel("robot (from behind: its left on the left)")
             fig.suptitle("camera (left image) and the robot's collision capsules (right arm blue, left arm green)\n"
                          "2D: the 3D render did not run: %s" % strip_robot[4:], fontsize=9, color="darkred")
         fig.tight_layout()
@@ -320,7 +342,7 @@ def make_strip(args, main_label, main_ts):
         strip_ok = True
     except (subprocess.CalledProcessError, OSError, ValueError, KeyError, IndexError) as e:
         print("report.py: warning: no frame strip: %s" % e, file=sys.stderr)
-    return strip_ok, strip_robot
+    return strip_ok, strip_robot, strip_times
 
 
 def write_report(args, summary, security, plant, strip_ok, strip_robot):
@@ -393,8 +415,9 @@ def main():
     main_label = "avoidance" if "avoidance" in runs else next(iter(runs))
     main_ts = runs[main_label]
     plot_figures(args.out, runs, main_ts)
-    strip_ok, strip_robot = make_strip(args, main_label, main_ts)
+    strip_ok, strip_robot, strip_times = make_strip(args, main_label, main_ts)
     summary["strip_robot"] = strip_robot or "none"
+    summary["strip_times"] = strip_times
     write_report(args, summary, security, plant, strip_ok, strip_robot)
     return 0
 

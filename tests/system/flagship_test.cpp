@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -31,6 +32,20 @@ TEST(Flagship, AvoidanceKeepsTheCrossingArmsApartAndWithoutItTheyPenetrate) {
   EXPECT_LT(field(json, "no_avoidance", "min_arm_distance_m"), 0.0) << "without avoidance the arms penetrate\n" << json;
   // The report's strip draws the robot with the live view's renderer (headless Chromium), not 2D sticks.
   EXPECT_NE(json.find("\"strip_robot\": \"3d\""), std::string::npos) << json;
+  // Its panels are different moments (at least 2 s apart, so no two show the same crossing), the
+  // closest approach among them.
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(
+      json, m, std::regex(R"re("panels_s":\s*\[([^\]]*)\][^}]*"closest_approach_s":\s*([-0-9.eE]+))re")))
+      << json;
+  std::vector<double> panels;
+  const std::string list = m[1].str();
+  for (std::sregex_iterator it(list.begin(), list.end(), std::regex(R"([-0-9.eE]+)")), end; it != end; ++it)
+    panels.push_back(std::stod(it->str()));
+  const double closest = std::stod(m[2].str());
+  ASSERT_GE(panels.size(), 3U) << json;
+  for (std::size_t i = 1; i < panels.size(); ++i) EXPECT_GE(panels[i] - panels[i - 1], 2.0 - 1e-3) << json;
+  EXPECT_NE(std::find(panels.begin(), panels.end(), closest), panels.end()) << json;
 }
 
 }  // namespace

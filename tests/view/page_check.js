@@ -5,10 +5,23 @@
 //   - expected capsules / spheres from the URDF text (as ws_client_check.js);
 //   - "robot pixels": the 3D canvas read back through a 2D canvas, pixels far from the background
 //     colour, so a page that claims to draw but renders nothing fails;
-//   - page errors (exceptions, console errors) collected from the DevTools events.
+//   - page errors (exceptions, console errors) collected from the DevTools events;
+//   - labels: in the same instant as the render they describe, the pixels of each label's box (as the
+//     page reports it) in the label's colour, so a label listed but not drawn counts 0;
+//   - the closest-pair bars: pixels near white (the bar's colour, no other colour of the scene) in the
+//     box around each bar's ends (a 1-pixel line of the zone's colour counted 0).
+// With --phases full the run follows a system the C++ test changes under it, and prints a line
+// "PHASE <name>" when it has seen each state (the test then makes the next change):
+//   nodata-seen  the page is connected and shows the "no data yet" sign (no controller yet);
+//   live-done    the live checks above are done (the test then stops the data);
+//   stale-done   the "stale" sign appeared; renders counted over one idle second, then one wheel event
+//                (one render expected); a second screenshot, FILE-stale.png (the test then restarts
+//                reflex_view on the same port and plays a recording in a loop);
+//   then: the page reconnected (connections 2), data flows again (no sign), time went back at the
+//   loop (a new plot trace, no backward step in the plot), each channel listed once.
 // Prints one JSON line (the C++ test asserts on it). Exit 1 if the browser cannot be driven.
 // Usage: node page_check.js --url http://127.0.0.1:PORT/ --urdf FILE --modules DIR --chromium PATH
-//        --screenshot FILE.png [--seconds S]
+//        --screenshot FILE.png [--seconds S] [--phases live|full]
 "use strict";
 const fs = require("fs");
 const os = require("os");
@@ -22,6 +35,7 @@ for (const k of ["url", "urdf", "modules", "chromium", "screenshot"]) {
   if (!args[k]) { console.error(`page_check: --${k} is required`); process.exit(2); }
 }
 const seconds = Number(args.seconds || 4);
+const fullRun = args.phases === "full";
 const WebSocket = require(path.join(path.resolve(args.modules), "ws"));
 
 const urdf = fs.readFileSync(args.urdf, "utf8").replace(/<!--[\s\S]*?-->/g, "");
@@ -47,7 +61,8 @@ function cleanup() {
   try { fs.rmSync(profile, { recursive: true, force: true }); } catch (e) { /* best effort */ }
 }
 browser.on("error", (e) => fail(`cannot start ${args.chromium}: ${e.message}`));
-const giveUp = setTimeout(() => fail("timed out (60 s)"), 60000);
+const giveUpSeconds = fullRun ? 150 : 60;
+const giveUp = setTimeout(() => fail(`timed out (${giveUpSeconds} s)`), giveUpSeconds * 1000);
 
 let stderr = "";
 browser.stderr.on("data", (chunk) => {
@@ -105,18 +120,40 @@ function drive(url) {
       await call("Runtime.enable");
       await call("Page.enable");
       const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-      let view = null;
-      const t0 = Date.now();
-      for (;;) {  // until the page has drawn a few scenes (or 30 s)
-        view = await evaluate("window.reflexView ? JSON.parse(JSON.stringify(window.reflexView)) : null");
-        if (view && view.framesReceived >= 10 && view.statusReceived > 0 && view.rendered > 5) break;
-        if (Date.now() - t0 > 30000) break;
-        await sleep(250);
+      const snapshot = () => evaluate("window.reflexView ? JSON.parse(JSON.stringify(window.reflexView)) : null");
+      // Polls the page's state until `ok(view)` or `ms` pass; the last state.
+      const waitFor = async (ok, ms) => {
+        const t0 = Date.now();
+        for (;;) {
+          const v = await snapshot();
+          if ((v && ok(v)) || Date.now() - t0 > ms) return v;
+          await sleep(100);
+        }
+      };
+      const screenshot = async (file) => {
+        const shot = await call("Page.captureScreenshot", { format: "png" });
+        fs.mkdirSync(path.dirname(path.resolve(file)), { recursive: true });
+        fs.writeFileSync(file, Buffer.from(shot.data, "base64"));
+        return path.resolve(file);
+      };
+      const sign = () => evaluate(`(() => { const e = document.getElementById('stale'); const r = e.getBoundingClientRect();
+        return { shown: !e.hidden && r.width > 0 && r.height > 0 && getComputedStyle(e).display !== 'none',
+                 text: e.textContent }; })()`);
+      const result = { expectedCapsules, expectedSpheres, pageErrors, waitSeconds: seconds };
+
+      if (fullRun) {  // the page before any controller: connected, and the "no data yet" sign
+        const v = await waitFor((x) => x.connected && x.stale, 20000);
+        result.nodata = { view: v, sign: await sign() };
+        console.log("PHASE nodata-seen");
       }
+
+      let view = await waitFor((x) => x.framesReceived >= 10 && x.statusReceived > 0 && x.rendered > 5, 40000);
       const framesBefore = view ? view.framesReceived : 0;
       await sleep(seconds * 1000);
-      view = await evaluate("JSON.parse(JSON.stringify(window.reflexView))");
-      const pixels = await evaluate(`(() => {
+      result.liveSign = await sign();
+      // One task: the state of the last render and the canvas it left (drawing buffer preserved).
+      const live = await evaluate(`(() => {
+        const view = JSON.parse(JSON.stringify(window.reflexView));
         const src = document.querySelector('#scene3d canvas');
         const c = document.createElement('canvas'); c.width = src.width; c.height = src.height;
         const g = c.getContext('2d'); g.drawImage(src, 0, 0);
@@ -126,17 +163,68 @@ function drive(url) {
           const dr = d[i] - 0x16, dg = d[i + 1] - 0x18, db = d[i + 2] - 0x1d;
           if (dr * dr + dg * dg + db * db > 80 * 80 && (d[i] > 120 || d[i + 1] > 120)) robot++;
         }
-        return { robot, width: c.width, height: c.height };
+        const k = view.dpr || 1;
+        const count = (x0, y0, x1, y1, match) => {
+          let n = 0;
+          for (let y = Math.max(0, Math.floor(y0 * k)); y < Math.min(c.height, Math.ceil(y1 * k)); ++y)
+            for (let x = Math.max(0, Math.floor(x0 * k)); x < Math.min(c.width, Math.ceil(x1 * k)); ++x) {
+              const i = 4 * (y * c.width + x);
+              if (match(d[i], d[i + 1], d[i + 2])) n++;
+            }
+          return n;
+        };
+        const labelPixels = view.labels.map((l) => {
+          const r = parseInt(l.colour.slice(1, 3), 16), gg = parseInt(l.colour.slice(3, 5), 16), b = parseInt(l.colour.slice(5, 7), 16);
+          return { entity: l.entity, text: l.text, pixels: count(l.x, l.y, l.x + l.w, l.y + l.h,
+            (pr, pg, pb) => (pr - r) ** 2 + (pg - gg) ** 2 + (pb - b) ** 2 < 60 * 60) };
+        });
+        const closestPixels = view.closest.map((cl) => ({ arm: cl.arm, label: cl.label,
+          pixels: count(Math.min(cl.a[0], cl.b[0]) - 8, Math.min(cl.a[1], cl.b[1]) - 8,
+                        Math.max(cl.a[0], cl.b[0]) + 8, Math.max(cl.a[1], cl.b[1]) + 8,
+                        (pr, pg, pb) => pr >= 235 && pg >= 235 && pb >= 235) }));
+        return { view, robot, width: c.width, height: c.height, labelPixels, closestPixels };
       })()`);
-      const camera = await evaluate("document.getElementById('camera').textContent");
-      const shot = await call("Page.captureScreenshot", { format: "png" });
-      fs.mkdirSync(path.dirname(path.resolve(args.screenshot)), { recursive: true });
-      fs.writeFileSync(args.screenshot, Buffer.from(shot.data, "base64"));
-      console.log(JSON.stringify({
-        expectedCapsules, expectedSpheres, view, framesDuringWait: view.framesReceived - framesBefore,
-        waitSeconds: seconds, robotPixels: pixels.robot, canvas: [pixels.width, pixels.height], cameraPanel: camera,
-        pageErrors, screenshot: path.resolve(args.screenshot),
-      }));
+      view = live.view;
+      Object.assign(result, {
+        view, framesDuringWait: view.framesReceived - framesBefore, robotPixels: live.robot,
+        canvas: [live.width, live.height], labelPixels: live.labelPixels, closestPixels: live.closestPixels,
+        cameraPanel: await evaluate("document.getElementById('camera').textContent"),
+        screenshot: await screenshot(args.screenshot),
+      });
+      if (fullRun) {
+        console.log("PHASE live-done");
+        // The data stops: the sign within a few seconds; then nothing is drawn while nothing changes.
+        const t0 = Date.now();
+        let v = await waitFor((x) => x.stale, 15000);
+        const stale = { view: v, afterMs: Date.now() - t0, sign: await sign() };
+        await sleep(300);
+        const before = await snapshot();
+        await sleep(1000);
+        const after = await snapshot();
+        stale.idleRenders = after.rendered - before.rendered;
+        stale.idlePlots = after.plotsDrawn - before.plotsDrawn;
+        stale.idleFrames = after.framesReceived - before.framesReceived;
+        // The camera moves (wheel over the 3D view): drawn again.
+        const box = await evaluate(`(() => { const r = document.querySelector('#scene3d canvas').getBoundingClientRect();
+          return [r.left + r.width / 2, r.top + r.height / 2]; })()`);
+        await call("Input.dispatchMouseEvent", { type: "mouseWheel", x: box[0], y: box[1], deltaX: 0, deltaY: 120 });
+        await sleep(500);
+        stale.wheelRenders = (await snapshot()).rendered - after.rendered;
+        stale.signLater = await sign();
+        stale.screenshot = await screenshot(args.screenshot.replace(/\.png$/, "") + "-stale.png");
+        result.stale = stale;
+        console.log("PHASE stale-done");
+        // reflex_view restarted, a recording played in a loop: reconnected, data again, a new trace.
+        const framesAtStale = after.framesReceived;
+        v = await waitFor((x) => x.connections >= 2 && x.connected && x.framesReceived > framesAtStale + 10 && !x.stale,
+                          40000);
+        const resumed = { view: v, sign: await sign() };
+        v = await waitFor((x) => x.plotTraces >= 2, 20000);  // the replay's start, then its first loop
+        await sleep(500);
+        resumed.final = await snapshot();
+        result.resumed = resumed;
+      }
+      console.log(JSON.stringify(result));
       clearTimeout(giveUp);
       ws.close();
       cleanup();

@@ -12,7 +12,9 @@
 //   - JSON: every message checked key by key against its schema (every key a schema property with the
 //     schema's type, oneOf consts, time bounds); the schemas name the foxglove fields of the published
 //     definitions (written out again here);
-//   - bad input: NaN joints, unknown joint names, NaN targets / objects, unknown pair names.
+//   - bad input: NaN joints, unknown joint names, NaN targets / objects, unknown pair names;
+//   - vision objects: each its own colour (pairwise distinct within a scene, the same name the same
+//     colour in another scene), its label the object's name in the sphere's colour.
 #include "../control/test_support.hpp"
 
 #include <reflex/control/geometry.hpp>
@@ -517,6 +519,58 @@ TEST(Scene, FindsTheRobotsControllerYamlBesideTheUrdf) {
     EXPECT_EQ(
         std::string(e.what()),
         "--controller '/nonexistent/ctl.yaml': no such controller configuration file (No such file or directory)");
+  }
+}
+
+// Two tracked objects must not look alike: every object of a scene its own colour, an object its
+// colour whatever else is in the scene, and each object's label its name in that colour.
+TEST(Scene, VisionObjectsAreDistinguishableAndLabelledWithTheirNames) {
+  // Pairwise distinct for up to the palette's six, even for names that pick the same colour first.
+  std::vector<std::string> names;
+  for (int i = 0; i < 6; ++i) names.push_back("tag_" + std::to_string(i));
+  names.insert(names.begin(), {"red_cup", "can"});
+  names.resize(6);
+  const std::vector<Rgba> colours = objectColours(names);
+  ASSERT_EQ(colours.size(), names.size());
+  for (std::size_t i = 0; i < colours.size(); ++i)
+    for (std::size_t j = i + 1; j < colours.size(); ++j)
+      EXPECT_GT(std::abs(colours[i].r - colours[j].r) + std::abs(colours[i].g - colours[j].g) +
+                    std::abs(colours[i].b - colours[j].b),
+                0.2)
+          << names[i] << " and " << names[j] << " look alike";
+  // The first name keeps its own colour whatever follows it; alone, every name has its own.
+  EXPECT_EQ(objectColours({"can"})[0].g, objectColours({"can", "red_cup", "x"})[0].g);
+  EXPECT_EQ(objectColours({"red_cup"})[0].b, objectColours({"red_cup", "can"})[0].b);
+  // None is a zone colour (the segments' colours).
+  for (const Rgba& c : colours)
+    for (const Zone z : {Zone::kFree, Zone::kYellow, Zone::kOrange, Zone::kRed}) {
+      const Rgba zc = zoneColour(z);
+      EXPECT_GT(std::abs(c.r - zc.r) + std::abs(c.g - zc.g) + std::abs(c.b - zc.b), 0.2) << zoneName(z);
+    }
+
+  const SceneModel scene = asimo();
+  SceneData data(scene);
+  std::mt19937_64 rng(5);
+  SceneInput in = inputAt(scene, rng);
+  in.objects.push_back({"red_cup", {0.5, 0.1, 1.0}, 0.9});
+  in.objects.push_back({"can", {0.45, -0.25, 0.9}, 0.9});
+  ASSERT_TRUE(updateScene(scene, data, in));
+  const json su = buildSceneUpdate(scene, data, in);
+  const json* objects = nullptr;
+  for (const json& e : su["entities"])
+    if (e["id"] == "objects") objects = &e;
+  ASSERT_NE(objects, nullptr);
+  ASSERT_EQ((*objects)["spheres"].size(), 2U);
+  ASSERT_EQ((*objects)["texts"].size(), 2U);
+  const json &s0 = (*objects)["spheres"][0]["color"], &s1 = (*objects)["spheres"][1]["color"];
+  EXPECT_NE(s0, s1) << "two objects, two colours";
+  EXPECT_EQ((*objects)["texts"][0]["text"], "red_cup");
+  EXPECT_EQ((*objects)["texts"][1]["text"], "can");
+  for (int i = 0; i < 2; ++i) {
+    const json& t = (*objects)["texts"][i];
+    const json& s = (*objects)["spheres"][i];
+    for (const char* k : {"r", "g", "b"}) EXPECT_EQ(t["color"][k], s["color"][k]) << "label in its object's colour";
+    EXPECT_GT(t["pose"]["position"]["z"].get<double>(), s["pose"]["position"]["z"].get<double>()) << "above it";
   }
 }
 

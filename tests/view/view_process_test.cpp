@@ -1,13 +1,16 @@
 // reflex_view as a real process: fed by a running
 // reflex_controller and reflex_behavior (scripted crossing arms; for the page also the grasped bar, the
 // gaze line and synthetic vision objects: separate processes, real DDS), checked by independent clients:
-//   - the Foxglove protocol's reference client (@foxglove/ws-protocol in Node, ws_client_check.js):
-//     >= 20 scene updates/s, capsule / sphere / transform counts from the URDF text, every message valid
+//   - the Foxglove protocol's reference client (@foxglove/ws-protocol in Node, ws_client_check.js),
+//     offering foxglove.websocket.v1 and, again, only the newer foxglove.sdk.v1: >= 20 scene updates/s, capsule / sphere / transform counts from the URDF text, every message valid
 //     against its advertised schema, protocol errors answered with a status message;
 //   - a DDS participant of this test that watches discovery: reflex_view announces no writer at all;
 //   - Debian's Chromium, headless with SwiftShader WebGL, driven over the DevTools protocol
 //     (page_check.js): window.reflexView counts equal the URDF's, pixels of the robot really rendered,
-//     zone colours present, no page error; the screenshot stays in the build tree;
+//     zone colours present, no page error; labels (objects, targets, distances) and the closest bars
+//     counted in the canvas's pixels; the "no data yet" / "stale" sign; no render while idle; one
+//     channel list after the page reconnects to a restarted reflex_view; a new plot trace when a
+//     looped recording's time goes back; the screenshots stay in the build tree;
 //   - start-up errors (port in use, bad --bind, missing web folder, bad --rate, bad URDF) exit 2 with a
 //     message naming the value; --help exits 0;
 //   - hostile local clients, written by hand on a raw socket (RawClient): one that never reads, one that
@@ -37,6 +40,7 @@
 #include <sys/time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <fstream>
 #include <memory>
@@ -232,6 +236,28 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     EXPECT_EQ(r["statusErrors"][0]["level"], 2);
     EXPECT_NE(r["statusErrors"][0]["message"].get<std::string>().find("4242"), std::string::npos);
     EXPECT_EQ(r["afterUnsubscribe"], 0) << "no /tf message after unsubscribe";
+    // The handshake: the first subprotocol offered that is served, either name; neither: HTTP 400.
+    ASSERT_EQ(r["handshakes"].size(), 5U) << r["handshakes"].dump();
+    EXPECT_EQ(r["handshakes"][0]["protocol"], "foxglove.sdk.v1") << r["handshakes"][0].dump();
+    EXPECT_EQ(r["handshakes"][1]["protocol"], "foxglove.sdk.v1") << r["handshakes"][1].dump();
+    EXPECT_EQ(r["handshakes"][2]["protocol"], "foxglove.websocket.v1") << r["handshakes"][2].dump();
+    EXPECT_EQ(r["handshakes"][3]["protocol"], "foxglove.sdk.v1") << r["handshakes"][3].dump();
+    EXPECT_EQ(r["handshakes"][4]["status"], 400) << r["handshakes"][4].dump();
+
+    // A client that offers only the newer name foxglove.sdk.v1 (the reference client on a socket that
+    // asked for it): the same protocol, the same scene.
+    const nlohmann::json sdk = runJson(
+        {REFLEX_NODE, kSource + "/tests/view/ws_client_check.js", "--url", "ws://127.0.0.1:" + std::to_string(sys.port),
+         "--urdf", kUrdf, "--modules", kModules, "--seconds", "2", "--subprotocols", "foxglove.sdk.v1"},
+        ::testing::TempDir() + "view_ws_client_sdk.log", 30s);
+    ASSERT_TRUE(sdk.contains("rates")) << sdk.dump();
+    EXPECT_EQ(sdk["subprotocol"], "foxglove.sdk.v1");
+    EXPECT_EQ(sdk["serverInfo"]["metadata"]["robot"], "asimo_like");
+    EXPECT_EQ(sdk["channels"].size(), 3U);
+    EXPECT_GE(sdk["rates"]["/reflex/scene"].get<double>(), 20.0);
+    ASSERT_GT(sdk["capsules"].size(), 20U);
+    for (const auto& n : sdk["capsules"]) EXPECT_EQ(n.get<int>(), capsules);
+    EXPECT_TRUE(sdk["schemaErrors"].empty()) << sdk["schemaErrors"].dump();
 
     // Never writes: its participant ("view") is discovered with its readers, and announces no writer.
     const std::string prefix = watch.prefixOf("view");
@@ -246,26 +272,106 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     EXPECT_EQ(sys.view.terminate(), 0);
     const std::string log = readText(sys.view_log);
     EXPECT_NE(log.find("reflex_view: stats"), std::string::npos) << log;
-    EXPECT_NE(log.find("bad_client_messages=1 "), std::string::npos) << log;
+    EXPECT_NE(log.find("bad_client_messages=2 "), std::string::npos) << "one unknown channel per client\n" << log;
   }
   factory->delete_participant(watcher);
 }
 
+/// The last line of `text` that is a JSON object, parsed (an empty object if none).
+nlohmann::json lastJsonLine(const std::string& text) {
+  std::istringstream lines(text);
+  std::string line, last;
+  while (std::getline(lines, line))
+    if (!line.empty() && line[0] == '{') last = line;
+  nlohmann::json j = nlohmann::json::parse(last, nullptr, false);
+  return j.is_discarded() ? nlohmann::json::object() : j;
+}
+
 TEST(ReflexView, PageRendersTheRobotInHeadlessChromium) {
   ASSERT_TRUE(toolsPresent(true));
-  // The grasped bar and the gaze line (body schema), scripted targets, and two vision objects.
-  LiveSystem sys(131, "view_page", "bar_occlusion.yaml", {"red_cup=0.50,0.10,1.00", "can=0.45,-0.25,0.90"});
-  ASSERT_GT(sys.port, 0) << readText(sys.view_log);
+  ASSERT_TRUE(exists(kBin + "/reflex_record") && exists(kBin + "/reflex_play")) << "reflex_record / reflex_play built";
+  // The page follows a system changed under it (page_check.js --phases full): reflex_view alone (the
+  // "no data yet" sign), then the controller, the scripted behavior with the grasped bar and the gaze
+  // line (body schema) and two vision objects (the live checks), then the data stopped (the "stale"
+  // sign, nothing drawn while idle), then reflex_view restarted on the same port (the page reconnects)
+  // and a recording of the live phase played in a loop (data again; time goes back at every loop).
+  constexpr int kDomain = 131;
+  const std::string tmp = ::testing::TempDir();
+  const std::string view_log = tmp + "view_page_view.log";
+  auto view = std::make_unique<testing::ChildProcess>(
+      std::vector<std::string>{kBin + "/reflex_view", "--domain", std::to_string(kDomain), "--port", "0", "--duration",
+                               "150"},
+      view_log);
+  const int port = bannerPort(view_log);
+  ASSERT_GT(port, 0) << readText(view_log);
+  const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/";
   const std::string shot = std::string(REFLEX_ARTEFACT_DIR) + "/reflex_view_page.png";
+  const std::string stale_shot = std::string(REFLEX_ARTEFACT_DIR) + "/reflex_view_page-stale.png";
   std::remove(shot.c_str());
-  const nlohmann::json r =
-      runJson({REFLEX_NODE, kSource + "/tests/view/page_check.js", "--url", sys.url(), "--urdf", kUrdf, "--modules",
-               kModules, "--chromium", REFLEX_CHROMIUM, "--screenshot", shot, "--seconds", "4"},
-              ::testing::TempDir() + "view_page_check.log", 90s);
-  ASSERT_TRUE(r.contains("view")) << r.dump();
-  std::printf("page: %s\n", r.dump().substr(0, 900).c_str());
+  std::remove(stale_shot.c_str());
+  const std::string page_log = tmp + "view_page_check.log";
+  testing::ChildProcess page(
+      {REFLEX_NODE, kSource + "/tests/view/page_check.js", "--url", url, "--urdf", kUrdf, "--modules", kModules,
+       "--chromium", REFLEX_CHROMIUM, "--screenshot", shot, "--seconds", "4", "--phases", "full"},
+      page_log);
+  ASSERT_TRUE(page.started());
+  ASSERT_NE(page.readUntil("PHASE nodata-seen", 60s).find("PHASE nodata-seen"), std::string::npos)
+      << readText(page_log);
+
+  const std::string d = std::to_string(kDomain);
+  const std::string recording = tmp + "view_page_loop.mcap";
+  std::remove(recording.c_str());
+  auto controller = std::make_unique<testing::ChildProcess>(
+      std::vector<std::string>{kBin + "/reflex_controller", "--domain", d, "--duration", "60"},
+      tmp + "view_page_controller.log");
+  auto behavior = std::make_unique<testing::ChildProcess>(
+      std::vector<std::string>{kBin + "/reflex_behavior", "--config", kSource + "/bringup/behavior/bar_occlusion.yaml",
+                               "--domain", d, "--duration", "60"},
+      tmp + "view_page_behavior.log");
+  auto objects = std::make_unique<testing::ChildProcess>(
+      LiveSystem::publisherArgs(kDomain, {"red_cup=0.50,0.10,1.00", "can=0.45,-0.25,0.90"}),
+      tmp + "view_page_objects.log");
+  // Three seconds of the live system: the recording played in a loop at the end.
+  testing::ChildProcess recorder(
+      {kBin + "/reflex_record", "record", "-o", recording, "--duration", "3", "--no-scene", "-t", "reflex/joint_state",
+       "-t", "reflex/control_status", "-t", "reflex/object_targets", "--domain", d},
+      tmp + "view_page_record.log");
+  ASSERT_NE(page.readUntil("PHASE live-done", 90s).find("PHASE live-done"), std::string::npos) << readText(page_log);
+  EXPECT_EQ(recorder.wait(20s), 0) << readText(tmp + "view_page_record.log");
+
+  // The data stops.
+  controller.reset();
+  behavior.reset();
+  objects.reset();
+  ASSERT_NE(page.readUntil("PHASE stale-done", 40s).find("PHASE stale-done"), std::string::npos) << readText(page_log);
+
+  // reflex_view goes away and comes back on the same port; a recording is played in a loop.
+  EXPECT_EQ(view->terminate(), 0);
+  const std::string view2_log = tmp + "view_page_view2.log";
+  view =
+      std::make_unique<testing::ChildProcess>(std::vector<std::string>{kBin + "/reflex_view", "--domain", d, "--port",
+                                                                       std::to_string(port), "--duration", "120"},
+                                              view2_log);
+  ASSERT_EQ(bannerPort(view2_log), port) << readText(view2_log);
+  testing::ChildProcess play({kBin + "/reflex_play", recording, "--loop", "--domain", d, "--quiet"},
+                             tmp + "view_page_play.log");
+  EXPECT_EQ(page.wait(100s), 0) << readText(page_log);
+  play.terminate();
+  view->terminate();
+  const nlohmann::json r = lastJsonLine(readText(page_log));
+  ASSERT_TRUE(r.contains("view") && r.contains("resumed")) << readText(page_log);
+  std::printf("page: %s\n", r.dump().substr(0, 1500).c_str());
+
+  // Before any data: the sign says so.
+  EXPECT_TRUE(r["nodata"]["sign"]["shown"].get<bool>()) << r["nodata"].dump();
+  EXPECT_EQ(r["nodata"]["sign"]["text"].get<std::string>().rfind("no data yet: connected", 0), 0U)
+      << r["nodata"]["sign"].dump();
+
+  // Live.
   const nlohmann::json& v = r["view"];
   EXPECT_TRUE(v["connected"].get<bool>());
+  EXPECT_FALSE(v["stale"].get<bool>()) << v["staleText"];
+  EXPECT_FALSE(r["liveSign"]["shown"].get<bool>()) << "no sign while data flows: " << r["liveSign"].dump();
   EXPECT_GT(v["framesReceived"].get<int>(), 0);
   EXPECT_GE(r["framesDuringWait"].get<double>() / r["waitSeconds"].get<double>(), 15.0)
       << "scene updates per second drawn";
@@ -294,6 +400,66 @@ TEST(ReflexView, PageRendersTheRobotInHeadlessChromium) {
   const std::string png = readText(shot);
   ASSERT_GT(png.size(), 10000U) << shot;
   EXPECT_EQ(png.substr(1, 3), "PNG");
+
+  // Labels: each object's name and each drawn target's name, really on the canvas in its colour.
+  std::map<std::string, int> label_pixels;  // text -> pixels of its colour in its box
+  int target_labels = 0;
+  for (const auto& l : r["labelPixels"]) {
+    const std::string entity = l["entity"], text = l["text"];
+    label_pixels[text] = l["pixels"].get<int>();
+    if (entity.rfind("target/", 0) == 0) {
+      ++target_labels;
+      EXPECT_EQ(text.rfind(entity.substr(7) + " target", 0), 0U) << text << " on " << entity;
+    }
+    EXPECT_GE(l["pixels"].get<int>(), 30) << "label '" << text << "' drawn in its colour: " << l.dump();
+  }
+  EXPECT_EQ(label_pixels.count("red_cup"), 1U) << r["labelPixels"].dump();
+  EXPECT_EQ(label_pixels.count("can"), 1U) << r["labelPixels"].dump();
+  EXPECT_EQ(target_labels, v["targetsDrawn"].get<int>()) << "one label per target drawn (same render)";
+  ASSERT_EQ(v["objectColours"].size(), 2U) << v["objectColours"].dump();
+  EXPECT_NE(v["objectColours"]["red_cup"], v["objectColours"]["can"]) << "two objects, two colours";
+
+  // The closest pairs: a white bar with dots over the capsules, and the distance as a label.
+  ASSERT_EQ(r["closestPixels"].size(), 2U) << r["closestPixels"].dump();
+  const std::regex distance_label("(left|right) [0-9]+(\\.[0-9])? mm");
+  for (const auto& c : r["closestPixels"]) {
+    EXPECT_GE(c["pixels"].get<int>(), 100) << "the closest bar is visible: " << c.dump();
+    EXPECT_TRUE(std::regex_match(c["label"].get<std::string>(), distance_label)) << c.dump();
+    EXPECT_EQ(c["label"].get<std::string>().rfind(c["arm"].get<std::string>(), 0), 0U) << c.dump();
+    EXPECT_GE(label_pixels[c["label"].get<std::string>()], 30) << "its distance label drawn: " << c.dump();
+  }
+
+  // The data stopped: the sign with the age of the last scene, and nothing drawn while nothing changes.
+  const nlohmann::json& st = r["stale"];
+  EXPECT_TRUE(st["sign"]["shown"].get<bool>()) << st.dump();
+  EXPECT_EQ(st["sign"]["text"].get<std::string>().rfind("stale: last scene ", 0), 0U) << st["sign"].dump();
+  EXPECT_NE(st["sign"]["text"].get<std::string>().find(" s ago"), std::string::npos) << st["sign"].dump();
+  EXPECT_LT(st["afterMs"].get<int>(), 8000) << "the sign within a few seconds of the stop";
+  EXPECT_GE(st["view"]["sceneAgeMs"].get<int>(), 1000);
+  EXPECT_EQ(st["idleFrames"], 0) << "no data during the idle second";
+  EXPECT_LE(st["idleRenders"].get<int>(), 1) << "no 3D render while idle (was one per animation frame)";
+  EXPECT_LE(st["idlePlots"].get<int>(), 1);
+  EXPECT_GE(st["wheelRenders"].get<int>(), 1) << "a camera move is drawn";
+  EXPECT_LE(st["wheelRenders"].get<int>(), 3);
+  EXPECT_TRUE(st["signLater"]["shown"].get<bool>());
+  EXPECT_GT(readText(stale_shot).size(), 10000U) << stale_shot;
+
+  // Reconnected to the new reflex_view, data again from the looped recording.
+  const nlohmann::json& re = r["resumed"];
+  EXPECT_GE(re["view"]["connections"].get<int>(), 2) << "the page reconnected";
+  EXPECT_TRUE(re["view"]["connected"].get<bool>());
+  EXPECT_FALSE(re["view"]["stale"].get<bool>()) << re["view"]["staleText"];
+  EXPECT_FALSE(re["sign"]["shown"].get<bool>()) << "the sign is gone once data flows: " << re["sign"].dump();
+  const nlohmann::json& fin = re["final"];
+  std::vector<std::string> channels = fin["channels"];
+  std::sort(channels.begin(), channels.end());
+  EXPECT_EQ(channels, (std::vector<std::string>{"/reflex/scene", "/reflex/status", "/tf"}))
+      << "each channel once after the reconnect";
+  // Time went back: the replay's first stamps are older than the live ones, and again at its first loop.
+  EXPECT_GE(fin["plotTraces"].get<int>(), 2) << "a new trace each time time goes back";
+  EXPECT_EQ(fin["plotBackSteps"], 0) << "the plot never joins a later point to an earlier one";
+  EXPECT_GT(fin["plotPoints"].get<int>(), 5);
+  EXPECT_TRUE(fin["errors"].empty()) << fin["errors"].dump();
 }
 
 int listeningSocket(int& port) {

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <utility>
 
@@ -126,6 +127,26 @@ Rgba zoneColour(Zone zone) {
 }
 
 Rgba neutralColour() { return {0.60, 0.62, 0.66, 0.55}; }
+
+std::vector<Rgba> objectColours(const std::vector<std::string>& names) {
+  // cyan, violet, pink, mint, sand, sky: away from the zones (green, yellow, orange, red), the targets
+  // (blue, magenta), the schema's tan and the page's white closest line.
+  static const std::array<Rgba, 6> kPalette{Rgba{0.10, 0.80, 0.90, 0.9}, Rgba{0.62, 0.45, 1.00, 0.9},
+                                            Rgba{1.00, 0.55, 0.75, 0.9}, Rgba{0.45, 1.00, 0.75, 0.9},
+                                            Rgba{0.95, 0.85, 0.60, 0.9}, Rgba{0.55, 0.75, 1.00, 0.9}};
+  std::vector<Rgba> colours;
+  colours.reserve(names.size());
+  std::array<bool, kPalette.size()> taken{};
+  for (const std::string& name : names) {
+    std::uint32_t h = 2166136261u;  // FNV-1a: the same name, the same colour, on every machine
+    for (const char ch : name) h = (h ^ static_cast<unsigned char>(ch)) * 16777619u;
+    std::size_t k = h % kPalette.size();
+    for (std::size_t tries = 0; tries < kPalette.size() && taken[k]; ++tries) k = (k + 1) % kPalette.size();
+    taken[k] = true;  // all taken (more than 6 objects): shared from here on
+    colours.push_back(kPalette[k]);
+  }
+  return colours;
+}
 
 const char* zoneName(Zone zone) {
   switch (zone) {
@@ -326,11 +347,17 @@ nlohmann::json buildSceneUpdate(const SceneModel& scene, const SceneData& data, 
     entities.push_back(std::move(e));
   }
   json objects = entityJson(scene, input.stamp_ns, "objects");
+  std::vector<std::string> object_names;
+  for (const ObjectState& o : input.objects)
+    if (finite(o.p_B)) object_names.push_back(o.name.empty() ? "?" : o.name);
+  const std::vector<Rgba> object_colours = objectColours(object_names);
+  std::size_t k = 0;
   for (const ObjectState& o : input.objects) {
     if (!finite(o.p_B)) continue;
-    objects["spheres"].push_back(sphereJson(o.p_B, 0.06, Rgba{0.1, 0.8, 0.9, 0.9}));
-    objects["texts"].push_back(
-        textJson(o.p_B + Eigen::Vector3d(0, 0, 0.05), o.name.empty() ? "?" : o.name, Rgba{0.1, 0.8, 0.9, 1.0}));
+    const Rgba& c = object_colours[k];
+    objects["spheres"].push_back(sphereJson(o.p_B, 0.06, c));
+    objects["texts"].push_back(textJson(o.p_B + Eigen::Vector3d(0, 0, 0.05), object_names[k], {c.r, c.g, c.b, 1.0}));
+    ++k;
   }
   entities.push_back(std::move(objects));
   for (const SchemaSegmentState& b : input.schema_segments) {

@@ -20,7 +20,8 @@ int main(int argc, char** argv) {
       "reflex_view: live 3D view of a running Reflex system. Reads reflex/joint_state, control_status, hand_targets, "
       "object_targets, controller_protection and body_schema (never writes to the bus) and serves, on one port, the "
       "Foxglove "
-      "WebSocket protocol (foxglove.websocket.v1: channels /tf, /reflex/scene, /reflex/status, JSON) and the bundled "
+      "WebSocket protocol (subprotocol foxglove.websocket.v1 or foxglove.sdk.v1: channels /tf, /reflex/scene, "
+      "/reflex/status, JSON) and the bundled "
       "web page (three.js). Open http://localhost:PORT, or in Foxglove: Open connection -> Foxglove WebSocket -> "
       "ws://localhost:PORT. Exit: 0 ok, 1 runtime error, 2 bad option or set-up (port in use, bad --bind, missing "
       "web folder, bad robot files)."};

@@ -5,6 +5,7 @@
 #include <websocketpp/config/asio_no_tls.hpp>
 #include <websocketpp/server.hpp>
 
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -19,7 +20,17 @@ namespace {
 
 using Server = websocketpp::server<websocketpp::config::asio>;
 using nlohmann::json;
-constexpr const char* kSubprotocol = "foxglove.websocket.v1";
+/// The Foxglove WebSocket subprotocols served, one protocol under two names: the protocol's own
+/// (`foxglove.websocket.v1`) and the newer one clients of the Foxglove SDK offer (`foxglove.sdk.v1`).
+constexpr std::array<const char*, 2> kSubprotocols{"foxglove.websocket.v1", "foxglove.sdk.v1"};
+
+/// The first subprotocol the client offered that is served ("" if none): the client's order decides.
+std::string chooseSubprotocol(const std::vector<std::string>& offered) {
+  for (const std::string& p : offered)
+    for (const char* served : kSubprotocols)
+      if (p == served) return p;
+  return "";
+}
 
 bool isRegularFile(const std::string& path) {
   struct stat st {};
@@ -411,14 +422,15 @@ ViewServer::ViewServer(const ServerOptions& options, std::vector<Channel> channe
       con->set_body("reflex_view serves at most " + std::to_string(kMaxClients) + " WebSocket clients at once\n");
       return false;
     }
-    for (const std::string& p : con->get_requested_subprotocols()) {
-      if (p == kSubprotocol) {
-        con->select_subprotocol(kSubprotocol);
-        return true;
-      }
+    const std::string chosen = chooseSubprotocol(con->get_requested_subprotocols());
+    if (!chosen.empty()) {
+      websocketpp::lib::error_code ec;
+      con->select_subprotocol(chosen, ec);
+      return !ec;
     }
     con->set_status(websocketpp::http::status_code::bad_request);
-    con->set_body(std::string("reflex_view speaks the WebSocket subprotocol ") + kSubprotocol + " only\n");
+    con->set_body(std::string("reflex_view speaks the WebSocket subprotocols ") + kSubprotocols[0] + " and " +
+                  kSubprotocols[1] + " only\n");
     return false;
   });
   m.server.set_open_handler([&m](websocketpp::connection_hdl hdl) {

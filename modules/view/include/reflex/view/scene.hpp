@@ -48,6 +48,11 @@ struct Rgba {
 };
 Rgba zoneColour(Zone zone);
 Rgba neutralColour();
+/// Colour of each vision object, in the order of `names`: each name's own colour of a fixed palette
+/// (chosen from the name, so an object keeps its colour from scene to scene), or, when an earlier name
+/// of the list holds it, the next colour of the palette not yet taken, so up to the palette's size
+/// (6) objects of one scene never share a colour. None is a zone, target or closest-line colour.
+std::vector<Rgba> objectColours(const std::vector<std::string>& names);
 /// "free", "yellow", "orange", "red" (anything else: "free").
 const char* zoneName(Zone zone);
 

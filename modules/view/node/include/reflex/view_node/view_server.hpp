@@ -1,6 +1,8 @@
 // The live view's server: one TCP port that speaks the Foxglove WebSocket protocol
 // (`foxglove.websocket.v1`, https://github.com/foxglove/ws-protocol docs/spec.md) to any WebSocket
-// client that asks for that subprotocol, and plain HTTP GET of the bundled web page to anything else.
+// client that offers that subprotocol or its newer name `foxglove.sdk.v1` (the handshake answers with
+// the first of the two the client offered; neither: HTTP 400), and plain HTTP GET of the bundled web
+// page to anything else.
 // websocketpp (Debian) on Boost.Asio, one I/O thread; no DDS here (ViewNode feeds it).
 //
 // Protocol subset served: on connect `serverInfo` (no capabilities: clients may not publish, call
