@@ -12,6 +12,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 
@@ -196,6 +198,8 @@ TEST(Import, BadInputsAreNamedAndLeaveNoSession) {
       {lr + " --fps nan", "--fps nan"},
       {lr + " --fps 10 --timestamps " + (dir / "long.csv"), "not both"},
       {lr + " --frames 5", "--frames and --duration apply to cameras"},
+      {lr + " --crf 52", "--crf 52 must be an integer in 0..51"},
+      {lr + " --crf -1", "--crf -1 must be an integer in 0..51"},
       {" --timestamps " + (dir / "long.csv") + " --camera-left 0 --camera-right 1", "--timestamps applies to"},
   };
   for (const Case& c : cases) {
@@ -207,6 +211,65 @@ TEST(Import, BadInputsAreNamedAndLeaveNoSession) {
   std::string out;
   EXPECT_EQ(runTool(kRecord + " --help", out, dir), 0);
   EXPECT_THAT(out, AllOf(HasSubstr("--from-files"), HasSubstr("--from-side-by-side"), HasSubstr("--timestamps")));
+}
+
+/// Mean PSNR (dB) of the left images of session `dir` against `reference`.
+double meanLeftPsnr(const std::string& dir, const std::vector<cv::Mat>& reference) {
+  const Frames back = decodeSession(dir);
+  EXPECT_EQ(back.left.size(), reference.size());
+  double sum = 0.0;
+  for (std::size_t i = 0; i < std::min(back.left.size(), reference.size()); ++i)
+    sum += cv::PSNR(back.left[i], reference[i]);
+  return back.left.empty() ? 0.0 : sum / static_cast<double>(back.left.size());
+}
+
+// The default import writes H.264 at CRF 18 by the ffmpeg program and says so; --crf sets the
+// quality. Independent answers: the encoder's own settings record in the video (x264 writes its
+// options, "crf=18.0", into the stream), the PSNR of the decoded images against the lossless source,
+// and the detections of the source session. Without ffmpeg the import says loudly what it used instead.
+TEST(Import, DefaultIsH264AtCrf18AndCrfSetsTheQuality) {
+  Fixture& fx = fixture();
+  TempDir dir("import_quality");
+  const std::size_t n = fx.frames.left.size();
+  writeVideo(dir / "left.avi", fx.frames.left, n);
+  writeVideo(dir / "right.avi", fx.frames.right, n);
+  const std::string lr = " --from-files " + (dir / "left.avi") + " " + (dir / "right.avi") + fx.calib + " --quiet";
+  std::string out;
+  ASSERT_EQ(runTool(kRecord + lr + " --out " + (dir / "crf18"), out, dir), 0) << out;
+  EXPECT_THAT(out, HasSubstr("with codec x264 (H.264 by ffmpeg/libx264 at CRF 18)"));
+  EXPECT_THAT(readText(dir / "crf18/session.yaml"), HasSubstr("codec: x264"));
+  EXPECT_THAT(readText(dir / "crf18/left.mp4"), HasSubstr("crf=18.0"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "crf18/left.mp4.ffmpeg.log")) << "the log goes when ffmpeg succeeds";
+  ASSERT_EQ(runTool(kRecord + lr + " --crf 35 --out " + (dir / "crf35"), out, dir), 0) << out;
+  EXPECT_THAT(out, HasSubstr("at CRF 35)"));
+  EXPECT_THAT(readText(dir / "crf35/left.mp4"), HasSubstr("crf=35.0"));
+  // The default keeps every detection of the source, within a millimetre.
+  const std::vector<Detection> a = detectSession(fx.session), b = detectSession(dir / "crf18");
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].frame, b[i].frame);
+    EXPECT_EQ(a[i].object, b[i].object);
+    EXPECT_LT(cv::norm(a[i].p_B - b[i].p_B), 1e-3) << "frame " << a[i].frame << " " << a[i].object;
+  }
+  // No ffmpeg program on PATH: OpenCV's H.264, said loudly.
+  ASSERT_EQ(runTool("PATH=" + (dir / "empty") + " " + kRecord + lr + " --out " + (dir / "noffmpeg"), out, dir), 0)
+      << out;
+  EXPECT_THAT(out, AllOf(HasSubstr("warning: the videos are avc1"), HasSubstr("not x264 at CRF 18"),
+                         HasSubstr("no ffmpeg program on PATH")));
+  // Quality against the lossless source: CRF 18 above OpenCV's H.264 (x264's default CRF 23, the
+  // import's codec before), CRF 35 below both and smallest.
+  const double psnr18 = meanLeftPsnr(dir / "crf18", fx.frames.left);
+  const double psnr23 = meanLeftPsnr(dir / "noffmpeg", fx.frames.left);
+  const double psnr35 = meanLeftPsnr(dir / "crf35", fx.frames.left);
+  auto bytes = [&](const std::string& folder) { return std::filesystem::file_size(dir / (folder + "/left.mp4")); };
+  std::printf(
+      "left images against the lossless source: CRF 18 %.1f dB %ju bytes, avc1 %.1f dB %ju bytes, "
+      "CRF 35 %.1f dB %ju bytes\n",
+      psnr18, bytes("crf18"), psnr23, bytes("noffmpeg"), psnr35, bytes("crf35"));
+  EXPECT_GT(psnr18, psnr23 + 0.3);
+  EXPECT_GT(psnr23, psnr35 + 1.0);
+  EXPECT_GT(bytes("crf18"), bytes("noffmpeg"));
+  EXPECT_GT(bytes("noffmpeg"), bytes("crf35"));
 }
 
 // A video file used as a camera (paced at its own 10 fps) ends at its end: exit 0 with the summary;

@@ -7,12 +7,24 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <csignal>
 #include <cmath>
-#include <limits>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <sstream>
+
+extern char** environ;
 
 namespace fs = std::filesystem;
 
@@ -348,6 +360,150 @@ ReadStatus SessionReader::read(StereoFrame& frame, std::string& message) {
   return ReadStatus::kOk;
 }
 
+namespace {
+
+/// The ffmpeg program on PATH, or "" if there is none.
+std::string findFfmpeg() {
+  const char* path = std::getenv("PATH");
+  std::stringstream dirs(path != nullptr ? path : "/usr/bin:/bin");
+  for (std::string dir; std::getline(dirs, dir, ':');) {
+    const std::string candidate = (dir.empty() ? std::string(".") : dir) + "/ffmpeg";
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+  }
+  return "";
+}
+
+}  // namespace
+
+/// One ffmpeg process encoding the 8-bit BGR frames it reads on its standard input into an MP4 with
+/// libx264 at a constant rate factor. Its input is a socket, not a pipe: a write after ffmpeg died
+/// fails with EPIPE (MSG_NOSIGNAL) instead of ending the writer with SIGPIPE. Its messages go to a log
+/// file beside the video, quoted when it fails and removed when it succeeds.
+class SessionWriter::FfmpegPipe {
+ public:
+  /// Starts ffmpeg. Throws VisionError naming the cause.
+  FfmpegPipe(const std::string& ffmpeg, const std::string& video, cv::Size size, double fps, int crf)
+      : video_(video), log_(video + ".ffmpeg.log") {
+    int fds[2];
+    if (::socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, fds) != 0)
+      throw VisionError("session writer: socketpair: " + std::string(std::strerror(errno)));
+    fd_ = fds[0];
+    std::ostringstream rate;
+    rate << std::setprecision(17) << fps;
+    // yuv420p halves the chroma of pixel pairs: an odd size keeps full chroma (yuv444p) instead of
+    // being cropped.
+    const bool even = size.width % 2 == 0 && size.height % 2 == 0;
+    const std::vector<std::string> args = {ffmpeg,
+                                           "-hide_banner",
+                                           "-loglevel",
+                                           "error",
+                                           "-y",
+                                           "-f",
+                                           "rawvideo",
+                                           "-pixel_format",
+                                           "bgr24",
+                                           "-video_size",
+                                           std::to_string(size.width) + "x" + std::to_string(size.height),
+                                           "-framerate",
+                                           rate.str(),
+                                           "-i",
+                                           "pipe:0",
+                                           "-an",
+                                           "-c:v",
+                                           "libx264",
+                                           "-preset",
+                                           "medium",
+                                           "-crf",
+                                           std::to_string(crf),
+                                           "-pix_fmt",
+                                           even ? "yuv420p" : "yuv444p",
+                                           video};
+    std::vector<char*> argv;
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], 0);
+    posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+    posix_spawn_file_actions_addopen(&actions, 2, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int rc = ::posix_spawn(&pid_, ffmpeg.c_str(), &actions, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    ::close(fds[1]);
+    if (rc != 0) {
+      pid_ = -1;
+      ::close(fd_);
+      fd_ = -1;
+      throw VisionError("session writer: cannot start '" + ffmpeg + "': " + std::strerror(rc));
+    }
+  }
+  ~FfmpegPipe() { kill(); }
+  FfmpegPipe(const FfmpegPipe&) = delete;
+  FfmpegPipe& operator=(const FfmpegPipe&) = delete;
+
+  /// Sends one frame (8-bit BGR of the size given). Throws VisionError (with ffmpeg's message) if it
+  /// cannot be sent.
+  void write(const cv::Mat& bgr) {
+    const cv::Mat frame = bgr.isContinuous() ? bgr : bgr.clone();
+    const char* data = reinterpret_cast<const char*>(frame.data);
+    std::size_t left = frame.total() * frame.elemSize();
+    while (left > 0) {
+      const ssize_t n = ::send(fd_, data, left, MSG_NOSIGNAL);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        const std::string why = std::strerror(errno);
+        kill();
+        throw VisionError("cannot write video '" + video_ + "': ffmpeg stopped reading (" + why + ")" + message());
+      }
+      data += n;
+      left -= static_cast<std::size_t>(n);
+    }
+  }
+
+  /// Ends the input and waits for ffmpeg. Throws VisionError with its message unless it exited 0.
+  void finish() {
+    if (pid_ < 0) return;
+    ::close(fd_);
+    fd_ = -1;
+    int status = 0;
+    while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+    }
+    pid_ = -1;
+    if (!(WIFEXITED(status) && WEXITSTATUS(status) == 0)) {
+      const std::string code = WIFEXITED(status) ? "exit " + std::to_string(WEXITSTATUS(status))
+                                                 : "signal " + std::to_string(WTERMSIG(status));
+      throw VisionError("cannot write video '" + video_ + "': ffmpeg ended with " + code + message());
+    }
+    std::error_code ec;
+    fs::remove(log_, ec);
+  }
+
+  /// Stops ffmpeg without finishing (an abandoned or failed session); the log stays.
+  void kill() noexcept {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+    if (pid_ > 0) {
+      ::kill(pid_, SIGKILL);
+      int status = 0;
+      while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+      }
+    }
+    pid_ = -1;
+  }
+
+ private:
+  /// ": <ffmpeg's last line> (log: <file>)", or "" when it said nothing.
+  std::string message() const {
+    std::ifstream in(log_);
+    std::string line, last;
+    while (std::getline(in, line))
+      if (!line.empty()) last = line;
+    return last.empty() ? std::string() : ": " + last + " (log: " + log_ + ")";
+  }
+  std::string video_, log_;
+  int fd_ = -1;
+  pid_t pid_ = -1;
+};
+
 std::string sessionFolderProblem(const std::string& dir) {
   if (std::string why = common::outputFolderProblem(dir); !why.empty()) return why;
   std::error_code ec;
@@ -389,12 +545,33 @@ SessionWriter::SessionWriter(const std::string& dir, const StereoCalibration& ca
     files_.camera_mount = "camera_mount.yaml";
     saveCameraMount(dir_ + "/" + files_.camera_mount, *mount, "camera mount during the recording");
   }
+  if (!(options_.crf >= 0 && options_.crf <= 51))
+    throw VisionError("session writer: crf " + std::to_string(options_.crf) + " is outside 0..51");
   std::string tried;
   for (const auto& [fourcc, ext] : options_.codecs) {
     if (fourcc.size() != 4) throw VisionError("session writer: codec '" + fourcc + "' is not a FourCC");
-    const int cc = cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]);
     files_.left_video = "left." + ext;
     files_.right_video = "right." + ext;
+    if (fourcc == kX264Codec) {  // H.264 by the ffmpeg program, at options_.crf
+      const std::string ffmpeg = findFfmpeg();
+      if (!ffmpeg.empty()) {
+        try {
+          pipe_[0] =
+              std::make_unique<FfmpegPipe>(ffmpeg, dir_ + "/" + files_.left_video, size_, options_.fps, options_.crf);
+          pipe_[1] =
+              std::make_unique<FfmpegPipe>(ffmpeg, dir_ + "/" + files_.right_video, size_, options_.fps, options_.crf);
+          codec_ = fourcc;
+          break;
+        } catch (const VisionError&) {
+          pipe_[0].reset();
+          pipe_[1].reset();
+        }
+      }
+      tried += std::string(tried.empty() ? "" : ", ") + fourcc + "/" + ext +
+               (ffmpeg.empty() ? " (no ffmpeg program on PATH)" : " (ffmpeg did not start)");
+      continue;
+    }
+    const int cc = cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]);
     const bool ok = writer_[0].open(dir_ + "/" + files_.left_video, cv::CAP_FFMPEG, cc, options_.fps, size_, true) &&
                     writer_[1].open(dir_ + "/" + files_.right_video, cv::CAP_FFMPEG, cc, options_.fps, size_, true);
     if (ok) {
@@ -438,21 +615,24 @@ void SessionWriter::write(double stamp, const cv::Mat& left, const cv::Mat& righ
     throw VisionError("session writer: stamp " + fmt(stamp) + " is " + fmt(stamp - stamps_.back()) +
                       " s after the previous one (more than " + fmt(kMaxFrameGap) + " s)");
   for (int i = 0; i < 2; ++i) {
-    if (in[i]->channels() == 3) {
-      writer_[i].write(*in[i]);
-    } else {
-      cv::Mat bgr;
-      cv::cvtColor(*in[i], bgr, in[i]->channels() == 1 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGRA2BGR);
+    cv::Mat converted;
+    if (in[i]->channels() != 3)
+      cv::cvtColor(*in[i], converted, in[i]->channels() == 1 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGRA2BGR);
+    const cv::Mat& bgr = in[i]->channels() == 3 ? *in[i] : converted;
+    if (pipe_[i])
+      pipe_[i]->write(bgr);
+    else
       writer_[i].write(bgr);
-    }
   }
   stamps_.push_back(stamp);
 }
 
 void SessionWriter::abandon() {
   finished_ = true;
-  writer_[0].release();
-  writer_[1].release();
+  for (int i = 0; i < 2; ++i) {
+    if (pipe_[i]) pipe_[i]->kill();
+    writer_[i].release();
+  }
 }
 
 void SessionWriter::finish(const std::string& ground_truth_file) {
@@ -460,6 +640,8 @@ void SessionWriter::finish(const std::string& ground_truth_file) {
   finished_ = true;
   writer_[0].release();
   writer_[1].release();
+  for (auto& pipe : pipe_)
+    if (pipe) pipe->finish();  // throws naming the video and ffmpeg's message
   files_.ground_truth = ground_truth_file;
   std::error_code ec;
   // cv::VideoWriter reports no write errors: the videos are opened again and must hold every pair.

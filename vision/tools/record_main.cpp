@@ -25,10 +25,26 @@ void onSignal(int) { g_stop.store(true); }
 /// Container for a FourCC: the lossless FFV1 and MJPEG go into AVI (exact frame counts), the rest into MP4.
 std::string containerFor(const std::string& fourcc) { return fourcc == "MJPG" || fourcc == "FFV1" ? "avi" : "mp4"; }
 
+/// What the videos were written with, in words (the codec chosen and its quality).
+std::string describeCodec(const std::string& codec, int crf) {
+  if (codec == reflex::vision::kX264Codec) return "x264 (H.264 by ffmpeg/libx264 at CRF " + std::to_string(crf) + ")";
+  if (codec == "avc1") return "avc1 (H.264 by OpenCV at x264's default CRF 23)";
+  if (codec == "FFV1") return "FFV1 (lossless)";
+  return codec;
+}
+
+/// Says loudly when the H.264 writer at the chosen quality could not be used (no ffmpeg program).
+void warnIfNotX264(const std::string& chosen, const std::string& asked, int crf) {
+  if ((asked.empty() || asked == reflex::vision::kX264Codec) && chosen != reflex::vision::kX264Codec)
+    std::cerr << "reflex_vision_record: warning: the videos are " << describeCodec(chosen, crf) << ", not x264 at CRF "
+              << crf << ": no ffmpeg program on PATH (apt install ffmpeg)\n";
+}
+
 /// Offline import of video files (--from-files / --from-side-by-side); returns the exit code.
 int importFiles(const reflex::vision::VideoFilesSpec& spec, const reflex::vision::StereoCalibration& calib,
                 const reflex::vision::ObjectMap& objects, const std::optional<reflex::vision::CameraMount>& mount,
-                reflex::vision::SessionWriterOptions wo, double fps_given, const std::string& out, bool show) {
+                reflex::vision::SessionWriterOptions wo, double fps_given, const std::string& out, bool show,
+                const std::string& asked_codec) {
   using namespace reflex::vision;
   VideoFilesReader reader(spec, calib.left.image_size);  // every check before decoding: VisionError (exit 2)
   wo.fps = fps_given > 0.0 ? fps_given : reader.nominalFps();
@@ -69,11 +85,12 @@ int importFiles(const reflex::vision::VideoFilesSpec& spec, const reflex::vision
     return 4;
   }
   const double span = stats.last_stamp - stats.first_stamp;
+  warnIfNotX264(writer.codec(), asked_codec, wo.crf);
   std::printf(
       "imported %d pairs%s into %s with codec %s: stamps %.6f .. %.6f s (span %.3f s, %.2f pairs/s of "
       "session time); %.1f pairs/s achieved (%.2f s)\n",
-      stats.frames, stats.stopped ? " (interrupted)" : "", out.c_str(), writer.codec().c_str(), stats.first_stamp,
-      stats.last_stamp, span, stats.frames > 1 && span > 0.0 ? (stats.frames - 1) / span : 0.0,
+      stats.frames, stats.stopped ? " (interrupted)" : "", out.c_str(), describeCodec(writer.codec(), wo.crf).c_str(),
+      stats.first_stamp, stats.last_stamp, span, stats.frames > 1 && span > 0.0 ? (stats.frames - 1) / span : 0.0,
       stats.frames / std::max(1e-9, stats.wall_seconds), stats.wall_seconds);
   return 0;
 }
@@ -86,6 +103,7 @@ struct RecordArgs {
   std::vector<std::string> from_files;
   reflex::vision::RecordOptions ro;
   double fps = 0.0;
+  int crf = 18;
   bool quiet = false, progress = false;
   CLI::Option* fps_opt = nullptr;
 };
@@ -111,7 +129,12 @@ void addOptions(CLI::App& app, RecordArgs& a) {
                              "cameras: nominal frame rate written to the videos (default: the camera's); "
                              "offline: stamp i = i / F (default: the video's rate)");
   app.add_option("--codec", a.codec,
-                 "FourCC to use first (default avc1/mp4, then mp4v/mp4, MJPG/avi; FFV1/avi is lossless)");
+                 "FourCC to use first (default x264/mp4: H.264 by ffmpeg at --crf; then avc1/mp4: H.264 by "
+                 "OpenCV at x264's default CRF 23, mp4v/mp4, MJPG/avi; FFV1/avi is lossless, about 90x larger)");
+  app.add_option("--crf", a.crf,
+                 "x264's quality, the constant rate factor 0..51: lower is better and larger (18: visually "
+                 "lossless; each +6 about halves the size)")
+      ->capture_default_str();
   app.add_flag("--quiet", a.quiet, "no progress display");
   app.add_flag("--progress", a.progress, "show progress even if stderr is not a terminal");
 }
@@ -124,7 +147,9 @@ int main(int argc, char** argv) {
       "frame rate, as a stand-in camera, and its end is a normal end). Stops at --frames/--duration, at the\n"
       "end of the source, or on Ctrl-C. Offline, --from-files LEFT RIGHT or --from-side-by-side FILE imports\n"
       "recorded videos as fast as the machine allows, stamped by --timestamps CSV (frame,stamp), --fps F\n"
-      "(stamp i = i/F) or the video's own frame rate; --codec FFV1 keeps the images exactly (lossless).\n"
+      "(stamp i = i/F) or the video's own frame rate. Videos: H.264 at --crf 18 (visually lossless) by the\n"
+      "ffmpeg program; --codec FFV1 keeps the images exactly (lossless, about 90x larger). The last line says\n"
+      "which codec and quality were used.\n"
       "The --out folder is created; its parent must exist. Exit: 0 recorded, 2 bad option or input (named),\n"
       "3 nothing recorded, 4 the session could not be written (file and cause named)."};
   RecordArgs args;
@@ -157,6 +182,10 @@ int main(int argc, char** argv) {
     if (!args.mount_path.empty()) mount = loadCameraMount(args.mount_path);
     SessionWriterOptions wo;
     wo.name = args.name;
+    if (!(args.crf >= 0 && args.crf <= 51))
+      throw VisionError("--crf " + std::to_string(args.crf) + " must be an integer in 0..51");
+    wo.crf = args.crf;
+    wo.codecs.insert(wo.codecs.begin(), {kX264Codec, "mp4"});
     if (!args.codec.empty()) {
       if (args.codec.size() != 4) throw VisionError("--codec '" + args.codec + "' is not a FourCC");
       wo.codecs.insert(wo.codecs.begin(), {args.codec, containerFor(args.codec)});
@@ -174,7 +203,7 @@ int main(int argc, char** argv) {
       spec.right = args.from_sbs.empty() ? args.from_files[1] : std::string();
       spec.timestamps = args.timestamps;
       spec.fps = args.fps;
-      return importFiles(spec, calib, objects, mount, wo, args.fps, args.out, show);
+      return importFiles(spec, calib, objects, mount, wo, args.fps, args.out, show, args.codec);
     }
     const std::string& first_spec = args.sbs.empty() ? args.cam_left : args.sbs;
     auto left = openCapture(first_spec);
@@ -204,8 +233,9 @@ int main(int argc, char** argv) {
       std::cerr << "reflex_vision_record: error: " << e.what() << "\n";
       return 4;
     }
+    warnIfNotX264(writer.codec(), args.codec, wo.crf);
     std::cout << "recorded " << stats.recorded << " pairs (" << stats.skipped << " skipped) into " << args.out
-              << " with codec " << writer.codec() << "\n";
+              << " with codec " << describeCodec(writer.codec(), wo.crf) << "\n";
     if (stats.recorded > 0 && !stats.end_message.empty())
       std::cerr << "reflex_vision_record: the source stopped: " << stats.end_message << "\n";
     if (stats.recorded == 0) {

@@ -18,6 +18,7 @@
 #include <opencv2/videoio.hpp>
 
 #include <atomic>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -129,11 +130,20 @@ class SessionReader {
   int next_ = 0;
 };
 
+/// The pseudo-FourCC of SessionWriterOptions::codecs for H.264 at a chosen quality: the `ffmpeg` program
+/// (libx264, constant rate factor SessionWriterOptions::crf) encodes the frames the writer pipes to it.
+/// OpenCV's own H.264 writer ("avc1") has no quality setting (x264's default CRF 23).
+inline constexpr const char* kX264Codec = "x264";
+
 struct SessionWriterOptions {
   std::string name = "session";
   double fps = 10.0;
-  /// FourCC and container tried in order until one opens (H.264 in MP4, then MPEG-4 part 2, MJPEG in AVI).
+  /// FourCC and container tried in order until one opens (H.264 in MP4, then MPEG-4 part 2, MJPEG in AVI;
+  /// kX264Codec: H.264 by ffmpeg at `crf`, opened when the ffmpeg program is found).
   std::vector<std::pair<std::string, std::string>> codecs = {{"avc1", "mp4"}, {"mp4v", "mp4"}, {"MJPG", "avi"}};
+  /// kX264Codec's constant rate factor, 0..51: lower is better and larger (18 is visually lossless;
+  /// 23 is x264's default; each +6 about halves the size).
+  int crf = 18;
 };
 
 /// Why `dir` cannot be written as a session folder, or "" if it can: the folder is missing (its parent
@@ -175,6 +185,8 @@ class SessionWriter {
   cv::Size size_;
   SessionFiles files_;
   cv::VideoWriter writer_[2];
+  class FfmpegPipe;
+  std::unique_ptr<FfmpegPipe> pipe_[2];  ///< kX264Codec: the ffmpeg processes (else empty)
   std::string codec_;
   std::vector<double> stamps_;
   bool finished_ = false;
