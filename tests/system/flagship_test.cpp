@@ -40,7 +40,8 @@ TEST(Flagship, AvoidanceKeepsTheCrossingArmsApartAndWithoutItTheyPenetrate) {
       << json;
   std::vector<double> panels;
   const std::string list = m[1].str();
-  for (std::sregex_iterator it(list.begin(), list.end(), std::regex(R"([-0-9.eE]+)")), end; it != end; ++it)
+  const std::regex number(R"([-0-9.eE]+)");
+  for (std::sregex_iterator it(list.begin(), list.end(), number), end; it != end; ++it)
     panels.push_back(std::stod(it->str()));
   const double closest = std::stod(m[2].str());
   ASSERT_GE(panels.size(), 3U) << json;
