@@ -112,19 +112,103 @@ TEST(StereoTagPoseFit, RecoversAKnownPoseFromExactCorners) {
   EXPECT_LT(rms, 1e-5);
 }
 
-TEST(Confidence, RangeAndMonotonicity) {
-  EXPECT_NEAR(computeConfidence(150, 0, 1.0), 1.0, 1e-12);
-  // The documented formula (stereo_pipeline.hpp): clamp(margin / 100) * exp(-e^2 / 2) *
-  // exp(-((ratio - 1) / 0.05)^2 / 2), each factor checked on its own.
-  EXPECT_NEAR(computeConfidence(50, 0, 1.0), 0.5, 1e-12);
-  EXPECT_NEAR(computeConfidence(100, 1.0, 1.0), std::exp(-0.5), 1e-12);
-  EXPECT_NEAR(computeConfidence(100, 0, 1.05), std::exp(-0.5), 1e-12);
-  EXPECT_NEAR(computeConfidence(80, 2.0, 0.9), 0.8 * std::exp(-2.0) * std::exp(-2.0), 1e-12);
-  EXPECT_EQ(computeConfidence(0, 10, 3.0), 0.0);   // no decision margin: no confidence
-  EXPECT_EQ(computeConfidence(-20, 0, 1.0), 0.0);  // a margin below 0 clamps to 0, not negative
-  EXPECT_LT(computeConfidence(50, 0, 1.0), computeConfidence(90, 0, 1.0));
-  EXPECT_LT(computeConfidence(90, 1.5, 1.0), computeConfidence(90, 0.2, 1.0));
-  EXPECT_LT(computeConfidence(90, 0, 1.1), computeConfidence(90, 0, 1.01));
+// A tag whose detected corners are all shrunk (or grown) about its centre by `bias` in both images, as
+// libapriltag's corners do on small tags: stereo (the disparity) is unaffected, the apparent size is not.
+TEST(StereoTagPoseFit, SizePriorFadesTheApparentSizeCueOnSmallTags) {
+  const StereoCalibration c = testRig();
+  const StereoRectifier rect(c);
+  const double s = 0.04;
+  const cv::Vec3d centre(0.1, 0.05, 1.2);  // ~17 px edge at f 500
+  cv::Matx33d R;
+  cv::Rodrigues(cv::Vec3d(0.2, -0.3, 0.1), R);
+  const cv::Vec3d model[4] = {{-s / 2, s / 2, 0}, {s / 2, s / 2, 0}, {s / 2, -s / 2, 0}, {-s / 2, -s / 2, 0}};
+  for (const double bias : {-0.013, 0.025}) {
+    std::array<cv::Point2d, 4> l, r;
+    std::array<cv::Vec3d, 4> seed;
+    cv::Point2d cl(0, 0), cr(0, 0);
+    for (std::size_t k = 0; k < 4; ++k) {
+      const cv::Vec3d p = R * model[k] + centre;
+      l[k] = rect.projectRect(p, false);
+      r[k] = rect.projectRect(p, true);
+      cl += 0.25 * l[k];
+      cr += 0.25 * r[k];
+      seed[k] = p;
+    }
+    double edge = 0.0;
+    for (std::size_t k = 0; k < 4; ++k) {
+      l[k] = cl + (1.0 + bias) * (l[k] - cl);
+      r[k] = cr + (1.0 + bias) * (r[k] - cr);
+      edge += cv::norm(l[(k + 1) % 4] - l[k]) / 4.0;
+    }
+    ASSERT_LT(edge, 20.0);
+    cv::Vec3d c_hard, c_weighted, z;
+    double rms = 0.0;
+    ASSERT_TRUE(fitTagPoseStereo(rect, l, r, seed, s, c_hard, z, rms));  // size exactly known: old behaviour
+    TagFitWeights w;
+    w.size_sigma = apparentSizeSigma(edge);
+    ASSERT_TRUE(fitTagPoseStereo(rect, l, r, seed, s, c_weighted, z, rms, w));
+    const double range = cv::norm(centre);
+    const double hard = cv::norm(c_hard) - range, weighted = cv::norm(c_weighted) - range;
+    // The hard size constraint reads the apparent size as depth (against the disparity): the range
+    // moves against the bias, here by ~0.3 of it (5-9 mm at 1.2 m).
+    EXPECT_GT(-hard * bias / std::abs(bias), 0.2 * std::abs(bias) * range) << "bias " << bias;
+    // Weighted, the disparity decides: a small fraction of that.
+    EXPECT_LT(std::abs(weighted), 0.2 * std::abs(hard)) << "bias " << bias << ", weighted " << weighted;
+  }
+}
+
+TEST(StereoTagPoseFit, SizePriorKeepsExactCornersExact) {
+  const StereoCalibration c = testRig();
+  const StereoRectifier rect(c);
+  const double s = 0.06;
+  const cv::Vec3d centre(-0.05, 0.02, 0.45);
+  const cv::Vec3d model[4] = {{-s / 2, s / 2, 0}, {s / 2, s / 2, 0}, {s / 2, -s / 2, 0}, {-s / 2, -s / 2, 0}};
+  std::array<cv::Point2d, 4> l, r;
+  std::array<cv::Vec3d, 4> seed;
+  for (std::size_t k = 0; k < 4; ++k) {
+    const cv::Vec3d p = model[k] + centre;
+    l[k] = rect.projectRect(p, false);
+    r[k] = rect.projectRect(p, true);
+    seed[k] = p + cv::Vec3d(-0.001, 0.002, 0.003 * (k % 2 ? -1 : 1));
+  }
+  for (const double sigma : {1e-4, 0.01, 0.3}) {
+    TagFitWeights w;
+    w.size_sigma = sigma;
+    cv::Vec3d c_fit, z_fit;
+    double rms = -1;
+    ASSERT_TRUE(fitTagPoseStereo(rect, l, r, seed, s, c_fit, z_fit, rms, w));
+    EXPECT_LT(cv::norm(c_fit - centre), 1e-7) << sigma;
+    EXPECT_LT(rms, 1e-5) << sigma;
+  }
+}
+
+TEST(Confidence, DocumentedFormulaOnHandComputedCases) {
+  // The documented formula (stereo_pipeline.hpp, vision/README.md "The pipeline"):
+  //   min(1, margin / 50) * exp(-epi^2 / 2) * exp(-((ratio - 1) / tol)^2 / 2),
+  //   tol = max(0.05, 2.5 * 12 / min(edge_px, disparity_px)^2), each factor checked on its own;
+  // the fit's size prior apparentSizeSigma(L) = 150 / L^3.
+  EXPECT_NEAR(computeConfidence(150, 0, 1.0, 60, 60), 1.0, 1e-12);
+  EXPECT_NEAR(computeConfidence(25, 0, 1.0, 60, 60), 0.5, 1e-12);
+  EXPECT_NEAR(computeConfidence(50, 0, 1.0, 60, 60), 1.0, 1e-12);
+  EXPECT_NEAR(computeConfidence(100, 1.0, 1.0, 60, 60), std::exp(-0.5), 1e-12);
+  // Large tag (60 px: 2.5 * 12 / 3600 = 0.8 % < 5 %): the 5 % tolerance.
+  EXPECT_NEAR(computeConfidence(100, 0, 1.05, 60, 80), std::exp(-0.5), 1e-12);
+  EXPECT_NEAR(computeConfidence(100, 0, 0.95, 80, 60), std::exp(-0.5), 1e-12);
+  // 20 px edge, 30 px disparity: sigma = 12 / 400 = 3 %, tol = 7.5 %.
+  EXPECT_NEAR(computeConfidence(100, 0, 1.075, 20, 30), std::exp(-0.5), 1e-12);
+  // 40 px edge but 20 px disparity (a large tag far away): the smaller one decides, the same 7.5 %.
+  EXPECT_NEAR(computeConfidence(100, 0, 0.925, 40, 20), std::exp(-0.5), 1e-12);
+  EXPECT_NEAR(computeConfidence(40, 2.0, 0.9, 60, 60), 0.8 * std::exp(-2.0) * std::exp(-2.0), 1e-12);
+  EXPECT_NEAR(stereoSizeSigma(20, 30), 0.03, 1e-15);
+  EXPECT_NEAR(apparentSizeSigma(20), 0.01875, 1e-15);      // 150 / 8000
+  EXPECT_EQ(computeConfidence(0, 10, 3.0, 60, 60), 0.0);   // no decision margin: no confidence
+  EXPECT_EQ(computeConfidence(-20, 0, 1.0, 60, 60), 0.0);  // a margin below 0 clamps to 0, not negative
+  EXPECT_LT(computeConfidence(20, 0, 1.0, 60, 60), computeConfidence(45, 0, 1.0, 60, 60));
+  EXPECT_LT(computeConfidence(90, 1.5, 1.0, 60, 60), computeConfidence(90, 0.2, 1.0, 60, 60));
+  EXPECT_LT(computeConfidence(90, 0, 1.1, 60, 60), computeConfidence(90, 0, 1.01, 60, 60));
+  // A wrong tag size in the object map (6 cm printed, 5 cm listed: ratio 1.2) reads low at any size.
+  EXPECT_LT(computeConfidence(100, 0, 1.2, 60, 60), 0.01);
+  EXPECT_LT(computeConfidence(100, 0, 1.2, 18, 25), 0.5);
 }
 
 TEST(TagDetector, FindsARenderedTagWhereItWasDrawn) {

@@ -81,13 +81,13 @@ cv::Point2d StereoRectifier::projectRect(const cv::Vec3d& p, bool right) const {
 namespace {
 
 // 16 residuals (u, v of 4 corners in the left then the right rectified image) of the square posed
-// by (R, t) in the rectified left frame.
-void tagResiduals(const StereoRectifier& rect, const cv::Vec3d model[4], const cv::Matx33d& R, const cv::Vec3d& t,
-                  const std::array<cv::Point2d, 4>& l, const std::array<cv::Point2d, 4>& r, double res[16],
-                  bool& in_front) {
+// by (R, t) in the rectified left frame, its model corners scaled by `scale`.
+void tagResiduals(const StereoRectifier& rect, const cv::Vec3d model[4], double scale, const cv::Matx33d& R,
+                  const cv::Vec3d& t, const std::array<cv::Point2d, 4>& l, const std::array<cv::Point2d, 4>& r,
+                  double res[16], bool& in_front) {
   in_front = true;
   for (int k = 0; k < 4; ++k) {
-    const cv::Vec3d p = R * model[k] + t;
+    const cv::Vec3d p = R * (scale * model[k]) + t;
     in_front = in_front && p[2] > 1e-3;
     const cv::Point2d pl = rect.projectRect(p, false);
     const cv::Point2d pr = rect.projectRect(p, true);
@@ -109,7 +109,8 @@ cv::Matx33d expRotation(const cv::Vec3d& w) {
 
 bool fitTagPoseStereo(const StereoRectifier& rectifier, const std::array<cv::Point2d, 4>& left_rect,
                       const std::array<cv::Point2d, 4>& right_rect, const std::array<cv::Vec3d, 4>& seed_rect,
-                      double tag_size, cv::Vec3d& centre_rect, cv::Vec3d& zhat_rect, double& rms_px) {
+                      double tag_size, cv::Vec3d& centre_rect, cv::Vec3d& zhat_rect, double& rms_px,
+                      const TagFitWeights& weights) {
   const double h = 0.5 * tag_size;
   const cv::Vec3d model[4] = {{-h, h, 0.0}, {h, h, 0.0}, {h, -h, 0.0}, {-h, -h, 0.0}};
   // Seed: Kabsch fit of the model square to the triangulated corners.
@@ -124,35 +125,51 @@ bool fitTagPoseStereo(const StereoRectifier& rectifier, const std::array<cv::Poi
   cv::Matx33d R = V * cv::Matx33d(1, 0, 0, 0, 1, 0, 0, 0, d) * Um.t();
   cv::Vec3d t = cbar;
 
+  // Residuals in units of their standard deviation: 16 pixel residuals / corner_sigma_px, then the
+  // size prior (scale - 1) / size_sigma. size_sigma <= 0 holds the scale at 1 (the known size, exactly).
+  const bool free_scale = weights.size_sigma > 0.0;
+  const double wp = 1.0 / std::max(weights.corner_sigma_px, 1e-6);
+  const double ws = free_scale ? 1.0 / weights.size_sigma : 0.0;
+  double scale = 1.0;
   double res[16], res2[16];
   bool in_front = true;
-  for (int iter = 0; iter < 10; ++iter) {
-    tagResiduals(rectifier, model, R, t, left_rect, right_rect, res, in_front);
+  for (int iter = 0; iter < 15; ++iter) {
+    tagResiduals(rectifier, model, scale, R, t, left_rect, right_rect, res, in_front);
     if (!in_front) return false;
-    cv::Matx<double, 16, 6> J;
-    for (int j = 0; j < 6; ++j) {
+    cv::Matx<double, 17, 7> J = cv::Matx<double, 17, 7>::zeros();
+    cv::Matx<double, 17, 1> r;
+    for (int i = 0; i < 16; ++i) r(i) = wp * res[i];
+    r(16) = ws * (scale - 1.0);
+    for (int j = 0; j < 7; ++j) {
+      if (j == 6 && !free_scale) break;
       cv::Vec3d dw(0, 0, 0), dt(0, 0, 0);
-      const double eps = j < 3 ? 1e-6 : 1e-7;
+      double ds = 0.0;
+      const double eps = j < 3 ? 1e-6 : (j < 6 ? 1e-7 : 1e-6);
       if (j < 3)
         dw[j] = eps;
-      else
+      else if (j < 6)
         dt[j - 3] = eps;
-      tagResiduals(rectifier, model, expRotation(dw) * R, t + dt, left_rect, right_rect, res2, in_front);
-      for (int i = 0; i < 16; ++i) J(i, j) = (res2[i] - res[i]) / eps;
+      else
+        ds = eps;
+      tagResiduals(rectifier, model, scale + ds, expRotation(dw) * R, t + dt, left_rect, right_rect, res2, in_front);
+      for (int i = 0; i < 16; ++i) J(i, j) = wp * (res2[i] - res[i]) / eps;
     }
-    const cv::Matx<double, 16, 1> r(res);
-    cv::Matx<double, 6, 6> A = J.t() * J;
-    for (int j = 0; j < 6; ++j) A(j, j) += 1e-9 + 1e-6 * A(j, j);
-    const cv::Matx<double, 6, 1> b = -(J.t() * r);
-    cv::Matx<double, 6, 1> delta;
+    J(16, 6) = ws;
+    cv::Matx<double, 7, 7> A = J.t() * J;
+    for (int j = 0; j < 7; ++j) A(j, j) += 1e-9 + 1e-6 * A(j, j);
+    if (!free_scale) A(6, 6) = 1.0;  // column 6 is zero: the scale stays at 1
+    const cv::Matx<double, 7, 1> b = -(J.t() * r);
+    cv::Matx<double, 7, 1> delta;
     if (!cv::solve(A, b, delta, cv::DECOMP_CHOLESKY)) return false;
     R = expRotation(cv::Vec3d(delta(0), delta(1), delta(2))) * R;
     t += cv::Vec3d(delta(3), delta(4), delta(5));
+    scale += delta(6);
+    if (!(scale > 0.5 && scale < 2.0)) return false;
     if (cv::norm(cv::Vec3d(delta(3), delta(4), delta(5))) < 1e-9 &&
-        cv::norm(cv::Vec3d(delta(0), delta(1), delta(2))) < 1e-9)
+        cv::norm(cv::Vec3d(delta(0), delta(1), delta(2))) < 1e-9 && std::abs(delta(6)) < 1e-9)
       break;
   }
-  tagResiduals(rectifier, model, R, t, left_rect, right_rect, res, in_front);
+  tagResiduals(rectifier, model, scale, R, t, left_rect, right_rect, res, in_front);
   double ss = 0.0;
   for (double v : res) ss += v * v;
   rms_px = std::sqrt(ss / 8.0);  // per corner observation (u and v together)
@@ -162,10 +179,22 @@ bool fitTagPoseStereo(const StereoRectifier& rectifier, const std::array<cv::Poi
   return true;
 }
 
-double computeConfidence(double decision_margin, double epipolar_px, double size_ratio) {
-  const double m = std::clamp(decision_margin / 100.0, 0.0, 1.0);
+double apparentSizeSigma(double edge_px) {
+  const double L = std::max(edge_px, 1.0);
+  return kApparentSizeBiasPx3 / (L * L * L);
+}
+
+double stereoSizeSigma(double edge_px, double disparity_px) {
+  const double m = std::max(std::min(edge_px, disparity_px), 1.0);
+  return kStereoSizeNoisePx2 / (m * m);
+}
+
+double computeConfidence(double decision_margin, double epipolar_px, double size_ratio, double edge_px,
+                         double disparity_px) {
+  const double m = std::clamp(decision_margin / kFullMargin, 0.0, 1.0);
   const double e = std::exp(-0.5 * epipolar_px * epipolar_px);
-  const double s = std::exp(-0.5 * std::pow((size_ratio - 1.0) / 0.05, 2));
+  const double tol = std::max(kMinSizeTolerance, kSizeToleranceSigmas * stereoSizeSigma(edge_px, disparity_px));
+  const double s = std::exp(-0.5 * std::pow((size_ratio - 1.0) / tol, 2));
   return std::clamp(m * e * s, 0.0, 1.0);
 }
 
@@ -270,10 +299,17 @@ bool StereoTagPipeline::observe(int id, const TagDetection& dl_ref, const TagDet
   }
   cv::Vec3d n = (c_rect[2] - c_rect[0]).cross(c_rect[3] - c_rect[1]);
   n = n / std::max(cv::norm(n), 1e-12);
+  double edge_px = 0.0;  // mean edge length over both rectified images
+  for (std::size_t k = 0; k < 4; ++k)
+    edge_px +=
+        (cv::norm(dl->corners[(k + 1) % 4] - dl->corners[k]) + cv::norm(dr.corners[(k + 1) % 4] - dr.corners[k])) / 8.0;
   double rms = 0.0;
   if (options_.refine_with_tag_size) {
     cv::Vec3d fit_centre, fit_z;
-    if (fitTagPoseStereo(rectifier_, dl->corners, dr.corners, c_rect, spec->tag_size, fit_centre, fit_z, rms)) {
+    TagFitWeights weights;
+    weights.size_sigma = apparentSizeSigma(edge_px);
+    if (fitTagPoseStereo(rectifier_, dl->corners, dr.corners, c_rect, spec->tag_size, fit_centre, fit_z, rms,
+                         weights)) {
       centre = fit_centre;
       n = fit_z;
     } else {
@@ -301,7 +337,8 @@ bool StereoTagPipeline::observe(int id, const TagDetection& dl_ref, const TagDet
   o.disparity_px = disparity;
   o.size_ratio = ratio;
   o.reprojection_px = rms;
-  o.confidence = computeConfidence(o.decision_margin, epi, ratio);
+  o.edge_px = edge_px;
+  o.confidence = computeConfidence(o.decision_margin, epi, ratio, edge_px, disparity);
   return true;
 }
 

@@ -10,9 +10,11 @@
 // then p_C = R_L^T p_rect (R_L = left rectification_matrix) and p_B = R_B_C p_C + p_B_C.
 // The tag centre is the mean of its four triangulated corners (exact for a planar square).
 // With refine_with_tag_size (default), that stereo-only estimate seeds a stereo pose fit: the tag's
-// square of known size is posed (6 DOF) to minimise the reprojection error of its four corners in
-// BOTH rectified images (Gauss-Newton, 16 residuals). This uses the tag size as a second depth cue
-// (apparent size) beside the disparity; at 1.5 m with a 6 cm baseline it is the stronger one.
+// square is posed (6 DOF) to minimise the reprojection error of its four corners in BOTH rectified
+// images (Gauss-Newton, 16 residuals), its size free within its expected error (a 7th parameter with a
+// prior, apparentSizeSigma). The tag size is then a second depth cue (apparent size) beside the
+// disparity, weighted by what it is worth: strong on large tags, fading out below ~30-40 px, where
+// libapriltag's corners bias the apparent size by 1-3 % and stereo alone is the better range.
 // size_ratio always reports the stereo-only edge length over the nominal size, so a wrong size in
 // the object map shows up (and beyond max_size_deviation the tag is rejected).
 //
@@ -82,19 +84,60 @@ struct ObjectObservation {
   double disparity_px = 0.0;     ///< mean disparity of the four corners
   double size_ratio = 0.0;       ///< triangulated mean edge length / nominal tag size
   double reprojection_px = 0.0;  ///< RMS corner reprojection error of the final estimate, both images
+  double edge_px = 0.0;          ///< mean edge length of the tag's square in both rectified images, px
+};
+
+/// Weights of the stereo pose fit: its residuals are divided by their expected standard deviation.
+struct TagFitWeights {
+  double corner_sigma_px = 0.1;  ///< noise of a detected corner, rectified px (each of u, v)
+  /// Expected relative error of the tag's apparent size (edge in the images / true edge). The fit's
+  /// square may scale by a factor s with the prior (s - 1) / size_sigma; 0 holds s = 1 (the size
+  /// exactly known: the apparent size is a depth cue as strong as the corners allow).
+  double size_sigma = 0.0;
 };
 
 /// Stereo pose fit of a square tag of edge `tag_size` (corners in libapriltag order, i.e. tag-frame
 /// (-1,+1), (+1,+1), (+1,-1), (-1,-1) times size/2, x right, y down). Inputs: rectified corners in
 /// the left and right images and the stereo-only corner points (rectified left frame) as the seed.
+/// Gauss-Newton over the pose (6) and the square's scale (weighted by `weights`, see TagFitWeights).
 /// Outputs the tag centre and unit normal (+z of the tag frame, pointing away from the viewer) in the
 /// rectified left frame and the RMS reprojection error in pixels. Returns false if it diverges.
 bool fitTagPoseStereo(const StereoRectifier& rectifier, const std::array<cv::Point2d, 4>& left_rect,
                       const std::array<cv::Point2d, 4>& right_rect, const std::array<cv::Vec3d, 4>& seed_rect,
-                      double tag_size, cv::Vec3d& centre_rect, cv::Vec3d& zhat_rect, double& rms_px);
+                      double tag_size, cv::Vec3d& centre_rect, cv::Vec3d& zhat_rect, double& rms_px,
+                      const TagFitWeights& weights = {});
 
-/// Confidence in [0, 1]: min(1, margin/100) * exp(-(epi/1px)^2/2) * exp(-((ratio-1)/0.05)^2/2).
-double computeConfidence(double decision_margin, double epipolar_px, double size_ratio);
+/// The apparent-size cue's error model, measured on generated sessions (docs/vision_accuracy.md):
+/// libapriltag's corners make a small tag's square systematically too large or too small (the sign
+/// depends on blur, rendering and lens; here +2.5 % at 19 px, +1 % at 23 px, +0.3 % at 33 px, < 0.05 %
+/// beyond 40 px; an outside evaluation measured -1.31 % at 16 px, -0.25 % at 35 px).
+/// apparentSizeSigma(L) = kApparentSizeBiasPx3 / L^3, L the mean edge in rectified px (2.2 % at 19 px,
+/// 0.35 % at 35 px, 0.16 % at 45 px, 0.03 % at 75 px): an upper bound of that bias, so the size cue fades
+/// out below ~30-40 px (stereo alone decides the range there) and keeps its weight on large tags.
+inline constexpr double kApparentSizeBiasPx3 = 150.0;
+double apparentSizeSigma(double edge_px);
+
+/// Expected relative error of the stereo-only size_ratio (edge length triangulated from both images):
+/// stereoSizeSigma(L, d) = kStereoSizeNoisePx2 / min(L, d)^2 (L edge, d disparity, rectified px).
+/// Measured: the RMS of size_ratio - 1 on generated sessions stays below it at every L (3.4 % at
+/// 19 px, 0.9 % at 27 px, 0.3 % at 45 px; the model gives 3.3, 1.6, 0.6 %).
+inline constexpr double kStereoSizeNoisePx2 = 12.0;
+double stereoSizeSigma(double edge_px, double disparity_px);
+
+/// Confidence factors (see computeConfidence).
+inline constexpr double kFullMargin = 50.0;          ///< decision margin that counts as fully decoded
+inline constexpr double kMinSizeTolerance = 0.05;    ///< size tolerance of a large, near tag (5 %)
+inline constexpr double kSizeToleranceSigmas = 2.5;  ///< tolerance in stereoSizeSigma units
+
+/// Confidence in [0, 1], the product of three factors, each 1 for a perfect measurement:
+///   margin   min(1, margin / 50)                 (libapriltag's decision margin; tags below 20 are dropped)
+///   epipolar exp(-epi^2 / 2)                     (epi: mean |v_L - v_R| of the corners, px)
+///   size     exp(-((ratio - 1) / tol)^2 / 2),  tol = max(0.05, 2.5 * stereoSizeSigma(edge_px, disparity_px))
+/// On a well calibrated rig each factor stays above 0.5 unless its cue is ~3 expected standard
+/// deviations off: margin below 25 (barely decoded), epipolar error above 1.18 px (calibration), stereo
+/// size off by more than 1.18 tol (calibration or a wrong size in the object map).
+double computeConfidence(double decision_margin, double epipolar_px, double size_ratio, double edge_px,
+                         double disparity_px);
 
 enum class FrameStatus { kOk, kSkipped };
 
