@@ -208,7 +208,7 @@ sign_if_changed "$out/governance.xml" "$out/governance.p7s" "$out/ca" "$(governa
 # ---- permissions -----------------------------------------------------------------------------
 # Topic names: idl/README.md. Every module publishes and reads reflex/heartbeat.
 declare -A publish subscribe
-publish[vision]="reflex/object_targets reflex/heartbeat"
+publish[vision]="reflex/object_targets reflex/camera_left reflex/heartbeat"
 subscribe[vision]="reflex/heartbeat"
 publish[behavior]="reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/heartbeat"
 subscribe[behavior]="reflex/object_targets reflex/joint_state reflex/control_status reflex/heartbeat"
@@ -224,18 +224,18 @@ publish[robot]="reflex/robot_state reflex/robot_contacts reflex/heartbeat"
 subscribe[robot]="reflex/joint_command reflex/heartbeat"
 # The recorder only listens (every topic); it may announce itself with a heartbeat.
 publish[recorder]="reflex/heartbeat"
-subscribe[recorder]="reflex/object_targets reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection reflex/robot_state reflex/joint_command reflex/robot_contacts"
+subscribe[recorder]="reflex/object_targets reflex/camera_left reflex/hand_targets reflex/motion_priority reflex/body_schema reflex/walk_command reflex/joint_state reflex/control_status reflex/heartbeat reflex/controller_protection reflex/robot_state reflex/joint_command reflex/robot_contacts"
 # The player (reflex_play) republishes recorded OBSERVATIONS only: what vision saw and what the
 # robot did, so a recording can re-run behavior modules and feed monitoring. Not the four command
 # topics the controller obeys (a recording replayed in a secure system never commands the robot),
 # not reflex/heartbeat (replayed heartbeats carry other modules' names and would keep a silent
 # source alive for the controller's staleness check). It reads nothing.
-publish[player]="reflex/object_targets reflex/joint_state reflex/control_status"
+publish[player]="reflex/object_targets reflex/camera_left reflex/joint_state reflex/control_status"
 subscribe[player]=""
 # The live view (reflex_view) only reads what it draws: it has no publish rule at all, so Fast DDS
 # refuses to create any writer for it (not even a heartbeat), and its samples could not be accepted.
 publish[view]=""
-subscribe[view]="reflex/joint_state reflex/control_status reflex/hand_targets reflex/object_targets reflex/controller_protection reflex/body_schema"
+subscribe[view]="reflex/joint_state reflex/control_status reflex/hand_targets reflex/object_targets reflex/camera_left reflex/controller_protection reflex/body_schema"
 # The intruder asks for everything, but its identity and permissions come from another CA.
 all_topics="${subscribe[recorder]}"
 publish[intruder]="$all_topics"

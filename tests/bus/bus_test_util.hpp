@@ -77,5 +77,9 @@ template <>
 inline msg::RobotContacts sampleOf<msg::RobotContacts>(int k) {
   return robotContacts(k);
 }
+template <>
+inline msg::CameraImage sampleOf<msg::CameraImage>(int k) {
+  return cameraImage(k);
+}
 
 }  // namespace reflex::bus::test

@@ -19,9 +19,10 @@ constexpr int kDomain = 40;
 template <class T>
 class RoundTrip : public ::testing::Test {};
 
-using AllTypes = ::testing::Types<msg::ObjectTargets, msg::HandTargets, msg::MotionPriority, msg::BodySchemaChange,
-                                  msg::WalkCommand, msg::JointState, msg::ControlStatus, msg::Heartbeat,
-                                  msg::ControllerProtection, msg::RobotState, msg::JointCommand, msg::RobotContacts>;
+using AllTypes =
+    ::testing::Types<msg::ObjectTargets, msg::HandTargets, msg::MotionPriority, msg::BodySchemaChange, msg::WalkCommand,
+                     msg::JointState, msg::ControlStatus, msg::Heartbeat, msg::ControllerProtection, msg::RobotState,
+                     msg::JointCommand, msg::RobotContacts, msg::CameraImage>;
 TYPED_TEST_SUITE(RoundTrip, AllTypes);
 
 TYPED_TEST(RoundTrip, EveryFieldSurvivesAndPublishStamps) {

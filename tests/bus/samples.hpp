@@ -188,6 +188,17 @@ inline void diff(const std::string& p, const msg::RobotContacts& e, const msg::R
   }
   diffValue(p + ".total_contact_steps", e.total_contact_steps(), a.total_contact_steps(), out);
 }
+inline void diff(const std::string& p, const msg::CameraImage& e, const msg::CameraImage& a, Diffs& out) {
+  diff(p + ".header", e.header(), a.header(), out);
+  diffValue(p + ".capture_stamp_ns", e.capture_stamp_ns(), a.capture_stamp_ns(), out);
+  diffValue(p + ".image_index", e.image_index(), a.image_index(), out);
+  diffValue(p + ".frame_id", e.frame_id(), a.frame_id(), out);
+  diffValue(p + ".format", e.format(), a.format(), out);
+  diffValue(p + ".width", e.width(), a.width(), out);
+  diffValue(p + ".height", e.height(), a.height(), out);
+  diffValue(p + ".data.size()", e.data().size(), a.data().size(), out);
+  diffValue(p + ".data", e.data() == a.data(), true, out);
+}
 
 template <class T>
 Diffs diffSample(const T& expected, const T& actual) {
@@ -383,6 +394,21 @@ inline msg::RobotContacts robotContacts(int k) {
     m.contacts().push_back(c);
   }
   m.total_contact_steps(0xFFFF'FFFF'0000'0000ULL + static_cast<std::uint64_t>(k));
+  return m;
+}
+
+inline msg::CameraImage cameraImage(int k) {
+  msg::CameraImage m;
+  m.header(header(k));
+  m.capture_stamp_ns(-7 - k);  // negative on purpose: sign must survive
+  m.image_index(0xFFFF'FFFF'0000'0002ULL + static_cast<std::uint64_t>(k));
+  m.frame_id("left_camera_optical");
+  m.format(k % 2 == 0 ? "jpeg" : "png");
+  m.width(640u + static_cast<std::uint32_t>(k));
+  m.height(0xFFFF'FFFFu);
+  // 200 kB (several fragments on UDP) of every byte value, 0 and 255 included.
+  m.data().resize(200'000);
+  for (std::size_t i = 0; i < m.data().size(); ++i) m.data()[i] = static_cast<std::uint8_t>((i * 131 + k) & 0xFF);
   return m;
 }
 

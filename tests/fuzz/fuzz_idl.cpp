@@ -54,7 +54,7 @@ void roundTrip(const std::uint8_t* data, std::size_t size) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 1) return 0;
-  const std::uint8_t which = data[0] % 10;
+  const std::uint8_t which = data[0] % 11;
   ++data;
   --size;
   try {
@@ -68,6 +68,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 6: roundTrip<reflex::msg::ControlStatus>(data, size); break;
       case 8: roundTrip<reflex::msg::RobotState>(data, size); break;
       case 9: roundTrip<reflex::ros2::JointState>(data, size); break;
+      case 10: roundTrip<reflex::msg::CameraImage>(data, size); break;
       default: roundTrip<reflex::msg::Heartbeat>(data, size); break;
     }
   } catch (const std::exception& e) {

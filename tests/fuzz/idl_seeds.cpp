@@ -81,10 +81,16 @@ int main(int argc, char** argv) {
   reflex::ros2::JointState ros_joints;  // likewise, sensor_msgs/JointState from a ROS 2 robot
   ros_joints.name({"l_shoulder_pitch", "l_elbow", "gripper_joint"});
   ros_joints.position({0.1, -0.5, 0.01});
+  CameraImage image;  // an unbounded octet sequence
+  image.frame_id("left_camera_optical");
+  image.format("jpeg");
+  image.width(2);
+  image.height(1);
+  image.data({0xFF, 0xD8, 0xFF, 0xE0, 0x00, 0x10, 0xFF, 0xD9});
   const bool ok = writeSeed(dir, 0, objects) && writeSeed(dir, 1, hands) && writeSeed(dir, 2, priority) &&
                   writeSeed(dir, 3, schema) && writeSeed(dir, 4, walk) && writeSeed(dir, 5, joints) &&
                   writeSeed(dir, 6, status) && writeSeed(dir, 7, hb) && writeSeed(dir, 8, robot) &&
-                  writeSeed(dir, 9, ros_joints);
+                  writeSeed(dir, 9, ros_joints) && writeSeed(dir, 10, image);
   if (!ok) {
     std::fprintf(stderr, "error: cannot write the seeds into '%s'\n", dir.c_str());
     return 1;

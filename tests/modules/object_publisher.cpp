@@ -3,7 +3,9 @@
 // positions; --inject-bad adds samples the behavior process must reject: a NaN copy of the first
 // object and an unknown "ghost" in every frame, every third frame an extra frame stamped 10 s in
 // the future that puts the first object somewhere else, and every third frame (another one) an
-// extra frame in frame_id "odom" that puts the first object somewhere else.
+// extra frame in frame_id "odom" that puts the first object somewhere else. --image FILE (a JPEG) also
+// publishes that image on reflex/camera_left every fifth frame, as reflex_vision publishes the left
+// camera's image.
 #include <reflex/bus/bus.hpp>
 
 #include <CLI/CLI.hpp>
@@ -11,9 +13,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <limits>
 #include <sstream>
 #include <thread>
+#include <vector>
 
 namespace {
 
@@ -46,6 +51,32 @@ reflex::msg::ObjectTarget target(const std::string& name, int tag, double x, dou
   return t;
 }
 
+/// A JPEG file's bytes and its size from its start-of-frame marker (baseline or progressive).
+struct Jpeg {
+  std::vector<std::uint8_t> bytes;
+  int width = 0, height = 0;
+};
+
+Jpeg readJpeg(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  Jpeg j;
+  j.bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  const std::vector<std::uint8_t>& b = j.bytes;
+  if (b.size() < 4 || b[0] != 0xFF || b[1] != 0xD8) throw std::invalid_argument("--image '" + path + "' is not a JPEG");
+  for (std::size_t i = 2; i + 9 < b.size();) {  // marker segments: FF xx, 16-bit length
+    if (b[i] != 0xFF) break;
+    const int marker = b[i + 1];
+    const std::size_t length = (std::size_t{b[i + 2]} << 8) | b[i + 3];
+    if (marker >= 0xC0 && marker <= 0xC2) {
+      j.height = (b[i + 5] << 8) | b[i + 6];
+      j.width = (b[i + 7] << 8) | b[i + 8];
+      return j;
+    }
+    i += 2 + length;
+  }
+  throw std::invalid_argument("--image '" + path + "': no JPEG start-of-frame marker");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -60,6 +91,8 @@ int main(int argc, char** argv) {
   app.add_option("--duration", duration, "seconds to publish")->check(CLI::PositiveNumber)->capture_default_str();
   app.add_option("--rate", rate, "frames per second")->check(CLI::Range(0.5, 100.0))->capture_default_str();
   app.add_flag("--inject-bad", inject, "add NaN, unknown, future and wrong-frame samples");
+  std::string image_path;
+  app.add_option("--image", image_path, "a JPEG also published on reflex/camera_left every fifth frame");
   CLI11_PARSE(app, argc, argv);
   try {
     std::vector<Obj> objects;
@@ -69,6 +102,12 @@ int main(int argc, char** argv) {
     config.domain_id = bus::parseDomainId(domain, "--domain");
     bus::Participant participant(config);
     auto& writer = participant.makeWriter<msg::ObjectTargets>();
+    Jpeg jpeg;
+    bus::Writer<msg::CameraImage>* image_writer = nullptr;
+    if (!image_path.empty()) {
+      jpeg = readJpeg(image_path);
+      image_writer = &participant.makeWriter<msg::CameraImage>();
+    }
     bus::StopOnSignal stop_on_signal(participant);
     const auto period = std::chrono::duration<double>(1.0 / rate);
     const auto t_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(duration);
@@ -86,6 +125,17 @@ int main(int argc, char** argv) {
             target(objects[i].name, static_cast<int>(i), objects[i].x, objects[i].y, objects[i].z));
       if (inject) frame.objects().push_back(target("ghost", 99, 0.40, 0.0, 1.0));
       writer.publish(frame);
+      if (image_writer != nullptr && index % 5 == 1) {
+        msg::CameraImage image;
+        image.capture_stamp_ns(frame.capture_stamp_ns());
+        image.image_index(index);
+        image.frame_id("left_camera_optical");
+        image.format("jpeg");
+        image.width(static_cast<std::uint32_t>(jpeg.width));
+        image.height(static_cast<std::uint32_t>(jpeg.height));
+        image.data(jpeg.bytes);
+        image_writer->publish(image);
+      }
       if (inject && index % 3 == 0) {
         msg::ObjectTargets future;
         const std::int64_t ahead = bus::nowNs() + 10'000'000'000LL;

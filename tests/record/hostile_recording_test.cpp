@@ -264,7 +264,8 @@ TEST(HostileSamples, EveryTopicTypeIsCheckedAndItsValidSamplesPass) {
       test::encodeEntry(bus::test::walkCommand(3), 1),          test::encodeEntry(bus::test::jointState(3), 1),
       test::encodeEntry(bus::test::controlStatus(3), 1),        test::encodeEntry(bus::test::heartbeat(3), 1),
       test::encodeEntry(bus::test::controllerProtection(3), 1), test::encodeEntry(bus::test::robotState(3), 1),
-      test::encodeEntry(bus::test::jointCommand(3), 1),         test::encodeEntry(bus::test::robotContacts(3), 1)};
+      test::encodeEntry(bus::test::jointCommand(3), 1),         test::encodeEntry(bus::test::robotContacts(3), 1),
+      test::encodeEntry(bus::test::cameraImage(3), 1)};
   ASSERT_EQ(valid.size(), allCodecs().size());
   for (const RecordEntry& e : valid) {
     EXPECT_EQ(cdrLengthProblem(e.type, e.payload.data(), e.payload.size()), "") << e.type;

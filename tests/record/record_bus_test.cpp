@@ -73,6 +73,7 @@ struct Sent {
   std::vector<msg::RobotState> robot;  // the robot boundary
   std::vector<msg::JointCommand> command;
   std::vector<msg::RobotContacts> contacts;
+  std::vector<msg::CameraImage> camera;
 };
 
 template <class T>
@@ -93,7 +94,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   ro.output = file;
   ro.bus = busConfig("recorder");
   Recorder recorder(ro);
-  EXPECT_EQ(recorder.counts().size(), 12u) << "all Reflex topics by default";
+  EXPECT_EQ(recorder.counts().size(), 13u) << "all Reflex topics by default";
   std::thread rec_thread([&] { recorder.run(); });
 
   Sent sent;
@@ -111,14 +112,15 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     auto& w_robot = src.makeWriter<msg::RobotState>();
     auto& w_command = src.makeWriter<msg::JointCommand>();
     auto& w_contacts = src.makeWriter<msg::RobotContacts>();
+    auto& w_camera = src.makeWriter<msg::CameraImage>();
     for (bus::detail::WriterBase* w : std::initializer_list<bus::detail::WriterBase*>{
              &w_obj, &w_hand, &w_prio, &w_schema, &w_walk, &w_joint, &w_status, &w_beat, &w_protection, &w_robot,
-             &w_command, &w_contacts})
+             &w_command, &w_contacts, &w_camera})
       ASSERT_TRUE(w->waitForReaders(1, 10s)) << w->topicName();
     // Both sides: a writer that matched the recorder may still be unknown to the recorder's reader,
     // which then drops a best-effort sample (on a loaded host that window lasted long enough to lose
     // 24 of 40 samples). Once both sides matched, every sample here is delivered:
-    // the reliable topics are read reliably (repaired if dropped), and 45 samples in 150 ms never
+    // the reliable topics are read reliably (repaired if dropped), and 65 samples in 150 ms never
     // fill a best-effort transport queue on one host.
     ASSERT_TRUE(recorder.waitForWriters(10s)) << "the recorder matched every writer";
     for (int k = 0; k < 5; ++k) {
@@ -134,6 +136,8 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
       sent.robot.push_back(bus::test::robotState(k));
       sent.command.push_back(bus::test::jointCommand(k));
       sent.contacts.push_back(bus::test::robotContacts(k));
+      sent.camera.push_back(bus::test::cameraImage(k));
+      sent.camera.back().data().resize(20'000);  // a small JPEG's size: 5 in 150 ms stay in the queue
       w_obj.write(sent.objects.back());
       w_hand.write(sent.hands.back());
       w_prio.write(sent.prio.back());
@@ -146,13 +150,14 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
       w_robot.write(sent.robot.back());
       w_command.write(sent.command.back());
       w_contacts.write(sent.contacts.back());
+      w_camera.write(sent.camera.back());
       std::this_thread::sleep_for(30ms);
     }
     std::this_thread::sleep_for(500ms);
   }
   recorder.stop();
   rec_thread.join();
-  EXPECT_EQ(recorder.totalSamples(), 60u);
+  EXPECT_EQ(recorder.totalSamples(), 65u);
 
   // Read back: every sample, unchanged, receive times ordered, DDS source times set.
   std::vector<RecordEntry> all;
@@ -162,7 +167,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     while (r.next(e)) all.push_back(e);
     EXPECT_EQ(r.tailState(), TailState::kClean);
   }
-  ASSERT_EQ(all.size(), 60u);
+  ASSERT_EQ(all.size(), 65u);
   for (std::size_t i = 1; i < all.size(); ++i) EXPECT_GE(all[i].receive_ns, all[i - 1].receive_ns);
   for (const auto& e : all) {
     EXPECT_GT(e.source_ns, 0);
@@ -180,6 +185,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   expectRecorded(all, sent.robot);
   expectRecorded(all, sent.command);
   expectRecorded(all, sent.contacts);
+  expectRecorded(all, sent.camera);
 
   std::vector<std::int64_t> status_rx;  // recorded receive times of the control status samples
   for (const auto& e : all)
@@ -243,6 +249,14 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   EXPECT_DOUBLE_EQ(std::stod(rows[1][col(rows[0], "distance")]), -0.0015);
   EXPECT_EQ(rows[3][col(rows[0], "segment_a")], "");
   EXPECT_EQ(rows[3][col(rows[0], "n_contacts")], "3");
+  const std::string csv_camera = tempPath("camera.csv");
+  EXPECT_EQ(exportCsv(file, "reflex/camera_left", csv_camera), 5u);
+  rows = readCsv(csv_camera);
+  ASSERT_EQ(rows.size(), 6u);
+  EXPECT_EQ(rows[2][col(rows[0], "format")], "png");
+  EXPECT_EQ(rows[2][col(rows[0], "width")], "641");
+  EXPECT_EQ(rows[2][col(rows[0], "bytes")], "20000");
+  EXPECT_EQ(rows[2][col(rows[0], "capture_stamp_ns")], "-8");
   EXPECT_THROW(exportCsv(file, "reflex/nothing", csv), RecordError);
 
   // Play back two topics: the same samples arrive, headers untouched; with --restamp the stamps move.
@@ -288,7 +302,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
   // named with --topic it is played. By default observations only: the six command topics of this
   // recording (hand targets, priority, body schema, walk command, joint command, and the robot state a
   // controller over DDS computes from; 5 samples each) only with `commands`.
-  // 12 types x 5 samples were recorded.
+  // 13 types x 5 samples were recorded (the camera image is an observation: played by default).
   enum class Mode { kDefault, kCommands, kProtectionNamed };
   for (const Mode mode : {Mode::kDefault, Mode::kCommands, Mode::kProtectionNamed}) {
     PlayerOptions po;
@@ -300,7 +314,7 @@ TEST(RecordBus, EveryTopicTypeIsRecordedPlayedAndExportedUnchanged) {
     po.rate = 0.0;  // as fast as possible
     Player player(po);
     player.run();
-    const std::uint64_t expected = mode == Mode::kProtectionNamed ? 5u : mode == Mode::kCommands ? 55u : 25u;
+    const std::uint64_t expected = mode == Mode::kProtectionNamed ? 5u : mode == Mode::kCommands ? 60u : 30u;
     EXPECT_EQ(player.stats().published, expected) << static_cast<int>(mode);
     if (mode == Mode::kDefault) {
       EXPECT_EQ(player.commandsSkipped().size(), 6u);

@@ -189,6 +189,11 @@ function drive(url) {
         view, framesDuringWait: view.framesReceived - framesBefore, robotPixels: live.robot,
         canvas: [live.width, live.height], labelPixels: live.labelPixels, closestPixels: live.closestPixels,
         cameraPanel: await evaluate("document.getElementById('camera').textContent"),
+        // The camera panel's image as the browser shows it: decoded size and the box it fills.
+        cameraImg: await evaluate(`(() => { const i = document.querySelector('#camera img');
+          if (!i) return null; const b = i.getBoundingClientRect();
+          return { complete: i.complete, naturalWidth: i.naturalWidth, naturalHeight: i.naturalHeight,
+                   shownWidth: Math.round(b.width), shownHeight: Math.round(b.height) }; })()`),
         screenshot: await screenshot(args.screenshot),
       });
       if (fullRun) {

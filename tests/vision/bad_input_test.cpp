@@ -232,6 +232,12 @@ TEST_F(BadInput, CommandLineErrorsNameTheBadValue) {
   EXPECT_THAT(err, HasSubstr("-2"));
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --max-lag 0", err), 2);
   EXPECT_THAT(err, HasSubstr("max lag 0.000000 s must be in (0, 10]"));
+  EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --image-rate 31", err), 2);
+  EXPECT_THAT(err, HasSubstr("--image-rate 31 must be in [0, 30] Hz"));
+  EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --image-rate nan", err), 2);
+  EXPECT_THAT(err, HasSubstr("--image-rate"));
+  EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --image-width 10", err), 2);
+  EXPECT_THAT(err, HasSubstr("--image-width 10 must be in [64, 4096] pixels"));
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --start 99", err), 2);
   EXPECT_THAT(err, HasSubstr("start offset 99"));
   EXPECT_EQ(runCli("--session " + (*base_ / "mp4") + " --dump " + (dir_ / "x.csv") + " --rectify sideways", err), 2);

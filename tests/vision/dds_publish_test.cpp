@@ -10,6 +10,9 @@
 
 #include <gtest/gtest.h>
 
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -102,6 +105,68 @@ TEST(VisionDds, PublishesObjectTargetsAt10HzMatchingGroundTruth) {
     }
   }
   EXPECT_GT(compared, 50);
+}
+
+// reflex/camera_left: the real reflex_vision publishes the left image at --image-rate (2 Hz of session
+// time) as a JPEG scaled to --image-width, with the capture stamp and index of that frame's
+// ObjectTargets. Independent answers: OpenCV decodes the JPEG, and it is the session's own left image
+// of that index (PSNR against the frame read from the session, scaled the same way).
+TEST(VisionDds, PublishesTheLeftImageAsAJpegOfItsFrame) {
+  TempDir dir("dds_image");
+  makeSession(parseSceneScript(nearScript(4.0), "near"), dir / "s");
+  ObjectTargetsCollector collector("vision_dds_image_test");
+  std::vector<reflex::msg::CameraImage> images;
+  collector.bus.makeReader<reflex::msg::CameraImage>().onData(
+      [&](const reflex::msg::CameraImage& m) { images.push_back(m); });
+  const std::string cmd = std::string(REFLEX_BIN_DIR) + "/reflex_vision --session " + (dir / "s") +
+                          " --domain 85 --loop --duration 8 --image-rate 2 --image-width 320 --quiet > " +
+                          (dir / "log.txt") + " 2>&1";
+  int rc = -1;
+  std::atomic<bool> done{false};
+  std::thread vision([&] {
+    rc = std::system(cmd.c_str());
+    done.store(true);
+  });
+  for (int i = 0; i < 900 && !done.load(); ++i) collector.bus.runFor(std::chrono::milliseconds(100));
+  collector.bus.runFor(std::chrono::milliseconds(200));
+  vision.join();
+  ASSERT_EQ(rc, 0) << readText(dir / "log.txt");
+
+  // 8 s at 2 Hz = 16 images; best effort loses those sent before discovery completes.
+  ASSERT_GE(images.size(), 6U);
+  const double span_s =
+      1e-9 * static_cast<double>(images.back().header().stamp_ns() - images.front().header().stamp_ns());
+  const double rate = static_cast<double>(images.back().header().seq() - images.front().header().seq()) / span_s;
+  std::printf("%zu images, %.2f per second, %zu bytes each (first)\n", images.size(), rate, images[0].data().size());
+  EXPECT_NEAR(rate, 2.0, 0.3);
+  // The session's left images, as reflex_vision reads them.
+  std::vector<cv::Mat> left;
+  {
+    SessionReader reader(dir / "s");
+    StereoFrame f;
+    std::string msg;
+    while (reader.read(f, msg) == ReadStatus::kOk) left.push_back(f.left.clone());
+  }
+  int matched_targets = 0;
+  for (const reflex::msg::CameraImage& m : images) {
+    EXPECT_EQ(m.header().source(), "vision");
+    EXPECT_EQ(m.format(), "jpeg");
+    EXPECT_EQ(m.frame_id(), "left_camera_optical");
+    const cv::Mat decoded = cv::imdecode(m.data(), cv::IMREAD_COLOR);
+    ASSERT_FALSE(decoded.empty()) << "image " << m.image_index() << " is not a JPEG OpenCV decodes";
+    EXPECT_EQ(decoded.cols, 320);
+    EXPECT_EQ(decoded.rows, 240);
+    EXPECT_EQ(static_cast<int>(m.width()), decoded.cols);
+    EXPECT_EQ(static_cast<int>(m.height()), decoded.rows);
+    ASSERT_LT(m.image_index(), left.size());
+    cv::Mat expected;
+    cv::resize(left[m.image_index()], expected, decoded.size(), 0, 0, cv::INTER_AREA);
+    EXPECT_GT(cv::PSNR(decoded, expected), 30.0) << "image " << m.image_index() << " is its frame";
+    for (const reflex::msg::ObjectTargets& t : collector.got)
+      if (t.image_index() == m.image_index() && t.capture_stamp_ns() == m.capture_stamp_ns()) ++matched_targets;
+  }
+  EXPECT_GE(matched_targets, static_cast<int>(images.size()) / 2)
+      << "an image carries the capture stamp and index of its frame's ObjectTargets";
 }
 
 // The publishing reflex_vision (DDS path: the bus loop on the main thread, vision

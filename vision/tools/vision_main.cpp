@@ -97,6 +97,12 @@ int main(int argc, char** argv) {
                  "DDS QoS profiles XML (default: " + reflex::common::defaultProfilesFile() + ")");
   app.add_option("--frame-id", o.frame_id, "name of the robot base frame written into ObjectTargets")
       ->capture_default_str();
+  app.add_option("--image-rate", o.image_hz,
+                 "publish the left camera's image (JPEG) on reflex/camera_left this often per second of session "
+                 "time, for viewers and recordings (0: never; at most 30)")
+      ->capture_default_str();
+  app.add_option("--image-width", o.image_width, "scale the published image down to at most this many pixels wide")
+      ->capture_default_str();
   app.add_option(
       "--wait-readers", o.wait_readers,
       "hold the start until this many readers of reflex/object_targets have matched (e.g. 2: "

@@ -161,6 +161,15 @@ void csvRows(std::ostream& o, const std::string& prefix, const msg::RobotContact
     o << head << ',' << csvField(c.segment_a()) << ',' << csvField(c.segment_b()) << ',' << num(c.distance()) << '\n';
 }
 
+// The image itself is not a CSV cell: its size and format are.
+void csvColumns(std::ostream& o, const msg::CameraImage&) {
+  o << ",capture_stamp_ns,image_index,frame_id,format,width,height,bytes";
+}
+void csvRows(std::ostream& o, const std::string& prefix, const msg::CameraImage& s) {
+  o << prefix << ',' << s.capture_stamp_ns() << ',' << s.image_index() << ',' << csvField(s.frame_id()) << ','
+    << csvField(s.format()) << ',' << s.width() << ',' << s.height() << ',' << s.data().size() << '\n';
+}
+
 // ---- restamping for replay ---------------------------------------------------------------------
 
 // A stamp comes from the recorded payload (any int64): the shifted value saturates instead of
@@ -173,6 +182,11 @@ std::int64_t shifted(std::int64_t stamp, std::int64_t shift) {
 template <class T>
 void shiftStamps(T& s, std::int64_t shift) {
   s.header().stamp_ns(shifted(s.header().stamp_ns(), shift));
+}
+template <>
+void shiftStamps(msg::CameraImage& s, std::int64_t shift) {
+  s.header().stamp_ns(shifted(s.header().stamp_ns(), shift));
+  s.capture_stamp_ns(shifted(s.capture_stamp_ns(), shift));
 }
 template <>
 void shiftStamps(msg::ObjectTargets& s, std::int64_t shift) {
@@ -294,9 +308,11 @@ const std::vector<const TopicCodec*>& allCodecs() {
   static const Codec<msg::RobotState> robot_state;                      // the robot boundary
   static const Codec<msg::JointCommand> joint_command;
   static const Codec<msg::RobotContacts> robot_contacts;
+  static const Codec<msg::CameraImage> camera_image;  // vision's left image (viewers, Foxglove)
   static const std::vector<const TopicCodec*> all = {
-      &object_targets, &hand_targets, &motion_priority,       &body_schema, &walk_command,  &joint_state,
-      &control_status, &heartbeat,    &controller_protection, &robot_state, &joint_command, &robot_contacts};
+      &object_targets, &hand_targets,   &motion_priority, &body_schema,           &walk_command,
+      &joint_state,    &control_status, &heartbeat,       &controller_protection, &robot_state,
+      &joint_command,  &robot_contacts, &camera_image};
   return all;
 }
 

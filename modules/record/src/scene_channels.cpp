@@ -16,7 +16,7 @@ struct SceneChannels::Impl {
   std::unique_ptr<view::SceneData> data;
   std::unique_ptr<view_node::SceneFeed> feed;
   std::int64_t period_ns = 0;
-  std::uint16_t tf_channel = 0, scene_channel = 0;  ///< 0: not added yet
+  std::uint16_t tf_channel = 0, scene_channel = 0, camera_channel = 0;  ///< 0: not added yet
   std::uint32_t sequence = 0;
   bool have_scene = false;
   std::int64_t last_scene_ns = 0;
@@ -25,6 +25,7 @@ struct SceneChannels::Impl {
   msg::HandTargets targets;
   msg::ObjectTargets objects;
   msg::BodySchemaChange schema;
+  msg::CameraImage image;
 
   /// Decodes `e` into `sample` and feeds it; false if it does not decode.
   template <class T>
@@ -61,6 +62,10 @@ const std::string& SceneChannels::robotName() const { return impl_->scene.model.
 void SceneChannels::add(const RecordEntry& e, McapWriter& writer) {
   Impl& m = *impl_;
   const std::string& t = e.type;
+  if (t == "reflex::msg::CameraImage") {
+    addCameraImage(e, writer);
+    return;
+  }
   bool ok = true;
   if (t == "reflex::msg::JointState")
     ok = m.feedSample(e, m.joints);
@@ -116,6 +121,29 @@ void SceneChannels::add(const RecordEntry& e, McapWriter& writer) {
   ++stats_.scenes;
 }
 
+void SceneChannels::addCameraImage(const RecordEntry& e, McapWriter& writer) {
+  Impl& m = *impl_;
+  if (e.topic != bus::TopicTraits<msg::CameraImage>::kTopicName) return;
+  if (!deserializeSample(e.payload, m.image)) {
+    ++stats_.undecodable;
+    return;
+  }
+  if (m.camera_channel == 0)
+    m.camera_channel = writer.addChannel({"/reflex/camera/left",
+                                          "json",
+                                          "foxglove.CompressedImage",
+                                          "jsonschema",
+                                          view::compressedImageSchema().dump(),
+                                          {}});
+  ++m.sequence;
+  const auto log_time = static_cast<std::uint64_t>(std::max<std::int64_t>(e.receive_ns, 0));
+  const std::int64_t stamp = m.image.header().stamp_ns();
+  m.write(&writer, m.camera_channel, log_time, stamp > 0 ? static_cast<std::uint64_t>(stamp) : log_time,
+          view_node::dumpJson(view::buildCompressedImage(m.image.capture_stamp_ns(), m.image.frame_id(),
+                                                         m.image.format(), m.image.data())));
+  ++stats_.camera_images;
+}
+
 std::string SceneChannels::summary() const {
   char line[400];
   if (stats_.joint_states == 0) {
@@ -127,6 +155,7 @@ std::string SceneChannels::summary() const {
                   robotName().c_str());
   }
   std::string out = line;
+  if (stats_.camera_images) out += "; /reflex/camera/left: " + std::to_string(stats_.camera_images) + " camera images";
   if (stats_.joint_entries_skipped)
     out += "; " + std::to_string(stats_.joint_entries_skipped) +
            " joint entries not in the robot model or not finite were skipped (another robot? give --urdf)";

@@ -288,6 +288,31 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
   return true;
 }
 
+std::string base64(const std::vector<std::uint8_t>& data) {
+  static const char kAlphabet[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((data.size() + 2) / 3 * 4);
+  std::size_t i = 0;
+  for (; i + 3 <= data.size(); i += 3) {  // 3 bytes -> 4 characters of 6 bits
+    const std::uint32_t v = (std::uint32_t{data[i]} << 16) | (std::uint32_t{data[i + 1]} << 8) | data[i + 2];
+    for (int shift = 18; shift >= 0; shift -= 6) out.push_back(kAlphabet[(v >> shift) & 63U]);
+  }
+  const std::size_t rest = data.size() - i;  // 1 or 2 bytes: 2 or 3 characters and padding
+  if (rest > 0) {
+    const std::uint32_t v = (std::uint32_t{data[i]} << 16) | (rest == 2 ? std::uint32_t{data[i + 1]} << 8 : 0U);
+    out.push_back(kAlphabet[(v >> 18) & 63U]);
+    out.push_back(kAlphabet[(v >> 12) & 63U]);
+    out.push_back(rest == 2 ? kAlphabet[(v >> 6) & 63U] : '=');
+    out.push_back('=');
+  }
+  return out;
+}
+
+nlohmann::json buildCompressedImage(std::int64_t stamp_ns, const std::string& frame_id, const std::string& format,
+                                    const std::vector<std::uint8_t>& data) {
+  return json{{"timestamp", stampJson(stamp_ns)}, {"frame_id", frame_id}, {"data", base64(data)}, {"format", format}};
+}
+
 nlohmann::json buildFrameTransforms(const SceneModel& scene, const SceneData& data, const SceneInput& input) {
   const control::Model& model = scene.model;
   json transforms = json::array();

@@ -242,6 +242,18 @@ nlohmann::json sceneUpdateSchema() {
                  {"entities", array(std::move(entity), "Scene entities to add or replace")}});
 }
 
+nlohmann::json compressedImageSchema() {
+  json data = string("Compressed image data");
+  data["contentEncoding"] = "base64";
+  return object("foxglove.CompressedImage", "A compressed image",
+                {{"timestamp", time("Timestamp of image")},
+                 {"frame_id", string("Frame of reference for the image. The origin of the frame is the optical "
+                                     "center of the camera. +x points to the right in the image, +y points down, and "
+                                     "+z points into the plane of the image.")},
+                 {"data", std::move(data)},
+                 {"format", string("Image format (jpeg, png, webp, avif)")}});
+}
+
 nlohmann::json viewStatusSchema() {
   json nullable_number{{"type", json::array({"number", "null"})}, {"description", "[m] or [1]; null when not finite"}};
   json target = object("reflex.Vector3", "hand target in the root frame [m], null when none",

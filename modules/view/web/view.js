@@ -1,14 +1,17 @@
 // Reflex live view page: a Foxglove WebSocket protocol client (foxglove.websocket.v1, written for the
-// browser's own WebSocket) that subscribes to reflex_view's /reflex/scene (foxglove.SceneUpdate) and
-// /reflex/status (reflex.ViewStatus) channels and draws them with three.js (served by reflex_view from
-// bringup/web/node_modules/three, never from a CDN).
+// browser's own WebSocket) that subscribes to reflex_view's /reflex/scene (foxglove.SceneUpdate),
+// /reflex/status (reflex.ViewStatus) and /reflex/camera/left (foxglove.CompressedImage) channels and draws
+// them with three.js (served by reflex_view from bringup/web/node_modules/three, never from a CDN) and,
+// for the camera, an <img>.
 //
 // window.reflexView holds the page's state for tests and for the curious:
 //   connected, channels (advertised topics), framesReceived (scene updates drawn), statusReceived,
 //   capsulesDrawn / spheresDrawn (collision primitives of the robot in the last scene: cylinders of
 //   capsules, and sphere primitives), closestLines, targetsDrawn, objectsDrawn, zoneColours ({zone:
 //   "#rrggbb"} of the robot segments in the last scene), zonesSeen ({zone: count of scenes}),
-//   lastStatus, cameraImage (false: no image topic on the bus), errors (status messages of the server),
+//   lastStatus, cameraImage (false until a camera image arrived), cameraImages (images received),
+//   cameraDecoded ({width, height} of the last image the browser decoded, null before), errors (status
+//   messages of the server),
 //   connections (WebSocket connections opened; every reconnect starts the channel list afresh),
 //   labels ([{entity, text, colour, x, y, w, h}]: every text label drawn in the last render, its box in
 //   CSS px of the 3D canvas, top left origin; dpr = canvas pixels per CSS px), objectColours ({name:
@@ -35,7 +38,7 @@ import * as THREE from "three";
 const state = {
   connected: false, channels: [], framesReceived: 0, statusReceived: 0, capsulesDrawn: 0, spheresDrawn: 0,
   closestLines: 0, targetsDrawn: 0, objectsDrawn: 0, schemaDrawn: 0, zoneColours: {}, zonesSeen: {}, lastStatus: null,
-  cameraImage: false, errors: [], rendered: 0, staticDrawn: 0, tiles: [], connections: 0, labels: [], dpr: 1,
+  cameraImage: false, cameraImages: 0, cameraDecoded: null, errors: [], rendered: 0, staticDrawn: 0, tiles: [], connections: 0, labels: [], dpr: 1,
   objectColours: {}, closest: [], stale: false, staleText: "", sceneAgeMs: null, plotTraces: 0, plotPoints: 0,
   plotBackSteps: 0, plotsDrawn: 0,
 };
@@ -485,7 +488,20 @@ function updateStale() {
 // ---------- Foxglove WebSocket protocol client ------------------------------------------------------
 const kSubprotocol = "foxglove.websocket.v1";
 const decoder = new TextDecoder();
-const handlers = { "/reflex/scene": onSceneUpdate, "/reflex/status": onStatus };
+// The left camera's image (foxglove.CompressedImage, base64 bytes): shown as it comes, with its capture
+// time; the browser decodes it (state.cameraDecoded says it could).
+const cameraImg = document.createElement("img");
+cameraImg.onload = () => { state.cameraDecoded = { width: cameraImg.naturalWidth, height: cameraImg.naturalHeight }; };
+function onCameraImage(m) {
+  const box = document.getElementById("camera");
+  if (!state.cameraImage) { box.textContent = ""; box.appendChild(cameraImg); box.classList.add("image"); }
+  state.cameraImage = true;
+  state.cameraImages += 1;
+  cameraImg.src = `data:image/${m.format === "png" ? "png" : "jpeg"};base64,${m.data}`;
+  const t = m.timestamp ? new Date(m.timestamp.sec * 1000 + m.timestamp.nsec / 1e6) : null;
+  cameraImg.title = `${m.frame_id}, captured ${t ? t.toISOString().substring(11, 23) : "?"}`;
+}
+const handlers = { "/reflex/scene": onSceneUpdate, "/reflex/status": onStatus, "/reflex/camera/left": onCameraImage };
 function connect() {
   const ws = new WebSocket(`ws://${location.host}/`, [kSubprotocol]);
   ws.binaryType = "arraybuffer";

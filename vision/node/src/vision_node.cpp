@@ -8,6 +8,9 @@
 #include <reflex/bus/log_limit.hpp>
 
 #include "vision_publisher.hpp"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #endif
 
 #include <chrono>
@@ -15,6 +18,7 @@
 #include <cstdio>
 #include <iomanip>
 #include <iostream>
+#include <mutex>
 #include <sstream>
 #include <thread>
 
@@ -29,6 +33,30 @@ const char* const kMountHelp =
     " (the left camera in the robot base frame; the shipped robot with its head at zero: "
     "bringup/vision/camera_mount.yaml; your own robot: see \"Measure the mount\" in vision/README.md)";
 
+#ifdef REFLEX_VISION_WITH_BUS
+/// The left image as JPEG (quality 85), scaled down to at most max_width pixels wide. False for an
+/// empty image or one the encoder refuses.
+bool encodeLeftImage(const cv::Mat& left, int max_width, std::vector<std::uint8_t>& jpeg, int& width, int& height) {
+  if (left.empty()) return false;
+  cv::Mat scaled;
+  if (left.cols > max_width) {
+    const double s = static_cast<double>(max_width) / left.cols;
+    cv::resize(left, scaled, cv::Size(max_width, std::max(1, static_cast<int>(std::lround(left.rows * s)))), 0, 0,
+               cv::INTER_AREA);
+  } else {
+    scaled = left;
+  }
+  try {
+    if (!cv::imencode(".jpg", scaled, jpeg, {cv::IMWRITE_JPEG_QUALITY, 85})) return false;
+  } catch (const cv::Exception&) {
+    return false;
+  }
+  width = scaled.cols;
+  height = scaled.rows;
+  return true;
+}
+#endif
+
 }  // namespace
 
 struct VisionNode::Impl {
@@ -41,6 +69,16 @@ struct VisionNode::Impl {
   // One line per skipped frame, rate-limited: a long corrupt stretch of video
   // is counted (stats.skipped, exit line) but cannot flood stderr.
   reflex::bus::LogLimiter skip_log;
+  // The left image for reflex/camera_left: encoded on the replay thread (on_frame) at most image_hz per
+  // second of session time, published on the publication thread with the publication of its frame
+  // (the same capture stamp and index as its ObjectTargets).
+  double image_period = 0.0;  // s of session time; 0: no images
+  int image_width = 640;
+  double next_image_stamp = -1e300;
+  std::mutex image_mutex;
+  int image_frame = -1;  // the frame `image` holds (-1: none waiting); guarded by image_mutex
+  std::vector<std::uint8_t> image;
+  int image_w = 0, image_h = 0;
 #endif
   int wait_readers = 0;
   double wait_timeout = 0.0;
@@ -104,6 +142,10 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
     throw VisionError("--wait-timeout " + seconds(o.wait_timeout) + " must be a positive, finite number of seconds");
   if (o.wait_readers > 0 && !o.dump.empty())
     throw VisionError("--wait-readers applies to publishing on the bus, not to --dump");
+  if (!(o.image_hz >= 0.0 && o.image_hz <= 30.0))
+    throw VisionError("--image-rate " + seconds(o.image_hz) + " must be in [0, 30] Hz (0: no camera image)");
+  if (!(o.image_width >= 64 && o.image_width <= 4096))
+    throw VisionError("--image-width " + std::to_string(o.image_width) + " must be in [64, 4096] pixels");
   m.wait_readers = o.wait_readers;
   m.wait_timeout = o.wait_timeout;
   const int sources =
@@ -163,6 +205,8 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
     config.domain_id = o.domain_id;
     config.profiles_file = o.profiles_file;
     m.publisher = std::make_unique<VisionPublisher>(config, o.frame_id);
+    m.image_period = o.image_hz > 0.0 ? 1.0 / o.image_hz : 0.0;
+    m.image_width = o.image_width;
   }
 #else
   if (o.dump.empty())
@@ -172,9 +216,27 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
   m.show = o.show_progress;
   m.last_shown = std::chrono::steady_clock::now() - std::chrono::seconds(1);
   m.row << std::fixed;
-  RunCallbacks& cb = m.callbacks;
+  setUpCallbacks();
+}
+
+void VisionNode::setUpCallbacks() {
+  RunCallbacks& cb = impl_->callbacks;
   cb.on_frame = [this](const StereoFrame& f, double stamp, const StereoResult& r) {
     Impl& n = *impl_;
+#ifdef REFLEX_VISION_WITH_BUS
+    if (n.publisher && n.image_period > 0.0 && (stamp >= n.next_image_stamp || stamp < n.next_image_stamp - 1.0)) {
+      n.next_image_stamp = stamp + n.image_period;  // (a loop's restart, stamp going back: at once)
+      std::vector<std::uint8_t> jpeg;
+      int w = 0, h = 0;
+      if (encodeLeftImage(f.left, n.image_width, jpeg, w, h)) {
+        std::lock_guard<std::mutex> lock(n.image_mutex);
+        n.image.swap(jpeg);
+        n.image_w = w;
+        n.image_h = h;
+        n.image_frame = f.index;
+      }
+    }
+#endif
     if (!n.dump) return;
     for (const ObjectObservation& ob : r.objects) {
       n.row.str("");
@@ -195,7 +257,14 @@ VisionNode::VisionNode(const NodeOptions& o) : impl_(std::make_unique<Impl>()) {
   };
 #ifdef REFLEX_VISION_WITH_BUS
   cb.on_publish = [this](const Publication& p) {
-    if (impl_->publisher) impl_->publisher->publish(p);
+    Impl& n = *impl_;
+    if (!n.publisher) return;
+    n.publisher->publish(p);
+    std::lock_guard<std::mutex> lock(n.image_mutex);
+    if (n.image_frame >= 0 && n.image_frame == p.frame) {
+      n.publisher->publishImage(p, n.image, n.image_w, n.image_h);
+      n.image_frame = -1;
+    }
   };
 #endif
   cb.on_progress = [this](const RunProgress& p) {

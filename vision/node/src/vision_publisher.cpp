@@ -32,12 +32,26 @@ void toObjectTargets(const Publication& p, const std::string& frame_id, reflex::
 VisionPublisher::VisionPublisher(const reflex::bus::BusConfig& config, std::string frame_id)
     : bus_(config),
       writer_(bus_.makeWriter<reflex::msg::ObjectTargets>()),
+      image_writer_(bus_.makeWriter<reflex::msg::CameraImage>()),
       heartbeat_(bus_),
       frame_id_(std::move(frame_id)) {}
 
 void VisionPublisher::publish(const Publication& p) {
   toObjectTargets(p, frame_id_, sample_);
   writer_.publish(sample_);
+}
+
+bool VisionPublisher::publishImage(const Publication& p, const std::vector<std::uint8_t>& jpeg, int width, int height) {
+  if (jpeg.size() > reflex::bus::kMaxCameraImageBytes) return false;
+  image_.capture_stamp_ns(static_cast<std::int64_t>(std::llround(p.capture_wall * 1e9)));
+  image_.image_index(p.frame < 0 ? 0 : static_cast<std::uint64_t>(p.frame));
+  image_.frame_id("left_camera_optical");
+  image_.format("jpeg");
+  image_.width(static_cast<std::uint32_t>(width));
+  image_.height(static_cast<std::uint32_t>(height));
+  image_.data(jpeg);
+  image_writer_.publish(image_);
+  return true;
 }
 
 }  // namespace reflex::vision

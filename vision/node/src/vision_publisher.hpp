@@ -1,15 +1,17 @@
 #pragma once
 // The DDS side of the vision node (reflex::vision_node, only in a build with reflex::bus; never in reflex::vision):
 // owns the bus participant, the ObjectTargets writer (topic reflex/object_targets, profile
-// reflex_object_targets from bringup/dds/reflex_profiles.xml) and the heartbeat, and turns a
-// runner Publication into an ObjectTargets sample.
+// reflex_object_targets from bringup/dds/reflex_profiles.xml), the CameraImage writer (reflex/camera_left)
+// and the heartbeat, and turns a runner Publication into an ObjectTargets sample.
 #include "reflex/vision/runner.hpp"
 
 #include <reflex/bus/bus.hpp>
 #include <reflex/msg/vision.h>
 
 #include <chrono>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 namespace reflex::vision {
 
@@ -24,6 +26,11 @@ class VisionPublisher {
   VisionPublisher(const reflex::bus::BusConfig& config, std::string frame_id);
   /// Called from one thread (the runner's publication thread). Never throws.
   void publish(const Publication& p);
+  /// Publishes an encoded image of the publication's frame on reflex/camera_left (same capture stamp and
+  /// index as its ObjectTargets). The publication thread, as publish(). Throws nothing but
+  /// std::bad_alloc; false if the image is larger than reflex::bus::kMaxCameraImageBytes (not published).
+  bool publishImage(const Publication& p, const std::vector<std::uint8_t>& jpeg, int width, int height);
+  std::uint64_t imagesPublished() const { return image_writer_.lastSeq(); }
   reflex::bus::Participant& bus() { return bus_; }
   reflex::bus::HeartbeatPublisher& heartbeat() { return heartbeat_; }
   std::uint64_t published() const { return writer_.lastSeq(); }
@@ -37,9 +44,11 @@ class VisionPublisher {
  private:
   reflex::bus::Participant bus_;
   reflex::bus::Writer<reflex::msg::ObjectTargets>& writer_;
+  reflex::bus::Writer<reflex::msg::CameraImage>& image_writer_;
   reflex::bus::HeartbeatPublisher heartbeat_;
   std::string frame_id_;
   reflex::msg::ObjectTargets sample_;
+  reflex::msg::CameraImage image_;
 };
 
 }  // namespace reflex::vision

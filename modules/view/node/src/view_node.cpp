@@ -13,7 +13,7 @@
 namespace reflex::view_node {
 namespace {
 
-constexpr std::uint32_t kChannelTf = 1, kChannelScene = 2, kChannelStatus = 3;
+constexpr std::uint32_t kChannelTf = 1, kChannelScene = 2, kChannelStatus = 3, kChannelCamera = 4;
 }  // namespace
 
 struct ViewNode::Impl {
@@ -30,6 +30,8 @@ struct ViewNode::Impl {
   bus::Reader<msg::ObjectTargets>* objects = nullptr;
   bus::Reader<msg::ControllerProtection>* protection_reader = nullptr;
   bus::Reader<msg::BodySchemaChange>* schema_reader = nullptr;
+  bus::Reader<msg::CameraImage>* camera = nullptr;
+  msg::CameraImage camera_msg;
   msg::JointState joint_msg;
   msg::ControlStatus status_msg;
   msg::HandTargets targets_msg;
@@ -50,7 +52,8 @@ ViewNode::ViewNode(const ViewOptions& options) : impl_(std::make_unique<Impl>())
   std::vector<Channel> channels{
       {kChannelTf, "/tf", "foxglove.FrameTransforms", view::frameTransformsSchema().dump()},
       {kChannelScene, "/reflex/scene", "foxglove.SceneUpdate", view::sceneUpdateSchema().dump()},
-      {kChannelStatus, "/reflex/status", "reflex.ViewStatus", view::viewStatusSchema().dump()}};
+      {kChannelStatus, "/reflex/status", "reflex.ViewStatus", view::viewStatusSchema().dump()},
+      {kChannelCamera, "/reflex/camera/left", "foxglove.CompressedImage", view::compressedImageSchema().dump()}};
   ServerOptions so = options.server;
   so.metadata_robot = m.scene.model.name;
   m.server = std::make_unique<ViewServer>(so, std::move(channels));
@@ -68,6 +71,7 @@ ViewNode::ViewNode(const ViewOptions& options) : impl_(std::make_unique<Impl>())
   m.objects = &m.bus->makeReader<msg::ObjectTargets>();
   m.protection_reader = &m.bus->makeReader<msg::ControllerProtection>();
   m.schema_reader = &m.bus->makeReader<msg::BodySchemaChange>();
+  m.camera = &m.bus->makeReader<msg::CameraImage>();
 }
 
 ViewNode::~ViewNode() = default;
@@ -87,6 +91,7 @@ std::string ViewNode::report() const {
       << " statuses=" << stats_.statuses << " hand_targets=" << stats_.hand_targets
       << " object_frames=" << stats_.object_frames << " object_frames_other_frame=" << stats_.object_frames_other_frame
       << " schema_changes=" << stats_.schema_changes << " scenes=" << stats_.scenes
+      << " camera_images=" << stats_.camera_images << " camera_images_refused=" << stats_.camera_images_refused
       << " connections=" << s.connections.load() << " subscriptions=" << s.subscriptions.load()
       << " messages_sent=" << s.messages_sent.load() << " dropped_slow_client=" << s.dropped.load()
       << " bad_client_messages=" << s.bad_client_messages.load() << " replies_not_sent=" << s.replies_not_sent.load()
@@ -113,6 +118,22 @@ void ViewNode::run() {
     while (m.objects->takeNext(m.objects_msg)) m.feed->add(m.objects_msg);
     while (m.schema_reader->takeNext(m.schema_msg)) m.feed->add(m.schema_msg);
     static_cast<SceneFeedStats&>(stats_) = m.feed->stats();
+    // The camera image goes out as it comes (a few Hz), not at the scene's rate. One that is not a
+    // JPEG or PNG of a sane size is counted and dropped (the page would show a broken image).
+    while (m.camera->takeNext(m.camera_msg)) {
+      const std::string& format = m.camera_msg.format();
+      if ((format != "jpeg" && format != "png") || m.camera_msg.data().empty() ||
+          m.camera_msg.data().size() > bus::kMaxCameraImageBytes) {
+        ++stats_.camera_images_refused;
+        continue;
+      }
+      ++stats_.camera_images;
+      if (m.server->subscribed(kChannelCamera))
+        m.server->publish(kChannelCamera,
+                          static_cast<std::uint64_t>(std::max<std::int64_t>(m.camera_msg.capture_stamp_ns(), 0)),
+                          std::make_shared<const std::string>(dumpJson(view::buildCompressedImage(
+                              m.camera_msg.capture_stamp_ns(), m.camera_msg.frame_id(), format, m.camera_msg.data()))));
+    }
     while (m.protection_reader->takeNext(m.protection_msg)) {
       m.protection = std::string(m.protection_msg.avoidance() ? "avoidance on" : "AVOIDANCE OFF") +
                      (m.protection_msg.estop() ? ", e-stop on" : ", E-STOP OFF") +

@@ -95,12 +95,23 @@ inline constexpr const char* kProfileRecordReliable =
 inline constexpr const char* kProfileControllerInfo = "reflex_controller_info";  // controller protection
 inline constexpr const char* kProfileRobot =
     "reflex_robot";  // robot state / joint command (the robot's rate / every control cycle)
+inline constexpr const char* kProfileCameraImage = "reflex_camera_image";  // vision's camera image, a few Hz
+
+/// Largest CameraImage::data a writer publishes and a reader takes (a 640 x 480 JPEG is about 50 kB).
+inline constexpr std::size_t kMaxCameraImageBytes = 4u << 20;
 
 template <>
 struct TopicTraits<reflex::msg::ObjectTargets> {
   using PubSubType = SafePubSubType<reflex::msg::ObjectTargetsPubSubType>;
   static constexpr const char* kTopicName = "reflex/object_targets";
   static constexpr const char* kProfile = kProfileObjectTargets;
+};
+
+template <>
+struct TopicTraits<reflex::msg::CameraImage> {
+  using PubSubType = SafePubSubType<reflex::msg::CameraImagePubSubType>;
+  static constexpr const char* kTopicName = "reflex/camera_left";
+  static constexpr const char* kProfile = kProfileCameraImage;
 };
 
 template <>

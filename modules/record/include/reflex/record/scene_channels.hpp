@@ -14,6 +14,9 @@
 // recording), publish time = the joint state's header.stamp_ns (its log time if not positive), and the
 // messages' own timestamps are header.stamp_ns (as reflex_view sends them).
 // Channels are added to the file with the first scene: a recording without joint states has none.
+// The camera: every reflex/camera_left sample (vision's left image) becomes a `/reflex/camera/left`
+// message (foxglove.CompressedImage, JSON, the bytes as base64, its capture stamp as its timestamp),
+// log time its receive time, so Foxglove's Image panel shows what the robot saw.
 #pragma once
 
 #include "reflex/record/mcap.hpp"
@@ -40,6 +43,7 @@ struct SceneChannelStats {
   std::uint64_t undecodable = 0;            ///< payloads of a scene topic that did not decode
   std::uint64_t out_of_order = 0;           ///< joint states received before the last scene (no scene)
   std::uint64_t not_drawn = 0;              ///< joint states whose q is not finite (no scene)
+  std::uint64_t camera_images = 0;          ///< /reflex/camera/left messages written
 };
 
 class SceneChannels {
@@ -64,6 +68,7 @@ class SceneChannels {
   std::string summary() const;
 
  private:
+  void addCameraImage(const RecordEntry& entry, McapWriter& writer);
   struct Impl;
   std::unique_ptr<Impl> impl_;
   SceneChannelStats stats_;

@@ -170,6 +170,15 @@ nlohmann::json frameTransformsSchema();
 nlohmann::json sceneUpdateSchema();
 nlohmann::json viewStatusSchema();
 
+/// `foxglove.CompressedImage` of an encoded camera image (the bus's reflex/camera_left): timestamp,
+/// frame_id, format ("jpeg") and the bytes as base64 (JSON encoding of a bytes field).
+nlohmann::json buildCompressedImage(std::int64_t stamp_ns, const std::string& frame_id, const std::string& format,
+                                    const std::vector<std::uint8_t>& data);
+/// Its JSON schema, from the published foxglove.CompressedImage definition.
+nlohmann::json compressedImageSchema();
+/// Standard base64 (RFC 4648, with padding) of `data`.
+std::string base64(const std::vector<std::uint8_t>& data);
+
 /// Counts of what buildSceneUpdate draws for the robot itself (for tests and the page's checks).
 struct CollisionCounts {
   int capsules = 0;  ///< capsule primitives (one cylinder + two spheres each)

@@ -58,6 +58,10 @@ struct NodeOptions {
   std::optional<int> domain_id;        ///< DDS domain (empty: $REFLEX_DOMAIN_ID, else 0)
   std::string profiles_file;           ///< QoS profiles ("" = bus default)
   std::string frame_id = "base_link";  ///< robot base frame name written into ObjectTargets
+  /// The left camera's image on reflex/camera_left (CameraImage, JPEG) at most this often per second
+  /// of session time (0: not published), scaled down to at most image_width pixels wide.
+  double image_hz = 2.0;
+  int image_width = 640;
   /// Hold the replay (or the cameras' first publication) until this many readers of
   /// reflex/object_targets have matched (0: start at once). A replay started before its consumers are
   /// there loses its first frames: under DDS-Security each pair of participants authenticates first
@@ -104,6 +108,8 @@ class VisionNode {
   void closeOutput();
 
  private:
+  /// The replay loop's callbacks: the camera image, the dump rows, skipped frames, publications, progress.
+  void setUpCallbacks();
   struct Impl;
   std::unique_ptr<Impl> impl_;
   reflex::vision::RunStats stats_;

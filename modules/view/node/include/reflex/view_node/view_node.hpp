@@ -3,14 +3,15 @@
 //
 // Reads (never writes: it creates no DDS writer and publishes no heartbeat; tested):
 //   reflex/joint_state, reflex/control_status, reflex/hand_targets, reflex/object_targets,
-//   reflex/controller_protection, reflex/body_schema (grasped objects and virtual segments, drawn).
+//   reflex/controller_protection, reflex/body_schema (grasped objects and virtual segments, drawn),
+//   reflex/camera_left (vision's left image).
 // Serves, at most `rate` times per second and only when a joint state arrived since the last time,
 // only to channels someone subscribed to (view_server.hpp):
 //   channel 1 "/tf"            foxglove.FrameTransforms  every link (scene.hpp)
 //   channel 2 "/reflex/scene"  foxglove.SceneUpdate      capsules by zone, closest pairs, targets, objects
 //   channel 3 "/reflex/status" reflex.ViewStatus         distances, f(d), zones, d_a/d_b/d_r, targets
-// The camera image is not on the bus today (vision publishes object targets only), so there is no
-// image channel; the page says so.
+//   channel 4 "/reflex/camera/left" foxglove.CompressedImage  each reflex/camera_left image as it
+//                                   arrives (a few Hz; not a jpeg / png, empty or too large: counted, dropped)
 // Bad samples: a joint state with a name the robot does not have or a non-finite position has those
 // entries skipped (counted); objects and targets with non-finite positions are not drawn; an object
 // frame whose frame_id is neither "base_link" nor the URDF root is not drawn (counted).
@@ -45,7 +46,9 @@ struct ViewOptions {
 
 /// The feed's counts (scene_feed.hpp) and the scenes built.
 struct ViewStats : SceneFeedStats {
-  std::uint64_t scenes = 0;  ///< scene updates built
+  std::uint64_t scenes = 0;                 ///< scene updates built
+  std::uint64_t camera_images = 0;          ///< reflex/camera_left images taken (sent to the subscribed clients)
+  std::uint64_t camera_images_refused = 0;  ///< ... dropped: not jpeg / png, empty or too large
 };
 
 class ViewNode {
