@@ -37,6 +37,8 @@ packages=(
   # tests and benchmarks: independent answers and a second DDS vendor
   googletest libgtest-dev libgmock-dev libbenchmark-dev libfcl-dev liborocos-kdl-dev
   libkdl-parser-dev cyclonedds-dev cyclonedds-tools
+  # OpenCV's own stereo sample pairs (examples/data/left01.jpg ...): real images for the calibration test
+  opencv-doc
   # multi-host tests and reports
   iproute2 python3 python3-matplotlib python3-numpy python3-yaml
   # DDS-Security test credentials (bringup/security/make_security.sh); fuzzing and sanitized tests

@@ -613,6 +613,34 @@ TEST(Cli, CalibratesFromPngPairs) {
   EXPECT_THAT(err, HasSubstr("missing R|rotation, T|translation"));
 }
 
+// OpenCV's own stereo sample (13 checkerboard pairs, 9 x 6 inner corners, real cameras; Debian's
+// opencv-doc, installed by bringup/setup.sh): every view is kept (the first-corner order of a board
+// seen diagonally once made pair 02 an "outlier" of 133.759 px), at a reprojection RMS of real images.
+TEST(Cli, OpenCvStereoSamplePairsKeepEveryView) {
+  const std::string data = "/usr/share/doc/opencv-doc/examples/data";
+  TempDir d("opencv_pairs");
+  int pairs = 0;
+  for (int i = 1; i <= 14; ++i) {
+    const std::string n = cv::format("%02d.jpg", i);
+    if (!std::filesystem::exists(data + "/left" + n)) continue;  // the sample has no pair 10
+    ASSERT_TRUE(std::filesystem::exists(data + "/right" + n)) << data << "/right" << n;
+    std::filesystem::copy_file(data + "/left" + n, d / ("left" + n));
+    std::filesystem::copy_file(data + "/right" + n, d / ("right" + n));
+    ++pairs;
+  }
+  ASSERT_EQ(pairs, 13) << "OpenCV's stereo sample pairs in " << data << " (apt install opencv-doc: bringup/setup.sh)";
+  std::string out, err;
+  ASSERT_EQ(
+      runCalibrate("calibrate --pairs " + d.path() + " --board checkerboard --cols 9 --rows 6 --out " + (d / "calib"),
+                   out, err),
+      0)
+      << out << err;
+  std::printf("%s", out.c_str());
+  EXPECT_THAT(out, HasSubstr("views: 13 kept of 13"));
+  const StereoCalibration c = loadStereoCalibration(d / "calib/left.yaml", d / "calib/right.yaml");
+  EXPECT_EQ(c.left.image_size, cv::Size(640, 480));
+}
+
 TEST(Cli, BadInputsAreNamed) {
   TempDir d("badcli");
   std::string out, err;
