@@ -86,6 +86,11 @@ struct Fixture {
     calib = " --calib-left " + session + "/left.yaml --calib-right " + session + "/right.yaml --objects " + session +
             "/objects.yaml --mount " + session + "/camera_mount.yaml";
   }
+  /// Every frame as lossless left.avi and right.avi in `dir`.
+  void writeVideos(const TempDir& out) const {
+    writeVideo(out / "left.avi", frames.left, frames.left.size());
+    writeVideo(out / "right.avi", frames.right, frames.right.size());
+  }
 };
 
 Fixture& fixture() {
@@ -113,8 +118,7 @@ TEST(Import, LeftRightFilesWithTimestampsGiveTheSessionsOwnDetections) {
   TempDir dir("import_lr");
   const std::size_t n = fx.frames.left.size();
   ASSERT_EQ(n, 10u);
-  writeVideo(dir / "left.avi", fx.frames.left, n);
-  writeVideo(dir / "right.avi", fx.frames.right, n);
+  fx.writeVideos(dir);
   std::string out;
   ASSERT_EQ(runTool(kRecord + " --from-files " + (dir / "left.avi") + " " + (dir / "right.avi") + " --timestamps " +
                         fx.session + "/timestamps.csv --codec FFV1 --out " + (dir / "imported") + fx.calib,
@@ -157,8 +161,7 @@ TEST(Import, BadInputsAreNamedAndLeaveNoSession) {
   Fixture& fx = fixture();
   TempDir dir("import_bad");
   const std::size_t n = fx.frames.left.size();
-  writeVideo(dir / "left.avi", fx.frames.left, n);
-  writeVideo(dir / "right.avi", fx.frames.right, n);
+  fx.writeVideos(dir);
   writeVideo(dir / "short.avi", fx.frames.right, n - 3);
   std::vector<cv::Mat> small;
   for (const cv::Mat& m : fx.frames.right) small.push_back(m(cv::Rect(0, 0, 320, 240)).clone());
@@ -230,9 +233,7 @@ double meanLeftPsnr(const std::string& dir, const std::vector<cv::Mat>& referenc
 TEST(Import, DefaultIsH264AtCrf18AndCrfSetsTheQuality) {
   Fixture& fx = fixture();
   TempDir dir("import_quality");
-  const std::size_t n = fx.frames.left.size();
-  writeVideo(dir / "left.avi", fx.frames.left, n);
-  writeVideo(dir / "right.avi", fx.frames.right, n);
+  fx.writeVideos(dir);
   const std::string lr = " --from-files " + (dir / "left.avi") + " " + (dir / "right.avi") + fx.calib + " --quiet";
   std::string out;
   ASSERT_EQ(runTool(kRecord + lr + " --out " + (dir / "crf18"), out, dir), 0) << out;
@@ -277,9 +278,7 @@ TEST(Import, DefaultIsH264AtCrf18AndCrfSetsTheQuality) {
 TEST(StandInCamera, AVideoFileEndsNormallyAndATruncatedOneIsAnError) {
   Fixture& fx = fixture();
   TempDir dir("standin");
-  const std::size_t n = fx.frames.left.size();
-  writeVideo(dir / "left.avi", fx.frames.left, n);
-  writeVideo(dir / "right.avi", fx.frames.right, n);
+  fx.writeVideos(dir);
   const std::string vision = std::string(REFLEX_BIN_DIR) + "/reflex_vision --calib-left " + fx.session +
                              "/left.yaml --calib-right " + fx.session + "/right.yaml --objects " + fx.session +
                              "/objects.yaml --mount " + fx.session + "/camera_mount.yaml --quiet --dump " +
