@@ -93,6 +93,9 @@ int main(int argc, char** argv) {
   app.add_flag("--inject-bad", inject, "add NaN, unknown, future and wrong-frame samples");
   std::string image_path;
   app.add_option("--image", image_path, "a JPEG also published on reflex/camera_left every fifth frame");
+  std::string image_format = "jpeg";
+  app.add_option("--image-format", image_format, "the format the image claims (a wrong one for the bad-input tests)")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
     std::vector<Obj> objects;
@@ -130,7 +133,7 @@ int main(int argc, char** argv) {
         image.capture_stamp_ns(frame.capture_stamp_ns());
         image.image_index(index);
         image.frame_id("left_camera_optical");
-        image.format("jpeg");
+        image.format(image_format);
         image.width(static_cast<std::uint32_t>(jpeg.width));
         image.height(static_cast<std::uint32_t>(jpeg.height));
         image.data(jpeg.bytes);

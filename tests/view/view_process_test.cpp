@@ -220,6 +220,22 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     ASSERT_FALSE(jpeg.empty()) << "ffmpeg made no JPEG of the flagship video";
     testing::ChildProcess camera(LiveSystem::publisherArgs(kDomain, {"cup=0.5,0.1,1.0"}, jpeg),
                                  ::testing::TempDir() + "view_ws_camera.log");
+    // ... and images that claim a format the page cannot show (at another rate, so the two never reach
+    // the reader's one-sample history together): counted by reflex_view, never sent.
+    const std::vector<std::string> bad_args{kBin + "/reflex_modules_object_publisher",
+                                            "--domain",
+                                            std::to_string(kDomain),
+                                            "--duration",
+                                            "60",
+                                            "--rate",
+                                            "7",
+                                            "--object",
+                                            "cup=0.5,0.1,1.0",
+                                            "--image",
+                                            jpeg,
+                                            "--image-format",
+                                            "gif"};
+    testing::ChildProcess bad_camera(bad_args, ::testing::TempDir() + "view_ws_bad_camera.log");
     std::this_thread::sleep_for(2s);  // the controller's first samples
     const nlohmann::json r = runJson(
         {REFLEX_NODE, kSource + "/tests/view/ws_client_check.js", "--url", "ws://127.0.0.1:" + std::to_string(sys.port),
@@ -291,6 +307,11 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
     const std::string log = readText(sys.view_log);
     EXPECT_NE(log.find("reflex_view: stats"), std::string::npos) << log;
     EXPECT_NE(log.find("bad_client_messages=2 "), std::string::npos) << "one unknown channel per client\n" << log;
+    // Both publishers' images reached reflex_view; only the JPEGs were passed on (the rate above).
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(log, m, std::regex("camera_images=([0-9]+) camera_images_refused=([0-9]+)"))) << log;
+    EXPECT_GE(std::stoi(m[1].str()), 10) << log;
+    EXPECT_GE(std::stoi(m[2].str()), 10) << "the 'gif' images are refused\n" << log;
   }
   factory->delete_participant(watcher);
 }
