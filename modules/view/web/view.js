@@ -181,7 +181,8 @@ function setLabel(sprite, text, colour, border = colour) {
   g.strokeStyle = border;
   g.lineWidth = 4;
   g.beginPath();
-  g.roundRect(x0, 2, w, kLabelCanvasH - 4, 10);
+  if (g.roundRect) g.roundRect(x0, 2, w, kLabelCanvasH - 4, 10);  // (browsers before 2023 lack it: square corners)
+  else g.rect(x0, 2, w, kLabelCanvasH - 4);
   g.fill();
   g.stroke();
   g.fillStyle = colour;
