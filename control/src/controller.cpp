@@ -602,13 +602,15 @@ std::uint8_t slotPairFlags(int a, int owner_a, int owner_b) {
 void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerData& data) {
   ClosestPair physical, virtual_slot, between_arms;
   std::array<std::array<ClosestPair, 2>, 2> arm{};
+  // Whether a pair of these facts is of an arm's kind k (0: every pair the arm moves, 1: not the other arm's).
+  auto armKind = [](std::uint8_t flags, std::size_t k) {
+    return (flags & ArmPairFacts::kInvolved) && (k == 0 || !(flags & ArmPairFacts::kOtherArm));
+  };
   auto offerToArms = [&](int i, double d, std::uint8_t left, std::uint8_t right) {
     const std::array<std::uint8_t, 2> flags{left, right};
-    for (std::size_t a = 0; a < 2; ++a) {
-      if (!(flags[a] & ArmPairFacts::kInvolved)) continue;
-      arm[a][0].offer(d, i);
-      if (!(flags[a] & ArmPairFacts::kOtherArm)) arm[a][1].offer(d, i);
-    }
+    for (std::size_t a = 0; a < 2; ++a)
+      for (std::size_t k = 0; k < 2; ++k)
+        if (armKind(flags[a], k)) arm[a][k].offer(d, i);
   };
   const std::vector<ArmPairFacts>& left_facts = data.arm_pair_facts[kLeft];
   const std::vector<ArmPairFacts>& right_facts = data.arm_pair_facts[kRight];
@@ -667,12 +669,11 @@ void findClosestPairs(const Model& model, const ControllerModel& cm, ControllerD
       const bool to_between = (left & ArmPairFacts::kOtherArm) && bound < between_arms.distance;
       std::array<std::array<bool, 2>, 2> to_arm{};
       bool any = to_physical || to_between;
-      for (std::size_t a = 0; a < 2; ++a) {
-        if (!(flags[a] & ArmPairFacts::kInvolved)) continue;
-        to_arm[a][0] = bound < arm[a][0].distance;
-        to_arm[a][1] = !(flags[a] & ArmPairFacts::kOtherArm) && bound < arm[a][1].distance;
-        any = any || to_arm[a][0] || to_arm[a][1];
-      }
+      for (std::size_t a = 0; a < 2; ++a)
+        for (std::size_t k = 0; k < 2; ++k) {
+          to_arm[a][k] = armKind(flags[a], k) && bound < arm[a][k].distance;
+          any = any || to_arm[a][k];
+        }
       if (!any) continue;
       if (!pd.exact) refinePairDistance(model, data.kin, data.dist, i, options);
       const double d = pd.distance;

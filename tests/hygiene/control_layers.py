@@ -37,9 +37,9 @@ def layer_sources(root):
     text = open(os.path.join(root, "control", "CMakeLists.txt")).read()
     out = {}
     for layer in LAYERS:
-        m = re.search(r"add_library\(" + layer + r"\s+([^)]*)\)", text)
+        m = re.search(r"(?:add_library|reflex_control_layer)\(" + layer + r"\s+([^)]*)\)", text)
         if not m:
-            raise SystemExit(f"control_layers: error: no add_library({layer} ...) in control/CMakeLists.txt")
+            raise SystemExit(f"control_layers: error: no reflex_control_layer({layer} ...) in control/CMakeLists.txt")
         out[layer] = [os.path.join(root, "control", s) for s in m.group(1).split()]
     return out
 

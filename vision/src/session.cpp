@@ -464,10 +464,7 @@ class SessionWriter::FfmpegPipe {
     if (pid_ < 0) return;
     ::close(fd_);
     fd_ = -1;
-    int status = 0;
-    while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
-    }
-    pid_ = -1;
+    const int status = reap();
     if (!(WIFEXITED(status) && WEXITSTATUS(status) == 0)) {
       const std::string code = WIFEXITED(status) ? "exit " + std::to_string(WEXITSTATUS(status))
                                                  : "signal " + std::to_string(WTERMSIG(status));
@@ -483,14 +480,20 @@ class SessionWriter::FfmpegPipe {
     fd_ = -1;
     if (pid_ > 0) {
       ::kill(pid_, SIGKILL);
-      int status = 0;
-      while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
-      }
+      reap();
     }
     pid_ = -1;
   }
 
  private:
+  /// Waits for ffmpeg to end; its wait status. pid_ is -1 after.
+  int reap() noexcept {
+    int status = 0;
+    while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+    }
+    pid_ = -1;
+    return status;
+  }
   /// ": <ffmpeg's last line> (log: <file>)", or "" when it said nothing.
   std::string message() const {
     std::ifstream in(log_);

@@ -94,6 +94,13 @@ json cylinder() {
         number("0-1, ratio of the diameter of the cylinder's top face (max z) to the top of the bounding box")},
        {"color", colour("Color of the cylinder")}});
 }
+/// `indices` of the line and triangle primitives (the same field in both published schemas).
+json pointIndices() {
+  return array(json{{"type", "integer"}, {"minimum", 0}},
+               "Indices into the `points` and `colors` attribute arrays, which can be used to avoid duplicating "
+               "attribute data.");
+}
+
 json line() {
   json type{
       {"title", "foxglove.LineType"},
@@ -114,9 +121,7 @@ json line() {
        {"color", colour("Solid color to use for the whole line. One of `color` or `colors` must be provided.")},
        {"colors", array(colour("A color in RGBA format"),
                         "Per-point colors (if specified, must have the same length as `points`).")},
-       {"indices", array(json{{"type", "integer"}, {"minimum", 0}},
-                         "Indices into the `points` and `colors` attribute arrays, which can be used to avoid "
-                         "duplicating attribute data.")}});
+       {"indices", pointIndices()}});
 }
 json arrow() {
   return object("foxglove.ArrowPrimitive", "A primitive representing an arrow",
@@ -143,9 +148,7 @@ json triangles() {
        {"color", colour("Solid color to use for the whole shape. One of `color` or `colors` must be provided.")},
        {"colors", array(colour("A color in RGBA format"),
                         "Per-vertex colors (if specified, must have the same length as `points`).")},
-       {"indices", array(json{{"type", "integer"}, {"minimum", 0}},
-                         "Indices into the `points` and `colors` attribute arrays, which can be used to avoid "
-                         "duplicating attribute data.")}});
+       {"indices", pointIndices()}});
 }
 json model() {
   return object(

@@ -5,9 +5,17 @@
 
 namespace reflex::vision {
 
+namespace {
+/// A publication's capture stamp (ns) and image index, as every sample of its frame carries them.
+std::int64_t captureStampNs(const Publication& p) {
+  return static_cast<std::int64_t>(std::llround(p.capture_wall * 1e9));
+}
+std::uint64_t imageIndex(const Publication& p) { return p.frame < 0 ? 0 : static_cast<std::uint64_t>(p.frame); }
+}  // namespace
+
 void toObjectTargets(const Publication& p, const std::string& frame_id, reflex::msg::ObjectTargets& out) {
-  out.capture_stamp_ns(static_cast<std::int64_t>(std::llround(p.capture_wall * 1e9)));
-  out.image_index(p.frame < 0 ? 0 : static_cast<std::uint64_t>(p.frame));
+  out.capture_stamp_ns(captureStampNs(p));
+  out.image_index(imageIndex(p));
   out.frame_id(frame_id);
   std::vector<reflex::msg::ObjectTarget>& objects = out.objects();
   objects.clear();
@@ -43,8 +51,8 @@ void VisionPublisher::publish(const Publication& p) {
 
 bool VisionPublisher::publishImage(const Publication& p, const std::vector<std::uint8_t>& jpeg, int width, int height) {
   if (jpeg.size() > reflex::bus::kMaxCameraImageBytes) return false;
-  image_.capture_stamp_ns(static_cast<std::int64_t>(std::llround(p.capture_wall * 1e9)));
-  image_.image_index(p.frame < 0 ? 0 : static_cast<std::uint64_t>(p.frame));
+  image_.capture_stamp_ns(captureStampNs(p));
+  image_.image_index(imageIndex(p));
   image_.frame_id("left_camera_optical");
   image_.format("jpeg");
   image_.width(static_cast<std::uint32_t>(width));

@@ -285,12 +285,10 @@ class OnboardController {
   const CycleReport& step(double now, double dt) noexcept;
 
   const CycleReport& report() const { return report_; }
-  /// The configuration the robot is expected at after the last command: the commanded positions
-  /// (commandedPositions(); KinematicPort: its next measured state). Used for body-schema placement checks.
-  const Eigen::VectorXd& jointPositions() const { return q_command_; }
   /// The measured positions the last computed cycle used.
   const Eigen::VectorXd& measuredPositions() const { return q_measured_; }
-  /// The last command (positions at the end of the cycle, velocities over it).
+  /// The last command (positions at the end of the cycle, velocities over it). The positions are where
+  /// the robot is expected next (KinematicPort: its next measured state); body-schema placement checks use them.
   const Eigen::VectorXd& commandedPositions() const { return q_command_; }
   const Eigen::VectorXd& commandedVelocities() const { return qdot_command_; }
   /// The joints this controller drives (arm joints, then walking joints), q indices, model order kept per group.
