@@ -13,6 +13,8 @@
 //                              limit by twice the tolerance (v_max * period)
 //   robot_state_other_writer   a good state from a second participant's writer while this one is bound
 // A state with l_elbow past its upper limit by half the tolerance is a GOOD state (taken).
+// Then three bad states of three causes back to back (one cycle usually takes them together): each is
+// counted and each is named on stderr with its own seq.
 // Independent answer: what this test sent. After each bad state the test waits for the controller's
 // status (reflex/control_status) and asserts that rejected_robot_states rose by exactly 1 and that
 // last_rejection names that cause; then, while good states keep coming for 150 ms, that the count
@@ -283,6 +285,38 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     EXPECT_EQ(latest.rejected_robot_states(), expected);
     e = std::nan("");
   }
+  // Three bad states of three causes back to back (microseconds apart, so one controller cycle
+  // usually takes them together): each is counted and each is named with its own seq, not only the
+  // last one the cycle took.
+  std::vector<std::uint64_t> burst_seqs;
+  {
+    const int l_wrist = model.qIndex("l_wrist");
+    const int r_wrist = model.qIndex("r_wrist");
+    ASSERT_GE(l_wrist, 0);
+    ASSERT_GE(r_wrist, 0);
+    msg::RobotState two_positions_too_many = good(), wrist_left_out = good(), wrist_nan = good();
+    two_positions_too_many.positions().push_back(0.0);
+    two_positions_too_many.positions().push_back(0.0);
+    drop(wrist_left_out, l_wrist);
+    wrist_nan.positions()[static_cast<std::size_t>(r_wrist)] = std::nan("");
+    for (msg::RobotState* st : {&two_positions_too_many, &wrist_left_out, &wrist_nan}) {
+      ASSERT_TRUE(states.publish(*st));
+      burst_seqs.push_back(st->header().seq());
+      bad_seqs.insert(st->header().seq());
+      bad_stamps.insert(st->header().stamp_ns());
+    }
+    ++length.sent;
+    ++missing.sent;
+    ++non_finite.sent;
+    expected += 3;
+    ASSERT_TRUE(ticksUntil(
+        3s, [&] { return latest.rejected_robot_states() >= expected; }, true))
+        << "rejected_robot_states stayed " << latest.rejected_robot_states() << "\n"
+        << readFile(log);
+    const std::uint64_t after = last_good_seq;
+    ASSERT_TRUE(ticksUntil(3s, [&] { return answered_seq > after; })) << "good states are taken again";
+    EXPECT_EQ(latest.rejected_robot_states(), expected);
+  }
   {
     bus::BusConfig second = config;
     second.module_name = "second_robot";
@@ -328,6 +362,15 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
                            "in the future", "not newer than", "joint 'l_elbow' is listed twice",
                            "joint 'l_elbow' position 1e+300 outside its limits", "not the robot writer"})
     EXPECT_NE(text.find(line), std::string::npos) << line << "\n" << text;
+  // The burst: each of the three named by its own seq with its own cause.
+  ASSERT_EQ(burst_seqs.size(), 3u);
+  const std::string n = std::to_string(model.nq);
+  const std::vector<std::string> burst_lines = {
+      " " + std::to_string(burst_seqs[0]) + " rejected: " + n + " names but " + std::to_string(model.nq + 2) +
+          " positions",
+      " " + std::to_string(burst_seqs[1]) + " rejected: joint 'l_wrist' is missing",
+      " " + std::to_string(burst_seqs[2]) + " rejected: joint 'r_wrist' position nan"};
+  for (const std::string& line : burst_lines) EXPECT_NE(text.find(line), std::string::npos) << line << "\n" << text;
 }
 
 }  // namespace

@@ -156,6 +156,7 @@ struct ControllerNode::Impl {
   bus::LogLimiter schema_log;
   /// Rejected robot states (--robot dds), one limiter per cause: a flood of one kind never hides another.
   std::array<bus::LogLimiter, kRobotStateCauses> robot_log;
+  BusRobotPort::CauseCounts robot_named{};  ///< rejections per cause when they were last named
   /// Robot state stale / fresh lines: a robot (or a loaded host) that flaps around --robot-timeout
   /// is counted (exit line) but cannot flood stderr.
   bus::LogLimiter robot_state_log{4};
@@ -577,8 +578,15 @@ bool ControllerNode::Impl::takeInputs(ControllerNode& node, double t_now, const 
     last_rejection = rejectCauseName(static_cast<RejectCause>(c.last_rejection));
   }
   if (dds && dds->poll() > 0) {
-    std::snprintf(schema_line, sizeof(schema_line), "controller: %s", dds->lastRejection());
-    robot_log[static_cast<std::size_t>(dds->lastCause())].print(stderr, schema_line);
+    // Every cause that rejected a state since the last poll is named (its latest sample): one cycle
+    // can take several bad states when the robot's samples queue up behind a late cycle.
+    const BusRobotPort::CauseCounts by_cause = dds->rejectedByCause();
+    for (std::size_t c = 0; c < by_cause.size(); ++c) {
+      if (by_cause[c] == robot_named[c]) continue;
+      robot_named[c] = by_cause[c];
+      std::snprintf(schema_line, sizeof(schema_line), "controller: %s", dds->rejectionOf(static_cast<int>(c)));
+      robot_log[c].print(stderr, schema_line);
+    }
     last_rejection = robotStateCauseName(dds->lastCause());
     const std::uint64_t other = dds->rejectedByCause()[kRobotCauseOtherWriter];
     const std::uint64_t bad = dds->rejectedTotal() - other;

@@ -32,7 +32,8 @@ class BusRobotPort : public control::RobotPort {
   using CauseCounts = std::array<std::uint64_t, kRobotStateCauses>;
 
   /// Takes every state that arrived since the last call (once per cycle, before step()); returns the
-  /// number rejected by this call (lastRejection() names the last one). No allocation, no throw.
+  /// number rejected by this call (lastRejection() names the last one, rejectionOf() the latest of
+  /// each cause: a cycle that takes several bad states can name each kind). No allocation, no throw.
   virtual int poll() noexcept = 0;
   /// Hands the commands to `outbox`'s writer thread, if the port's type can go through it.
   virtual void sendThrough(bus::Outbox& outbox) = 0;
@@ -41,6 +42,8 @@ class BusRobotPort : public control::RobotPort {
   virtual void finish(double /*period*/) noexcept {}
 
   virtual const char* lastRejection() const = 0;
+  /// The latest rejection of `cause` (0 <= cause < kRobotStateCauses; "" none yet).
+  virtual const char* rejectionOf(int cause) const = 0;
   /// The latest rejection that was not another writer's sample ("" none).
   virtual const char* lastBadRejection() const = 0;
   virtual int lastCause() const = 0;

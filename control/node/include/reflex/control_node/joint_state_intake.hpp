@@ -94,6 +94,7 @@ class JointStateIntake {
   const Counts& counts() const { return counts_; }
   const char* lastRejection() const { return rejection_; }
   const char* lastBadRejection() const { return bad_rejection_; }
+  const char* rejectionOf(int cause) const { return by_cause_[static_cast<std::size_t>(cause)].data(); }
   int lastCause() const { return cause_; }
   const char* boundWriter() const { return bound_text_; }
   const char* otherWriter() const { return other_text_; }
@@ -126,6 +127,7 @@ class JointStateIntake {
   Counts counts_;
   char rejection_[300] = {};
   char bad_rejection_[300] = {};
+  std::array<std::array<char, 300>, kRobotStateCauses> by_cause_{};  ///< the latest rejection of each cause
   int cause_ = 0;
 };
 
@@ -138,6 +140,7 @@ class NamedJointPort : public BusRobotPort {
   double stateInterval() const noexcept override { return intake_.stateInterval(); }
   const char* lastRejection() const override { return intake_.lastRejection(); }
   const char* lastBadRejection() const override { return intake_.lastBadRejection(); }
+  const char* rejectionOf(int cause) const override { return intake_.rejectionOf(cause); }
   int lastCause() const override { return intake_.lastCause(); }
   bool haveState() const override { return intake_.haveState(); }
   std::uint64_t stateSeq() const override { return intake_.stateSeq(); }

@@ -81,6 +81,7 @@ class UnitreeHgPort final : public BusRobotPort {
   double stateInterval() const noexcept override { return 1e-9 * static_cast<double>(state_interval_ns_); }
   const char* lastRejection() const override { return rejection_; }
   const char* lastBadRejection() const override { return bad_rejection_; }
+  const char* rejectionOf(int cause) const override { return by_cause_[static_cast<std::size_t>(cause)].data(); }
   int lastCause() const override { return cause_; }
   bool haveState() const override { return have_state_; }
   std::uint64_t stateSeq() const override { return tick_; }
@@ -137,6 +138,7 @@ class UnitreeHgPort final : public BusRobotPort {
   CauseCounts rejected_{};
   char rejection_[300] = {};
   char bad_rejection_[300] = {};
+  std::array<std::array<char, 300>, kRobotStateCauses> by_cause_{};  ///< the latest rejection of each cause
   int cause_ = 0;
 };
 
