@@ -322,7 +322,12 @@ TEST(RobotStateRejection, EachCauseIsCountedOnceNamedInTheStatusAndGoodStatesAre
     second.module_name = "second_robot";
     bus::Participant intruder(second);
     auto& intruder_states = intruder.makeWriter<msg::RobotState>();
-    ASSERT_TRUE(intruder_states.waitForReaders(1, 15s));
+    // The robot keeps sending while the intruder is discovered: silent for rebind_silence (1 s), its
+    // writer would count as gone and the intruder's state would rebind instead of being refused. Then
+    // 300 ms more, so the controller's reader has matched the intruder's writer too (best effort: a
+    // sample written before that is lost).
+    ASSERT_TRUE(ticksUntil(15s, [&] { return intruder_states.waitForReaders(1, 0s); }));
+    ticksUntil(300ms, [] { return false; });
     sendBad(
         other, "a good state from a second writer", [](msg::RobotState&) {}, false, &intruder_states);
   }
