@@ -8,6 +8,8 @@
 // with that point's barycentric coordinates; everything lives on the stack (4 points at most).
 #include "reflex/control/convex.hpp"
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cassert>
 #include <cmath>
@@ -17,6 +19,57 @@
 #include <utility>
 
 namespace reflex::control {
+
+namespace {
+
+/// A flat set of points (every point within kFlatTolerance of one plane; a mesh's planar face, which a
+/// hull program refuses as degenerate) as its polygon: the indices of the corners of its convex
+/// hull in the plane, in order around it (inner points and points within kFlatTolerance of a side left
+/// out: convex combinations of the corners to within it, so no support query can need them beyond
+/// that). Empty when the points are not flat or fewer than 4.
+std::vector<int> flatPolygon(const std::vector<Eigen::Vector3d>& v) {
+  constexpr double kFlatTolerance = 1e-12;  // m: far below kConvexTolerance
+  const std::size_t n = v.size();
+  if (n < 4) return {};
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& p : v) c += p;
+  c /= static_cast<double>(n);
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const Eigen::Vector3d& p : v) cov += (p - c) * (p - c).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  const Eigen::Vector3d normal = eig.eigenvectors().col(0), e1 = eig.eigenvectors().col(2),
+                        e2 = eig.eigenvectors().col(1);
+  for (const Eigen::Vector3d& p : v)
+    if (!(std::abs(normal.dot(p - c)) <= kFlatTolerance)) return {};
+  // Andrew's monotone chain on the in-plane coordinates; strict turns only.
+  std::vector<int> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = static_cast<int>(i);
+  auto uv = [&](int i) { return Eigen::Vector2d(e1.dot(v[i] - c), e2.dot(v[i] - c)); };
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    const Eigen::Vector2d pa = uv(a), pb = uv(b);
+    return pa.x() < pb.x() || (pa.x() == pb.x() && pa.y() < pb.y());
+  });
+  // Whether a turns left from o to b by more than the tolerance: a farther than kFlatTolerance from
+  // the line o-b (|b - o| times that distance is the cross product), else a is left out.
+  auto turns = [&](int o, int a, int b) {
+    const Eigen::Vector2d po = uv(o), pa = uv(a) - po, pb = uv(b) - po;
+    return pa.x() * pb.y() - pa.y() * pb.x() > kFlatTolerance * pb.norm();
+  };
+  std::vector<int> hull(2 * n);
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < n; ++i) {  // lower chain
+    while (k >= 2 && !turns(hull[k - 2], hull[k - 1], order[i])) --k;
+    hull[k++] = order[i];
+  }
+  for (std::size_t i = n - 1, lower = k + 1; i-- > 0;) {  // upper chain
+    while (k >= lower && !turns(hull[k - 2], hull[k - 1], order[i])) --k;
+    hull[k++] = order[i];
+  }
+  hull.resize(k > 1 ? k - 1 : k);  // the first point closes the chain
+  return hull;
+}
+
+}  // namespace
 
 ConvexPiece makeConvexPiece(const std::vector<Eigen::Vector3d>& vertices,
                             const std::vector<std::array<int, 3>>& triangles) {
@@ -33,6 +86,19 @@ ConvexPiece makeConvexPiece(const std::vector<Eigen::Vector3d>& vertices,
         throw std::invalid_argument("makeConvexPiece: triangle " + std::to_string(t) + " has vertex index " +
                                     std::to_string(triangles[t][k]) + ", outside [0, " + std::to_string(n) + ")");
 
+  // A flat piece without triangles: its polygon's corners, each joined to the next (hill-climbing
+  // along a convex polygon's boundary finds its maximum like over a hull's edges).
+  if (triangles.empty()) {
+    const std::vector<int> polygon = flatPolygon(vertices);
+    if (polygon.size() >= 3) {
+      std::vector<Eigen::Vector3d> corners;
+      std::vector<std::array<int, 3>> edges;  // {i, j, j}: the edge i-j alone (the graph takes triangles)
+      for (const int i : polygon) corners.push_back(vertices[static_cast<std::size_t>(i)]);
+      const int m = static_cast<int>(corners.size());
+      for (int i = 0; i < m; ++i) edges.push_back({i, (i + 1) % m, (i + 1) % m});
+      return makeConvexPiece(corners, edges);
+    }
+  }
   ConvexPiece piece;
   piece.vertices_L = vertices;
   Eigen::Vector3d lo = vertices[0], hi = vertices[0];

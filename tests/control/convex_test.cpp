@@ -274,6 +274,51 @@ TEST(ConvexPiece, BuildsTheEdgeGraphAndTheBoundingSphere) {
   EXPECT_EQ(single.bound_radius, 0.0);
 }
 
+// A flat piece (a mesh's planar face: qhull refuses it, the fit keeps its points without triangles)
+// climbs along its polygon: the corners only, in a cycle; every support query and distance equal to a
+// linear scan over all the points given (the independent answer), inner and edge points included.
+TEST(ConvexPiece, AFlatPieceWithoutTrianglesClimbsAlongItsPolygon) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Eigen::Isometry3d X = Eigen::Translation3d(0.3, -0.2, 0.1) * Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized());
+  std::vector<Vec3> disk;
+  for (int k = 0; k < 12; ++k) {  // corners of a 12-gon, the midpoint of each side, and inner points
+    const double a = 2.0 * M_PI * k / 12.0, b = 2.0 * M_PI * (k + 1) / 12.0;
+    disk.push_back(Vec3(0.02 * std::cos(a), 0.02 * std::sin(a), 0.0));
+    disk.push_back(Vec3(0.01 * (std::cos(a) + std::cos(b)), 0.01 * (std::sin(a) + std::sin(b)), 0.0));
+  }
+  for (int k = 0; k < 150; ++k) disk.push_back(Vec3(0.012 * u(rng), 0.012 * u(rng), 0.0));
+  for (Vec3& p : disk) p = X * p;  // a plane in no axis direction
+  const ConvexPiece flat = makeConvexPiece(disk, {});
+  ASSERT_EQ(flat.vertices_L.size(), 12u) << "the 12 corners, not the side midpoints or the inner points";
+  ASSERT_EQ(flat.neighbor_begin.size(), 13u);
+  for (int i = 0; i < 12; ++i) EXPECT_EQ(flat.neighbor_begin[i + 1] - flat.neighbor_begin[i], 2) << "a cycle";
+  const ConvexPiece scanned = makeConvexPiece(disk, {{0, 1, 2}, {0, 0, 0}}) /* a vertex on no edge: no graph */;
+  ASSERT_TRUE(scanned.neighbor_begin.empty());
+  std::normal_distribution<double> g;
+  for (int k = 0; k < 2000; ++k) {
+    const Vec3 d(g(rng), g(rng), g(rng));
+    double most = -1e300;
+    for (const Vec3& p : disk) most = std::max(most, d.dot(p));
+    const int start = std::uniform_int_distribution<int>(0, 11)(rng);
+    EXPECT_NEAR(d.dot(flat.vertices_L[static_cast<std::size_t>(supportVertex(flat, d, start))]), most, 1e-15);
+  }
+  const ConvexPiece box = pieceOf(
+      qhullHull({Vec3(-0.01, -0.01, -0.01), Vec3(0.01, -0.01, -0.01), Vec3(-0.01, 0.01, -0.01), Vec3(0.01, 0.01, -0.01),
+                 Vec3(-0.01, -0.01, 0.01), Vec3(0.01, -0.01, 0.01), Vec3(-0.01, 0.01, 0.01), Vec3(0.01, 0.01, 0.01)}));
+  for (int k = 0; k < 300; ++k) {
+    const Eigen::Isometry3d Y = Eigen::Translation3d(0.3 + 0.05 * u(rng), -0.2 + 0.05 * u(rng), 0.1 + 0.05 * u(rng)) *
+                                Eigen::AngleAxisd(3.0 * u(rng), Vec3(g(rng), g(rng), g(rng)).normalized());
+    const ConvexDistance a = computeConvexDistance(flat, Eigen::Isometry3d::Identity(), box, Y);
+    const ConvexDistance b = computeConvexDistance(scanned, Eigen::Isometry3d::Identity(), box, Y);
+    EXPECT_NEAR(a.distance, b.distance, 1e-9) << k;
+  }
+  // Points off the plane by more than the tolerance: not flat, no graph (scanned as before).
+  std::vector<Vec3> bent = disk;
+  bent.back() += 1e-9 * (X.linear() * Vec3::UnitZ());
+  EXPECT_TRUE(makeConvexPiece(bent, {}).neighbor_begin.empty());
+}
+
 TEST(ConvexPiece, RejectsBadInput) {
   EXPECT_THROW(makeConvexPiece({}, {}), std::invalid_argument);
   EXPECT_THROW(makeConvexPiece({Vec3(0, 0, std::numeric_limits<double>::quiet_NaN())}, {}), std::invalid_argument);

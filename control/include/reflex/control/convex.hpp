@@ -73,7 +73,9 @@ int startVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L) noexcept;
 
 /// Builds a ConvexPiece from its hull vertices and the hull's triangles (indices into `vertices`):
 /// the edge graph from the triangles' edges, the bounding sphere (centre: the vertices' box centre).
-/// Triangles may be empty (no graph: support queries scan every vertex). Throws std::invalid_argument
+/// Triangles may be empty: a flat set of at least 4 points (a mesh's planar face, which a hull program
+/// refuses; within 1e-12 m of one plane) keeps only its polygon's corners, each joined to the next;
+/// any other set gets no graph (support queries scan every vertex). Throws std::invalid_argument
 /// for no vertex, a non-finite vertex or a triangle index out of range.
 ConvexPiece makeConvexPiece(const std::vector<Eigen::Vector3d>& vertices,
                             const std::vector<std::array<int, 3>>& triangles);
