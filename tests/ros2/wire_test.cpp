@@ -53,7 +53,7 @@ PairRun runPair(const std::vector<std::string>& controller_extra, const std::str
   PairRun run;
   const std::string log = testing::TempDir() + "/ros2_controller_" + tag + ".log";
   std::vector<std::string> args = {
-      binPath("reflex_controller"), "--robot", "ros2", "--domain", "24", "--duration", "5", "--peer-probe", "0"};
+      binPath("reflex_controller"), "--robot", "ros2", "--domain", "24", "--duration", "6.5", "--peer-probe", "0"};
   args.insert(args.end(), controller_extra.begin(), controller_extra.end());
   ChildProcess controller(args, log);
   EXPECT_TRUE(controller.started()) << controller.error();
@@ -139,7 +139,9 @@ TEST(Ros2Wire, ForwardControllerStateInCommandsOutBadStatesRejectedCountedNamed)
   EXPECT_EQ(rejected, 6u)
       << "the unstamped states, those without velocities and the unknown gripper joint are accepted\n"
       << ctl;
-  EXPECT_GT(accepted, 600u) << ctl;  // 200 Hz for ~4.5 s while the controller runs
+  // 200 Hz from when the robot's reader matched (about 1.3 s after the robot started, here) until the
+  // controller stops (6.5 s after it started).
+  EXPECT_GT(accepted, 600u) << ctl;
   EXPECT_NE(ctl.find("rt/joint_states sample"), std::string::npos) << ctl;
   EXPECT_NE(ctl.find("rejected: joint 'l_elbow' is missing"), std::string::npos) << ctl;
   EXPECT_NE(ctl.find("is listed twice"), std::string::npos) << ctl;

@@ -9,7 +9,8 @@
  * Subscribes with the same QoS to the controller's command: --command forward reads
  * std_msgs/Float64MultiArray on rt/<controller>/commands, trajectory reads
  * trajectory_msgs/JointTrajectory on rt/<controller>/joint_trajectory.
- * Schedule (seconds from its start): good states until --bad-at; then 2 states with --rename's joint
+ * Schedule (seconds from when its command reader matched the controller's writer, plus 300 ms):
+ * good states until --bad-at; then 2 states with --rename's joint
  * renamed (the model's joint missing), 1 with one position too few, 1 naming a joint twice, 1 with a
  * NaN position, 1 stamped 1 s ahead; then 40 states stamped 0 (a driver that does not stamp) and
  * 40 without velocities; then good states until --stop-at; then it listens until --listen-until.
@@ -148,6 +149,17 @@ int main(int argc, char** argv) {
     fprintf(stderr, "ros2_cyclone_robot: creating the writer / reader failed\n");
     return 1;
   }
+
+  /* No state before the command reader has matched the controller's writer (up to 15 s), and 300 ms
+   * more for the controller's writer to match this reader: the controller commands as soon as a state
+   * arrives, and a command written before both ends know each other reaches nobody (volatile), so the
+   * test's "every command sent arrived" would depend on discovery's timing (it took 1 s once). */
+  for (const double until = mono_now_s() + 15.0; mono_now_s() < until;) {
+    dds_subscription_matched_status_t matched;
+    if (dds_get_subscription_matched_status(reader, &matched) == DDS_RETCODE_OK && matched.current_count > 0) break;
+    dds_sleepfor(DDS_MSECS(10));
+  }
+  dds_sleepfor(DDS_MSECS(300));
 
   double pos[MAX_JOINTS + 1], vel[MAX_JOINTS + 1];
   char* sent_names[MAX_JOINTS + 2];
