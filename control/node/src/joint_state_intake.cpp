@@ -48,8 +48,7 @@ bool JointStateIntake::take(const View& s, const bus::dds::SampleInfo& info, std
 bool JointStateIntake::reject(int cause, std::uint64_t& counter) noexcept {
   ++counter;
   cause_ = cause;
-  std::memcpy(by_cause_[static_cast<std::size_t>(cause)].data(), rejection_, sizeof(rejection_));
-  if (cause != kCauseOtherWriter) std::memcpy(bad_rejection_, rejection_, sizeof(bad_rejection_));
+  texts_.keep(cause, rejection_);
   return false;
 }
 

@@ -60,8 +60,7 @@ void formatGuid(const std::array<unsigned char, 16>& g, char (&out)[64]) noexcep
 bool UnitreeHgPort::reject(int cause) noexcept {
   ++rejected_[static_cast<std::size_t>(cause)];
   cause_ = cause;
-  std::memcpy(by_cause_[static_cast<std::size_t>(cause)].data(), rejection_, sizeof(rejection_));
-  if (cause != kRobotCauseOtherWriter) std::memcpy(bad_rejection_, rejection_, sizeof(bad_rejection_));
+  texts_.keep(cause, rejection_);
   return false;
 }
 

@@ -11,6 +11,7 @@
 #include <array>
 #include <chrono>
 #include <cstdint>
+#include <cstring>
 
 namespace reflex::bus {
 class Outbox;
@@ -26,6 +27,27 @@ inline constexpr int kRobotCauseOtherWriter = 7;
 inline constexpr int kCauseBadCrc = 8;
 inline constexpr int kCauseMotorCount = 9;
 inline constexpr int kCauseOldTick = 10;
+
+/// A port's rejection texts kept for its readers: the latest of each cause (every cause a cycle
+/// rejected can be named, not only the last) and the latest that was not another writer's sample
+/// (the heartbeat's). Fixed arrays: keeping one never allocates.
+class RejectionTexts {
+ public:
+  static constexpr std::size_t kBytes = 300;
+  /// After the port formatted `text` for a state it rejects with `cause`.
+  void keep(int cause, const char (&text)[kBytes]) noexcept {
+    std::memcpy(by_cause_[static_cast<std::size_t>(cause)].data(), text, kBytes);
+    if (cause != kRobotCauseOtherWriter) last_bad_ = cause;
+  }
+  /// The latest rejection of `cause` (0 <= cause < kRobotStateCauses; "" none yet).
+  const char* of(int cause) const noexcept { return by_cause_[static_cast<std::size_t>(cause)].data(); }
+  /// The latest rejection that was not another writer's sample ("" none).
+  const char* lastBad() const noexcept { return last_bad_ < 0 ? "" : of(last_bad_); }
+
+ private:
+  std::array<std::array<char, kBytes>, kRobotStateCauses> by_cause_{};
+  int last_bad_ = -1;
+};
 
 class BusRobotPort : public control::RobotPort {
  public:

@@ -93,8 +93,8 @@ class JointStateIntake {
   double stateInterval() const noexcept { return 1e-9 * static_cast<double>(state_interval_ns_); }
   const Counts& counts() const { return counts_; }
   const char* lastRejection() const { return rejection_; }
-  const char* lastBadRejection() const { return bad_rejection_; }
-  const char* rejectionOf(int cause) const { return by_cause_[static_cast<std::size_t>(cause)].data(); }
+  const char* lastBadRejection() const { return texts_.lastBad(); }
+  const char* rejectionOf(int cause) const { return texts_.of(cause); }
   int lastCause() const { return cause_; }
   const char* boundWriter() const { return bound_text_; }
   const char* otherWriter() const { return other_text_; }
@@ -125,9 +125,8 @@ class JointStateIntake {
   std::int64_t state_stamp_ns_ = 0;
   std::int64_t state_interval_ns_ = 0;
   Counts counts_;
-  char rejection_[300] = {};
-  char bad_rejection_[300] = {};
-  std::array<std::array<char, 300>, kRobotStateCauses> by_cause_{};  ///< the latest rejection of each cause
+  char rejection_[RejectionTexts::kBytes] = {};  ///< the rejection being formatted, then the latest
+  RejectionTexts texts_;
   int cause_ = 0;
 };
 

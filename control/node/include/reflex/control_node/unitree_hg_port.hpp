@@ -80,8 +80,8 @@ class UnitreeHgPort final : public BusRobotPort {
   bool waitForState(std::chrono::nanoseconds timeout) noexcept override;
   double stateInterval() const noexcept override { return 1e-9 * static_cast<double>(state_interval_ns_); }
   const char* lastRejection() const override { return rejection_; }
-  const char* lastBadRejection() const override { return bad_rejection_; }
-  const char* rejectionOf(int cause) const override { return by_cause_[static_cast<std::size_t>(cause)].data(); }
+  const char* lastBadRejection() const override { return texts_.lastBad(); }
+  const char* rejectionOf(int cause) const override { return texts_.of(cause); }
   int lastCause() const override { return cause_; }
   bool haveState() const override { return have_state_; }
   std::uint64_t stateSeq() const override { return tick_; }
@@ -136,9 +136,8 @@ class UnitreeHgPort final : public BusRobotPort {
   bool sent_ = false;
   std::uint64_t accepted_ = 0, writer_changes_ = 0, commands_ = 0;
   CauseCounts rejected_{};
-  char rejection_[300] = {};
-  char bad_rejection_[300] = {};
-  std::array<std::array<char, 300>, kRobotStateCauses> by_cause_{};  ///< the latest rejection of each cause
+  char rejection_[RejectionTexts::kBytes] = {};  ///< the rejection being formatted, then the latest
+  RejectionTexts texts_;
   int cause_ = 0;
 };
 
