@@ -20,6 +20,22 @@
 
 namespace reflex::control {
 
+Eigen::Matrix3d principalAxes(const std::vector<Eigen::Vector3d>& pts) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : pts) mean += p;
+  mean /= static_cast<double>(pts.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& p : pts) cov += (p - mean) * (p - mean).transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  Eigen::Matrix3d axes = es.eigenvectors();  // columns, ascending eigenvalues
+  for (int k = 0; k < 3; ++k) {              // a fixed sign, for determinism across solvers
+    int big = 0;
+    axes.col(k).cwiseAbs().maxCoeff(&big);
+    if (axes(big, k) < 0) axes.col(k) = -axes.col(k);
+  }
+  return axes;
+}
+
 namespace {
 
 /// A flat set of points (every point within kFlatTolerance of one plane; a mesh's planar face, which a
@@ -34,11 +50,8 @@ std::vector<int> flatPolygon(const std::vector<Eigen::Vector3d>& v) {
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
   for (const Eigen::Vector3d& p : v) c += p;
   c /= static_cast<double>(n);
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (const Eigen::Vector3d& p : v) cov += (p - c) * (p - c).transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-  const Eigen::Vector3d normal = eig.eigenvectors().col(0), e1 = eig.eigenvectors().col(2),
-                        e2 = eig.eigenvectors().col(1);
+  const Eigen::Matrix3d axes = principalAxes(v);
+  const Eigen::Vector3d normal = axes.col(0), e1 = axes.col(2), e2 = axes.col(1);
   for (const Eigen::Vector3d& p : v)
     if (!(std::abs(normal.dot(p - c)) <= kFlatTolerance)) return {};
   // Andrew's monotone chain on the in-plane coordinates; strict turns only.

@@ -23,7 +23,6 @@
 #include "reflex/control/mesh_fit.hpp"
 #include "reflex/control/urdf_loader.hpp"
 
-#include <Eigen/Eigenvalues>
 #include <libqhull_r/qhull_ra.h>
 
 #include <algorithm>
@@ -154,22 +153,6 @@ Primitive enclosingSphere(const std::vector<Eigen::Vector3d>& pts) {
   p.radius = r;
   p.sphere = true;
   return p;
-}
-
-Eigen::Matrix3d principalAxes(const std::vector<Eigen::Vector3d>& pts) {
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& p : pts) mean += p;
-  mean /= static_cast<double>(pts.size());
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (const auto& p : pts) cov += (p - mean) * (p - mean).transpose();
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-  Eigen::Matrix3d axes = es.eigenvectors();  // columns, ascending eigenvalues
-  for (int k = 0; k < 3; ++k) {              // a fixed sign, for determinism across solvers
-    int big = 0;
-    axes.col(k).cwiseAbs().maxCoeff(&big);
-    if (axes(big, k) < 0) axes.col(k) = -axes.col(k);
-  }
-  return axes;
 }
 
 /// Convex hull of pts with qhull: its vertex indices and volume. A flat or tiny set (qhull refuses

@@ -228,7 +228,7 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
                                             "--duration",
                                             "60",
                                             "--rate",
-                                            "7",
+                                            "9",
                                             "--object",
                                             "cup=0.5,0.1,1.0",
                                             "--image",
@@ -236,7 +236,9 @@ TEST(ReflexView, FoxgloveClientGetsTheLiveSceneAndTheViewWritesNothing) {
                                             "--image-format",
                                             "gif"};
     testing::ChildProcess bad_camera(bad_args, ::testing::TempDir() + "view_ws_bad_camera.log");
-    std::this_thread::sleep_for(2s);  // the controller's first samples
+    // The controller's first samples; the 'gif' images (every fifth frame: 1.8 a second) need the
+    // time to reach the count asserted at the end (at 1.4 a second and 2 s here a loaded run saw 9).
+    std::this_thread::sleep_for(4s);
     const nlohmann::json r = runJson(
         {REFLEX_NODE, kSource + "/tests/view/ws_client_check.js", "--url", "ws://127.0.0.1:" + std::to_string(sys.port),
          "--urdf", kUrdf, "--modules", kModules, "--seconds", "4"},

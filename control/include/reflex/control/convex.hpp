@@ -51,6 +51,10 @@ struct ConvexPiece {
   std::array<int, 14> start_vertex{};
 };
 
+/// The principal axes of a point set: the columns, by ascending variance, each signed so that its
+/// largest component is positive (the same axes whichever eigen solver ran). Needs one point.
+Eigen::Matrix3d principalAxes(const std::vector<Eigen::Vector3d>& pts);
+
 /// The 14 directions of ConvexPiece::start_vertex (unnormalized: the axes and the cube's diagonals).
 inline constexpr std::array<std::array<double, 3>, 14> kStartDirections = {{{1, 0, 0},
                                                                             {-1, 0, 0},
