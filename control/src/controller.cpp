@@ -157,8 +157,8 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
     if (seg.body_schema_slot || seg.link < 0) continue;
     for (int k = 0; k < seg.num_primitives; ++k) {
       const Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
-      reach[static_cast<std::size_t>(seg.link)] =
-          std::max(reach[static_cast<std::size_t>(seg.link)], std::max(prim.a_L.norm(), prim.b_L.norm()) + prim.radius);
+      const std::size_t l = static_cast<std::size_t>(linkOf(seg, prim));  // a finger's on the finger
+      reach[l] = std::max(reach[l], std::max(prim.a_L.norm(), prim.b_L.norm()) + prim.radius);
     }
   }
   for (std::size_t l = nl; l-- > 1;) {  // children after parents: accumulate bottom-up

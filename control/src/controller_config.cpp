@@ -271,6 +271,25 @@ ControllerModel makeControllerModel(const Model& model, const ControllerConfig& 
       if (mine || slot) arm.candidate_pairs.push_back(static_cast<int>(i));
     }
   }
+  // A segment of several links (a hand with its fingers) moves as one body for the controller: its row
+  // is taken on its link. No arm joint may lie between that link and another of its links.
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      for (int l = linkOf(seg, model.primitives[static_cast<std::size_t>(p)]); l != seg.link && l >= 0;
+           l = model.links[static_cast<std::size_t>(l)].parent) {
+        const int qi = model.links[static_cast<std::size_t>(l)].q_index;
+        if (qi >= 0 && used.count(qi))
+          throw ConfigError(
+              config.source + ": segment '" + seg.name + "' takes in link '" +
+              model.links[static_cast<std::size_t>(linkOf(seg, model.primitives[static_cast<std::size_t>(p)]))].name +
+              "', which arm joint '" + model.q_names[static_cast<std::size_t>(qi)] + "' moves against '" +
+              model.links[static_cast<std::size_t>(seg.link)].name +
+              "': a segment's links move as one body; leave it out of the segment (collision YAML "
+              "'segments:')");
+      }
+    }
+  }
   // Ownership, once: the left arm first (as the per-pair lookup it replaces did).
   cm.link_owner.assign(model.links.size(), -1);
   for (std::size_t l = 0; l < model.links.size(); ++l)

@@ -15,6 +15,38 @@
 
 namespace reflex::control {
 
+namespace {
+
+/// Whether segment `seg` has a primitive on a link other than its own.
+bool severalLinks(const Model& model, const Segment& seg) {
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
+    if (linkOf(seg, model.primitives[static_cast<std::size_t>(p)]) != seg.link) return true;
+  return false;
+}
+
+/// How far from its link's origin any point of segment `seg` can be, whatever the joints between its
+/// link and its primitives' links: each primitive's farthest point from its own link's origin, plus,
+/// joint by joint up to the segment's link, the distance of the joint's origin from its parent's (a
+/// revolute joint turns about an axis through its link's origin, which keeps every distance to that
+/// origin) and a prismatic joint's longest travel.
+double reachFromSegmentLink(const Model& model, const Segment& seg) {
+  double reach = 0.0;
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+    double r = std::max(prim.a_L.norm(), prim.b_L.norm()) + prim.radius;
+    for (int l = linkOf(seg, prim); l != seg.link && l >= 0; l = model.links[static_cast<std::size_t>(l)].parent) {
+      const Link& link = model.links[static_cast<std::size_t>(l)];
+      r += link.X_P_J.translation().norm();
+      if (link.type == JointType::kPrismatic && link.q_index >= 0)
+        r += std::max(std::abs(model.q_lower[link.q_index]), std::abs(model.q_upper[link.q_index]));
+    }
+    reach = std::max(reach, r);
+  }
+  return reach;
+}
+
+}  // namespace
+
 DistanceData::DistanceData(const Model& model)
     : pairs(model.pairs.size()),
       rows(Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(model.pairs.size()), model.nq)),
@@ -38,10 +70,25 @@ DistanceData::DistanceData(const Model& model)
       for (int b = sb.first_primitive; b < sb.first_primitive + sb.num_primitives; ++b) {
         pp_a.push_back(a);
         pp_b.push_back(b);
+        const std::array<int, 2> links{linkOf(sa, model.primitives[static_cast<std::size_t>(a)]),
+                                       linkOf(sb, model.primitives[static_cast<std::size_t>(b)])};
+        const bool unchecked = std::binary_search(p.unchecked_links.begin(), p.unchecked_links.end(), links);
+        pp_unchecked.push_back(unchecked ? 1 : 0);
+        any_pp_unchecked = any_pp_unchecked || unchecked;
       }
     }
   }
   pp_begin.push_back(static_cast<int>(pp_a.size()));
+  prim_link.assign(model.primitives.size(), -1);
+  link_segment.assign(model.links.size(), -1);
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+    if (seg.link >= 0) link_segment[static_cast<std::size_t>(seg.link)] = s;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      prim_link[static_cast<std::size_t>(p)] = linkOf(seg, model.primitives[static_cast<std::size_t>(p)]);
+      link_segment[static_cast<std::size_t>(prim_link[static_cast<std::size_t>(p)])] = s;
+    }
+  }
   exact_pairs.assign(robot_pairs.size(), -1);
   // The tight model: cores of the capsules as two-vertex pieces; which pairs have a piece.
   core_piece.resize(model.primitives.size());
@@ -74,6 +121,11 @@ DistanceData::DistanceData(const Model& model)
   for (std::size_t s = 0; s < model.segments.size(); ++s) {
     const Segment& seg = model.segments[s];
     if (seg.body_schema_slot || seg.num_primitives == 0) continue;
+    if (severalLinks(model, seg)) {  // its primitives move against its link: a sphere for every posture
+      bound_center_L[s].setZero();
+      bound_radius[s] = reachFromSegmentLink(model, seg);
+      continue;
+    }
     Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
     Eigen::Vector3d hi = -lo;
     for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
@@ -90,8 +142,45 @@ DistanceData::DistanceData(const Model& model)
     bound_center_L[s] = c;
     bound_radius[s] = r;
   }
+  several_links.assign(model.segments.size(), 0);
+  for (int s = 0; s < model.num_robot_segments; ++s)
+    several_links[static_cast<std::size_t>(s)] = severalLinks(model, model.segments[static_cast<std::size_t>(s)]);
+  for (std::size_t s = 0; s < model.segments.size(); ++s) {
+    seg_block.push_back(static_cast<int>(block_first.size()));
+    const Segment& seg = model.segments[s];
+    if (!several_links[s]) continue;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const int link = linkOf(seg, model.primitives[static_cast<std::size_t>(p)]);
+      if (block_first.size() == static_cast<std::size_t>(seg_block.back()) || block_link.back() != link) {
+        block_first.push_back(p);
+        block_end.push_back(p);
+        block_link.push_back(link);
+      }
+      block_end.back() = p + 1;
+    }
+  }
+  seg_block.push_back(static_cast<int>(block_first.size()));
+  for (std::size_t k = 0; k < block_first.size(); ++k) {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (int p = block_first[k]; p < block_end[k]; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      lo = lo.cwiseMin(prim.a_L).cwiseMin(prim.b_L);
+      hi = hi.cwiseMax(prim.a_L).cwiseMax(prim.b_L);
+    }
+    const Eigen::Vector3d c = 0.5 * (lo + hi);
+    double r = 0.0;
+    for (int p = block_first[k]; p < block_end[k]; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      r = std::max(r, std::max((prim.a_L - c).norm(), (prim.b_L - c).norm()) + prim.radius);
+    }
+    block_center_L.push_back(c);
+    block_radius.push_back(r);
+  }
+  block_center_B.assign(block_first.size(), Eigen::Vector3d::Zero());
   for (const int i : robot_pairs) {
     const SegmentPair& p = model.pairs[static_cast<std::size_t>(i)];
+    if (several_links[static_cast<std::size_t>(p.a)] || several_links[static_cast<std::size_t>(p.b)])
+      rp_dynamic.push_back(static_cast<int>(rp_a.size()));
     rp_a.push_back(p.a);
     rp_b.push_back(p.b);
     rp_rsum.push_back(bound_radius[static_cast<std::size_t>(p.a)] + bound_radius[static_cast<std::size_t>(p.b)]);
@@ -131,18 +220,28 @@ namespace {
 /// Subtracted from a carried lower bound: the rounding of the motion bound.
 constexpr double kCarryMargin = 1e-9;
 
-/// The primitives of robot segment `seg` whose bounding sphere lies within `within` of robot segment
-/// `other`'s (both in B this call) into kept[0 .. n); `left_out` lowered to the smallest gap of the
-/// others (a lower bound of their distance to `other`).
-inline void keepNear(const DistanceData& data, const Segment& seg, int other, double within, int* kept, int& n,
-                     double& left_out) {
-  const double* c4 = data.bound_center4_B.data() + 4 * other;
-  const Eigen::Vector3d c(c4[0], c4[1], c4[2]);
-  const double r_other = data.bound_radius[static_cast<std::size_t>(other)];
+/// The index in pp_a / pp_b of primitives pa and pb of robot pair i (segments sa, sb).
+inline int primitivePairIndex(const DistanceData& data, int i, const Segment& sa, const Segment& sb, int pa, int pb) {
+  return data.pp_begin[static_cast<std::size_t>(i)] + (pa - sa.first_primitive) * sb.num_primitives +
+         (pb - sb.first_primitive);
+}
+
+/// Whether primitives pa, pb of pair i are on a link pair the model does not check (never for a pair
+/// with a body-schema slot, which has no primitive pairs listed).
+inline bool uncheckedPrimitivePair(const DistanceData& data, int i, const Segment& sa, const Segment& sb, int pa,
+                                   int pb) {
+  return data.any_pp_unchecked && data.pair_common[static_cast<std::size_t>(i)] >= 0 &&
+         data.pp_unchecked[static_cast<std::size_t>(primitivePairIndex(data, i, sa, sb, pa, pb))];
+}
+
+/// The primitives of [first, end) whose bounding sphere lies within `within` of the sphere (c, r)
+/// into kept[0 .. n); `left_out` lowered to the smallest gap of the others.
+inline void keepNearSphere(const DistanceData& data, int first, int end, const Eigen::Vector3d& c, double r,
+                           double within, int* kept, int& n, double& left_out) {
   n = 0;
-  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+  for (int p = first; p < end; ++p) {
     const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
-    const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r_other;
+    const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r;
     if (gap > within)
       left_out = std::min(left_out, gap);
     else
@@ -150,9 +249,54 @@ inline void keepNear(const DistanceData& data, const Segment& seg, int other, do
   }
 }
 
+/// Calls emit(pa, pb) for robot pair i's primitive pairs that can be within `within` (their link pair
+/// checked), block pair by block pair (a segment of one link is one block: its sphere the segment's):
+/// a block pair whose spheres are farther apart is skipped, then each block keeps its primitives near
+/// the other block's sphere. `left_out` is lowered to the smallest gap of what is left out (a lower
+/// bound of its distance). Every segment's spheres of this call must be in place.
+template <class Emit>
+void listNearPairs(DistanceData& data, int i, const Segment& sa, int a, const Segment& sb, int b, double within,
+                   double& left_out, Emit&& emit) {
+  struct Block {
+    int first, end;
+    Eigen::Vector3d c;
+    double r;
+  };
+  auto blocks = [&](const Segment& seg, int s, auto&& f) {
+    if (!data.several_links[static_cast<std::size_t>(s)]) {
+      const double* c4 = data.bound_center4_B.data() + 4 * s;
+      f(Block{seg.first_primitive, seg.first_primitive + seg.num_primitives, Eigen::Vector3d(c4[0], c4[1], c4[2]),
+              data.bound_radius[static_cast<std::size_t>(s)]});
+      return;
+    }
+    for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k)
+      f(Block{data.block_first[static_cast<std::size_t>(k)], data.block_end[static_cast<std::size_t>(k)],
+              data.block_center_B[static_cast<std::size_t>(k)], data.block_radius[static_cast<std::size_t>(k)]});
+  };
+  blocks(sa, a, [&](const Block& x) {
+    blocks(sb, b, [&](const Block& y) {
+      const double gap = (x.c - y.c).norm() - x.r - y.r;
+      if (gap > within) {
+        left_out = std::min(left_out, gap);
+        return;
+      }
+      int nka = 0, nkb = 0;
+      keepNearSphere(data, x.first, x.end, y.c, y.r, within, data.kept_a.data(), nka, left_out);
+      keepNearSphere(data, y.first, y.end, x.c, x.r, within, data.kept_b.data(), nkb, left_out);
+      for (int ka = 0; ka < nka; ++ka)
+        for (int kb = 0; kb < nkb; ++kb) {
+          const int pa = data.kept_a[static_cast<std::size_t>(ka)], pb = data.kept_b[static_cast<std::size_t>(kb)];
+          const int pp = primitivePairIndex(data, i, sa, sb, pa, pb);
+          if (data.any_pp_unchecked && data.pp_unchecked[static_cast<std::size_t>(pp)]) continue;
+          emit(pa, pb, pp);
+        }
+    });
+  });
+}
+
 /// Whether a pair that involves a body-schema slot is checked this cycle; sets the links.
-bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const SegmentPair& pair, int& link_a,
-                    int& link_b) {
+bool slotPairActive(const Model& model, const DistanceData& data, const BodySchemaSlots& slots, const SegmentPair& pair,
+                    int& link_a, int& link_b) {
   const Segment& sa = model.segments[pair.a];
   const Segment& sb = model.segments[pair.b];
   if (sa.body_schema_slot) {
@@ -165,7 +309,8 @@ bool slotPairActive(const Model& model, const BodySchemaSlots& slots, const Segm
     if (!slot.enabled) return false;
     link_b = slot.link;
     if ((slot.ignore_mask >> pair.a) & 1U) return false;
-    if (sa.link == slot.link) return false;  // never against the segment of the link it hangs on
+    // never against the segment that has the link it hangs on
+    if (data.link_segment[static_cast<std::size_t>(slot.link)] == pair.a) return false;
   }
   return true;
 }
@@ -251,9 +396,14 @@ inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin,
       B.piece >= 0 ? model.pieces[static_cast<std::size_t>(B.piece)] : data.core_piece[static_cast<std::size_t>(pb)];
   const double ra = A.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pa)];
   const double rb = B.piece >= 0 ? 0.0 : data.prim_r[static_cast<std::size_t>(pb)];
+  // Each primitive placed by its own link (a segment of several links), a slot's by the slot's.
+  const int la =
+      data.prim_link[static_cast<std::size_t>(pa)] >= 0 ? data.prim_link[static_cast<std::size_t>(pa)] : link_a;
+  const int lb =
+      data.prim_link[static_cast<std::size_t>(pb)] >= 0 ? data.prim_link[static_cast<std::size_t>(pb)] : link_b;
   const ConvexDistance c =
-      computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(link_a)], cb,
-                            kin.X_B_L[static_cast<std::size_t>(link_b)], nullptr, stop_above + ra + rb, towards_b);
+      computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(la)], cb, kin.X_B_L[static_cast<std::size_t>(lb)],
+                            nullptr, stop_above + ra + rb, towards_b);
   if (c.above) {
     d = c.distance - ra - rb;
     return PieceOutcome::kAbove;
@@ -399,48 +549,87 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   return true;
 }
 
+/// An upper bound of robot pair i's distance (+inf: none found): the exact distance of one of its
+/// primitive pairs, the one that won last time, else the primitives nearest the other segment's
+/// bounding sphere (this call's: the caller has them).
+double upperBoundOfPair(const Model& model, const KinematicsData& kin, DistanceData& data, int i, const Segment& sa,
+                        const Segment& sb, int link_a, int link_b) {
+  const std::array<int, 2>& w = data.piece_winner[static_cast<std::size_t>(i)];
+  int pa = w[0], pb = w[1];
+  if (pa < sa.first_primitive || pa >= sa.first_primitive + sa.num_primitives || pb < sb.first_primitive ||
+      pb >= sb.first_primitive + sb.num_primitives) {
+    auto nearest = [&](const Segment& seg, int other) {
+      const double* c4 = data.bound_center4_B.data() + 4 * other;
+      const Eigen::Vector3d c(c4[0], c4[1], c4[2]);
+      int best = seg.first_primitive;
+      double best_gap = std::numeric_limits<double>::infinity();
+      for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+        const SegmentB& x = data.prim_B[static_cast<std::size_t>(p)];
+        const double gap = (x.start + 0.5 * x.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)];
+        if (gap < best_gap) best_gap = gap, best = p;
+      }
+      return best;
+    };
+    const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
+    pa = nearest(sa, pair.b);
+    pb = nearest(sb, pair.a);
+  }
+  if (uncheckedPrimitivePair(data, i, sa, sb, pa, pb)) return std::numeric_limits<double>::infinity();
+  const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
+  const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
+  double s, t;
+  (void)detail::coreDistance(A, B, s, t);
+  const Eigen::Vector3d towards_b = (B.start + t * B.d) - (A.start + s * A.d);
+  double d;
+  Eigen::Vector3d p_a, p_b, n;
+  ++data.num_piece_searches;
+  const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b,
+                                       std::numeric_limits<double>::infinity(), towards_b, d, p_a, p_b, n);
+  if (o == PieceOutcome::kTouching) return 0.0;
+  return d == d ? d : std::numeric_limits<double>::infinity();
+}
+
 /// The closest primitive pair of segments sa and sb, computed directly (slot pairs, refinement);
 /// the same arithmetic and order as the flat loop of computeSegmentDistances.
 /// `give_up` (a pair of the tight model only): a pair proven farther than it comes out inexact, its
 /// distance a lower bound above give_up (finishPiecePair); +inf: always exact.
 void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceData& data,
                         const DistanceOptions& options, int i, const Segment& sa, const Segment& sb, int link_a,
-                        int link_b, double give_up = std::numeric_limits<double>::infinity()) {
+                        int link_b, double give_up = std::numeric_limits<double>::infinity(),
+                        bool bounds_fresh = false) {
   const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
   if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
   if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
-    // With a finite give_up, a robot pair lists only the primitives whose bounding sphere lies within
-    // give_up of the other segment's (as the sweep does with its prune distance); `left_out` is the
-    // smallest gap of those it leaves out.
-    const int* ka = nullptr;
-    const int* kb = nullptr;
-    int nka = sa.num_primitives, nkb = sb.num_primitives;
+    // With a finite give_up, a robot pair lists only the primitive pairs that can be within it (as the
+    // sweep does with its prune distance: listNearPairs); `left_out` is the smallest gap of those it
+    // leaves out. Asked for the exact distance, a robot pair (its bounding spheres of this call in
+    // place) lists only those within an upper bound of it: one primitive pair's exact distance.
+    const int nka = sa.num_primitives, nkb = sb.num_primitives;
     double left_out = std::numeric_limits<double>::infinity();
-    const bool filter = give_up < std::numeric_limits<double>::infinity() && !sa.body_schema_slot &&
-                        !sb.body_schema_slot && nka * nkb > 4;
-    if (filter) {
-      const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
-      keepNear(data, sa, pair.b, give_up, data.kept_a.data(), nka, left_out);
-      keepNear(data, sb, pair.a, give_up, data.kept_b.data(), nkb, left_out);
-      ka = data.kept_a.data();
-      kb = data.kept_b.data();
-    }
+    const bool robot = !sa.body_schema_slot && !sb.body_schema_slot && nka * nkb > 4;
+    double within = give_up;
+    if (robot && bounds_fresh && !(give_up < std::numeric_limits<double>::infinity()))
+      within = upperBoundOfPair(model, kin, data, i, sa, sb, link_a, link_b);
+    const bool filter = robot && within < std::numeric_limits<double>::infinity();
+    auto offer = [&](auto&& f, int pa, int pb) {
+      double s, t;
+      const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
+      f(pa, pb, core - radius[pa] - radius[pb], core, s, t, -1, -std::numeric_limits<double>::infinity());
+    };
     double floor;
-    const bool finished =
-        nka > 0 && nkb > 0 &&
-        finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
-          for (int x = 0; x < nka; ++x)
-            for (int y = 0; y < nkb; ++y) {
-              const int pa = ka ? ka[x] : sa.first_primitive + x;
-              const int pb = kb ? kb[y] : sb.first_primitive + y;
-              double s, t;
-              const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
-              f(pa, pb, core - radius[pa] - radius[pb], core, s, t, -1, -std::numeric_limits<double>::infinity());
-            }
-        });
+    const bool finished = finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
+      if (filter) {
+        const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
+        listNearPairs(data, i, sa, pair.a, sb, pair.b, within, left_out,
+                      [&](int pa, int pb, int) { offer(f, pa, pb); });
+        return;
+      }
+      for (int pa = sa.first_primitive; pa < sa.first_primitive + nka; ++pa)
+        for (int pb = sb.first_primitive; pb < sb.first_primitive + nkb; ++pb)
+          if (!uncheckedPrimitivePair(data, i, sa, sb, pa, pb)) offer(f, pa, pb);
+    });
     if (!finished) {
-      if (nka == 0 || nkb == 0) floor = std::numeric_limits<double>::infinity();
       PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
       out.active = true;
       out.exact = false;
@@ -453,6 +642,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
   int best_pa = sa.first_primitive, best_pb = sb.first_primitive;
   for (int pa = sa.first_primitive; pa < sa.first_primitive + sa.num_primitives; ++pa) {
     for (int pb = sb.first_primitive; pb < sb.first_primitive + sb.num_primitives; ++pb) {
+      if (uncheckedPrimitivePair(data, i, sa, sb, pa, pb)) continue;
       double s, t;
       const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
       const double d = core - radius[pa] - radius[pb];
@@ -467,6 +657,31 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
     }
   }
   finishPair(model, kin, data, options, i, link_a, link_b, best, best_core, best_pa, best_pb, best_s, best_t);
+}
+
+/// The bounding sphere of segment s of several links (its primitives already in B this call): about
+/// the middle of its primitives' sphere centres' box, through the farthest sphere. Its radius changes
+/// with the joints between its links, so the sums of its robot pairs are redone in the broad phase.
+void boundPrimitivesWhereTheyAre(DistanceData& data, const Segment& seg, int s) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
+    const Eigen::Vector3d c = w.start + 0.5 * w.d;
+    lo = lo.cwiseMin(c);
+    hi = hi.cwiseMax(c);
+  }
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  double r = 0.0;
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
+    r = std::max(r, (w.start + 0.5 * w.d - centre).norm() + data.prim_sphere_r[static_cast<std::size_t>(p)]);
+  }
+  double* c4 = data.bound_center4_B.data() + 4 * s;
+  c4[0] = centre.x();
+  c4[1] = centre.y();
+  c4[2] = centre.z();
+  // NaN poses: an infinite sphere (never skipped on its account; the NaN shows in the pair).
+  data.bound_radius[static_cast<std::size_t>(s)] = r == r ? r : std::numeric_limits<double>::infinity();
 }
 
 /// Segment s's primitives (core start, direction and radius) into B for this cycle's kinematics; a
@@ -487,7 +702,8 @@ void transformSegment(const Model& model, const KinematicsData& kin, const BodyS
     return;
   }
   const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
-  if (bound) {
+  const bool several = data.several_links[static_cast<std::size_t>(s)] != 0;
+  if (bound && !several) {
     const Eigen::Vector3d c = X * data.bound_center_L[s];
     double* c4 = data.bound_center4_B.data() + 4 * s;
     c4[0] = c.x();
@@ -496,18 +712,26 @@ void transformSegment(const Model& model, const KinematicsData& kin, const BodyS
   }
   for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
     const Primitive& prim = model.primitives[p];
+    const Eigen::Isometry3d& X_p = prim.link >= 0 ? kin.X_B_L[static_cast<std::size_t>(prim.link)] : X;
     SegmentB& w = data.prim_B[p];
-    w.start = X * prim.a_L;
+    w.start = X_p * prim.a_L;
     if (prim.sphere) {  // no second end point to transform
       w.d.setZero();
       w.dd = 0.0;
       w.inv_dd = 0.0;
     } else {
-      w.d = X.linear() * (prim.b_L - prim.a_L);
+      w.d = X_p.linear() * (prim.b_L - prim.a_L);
       w.dd = w.d.squaredNorm();
       w.inv_dd = w.dd > kPointSegmentSq ? 1.0 / w.dd : 0.0;
     }
     data.prim_r[p] = prim.radius;
+  }
+  if (bound && several) {
+    boundPrimitivesWhereTheyAre(data, seg, s);
+    for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k)
+      data.block_center_B[static_cast<std::size_t>(k)] =
+          kin.X_B_L[static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)])] *
+          data.block_center_L[static_cast<std::size_t>(k)];
   }
 }
 
@@ -528,6 +752,9 @@ struct Sweep {
   const int* exact_pairs = nullptr;
   int nexact = 0;
   double pruned_floor = std::numeric_limits<double>::infinity();
+  /// The exact pairs' primitive pairs were listed (list_end, list_pp): with the broad phase, or when
+  /// some link pairs are not checked; else they are pp_a / pp_b in pair order.
+  bool listed = false;
   const int* list_a = nullptr;
   const int* list_b = nullptr;
   int nlist = 0;
@@ -546,11 +773,17 @@ void measurePrimitiveMotion(const Model& model, const KinematicsData& kin, Dista
   if (model.pieces.empty()) return;
   for (int s = 0; s < model.num_robot_segments; ++s) {
     const Segment& seg = model.segments[static_cast<std::size_t>(s)];
-    const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(seg.link)];
-    const Eigen::Isometry3d& X0 = data.last_X[static_cast<std::size_t>(seg.link)];
-    const double turn = std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
+    auto turnOf = [&](const Eigen::Isometry3d& X, const Eigen::Isometry3d& X0) {
+      return std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
+    };
+    const double seg_turn =
+        turnOf(kin.X_B_L[static_cast<std::size_t>(seg.link)], data.last_X[static_cast<std::size_t>(seg.link)]);
     for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
       const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      const std::size_t link = static_cast<std::size_t>(linkOf(seg, prim));  // a finger's own link
+      const Eigen::Isometry3d& X = kin.X_B_L[link];
+      const Eigen::Isometry3d& X0 = data.last_X[link];
+      const double turn = prim.link >= 0 ? turnOf(X, X0) : seg_turn;
       const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
       const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
       data.prim_motion[static_cast<std::size_t>(p)] = m == m ? m : kInf;  // NaN poses: no carry
@@ -572,6 +805,9 @@ void broadPhase(DistanceData& data, const DistanceOptions& options, Sweep& sw) {
     // goes is data-dependent and mispredicts), each pair's entry as skipped (the exact ones are
     // overwritten in step 4) and the kept ones appended to the exact list.
     const int nrobot = static_cast<int>(data.robot_pairs.size());
+    for (const int r : data.rp_dynamic)  // a segment of several links: its sphere of this call
+      data.rp_rsum[static_cast<std::size_t>(r)] = data.bound_radius[static_cast<std::size_t>(data.rp_a[r])] +
+                                                  data.bound_radius[static_cast<std::size_t>(data.rp_b[r])];
     if (data.kernel == SweepKernel::kAvx2)
       detail::boundGapsAvx2(data.bound_center4_B.data(), data.rp_a.data(), data.rp_b.data(), data.rp_rsum.data(),
                             nrobot, data.rp_gap.data());
@@ -612,7 +848,8 @@ void coreDistancesOfExactPairs(const Model& model, DistanceData& data, const Dis
   sw.list_a = data.pp_a.data();
   sw.list_b = data.pp_b.data();
   sw.nlist = static_cast<int>(data.pp_a.size());
-  if (sw.prune) {
+  sw.listed = sw.prune || data.any_pp_unchecked;
+  if (sw.listed) {
     // A pair of the tight model keeps only the primitives of each segment whose bounding sphere lies
     // within prune_distance of the other segment's: the others' primitive pairs are farther than it
     // (their smallest sphere gap, list_floor, is a lower bound of their distance). A torso of 48
@@ -625,26 +862,21 @@ void coreDistancesOfExactPairs(const Model& model, DistanceData& data, const Dis
       const int i = exact_pairs[e];
       const int count = data.pp_begin[i + 1] - data.pp_begin[i];
       double floor = kInf;
-      if (data.pair_has_piece[static_cast<std::size_t>(i)] && count > 4) {
+      if (sw.prune && data.pair_has_piece[static_cast<std::size_t>(i)] && count > 4) {
         const SegmentPair& pair = model.pairs[i];
         const Segment& sa = model.segments[pair.a];
         const Segment& sb = model.segments[pair.b];
-        int nka = 0, nkb = 0;
-        keepNear(data, sa, pair.b, prune_distance, data.kept_a.data(), nka, floor);
-        keepNear(data, sb, pair.a, prune_distance, data.kept_b.data(), nkb, floor);
-        for (int ka = 0; ka < nka; ++ka)
-          for (int kb = 0; kb < nkb; ++kb, ++nlist) {
-            const int pa = data.kept_a[static_cast<std::size_t>(ka)], pb = data.kept_b[static_cast<std::size_t>(kb)];
-            data.list_a[nlist] = pa;
-            data.list_b[nlist] = pb;
-            data.list_pp[static_cast<std::size_t>(nlist)] =
-                data.pp_begin[i] + (pa - sa.first_primitive) * sb.num_primitives + (pb - sb.first_primitive);
-          }
+        listNearPairs(data, i, sa, pair.a, sb, pair.b, prune_distance, floor, [&](int pa, int pb, int pp) {
+          data.list_a[nlist] = pa;
+          data.list_b[nlist] = pb;
+          data.list_pp[static_cast<std::size_t>(nlist++)] = pp;
+        });
       } else {
-        for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k, ++nlist) {
+        for (int k = data.pp_begin[i]; k < data.pp_begin[i + 1]; ++k) {
+          if (data.any_pp_unchecked && data.pp_unchecked[static_cast<std::size_t>(k)]) continue;
           data.list_a[nlist] = data.pp_a[k];
           data.list_b[nlist] = data.pp_b[k];
-          data.list_pp[static_cast<std::size_t>(nlist)] = k;
+          data.list_pp[static_cast<std::size_t>(nlist++)] = k;
         }
       }
       data.list_end[static_cast<std::size_t>(e)] = nlist;
@@ -681,7 +913,8 @@ void finishExactPairs(const Model& model, const KinematicsData& kin, DistanceDat
   for (int e = 0, j = 0; e < nexact; ++e) {
     const int i = exact_pairs[e];
     const SegmentPair& pair = model.pairs[i];
-    const int end = prune ? data.list_end[static_cast<std::size_t>(e)] : j + data.pp_begin[i + 1] - data.pp_begin[i];
+    const int end =
+        sw.listed ? data.list_end[static_cast<std::size_t>(e)] : j + data.pp_begin[i + 1] - data.pp_begin[i];
     assert(end > j ||
            (prune && data.pair_has_piece[static_cast<std::size_t>(i)]));  // every robot segment has a primitive
     if (data.pair_has_piece[static_cast<std::size_t>(i)]) {
@@ -707,7 +940,7 @@ void finishExactPairs(const Model& model, const KinematicsData& kin, DistanceDat
       if (!finishPiecePair(model, kin, data, options, i, model.segments[pair.a].link, model.segments[pair.b].link,
                            prune ? options.prune_distance : kInf, floor, [&](auto&& f) {
                              for (int k = begin; k < end; ++k) {
-                               const int pp = prune ? data.list_pp[static_cast<std::size_t>(k)] : k;
+                               const int pp = sw.listed ? data.list_pp[static_cast<std::size_t>(k)] : k;
                                const double carried = data.pp_stamp[static_cast<std::size_t>(pp)] + 1 == data.cycle
                                                           ? data.pp_lower[static_cast<std::size_t>(pp)] -
                                                                 data.prim_motion[static_cast<std::size_t>(list_a[k])] -
@@ -760,7 +993,7 @@ bool computeSlotPairs(const Model& model, const KinematicsData& kin, const BodyS
     const Segment& sa = model.segments[pair.a];
     const Segment& sb = model.segments[pair.b];
     int link_a = sa.link, link_b = sb.link;
-    if (!any_slot || !slotPairActive(model, slots, pair, link_a, link_b)) {
+    if (!any_slot || !slotPairActive(model, data, slots, pair, link_a, link_b)) {
       PairDistance& out = data.pairs[i];
       out.active = false;
       out.has_row = false;
@@ -824,7 +1057,7 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
     const Segment& sa = model.segments[pair.a];
     const Segment& sb = model.segments[pair.b];
     int link_a = sa.link, link_b = sb.link;
-    if ((sa.body_schema_slot || sb.body_schema_slot) && !slotPairActive(model, slots, pair, link_a, link_b)) {
+    if ((sa.body_schema_slot || sb.body_schema_slot) && !slotPairActive(model, data, slots, pair, link_a, link_b)) {
       PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
       out.active = false;
       out.has_row = false;
@@ -836,7 +1069,7 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
       data.segment_stamp[static_cast<std::size_t>(s)] = now;
       transformSegment(model, kin, slots, data, s, true);  // with the bounding sphere (give_up's filter)
     }
-    computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up);
+    computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up, /*bounds_fresh=*/true);
   }
 }
 
@@ -848,7 +1081,9 @@ void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceD
   const SegmentPair& p = model.pairs[pair];
   const Segment& sa = model.segments[p.a];
   const Segment& sb = model.segments[p.b];
-  computeSegmentPair(model, kin, data, options, pair, sa, sb, sa.link, sb.link);
+  // Skipped by the broad phase: the bounding spheres of that call are in place.
+  computeSegmentPair(model, kin, data, options, pair, sa, sb, sa.link, sb.link, std::numeric_limits<double>::infinity(),
+                     /*bounds_fresh=*/data.last_pruned);
 }
 
 bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link, const Eigen::Vector3d& a_L,

@@ -17,6 +17,14 @@ int Model::qIndex(const std::string& joint_name) const {
 int Model::segmentIndex(const std::string& segment_name) const {
   for (std::size_t i = 0; i < segments.size(); ++i)
     if (segments[i].name == segment_name) return static_cast<int>(i);
+  const int link = linkIndex(segment_name);
+  if (link < 0) return -1;
+  for (std::size_t i = 0; i < segments.size(); ++i) {
+    const Segment& seg = segments[i];
+    if (seg.body_schema_slot) continue;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
+      if (primitives[static_cast<std::size_t>(p)].link == link) return static_cast<int>(i);
+  }
   return -1;
 }
 

@@ -194,6 +194,7 @@ Eigen::Vector3d handPoint(const Model& m, const Tree& t, int hand, bool* has_geo
   Eigen::Vector3d best = Eigen::Vector3d::Zero();
   double best_n = -1.0;
   for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    if (linkOf(seg, m.primitives[p]) != hand) continue;  // a finger's (a segment of several links)
     for (const Eigen::Vector3d& e : {m.primitives[p].a_L, m.primitives[p].b_L}) {
       if (e.norm() > best_n + 1e-12) {
         best_n = e.norm();
@@ -211,6 +212,37 @@ int linkOrThrow(const Model& m, const std::string& name, const char* what) {
 }
 
 }  // namespace
+
+std::vector<std::pair<std::string, std::vector<std::string>>> handSegments(
+    const Model& model, const std::vector<std::string>& hand_links, const std::vector<std::string>& driven_joints) {
+  std::vector<std::pair<std::string, std::vector<std::string>>> out;
+  std::vector<bool> has_geometry(model.links.size(), false);
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
+      has_geometry[static_cast<std::size_t>(linkOf(seg, model.primitives[static_cast<std::size_t>(p)]))] = true;
+  }
+  for (const std::string& name : hand_links) {
+    const int hand = model.linkIndex(name);
+    if (hand < 0) continue;
+    // below[l]: l is below the hand with no driven joint on the way (links come parents first).
+    std::vector<bool> below(model.links.size(), false);
+    below[static_cast<std::size_t>(hand)] = true;
+    std::vector<std::string> members;
+    for (std::size_t l = static_cast<std::size_t>(hand) + 1; l < model.links.size(); ++l) {
+      const Link& link = model.links[l];
+      if (link.parent < 0 || !below[static_cast<std::size_t>(link.parent)]) continue;
+      const bool driven =
+          link.q_index >= 0 && std::find(driven_joints.begin(), driven_joints.end(),
+                                         model.q_names[static_cast<std::size_t>(link.q_index)]) != driven_joints.end();
+      if (driven) continue;
+      below[l] = true;
+      if (has_geometry[l]) members.push_back(link.name);
+    }
+    if (!members.empty()) out.emplace_back(name, members);
+  }
+  return out;
+}
 
 Eigen::VectorXd neutralConfiguration(const Model& model) {
   Eigen::VectorXd q(model.nq);
@@ -821,6 +853,7 @@ std::vector<std::vector<Primitive>> bodyPrimitivesInLink(const Model& m, const T
       if (const int sg = t.segment_of[l]; sg >= 0) {
         const Segment& seg = m.segments[sg];
         for (int pi = seg.first_primitive; pi < seg.first_primitive + seg.num_primitives; ++pi) {
+          if (linkOf(seg, m.primitives[pi]) != l) continue;  // on a link below, moved by its joint
           Primitive p = m.primitives[pi];
           p.a_L = X_body_l * p.a_L;
           p.b_L = X_body_l * p.b_L;

@@ -105,7 +105,7 @@ ScenarioFrame scenarioFrame(const Model& model, const ControllerModel& cm) {
   for (int p = trunk.first_primitive; p < trunk.first_primitive + trunk.num_primitives; ++p) {
     const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
     for (const Eigen::Vector3d& end : {prim.a_L, prim.b_L}) {
-      const double y = left.dot(kin.X_B_L[static_cast<std::size_t>(trunk.link)] * end);
+      const double y = left.dot(kin.X_B_L[static_cast<std::size_t>(linkOf(trunk, prim))] * end);
       y_lo = std::min(y_lo, y - prim.radius);
       y_hi = std::max(y_hi, y + prim.radius);
     }

@@ -180,13 +180,23 @@ CollisionConfig loadCollisionConfig(const std::string& yaml_path) {
   // An empty file is the defaults; errors name FILE:LINE:COL: KEY.PATH (control/docs/configuration.md).
   const common::ConfigNode root = common::ConfigNode::loadFile(
       yaml_path, "collision configuration", [](const std::string& m) { throw ModelError(m); }, /*allow_empty=*/true);
-  root.rejectUnknown({"exclude_adjacent", "exclude", "srdf", "cylinder_as", "fit"});
+  root.rejectUnknown({"exclude_adjacent", "exclude", "srdf", "cylinder_as", "fit", "segments"});
   config.exclude_adjacent = root.boolean("exclude_adjacent", config.exclude_adjacent);
   if (root.has("exclude")) {
     for (const common::ConfigNode& item : root.at("exclude", "a list of pairs").elements()) {
       if (!item.isList() || item.node().size() != 2 || !item.node()[0].IsScalar() || !item.node()[1].IsScalar())
         item.failHere("not a pair", "a pair [segment_a, segment_b]");
       config.exclude.emplace_back(item.node()[0].Scalar(), item.node()[1].Scalar());
+    }
+  }
+  if (root.has("segments")) {
+    const common::ConfigNode segs = root.at("segments", "a map: segment link -> the links below it it takes in");
+    segs.requireMap("a map: segment link -> the links below it it takes in");
+    for (const auto& entry : segs.entries()) {
+      const std::string& name = entry.first;
+      config.segments.emplace_back(name, segs.strings(name, {}));
+      if (config.segments.back().second.empty())
+        segs.fail(name, "an empty list", "the links below " + name + " it takes in");
     }
   }
   config.cylinder_as = root.string("cylinder_as", config.cylinder_as);
@@ -458,6 +468,131 @@ void addPairs(Model& model, const CollisionConfig& config, const std::string& or
   }
 }
 
+/// The segments of several links (`segments:`): each takes in the segments of the links it lists,
+/// their primitives keeping their own links; the checked pairs become pairs of the new segments, with
+/// every link pair that was not checked listed in SegmentPair::unchecked_links, so exactly the same
+/// link pairs are checked. A link pair inside one segment that was checked is refused (a segment is
+/// never checked against itself).
+void groupSegments(Model& model, const CollisionConfig& config, const std::string& origin) {
+  if (config.segments.empty()) return;
+  const std::string where = "segments: ";
+  const int nl = static_cast<int>(model.links.size());
+  std::vector<int> old_segment_of_link(static_cast<std::size_t>(nl), -1);
+  for (int s = 0; s < model.num_robot_segments; ++s) old_segment_of_link[model.segments[s].link] = s;
+  std::vector<int> group_of_link(static_cast<std::size_t>(nl), -1);  // key and members
+  std::vector<int> group_key;
+  std::vector<std::vector<int>> group_members;
+  for (const auto& [key_name, members] : config.segments) {
+    const int key = model.linkIndex(key_name);
+    if (key < 0) fail(config.source, where + "'" + key_name + "' is not a link of " + origin);
+    const int g = static_cast<int>(group_key.size());
+    if (group_of_link[key] >= 0)
+      fail(config.source, where + "link '" + key_name + "' is in two segments ('" +
+                              model.links[group_key[group_of_link[key]]].name + "' and '" + key_name + "')");
+    group_of_link[key] = g;
+    group_key.push_back(key);
+    group_members.emplace_back();
+    for (const std::string& name : members) {
+      const int l = model.linkIndex(name);
+      if (l < 0) fail(config.source, where + key_name + ": '" + name + "' is not a link of " + origin);
+      if (group_of_link[l] >= 0)
+        fail(config.source, where + "link '" + name + "' is in two segments ('" +
+                                model.links[group_key[group_of_link[l]]].name + "' and '" + key_name + "')");
+      int up = model.links[l].parent;
+      while (up >= 0 && up != key) up = model.links[up].parent;
+      if (up != key) fail(config.source, where + key_name + ": '" + name + "' is not below '" + key_name + "'");
+      if (old_segment_of_link[l] < 0)
+        fail(config.source, where + key_name + ": '" + name + "' has no collision geometry (nothing to take in)");
+      group_of_link[l] = g;
+      group_members.back().push_back(l);
+    }
+  }
+  // The new robot segments, in the order of their first link's segment; primitives re-laid.
+  std::vector<Segment> segs;
+  std::vector<Primitive> prims;
+  std::vector<int> new_of_old(model.segments.size(), -1);
+  std::vector<int> new_of_group(group_key.size(), -1);
+  auto append = [&](Segment& seg, int old) {
+    const Segment& o = model.segments[static_cast<std::size_t>(old)];
+    for (int p = o.first_primitive; p < o.first_primitive + o.num_primitives; ++p) {
+      Primitive prim = model.primitives[static_cast<std::size_t>(p)];
+      if (o.link != seg.link) prim.link = o.link;
+      prims.push_back(prim);
+    }
+    seg.num_primitives += o.num_primitives;
+    new_of_old[static_cast<std::size_t>(old)] = static_cast<int>(segs.size());
+  };
+  for (int s = 0; s < model.num_robot_segments; ++s) {
+    const int g = group_of_link[model.segments[s].link];
+    if (g >= 0 && new_of_group[g] >= 0) continue;  // taken in with its group
+    Segment seg;
+    seg.first_primitive = static_cast<int>(prims.size());
+    if (g < 0) {
+      seg.name = model.segments[s].name;
+      seg.link = model.segments[s].link;
+      append(seg, s);
+    } else {
+      seg.name = model.links[group_key[g]].name;
+      seg.link = group_key[g];
+      if (const int own = old_segment_of_link[group_key[g]]; own >= 0) append(seg, own);
+      for (const int l : group_members[g]) append(seg, old_segment_of_link[l]);
+      new_of_group[g] = static_cast<int>(segs.size());
+    }
+    segs.push_back(std::move(seg));
+  }
+  const int nrobot = static_cast<int>(segs.size());
+  for (int s = model.num_robot_segments; s < static_cast<int>(model.segments.size()); ++s) {
+    Segment seg = model.segments[s];
+    seg.first_primitive = static_cast<int>(prims.size());
+    prims.push_back(model.primitives[static_cast<std::size_t>(model.segments[s].first_primitive)]);
+    segs.push_back(seg);
+  }
+  // The checked link pairs, and the new segment pairs they fall in.
+  std::set<std::pair<int, int>> checked_links;
+  std::set<std::pair<int, int>> new_pairs;
+  for (const SegmentPair& p : model.pairs) {
+    if (model.segments[p.a].body_schema_slot || model.segments[p.b].body_schema_slot) continue;
+    const int la = model.segments[p.a].link, lb = model.segments[p.b].link;
+    const int na = new_of_old[p.a], nb = new_of_old[p.b];
+    if (na == nb)
+      fail(config.source,
+           where + "'" + segs[na].name + "' takes in '" + model.links[la].name + "' and '" + model.links[lb].name +
+               "', a pair that is checked; a segment is never checked against itself: exclude [" +
+               model.links[la].name + ", " + model.links[lb].name + "] or leave one of them out of the segment");
+    checked_links.insert({std::min(la, lb), std::max(la, lb)});
+    new_pairs.insert({std::min(na, nb), std::max(na, nb)});
+  }
+  auto linksOf = [&](const Segment& seg) {
+    std::vector<int> out;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const int l = linkOf(seg, prims[static_cast<std::size_t>(p)]);
+      if (std::find(out.begin(), out.end(), l) == out.end()) out.push_back(l);
+    }
+    return out;
+  };
+  std::vector<SegmentPair> pairs;
+  const int nseg = static_cast<int>(segs.size());
+  for (int a = 0; a < nrobot; ++a) {
+    for (int b = a + 1; b < nseg; ++b) {
+      if (b >= nrobot) {  // a body-schema slot: checked against every robot segment
+        pairs.push_back({a, b, {}});
+        continue;
+      }
+      if (!new_pairs.count({a, b})) continue;
+      SegmentPair pair{a, b, {}};
+      for (const int la : linksOf(segs[a]))
+        for (const int lb : linksOf(segs[b]))
+          if (!checked_links.count({std::min(la, lb), std::max(la, lb)})) pair.unchecked_links.push_back({la, lb});
+      std::sort(pair.unchecked_links.begin(), pair.unchecked_links.end());
+      pairs.push_back(std::move(pair));
+    }
+  }
+  model.segments = std::move(segs);
+  model.primitives = std::move(prims);
+  model.num_robot_segments = nrobot;
+  model.pairs = std::move(pairs);
+}
+
 }  // namespace
 
 Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& config, const std::string& origin,
@@ -530,6 +665,7 @@ Model loadModelFromString(const std::string& urdf_xml, const CollisionConfig& co
   addSegments(model, order, fitted, origin, warnings);
 
   addPairs(model, config, origin);
+  groupSegments(model, config, origin);
   return model;
 }
 

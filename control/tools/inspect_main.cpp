@@ -149,9 +149,12 @@ void printSegments(const Model& model, bool json) {
                   jsonString(model.links[seg.link].name).c_str());
       for (int p = 0; p < seg.num_primitives; ++p) {
         const auto& prim = model.primitives[seg.first_primitive + p];
-        std::printf("%s{\"type\": \"%s\", \"a\": [%.6f, %.6f, %.6f], \"b\": [%.6f, %.6f, %.6f], \"radius\": %.6f}",
-                    p ? ", " : "", prim.sphere ? "sphere" : "capsule", prim.a_L.x(), prim.a_L.y(), prim.a_L.z(),
-                    prim.b_L.x(), prim.b_L.y(), prim.b_L.z(), prim.radius);
+        std::printf(
+            "%s{\"type\": \"%s\", \"link\": %s, \"a\": [%.6f, %.6f, %.6f], \"b\": [%.6f, %.6f, %.6f], "
+            "\"radius\": %.6f}",
+            p ? ", " : "", prim.sphere ? "sphere" : "capsule",
+            jsonString(model.links[reflex::control::linkOf(seg, prim)].name).c_str(), prim.a_L.x(), prim.a_L.y(),
+            prim.a_L.z(), prim.b_L.x(), prim.b_L.y(), prim.b_L.z(), prim.radius);
       }
       std::printf("]}%s\n", s + 1 < model.num_robot_segments ? "," : "");
     } else {

@@ -310,7 +310,7 @@ class Setup {
       warnUnchecked(p);
     }
     std::string collision = "# Written by reflex_setup for " + a_.urdf + " (keys: control/docs/configuration.md).\n" +
-                            reflex::control::exclusionYaml(report);
+                            reflex::control::exclusionYaml(report) + handSegmentsYaml(nonadj);
     collision_final_ = collision;
     if (!a_.srdf.empty()) {
       collision += "srdf: " + relativeTo(a_.srdf, out_dir_) + "   # its <disable_collisions> pairs are excluded too\n";
@@ -338,7 +338,9 @@ class Setup {
                          std::map<std::string, reflex::control::TriangleMesh>& link_meshes) {
     reflex::control::PairSamplingOptions& sampling = a_.sampling;
     const reflex::control::RobotSetup structure = reflex::control::findRobotStructure(nonadj, a_.o);
+    hand_links_.clear();
     for (const auto& arm : structure.arms) {
+      hand_links_.push_back(arm.hand_link);
       sampling.driven_joints.insert(sampling.driven_joints.end(), arm.joints.begin(), arm.joints.end());
       sampling.arm_joints.insert(sampling.arm_joints.end(), arm.joints.begin(), arm.joints.end());
     }
@@ -363,6 +365,24 @@ class Setup {
       sampling.driven_joints.push_back(nonadj.q_names[static_cast<std::size_t>(qi)]);
   }
 
+  /// One segment per hand: the hand with the links below it that no joint Reflex drives moves (every
+  /// pair inside it is then one the pair list does not check: moved by no driven joint, or adjacent).
+  std::string handSegmentsYaml(const Model& nonadj) {
+    hand_segments_ = reflex::control::handSegments(nonadj, hand_links_, a_.sampling.driven_joints);
+    if (hand_segments_.empty()) return "";
+    std::string y =
+        "# One segment per hand: the hand with every link below it that no joint Reflex drives moves (its\n"
+        "# fingers). Each link keeps its own geometry and its own pairs above; the hand's distance to another\n"
+        "# segment is the closest of them, and the avoidance moves the hand as one body.\n"
+        "segments:\n";
+    for (const auto& [hand, links] : hand_segments_) {
+      y += "  " + hand + ": [";
+      for (std::size_t i = 0; i < links.size(); ++i) y += (i ? ", " : "") + links[i];
+      y += "]\n";
+    }
+    return y;
+  }
+
   /// A warning for a pair that is not checked although it comes close.
   void warnUnchecked(const reflex::control::SampledPair& p) const {
     if (p.verdict == reflex::control::PairVerdict::kAlwaysNear && p.min_distance <= a_.sampling.touch_distance)
@@ -383,12 +403,21 @@ class Setup {
           p.a.c_str(), p.b.c_str(), 1e3 * p.min_distance);
   }
 
+  /// The collision configuration at `path` with a segment per link: the structure, rest and reach are
+  /// found link by link (the same link pairs are checked as with the hands' segments, so the same
+  /// distances count).
+  static reflex::control::CollisionConfig perLinkConfig(const std::string& path) {
+    reflex::control::CollisionConfig c = reflex::control::loadCollisionConfig(path);
+    c.segments.clear();
+    return c;
+  }
+
   /// 3. The robot as the controller will load it, and what the setup finds on it (closing the arm
   /// gaps in a copy of the URDF with --close-gaps).
   void configureRobot() {
     const std::string collision_path = stagedPath("collision.yaml");
     robot_urdf_ = a_.urdf;
-    model_ = reflex::control::loadModel(a_.urdf, reflex::control::loadCollisionConfig(collision_path));
+    model_ = reflex::control::loadModel(a_.urdf, perLinkConfig(collision_path));
     setup_ = reflex::control::findRobotStructure(model_, a_.o);
     reflex::control::findRestPosture(model_, a_.o, setup_);
     reflex::control::findArmGaps(model_, a_.o, setup_);
@@ -407,7 +436,7 @@ class Setup {
                 finalPath(stem_ + ".urdf").c_str(), setup_.gaps.size());
     robot_urdf_ = closed_urdf;
     if (meshes_) fit(robot_urdf_);
-    model_ = reflex::control::loadModel(robot_urdf_, reflex::control::loadCollisionConfig(collision_path));
+    model_ = reflex::control::loadModel(robot_urdf_, perLinkConfig(collision_path));
     setup_ = reflex::control::findRobotStructure(model_, a_.o);
     reflex::control::findRestPosture(model_, a_.o, setup_);
     if (const int left = reflex::control::findArmGaps(model_, a_.o, setup_); left > 0)
@@ -437,7 +466,18 @@ class Setup {
     writeFile(stagedPath("controller.yaml"), ctl);
     const auto cconf = reflex::control::loadControllerConfig(stagedPath("controller.yaml"));
     cm_ = std::make_unique<reflex::control::ControllerModel>(reflex::control::makeControllerModel(model_, cconf));
+    // The robot as the controller loads it, with the hands' segments: it must load and take this
+    // configuration (no arm joint inside a segment).
+    const Model as_loaded =
+        reflex::control::loadModel(robot_urdf_, reflex::control::loadCollisionConfig(stagedPath("collision.yaml")));
+    (void)reflex::control::makeControllerModel(as_loaded, cconf);
     for (const auto& d : setup_.decisions) std::printf("%s\n", d.c_str());
+    for (const auto& [hand, links] : hand_segments_)
+      std::printf(
+          "segments: '%s' is one segment with the %zu link%s below it that no joint Reflex drives moves "
+          "(%s%s): %d robot segments in all\n",
+          hand.c_str(), links.size(), links.size() == 1 ? "" : "s", links.front().c_str(),
+          links.size() > 1 ? ", ..." : "", as_loaded.num_robot_segments);
   }
 
   /// 5. A behavior that works with this robot: both hands to points 8 cm in front of (and 5 cm above)
@@ -541,6 +581,8 @@ class Setup {
   reflex::control::RobotSetup setup_;
   std::vector<reflex::control::ArmGap> closing_gaps_;
   std::unique_ptr<reflex::control::ControllerModel> cm_;
+  std::vector<std::string> hand_links_;  ///< the arms' hand links (structure, before the pair list)
+  std::vector<std::pair<std::string, std::vector<std::string>>> hand_segments_;  ///< written in collision.yaml
   reflex::control::ReachCheck reach_;
 };
 

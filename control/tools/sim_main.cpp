@@ -50,8 +50,9 @@ void writePostures(const Model& model, const SimResult& result, const std::strin
     for (int seg = 0; seg < model.num_robot_segments; ++seg) {
       const Segment& sg = model.segments[seg];
       for (int p = sg.first_primitive; p < sg.first_primitive + sg.num_primitives; ++p) {
-        const Eigen::Vector3d a = kin.X_B_L[sg.link] * model.primitives[p].a_L;
-        const Eigen::Vector3d b = kin.X_B_L[sg.link] * model.primitives[p].b_L;
+        const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(linkOf(sg, model.primitives[p]))];
+        const Eigen::Vector3d a = X * model.primitives[p].a_L;
+        const Eigen::Vector3d b = X * model.primitives[p].b_L;
         out << f << ',' << s.t << ',' << sg.name << ',' << a.x() << ',' << a.y() << ',' << a.z() << ',' << b.x() << ','
             << b.y() << ',' << b.z() << ',' << model.primitives[p].radius << '\n';
       }

@@ -712,6 +712,174 @@ TEST(DistanceBroadPhase, BoundingSpheresEncloseEveryPrimitive) {
   }
 }
 
+// ---------------------------------------------------------------- segments of several links
+/// The mesh robot with each forearm and its hand as one segment (collision YAML `segments:`).
+Model meshRobotWithForearmSegments() {
+  CollisionConfig config = loadCollisionConfig(testing::robotPath("mesh_humanoid.collision.yaml"));
+  config.segments = {{"l_forearm", {"l_hand"}}, {"r_forearm", {"r_hand"}}};
+  return loadModel(testing::robotPath("mesh_humanoid.urdf"), config);
+}
+
+/// A segment of several links is the closest of its link pairs: against the same robot with a segment
+/// per link (the independent answer: pair by pair, the sweep tested above), at random configurations,
+/// each pair of the grouped model is the least of the per-link pairs it is made of (the same link
+/// pairs: a hand-upper arm pair is checked inside the forearm segment's pair with the upper arm,
+/// whose forearm-upper arm link pair is adjacent, not checked), with and without the broad phase; its
+/// witness points and normal are those of that per-link pair, and its row is that pair's row on the
+/// joints above the forearm, 0 on the wrist joint between forearm and hand.
+TEST(DistanceSegmentsOfSeveralLinks, EachPairIsTheClosestOfItsLinkPairs) {
+  const Model flat = testing::loadRobot("mesh_humanoid");
+  const Model grouped = meshRobotWithForearmSegments();
+  ASSERT_EQ(grouped.num_robot_segments, flat.num_robot_segments - 2);
+  ASSERT_EQ(grouped.pieces.size(), flat.pieces.size());
+  const int l_forearm = grouped.segmentIndex("l_forearm");
+  ASSERT_GE(l_forearm, 0);
+  EXPECT_EQ(grouped.segmentIndex("l_hand"), l_forearm) << "a link of a segment names the segment";
+  // Which grouped pair each per-link pair falls in (by link names), and the reverse.
+  std::vector<int> grouped_pair_of(flat.pairs.size(), -1);
+  int upper_arm_pair = -1;
+  for (std::size_t i = 0; i < flat.pairs.size(); ++i) {
+    const SegmentPair& p = flat.pairs[i];
+    if (flat.segments[p.b].body_schema_slot) continue;
+    const int a = grouped.segmentIndex(flat.segments[p.a].name), b = grouped.segmentIndex(flat.segments[p.b].name);
+    ASSERT_GE(a, 0);
+    ASSERT_GE(b, 0);
+    ASSERT_NE(a, b) << "a per-link pair inside one segment is not checked";
+    for (std::size_t j = 0; j < grouped.pairs.size(); ++j)
+      if ((grouped.pairs[j].a == std::min(a, b) && grouped.pairs[j].b == std::max(a, b))) grouped_pair_of[i] = j;
+    ASSERT_GE(grouped_pair_of[i], 0) << flat.segments[p.a].name << "-" << flat.segments[p.b].name;
+  }
+  for (std::size_t j = 0; j < grouped.pairs.size(); ++j)
+    if (grouped.segments[grouped.pairs[j].a].name == "l_upper_arm" && grouped.pairs[j].b == l_forearm)
+      upper_arm_pair = static_cast<int>(j);
+  ASSERT_GE(upper_arm_pair, 0) << "the hand-upper arm link pair keeps the segment pair checked";
+  const std::vector<std::array<int, 2>> adjacent{{flat.linkIndex("l_upper_arm"), flat.linkIndex("l_forearm")}};
+  EXPECT_EQ(grouped.pairs[static_cast<std::size_t>(upper_arm_pair)].unchecked_links, adjacent);
+  const int wrist = grouped.qIndex("l_wrist_pitch");
+  KinematicsData kin_flat(flat), kin_grouped(grouped);
+  DistanceData dist_flat(flat), dist_grouped(grouped);
+  std::mt19937_64 rng(61);
+  long compared = 0, multi = 0, skipped = 0;
+  for (const double prune : {std::numeric_limits<double>::infinity(), 0.05}) {
+    DistanceOptions options;
+    options.prune_distance = prune;
+    for (int c = 0; c < 150; ++c) {
+      const Eigen::VectorXd q = test::randomConfiguration(flat, rng);
+      ASSERT_TRUE(computeForwardKinematics(flat, kin_flat, q));
+      ASSERT_TRUE(computeForwardKinematics(grouped, kin_grouped, q));
+      computeSegmentDistances(flat, kin_flat, dist_flat);  // every pair exact: the answer
+      computeSegmentDistances(grouped, kin_grouped, dist_grouped, options);
+      for (std::size_t j = 0; j < grouped.pairs.size(); ++j) {
+        const PairDistance& g = dist_grouped.pairs[j];
+        if (grouped.segments[grouped.pairs[j].b].body_schema_slot) continue;
+        double least = std::numeric_limits<double>::infinity();
+        int from = -1, members = 0;
+        for (std::size_t i = 0; i < flat.pairs.size(); ++i)
+          if (grouped_pair_of[i] == static_cast<int>(j)) {
+            ++members;
+            if (dist_flat.pairs[i].distance < least) least = dist_flat.pairs[i].distance, from = static_cast<int>(i);
+          }
+        ASSERT_GE(from, 0);
+        const std::string name = grouped.segments[g.seg_a].name + "-" + grouped.segments[g.seg_b].name;
+        if (!g.exact) {
+          ++skipped;
+          EXPECT_GT(g.distance, prune) << name;
+          EXPECT_LE(g.distance, least + 1e-12) << name << ": a skipped pair's bound is a lower bound";
+          continue;
+        }
+        ++compared;
+        multi += members > 1 ? 1 : 0;
+        ASSERT_NEAR(g.distance, least, 1e-12) << name << " configuration " << c;
+        const PairDistance& f = dist_flat.pairs[static_cast<std::size_t>(from)];
+        if (least <= 0.0) continue;  // touching pieces: any common point
+        // The per-link pair may list the two the other way round (a hand after a foot).
+        const bool swapped = grouped.segmentIndex(flat.segments[f.seg_a].name) != g.seg_a;
+        EXPECT_LT((g.p_B_a - (swapped ? f.p_B_b : f.p_B_a)).norm(), 1e-9) << name;
+        EXPECT_LT((g.nhat_B - (swapped ? -f.nhat_B : f.nhat_B)).norm(), 1e-9) << name;
+        if (!g.has_row) continue;
+        // The row: the per-link pair's on every joint above the segments' links (its own links'
+        // support), 0 on joints between a segment's link and its primitives' links.
+        for (int k = 0; k < grouped.nq; ++k) {
+          const bool on_support = [&] {
+            for (const int link : {grouped.segments[g.seg_a].link, grouped.segments[g.seg_b].link})
+              for (const int qi : grouped.link_support[static_cast<std::size_t>(link)])
+                if (qi == k) return true;
+            return false;
+          }();
+          const double expected = on_support ? dist_flat.rows(from, k) : 0.0;
+          EXPECT_NEAR(dist_grouped.rows(static_cast<Eigen::Index>(j), k), expected, 1e-9)
+              << name << " joint " << grouped.q_names[static_cast<std::size_t>(k)];
+        }
+        if (g.seg_a == l_forearm || g.seg_b == l_forearm) {
+          EXPECT_EQ(dist_grouped.rows(static_cast<Eigen::Index>(j), wrist), 0.0) << name;
+        }
+      }
+    }
+  }
+  std::printf(
+      "grouped mesh robot: %ld pairs equal to the least of their link pairs (%ld of several link pairs), "
+      "%ld skipped by the broad phase (lower bounds)\n",
+      compared, multi, skipped);
+  EXPECT_GT(multi, 300);
+  EXPECT_GT(skipped, 100);
+}
+
+/// A segment's bounding sphere (the broad phase) holds each of its primitives wherever the joints
+/// between its link and theirs put them: after each sweep, surface points of every primitive at random
+/// configurations lie in the sphere of that call (a segment of several links: made around its
+/// primitives each call; the others: fixed in the link).
+TEST(DistanceSegmentsOfSeveralLinks, BoundingSpheresHoldEveryPrimitiveInEveryPosture) {
+  const Model m = meshRobotWithForearmSegments();
+  DistanceData dist(m);
+  KinematicsData kin(m);
+  DistanceOptions options;
+  options.prune_distance = 0.05;
+  std::mt19937_64 rng(62);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  int checked = 0;
+  for (int c = 0; c < 100; ++c) {
+    ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+    computeSegmentDistances(m, kin, dist, options);
+    for (int s = 0; s < m.num_robot_segments; ++s) {
+      const Segment& seg = m.segments[s];
+      const double* c4 = dist.bound_center4_B.data() + 4 * s;
+      const Vector3d centre(c4[0], c4[1], c4[2]);
+      for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+        const Primitive& prim = m.primitives[p];
+        const Eigen::Isometry3d& X = kin.X_B_L[linkOf(seg, prim)];
+        for (int k = 0; k < 20; ++k, ++checked) {
+          const Vector3d dir = Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+          const Vector3d x = X * (prim.a_L + unit(rng) * (prim.b_L - prim.a_L) + prim.radius * dir);
+          ASSERT_LE((x - centre).norm(), dist.bound_radius[s] + 1e-12) << seg.name;
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked, 10000);
+}
+
+/// A body-schema segment hung on a link of a segment of several links is never checked against that
+/// segment (as against the segment of its own link), and is against the others.
+TEST(DistanceSegmentsOfSeveralLinks, ASlotOnTheHandSkipsTheSegmentThatHasTheHand) {
+  const Model m = meshRobotWithForearmSegments();
+  DistanceData dist(m);
+  KinematicsData kin(m);
+  std::mt19937_64 rng(63);
+  ASSERT_TRUE(computeForwardKinematics(m, kin, test::randomConfiguration(m, rng)));
+  ASSERT_TRUE(attachBodySchemaSegment(m, dist, 0, m.linkIndex("l_hand"), Vector3d(0, 0, 0), Vector3d(0.1, 0, 0), 0.02));
+  computeSegmentDistances(m, kin, dist);
+  int active = 0;
+  for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+    if (m.pairs[i].b != m.num_robot_segments) continue;
+    if (m.pairs[i].a == m.segmentIndex("l_forearm"))
+      EXPECT_FALSE(dist.pairs[i].active);
+    else
+      active += dist.pairs[i].active ? 1 : 0;
+  }
+  EXPECT_EQ(active, m.num_robot_segments - 1);
+}
+
 // ---------------------------------------------------------------- body schema
 TEST(DistanceBodySchema, SlotCapsuleOnTheHandIsChecked) {
   const Model m = testing::loadRobot(testing::kAsimo);

@@ -372,13 +372,66 @@ TEST(UrdfLoaderConfig, UnknownSegmentNamesAreReported) {
   expectModelError([&] { loadModel(testing::robotPath("asimo_like.urdf"), c); }, {"[head, head]", "itself"});
 }
 
+/// Segments of several links (`segments:`): read from the YAML; every bad entry refused naming it.
+TEST(UrdfLoaderConfig, SegmentsOfSeveralLinksAreReadAndEveryBadEntryIsNamed) {
+  const std::string good = tempFile("reflex_groups.collision.yaml", "segments:\n  l_forearm: [l_hand]\n");
+  const CollisionConfig read = loadCollisionConfig(good);
+  ASSERT_EQ(read.segments.size(), 1u);
+  EXPECT_EQ(read.segments[0].first, "l_forearm");
+  EXPECT_EQ(read.segments[0].second, std::vector<std::string>{"l_hand"});
+  const Model m = loadModel(testing::robotPath("asimo_like.urdf"), read);
+  const Model flat = testing::loadRobot(testing::kAsimo);
+  EXPECT_EQ(m.num_robot_segments, flat.num_robot_segments - 1);
+  const Segment& seg = m.segments[static_cast<std::size_t>(m.segmentIndex("l_forearm"))];
+  const int hand = m.linkIndex("l_hand");
+  int on_hand = 0;
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
+    on_hand += linkOf(seg, m.primitives[static_cast<std::size_t>(p)]) == hand ? 1 : 0;
+  const Segment& flat_hand = flat.segments[static_cast<std::size_t>(flat.segmentIndex("l_hand"))];
+  EXPECT_EQ(on_hand, flat_hand.num_primitives) << "the hand's primitives, on the hand";
+  const std::string empty = tempFile("reflex_groups_empty.collision.yaml", "segments:\n  l_forearm: []\n");
+  expectModelError([&] { loadCollisionConfig(empty); }, {empty, "segments.l_forearm", "an empty list"});
+  const std::string notmap = tempFile("reflex_groups_list.collision.yaml", "segments: [l_forearm, l_hand]\n");
+  expectModelError([&] { loadCollisionConfig(notmap); }, {notmap, "segments", "not a map"});
+
+  const std::string urdf = testing::robotPath("asimo_like.urdf");
+  CollisionConfig c = loadCollisionConfig(testing::robotPath("asimo_like.collision.yaml"));
+  c.source = "my.collision.yaml";
+  c.segments = {{"l_forearm", {"l_tentacle"}}};
+  expectModelError([&] { loadModel(urdf, c); },
+                   {"my.collision.yaml", "segments: l_forearm: 'l_tentacle' is not a link"});
+  c.segments = {{"wing", {"l_hand"}}};
+  expectModelError([&] { loadModel(urdf, c); }, {"segments: 'wing' is not a link"});
+  c.segments = {{"l_forearm", {"r_hand"}}};
+  expectModelError([&] { loadModel(urdf, c); }, {"'r_hand' is not below 'l_forearm'"});
+  c.segments = {{"l_upper_arm", {"l_shoulder_roll_link"}}};
+  expectModelError([&] { loadModel(urdf, c); }, {"not below"});
+  c.segments = {{"l_upper_arm", {"l_forearm"}}, {"l_forearm", {"l_hand"}}};
+  expectModelError([&] { loadModel(urdf, c); }, {"link 'l_forearm' is in two segments"});
+  c.segments = {{"l_shoulder", {"l_forearm"}}, {"l_upper_arm", {"l_forearm"}}};
+  expectModelError([&] { loadModel(urdf, c); }, {"link 'l_forearm' is in two segments"});
+  // The hand and the upper arm are a checked pair: inside one segment they would not be.
+  c.segments = {{"l_upper_arm", {"l_forearm", "l_hand"}}};
+  expectModelError(
+      [&] { loadModel(urdf, c); },
+      {"'l_upper_arm' takes in 'l_upper_arm' and 'l_hand', a pair that is checked", "exclude [l_upper_arm, l_hand]"});
+  // Excluded, it may be inside: the same link pairs are checked as without the segment.
+  c.exclude.push_back({"l_upper_arm", "l_hand"});
+  const Model ok = loadModel(urdf, c);
+  EXPECT_EQ(ok.num_robot_segments, flat.num_robot_segments - 2);
+  // A link without collision geometry has nothing to take in.
+  c.segments = {{"body", {"neck_link"}}};
+  expectModelError([&] { loadModel(urdf, c); }, {"'neck_link' has no collision geometry"});
+}
+
 TEST(UrdfLoaderConfig, MalformedYaml) {
   const std::string broken = tempFile("reflex_broken.collision.yaml", "exclude: [[a, b\n");
   expectModelError([&] { loadCollisionConfig(broken); }, {broken, "YAML syntax error"});
   const std::string key = tempFile("reflex_key.collision.yaml", "exclude_adjacent: true\nexclud: []\n");
   expectModelError(
       [&] { loadCollisionConfig(key); },
-      {key + ":2:1: exclud: unknown key (expected one of exclude_adjacent, exclude, srdf, cylinder_as, fit)"});
+      {key +
+       ":2:1: exclud: unknown key (expected one of exclude_adjacent, exclude, srdf, cylinder_as, fit, segments)"});
   const std::string flag = tempFile("reflex_flag.collision.yaml", "exclude_adjacent: maybe\n");
   expectModelError([&] { loadCollisionConfig(flag); },
                    {flag + ":1:19: exclude_adjacent: not true or false (value 'maybe', expected true or false)"});

@@ -33,6 +33,7 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <set>
 
 namespace reflex::mujoco {
 namespace {
@@ -51,8 +52,7 @@ Eigen::Matrix3d geomRotation(const mjData& d, int g) {
 
 class ModelFidelity : public ::testing::TestWithParam<const char*> {};
 
-TEST_P(ModelFidelity, BodyPosesAndGeomsEqualTheProjectsKinematics) {
-  const Model model = loadRobot(GetParam());
+void checkBodyPosesAndGeoms(const Model& model, const char* name) {
   MujocoRobot robot(model, MjcfOptions{});
   const mjModel& m = robot.mjModelRef();
   const mjData& d = robot.mjDataRef();
@@ -80,7 +80,8 @@ TEST_P(ModelFidelity, BodyPosesAndGeomsEqualTheProjectsKinematics) {
         const int g = mj_name2id(&m, mjOBJ_GEOM, geomName(model, s, k).c_str());
         ASSERT_GE(g, 0);
         EXPECT_NEAR(m.geom_size[3 * g], prim.radius, 1e-12);
-        const Eigen::Vector3d a = kin.X_B_L[seg.link] * prim.a_L, b = kin.X_B_L[seg.link] * prim.b_L;
+        const Eigen::Isometry3d& X = kin.X_B_L[static_cast<std::size_t>(control::linkOf(seg, prim))];
+        const Eigen::Vector3d a = X * prim.a_L, b = X * prim.b_L;
         const Eigen::Vector3d c(d.geom_xpos[3 * g], d.geom_xpos[3 * g + 1], d.geom_xpos[3 * g + 2]);
         if (prim.sphere) {
           ASSERT_EQ(m.geom_type[g], mjGEOM_SPHERE);
@@ -99,10 +100,45 @@ TEST_P(ModelFidelity, BodyPosesAndGeomsEqualTheProjectsKinematics) {
   std::printf(
       "[ measured ] %s: %d body poses, max position error %.2e m, max rotation error %.2e; %d geoms, "
       "max endpoint error %.2e m\n",
-      GetParam(), poses, max_pos, max_rot, geoms, max_geom);
+      name, poses, max_pos, max_rot, geoms, max_geom);
   EXPECT_LT(max_pos, 1e-9);
   EXPECT_LT(max_rot, 1e-9);
   EXPECT_LT(max_geom, 1e-9);
+}
+
+TEST_P(ModelFidelity, BodyPosesAndGeomsEqualTheProjectsKinematics) {
+  checkBodyPosesAndGeoms(loadRobot(GetParam()), GetParam());
+}
+
+/// A segment of several links (collision YAML `segments:`): each primitive is a geom of its own
+/// link's body, and the contact pairs are the same as with a segment per link (the same link pairs
+/// are checked; the forearm-upper arm link pair stays adjacent, not a contact pair).
+TEST(ModelFidelitySegments, ASegmentOfSeveralLinksHasEachGeomOnItsLinkAndTheSameContactPairs) {
+  control::CollisionConfig config =
+      control::loadCollisionConfig(reflex::testing::robotPath("asimo_like.collision.yaml"));
+  config.segments = {{"l_forearm", {"l_hand"}}, {"r_forearm", {"r_hand"}}};
+  const Model grouped = control::loadModel(reflex::testing::robotPath("asimo_like.urdf"), config);
+  ASSERT_EQ(grouped.num_robot_segments, loadRobot(reflex::testing::kAsimo).num_robot_segments - 2);
+  checkBodyPosesAndGeoms(grouped, "asimo_like with a segment per forearm and hand");
+  MujocoRobot flat_robot(loadRobot(reflex::testing::kAsimo), MjcfOptions{});
+  MujocoRobot grouped_robot(grouped, MjcfOptions{});
+  const mjModel& f = flat_robot.mjModelRef();
+  const mjModel& g = grouped_robot.mjModelRef();
+  ASSERT_EQ(g.npair, f.npair);
+  // Pair by pair, the bodies of the two geoms (links): the same set.
+  auto bodies = [](const mjModel& m) {
+    std::multiset<std::pair<std::string, std::string>> out;
+    for (int k = 0; k < m.npair; ++k) {
+      std::string a = mj_id2name(&m, mjOBJ_BODY, m.geom_bodyid[m.pair_geom1[k]]);
+      std::string b = mj_id2name(&m, mjOBJ_BODY, m.geom_bodyid[m.pair_geom2[k]]);
+      if (b < a) std::swap(a, b);
+      out.insert({a, b});
+    }
+    return out;
+  };
+  EXPECT_EQ(bodies(g), bodies(f));
+  EXPECT_GT(bodies(g).count({"l_hand", "l_upper_arm"}), 0u);
+  EXPECT_EQ(bodies(g).count({"l_forearm", "l_upper_arm"}), 0u);
 }
 
 TEST_P(ModelFidelity, MassIsTheCollisionVolumeAtTheStatedDensity) {

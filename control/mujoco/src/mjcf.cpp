@@ -142,8 +142,14 @@ class MjcfWriter {
         options_(options),
         gains_(gains),
         children_(childrenOf(model)),
-        segment_of_link_(model.links.size(), -1) {
-    for (int s = 0; s < model.num_robot_segments; ++s) segment_of_link_[model.segments[s].link] = s;
+        geoms_of_link_(model.links.size()) {
+    // Each primitive in the body of the link it moves with (a segment of several links: its own).
+    for (int s = 0; s < model.num_robot_segments; ++s) {
+      const auto& seg = model.segments[s];
+      for (int k = 0; k < seg.num_primitives; ++k)
+        geoms_of_link_[static_cast<std::size_t>(control::linkOf(seg, model.primitives[seg.first_primitive + k]))]
+            .push_back({s, k});
+    }
   }
 
   std::string write() {
@@ -188,7 +194,7 @@ class MjcfWriter {
       out_ << in2 << "<inertial pos=\"" << vec(link.com_L) << "\" mass=\"" << num(mass) << "\" fullinertia=\""
            << num(I(0, 0)) << " " << num(I(1, 1)) << " " << num(I(2, 2)) << " " << num(I(0, 1)) << " " << num(I(0, 2))
            << " " << num(I(1, 2)) << "\"/>\n";
-    } else if (segment_of_link_[l] < 0) {
+    } else if (geoms_of_link_[static_cast<std::size_t>(l)].empty()) {
       const std::string i = num(options_.min_inertia);
       out_ << in2 << "<inertial pos=\"0 0 0\" mass=\"" << num(options_.min_mass) << "\" diaginertia=\"" << i << " " << i
            << " " << i << "\"/>\n";
@@ -256,11 +262,8 @@ class MjcfWriter {
   std::string meshName(int s, int k) const { return geomName(model_, s, k) + "_piece"; }
 
   void writeGeoms(int l, const std::string& in) {
-    const int s = segment_of_link_[l];
-    if (s < 0) return;
-    const auto& seg = model_.segments[s];
-    for (int k = 0; k < seg.num_primitives; ++k) {
-      const auto& p = model_.primitives[seg.first_primitive + k];
+    for (const auto& [s, k] : geoms_of_link_[static_cast<std::size_t>(l)]) {
+      const auto& p = model_.primitives[model_.segments[s].first_primitive + k];
       out_ << in << "<geom name=\"" << esc(geomName(model_, s, k)) << "\" ";
       if (p.piece >= 0)
         out_ << "type=\"mesh\" mesh=\"" << esc(meshName(s, k)) << "\"/>\n";
@@ -280,10 +283,14 @@ class MjcfWriter {
       const auto& a = model_.segments[pair.a];
       const auto& b = model_.segments[pair.b];
       for (int i = 0; i < a.num_primitives; ++i)
-        for (int j = 0; j < b.num_primitives; ++j)
+        for (int j = 0; j < b.num_primitives; ++j) {
+          const std::array<int, 2> links{control::linkOf(a, model_.primitives[a.first_primitive + i]),
+                                         control::linkOf(b, model_.primitives[b.first_primitive + j])};
+          if (std::binary_search(pair.unchecked_links.begin(), pair.unchecked_links.end(), links)) continue;
           out_ << "    <pair geom1=\"" << esc(geomName(model_, pair.a, i)) << "\" geom2=\""
                << esc(geomName(model_, pair.b, j)) << "\" condim=\"3\" margin=\"" << margin << "\" gap=\"" << margin
                << "\"/>\n";
+        }
     }
     out_ << "  </contact>\n";
   }
@@ -305,7 +312,7 @@ class MjcfWriter {
   const MjcfOptions& options_;
   const std::vector<ServoGains>& gains_;
   std::vector<std::vector<int>> children_;
-  std::vector<int> segment_of_link_;
+  std::vector<std::vector<std::pair<int, int>>> geoms_of_link_;  ///< per link: (segment, primitive k)
   std::ostringstream out_;
 };
 

@@ -89,12 +89,12 @@ void appendCapsule(json& entity, const Eigen::Vector3d& a_B, const Eigen::Vector
 void appendSegmentEntity(const SceneModel& scene, const SceneData& data, int s, json& entity) {
   const control::Model& model = scene.model;
   const control::Segment& seg = model.segments[static_cast<std::size_t>(s)];
-  const Eigen::Isometry3d& X_B_L = data.kin.X_B_L[static_cast<std::size_t>(seg.link)];
   const Rgba colour = data.segment_in_arm[static_cast<std::size_t>(s)]
                           ? zoneColour(data.segment_zone[static_cast<std::size_t>(s)])
                           : neutralColour();
   for (int k = 0; k < seg.num_primitives; ++k) {
     const control::Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
+    const Eigen::Isometry3d& X_B_L = data.kin.X_B_L[static_cast<std::size_t>(control::linkOf(seg, prim))];
     appendCapsule(entity, X_B_L * prim.a_L, X_B_L * prim.b_L, prim.radius, prim.sphere, colour);
   }
   const std::string zone = data.segment_in_arm[static_cast<std::size_t>(s)]
@@ -261,7 +261,6 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
     const int b = model.segmentIndex(st.closest_b);
     if (!st.valid || a < 0 || a >= model.num_robot_segments || b < model.num_robot_segments) continue;
     const control::Segment& seg = model.segments[static_cast<std::size_t>(a)];
-    const Eigen::Isometry3d& X_B_A = data.kin.X_B_L[static_cast<std::size_t>(seg.link)];
     double best = std::numeric_limits<double>::infinity();
     for (const SchemaSegmentState& sch : input.schema_segments) {
       const int link = model.linkIndex(sch.parent_link);
@@ -272,6 +271,7 @@ bool updateScene(const SceneModel& scene, SceneData& data, const SceneInput& inp
       const Eigen::Vector3d s0 = X_B_S * sch.a_L, s1 = X_B_S * (sch.capsule ? sch.b_L : sch.a_L);
       for (int k = 0; k < seg.num_primitives; ++k) {
         const control::Primitive& prim = model.primitives[static_cast<std::size_t>(seg.first_primitive + k)];
+        const Eigen::Isometry3d& X_B_A = data.kin.X_B_L[static_cast<std::size_t>(control::linkOf(seg, prim))];
         double d = 0.0;
         Eigen::Vector3d pa, pb, n;
         control::capsuleCapsuleDistance(X_B_A * prim.a_L, X_B_A * prim.b_L, prim.radius, s0, s1, sch.radius,

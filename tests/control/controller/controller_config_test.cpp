@@ -39,6 +39,29 @@ void expectError(const std::string& yaml, const std::string& needle) {
   std::remove(path.c_str());
 }
 
+/// A segment of several links moves as one body for the controller (its row is taken on its link):
+/// an arm joint between its links is refused, naming the segment, the link and the joint; a segment
+/// whose links no arm joint moves apart (the head with the torso: neck joints) is taken.
+TEST(ControllerConfig, ASegmentThatAnArmJointBendsIsRefused) {
+  CollisionConfig c = loadCollisionConfig(testing::robotPath("mesh_humanoid.collision.yaml"));
+  c.segments = {{"l_forearm", {"l_hand"}}};
+  const Model bent = loadModel(testing::robotPath("mesh_humanoid.urdf"), c);
+  const ControllerConfig config = loadControllerConfig(testing::robotPath("mesh_humanoid.controller.yaml"));
+  try {
+    makeControllerModel(bent, config);
+    ADD_FAILURE() << "a segment bent by l_wrist_pitch was taken";
+  } catch (const ConfigError& e) {
+    const std::string what = e.what();
+    for (const char* part :
+         {"mesh_humanoid.controller.yaml", "segment 'l_forearm' takes in link 'l_hand'", "arm joint 'l_wrist_pitch'"})
+      EXPECT_NE(what.find(part), std::string::npos) << what;
+  }
+  c.segments = {{"torso", {"head"}}};
+  const Model head = loadModel(testing::robotPath("mesh_humanoid.urdf"), c);
+  const ControllerModel cm = makeControllerModel(head, config);
+  EXPECT_EQ(cm.arms[kLeft].n, 5);
+}
+
 TEST(ControllerConfig, DefaultsAreThePapers) {
   const ControllerParams p;
   EXPECT_DOUBLE_EQ(p.d_a, 0.040);

@@ -127,6 +127,27 @@ struct DistanceData {
   // The primitive pairs of all robot-robot pairs, flat, so that they are computed in one tight loop:
   // pair i owns entries [pp_begin[i], pp_begin[i + 1]) (none for pairs with a body-schema slot).
   std::vector<int> pp_a, pp_b, pp_begin;
+  // Per primitive pair (pp index): 1 when its two links are a pair the model does not check
+  // (SegmentPair::unchecked_links; only where a segment has several links): it is never listed.
+  // any_pp_unchecked: some entry is 1 (every cycle then lists its primitive pairs, also unpruned).
+  std::vector<char> pp_unchecked;
+  bool any_pp_unchecked = false;
+  // Per primitive, the link it moves with (linkOf; -1 for a body-schema slot's, whose link is the
+  // slot's); per link, the robot segment that has it (-1: none).
+  std::vector<int> prim_link, link_segment;
+  // Segments of several links: their primitives move against their link, so their bounding sphere is
+  // made each call around the primitives where they are (bound_center4_B, bound_radius written by the
+  // transform), and the sums of the robot pairs that have one (rp_dynamic: indices into rp_a) redone.
+  std::vector<char> several_links;
+  std::vector<int> rp_dynamic;
+  // A segment of several links in blocks, one per link (its primitives of that link are contiguous):
+  // segment s's blocks are [seg_block[s], seg_block[s + 1]); each block its primitives [first, end),
+  // its bounding sphere in its link's frame and this call's centre in B. A pair lists its primitive
+  // pairs block pair by block pair, each skipped when their spheres are apart (as the per-link pairs
+  // of the same robot would be).
+  std::vector<int> seg_block, block_first, block_end, block_link;
+  std::vector<Eigen::Vector3d> block_center_L, block_center_B;
+  std::vector<double> block_radius;
   // The primitive pairs the sweep computes this cycle, in pair order (the broad phase's survivors';
   // all of pp_a / pp_b without it), and their segment parameters and core distance (scratch).
   std::vector<int> list_a, list_b;

@@ -13,7 +13,9 @@
 
 #include "reflex/control/convex.hpp"
 
+#include <array>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace reflex::control {
@@ -49,13 +51,20 @@ struct Primitive {
   double radius = 0.0;
   bool sphere = true;
   int piece = -1;  ///< index into Model::pieces, -1: the capsule (or sphere) is the shape itself
+  /// The link the primitive is expressed in and moves with, when it is not its segment's (a segment of
+  /// several links: a hand with its fingers); -1: the segment's link. See linkOf.
+  int link = -1;
 };
 
-/// A collision segment (paper Fig. 1): one or several primitives rigidly attached to one link.
+/// A collision segment (paper Fig. 1): one or several primitives of one body part. Usually one link; a
+/// segment of several links (collision YAML `segments:`, e.g. a hand with its fingers) is its first
+/// link and links below it that no joint the controller drives moves: each primitive then moves with
+/// its own link (Primitive::link), the pair's distance is the least over its primitives, and its
+/// Jacobian row is taken on the segment's link (the columns of the joints above it).
 /// Primitives are stored flat in Model::primitives[first_primitive, first_primitive + num_primitives).
 struct Segment {
   std::string name;  ///< the link name for robot segments; the slot name for body-schema slots
-  int link = -1;     ///< link the primitives are expressed in (body-schema slots: set at run time)
+  int link = -1;     ///< the segment's link (its primitives' unless they name theirs; slots: set at run time)
   int first_primitive = 0;
   int num_primitives = 0;
   bool body_schema_slot = false;  ///< a run-time slot (grasped object / virtual segment), Sec. 8.5
@@ -63,8 +72,15 @@ struct Segment {
 
 /// A pair of segments whose distance is computed every cycle. Invariant: a < b.
 struct SegmentPair {
+  SegmentPair() = default;
+  SegmentPair(int a_, int b_, std::vector<std::array<int, 2>> unchecked = {})
+      : a(a_), b(b_), unchecked_links(std::move(unchecked)) {}
   int a = -1;
   int b = -1;
+  /// Link pairs {link of a, link of b} of this pair that are not checked (excluded, adjacent or on
+  /// one rigid body as links): only where a segment has several links, sorted. Their primitive pairs
+  /// are never computed.
+  std::vector<std::array<int, 2>> unchecked_links;
 };
 
 /// The immutable robot model. Build it with loadModel(); do not edit it after loading.
@@ -87,11 +103,15 @@ struct Model {
   int num_robot_segments = 0;
   std::vector<SegmentPair> pairs;  ///< checked pairs (configuration), including slot pairs
 
-  /// Index lookups; return -1 when the name is unknown.
+  /// Index lookups; return -1 when the name is unknown. segmentIndex also finds a segment by the
+  /// name of any link it has (a finger link names its hand's segment).
   int linkIndex(const std::string& link_name) const;
   int qIndex(const std::string& joint_name) const;
   int segmentIndex(const std::string& segment_name) const;
 };
+
+/// The link primitive `prim` of segment `seg` moves with.
+inline int linkOf(const Segment& seg, const Primitive& prim) { return prim.link >= 0 ? prim.link : seg.link; }
 
 /// The file of a robot's set that lies beside its URDF: the URDF's path without its extension, then
 /// `suffix` (".collision.yaml", ".controller.yaml", ".fit.yaml", ...). One rule for every such file.

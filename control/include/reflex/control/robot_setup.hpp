@@ -101,6 +101,13 @@ struct RobotSetup {
 /// Finds arms, hands, hand points and head/camera (not rest, not gaps). Throws SetupError.
 RobotSetup findRobotStructure(const Model& model, const SetupOptions& options);
 
+/// The segments of several links set-up writes (collision YAML `segments:`): each hand with every link
+/// below it that has collision geometry and that no joint in `driven_joints` moves against it (its
+/// fingers, links fixed to it), in the model's link order; a hand with none is left out. One segment
+/// per hand is the paper's segment per body part: one distance per hand pair instead of one per finger.
+std::vector<std::pair<std::string, std::vector<std::string>>> handSegments(
+    const Model& model, const std::vector<std::string>& hand_links, const std::vector<std::string>& driven_joints);
+
 /// The configuration every joint outside the arms takes: 0, or the nearest limit if 0 is outside.
 Eigen::VectorXd neutralConfiguration(const Model& model);
 

@@ -61,7 +61,10 @@ struct CollisionConfig {
   std::vector<SrdfPair> srdf_disabled;  ///< its disable_collisions entries
   std::string cylinder_as = "capsule";  ///< cylinder policy
   std::string fit;                      ///< fit overlay path ("" = loadModel's default, if present)
-  std::string source = "<defaults>";    ///< where it was read from, for error messages
+  /// Segments of several links (`segments:`): a segment named by its first link, with the links
+  /// listed (each below it). Their link pairs are checked as before, one distance per segment pair.
+  std::vector<std::pair<std::string, std::vector<std::string>>> segments;
+  std::string source = "<defaults>";  ///< where it was read from, for error messages
 };
 
 /// Reads the <disable_collisions> entries of an SRDF (tinyxml2; other SRDF elements are ignored).
