@@ -45,6 +45,76 @@ double reachFromSegmentLink(const Model& model, const Segment& seg) {
   return reach;
 }
 
+/// The link blocks of every segment of several links (DistanceData::seg_block ..): its primitives of
+/// one link (contiguous), with their bounding sphere in that link's frame.
+void buildLinkBlocks(const Model& model, DistanceData& d) {
+  for (std::size_t s = 0; s < model.segments.size(); ++s) {
+    d.seg_block.push_back(static_cast<int>(d.block_first.size()));
+    const Segment& seg = model.segments[s];
+    if (!d.several_links[s]) continue;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const int link = linkOf(seg, model.primitives[static_cast<std::size_t>(p)]);
+      if (d.block_first.size() == static_cast<std::size_t>(d.seg_block.back()) || d.block_link.back() != link) {
+        d.block_first.push_back(p);
+        d.block_end.push_back(p);
+        d.block_link.push_back(link);
+      }
+      d.block_end.back() = p + 1;
+    }
+  }
+  d.seg_block.push_back(static_cast<int>(d.block_first.size()));
+  for (std::size_t k = 0; k < d.block_first.size(); ++k) {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (int p = d.block_first[k]; p < d.block_end[k]; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      lo = lo.cwiseMin(prim.a_L).cwiseMin(prim.b_L);
+      hi = hi.cwiseMax(prim.a_L).cwiseMax(prim.b_L);
+    }
+    const Eigen::Vector3d c = 0.5 * (lo + hi);
+    double r = 0.0;
+    for (int p = d.block_first[k]; p < d.block_end[k]; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      r = std::max(r, std::max((prim.a_L - c).norm(), (prim.b_L - c).norm()) + prim.radius);
+    }
+    d.block_center_L.push_back(c);
+    d.block_radius.push_back(r);
+  }
+  d.block_center_B.assign(d.block_first.size(), Eigen::Vector3d::Zero());
+}
+
+/// Every robot segment's bounding sphere in its link frame (a segment of several links: one about its
+/// link's origin for every posture of the joints below, replaced each call by one around its
+/// primitives where they are).
+void buildSegmentSpheres(const Model& model, DistanceData& d) {
+  d.bound_center_L.assign(model.segments.size(), Eigen::Vector3d::Zero());
+  d.bound_center4_B.assign(4 * model.segments.size(), 0.0);
+  d.bound_radius.assign(model.segments.size(), 0.0);
+  for (std::size_t s = 0; s < model.segments.size(); ++s) {
+    const Segment& seg = model.segments[s];
+    if (seg.body_schema_slot || seg.num_primitives == 0) continue;
+    if (severalLinks(model, seg)) {  // its primitives move against its link: a sphere for every posture
+      d.bound_center_L[s].setZero();
+      d.bound_radius[s] = reachFromSegmentLink(model, seg);
+      continue;
+    }
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+    Eigen::Vector3d hi = -lo;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      lo = lo.cwiseMin(prim.a_L).cwiseMin(prim.b_L);
+      hi = hi.cwiseMax(prim.a_L).cwiseMax(prim.b_L);
+    }
+    const Eigen::Vector3d c = 0.5 * (lo + hi);
+    double r = 0.0;
+    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+      r = std::max(r, std::max((prim.a_L - c).norm(), (prim.b_L - c).norm()) + prim.radius);
+    }
+    d.bound_center_L[s] = c;
+    d.bound_radius[s] = r;
+  }
+}
+
 }  // namespace
 
 DistanceData::DistanceData(const Model& model)
@@ -115,68 +185,11 @@ DistanceData::DistanceData(const Model& model)
   // Bounding sphere of every robot segment in its link frame: centred on the middle of the box
   // around its primitives' end points; the radius reaches the farthest end point plus its radius
   // (a capsule lies inside the spheres around its two ends' hull, so the sphere encloses it).
-  bound_center_L.assign(model.segments.size(), Eigen::Vector3d::Zero());
-  bound_center4_B.assign(4 * model.segments.size(), 0.0);
-  bound_radius.assign(model.segments.size(), 0.0);
-  for (std::size_t s = 0; s < model.segments.size(); ++s) {
-    const Segment& seg = model.segments[s];
-    if (seg.body_schema_slot || seg.num_primitives == 0) continue;
-    if (severalLinks(model, seg)) {  // its primitives move against its link: a sphere for every posture
-      bound_center_L[s].setZero();
-      bound_radius[s] = reachFromSegmentLink(model, seg);
-      continue;
-    }
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-    Eigen::Vector3d hi = -lo;
-    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-      lo = lo.cwiseMin(prim.a_L).cwiseMin(prim.b_L);
-      hi = hi.cwiseMax(prim.a_L).cwiseMax(prim.b_L);
-    }
-    const Eigen::Vector3d c = 0.5 * (lo + hi);
-    double r = 0.0;
-    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-      r = std::max(r, std::max((prim.a_L - c).norm(), (prim.b_L - c).norm()) + prim.radius);
-    }
-    bound_center_L[s] = c;
-    bound_radius[s] = r;
-  }
+  buildSegmentSpheres(model, *this);
   several_links.assign(model.segments.size(), 0);
   for (int s = 0; s < model.num_robot_segments; ++s)
     several_links[static_cast<std::size_t>(s)] = severalLinks(model, model.segments[static_cast<std::size_t>(s)]);
-  for (std::size_t s = 0; s < model.segments.size(); ++s) {
-    seg_block.push_back(static_cast<int>(block_first.size()));
-    const Segment& seg = model.segments[s];
-    if (!several_links[s]) continue;
-    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-      const int link = linkOf(seg, model.primitives[static_cast<std::size_t>(p)]);
-      if (block_first.size() == static_cast<std::size_t>(seg_block.back()) || block_link.back() != link) {
-        block_first.push_back(p);
-        block_end.push_back(p);
-        block_link.push_back(link);
-      }
-      block_end.back() = p + 1;
-    }
-  }
-  seg_block.push_back(static_cast<int>(block_first.size()));
-  for (std::size_t k = 0; k < block_first.size(); ++k) {
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-    for (int p = block_first[k]; p < block_end[k]; ++p) {
-      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-      lo = lo.cwiseMin(prim.a_L).cwiseMin(prim.b_L);
-      hi = hi.cwiseMax(prim.a_L).cwiseMax(prim.b_L);
-    }
-    const Eigen::Vector3d c = 0.5 * (lo + hi);
-    double r = 0.0;
-    for (int p = block_first[k]; p < block_end[k]; ++p) {
-      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-      r = std::max(r, std::max((prim.a_L - c).norm(), (prim.b_L - c).norm()) + prim.radius);
-    }
-    block_center_L.push_back(c);
-    block_radius.push_back(r);
-  }
-  block_center_B.assign(block_first.size(), Eigen::Vector3d::Zero());
+  buildLinkBlocks(model, *this);
   for (const int i : robot_pairs) {
     const SegmentPair& p = model.pairs[static_cast<std::size_t>(i)];
     if (several_links[static_cast<std::size_t>(p.a)] || several_links[static_cast<std::size_t>(p.b)])
