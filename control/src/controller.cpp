@@ -756,6 +756,15 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     if (j >= 0) s += std::abs(data.qdot[j] + data.qdot_uncontrolled[j]) * (data.lever[j] + slot_extent) * params.period;
     data.link_sweep[l] = s;
   }
+  // A segment of several links (a hand with its fingers) is looked up by its link: it takes the most
+  // any of its links can move (fingers the robot closes itself move more than the hand).
+  for (int sg = 0; sg < model.num_robot_segments; ++sg) {
+    if (!data.dist.several_links[static_cast<std::size_t>(sg)]) continue;
+    double& own = data.link_sweep[static_cast<std::size_t>(model.segments[static_cast<std::size_t>(sg)].link)];
+    for (int k = data.dist.seg_block[static_cast<std::size_t>(sg)];
+         k < data.dist.seg_block[static_cast<std::size_t>(sg) + 1]; ++k)
+      own = std::max(own, data.link_sweep[static_cast<std::size_t>(data.dist.block_link[static_cast<std::size_t>(k)])]);
+  }
   // The pairs the step can bring below the floor, and only those, are predicted: a physical pair
   // that an arm moves and whose bound does not clear the floor. Every other pair can never count
   // as a hit below (it ends above the floor, or no arm's scale can change it). A pair the sweep

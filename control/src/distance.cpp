@@ -190,10 +190,13 @@ DistanceData::DistanceData(const Model& model)
   for (int s = 0; s < model.num_robot_segments; ++s)
     several_links[static_cast<std::size_t>(s)] = severalLinks(model, model.segments[static_cast<std::size_t>(s)]);
   buildLinkBlocks(model, *this);
+  pair_several.assign(model.pairs.size(), 0);
+  for (std::size_t i = 0; i < model.pairs.size(); ++i)
+    pair_several[i] = several_links[static_cast<std::size_t>(model.pairs[i].a)] ||
+                      several_links[static_cast<std::size_t>(model.pairs[i].b)];
   for (const int i : robot_pairs) {
     const SegmentPair& p = model.pairs[static_cast<std::size_t>(i)];
-    if (several_links[static_cast<std::size_t>(p.a)] || several_links[static_cast<std::size_t>(p.b)])
-      rp_dynamic.push_back(static_cast<int>(rp_a.size()));
+    if (pair_several[static_cast<std::size_t>(i)]) rp_dynamic.push_back(static_cast<int>(rp_a.size()));
     rp_a.push_back(p.a);
     rp_b.push_back(p.b);
     rp_rsum.push_back(bound_radius[static_cast<std::size_t>(p.a)] + bound_radius[static_cast<std::size_t>(p.b)]);
@@ -219,6 +222,8 @@ DistanceData::DistanceData(const Model& model)
   list_pp.assign(pp_a.size(), 0);
   kept_a.assign(most_primitives, 0);
   kept_b.assign(most_primitives, 0);
+  kept_a2.assign(most_primitives, 0);
+  kept_b2.assign(most_primitives, 0);
   list_end.assign(robot_pairs.size(), 0);
   list_floor.assign(robot_pairs.size(), 0.0);
   list_a.assign(pp_a.size(), 0);
@@ -262,47 +267,86 @@ inline void keepNearSphere(const DistanceData& data, int first, int end, const E
   }
 }
 
-/// Calls emit(pa, pb) for robot pair i's primitive pairs that can be within `within` (their link pair
-/// checked), block pair by block pair (a segment of one link is one block: its sphere the segment's):
-/// a block pair whose spheres are farther apart is skipped, then each block keeps its primitives near
-/// the other block's sphere. `left_out` is lowered to the smallest gap of what is left out (a lower
-/// bound of its distance). Every segment's spheres of this call must be in place.
+/// Calls emit(pa, pb, pp) for robot pair i's primitive pairs that can be within `within` (their link
+/// pair checked). Each segment first keeps its primitives near the other segment's sphere. A segment
+/// of several links then goes block (link) by block: a block pair whose spheres are farther apart is
+/// skipped, and each block's kept primitives are kept again near the other block's sphere (as the
+/// per-link pairs of the same robot would be). `left_out` is lowered to the smallest gap of what is
+/// left out (a lower bound of its distance). Every segment's spheres of this call must be in place.
 template <class Emit>
 void listNearPairs(DistanceData& data, int i, const Segment& sa, int a, const Segment& sb, int b, double within,
                    double& left_out, Emit&& emit) {
-  struct Block {
-    int first, end;
-    Eigen::Vector3d c;
-    double r;
+  auto sphere = [&](int s, Eigen::Vector3d& c, double& r) {
+    const double* c4 = data.bound_center4_B.data() + 4 * s;
+    c = Eigen::Vector3d(c4[0], c4[1], c4[2]);
+    r = data.bound_radius[static_cast<std::size_t>(s)];
   };
-  auto blocks = [&](const Segment& seg, int s, auto&& f) {
-    if (!data.several_links[static_cast<std::size_t>(s)]) {
-      const double* c4 = data.bound_center4_B.data() + 4 * s;
-      f(Block{seg.first_primitive, seg.first_primitive + seg.num_primitives, Eigen::Vector3d(c4[0], c4[1], c4[2]),
-              data.bound_radius[static_cast<std::size_t>(s)]});
+  Eigen::Vector3d ca, cb;
+  double ra, rb;
+  sphere(a, ca, ra);
+  sphere(b, cb, rb);
+  int na = 0, nb = 0;
+  int* kept_a = data.kept_a.data();
+  int* kept_b = data.kept_b.data();
+  keepNearSphere(data, sa.first_primitive, sa.first_primitive + sa.num_primitives, cb, rb, within, kept_a, na,
+                 left_out);
+  keepNearSphere(data, sb.first_primitive, sb.first_primitive + sb.num_primitives, ca, ra, within, kept_b, nb,
+                 left_out);
+  auto cross = [&](const int* xa, int nxa, const int* xb, int nxb) {
+    for (int ka = 0; ka < nxa; ++ka)
+      for (int kb = 0; kb < nxb; ++kb) {
+        const int pa = xa[ka], pb = xb[kb];
+        const int pp = primitivePairIndex(data, i, sa, sb, pa, pb);
+        if (data.any_pp_unchecked && data.pp_unchecked[static_cast<std::size_t>(pp)]) continue;
+        emit(pa, pb, pp);
+      }
+  };
+  const bool several_a = data.several_links[static_cast<std::size_t>(a)] != 0;
+  const bool several_b = data.several_links[static_cast<std::size_t>(b)] != 0;
+  if (!several_a && !several_b) {
+    cross(kept_a, na, kept_b, nb);
+    return;
+  }
+  // The blocks of a segment over its kept primitives (ascending, so each block's are consecutive):
+  // f(begin, end, centre, radius) with [begin, end) indices into the kept list.
+  auto blocks = [&](int s, bool several, const int* kept, int n, const Eigen::Vector3d& c, double r, auto&& f) {
+    if (!several) {
+      if (n > 0) f(0, n, c, r);
       return;
     }
-    for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k)
-      f(Block{data.block_first[static_cast<std::size_t>(k)], data.block_end[static_cast<std::size_t>(k)],
-              data.block_center_B[static_cast<std::size_t>(k)], data.block_radius[static_cast<std::size_t>(k)]});
+    int at = 0;
+    for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1];
+         ++k) {
+      const int begin = at;
+      while (at < n && kept[at] < data.block_end[static_cast<std::size_t>(k)]) ++at;
+      if (at > begin)
+        f(begin, at, data.block_center_B[static_cast<std::size_t>(k)], data.block_radius[static_cast<std::size_t>(k)]);
+    }
   };
-  blocks(sa, a, [&](const Block& x) {
-    blocks(sb, b, [&](const Block& y) {
-      const double gap = (x.c - y.c).norm() - x.r - y.r;
+  int* again_a = data.kept_a2.data();
+  int* again_b = data.kept_b2.data();
+  blocks(a, several_a, kept_a, na, ca, ra, [&](int xa0, int xa1, const Eigen::Vector3d& cx, double rx) {
+    blocks(b, several_b, kept_b, nb, cb, rb, [&](int xb0, int xb1, const Eigen::Vector3d& cy, double ry) {
+      const double gap = (cx - cy).norm() - rx - ry;
       if (gap > within) {
         left_out = std::min(left_out, gap);
         return;
       }
-      int nka = 0, nkb = 0;
-      keepNearSphere(data, x.first, x.end, y.c, y.r, within, data.kept_a.data(), nka, left_out);
-      keepNearSphere(data, y.first, y.end, x.c, x.r, within, data.kept_b.data(), nkb, left_out);
-      for (int ka = 0; ka < nka; ++ka)
-        for (int kb = 0; kb < nkb; ++kb) {
-          const int pa = data.kept_a[static_cast<std::size_t>(ka)], pb = data.kept_b[static_cast<std::size_t>(kb)];
-          const int pp = primitivePairIndex(data, i, sa, sb, pa, pb);
-          if (data.any_pp_unchecked && data.pp_unchecked[static_cast<std::size_t>(pp)]) continue;
-          emit(pa, pb, pp);
+      int nxa = 0, nxb = 0;
+      auto keepAgain = [&](const int* from, int begin, int end, const Eigen::Vector3d& c, double r, int* into, int& n) {
+        for (int k = begin; k < end; ++k) {
+          const int p = from[k];
+          const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
+          const double g = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r;
+          if (g > within)
+            left_out = std::min(left_out, g);
+          else
+            into[n++] = p;
         }
+      };
+      keepAgain(kept_a, xa0, xa1, cy, ry, again_a, nxa);
+      keepAgain(kept_b, xb0, xb1, cx, rx, again_b, nxb);
+      cross(again_a, nxa, again_b, nxb);
     });
   });
 }
@@ -326,6 +370,26 @@ bool slotPairActive(const Model& model, const DistanceData& data, const BodySche
     if (data.link_segment[static_cast<std::size_t>(slot.link)] == pair.a) return false;
   }
   return true;
+}
+
+/// Pair i's avoidance row, n^T (J_pa - J_pb), with each witness point's Jacobian on the link of its
+/// primitive (pa, pb; a body-schema slot's primitive: the slot's link_a / link_b). A robot pair of
+/// single-link segments writes only its links' common support columns (the rest stay 0 from set-up);
+/// a pair with a segment of several links, whose winning links change, and a slot pair write the row.
+REFLEX_ALWAYS_INLINE inline void writeRow(const Model& model, const KinematicsData& kin, DistanceData& data, int i,
+                                          int pa, int pb, int link_a, int link_b, const Eigen::Vector3d& p_a,
+                                          const Eigen::Vector3d& p_b, const Eigen::Vector3d& n) {
+  const int common = data.pair_common[static_cast<std::size_t>(i)];
+  if (common >= 0 && !data.pair_several[static_cast<std::size_t>(i)]) {
+    computeDirectionalRowOnSupport(model, kin, link_a, p_a, link_b, p_b, n, static_cast<std::size_t>(common),
+                                   data.rows.row(i).data());
+    return;
+  }
+  const int la =
+      data.prim_link[static_cast<std::size_t>(pa)] >= 0 ? data.prim_link[static_cast<std::size_t>(pa)] : link_a;
+  const int lb =
+      data.prim_link[static_cast<std::size_t>(pb)] >= 0 ? data.prim_link[static_cast<std::size_t>(pb)] : link_b;
+  computeDirectionalRow(model, kin, la, p_a, lb, p_b, n, data.rows.row(i));
 }
 
 /// Writes pair i's result from its closest primitive pair (pa, pb: core distance `core`, parameters
@@ -357,21 +421,15 @@ REFLEX_ALWAYS_INLINE inline void finishPair(const Model& model, const Kinematics
   out.p_B_b = c_b + data.prim_r[pb] * n;
   out.has_row = best < options.row_threshold;
   if (!out.has_row) return;
-  const int common = data.pair_common[static_cast<std::size_t>(i)];
-  if (common >= 0) {  // a robot pair: always the same two links, whose other columns stay 0 (set-up)
-    computeDirectionalRowOnSupport(model, kin, link_a, out.p_B_a, link_b, out.p_B_b, n,
-                                   static_cast<std::size_t>(common), data.rows.row(i).data());
-  } else {  // a body-schema slot's link changes with what it holds
-    computeDirectionalRow(model, kin, link_a, out.p_B_a, link_b, out.p_B_b, n, data.rows.row(i));
-  }
+  writeRow(model, kin, data, i, pa, pb, link_a, link_b, out.p_B_a, out.p_B_b, n);
 }
 
 /// Pair i's result from witness points on the real shapes (the tight model): p_a on a's surface, p_b
 /// on b's, unit normal n from b towards a, distance d; below the threshold, the row.
 REFLEX_ALWAYS_INLINE inline void finishPairPoints(const Model& model, const KinematicsData& kin, DistanceData& data,
                                                   const DistanceOptions& options, int i, int link_a, int link_b,
-                                                  double d, const Eigen::Vector3d& p_a, const Eigen::Vector3d& p_b,
-                                                  const Eigen::Vector3d& n) {
+                                                  double d, int pa, int pb, const Eigen::Vector3d& p_a,
+                                                  const Eigen::Vector3d& p_b, const Eigen::Vector3d& n) {
   PairDistance& out = data.pairs[i];
   out.well_defined = true;
   out.active = true;
@@ -382,13 +440,7 @@ REFLEX_ALWAYS_INLINE inline void finishPairPoints(const Model& model, const Kine
   out.p_B_b = p_b;
   out.has_row = d < options.row_threshold;
   if (!out.has_row) return;
-  const int common = data.pair_common[static_cast<std::size_t>(i)];
-  if (common >= 0) {
-    computeDirectionalRowOnSupport(model, kin, link_a, p_a, link_b, p_b, n, static_cast<std::size_t>(common),
-                                   data.rows.row(i).data());
-  } else {
-    computeDirectionalRow(model, kin, link_a, p_a, link_b, p_b, n, data.rows.row(i));
-  }
+  writeRow(model, kin, data, i, pa, pb, link_a, link_b, p_a, p_b, n);
 }
 
 /// What pieceDistance found.
@@ -554,7 +606,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   }
   winner = {cap_pa, cap_pb};
   if (on_pieces) {
-    finishPairPoints(model, kin, data, options, i, link_a, link_b, best, best_pa, best_pb, best_n);
+    finishPairPoints(model, kin, data, options, i, link_a, link_b, best, cap_pa, cap_pb, best_pa, best_pb, best_n);
     data.pairs[static_cast<std::size_t>(i)].well_defined = !overlap;  // overlapping pieces: the capsules' normal
   } else {
     finishPair(model, kin, data, options, i, link_a, link_b, best, cap_core, cap_pa, cap_pb, cap_s, cap_t);

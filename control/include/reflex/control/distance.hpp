@@ -4,7 +4,8 @@
 //   d      surface-to-surface distance between segments a and b (radii subtracted; < 0 if penetrating)
 //   p_B_a  witness point on a's surface, p_B_b on b's surface, both in the base frame B
 //   nhat_B = (p_B_a - p_B_b) / d, unit, pointing from b towards a
-//   row    = nhat_B^T (J_B_pa - J_B_pb)  (1 x nq): the rate of d, so a positive row velocity
+//   row    = nhat_B^T (J_B_pa - J_B_pb)  (1 x nq; each witness point's Jacobian on the link of its
+//            primitive, a finger's in a segment of several links): the rate of d, so a positive row velocity
 //          row * qdot > 0 separates the pair.
 // Coincident core points: the normal falls back to the direction between the two links' origins
 // (else +z), `well_defined` is false, and everything stays finite.
@@ -121,8 +122,9 @@ struct DistanceData {
   std::vector<SegmentB> prim_B;  ///< core segment in B (start, direction, squared length)
   std::vector<double> prim_r;    ///< radius (body-schema slots: the slot's)
   // Per pair: commonSupport of its two links for a robot pair (its row then has nonzero entries only
-  // in those links' support columns, written each time, the rest zero from set-up); -1 for a pair
-  // with a body-schema slot (whose row is zeroed each time).
+  // in those links' support columns, written each time, the rest zero from set-up; a pair with a
+  // segment of several links writes its whole row); -1 for a pair with a body-schema slot (whose row
+  // is zeroed each time).
   std::vector<int> pair_common;
   // The primitive pairs of all robot-robot pairs, flat, so that they are computed in one tight loop:
   // pair i owns entries [pp_begin[i], pp_begin[i + 1]) (none for pairs with a body-schema slot).
@@ -139,6 +141,7 @@ struct DistanceData {
   // made each call around the primitives where they are (bound_center4_B, bound_radius written by the
   // transform), and the sums of the robot pairs that have one (rp_dynamic: indices into rp_a) redone.
   std::vector<char> several_links;
+  std::vector<char> pair_several;  ///< per pair: one of its segments has several links
   std::vector<int> rp_dynamic;
   // A segment of several links in blocks, one per link (its primitives of that link are contiguous):
   // segment s's blocks are [seg_block[s], seg_block[s + 1]); each block its primitives [first, end),
@@ -159,7 +162,7 @@ struct DistanceData {
   std::vector<int> list_end;
   std::vector<double> list_floor;
   std::vector<double> prim_sphere_r;
-  std::vector<int> kept_a, kept_b;
+  std::vector<int> kept_a, kept_b, kept_a2, kept_b2;
   std::vector<int> list_pp;  ///< per list entry, its index in pp_a / pp_b
   // Carried bounds (the tight model): per primitive pair (pp index), a lower bound of its distance at
   // the poses of the call stamped `pp_stamp` (the `cycle` count of computeSegmentDistances calls);

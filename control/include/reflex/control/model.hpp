@@ -60,7 +60,8 @@ struct Primitive {
 /// segment of several links (collision YAML `segments:`, e.g. a hand with its fingers) is its first
 /// link and links below it that no joint the controller drives moves: each primitive then moves with
 /// its own link (Primitive::link), the pair's distance is the least over its primitives, and its
-/// Jacobian row is taken on the segment's link (the columns of the joints above it).
+/// Jacobian row is that of the winning primitives' links (a finger's own joints included: the fingers'
+/// motion counts as motion the arm does not command; the controller acts on the arm's columns).
 /// Primitives are stored flat in Model::primitives[first_primitive, first_primitive + num_primitives).
 struct Segment {
   std::string name;  ///< the link name for robot segments; the slot name for body-schema slots
