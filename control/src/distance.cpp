@@ -252,12 +252,13 @@ inline bool uncheckedPrimitivePair(const DistanceData& data, int i, const Segmen
          data.pp_unchecked[static_cast<std::size_t>(primitivePairIndex(data, i, sa, sb, pa, pb))];
 }
 
-/// The primitives of [first, end) whose bounding sphere lies within `within` of the sphere (c, r)
-/// into kept[0 .. n); `left_out` lowered to the smallest gap of the others.
-inline void keepNearSphere(const DistanceData& data, int first, int end, const Eigen::Vector3d& c, double r,
-                           double within, int* kept, int& n, double& left_out) {
+/// The primitives k of [first, end) (from[k] with a list `from`) whose bounding sphere lies within
+/// `within` of the sphere (c, r) into kept[0 .. n); `left_out` lowered to the smallest gap of the others.
+inline void keepNearSphere(const DistanceData& data, const int* from, int first, int end, const Eigen::Vector3d& c,
+                           double r, double within, int* kept, int& n, double& left_out) {
   n = 0;
-  for (int p = first; p < end; ++p) {
+  for (int k = first; k < end; ++k) {
+    const int p = from ? from[k] : k;
     const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
     const double gap = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r;
     if (gap > within)
@@ -270,8 +271,8 @@ inline void keepNearSphere(const DistanceData& data, int first, int end, const E
 /// Calls emit(pa, pb, pp) for robot pair i's primitive pairs that can be within `within` (their link
 /// pair checked). Each segment first keeps its primitives near the other segment's sphere. A segment
 /// of several links then goes block (link) by block: a block pair whose spheres are farther apart is
-/// skipped, and each block's kept primitives are kept again near the other block's sphere (as the
-/// per-link pairs of the same robot would be). `left_out` is lowered to the smallest gap of what is
+/// skipped, each block's kept primitives are kept again near the other block's sphere (as the
+/// per-link pairs of the same robot would be), and a primitive pair whose spheres are apart is left out. `left_out` is lowered to the smallest gap of what is
 /// left out (a lower bound of its distance). Every segment's spheres of this call must be in place.
 template <class Emit>
 void listNearPairs(DistanceData& data, int i, const Segment& sa, int a, const Segment& sb, int b, double within,
@@ -288,23 +289,38 @@ void listNearPairs(DistanceData& data, int i, const Segment& sa, int a, const Se
   int na = 0, nb = 0;
   int* kept_a = data.kept_a.data();
   int* kept_b = data.kept_b.data();
-  keepNearSphere(data, sa.first_primitive, sa.first_primitive + sa.num_primitives, cb, rb, within, kept_a, na,
+  keepNearSphere(data, nullptr, sa.first_primitive, sa.first_primitive + sa.num_primitives, cb, rb, within, kept_a, na,
                  left_out);
-  keepNearSphere(data, sb.first_primitive, sb.first_primitive + sb.num_primitives, ca, ra, within, kept_b, nb,
+  keepNearSphere(data, nullptr, sb.first_primitive, sb.first_primitive + sb.num_primitives, ca, ra, within, kept_b, nb,
                  left_out);
-  auto cross = [&](const int* xa, int nxa, const int* xb, int nxb) {
-    for (int ka = 0; ka < nxa; ++ka)
+  // Every pair of the two lists; with `spheres`, only those whose primitives' spheres are within.
+  auto cross = [&](const int* xa, int nxa, const int* xb, int nxb, bool spheres) {
+    for (int ka = 0; ka < nxa; ++ka) {
+      const int pa = xa[ka];
+      const SegmentB& wa = data.prim_B[static_cast<std::size_t>(pa)];
+      const Eigen::Vector3d c_pa = wa.start + 0.5 * wa.d;
+      const double r_pa = data.prim_sphere_r[static_cast<std::size_t>(pa)];
       for (int kb = 0; kb < nxb; ++kb) {
-        const int pa = xa[ka], pb = xb[kb];
+        const int pb = xb[kb];
         const int pp = primitivePairIndex(data, i, sa, sb, pa, pb);
         if (data.any_pp_unchecked && data.pp_unchecked[static_cast<std::size_t>(pp)]) continue;
+        if (spheres) {
+          const SegmentB& wb = data.prim_B[static_cast<std::size_t>(pb)];
+          const double gap =
+              (c_pa - (wb.start + 0.5 * wb.d)).norm() - r_pa - data.prim_sphere_r[static_cast<std::size_t>(pb)];
+          if (gap > within) {
+            left_out = std::min(left_out, gap);
+            continue;
+          }
+        }
         emit(pa, pb, pp);
       }
+    }
   };
   const bool several_a = data.several_links[static_cast<std::size_t>(a)] != 0;
   const bool several_b = data.several_links[static_cast<std::size_t>(b)] != 0;
   if (!several_a && !several_b) {
-    cross(kept_a, na, kept_b, nb);
+    cross(kept_a, na, kept_b, nb, /*spheres=*/false);  // the sweep's kernel computes them all at once
     return;
   }
   // The blocks of a segment over its kept primitives (ascending, so each block's are consecutive):
@@ -333,20 +349,9 @@ void listNearPairs(DistanceData& data, int i, const Segment& sa, int a, const Se
         return;
       }
       int nxa = 0, nxb = 0;
-      auto keepAgain = [&](const int* from, int begin, int end, const Eigen::Vector3d& c, double r, int* into, int& n) {
-        for (int k = begin; k < end; ++k) {
-          const int p = from[k];
-          const SegmentB& w = data.prim_B[static_cast<std::size_t>(p)];
-          const double g = (w.start + 0.5 * w.d - c).norm() - data.prim_sphere_r[static_cast<std::size_t>(p)] - r;
-          if (g > within)
-            left_out = std::min(left_out, g);
-          else
-            into[n++] = p;
-        }
-      };
-      keepAgain(kept_a, xa0, xa1, cy, ry, again_a, nxa);
-      keepAgain(kept_b, xb0, xb1, cx, rx, again_b, nxb);
-      cross(again_a, nxa, again_b, nxb);
+      keepNearSphere(data, kept_a, xa0, xa1, cy, ry, within, again_a, nxa, left_out);
+      keepNearSphere(data, kept_b, xb0, xb1, cx, rx, within, again_b, nxb, left_out);
+      cross(again_a, nxa, again_b, nxb, /*spheres=*/true);
     });
   });
 }
