@@ -13,6 +13,7 @@
 // With --phases full the run follows a system the C++ test changes under it, and prints a line
 // "PHASE <name>" when it has seen each state (the test then makes the next change):
 //   nodata-seen  the page is connected and shows the "no data yet" sign (no controller yet);
+//   live-seen    frames and a status arrived (the test then records a few seconds of the live data);
 //   live-done    the live checks above are done (the test then stops the data);
 //   stale-done   the "stale" sign appeared; renders counted over one idle second, then one wheel event
 //                (one render expected); a second screenshot, FILE-stale.png (the test then restarts
@@ -148,6 +149,7 @@ function drive(url) {
       }
 
       let view = await waitFor((x) => x.framesReceived >= 10 && x.statusReceived > 0 && x.rendered > 5, 40000);
+      console.log("PHASE live-seen");  // data flows: the test records the next seconds of it
       const framesBefore = view ? view.framesReceived : 0;
       await sleep(seconds * 1000);
       result.liveSign = await sign();

@@ -376,7 +376,10 @@ TEST(ReflexView, PageRendersTheRobotInHeadlessChromium) {
   auto objects = std::make_unique<testing::ChildProcess>(
       LiveSystem::publisherArgs(kDomain, {"red_cup=0.50,0.10,1.00", "can=0.45,-0.25,0.90"}, jpeg),
       tmp + "view_page_objects.log");
-  // Three seconds of the live system: the recording played in a loop at the end.
+  // Three seconds of the live system once the page sees its data (a recorder started with the
+  // controller recorded no joint state when discovery took longer than that on a loaded host): the
+  // recording played in a loop at the end.
+  ASSERT_NE(page.readUntil("PHASE live-seen", 60s).find("PHASE live-seen"), std::string::npos) << readText(page_log);
   testing::ChildProcess recorder(
       {kBin + "/reflex_record", "record", "-o", recording, "--duration", "3", "--no-scene", "-t", "reflex/joint_state",
        "-t", "reflex/control_status", "-t", "reflex/object_targets", "--domain", d},
