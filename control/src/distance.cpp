@@ -24,27 +24,6 @@ bool severalLinks(const Model& model, const Segment& seg) {
   return false;
 }
 
-/// How far from its link's origin any point of segment `seg` can be, whatever the joints between its
-/// link and its primitives' links: each primitive's farthest point from its own link's origin, plus,
-/// joint by joint up to the segment's link, the distance of the joint's origin from its parent's (a
-/// revolute joint turns about an axis through its link's origin, which keeps every distance to that
-/// origin) and a prismatic joint's longest travel.
-double reachFromSegmentLink(const Model& model, const Segment& seg) {
-  double reach = 0.0;
-  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-    const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-    double r = std::max(prim.a_L.norm(), prim.b_L.norm()) + prim.radius;
-    for (int l = linkOf(seg, prim); l != seg.link && l >= 0; l = model.links[static_cast<std::size_t>(l)].parent) {
-      const Link& link = model.links[static_cast<std::size_t>(l)];
-      r += link.X_P_J.translation().norm();
-      if (link.type == JointType::kPrismatic && link.q_index >= 0)
-        r += std::max(std::abs(model.q_lower[link.q_index]), std::abs(model.q_upper[link.q_index]));
-    }
-    reach = std::max(reach, r);
-  }
-  return reach;
-}
-
 /// The link blocks of every segment of several links (DistanceData::seg_block ..): its primitives of
 /// one link (contiguous), with their bounding sphere in that link's frame.
 void buildLinkBlocks(const Model& model, DistanceData& d) {
@@ -82,9 +61,8 @@ void buildLinkBlocks(const Model& model, DistanceData& d) {
   d.block_center_B.assign(d.block_first.size(), Eigen::Vector3d::Zero());
 }
 
-/// Every robot segment's bounding sphere in its link frame (a segment of several links: one about its
-/// link's origin for every posture of the joints below, replaced each call by one around its
-/// primitives where they are).
+/// Every robot segment's bounding sphere in its link frame (a segment of several links: none here, an
+/// infinite one until each call makes one around its primitives where they are).
 void buildSegmentSpheres(const Model& model, DistanceData& d) {
   d.bound_center_L.assign(model.segments.size(), Eigen::Vector3d::Zero());
   d.bound_center4_B.assign(4 * model.segments.size(), 0.0);
@@ -92,9 +70,8 @@ void buildSegmentSpheres(const Model& model, DistanceData& d) {
   for (std::size_t s = 0; s < model.segments.size(); ++s) {
     const Segment& seg = model.segments[s];
     if (seg.body_schema_slot || seg.num_primitives == 0) continue;
-    if (severalLinks(model, seg)) {  // its primitives move against its link: a sphere for every posture
-      d.bound_center_L[s].setZero();
-      d.bound_radius[s] = reachFromSegmentLink(model, seg);
+    if (severalLinks(model, seg)) {  // made each call around its primitives (boundPrimitivesWhereTheyAre)
+      d.bound_radius[s] = std::numeric_limits<double>::infinity();
       continue;
     }
     Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
