@@ -713,7 +713,7 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
   for (int j = 0; j < model.nq; ++j) data.q_next[j] = q[j] + dt * data.qdot_uncontrolled[j];
   for (int a = 0; a < 2; ++a)
     for (int i = 0; i < cm.arms[a].n; ++i) data.q_next[cm.arms[a].q[i]] += dt * scale[a] * data.qdot[cm.arms[a].q[i]];
-  if (!computeForwardKinematics(model, data.kin_next, data.q_next)) {
+  if (!computeForwardKinematics(model, data.kin_next, data.q_next, &data.kin)) {  // only moving joints' links
     for (auto& pd : out.pairs) pd.distance = -kInf;  // cannot happen for finite q; counts as a hit
     return;
   }

@@ -49,9 +49,11 @@ KinematicsData::KinematicsData(const Model& model)
   computeForwardKinematics(model, *this, q);
 }
 
-bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q) {
+bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q,
+                              const KinematicsData* near) {
   if (q.size() != model.nq || !q.allFinite()) return false;
   assert(data.X_B_L.size() == model.links.size());
+  assert(near != &data);
   data.q = q;
   const std::size_t n = model.links.size();
   for (std::size_t i = 0; i < n; ++i) {
@@ -59,6 +61,15 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data, const Ei
     if (link.parent < 0) {
       data.X_B_L[i].setIdentity();
       data.axis_B[i] = link.axis_J;
+      continue;
+    }
+    // A link whose parent pose and joint value are those of `near` has its pose too: the same
+    // operations on the same values (links come after their parent).
+    if (near && (link.q_index < 0 || q[link.q_index] == near->q[link.q_index]) &&
+        data.X_B_L[static_cast<std::size_t>(link.parent)].matrix() ==
+            near->X_B_L[static_cast<std::size_t>(link.parent)].matrix()) {
+      data.X_B_L[i] = near->X_B_L[i];
+      data.axis_B[i] = near->axis_B[i];
       continue;
     }
     const Eigen::Isometry3d X_B_J = data.X_B_L[link.parent] * link.X_P_J;

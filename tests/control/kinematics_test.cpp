@@ -197,6 +197,40 @@ TEST(KinematicsFiniteDifferences, JacobiansRelativeJacobianAndRowOfEveryLink) {
   }
 }
 
+// ---------------------------------------------------------------- from a nearby configuration
+/// computeForwardKinematics with `near` (the kinematics of a configuration that differs in a few
+/// joints): every pose, axis and twist bit for bit as computed from scratch, whichever joints differ.
+TEST(KinematicsNear, PosesFromANearbyConfigurationAreTheSameBits) {
+  for (const char* robot : {testing::kAsimo, "mesh_humanoid"}) {
+    const Model m = testing::loadRobot(robot);
+    KinematicsData near(m), from_near(m), scratch(m);
+    std::mt19937_64 rng(44);
+    long copied_links = 0;
+    for (int c = 0; c < 200; ++c) {
+      const Eigen::VectorXd q0 = test::randomConfiguration(m, rng);
+      Eigen::VectorXd q = q0;
+      // 0 to 3 joints moved (0: all copied), or every joint (c % 10 == 9: none copied).
+      const Eigen::VectorXd other = test::randomConfiguration(m, rng);
+      if (c % 10 == 9) q = other;
+      for (int k = 0; k < c % 4; ++k) {
+        const int j = static_cast<int>(rng() % static_cast<unsigned>(m.nq));
+        q[j] = other[j];
+      }
+      ASSERT_TRUE(computeForwardKinematics(m, near, q0));
+      ASSERT_TRUE(computeForwardKinematics(m, from_near, q, &near));
+      ASSERT_TRUE(computeForwardKinematics(m, scratch, q));
+      for (std::size_t l = 0; l < m.links.size(); ++l) {
+        ASSERT_TRUE(from_near.X_B_L[l].matrix() == scratch.X_B_L[l].matrix()) << robot << " link " << l;
+        ASSERT_TRUE(from_near.axis_B[l] == scratch.axis_B[l]) << robot << " link " << l;
+        copied_links += near.X_B_L[l].matrix() == scratch.X_B_L[l].matrix() ? 1 : 0;
+      }
+      ASSERT_TRUE(from_near.twist_B == scratch.twist_B) << robot;
+      ASSERT_TRUE(from_near.q == q) << robot;
+    }
+    EXPECT_GT(copied_links, 200 * static_cast<long>(m.links.size()) / 4) << robot;  // the copy path ran
+  }
+}
+
 // ---------------------------------------------------------------- bad joint vectors
 TEST(KinematicsRuntime, NonFiniteOrWrongSizeJointVectorIsRejectedAndDataKept) {
   const Model m = testing::loadRobot(testing::kAsimo);

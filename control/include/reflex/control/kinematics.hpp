@@ -30,8 +30,12 @@ struct KinematicsData {
 };
 
 /// Forward kinematics. Returns false (and leaves `data` unchanged) if q has the wrong size or a
-/// non-finite value; the caller then keeps its last valid state.
-bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q);
+/// non-finite value; the caller then keeps its last valid state. With `near` (the kinematics of a
+/// configuration that differs from q in a few joints, e.g. the cycle's for a prediction one step
+/// ahead), a link whose parent pose and joint value equal near's copies its pose from it: the same
+/// bits as computing it, without the trigonometry.
+bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q,
+                              const KinematicsData* near = nullptr);
 
 /// J_B (3 x nq) of the point p_B rigidly attached to `link` (after computeForwardKinematics).
 void computePointJacobian(const Model& model, const KinematicsData& data, int link, const Eigen::Vector3d& p_B,
