@@ -642,8 +642,8 @@ double upperBoundOfPair(const Model& model, const KinematicsData& kin, DistanceD
 /// distance a lower bound above give_up (finishPiecePair); +inf: always exact.
 void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceData& data,
                         const DistanceOptions& options, int i, const Segment& sa, const Segment& sb, int link_a,
-                        int link_b, double give_up = std::numeric_limits<double>::infinity(),
-                        bool bounds_fresh = false) {
+                        int link_b, double give_up = std::numeric_limits<double>::infinity(), bool bounds_fresh = false,
+                        bool carry = false) {
   const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
   if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
@@ -659,22 +659,29 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
     if (robot && bounds_fresh && !(give_up < std::numeric_limits<double>::infinity()))
       within = upperBoundOfPair(model, kin, data, i, sa, sb, link_a, link_b);
     const bool filter = robot && within < std::numeric_limits<double>::infinity();
-    auto offer = [&](auto&& f, int pa, int pb) {
+    // With `carry` (a listed robot pair), each primitive pair's lower bound from the last call on
+    // `data`, less how far its two primitives have moved since (measureSegmentMotion), is offered.
+    auto offer = [&](auto&& f, int pa, int pb, int pp) {
       double s, t;
       const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
-      f(pa, pb, core - radius[pa] - radius[pb], core, s, t, -1, -std::numeric_limits<double>::infinity());
+      double carried = -std::numeric_limits<double>::infinity();
+      if (pp >= 0 && data.pp_stamp[static_cast<std::size_t>(pp)] + 1 == data.cycle)
+        carried = data.pp_lower[static_cast<std::size_t>(pp)] - data.prim_motion[static_cast<std::size_t>(pa)] -
+                  data.prim_motion[static_cast<std::size_t>(pb)] - kCarryMargin;
+      f(pa, pb, core - radius[pa] - radius[pb], core, s, t, pp, carried);
     };
     double floor;
     const bool finished = finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
       if (filter) {
         const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
         listNearPairs(data, i, sa, pair.a, sb, pair.b, within, left_out,
-                      [&](int pa, int pb, int) { offer(f, pa, pb); });
+                      [&](int pa, int pb, int pp) { offer(f, pa, pb, carry ? pp : -1); });
         return;
       }
       for (int pa = sa.first_primitive; pa < sa.first_primitive + nka; ++pa)
         for (int pb = sb.first_primitive; pb < sb.first_primitive + nkb; ++pb)
-          if (!uncheckedPrimitivePair(data, i, sa, sb, pa, pb)) offer(f, pa, pb);
+          if (!uncheckedPrimitivePair(data, i, sa, sb, pa, pb))
+            offer(f, pa, pb, carry && robot ? primitivePairIndex(data, i, sa, sb, pa, pb) : -1);
     });
     if (!finished) {
       PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
@@ -807,35 +814,49 @@ struct Sweep {
   int nlist = 0;
 };
 
-/// Step 1, the tight model: how far each robot primitive can have moved since the last call (its
-/// bounding sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn theta),
-/// so a lower bound from then, less both primitives' motion, is a lower bound now.
-void measurePrimitiveMotion(const Model& model, const KinematicsData& kin, DistanceData& data) {
-  constexpr double kInf = std::numeric_limits<double>::infinity();
+/// How far each primitive of robot segment s can have moved since its links' poses in data.last_X
+/// (its bounding sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn
+/// theta), into prim_motion; then last_X of the segment's links takes these poses.
+void measureSegmentMotion(const Model& model, const KinematicsData& kin, DistanceData& data, int s) {
+  const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+  auto turnOf = [&](const Eigen::Isometry3d& X, const Eigen::Isometry3d& X0) {
+    return std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
+  };
+  const double seg_turn =
+      turnOf(kin.X_B_L[static_cast<std::size_t>(seg.link)], data.last_X[static_cast<std::size_t>(seg.link)]);
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+    const std::size_t link = static_cast<std::size_t>(linkOf(seg, prim));  // a finger's own link
+    const Eigen::Isometry3d& X = kin.X_B_L[link];
+    const Eigen::Isometry3d& X0 = data.last_X[link];
+    const double turn = prim.link >= 0 ? turnOf(X, X0) : seg_turn;
+    const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
+    const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
+    data.prim_motion[static_cast<std::size_t>(p)] =
+        m == m ? m : std::numeric_limits<double>::infinity();  // NaN: no carry
+  }
+  data.last_X[static_cast<std::size_t>(seg.link)] = kin.X_B_L[static_cast<std::size_t>(seg.link)];
+  for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k) {
+    const std::size_t l = static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)]);
+    data.last_X[l] = kin.X_B_L[l];
+  }
+}
+
+/// A new call of the carried bounds: entries stamped by the last call may be carried, no older one.
+void nextCarryCall(DistanceData& data) {
   data.num_piece_searches = 0;
   if (++data.cycle == 0) {  // wrapped: no old stamp may pass for the last call's
     std::fill(data.pp_stamp.begin(), data.pp_stamp.end(), 0U);
     data.cycle = 2;
   }
+}
+
+/// Step 1, the tight model: how far each robot primitive can have moved since the last call, so a
+/// lower bound from then, less both primitives' motion, is a lower bound now.
+void measurePrimitiveMotion(const Model& model, const KinematicsData& kin, DistanceData& data) {
+  nextCarryCall(data);
   if (model.pieces.empty()) return;
-  for (int s = 0; s < model.num_robot_segments; ++s) {
-    const Segment& seg = model.segments[static_cast<std::size_t>(s)];
-    auto turnOf = [&](const Eigen::Isometry3d& X, const Eigen::Isometry3d& X0) {
-      return std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
-    };
-    const double seg_turn =
-        turnOf(kin.X_B_L[static_cast<std::size_t>(seg.link)], data.last_X[static_cast<std::size_t>(seg.link)]);
-    for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-      const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-      const std::size_t link = static_cast<std::size_t>(linkOf(seg, prim));  // a finger's own link
-      const Eigen::Isometry3d& X = kin.X_B_L[link];
-      const Eigen::Isometry3d& X0 = data.last_X[link];
-      const double turn = prim.link >= 0 ? turnOf(X, X0) : seg_turn;
-      const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
-      const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
-      data.prim_motion[static_cast<std::size_t>(p)] = m == m ? m : kInf;  // NaN poses: no carry
-    }
-  }
+  for (int s = 0; s < model.num_robot_segments; ++s) measureSegmentMotion(model, kin, data, s);
   data.last_X = kin.X_B_L;  // no allocation: the same size every call
 }
 
@@ -1096,6 +1117,9 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
     data.segment_stamp_now = 1;
   }
   const std::uint32_t now = data.segment_stamp_now;
+  // Lower bounds carried from the last call on `data` (the guard's predictions of one cycle differ
+  // by a fraction of a step): a primitive pair proven far then is skipped without a search.
+  nextCarryCall(data);
   DistanceOptions no_rows;
   no_rows.row_threshold = -std::numeric_limits<double>::infinity();
   for (int k = 0; k < count; ++k) {
@@ -1115,8 +1139,10 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
       if (data.segment_stamp[static_cast<std::size_t>(s)] == now) continue;
       data.segment_stamp[static_cast<std::size_t>(s)] = now;
       transformSegment(model, kin, slots, data, s, true);  // with the bounding sphere (give_up's filter)
+      if (s < model.num_robot_segments && !model.pieces.empty()) measureSegmentMotion(model, kin, data, s);
     }
-    computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up, /*bounds_fresh=*/true);
+    computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up, /*bounds_fresh=*/true,
+                       /*carry=*/true);
   }
 }
 

@@ -508,6 +508,58 @@ TEST(DistanceListedPairs, TightPairsBeyondTheGiveUpDistanceComeOutAsLowerBounds)
   EXPECT_GT(bounded, 150 * 20);
 }
 
+/// computeListedPairDistances carries each primitive pair's lower bound to the next call on the same
+/// DistanceData (the guard's predictions of one cycle differ by a fraction of a step), less how far its
+/// primitives moved: along a trajectory of small steps, with a sweep on the same data now and then (the
+/// controller's walking check shares it), every listed pair comes out as from a fresh DistanceData, bit
+/// for bit, and the carried bounds save searches.
+TEST(DistanceListedPairs, CarriedBoundsChangeNoResultAlongATrajectory) {
+  const Model m = testing::loadRobot("mesh_humanoid");
+  KinematicsData kin(m);
+  std::vector<int> pairs;
+  for (int i = 0; i < static_cast<int>(m.pairs.size()); ++i) pairs.push_back(i);
+  DistanceOptions no_rows;
+  no_rows.row_threshold = -std::numeric_limits<double>::infinity();
+  for (const double give_up : {0.06, std::numeric_limits<double>::infinity()}) {
+    DistanceData reused(m);
+    std::mt19937_64 rng(43);
+    Eigen::VectorXd q = test::randomConfiguration(m, rng);
+    long compared = 0, bounded = 0, searches_reused = 0, searches_fresh = 0;
+    for (int c = 0; c < 400; ++c) {
+      const Eigen::VectorXd target = test::randomConfiguration(m, rng);
+      q = c % 40 == 0 ? target : Eigen::VectorXd(q + 0.01 * (target - q));
+      ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+      if (c % 7 == 3) computeSegmentDistances(m, kin, reused.slots, reused, no_rows);
+      DistanceData fresh(m);
+      computeListedPairDistances(m, kin, reused.slots, reused, pairs.data(), static_cast<int>(pairs.size()), give_up);
+      searches_reused += reused.num_piece_searches;
+      computeListedPairDistances(m, kin, fresh.slots, fresh, pairs.data(), static_cast<int>(pairs.size()), give_up);
+      searches_fresh += fresh.num_piece_searches;
+      for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+        const PairDistance& f = fresh.pairs[i];
+        const PairDistance& r = reused.pairs[i];
+        ASSERT_EQ(r.active, f.active) << "pair " << i << " call " << c;
+        if (!f.active) continue;
+        ASSERT_EQ(r.exact, f.exact) << "pair " << i << " call " << c << " give-up " << give_up;
+        if (!f.exact) {  // both lower bounds above give_up (how far above may differ)
+          EXPECT_GT(r.distance, give_up) << "pair " << i << " call " << c;
+          ++bounded;
+          continue;
+        }
+        ASSERT_EQ(r.distance, f.distance) << "pair " << i << " call " << c << " give-up " << give_up;
+        expectSamePair(fresh, reused, i, "pair " + std::to_string(i));
+        ++compared;
+      }
+    }
+    std::printf(
+        "listed pairs along a trajectory, give-up %.3f m: %ld exact identical, %ld lower bounds; "
+        "%ld searches with carried bounds, %ld without\n",
+        give_up, compared, bounded, searches_reused, searches_fresh);
+    EXPECT_GT(compared, 300);
+    EXPECT_LT(searches_reused, searches_fresh);  // not vacuous: the carried bounds skipped searches
+  }
+}
+
 /// computeListedPairDistances (the predictive guard's): the listed pairs come out as the full sweep
 /// computes them, bit for bit (with a slot, enabled and then disabled), and no other entry changes.
 TEST(DistanceListedPairs, ListedPairsEqualTheFullSweepAndNothingElseChanges) {
