@@ -71,7 +71,7 @@ struct FitOptions {
   /// The tight model (fitConvexPieces): a link's mesh is cut into at most this many convex pieces...
   int max_pieces = 16;
   /// ...while a piece's surface stands off the mesh surface by more than this (m, its worst gap).
-  double piece_gap = 0.003;
+  double piece_gap = 0.004;
   /// Beyond max_pieces, a piece whose gap is above large_gap is still cut, up to this many pieces:
   /// the few links (a shell open at the neck, a deep concavity) where 16 pieces leave centimetres.
   int max_pieces_large_gap = 48;
