@@ -307,12 +307,18 @@ void BM_KinematicsAndDistancesOnly(benchmark::State& state) {
   countPairs(state);
   const auto& qs = states();
   std::size_t i = 0;
+  double searches = 0.0, exact = 0.0, calls = 0.0;
   for (auto _ : state) {
     computeForwardKinematics(model(), kin, qs[i]);
     computeSegmentDistances(model(), kin, dist, opt);
     benchmark::DoNotOptimize(dist.closest);
+    searches += dist.num_piece_searches;
+    exact += dist.num_exact_pairs;
+    calls += 1.0;
     i = (i + 1) % qs.size();
   }
+  state.counters["piece_searches"] = calls > 0.0 ? searches / calls : 0.0;  // per call
+  state.counters["exact_pairs"] = calls > 0.0 ? exact / calls : 0.0;
 }
 BENCHMARK(BM_KinematicsAndDistancesOnly)->ArgName("prune")->Arg(1)->Arg(0);
 
