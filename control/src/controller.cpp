@@ -126,6 +126,7 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
       qdot_uncontrolled(Eigen::VectorXd::Zero(model.nq)),
       q_prev(Eigen::VectorXd::Zero(model.nq)),
       arm_joint(static_cast<std::size_t>(model.nq), 0),
+      guard_listing(model),
       q_next(Eigen::VectorXd::Zero(model.nq)),
       kin_next(model),
       dist_next(model),
@@ -186,6 +187,7 @@ ControllerData::ControllerData(const Model& model, const ControllerModel& cm)
   arm_ws.grad_M.assign(nl, Eigen::Vector3d::Zero());
   arm_ws.grad_N.assign(nl, Eigen::Vector3d::Zero());
   guard_pairs.assign(model.pairs.size(), -1);
+  guard_reach.assign(model.pairs.size(), 0.0);
   lever = Eigen::VectorXd::Zero(model.nq);
   for (int j = 0; j < model.nq; ++j) {
     const Link& link = model.links[static_cast<std::size_t>(model.q_link[j])];
@@ -719,8 +721,13 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
   }
   // Only whether a pair ends below d_r + predict_margin matters (predictiveGuard): a pair of the tight
   // model proven above it is left a lower bound (above it too: never a hit, the same outcome).
-  computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(), data.num_guard_pairs,
-                             cm.params.d_r + cm.params.predict_margin);
+  const double floor = cm.params.d_r + cm.params.predict_margin;
+  if (cm.broad_phase)  // the primitive pairs listed once this cycle (predictiveGuard)
+    computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(),
+                               data.num_guard_pairs, floor, data.guard_listing);
+  else
+    computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(),
+                               data.num_guard_pairs, floor);
 }
 
 /// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's
@@ -778,8 +785,10 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     const double reach =
         data.link_sweep[static_cast<std::size_t>(link_a)] + data.link_sweep[static_cast<std::size_t>(link_b)];
     // Without the broad phase (tests' brute-force reference): every such pair, whatever its bound.
-    if (!cm.broad_phase || !(pd.distance - reach > floor))
+    if (!cm.broad_phase || !(pd.distance - reach > floor)) {
+      data.guard_reach[static_cast<std::size_t>(data.num_guard_pairs)] = reach;
       data.guard_pairs[static_cast<std::size_t>(data.num_guard_pairs++)] = i;
+    }
   };
   if (data.dist.pruned_floor - 2.0 * most_sweep > floor) {
     forEachExactPair(data.dist, [&](int i, bool robot) {
@@ -804,6 +813,11 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     }
   }
   if (data.num_guard_pairs == 0) return;
+  // Every prediction below moves each point at most its link's sweep from this cycle's poses (the
+  // sweep's, bounding spheres in place with the broad phase): list the primitive pairs once.
+  if (cm.broad_phase)
+    listPairsNear(model, data.dist, data.guard_pairs.data(), data.num_guard_pairs, floor, data.guard_reach.data(),
+                  data.guard_listing);
 
   bool have_hold = false;
   std::array<double, 2> scale{1.0, 1.0};
@@ -833,6 +847,7 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     if (!hit[0] && !hit[1]) break;
     for (int a = 0; a < 2; ++a)
       if (hit[a]) scale[a] = iter < 6 ? 0.5 * scale[a] : 0.0;
+    if (scale[0] == 0.0 && scale[1] == 0.0) break;  // no arm moves: no pair can count as a hit
   }
   if (scale[0] < 1.0 || scale[1] < 1.0) {
     ++data.guard_count;

@@ -643,7 +643,7 @@ double upperBoundOfPair(const Model& model, const KinematicsData& kin, DistanceD
 void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceData& data,
                         const DistanceOptions& options, int i, const Segment& sa, const Segment& sb, int link_a,
                         int link_b, double give_up = std::numeric_limits<double>::infinity(), bool bounds_fresh = false,
-                        bool carry = false) {
+                        bool carry = false, const PairListing* listing = nullptr) {
   const SegmentB* prim = data.prim_B.data();
   const double* radius = data.prim_r.data();
   if (data.pair_common[static_cast<std::size_t>(i)] < 0) data.slot_pairs_inactive = false;  // a slot pair
@@ -670,8 +670,19 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
                   data.prim_motion[static_cast<std::size_t>(pb)] - kCarryMargin;
       f(pa, pb, core - radius[pa] - radius[pb], core, s, t, pp, carried);
     };
+    // A pair listed beforehand (listPairsNear, valid for these poses) offers its listed primitive pairs.
+    const bool listed = listing && listing->count[static_cast<std::size_t>(i)] >= 0;
+    if (listed) left_out = listing->floor[static_cast<std::size_t>(i)];
     double floor;
     const bool finished = finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
+      if (listed) {
+        const int first = listing->begin[static_cast<std::size_t>(i)];
+        const int end = first + listing->count[static_cast<std::size_t>(i)];
+        for (int k = first; k < end; ++k)
+          offer(f, listing->pa[static_cast<std::size_t>(k)], listing->pb[static_cast<std::size_t>(k)],
+                carry ? listing->pp[static_cast<std::size_t>(k)] : -1);
+        return;
+      }
       if (filter) {
         const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
         listNearPairs(data, i, sa, pair.a, sb, pair.b, within, left_out,
@@ -1108,8 +1119,10 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   data.closest = closest.pair;
 }
 
-void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                                DistanceData& data, const int* pairs, int count, double give_up) {
+namespace {
+
+void listedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                         DistanceData& data, const int* pairs, int count, double give_up, const PairListing* listing) {
   assert(data.pairs.size() == model.pairs.size());
   // Each segment of the listed pairs into B once: a stamp per segment marks this call's.
   if (++data.segment_stamp_now == 0) {  // wrapped: no stale stamp may equal the new one
@@ -1142,7 +1155,62 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
       if (s < model.num_robot_segments && !model.pieces.empty()) measureSegmentMotion(model, kin, data, s);
     }
     computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up, /*bounds_fresh=*/true,
-                       /*carry=*/true);
+                       /*carry=*/true, listing);
+  }
+}
+
+}  // namespace
+
+void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                                DistanceData& data, const int* pairs, int count, double give_up) {
+  listedPairDistances(model, kin, slots, data, pairs, count, give_up, nullptr);
+}
+
+void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                                DistanceData& data, const int* pairs, int count, double give_up,
+                                const PairListing& listing) {
+  listedPairDistances(model, kin, slots, data, pairs, count, give_up, &listing);
+}
+
+PairListing::PairListing(const Model& model)
+    : count(model.pairs.size(), -1), floor(model.pairs.size(), std::numeric_limits<double>::infinity()) {
+  int total = 0;
+  for (const SegmentPair& p : model.pairs) {
+    begin.push_back(total);
+    const Segment& sa = model.segments[p.a];
+    const Segment& sb = model.segments[p.b];
+    if (!sa.body_schema_slot && !sb.body_schema_slot) total += sa.num_primitives * sb.num_primitives;
+  }
+  begin.push_back(total);
+  pa.assign(static_cast<std::size_t>(total), 0);
+  pb.assign(static_cast<std::size_t>(total), 0);
+  pp.assign(static_cast<std::size_t>(total), 0);
+}
+
+void listPairsNear(const Model& model, DistanceData& now, const int* pairs, int count, double give_up,
+                   const double* reach, PairListing& out) {
+  for (int k = 0; k < count; ++k) {
+    const int i = pairs[k];
+    const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
+    const Segment& sa = model.segments[pair.a];
+    const Segment& sb = model.segments[pair.b];
+    int& n = out.count[static_cast<std::size_t>(i)];
+    n = -1;
+    // The pairs computeSegmentPair would list itself (with pieces, of robot segments, more than 4).
+    if (sa.body_schema_slot || sb.body_schema_slot || !now.pair_has_piece[static_cast<std::size_t>(i)] ||
+        sa.num_primitives * sb.num_primitives <= 4 || !(reach[k] >= 0.0))
+      continue;
+    const int first = out.begin[static_cast<std::size_t>(i)];
+    double left_out = std::numeric_limits<double>::infinity();
+    n = 0;
+    listNearPairs(now, i, sa, pair.a, sb, pair.b, give_up + reach[k], left_out, [&](int a, int b, int p) {
+      const std::size_t at = static_cast<std::size_t>(first + n++);
+      out.pa[at] = a;
+      out.pb[at] = b;
+      out.pp[at] = p;
+    });
+    // A primitive pair left out was farther than give_up + reach: it still is farther than give_up.
+    out.floor[static_cast<std::size_t>(i)] = left_out - reach[k];
   }
 }
 

@@ -56,6 +56,9 @@ void runCycles(const char* robot) {
   std::vector<int> listed;
   for (int p = 0; p < static_cast<int>(model.pairs.size()); p += 2) listed.push_back(p);
   DistanceData scratch(model);
+  PairListing listing(model);
+  const std::vector<double> reach(listed.size(), 0.01);
+  KinematicsData kin_near(model);
 
   AllocationCounter counter;
   for (int i = 0; i < 50; ++i) {
@@ -66,6 +69,10 @@ void runCycles(const char* robot) {
     computeSegmentDistances(model, kin, dist, pruned);
     computeListedPairDistances(model, kin, dist.slots, scratch, listed.data(), static_cast<int>(listed.size()));
     computeListedPairDistances(model, kin, dist.slots, scratch, listed.data(), static_cast<int>(listed.size()), 0.02);
+    listPairsNear(model, dist, listed.data(), static_cast<int>(listed.size()), 0.02, reach.data(), listing);
+    computeListedPairDistances(model, kin, dist.slots, scratch, listed.data(), static_cast<int>(listed.size()), 0.02,
+                               listing);
+    computeForwardKinematics(model, kin_near, qs[(i + 1) % 50], &kin);
     computePointJacobian(model, kin, hand, kin.X_B_L[hand].translation(), J);
     computeRelativeJacobian(model, kin, hand, kin.X_B_L[hand].translation(), head, kin.X_B_L[head].translation(), J);
     computeDirectionalRow(model, kin, hand, kin.X_B_L[hand].translation(), head, kin.X_B_L[head].translation(),

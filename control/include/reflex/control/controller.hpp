@@ -369,6 +369,11 @@ struct ControllerData {
   /// when the guard did not predict this cycle).
   std::vector<int> guard_pairs;
   int num_guard_pairs = 0;
+  /// ... how far the step can move each of them (the two segments' sweeps together, m), and their
+  /// primitive pairs that can come within the guard's floor at any scale of the step, listed once a
+  /// cycle for all its predictions (with the broad phase).
+  std::vector<double> guard_reach;
+  PairListing guard_listing;
   // scratch of the predictive guard: the configuration one step ahead
   Eigen::VectorXd q_next;
   KinematicsData kin_next;

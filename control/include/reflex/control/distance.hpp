@@ -268,9 +268,42 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
 /// `give_up`, a listed pair of the tight model (convex pieces) whose pieces are proven farther apart
 /// than give_up may come out inexact instead (exact = false, distance a lower bound above give_up):
 /// for a caller that only asks whether a pair is below give_up. Allocates nothing, never throws.
+/// The primitive pairs of some robot pairs that can come within a distance while every point moves at
+/// most a given reach (listPairsNear): for a caller that computes the same pairs at several nearby
+/// configurations (the predictive guard's predictions of one cycle), so each lists them once.
+/// Sized from the model; allocates nothing after construction.
+struct PairListing {
+  explicit PairListing(const Model& model);
+  /// Per pair (index into Model::pairs): how many primitive pairs are listed, -1 if the pair is not
+  /// listed (it is then computed as without a listing).
+  std::vector<int> count;
+  /// Per pair, its listed primitives and primitive-pair index at [pp_begin(pair), + count).
+  std::vector<int> pa, pb, pp;
+  std::vector<int> begin;  ///< per pair: where its entries start (its primitive pairs' range)
+  /// Per pair: a lower bound of the distance of every primitive pair left out, at any configuration
+  /// within the reach (m).
+  std::vector<double> floor;
+};
+
+/// Lists into `out`, for each of pairs[0 .. count), the primitive pairs (on checked link pairs) whose
+/// bounding spheres in `now` are within give_up + reach[k] (`now`: the last computeSegmentDistances
+/// with the broad phase, whose bounding spheres are in place): at any configuration where no point has
+/// moved more than reach[k] (both segments' motion together) from now's, every primitive pair that
+/// can be within give_up is listed. Pairs with a body-schema slot, and pairs of capsules alone, are
+/// not listed. Allocates nothing, never throws.
+void listPairsNear(const Model& model, DistanceData& now, const int* pairs, int count, double give_up,
+                   const double* reach, PairListing& out);
+
 void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
                                 DistanceData& data, const int* pairs, int count,
                                 double give_up = std::numeric_limits<double>::infinity());
+
+/// The same with a listing made by listPairsNear with the same give_up, valid for `kin` (no point
+/// moved farther than its reach since): a listed pair offers only its listed primitive pairs (the
+/// same result; an inexact distance may be a different lower bound above give_up).
+void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                                DistanceData& data, const int* pairs, int count, double give_up,
+                                const PairListing& listing);
 
 /// Computes pair `pair` exactly (after computeSegmentDistances for the same kinematics and options):
 /// for a pair the broad phase skipped, the result computeSegmentDistances gives without pruning
