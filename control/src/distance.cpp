@@ -145,6 +145,7 @@ DistanceData::DistanceData(const Model& model)
   }
   pair_has_piece.assign(model.pairs.size(), 0);
   piece_winner.assign(model.pairs.size(), {-1, -1});
+  upper_search.assign(model.pairs.size(), UpperSearch{});
   auto hasPiece = [&](const Segment& seg) {
     for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p)
       if (model.primitives[static_cast<std::size_t>(p)].piece >= 0) return true;
@@ -192,9 +193,8 @@ DistanceData::DistanceData(const Model& model)
       prim_sphere_r[static_cast<std::size_t>(p)] = 0.5 * (prim.b_L - prim.a_L).norm() + prim.radius;
     }
   }
-  pp_lower.assign(pp_a.size(), 0.0);
-  pp_stamp.assign(pp_a.size(), 0U);
-  prim_motion.assign(model.primitives.size(), std::numeric_limits<double>::infinity());
+  pp_lower.assign(pp_a.size(), -std::numeric_limits<double>::infinity());
+  prim_odometer.assign(model.primitives.size(), 0.0);
   last_X.assign(model.links.size(), Eigen::Isometry3d::Identity());
   list_pp.assign(pp_a.size(), 0);
   kept_a.assign(most_primitives, 0);
@@ -214,6 +214,21 @@ namespace {
 
 /// Subtracted from a carried lower bound: the rounding of the motion bound.
 constexpr double kCarryMargin = 1e-9;
+/// Added to an upper bound a listing is cut at: the rounding of a bounding-sphere gap (m).
+constexpr double kListMargin = 1e-6;
+
+/// Primitive pair pp's carried lower bound now (-inf: none): the bound stored at some earlier call,
+/// less how far each of its primitives has moved since (its odometer then is in the stored value).
+inline double carriedBound(const DistanceData& data, int pp, int pa, int pb) {
+  return data.pp_lower[static_cast<std::size_t>(pp)] - data.prim_odometer[static_cast<std::size_t>(pa)] -
+         data.prim_odometer[static_cast<std::size_t>(pb)] - kCarryMargin;
+}
+
+/// Stores `lower`, a lower bound of primitive pair pp's distance at this call's poses, to be carried.
+inline void storeBound(DistanceData& data, int pp, int pa, int pb, double lower) {
+  data.pp_lower[static_cast<std::size_t>(pp)] =
+      lower + data.prim_odometer[static_cast<std::size_t>(pa)] + data.prim_odometer[static_cast<std::size_t>(pb)];
+}
 
 /// The index in pp_a / pp_b of primitives pa and pb of robot pair i (segments sa, sb).
 inline int primitivePairIndex(const DistanceData& data, int i, const Segment& sa, const Segment& sb, int pa, int pb) {
@@ -526,9 +541,17 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
     const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
     const Eigen::Vector3d towards_b = (B.start + c.t * B.d) - (A.start + c.s * A.d);
-    ++data.num_piece_searches;
-    const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b, cap_pa >= 0 ? best : give_up,
-                                         towards_b, d, p_a, p_b, n);
+    const double stop_above = cap_pa >= 0 ? best : give_up;
+    PieceOutcome o;
+    const DistanceData::UpperSearch& u = data.upper_search[static_cast<std::size_t>(i)];
+    if (u.call == data.search_call && u.pa == pa && u.pb == pb) {  // searched in full this call
+      o = static_cast<PieceOutcome>(u.outcome);
+      d = u.d, p_a = u.p_a, p_b = u.p_b, n = u.n;
+      if (o == PieceOutcome::kApart && d > stop_above) o = PieceOutcome::kAbove;  // as a search stopped there
+    } else {
+      ++data.num_piece_searches;
+      o = pieceDistance(model, kin, data, pa, pb, link_a, link_b, stop_above, towards_b, d, p_a, p_b, n);
+    }
     c.lower = o == PieceOutcome::kTouching ? 0.0 : std::max(c.lower, d);
     if (o == PieceOutcome::kAbove) {
       floor = std::min(floor, d);
@@ -579,8 +602,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   // Every listed candidate's lower bound at these poses, for the next cycle to carry.
   for (std::size_t k = 0; k < count; ++k) {
     if (cand[k].pp < 0) continue;
-    data.pp_lower[static_cast<std::size_t>(cand[k].pp)] = cand[k].lower;
-    data.pp_stamp[static_cast<std::size_t>(cand[k].pp)] = data.cycle;
+    storeBound(data, cand[k].pp, cand[k].pa, cand[k].pb, cand[k].lower);
   }
   if (cap_pa < 0) {  // every primitive pair proven farther than give_up
     if (count > 0 && cand[0].bound > give_up) floor = std::min(floor, cand[0].bound);
@@ -627,11 +649,13 @@ double upperBoundOfPair(const Model& model, const KinematicsData& kin, DistanceD
   double s, t;
   (void)detail::coreDistance(A, B, s, t);
   const Eigen::Vector3d towards_b = (B.start + t * B.d) - (A.start + s * A.d);
-  double d;
-  Eigen::Vector3d p_a, p_b, n;
+  double d = 0.0;
+  Eigen::Vector3d p_a = Eigen::Vector3d::Zero(), p_b = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::UnitZ();
   ++data.num_piece_searches;
   const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b,
                                        std::numeric_limits<double>::infinity(), towards_b, d, p_a, p_b, n);
+  data.upper_search[static_cast<std::size_t>(i)] = {pa,  pb, data.search_call, static_cast<std::uint8_t>(o), d, p_a,
+                                                    p_b, n};
   if (o == PieceOutcome::kTouching) return 0.0;
   return d == d ? d : std::numeric_limits<double>::infinity();
 }
@@ -664,10 +688,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
     auto offer = [&](auto&& f, int pa, int pb, int pp) {
       double s, t;
       const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
-      double carried = -std::numeric_limits<double>::infinity();
-      if (pp >= 0 && data.pp_stamp[static_cast<std::size_t>(pp)] + 1 == data.cycle)
-        carried = data.pp_lower[static_cast<std::size_t>(pp)] - data.prim_motion[static_cast<std::size_t>(pa)] -
-                  data.prim_motion[static_cast<std::size_t>(pb)] - kCarryMargin;
+      const double carried = pp >= 0 ? carriedBound(data, pp, pa, pb) : -std::numeric_limits<double>::infinity();
       f(pa, pb, core - radius[pa] - radius[pb], core, s, t, pp, carried);
     };
     // A pair listed beforehand (listPairsNear, valid for these poses) offers its listed primitive pairs.
@@ -827,7 +848,7 @@ struct Sweep {
 
 /// How far each primitive of robot segment s can have moved since its links' poses in data.last_X
 /// (its bounding sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn
-/// theta), into prim_motion; then last_X of the segment's links takes these poses.
+/// theta), added to its odometer; then last_X of the segment's links takes these poses.
 void measureSegmentMotion(const Model& model, const KinematicsData& kin, DistanceData& data, int s) {
   const Segment& seg = model.segments[static_cast<std::size_t>(s)];
   auto turnOf = [&](const Eigen::Isometry3d& X, const Eigen::Isometry3d& X0) {
@@ -843,8 +864,7 @@ void measureSegmentMotion(const Model& model, const KinematicsData& kin, Distanc
     const double turn = prim.link >= 0 ? turnOf(X, X0) : seg_turn;
     const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
     const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
-    data.prim_motion[static_cast<std::size_t>(p)] =
-        m == m ? m : std::numeric_limits<double>::infinity();  // NaN: no carry
+    data.prim_odometer[static_cast<std::size_t>(p)] += m == m ? m : std::numeric_limits<double>::infinity();
   }
   data.last_X[static_cast<std::size_t>(seg.link)] = kin.X_B_L[static_cast<std::size_t>(seg.link)];
   for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k) {
@@ -853,12 +873,12 @@ void measureSegmentMotion(const Model& model, const KinematicsData& kin, Distanc
   }
 }
 
-/// A new call of the carried bounds: entries stamped by the last call may be carried, no older one.
+/// A new call of the carried bounds (the searches counted from here).
 void nextCarryCall(DistanceData& data) {
   data.num_piece_searches = 0;
-  if (++data.cycle == 0) {  // wrapped: no old stamp may pass for the last call's
-    std::fill(data.pp_stamp.begin(), data.pp_stamp.end(), 0U);
-    data.cycle = 2;
+  if (++data.search_call == 0) {  // wrapped: no old entry may pass for this call's
+    for (DistanceData::UpperSearch& u : data.upper_search) u.call = 0;
+    data.search_call = 1;
   }
 }
 
@@ -922,7 +942,8 @@ void broadPhase(DistanceData& data, const DistanceOptions& options, Sweep& sw) {
 /// Step 3: the core closest points of the exact pairs' primitive pairs, in one tight loop over a flat
 /// list (independent iterations: the long sqrt / division latency chains of neighbouring pairs
 /// overlap; the AVX2 kernel runs four at a time).
-void coreDistancesOfExactPairs(const Model& model, DistanceData& data, const DistanceOptions& options, Sweep& sw) {
+void coreDistancesOfExactPairs(const Model& model, const KinematicsData& kin, DistanceData& data,
+                               const DistanceOptions& options, Sweep& sw) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   sw.list_a = data.pp_a.data();
   sw.list_b = data.pp_b.data();
@@ -945,7 +966,11 @@ void coreDistancesOfExactPairs(const Model& model, DistanceData& data, const Dis
         const SegmentPair& pair = model.pairs[i];
         const Segment& sa = model.segments[pair.a];
         const Segment& sb = model.segments[pair.b];
-        listNearPairs(data, i, sa, pair.a, sb, pair.b, prune_distance, floor, [&](int pa, int pb, int pp) {
+        // Only primitive pairs that can beat an upper bound of the pair's distance can win: one
+        // primitive pair's exact distance (last call's winner), when it is below prune_distance.
+        const double upper = upperBoundOfPair(model, kin, data, i, sa, sb, sa.link, sb.link);
+        const double within = std::min(prune_distance, upper + kListMargin);
+        listNearPairs(data, i, sa, pair.a, sb, pair.b, within, floor, [&](int pa, int pb, int pp) {
           data.list_a[nlist] = pa;
           data.list_b[nlist] = pb;
           data.list_pp[static_cast<std::size_t>(nlist++)] = pp;
@@ -1020,12 +1045,7 @@ void finishExactPairs(const Model& model, const KinematicsData& kin, DistanceDat
                            prune ? options.prune_distance : kInf, floor, [&](auto&& f) {
                              for (int k = begin; k < end; ++k) {
                                const int pp = sw.listed ? data.list_pp[static_cast<std::size_t>(k)] : k;
-                               const double carried = data.pp_stamp[static_cast<std::size_t>(pp)] + 1 == data.cycle
-                                                          ? data.pp_lower[static_cast<std::size_t>(pp)] -
-                                                                data.prim_motion[static_cast<std::size_t>(list_a[k])] -
-                                                                data.prim_motion[static_cast<std::size_t>(list_b[k])] -
-                                                                kCarryMargin
-                                                          : -kInf;
+                               const double carried = carriedBound(data, pp, list_a[k], list_b[k]);
                                f(list_a[k], list_b[k], data.pp_core[k] - radius[list_a[k]] - radius[list_b[k]],
                                  data.pp_core[k], data.pp_s[k], data.pp_t[k], pp, carried);
                              }
@@ -1101,7 +1121,7 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   measurePrimitiveMotion(model, kin, data);
   // 2.-4. The robot pairs: broad phase, core distances, then each kept pair exactly.
   broadPhase(data, options, sw);
-  coreDistancesOfExactPairs(model, data, options, sw);
+  coreDistancesOfExactPairs(model, kin, data, options, sw);
   finishExactPairs(model, kin, data, options, sw);
   // 5. The body-schema slots' pairs.
   const bool any_slot = computeSlotPairs(model, kin, slots, data, options);

@@ -165,15 +165,14 @@ struct DistanceData {
   std::vector<int> kept_a, kept_b, kept_a2, kept_b2;
   std::vector<int> list_pp;  ///< per list entry, its index in pp_a / pp_b
   // Carried bounds (the tight model): per primitive pair (pp index), a lower bound of its distance at
-  // the poses of the call stamped `pp_stamp` (the `cycle` count of computeSegmentDistances calls);
-  // the links' poses of the last call, and how far each primitive can have moved since (m). A bound
-  // from the last call, less both primitives' motion, bounds the distance now: a primitive pair
-  // proven far last cycle is skipped without a search. Only the work depends on them.
+  // the poses of the call that last computed it plus both primitives' odometers then (-inf: none);
+  // per primitive its odometer, the sum of how far it can have moved between the calls that placed
+  // it (m), and the links' poses of the call that last placed them. The stored value less both
+  // odometers now bounds the distance now, however many calls ago it was computed: a primitive pair
+  // proven far is skipped without a search. Only the work depends on them.
   std::vector<double> pp_lower;
-  std::vector<std::uint32_t> pp_stamp;
-  std::uint32_t cycle = 1;  ///< never 1 + a stamp of an entry not written by the last call
+  std::vector<double> prim_odometer;
   std::vector<Eigen::Isometry3d> last_X;
-  std::vector<double> prim_motion;
   /// Exact convex-distance searches (computeConvexDistance calls) since the last
   /// computeSegmentDistances began: the narrow phase's work (benchmarks and tests read it).
   int num_piece_searches = 0;
@@ -196,6 +195,18 @@ struct DistanceData {
   /// Per pair of the tight model: the primitive pair that gave its distance last time ({-1, -1}: none
   /// yet), tried first next time. Only the work depends on it, never the result.
   std::vector<std::array<int, 2>> piece_winner;
+  /// Per pair: the exact search of one primitive pair that bounded its distance from above (its
+  /// listing is cut there) during call `call` (search_call counts the calls), reused when that
+  /// primitive pair is evaluated in the same call instead of searching it again.
+  struct UpperSearch {
+    int pa = -1, pb = -1;
+    std::uint32_t call = 0;
+    std::uint8_t outcome = 0;
+    double d = 0.0;
+    Eigen::Vector3d p_a = Eigen::Vector3d::Zero(), p_b = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::UnitZ();
+  };
+  std::vector<UpperSearch> upper_search;
+  std::uint32_t search_call = 1;
   /// The kernel computeSegmentDistances runs (fastestSweepKernel() unless set: tests run both).
   SweepKernel kernel = fastestSweepKernel();
   std::vector<int> robot_pairs, slot_pairs;  ///< indices into pairs
