@@ -481,6 +481,22 @@ inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin,
   return PieceOutcome::kApart;
 }
 
+/// pieceDistance of primitives pa, pb of pair i, or, when upperBoundOfPair searched that primitive
+/// pair in full this call, its result (the same bits: a search only stops earlier above stop_above).
+inline PieceOutcome searchOrReuse(const Model& model, const KinematicsData& kin, DistanceData& data, int i, int pa,
+                                  int pb, int link_a, int link_b, double stop_above, const Eigen::Vector3d& towards_b,
+                                  double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b, Eigen::Vector3d& n) {
+  const DistanceData::UpperSearch& u = data.upper_search[static_cast<std::size_t>(i)];
+  if (u.call == data.search_call && u.pa == pa && u.pb == pb) {
+    PieceOutcome o = static_cast<PieceOutcome>(u.outcome);
+    d = u.d, p_a = u.p_a, p_b = u.p_b, n = u.n;
+    if (o == PieceOutcome::kApart && d > stop_above) o = PieceOutcome::kAbove;  // as a search stopped there
+    return o;
+  }
+  ++data.num_piece_searches;
+  return pieceDistance(model, kin, data, pa, pb, link_a, link_b, stop_above, towards_b, d, p_a, p_b, n);
+}
+
 /// Pair i of the tight model: the least exact distance over its primitive pairs, visited by
 /// `each(f)` calling f(pa, pb, capsule distance, core distance, s, t) for each. The primitive pair of
 /// the smallest capsule distance (a lower bound of the exact one) goes first; of the rest only those
@@ -541,17 +557,8 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     const SegmentB& A = data.prim_B[static_cast<std::size_t>(pa)];
     const SegmentB& B = data.prim_B[static_cast<std::size_t>(pb)];
     const Eigen::Vector3d towards_b = (B.start + c.t * B.d) - (A.start + c.s * A.d);
-    const double stop_above = cap_pa >= 0 ? best : give_up;
-    PieceOutcome o;
-    const DistanceData::UpperSearch& u = data.upper_search[static_cast<std::size_t>(i)];
-    if (u.call == data.search_call && u.pa == pa && u.pb == pb) {  // searched in full this call
-      o = static_cast<PieceOutcome>(u.outcome);
-      d = u.d, p_a = u.p_a, p_b = u.p_b, n = u.n;
-      if (o == PieceOutcome::kApart && d > stop_above) o = PieceOutcome::kAbove;  // as a search stopped there
-    } else {
-      ++data.num_piece_searches;
-      o = pieceDistance(model, kin, data, pa, pb, link_a, link_b, stop_above, towards_b, d, p_a, p_b, n);
-    }
+    const PieceOutcome o = searchOrReuse(model, kin, data, i, pa, pb, link_a, link_b, cap_pa >= 0 ? best : give_up,
+                                         towards_b, d, p_a, p_b, n);
     c.lower = o == PieceOutcome::kTouching ? 0.0 : std::max(c.lower, d);
     if (o == PieceOutcome::kAbove) {
       floor = std::min(floor, d);
