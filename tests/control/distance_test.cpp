@@ -406,6 +406,24 @@ TEST(DistanceBroadPhase, PrunedSweepEqualsBruteForceOnTheTightModel) {
   checkBroadPhase(m, 0.02, 300, 26);
 }
 
+/// A trajectory of small steps: each call moves `fraction` of the way to a random configuration,
+/// and every `jump_every`-th call jumps to it.
+struct Trajectory {
+  Trajectory(const Model& model, unsigned seed, int jump_every, double fraction)
+      : m(model), rng(seed), q(test::randomConfiguration(model, rng)), every(jump_every), step(fraction) {}
+  const Eigen::VectorXd& next() {
+    const Eigen::VectorXd target = test::randomConfiguration(m, rng);
+    q = calls++ % every == 0 ? target : Eigen::VectorXd(q + step * (target - q));
+    return q;
+  }
+  const Model& m;
+  std::mt19937_64 rng;
+  Eigen::VectorXd q;
+  int every;
+  double step;
+  int calls = 0;
+};
+
 /// What a DistanceData carries from one call to the next (the last winner of each pair, each primitive
 /// pair's lower bound less how far its pieces moved) changes the work, never the result: along a
 /// trajectory of small steps (where the carried bounds skip searches) with a jump every 20 cycles,
@@ -419,13 +437,10 @@ TEST(DistanceTightModel, ResultsDoNotDependOnEarlierCycles) {
     options.row_threshold = 0.04;
     options.prune_distance = prune;
     DistanceData reused(m);
-    std::mt19937_64 rng(41);
-    Eigen::VectorXd q = test::randomConfiguration(m, rng);
+    Trajectory path(m, 41, 20, 0.02);
     long compared = 0, bounded = 0, searches_reused = 0, searches_fresh = 0;
     for (int c = 0; c < 300; ++c) {
-      const Eigen::VectorXd target = test::randomConfiguration(m, rng);
-      q = c % 20 == 0 ? target : Eigen::VectorXd(q + 0.02 * (target - q));
-      ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+      ASSERT_TRUE(computeForwardKinematics(m, kin, path.next()));
       DistanceData fresh(m), exact(m);
       computeSegmentDistances(m, kin, reused, options);
       computeSegmentDistances(m, kin, fresh, options);
@@ -522,13 +537,10 @@ TEST(DistanceListedPairs, CarriedBoundsChangeNoResultAlongATrajectory) {
   no_rows.row_threshold = -std::numeric_limits<double>::infinity();
   for (const double give_up : {0.06, std::numeric_limits<double>::infinity()}) {
     DistanceData reused(m);
-    std::mt19937_64 rng(43);
-    Eigen::VectorXd q = test::randomConfiguration(m, rng);
+    Trajectory path(m, 43, 40, 0.01);
     long compared = 0, bounded = 0, searches_reused = 0, searches_fresh = 0;
     for (int c = 0; c < 400; ++c) {
-      const Eigen::VectorXd target = test::randomConfiguration(m, rng);
-      q = c % 40 == 0 ? target : Eigen::VectorXd(q + 0.01 * (target - q));
-      ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+      ASSERT_TRUE(computeForwardKinematics(m, kin, path.next()));
       if (c % 7 == 3) computeSegmentDistances(m, kin, reused.slots, reused, no_rows);
       DistanceData fresh(m);
       computeListedPairDistances(m, kin, reused.slots, reused, pairs.data(), static_cast<int>(pairs.size()), give_up);
