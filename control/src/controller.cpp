@@ -722,12 +722,9 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
   // Only whether a pair ends below d_r + predict_margin matters (predictiveGuard): a pair of the tight
   // model proven above it is left a lower bound (above it too: never a hit, the same outcome).
   const double floor = cm.params.d_r + cm.params.predict_margin;
-  if (cm.broad_phase)  // the primitive pairs listed once this cycle (predictiveGuard)
-    computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(),
-                               data.num_guard_pairs, floor, data.guard_listing);
-  else
-    computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(),
-                               data.num_guard_pairs, floor);
+  // With the broad phase, the primitive pairs predictiveGuard listed once this cycle.
+  computeListedPairDistances(model, data.kin_next, data.dist.slots, out, data.guard_pairs.data(), data.num_guard_pairs,
+                             floor, cm.broad_phase ? &data.guard_listing : nullptr);
 }
 
 /// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's

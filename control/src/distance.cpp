@@ -690,8 +690,8 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
     if (robot && bounds_fresh && !(give_up < std::numeric_limits<double>::infinity()))
       within = upperBoundOfPair(model, kin, data, i, sa, sb, link_a, link_b);
     const bool filter = robot && within < std::numeric_limits<double>::infinity();
-    // With `carry` (a listed robot pair), each primitive pair's lower bound from the last call on
-    // `data`, less how far its two primitives have moved since (measureSegmentMotion), is offered.
+    // With `carry` (a listed robot pair, its primitives measured this call), each primitive pair's
+    // carried lower bound (carriedBound: less how far its primitives moved since) is offered.
     auto offer = [&](auto&& f, int pa, int pb, int pp) {
       double s, t;
       const double core = detail::coreDistance(prim[pa], prim[pb], s, t);
@@ -704,7 +704,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
     double floor;
     const bool finished = finishPiecePair(model, kin, data, options, i, link_a, link_b, give_up, floor, [&](auto&& f) {
       if (listed) {
-        const int first = listing->begin[static_cast<std::size_t>(i)];
+        const int first = data.pp_begin[static_cast<std::size_t>(i)];
         const int end = first + listing->count[static_cast<std::size_t>(i)];
         for (int k = first; k < end; ++k)
           offer(f, listing->pa[static_cast<std::size_t>(k)], listing->pb[static_cast<std::size_t>(k)],
@@ -880,8 +880,8 @@ void measureSegmentMotion(const Model& model, const KinematicsData& kin, Distanc
   }
 }
 
-/// A new call of the carried bounds (the searches counted from here).
-void nextCarryCall(DistanceData& data) {
+/// A new call: the searches counted from here; an upper bound's search of an earlier call is not reused.
+void nextSearchCall(DistanceData& data) {
   data.num_piece_searches = 0;
   if (++data.search_call == 0) {  // wrapped: no old entry may pass for this call's
     for (DistanceData::UpperSearch& u : data.upper_search) u.call = 0;
@@ -892,7 +892,7 @@ void nextCarryCall(DistanceData& data) {
 /// Step 1, the tight model: how far each robot primitive can have moved since the last call, so a
 /// lower bound from then, less both primitives' motion, is a lower bound now.
 void measurePrimitiveMotion(const Model& model, const KinematicsData& kin, DistanceData& data) {
-  nextCarryCall(data);
+  nextSearchCall(data);
   if (model.pieces.empty()) return;
   for (int s = 0; s < model.num_robot_segments; ++s) measureSegmentMotion(model, kin, data, s);
   data.last_X = kin.X_B_L;  // no allocation: the same size every call
@@ -1146,10 +1146,9 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   data.closest = closest.pair;
 }
 
-namespace {
-
-void listedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                         DistanceData& data, const int* pairs, int count, double give_up, const PairListing* listing) {
+void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
+                                DistanceData& data, const int* pairs, int count, double give_up,
+                                const PairListing* listing) {
   assert(data.pairs.size() == model.pairs.size());
   // Each segment of the listed pairs into B once: a stamp per segment marks this call's.
   if (++data.segment_stamp_now == 0) {  // wrapped: no stale stamp may equal the new one
@@ -1157,9 +1156,9 @@ void listedPairDistances(const Model& model, const KinematicsData& kin, const Bo
     data.segment_stamp_now = 1;
   }
   const std::uint32_t now = data.segment_stamp_now;
-  // Lower bounds carried from the last call on `data` (the guard's predictions of one cycle differ
+  // Lower bounds are carried from earlier calls on `data` (the guard's predictions of one cycle differ
   // by a fraction of a step): a primitive pair proven far then is skipped without a search.
-  nextCarryCall(data);
+  nextSearchCall(data);
   DistanceOptions no_rows;
   no_rows.row_threshold = -std::numeric_limits<double>::infinity();
   for (int k = 0; k < count; ++k) {
@@ -1186,32 +1185,18 @@ void listedPairDistances(const Model& model, const KinematicsData& kin, const Bo
   }
 }
 
-}  // namespace
-
-void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                                DistanceData& data, const int* pairs, int count, double give_up) {
-  listedPairDistances(model, kin, slots, data, pairs, count, give_up, nullptr);
-}
-
-void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                                DistanceData& data, const int* pairs, int count, double give_up,
-                                const PairListing& listing) {
-  listedPairDistances(model, kin, slots, data, pairs, count, give_up, &listing);
-}
-
 PairListing::PairListing(const Model& model)
     : count(model.pairs.size(), -1), floor(model.pairs.size(), std::numeric_limits<double>::infinity()) {
-  int total = 0;
+  std::size_t total = 0;  // every robot pair's primitive pairs (DistanceData::pp_a's size)
   for (const SegmentPair& p : model.pairs) {
-    begin.push_back(total);
     const Segment& sa = model.segments[p.a];
     const Segment& sb = model.segments[p.b];
-    if (!sa.body_schema_slot && !sb.body_schema_slot) total += sa.num_primitives * sb.num_primitives;
+    if (!sa.body_schema_slot && !sb.body_schema_slot)
+      total += static_cast<std::size_t>(sa.num_primitives) * static_cast<std::size_t>(sb.num_primitives);
   }
-  begin.push_back(total);
-  pa.assign(static_cast<std::size_t>(total), 0);
-  pb.assign(static_cast<std::size_t>(total), 0);
-  pp.assign(static_cast<std::size_t>(total), 0);
+  pa.assign(total, 0);
+  pb.assign(total, 0);
+  pp.assign(total, 0);
 }
 
 void listPairsNear(const Model& model, DistanceData& now, const int* pairs, int count, double give_up,
@@ -1227,7 +1212,7 @@ void listPairsNear(const Model& model, DistanceData& now, const int* pairs, int 
     if (sa.body_schema_slot || sb.body_schema_slot || !now.pair_has_piece[static_cast<std::size_t>(i)] ||
         sa.num_primitives * sb.num_primitives <= 4 || !(reach[k] >= 0.0))
       continue;
-    const int first = out.begin[static_cast<std::size_t>(i)];
+    const int first = now.pp_begin[static_cast<std::size_t>(i)];
     double left_out = std::numeric_limits<double>::infinity();
     n = 0;
     listNearPairs(now, i, sa, pair.a, sb, pair.b, give_up + reach[k], left_out, [&](int a, int b, int p) {

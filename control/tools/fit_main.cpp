@@ -31,13 +31,13 @@ int main(int argc, char** argv) {
   app.add_option("--max-primitives", options.max_primitives, "most primitives per link")->check(CLI::Range(1, 16));
   app.add_option("--split-ratio", options.split_ratio,
                  "split a link while fitted volume / convex-hull volume is above this")
-      ->check(CLI::Range(1.0, 100.0));
+      ->check(reflex::FiniteRange(1.0, 100.0));
   app.add_option("--max-pieces", options.max_pieces,
                  "tight model: most convex pieces per link while a piece's gap is above --piece-gap")
       ->check(CLI::Range(1, 256));
   app.add_option("--piece-gap", options.piece_gap,
                  "tight model: a piece is cut while its surface stands off the mesh by more than this (m)")
-      ->check(CLI::Range(0.0005, 0.1));
+      ->check(reflex::FiniteRange(0.0005, 0.1));
   app.add_flag("-q,--quiet", quiet, "no per-link progress lines");
   return reflex::runMain("reflex_fit", app, argc, argv, [&]() -> int {
     const reflex::control::PackagePaths paths = reflex::control::parsePackagePathArgs(package_args);

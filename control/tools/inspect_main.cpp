@@ -239,7 +239,7 @@ int run(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--always-fraction", sampling.always_fraction,
                  "--sample-pairs: 'always in collision' means penetrating in at least this fraction of samples")
-      ->check(CLI::Range(1e-9, 1.0));
+      ->check(reflex::FiniteRange(1e-9, 1.0));
   app.add_option("--write", write_path, "--sample-pairs: write the proposal to this file instead of standard output");
   app.add_flag("--force", force, "--write may replace an existing file");
   if (const int code = reflex::parseCommandLine(app, argc, argv); code >= 0) return code;

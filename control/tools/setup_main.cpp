@@ -146,9 +146,9 @@ void addOptions(CLI::App& app, Args& a) {
   app.add_option("--gap-tolerance", a.o.gap_tolerance,
                  "m: an arm skeleton point farther than this from the arm's "
                  "primitives is a gap")
-      ->check(CLI::Range(0.001, 0.5));
+      ->check(reflex::FiniteRange(0.001, 0.5));
   app.add_option("--rest-margin", a.o.rest_margin, "m: the rest posture clears every arm pair by d_a + this")
-      ->check(CLI::Range(0.0, 0.2));
+      ->check(reflex::FiniteRange(0.0, 0.2));
   app.add_flag("--close-gaps", a.close_gaps,
                "write DIR/<stem>.urdf, a copy of the URDF with the capsules that close "
                "the gaps, and configure the robot from it");

@@ -296,21 +296,21 @@ void addOptions(CLI::App& app, SimArgs& a) {
                  "--robot unitree_hg: the joint map YAML (default: <URDF stem>.hg.yaml beside the URDF)");
   app.add_option("--ramp-time", a.ramp_time, "--robot unitree_hg: seconds of the arm_sdk weight's ramp in and out")
       ->capture_default_str()
-      ->check(CLI::Range(1e-3, 60.0));
+      ->check(reflex::FiniteRange(1e-3, 60.0));
   app.add_option("--domain", a.domain,
                  "DDS domain id of the robot (--robot mujoco: default 197; dds: $REFLEX_DOMAIN_ID or 0)")
       ->check(CLI::Range(0, reflex::bus::kMaxDomainId));
   app.add_option("--robot-timeout", a.robot_timeout,
                  "seconds after which the newest robot state is stale (mujoco, dds): nothing is commanded; (0, 1]")
       ->capture_default_str()
-      ->check(CLI::Range(1e-4, 1.0));
+      ->check(reflex::FiniteRange(1e-4, 1.0));
   app.add_option("--command-deadline", a.command_deadline,
                  "seconds each joint command stays valid (mujoco, dds); (0, 1]")
       ->capture_default_str()
-      ->check(CLI::Range(1e-4, 1.0));
+      ->check(reflex::FiniteRange(1e-4, 1.0));
   app.add_option("--robot-wait", a.robot_wait, "seconds to wait for the robot's first state (mujoco, dds); (0, 600]")
       ->capture_default_str()
-      ->check(CLI::Range(1e-3, 600.0));
+      ->check(reflex::FiniteRange(1e-3, 600.0));
 }
 
 /// --postures-from: OUT/postures.csv for rows of a time series, instead of simulating.

@@ -71,7 +71,7 @@ void runCycles(const char* robot) {
     computeListedPairDistances(model, kin, dist.slots, scratch, listed.data(), static_cast<int>(listed.size()), 0.02);
     listPairsNear(model, dist, listed.data(), static_cast<int>(listed.size()), 0.02, reach.data(), listing);
     computeListedPairDistances(model, kin, dist.slots, scratch, listed.data(), static_cast<int>(listed.size()), 0.02,
-                               listing);
+                               &listing);
     computeForwardKinematics(model, kin_near, qs[(i + 1) % 50], &kin);
     computePointJacobian(model, kin, hand, kin.X_B_L[hand].translation(), J);
     computeRelativeJacobian(model, kin, hand, kin.X_B_L[hand].translation(), head, kin.X_B_L[head].translation(), J);

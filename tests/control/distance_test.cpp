@@ -612,7 +612,7 @@ TEST(DistanceListedPairs, APairListedOnceComesOutAsWithoutTheListingWithinItsRea
     listPairsNear(m, now, pairs.data(), static_cast<int>(pairs.size()), kGiveUp, reach.data(), listing);
     DistanceData with(m), without(m);
     computeListedPairDistances(m, kin1, with.slots, with, pairs.data(), static_cast<int>(pairs.size()), kGiveUp,
-                               listing);
+                               &listing);
     computeListedPairDistances(m, kin1, without.slots, without, pairs.data(), static_cast<int>(pairs.size()), kGiveUp);
     for (std::size_t i = 0; i < m.pairs.size(); ++i) {
       const PairDistance& w = with.pairs[i];

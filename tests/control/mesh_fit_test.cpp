@@ -32,6 +32,7 @@
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/distance.h>
 #include <gmock/gmock.h>
+#include <sys/wait.h>
 #include <gtest/gtest.h>
 #include <tinyxml2.h>
 #include <yaml-cpp/yaml.h>
@@ -312,6 +313,29 @@ TEST(MeshFit, GeneratorAndReflexFitReproduceTheCommittedFilesByteForByte) {
                           " -q > /dev/null";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   EXPECT_EQ(readFile(out), readFile(testing::robotPath("mesh_humanoid.fit.yaml")));
+}
+
+/// Every number option of reflex_fit refuses what is out of range or not a number (exit 2, the
+/// value named, nothing written): CLI11's Range alone let `nan` through to the fit.
+TEST(MeshFit, ReflexFitRefusesANumberOptionOutOfRangeOrNotFinite) {
+  TempDir dir;
+  const std::string out = dir / "out.fit.yaml";
+  for (const std::string arg : {"--piece-gap nan", "--piece-gap 0", "--piece-gap inf", "--split-ratio nan",
+                                "--split-ratio 0.5", "--max-pieces 0", "--piece-gap x"}) {
+    const std::string cmd =
+        std::string(REFLEX_FIT) + " " + testing::robotPath("mesh_humanoid.urdf") + " " + arg + " -o " + out + " 2>&1";
+    FILE* pipe = popen(cmd.c_str(), "r");
+    ASSERT_NE(pipe, nullptr);
+    std::string text;
+    char buf[512];
+    while (std::fgets(buf, sizeof buf, pipe)) text += buf;
+    const int status = pclose(pipe);
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << arg << ": " << text;
+    const std::string value = arg.substr(arg.find(' ') + 1);
+    EXPECT_NE(text.find(arg.substr(0, arg.find(' '))), std::string::npos) << arg << ": " << text;
+    EXPECT_NE(text.find("Value " + value), std::string::npos) << arg << ": " << text;
+    EXPECT_FALSE(fs::exists(out)) << arg;
+  }
 }
 
 /// A one-link robot with the given collision XML, in `dir`.

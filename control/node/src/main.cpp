@@ -91,7 +91,7 @@ void addOptions(CLI::App& app, Options& o) {
                  "--robot unitree_hg: seconds for the arm_sdk weight to rise from 0 to 1 after the first command "
                  "and to fall back to 0 after the last cycle (the exit waits for it); (0, 60]")
       ->capture_default_str()
-      ->check(CLI::Range(1e-3, 60.0));
+      ->check(reflex::FiniteRange(1e-3, 60.0));
   app.add_option(
          "--robot-timeout", config.robot_timeout,
          "seconds (system clock, against the state's stamp) after which the newest robot state is stale "

@@ -62,7 +62,7 @@ int main(int argc, char** argv) {
     sub->add_option("-w,--window", window,
                     "seconds to listen (at least 3.5: every process announces itself at least every 3 s; "
                     "list then listens up to 5 s more while a process it found has not been heard)")
-        ->check(CLI::Range(0.1, 3600.0))
+        ->check(reflex::FiniteRange(0.1, 3600.0))
         ->capture_default_str();
     bus_options.add(*sub);
   }

@@ -174,7 +174,7 @@ struct DistanceData {
   std::vector<double> prim_odometer;
   std::vector<Eigen::Isometry3d> last_X;
   /// Exact convex-distance searches (computeConvexDistance calls) since the last
-  /// computeSegmentDistances began: the narrow phase's work (benchmarks and tests read it).
+  /// computeSegmentDistances or computeListedPairDistances began: the narrow phase's work (benchmarks and tests read it).
   int num_piece_searches = 0;
   // The tight model (Primitive::piece): per pair, whether a primitive of either segment is a convex
   // piece (the pair's distance is then the least over its primitive pairs of computeConvexDistance on
@@ -188,7 +188,7 @@ struct DistanceData {
   struct PieceCandidate {
     double bound, core, s, t;
     int pa, pb;
-    int pp;        ///< its index in pp_a / pp_b (-1: not from the sweep's list: nothing carried)
+    int pp;        ///< its index in pp_a / pp_b (-1: nothing carried: a slot pair or a refinement)
     double lower;  ///< its lower bound at this call's poses (the bound, or what its search proved)
   };
   std::vector<PieceCandidate> piece_candidates;
@@ -288,9 +288,9 @@ struct PairListing {
   /// Per pair (index into Model::pairs): how many primitive pairs are listed, -1 if the pair is not
   /// listed (it is then computed as without a listing).
   std::vector<int> count;
-  /// Per pair, its listed primitives and primitive-pair index at [pp_begin(pair), + count).
+  /// Per pair i, its listed primitives and primitive-pair index at [DistanceData::pp_begin[i], + count)
+  /// (within the range of its primitive pairs, the same in every DistanceData of the model).
   std::vector<int> pa, pb, pp;
-  std::vector<int> begin;  ///< per pair: where its entries start (its primitive pairs' range)
   /// Per pair: a lower bound of the distance of every primitive pair left out, at any configuration
   /// within the reach (m).
   std::vector<double> floor;
@@ -305,16 +305,13 @@ struct PairListing {
 void listPairsNear(const Model& model, DistanceData& now, const int* pairs, int count, double give_up,
                    const double* reach, PairListing& out);
 
+/// With `listing` (made by listPairsNear with the same give_up, valid for `kin`: no point moved
+/// farther than its reach since), a listed pair offers only its listed primitive pairs: the same
+/// result (an inexact distance may be a different lower bound above give_up).
 void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
                                 DistanceData& data, const int* pairs, int count,
-                                double give_up = std::numeric_limits<double>::infinity());
-
-/// The same with a listing made by listPairsNear with the same give_up, valid for `kin` (no point
-/// moved farther than its reach since): a listed pair offers only its listed primitive pairs (the
-/// same result; an inexact distance may be a different lower bound above give_up).
-void computeListedPairDistances(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots,
-                                DistanceData& data, const int* pairs, int count, double give_up,
-                                const PairListing& listing);
+                                double give_up = std::numeric_limits<double>::infinity(),
+                                const PairListing* listing = nullptr);
 
 /// Computes pair `pair` exactly (after computeSegmentDistances for the same kinematics and options):
 /// for a pair the broad phase skipped, the result computeSegmentDistances gives without pruning

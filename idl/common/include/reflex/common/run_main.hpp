@@ -13,10 +13,26 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cmath>
 #include <cstdio>
 #include <exception>
+#include <string>
 
 namespace reflex {
+
+/// A number option's check: finite and within [lo, hi] (CLI::Range alone lets `nan` through, since
+/// every comparison with it is false). The message names the value and the range.
+inline CLI::Validator FiniteRange(double lo, double hi) {
+  return CLI::Validator(
+      [lo, hi](std::string& text) {
+        double v = 0.0;
+        if (!CLI::detail::lexical_cast(text, v)) return "Value " + text + " is not a number";
+        if (!std::isfinite(v) || v < lo || v > hi)
+          return "Value " + text + " not in range " + std::to_string(lo) + " to " + std::to_string(hi);
+        return std::string();
+      },
+      "FLOAT in [" + CLI::detail::to_string(lo) + " - " + CLI::detail::to_string(hi) + "]");
+}
 
 /// Parses argc/argv into `app`: -1 to go on, else the exit code to return at once (0 after --help or
 /// --version, 2 after a command-line error; CLI11 has printed the text).
