@@ -17,6 +17,8 @@ using MatA3 = TaskJacobianInverse;
 using RowA = ArmRow;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+/// The predictive guard shortens a hit arm's step at least this much per try (predictiveGuard).
+constexpr double kGuardShrink = 0.5;
 
 /// The arm (kLeft / kRight) that moves segment s this cycle, or -1 (ControllerModel's ownership; a
 /// body-schema slot belongs to the arm of the link it hangs on).
@@ -730,10 +732,13 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
 /// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's
 /// closest physical pair (computeControl's red-zone check). The two filters inside
 /// computeArm bound the approach to first order; this one checks the step itself. Each arm's step is
-/// halved (at most six times, then dropped) while, one period ahead, some physical pair of that arm
-/// would end below d_r + predict_margin AND closer than it is now and than it would be if the arms
-/// held still (so walking motion that no arm step can undo is not blamed on the arms). On the
-/// kinematic robot the prediction is exact for the arms, so no arm motion ever enters the red zone.
+/// shortened (at most six times, each to at most half, then dropped) while, one period ahead, some
+/// physical pair of that arm would end below d_r + predict_margin AND closer than it is now and than
+/// it would be if the arms held still (so walking motion that no arm step can undo is not blamed on
+/// the arms). Each try aims where the hit pairs, taken as straight from now to the step, end at what
+/// they may: an arm pressed at the floor gets a tiny step after two predictions and the hold, not
+/// after eight. On the kinematic robot the prediction is exact for the arms, so no arm motion ever
+/// enters the red zone.
 void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerData& data,
                      const Eigen::Ref<const Eigen::VectorXd>& q, double d_phys) {
   const ControllerParams& params = cm.params;
@@ -821,6 +826,7 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
   for (int iter = 0; iter < 8; ++iter) {
     predict(model, cm, data, q, scale, data.dist_next);
     std::array<bool, 2> hit{false, false};
+    std::array<double, 2> shrink{kGuardShrink, kGuardShrink};  // each hit arm's next scale / this one
     for (int k = 0; k < data.num_guard_pairs; ++k) {
       const std::size_t i = static_cast<std::size_t>(data.guard_pairs[static_cast<std::size_t>(k)]);
       const PairDistance& pn = data.dist_next.pairs[i];
@@ -837,13 +843,26 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
         predict(model, cm, data, q, zero, data.dist_hold);
         have_hold = true;
       }
-      if (!(pn.distance < data.dist_hold.pairs[i].distance)) continue;  // no worse than holding still
-      if (owner_a >= 0) hit[owner_a] = true;
-      if (owner_b >= 0) hit[owner_b] = true;
+      const double held = data.dist_hold.pairs[i].distance;
+      if (!(pn.distance < held)) continue;  // no worse than holding still
+      // The pair is no hit at or above `least`. From now (scale 0) to this step its distance is taken
+      // as straight: the fraction of the step that ends at `least`, with a tenth to spare, is the next
+      // try (at most half: the search still ends within the iterations). Pressed at the floor that is
+      // almost zero at once. Only exact distances enter: `least` is below the floor, and the start is
+      // capped at d_b (within the sweep's prune distance, so exact with or without the broad phase).
+      const double least = std::min({floor, p0.distance, held});
+      const double start = std::min(p0.distance, params.d_b);
+      const double fraction = (start - least) / (start - pn.distance);
+      const double next = fraction >= 0.0 ? std::min(kGuardShrink, 0.9 * fraction) : kGuardShrink;
+      for (const int owner : {owner_a, owner_b}) {
+        if (owner < 0) continue;
+        hit[owner] = true;
+        shrink[owner] = std::min(shrink[owner], next);
+      }
     }
     if (!hit[0] && !hit[1]) break;
     for (int a = 0; a < 2; ++a)
-      if (hit[a]) scale[a] = iter < 6 ? 0.5 * scale[a] : 0.0;
+      if (hit[a]) scale[a] = iter < 6 ? shrink[a] * scale[a] : 0.0;
     if (scale[0] == 0.0 && scale[1] == 0.0) break;  // no arm moves: no pair can count as a hit
   }
   if (scale[0] < 1.0 || scale[1] < 1.0) {

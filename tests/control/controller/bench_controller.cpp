@@ -150,10 +150,19 @@ void BM_ControllerCycle(benchmark::State& state) {
   std::vector<std::uint32_t> state_of;  // per kept cycle, its state
   state_of.reserve(times.wall.capacity());
   std::size_t i = 0;
+  std::uint64_t cycles = 0, guard_pairs = 0;
+  const std::uint64_t guard_before = data.guard_count;
   for (auto _ : state) {
     times.time([&] { benchmark::DoNotOptimize(computeControl(model(), cm, data, qs[i], in)); }, [] { return true; });
     if (state_of.size() < times.wall.size()) state_of.push_back(static_cast<std::uint32_t>(i));
     i = (i + 1) % qs.size();
+    ++cycles;
+    guard_pairs += static_cast<std::uint64_t>(data.num_guard_pairs);
+  }
+  // How often the predictive guard shortened a step, and how many pairs it predicted per cycle.
+  if (cycles > 0) {
+    state.counters["guard_share"] = static_cast<double>(data.guard_count - guard_before) / static_cast<double>(cycles);
+    state.counters["guard_pairs"] = static_cast<double>(guard_pairs) / static_cast<double>(cycles);
   }
   reportInterruptions(state, times.wall, state_of);  // before reportPercentiles sorts the times
   reportPercentiles(state, times);
