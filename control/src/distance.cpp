@@ -195,6 +195,8 @@ DistanceData::DistanceData(const Model& model)
   }
   pp_lower.assign(pp_a.size(), -std::numeric_limits<double>::infinity());
   prim_odometer.assign(model.primitives.size(), 0.0);
+  pair_lower.assign(model.pairs.size(), -std::numeric_limits<double>::infinity());
+  seg_odometer.assign(model.segments.size(), 0.0);
   last_X.assign(model.links.size(), Eigen::Isometry3d::Identity());
   list_pp.assign(pp_a.size(), 0);
   kept_a.assign(most_primitives, 0);
@@ -863,6 +865,7 @@ void measureSegmentMotion(const Model& model, const KinematicsData& kin, Distanc
   };
   const double seg_turn =
       turnOf(kin.X_B_L[static_cast<std::size_t>(seg.link)], data.last_X[static_cast<std::size_t>(seg.link)]);
+  double most = 0.0;
   for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
     const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
     const std::size_t link = static_cast<std::size_t>(linkOf(seg, prim));  // a finger's own link
@@ -870,9 +873,12 @@ void measureSegmentMotion(const Model& model, const KinematicsData& kin, Distanc
     const Eigen::Isometry3d& X0 = data.last_X[link];
     const double turn = prim.link >= 0 ? turnOf(X, X0) : seg_turn;
     const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
-    const double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
-    data.prim_odometer[static_cast<std::size_t>(p)] += m == m ? m : std::numeric_limits<double>::infinity();
+    double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
+    m = m == m ? m : std::numeric_limits<double>::infinity();
+    data.prim_odometer[static_cast<std::size_t>(p)] += m;
+    most = std::max(most, m);
   }
+  data.seg_odometer[static_cast<std::size_t>(s)] += most;
   data.last_X[static_cast<std::size_t>(seg.link)] = kin.X_B_L[static_cast<std::size_t>(seg.link)];
   for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k) {
     const std::size_t l = static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)]);
@@ -925,7 +931,13 @@ void broadPhase(DistanceData& data, const DistanceOptions& options, Sweep& sw) {
     const double prune_distance = options.prune_distance;
     for (int r = 0; r < nrobot; ++r) {
       const int i = data.robot_pairs[static_cast<std::size_t>(r)];
-      const double gap = data.rp_gap[static_cast<std::size_t>(r)];
+      double gap = data.rp_gap[static_cast<std::size_t>(r)];
+      // A bound carried from an earlier sweep may be the better one (the tight model's far pairs).
+      const double carried = data.pair_lower[static_cast<std::size_t>(i)] -
+                             data.seg_odometer[static_cast<std::size_t>(data.rp_a[static_cast<std::size_t>(r)])] -
+                             data.seg_odometer[static_cast<std::size_t>(data.rp_b[static_cast<std::size_t>(r)])] -
+                             kCarryMargin;
+      gap = carried > gap ? carried : gap;  // a NaN gap stays NaN
       PairDistance& out = data.pairs[static_cast<std::size_t>(i)];
       out.active = true;
       out.exact = false;
@@ -1042,6 +1054,9 @@ void finishExactPairs(const Model& model, const KinematicsData& kin, DistanceDat
         out.distance = lower;
         pruned_floor = std::min(pruned_floor, lower);
         ++data.num_pruned_pairs;
+        if (lower < kInf)  // carried to the next sweeps (broadPhase)
+          data.pair_lower[static_cast<std::size_t>(i)] = lower + data.seg_odometer[static_cast<std::size_t>(pair.a)] +
+                                                         data.seg_odometer[static_cast<std::size_t>(pair.b)];
       };
       if (prune && listed > options.prune_distance) {  // none listed within it (or none listed: +inf)
         skip(std::min(bound, listed));

@@ -173,6 +173,13 @@ struct DistanceData {
   std::vector<double> pp_lower;
   std::vector<double> prim_odometer;
   std::vector<Eigen::Isometry3d> last_X;
+  // The same for whole pairs of the tight model: per pair, a lower bound of its distance from the
+  // sweep that last skipped it after a look at its pieces, plus both segments' odometers then (-inf:
+  // none); per segment, its odometer (the sum of the most any of its primitives moved at each
+  // measure). A pair whose carried bound is above the prune distance is skipped in the broad phase,
+  // with no search and no listing: far pairs stay skipped while they move less than their margin.
+  std::vector<double> pair_lower;
+  std::vector<double> seg_odometer;
   /// Exact convex-distance searches (computeConvexDistance calls) since the last
   /// computeSegmentDistances or computeListedPairDistances began: the narrow phase's work (benchmarks and tests read it).
   int num_piece_searches = 0;
