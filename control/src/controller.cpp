@@ -821,7 +821,11 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     listPairsNear(model, data.dist, data.guard_pairs.data(), data.num_guard_pairs, floor, data.guard_reach.data(),
                   data.guard_listing);
 
-  bool have_hold = false;
+  // Holding the arms still leaves the robot where it is unless walking or balance moves it: then the
+  // distances of holding still are this cycle's (a pair the sweep left as a lower bound is above the
+  // floor either way, so every comparison below comes out the same), and the hold is not predicted.
+  bool have_hold = false, hold_is_now = true;
+  for (int j = 0; j < model.nq; ++j) hold_is_now = hold_is_now && data.qdot_uncontrolled[j] == 0.0;
   std::array<double, 2> scale{1.0, 1.0};
   for (int iter = 0; iter < 8; ++iter) {
     predict(model, cm, data, q, scale, data.dist_next);
@@ -838,12 +842,12 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
       const int owner_b = ownerArm(model, cm, data.dist, pn.seg_b);
       const bool movable = (owner_a >= 0 && scale[owner_a] > 0.0) || (owner_b >= 0 && scale[owner_b] > 0.0);
       if (!movable) continue;
-      if (!have_hold) {
+      if (!have_hold && !hold_is_now) {
         const std::array<double, 2> zero{0.0, 0.0};
         predict(model, cm, data, q, zero, data.dist_hold);
         have_hold = true;
       }
-      const double held = data.dist_hold.pairs[i].distance;
+      const double held = hold_is_now ? p0.distance : data.dist_hold.pairs[i].distance;
       if (!(pn.distance < held)) continue;  // no worse than holding still
       // The pair is no hit at or above `least`. From now (scale 0) to this step its distance is taken
       // as straight: the fraction of the step that ends at `least`, with a tenth to spare, is the next
