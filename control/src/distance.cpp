@@ -484,12 +484,15 @@ inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin,
 }
 
 /// pieceDistance of primitives pa, pb of pair i, or, when upperBoundOfPair searched that primitive
-/// pair in full this call, its result (the same bits: a search only stops earlier above stop_above).
+/// pair this call, its result (the same bits: a search only stops earlier above stop_above), unless
+/// that search stopped above a bound not above this stop_above.
 inline PieceOutcome searchOrReuse(const Model& model, const KinematicsData& kin, DistanceData& data, int i, int pa,
                                   int pb, int link_a, int link_b, double stop_above, const Eigen::Vector3d& towards_b,
                                   double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b, Eigen::Vector3d& n) {
   const DistanceData::UpperSearch& u = data.upper_search[static_cast<std::size_t>(i)];
-  if (u.call == data.search_call && u.pa == pa && u.pb == pb) {
+  // A search that stopped above its own bound answers only a question about a bound below that.
+  if (u.call == data.search_call && u.pa == pa && u.pb == pb &&
+      (static_cast<PieceOutcome>(u.outcome) != PieceOutcome::kAbove || u.d > stop_above)) {
     PieceOutcome o = static_cast<PieceOutcome>(u.outcome);
     d = u.d, p_a = u.p_a, p_b = u.p_b, n = u.n;
     if (o == PieceOutcome::kApart && d > stop_above) o = PieceOutcome::kAbove;  // as a search stopped there
@@ -627,11 +630,13 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
   return true;
 }
 
-/// An upper bound of robot pair i's distance (+inf: none found): the exact distance of one of its
-/// primitive pairs, the one that won last time, else the primitives nearest the other segment's
-/// bounding sphere (this call's: the caller has them).
+/// An upper bound of robot pair i's distance (+inf: none found, or none at most `stop_above`): the
+/// exact distance of one of its primitive pairs, the one that won last time, else the primitives
+/// nearest the other segment's bounding sphere (this call's: the caller has them). A primitive pair
+/// proven farther than stop_above is not searched further (the caller's listing is cut there anyway).
 double upperBoundOfPair(const Model& model, const KinematicsData& kin, DistanceData& data, int i, const Segment& sa,
-                        const Segment& sb, int link_a, int link_b) {
+                        const Segment& sb, int link_a, int link_b,
+                        double stop_above = std::numeric_limits<double>::infinity()) {
   const std::array<int, 2>& w = data.piece_winner[static_cast<std::size_t>(i)];
   int pa = w[0], pb = w[1];
   if (pa < sa.first_primitive || pa >= sa.first_primitive + sa.num_primitives || pb < sb.first_primitive ||
@@ -661,11 +666,11 @@ double upperBoundOfPair(const Model& model, const KinematicsData& kin, DistanceD
   double d = 0.0;
   Eigen::Vector3d p_a = Eigen::Vector3d::Zero(), p_b = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::UnitZ();
   ++data.num_piece_searches;
-  const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b,
-                                       std::numeric_limits<double>::infinity(), towards_b, d, p_a, p_b, n);
+  const PieceOutcome o = pieceDistance(model, kin, data, pa, pb, link_a, link_b, stop_above, towards_b, d, p_a, p_b, n);
   data.upper_search[static_cast<std::size_t>(i)] = {pa,  pb, data.search_call, static_cast<std::uint8_t>(o), d, p_a,
                                                     p_b, n};
   if (o == PieceOutcome::kTouching) return 0.0;
+  if (o == PieceOutcome::kAbove) return std::numeric_limits<double>::infinity();
   return d == d ? d : std::numeric_limits<double>::infinity();
 }
 
@@ -987,7 +992,7 @@ void coreDistancesOfExactPairs(const Model& model, const KinematicsData& kin, Di
         const Segment& sb = model.segments[pair.b];
         // Only primitive pairs that can beat an upper bound of the pair's distance can win: one
         // primitive pair's exact distance (last call's winner), when it is below prune_distance.
-        const double upper = upperBoundOfPair(model, kin, data, i, sa, sb, sa.link, sb.link);
+        const double upper = upperBoundOfPair(model, kin, data, i, sa, sb, sa.link, sb.link, prune_distance);
         const double within = std::min(prune_distance, upper + kListMargin);
         listNearPairs(data, i, sa, pair.a, sb, pair.b, within, floor, [&](int pa, int pb, int pp) {
           data.list_a[nlist] = pa;

@@ -202,9 +202,10 @@ struct DistanceData {
   /// Per pair of the tight model: the primitive pair that gave its distance last time ({-1, -1}: none
   /// yet), tried first next time. Only the work depends on it, never the result.
   std::vector<std::array<int, 2>> piece_winner;
-  /// Per pair: the exact search of one primitive pair that bounded its distance from above (its
-  /// listing is cut there) during call `call` (search_call counts the calls), reused when that
-  /// primitive pair is evaluated in the same call instead of searching it again.
+  /// Per pair: the search of one primitive pair that bounded its distance from above (its listing is
+  /// cut there; or that stopped once it proved that primitive pair beyond the prune distance) during
+  /// call `call` (search_call counts the calls), reused when that primitive pair is evaluated in the
+  /// same call instead of searching it again.
   struct UpperSearch {
     int pa = -1, pb = -1;
     std::uint32_t call = 0;
