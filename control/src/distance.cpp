@@ -994,7 +994,14 @@ void coreDistancesOfExactPairs(const Model& model, const KinematicsData& kin, Di
         // primitive pair's exact distance (last call's winner), when it is below prune_distance.
         const double upper = upperBoundOfPair(model, kin, data, i, sa, sb, sa.link, sb.link, prune_distance);
         const double within = std::min(prune_distance, upper + kListMargin);
+        // A primitive pair whose carried bound is beyond `within` is left out too (its bound kept as it
+        // was): no core distance, no candidate.
         listNearPairs(data, i, sa, pair.a, sb, pair.b, within, floor, [&](int pa, int pb, int pp) {
+          const double carried = carriedBound(data, pp, pa, pb);
+          if (carried > within) {
+            floor = std::min(floor, carried);
+            return;
+          }
           data.list_a[nlist] = pa;
           data.list_b[nlist] = pb;
           data.list_pp[static_cast<std::size_t>(nlist++)] = pp;
