@@ -697,7 +697,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
     if (robot && bounds_fresh && !(give_up < std::numeric_limits<double>::infinity()))
       within = upperBoundOfPair(model, kin, data, i, sa, sb, link_a, link_b);
     const bool filter = robot && within < std::numeric_limits<double>::infinity();
-    // With `carry` (a listed robot pair, its primitives measured this call), each primitive pair's
+    // With `carry` (a listed pair or a refinement: its primitives measured this call), each primitive pair's
     // carried lower bound (carriedBound: less how far its primitives moved since) is offered.
     auto offer = [&](auto&& f, int pa, int pb, int pp) {
       double s, t;
@@ -719,9 +719,19 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
         return;
       }
       if (filter) {
+        // As the sweep lists (coreDistancesOfExactPairs): with `carry`, a primitive pair carried
+        // beyond `within` is left out with that bound.
         const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
-        listNearPairs(data, i, sa, pair.a, sb, pair.b, within, left_out,
-                      [&](int pa, int pb, int pp) { offer(f, pa, pb, carry ? pp : -1); });
+        listNearPairs(data, i, sa, pair.a, sb, pair.b, within, left_out, [&](int pa, int pb, int pp) {
+          if (carry) {
+            const double carried = carriedBound(data, pp, pa, pb);
+            if (carried > within) {
+              left_out = std::min(left_out, carried);
+              return;
+            }
+          }
+          offer(f, pa, pb, carry ? pp : -1);
+        });
         return;
       }
       for (int pa = sa.first_primitive; pa < sa.first_primitive + nka; ++pa)
@@ -1261,9 +1271,10 @@ void refinePairDistance(const Model& model, const KinematicsData& kin, DistanceD
   const SegmentPair& p = model.pairs[pair];
   const Segment& sa = model.segments[p.a];
   const Segment& sb = model.segments[p.b];
-  // Skipped by the broad phase: the bounding spheres of that call are in place.
+  // Skipped by the broad phase: the bounding spheres of that call are in place, and its primitives
+  // measured (their carried bounds hold for these poses).
   computeSegmentPair(model, kin, data, options, pair, sa, sb, sa.link, sb.link, std::numeric_limits<double>::infinity(),
-                     /*bounds_fresh=*/data.last_pruned);
+                     /*bounds_fresh=*/data.last_pruned, /*carry=*/data.last_pruned);
 }
 
 bool attachBodySchemaSegment(const Model& model, DistanceData& data, int slot, int link, const Eigen::Vector3d& a_L,
