@@ -729,6 +729,62 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
                              floor, cm.broad_phase ? &data.guard_listing : nullptr);
 }
 
+/// The predictive guard's search (predictiveGuard): each arm's scale of its step, 1 if no physical
+/// pair of the listed guard pairs (data.guard_pairs) is a hit one period ahead, else shortened until
+/// none is (at most six tries, then 0).
+std::array<double, 2> guardStepScales(const Model& model, const ControllerModel& cm, ControllerData& data,
+                                      const Eigen::Ref<const Eigen::VectorXd>& q, double floor) {
+  // Holding the arms still leaves the robot where it is unless walking or balance moves it: then the
+  // distances of holding still are this cycle's (a pair the sweep left as a lower bound is above the
+  // floor either way, so every comparison below comes out the same), and the hold is not predicted.
+  bool have_hold = false, hold_is_now = true;
+  for (int j = 0; j < model.nq; ++j) hold_is_now = hold_is_now && data.qdot_uncontrolled[j] == 0.0;
+  std::array<double, 2> scale{1.0, 1.0};
+  for (int iter = 0; iter < 8; ++iter) {
+    predict(model, cm, data, q, scale, data.dist_next);
+    std::array<bool, 2> hit{false, false};
+    std::array<double, 2> shrink{kGuardShrink, kGuardShrink};  // each hit arm's next scale / this one
+    for (int k = 0; k < data.num_guard_pairs; ++k) {
+      const std::size_t i = static_cast<std::size_t>(data.guard_pairs[static_cast<std::size_t>(k)]);
+      const PairDistance& pn = data.dist_next.pairs[i];
+      const PairDistance& p0 = data.dist.pairs[i];
+      if (!pn.active || !isPhysical(model, data, pn)) continue;
+      if (!(pn.distance < floor) || !(pn.distance < p0.distance)) continue;
+      // Ownership from this cycle's body schema (data.dist.slots, which the prediction used).
+      const int owner_a = ownerArm(model, cm, data.dist, pn.seg_a);
+      const int owner_b = ownerArm(model, cm, data.dist, pn.seg_b);
+      const bool movable = (owner_a >= 0 && scale[owner_a] > 0.0) || (owner_b >= 0 && scale[owner_b] > 0.0);
+      if (!movable) continue;
+      if (!have_hold && !hold_is_now) {
+        const std::array<double, 2> zero{0.0, 0.0};
+        predict(model, cm, data, q, zero, data.dist_hold);
+        have_hold = true;
+      }
+      const double held = hold_is_now ? p0.distance : data.dist_hold.pairs[i].distance;
+      if (!(pn.distance < held)) continue;  // no worse than holding still
+      // The pair is no hit at or above `least`. From now (scale 0) to this step its distance is taken
+      // as straight: the fraction of the step that ends at `least`, with a tenth to spare, is the next
+      // try (at most half: the search still ends within the iterations). Pressed at the floor that is
+      // almost zero at once. Only exact distances enter: `least` is below the floor, and the start is
+      // capped at d_b (within the sweep's prune distance, so exact with or without the broad phase).
+      const double least = std::min({floor, p0.distance, held});
+      const double start = std::min(p0.distance, cm.params.d_b);
+      const double fraction = (start - least) / (start - pn.distance);
+      const double next = fraction >= 0.0 ? std::min(kGuardShrink, 0.9 * fraction) : kGuardShrink;
+      for (const int owner : {owner_a, owner_b}) {
+        if (owner < 0) continue;
+        hit[owner] = true;
+        shrink[owner] = std::min(shrink[owner], next);
+      }
+    }
+    if (!hit[0] && !hit[1]) break;
+    for (int a = 0; a < 2; ++a)
+      if (hit[a]) scale[a] = iter < 6 ? shrink[a] * scale[a] : 0.0;
+    if (scale[0] == 0.0 && scale[1] == 0.0) break;  // no arm moves: no pair can count as a hit
+  }
+  return scale;
+}
+
 /// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's
 /// closest physical pair (computeControl's red-zone check). The two filters inside
 /// computeArm bound the approach to first order; this one checks the step itself. Each arm's step is
@@ -821,54 +877,7 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     listPairsNear(model, data.dist, data.guard_pairs.data(), data.num_guard_pairs, floor, data.guard_reach.data(),
                   data.guard_listing);
 
-  // Holding the arms still leaves the robot where it is unless walking or balance moves it: then the
-  // distances of holding still are this cycle's (a pair the sweep left as a lower bound is above the
-  // floor either way, so every comparison below comes out the same), and the hold is not predicted.
-  bool have_hold = false, hold_is_now = true;
-  for (int j = 0; j < model.nq; ++j) hold_is_now = hold_is_now && data.qdot_uncontrolled[j] == 0.0;
-  std::array<double, 2> scale{1.0, 1.0};
-  for (int iter = 0; iter < 8; ++iter) {
-    predict(model, cm, data, q, scale, data.dist_next);
-    std::array<bool, 2> hit{false, false};
-    std::array<double, 2> shrink{kGuardShrink, kGuardShrink};  // each hit arm's next scale / this one
-    for (int k = 0; k < data.num_guard_pairs; ++k) {
-      const std::size_t i = static_cast<std::size_t>(data.guard_pairs[static_cast<std::size_t>(k)]);
-      const PairDistance& pn = data.dist_next.pairs[i];
-      const PairDistance& p0 = data.dist.pairs[i];
-      if (!pn.active || !isPhysical(model, data, pn)) continue;
-      if (!(pn.distance < floor) || !(pn.distance < p0.distance)) continue;
-      // Ownership from this cycle's body schema (data.dist.slots, which the prediction used).
-      const int owner_a = ownerArm(model, cm, data.dist, pn.seg_a);
-      const int owner_b = ownerArm(model, cm, data.dist, pn.seg_b);
-      const bool movable = (owner_a >= 0 && scale[owner_a] > 0.0) || (owner_b >= 0 && scale[owner_b] > 0.0);
-      if (!movable) continue;
-      if (!have_hold && !hold_is_now) {
-        const std::array<double, 2> zero{0.0, 0.0};
-        predict(model, cm, data, q, zero, data.dist_hold);
-        have_hold = true;
-      }
-      const double held = hold_is_now ? p0.distance : data.dist_hold.pairs[i].distance;
-      if (!(pn.distance < held)) continue;  // no worse than holding still
-      // The pair is no hit at or above `least`. From now (scale 0) to this step its distance is taken
-      // as straight: the fraction of the step that ends at `least`, with a tenth to spare, is the next
-      // try (at most half: the search still ends within the iterations). Pressed at the floor that is
-      // almost zero at once. Only exact distances enter: `least` is below the floor, and the start is
-      // capped at d_b (within the sweep's prune distance, so exact with or without the broad phase).
-      const double least = std::min({floor, p0.distance, held});
-      const double start = std::min(p0.distance, params.d_b);
-      const double fraction = (start - least) / (start - pn.distance);
-      const double next = fraction >= 0.0 ? std::min(kGuardShrink, 0.9 * fraction) : kGuardShrink;
-      for (const int owner : {owner_a, owner_b}) {
-        if (owner < 0) continue;
-        hit[owner] = true;
-        shrink[owner] = std::min(shrink[owner], next);
-      }
-    }
-    if (!hit[0] && !hit[1]) break;
-    for (int a = 0; a < 2; ++a)
-      if (hit[a]) scale[a] = iter < 6 ? shrink[a] * scale[a] : 0.0;
-    if (scale[0] == 0.0 && scale[1] == 0.0) break;  // no arm moves: no pair can count as a hit
-  }
+  const std::array<double, 2> scale = guardStepScales(model, cm, data, q, floor);
   if (scale[0] < 1.0 || scale[1] < 1.0) {
     ++data.guard_count;
     for (int a = 0; a < 2; ++a)
