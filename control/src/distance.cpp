@@ -168,6 +168,9 @@ DistanceData::DistanceData(const Model& model)
   for (int s = 0; s < model.num_robot_segments; ++s)
     several_links[static_cast<std::size_t>(s)] = severalLinks(model, model.segments[static_cast<std::size_t>(s)]);
   buildLinkBlocks(model, *this);
+  seg_placed.assign(model.segments.size(), 0);
+  placed_X.assign(model.segments.size(), Eigen::Isometry3d::Identity());
+  block_placed_X.assign(block_first.size(), Eigen::Isometry3d::Identity());
   pair_several.assign(model.pairs.size(), 0);
   for (std::size_t i = 0; i < model.pairs.size(); ++i)
     pair_several[i] = several_links[static_cast<std::size_t>(model.pairs[i].a)] ||
@@ -266,8 +269,9 @@ inline void keepNearSphere(const DistanceData& data, const int* from, int first,
 /// pair checked). Each segment first keeps its primitives near the other segment's sphere. A segment
 /// of several links then goes block (link) by block: a block pair whose spheres are farther apart is
 /// skipped, each block's kept primitives are kept again near the other block's sphere (as the
-/// per-link pairs of the same robot would be), and a primitive pair whose spheres are apart is left out. `left_out` is lowered to the smallest gap of what is
-/// left out (a lower bound of its distance). Every segment's spheres of this call must be in place.
+/// per-link pairs of the same robot would be), and a primitive pair whose spheres are apart is left
+/// out. `left_out` is lowered to the smallest gap of what is left out (a lower bound of its distance).
+/// Every segment's spheres of this call must be in place.
 template <class Emit>
 void listNearPairs(DistanceData& data, int i, const Segment& sa, int a, const Segment& sb, int b, double within,
                    double& left_out, Emit&& emit) {
@@ -813,6 +817,25 @@ void transformSegment(const Model& model, const KinematicsData& kin, const BodyS
   }
   const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
   const bool several = data.several_links[static_cast<std::size_t>(s)] != 0;
+  // The tight model (many primitives a segment): nothing to do when every link of the segment is where
+  // it was placed last (with its sphere, if asked).
+  const int block_begin = data.seg_block[static_cast<std::size_t>(s)];
+  const int block_end = data.seg_block[static_cast<std::size_t>(s) + 1];
+  if (!model.pieces.empty()) {
+    std::uint8_t& placed = data.seg_placed[static_cast<std::size_t>(s)];
+    if (placed >= (bound ? 2 : 1)) {
+      bool still = X.matrix() == data.placed_X[static_cast<std::size_t>(s)].matrix();
+      for (int k = block_begin; still && k < block_end; ++k)
+        still = kin.X_B_L[static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)])].matrix() ==
+                data.block_placed_X[static_cast<std::size_t>(k)].matrix();
+      if (still) return;
+    }
+    placed = bound ? 2 : 1;
+    data.placed_X[static_cast<std::size_t>(s)] = X;
+    for (int k = block_begin; k < block_end; ++k)
+      data.block_placed_X[static_cast<std::size_t>(k)] =
+          kin.X_B_L[static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)])];
+  }
   if (bound && !several) {
     const Eigen::Vector3d c = X * data.bound_center_L[s];
     double* c4 = data.bound_center4_B.data() + 4 * s;
@@ -838,7 +861,7 @@ void transformSegment(const Model& model, const KinematicsData& kin, const BodyS
   }
   if (bound && several) {
     boundPrimitivesWhereTheyAre(data, seg, s);
-    for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k)
+    for (int k = block_begin; k < block_end; ++k)
       data.block_center_B[static_cast<std::size_t>(k)] =
           kin.X_B_L[static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)])] *
           data.block_center_L[static_cast<std::size_t>(k)];
@@ -875,6 +898,16 @@ struct Sweep {
 /// theta), added to its odometer; then last_X of the segment's links takes these poses.
 void measureSegmentMotion(const Model& model, const KinematicsData& kin, DistanceData& data, int s) {
   const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+  // Every link of the segment where it was: nothing moved, the odometers gain nothing.
+  const int block_begin = data.seg_block[static_cast<std::size_t>(s)];
+  const int block_end = data.seg_block[static_cast<std::size_t>(s) + 1];
+  bool still = kin.X_B_L[static_cast<std::size_t>(seg.link)].matrix() ==
+               data.last_X[static_cast<std::size_t>(seg.link)].matrix();
+  for (int k = block_begin; still && k < block_end; ++k) {
+    const std::size_t l = static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)]);
+    still = kin.X_B_L[l].matrix() == data.last_X[l].matrix();
+  }
+  if (still) return;
   auto turnOf = [&](const Eigen::Isometry3d& X, const Eigen::Isometry3d& X0) {
     return std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
   };

@@ -435,55 +435,78 @@ struct Trajectory {
 TEST(DistanceTightModel, ResultsDoNotDependOnEarlierCycles) {
   const Model m = testing::loadRobot("mesh_humanoid");
   KinematicsData kin(m);
-  for (const double prune : {std::numeric_limits<double>::infinity(), 0.04}) {
-    DistanceOptions options;
-    options.row_threshold = 0.04;
-    options.prune_distance = prune;
-    DistanceData reused(m);
-    Trajectory path(m, 41, 20, 0.02);
-    long compared = 0, bounded = 0, searches_reused = 0, searches_fresh = 0;
-    for (int c = 0; c < 300; ++c) {
-      ASSERT_TRUE(computeForwardKinematics(m, kin, path.next()));
-      DistanceData fresh(m), exact(m);
-      computeSegmentDistances(m, kin, reused, options);
-      computeSegmentDistances(m, kin, fresh, options);
-      searches_reused += reused.num_piece_searches;
-      searches_fresh += fresh.num_piece_searches;
-      computeSegmentDistances(m, kin, exact);
-      ASSERT_EQ(reused.closest, fresh.closest) << "cycle " << c;
-      for (std::size_t i = 0; i < m.pairs.size(); ++i) {
-        if (!fresh.pairs[i].active) continue;
-        const std::string name = m.segments[fresh.pairs[i].seg_a].name + "-" + m.segments[fresh.pairs[i].seg_b].name;
-        const std::string where = name + " cycle " + std::to_string(c) + " prune " + std::to_string(prune);
-        ASSERT_EQ(reused.pairs[i].active, fresh.pairs[i].active) << where;
-        if (exact.pairs[i].distance <= prune) {
-          ASSERT_TRUE(reused.pairs[i].exact && fresh.pairs[i].exact) << where;
+  // Once with every joint moving, once with the first half of the joints held (the links they alone
+  // move stay where they are: their segments are not placed again, and must be where a fresh
+  // placement puts them).
+  for (const bool half_held : {false, true}) {
+    for (const double prune : {std::numeric_limits<double>::infinity(), 0.04}) {
+      DistanceOptions options;
+      options.row_threshold = 0.04;
+      options.prune_distance = prune;
+      DistanceData reused(m);
+      Trajectory path(m, 41, 20, 0.02);
+      const Eigen::VectorXd held = path.q;
+      long compared = 0, bounded = 0, searches_reused = 0, searches_fresh = 0, still = 0;
+      std::vector<Eigen::Isometry3d> before(m.links.size(), Eigen::Isometry3d::Identity());
+      for (int c = 0; c < 300; ++c) {
+        Eigen::VectorXd q = path.next();
+        if (half_held) q.head(m.nq / 2) = held.head(m.nq / 2);
+        ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+        for (int s = 0; s < m.num_robot_segments; ++s) {
+          const int link = m.segments[static_cast<std::size_t>(s)].link;
+          still +=
+              kin.X_B_L[static_cast<std::size_t>(link)].matrix() == before[static_cast<std::size_t>(link)].matrix();
         }
-        bool inexact = false;
-        for (const DistanceData* d : {&reused, &fresh}) {
-          if (d->pairs[i].exact) continue;
-          inexact = true;
-          EXPECT_LE(d->pairs[i].distance, exact.pairs[i].distance) << where;
-          EXPECT_GT(d->pairs[i].distance, prune) << where;
+        before = kin.X_B_L;
+        DistanceData fresh(m), exact(m);
+        computeSegmentDistances(m, kin, reused, options);
+        computeSegmentDistances(m, kin, fresh, options);
+        searches_reused += reused.num_piece_searches;
+        searches_fresh += fresh.num_piece_searches;
+        computeSegmentDistances(m, kin, exact);
+        ASSERT_EQ(reused.closest, fresh.closest) << "cycle " << c;
+        for (std::size_t p = 0; p < m.primitives.size(); ++p) {
+          ASSERT_EQ(reused.prim_B[p].start, fresh.prim_B[p].start) << "primitive " << p << " cycle " << c;
+          ASSERT_EQ(reused.prim_B[p].d, fresh.prim_B[p].d) << "primitive " << p << " cycle " << c;
         }
-        if (inexact) {
-          ++bounded;
-          continue;
+        for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+          if (!fresh.pairs[i].active) continue;
+          const std::string name = m.segments[fresh.pairs[i].seg_a].name + "-" + m.segments[fresh.pairs[i].seg_b].name;
+          const std::string where = name + " cycle " + std::to_string(c) + " prune " + std::to_string(prune);
+          ASSERT_EQ(reused.pairs[i].active, fresh.pairs[i].active) << where;
+          if (exact.pairs[i].distance <= prune) {
+            ASSERT_TRUE(reused.pairs[i].exact && fresh.pairs[i].exact) << where;
+          }
+          bool inexact = false;
+          for (const DistanceData* d : {&reused, &fresh}) {
+            if (d->pairs[i].exact) continue;
+            inexact = true;
+            EXPECT_LE(d->pairs[i].distance, exact.pairs[i].distance) << where;
+            EXPECT_GT(d->pairs[i].distance, prune) << where;
+          }
+          if (inexact) {
+            ++bounded;
+            continue;
+          }
+          ASSERT_EQ(reused.pairs[i].distance, fresh.pairs[i].distance) << where;
+          expectSamePair(fresh, reused, i, name);
+          ++compared;
         }
-        ASSERT_EQ(reused.pairs[i].distance, fresh.pairs[i].distance) << where;
-        expectSamePair(fresh, reused, i, name);
-        ++compared;
+      }
+      std::printf(
+          "tight model along a trajectory (%s), prune %.3f m: %ld exact pairs identical, %ld left as lower "
+          "bounds; %ld searches with what the last cycles carried, %ld without; %ld segment-cycles still\n",
+          half_held ? "half the joints held" : "every joint moving", prune, compared, bounded, searches_reused,
+          searches_fresh, still);
+      EXPECT_GT(compared, prune < 1.0 ? 300 : 300 * 100);
+      // Not vacuous: the carried bounds did skip searches (few here: most of this robot's links are one
+      // piece, so a pair's one search is its answer; on Romeo's crossed arms they halve the searches).
+      // With the broad phase, a far pair's carried bound skips it before any search.
+      EXPECT_LT(searches_reused, searches_fresh);
+      if (half_held) {
+        EXPECT_GT(still, 300) << "held joints must leave segments where they were";
       }
     }
-    std::printf(
-        "tight model along a trajectory, prune %.3f m: %ld exact pairs identical, %ld left as lower bounds; "
-        "%ld searches with what the last cycles carried, %ld without\n",
-        prune, compared, bounded, searches_reused, searches_fresh);
-    EXPECT_GT(compared, prune < 1.0 ? 300 : 300 * 100);
-    // Not vacuous: the carried bounds did skip searches (few here: most of this robot's links are one
-    // piece, so a pair's one search is its answer; on Romeo's crossed arms they halve the searches).
-    // With the broad phase, a far pair's carried bound skips it before any search.
-    EXPECT_LT(searches_reused, searches_fresh);
   }
 }
 
@@ -952,6 +975,45 @@ TEST(DistanceSegmentsOfSeveralLinks, EachPairIsTheClosestOfItsLinkPairs) {
   EXPECT_GT(multi, 300);
   EXPECT_GT(skipped, 100);
   EXPECT_GT(on_wrist, 100) << "rows of forearm-segment pairs won by the hand move with the wrist joint";
+}
+
+/// A segment is placed into B again only when one of its links moved: with every joint held but the
+/// left wrist, the left forearm segment's own link stays where it was while its hand block moves, so
+/// the segment must be placed again. Along a trajectory, a DistanceData used every call has every
+/// primitive, every bounding sphere and every pair within the prune distance exactly where a fresh
+/// one has them.
+TEST(DistanceSegmentsOfSeveralLinks, ASegmentWhoseBlockMovedIsPlacedAgain) {
+  const Model m = meshRobotWithForearmSegments();
+  const int wrist = m.qIndex("l_wrist_pitch");
+  ASSERT_GE(wrist, 0);
+  KinematicsData kin(m);
+  DistanceOptions options;
+  options.prune_distance = 0.1;
+  DistanceData reused(m);
+  Trajectory path(m, 47, 25, 0.05);
+  const Eigen::VectorXd held = path.q;
+  long compared = 0;
+  for (int c = 0; c < 200; ++c) {
+    Eigen::VectorXd q = held;
+    q[wrist] = path.next()[wrist];
+    ASSERT_TRUE(computeForwardKinematics(m, kin, q));
+    DistanceData fresh(m);
+    computeSegmentDistances(m, kin, reused, options);
+    computeSegmentDistances(m, kin, fresh, options);
+    for (std::size_t p = 0; p < m.primitives.size(); ++p) {
+      ASSERT_EQ(reused.prim_B[p].start, fresh.prim_B[p].start) << "primitive " << p << " call " << c;
+      ASSERT_EQ(reused.prim_B[p].d, fresh.prim_B[p].d) << "primitive " << p << " call " << c;
+    }
+    ASSERT_EQ(reused.bound_center4_B, fresh.bound_center4_B) << "call " << c;
+    ASSERT_EQ(reused.bound_radius, fresh.bound_radius) << "call " << c;
+    for (std::size_t i = 0; i < m.pairs.size(); ++i) {
+      if (!fresh.pairs[i].exact || fresh.pairs[i].distance > options.prune_distance) continue;
+      ASSERT_TRUE(reused.pairs[i].exact) << "pair " << i << " call " << c;
+      ASSERT_EQ(reused.pairs[i].distance, fresh.pairs[i].distance) << "pair " << i << " call " << c;
+      ++compared;
+    }
+  }
+  EXPECT_GE(compared, 100);
 }
 
 /// A segment's bounding sphere (the broad phase) holds each of its primitives wherever the joints

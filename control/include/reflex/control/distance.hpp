@@ -151,6 +151,12 @@ struct DistanceData {
   std::vector<int> seg_block, block_first, block_end, block_link;
   std::vector<Eigen::Vector3d> block_center_L, block_center_B;
   std::vector<double> block_radius;
+  // The tight model, per robot segment, where its primitives were last placed into B: 0 never, 1
+  // placed, 2 with its bounding sphere too; the pose of its link then (placed_X) and of each block's
+  // link (block_placed_X). A segment whose links are where they were is not placed again (a still
+  // torso, legs, head): only the work depends on it.
+  std::vector<std::uint8_t> seg_placed;
+  std::vector<Eigen::Isometry3d> placed_X, block_placed_X;
   // The primitive pairs the sweep computes this cycle, in pair order (the broad phase's survivors';
   // all of pp_a / pp_b without it), and their segment parameters and core distance (scratch).
   std::vector<int> list_a, list_b;
@@ -180,8 +186,8 @@ struct DistanceData {
   // with no search and no listing: far pairs stay skipped while they move less than their margin.
   std::vector<double> pair_lower;
   std::vector<double> seg_odometer;
-  /// Exact convex-distance searches (computeConvexDistance calls) since the last
-  /// computeSegmentDistances or computeListedPairDistances began: the narrow phase's work (benchmarks and tests read it).
+  /// Exact convex-distance searches (computeConvexDistance calls) since the last computeSegmentDistances
+  /// or computeListedPairDistances began: the narrow phase's work (benchmarks and tests read it).
   int num_piece_searches = 0;
   // The tight model (Primitive::piece): per pair, whether a primitive of either segment is a convex
   // piece (the pair's distance is then the least over its primitive pairs of computeConvexDistance on
