@@ -17,8 +17,10 @@ using MatA3 = TaskJacobianInverse;
 using RowA = ArmRow;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-/// The predictive guard shortens a hit arm's step at least this much per try (predictiveGuard).
+/// The predictive guard shortens a hit arm's step at least this much per try, and aims at this share of
+/// the step it estimates the hit pairs allow (predictiveGuard).
 constexpr double kGuardShrink = 0.5;
+constexpr double kGuardAim = 0.9;
 
 /// The arm (kLeft / kRight) that moves segment s this cycle, or -1 (ControllerModel's ownership; a
 /// body-schema slot belongs to the arm of the link it hangs on).
@@ -770,7 +772,7 @@ std::array<double, 2> guardStepScales(const Model& model, const ControllerModel&
       const double least = std::min({floor, p0.distance, held});
       const double start = std::min(p0.distance, cm.params.d_b);
       const double fraction = (start - least) / (start - pn.distance);
-      const double next = fraction >= 0.0 ? std::min(kGuardShrink, 0.9 * fraction) : kGuardShrink;
+      const double next = fraction >= 0.0 ? std::min(kGuardShrink, kGuardAim * fraction) : kGuardShrink;
       for (const int owner : {owner_a, owner_b}) {
         if (owner < 0) continue;
         hit[owner] = true;

@@ -169,8 +169,6 @@ DistanceData::DistanceData(const Model& model)
     several_links[static_cast<std::size_t>(s)] = severalLinks(model, model.segments[static_cast<std::size_t>(s)]);
   buildLinkBlocks(model, *this);
   seg_placed.assign(model.segments.size(), 0);
-  placed_X.assign(model.segments.size(), Eigen::Isometry3d::Identity());
-  block_placed_X.assign(block_first.size(), Eigen::Isometry3d::Identity());
   pair_several.assign(model.pairs.size(), 0);
   for (std::size_t i = 0; i < model.pairs.size(); ++i)
     pair_several[i] = several_links[static_cast<std::size_t>(model.pairs[i].a)] ||
@@ -233,6 +231,15 @@ inline double carriedBound(const DistanceData& data, int pp, int pa, int pb) {
 inline void storeBound(DistanceData& data, int pp, int pa, int pb, double lower) {
   data.pp_lower[static_cast<std::size_t>(pp)] =
       lower + data.prim_odometer[static_cast<std::size_t>(pa)] + data.prim_odometer[static_cast<std::size_t>(pb)];
+}
+
+/// Whether primitive pair pp's carried bound is beyond `within`: it is then left out of a listing
+/// (nothing computed for it, its stored bound kept), and `left_out` lowered to that bound.
+inline bool carriedBeyond(const DistanceData& data, int pp, int pa, int pb, double within, double& left_out) {
+  const double carried = carriedBound(data, pp, pa, pb);
+  if (!(carried > within)) return false;
+  left_out = std::min(left_out, carried);
+  return true;
 }
 
 /// The index in pp_a / pp_b of primitives pa and pb of robot pair i (segments sa, sb).
@@ -727,13 +734,7 @@ void computeSegmentPair(const Model& model, const KinematicsData& kin, DistanceD
         // beyond `within` is left out with that bound.
         const SegmentPair& pair = model.pairs[static_cast<std::size_t>(i)];
         listNearPairs(data, i, sa, pair.a, sb, pair.b, within, left_out, [&](int pa, int pb, int pp) {
-          if (carry) {
-            const double carried = carriedBound(data, pp, pa, pb);
-            if (carried > within) {
-              left_out = std::min(left_out, carried);
-              return;
-            }
-          }
+          if (carry && carriedBeyond(data, pp, pa, pb, within, left_out)) return;
           offer(f, pa, pb, carry ? pp : -1);
         });
         return;
@@ -798,11 +799,54 @@ void boundPrimitivesWhereTheyAre(DistanceData& data, const Segment& seg, int s) 
   data.bound_radius[static_cast<std::size_t>(s)] = r == r ? r : std::numeric_limits<double>::infinity();
 }
 
+/// Whether every link robot segment s's primitives move with is, bit for bit, where the segment's last
+/// measure left it (data.last_X): then it has not moved since it was last placed (placeSegment).
+bool segmentWhereMeasured(const KinematicsData& kin, const DistanceData& data, const Segment& seg, int s) {
+  auto same = [&](int l) {
+    return kin.X_B_L[static_cast<std::size_t>(l)].matrix() == data.last_X[static_cast<std::size_t>(l)].matrix();
+  };
+  if (!same(seg.link)) return false;
+  for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k)
+    if (!same(data.block_link[static_cast<std::size_t>(k)])) return false;
+  return true;
+}
+
+/// How far each primitive of robot segment s can have moved since its links' poses in data.last_X
+/// (its bounding sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn
+/// theta), added to its odometer; then last_X of the segment's links takes these poses.
+void measureSegmentMotion(const Model& model, const KinematicsData& kin, DistanceData& data, int s) {
+  const Segment& seg = model.segments[static_cast<std::size_t>(s)];
+  auto turnOf = [&](const Eigen::Isometry3d& X, const Eigen::Isometry3d& X0) {
+    return std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
+  };
+  const double seg_turn =
+      turnOf(kin.X_B_L[static_cast<std::size_t>(seg.link)], data.last_X[static_cast<std::size_t>(seg.link)]);
+  double most = 0.0;
+  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
+    const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
+    const std::size_t link = static_cast<std::size_t>(linkOf(seg, prim));  // a finger's own link
+    const Eigen::Isometry3d& X = kin.X_B_L[link];
+    const Eigen::Isometry3d& X0 = data.last_X[link];
+    const double turn = prim.link >= 0 ? turnOf(X, X0) : seg_turn;
+    const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
+    double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
+    m = m == m ? m : std::numeric_limits<double>::infinity();
+    data.prim_odometer[static_cast<std::size_t>(p)] += m;
+    most = std::max(most, m);
+  }
+  data.seg_odometer[static_cast<std::size_t>(s)] += most;
+  data.last_X[static_cast<std::size_t>(seg.link)] = kin.X_B_L[static_cast<std::size_t>(seg.link)];
+  for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k) {
+    const std::size_t l = static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)]);
+    data.last_X[l] = kin.X_B_L[l];
+  }
+}
+
 /// Segment s's primitives (core start, direction and radius) into B for this cycle's kinematics; a
 /// disabled body-schema slot is left as it was. With `bound`, a robot segment's bounding sphere
-/// centre too.
-void transformSegment(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots, DistanceData& data,
-                      int s, bool bound) {
+/// centre too. A robot segment of the tight model is measured too (measureSegmentMotion).
+void placeSegment(const Model& model, const KinematicsData& kin, const BodySchemaSlots& slots, DistanceData& data,
+                  int s, bool bound) {
   const Segment& seg = model.segments[s];
   if (seg.body_schema_slot) {
     const BodySchemaSlot& slot = slots[static_cast<std::size_t>(s - model.num_robot_segments)];
@@ -817,25 +861,19 @@ void transformSegment(const Model& model, const KinematicsData& kin, const BodyS
   }
   const Eigen::Isometry3d& X = kin.X_B_L[seg.link];
   const bool several = data.several_links[static_cast<std::size_t>(s)] != 0;
-  // The tight model (many primitives a segment): nothing to do when every link of the segment is where
-  // it was placed last (with its sphere, if asked).
+  // The tight model: the segment is measured here too (how far it moved since its last measure, which
+  // placed it). One whose links did not move is neither measured nor placed again (a still torso, legs,
+  // head), unless its bounding sphere is asked for and was not made at these poses.
+  const bool tight = !model.pieces.empty();
+  const bool still = tight && segmentWhereMeasured(kin, data, seg, s);
+  if (tight) {
+    std::uint8_t& placed = data.seg_placed[static_cast<std::size_t>(s)];
+    if (still && placed >= (bound ? 2 : 1)) return;
+    placed = bound ? 2 : 1;
+    if (!still) measureSegmentMotion(model, kin, data, s);
+  }
   const int block_begin = data.seg_block[static_cast<std::size_t>(s)];
   const int block_end = data.seg_block[static_cast<std::size_t>(s) + 1];
-  if (!model.pieces.empty()) {
-    std::uint8_t& placed = data.seg_placed[static_cast<std::size_t>(s)];
-    if (placed >= (bound ? 2 : 1)) {
-      bool still = X.matrix() == data.placed_X[static_cast<std::size_t>(s)].matrix();
-      for (int k = block_begin; still && k < block_end; ++k)
-        still = kin.X_B_L[static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)])].matrix() ==
-                data.block_placed_X[static_cast<std::size_t>(k)].matrix();
-      if (still) return;
-    }
-    placed = bound ? 2 : 1;
-    data.placed_X[static_cast<std::size_t>(s)] = X;
-    for (int k = block_begin; k < block_end; ++k)
-      data.block_placed_X[static_cast<std::size_t>(k)] =
-          kin.X_B_L[static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)])];
-  }
   if (bound && !several) {
     const Eigen::Vector3d c = X * data.bound_center_L[s];
     double* c4 = data.bound_center4_B.data() + 4 * s;
@@ -893,47 +931,6 @@ struct Sweep {
   int nlist = 0;
 };
 
-/// How far each primitive of robot segment s can have moved since its links' poses in data.last_X
-/// (its bounding sphere's centre moved, plus its radius times 2 sin(theta / 2) of its link's turn
-/// theta), added to its odometer; then last_X of the segment's links takes these poses.
-void measureSegmentMotion(const Model& model, const KinematicsData& kin, DistanceData& data, int s) {
-  const Segment& seg = model.segments[static_cast<std::size_t>(s)];
-  // Every link of the segment where it was: nothing moved, the odometers gain nothing.
-  const int block_begin = data.seg_block[static_cast<std::size_t>(s)];
-  const int block_end = data.seg_block[static_cast<std::size_t>(s) + 1];
-  bool still = kin.X_B_L[static_cast<std::size_t>(seg.link)].matrix() ==
-               data.last_X[static_cast<std::size_t>(seg.link)].matrix();
-  for (int k = block_begin; still && k < block_end; ++k) {
-    const std::size_t l = static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)]);
-    still = kin.X_B_L[l].matrix() == data.last_X[l].matrix();
-  }
-  if (still) return;
-  auto turnOf = [&](const Eigen::Isometry3d& X, const Eigen::Isometry3d& X0) {
-    return std::sqrt(std::max(0.0, 3.0 - (X.linear().array() * X0.linear().array()).sum()));
-  };
-  const double seg_turn =
-      turnOf(kin.X_B_L[static_cast<std::size_t>(seg.link)], data.last_X[static_cast<std::size_t>(seg.link)]);
-  double most = 0.0;
-  for (int p = seg.first_primitive; p < seg.first_primitive + seg.num_primitives; ++p) {
-    const Primitive& prim = model.primitives[static_cast<std::size_t>(p)];
-    const std::size_t link = static_cast<std::size_t>(linkOf(seg, prim));  // a finger's own link
-    const Eigen::Isometry3d& X = kin.X_B_L[link];
-    const Eigen::Isometry3d& X0 = data.last_X[link];
-    const double turn = prim.link >= 0 ? turnOf(X, X0) : seg_turn;
-    const Eigen::Vector3d c_L = 0.5 * (prim.a_L + prim.b_L);
-    double m = (X * c_L - X0 * c_L).norm() + turn * data.prim_sphere_r[static_cast<std::size_t>(p)];
-    m = m == m ? m : std::numeric_limits<double>::infinity();
-    data.prim_odometer[static_cast<std::size_t>(p)] += m;
-    most = std::max(most, m);
-  }
-  data.seg_odometer[static_cast<std::size_t>(s)] += most;
-  data.last_X[static_cast<std::size_t>(seg.link)] = kin.X_B_L[static_cast<std::size_t>(seg.link)];
-  for (int k = data.seg_block[static_cast<std::size_t>(s)]; k < data.seg_block[static_cast<std::size_t>(s) + 1]; ++k) {
-    const std::size_t l = static_cast<std::size_t>(data.block_link[static_cast<std::size_t>(k)]);
-    data.last_X[l] = kin.X_B_L[l];
-  }
-}
-
 /// A new call: the searches counted from here; an upper bound's search of an earlier call is not reused.
 void nextSearchCall(DistanceData& data) {
   data.num_piece_searches = 0;
@@ -941,15 +938,6 @@ void nextSearchCall(DistanceData& data) {
     for (DistanceData::UpperSearch& u : data.upper_search) u.call = 0;
     data.search_call = 1;
   }
-}
-
-/// Step 1, the tight model: how far each robot primitive can have moved since the last call, so a
-/// lower bound from then, less both primitives' motion, is a lower bound now.
-void measurePrimitiveMotion(const Model& model, const KinematicsData& kin, DistanceData& data) {
-  nextSearchCall(data);
-  if (model.pieces.empty()) return;
-  for (int s = 0; s < model.num_robot_segments; ++s) measureSegmentMotion(model, kin, data, s);
-  data.last_X = kin.X_B_L;  // no allocation: the same size every call
 }
 
 /// Step 2, the broad phase: robot pairs whose bounding spheres are more than prune_distance apart get
@@ -1040,11 +1028,7 @@ void coreDistancesOfExactPairs(const Model& model, const KinematicsData& kin, Di
         // A primitive pair whose carried bound is beyond `within` is left out too (its bound kept as it
         // was): no core distance, no candidate.
         listNearPairs(data, i, sa, pair.a, sb, pair.b, within, floor, [&](int pa, int pb, int pp) {
-          const double carried = carriedBound(data, pp, pa, pb);
-          if (carried > within) {
-            floor = std::min(floor, carried);
-            return;
-          }
+          if (carriedBeyond(data, pp, pa, pb, within, floor)) return;
           data.list_a[nlist] = pa;
           data.list_b[nlist] = pb;
           data.list_pp[static_cast<std::size_t>(nlist++)] = pp;
@@ -1194,8 +1178,8 @@ void computeSegmentDistances(const Model& model, const KinematicsData& kin, cons
   // 1. Every enabled primitive's core into B, once (a primitive takes part in several pairs); with
   //    the broad phase, every robot segment's bounding sphere centre too; how far each moved.
   const int nseg = static_cast<int>(model.segments.size());
-  for (int s = 0; s < nseg; ++s) transformSegment(model, kin, slots, data, s, sw.prune);
-  measurePrimitiveMotion(model, kin, data);
+  nextSearchCall(data);
+  for (int s = 0; s < nseg; ++s) placeSegment(model, kin, slots, data, s, sw.prune);
   // 2.-4. The robot pairs: broad phase, core distances, then each kept pair exactly.
   broadPhase(data, options, sw);
   coreDistancesOfExactPairs(model, kin, data, options, sw);
@@ -1247,8 +1231,7 @@ void computeListedPairDistances(const Model& model, const KinematicsData& kin, c
     for (const int s : {pair.a, pair.b}) {
       if (data.segment_stamp[static_cast<std::size_t>(s)] == now) continue;
       data.segment_stamp[static_cast<std::size_t>(s)] = now;
-      transformSegment(model, kin, slots, data, s, true);  // with the bounding sphere (give_up's filter)
-      if (s < model.num_robot_segments && !model.pieces.empty()) measureSegmentMotion(model, kin, data, s);
+      placeSegment(model, kin, slots, data, s, true);  // with the bounding sphere (give_up's filter)
     }
     computeSegmentPair(model, kin, data, no_rows, i, sa, sb, link_a, link_b, give_up, /*bounds_fresh=*/true,
                        /*carry=*/true, listing);

@@ -151,12 +151,11 @@ struct DistanceData {
   std::vector<int> seg_block, block_first, block_end, block_link;
   std::vector<Eigen::Vector3d> block_center_L, block_center_B;
   std::vector<double> block_radius;
-  // The tight model, per robot segment, where its primitives were last placed into B: 0 never, 1
-  // placed, 2 with its bounding sphere too; the pose of its link then (placed_X) and of each block's
-  // link (block_placed_X). A segment whose links are where they were is not placed again (a still
-  // torso, legs, head): only the work depends on it.
+  // The tight model, per robot segment: 0 never placed into B, 1 placed at the poses of its last measure
+  // (last_X: a link is in one robot segment, and placing a segment measures it), 2 with its bounding
+  // sphere too. A segment whose links are where they were is not placed again (a still torso, legs,
+  // head): only the work depends on it.
   std::vector<std::uint8_t> seg_placed;
-  std::vector<Eigen::Isometry3d> placed_X, block_placed_X;
   // The primitive pairs the sweep computes this cycle, in pair order (the broad phase's survivors';
   // all of pp_a / pp_b without it), and their segment parameters and core distance (scratch).
   std::vector<int> list_a, list_b;
@@ -173,9 +172,9 @@ struct DistanceData {
   // Carried bounds (the tight model): per primitive pair (pp index), a lower bound of its distance at
   // the poses of the call that last computed it plus both primitives' odometers then (-inf: none);
   // per primitive its odometer, the sum of how far it can have moved between the calls that placed
-  // it (m), and the links' poses of the call that last placed them. The stored value less both
-  // odometers now bounds the distance now, however many calls ago it was computed: a primitive pair
-  // proven far is skipped without a search. Only the work depends on them.
+  // it (m), and per link of a robot segment its pose when that segment was last measured (placed).
+  // The stored value less both odometers now bounds the distance now, however many calls ago it was
+  // computed: a primitive pair proven far is skipped without a search. Only the work depends on them.
   std::vector<double> pp_lower;
   std::vector<double> prim_odometer;
   std::vector<Eigen::Isometry3d> last_X;
