@@ -101,11 +101,26 @@ class ControllerRun {
   /// Waits until the controller's status stream and the given writer are matched, then 0.5 s more:
   /// the writer sees the match before the controller's reader has matched back, and a reliable
   /// keep-last-1 writer replaces a first sample that was never acknowledged.
+  /// On failure: which side did not match, whether the process still runs, and its output so far.
   template <class W>
-  bool waitMatched(W& writer) {
-    const bool ok = status->waitForWriters(1, 15s) && writer.waitForReaders(1, 15s);
-    std::this_thread::sleep_for(500ms);
-    return ok;
+  ::testing::AssertionResult waitMatched(W& writer) {
+    const char* missing = nullptr;
+    if (!status->waitForWriters(1, 30s)) {
+      missing = "the controller's reflex/control_status writer never matched the watching reader";
+    } else if (!writer.waitForReaders(1, 30s)) {
+      missing = "the controller's reader never matched the feeding writer";
+    }
+    if (missing == nullptr) {
+      std::this_thread::sleep_for(500ms);
+      return ::testing::AssertionSuccess();
+    }
+    const int rc = process_->wait(0ms);
+    return ::testing::AssertionFailure() << missing << " within 30 s; the controller "
+                                         << (rc == testing::ChildProcess::kStillRunning
+                                                 ? std::string("still runs")
+                                                 : "exited with " + std::to_string(rc))
+                                         << "; its output so far:\n"
+                                         << process_->output();
   }
   /// Keeps draining the watch readers for `d` while calling `tick(k)` every `period`.
   template <class Fn>
