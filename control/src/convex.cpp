@@ -163,13 +163,13 @@ ConvexPiece makeConvexPiece(const std::vector<Eigen::Vector3d>& vertices,
 int startVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L) noexcept {
   // The axes' cosines are |d_i| / |d|, the diagonals' (|d_x| + |d_y| + |d_z|) / (sqrt(3) |d|): the
   // largest component against the sum over sqrt(3) picks between the two kinds, the signs the one.
-  const Eigen::Vector3d m = d_L.cwiseAbs();
-  int axis = 0;
-  const double largest = m.maxCoeff(&axis);
-  if (largest * 1.7320508075688772 >= m.sum())
-    return piece.start_vertex[static_cast<std::size_t>(2 * axis + (d_L[axis] < 0 ? 1 : 0))];
-  const int octant = (d_L.x() < 0 ? 4 : 0) + (d_L.y() < 0 ? 2 : 0) + (d_L.z() < 0 ? 1 : 0);
-  return piece.start_vertex[static_cast<std::size_t>(6 + octant)];
+  const double ax = std::abs(d_L.x()), ay = std::abs(d_L.y()), az = std::abs(d_L.z());
+  const int axis = ax >= ay ? (ax >= az ? 0 : 2) : (ay >= az ? 1 : 2);
+  const double largest = std::max(ax, std::max(ay, az));
+  const int on_axis = 2 * axis + (d_L[axis] < 0 ? 1 : 0);
+  const int octant = 6 + (d_L.x() < 0 ? 4 : 0) + (d_L.y() < 0 ? 2 : 0) + (d_L.z() < 0 ? 1 : 0);
+  const int k = largest * 1.7320508075688772 >= ax + ay + az ? on_axis : octant;
+  return piece.start_vertex[static_cast<std::size_t>(k)];
 }
 
 int supportVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L, int start) noexcept {
@@ -207,12 +207,10 @@ int supportVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L, int star
 
 namespace {
 
-/// The GJK simplex: up to 4 points w = p_a - p_b of A - B (frame B), with the vertex indices and the
-/// points of each piece they came from.
+/// The GJK simplex: up to 4 points w = p_a - p_b of A - B (in A's link frame), with the vertex
+/// indices they came from (the witness points are made from those at the end).
 struct Simplex {
   Eigen::Vector3d w[4];
-  Eigen::Vector3d p_a[4];
-  Eigen::Vector3d p_b[4];
   int ia[4];
   int ib[4];
   int size = 0;
@@ -395,8 +393,6 @@ void reduce(Simplex& s, SubResult& r) {
   for (int m = 0; m < r.n; ++m) {
     const int k = r.idx[m];
     t.w[m] = s.w[k];
-    t.p_a[m] = s.p_a[k];
-    t.p_b[m] = s.p_b[k];
     t.ia[m] = s.ia[k];
     t.ib[m] = s.ib[k];
     r.idx[m] = m;
@@ -409,28 +405,40 @@ void reduce(Simplex& s, SubResult& r) {
 /// piece's support points (contact: their midpoint, distance 0), and the warm start for the next call
 /// (the support pair of the heaviest weight).
 [[gnu::always_inline]] inline void witnessPoints(const Simplex& s, const SubResult& sub, bool contact,
+                                                 const ConvexPiece& a, const ConvexPiece& b, const Eigen::Matrix3d& R,
+                                                 const Eigen::Vector3d& t, const Eigen::Isometry3d& X_B_A,
                                                  ConvexWarmStart* warm, ConvexDistance& out) {
   Eigen::Vector3d p_a = Eigen::Vector3d::Zero(), p_b = Eigen::Vector3d::Zero();
   int heaviest = 0;
   for (int m = 0; m < sub.n; ++m) {
     const int k = sub.idx[m];
-    p_a += sub.lambda[m] * s.p_a[k];
-    p_b += sub.lambda[m] * s.p_b[k];
+    p_a += sub.lambda[m] * a.vertices_L[s.ia[k]];
+    p_b += sub.lambda[m] * b.vertices_L[s.ib[k]];
     if (sub.lambda[m] > sub.lambda[heaviest]) heaviest = m;
   }
+  p_b = R * p_b + t;  // the weights sum to 1
+  const Eigen::Matrix3d& R_B_A = X_B_A.linear();
+  const Eigen::Vector3d& p_B_A = X_B_A.translation();
   if (contact) {
     out.distance = 0.0;
     out.penetrating = true;
-    out.p_B_a = out.p_B_b = 0.5 * (p_a + p_b);
+    out.p_B_a = out.p_B_b = R_B_A * (0.5 * (p_a + p_b)) + p_B_A;
   } else {
-    out.distance = (p_a - p_b).norm();
-    out.p_B_a = p_a;
-    out.p_B_b = p_b;
+    out.p_B_a = R_B_A * p_a + p_B_A;
+    out.p_B_b = R_B_A * p_b + p_B_A;
+    out.distance = (out.p_B_a - out.p_B_b).norm();  // their distance, bit for bit, in B
   }
   if (warm != nullptr) {
     warm->vertex_a = s.ia[sub.idx[heaviest]];
     warm->vertex_b = s.ib[sub.idx[heaviest]];
   }
+}
+
+/// The search's tolerance for a problem of size sqrt(w2) (the largest |w| seen):
+/// max(kConvexTolerance, 1e-9 |w|), without a square root below 1 m.
+inline double searchTolerance(double w2) {
+  static_assert(kConvexTolerance == 1e-9, "the 1 m threshold below assumes it");
+  return w2 > 1.0 ? 1e-9 * std::sqrt(w2) : kConvexTolerance;
 }
 
 }  // namespace
@@ -446,21 +454,20 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     out.p_B_a = out.p_B_b = X_B_A.translation();
     return out;
   }
+  // The search runs in A's link frame: B's vertices placed by X_A_B = X_B_A^-1 X_B_B (R, t), A's as
+  // they are; only the witness points go back to B.
   const Eigen::Matrix3d R_B_A = X_B_A.linear();
-  const Eigen::Matrix3d R_B_B = X_B_B.linear();
-  const Eigen::Vector3d p_B_A = X_B_A.translation();
-  const Eigen::Vector3d p_B_B = X_B_B.translation();
+  const Eigen::Matrix3d R = R_B_A.transpose() * X_B_B.linear();
+  const Eigen::Vector3d t = R_B_A.transpose() * (X_B_B.translation() - X_B_A.translation());
 
-  // Support point of A - B in direction d (frame B): s_A(d) - s_B(-d), directions taken into each
-  // link frame (R^T d) so that only the two chosen vertices are transformed.
+  // Support point of A - B in direction d (frame A): s_A(d) - s_B(-d), B's direction taken into its
+  // link frame (R^T d) so that only its chosen vertex is transformed.
   int ia = 0, ib = 0;
   Simplex s;
-  auto support = [&](const Eigen::Vector3d& d_B, int m) {
-    ia = supportVertex(a, R_B_A.transpose() * d_B, ia);
-    ib = supportVertex(b, -(R_B_B.transpose() * d_B), ib);
-    s.p_a[m] = R_B_A * a.vertices_L[ia] + p_B_A;
-    s.p_b[m] = R_B_B * b.vertices_L[ib] + p_B_B;
-    s.w[m] = s.p_a[m] - s.p_b[m];
+  auto support = [&](const Eigen::Vector3d& d, int m) {
+    ia = supportVertex(a, d, ia);
+    ib = supportVertex(b, -(R.transpose() * d), ib);
+    s.w[m] = a.vertices_L[ia] - (R * b.vertices_L[ib] + t);
     s.ia[m] = ia;
     s.ib[m] = ib;
   };
@@ -468,40 +475,39 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
   if (warm != nullptr) {
     ia = std::clamp(warm->vertex_a, 0, static_cast<int>(a.vertices_L.size()) - 1);
     ib = std::clamp(warm->vertex_b, 0, static_cast<int>(b.vertices_L.size()) - 1);
-    s.p_a[0] = R_B_A * a.vertices_L[ia] + p_B_A;
-    s.p_b[0] = R_B_B * b.vertices_L[ib] + p_B_B;
-    s.w[0] = s.p_a[0] - s.p_b[0];
+    s.w[0] = a.vertices_L[ia] - (R * b.vertices_L[ib] + t);
     s.ia[0] = ia;
     s.ib[0] = ib;
   } else {
     // Cold: the support point towards B (the caller's direction, else B's bounding centre from A's),
     // each climb from its piece's start vertex for that direction.
-    Eigen::Vector3d d = towards_b;
-    if (!(d.squaredNorm() > 0)) d = (R_B_B * b.bound_center_L + p_B_B) - (R_B_A * a.bound_center_L + p_B_A);
+    Eigen::Vector3d d = R_B_A.transpose() * towards_b;
+    if (!(d.squaredNorm() > 0)) d = (R * b.bound_center_L + t) - a.bound_center_L;
     if (!(d.squaredNorm() > 0)) d = Eigen::Vector3d::UnitX();
-    ia = startVertex(a, R_B_A.transpose() * d);
-    ib = startVertex(b, -(R_B_B.transpose() * d));
+    ia = startVertex(a, d);
+    ib = startVertex(b, -(R.transpose() * d));
     support(d, 0);
-    // That support pair already bounds the distance: A's farthest point along d is s.p_a[0] and B's
-    // nearest is s.p_b[0], so every point x of A - B has -d.x >= -d.w (the gap between the two
+    // That support pair already bounds the distance: A's farthest point along d is A's support and
+    // B's nearest is B's, so every point x of A - B has -d.x >= -d.w (the gap between the two
     // pieces' extents along d). A good guess of d (the caller's) often proves a far pair at once.
-    const double tol = std::max(kConvexTolerance, 1e-9 * s.w[0].norm());
-    const double lower = -d.dot(s.w[0]) / d.norm() - tol;
-    if (lower > stop_above) {
-      out.above = true;
-      out.distance = lower;
-      return out;
+    if (stop_above < std::numeric_limits<double>::infinity()) {
+      const double lower = -d.dot(s.w[0]) / d.norm() - searchTolerance(s.w[0].squaredNorm());
+      if (lower > stop_above) {
+        out.above = true;
+        out.distance = lower;
+        return out;
+      }
     }
   }
   s.size = 1;
   SubResult sub;
   point(s.w, 0, sub);
-  double w_max = s.w[0].norm();  // the largest |w| seen: the problem's size for the tolerance
+  double w2_max = s.w[0].squaredNorm();  // the largest |w|^2 seen: the problem's size for the tolerance
 
   bool contact = false;
   for (int it = 0; it < kMaxIterations; ++it) {
     // Tolerance on the distance: absolute, or relative to the size where rounding would dominate.
-    const double tol = std::max(kConvexTolerance, 1e-9 * w_max);
+    const double tol = searchTolerance(w2_max);
     if (!(sub.vv > tol * tol)) {  // origin inside (v = 0) or within the tolerance of A - B
       contact = true;
       break;
@@ -511,19 +517,22 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     assert(m < 4);
     support(-v, m);
     ++out.iterations;
-    w_max = std::max(w_max, s.w[m].norm());
+    w2_max = std::max(w2_max, s.w[m].squaredNorm());
     // Every point x of A - B has v.x >= v.w (w is the support in -v): the distance is at least
     // v.w / |v|; less the tolerance, at most the distance this search would report (within tol of
     // the exact one), so the bound is below the answer too. Above stop_above the caller needs no more.
     const double vw = v.dot(s.w[m]);
-    const double lower = vw / std::sqrt(sub.vv) - tol;
-    if (lower > stop_above) {
-      out.above = true;
-      out.distance = lower;
-      return out;
+    if (stop_above < std::numeric_limits<double>::infinity()) {
+      const double lower = vw / std::sqrt(sub.vv) - tol;
+      if (lower > stop_above) {
+        out.above = true;
+        out.distance = lower;
+        return out;
+      }
     }
     // Montanari Alg. 1's relative test as a bound on the error: |v| - d <= (|v|^2 - v.w) / |v|.
-    if (!(sub.vv - vw > tol * std::sqrt(sub.vv))) break;
+    const double gap = sub.vv - vw;  // >= 0 in exact arithmetic
+    if (!(gap > 0 && gap * gap > tol * tol * sub.vv)) break;
     bool repeated = false;  // a vertex pair already in the simplex: no progress possible
     for (int k = 0; k < m; ++k) repeated = repeated || (s.ia[k] == ia && s.ib[k] == ib);
     if (repeated) break;
@@ -540,7 +549,7 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     sub = next;
   }
 
-  witnessPoints(s, sub, contact, warm, out);
+  witnessPoints(s, sub, contact, a, b, R, t, X_B_A, warm, out);
   return out;
 }
 
