@@ -207,6 +207,63 @@ int supportVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L, int star
 
 namespace {
 
+/// One climber of supportPair: a piece with a graph, its direction, where it stands.
+struct Climb {
+  const Eigen::Vector3d* v;
+  const int* nb;
+  const int* adj;
+  double dx, dy, dz;
+  int at;
+  double at_dot;
+  bool done;
+  void init(const ConvexPiece& p, const Eigen::Vector3d& d, int start) {
+    v = p.vertices_L.data();
+    nb = p.neighbor_begin.data();
+    adj = p.neighbors.data();
+    dx = d.x(), dy = d.y(), dz = d.z();
+    at = std::clamp(start, 0, static_cast<int>(p.vertices_L.size()) - 1);
+    at_dot = dx * v[at].x() + dy * v[at].y() + dz * v[at].z();
+    done = false;
+  }
+  [[gnu::always_inline]] inline void step() {
+    int next = at;
+    for (int k = nb[at]; k < nb[at + 1]; ++k) {
+      const Eigen::Vector3d& w = v[adj[k]];
+      const double dot = dx * w.x() + dy * w.y() + dz * w.z();
+      if (dot > at_dot) {
+        at_dot = dot;
+        next = adj[k];
+      }
+    }
+    done = next == at;
+    at = next;
+  }
+};
+
+/// supportVertex of both pieces, the two climbs interleaved step by step (independent work for the
+/// processor to overlap).
+void supportPair(const ConvexPiece& a, const Eigen::Vector3d& da, int& ia, const ConvexPiece& b,
+                 const Eigen::Vector3d& db, int& ib) {
+  const bool ga = a.neighbor_begin.size() == a.vertices_L.size() + 1;
+  const bool gb = b.neighbor_begin.size() == b.vertices_L.size() + 1;
+  if (!ga || !gb) {
+    ia = supportVertex(a, da, ia);
+    ib = supportVertex(b, db, ib);
+    return;
+  }
+  Climb A, B;
+  A.init(a, da, ia);
+  B.init(b, db, ib);
+  while (!A.done && !B.done) {
+    A.step();
+    B.step();
+  }
+  while (!A.done) A.step();
+  while (!B.done) B.step();
+  ia = A.at;
+  ib = B.at;
+}
+
 /// The GJK simplex: up to 4 points w = p_a - p_b of A - B (in A's link frame), with the vertex
 /// indices they came from (the witness points are made from those at the end).
 struct Simplex {
@@ -465,8 +522,7 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
   int ia = 0, ib = 0;
   Simplex s;
   auto support = [&](const Eigen::Vector3d& d, int m) {
-    ia = supportVertex(a, d, ia);
-    ib = supportVertex(b, -(R.transpose() * d), ib);
+    supportPair(a, d, ia, b, -(R.transpose() * d), ib);
     s.w[m] = a.vertices_L[ia] - (R * b.vertices_L[ib] + t);
     s.ia[m] = ia;
     s.ib[m] = ib;
