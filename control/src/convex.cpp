@@ -502,7 +502,7 @@ inline double searchTolerance(double w2) {
 
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
                                      const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm, double stop_above,
-                                     const Eigen::Vector3d& towards_b) noexcept {
+                                     const Eigen::Vector3d& towards_b, Eigen::Vector3d* axis) noexcept {
   constexpr int kMaxIterations = 64;
   ConvexDistance out;
   assert(!a.vertices_L.empty() && !b.vertices_L.empty());
@@ -551,10 +551,26 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
       if (lower > stop_above) {
         out.above = true;
         out.distance = lower;
+        if (axis != nullptr) *axis = d;
         return out;
+      }
+      // The direction that proved this pair far last time: its own support pair, the same bound.
+      if (axis != nullptr && axis->squaredNorm() > 0) {
+        const Eigen::Vector3d e = *axis;
+        const Eigen::Vector3d e_b = -(R.transpose() * e);
+        int ja = startVertex(a, e), jb = startVertex(b, e_b);
+        supportPair(a, e, ja, b, e_b, jb);
+        const Eigen::Vector3d w = a.vertices_L[ja] - (R * b.vertices_L[jb] + t);
+        const double lower_e = -e.dot(w) / e.norm() - searchTolerance(w.squaredNorm());
+        if (lower_e > stop_above) {
+          out.above = true;
+          out.distance = lower_e;
+          return out;
+        }
       }
     }
   }
+  if (axis != nullptr) axis->setZero();  // set again below if the search proves the pair far
   s.size = 1;
   SubResult sub;
   point(s.w, 0, sub);
@@ -583,6 +599,7 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
       if (lower > stop_above) {
         out.above = true;
         out.distance = lower;
+        if (axis != nullptr) *axis = -v;  // v points from B towards A
         return out;
       }
     }

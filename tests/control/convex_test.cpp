@@ -625,6 +625,58 @@ TEST(ConvexDistance, TheFirstDirectionAloneProvesAFarPair) {
   EXPECT_GE(at_once, apart);
 }
 
+/// `axis`: a search that proves a pair far stores the direction that did it (A's link frame); given
+/// back with the pair moved a little, that direction alone proves it far again (no GJK iteration),
+/// from a poor first direction (random); a bound so proven is below the brute-force distance; a
+/// distance computed with a stored direction is the same bits as without one, and clears it.
+TEST(ConvexDistance, AnAxisThatProvedAPairFarProvesItAgainAndChangesNoComputedDistance) {
+  std::mt19937_64 rng(79);
+  std::uniform_real_distribution<double> centre(0.08, 0.3), nudge(-0.002, 0.002);
+  int stored = 0, again_at_once = 0, computed = 0;
+  for (int k = 0; k < 300; ++k) {
+    const Hull ha = randomHull(rng), hb = randomHull(rng);
+    const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
+    const Eigen::Isometry3d X_B_A = pose(randomRotation(rng), centre(rng) * (randomRotation(rng) * Vec3::UnitX()));
+    const Eigen::Isometry3d X_B_B = pose(randomRotation(rng), Vec3::Zero());
+    const double brute = bruteDistance(ha, X_B_A, hb, X_B_B);
+    if (!(brute > 0.01)) continue;
+    const Vec3 poor = randomRotation(rng) * Vec3::UnitX();
+    const double stop = 0.5 * brute;
+    Vec3 axis = Vec3::Zero();
+    const ConvexDistance first = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, stop, poor, &axis);
+    ASSERT_TRUE(first.above) << "case " << k;
+    EXPECT_LE(first.distance, brute + 1e-9) << "case " << k;
+    ASSERT_GT(axis.squaredNorm(), 0.0) << "case " << k << ": the proving direction is stored";
+    ++stored;
+    // Moved by up to 2 mm: the same direction proves half the distance again, at once.
+    Eigen::Isometry3d moved = X_B_A;
+    moved.translation() += Vec3(nudge(rng), nudge(rng), nudge(rng));
+    const double brute_moved = bruteDistance(ha, moved, hb, X_B_B);
+    const Vec3 other_poor = randomRotation(rng) * Vec3::UnitX();
+    const ConvexDistance again = computeConvexDistance(a, moved, b, X_B_B, nullptr, stop, other_poor, &axis);
+    ASSERT_TRUE(again.above) << "case " << k;
+    EXPECT_GT(again.distance, stop) << "case " << k;
+    EXPECT_LE(again.distance, brute_moved + 1e-9) << "case " << k << ": the bound must be below the distance";
+    if (again.iterations == 0) ++again_at_once;
+    // Asked for more than the distance: computed in full, the same bits as without a direction.
+    const double past = brute_moved + 0.01;
+    const ConvexDistance plain = computeConvexDistance(a, moved, b, X_B_B, nullptr, past, other_poor);
+    const ConvexDistance with_axis = computeConvexDistance(a, moved, b, X_B_B, nullptr, past, other_poor, &axis);
+    ASSERT_FALSE(plain.above) << "case " << k;
+    EXPECT_EQ(with_axis.above, plain.above) << "case " << k;
+    EXPECT_EQ(with_axis.distance, plain.distance) << "case " << k;
+    EXPECT_EQ(with_axis.p_B_a, plain.p_B_a) << "case " << k;
+    EXPECT_EQ(with_axis.p_B_b, plain.p_B_b) << "case " << k;
+    EXPECT_EQ(axis, Vec3::Zero()) << "case " << k << ": a computed distance clears the direction";
+    ++computed;
+  }
+  std::printf("[ convex ] axis: %d stored, %d proven again before any iteration, %d computed the same\n", stored,
+              again_at_once, computed);
+  EXPECT_GT(stored, 200);
+  EXPECT_EQ(again_at_once, stored);
+  EXPECT_EQ(computed, stored);
+}
+
 TEST(ConvexDistance, NearlyTouchingRandomPiecesMatchBruteForce) {
   // Pieces pushed apart along a random direction until they are 0.1 um to 1 mm apart: the regime
   // where the controller acts and where the sub-distance sees nearly flat simplices.

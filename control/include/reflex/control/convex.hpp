@@ -112,11 +112,18 @@ struct ConvexWarmStart {
 /// plane proves the distance above it (ConvexDistance::above): a caller that only needs the pieces
 /// closer than a bound (the closest of several, a pruning distance) skips most of the work on the
 /// others. A distance at most stop_above is computed exactly as without it (the same operations).
+/// `axis` (may be nullptr; A's link frame, from A towards B; zero: none): a direction that proved this
+/// pair of pieces far before. A cold search with a finite stop_above whose first support pair does
+/// not prove the distance above stop_above tries that direction's support pair next (any direction's
+/// gap is a lower bound), then goes on as without it: a computed distance is the same bits with or
+/// without it, only the lower bound of a pair proven far may differ. On return it holds the
+/// direction that proved the distance above stop_above, or zero (a distance computed, or contact).
 /// Allocation-free; never throws.
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
                                      const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm = nullptr,
                                      double stop_above = std::numeric_limits<double>::infinity(),
-                                     const Eigen::Vector3d& towards_b = Eigen::Vector3d::Zero()) noexcept;
+                                     const Eigen::Vector3d& towards_b = Eigen::Vector3d::Zero(),
+                                     Eigen::Vector3d* axis = nullptr) noexcept;
 
 /// The support point of `piece` in direction d_L (link frame): the vertex maximising d_L . v. `start`
 /// is the vertex index to hill-climb from (clamped); returns the index found.
