@@ -498,6 +498,17 @@ inline double searchTolerance(double w2) {
   return w2 > 1.0 ? 1e-9 * std::sqrt(w2) : kConvexTolerance;
 }
 
+/// The gap between the extents of A and of B (placed in A's link frame by R, t) along e (from A
+/// towards B), less the tolerance: a lower bound of their distance whatever e is.
+double gapAlong(const ConvexPiece& a, const ConvexPiece& b, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                const Eigen::Vector3d& e) noexcept {
+  const Eigen::Vector3d e_b = -(R.transpose() * e);
+  int ja = startVertex(a, e), jb = startVertex(b, e_b);
+  supportPair(a, e, ja, b, e_b, jb);
+  const Eigen::Vector3d w = a.vertices_L[ja] - (R * b.vertices_L[jb] + t);
+  return -e.dot(w) / e.norm() - searchTolerance(w.squaredNorm());
+}
+
 }  // namespace
 
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
@@ -556,12 +567,7 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
       }
       // The direction that proved this pair far last time: its own support pair, the same bound.
       if (axis != nullptr && axis->squaredNorm() > 0) {
-        const Eigen::Vector3d e = *axis;
-        const Eigen::Vector3d e_b = -(R.transpose() * e);
-        int ja = startVertex(a, e), jb = startVertex(b, e_b);
-        supportPair(a, e, ja, b, e_b, jb);
-        const Eigen::Vector3d w = a.vertices_L[ja] - (R * b.vertices_L[jb] + t);
-        const double lower_e = -e.dot(w) / e.norm() - searchTolerance(w.squaredNorm());
+        const double lower_e = gapAlong(a, b, R, t, *axis);
         if (lower_e > stop_above) {
           out.above = true;
           out.distance = lower_e;
