@@ -172,42 +172,15 @@ int startVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L) noexcept {
   return piece.start_vertex[static_cast<std::size_t>(k)];
 }
 
-int supportVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L, int start) noexcept {
-  const int n = static_cast<int>(piece.vertices_L.size());
-  if (n <= 0) return 0;
-  int best = std::clamp(start, 0, n - 1);
-  double best_dot = d_L.dot(piece.vertices_L[best]);
-  if (piece.neighbor_begin.size() != piece.vertices_L.size() + 1) {
-    for (int i = 0; i < n; ++i) {
-      const double dot = d_L.dot(piece.vertices_L[i]);
-      if (dot > best_dot) {
-        best_dot = dot;
-        best = i;
-      }
-    }
-    return best;
-  }
-  // Steepest ascent over the hull's edge graph. On a convex polytope a vertex that no neighbour beats
-  // is a global maximum; every step strictly increases the (computed) dot product, so no vertex is
-  // visited twice and the climb ends after at most n steps even with rounding or a NaN direction.
-  for (;;) {
-    int next = best;
-    for (int k = piece.neighbor_begin[best]; k < piece.neighbor_begin[best + 1]; ++k) {
-      const int j = piece.neighbors[k];
-      const double dot = d_L.dot(piece.vertices_L[j]);
-      if (dot > best_dot) {
-        best_dot = dot;
-        next = j;
-      }
-    }
-    if (next == best) return best;
-    best = next;
-  }
-}
-
 namespace {
 
-/// One climber of supportPair: a piece with a graph, its direction, where it stands.
+/// Whether the piece has its edge graph (else support queries scan every vertex).
+inline bool hasGraph(const ConvexPiece& p) { return p.neighbor_begin.size() == p.vertices_L.size() + 1; }
+
+/// Steepest ascent over a piece's edge graph towards direction d, a step at a time (supportVertex
+/// climbs one piece, supportPair two side by side). On a convex polytope a vertex that no neighbour
+/// beats is a global maximum; every step strictly increases the (computed) dot product, so no vertex
+/// is visited twice and the climb ends after at most n steps even with rounding or a NaN direction.
 struct Climb {
   const Eigen::Vector3d* v;
   const int* nb;
@@ -240,13 +213,36 @@ struct Climb {
   }
 };
 
+}  // namespace
+
+int supportVertex(const ConvexPiece& piece, const Eigen::Vector3d& d_L, int start) noexcept {
+  const int n = static_cast<int>(piece.vertices_L.size());
+  if (n <= 0) return 0;
+  if (!hasGraph(piece)) {  // every vertex
+    int best = std::clamp(start, 0, n - 1);
+    double best_dot = d_L.dot(piece.vertices_L[best]);
+    for (int i = 0; i < n; ++i) {
+      const double dot = d_L.dot(piece.vertices_L[i]);
+      if (dot > best_dot) {
+        best_dot = dot;
+        best = i;
+      }
+    }
+    return best;
+  }
+  Climb c;
+  c.init(piece, d_L, start);
+  while (!c.done) c.step();
+  return c.at;
+}
+
+namespace {
+
 /// supportVertex of both pieces, the two climbs interleaved step by step (independent work for the
 /// processor to overlap).
 void supportPair(const ConvexPiece& a, const Eigen::Vector3d& da, int& ia, const ConvexPiece& b,
                  const Eigen::Vector3d& db, int& ib) {
-  const bool ga = a.neighbor_begin.size() == a.vertices_L.size() + 1;
-  const bool gb = b.neighbor_begin.size() == b.vertices_L.size() + 1;
-  if (!ga || !gb) {
+  if (!hasGraph(a) || !hasGraph(b)) {
     ia = supportVertex(a, da, ia);
     ib = supportVertex(b, db, ib);
     return;

@@ -175,6 +175,24 @@ Hull randomHull(std::mt19937_64& rng) {
   }
 }
 
+/// Two random hulls (randomHull), A turned at random with its origin `centre` away from B's in a
+/// random direction, B turned at random at the origin.
+struct RandomPair {
+  Hull ha, hb;
+  ConvexPiece a, b;
+  Eigen::Isometry3d X_B_A, X_B_B;
+};
+RandomPair randomPair(std::mt19937_64& rng, std::uniform_real_distribution<double>& centre) {
+  RandomPair p;
+  p.ha = randomHull(rng);
+  p.hb = randomHull(rng);
+  p.a = pieceOf(p.ha);
+  p.b = pieceOf(p.hb);
+  p.X_B_A = pose(randomRotation(rng), centre(rng) * (randomRotation(rng) * Vec3::UnitX()));
+  p.X_B_B = pose(randomRotation(rng), Vec3::Zero());
+  return p;
+}
+
 /// Brute-force exact distance between two hulls placed in B: the minimum over all triangle pairs of
 /// FCL's triangle-triangle distance, 0 when one holds a vertex of the other.
 double bruteDistance(const Hull& a, const Eigen::Isometry3d& X_B_A, const Hull& b, const Eigen::Isometry3d& X_B_B) {
@@ -550,10 +568,10 @@ TEST(ConvexDistance, StopAboveGivesALowerBoundOrTheSameAnswer) {
   std::uniform_real_distribution<double> centre(0.05, 0.3);
   int above = 0, same = 0;
   for (int k = 0; k < 300; ++k) {
-    const Hull ha = randomHull(rng), hb = randomHull(rng);
-    const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
-    const Eigen::Isometry3d X_B_A = pose(randomRotation(rng), centre(rng) * (randomRotation(rng) * Vec3::UnitX()));
-    const Eigen::Isometry3d X_B_B = pose(randomRotation(rng), Vec3::Zero());
+    const RandomPair pair = randomPair(rng, centre);
+    const Hull &ha = pair.ha, &hb = pair.hb;
+    const ConvexPiece &a = pair.a, &b = pair.b;
+    const Eigen::Isometry3d &X_B_A = pair.X_B_A, &X_B_B = pair.X_B_B;
     const ConvexDistance full = computeConvexDistance(a, X_B_A, b, X_B_B);
     const double brute = bruteDistance(ha, X_B_A, hb, X_B_B);
     for (const double stop : {brute * 0.5, brute - 1e-4, brute + 1e-4, brute * 2.0 + 0.01}) {
@@ -586,10 +604,10 @@ TEST(ConvexDistance, TheFirstDirectionAloneProvesAFarPair) {
   std::uniform_real_distribution<double> centre(0.05, 0.3);
   int at_once = 0, apart = 0;
   for (int k = 0; k < 300; ++k) {
-    const Hull ha = randomHull(rng), hb = randomHull(rng);
-    const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
-    const Eigen::Isometry3d X_B_A = pose(randomRotation(rng), centre(rng) * (randomRotation(rng) * Vec3::UnitX()));
-    const Eigen::Isometry3d X_B_B = pose(randomRotation(rng), Vec3::Zero());
+    const RandomPair pair = randomPair(rng, centre);
+    const Hull &ha = pair.ha, &hb = pair.hb;
+    const ConvexPiece &a = pair.a, &b = pair.b;
+    const Eigen::Isometry3d &X_B_A = pair.X_B_A, &X_B_B = pair.X_B_B;
     const ConvexDistance full = computeConvexDistance(a, X_B_A, b, X_B_B);
     if (full.penetrating) continue;
     ++apart;
@@ -634,10 +652,10 @@ TEST(ConvexDistance, AnAxisThatProvedAPairFarProvesItAgainAndChangesNoComputedDi
   std::uniform_real_distribution<double> centre(0.08, 0.3), nudge(-0.002, 0.002);
   int stored = 0, again_at_once = 0, computed = 0;
   for (int k = 0; k < 300; ++k) {
-    const Hull ha = randomHull(rng), hb = randomHull(rng);
-    const ConvexPiece a = pieceOf(ha), b = pieceOf(hb);
-    const Eigen::Isometry3d X_B_A = pose(randomRotation(rng), centre(rng) * (randomRotation(rng) * Vec3::UnitX()));
-    const Eigen::Isometry3d X_B_B = pose(randomRotation(rng), Vec3::Zero());
+    const RandomPair pair = randomPair(rng, centre);
+    const Hull &ha = pair.ha, &hb = pair.hb;
+    const ConvexPiece &a = pair.a, &b = pair.b;
+    const Eigen::Isometry3d &X_B_A = pair.X_B_A, &X_B_B = pair.X_B_B;
     const double brute = bruteDistance(ha, X_B_A, hb, X_B_B);
     if (!(brute > 0.01)) continue;
     const Vec3 poor = randomRotation(rng) * Vec3::UnitX();
