@@ -21,6 +21,9 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 /// the step it estimates the hit pairs allow (predictiveGuard).
 constexpr double kGuardShrink = 0.5;
 constexpr double kGuardAim = 0.9;
+/// A hit arm's step shortened so far that no point of the arm would move more than this (m) is held
+/// instead: the same to a micrometre, and holding still is never a hit.
+constexpr double kGuardNegligibleMove = 1e-6;
 
 /// The arm (kLeft / kRight) that moves segment s this cycle, or -1 (ControllerModel's ownership; a
 /// body-schema slot belongs to the arm of the link it hangs on).
@@ -733,9 +736,11 @@ void predict(const Model& model, const ControllerModel& cm, ControllerData& data
 
 /// The predictive guard's search (predictiveGuard): each arm's scale of its step, 1 if no physical
 /// pair of the listed guard pairs (data.guard_pairs) is a hit one period ahead, else shortened until
-/// none is (at most six tries, then 0).
+/// none is (at most six tries, then 0; 0 at once when the shortened step would move no point of the
+/// arm more than kGuardNegligibleMove, `arm_move`: how far its whole step can move one).
 std::array<double, 2> guardStepScales(const Model& model, const ControllerModel& cm, ControllerData& data,
-                                      const Eigen::Ref<const Eigen::VectorXd>& q, double floor) {
+                                      const Eigen::Ref<const Eigen::VectorXd>& q, double floor,
+                                      const std::array<double, 2>& arm_move) {
   // Holding the arms still leaves the robot where it is unless walking or balance moves it: then the
   // distances of holding still are this cycle's (a pair the sweep left as a lower bound is above the
   // floor either way, so every comparison below comes out the same), and the hold is not predicted.
@@ -780,8 +785,13 @@ std::array<double, 2> guardStepScales(const Model& model, const ControllerModel&
       }
     }
     if (!hit[0] && !hit[1]) break;
-    for (int a = 0; a < 2; ++a)
-      if (hit[a]) scale[a] = iter < 6 ? shrink[a] * scale[a] : 0.0;
+    for (int a = 0; a < 2; ++a) {
+      if (!hit[a]) continue;
+      scale[a] = iter < 6 ? shrink[a] * scale[a] : 0.0;
+      // An arm pressed at the floor gets a vanishing step (its pairs have nothing left to give): held,
+      // it needs no more predictions.
+      if (scale[a] * arm_move[a] < kGuardNegligibleMove) scale[a] = 0.0;
+    }
     if (scale[0] == 0.0 && scale[1] == 0.0) break;  // no arm moves: no pair can count as a hit
   }
   return scale;
@@ -790,12 +800,13 @@ std::array<double, 2> guardStepScales(const Model& model, const ControllerModel&
 /// Predictive guard (not in the paper; ControllerParams::predict_margin). d_phys: this cycle's
 /// closest physical pair (computeControl's red-zone check). The two filters inside
 /// computeArm bound the approach to first order; this one checks the step itself. Each arm's step is
-/// shortened (at most six times, each to at most half, then dropped) while, one period ahead, some
+/// shortened (at most six times, each to at most half, then dropped; dropped at once below a
+/// micrometre of motion) while, one period ahead, some
 /// physical pair of that arm would end below d_r + predict_margin AND closer than it is now and than
 /// it would be if the arms held still (so walking motion that no arm step can undo is not blamed on
 /// the arms). Each try aims where the hit pairs, taken as straight from now to the step, end at what
-/// they may: an arm pressed at the floor gets a tiny step after two predictions and the hold, not
-/// after eight. On the kinematic robot the prediction is exact for the arms, so no arm motion ever
+/// they may: an arm pressed at the floor is held after one prediction (its step would shrink to
+/// nothing), not after eight. On the kinematic robot the prediction is exact for the arms, so no arm motion ever
 /// enters the red zone.
 void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerData& data,
                      const Eigen::Ref<const Eigen::VectorXd>& q, double d_phys) {
@@ -879,7 +890,14 @@ void predictiveGuard(const Model& model, const ControllerModel& cm, ControllerDa
     listPairsNear(model, data.dist, data.guard_pairs.data(), data.num_guard_pairs, floor, data.guard_reach.data(),
                   data.guard_listing);
 
-  const std::array<double, 2> scale = guardStepScales(model, cm, data, q, floor);
+  // How far each arm's own step can move a point of it (its joints' share of the sweep above).
+  std::array<double, 2> arm_move{0.0, 0.0};
+  for (int a = 0; a < 2; ++a)
+    for (int i = 0; i < cm.arms[a].n; ++i) {
+      const int j = cm.arms[a].q[i];
+      arm_move[a] += std::abs(data.qdot[j]) * (data.lever[j] + slot_extent) * params.period;
+    }
+  const std::array<double, 2> scale = guardStepScales(model, cm, data, q, floor, arm_move);
   if (scale[0] < 1.0 || scale[1] < 1.0) {
     ++data.guard_count;
     for (int a = 0; a < 2; ++a)

@@ -385,7 +385,7 @@ TEST(PredictiveGuard, NoStepEndsBelowTheFloorAndCloserThanBefore) {
   const std::array<std::array<Eigen::Vector3d, 2>, 4> phases{
       {{across_l, across_r}, {inside, across_r}, {low_l, inside}, {across_l, low_r}}};
   double closest = 1.0;
-  int checked = 0;
+  int checked = 0, held = 0;
   for (int k = 0; k < 1600; ++k) {
     const int phase = (k / 80) % 4;
     ControlInput in;
@@ -393,7 +393,20 @@ TEST(PredictiveGuard, NoStepEndsBelowTheFloorAndCloserThanBefore) {
     in.hands[kRight] = {HandStatus::kGiven, phases[phase][kRight]};
     in.priority = static_cast<MotionPriority>((k / 120) % 3);
     const Eigen::VectorXd q = robot.jointPositions();
+    const std::uint64_t guard_before = data.guard_count;
     ASSERT_EQ(computeControl(model, cm, data, q, in), ControlResult::kOk) << "cycle " << k;
+    // A step the guard shortened is held outright once it would move nothing (an arm pressed at the
+    // floor): every arm step it leaves moves some joint by at least a nanoradian, or none at all.
+    if (data.guard_count > guard_before) {
+      for (int a = 0; a < 2; ++a) {
+        double largest = 0.0;
+        for (int i = 0; i < cm.arms[a].n; ++i)
+          largest = std::max(largest, std::abs(data.qdot[cm.arms[a].q[i]]) * cm.params.period);
+        if (largest == 0.0) ++held;
+        EXPECT_TRUE(largest == 0.0 || largest >= 1e-9)
+            << "cycle " << k << " arm " << a << ": a vanishing step " << largest << " rad left moving";
+      }
+    }
     robot.command(data.qdot, cm.params.period);
     ASSERT_TRUE(computeForwardKinematics(model, kin, robot.jointPositions()));
     computeSegmentDistances(model, kin, dist);
@@ -407,11 +420,14 @@ TEST(PredictiveGuard, NoStepEndsBelowTheFloorAndCloserThanBefore) {
     }
   }
   EXPECT_GT(data.guard_count, 0U) << "the targets drove pairs to the guard";
+  EXPECT_GT(held, 0) << "the targets pressed an arm at the floor";
   EXPECT_GE(closest, floor - 1e-12);
   EXPECT_LT(closest, cm.params.d_r + cm.params.guard_margin + 0.002) << "pairs did come close";
   EXPECT_EQ(data.estop_count, 0U);
-  std::printf("closest %.3f mm, floor %.3f mm, guard shortened %llu steps, %d pair-cycles below the floor\n",
-              closest * 1e3, floor * 1e3, static_cast<unsigned long long>(data.guard_count), checked);
+  std::printf(
+      "closest %.3f mm, floor %.3f mm, guard shortened %llu steps (%d arm steps held), %d pair-cycles below "
+      "the floor\n",
+      closest * 1e3, floor * 1e3, static_cast<unsigned long long>(data.guard_count), held, checked);
 }
 
 TEST(PredictiveGuard, JointLeversBoundHowFarAnySegmentPointMoves) {
