@@ -2,6 +2,7 @@
 
 #include <cassert>
 #include <cmath>
+#include <limits>
 
 namespace reflex::control {
 namespace {
@@ -45,8 +46,11 @@ KinematicsData::KinematicsData(const Model& model)
     : X_B_L(model.links.size(), Eigen::Isometry3d::Identity()),
       axis_B(model.links.size(), Eigen::Vector3d::UnitZ()),
       q(Eigen::VectorXd::Zero(model.nq)),
-      twist_B(Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, model.nq)) {
-  computeForwardKinematics(model, *this, q);
+      twist_B(Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, model.nq)),
+      moved(model.links.size(), 1) {
+  // Every pose computed (none kept: `moved` starts set and the joint values are compared with NaN).
+  q.setConstant(std::numeric_limits<double>::quiet_NaN());
+  computeForwardKinematics(model, *this, Eigen::VectorXd::Zero(model.nq));
 }
 
 bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q,
@@ -54,20 +58,30 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data, const Ei
   if (q.size() != model.nq || !q.allFinite()) return false;
   assert(data.X_B_L.size() == model.links.size());
   assert(near != &data);
-  data.q = q;
+  assert(data.moved.size() == model.links.size());
   const std::size_t n = model.links.size();
+  // data.q still holds the joint values of the poses in data; NaN: none computed yet (construction),
+  // and a model without joints has nothing worth keeping.
+  const unsigned char root_moved = data.q.size() == 0 || data.q[0] != data.q[0] ? 1 : 0;
   for (std::size_t i = 0; i < n; ++i) {
     const Link& link = model.links[i];
     if (link.parent < 0) {
       data.X_B_L[i].setIdentity();
       data.axis_B[i] = link.axis_J;
+      data.moved[i] = root_moved;
       continue;
     }
-    // A link whose parent pose and joint value are those of `near` has its pose too: the same
-    // operations on the same values (links come after their parent).
+    // A link whose parent kept its pose and whose joint value is the one of its pose keeps it; one
+    // whose parent pose and joint value are those of `near` has near's: the same operations on the
+    // same values (links come after their parent).
+    const std::size_t parent = static_cast<std::size_t>(link.parent);
+    if (!data.moved[parent] && (link.q_index < 0 || q[link.q_index] == data.q[link.q_index])) {
+      data.moved[i] = 0;
+      continue;
+    }
+    data.moved[i] = 1;
     if (near && (link.q_index < 0 || q[link.q_index] == near->q[link.q_index]) &&
-        data.X_B_L[static_cast<std::size_t>(link.parent)].matrix() ==
-            near->X_B_L[static_cast<std::size_t>(link.parent)].matrix()) {
+        data.X_B_L[parent].matrix() == near->X_B_L[parent].matrix()) {
       data.X_B_L[i] = near->X_B_L[i];
       data.axis_B[i] = near->axis_B[i];
       continue;
@@ -86,8 +100,10 @@ bool computeForwardKinematics(const Model& model, KinematicsData& data, const Ei
         break;
     }
   }
+  data.q = q;
   for (int j = 0; j < model.nq; ++j) {
     const int l = model.q_link[j];
+    if (!data.moved[static_cast<std::size_t>(l)]) continue;  // its twist is the one computed with its pose
     const Eigen::Vector3d& axis = data.axis_B[l];
     if (model.links[l].type == JointType::kRevolute) {
       data.twist_B.col(j).head<3>() = axis;

@@ -12,6 +12,8 @@
 #include <kdl/tree.hpp>
 #include <kdl_parser/kdl_parser.hpp>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -228,6 +230,41 @@ TEST(KinematicsNear, PosesFromANearbyConfigurationAreTheSameBits) {
       ASSERT_TRUE(from_near.q == q) << robot;
     }
     EXPECT_GT(copied_links, 200 * static_cast<long>(m.links.size()) / 4) << robot;  // the copy path ran
+  }
+}
+
+TEST(KinematicsKept, PosesKeptFromTheLastCallAreTheSameBits) {
+  // One KinematicsData along a walk through random configurations, each step moving some joints and
+  // holding the others (the arms reach, the legs stand): every pose, axis and twist the same bits as
+  // a KinematicsData made for that configuration alone. It fails when a link keeps its pose although
+  // its parent moved (a held wrist on a moving shoulder) or its own joint changed.
+  for (const char* robot : {testing::kAsimo, "mesh_humanoid"}) {
+    const Model m = testing::loadRobot(robot);
+    KinematicsData along(m);
+    std::mt19937_64 rng(45);
+    Eigen::VectorXd q = test::randomConfiguration(m, rng);
+    long kept_links = 0;
+    for (int c = 0; c < 300; ++c) {
+      const Eigen::VectorXd other = test::randomConfiguration(m, rng);
+      // Steps 0 to 3: none, one, a few or half of the joints move (those a shuffled order puts first).
+      std::vector<int> order(static_cast<std::size_t>(m.nq));
+      for (int j = 0; j < m.nq; ++j) order[static_cast<std::size_t>(j)] = j;
+      std::shuffle(order.begin(), order.end(), rng);
+      const int moving = std::array<int, 4>{0, 1, 3, m.nq / 2}[static_cast<std::size_t>(c % 4)];
+      for (int k = 0; k < moving; ++k)
+        q[order[static_cast<std::size_t>(k)]] = other[order[static_cast<std::size_t>(k)]];
+      ASSERT_TRUE(computeForwardKinematics(m, along, q));
+      KinematicsData alone(m);
+      ASSERT_TRUE(computeForwardKinematics(m, alone, q));
+      for (std::size_t l = 0; l < m.links.size(); ++l) {
+        ASSERT_TRUE(along.X_B_L[l].matrix() == alone.X_B_L[l].matrix()) << robot << " step " << c << " link " << l;
+        ASSERT_TRUE(along.axis_B[l] == alone.axis_B[l]) << robot << " step " << c << " link " << l;
+        kept_links += along.moved[l] ? 0 : 1;
+      }
+      ASSERT_TRUE(along.twist_B == alone.twist_B) << robot << " step " << c;
+      ASSERT_TRUE(along.q == q) << robot;
+    }
+    EXPECT_GT(kept_links, 300 * static_cast<long>(m.links.size()) / 4) << robot;  // the keeping path ran
   }
 }
 

@@ -27,13 +27,16 @@ struct KinematicsData {
   /// (w x p_B + v) per unit qdot_j: the Jacobian and row functions use it, so the per-joint work
   /// (o x axis) is done once per cycle instead of once per pair.
   Eigen::Matrix<double, 6, Eigen::Dynamic> twist_B;
+  /// Per link, whether the last computeForwardKinematics changed its pose (scratch of the next one).
+  std::vector<unsigned char> moved;
 };
 
 /// Forward kinematics. Returns false (and leaves `data` unchanged) if q has the wrong size or a
-/// non-finite value; the caller then keeps its last valid state. With `near` (the kinematics of a
-/// configuration that differs from q in a few joints, e.g. the cycle's for a prediction one step
-/// ahead), a link whose parent pose and joint value equal near's copies its pose from it: the same
-/// bits as computing it, without the trigonometry.
+/// non-finite value; the caller then keeps its last valid state. A link whose parent kept its pose
+/// and whose joint value is the one `data` last had keeps its pose (the arms move, the legs and head
+/// cost nothing). With `near` (the kinematics of a configuration that differs from q in a few joints,
+/// e.g. the cycle's for a prediction one step ahead), a link whose parent pose and joint value equal
+/// near's copies its pose from it. Either way the same bits as computing it.
 bool computeForwardKinematics(const Model& model, KinematicsData& data, const Eigen::Ref<const Eigen::VectorXd>& q,
                               const KinematicsData* near = nullptr);
 
