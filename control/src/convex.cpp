@@ -509,7 +509,7 @@ double gapAlong(const ConvexPiece& a, const ConvexPiece& b, const Eigen::Matrix3
 
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
                                      const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm, double stop_above,
-                                     const Eigen::Vector3d& towards_b, Eigen::Vector3d* axis) noexcept {
+                                     const Eigen::Vector3d& towards_b, ConvexHint* hint) noexcept {
   constexpr int kMaxIterations = 64;
   ConvexDistance out;
   assert(!a.vertices_L.empty() && !b.vertices_L.empty());
@@ -547,23 +547,29 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     Eigen::Vector3d d = R_B_A.transpose() * towards_b;
     if (!(d.squaredNorm() > 0)) d = (R * b.bound_center_L + t) - a.bound_center_L;
     if (!(d.squaredNorm() > 0)) d = Eigen::Vector3d::UnitX();
-    ia = startVertex(a, d);
-    ib = startVertex(b, -(R.transpose() * d));
+    const bool proof = stop_above < std::numeric_limits<double>::infinity();
+    // A proof climbs from where the last one ended (the same support pair unless vertices tie).
+    const bool hinted = proof && hint != nullptr && hint->vertex_a >= 0 &&
+                        hint->vertex_a < static_cast<int>(a.vertices_L.size()) && hint->vertex_b >= 0 &&
+                        hint->vertex_b < static_cast<int>(b.vertices_L.size());
+    ia = hinted ? hint->vertex_a : startVertex(a, d);
+    ib = hinted ? hint->vertex_b : startVertex(b, -(R.transpose() * d));
     support(d, 0);
+    if (hint != nullptr) hint->vertex_a = ia, hint->vertex_b = ib;
     // That support pair already bounds the distance: A's farthest point along d is A's support and
     // B's nearest is B's, so every point x of A - B has -d.x >= -d.w (the gap between the two
     // pieces' extents along d). A good guess of d (the caller's) often proves a far pair at once.
-    if (stop_above < std::numeric_limits<double>::infinity()) {
+    if (proof) {
       const double lower = -d.dot(s.w[0]) / d.norm() - searchTolerance(s.w[0].squaredNorm());
       if (lower > stop_above) {
         out.above = true;
         out.distance = lower;
-        if (axis != nullptr) *axis = d;
+        if (hint != nullptr) hint->axis = d;
         return out;
       }
       // The direction that proved this pair far last time: its own support pair, the same bound.
-      if (axis != nullptr && axis->squaredNorm() > 0) {
-        const double lower_e = gapAlong(a, b, R, t, *axis);
+      if (hint != nullptr && hint->axis.squaredNorm() > 0) {
+        const double lower_e = gapAlong(a, b, R, t, hint->axis);
         if (lower_e > stop_above) {
           out.above = true;
           out.distance = lower_e;
@@ -571,8 +577,14 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
         }
       }
     }
+    // The search goes on as without a hint: from the start vertices' climb.
+    if (hinted) {
+      ia = startVertex(a, d);
+      ib = startVertex(b, -(R.transpose() * d));
+      support(d, 0);
+    }
   }
-  if (axis != nullptr) axis->setZero();  // set again below if the search proves the pair far
+  if (hint != nullptr) hint->axis.setZero();  // set again below if the search proves the pair far
   s.size = 1;
   SubResult sub;
   point(s.w, 0, sub);
@@ -601,7 +613,7 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
       if (lower > stop_above) {
         out.above = true;
         out.distance = lower;
-        if (axis != nullptr) *axis = -v;  // v points from B towards A
+        if (hint != nullptr) hint->axis = -v;  // v points from B towards A
         return out;
       }
     }

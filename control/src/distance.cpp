@@ -195,7 +195,7 @@ DistanceData::DistanceData(const Model& model)
     }
   }
   pp_lower.assign(pp_a.size(), -std::numeric_limits<double>::infinity());
-  pp_axis.assign(pp_a.size(), Eigen::Vector3d::Zero());
+  pp_hint.assign(pp_a.size(), ConvexHint{});
   prim_odometer.assign(model.primitives.size(), 0.0);
   pair_lower.assign(model.pairs.size(), -std::numeric_limits<double>::infinity());
   seg_odometer.assign(model.segments.size(), 0.0);
@@ -464,7 +464,7 @@ enum class PieceOutcome : std::uint8_t { kApart, kTouching, kAbove };
 inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin, const DistanceData& data, int pa,
                                   int pb, int link_a, int link_b, double stop_above, const Eigen::Vector3d& towards_b,
                                   double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b, Eigen::Vector3d& n,
-                                  Eigen::Vector3d* axis = nullptr) {
+                                  ConvexHint* hint = nullptr) {
   const Primitive& A = model.primitives[static_cast<std::size_t>(pa)];
   const Primitive& B = model.primitives[static_cast<std::size_t>(pb)];
   const ConvexPiece& ca =
@@ -480,7 +480,7 @@ inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin,
       data.prim_link[static_cast<std::size_t>(pb)] >= 0 ? data.prim_link[static_cast<std::size_t>(pb)] : link_b;
   const ConvexDistance c =
       computeConvexDistance(ca, kin.X_B_L[static_cast<std::size_t>(la)], cb, kin.X_B_L[static_cast<std::size_t>(lb)],
-                            nullptr, stop_above + ra + rb, towards_b, axis);
+                            nullptr, stop_above + ra + rb, towards_b, hint);
   if (c.above) {
     d = c.distance - ra - rb;
     return PieceOutcome::kAbove;
@@ -502,7 +502,7 @@ inline PieceOutcome pieceDistance(const Model& model, const KinematicsData& kin,
 inline PieceOutcome searchOrReuse(const Model& model, const KinematicsData& kin, DistanceData& data, int i, int pa,
                                   int pb, int link_a, int link_b, double stop_above, const Eigen::Vector3d& towards_b,
                                   double& d, Eigen::Vector3d& p_a, Eigen::Vector3d& p_b, Eigen::Vector3d& n,
-                                  Eigen::Vector3d* axis) {
+                                  ConvexHint* hint) {
   const DistanceData::UpperSearch& u = data.upper_search[static_cast<std::size_t>(i)];
   // A search that stopped above its own bound answers only a question about a bound below that.
   if (u.call == data.search_call && u.pa == pa && u.pb == pb &&
@@ -513,7 +513,7 @@ inline PieceOutcome searchOrReuse(const Model& model, const KinematicsData& kin,
     return o;
   }
   ++data.num_piece_searches;
-  return pieceDistance(model, kin, data, pa, pb, link_a, link_b, stop_above, towards_b, d, p_a, p_b, n, axis);
+  return pieceDistance(model, kin, data, pa, pb, link_a, link_b, stop_above, towards_b, d, p_a, p_b, n, hint);
 }
 
 /// Pair i of the tight model: the least exact distance over its primitive pairs, visited by
@@ -578,7 +578,7 @@ bool finishPiecePair(const Model& model, const KinematicsData& kin, DistanceData
     const Eigen::Vector3d towards_b = (B.start + c.t * B.d) - (A.start + c.s * A.d);
     const PieceOutcome o =
         searchOrReuse(model, kin, data, i, pa, pb, link_a, link_b, cap_pa >= 0 ? best : give_up, towards_b, d, p_a, p_b,
-                      n, c.pp >= 0 ? &data.pp_axis[static_cast<std::size_t>(c.pp)] : nullptr);
+                      n, c.pp >= 0 ? &data.pp_hint[static_cast<std::size_t>(c.pp)] : nullptr);
     c.lower = o == PieceOutcome::kTouching ? 0.0 : std::max(c.lower, d);
     if (o == PieceOutcome::kAbove) {
       floor = std::min(floor, d);

@@ -660,18 +660,21 @@ TEST(ConvexDistance, AnAxisThatProvedAPairFarProvesItAgainAndChangesNoComputedDi
     if (!(brute > 0.01)) continue;
     const Vec3 poor = randomRotation(rng) * Vec3::UnitX();
     const double stop = 0.5 * brute;
-    Vec3 axis = Vec3::Zero();
-    const ConvexDistance first = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, stop, poor, &axis);
+    ConvexHint hint;
+    const ConvexDistance first = computeConvexDistance(a, X_B_A, b, X_B_B, nullptr, stop, poor, &hint);
     ASSERT_TRUE(first.above) << "case " << k;
     EXPECT_LE(first.distance, brute + 1e-9) << "case " << k;
-    ASSERT_GT(axis.squaredNorm(), 0.0) << "case " << k << ": the proving direction is stored";
+    ASSERT_GT(hint.axis.squaredNorm(), 0.0) << "case " << k << ": the proving direction is stored";
+    ASSERT_GE(hint.vertex_a, 0) << "case " << k << ": the first support pair is stored";
+    ASSERT_GE(hint.vertex_b, 0) << "case " << k;
+    hint.vertex_a = hint.vertex_b = -1;  // the axis alone
     ++stored;
     // Moved by up to 2 mm: the same direction proves half the distance again, at once.
     Eigen::Isometry3d moved = X_B_A;
     moved.translation() += Vec3(nudge(rng), nudge(rng), nudge(rng));
     const double brute_moved = bruteDistance(ha, moved, hb, X_B_B);
     const Vec3 other_poor = randomRotation(rng) * Vec3::UnitX();
-    const ConvexDistance again = computeConvexDistance(a, moved, b, X_B_B, nullptr, stop, other_poor, &axis);
+    const ConvexDistance again = computeConvexDistance(a, moved, b, X_B_B, nullptr, stop, other_poor, &hint);
     ASSERT_TRUE(again.above) << "case " << k;
     EXPECT_GT(again.distance, stop) << "case " << k;
     EXPECT_LE(again.distance, brute_moved + 1e-9) << "case " << k << ": the bound must be below the distance";
@@ -679,13 +682,13 @@ TEST(ConvexDistance, AnAxisThatProvedAPairFarProvesItAgainAndChangesNoComputedDi
     // Asked for more than the distance: computed in full, the same bits as without a direction.
     const double past = brute_moved + 0.01;
     const ConvexDistance plain = computeConvexDistance(a, moved, b, X_B_B, nullptr, past, other_poor);
-    const ConvexDistance with_axis = computeConvexDistance(a, moved, b, X_B_B, nullptr, past, other_poor, &axis);
+    const ConvexDistance with_axis = computeConvexDistance(a, moved, b, X_B_B, nullptr, past, other_poor, &hint);
     ASSERT_FALSE(plain.above) << "case " << k;
     EXPECT_EQ(with_axis.above, plain.above) << "case " << k;
     EXPECT_EQ(with_axis.distance, plain.distance) << "case " << k;
     EXPECT_EQ(with_axis.p_B_a, plain.p_B_a) << "case " << k;
     EXPECT_EQ(with_axis.p_B_b, plain.p_B_b) << "case " << k;
-    EXPECT_EQ(axis, Vec3::Zero()) << "case " << k << ": a computed distance clears the direction";
+    EXPECT_EQ(hint.axis, Vec3::Zero()) << "case " << k << ": a computed distance clears the direction";
     ++computed;
   }
   std::printf("[ convex ] axis: %d stored, %d proven again before any iteration, %d computed the same\n", stored,
@@ -693,6 +696,62 @@ TEST(ConvexDistance, AnAxisThatProvedAPairFarProvesItAgainAndChangesNoComputedDi
   EXPECT_GT(stored, 200);
   EXPECT_EQ(again_at_once, stored);
   EXPECT_EQ(computed, stored);
+}
+
+TEST(ConvexDistance, AHintOfAnyVerticesChangesNoComputedDistance) {
+  // A hint's support pair only starts the first climbs: whatever vertices it names (ties on cubes'
+  // faces included), a distance asked past is the same bits as without a hint, and a pair asked for
+  // half its distance is proven above it with a bound below the brute force's distance. It fails
+  // when a search goes on from the hinted climb (a tied vertex changes the simplex's path).
+  std::mt19937_64 rng(83);
+  std::uniform_real_distribution<double> centre(0.06, 0.3), unit(0.0, 1.0);
+  int computed = 0, proven = 0, ties = 0;
+  for (int k = 0; k < 600; ++k) {
+    // Half random hulls, half axis-aligned cubes on axis-aligned offsets (support ties everywhere).
+    RandomPair pair = randomPair(rng, centre);
+    if (k % 2 == 1) {
+      pair.ha = cube(0.02 + 0.03 * unit(rng));
+      pair.hb = cube(0.02 + 0.03 * unit(rng));
+      pair.a = pieceOf(pair.ha);
+      pair.b = pieceOf(pair.hb);
+      pair.X_B_A = translation(0.0, 0.0, 0.0);
+      const int along = static_cast<int>(rng() % 3);
+      Vec3 offset = Vec3::Zero();
+      offset[along] = centre(rng);
+      pair.X_B_B = translation(offset.x(), offset.y(), offset.z());
+      ++ties;
+    }
+    const double brute = bruteDistance(pair.ha, pair.X_B_A, pair.hb, pair.X_B_B);
+    if (!(brute > 0.005)) continue;
+    const Vec3 towards = pair.X_B_B.translation() - pair.X_B_A.translation();
+    for (int trial = 0; trial < 4; ++trial) {
+      ConvexHint hint;
+      hint.vertex_a = static_cast<int>(rng() % pair.a.vertices_L.size());
+      hint.vertex_b = static_cast<int>(rng() % pair.b.vertices_L.size());
+      ConvexHint proof_hint = hint;
+      const double past = brute + 0.01;
+      const ConvexDistance plain =
+          computeConvexDistance(pair.a, pair.X_B_A, pair.b, pair.X_B_B, nullptr, past, towards);
+      const ConvexDistance hinted =
+          computeConvexDistance(pair.a, pair.X_B_A, pair.b, pair.X_B_B, nullptr, past, towards, &hint);
+      ASSERT_FALSE(plain.above) << "case " << k;
+      EXPECT_EQ(hinted.above, plain.above) << "case " << k;
+      EXPECT_EQ(hinted.distance, plain.distance) << "case " << k << " trial " << trial;
+      EXPECT_EQ(hinted.p_B_a, plain.p_B_a) << "case " << k << " trial " << trial;
+      EXPECT_EQ(hinted.p_B_b, plain.p_B_b) << "case " << k << " trial " << trial;
+      EXPECT_EQ(hinted.iterations, plain.iterations) << "case " << k << " trial " << trial;
+      ++computed;
+      const ConvexDistance half =
+          computeConvexDistance(pair.a, pair.X_B_A, pair.b, pair.X_B_B, nullptr, 0.5 * brute, towards, &proof_hint);
+      ASSERT_TRUE(half.above) << "case " << k;
+      EXPECT_GT(half.distance, 0.5 * brute) << "case " << k;
+      EXPECT_LE(half.distance, brute + 1e-9) << "case " << k << ": the bound must be below the distance";
+      ++proven;
+    }
+  }
+  std::printf("[ convex ] hint: %d computed the same bits, %d proven far (%d cube pairs)\n", computed, proven, ties);
+  EXPECT_GT(computed, 1500);
+  EXPECT_GT(ties, 250);
 }
 
 TEST(ConvexDistance, NearlyTouchingRandomPiecesMatchBruteForce) {

@@ -105,6 +105,17 @@ struct ConvexWarmStart {
   int vertex_b = 0;
 };
 
+/// What a pair of pieces remembers for its next search (computeConvexDistance's `hint`). Only the
+/// work depends on it: a computed distance is the same bits with or without it.
+struct ConvexHint {
+  /// A direction that proved the pair far (A's link frame, from A towards B; zero: none).
+  Eigen::Vector3d axis = Eigen::Vector3d::Zero();
+  /// A's and B's support vertices along the last search's first direction (-1: none): the next
+  /// search's first climbs start there.
+  int vertex_a = -1;
+  int vertex_b = -1;
+};
+
 /// The distance between piece A placed by X_B_A (L_A -> B) and piece B placed by X_B_B. See the
 /// opening block. `warm` may be nullptr (each piece's climb then starts at its start_vertex, in the
 /// direction `towards_b` (frame B, from A towards B; zero: from A's bounding centre to B's), a good
@@ -112,18 +123,19 @@ struct ConvexWarmStart {
 /// plane proves the distance above it (ConvexDistance::above): a caller that only needs the pieces
 /// closer than a bound (the closest of several, a pruning distance) skips most of the work on the
 /// others. A distance at most stop_above is computed exactly as without it (the same operations).
-/// `axis` (may be nullptr; A's link frame, from A towards B; zero: none): a direction that proved this
-/// pair of pieces far before. A cold search with a finite stop_above whose first support pair does
-/// not prove the distance above stop_above tries that direction's support pair next (any direction's
-/// gap is a lower bound), then goes on as without it: a computed distance is the same bits with or
-/// without it, only the lower bound of a pair proven far may differ. On return it holds the
-/// direction that proved the distance above stop_above, or zero (a distance computed, or contact).
-/// Allocation-free; never throws.
+/// `hint` (may be nullptr) is what the last search of this pair of pieces left. A cold search with a
+/// finite stop_above climbs to its first support pair from the hint's vertices (pieces that moved a
+/// little: a step or none); if that pair does not prove the distance above stop_above, it tries the
+/// hint's axis (any direction's gap is a lower bound), then goes on exactly as without a hint (the
+/// first support pair climbed again from the start vertices): a computed distance is the same bits
+/// with or without it, only the lower bound of a pair proven far may differ. On return the hint
+/// holds the direction that proved the distance above stop_above (zero: a distance computed, or
+/// contact) and the first support pair. Allocation-free; never throws.
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
                                      const Eigen::Isometry3d& X_B_B, ConvexWarmStart* warm = nullptr,
                                      double stop_above = std::numeric_limits<double>::infinity(),
                                      const Eigen::Vector3d& towards_b = Eigen::Vector3d::Zero(),
-                                     Eigen::Vector3d* axis = nullptr) noexcept;
+                                     ConvexHint* hint = nullptr) noexcept;
 
 /// The support point of `piece` in direction d_L (link frame): the vertex maximising d_L . v. `start`
 /// is the vertex index to hill-climb from (clamped); returns the index found.

@@ -176,9 +176,9 @@ struct DistanceData {
   // The stored value less both odometers now bounds the distance now, however many calls ago it was
   // computed: a primitive pair proven far is skipped without a search. Only the work depends on them.
   std::vector<double> pp_lower;
-  // Per primitive pair, the direction that last proved it far (computeConvexDistance's `axis`: its first
-  // primitive's link frame; zero: none). Tried before a search goes on; only the work depends on it.
-  std::vector<Eigen::Vector3d> pp_axis;
+  // Per primitive pair, what its last search left (computeConvexDistance's `hint`: the direction that
+  // proved it far, the first support pair). Only the work depends on it.
+  std::vector<ConvexHint> pp_hint;
   std::vector<double> prim_odometer;
   std::vector<Eigen::Isometry3d> last_X;
   // The same for whole pairs of the tight model: per pair, a lower bound of its distance from the
