@@ -505,6 +505,56 @@ double gapAlong(const ConvexPiece& a, const ConvexPiece& b, const Eigen::Matrix3
   return -e.dot(w) / e.norm() - searchTolerance(w.squaredNorm());
 }
 
+/// A cold search's first support pair into the simplex's slot 0, towards B (`d`: the caller's
+/// direction in A's frame, else B's bounding centre from A's), each climb from its piece's start
+/// vertex for that direction, a proof's from the hint's vertices. True when that pair, or the hint's
+/// axis, proves the distance above stop_above (`out` then holds the bound).
+template <class Support>
+[[gnu::always_inline]] inline bool coldStart(const ConvexPiece& a, const ConvexPiece& b, const Eigen::Matrix3d& R,
+                                             const Eigen::Vector3d& t, Eigen::Vector3d d, double stop_above,
+                                             ConvexHint* hint, int& ia, int& ib, Support&& support, const Simplex& s,
+                                             ConvexDistance& out) {
+  if (!(d.squaredNorm() > 0)) d = (R * b.bound_center_L + t) - a.bound_center_L;
+  if (!(d.squaredNorm() > 0)) d = Eigen::Vector3d::UnitX();
+  const bool proof = stop_above < std::numeric_limits<double>::infinity();
+  // A proof climbs from where the last one ended (the same support pair unless vertices tie).
+  const bool hinted = proof && hint != nullptr && hint->vertex_a >= 0 &&
+                      hint->vertex_a < static_cast<int>(a.vertices_L.size()) && hint->vertex_b >= 0 &&
+                      hint->vertex_b < static_cast<int>(b.vertices_L.size());
+  ia = hinted ? hint->vertex_a : startVertex(a, d);
+  ib = hinted ? hint->vertex_b : startVertex(b, -(R.transpose() * d));
+  support(d, 0);
+  if (hint != nullptr) hint->vertex_a = ia, hint->vertex_b = ib;
+  // That support pair already bounds the distance: A's farthest point along d is A's support and
+  // B's nearest is B's, so every point x of A - B has -d.x >= -d.w (the gap between the two
+  // pieces' extents along d). A good guess of d (the caller's) often proves a far pair at once.
+  if (proof) {
+    const double lower = -d.dot(s.w[0]) / d.norm() - searchTolerance(s.w[0].squaredNorm());
+    if (lower > stop_above) {
+      out.above = true;
+      out.distance = lower;
+      if (hint != nullptr) hint->axis = d;
+      return true;
+    }
+    // The direction that proved this pair far last time: its own support pair, the same bound.
+    if (hint != nullptr && hint->axis.squaredNorm() > 0) {
+      const double lower_e = gapAlong(a, b, R, t, hint->axis);
+      if (lower_e > stop_above) {
+        out.above = true;
+        out.distance = lower_e;
+        return true;
+      }
+    }
+  }
+  // The search goes on as without a hint: from the start vertices' climb.
+  if (hinted) {
+    ia = startVertex(a, d);
+    ib = startVertex(b, -(R.transpose() * d));
+    support(d, 0);
+  }
+  return false;
+}
+
 }  // namespace
 
 ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry3d& X_B_A, const ConvexPiece& b,
@@ -541,48 +591,8 @@ ConvexDistance computeConvexDistance(const ConvexPiece& a, const Eigen::Isometry
     s.w[0] = a.vertices_L[ia] - (R * b.vertices_L[ib] + t);
     s.ia[0] = ia;
     s.ib[0] = ib;
-  } else {
-    // Cold: the support point towards B (the caller's direction, else B's bounding centre from A's),
-    // each climb from its piece's start vertex for that direction.
-    Eigen::Vector3d d = R_B_A.transpose() * towards_b;
-    if (!(d.squaredNorm() > 0)) d = (R * b.bound_center_L + t) - a.bound_center_L;
-    if (!(d.squaredNorm() > 0)) d = Eigen::Vector3d::UnitX();
-    const bool proof = stop_above < std::numeric_limits<double>::infinity();
-    // A proof climbs from where the last one ended (the same support pair unless vertices tie).
-    const bool hinted = proof && hint != nullptr && hint->vertex_a >= 0 &&
-                        hint->vertex_a < static_cast<int>(a.vertices_L.size()) && hint->vertex_b >= 0 &&
-                        hint->vertex_b < static_cast<int>(b.vertices_L.size());
-    ia = hinted ? hint->vertex_a : startVertex(a, d);
-    ib = hinted ? hint->vertex_b : startVertex(b, -(R.transpose() * d));
-    support(d, 0);
-    if (hint != nullptr) hint->vertex_a = ia, hint->vertex_b = ib;
-    // That support pair already bounds the distance: A's farthest point along d is A's support and
-    // B's nearest is B's, so every point x of A - B has -d.x >= -d.w (the gap between the two
-    // pieces' extents along d). A good guess of d (the caller's) often proves a far pair at once.
-    if (proof) {
-      const double lower = -d.dot(s.w[0]) / d.norm() - searchTolerance(s.w[0].squaredNorm());
-      if (lower > stop_above) {
-        out.above = true;
-        out.distance = lower;
-        if (hint != nullptr) hint->axis = d;
-        return out;
-      }
-      // The direction that proved this pair far last time: its own support pair, the same bound.
-      if (hint != nullptr && hint->axis.squaredNorm() > 0) {
-        const double lower_e = gapAlong(a, b, R, t, hint->axis);
-        if (lower_e > stop_above) {
-          out.above = true;
-          out.distance = lower_e;
-          return out;
-        }
-      }
-    }
-    // The search goes on as without a hint: from the start vertices' climb.
-    if (hinted) {
-      ia = startVertex(a, d);
-      ib = startVertex(b, -(R.transpose() * d));
-      support(d, 0);
-    }
+  } else if (coldStart(a, b, R, t, R_B_A.transpose() * towards_b, stop_above, hint, ia, ib, support, s, out)) {
+    return out;
   }
   if (hint != nullptr) hint->axis.setZero();  // set again below if the search proves the pair far
   s.size = 1;
