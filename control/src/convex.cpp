@@ -521,10 +521,21 @@ template <class Support>
   const bool hinted = proof && hint != nullptr && hint->vertex_a >= 0 &&
                       hint->vertex_a < static_cast<int>(a.vertices_L.size()) && hint->vertex_b >= 0 &&
                       hint->vertex_b < static_cast<int>(b.vertices_L.size());
-  ia = hinted ? hint->vertex_a : startVertex(a, d);
-  ib = hinted ? hint->vertex_b : startVertex(b, -(R.transpose() * d));
+  auto fromStartVertices = [&] {
+    ia = startVertex(a, d);
+    ib = startVertex(b, -(R.transpose() * d));
+  };
+  if (hinted) {
+    ia = hint->vertex_a;
+    ib = hint->vertex_b;
+  } else {
+    fromStartVertices();
+  }
   support(d, 0);
-  if (hint != nullptr) hint->vertex_a = ia, hint->vertex_b = ib;
+  if (hint != nullptr) {
+    hint->vertex_a = ia;
+    hint->vertex_b = ib;
+  }
   // That support pair already bounds the distance: A's farthest point along d is A's support and
   // B's nearest is B's, so every point x of A - B has -d.x >= -d.w (the gap between the two
   // pieces' extents along d). A good guess of d (the caller's) often proves a far pair at once.
@@ -548,8 +559,7 @@ template <class Support>
   }
   // The search goes on as without a hint: from the start vertices' climb.
   if (hinted) {
-    ia = startVertex(a, d);
-    ib = startVertex(b, -(R.transpose() * d));
+    fromStartVertices();
     support(d, 0);
   }
   return false;

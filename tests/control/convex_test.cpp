@@ -568,10 +568,7 @@ TEST(ConvexDistance, StopAboveGivesALowerBoundOrTheSameAnswer) {
   std::uniform_real_distribution<double> centre(0.05, 0.3);
   int above = 0, same = 0;
   for (int k = 0; k < 300; ++k) {
-    const RandomPair pair = randomPair(rng, centre);
-    const Hull &ha = pair.ha, &hb = pair.hb;
-    const ConvexPiece &a = pair.a, &b = pair.b;
-    const Eigen::Isometry3d &X_B_A = pair.X_B_A, &X_B_B = pair.X_B_B;
+    const auto [ha, hb, a, b, X_B_A, X_B_B] = randomPair(rng, centre);
     const ConvexDistance full = computeConvexDistance(a, X_B_A, b, X_B_B);
     const double brute = bruteDistance(ha, X_B_A, hb, X_B_B);
     for (const double stop : {brute * 0.5, brute - 1e-4, brute + 1e-4, brute * 2.0 + 0.01}) {
@@ -604,10 +601,7 @@ TEST(ConvexDistance, TheFirstDirectionAloneProvesAFarPair) {
   std::uniform_real_distribution<double> centre(0.05, 0.3);
   int at_once = 0, apart = 0;
   for (int k = 0; k < 300; ++k) {
-    const RandomPair pair = randomPair(rng, centre);
-    const Hull &ha = pair.ha, &hb = pair.hb;
-    const ConvexPiece &a = pair.a, &b = pair.b;
-    const Eigen::Isometry3d &X_B_A = pair.X_B_A, &X_B_B = pair.X_B_B;
+    const auto [ha, hb, a, b, X_B_A, X_B_B] = randomPair(rng, centre);
     const ConvexDistance full = computeConvexDistance(a, X_B_A, b, X_B_B);
     if (full.penetrating) continue;
     ++apart;
@@ -652,10 +646,7 @@ TEST(ConvexDistance, AnAxisThatProvedAPairFarProvesItAgainAndChangesNoComputedDi
   std::uniform_real_distribution<double> centre(0.08, 0.3), nudge(-0.002, 0.002);
   int stored = 0, again_at_once = 0, computed = 0;
   for (int k = 0; k < 300; ++k) {
-    const RandomPair pair = randomPair(rng, centre);
-    const Hull &ha = pair.ha, &hb = pair.hb;
-    const ConvexPiece &a = pair.a, &b = pair.b;
-    const Eigen::Isometry3d &X_B_A = pair.X_B_A, &X_B_B = pair.X_B_B;
+    const auto [ha, hb, a, b, X_B_A, X_B_B] = randomPair(rng, centre);
     const double brute = bruteDistance(ha, X_B_A, hb, X_B_B);
     if (!(brute > 0.01)) continue;
     const Vec3 poor = randomRotation(rng) * Vec3::UnitX();
