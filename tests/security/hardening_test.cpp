@@ -435,8 +435,14 @@ TEST(SecurityHardening, TheWriterGuidAuthenticatesTheCertificateSubjectNotTheHea
   auto& reader = behavior->makeReader<msg::ObjectTargets>("reflex/object_targets", bus::kProfileRecord);
   auto& from_vision = vision->makeWriter<msg::ObjectTargets>();
   auto& from_player = player->makeWriter<msg::ObjectTargets>();
-  ASSERT_TRUE(reader.waitForWriters(2, 30s));
-  ASSERT_TRUE(from_vision.waitForReaders(1, 30s) && from_player.waitForReaders(1, 30s));
+  // Three secure participants authenticate each other: seconds when idle, but a handshake took more
+  // than 30 s in a full parallel test run (as in BehaviorTakesObjectsOnlyFromTheConfiguredIdentities).
+  const bool reader_matched = reader.waitForWriters(2, 60s);
+  const bool vision_matched = from_vision.waitForReaders(1, 60s);
+  const bool player_matched = from_player.waitForReaders(1, 60s);
+  ASSERT_TRUE(reader_matched && vision_matched && player_matched)
+      << "not matched: the behavior's reader to both writers " << reader_matched << ", vision's writer "
+      << vision_matched << ", player's writer " << player_matched;
   std::this_thread::sleep_for(500ms);
   msg::ObjectTargets o;
   o.frame_id("base_link");
