@@ -505,6 +505,9 @@ ArmIndex armIndex(const Model& m, const RobotSetup& s) {
     for (const std::string& j : s.arms[a].joints) ix.q[a].push_back(m.qIndex(j));
   KinematicsData kin(m);
   computeForwardKinematics(m, kin, neutralConfiguration(m));
+  // URDFs round their angles (3.14159, 1.5708: a few micro-radians off, compounding along the chain), so
+  // two axes are taken as mirror images within 2 mrad; an axis that is not is tenths of a radian off.
+  constexpr double kMirrorAxisTolerance = 2e-3;
   for (std::size_t i = 0; i < ix.q[0].size(); ++i) {
     double sign = 0.0;
     if (i < ix.q[1].size()) {
@@ -512,9 +515,9 @@ ArmIndex armIndex(const Model& m, const RobotSetup& s) {
       Eigen::Vector3d mu = kin.axis_B[m.q_link[ix.q[0][i]]];
       mu.y() = -mu.y();
       const Eigen::Vector3d ur = kin.axis_B[m.q_link[ix.q[1][i]]];
-      if ((ur - mu).norm() < 1e-6)
+      if ((ur - mu).norm() < kMirrorAxisTolerance)
         sign = -1.0;
-      else if ((ur + mu).norm() < 1e-6)
+      else if ((ur + mu).norm() < kMirrorAxisTolerance)
         sign = 1.0;
     }
     ix.mirror.push_back(sign);
@@ -585,7 +588,19 @@ class RestSearch {
   void run() {
     setRequirements();
     search();
+    // No sample clears every pair: the clearest one climbs (a crowded shoulder leaves a narrow region
+    // that random postures rarely hit, mirrored arms in 7 joints even less). Clear now, it is the start
+    // of the refinement; else the requirements are scaled to what it keeps.
     if (!best.clear && closest.ratio > 0.0) {
+      climbClearest();
+      if (closest.clear) {
+        best = closest;
+        best_l = closest_l;
+        best_r = closest_r;
+      }
+    }
+    if (!best.clear && closest.ratio > 0.0) {
+      const std::vector<double> climbed_l = closest_l, climbed_r = closest_r;
       const double floor = latch_floor + 0.004;
       const double first_ratio = closest.ratio;
       const double scale = 0.95 * first_ratio;
@@ -597,6 +612,14 @@ class RestSearch {
         required[i] = r_new;
       }
       search();
+      if (!best.clear) {  // the climbed posture keeps more than the scaled requirements
+        const Eval e = evaluate(climbed_l, climbed_r);
+        if (e.clear) {
+          best = e;
+          best_l = climbed_l;
+          best_r = climbed_r;
+        }
+      }
       if (best.clear)
         s.decisions.push_back(
             "rest: WARNING: no posture clears every arm pair by d_a + margin (or 90 % of its reach); "
@@ -761,31 +784,48 @@ class RestSearch {
                      ": exclude the pairs that cannot collide (collision YAML exclude:), or lower d_r");
   }
 
-  // Coordinate descent: each left joint by +-step (the right one mirrored), then unmirrored right joints.
-  void refine() {
+  /// Coordinate steps from the posture (pl, pr) with evaluation pe: each left joint by +-step (the right
+  /// one mirrored), then the unmirrored right joints, steps of 0.2 down to 0.01 rad, a step taken when
+  /// better(its Eval, pe); until no step is taken or done(pe).
+  template <class Better, class Done>
+  void coordinateSteps(std::vector<double>& pl, std::vector<double>& pr, Eval& pe, Better better, Done done) {
     for (double step : {0.2, 0.1, 0.05, 0.02, 0.01}) {
       bool improved = true;
-      while (improved) {
+      while (improved && !done(pe)) {
         improved = false;
         for (int a = 0; a < 2; ++a)
           for (std::size_t i = 0; i < ix.q[a].size(); ++i) {
             if (a == 1 && i < ix.mirror.size() && ix.mirror[i] != 0.0) continue;
             for (double d : {step, -step}) {
-              std::vector<double> tl = best_l, tr = best_r;
+              std::vector<double> tl = pl, tr = pr;
               std::vector<double>& v = a == 0 ? tl : tr;
               v[i] = std::clamp(v[i] + d, lo80(m, ix.q[a][i]), hi80(m, ix.q[a][i]));
               if (a == 0) tr = mirrorOf(tl, tr);
               const Eval e = evaluate(tl, tr);
-              if (e.clear && e.cost < best.cost - 1e-9) {
-                best = e;
-                best_l = tl;
-                best_r = tr;
+              if (better(e, pe)) {
+                pe = e;
+                pl = tl;
+                pr = tr;
                 improved = true;
               }
             }
           }
       }
     }
+  }
+
+  /// Coordinate ascent of the clearest posture's smallest distance / requirement, until it clears.
+  void climbClearest() {
+    coordinateSteps(
+        closest_l, closest_r, closest, [](const Eval& e, const Eval& now) { return e.ratio > now.ratio + 1e-9; },
+        [](const Eval& now) { return now.clear; });
+  }
+
+  /// Coordinate descent of the best posture's cost, every pair kept clear.
+  void refine() {
+    coordinateSteps(
+        best_l, best_r, best, [](const Eval& e, const Eval& now) { return e.clear && e.cost < now.cost - 1e-9; },
+        [](const Eval&) { return false; });
   }
 
   void describe() {
@@ -805,6 +845,12 @@ class RestSearch {
        << fmt("%.3f", o.rest_margin) << " m; at rest the pair with the least margin over what it must keep is '"
        << m.segments[p.a].name << "'-'" << m.segments[p.b].name << "', " << fmt("%.3f", s.rest_distance)
        << " m apart; right arm mirrored";
+    std::string own;  // right joints whose axis is no mirror image of the left one's: searched on their own
+    for (std::size_t i = 0; i < ix.q[1].size(); ++i)
+      if (i >= ix.mirror.size() || ix.mirror[i] == 0.0) own += (own.empty() ? "" : ", ") + s.arms[1].joints[i];
+    if (!own.empty())
+      os << " except " << own
+         << " (at the zero posture their axes are no mirror images of the left ones': each chosen on its own)";
     s.decisions.push_back(os.str());
   }
 
