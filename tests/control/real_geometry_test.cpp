@@ -28,7 +28,6 @@
 #include "reflex/control/distance.hpp"
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/mesh_fit.hpp"
-#include "reflex/control/robot_setup.hpp"
 #include "reflex/control/urdf_loader.hpp"
 
 #include <fcl/geometry/bvh/BVH_model.h>
@@ -321,19 +320,9 @@ TEST_P(RealGeometry, DistanceIsNeverAboveTheMeshDistanceAndCloseToIt) {
   // The rest posture is symmetric: every arm joint mirrored (these URDFs are mirror images left to right,
   // up to their rounded angles), so the hand links sit at mirror images through the base's x-z plane.
   EXPECT_EQ(r.out.find("right arm mirrored except"), std::string::npos) << r.out;
-  {
-    Eigen::VectorXd q_rest = neutralConfiguration(setup_model);
-    for (const auto& arm : cc.arms)
-      for (std::size_t i = 0; i < arm.joints.size(); ++i) q_rest[setup_model.qIndex(arm.joints[i])] = arm.rest[i];
-    KinematicsData rest_kin(setup_model);
-    computeForwardKinematics(setup_model, rest_kin, q_rest);
-    const Eigen::Vector3d l = rest_kin.X_B_L[setup_model.linkIndex(cc.arms[kLeft].hand_link)].translation();
-    const Eigen::Vector3d rh = rest_kin.X_B_L[setup_model.linkIndex(cc.arms[kRight].hand_link)].translation();
-    const Eigen::Vector3d mirrored_l(l.x(), -l.y(), l.z());
-    std::printf("%s: rest hands at (%.3f, %.3f, %.3f) / (%.3f, %.3f, %.3f) m, %.1f mm from mirror images\n", robot.name,
-                l.x(), l.y(), l.z(), rh.x(), rh.y(), rh.z(), 1e3 * (rh - mirrored_l).norm());
-    EXPECT_LT((rh - mirrored_l).norm(), 0.005) << "the rest posture's hands are no mirror images";
-  }
+  const double mirror_gap = test::restHandsMirrorGap(setup_model, cc);
+  std::printf("%s: rest hands %.1f mm from mirror images\n", robot.name, 1e3 * mirror_gap);
+  EXPECT_LT(mirror_gap, 0.005) << "the rest posture's hands are no mirror images";
   const auto setup_bvh = segmentBvhs(setup_model, meshes);
   const std::string sim_args = " all --urdf " + urdf + " --collision " + out + "/collision.yaml --controller " + out +
                                "/controller.yaml --no-plots --out ";

@@ -16,7 +16,6 @@
 #include "reflex/control/kinematics.hpp"
 #include "reflex/control/mesh_fit.hpp"
 #include "reflex/control/onboard.hpp"
-#include "reflex/control/robot_setup.hpp"
 #include "reflex/modules/host.hpp"
 #include "reflex/modules/registry.hpp"
 #include "test_support.hpp"
@@ -425,14 +424,7 @@ TEST(Setup, TheRightArmMirrorsTheLeftUpToRoundedAnglesAndNamesTheJointsItCannot)
     EXPECT_THAT(r.out, HasSubstr("right arm mirrored\n"));
     const Model model = loadModel(dir + "/turned.urdf", loadCollisionConfig(dir + "/out/collision.yaml"));
     const ControllerConfig config = loadControllerConfig(dir + "/out/controller.yaml");
-    Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
-    for (const auto& arm : config.arms)
-      for (std::size_t i = 0; i < arm.joints.size(); ++i) q[model.qIndex(arm.joints[i])] = arm.rest[i];
-    KinematicsData kin(model);
-    computeForwardKinematics(model, kin, q);
-    const Eigen::Vector3d l = kin.X_B_L[model.linkIndex("l_hand")].translation();
-    const Eigen::Vector3d rh = kin.X_B_L[model.linkIndex("r_hand")].translation();
-    EXPECT_LT((rh - Eigen::Vector3d(l.x(), -l.y(), l.z())).norm(), 1e-4) << l.transpose() << " / " << rh.transpose();
+    EXPECT_LT(test::restHandsMirrorGap(model, config), 1e-4);
   }
 }
 

@@ -3,7 +3,10 @@
 // loadRobot, kAsimo, kSmall) are in tests/support/robot.hpp, included here.
 #pragma once
 
+#include "reflex/control/controller.hpp"
+#include "reflex/control/kinematics.hpp"
 #include "reflex/control/model.hpp"
+#include "reflex/control/robot_setup.hpp"
 #include "support/child_process.hpp"
 #include "support/robot.hpp"
 
@@ -33,6 +36,21 @@ inline Eigen::VectorXd randomConfiguration(const Model& model, std::mt19937_64& 
 inline Eigen::Vector3d randomPoint(std::mt19937_64& rng, double half_width) {
   std::uniform_real_distribution<double> u(-half_width, half_width);
   return {u(rng), u(rng), u(rng)};
+}
+
+/// At the rest posture `config` names (every other joint at neutralConfiguration), how far (m) the
+/// right hand link's origin is from the mirror image of the left one's through the base's x-z plane.
+inline double restHandsMirrorGap(const Model& model, const ControllerConfig& config) {
+  Eigen::VectorXd q = neutralConfiguration(model);
+  for (const auto& arm : config.arms)
+    for (std::size_t i = 0; i < arm.joints.size(); ++i) q[model.qIndex(arm.joints[i])] = arm.rest[i];
+  KinematicsData kin(model);
+  computeForwardKinematics(model, kin, q);
+  const Eigen::Vector3d l =
+      kin.X_B_L[static_cast<std::size_t>(model.linkIndex(config.arms[kLeft].hand_link))].translation();
+  const Eigen::Vector3d r =
+      kin.X_B_L[static_cast<std::size_t>(model.linkIndex(config.arms[kRight].hand_link))].translation();
+  return (r - Eigen::Vector3d(l.x(), -l.y(), l.z())).norm();
 }
 
 /// A whole file as text ("" if it cannot be read).
